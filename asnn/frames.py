@@ -1,0 +1,54 @@
+"""Validation and conversion of input frames to the luminance the retina works on."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+__all__ = ["FrameError", "to_luminance"]
+
+_LUMA = np.array([0.114, 0.587, 0.299])  # B, G, R weights of OpenCV's BGR -> gray
+
+
+class FrameError(ValueError):
+    """A frame the model cannot take: wrong type, shape, range or size."""
+
+
+def to_luminance(frame: np.ndarray, min_side: int) -> np.ndarray:
+    """Validate a frame and return its luminance as float64 on the [0, 1] scale.
+
+    Parameters
+    ----------
+    frame : ndarray
+        Gray (H, W) or (H, W, 1), or BGR (H, W, 3). uint8 frames are on 0..255; float frames
+        must lie in [0, 1]. A BGR uint8 frame is converted with OpenCV's rounded luma
+        (0.299 R + 0.587 G + 0.114 B) before scaling, as the published implementation does.
+    min_side : int
+        Smallest accepted height and width (the largest kernel of the model).
+
+    Raises
+    ------
+    FrameError
+        For anything but the above.
+    """
+    if not isinstance(frame, np.ndarray):
+        raise FrameError(f"a frame must be a numpy array, got {type(frame).__name__}")
+    if frame.ndim == 3 and frame.shape[2] == 1:
+        frame = frame[:, :, 0]
+    if frame.ndim not in (2, 3) or (frame.ndim == 3 and frame.shape[2] != 3):
+        raise FrameError(f"a frame must be gray (H, W) or BGR (H, W, 3), got shape {frame.shape}")
+    h, w = frame.shape[:2]
+    if h < min_side or w < min_side:
+        raise FrameError(f"frame {w}x{h} is smaller than the model's {min_side}x{min_side} kernels")
+    if frame.dtype == np.uint8:
+        gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
+        return gray.astype(np.float64) / 255.0
+    if frame.dtype.kind != "f":
+        raise FrameError(f"frame dtype must be uint8 or float, got {frame.dtype}")
+    if not np.isfinite(frame).all():
+        raise FrameError("frame contains NaN or infinite values")
+    lo, hi = float(frame.min()), float(frame.max())
+    if lo < 0.0 or hi > 1.0:
+        raise FrameError(f"float frames must lie in [0, 1], got values in [{lo:g}, {hi:g}]")
+    gray = frame.astype(np.float64)
+    return gray @ _LUMA if gray.ndim == 3 else gray

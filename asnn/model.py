@@ -1,0 +1,155 @@
+"""The ASNN model: one stateful object per camera stream, ``step(frame) -> Response``."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import cv2
+import numpy as np
+
+from . import retina
+from .frames import FrameError, to_luminance
+from .params import ASNNParams, preset
+from .response import Maps, Response
+from .targets import extract_targets
+
+__all__ = ["ASNN", "FrameError"]
+
+N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
+
+
+class ASNN:
+    """Approach-Sensitive Neural Network for one stream of frames.
+
+    Parameters
+    ----------
+    params : ASNNParams or str
+        A parameter set or a preset name (see :mod:`asnn.params`).
+    record_maps : bool
+        Attach the intermediate maps (:class:`~asnn.response.Maps`) to every response.
+
+    Attributes
+    ----------
+    params : ASNNParams
+    shape : (H, W) or None
+        The stream's frame size, fixed by its first frame.
+    previous : ndarray (H, W)
+        Luminance of the last frame, after the optional input blur.
+    history : deque of ndarray (H, W)
+        The last N_p photoreceptor activations, most recent first.
+    stages_on, stages_off : ndarray (n_s + 2, H, W)
+        Leaky-integrator cascades of the ON and OFF bipolar channels (z_0..z_{n_s+1}).
+    spike_window : deque of int
+        Spikes of the last N_t frames.
+
+    Notes
+    -----
+    The model integrates with the fixed step ``params.dt`` (0.05 s by default) whatever the
+    frames' timestamps: the paper assumes a constant frame rate. The first frame of a stream
+    only primes the state: its response is all zeros (u = 0, out = 0.5, no spikes).
+    """
+
+    def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False):
+        self.params = preset(params) if isinstance(params, str) else params
+        self.record_maps = record_maps
+        p = self.params
+        self._min_side = max(p.dog_size, p.kernel_size, p.attention_size)
+        self._p_weights = retina.photoreceptor_weights(p.n_p, p.p_u)
+        self._dog = retina.dog_kernel(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
+                                      p.dog_normalisation)
+        half = N_ORIENTATIONS // 2
+        self._gabor = [retina.gabor_pair(k * math.pi / half, p.ds_sigma, p.ds_wavelength,
+                                         p.kernel_size, p.kernel_extent) for k in range(half)]
+        self._cs = retina.center_surround_kernel(p.cs_sigma, p.cs_wavelength, p.cs_phase,
+                                                 p.kernel_size, p.kernel_extent)
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+
+    def reset(self) -> None:
+        """Forget the stream: the next frame starts a new one (of any size)."""
+        self.shape: tuple[int, int] | None = None
+        self.previous: np.ndarray | None = None
+        self.history: deque[np.ndarray] = deque(maxlen=self.params.n_p)
+        self.stages_on: np.ndarray | None = None
+        self.stages_off: np.ndarray | None = None
+        self.spike_window: deque[int] = deque(maxlen=self.params.n_t)
+        self.index = 0
+
+    # ------------------------------------------------------------------ step
+
+    def _luminance(self, frame: np.ndarray) -> np.ndarray:
+        lum = to_luminance(frame, self._min_side)
+        if self.shape is not None and lum.shape != self.shape:
+            h, w = self.shape
+            raise FrameError(f"frame {lum.shape[1]}x{lum.shape[0]} differs from the stream's {w}x{h};"
+                             " reset() the model or start a new one")
+        if self.params.input_blur:
+            lum = cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
+        return lum
+
+    def step(self, frame: np.ndarray) -> Response:
+        """Process one frame and return the model's response to it.
+
+        Raises
+        ------
+        FrameError
+            If the frame is not an image the model accepts, or its size differs from the stream's.
+        """
+        lum = self._luminance(frame)
+        index = self.index
+        self.index += 1
+        if self.previous is None:
+            p = self.params
+            self.shape = lum.shape
+            self.previous = lum
+            self.stages_on = np.zeros((p.n_slow + 2, *lum.shape))
+            self.stages_off = np.zeros_like(self.stages_on)
+            return Response(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False)
+        return self._respond(index, lum)
+
+    def _respond(self, index: int, lum: np.ndarray) -> Response:
+        p = self.params
+        photo = retina.photoreceptor(lum, self.previous, list(self.history), self._p_weights)
+        self.previous = lum
+        if p.n_p:
+            self.history.appendleft(photo)
+
+        on0, off0 = retina.bipolar(photo, self._dog)
+        rate = p.dt / p.tau
+        retina.temporal_filter_step(self.stages_on, on0, rate, p.c, p.decay, p.leaky_input)
+        retina.temporal_filter_step(self.stages_off, off0, rate, p.c, p.decay, p.leaky_input)
+        fast_on = retina.temporal_readout(self.stages_on, p.gain, p.n_fast)
+        slow_on = retina.temporal_readout(self.stages_on, p.gain, p.n_slow)
+        fast_off = retina.temporal_readout(self.stages_off, p.gain, p.n_fast)
+        slow_off = retina.temporal_readout(self.stages_off, p.gain, p.n_slow)
+
+        r = retina.motion_energy(slow_on, fast_on, slow_off, fast_off, self._gabor,
+                                 p.v_on, p.v_off)
+        v = r.max(axis=0)
+        phi = np.arctan2(r[2], r[0])  # R^{pi/2}, R^0
+
+        g = retina.approach_map(slow_on, fast_on, slow_off, fast_off, self._cs,
+                                (p.w1_on, p.w2_off, p.w1_off, p.w2_on))
+        if p.grouping:
+            g = retina.group(g)
+        m_a = retina.approach_attention(g, p.attention_sigma, p.attention_size,
+                                        p.attention_normalised, p.gamma_a)
+        m_d = retina.direction_attention(r, v, p.top_k, p.attention_sigma, p.attention_size,
+                                         p.attention_normalised, p.gamma_d)
+        attended = m_a & m_d
+        g_prime = g * attended
+
+        u = retina.membrane_potential(g_prime, p.u_scale, p.u_abs)
+        out = retina.sigmoid_output(u, g.size)
+        spikes = retina.spike_count(out, p.k_sp, p.t_sp)
+        self.spike_window.append(spikes)
+        spike_rate = sum(self.spike_window) / (p.n_t * p.window_dt)
+
+        targets = extract_targets(attended, v * np.cos(phi), v * np.sin(phi), p.cluster_eps,
+                                  p.cluster_min_samples, p.origin_seed)
+        maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d,
+                    G_prime=g_prime) if self.record_maps else None
+        return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
+                        collision=spike_rate >= p.t_c, targets=targets, maps=maps)

@@ -1,0 +1,205 @@
+"""Typed parameter set of the ASNN model and its named presets.
+
+Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The presets are:
+
+``paper``
+    Table I, the rulings of SPEC section 2, the weights of the approach experiment and the
+    warning parameters of the vehicle experiment, read literally.
+``approach``, ``translation``, ``robot``
+    ``paper`` with the weight vector of the corresponding experiment.
+``vehicle``
+    ``paper`` with the vehicle experiment's warning parameters (K_sp=10, T_sp=0.7).
+``reference``
+    The published Python implementation (SPEC section 3), reproduced to float64 precision.
+``default``
+    The preset :command:`asnn detect` uses when none is named; chosen by measurement (README).
+
+Weights are signed as they enter the paper's fusion equation
+``G = w1+ G1+ - w2- G2- + w1- G1- - w2+ G2+``; the published implementation *adds* its fast-ON
+term, which is ``w2+ = -0.3`` here.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "preset", "preset_names"]
+
+
+class ASNNParams(BaseModel):
+    """Every parameter of the ASNN model, with the paper's symbol in each description."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    # --- input and photoreceptors (paper eq. 1) ---
+    input_blur: bool = Field(
+        False, description="3x3, sigma 1 Gaussian blur of each frame before differencing (reference)"
+    )
+    n_p: int = Field(0, ge=0, le=16, description="N_p: frames of photoreceptor history (paper eq. 1)")
+    p_u: float = Field(1.0, description="u in p_i = 1/(1+exp(u i))")
+
+    # --- bipolar cells (eqs. 2-4) ---
+    dog_gain: float = Field(5.0, description="F, gain of the difference of Gaussians g_I")
+    dog_sigma1: float = Field(1.0, gt=0, description="sigma_1 of g_I")
+    dog_sigma2: float = Field(3.0, gt=0, description="sigma_2 of g_I")
+    dog_size: int = Field(5, ge=3, description="size of the square kernel g_I (odd)")
+    dog_normalisation: Literal["paper", "2d"] = Field(
+        "paper",
+        description="'paper': F/(sqrt(2 pi) sigma) as printed in eq. 3; "
+        "'2d': F/(2 pi sigma^2) as in the published implementation",
+    )
+
+    # --- temporal filter L(K, n, z0) (eqs. 5-7) ---
+    gain: float = Field(5.0, description="K, gain of the temporal filter")
+    decay: float = Field(60.0, gt=0, description="A, decay coefficient")
+    transmission: float | None = Field(
+        None, description="C, transmission coefficient; None means C = A (SPEC ruling)"
+    )
+    tau: float = Field(5.0, gt=0, description="tau, integration time constant")
+    leaky_input: bool = Field(
+        False, description="z_0 integrates the input instead of being it (reference: six integrators)"
+    )
+    n_fast: int = Field(2, ge=1, description="n_f, stages of the fast filter")
+    n_slow: int = Field(4, ge=2, description="n_s, stages of the slow filter")
+    dt: float = Field(0.05, gt=0, description="integration step, seconds per frame")
+
+    # --- amacrine cells (eqs. 8-13) ---
+    ds_sigma: float = Field(0.3, gt=0, description="sigma_DS of the Gabor pair")
+    ds_wavelength: float = Field(4.0, gt=0, description="lambda_DS of the Gabor pair")
+    cs_sigma: float = Field(0.3, gt=0, description="sigma_CS of the centre-surround kernel")
+    cs_wavelength: float = Field(4.0, gt=0, description="lambda_CS of the centre-surround kernel")
+    cs_phase: float = Field(0.0, description="psi_CS")
+    kernel_size: int = Field(5, ge=3, description="size of g_DS and g_CS (odd)")
+    kernel_extent: float = Field(
+        1.0, gt=0, description="g_DS and g_CS are sampled on [-extent, extent] (SPEC ruling)"
+    )
+
+    # --- ganglion cells (eqs. 14-19) ---
+    v_on: float = Field(1.0, description="v+, weight of ON motion energy")
+    v_off: float = Field(1.0, description="v-, weight of OFF motion energy")
+    w1_on: float = Field(1.0, description="w^1_+, weight of G^1_+ (slow ON)")
+    w2_off: float = Field(0.0, description="w^2_-, weight of G^2_- (fast OFF), subtracted")
+    w1_off: float = Field(0.5, description="w^1_-, weight of G^1_- (slow OFF)")
+    w2_on: float = Field(0.0, description="w^2_+, weight of G^2_+ (fast ON), subtracted")
+    grouping: bool = Field(
+        False, description="G <- G (G * ones(3,3)/9) before attention (reference)"
+    )
+
+    # --- attention (eqs. 20-26) ---
+    attention_sigma: float = Field(8.0, gt=0, description="sigma_g of g_sigma")
+    attention_size: int = Field(31, ge=3, description="size of g_sigma (odd)")
+    attention_normalised: bool = Field(
+        False,
+        description="False: g_sigma = exp(-r^2/2s^2)/(2 pi s^2) as printed (eq. 20); "
+        "True: normalised to sum 1 (OpenCV GaussianBlur, reference)",
+    )
+    gamma_a: float = Field(0.005, description="gamma_a, threshold of the approach attention M_a")
+    gamma_d: float = Field(0.005, description="gamma_d, threshold of the direction attention M_d")
+    top_k: int = Field(1, ge=0, le=7, description="k of the top-k inhibited orientations")
+
+    # --- output and warning (eqs. 27-29) ---
+    u_scale: float = Field(
+        1.0, gt=0, description="u = u_scale * sum(G'); 255 undoes the [0,1] input scaling"
+    )
+    u_abs: bool = Field(False, description="sum |G'| instead of G' (reference)")
+    k_sp: float = Field(10.0, description="K_sp, spike gain")
+    t_sp: float = Field(0.7, description="T_sp, spike threshold on out(t)")
+    n_t: int = Field(4, ge=1, description="N_t, spike window in frames")
+    t_c: float = Field(1.0, description="T_c, spike-rate threshold of the warning, Hz")
+    spike_dt: float | None = Field(
+        None, gt=0, description="frame period used in the spike rate; None means dt"
+    )
+
+    # --- targets (SPEC section 1 item 10) ---
+    cluster_eps: float = Field(5.0, gt=0, description="DBSCAN eps, pixels of the model's grid")
+    cluster_min_samples: int = Field(2, ge=1, description="DBSCAN min_samples (a point counts itself)")
+    origin_seed: bool = Field(
+        False, description="add the pixel (0, 0) to the clustered points, as the reference does"
+    )
+
+    @model_validator(mode="after")
+    def _check(self) -> "ASNNParams":
+        for name in ("dog_size", "kernel_size", "attention_size"):
+            if getattr(self, name) % 2 == 0:
+                raise ValueError(f"{name} must be odd, got {getattr(self, name)}")
+        if self.n_fast >= self.n_slow:
+            raise ValueError("n_fast must be smaller than n_slow")
+        return self
+
+    @property
+    def c(self) -> float:
+        """C, the transmission coefficient (C = A unless set)."""
+        return self.decay if self.transmission is None else self.transmission
+
+    @property
+    def window_dt(self) -> float:
+        """Frame period of the spike-rate window."""
+        return self.dt if self.spike_dt is None else self.spike_dt
+
+    @property
+    def min_frame_size(self) -> int:
+        """Smallest frame side the kernels accept (OpenCV's reflect-101 border needs more than the radius)."""
+        return max(self.dog_size, self.kernel_size, 3) // 2 + 1
+
+
+_WEIGHTS = {  # [v+, v-, w1+, w2-, w1-, w2+] from the paper's experiments
+    "approach": (1.0, 1.0, 1.0, 0.0, 0.5, 0.0),
+    "translation": (1.0, 1.0, 0.4, 1.0, 0.0, 0.0),
+    "robot": (1.0, 1.0, 1.0, 0.4, 1.0, 0.4),
+}
+
+
+def _weights(name: str) -> dict:
+    keys = ("v_on", "v_off", "w1_on", "w2_off", "w1_off", "w2_on")
+    return dict(zip(keys, _WEIGHTS[name]))
+
+
+_PAPER = ASNNParams()
+
+PRESETS: dict[str, ASNNParams] = {
+    "paper": _PAPER,
+    "approach": _PAPER.model_copy(update=_weights("approach")),
+    "translation": _PAPER.model_copy(update=_weights("translation")),
+    "vehicle": _PAPER.model_copy(update=dict(k_sp=10.0, t_sp=0.7, n_t=4, t_c=1.0)),
+    "robot": _PAPER.model_copy(update=dict(**_weights("robot"), k_sp=20.0, t_sp=0.52, n_t=4, t_c=1.0)),
+    "reference": ASNNParams(
+        input_blur=True,
+        n_p=0,
+        leaky_input=True,
+        dog_normalisation="2d",
+        v_on=1.0, v_off=1.0,
+        w1_on=0.0, w2_off=0.0, w1_off=1.0, w2_on=-0.3,
+        grouping=True,
+        attention_normalised=True,
+        gamma_a=0.01, gamma_d=0.008, top_k=1,
+        u_scale=255.0, u_abs=True,
+        k_sp=10.0, t_sp=0.51, n_t=4, t_c=1.0, spike_dt=0.025,
+        origin_seed=True,
+    ),
+}
+
+DEFAULT_PRESET = "reference"
+
+
+def preset_names() -> list[str]:
+    """Names accepted by :func:`preset`, ``default`` included."""
+    return ["default", *PRESETS]
+
+
+def preset(name: str, **overrides) -> ASNNParams:
+    """Return the named preset, optionally with some parameters overridden.
+
+    Raises
+    ------
+    ValueError
+        If the name is unknown or an override is invalid.
+    """
+    key = DEFAULT_PRESET if name == "default" else name
+    if key not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(preset_names())}")
+    base = PRESETS[key]
+    if not overrides:
+        return base
+    return ASNNParams(**{**base.model_dump(), **overrides})

@@ -1,0 +1,343 @@
+"""The layers of the ASNN retina, one pure function per stage of the paper.
+
+Each function takes and returns plain NumPy arrays (H x W, row-major, x to the right and y
+downwards) and names the equation of Huang et al. it implements. Spatial filtering is 2-D
+*correlation* with OpenCV's reflect-101 border, as in the published implementation; for the
+symmetric kernels this equals the paper's convolution, and for the odd Gabor kernel the choice of
+orientation convention (see :func:`gabor_pair`) absorbs the flip.
+
+References
+----------
+.. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+   Detection in Cluttered and Dynamic Backgrounds".
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "correlate",
+    "photoreceptor_weights",
+    "photoreceptor",
+    "dog_kernel",
+    "bipolar",
+    "temporal_filter_step",
+    "temporal_readout",
+    "gabor_pair",
+    "center_surround_kernel",
+    "motion_energy",
+    "center_surround_inhibition",
+    "approach_map",
+    "group",
+    "attention_blur",
+    "approach_attention",
+    "direction_attention",
+    "membrane_potential",
+    "sigmoid_output",
+    "spike_count",
+]
+
+_BORDER = cv2.BORDER_REFLECT_101
+
+
+def correlate(image: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """2-D correlation with a centred kernel and reflect-101 border, in the image's float type."""
+    depth = cv2.CV_32F if image.dtype == np.float32 else cv2.CV_64F
+    return cv2.filter2D(image, depth, kernel, borderType=_BORDER)
+
+
+# --------------------------------------------------------------------------- photoreceptors
+
+
+def photoreceptor_weights(n_p: int, u: float = 1.0) -> np.ndarray:
+    """Decay coefficients p_i = 1 / (1 + exp(u i)), i = 1..N_p (paper eq. 1)."""
+    i = np.arange(1, n_p + 1, dtype=np.float64)
+    return 1.0 / (1.0 + np.exp(u * i))
+
+
+def photoreceptor(current: np.ndarray, previous: np.ndarray, history: list[np.ndarray],
+                  weights: np.ndarray) -> np.ndarray:
+    """Photoreceptor activation, paper eq. 1.
+
+    ``P(t) = I(t) - I(t-1) + sum_i p_i P(t-i)``
+
+    Parameters
+    ----------
+    current, previous : ndarray (H, W)
+        Luminance of frames t and t-1 (on the scale the thresholds use, [0, 1]).
+    history : list of ndarray (H, W)
+        Earlier activations, most recent first: ``history[i-1] = P(t-i)``.
+    weights : ndarray (N_p,)
+        Decay coefficients from :func:`photoreceptor_weights`.
+
+    Returns
+    -------
+    P : ndarray (H, W)
+    """
+    p = current - previous
+    for w, past in zip(weights, history):
+        p += w * past
+    return p
+
+
+# --------------------------------------------------------------------------- bipolar cells
+
+
+def dog_kernel(gain: float, sigma1: float, sigma2: float, size: int,
+               normalisation: str = "paper") -> np.ndarray:
+    """Difference-of-Gaussians kernel g_I, paper eq. 3, sampled on integer pixel offsets.
+
+    ``normalisation='paper'`` uses F/(sqrt(2 pi) sigma) as printed; ``'2d'`` uses the
+    two-dimensional F/(2 pi sigma^2) of the published implementation. Neither is renormalised.
+    """
+    r = size // 2
+    y, x = np.mgrid[-r:r + 1, -r:r + 1].astype(np.float64)
+    r2 = x * x + y * y
+    if normalisation == "paper":
+        norm1, norm2 = math.sqrt(2 * math.pi) * sigma1, math.sqrt(2 * math.pi) * sigma2
+    elif normalisation == "2d":
+        norm1, norm2 = 2 * math.pi * sigma1**2, 2 * math.pi * sigma2**2
+    else:
+        raise ValueError(f"unknown normalisation {normalisation!r}")
+    return gain * (np.exp(-r2 / (2 * sigma1**2)) / norm1 - np.exp(-r2 / (2 * sigma2**2)) / norm2)
+
+
+def bipolar(p: np.ndarray, dog: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """ON and OFF bipolar inputs B+^0, B-^0: half-wave rectification then g_I (paper eqs. 2, 4).
+
+    Returns
+    -------
+    on, off : ndarray (H, W)
+        ``relu(P) (*) g_I`` and ``relu(-P) (*) g_I``.
+    """
+    return correlate(np.maximum(p, 0.0), dog), correlate(np.maximum(-p, 0.0), dog)
+
+
+# --------------------------------------------------------------------------- temporal filter
+
+
+def temporal_filter_step(stages: np.ndarray, x: np.ndarray, rate: float, transmission: float,
+                         decay: float, leaky_input: bool) -> None:
+    """Advance the leaky-integrator cascade by one frame, in place (paper eq. 5).
+
+    ``tau dz_n/dt = -A z_n + C z_{n-1}``, integrated with forward Euler, ``rate = dt / tau``,
+    stage by stage so that each stage sees its predecessor as already updated in this frame
+    (the published implementation's order; both converge to eq. 5 as dt -> 0).
+
+    Parameters
+    ----------
+    stages : ndarray (n_s + 2, H, W)
+        ``stages[i]`` is z_i. With ``leaky_input=False`` (the paper), z_0 is the input itself and
+        z_1..z_{n_s+1} integrate; with ``leaky_input=True`` (the published implementation), z_0 is
+        an integrator of the input as well.
+    x : ndarray (H, W)
+        The bipolar input B^0 of this frame.
+    """
+    if leaky_input:
+        stages[0] += rate * (transmission * x - decay * stages[0])
+    else:
+        stages[0] = x
+    for i in range(1, stages.shape[0]):
+        stages[i] += rate * (transmission * stages[i - 1] - decay * stages[i])
+
+
+def temporal_readout(stages: np.ndarray, gain: float, n: int) -> np.ndarray:
+    """Temporal filter output L(K, n, z_0) = K (z_n - z_{n+1}) (paper eq. 6)."""
+    return gain * (stages[n] - stages[n + 1])
+
+
+# --------------------------------------------------------------------------- amacrine cells
+
+
+def _grid(size: int, extent: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample coordinates (X along columns, Y along rows) spanning [-extent, extent]."""
+    axis = np.linspace(-extent, extent, size)
+    x, y = np.meshgrid(axis, axis)
+    return x, y
+
+
+def gabor_pair(theta: float, sigma: float, wavelength: float, size: int,
+               extent: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Even and odd Gabor kernels g^0_DS, g^{pi/2}_DS at orientation theta (paper eq. 8).
+
+    ``g = exp(-(x'^2 + y'^2) / (2 sigma^2)) cos(2 pi x' / lambda + psi)`` with
+    ``x' = x cos(theta') + y sin(theta')``, ``y' = -x sin(theta') + y cos(theta')`` and
+    ``theta' = pi - theta``. The mirrored angle is the published implementation's; with
+    correlation on an image whose y axis points down, it makes the direction estimate of
+    :func:`motion_energy` come out in image coordinates (x right, y down). The odd kernel is
+    returned as ``exp(...) sin(2 pi x' / lambda)``, i.e. psi = -pi/2, as published.
+
+    Returns
+    -------
+    even, odd : ndarray (size, size)
+    """
+    x, y = _grid(size, extent)
+    t = math.pi - theta
+    rx = x * math.cos(t) + y * math.sin(t)
+    ry = -x * math.sin(t) + y * math.cos(t)
+    envelope = np.exp(-(rx**2 + ry**2) / (2 * sigma**2))
+    phase = 2 * math.pi * rx / wavelength
+    return envelope * np.cos(phase), envelope * np.sin(phase)
+
+
+def center_surround_kernel(sigma: float, wavelength: float, phase: float, size: int,
+                           extent: float = 1.0) -> np.ndarray:
+    """Antagonistic centre-surround kernel g_CS (paper eq. 10).
+
+    ``g_CS = 1 - exp(-r^2 / (2 sigma^2)) cos(2 pi r^2 / lambda + psi)``; with psi = 0 the centre
+    weight is 0 and the surround approaches 1.
+    """
+    x, y = _grid(size, extent)
+    r2 = x * x + y * y
+    return 1.0 - np.exp(-r2 / (2 * sigma**2)) * np.cos(2 * math.pi * r2 / wavelength + phase)
+
+
+def _orientation_energy(slow: np.ndarray, fast: np.ndarray, even: np.ndarray,
+                        odd: np.ndarray) -> np.ndarray:
+    """E^theta = SA^1 SB^2 - SA^2 SB^1 for one channel and one orientation (paper eqs. 9, 14)."""
+    sa1, sb1 = correlate(slow, even), correlate(slow, odd)
+    sa2, sb2 = correlate(fast, even), correlate(fast, odd)
+    return sa1 * sb2 - sa2 * sb1
+
+
+def motion_energy(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
+                  fast_off: np.ndarray, pairs: list[tuple[np.ndarray, np.ndarray]],
+                  v_on: float, v_off: float) -> np.ndarray:
+    """Ganglion motion energy R^theta = v+ E+^theta + v- E-^theta (paper eqs. 9, 14, 15).
+
+    Parameters
+    ----------
+    slow_on, fast_on, slow_off, fast_off : ndarray (H, W)
+        Bipolar responses B+^s, B+^f, B-^s, B-^f.
+    pairs : list of (even, odd) kernels
+        Gabor pairs for the orientations theta_k = k pi / n, k = 0..n-1 (half the circle).
+    v_on, v_off : float
+        Channel weights v+ and v-.
+
+    Returns
+    -------
+    R : ndarray (2 n, H, W)
+        R^theta for theta_k = k pi / n, k = 0..2n-1. The second half is the negation of the
+        first: the even kernel is symmetric and the odd one antisymmetric under theta -> theta + pi,
+        so R^{theta + pi} = -R^theta exactly.
+    """
+    n = len(pairs)
+    h, w = slow_on.shape
+    r = np.empty((2 * n, h, w), dtype=slow_on.dtype)
+    for k, (even, odd) in enumerate(pairs):
+        r[k] = v_on * _orientation_energy(slow_on, fast_on, even, odd)
+        r[k] += v_off * _orientation_energy(slow_off, fast_off, even, odd)
+        np.negative(r[k], out=r[k + n])
+    return r
+
+
+def center_surround_inhibition(response: np.ndarray, kernel: np.ndarray) -> np.ndarray:
+    """SAC inhibition S = relu(B (*) g_CS) (paper eqs. 11-13)."""
+    return np.maximum(correlate(response, kernel), 0.0)
+
+
+def approach_map(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
+                 fast_off: np.ndarray, cs_kernel: np.ndarray,
+                 weights: tuple[float, float, float, float]) -> np.ndarray:
+    """Approach-sensitive map G of the ganglion cells (paper eqs. 16, 17).
+
+    ``G1+ = relu(relu(B+s) - S1-)``, ``G2+ = relu(relu(B+f) - S2-)``,
+    ``G1- = relu(relu(B-s) - S1+)``, ``G2- = relu(relu(B-f) - S2+)``, where
+    ``S1± = relu(B±f (*) g_CS)`` and ``S2± = relu(B±s (*) g_CS)``; then
+    ``G = w1+ G1+ - w2- G2- + w1- G1- - w2+ G2+``.
+
+    Parameters
+    ----------
+    weights : (w1_on, w2_off, w1_off, w2_on)
+        Signed as in the fusion equation; a zero weight skips its term's filtering.
+    """
+    w1_on, w2_off, w1_off, w2_on = weights
+    g = np.zeros_like(slow_on)
+
+    def term(excitation: np.ndarray, inhibitor: np.ndarray) -> np.ndarray:
+        inhibition = center_surround_inhibition(inhibitor, cs_kernel)
+        return np.maximum(np.maximum(excitation, 0.0) - inhibition, 0.0)
+
+    if w1_on:
+        g += w1_on * term(slow_on, fast_off)     # G1+, inhibited by S1-
+    if w2_off:
+        g -= w2_off * term(fast_off, slow_on)    # G2-, inhibited by S2+
+    if w1_off:
+        g += w1_off * term(slow_off, fast_on)    # G1-, inhibited by S1+
+    if w2_on:
+        g -= w2_on * term(fast_on, slow_off)     # G2+, inhibited by S2-
+    return g
+
+
+def group(g: np.ndarray) -> np.ndarray:
+    """Grouping of the published implementation: ``G (G (*) ones(3, 3) / 9)``."""
+    return g * cv2.blur(g, (3, 3), borderType=_BORDER)
+
+
+# --------------------------------------------------------------------------- attention
+
+
+def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool) -> np.ndarray:
+    """Smoothing with the attention Gaussian g_sigma (paper eqs. 20, 21).
+
+    ``normalised=False`` uses the printed ``exp(-r^2/2 sigma^2) / (2 pi sigma^2)`` on a
+    size x size window; ``True`` uses OpenCV's GaussianBlur (sampled, normalised to sum 1),
+    as the published implementation does.
+    """
+    if normalised:
+        return cv2.GaussianBlur(image, (size, size), sigma, borderType=_BORDER)
+    r = size // 2
+    axis = np.arange(-r, r + 1, dtype=np.float64)
+    k = np.exp(-axis**2 / (2 * sigma**2)) / (math.sqrt(2 * math.pi) * sigma)
+    depth = cv2.CV_32F if image.dtype == np.float32 else cv2.CV_64F
+    return cv2.sepFilter2D(image, depth, k, k, borderType=_BORDER)
+
+
+def approach_attention(g: np.ndarray, sigma: float, size: int, normalised: bool,
+                       gamma_a: float) -> np.ndarray:
+    """Approach-sensitive attention mask M_a = B(G (*) g_sigma, gamma_a) (paper eqs. 21, 22)."""
+    return attention_blur(g, sigma, size, normalised) > gamma_a
+
+
+def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, size: int,
+                        normalised: bool, gamma_d: float) -> np.ndarray:
+    """Directionally selective attention M_d (paper eqs. 23-25).
+
+    The top-k orientations by ``R_sum(theta) = sum_xy R^theta`` form Theta_I;
+    ``V' = V - max_{Theta_I} R`` and ``M_d = B(V' (*) g_sigma, gamma_d)``.
+
+    Parameters
+    ----------
+    r : ndarray (n_theta, H, W)
+        Motion energy per orientation.
+    v : ndarray (H, W)
+        Its maximum over orientations.
+    """
+    if top_k:
+        totals = r.sum(axis=(1, 2))
+        inhibited = np.argsort(-totals, kind="stable")[:top_k]
+        v = v - r[inhibited].max(axis=0)
+    return attention_blur(v, sigma, size, normalised) > gamma_d
+
+
+# --------------------------------------------------------------------------- output
+
+
+def membrane_potential(g_prime: np.ndarray, scale: float, absolute: bool) -> float:
+    """u(t) = sum_xy G'(x, y, t) (paper eq. 26), scaled; ``absolute`` sums |G'| instead."""
+    total = np.abs(g_prime).sum() if absolute else g_prime.sum()
+    return float(scale * total)
+
+
+def sigmoid_output(u: float, n_cells: int) -> float:
+    """out(t) = 1 / (1 + exp(-|u| / N)), in [0.5, 1) (SPEC ruling on paper eq. 27)."""
+    return 1.0 / (1.0 + math.exp(-abs(u) / n_cells))
+
+
+def spike_count(out: float, k_sp: float, t_sp: float) -> int:
+    """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 28)."""
+    return int(math.floor(math.exp(k_sp * (out - t_sp))))

@@ -1,0 +1,254 @@
+"""Synthetic scenes of the paper's experiments, generated in code (no video files are shipped).
+
+Every scene is a :class:`Scene`: uint8 gray frames plus the ground truth a scorer needs. Targets
+are drawn anti-aliased (pixel coverage of the exact disk or bar), so sub-pixel growth and motion
+change the image smoothly, as a camera would see them.
+
+Scenes (``make_scene(name, ...)``):
+
+``approach_recession``
+    A disk expands from ``start`` to ``stop`` and shrinks back from ``stop + hold`` (paper Fig. 5a:
+    expands over steps 10-55, shrinks over 75-120 of 130).
+``looming`` / ``receding``
+    Only the expansion (ends at contact) / only the shrinking.
+``translation``
+    A bar moves right from ``start`` to ``stop`` and back left after ``hold`` (Fig. 5b).
+``translating_bar``
+    A bar moving right for the whole clip.
+``stripes``
+    Vertical stripes translating right for the whole clip, nothing looming.
+``looming_over_stripes`` / ``approach_recession_over_stripes``
+    The disk scenes in front of translating stripes (Fig. 5c).
+
+Contrast is Weber contrast ``c = |I_target - I_background| / 255``; ``polarity='dark'`` draws a
+dark target on a light background, ``'light'`` the reverse.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+__all__ = ["Scene", "SCENE_NAMES", "make_scene", "write_video", "write_frames"]
+
+
+@dataclass
+class Scene:
+    """A generated clip and its ground truth.
+
+    Attributes
+    ----------
+    name : str
+    frames : ndarray of uint8 (T, H, W)
+    fps : float
+    collision : bool
+        Whether something approaches (a looming phase exists).
+    onset_frame, contact_frame : int or None
+        First and last frame of the (first) looming phase.
+    center : (x, y) or None
+        Centre of the looming object, pixels.
+    params : dict
+        The arguments the scene was made with.
+    """
+
+    name: str
+    frames: np.ndarray
+    fps: float
+    collision: bool
+    onset_frame: int | None = None
+    contact_frame: int | None = None
+    center: tuple[float, float] | None = None
+    params: dict = field(default_factory=dict)
+
+    def label(self, file: str) -> dict:
+        """An entry in the format of ``labels.json`` for this clip saved as ``file``."""
+        t, h, w = self.frames.shape
+        return {"file": file, "width": w, "height": h, "fps": self.fps, "frames": t,
+                "collision": self.collision, "onset_frame": self.onset_frame,
+                "contact_frame": self.contact_frame,
+                "center": list(self.center) if self.center else None,
+                "description": f"generated scene {self.name} {self.params}"}
+
+
+def _levels(contrast: float, polarity: str) -> tuple[float, float]:
+    """(background, target) gray levels for a Weber contrast, centred on mid-gray."""
+    if not 0.0 <= contrast <= 1.0:
+        raise ValueError(f"contrast must lie in [0, 1], got {contrast}")
+    if polarity not in ("dark", "light"):
+        raise ValueError(f"polarity must be 'dark' or 'light', got {polarity!r}")
+    delta = contrast * 255.0
+    light, dark = 127.5 + delta / 2, 127.5 - delta / 2
+    return (light, dark) if polarity == "dark" else (dark, light)
+
+
+def _disk_coverage(h: int, w: int, cx: float, cy: float, radius: float) -> np.ndarray:
+    y, x = np.mgrid[0:h, 0:w]
+    d = np.hypot(x - cx, y - cy)
+    return np.clip(radius - d + 0.5, 0.0, 1.0)
+
+
+def _bar_coverage(h: int, w: int, left: float, width: float, top: float,
+                  height: float) -> np.ndarray:
+    x = np.arange(w) + 0.5
+    y = np.arange(h) + 0.5
+    cov_x = np.clip(np.minimum(x + 0.5, left + width) - np.maximum(x - 0.5, left), 0.0, 1.0)
+    cov_y = np.clip(np.minimum(y + 0.5, top + height) - np.maximum(y - 0.5, top), 0.0, 1.0)
+    return cov_y[:, None] * cov_x[None, :]
+
+
+def _stripe_coverage(h: int, w: int, offset: float, period: float, width: float) -> np.ndarray:
+    x = np.arange(w, dtype=np.float64)
+    # coverage of [x, x+1) by stripes [offset + k period, offset + k period + width)
+    phase = np.mod(x - offset, period)
+    cov = np.clip(width - phase, 0.0, 1.0) + np.clip(phase + 1.0 - period, 0.0, 1.0)
+    return np.broadcast_to(np.clip(cov, 0.0, 1.0)[None, :], (h, w))
+
+
+def _radii(frames: int, start: int, stop: int, hold: int, r0: float, speed: float,
+           recede: bool, expand: bool) -> np.ndarray:
+    """Disk radius per frame: grows by speed * exp(0.001 t) px/step on [start, stop) (paper)."""
+    r = np.full(frames, r0 if expand else np.nan)
+    radius = r0
+    for t in range(frames):
+        if expand and start <= t < stop:
+            radius += speed * math.exp(0.001 * t)
+        if recede and stop + hold <= t < stop + hold + (stop - start):
+            radius -= speed * math.exp(0.001 * (t - hold - (stop - start)))
+        r[t] = max(radius, 0.0)
+    return r
+
+
+def make_scene(name: str, *, size: tuple[int, int] = (128, 128), frames: int | None = None,
+               contrast: float = 1.0, polarity: str = "dark", speed: float | None = None,
+               start: int = 10, stop: int = 55, hold: int = 20, radius: float = 6.0,
+               center: tuple[float, float] | None = None, bar: tuple[float, float] = (12.0, 48.0),
+               stripe_period: float = 16.0, stripe_width: float = 4.0,
+               stripe_speed: float = 2.0, fps: float = 20.0) -> Scene:
+    """Generate one of the paper's synthetic scenes.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SCENE_NAMES`.
+    size : (width, height)
+    frames : int, optional
+        Clip length; defaults to 130 for the two-phase scenes (the paper's T), ``stop + 5`` for
+        ``looming``, and 70 otherwise.
+    contrast : float
+        Weber contrast of the target (and of the stripes), in [0, 1].
+    polarity : {'dark', 'light'}
+    speed : float, optional
+        Edge speed in px/step: the disk's radius growth rate (default 1) or the bar's speed
+        (default 2).
+    start, stop, hold : int
+        The motion runs over frames [start, stop); two-phase scenes reverse after ``hold`` frames.
+    radius : float
+        Initial disk radius.
+    center : (x, y), optional
+        Disk centre or the bar's starting centre; defaults to the image centre (for the bar, the
+        left quarter).
+    bar : (width, height)
+    stripe_period, stripe_width, stripe_speed : float
+        Background stripes (px, px, px/step to the right).
+    fps : float
+
+    Returns
+    -------
+    Scene
+    """
+    if name not in SCENE_NAMES:
+        raise ValueError(f"unknown scene {name!r}; choose one of {', '.join(SCENE_NAMES)}")
+    w, h = size
+    if w < 8 or h < 8:
+        raise ValueError(f"scene size must be at least 8x8, got {w}x{h}")
+    if not 0 <= start < stop:
+        raise ValueError("need 0 <= start < stop")
+    two_phase = name in ("approach_recession", "translation", "approach_recession_over_stripes")
+    if frames is None:
+        frames = 130 if two_phase else (stop + 5 if name in ("looming", "looming_over_stripes")
+                                        else 70)
+    background, target = _levels(contrast, polarity)
+    cx, cy = center if center is not None else (w / 2.0, h / 2.0)
+    params = dict(size=size, frames=frames, contrast=contrast, polarity=polarity, speed=speed,
+                  start=start, stop=stop, hold=hold)
+
+    images = np.empty((frames, h, w), dtype=np.float64)
+    stripes = name in ("stripes", "looming_over_stripes", "approach_recession_over_stripes")
+    disk = name in ("approach_recession", "looming", "receding", "looming_over_stripes",
+                    "approach_recession_over_stripes")
+    if disk:
+        rate = 1.0 if speed is None else speed
+        radii = _radii(frames, start, stop, hold, radius, rate, two_phase, True)
+        if name == "receding":  # shrinks from the fully grown size by the same steps
+            radii = radii[-1] - (radii - radius)
+    for t in range(frames):
+        img = np.full((h, w), background)
+        if stripes:
+            cov = _stripe_coverage(h, w, stripe_speed * t, stripe_period, stripe_width)
+            img += cov * (target - background)
+        if disk:
+            cov = _disk_coverage(h, w, cx, cy, radii[t])
+            img += cov * (target - img)
+        if name in ("translation", "translating_bar"):
+            bw, bh = bar
+            v = 2.0 if speed is None else speed
+            x0 = (center[0] if center else w / 4.0) - bw / 2
+            steps = min(max(t - start, 0), stop - start)
+            left = x0 + v * steps
+            if name == "translation" and t >= stop + hold:
+                left -= v * min(t - stop - hold, stop - start)
+            if name == "translating_bar":
+                left = x0 + v * t
+            cov = _bar_coverage(h, w, left, bw, cy - bh / 2, bh)
+            img += cov * (target - img)
+        images[t] = img
+    clip = np.clip(np.rint(images), 0, 255).astype(np.uint8)
+
+    collision = disk and name != "receding"
+    return Scene(name=name, frames=clip, fps=fps, collision=collision,
+                 onset_frame=start if collision else None,
+                 contact_frame=stop if collision else None,
+                 center=(cx, cy) if collision else None, params=params)
+
+
+SCENE_NAMES = ("approach_recession", "looming", "receding", "translation", "translating_bar",
+               "stripes", "looming_over_stripes", "approach_recession_over_stripes")
+
+
+def write_video(frames: np.ndarray, path: str | Path, fps: float = 20.0) -> Path:
+    """Write gray uint8 frames (T, H, W) to a video file (mp4v for .mp4, MJPG for .avi).
+
+    Raises
+    ------
+    OSError
+        If OpenCV cannot open a writer for the path.
+    """
+    path = Path(path)
+    t, h, w = frames.shape
+    fourcc = cv2.VideoWriter_fourcc(*("MJPG" if path.suffix.lower() == ".avi" else "mp4v"))
+    writer = cv2.VideoWriter(str(path), fourcc, fps, (w, h), isColor=True)
+    if not writer.isOpened():
+        raise OSError(f"cannot write video {path}")
+    try:
+        for frame in frames:
+            writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
+    finally:
+        writer.release()
+    return path
+
+
+def write_frames(frames: np.ndarray, directory: str | Path) -> list[Path]:
+    """Write frames as numbered PNG files (lossless) and return their paths."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, frame in enumerate(frames):
+        path = directory / f"frame_{i:05d}.png"
+        if not cv2.imwrite(str(path), frame):
+            raise OSError(f"cannot write {path}")
+        paths.append(path)
+    return paths

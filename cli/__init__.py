@@ -1,0 +1,1 @@
+"""The ``asnn`` command line: the top layer, importing asnn, service and clients."""

@@ -1,0 +1,1 @@
+"""Consumers of the ASNN service: warning subscribers and the fleet dashboard."""

@@ -1,0 +1,1 @@
+"""Zenoh plumbing of the ASNN service: messages, keys, configuration, camera, worker."""
