@@ -3,8 +3,8 @@
 Each function takes and returns plain NumPy arrays (H x W, row-major, x to the right and y
 downwards) and names the equation of Huang et al. it implements. Spatial filtering is 2-D
 *correlation* with OpenCV's reflect-101 border, as in the published implementation; for the
-symmetric kernels this equals the paper's convolution, and for the odd Gabor kernel the choice of
-orientation convention (see :func:`gabor_pair`) absorbs the flip.
+symmetric kernels this equals the paper's convolution, and for the odd Gabor kernel the sign
+convention of :func:`gabor_pair` absorbs the flip.
 
 References
 ----------
@@ -165,20 +165,22 @@ def gabor_pair(theta: float, sigma: float, wavelength: float, size: int,
     """Even and odd Gabor kernels g^0_DS, g^{pi/2}_DS at orientation theta (paper eq. 8).
 
     ``g = exp(-(x'^2 + y'^2) / (2 sigma^2)) cos(2 pi x' / lambda + psi)`` with
-    ``x' = x cos(theta') + y sin(theta')``, ``y' = -x sin(theta') + y cos(theta')`` and
-    ``theta' = pi - theta``. The mirrored angle is the published implementation's; with
-    correlation on an image whose y axis points down, it makes the direction estimate of
-    :func:`motion_energy` come out in image coordinates (x right, y down). The odd kernel is
-    returned as ``exp(...) sin(2 pi x' / lambda)``, i.e. psi = -pi/2, as published.
+    ``x' = x cos(theta) + y sin(theta)``, ``y' = -x sin(theta) + y cos(theta)``, x along columns
+    and y along rows (downwards). The odd kernel is ``exp(...) sin(2 pi x' / lambda)``
+    (psi = -pi/2): with correlation, this sign makes the direction estimate of
+    :func:`motion_energy` point the way things move in image coordinates.
+
+    The published implementation uses ``theta' = pi - theta``; its orientation k is this
+    function's orientation (4 - k) mod 8, so all its sums, maxima and masks are the same and
+    only the x component of its motion vectors has the opposite sign.
 
     Returns
     -------
     even, odd : ndarray (size, size)
     """
     x, y = _grid(size, extent)
-    t = math.pi - theta
-    rx = x * math.cos(t) + y * math.sin(t)
-    ry = -x * math.sin(t) + y * math.cos(t)
+    rx = x * math.cos(theta) + y * math.sin(theta)
+    ry = -x * math.sin(theta) + y * math.cos(theta)
     envelope = np.exp(-(rx**2 + ry**2) / (2 * sigma**2))
     phase = 2 * math.pi * rx / wavelength
     return envelope * np.cos(phase), envelope * np.sin(phase)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -9,6 +10,9 @@ import cv2
 import numpy as np
 
 __all__ = ["VideoError", "VideoClip", "open_video"]
+
+# FFmpeg prints its own decoder complaints on stderr; our errors say it in one line instead.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 
 class VideoError(OSError):

@@ -1,0 +1,103 @@
+"""Pictures of a detector's output: annotated frames (paper Fig. 8) and response plots."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .response import Response
+
+__all__ = ["annotate_frame", "warning_intervals", "plot_responses"]
+
+_ARROW_GAIN = 400.0  # pixels per unit of motion energy, clamped below
+
+
+def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
+    """Overlay a response on its input frame.
+
+    The approach map G is drawn in red where positive, the attended region M_a M_d is outlined in
+    green, and each target gets a blue dot and an arrow along its direction whose length grows
+    with its energy (as in the paper's Fig. 8). A red border marks a collision warning.
+
+    Parameters
+    ----------
+    frame : ndarray (H, W) or (H, W, 3), uint8
+    response : Response
+        With maps (``record_maps=True``) for the overlays; without, only the text and targets.
+
+    Returns
+    -------
+    ndarray (H, W, 3), uint8, BGR
+    """
+    image = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR) if frame.ndim == 2 else frame.copy()
+    maps = response.maps
+    if maps is not None:
+        g = np.maximum(maps.G, 0.0)
+        peak = float(g.max())
+        if peak > 0:
+            alpha = np.clip(g / peak, 0.0, 1.0)[..., None] * 0.8
+            red = np.zeros_like(image)
+            red[..., 2] = 255
+            image = (image * (1 - alpha) + red * alpha).astype(np.uint8)
+        attended = (maps.M_a & maps.M_d).astype(np.uint8)
+        contours, _ = cv2.findContours(attended, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        cv2.drawContours(image, contours, -1, (0, 220, 0), 1)
+    for t in response.targets:
+        centre = (int(round(t.x)), int(round(t.y)))
+        length = min(10.0 + _ARROW_GAIN * t.energy, 0.25 * max(image.shape[:2]))
+        tip = (int(round(t.x + length * math.cos(t.direction))),
+               int(round(t.y + length * math.sin(t.direction))))
+        cv2.circle(image, centre, 3, (255, 80, 0), -1)
+        cv2.arrowedLine(image, centre, tip, (255, 80, 0), 2, tipLength=0.3)
+    if response.collision:
+        cv2.rectangle(image, (0, 0), (image.shape[1] - 1, image.shape[0] - 1), (0, 0, 255), 3)
+    text = f"#{response.index} spikes/s {response.spike_rate:.0f}" + (" WARNING" if response.collision else "")
+    cv2.putText(image, text, (5, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 3, cv2.LINE_AA)
+    cv2.putText(image, text, (5, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
+    return image
+
+
+def warning_intervals(collision: Sequence[bool]) -> list[tuple[int, int]]:
+    """Maximal runs of consecutive warnings as (first, last) frame indices."""
+    runs, start = [], None
+    for i, c in enumerate(collision):
+        if c and start is None:
+            start = i
+        elif not c and start is not None:
+            runs.append((start, i - 1))
+            start = None
+    if start is not None:
+        runs.append((start, len(collision) - 1))
+    return runs
+
+
+def plot_responses(times: Sequence[float], u: Sequence[float], spike_rate: Sequence[float],
+                   collision: Sequence[bool], path: str | Path, title: str = "") -> Path:
+    """Plot u(t) and the spike rate over time, warning intervals shaded, to a PNG file."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    times = np.asarray(times, dtype=float)
+    step = float(np.median(np.diff(times))) if len(times) > 1 else 1.0
+    fig, (ax_u, ax_s) = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
+    ax_u.plot(times, u, color="tab:blue")
+    ax_u.set_ylabel("u(t)")
+    ax_s.step(times, spike_rate, where="post", color="tab:orange")
+    ax_s.set_ylabel("spike rate (Hz)")
+    ax_s.set_xlabel("time (s)")
+    for first, last in warning_intervals(collision):
+        for ax in (ax_u, ax_s):
+            ax.axvspan(times[first], times[last] + step, color="red", alpha=0.15, lw=0)
+    if title:
+        ax_u.set_title(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
