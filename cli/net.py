@@ -1,0 +1,266 @@
+"""The networked commands: camera, worker, alerts, router and the one-process demo."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+
+from service import keys
+from service.config import ConfigError, ZenohOptions
+
+__all__ = ["add_zenoh_options", "register", "zenoh_options"]
+
+log = logging.getLogger("asnn")
+
+
+# ---------------------------------------------------------------- shared options
+
+def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client")) -> None:
+    """The common Zenoh options of every networked command (CONTRACT.md)."""
+    group = parser.add_argument_group("Zenoh")
+    group.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                       help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
+    group.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                       help="endpoint to listen on, e.g. tcp/0.0.0.0:7448 (repeatable)")
+    if modes:
+        group.add_argument("--mode", choices=modes, default=None,
+                           help="Zenoh session mode (default: the config's, else peer)")
+    group.add_argument("--config", metavar="FILE", default=None,
+                       help="Zenoh JSON5 configuration file (options above override it)")
+    group.add_argument("--prefix", default=keys.DEFAULT_PREFIX, type=_prefix,
+                       help="key expression prefix (default: %(default)s)")
+    group.add_argument("--log-level", default="info",
+                       choices=("debug", "info", "warning", "error"),
+                       help="log level on stderr (default: %(default)s)")
+
+
+def _prefix(value: str) -> str:
+    try:
+        return keys.check_prefix(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _robot(value: str) -> str:
+    try:
+        return keys.check_robot(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _positive(value: str) -> float:
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
+    if not number > 0:
+        raise argparse.ArgumentTypeError(f"must be positive: {value!r}")
+    return number
+
+
+def zenoh_options(args: argparse.Namespace) -> ZenohOptions:
+    return ZenohOptions(mode=getattr(args, "mode", None), connect=tuple(args.connect),
+                        listen=tuple(args.listen), config_file=args.config)
+
+
+def _setup_logging(args: argparse.Namespace) -> None:
+    import zenoh
+
+    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    zenoh.try_init_log_from_env()  # Zenoh's own logs only when RUST_LOG is set
+
+
+def _stop_on_signals() -> threading.Event:
+    """An event set by SIGINT or SIGTERM (docker stop), for a clean shutdown."""
+    stop = threading.Event()
+
+    def handler(signum, frame):
+        stop.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, handler)
+    return stop
+
+
+def _fail(message: str, status: int = 2) -> int:
+    print(f"asnn: error: {message}", file=sys.stderr)
+    return status
+
+
+# ---------------------------------------------------------------- commands
+
+def cmd_camera(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from service.camera import SourceError, open_source, publish_frames
+    from service.config import make_config
+
+    _setup_logging(args)
+    try:
+        source = open_source(args.source)
+        config = make_config(zenoh_options(args))
+    except (SourceError, ConfigError) as exc:
+        return _fail(str(exc))
+    stop = _stop_on_signals()
+    with zenoh.open(config) as session:
+        count = publish_frames(session, args.robot, source, prefix=args.prefix, fps=args.fps,
+                               loop=args.loop, format=args.format, wait=args.wait, stop=stop)
+    log.info("camera %s: %d frames published", args.robot, count)
+    return 0
+
+
+def cmd_worker(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from service.config import make_config
+    from service.core import WorkerCore
+    from service.worker import Worker
+
+    _setup_logging(args)
+    try:
+        core = WorkerCore(args.model, args.preset, worker_id=args.id, prefix=args.prefix,
+                          idle_timeout=args.idle_timeout, max_gap=args.max_gap)
+        config = make_config(zenoh_options(args))
+    except (ValueError, ImportError) as exc:
+        return _fail(str(exc))
+    stop = _stop_on_signals()
+    with zenoh.open(config) as session, Worker(session, core):
+        print(f"worker {core.worker_id} ready", file=sys.stderr, flush=True)
+        while not stop.wait(0.5):
+            pass
+    log.info("worker stopped: %s", core.stats())
+    return 0
+
+
+def cmd_alerts(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from clients.alerts import WarningListener, printer
+    from service.config import make_config
+
+    _setup_logging(args)
+    try:
+        config = make_config(zenoh_options(args))
+    except ConfigError as exc:
+        return _fail(str(exc))
+    stop = _stop_on_signals()
+    with zenoh.open(config) as session, \
+            WarningListener(session, printer(args.json, sys.stdout), prefix=args.prefix,
+                            robot=args.robot) as listener:
+        print(f"listening on {listener.key}", file=sys.stderr, flush=True)
+        while not stop.wait(0.5):
+            pass
+    return 0
+
+
+def cmd_router(args: argparse.Namespace) -> int:
+    from service.router import DEFAULT_LISTEN, open_router
+
+    _setup_logging(args)
+    stop = _stop_on_signals()
+    try:
+        session = open_router(zenoh_options(args))
+    except (ConfigError, Exception) as exc:  # zenoh.ZError: e.g. the port is taken
+        return _fail(f"cannot start the router: {exc}")
+    with session:
+        listen = ", ".join(args.listen or [DEFAULT_LISTEN])
+        print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)
+        while not stop.wait(0.5):
+            pass
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from clients.alerts import WarningListener, printer
+    from service.camera import open_source
+    from service.core import WorkerCore
+    from service.demo import run_pipeline
+
+    logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
+                        format="%(name)s %(levelname)s %(message)s")
+    try:
+        core = WorkerCore(args.model, args.preset)
+        source = open_source(f"synthetic:{args.scene}")
+    except (ValueError, ImportError, OSError) as exc:
+        return _fail(str(exc))
+    info = sys.stderr if args.json else sys.stdout
+    print(f"asnn demo: camera -> worker ({core.model}, preset {core.preset or '-'}) -> alerts, "
+          f"scene {args.scene!r}, {source.fps:g} fps, over Zenoh on 127.0.0.1", file=info,
+          flush=True)
+    result = run_pipeline(source, core,
+                          lambda s: WarningListener(s, printer(args.json, sys.stdout)),
+                          fps=args.fps)
+    print(f"{result['published']} frames published, {result['responses']} responses, "
+          f"{result['received']} warnings received", file=info, flush=True)
+    return 0
+
+
+# ---------------------------------------------------------------- registration
+
+def register(subparsers) -> None:
+    from asnn.detectors import MODELS
+    from asnn.stimuli import SCENE_NAMES
+    from service.messages import FORMATS
+
+    p = subparsers.add_parser("camera", help="publish a camera's frames",
+                              description="Publish frames of a video file, a capture device, "
+                              "a stream URL or a generated scene on <prefix>/<robot>/frame.")
+    p.add_argument("--robot", required=True, type=_robot, help="robot id ([A-Za-z0-9_-]{1,64})")
+    p.add_argument("--source", required=True,
+                   help="FILE, DEVICE_INDEX, URL or synthetic:SCENE "
+                        f"(SCENE: {', '.join(SCENE_NAMES)})")
+    p.add_argument("--fps", type=_positive, default=None,
+                   help="publishing rate (default: the source's frame rate)")
+    p.add_argument("--loop", action="store_true", help="replay a file or scene forever")
+    p.add_argument("--format", choices=FORMATS, default="gray8",
+                   help="frame encoding on the wire (default: %(default)s)")
+    p.add_argument("--wait", type=float, default=2.0, metavar="SECONDS",
+                   help="wait up to SECONDS for a subscriber before the first frame "
+                        "(default: %(default)s)")
+    add_zenoh_options(p)
+    p.set_defaults(func=cmd_camera)
+
+    p = subparsers.add_parser("worker", help="run the detector on every robot's frames",
+                              description="Subscribe to <prefix>/*/frame and publish a response "
+                              "per processed frame and a warning per collision.")
+    p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
+    p.add_argument("--preset", default=None, help="ASNN preset (default: the default preset)")
+    p.add_argument("--id", type=_robot, default=None,
+                   help="worker id reported in responses (default: <host>-<pid>)")
+    p.add_argument("--idle-timeout", type=_positive, default=60.0, metavar="SECONDS",
+                   help="forget a robot after SECONDS without frames (default: %(default)s)")
+    p.add_argument("--max-gap", type=int, default=20, metavar="N",
+                   help="reset a robot's state when seq jumps ahead by more than N "
+                        "(default: %(default)s)")
+    add_zenoh_options(p)
+    p.set_defaults(func=cmd_worker)
+
+    p = subparsers.add_parser("alerts", help="print the fleet's collision warnings",
+                              description="Subscribe to <prefix>/<robot>/warning; one line per "
+                              "warning. A late subscriber first receives each robot's latest.")
+    p.add_argument("--robot", type=_robot, default=None, help="only this robot (default: all)")
+    p.add_argument("--json", action="store_true", help="JSON lines (the Response fields)")
+    add_zenoh_options(p)
+    p.set_defaults(func=cmd_alerts)
+
+    p = subparsers.add_parser("router", help="run a Zenoh router (for machines without zenohd)",
+                              description="A Zenoh router from the Python package; robots, "
+                              "workers and subscribers --connect to it.")
+    add_zenoh_options(p, modes=())
+    p.set_defaults(func=cmd_router)
+
+    p = subparsers.add_parser("demo", help="camera, worker and alerts in one process",
+                              description="Play a generated scene through the whole pipeline "
+                              "over in-process Zenoh sessions and print the warnings.")
+    p.add_argument("--scene", choices=SCENE_NAMES, default="looming",
+                   help="generated scene (default: %(default)s)")
+    p.add_argument("--fps", type=_positive, default=None,
+                   help="playback rate (default: the scene's, 20)")
+    p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
+    p.add_argument("--preset", default=None, help="ASNN preset (default: the default preset)")
+    p.add_argument("--json", action="store_true", help="print the warnings as JSON lines")
+    p.set_defaults(func=cmd_demo)

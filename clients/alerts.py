@@ -1,0 +1,102 @@
+"""The fleet's warning subscriber: one line per collision warning, readable or JSON.
+
+Subscribes to ``<prefix>/<robot or *>/warning`` with an advanced subscriber that asks the
+workers' warning caches for history, so a subscriber that joins late receives the latest warning
+of each robot first.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+
+import zenoh
+from zenoh.ext import HistoryConfig, declare_advanced_subscriber
+
+from service import keys
+from service.messages import MessageError, Response, decode_response
+
+__all__ = ["WarningListener", "format_warning"]
+
+log = logging.getLogger("asnn.alerts")
+
+
+def format_warning(r: Response) -> str:
+    """One readable line: time of capture, robot, seq, output and the looming targets."""
+    clock = time.strftime("%H:%M:%S", time.localtime(r.stamp)) + f".{int(r.stamp % 1 * 1000):03d}"
+    if r.targets:
+        targets = "; ".join(
+            f"({t.x:.0f}, {t.y:.0f}) heading {math.degrees(t.direction):+.0f} deg"
+            f" energy {t.energy:.3g} {t.pixels} px" for t in r.targets)
+    else:
+        targets = "none located"
+    return (f"{clock} WARNING robot {r.robot} seq {r.seq}: out {r.out:.3f}, "
+            f"{r.spike_rate:.0f} spikes/s, targets: {targets}")
+
+
+def format_json(r: Response) -> str:
+    return json.dumps(r.model_dump(), separators=(", ", ": "))
+
+
+class WarningListener:
+    """Declares the warning subscriber on a session and calls ``on_warning(Response)``.
+
+    Invalid payloads are counted per reason in ``invalid`` and logged; they never raise.
+    Use as a context manager (or call ``close``).
+    """
+
+    def __init__(self, session: zenoh.Session, on_warning: Callable[[Response], None], *,
+                 prefix: str = keys.DEFAULT_PREFIX, robot: str | None = None):
+        self.on_warning = on_warning
+        self.invalid: Counter = Counter()
+        self.received = 0
+        self._lock = threading.Lock()
+        self.key = keys.warnings(prefix, robot)
+        self._subscriber = declare_advanced_subscriber(
+            session, self.key, self._on_sample,
+            history=HistoryConfig(detect_late_publishers=True, max_samples=1))
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            response = decode_response(sample.payload.to_bytes())
+        except MessageError as exc:
+            with self._lock:
+                self.invalid[exc.reason] += 1
+            log.warning("invalid warning on %s (%s): %s", sample.key_expr, exc.reason, exc.detail)
+            return
+        with self._lock:
+            self.received += 1
+        try:
+            self.on_warning(response)
+        except Exception:
+            log.exception("warning handler failed")
+
+    def __enter__(self) -> WarningListener:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._subscriber is not None:
+            self._subscriber.undeclare()
+            self._subscriber = None
+
+
+def printer(json_lines: bool, out) -> Callable[[Response], None]:
+    """A handler writing one line per warning to ``out`` (flushed: pipes see it at once)."""
+    lock = threading.Lock()
+    fmt = format_json if json_lines else format_warning
+
+    def show(response: Response) -> None:
+        line = fmt(response)
+        with lock:
+            out.write(line + "\n")
+            out.flush()
+
+    return show

@@ -1,0 +1,149 @@
+"""The camera: frames of a file, a device, a stream URL or a generated scene, published on Zenoh.
+
+Frames go to ``<prefix>/<robot>/frame``, best effort (congestion control drop, lowest data
+priority): a late frame is worth less than the next one. ``seq`` counts from 0 and keeps
+increasing across ``--loop`` repetitions; ``stamp`` is the wall-clock time of capture.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import zenoh
+
+from asnn.stimuli import SCENE_NAMES, make_scene
+from asnn.video import VideoError, open_video
+
+from . import keys
+from .messages import FORMATS, Frame, encode
+
+__all__ = ["FRAME_QOS", "Source", "SourceError", "open_source", "publish_frames"]
+
+log = logging.getLogger("asnn.camera")
+
+FRAME_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
+                 priority=zenoh.Priority.DATA_LOW, reliability=zenoh.Reliability.BEST_EFFORT)
+SYNTHETIC = "synthetic:"
+
+
+class SourceError(OSError):
+    """A source that cannot be opened."""
+
+
+@dataclass
+class Source:
+    """Frames (gray or BGR uint8) and their nominal rate.
+
+    ``frames()`` yields one pass over the source; ``live`` sources (devices, URLs) cannot be
+    replayed and are paced by their own capture.
+    """
+
+    name: str
+    fps: float
+    live: bool
+    _open: object
+
+    def frames(self) -> Iterator[np.ndarray]:
+        return self._open()
+
+
+def open_source(spec: str) -> Source:
+    """Open ``FILE``, ``DEVICE_INDEX`` (an integer), ``URL`` (``scheme://...``) or
+    ``synthetic:SCENE`` (one of ``asnn.stimuli.SCENE_NAMES``, 128x128, 20 fps).
+
+    Raises
+    ------
+    SourceError
+        If the source does not exist or yields no frame.
+    """
+    if spec.startswith(SYNTHETIC):
+        name = spec[len(SYNTHETIC):]
+        if name not in SCENE_NAMES:
+            raise SourceError(f"unknown scene {name!r}; choose one of {', '.join(SCENE_NAMES)}")
+        scene = make_scene(name)
+        return Source(spec, scene.fps, False, lambda: iter(scene.frames))
+    if spec.isdigit() or "://" in spec:
+        target = int(spec) if spec.isdigit() else spec
+        cap = cv2.VideoCapture(target)
+        if not cap.isOpened():
+            raise SourceError(f"cannot open capture source {spec!r}")
+        fps = cap.get(cv2.CAP_PROP_FPS)
+        fps = float(fps) if fps and np.isfinite(fps) and 0 < fps <= 240 else 20.0
+        return Source(spec, fps, True, lambda: _capture(cap))
+    try:
+        clip = open_video(spec)
+    except VideoError as exc:
+        raise SourceError(str(exc)) from None
+    return Source(spec, clip.fps, False, lambda: iter(clip))
+
+
+def _capture(cap) -> Iterator[np.ndarray]:
+    try:
+        while True:
+            ok, frame = cap.read()
+            if not ok:
+                return
+            yield frame
+    finally:
+        cap.release()
+
+
+def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
+                   prefix: str = keys.DEFAULT_PREFIX, fps: float | None = None,
+                   loop: bool = False, format: str = "gray8", wait: float = 0.0,
+                   stop: threading.Event | None = None, max_frames: int | None = None) -> int:
+    """Publish the source's frames paced at ``fps`` (default: the source's rate).
+
+    ``wait``: seconds to wait, at most, for a subscriber (a worker) before the first frame.
+    Returns the number of frames published. Ends at the end of the source unless ``loop``
+    (a live source is never replayed), when ``stop`` is set, or after ``max_frames``.
+    """
+    if format not in FORMATS:
+        raise ValueError(f"unknown frame format {format!r}; choose one of {', '.join(FORMATS)}")
+    rate = float(fps or source.fps)
+    if not rate > 0:
+        raise ValueError(f"frame rate must be positive, got {rate}")
+    period = 1.0 / rate
+    stop = stop or threading.Event()
+    key = keys.frame_key(robot, prefix)
+    publisher = session.declare_publisher(key, **FRAME_QOS)
+    try:
+        deadline = time.monotonic() + wait
+        while not publisher.matching_status and time.monotonic() < deadline and not stop.is_set():
+            time.sleep(0.05)
+        if wait and not publisher.matching_status:
+            log.warning("no subscriber on %s after %.1f s; publishing anyway", key, wait)
+        log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
+        seq = 0
+        next_time = time.monotonic()
+        while not stop.is_set():
+            for image in source.frames():
+                if stop.is_set() or (max_frames is not None and seq >= max_frames):
+                    return seq
+                now = time.monotonic()
+                if source.live:  # paced by its capture; --fps only thins it out
+                    if fps and now < next_time:
+                        continue
+                    next_time = max(next_time + period, now) if fps else now
+                else:
+                    if next_time > now:
+                        if stop.wait(next_time - now):
+                            return seq
+                    elif now - next_time > period:  # fell behind: do not burst to catch up
+                        next_time = now
+                    next_time += period
+                frame = Frame.from_image(np.ascontiguousarray(image), seq=seq,
+                                         stamp=time.time(), format=format)
+                publisher.put(encode(frame))
+                seq += 1
+            if not loop or source.live or seq == 0:
+                break
+        return seq
+    finally:
+        publisher.undeclare()

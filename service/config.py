@@ -1,0 +1,78 @@
+"""The Zenoh configuration of every service part, built in one place.
+
+Precedence: Zenoh's defaults < ``--config FILE`` (a Zenoh JSON5 config) < the command-line
+options (``--mode``, ``--connect``, ``--listen``, scouting switches). Timestamping is always
+enabled, because the worker's warning publisher keeps a cache for late subscribers and Zenoh
+requires timestamps for that.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+
+__all__ = ["MODES", "ConfigError", "ZenohOptions", "make_config"]
+
+MODES = ("peer", "client", "router")
+
+
+class ConfigError(ValueError):
+    """A configuration file or option Zenoh does not accept."""
+
+
+@dataclass(frozen=True)
+class ZenohOptions:
+    """What the common command-line options say about the Zenoh session.
+
+    ``None`` (or empty) means "leave Zenoh's value (or the config file's) alone".
+    """
+
+    mode: str | None = None
+    connect: Sequence[str] = field(default_factory=tuple)
+    listen: Sequence[str] = field(default_factory=tuple)
+    config_file: str | Path | None = None
+    multicast_scouting: bool | None = None
+    gossip: bool | None = None
+
+    def config(self) -> zenoh.Config:
+        return make_config(self)
+
+
+def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Config:
+    """Build a ``zenoh.Config`` from options (keyword arguments override fields of ``options``).
+
+    Raises
+    ------
+    ConfigError
+        For an unreadable config file, an unknown mode or an endpoint Zenoh rejects.
+    """
+    opts = options or ZenohOptions()
+    if overrides:
+        opts = ZenohOptions(**{**opts.__dict__, **overrides})
+    try:
+        conf = zenoh.Config.from_file(str(opts.config_file)) if opts.config_file else zenoh.Config()
+    except Exception as exc:  # zenoh.ZError, or an OS error surfaced by zenoh
+        raise ConfigError(f"cannot load Zenoh config {opts.config_file}: {exc}") from None
+    settings: list[tuple[str, object]] = [("timestamping/enabled", True)]
+    if opts.mode is not None:
+        if opts.mode not in MODES:
+            raise ConfigError(f"unknown Zenoh mode {opts.mode!r}; choose one of {', '.join(MODES)}")
+        settings.append(("mode", opts.mode))
+    if opts.connect:
+        settings.append(("connect/endpoints", list(opts.connect)))
+    if opts.listen:
+        settings.append(("listen/endpoints", list(opts.listen)))
+    if opts.multicast_scouting is not None:
+        settings.append(("scouting/multicast/enabled", opts.multicast_scouting))
+    if opts.gossip is not None:
+        settings.append(("scouting/gossip/enabled", opts.gossip))
+    for key, value in settings:
+        try:
+            conf.insert_json5(key, json.dumps(value))
+        except Exception as exc:
+            raise ConfigError(f"Zenoh rejects {key} = {json.dumps(value)}: {exc}") from None
+    return conf

@@ -1,0 +1,332 @@
+"""The worker's logic without the network: per-robot model state, newest frame wins, counters.
+
+:class:`WorkerCore` takes raw payloads (``offer``, from any thread) and hands out one job per
+robot at a time (``take``, ``process``, from one or more processing threads). It imports no Zenoh,
+so tests can drive it directly.
+
+Per-robot state and its reset rule
+----------------------------------
+A robot's model state is created on its first valid frame. Before each frame is processed, the
+state is **reset** (a new stream starts, whose first frame only primes the model) when
+
+* the frame size (width x height) differs from the stream's (``size``);
+* ``seq`` is not greater than the last processed one (``seq-backwards``: the camera restarted);
+* ``seq`` jumps ahead by more than ``max_gap`` frames (``seq-gap``: the stream was interrupted;
+  the gaps that the worker makes itself by skipping frames are normally far smaller);
+* ``stamp`` is smaller than the last processed one (``stamp-backwards``).
+
+The model integrates with its fixed time step (0.05 s), whatever the stamps say. A robot that
+sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten).
+
+Newest frame wins: each robot has one pending slot. A frame that arrives while the previous one
+is still waiting replaces it, and the replaced one is counted in the next response's ``dropped``.
+
+Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``)
+and logged (the first few of each reason, then every power of ten).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import socket
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from asnn import FrameError
+from asnn.detectors import make_detector
+from asnn.params import DEFAULT_PRESET
+
+from . import keys
+from .messages import Frame, MessageError, Response, decode_frame, response_from
+
+__all__ = ["Job", "RESET_REASONS", "WorkerCore", "default_worker_id"]
+
+log = logging.getLogger("asnn.worker")
+
+RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards")
+
+
+def default_worker_id() -> str:
+    """``<host>-<pid>``, restricted to the robot-id alphabet."""
+    host = re.sub(r"[^A-Za-z0-9_-]", "-", socket.gethostname())[:40] or "worker"
+    return f"{host}-{os.getpid()}"
+
+
+@dataclass
+class _Robot:
+    """What the worker knows about one robot."""
+
+    detector: object | None = None
+    shape: tuple[int, int] | None = None  # (width, height) of the stream
+    last_seq: int | None = None
+    last_stamp: float | None = None
+    last_seen: float = 0.0
+    pending: tuple[Frame, float] | None = None  # (frame, received) waiting to be processed
+    dropped: int = 0  # frames replaced since the last response
+    busy: bool = False
+    processed: int = 0
+    resets: int = 0
+
+
+@dataclass(frozen=True)
+class Job:
+    """One frame taken for processing."""
+
+    robot: str
+    frame: Frame
+    received: float  # clock() when the frame arrived
+    dropped: int  # frames of this robot skipped since its previous response
+
+
+@dataclass
+class _Stats:
+    received: int = 0
+    processed: int = 0
+    dropped: int = 0
+    warnings: int = 0
+    evicted: int = 0
+    invalid: Counter = field(default_factory=Counter)
+    resets: Counter = field(default_factory=Counter)
+
+
+class WorkerCore:
+    """Per-robot ASNN state behind a newest-frame-wins queue.
+
+    Parameters
+    ----------
+    model : {'asnn', 'lgmd1', 'lgmd2'}
+    preset : str, optional
+        ASNN preset (``None``: the default preset).
+    worker_id : str, optional
+        Reported in every response; default ``<host>-<pid>``.
+    prefix : str
+        Key prefix; frames are taken from ``<prefix>/<robot>/frame``.
+    idle_timeout : float
+        Seconds without frames after which a robot's state is evicted.
+    max_gap : int
+        Largest forward jump of ``seq`` that keeps the state (see the module notes).
+    max_robots : int
+        Robots tracked at once; frames of further robots are rejected (``too-many-robots``).
+    clock : callable
+        Monotonic seconds (tests may pass a fake one).
+
+    Raises
+    ------
+    ValueError
+        For an unknown model or preset.
+    """
+
+    def __init__(self, model: str = "asnn", preset: str | None = None, *,
+                 worker_id: str | None = None, prefix: str = keys.DEFAULT_PREFIX,
+                 idle_timeout: float = 60.0, max_gap: int = 20, max_robots: int = 256,
+                 clock: Callable[[], float] = time.monotonic):
+        make_detector(model, preset)  # fail now, not on the first frame
+        self.model = model
+        self.preset = (DEFAULT_PRESET if preset in (None, "default") else preset) \
+            if model == "asnn" else ""
+        self.worker_id = worker_id or default_worker_id()
+        self.prefix = keys.check_prefix(prefix)
+        self.idle_timeout = float(idle_timeout)
+        self.max_gap = int(max_gap)
+        self.max_robots = int(max_robots)
+        self.clock = clock
+        self._robots: dict[str, _Robot] = {}
+        self._stats = _Stats()
+        self._lock = threading.Lock()
+        self._ready = threading.Condition(self._lock)
+
+    # ------------------------------------------------------------------ input side
+
+    def offer(self, key: str, payload: bytes, received: float | None = None) -> str | None:
+        """Validate a frame message and make it the robot's pending frame.
+
+        Returns the robot id, or ``None`` when the message was rejected (and counted).
+        Never raises for bad input.
+        """
+        received = self.clock() if received is None else received
+        try:
+            robot, kind = keys.parse_key(key, self.prefix)
+            if kind != "frame":
+                raise MessageError("bad-key", f"{key!r} is not a frame key")
+            frame = decode_frame(payload)
+            frame.check_size()
+        except keys.KeySchemeError as exc:
+            self._reject("bad-key", str(exc), key)
+            return None
+        except MessageError as exc:
+            self._reject(exc.reason, exc.detail, key)
+            return None
+        with self._lock:
+            self._stats.received += 1
+            state = self._robots.get(robot)
+            if state is None:
+                if len(self._robots) >= self.max_robots:
+                    self._reject_locked("too-many-robots",
+                                        f"already tracking {self.max_robots} robots", key)
+                    return None
+                state = self._robots[robot] = _Robot()
+                log.info("robot %s: first frame (%dx%d %s)", robot, frame.width, frame.height,
+                         frame.format)
+            if state.pending is not None:
+                state.dropped += 1
+                self._stats.dropped += 1
+            state.pending = (frame, received)
+            state.last_seen = received
+            self._ready.notify()
+        return robot
+
+    def _reject(self, reason: str, detail: str, key: str) -> None:
+        with self._lock:
+            self._reject_locked(reason, detail, key)
+
+    def _reject_locked(self, reason: str, detail: str, key: str) -> None:
+        self._stats.invalid[reason] += 1
+        n = self._stats.invalid[reason]
+        if n <= 5 or _power_of_ten(n):
+            log.warning("invalid frame on %s (%s, #%d): %s", key, reason, n, detail)
+
+    # ------------------------------------------------------------------ processing side
+
+    def take(self, timeout: float | None = 0.0) -> Job | None:
+        """The pending frame that has waited longest (of a robot not being processed), or None.
+
+        Waits up to ``timeout`` seconds for one (``None``: forever). The robot stays busy until
+        :meth:`process` finishes with the job.
+        """
+        deadline = None if timeout is None else time.monotonic() + timeout
+        with self._ready:
+            while True:
+                ready = [(s.pending[1], r) for r, s in self._robots.items()
+                         if s.pending is not None and not s.busy]
+                if ready:
+                    robot = min(ready)[1]
+                    state = self._robots[robot]
+                    frame, received = state.pending
+                    job = Job(robot, frame, received, state.dropped)
+                    state.pending, state.dropped, state.busy = None, 0, True
+                    return job
+                remaining = None if deadline is None else deadline - time.monotonic()
+                if remaining is not None and remaining <= 0:
+                    return None
+                self._ready.wait(remaining)
+
+    def process(self, job: Job) -> Response | None:
+        """Run the robot's model on the job's frame; the wire Response, or None if rejected."""
+        try:
+            return self._process(job)
+        finally:
+            with self._ready:
+                state = self._robots.get(job.robot)
+                if state is not None:
+                    state.busy = False
+                    if state.pending is not None:
+                        self._ready.notify()
+
+    def _process(self, job: Job) -> Response | None:
+        frame = job.frame
+        with self._lock:
+            state = self._robots.get(job.robot)
+            if state is None:  # evicted meanwhile (cannot happen while busy, but be safe)
+                state = self._robots[job.robot] = _Robot(last_seen=job.received, busy=True)
+        try:
+            image = frame.image()
+        except MessageError as exc:
+            self._give_back(state, job.dropped)
+            self._reject(exc.reason, exc.detail, keys.frame_key(job.robot, self.prefix))
+            return None
+        reason = self._reset_reason(state, frame)
+        if reason is not None or state.detector is None:
+            if state.detector is None:
+                state.detector = make_detector(self.model, self.preset or None)
+            else:
+                state.detector.reset()
+                state.resets += 1
+                with self._lock:
+                    self._stats.resets[reason] += 1
+                log.info("robot %s: state reset (%s) at seq %d", job.robot, reason, frame.seq)
+        try:
+            result = state.detector.step(image)
+        except FrameError as exc:
+            self._give_back(state, job.dropped)
+            self._reject("frame-rejected", str(exc), keys.frame_key(job.robot, self.prefix))
+            return None
+        state.shape = (frame.width, frame.height)
+        state.last_seq, state.last_stamp = frame.seq, frame.stamp
+        state.processed += 1
+        response = response_from(result, robot=job.robot, frame=frame, model=self.model,
+                                 preset=self.preset, worker=self.worker_id,
+                                 latency_ms=(self.clock() - job.received) * 1e3,
+                                 dropped=job.dropped)
+        with self._lock:
+            self._stats.processed += 1
+            self._stats.warnings += response.collision
+        return response
+
+    def _give_back(self, state: _Robot, dropped: int) -> None:
+        """A taken frame produced no response: its skipped count moves to the next one."""
+        with self._lock:
+            state.dropped += dropped
+
+    def _reset_reason(self, state: _Robot, frame: Frame) -> str | None:
+        """Which rule (if any) says this frame starts a new stream (see the module notes)."""
+        if state.shape is None:
+            return None
+        if (frame.width, frame.height) != state.shape:
+            return "size"
+        if frame.seq <= state.last_seq:
+            return "seq-backwards"
+        if frame.seq - state.last_seq > self.max_gap:
+            return "seq-gap"
+        if frame.stamp < state.last_stamp:
+            return "stamp-backwards"
+        return None
+
+    def latency_ms(self, job: Job) -> float:
+        """Milliseconds since the job's frame arrived."""
+        return max((self.clock() - job.received) * 1e3, 0.0)
+
+    # ------------------------------------------------------------------ housekeeping
+
+    def evict_idle(self, now: float | None = None) -> list[str]:
+        """Forget robots idle for longer than ``idle_timeout``; returns their ids."""
+        now = self.clock() if now is None else now
+        with self._lock:
+            gone = [r for r, s in self._robots.items()
+                    if not s.busy and s.pending is None and now - s.last_seen > self.idle_timeout]
+            for robot in gone:
+                del self._robots[robot]
+            self._stats.evicted += len(gone)
+        for robot in gone:
+            log.info("robot %s: evicted after %.0f s without frames", robot, self.idle_timeout)
+        return gone
+
+    def robots(self) -> list[str]:
+        """Robots currently tracked."""
+        with self._lock:
+            return sorted(self._robots)
+
+    def backlog(self) -> int:
+        """Frames waiting or being processed (at most two per robot)."""
+        with self._lock:
+            return sum((s.pending is not None) + s.busy for s in self._robots.values())
+
+    def stats(self) -> dict:
+        """Counters: received, processed, dropped, warnings, evicted, robots, invalid{reason},
+        resets{reason}."""
+        with self._lock:
+            s = self._stats
+            return {"received": s.received, "processed": s.processed, "dropped": s.dropped,
+                    "warnings": s.warnings, "evicted": s.evicted, "robots": len(self._robots),
+                    "invalid": dict(s.invalid), "resets": dict(s.resets)}
+
+
+def _power_of_ten(n: int) -> bool:
+    while n % 10 == 0 and n > 1:
+        n //= 10
+    return n == 1
+

@@ -1,0 +1,211 @@
+"""Wire formats of the service, in one place: pydantic models and their msgpack codec.
+
+All payloads are msgpack maps (CONTRACT.md). Unknown fields are ignored; a missing or ill-typed
+required field makes the message invalid. Decoding raises :class:`MessageError`, whose ``reason``
+is a short stable label that receivers count (``undecodable``, ``not-a-map``, ``invalid-field``,
+``unsupported-version``, ``bad-pixels``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal
+
+import cv2
+import msgpack
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+__all__ = ["FORMATS", "Frame", "MessageError", "Response", "TargetMsg", "VERSION",
+           "decode_frame", "decode_response", "encode", "encode_image"]
+
+VERSION = 1
+FORMATS = ("gray8", "bgr8", "jpeg", "png")
+MAX_SIDE = 8192  # largest accepted frame width or height
+JPEG_QUALITY = 90
+
+
+class MessageError(ValueError):
+    """An invalid message. ``reason`` is a short label for counting, ``str()`` the details."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+
+
+class _Message(BaseModel):
+    # strict: "12" is not an int, 1.5 is not an int, true is not an int; extra fields ignored
+    model_config = ConfigDict(strict=True, extra="ignore", allow_inf_nan=False, frozen=True)
+
+
+class Frame(_Message):
+    """One camera frame, ``<prefix>/<robot>/frame``."""
+
+    v: int = Field(VERSION, description="message version (1)")
+    seq: int = Field(ge=0, description="increasing per robot")
+    stamp: float = Field(description="capture time, seconds, camera clock")
+    width: int = Field(ge=1, le=MAX_SIDE)
+    height: int = Field(ge=1, le=MAX_SIDE)
+    format: Literal["gray8", "bgr8", "jpeg", "png"]
+    data: bytes = Field(description="row-major pixels (gray8, bgr8) or the encoded file")
+
+    def image(self) -> np.ndarray:
+        """The pixels: (H, W) uint8 for gray8, (H, W, 3) BGR uint8 otherwise.
+
+        Raises
+        ------
+        MessageError
+            ``bad-pixels`` when the data does not hold a ``width`` x ``height`` image.
+        """
+        w, h = self.width, self.height
+        if self.format in ("gray8", "bgr8"):
+            self.check_size()
+            pixels = np.frombuffer(self.data, dtype=np.uint8)
+            return pixels.reshape((h, w) if self.format == "gray8" else (h, w, 3))
+        image = cv2.imdecode(np.frombuffer(self.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise MessageError("bad-pixels", f"data is not a decodable {self.format} image")
+        if image.dtype != np.uint8:
+            raise MessageError("bad-pixels", f"{self.format} image is {image.dtype}, not 8-bit")
+        if image.ndim == 3 and image.shape[2] == 4:
+            image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+        if image.shape[:2] != (h, w):
+            raise MessageError("bad-pixels", f"{self.format} image is {image.shape[1]}x"
+                               f"{image.shape[0]}, the message says {w}x{h}")
+        return image
+
+    def check_size(self) -> None:
+        """Cheap check of a raw frame's data length (encoded formats are checked by image()).
+
+        Raises
+        ------
+        MessageError
+            ``bad-pixels`` when a gray8 or bgr8 frame's data is not width x height pixels.
+        """
+        if self.format in ("gray8", "bgr8"):
+            need = self.width * self.height * (1 if self.format == "gray8" else 3)
+            if len(self.data) != need:
+                raise MessageError("bad-pixels", f"{self.format} {self.width}x{self.height} "
+                                   f"needs {need} bytes, got {len(self.data)}")
+
+    @classmethod
+    def from_image(cls, image: np.ndarray, *, seq: int, stamp: float,
+                   format: str = "gray8") -> Frame:
+        """Build a frame from a gray (H, W) or BGR (H, W, 3) uint8 image."""
+        return cls(seq=seq, stamp=stamp, width=image.shape[1], height=image.shape[0],
+                   format=format, data=encode_image(image, format))
+
+
+class TargetMsg(_Message):
+    """A looming region (as in ``asnn detect``)."""
+
+    x: float
+    y: float
+    direction: float
+    energy: float
+    pixels: int = Field(ge=0)
+
+
+class Response(_Message):
+    """The worker's output for one frame, ``<prefix>/<robot>/response`` and ``.../warning``."""
+
+    v: int = VERSION
+    robot: str
+    seq: int = Field(ge=0)
+    stamp: float
+    model: str
+    preset: str
+    u: float
+    out: float
+    spikes: int
+    spike_rate: float
+    collision: bool
+    targets: list[TargetMsg] = Field(default_factory=list)
+    worker: str
+    latency_ms: float = Field(ge=0)
+    dropped: int = Field(ge=0)
+
+
+def encode_image(image: np.ndarray, format: str) -> bytes:
+    """Pixels of a gray or BGR uint8 image as a frame's ``data`` in ``format``."""
+    if image.dtype != np.uint8 or image.ndim not in (2, 3):
+        raise ValueError(f"need a uint8 gray or BGR image, got {image.dtype} {image.shape}")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if format == "gray8":
+        gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+        return np.ascontiguousarray(gray).tobytes()
+    if format == "bgr8":
+        bgr = image if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+        return np.ascontiguousarray(bgr).tobytes()
+    if format in ("jpeg", "png"):
+        params = [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY] if format == "jpeg" else []
+        ok, buf = cv2.imencode(".jpg" if format == "jpeg" else ".png", image, params)
+        if not ok:
+            raise ValueError(f"cannot encode a {image.shape} image as {format}")
+        return buf.tobytes()
+    raise ValueError(f"unknown frame format {format!r}; choose one of {', '.join(FORMATS)}")
+
+
+def encode(message: BaseModel) -> bytes:
+    """msgpack bytes of a message."""
+    return msgpack.packb(message.model_dump(), use_bin_type=True)
+
+
+def _unpack(payload: bytes, what: str) -> dict[str, Any]:
+    try:
+        obj = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated types on garbage
+        why = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        raise MessageError("undecodable", f"{what} is not msgpack ({why})") from None
+    if not isinstance(obj, dict):
+        raise MessageError("not-a-map", f"{what} is a msgpack {type(obj).__name__}, not a map")
+    version = obj.get("v", VERSION)
+    if version != VERSION or isinstance(version, bool):
+        raise MessageError("unsupported-version", f"{what} version {version!r}, expected {VERSION}")
+    return obj
+
+
+def _validate(model: type[BaseModel], obj: dict, what: str):
+    try:
+        return model.model_validate(obj)
+    except ValidationError as exc:
+        fields = "; ".join(f"{'.'.join(map(str, e['loc'])) or '?'}: {e['msg']}"
+                           for e in exc.errors()[:3])
+        raise MessageError("invalid-field", f"{what}: {fields}") from None
+
+
+def decode_frame(payload: bytes) -> Frame:
+    """Validate a Frame payload (the pixels are checked by :meth:`Frame.image`)."""
+    return _validate(Frame, _unpack(payload, "frame"), "frame")
+
+
+def decode_response(payload: bytes) -> Response:
+    """Validate a Response payload."""
+    return _validate(Response, _unpack(payload, "response"), "response")
+
+
+def response_from(result, *, robot: str, frame: Frame, model: str, preset: str, worker: str,
+                  latency_ms: float, dropped: int) -> Response:
+    """Wrap an ``asnn.Response`` (the model's output) for the wire."""
+    fields = result.to_dict()
+    targets = [TargetMsg(**_finite(t)) for t in fields.pop("targets")]
+    return Response(robot=robot, seq=frame.seq, stamp=frame.stamp, model=model, preset=preset,
+                    targets=targets, worker=worker, latency_ms=max(latency_ms, 0.0),
+                    dropped=dropped, **_finite(fields))
+
+
+def _finite(fields: dict) -> dict:
+    """Plain Python scalars (numpy ones are rejected by strict models); non-finite -> 0."""
+    out = {}
+    for key, value in fields.items():
+        if isinstance(value, (bool, np.bool_)):
+            out[key] = bool(value)
+        elif isinstance(value, (int, np.integer)):
+            out[key] = int(value)
+        elif isinstance(value, (float, np.floating)):
+            out[key] = float(value) if math.isfinite(value) else 0.0
+        else:
+            out[key] = value
+    return out
