@@ -117,6 +117,8 @@ class ASNN:
             self.history.appendleft(photo)
 
         on0, off0 = retina.bipolar(photo, self._dog)
+        if p.target_polarity == "light":
+            on0, off0 = off0, on0
         rate = p.dt / p.tau
         retina.temporal_filter_step(self.stages_on, on0, rate, p.c, p.decay, p.leaky_input)
         retina.temporal_filter_step(self.stages_off, off0, rate, p.c, p.decay, p.leaky_input)

@@ -11,6 +11,8 @@ Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The pre
     ``paper`` with the vehicle experiment's warning parameters (K_sp=10, T_sp=0.7).
 ``reference``
     The published Python implementation (SPEC section 3), reproduced to float64 precision.
+``light``
+    The default preset for light objects on a dark background (ON and OFF swapped).
 ``default``
     The preset :command:`asnn detect` uses when none is named; chosen by measurement (README).
 
@@ -34,6 +36,11 @@ class ASNNParams(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     # --- input and photoreceptors (paper eq. 1) ---
+    target_polarity: Literal["dark", "light"] = Field(
+        "dark",
+        description="'light' negates P, which swaps the ON and OFF pathways: the model then "
+        "treats light objects on dark backgrounds as the weights treat dark ones",
+    )
     input_blur: bool = Field(
         False, description="3x3, sigma 1 Gaussian blur of each frame before differencing (reference)"
     )
@@ -181,6 +188,7 @@ PRESETS: dict[str, ASNNParams] = {
 }
 
 DEFAULT_PRESET = "reference"
+PRESETS["light"] = PRESETS[DEFAULT_PRESET].model_copy(update={"target_polarity": "light"})
 
 
 def preset_names() -> list[str]:
