@@ -1,0 +1,156 @@
+"""Wire formats (Frame, Response), key expressions and the Zenoh configuration."""
+
+import json
+import math
+
+import msgpack
+import numpy as np
+import pytest
+
+from asnn import ASNN
+from asnn.stimuli import make_scene
+from service import keys
+from service.config import ConfigError, ZenohOptions, make_config
+from service.messages import (FORMATS, Frame, MessageError, Response, decode_frame,
+                              decode_response, encode, response_from)
+
+RNG = np.random.default_rng(4)
+IMAGE = RNG.integers(0, 256, size=(40, 56, 3), dtype=np.uint8)
+
+
+def frame_dict(**changes):
+    base = {"v": 1, "seq": 3, "stamp": 12.5, "width": 4, "height": 2, "format": "gray8",
+            "data": bytes(range(8))}
+    base.update(changes)
+    return {k: v for k, v in base.items() if v is not ...}
+
+
+def reason(payload: bytes, decoder=decode_frame) -> str:
+    with pytest.raises(MessageError) as err:
+        message = decoder(payload)
+        if isinstance(message, Frame):
+            message.image()
+    return err.value.reason
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_frames_round_trip_in_every_format(fmt):
+    frame = Frame.from_image(IMAGE, seq=7, stamp=1.25, format=fmt)
+    back = decode_frame(encode(frame))
+    assert (back.seq, back.stamp, back.width, back.height, back.format) == (7, 1.25, 56, 40, fmt)
+    image = back.image()
+    assert image.dtype == np.uint8 and image.shape[:2] == (40, 56)
+    if fmt == "bgr8" or fmt == "png":
+        assert np.array_equal(image, IMAGE)
+    if fmt == "gray8":
+        assert image.shape == (40, 56)
+
+
+def test_gray_frames_keep_their_pixels():
+    gray = IMAGE[:, :, 1].copy()
+    assert np.array_equal(decode_frame(encode(Frame.from_image(gray, seq=0, stamp=0))).image(),
+                          gray)
+
+
+def test_wire_format_is_a_msgpack_map_with_the_contract_fields():
+    raw = msgpack.unpackb(encode(Frame.from_image(IMAGE, seq=1, stamp=2.0)))
+    assert set(raw) == {"v", "seq", "stamp", "width", "height", "format", "data"}
+    assert raw["v"] == 1 and isinstance(raw["data"], bytes)
+
+
+def test_unknown_fields_are_ignored():
+    frame = decode_frame(msgpack.packb(frame_dict(extra="hello", nested={"a": 1})))
+    assert frame.seq == 3 and frame.image().shape == (2, 4)
+
+
+@pytest.mark.parametrize("payload, expected", [
+    (b"\xc1\x00garbage", "undecodable"),
+    (b"", "undecodable"),
+    (msgpack.packb([1, 2, 3]), "not-a-map"),
+    (msgpack.packb(frame_dict(v=2)), "unsupported-version"),
+    (msgpack.packb(frame_dict(seq=...)), "invalid-field"),
+    (msgpack.packb(frame_dict(seq="3")), "invalid-field"),
+    (msgpack.packb(frame_dict(seq=3.5)), "invalid-field"),
+    (msgpack.packb(frame_dict(seq=True)), "invalid-field"),
+    (msgpack.packb(frame_dict(seq=-1)), "invalid-field"),
+    (msgpack.packb(frame_dict(stamp=math.nan)), "invalid-field"),
+    (msgpack.packb(frame_dict(width=0)), "invalid-field"),
+    (msgpack.packb(frame_dict(format="yuv")), "invalid-field"),
+    (msgpack.packb(frame_dict(data="text, not bytes")), "invalid-field"),
+    (msgpack.packb(frame_dict(data=b"short")), "bad-pixels"),
+    (msgpack.packb(frame_dict(format="jpeg", data=b"not a jpeg")), "bad-pixels"),
+])
+def test_invalid_frames_are_rejected_with_a_reason(payload, expected):
+    assert reason(payload) == expected
+
+
+def test_an_encoded_image_of_another_size_is_rejected():
+    frame = Frame.from_image(IMAGE, seq=0, stamp=0, format="png")
+    lying = msgpack.packb({**msgpack.unpackb(encode(frame)), "width": 20})
+    assert reason(lying) == "bad-pixels"
+
+
+def test_response_from_a_model_step_round_trips_with_targets():
+    scene = make_scene("looming")
+    model = ASNN("default")
+    result = None
+    for image in scene.frames[:30]:
+        result = model.step(image)
+    assert result.collision and result.targets
+    frame = Frame.from_image(scene.frames[29], seq=29, stamp=100.0)
+    response = response_from(result, robot="r1", frame=frame, model="asnn", preset="reference",
+                             worker="w", latency_ms=3.0, dropped=2)
+    back = decode_response(encode(response))
+    assert back == response
+    assert back.seq == 29 and back.stamp == 100.0 and back.dropped == 2 and back.collision
+    assert back.targets[0].pixels == result.targets[0].pixels
+    assert set(back.model_dump()) == {"v", "robot", "seq", "stamp", "model", "preset", "u", "out",
+                                      "spikes", "spike_rate", "collision", "targets", "worker",
+                                      "latency_ms", "dropped"}
+    json.dumps(back.model_dump())  # JSON-ready for `asnn alerts --json`
+
+
+def test_invalid_responses_are_rejected():
+    good = msgpack.unpackb(encode(Response(
+        robot="r", seq=1, stamp=1.0, model="asnn", preset="p", u=1.0, out=0.5, spikes=0,
+        spike_rate=0.0, collision=True, worker="w", latency_ms=1.0, dropped=0)))
+    assert decode_response(msgpack.packb(good)).collision
+    assert reason(msgpack.packb({**good, "collision": "yes"}), decode_response) == "invalid-field"
+    assert reason(msgpack.packb({**good, "targets": [{"x": 1}]}), decode_response) == \
+        "invalid-field"
+
+
+def test_keys_follow_the_contract():
+    assert keys.frame_key("r1") == "asnn/r1/frame"
+    assert keys.warning_key("robot_2-b", "fleet/a") == "fleet/a/robot_2-b/warning"
+    assert keys.frames() == "asnn/*/frame" and keys.warnings(robot="r1") == "asnn/r1/warning"
+    assert keys.parse_key("asnn/r1/frame") == ("r1", "frame")
+    assert keys.parse_key("x/y/r1/response", "x/y") == ("r1", "response")
+    for bad in ("asnn/r1/frame/extra", "other/r1/frame", "asnn/r 1/frame", "asnn/r1/video",
+                "asnn/" + "r" * 65 + "/frame"):
+        with pytest.raises(keys.KeySchemeError):
+            keys.parse_key(bad)
+    for bad in ("", "a b", "a/*", "a//b", "r/1/../**"):
+        with pytest.raises(keys.KeySchemeError):
+            keys.check_prefix(bad)
+
+
+def test_config_options_override_the_file(tmp_path):
+    path = tmp_path / "z.json5"
+    path.write_text('{ mode: "client", connect: { endpoints: ["tcp/10.0.0.1:7447"] },'
+                    ' scouting: { multicast: { enabled: false } } }')
+    conf = make_config(ZenohOptions(config_file=path))
+    assert json.loads(conf.get_json("mode")) == "client"
+    assert json.loads(conf.get_json("timestamping/enabled")) is True
+    conf = make_config(ZenohOptions(config_file=path, mode="peer",
+                                    connect=("tcp/127.0.0.1:1234",)))
+    assert json.loads(conf.get_json("mode")) == "peer"
+    assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:1234"]
+    assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+
+
+@pytest.mark.parametrize("options", [ZenohOptions(mode="hub"), ZenohOptions(connect=("nope",)),
+                                     ZenohOptions(config_file="/does/not/exist.json5")])
+def test_bad_config_is_a_clear_error(options):
+    with pytest.raises(ConfigError):
+        make_config(options)

@@ -1,0 +1,203 @@
+"""The worker's core without Zenoh: per-robot state, newest frame wins, resets, counters."""
+
+import msgpack
+import numpy as np
+import pytest
+
+from asnn import ASNN
+from asnn.stimuli import make_scene
+from service.core import WorkerCore
+from service.messages import Frame, encode
+
+
+class FakeClock:
+    def __init__(self):
+        self.now = 1000.0
+
+    def __call__(self):
+        return self.now
+
+
+def payload(image, seq, stamp=None, fmt="gray8"):
+    return encode(Frame.from_image(image, seq=seq, stamp=seq * 0.05 if stamp is None else stamp,
+                                   format=fmt))
+
+
+def feed(core, robot, image, seq, stamp=None):
+    """Offer one frame and process it at once; the response (or None)."""
+    assert core.offer(f"asnn/{robot}/frame", payload(image, seq, stamp)) == robot
+    job = core.take()
+    assert job is not None and job.robot == robot
+    return core.process(job)
+
+
+@pytest.fixture(scope="module")
+def looming():
+    return make_scene("looming")
+
+
+@pytest.fixture(scope="module")
+def bar():
+    return make_scene("translating_bar")
+
+
+def test_looming_stream_warns_inside_the_stimulus_window_with_targets(looming):
+    core = WorkerCore()
+    responses = [feed(core, "r1", image, i) for i, image in enumerate(looming.frames)]
+    warned = [r for r in responses if r.collision]
+    assert warned
+    assert looming.onset_frame <= warned[0].seq <= looming.contact_frame
+    assert all(r.robot == "r1" and r.model == "asnn" and r.preset == "reference" for r in warned)
+    assert any(r.targets for r in warned)
+    assert [r.seq for r in responses] == list(range(len(looming.frames)))
+    assert core.stats()["warnings"] == len(warned)
+
+
+def test_translating_stream_yields_no_warning(bar):
+    core = WorkerCore()
+    responses = [feed(core, "r1", image, i) for i, image in enumerate(bar.frames)]
+    assert len(responses) == len(bar.frames) and not any(r.collision for r in responses)
+
+
+def test_two_robots_interleaved_keep_isolated_state(looming, bar):
+    core = WorkerCore()
+    alone = ASNN("default")
+    expected = [alone.step(image).u for image in looming.frames]
+    got = {"a": [], "b": []}
+    for i in range(min(len(looming.frames), len(bar.frames))):
+        got["a"].append(feed(core, "a", looming.frames[i], i))
+        got["b"].append(feed(core, "b", bar.frames[i], i))
+    assert [r.u for r in got["a"]] == expected[:len(got["a"])]
+    assert any(r.collision for r in got["a"]) and not any(r.collision for r in got["b"])
+    assert core.robots() == ["a", "b"]
+
+
+def test_newest_frame_wins_and_skipped_frames_are_counted(looming):
+    core = WorkerCore()
+    for seq in range(3):
+        core.offer("asnn/r1/frame", payload(looming.frames[seq], seq))
+    job = core.take()
+    assert job.frame.seq == 2 and job.dropped == 2
+    assert core.take() is None  # one pending slot per robot
+    assert core.process(job).dropped == 2
+    feed_response = feed(core, "r1", looming.frames[3], 3)
+    assert feed_response.dropped == 0
+    assert core.stats()["dropped"] == 2
+
+
+def test_a_robot_is_not_processed_twice_at_once(looming):
+    core = WorkerCore()
+    core.offer("asnn/r1/frame", payload(looming.frames[0], 0))
+    job = core.take()
+    core.offer("asnn/r1/frame", payload(looming.frames[1], 1))
+    core.offer("asnn/r2/frame", payload(looming.frames[0], 0))
+    second = core.take()
+    assert second.robot == "r2"  # r1 is busy until its job is processed
+    core.process(job)
+    assert core.take().robot == "r1"
+
+
+def test_frame_size_change_resets_the_robot_instead_of_crashing(looming):
+    core = WorkerCore()
+    small = make_scene("looming", size=(96, 64))
+    for i in range(20):
+        feed(core, "r1", looming.frames[i], i)
+    first = feed(core, "r1", small.frames[20], 20)
+    assert first is not None and first.u == 0.0  # a new stream: its first frame primes
+    later = [feed(core, "r1", small.frames[i], i) for i in range(21, 40)]
+    assert all(r is not None for r in later) and any(r.collision for r in later)
+    assert core.stats()["resets"] == {"size": 1}
+
+
+@pytest.mark.parametrize("seqs, stamps, rule", [
+    ([0, 1, 2, 0], None, "seq-backwards"),      # the camera restarted
+    ([0, 1, 2, 2], None, "seq-backwards"),      # a repeated seq
+    ([0, 1, 2, 40], None, "seq-gap"),           # more than max_gap=20 frames missing
+    ([0, 1, 2, 3], [0.0, 0.05, 0.1, 0.02], "stamp-backwards"),
+])
+def test_reset_rules(looming, seqs, stamps, rule):
+    core = WorkerCore(max_gap=20)
+    responses = [feed(core, "r1", looming.frames[10 + i], seq,
+                      None if stamps is None else stamps[i]) for i, seq in enumerate(seqs)]
+    assert responses[-1].u == 0.0 and responses[-1].seq == seqs[-1]
+    assert core.stats()["resets"] == {rule: 1}
+
+
+def test_small_gaps_from_skipped_frames_keep_the_state(looming):
+    core = WorkerCore(max_gap=20)
+    seqs = [0, 1, 3, 6, 10, 15]
+    responses = [feed(core, "r1", looming.frames[10 + s], s) for s in seqs]
+    assert core.stats()["resets"] == {} and responses[-1].u != 0.0
+
+
+def test_malformed_frames_are_counted_while_valid_frames_flow(looming):
+    core = WorkerCore()
+    bad = {
+        "undecodable": b"\x00\xc1 not msgpack",
+        "not-a-map": msgpack.packb("a string"),
+        "invalid-field": msgpack.packb({"seq": "one", "stamp": 0.0}),
+        "unsupported-version": msgpack.packb({"v": 9}),
+        "bad-pixels": msgpack.packb({"seq": 0, "stamp": 0.0, "width": 128, "height": 128,
+                                     "format": "gray8", "data": b"\x00" * 10}),
+    }
+    responses = []
+    for i, image in enumerate(looming.frames[:30]):
+        for name, junk in bad.items():
+            assert core.offer(f"asnn/{name.replace('-', '_')}/frame", junk) is None
+        assert core.offer("asnn/bad robot/frame", payload(image, i)) is None
+        responses.append(feed(core, "good", image, i))
+    stats = core.stats()
+    assert stats["invalid"] == {**{name: 30 for name in bad}, "bad-key": 30}
+    assert stats["processed"] == 30 and all(r is not None for r in responses)
+    assert any(r.collision for r in responses)
+    assert core.robots() == ["good"]
+
+
+def test_frames_the_model_refuses_are_counted_not_raised(looming):
+    core = WorkerCore()
+    tiny = np.zeros((16, 16), np.uint8)
+    assert feed(core, "r1", tiny, 0) is None
+    assert core.stats()["invalid"] == {"frame-rejected": 1}
+    assert feed(core, "r1", looming.frames[0], 1) is not None
+
+
+def test_compressed_frames_with_bad_data_are_counted_at_processing(looming):
+    core = WorkerCore()
+    junk = msgpack.packb({"seq": 0, "stamp": 0.0, "width": 128, "height": 128,
+                          "format": "jpeg", "data": b"\xff\xd8 broken"})
+    core.offer("asnn/r1/frame", payload(looming.frames[0], 0))
+    core.offer("asnn/r1/frame", junk)  # replaces the valid one
+    assert core.process(core.take()) is None
+    assert core.stats()["invalid"] == {"bad-pixels": 1}
+    response = feed(core, "r1", looming.frames[1], 1)
+    assert response is not None and response.dropped == 1  # the replaced frame still counts
+
+
+def test_idle_robots_are_evicted_and_start_afresh():
+    clock = FakeClock()
+    core = WorkerCore(idle_timeout=30, clock=clock)
+    scene = make_scene("looming")
+    for i in range(15):
+        feed(core, "r1", scene.frames[i], i)
+    clock.now += 10
+    feed(core, "r2", scene.frames[0], 0)
+    clock.now += 25
+    assert core.evict_idle() == ["r1"]
+    assert core.robots() == ["r2"]
+    assert feed(core, "r1", scene.frames[15], 15).u == 0.0  # a new state
+    assert core.stats()["evicted"] == 1
+
+
+def test_robot_limit_rejects_new_robots(looming):
+    core = WorkerCore(max_robots=2)
+    for robot in ("a", "b"):
+        feed(core, robot, looming.frames[0], 0)
+    assert core.offer("asnn/c/frame", payload(looming.frames[0], 0)) is None
+    assert core.stats()["invalid"] == {"too-many-robots": 1}
+
+
+def test_unknown_model_or_preset_fails_at_start():
+    with pytest.raises(ValueError):
+        WorkerCore(model="nope")
+    with pytest.raises(ValueError):
+        WorkerCore(preset="nope")
