@@ -1,0 +1,146 @@
+"""LGMD1-1 and LGMD1-2 baselines: interface and characteristic behaviour (SPEC.md section 4)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from asnn.baselines import (LGMD1, LGMD2, LGMD1Params, LGMD2Params, group_excitation,
+                            spike_frequency_adaptation)
+from asnn.detectors import make_detector
+from asnn.frames import FrameError
+from asnn.stimuli import make_scene
+
+SIZE = (96, 96)
+
+
+def _run(model, frames):
+    return [model.step(f) for f in frames]
+
+
+def _flash(levels, size=64):
+    """A uniform field whose brightness follows ``levels`` (a whole-field change)."""
+    return [np.full((size, size), level, dtype=np.uint8) for level in levels]
+
+
+@pytest.fixture(scope="module")
+def looming():
+    return make_scene("looming", size=SIZE, start=8, stop=40)
+
+
+@pytest.fixture(scope="module")
+def translating():
+    return make_scene("translating_bar", size=SIZE, speed=2.0, frames=40,
+                      center=(10.0, 48.0), bar=(8.0, 40.0))
+
+
+@pytest.mark.parametrize("cls", [LGMD1, LGMD2])
+def test_interface_first_frame_targets_and_reset(cls, looming):
+    model = cls()
+    responses = _run(model, looming.frames[:20])
+    first = responses[0]
+    assert (first.index, first.u, first.out, first.spikes, first.collision) == (0, 0.0, 0.5, 0, False)
+    assert [r.index for r in responses] == list(range(20))
+    assert all(r.targets == [] and r.maps is None for r in responses)
+    assert all(0.5 <= r.out < 1.0 for r in responses)
+    model.reset()
+    again = _run(model, looming.frames[:20])
+    assert [r.u for r in again] == [r.u for r in responses]
+    with pytest.raises(FrameError):
+        model.step(np.zeros((50, 60), np.uint8))
+
+
+@pytest.mark.parametrize("cls", [LGMD1, LGMD2])
+def test_float_and_uint8_frames_agree(cls, looming):
+    a = _run(cls(), looming.frames[:15])
+    b = _run(cls(), [f / 255.0 for f in looming.frames[:15]])
+    np.testing.assert_allclose([r.u for r in a], [r.u for r in b], rtol=1e-9)
+
+
+def test_parameters_are_typed_and_overridable():
+    assert LGMD1(w_i=0.6).params.w_i == 0.6
+    assert LGMD2(LGMD2Params(n_ts=8)).params.n_ts == 8
+    with pytest.raises(ValidationError):
+        LGMD1Params(not_a_parameter=1)
+    with pytest.raises(ValidationError):
+        LGMD2Params(persistence=1.5)
+    for params in (LGMD1Params(), LGMD2Params()):  # every default documents its source
+        assert all(f.description for f in type(params).model_fields.values())
+
+
+def test_factory_builds_the_baselines():
+    assert isinstance(make_detector("lgmd1"), LGMD1)
+    assert isinstance(make_detector("lgmd2", "paper"), LGMD2)
+
+
+def test_grouping_keeps_only_clustered_excitation():
+    s = np.zeros((20, 20))
+    s[2:7, 2:7] = 100.0      # a strong cluster sets omega = 0.01 + 100 / 4
+    s[12:17, 2:7] = 30.0     # a weak cluster: Ce = 30, G = 30 * 30 / 25 = 36, kept
+    s[15, 15] = 30.0         # an isolated pixel as strong: Ce = 30 / 9, G = 4, dropped
+    g = group_excitation(s, c_w=4.0, delta_c=0.01, c_de=0.5, t_de=15.0)
+    assert g[4, 4] > 0 and g[14, 4] > 0 and g[15, 15] == 0.0
+    assert (g >= 0).all()
+
+
+def test_spike_frequency_adaptation_rule():
+    a3 = 0.8 / 0.85
+    # a rise above T_sfa restarts from K(t)
+    assert spike_frequency_adaptation(0.6, 0.7, 0.9, a3, 0.003) == pytest.approx(a3 * 0.9)
+    # a steady K(t) decays the adapted potential, down to 0.5
+    assert spike_frequency_adaptation(0.9, 0.9, 0.9, a3, 0.003) == pytest.approx(a3 * 0.9)
+    assert spike_frequency_adaptation(0.51, 0.9, 0.9, a3, 0.003) == 0.5
+
+
+def test_lgmd1_fires_on_approach(looming):
+    responses = _run(LGMD1(), looming.frames)
+    warned = [r.index for r in responses if r.collision]
+    assert warned and looming.onset_frame <= warned[0] <= looming.contact_frame
+    assert not any(r.spikes for r in responses[:looming.onset_frame])
+
+
+def test_lgmd1_also_fires_on_fast_translation():
+    # a small bar, so that the whole-field feed-forward inhibition stays below its threshold
+    scene = make_scene("translating_bar", size=SIZE, speed=4.0, frames=20, center=(10.0, 48.0),
+                       bar=(8.0, 24.0))
+    responses = _run(LGMD1(), scene.frames)
+    assert any(r.collision for r in responses)
+    assert sum(r.spikes for r in responses[5:]) >= 10
+
+
+def test_lgmd2_fires_on_approach(looming):
+    responses = _run(LGMD2(), looming.frames)
+    warned = [r.index for r in responses if r.collision]
+    assert warned and looming.onset_frame <= warned[0] <= looming.contact_frame
+
+
+def test_lgmd2_adaptation_quiets_a_steady_translation(translating):
+    adapted = _run(LGMD2(), translating.frames)
+    unadapted = _run(LGMD2(sfa=False), translating.frames)
+    late = slice(20, None)  # the bar has been moving at a constant speed for 19 frames
+    assert sum(r.spikes for r in adapted[late]) == 0
+    assert not any(r.collision for r in adapted)
+    # without adaptation the same stimulus keeps the cell firing and warning
+    assert sum(r.spikes for r in unadapted[late]) >= 10
+    assert any(r.collision for r in unadapted)
+    # the excitation itself is the same: adaptation acts on the output only
+    np.testing.assert_allclose([r.u for r in adapted], [r.u for r in unadapted])
+
+
+@pytest.mark.parametrize("cls, options", [(LGMD1, {}), (LGMD2, {"sfa": False})])
+def test_feed_forward_inhibition_suppresses_a_whole_field_flash(cls, options):
+    # LGMD1-2 without adaptation, which on its own would quiet a steady flash after a few frames
+    frames = _flash([40] * 4 + [40 + 30 * k for k in range(1, 7)] + [220] * 3)
+    on = _run(cls(**options), frames)
+    off = _run(cls(t_ffi=math.inf, **options), frames)
+    flash = slice(5, 10)
+    # without FFI the brightening field drives the cell to spike every frame
+    assert all(r.spikes for r in off[flash])
+    # with FFI at most the flash's first frame escapes (LGMD1-1's F_f looks one frame back)
+    assert sum(bool(r.spikes) for r in on[flash]) <= 1
+    assert not any(r.collision for r in on)
+    assert all(r.out == 0.5 for r in on[6:10])
+    assert any(r.collision for r in off)
