@@ -1,0 +1,305 @@
+"""Scoring of per-frame detector results against clip labels (SPEC.md section 5).
+
+The per-frame results of one detector on one clip are the records ``asnn detect --jsonl`` writes
+(CONTRACT.md): dicts with at least ``frame`` and ``collision``, and ``targets`` (a list of dicts
+with ``x`` and ``y``) where the detector reports them. A label is an entry of ``labels.json``
+(see ``data/real/README.md``): ``file``, ``fps``, ``collision``, ``onset_frame``,
+``contact_frame``, ``center``.
+
+Rules, with W the warm-up, T the early tolerance in frames (``round(tolerance_s * fps)``), and
+``first`` the first frame at or after W whose record has ``collision`` true:
+
+=========  ===================================================================================
+outcome    when
+=========  ===================================================================================
+hit        collision clip, ``onset - T <= first <= contact + 2``
+early      collision clip, ``first < onset - T``: an early warning, counted as a false alarm
+late       collision clip, ``first > contact + 2``
+miss       collision clip, no warning at or after W
+false      non-collision clip, any warning at or after W (a false alarm)
+quiet      non-collision clip, no warning at or after W (a correct rejection)
+missing    no results for the clip: excluded from every rate, counted on its own
+=========  ===================================================================================
+
+Lead time is ``contact - first`` (frames, and seconds at the clip's fps) for every first warning
+on a collision clip (negative when late). The localisation error is the distance from the
+nearest target of the first warning's frame to the labelled centre, where that frame has targets.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+__all__ = [
+    "OUTCOMES",
+    "WARMUP_FRAMES",
+    "CONTACT_SLACK_FRAMES",
+    "EARLY_TOLERANCE_S",
+    "ClipScore",
+    "first_warning",
+    "score_clip",
+    "missing_clip",
+    "summarize",
+    "load_records",
+    "load_labels",
+    "results_path",
+    "score_directory",
+]
+
+WARMUP_FRAMES = 5
+CONTACT_SLACK_FRAMES = 2
+EARLY_TOLERANCE_S = 0.5
+OUTCOMES = ("hit", "early", "late", "miss", "false", "quiet", "missing")
+
+
+@dataclass(frozen=True)
+class ClipScore:
+    """The score of one detector on one clip.
+
+    Attributes
+    ----------
+    clip : str
+        The label's ``file``.
+    collision : bool
+        Whether the clip is labelled as a collision.
+    outcome : str
+        One of :data:`OUTCOMES`.
+    first_warning : int or None
+        First warning frame at or after the warm-up.
+    warning_frames : int
+        Frames with a warning at or after the warm-up.
+    false_alarm : bool
+        An early warning on a collision clip, or any warning on a non-collision clip.
+    lead_frames, lead_s : float or None
+        ``contact - first_warning``, in frames and seconds (collision clips with a warning).
+    localisation_px : float or None
+        Distance from the nearest target at the first warning to the labelled centre.
+    window : (int, int) or None
+        The frames a first warning must lie in to be a hit.
+    """
+
+    clip: str
+    collision: bool
+    outcome: str
+    first_warning: int | None = None
+    warning_frames: int = 0
+    false_alarm: bool = False
+    lead_frames: float | None = None
+    lead_s: float | None = None
+    localisation_px: float | None = None
+    window: tuple[int, int] | None = None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["window"] = list(self.window) if self.window else None
+        return d
+
+
+def first_warning(records: Iterable[Mapping], warmup: int = WARMUP_FRAMES) -> tuple[int | None, int]:
+    """The first warning frame at or after ``warmup``, and the number of such warning frames.
+
+    Parameters
+    ----------
+    records : iterable of dict
+        Per-frame results with ``frame`` (0-based) and ``collision``.
+    warmup : int
+        Frames ``0 .. warmup - 1`` are ignored.
+
+    Returns
+    -------
+    first : int or None
+    count : int
+    """
+    frames = sorted(int(r["frame"]) for r in records
+                    if r.get("collision") and int(r["frame"]) >= warmup)
+    return (frames[0] if frames else None), len(frames)
+
+
+def _nearest_target_distance(records: Sequence[Mapping], frame: int,
+                             center: Sequence[float] | None) -> float | None:
+    if center is None:
+        return None
+    for r in records:
+        if int(r["frame"]) == frame:
+            targets = r.get("targets") or []
+            if not targets:
+                return None
+            cx, cy = float(center[0]), float(center[1])
+            return min(math.hypot(float(t["x"]) - cx, float(t["y"]) - cy) for t in targets)
+    return None
+
+
+def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARMUP_FRAMES,
+               early_tolerance_s: float = EARLY_TOLERANCE_S,
+               contact_slack: int = CONTACT_SLACK_FRAMES) -> ClipScore:
+    """Score one detector's per-frame results on one clip (SPEC.md section 5).
+
+    Parameters
+    ----------
+    records : sequence of dict
+        Per-frame results (``frame``, ``collision``, optionally ``targets``).
+    label : dict
+        The clip's entry in ``labels.json``.
+    warmup : int
+        Frames ignored at the start of the clip (5).
+    early_tolerance_s : float
+        How long before the labelled onset a first warning still counts as a hit, in seconds
+        (0.5 for the real clips, whose onsets were judged by eye; 0 for generated clips).
+    contact_slack : int
+        Frames after contact a first warning still counts as a hit (2).
+
+    Returns
+    -------
+    ClipScore
+
+    Raises
+    ------
+    ValueError
+        If a collision label lacks its onset or contact frame.
+    """
+    clip = str(label.get("file", "?"))
+    collision = bool(label.get("collision"))
+    first, count = first_warning(records, warmup)
+    if not collision:
+        return ClipScore(clip=clip, collision=False, outcome="false" if count else "quiet",
+                         first_warning=first, warning_frames=count, false_alarm=bool(count))
+
+    onset, contact = label.get("onset_frame"), label.get("contact_frame")
+    if onset is None or contact is None:
+        raise ValueError(f"{clip}: a collision label needs onset_frame and contact_frame")
+    fps = float(label.get("fps") or 0.0)
+    tolerance = int(round(early_tolerance_s * fps)) if fps > 0 else 0
+    window = (int(onset) - tolerance, int(contact) + contact_slack)
+    if first is None:
+        return ClipScore(clip=clip, collision=True, outcome="miss", window=window)
+    if first < window[0]:
+        outcome = "early"
+    elif first <= window[1]:
+        outcome = "hit"
+    else:
+        outcome = "late"
+    lead = float(int(contact) - first)
+    return ClipScore(clip=clip, collision=True, outcome=outcome, first_warning=first,
+                     warning_frames=count, false_alarm=outcome == "early",
+                     lead_frames=lead, lead_s=lead / fps if fps > 0 else None,
+                     localisation_px=_nearest_target_distance(records, first, label.get("center")),
+                     window=window)
+
+
+def missing_clip(label: Mapping) -> ClipScore:
+    """The score of a clip the detector has no results for (outcome ``missing``)."""
+    return ClipScore(clip=str(label.get("file", "?")), collision=bool(label.get("collision")),
+                     outcome="missing")
+
+
+def _mean(values: list[float]) -> float | None:
+    return sum(values) / len(values) if values else None
+
+
+def _median(values: list[float]) -> float | None:
+    if not values:
+        return None
+    v = sorted(values)
+    mid = len(v) // 2
+    return v[mid] if len(v) % 2 else (v[mid - 1] + v[mid]) / 2
+
+
+def summarize(scores: Iterable[ClipScore]) -> dict:
+    """Aggregate clip scores of one detector.
+
+    Returns
+    -------
+    dict
+        ``clips``, ``scored`` and ``missing`` counts; ``collision_clips``,
+        ``noncollision_clips`` (scored only); the count of each outcome; ``false_alarms``
+        (early warnings plus warned non-collision clips); ``hit_rate`` (hits over scored collision
+        clips), ``false_alarm_rate`` (false alarms over scored clips), ``specificity`` (quiet over
+        scored non-collision clips), each None without a denominator; ``mean_lead_s`` and
+        ``mean_lead_frames`` over hits; ``median_localisation_px`` over hits with targets.
+    """
+    scores = list(scores)
+    scored = [s for s in scores if s.outcome != "missing"]
+    counts = {o: sum(s.outcome == o for s in scores) for o in OUTCOMES}
+    n_col = sum(s.collision for s in scored)
+    n_non = len(scored) - n_col
+    false_alarms = counts["early"] + counts["false"]
+    hits = [s for s in scored if s.outcome == "hit"]
+    return {
+        "clips": len(scores),
+        "scored": len(scored),
+        "missing": counts["missing"],
+        "collision_clips": n_col,
+        "noncollision_clips": n_non,
+        **{o: counts[o] for o in OUTCOMES if o != "missing"},
+        "false_alarms": false_alarms,
+        "hit_rate": counts["hit"] / n_col if n_col else None,
+        "false_alarm_rate": false_alarms / len(scored) if scored else None,
+        "specificity": counts["quiet"] / n_non if n_non else None,
+        "mean_lead_frames": _mean([s.lead_frames for s in hits]),
+        "mean_lead_s": _mean([s.lead_s for s in hits if s.lead_s is not None]),
+        "median_localisation_px": _median([s.localisation_px for s in hits
+                                           if s.localisation_px is not None]),
+    }
+
+
+def load_records(path: str | Path) -> list[dict]:
+    """Read per-frame results: a JSON-lines file (``asnn detect --jsonl``) or a JSON list.
+
+    Raises
+    ------
+    ValueError
+        If a line is not a JSON object with a ``frame``.
+    """
+    text = Path(path).read_text(encoding="utf-8")
+    stripped = text.lstrip()
+    if stripped.startswith("["):
+        records = json.loads(stripped)
+    else:
+        records = [json.loads(line) for line in text.splitlines() if line.strip()]
+    for r in records:
+        if not isinstance(r, dict) or "frame" not in r:
+            raise ValueError(f"{path}: every record must be a JSON object with a 'frame'")
+    return records
+
+
+def load_labels(path: str | Path) -> list[dict]:
+    """Read ``labels.json``: a list of clip labels (or an object with a ``clips`` list).
+
+    Raises
+    ------
+    ValueError
+        If the file holds neither, or an entry has no ``file``.
+    """
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    if isinstance(data, dict):
+        data = data.get("clips")
+    if not isinstance(data, list) or not all(isinstance(d, dict) and "file" in d for d in data):
+        raise ValueError(f"{path}: expected a list of clip labels, each with a 'file'")
+    return data
+
+
+def results_path(results_dir: str | Path, clip: str) -> Path | None:
+    """The results file of a clip in a directory: ``<stem>.jsonl`` or ``<stem>.json``, if any."""
+    stem = Path(clip).stem
+    for suffix in (".jsonl", ".json"):
+        candidate = Path(results_dir) / f"{stem}{suffix}"
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def score_directory(results_dir: str | Path, labels: Sequence[Mapping], **options) -> list[ClipScore]:
+    """Score every labelled clip from its results file in ``results_dir``.
+
+    A clip without a results file scores ``missing``. ``options`` go to :func:`score_clip`.
+    """
+    scores = []
+    for label in labels:
+        path = results_path(results_dir, str(label["file"]))
+        scores.append(missing_clip(label) if path is None
+                      else score_clip(load_records(path), label, **options))
+    return scores

@@ -1,0 +1,131 @@
+"""Scoring rules of SPEC.md section 5 on hand-made results."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from asnn import scoring
+
+# fps 20: the 0.5 s tolerance is 10 frames, so the hit window of onset 20, contact 40 is [10, 42]
+COLLISION = {"file": "c.mp4", "fps": 20.0, "frames": 60, "collision": True, "onset_frame": 20,
+             "contact_frame": 40, "center": [30.0, 40.0]}
+QUIET = {"file": "nc.mp4", "fps": 20.0, "frames": 60, "collision": False, "onset_frame": None,
+         "contact_frame": None, "center": None}
+
+
+def records(warnings=(), frames=60, targets=None):
+    """Per-frame records with warnings at the given frames; ``targets``: {frame: [(x, y)]}."""
+    targets = targets or {}
+    return [{"frame": i, "collision": i in warnings,
+             "targets": [{"x": x, "y": y} for x, y in targets.get(i, [])]} for i in range(frames)]
+
+
+@pytest.mark.parametrize("warnings, outcome", [
+    ((), "miss"),
+    ((0, 4), "miss"),            # inside the warm-up only
+    ((9,), "early"),
+    ((10,), "hit"),              # onset - 0.5 s
+    ((20, 21), "hit"),
+    ((42,), "hit"),              # contact + 2
+    ((43,), "late"),
+    ((3, 43), "late"),           # the warm-up warning is ignored
+    ((9, 30), "early"),          # only the first warning counts
+])
+def test_collision_outcomes(warnings, outcome):
+    score = scoring.score_clip(records(warnings), COLLISION)
+    assert score.outcome == outcome
+    assert score.false_alarm == (outcome == "early")
+    assert score.window == (10, 42)
+
+
+def test_lead_time_in_frames_and_seconds():
+    early = scoring.score_clip(records((9, 10, 11)), COLLISION)
+    assert (early.first_warning, early.warning_frames) == (9, 3)
+    assert early.lead_frames == 31 and early.lead_s == pytest.approx(1.55)
+    late = scoring.score_clip(records((45,)), COLLISION)
+    assert late.lead_frames == -5 and late.lead_s == pytest.approx(-0.25)
+    miss = scoring.score_clip(records(()), COLLISION)
+    assert miss.lead_frames is None and miss.first_warning is None
+
+
+def test_tolerance_and_warmup_are_parameters():
+    assert scoring.score_clip(records((15,)), COLLISION).outcome == "hit"
+    assert scoring.score_clip(records((15,)), COLLISION, early_tolerance_s=0).outcome == "early"
+    assert scoring.score_clip(records((19,)), COLLISION, early_tolerance_s=0).outcome == "early"
+    assert scoring.score_clip(records((20,)), COLLISION, early_tolerance_s=0).outcome == "hit"
+    assert scoring.score_clip(records((8, 30)), COLLISION, warmup=9).outcome == "hit"
+    no_fps = {**COLLISION, "fps": None}
+    assert scoring.score_clip(records((15,)), no_fps).outcome == "early"  # no fps: no tolerance
+
+
+def test_noncollision_clip():
+    assert scoring.score_clip(records((1, 4)), QUIET).outcome == "quiet"
+    score = scoring.score_clip(records((5, 6, 50)), QUIET)
+    assert (score.outcome, score.false_alarm, score.first_warning, score.warning_frames) == \
+        ("false", True, 5, 3)
+    assert score.lead_frames is None
+
+
+def test_localisation_error_uses_the_nearest_target_at_the_first_warning():
+    targets = {25: [(100.0, 100.0), (33.0, 44.0)], 26: [(30.0, 40.0)]}
+    score = scoring.score_clip(records((25, 26), targets=targets), COLLISION)
+    assert score.localisation_px == pytest.approx(5.0)
+    no_targets = scoring.score_clip(records((24, 25), targets=targets), COLLISION)
+    assert no_targets.localisation_px is None
+
+
+def test_unordered_records_and_missing_onset():
+    shuffled = list(reversed(records((30, 12))))
+    assert scoring.score_clip(shuffled, COLLISION).first_warning == 12
+    with pytest.raises(ValueError):
+        scoring.score_clip(records(), {**COLLISION, "onset_frame": None})
+
+
+def test_summary_counts_rates_and_lead():
+    scores = [
+        scoring.score_clip(records((20,)), {**COLLISION, "file": "a"}),   # hit, lead 20 fr
+        scoring.score_clip(records((40,)), {**COLLISION, "file": "b"}),   # hit, lead 0
+        scoring.score_clip(records((6,)), {**COLLISION, "file": "c"}),    # early
+        scoring.score_clip(records(()), {**COLLISION, "file": "d"}),      # miss
+        scoring.score_clip(records((7,)), {**QUIET, "file": "e"}),        # false alarm
+        scoring.score_clip(records(()), {**QUIET, "file": "f"}),          # quiet
+        scoring.missing_clip({**COLLISION, "file": "g"}),
+    ]
+    s = scoring.summarize(scores)
+    assert (s["clips"], s["scored"], s["missing"]) == (7, 6, 1)
+    assert (s["collision_clips"], s["noncollision_clips"]) == (4, 2)
+    assert (s["hit"], s["early"], s["late"], s["miss"], s["false"], s["quiet"]) == (2, 1, 0, 1, 1, 1)
+    assert s["false_alarms"] == 2
+    assert s["hit_rate"] == pytest.approx(0.5)
+    assert s["false_alarm_rate"] == pytest.approx(2 / 6)
+    assert s["specificity"] == pytest.approx(0.5)
+    assert s["mean_lead_frames"] == pytest.approx(10.0)
+    assert s["mean_lead_s"] == pytest.approx(0.5)
+    assert s["median_localisation_px"] is None
+    empty = scoring.summarize([])
+    assert empty["hit_rate"] is None and empty["false_alarm_rate"] is None
+
+
+def test_score_directory_with_hand_made_files_and_a_missing_clip(tmp_path):
+    labels = [COLLISION, QUIET, {**COLLISION, "file": "absent.mp4"}]
+    (tmp_path / "c.jsonl").write_text(
+        "\n".join(json.dumps(r) for r in records((12,), frames=50)) + "\n")
+    (tmp_path / "nc.json").write_text(json.dumps(records((30,), frames=50)))  # a JSON list
+    scores = scoring.score_directory(tmp_path, labels, early_tolerance_s=0.0)
+    assert [s.outcome for s in scores] == ["early", "false", "missing"]
+    summary = scoring.summarize(scores)
+    assert summary["missing"] == 1 and summary["collision_clips"] == 1
+    assert summary["false_alarms"] == 2
+
+
+def test_load_records_rejects_records_without_frames(tmp_path):
+    path = tmp_path / "bad.jsonl"
+    path.write_text('{"collision": true}\n')
+    with pytest.raises(ValueError):
+        scoring.load_records(path)
+    labels = tmp_path / "labels.json"
+    labels.write_text('{"clips": [{"nofile": 1}]}')
+    with pytest.raises(ValueError):
+        scoring.load_labels(labels)
