@@ -4,11 +4,16 @@ Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The pre
 
 ``paper``
     Table I, the rulings of SPEC section 2, the weights of the approach experiment and the
-    warning parameters of the vehicle experiment, read literally.
+    warning parameters of the vehicle experiment, read literally. On the [0, 1] intensity scale
+    of the rulings, ``out(t) = 1/(1+exp(-|u|/N))`` stays below 0.51 for any real input, so with
+    T_sp = 0.7 this preset never fires a spike: it is kept for studying the maps and u(t).
 ``approach``, ``translation``, ``robot``
-    ``paper`` with the weight vector of the corresponding experiment.
+    The weight vector of the corresponding experiment; ``robot`` with its warning parameters.
 ``vehicle``
-    ``paper`` with the vehicle experiment's warning parameters (K_sp=10, T_sp=0.7).
+    The vehicle experiment: approach weights, K_sp=10, T_sp=0.7, N_t=4, T_c=1.
+    These four scale u by 255 before the sigmoid (``u_scale``), i.e. measure it in the 0..255
+    units the paper's warning thresholds were evidently tuned for (as the published
+    implementation does); without it they could never warn.
 ``reference``
     The published Python implementation (SPEC section 3), reproduced to float64 precision.
 ``light``
@@ -167,10 +172,11 @@ _PAPER = ASNNParams()
 
 PRESETS: dict[str, ASNNParams] = {
     "paper": _PAPER,
-    "approach": _PAPER.model_copy(update=_weights("approach")),
-    "translation": _PAPER.model_copy(update=_weights("translation")),
-    "vehicle": _PAPER.model_copy(update=dict(k_sp=10.0, t_sp=0.7, n_t=4, t_c=1.0)),
-    "robot": _PAPER.model_copy(update=dict(**_weights("robot"), k_sp=20.0, t_sp=0.52, n_t=4, t_c=1.0)),
+    "approach": _PAPER.model_copy(update=dict(**_weights("approach"), u_scale=255.0)),
+    "translation": _PAPER.model_copy(update=dict(**_weights("translation"), u_scale=255.0)),
+    "vehicle": _PAPER.model_copy(update=dict(k_sp=10.0, t_sp=0.7, n_t=4, t_c=1.0, u_scale=255.0)),
+    "robot": _PAPER.model_copy(update=dict(**_weights("robot"), k_sp=20.0, t_sp=0.52, n_t=4,
+                                           t_c=1.0, u_scale=255.0)),
     "reference": ASNNParams(
         input_blur=True,
         n_p=0,
