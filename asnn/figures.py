@@ -1,0 +1,250 @@
+"""Figures of the evaluation, drawn with Matplotlib's object API on the Agg canvas.
+
+Every function takes the JSON-ready data :mod:`asnn.evaluation` computes (and saves next to the
+figure), draws one PNG and returns its path. No pyplot: nothing touches Matplotlib's global state,
+so the functions are safe in servers and tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+__all__ = [
+    "MODEL_COLOURS",
+    "plot_clip_responses",
+    "plot_summary",
+    "plot_synthetic_responses",
+    "plot_sweeps",
+    "plot_maps",
+    "plot_temporal_filter",
+]
+
+MODEL_COLOURS = {"asnn": "tab:red", "lgmd1": "tab:blue", "lgmd2": "tab:green"}
+_OUTCOME_COLOURS = {"hit": "tab:green", "early": "tab:orange", "late": "tab:purple",
+                    "miss": "tab:gray", "false": "tab:red", "quiet": "tab:cyan"}
+
+
+def _figure(width: float, height: float) -> Figure:
+    fig = Figure(figsize=(width, height), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    return path
+
+
+def _colour(model: str) -> str:
+    return MODEL_COLOURS.get(model, "black")
+
+
+def _mark_events(ax, onset: int | None, contact: int | None, window: Sequence[int] | None = None):
+    if window is not None:
+        ax.axvspan(window[0], window[1], color="tab:green", alpha=0.08, lw=0)
+    if onset is not None:
+        ax.axvline(onset, color="black", ls="--", lw=0.8)
+    if contact is not None:
+        ax.axvline(contact, color="black", ls="-", lw=1.0)
+
+
+def plot_clip_responses(path: str | Path, clip: Mapping) -> Path:
+    """One clip: each model's output over time, its warnings, onset and contact.
+
+    Parameters
+    ----------
+    path : str or Path
+        The PNG to write.
+    clip : dict
+        ``name``, ``onset``, ``contact`` (frames or None), ``window`` (the hit window or None),
+        ``warmup`` and ``models``: ``{model: {"out": [...], "spike_rate": [...],
+        "collision": [...], "outcome": str}}``.
+    """
+    models = clip["models"]
+    fig = _figure(8.0, 5.6)
+    top, middle, bottom = fig.subplots(3, 1, sharex=True, height_ratios=[3, 2, 1])
+    for model, series in models.items():
+        frames = np.arange(len(series["out"]))
+        top.plot(frames, series["out"], color=_colour(model), lw=1.2,
+                 label=f"{model} ({series.get('outcome', '?')})")
+        if "spike_rate" in series:
+            middle.plot(frames, series["spike_rate"], color=_colour(model), lw=1.0)
+    for row, (model, series) in enumerate(models.items()):
+        warn = np.flatnonzero(np.asarray(series["collision"], dtype=bool))
+        bottom.scatter(warn, np.full(len(warn), row), marker="|", s=80, color=_colour(model))
+    for ax in (top, middle, bottom):
+        _mark_events(ax, clip.get("onset"), clip.get("contact"), clip.get("window"))
+        ax.axvspan(0, clip.get("warmup", 0) - 0.5, color="0.85", lw=0)
+    top.set_ylabel("out(t)")
+    top.set_title(f"{clip['name']}: responses (dashed onset, solid contact, green hit window)")
+    top.legend(loc="upper left", fontsize=8)
+    middle.set_yscale("symlog", linthresh=10.0)
+    middle.set_ylabel("spike rate, Hz")
+    bottom.set_yticks(range(len(models)), list(models))
+    bottom.set_ylim(-0.7, len(models) - 0.3)
+    bottom.set_ylabel("warnings")
+    bottom.set_xlabel("frame")
+    return _save(fig, path)
+
+
+def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
+    """Stacked bars of the outcomes per model, and the mean lead time of the hits.
+
+    Parameters
+    ----------
+    summaries : dict
+        ``{model: scoring.summarize(...)}``.
+    """
+    models = list(summaries)
+    fig = _figure(8.0, 3.6)
+    counts_ax, lead_ax = fig.subplots(1, 2, width_ratios=[2, 1])
+    x = np.arange(len(models))
+    bottom = np.zeros(len(models))
+    for outcome, colour in _OUTCOME_COLOURS.items():
+        values = np.array([summaries[m].get(outcome, 0) for m in models], dtype=float)
+        counts_ax.bar(x, values, bottom=bottom, color=colour, label=outcome, width=0.6)
+        bottom += values
+    counts_ax.set_xticks(x, models)
+    counts_ax.set_ylabel("clips")
+    counts_ax.set_title("outcomes (early and false are false alarms)")
+    counts_ax.legend(fontsize=8, ncol=3, loc="upper right")
+    counts_ax.set_ylim(0, max(bottom.max(), 1) * 1.35)
+    lead = [summaries[m].get("mean_lead_s") for m in models]
+    lead_ax.bar(x, [v if v is not None else 0.0 for v in lead],
+                color=[_colour(m) for m in models], width=0.6)
+    lead_ax.set_xticks(x, models)
+    lead_ax.set_ylabel("seconds")
+    lead_ax.set_title("mean lead time of hits")
+    return _save(fig, path)
+
+
+def plot_synthetic_responses(path: str | Path, data: Mapping) -> Path:
+    """Paper Figs. 5 and 6: a stimulus frame and the models' outputs, one column per scene.
+
+    Parameters
+    ----------
+    data : dict
+        ``title`` and ``scenes``: a list of ``{"title", "snapshot" (2-D list, uint8),
+        "snapshot_frame", "onset", "contact", "models": {model: {"out": [...],
+        "collision": [...]}}}``.
+    """
+    scenes = data["scenes"]
+    fig = _figure(4.0 * len(scenes), 5.8)
+    axes = fig.subplots(2, len(scenes), squeeze=False, height_ratios=[1, 1.1])
+    for col, scene in enumerate(scenes):
+        img_ax, ax = axes[0, col], axes[1, col]
+        img_ax.imshow(np.asarray(scene["snapshot"]), cmap="gray", vmin=0, vmax=255)
+        img_ax.set_title(f"{scene['title']}\n(frame {scene['snapshot_frame']})", fontsize=9)
+        img_ax.set_axis_off()
+        for model, series in scene["models"].items():
+            out = np.asarray(series["out"])
+            ax.plot(np.arange(len(out)), out, color=_colour(model), lw=1.2, label=model)
+            warn = np.flatnonzero(np.asarray(series["collision"], dtype=bool))
+            ax.scatter(warn, np.full(len(warn), 1.0), marker="|", s=25, color=_colour(model))
+        _mark_events(ax, scene.get("onset"), scene.get("contact"))
+        ax.set_ylim(0.48, 1.03)
+        ax.set_xlabel("step")
+        if col == 0:
+            ax.set_ylabel("out(t); ticks at 1 = warnings")
+            ax.legend(fontsize=8, loc="center right")
+    fig.suptitle(data.get("title", ""))
+    return _save(fig, path)
+
+
+def plot_sweeps(path: str | Path, data: Mapping) -> Path:
+    """Paper Fig. 7: ASNN's u(t) and its peak for a contrast sweep and a speed sweep.
+
+    Parameters
+    ----------
+    data : dict
+        ``contrast`` and ``speed``, each ``{"values": [...], "u": [[...], ...], "peak": [...]}``,
+        plus ``onset`` and ``contact``.
+    """
+    fig = _figure(9.0, 6.0)
+    axes = fig.subplots(2, 2, width_ratios=[2, 1])
+    for row, (key, unit) in enumerate((("contrast", "Weber contrast"),
+                                       ("speed", "edge speed, px/step"))):
+        sweep = data[key]
+        series_ax, peak_ax = axes[row]
+        colours = [f"C{i}" for i in range(len(sweep["values"]))]
+        for value, u, colour in zip(sweep["values"], sweep["u"], colours):
+            series_ax.plot(np.arange(len(u)), u, color=colour, lw=1.0, label=f"{value:g}")
+        _mark_events(series_ax, data.get("onset"), data.get("contact"))
+        series_ax.set_ylabel("u(t)")
+        series_ax.set_xlabel("step")
+        series_ax.legend(title=unit, fontsize=7, title_fontsize=8, ncol=2)
+        peak_ax.plot(sweep["values"], sweep["peak"], "o-", color="tab:red")
+        peak_ax.set_xlabel(unit)
+        peak_ax.set_ylabel("peak u")
+    fig.suptitle(data.get("title", "contrast and speed sensitivity"))
+    return _save(fig, path)
+
+
+def plot_maps(path: str | Path, data: Mapping) -> Path:
+    """Paper Fig. 4: motion-energy flow, V, G, M_a, M_d and G' at one step.
+
+    Parameters
+    ----------
+    data : dict
+        ``frame`` (2-D gray), ``V``, ``phi``, ``G``, ``M_a``, ``M_d``, ``G_prime`` (2-D lists),
+        ``step`` and ``title``.
+    """
+    frame = np.asarray(data["frame"], dtype=float)
+    v, phi = np.asarray(data["V"], dtype=float), np.asarray(data["phi"], dtype=float)
+    fig = _figure(12.0, 7.6)
+    axes = fig.subplots(2, 3)
+    ax = axes[0, 0]
+    ax.imshow(frame, cmap="gray", vmin=0, vmax=255)
+    stride = max(min(frame.shape) // 24, 1)
+    ys, xs = np.mgrid[stride // 2:frame.shape[0]:stride, stride // 2:frame.shape[1]:stride]
+    vv = np.clip(v[ys, xs], 0.0, None)
+    scale = vv.max() if vv.max() > 0 else 1.0
+    # image coordinates: y points down, so the arrow's screen y is the negated vector y
+    ax.quiver(xs, ys, vv * np.cos(phi[ys, xs]) / scale, -vv * np.sin(phi[ys, xs]) / scale,
+              color="tab:red", angles="xy", scale_units="xy", scale=1.0 / (1.5 * stride))
+    ax.set_title("(a) flow of motion energy")
+    panels = [("V", "(b) maximal motion energy V", "magma"),
+              ("G", "(c) approach-sensitive map G", "magma"),
+              ("M_a", "(d) approach-sensitive attention M_a", "gray"),
+              ("M_d", "(e) directionally selective attention M_d", "gray"),
+              ("G_prime", "(f) approach-sensitive response G'", "magma")]
+    for ax, (key, title, cmap) in zip(axes.ravel()[1:], panels):
+        image = ax.imshow(np.asarray(data[key], dtype=float), cmap=cmap)
+        ax.set_title(title)
+        fig.colorbar(image, ax=ax, shrink=0.8)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+    fig.suptitle(data.get("title", f"intermediate maps at step {data.get('step')}"))
+    return _save(fig, path)
+
+
+def plot_temporal_filter(path: str | Path, data: Mapping) -> Path:
+    """Paper Fig. 2: impulse and step responses of L(K, n, z0) for several n.
+
+    Parameters
+    ----------
+    data : dict
+        ``t`` (seconds), ``impulse`` and ``step`` (``{str(n): [...]}``), ``title``.
+    """
+    t = np.asarray(data["t"])
+    fig = _figure(10.0, 3.8)
+    axes = fig.subplots(1, 2)
+    for ax, key, title in ((axes[0], "impulse", "impulse response"),
+                           (axes[1], "step", "step response")):
+        for n, values in data[key].items():
+            ax.plot(t, values, lw=1.2, label=f"n = {n}")
+        ax.axhline(0.0, color="0.6", lw=0.6)
+        ax.set_xlabel("t, s")
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+    axes[0].set_ylabel("K (z_n - z_{n+1})")
+    fig.suptitle(data.get("title", "temporal filter L(K, n, z0)"))
+    return _save(fig, path)

@@ -1,0 +1,187 @@
+"""``asnn eval`` end to end on generated clips, and the synthetic suite."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from asnn import evaluation, scoring
+from asnn.params import preset
+from asnn.stimuli import make_scene, write_video
+from cli.main import main
+
+MODELS = ("asnn", "lgmd1", "lgmd2")
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+REAL = Path("/work/shared/data/real")
+
+
+def _png(path: Path) -> bool:
+    return path.is_file() and path.read_bytes()[:8] == PNG_MAGIC
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory):
+    """Two generated clips written as videos, with their labels.json."""
+    root = tmp_path_factory.mktemp("clips")
+    scenes = {
+        "loom.mp4": make_scene("looming", size=(64, 64), start=8, stop=30),
+        "bar.mp4": make_scene("translating_bar", size=(64, 64), speed=3.0, frames=30,
+                              center=(8.0, 32.0), bar=(6.0, 20.0)),
+    }
+    labels = []
+    for name, scene in scenes.items():
+        write_video(scene.frames, root / name, scene.fps)
+        labels.append(scene.label(name))
+    (root / "labels.json").write_text(json.dumps(labels))
+    return root, labels
+
+
+@pytest.fixture(scope="module")
+def evaluated(clips, tmp_path_factory):
+    root, _ = clips
+    out = tmp_path_factory.mktemp("eval")
+    stderr, stdout = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(stdout):
+        status = main(["eval", str(root), "--out", str(out), "--early-tolerance", "0"])
+    return status, out, stdout.getvalue(), stderr.getvalue()
+
+
+def test_eval_end_to_end_writes_results_report_and_plots(clips, evaluated):
+    root, labels = clips
+    status, out, stdout, stderr = evaluated
+    assert status == 0
+    assert "report.md" in stdout
+    for model in MODELS:  # the progress printer names every run
+        for label in labels:
+            assert f"{model} {label['file']}" in stderr
+
+    results = json.loads((out / "results.json").read_text())
+    assert list(results["models"]) == list(MODELS)
+    assert results["errors"] == []
+    assert results["settings"]["early_tolerance_s"] == 0.0
+    for model in MODELS:
+        entry = results["models"][model]
+        assert [c["clip"] for c in entry["clips"]] == ["loom.mp4", "bar.mp4"]
+        assert entry["summary"]["scored"] == 2
+        assert {c["outcome"] for c in entry["clips"]} <= set(scoring.OUTCOMES)
+        # the per-frame results are kept in the detect --jsonl format, one record per frame
+        for label in labels:
+            path = out / "results" / model / f"{Path(label['file']).stem}.jsonl"
+            records = scoring.load_records(path)
+            assert [r["frame"] for r in records] == list(range(label["frames"]))
+            assert set(records[0]) >= {"frame", "t", "u", "out", "spikes", "spike_rate",
+                                       "collision", "targets"}
+            if model != "asnn":
+                assert all(r["targets"] == [] for r in records)
+        # and scoring them again reproduces the report's numbers
+        rescored = scoring.score_directory(out / "results" / model, labels,
+                                           early_tolerance_s=0.0)
+        assert [s.to_dict() for s in rescored] == entry["clips"]
+
+    # LGMD1-1 sees the approach and also warns on the translating bar
+    lgmd1 = {c["clip"]: c for c in results["models"]["lgmd1"]["clips"]}
+    assert lgmd1["loom.mp4"]["first_warning"] is not None
+    assert lgmd1["bar.mp4"]["outcome"] == "false"
+
+    report = (out / "report.md").read_text()
+    for model in MODELS:
+        assert f"| {model} |" in report
+    assert "| loom.mp4 |" in report and "| bar.mp4 |" in report
+    for name in ("loom.png", "bar.png", "summary.png"):
+        assert _png(out / "plots" / name)
+
+
+def test_eval_subset_of_models_and_a_clip_without_video(clips, tmp_path):
+    root, labels = clips
+    extra = tmp_path / "labels.json"
+    extra.write_text(json.dumps([labels[1], {**labels[0], "file": "gone.mp4"}]))
+    out = tmp_path / "out"
+    status = main(["eval", str(root), "--labels", str(extra), "--models", "lgmd1",
+                   "--out", str(out), "--no-plots"])
+    assert status == 0
+    results = json.loads((out / "results.json").read_text())
+    assert list(results["models"]) == ["lgmd1"]
+    assert len(results["errors"]) == 1 and "gone.mp4" in results["errors"][0]
+    outcomes = [c["outcome"] for c in results["models"]["lgmd1"]["clips"]]
+    assert outcomes == ["false", "missing"]
+    assert results["models"]["lgmd1"]["summary"]["missing"] == 1
+    assert not (out / "plots").exists()
+
+
+def test_eval_rejects_bad_input(tmp_path, capsys):
+    assert main(["eval", str(tmp_path), "--out", str(tmp_path / "o")]) == 2  # no labels.json
+    assert "labels.json" in capsys.readouterr().err
+    assert main(["eval", "--out", str(tmp_path / "o")]) == 2                  # nothing to do
+    with pytest.raises(SystemExit):
+        main(["eval", str(tmp_path), "--models", "asnn,nope"])
+
+
+def test_progress_printer_draws_a_bar_on_a_terminal():
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+
+    stream = Tty()
+    bar = evaluation.ProgressPrinter(stream, width=10)
+    bar.start(4, "eval")
+    bar.advance(2, "half")
+    bar.note("half")  # lines are for logs, not terminals
+    bar.advance(2, "all")
+    bar.finish()
+    text = stream.getvalue()
+    assert "\reval [#####     ] 2/4" in text and "\reval [##########] 4/4" in text
+    assert text.endswith("\n") and "eval: half" not in text
+
+
+def test_temporal_filter_responses_are_band_pass_and_slower_for_larger_n():
+    data = evaluation.temporal_filter_responses(preset("paper"), orders=(1, 2, 3, 4), steps=200)
+    peaks = [int(np.argmax(data["impulse"][str(n)])) for n in (1, 2, 3, 4)]
+    assert peaks == sorted(peaks) and peaks[0] < peaks[-1]
+    for n in (1, 2, 3, 4):
+        step = np.asarray(data["step"][str(n)])
+        assert step.max() > 0.1 and abs(step[-1]) < 1e-3 * step.max()  # transient: no DC
+
+
+def test_synthetic_suite_writes_every_figure_with_its_numbers(tmp_path, capsys):
+    out = tmp_path / "syn"
+    assert main(["eval", "--synthetic", "--size", "64x64", "--out", str(out)]) == 0
+    for stem in ("fig2_temporal_filter", "fig4_maps", "fig5_dark_responses",
+                 "fig6_light_responses", "fig7_contrast_speed"):
+        assert _png(out / f"{stem}.png")
+        assert json.loads((out / f"{stem}.json").read_text())
+    assert "report.md" in capsys.readouterr().out
+
+    results = json.loads((out / "results.json").read_text())
+    table = {(r["scene"], r["polarity"], r["model"]): r for r in results["table"]}
+    assert len(table) == 3 * 2 * 3
+    for polarity in ("dark", "light"):
+        # the paper's Fig. 5b/6b: LGMD1-1 keeps firing on translation, LGMD1-2 adapts
+        assert table[("translation", polarity, "lgmd1")]["outcome"] == "false"
+        assert table[("translation", polarity, "lgmd2")]["outcome"] == "quiet"
+
+    fig5 = json.loads((out / "fig5_dark_responses.json").read_text())
+    assert [s["scene"] for s in fig5["scenes"]] == [s for s, _ in evaluation.SYNTHETIC_SCENES]
+    for scene in fig5["scenes"]:
+        assert set(scene["models"]) == set(MODELS)
+        assert all(len(m["out"]) == 130 for m in scene["models"].values())
+    sweeps = json.loads((out / "fig7_contrast_speed.json").read_text())
+    assert sweeps["contrast"]["values"] == list(evaluation.CONTRAST_SWEEP)
+    assert sweeps["speed"]["peak"] == [max(u) for u in sweeps["speed"]["u"]]
+    maps = json.loads((out / "fig4_maps.json").read_text())
+    assert np.asarray(maps["V"]).shape == (64, 64)
+    assert set(np.unique(maps["M_a"])) <= {0, 1}
+    g_prime = np.asarray(maps["G_prime"])
+    assert np.all(g_prime[np.asarray(maps["M_a"]) * np.asarray(maps["M_d"]) == 0] == 0)
+
+
+@pytest.mark.skipif(not (REAL / "labels.json").is_file(), reason="real clips not present")
+def test_real_labels_are_scorable():
+    labels = scoring.load_labels(REAL / "labels.json")
+    for label in labels:
+        score = scoring.score_clip([], label)
+        assert score.outcome == ("miss" if label["collision"] else "quiet")
