@@ -7,7 +7,7 @@ import importlib
 import sys
 
 # Each module defines ``register(subparsers)``, adding its sub-commands with ``func`` set.
-COMMAND_MODULES = ["cli.detect", "cli.net", "cli.evaluate"]
+COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate"]
 
 
 def build_parser() -> argparse.ArgumentParser:
