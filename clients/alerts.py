@@ -2,7 +2,7 @@
 
 Subscribes to ``<prefix>/<robot or *>/warning`` with an advanced subscriber that asks the
 workers' warning caches for history, so a subscriber that joins late receives the latest warning
-of each robot first.
+of each robot first, and recovers (through the workers' heartbeats) a warning it missed.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from collections import Counter
 from collections.abc import Callable
 
 import zenoh
-from zenoh.ext import HistoryConfig, declare_advanced_subscriber
+from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
 
 from service import keys
 from service.messages import MessageError, Response, decode_response
@@ -59,7 +59,8 @@ class WarningListener:
         self.key = keys.warnings(prefix, robot)
         self._subscriber = declare_advanced_subscriber(
             session, self.key, self._on_sample,
-            history=HistoryConfig(detect_late_publishers=True, max_samples=1))
+            history=HistoryConfig(detect_late_publishers=True, max_samples=1),
+            recovery=RecoveryConfig(periodic_queries=None, heartbeat=True))
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:

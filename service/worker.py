@@ -15,7 +15,7 @@ import threading
 import time
 
 import zenoh
-from zenoh.ext import CacheConfig, declare_advanced_publisher
+from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
 from . import keys
 from .core import WorkerCore
@@ -29,6 +29,11 @@ RESPONSE_QOS = dict(congestion_control=zenoh.CongestionControl.BLOCK,
                     priority=zenoh.Priority.DATA_HIGH, reliability=zenoh.Reliability.RELIABLE)
 WARNING_QOS = dict(congestion_control=zenoh.CongestionControl.BLOCK,
                    priority=zenoh.Priority.INTERACTIVE_HIGH, reliability=zenoh.Reliability.RELIABLE)
+# Per-publisher sequence numbers. Without them the advanced subscriber orders samples by
+# timestamp per session, and a late joiner can lose the cached warning of every robot but the
+# most recent one (all warning publishers of a worker share its session). The sporadic heartbeat
+# also lets subscribers recover a warning they missed.
+MISS_DETECTION = MissDetectionConfig(heartbeat=None, sporadic_heartbeat=1.0)
 
 
 class _Outlets:
@@ -38,7 +43,7 @@ class _Outlets:
         self.response = session.declare_publisher(keys.response_key(robot, prefix), **RESPONSE_QOS)
         self.warning = declare_advanced_publisher(
             session, keys.warning_key(robot, prefix), cache=CacheConfig(max_samples=1),
-            publisher_detection=True, **WARNING_QOS)
+            publisher_detection=True, sample_miss_detection=MISS_DETECTION, **WARNING_QOS)
 
     def undeclare(self) -> None:
         for pub in (self.response, self.warning):

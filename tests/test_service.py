@@ -1,0 +1,254 @@
+"""The service over real Zenoh sessions: in-process on TCP loopback, and as separate processes.
+
+Every session uses a free port, multicast scouting and gossip are off, and everything started is
+stopped at the end of its test. Waits are generous timeouts on messages, never timing assertions.
+"""
+
+import json
+import os
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import msgpack
+import pytest
+
+from asnn.stimuli import make_scene
+from clients.alerts import WarningListener
+from cli.main import main
+from service import keys
+from service.camera import Source, publish_frames
+from service.core import WorkerCore
+from service.demo import free_port
+from service.messages import Frame, decode_response, encode
+from service.worker import Worker
+
+ROOT = Path(__file__).resolve().parents[1]
+TIMEOUT = 20.0
+
+
+def wait_for(predicate, timeout=TIMEOUT, what="condition"):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+class Responses:
+    """Collects the responses of every robot from a plain subscriber."""
+
+    def __init__(self, session, prefix="asnn"):
+        self.by_robot: dict[str, list] = {}
+        self.lock = threading.Lock()
+        self.sub = session.declare_subscriber(keys.responses(prefix), self._on)
+
+    def _on(self, sample):
+        response = decode_response(sample.payload.to_bytes())
+        with self.lock:
+            self.by_robot.setdefault(response.robot, []).append(response)
+
+    def of(self, robot):
+        with self.lock:
+            return list(self.by_robot.get(robot, []))
+
+
+def scene_source(name, **kwargs):
+    scene = make_scene(name, **kwargs)
+    return scene, Source(f"synthetic:{name}", scene.fps, False, lambda: iter(scene.frames))
+
+
+def send_one(session, responses, robot, image, seq):
+    """Put one frame and wait for its response (so that nothing is skipped)."""
+    session.put(keys.frame_key(robot), encode(Frame.from_image(image, seq=seq, stamp=seq * 0.05)))
+    wait_for(lambda: any(r.seq == seq for r in responses.of(robot)), what=f"{robot} seq {seq}")
+    return next(r for r in responses.of(robot) if r.seq == seq)
+
+
+@pytest.fixture
+def service(zenoh_net):
+    """A worker on the hub session, and a response collector on a spoke."""
+    core = WorkerCore()
+    with Worker(zenoh_net.hub, core, stats_every=0) as worker:
+        zenoh_net.core, zenoh_net.worker = core, worker
+        zenoh_net.responses = Responses(zenoh_net.spoke())
+        yield zenoh_net
+
+
+def test_two_cameras_at_once_looming_warns_with_targets_translating_does_not(service):
+    warnings = []
+    listener = WarningListener(service.spoke(), warnings.append)
+    loom, loom_source = scene_source("looming")
+    bar, bar_source = scene_source("translating_bar")
+    cameras = [threading.Thread(target=publish_frames, args=(service.spoke(), robot, source),
+                                kwargs=dict(fps=40, wait=TIMEOUT))
+               for robot, source in (("loom", loom_source), ("bar", bar_source))]
+    for camera in cameras:
+        camera.start()
+    for camera in cameras:
+        camera.join(timeout=60)
+    wait_for(lambda: service.worker.idle(), what="the worker to finish")
+    # frames are best effort: both streams must have been answered to near their ends
+    wait_for(lambda: service.responses.of("loom") and service.responses.of("bar")
+             and service.responses.of("loom")[-1].seq >= len(loom.frames) - 5
+             and service.responses.of("bar")[-1].seq >= len(bar.frames) - 5, what="responses")
+    loom_responses, bar_responses = service.responses.of("loom"), service.responses.of("bar")
+    sent = [r for r in loom_responses if r.collision]
+    assert sent and loom.onset_frame <= sent[0].seq <= loom.contact_frame
+    assert any(r.targets for r in sent)
+    assert not any(r.collision for r in bar_responses)
+    wait_for(lambda: len(warnings) >= len(sent), what="the warnings")
+    listener.close()
+    assert {(w.robot, w.seq) for w in warnings} == {("loom", r.seq) for r in sent}
+    assert all(r.worker == service.core.worker_id and r.model == "asnn" for r in loom_responses)
+    assert service.core.stats()["invalid"] == {}
+
+
+def test_frame_size_change_resets_the_robot_over_zenoh(service):
+    session = service.spoke()
+    big, small = make_scene("looming"), make_scene("looming", size=(80, 96))
+    for seq in range(15):
+        send_one(session, service.responses, "r1", big.frames[seq], seq)
+    after = [send_one(session, service.responses, "r1", small.frames[seq], seq)
+             for seq in range(15, 35)]
+    assert after[0].u == 0.0 and any(r.collision for r in after)
+    assert service.core.stats()["resets"] == {"size": 1}
+
+
+def test_malformed_frames_are_counted_while_valid_frames_keep_flowing(service):
+    session = service.spoke()
+    scene = make_scene("looming")
+    junk = [b"\xc1\xc1", msgpack.packb([1, 2]), msgpack.packb({"seq": "x"}),
+            msgpack.packb({"seq": 1, "stamp": 0.0, "width": 64, "height": 64, "format": "gray8",
+                           "data": b"\x00"})]
+    for seq in range(25):
+        for payload in junk:
+            session.put(keys.frame_key("r1"), payload)
+        session.put("asnn/not a robot/frame", encode(Frame.from_image(scene.frames[0], seq=0,
+                                                                      stamp=0.0)))
+        assert send_one(session, service.responses, "r1", scene.frames[seq], seq) is not None
+    wait_for(lambda: sum(service.core.stats()["invalid"].values()) == 25 * 5,
+             what="every invalid frame to be counted")
+    assert service.core.stats()["invalid"] == {"undecodable": 25, "not-a-map": 25,
+                                               "invalid-field": 25, "bad-pixels": 25,
+                                               "bad-key": 25}
+    assert any(r.collision for r in service.responses.of("r1"))
+
+
+def test_a_late_subscriber_receives_the_last_warning_of_each_robot(service):
+    session = service.spoke()
+    scene = make_scene("looming")
+    last = {"a": 25, "b": 30}
+    for robot, stop in last.items():
+        for seq in range(stop + 1):
+            response = send_one(session, service.responses, robot, scene.frames[seq], seq)
+        assert response.collision
+    late = []
+    with WarningListener(service.spoke(), late.append):
+        wait_for(lambda: {w.robot for w in late} == set(last), what="the cached warnings")
+        time.sleep(0.3)  # anything further would arrive now
+    assert sorted((w.robot, w.seq) for w in late) == sorted(last.items())
+
+
+def test_demo_prints_warnings_and_exits_0(capsys):
+    assert main(["demo", "--fps", "100"]) == 0
+    out = capsys.readouterr().out
+    lines = [line for line in out.splitlines() if "WARNING robot demo" in line]
+    assert lines and "targets: (" in lines[0]
+    assert "60 frames published" in out
+
+
+# ---------------------------------------------------------------- separate processes
+
+class Proc:
+    """A child ``asnn`` process whose output is drained by threads into queues."""
+
+    def __init__(self, *args):
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        env.pop("RUST_LOG", None)
+        self.popen = subprocess.Popen([sys.executable, "-m", "cli.main", *args], cwd=ROOT,
+                                      env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                      text=True)
+        self.out, self.err = [], []
+        self.threads = [threading.Thread(target=self._drain, args=(s, lines), daemon=True)
+                        for s, lines in ((self.popen.stdout, self.out),
+                                         (self.popen.stderr, self.err))]
+        for thread in self.threads:
+            thread.start()
+
+    @staticmethod
+    def _drain(stream, lines):
+        for line in stream:
+            lines.append(line.rstrip("\n"))
+
+    def wait_line(self, text, stream="err"):
+        lines = self.err if stream == "err" else self.out
+        wait_for(lambda: any(text in line for line in lines) or self.popen.poll() is not None,
+                 what=f"{text!r}")
+        assert any(text in line for line in lines), "\n".join(self.err)
+
+    def stop(self, sig=signal.SIGINT):
+        if self.popen.poll() is None:
+            self.popen.send_signal(sig)
+        try:
+            code = self.popen.wait(timeout=TIMEOUT)
+        except subprocess.TimeoutExpired:
+            self.popen.kill()
+            code = self.popen.wait()
+        for thread in self.threads:
+            thread.join(timeout=5)
+        return code
+
+
+@pytest.fixture
+def procs():
+    started: list[Proc] = []
+
+    def start(*args):
+        started.append(Proc(*args))
+        return started[-1]
+
+    yield start
+    for proc in started:
+        if proc.popen.poll() is None:
+            proc.popen.kill()
+            proc.popen.wait()
+
+
+def test_router_worker_camera_alerts_as_separate_processes(procs, tmp_path):
+    config = tmp_path / "zenoh.json5"
+    config.write_text("{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    common = ["--config", str(config), "--connect", endpoint, "--mode", "client"]
+    router = procs("router", "--listen", endpoint, "--config", str(config))
+    router.wait_line("listening on")
+    worker = procs("worker", "--id", "w1", *common)
+    alerts = procs("alerts", "--json", *common)
+    worker.wait_line("ready")
+    alerts.wait_line("listening on")
+    loom = procs("camera", "--robot", "loom", "--source", "synthetic:looming", "--fps", "40",
+                 "--wait", str(TIMEOUT), *common)
+    bar = procs("camera", "--robot", "bar", "--source", "synthetic:translating_bar",
+                "--format", "jpeg", "--fps", "40", "--wait", str(TIMEOUT), *common)
+    assert loom.popen.wait(timeout=60) == 0 and bar.popen.wait(timeout=60) == 0
+    scene = make_scene("looming")
+
+    def warned_late_enough():  # the clip's warnings last to frame ~58 (see test_worker)
+        return any(json.loads(line)["seq"] >= scene.contact_frame for line in alerts.out)
+
+    wait_for(warned_late_enough, what="the warnings near the end of the clip")
+    assert alerts.stop() == 0
+    assert worker.stop(signal.SIGTERM) == 0
+    assert router.stop() == 0
+    warnings = [json.loads(line) for line in alerts.out]
+    assert {w["robot"] for w in warnings} == {"loom"}
+    first = min(w["seq"] for w in warnings)
+    assert scene.onset_frame <= first <= scene.contact_frame
+    assert all(w["collision"] and w["worker"] == "w1" for w in warnings)
+    assert any(w["targets"] for w in warnings)
+    assert "worker stopped" in "\n".join(worker.err)
