@@ -350,7 +350,7 @@ def _plot_clips(out_dir: Path, labels: Sequence[Mapping], models: Sequence[str],
 
 
 def temporal_filter_responses(params, orders: Sequence[int] = FILTER_ORDERS,
-                              steps: int = 60) -> dict:
+                              steps: int = 30) -> dict:
     """Impulse and step responses of L(K, n, z0) = K (z_n - z_{n+1}) for several n (Fig. 2).
 
     Uses the cascade of :func:`asnn.retina.temporal_filter_step` with the parameters' dt, tau,
