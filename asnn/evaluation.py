@@ -15,8 +15,6 @@ Two entry points, both behind ``asnn eval``:
 from __future__ import annotations
 
 import json
-import sys
-import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
@@ -27,11 +25,11 @@ from . import figures, retina, scoring
 from .detectors import MODELS, make_detector
 from .model import ASNN
 from .params import preset
+from .progress import Silent
 from .stimuli import make_scene
 from .video import VideoError, open_video
 
 __all__ = [
-    "ProgressPrinter",
     "run_detector",
     "evaluate_clips",
     "synthetic_suite",
@@ -50,61 +48,6 @@ CONTRAST_SWEEP = (0.1, 0.2, 0.4, 0.6, 0.8, 1.0)
 SPEED_SWEEP = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 MAPS_STEP = 32  # the step of paper Fig. 4
 FILTER_ORDERS = (1, 2, 3, 4, 5)
-
-
-# --------------------------------------------------------------------------- progress
-
-
-class ProgressPrinter:
-    """A tiny progress bar on a stream (stderr by default).
-
-    On a terminal it redraws ``label [#####     ] done/total note`` in place; elsewhere it prints
-    one line each time a piece of work (``note``) finishes, so logs stay readable.
-
-    Parameters
-    ----------
-    stream : file, optional
-    width : int
-        Characters of the bar.
-    """
-
-    def __init__(self, stream=None, width: int = 30):
-        self.stream = stream if stream is not None else sys.stderr
-        self.width = width
-        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.total, self.done, self.label, self._last = 0, 0, "", 0.0
-
-    def start(self, total: int, label: str) -> None:
-        self.total, self.done, self.label, self._last = max(int(total), 0), 0, label, 0.0
-
-    def advance(self, n: int = 1, note: str = "") -> None:
-        self.done += n
-        now = time.monotonic()
-        if self.tty and (now - self._last > 0.1 or self.done >= self.total):
-            self._last = now
-            frac = min(self.done / self.total, 1.0) if self.total else 1.0
-            bar = "#" * int(round(self.width * frac))
-            self.stream.write(f"\r{self.label} [{bar:<{self.width}}] {self.done}/{self.total} "
-                              f"{note[:40]:<40}")
-            self.stream.flush()
-
-    def note(self, text: str) -> None:
-        """A finished piece of work (printed as a line when the stream is not a terminal)."""
-        if not self.tty:
-            self.stream.write(f"{self.label}: {text} ({self.done}/{self.total})\n")
-            self.stream.flush()
-
-    def finish(self) -> None:
-        if self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
-class _Silent:
-    def start(self, total: int, label: str) -> None: ...
-    def advance(self, n: int = 1, note: str = "") -> None: ...
-    def note(self, text: str) -> None: ...
-    def finish(self) -> None: ...
 
 
 # --------------------------------------------------------------------------- running
@@ -271,7 +214,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         if m not in MODELS:
             raise ValueError(f"unknown model {m!r}; choose from {', '.join(MODELS)}")
     preset(preset_name or "default")  # fail early on an unknown preset
-    progress = progress or _Silent()
+    progress = progress or Silent()
 
     tasks = [(str(clips_dir / lab["file"]), m, preset_name,
               str(out_dir / "results" / m / f"{Path(lab['file']).stem}.jsonl"))
@@ -462,7 +405,7 @@ def synthetic_suite(out_dir: str | Path, *, preset_name: str | None = None,
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     params = preset(preset_name or "default")
-    progress = progress or _Silent()
+    progress = progress or Silent()
     n_runs = 2 * len(SYNTHETIC_SCENES) * len(models) + len(CONTRAST_SWEEP) + len(SPEED_SWEEP) + 2
     progress.start(n_runs, "eval --synthetic")
     written = []

@@ -12,10 +12,9 @@ import cv2
 
 from asnn.detectors import MODELS, make_detector
 from asnn.params import preset_names
+from asnn.progress import ProgressPrinter
 from asnn.video import VideoError, open_video
 from asnn.visualize import annotate_frame, plot_responses
-
-from .progress import Progress
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,7 +50,9 @@ def run(args: argparse.Namespace) -> int:
         elif args.jsonl:
             jsonl = stack.enter_context(open(args.jsonl, "w", encoding="utf-8"))
         writer = None
-        progress = stack.enter_context(Progress(clip.frame_count, "detect"))
+        progress = ProgressPrinter()
+        progress.start(clip.frame_count, "detect")
+        stack.callback(progress.finish)
         for index, frame in enumerate(clip):
             response = detector.step(frame)
             record = _record(index, clip.fps, response)
@@ -67,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
                         return 2
                     stack.callback(writer.release)
                 writer.write(annotate_frame(frame, response))
-            progress.update()
+            progress.advance()
     if not records:
         print(f"asnn detect: {args.video}: no frames decoded", file=sys.stderr)
         return 2

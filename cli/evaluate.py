@@ -13,6 +13,9 @@ import sys
 from asnn import scoring
 from asnn.detectors import MODELS
 from asnn.params import preset_names
+from asnn.progress import ProgressPrinter
+
+from .arguments import frame_size
 
 
 def _models(text: str) -> list[str]:
@@ -22,17 +25,6 @@ def _models(text: str) -> list[str]:
         raise argparse.ArgumentTypeError(
             f"expected a comma-separated subset of {','.join(MODELS)}, got {text!r}")
     return list(dict.fromkeys(models))
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, _, h = text.lower().partition("x")
-        size = (int(w), int(h or w))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
-    if min(size) < 32:
-        raise argparse.ArgumentTypeError("the synthetic scenes need at least 32x32")
-    return size
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -61,7 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="frames ignored at the start of each clip (default: %(default)s)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="clips evaluated in parallel processes (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=(128, 128), metavar="WxH",
+    p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH",
                    help="frame size of the synthetic scenes (default: 128x128, the paper's)")
     p.add_argument("--no-plots", action="store_true", help="skip the per-clip PNGs")
     p.set_defaults(func=run)
@@ -70,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from asnn import evaluation  # imports matplotlib: only when the command runs
 
-    progress = evaluation.ProgressPrinter(sys.stderr)
+    progress = ProgressPrinter(sys.stderr)
     if args.synthetic:
         if args.clips_dir:
             print("asnn eval: give either CLIPS_DIR or --synthetic", file=sys.stderr)

@@ -8,13 +8,7 @@ import sys
 
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size must look like 128x128, got {text!r}") from None
-    return w, h
+from .arguments import frame_size
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Generate one of the paper's synthetic scenes (asnn.stimuli).")
     p.add_argument("name", choices=SCENE_NAMES)
     p.add_argument("out", metavar="OUT", help="video file to write (.mp4 or .avi)")
-    p.add_argument("--size", type=_size, default=(128, 128), metavar="WxH")
+    p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH")
     p.add_argument("--polarity", choices=("dark", "light"), default="dark")
     p.add_argument("--contrast", type=float, default=1.0)
     p.add_argument("--speed", type=float, help="edge speed, px/frame")

@@ -12,6 +12,7 @@ import pytest
 
 from asnn import evaluation, scoring
 from asnn.params import preset
+from asnn.progress import ProgressPrinter
 from asnn.stimuli import make_scene, write_video
 from cli.main import main
 
@@ -127,7 +128,7 @@ def test_progress_printer_draws_a_bar_on_a_terminal():
             return True
 
     stream = Tty()
-    bar = evaluation.ProgressPrinter(stream, width=10)
+    bar = ProgressPrinter(stream, width=10)
     bar.start(4, "eval")
     bar.advance(2, "half")
     bar.note("half")  # lines are for logs, not terminals
