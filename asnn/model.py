@@ -1,4 +1,12 @@
-"""The ASNN model: one stateful object per camera stream, ``step(frame) -> Response``."""
+"""The ASNN model: one stateful object per camera stream, ``step(frame) -> Response``.
+
+``ASNN.step`` has two implementations of the same equations. The straightforward one calls the
+functions of :mod:`asnn.retina` stage by stage on float64 arrays: it is the definition, and
+``ASNN(params, optimised=False)`` runs it. The optimised one (the default) computes the
+expensive stages with the fused kernels of :mod:`asnn._fast`, in the preset's ``precision``;
+the cheap stages (photoreceptors, attention blurs, output, targets) call the same retina
+functions. ``tests/test_equivalence.py`` keeps the two together.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +16,7 @@ from collections import deque
 import cv2
 import numpy as np
 
-from . import retina
+from . import _fast, retina
 from .frames import FrameError, to_luminance
 from .params import ASNNParams, preset
 from .response import Maps, Response
@@ -28,6 +36,10 @@ class ASNN:
         A parameter set or a preset name (see :mod:`asnn.params`).
     record_maps : bool
         Attach the intermediate maps (:class:`~asnn.response.Maps`) to every response.
+    optimised : bool
+        Use the fused kernels of :mod:`asnn._fast` in ``params.precision`` (default), or the
+        straightforward float64 form of :mod:`asnn.retina` (``False``; for comparisons). Kernel
+        sizes other than 5x5 always use the straightforward form.
 
     Attributes
     ----------
@@ -39,7 +51,10 @@ class ASNN:
     history : deque of ndarray (H, W)
         The last N_p photoreceptor activations, most recent first.
     stages_on, stages_off : ndarray (n_s + 2, H, W)
-        Leaky-integrator cascades of the ON and OFF bipolar channels (z_0..z_{n_s+1}).
+        Leaky-integrator cascades of the ON and OFF bipolar channels (z_0..z_{n_s+1}), in
+        :attr:`dtype`.
+    dtype : numpy dtype
+        Floating-point type of the state and the computation.
     spike_window : deque of int
         Spikes of the last N_t frames.
 
@@ -50,10 +65,13 @@ class ASNN:
     only primes the state: its response is all zeros (u = 0, out = 0.5, no spikes).
     """
 
-    def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False):
+    def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,
+                 optimised: bool = True):
         self.params = preset(params) if isinstance(params, str) else params
         self.record_maps = record_maps
         p = self.params
+        self.optimised = bool(optimised) and _fast.supported(p)
+        self.dtype = np.dtype(p.precision if self.optimised else np.float64)
         self._min_side = max(p.dog_size, p.kernel_size, p.attention_size)
         self._p_weights = retina.photoreceptor_weights(p.n_p, p.p_u)
         self._dog = retina.dog_kernel(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
@@ -63,6 +81,8 @@ class ASNN:
                                          p.kernel_size, p.kernel_extent) for k in range(half)]
         self._cs = retina.center_surround_kernel(p.cs_sigma, p.cs_wavelength, p.cs_phase,
                                                  p.kernel_size, p.kernel_extent)
+        self._factors = _fast.gabor_factors(p.ds_sigma, p.ds_wavelength, p.kernel_size,
+                                            p.kernel_extent)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -85,6 +105,8 @@ class ASNN:
             h, w = self.shape
             raise FrameError(f"frame {lum.shape[1]}x{lum.shape[0]} differs from the stream's {w}x{h};"
                              " reset() the model or start a new one")
+        if lum.dtype != self.dtype:
+            lum = lum.astype(self.dtype)
         if self.params.input_blur:
             lum = cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
         return lum
@@ -104,12 +126,92 @@ class ASNN:
             p = self.params
             self.shape = lum.shape
             self.previous = lum
-            self.stages_on = np.zeros((p.n_slow + 2, *lum.shape))
+            self.stages_on = np.zeros((p.n_slow + 2, *lum.shape), self.dtype)
             self.stages_off = np.zeros_like(self.stages_on)
             return Response(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False)
+        if self.optimised:
+            return self._respond_optimised(index, lum)
         return self._respond(index, lum)
 
+    def _spikes(self, u: float, n_cells: int) -> tuple[float, int, float]:
+        p = self.params
+        out = retina.sigmoid_output(u, n_cells)
+        spikes = retina.spike_count(out, p.k_sp, p.t_sp)
+        self.spike_window.append(spikes)
+        return out, spikes, sum(self.spike_window) / (p.n_t * p.window_dt)
+
+    def _respond_optimised(self, index: int, lum: np.ndarray) -> Response:
+        """:meth:`_respond` with the fused kernels of :mod:`asnn._fast`."""
+        p = self.params
+        ws = _fast.workspace(lum.shape, self.dtype)
+        photo = retina.photoreceptor(lum, self.previous, list(self.history), self._p_weights)
+        self.previous = lum
+        if p.n_p:
+            self.history.appendleft(photo)
+
+        fast_on, slow_on, fast_off, slow_off = _fast.bipolar_cascade(
+            photo, ws, self._dog, p.target_polarity == "light", self.stages_on, self.stages_off,
+            p.dt / p.tau, p.c, p.decay, p.leaky_input, p.gain, p.n_fast, p.n_slow)
+
+        _fast.gabor_energy(slow_on, fast_on, ws, self._factors, p.v_on, first=True, last=False)
+        _fast.gabor_energy(slow_off, fast_off, ws, self._factors, p.v_off, first=False, last=True)
+        r, v = ws.r, ws.v  # R^theta for k = 0..3; R^{theta + pi} = -R^theta
+
+        terms = [(p.w1_on, slow_on, fast_off), (-p.w2_off, fast_off, slow_on),
+                 (p.w1_off, slow_off, fast_on), (-p.w2_on, fast_on, slow_off)]
+        terms = [t for t in terms if t[0]]
+        for i, (weight, excitation, inhibitor) in enumerate(terms):
+            _fast.approach_term(excitation, inhibitor, ws, self._cs, weight, first=i == 0)
+        g = ws.g
+        if not terms:
+            g.fill(0)
+        if p.grouping:
+            g = _fast.group(g, ws)
+
+        blur_g = retina.attention_blur(g, p.attention_sigma, p.attention_size,
+                                       p.attention_normalised)
+        v_prime = v
+        if p.top_k:
+            half = r.shape[0]
+            sums = r.sum(axis=(1, 2), dtype=np.float64)
+            totals = np.concatenate([sums, -sums])
+            chosen = np.argsort(-totals, kind="stable")[:p.top_k]
+            strongest = None
+            for k in chosen:
+                rk = r[k] if k < half else np.negative(r[k - half])
+                strongest = rk if strongest is None else np.maximum(strongest, rk)
+            v_prime = v - strongest
+        blur_v = retina.attention_blur(v_prime, p.attention_sigma, p.attention_size,
+                                       p.attention_normalised)
+        total, count = _fast.attend(blur_g, p.gamma_a, blur_v, p.gamma_d, g, p.u_abs, ws)
+        attended = ws.mask
+
+        u = float(p.u_scale * total)
+        out, spikes, spike_rate = self._spikes(u, g.size)
+
+        targets = []
+        if count:
+            def vectors(rows, cols):
+                rr = r[:, rows, cols].astype(np.float64)
+                vv = v[rows, cols].astype(np.float64)
+                phi = np.arctan2(rr[2], rr[0])
+                return vv * np.cos(phi), vv * np.sin(phi)
+
+            targets = extract_targets(attended, None, None, p.cluster_eps, p.cluster_min_samples,
+                                      p.origin_seed, vectors=vectors)
+        maps = None
+        if self.record_maps:
+            m_a = blur_g > p.gamma_a
+            m_d = blur_v > p.gamma_d
+            mask = attended.copy()
+            maps = Maps(P=photo.copy(), R=np.concatenate([r, -r]), V=v.copy(),
+                        phi=np.arctan2(r[2], r[0]), G=g.copy(), M_a=m_a, M_d=m_d,
+                        G_prime=g * mask)
+        return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
+                        collision=spike_rate >= p.t_c, targets=targets, maps=maps)
+
     def _respond(self, index: int, lum: np.ndarray) -> Response:
+        """One step in the straightforward float64 form (:mod:`asnn.retina`, stage by stage)."""
         p = self.params
         photo = retina.photoreceptor(lum, self.previous, list(self.history), self._p_weights)
         self.previous = lum

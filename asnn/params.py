@@ -21,6 +21,9 @@ Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The pre
 ``default``
     The preset :command:`asnn detect` uses when none is named; chosen by measurement (README).
 
+Every preset but ``reference`` (and ``light``, derived from it) runs its optimised step in
+float32 (``precision``); see :mod:`asnn._fast`.
+
 Weights are signed as they enter the paper's fusion equation
 ``G = w1+ G1+ - w2- G2- + w1- G1- - w2+ G2+``; the published implementation *adds* its fast-ON
 term, which is ``w2+ = -0.3`` here.
@@ -131,6 +134,15 @@ class ASNNParams(BaseModel):
         False, description="add the pixel (0, 0) to the clustered points, as the reference does"
     )
 
+    # --- computation ---
+    precision: Literal["float32", "float64"] = Field(
+        "float32",
+        description="floating-point type of the optimised step (ASNN(optimised=True)); the "
+        "straightforward form always computes in float64. 'reference' keeps float64 to match "
+        "the published implementation; elsewhere float32 stays within 1e-5 of float64 on u(t) "
+        "(tests/test_equivalence.py)",
+    )
+
     @model_validator(mode="after")
     def _check(self) -> "ASNNParams":
         for name in ("dog_size", "kernel_size", "attention_size"):
@@ -190,6 +202,7 @@ PRESETS: dict[str, ASNNParams] = {
         u_scale=255.0, u_abs=True,
         k_sp=10.0, t_sp=0.51, n_t=4, t_c=1.0, spike_dt=0.025,
         origin_seed=True,
+        precision="float64",
     ),
 }
 

@@ -7,6 +7,7 @@ clockwise on screen).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -153,17 +154,22 @@ def dbscan_grid(mask: np.ndarray, eps: float, min_samples: int,
     return labels, seed_core, seed_label
 
 
-def extract_targets(mask: np.ndarray, dx: np.ndarray, dy: np.ndarray, eps: float,
-                    min_samples: int, origin_seed: bool = False) -> list[Target]:
+def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | None, eps: float,
+                    min_samples: int, origin_seed: bool = False, *,
+                    vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+                    | None = None) -> list[Target]:
     """Targets of the attended pixels ``M_a M_d = 1`` (paper eqs. 30-32).
 
     Parameters
     ----------
     mask : ndarray of bool (H, W)
         ``M_a M_d``.
-    dx, dy : ndarray (H, W)
+    dx, dy : ndarray (H, W) or None
         Motion vector per pixel, ``V cos(phi)`` and ``V sin(phi)`` (eq. 30).
     eps, min_samples : DBSCAN parameters.
+    vectors : callable, optional
+        Instead of ``dx`` and ``dy``: ``vectors(rows, cols) -> (dx, dy)`` at the given pixels,
+        so that the motion vectors are computed for the core samples only.
     origin_seed : bool
         Add the point (0, 0) and drop clusters centred within 1 px of it (published variant).
 
@@ -180,16 +186,26 @@ def extract_targets(mask: np.ndarray, dx: np.ndarray, dy: np.ndarray, eps: float
         return []
     lab = labels[core]
     rows, cols = np.nonzero(core)
+    if vectors is None:
+        vx, vy = dx[rows, cols], dy[rows, cols]
+        vx0, vy0 = (dx[0, 0], dy[0, 0]) if seed_core else (0.0, 0.0)
+    else:
+        if seed_core:
+            rows0, cols0 = np.append(rows, 0), np.append(cols, 0)
+            vx, vy = vectors(rows0, cols0)
+            vx, vy, vx0, vy0 = vx[:-1], vy[:-1], vx[-1], vy[-1]
+        else:
+            vx, vy = vectors(rows, cols)
     n = int(lab.max()) + 1
     count = np.bincount(lab, minlength=n).astype(np.float64)
     sum_x = np.bincount(lab, cols, n)
     sum_y = np.bincount(lab, rows, n)
-    sum_dx = np.bincount(lab, dx[core], n)
-    sum_dy = np.bincount(lab, dy[core], n)
+    sum_dx = np.bincount(lab, vx, n)
+    sum_dy = np.bincount(lab, vy, n)
     if seed_core:
         count[seed_label] += 1
-        sum_dx[seed_label] += dx[0, 0]
-        sum_dy[seed_label] += dy[0, 0]
+        sum_dx[seed_label] += vx0
+        sum_dy[seed_label] += vy0
     targets = []
     for k in range(n):
         cx, cy = sum_x[k] / count[k], sum_y[k] / count[k]
