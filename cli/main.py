@@ -7,7 +7,7 @@ import importlib
 import sys
 
 # Each module defines ``register(subparsers)``, adding its sub-commands with ``func`` set.
-COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate"]
+COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.bench"]
 
 
 def build_parser() -> argparse.ArgumentParser:

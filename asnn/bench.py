@@ -1,0 +1,152 @@
+"""Per-frame cost of the models (``asnn bench``).
+
+Every model and ASNN preset runs on a generated scene (:func:`asnn.stimuli.make_scene`,
+``looming_over_stripes``: a looming disk over translating stripes, so that every stage and the
+clustering have work to do) at each size, one thread: :func:`pin_threads` sets OpenCV's thread
+count and the OpenMP / BLAS / numba variables to 1 before anything is timed. Each frame is timed
+with ``time.perf_counter`` around ``step``, targets included; the first ``warmup`` frames (the
+first one only primes the state; numba compiles on first use) are not counted. The same run
+times the straightforward float64 form (``ASNN(params, optimised=False)``) of the default preset
+and reports the speed-up as a ratio of medians.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+
+import numpy as np
+
+__all__ = ["THREAD_VARIABLES", "pin_threads", "machine", "time_detector", "run"]
+
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                    "NUMBA_NUM_THREADS")
+DEFAULT_SIZES = ((128, 128), (320, 240), (640, 480))
+SCENE = "looming_over_stripes"
+
+
+def pin_threads() -> str:
+    """One thread everywhere; returns a description for the report.
+
+    Must run before numba (and ideally NumPy's BLAS) is first imported to fully apply; the
+    ``asnn bench`` command calls it first thing.
+    """
+    for name in THREAD_VARIABLES:
+        os.environ[name] = "1"
+    import cv2
+
+    cv2.setNumThreads(1)
+    try:
+        import numba
+
+        numba.set_num_threads(1)
+    except (ImportError, ValueError):
+        pass
+    return "cv2.setNumThreads(1); " + ", ".join(f"{n}=1" for n in THREAD_VARIABLES)
+
+
+def machine() -> dict:
+    """CPU model, logical cores and library versions."""
+    import cv2
+    import numba
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "numpy": np.__version__, "opencv": cv2.__version__, "numba": numba.__version__}
+
+
+def time_detector(make, frames: np.ndarray, warmup: int = 2) -> np.ndarray:
+    """Seconds per ``step`` of a fresh detector over ``frames``, after ``warmup`` frames."""
+    detector = make()
+    times = []
+    for i, frame in enumerate(frames):
+        start = time.perf_counter()
+        detector.step(frame)
+        elapsed = time.perf_counter() - start
+        if i >= warmup:
+            times.append(elapsed)
+    return np.array(times)
+
+
+def _stats(seconds: np.ndarray) -> dict:
+    ms = seconds * 1e3
+    return {"median_ms": float(np.median(ms)), "p90_ms": float(np.percentile(ms, 90)),
+            "frames": int(len(ms))}
+
+
+def _state_bytes(model) -> int:
+    """Bytes of per-stream state of an ASNN after a few frames (cascades, previous frame)."""
+    total = 0
+    for name in ("stages_on", "stages_off", "previous"):
+        a = getattr(model, name, None)
+        if isinstance(a, np.ndarray):
+            total += a.nbytes
+    total += sum(h.nbytes for h in getattr(model, "history", []))
+    return total
+
+
+def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
+        models=("asnn", "lgmd1", "lgmd2"), straightforward: bool = True,
+        progress=None) -> dict:
+    """Time every model and preset at every size; returns the report as a dict."""
+    from .detectors import make_detector
+    from .model import ASNN
+    from .params import DEFAULT_PRESET, PRESETS
+    from .stimuli import make_scene
+
+    presets = list(PRESETS) if presets is None else presets
+    warmup = 2  # the first frame only primes the state; the second compiles on first use
+    rows = []
+    for w, h in sizes:
+        scene = make_scene(SCENE, size=(w, h), frames=frames + warmup,
+                           start=2, stop=max(3, frames + warmup - 2))
+        clip = scene.frames
+
+        def add(model: str, preset: str, form: str, make):
+            if progress:
+                progress(f"{w}x{h} {model} {preset or '-'} {form}")
+            row = {"size": f"{w}x{h}", "model": model, "preset": preset, "form": form,
+                   **_stats(time_detector(make, clip, warmup))}
+            if model == "asnn":
+                probe = make()
+                for f in clip[:2]:
+                    probe.step(f)
+                row["state_mb"] = _state_bytes(probe) / 2**20
+            rows.append(row)
+            return row
+
+        for model in models:
+            if model != "asnn":
+                add(model, "", "optimised", lambda m=model: make_detector(m, None))
+                continue
+            for name in presets:
+                add("asnn", name, "optimised", lambda n=name: ASNN(n))
+        if straightforward and "asnn" in models:
+            slow = add("asnn", DEFAULT_PRESET, "straightforward",
+                       lambda: ASNN(DEFAULT_PRESET, optimised=False))
+            fast = next(r for r in rows if r["size"] == f"{w}x{h}" and r["model"] == "asnn"
+                        and r["preset"] == DEFAULT_PRESET and r["form"] == "optimised")
+            slow["speedup"] = slow["median_ms"] / fast["median_ms"]
+    return {"scene": SCENE, "frames": frames, "warmup": warmup, "default_preset": DEFAULT_PRESET,
+            "results": rows}
+
+
+def format_table(report: dict) -> str:
+    """The report as a Markdown table."""
+    lines = ["| size | model | preset | form | median ms | p90 ms | state MiB | note |",
+             "| --- | --- | --- | --- | ---: | ---: | ---: | --- |"]
+    for r in report["results"]:
+        note = f"{r['speedup']:.1f}x slower than optimised" if "speedup" in r else ""
+        state = f"{r['state_mb']:.2f}" if "state_mb" in r else ""
+        lines.append(f"| {r['size']} | {r['model']} | {r['preset'] or '-'} | {r['form']} | "
+                     f"{r['median_ms']:.2f} | {r['p90_ms']:.2f} | {state} | {note} |")
+    return "\n".join(lines)

@@ -1,0 +1,86 @@
+"""``asnn bench``: per-frame cost of every model and preset, one thread (see :mod:`asnn.bench`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from cli.arguments import frame_size
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "bench", help="time the models per frame (one thread)",
+        description="Median and p90 cost per frame of every model and ASNN preset on a generated "
+        "scene, one thread, with the straightforward float64 form of the default preset as a "
+        "ratio. --service instead measures cameras through Zenoh on loopback.")
+    p.add_argument("--size", type=frame_size, action="append", metavar="WxH",
+                   help="frame size (repeatable; default 128x128, 320x240 and 640x480)")
+    p.add_argument("--frames", type=int, default=40, help="timed frames per run (default 40)")
+    p.add_argument("--preset", action="append", metavar="NAME",
+                   help="ASNN preset to time (repeatable; default: all)")
+    p.add_argument("--model", action="append", choices=("asnn", "lgmd1", "lgmd2"),
+                   help="model to time (repeatable; default: all)")
+    p.add_argument("--no-straightforward", action="store_true",
+                   help="skip the straightforward float64 form")
+    p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
+    p.add_argument("--service", action="store_true",
+                   help="cameras at --fps through a worker over Zenoh on loopback, ramping the "
+                   "number of cameras")
+    p.add_argument("--fps", type=float, default=25.0, help="camera rate for --service")
+    p.add_argument("--seconds", type=float, default=4.0,
+                   help="duration of each --service step")
+    p.add_argument("--cameras", type=int, action="append", metavar="N",
+                   help="camera counts for --service (repeatable; default 1, 2, 4, 8, 12, 16, 20, 24)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from asnn.bench import pin_threads
+
+    pinning = pin_threads()  # before numba and the models are imported
+    from asnn import bench
+
+    if args.frames < 1:
+        print("asnn bench: --frames must be at least 1", file=sys.stderr)
+        return 2
+    sizes = args.size or list(bench.DEFAULT_SIZES)
+    if args.service:
+        from service import bench as service_bench
+
+        report = service_bench.run(size=sizes[0], fps=args.fps, seconds=args.seconds,
+                                   counts=args.cameras, progress=_progress(args))
+        report["threads"] = pinning
+        report["machine"] = bench.machine()
+        if args.json:
+            print(json.dumps(report, indent=1))
+        else:
+            print(service_bench.format_report(report))
+        return 0
+    try:
+        report = bench.run(sizes=sizes, frames=args.frames, presets=args.preset,
+                           models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
+                           straightforward=not args.no_straightforward, progress=_progress(args))
+    except ValueError as exc:
+        print(f"asnn bench: {exc}", file=sys.stderr)
+        return 2
+    report["threads"] = pinning
+    report["machine"] = bench.machine()
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        m = report["machine"]
+        print(f"# asnn bench: {m['cpu']}, {m['cores']} logical cores; Python {m['python']}, "
+              f"NumPy {m['numpy']}, OpenCV {m['opencv']}, numba {m['numba']}")
+        print(f"# threads: {pinning}")
+        print(f"# scene {report['scene']}, {report['frames']} timed frames after "
+              f"{report['warmup']} warm-up frames, targets included")
+        print(bench.format_table(report))
+    return 0
+
+
+def _progress(args):
+    if not sys.stderr.isatty():
+        return None
+    return lambda text: print(f"\r\033[Kbench: {text}", end="", file=sys.stderr, flush=True)
