@@ -47,8 +47,12 @@ def run(args: argparse.Namespace) -> int:
         return 2
     sizes = args.size or list(bench.DEFAULT_SIZES)
     if args.service:
-        from service import bench as service_bench
-
+        try:
+            from service import bench as service_bench
+        except ImportError:
+            print("asnn bench --service: not available yet (service/bench.py is missing)",
+                  file=sys.stderr)
+            return 2
         report = service_bench.run(size=sizes[0], fps=args.fps, seconds=args.seconds,
                                    counts=args.cameras, progress=_progress(args))
         report["threads"] = pinning
