@@ -134,8 +134,9 @@ def _clips_report(results: Mapping) -> str:
         " non-collision clip is a false alarm.",
         "",
         "| model | hits | early | late | misses | false alarms (nc) | quiet (nc) | hit rate |"
-        " false-alarm rate | mean lead (hits) | median loc. error |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        " false-alarm rate | mean lead (hits) | median loc. error | warning frames in / out of"
+        " windows |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for m in models:
         s = results["models"][m]["summary"]
@@ -143,7 +144,8 @@ def _clips_report(results: Mapping) -> str:
             f"| {m} | {s['hit']}/{s['collision_clips']} | {s['early']} | {s['late']} | {s['miss']}"
             f" | {s['false']}/{s['noncollision_clips']} | {s['quiet']}/{s['noncollision_clips']}"
             f" | {_rate(s['hit_rate'])} | {_rate(s['false_alarm_rate'])}"
-            f" | {_fmt(s['mean_lead_s'], 2, ' s')} | {_fmt(s['median_localisation_px'], 0, ' px')} |")
+            f" | {_fmt(s['mean_lead_s'], 2, ' s')} | {_fmt(s['median_localisation_px'], 0, ' px')}"
+            f" | {s['window_warning_frames']} / {s['warning_frames'] - s['window_warning_frames']} |")
         if s["missing"]:
             lines[-1] += f" ({s['missing']} clips without results)"
     lines += ["", "Per clip: outcome, first warning frame (lead time, s), warning frames.", "",

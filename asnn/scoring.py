@@ -72,6 +72,9 @@ class ClipScore:
         First warning frame at or after the warm-up.
     warning_frames : int
         Frames with a warning at or after the warm-up.
+    window_warning_frames : int
+        Of those, the frames inside the hit window (always 0 on a non-collision clip): how much
+        of a detector's warning falls where a warning is due.
     false_alarm : bool
         An early warning on a collision clip, or any warning on a non-collision clip.
     lead_frames, lead_s : float or None
@@ -87,6 +90,7 @@ class ClipScore:
     outcome: str
     first_warning: int | None = None
     warning_frames: int = 0
+    window_warning_frames: int = 0
     false_alarm: bool = False
     lead_frames: float | None = None
     lead_s: float | None = None
@@ -183,8 +187,11 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     else:
         outcome = "late"
     lead = float(int(contact) - first)
+    in_window = sum(1 for r in records if r.get("collision")
+                    and max(warmup, window[0]) <= int(r["frame"]) <= window[1])
     return ClipScore(clip=clip, collision=True, outcome=outcome, first_warning=first,
-                     warning_frames=count, false_alarm=outcome == "early",
+                     warning_frames=count, window_warning_frames=in_window,
+                     false_alarm=outcome == "early",
                      lead_frames=lead, lead_s=lead / fps if fps > 0 else None,
                      localisation_px=_nearest_target_distance(records, first, label.get("center")),
                      window=window)
@@ -218,7 +225,8 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         ``noncollision_clips`` (scored only); the count of each outcome; ``false_alarms``
         (early warnings plus warned non-collision clips); ``hit_rate`` (hits over scored collision
         clips), ``false_alarm_rate`` (false alarms over scored clips), ``specificity`` (quiet over
-        scored non-collision clips), each None without a denominator; ``mean_lead_s`` and
+        scored non-collision clips), each None without a denominator; ``warning_frames`` and
+        ``window_warning_frames`` summed over the scored clips; ``mean_lead_s`` and
         ``mean_lead_frames`` over hits; ``median_localisation_px`` over hits with targets.
     """
     scores = list(scores)
@@ -239,6 +247,8 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         "hit_rate": counts["hit"] / n_col if n_col else None,
         "false_alarm_rate": false_alarms / len(scored) if scored else None,
         "specificity": counts["quiet"] / n_non if n_non else None,
+        "warning_frames": sum(s.warning_frames for s in scored),
+        "window_warning_frames": sum(s.window_warning_frames for s in scored),
         "mean_lead_frames": _mean([s.lead_frames for s in hits]),
         "mean_lead_s": _mean([s.lead_s for s in hits if s.lead_s is not None]),
         "median_localisation_px": _median([s.localisation_px for s in hits

@@ -60,6 +60,14 @@ def test_tolerance_and_warmup_are_parameters():
     assert scoring.score_clip(records((15,)), no_fps).outcome == "early"  # no fps: no tolerance
 
 
+def test_warning_frames_inside_the_hit_window_are_counted():
+    score = scoring.score_clip(records((3, 9, 10, 11, 42, 43, 50)), COLLISION)
+    assert (score.warning_frames, score.window_warning_frames) == (6, 3)  # 10, 11, 42
+    assert scoring.score_clip(records((5, 6, 50)), QUIET).window_warning_frames == 0
+    summary = scoring.summarize([score, scoring.score_clip(records((5, 6, 50)), QUIET)])
+    assert (summary["warning_frames"], summary["window_warning_frames"]) == (9, 3)
+
+
 def test_noncollision_clip():
     assert scoring.score_clip(records((1, 4)), QUIET).outcome == "quiet"
     score = scoring.score_clip(records((5, 6, 50)), QUIET)
