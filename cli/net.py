@@ -86,6 +86,16 @@ def _stop_on_signals() -> threading.Event:
     return stop
 
 
+def _open_session(config):
+    """zenoh.open, with Zenoh's failures (no router reachable, port taken) as one clear line."""
+    import zenoh
+
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        raise ConfigError(f"cannot open a Zenoh session: {str(exc).split(' at /')[0]}") from None
+
+
 def _fail(message: str, status: int = 2) -> int:
     print(f"asnn: error: {message}", file=sys.stderr)
     return status
@@ -94,19 +104,17 @@ def _fail(message: str, status: int = 2) -> int:
 # ---------------------------------------------------------------- commands
 
 def cmd_camera(args: argparse.Namespace) -> int:
-    import zenoh
-
     from service.camera import SourceError, open_source, publish_frames
     from service.config import make_config
 
     _setup_logging(args)
     try:
         source = open_source(args.source)
-        config = make_config(zenoh_options(args))
+        session = _open_session(make_config(zenoh_options(args)))
     except (SourceError, ConfigError) as exc:
         return _fail(str(exc))
     stop = _stop_on_signals()
-    with zenoh.open(config) as session:
+    with session:
         count = publish_frames(session, args.robot, source, prefix=args.prefix, fps=args.fps,
                                loop=args.loop, format=args.format, wait=args.wait, stop=stop)
     log.info("camera %s: %d frames published", args.robot, count)
@@ -114,8 +122,6 @@ def cmd_camera(args: argparse.Namespace) -> int:
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
-    import zenoh
-
     from service.config import make_config
     from service.core import WorkerCore
     from service.worker import Worker
@@ -124,11 +130,11 @@ def cmd_worker(args: argparse.Namespace) -> int:
     try:
         core = WorkerCore(args.model, args.preset, worker_id=args.id, prefix=args.prefix,
                           idle_timeout=args.idle_timeout, max_gap=args.max_gap)
-        config = make_config(zenoh_options(args))
-    except (ValueError, ImportError) as exc:
+        session = _open_session(make_config(zenoh_options(args)))
+    except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return _fail(str(exc))
     stop = _stop_on_signals()
-    with zenoh.open(config) as session, Worker(session, core):
+    with session, Worker(session, core):
         print(f"worker {core.worker_id} ready", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
@@ -137,18 +143,16 @@ def cmd_worker(args: argparse.Namespace) -> int:
 
 
 def cmd_alerts(args: argparse.Namespace) -> int:
-    import zenoh
-
     from clients.alerts import WarningListener, printer
     from service.config import make_config
 
     _setup_logging(args)
     try:
-        config = make_config(zenoh_options(args))
+        session = _open_session(make_config(zenoh_options(args)))
     except ConfigError as exc:
         return _fail(str(exc))
     stop = _stop_on_signals()
-    with zenoh.open(config) as session, \
+    with session, \
             WarningListener(session, printer(args.json, sys.stdout), prefix=args.prefix,
                             robot=args.robot) as listener:
         print(f"listening on {listener.key}", file=sys.stderr, flush=True)
@@ -164,8 +168,10 @@ def cmd_router(args: argparse.Namespace) -> int:
     stop = _stop_on_signals()
     try:
         session = open_router(zenoh_options(args))
-    except (ConfigError, Exception) as exc:  # zenoh.ZError: e.g. the port is taken
-        return _fail(f"cannot start the router: {exc}")
+    except ConfigError as exc:
+        return _fail(str(exc))
+    except Exception as exc:  # zenoh.ZError: e.g. the port is taken
+        return _fail(f"cannot start the router: {str(exc).split(' at /')[0]}")
     with session:
         listen = ", ".join(args.listen or [DEFAULT_LISTEN])
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)

@@ -6,7 +6,6 @@ stopped at the end of its test. Waits are generous timeouts on messages, never t
 
 import json
 import os
-import queue
 import signal
 import subprocess
 import sys
