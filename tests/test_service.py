@@ -16,11 +16,11 @@ from pathlib import Path
 import msgpack
 import pytest
 
-from asnn.stimuli import make_scene
+from asnn.stimuli import make_scene, write_video
 from clients.alerts import WarningListener
 from cli.main import main
 from service import keys
-from service.camera import Source, publish_frames
+from service.camera import Source, SourceError, open_source, publish_frames
 from service.core import WorkerCore
 from service.demo import free_port
 from service.messages import Frame, decode_response, encode
@@ -147,11 +147,30 @@ def test_a_late_subscriber_receives_the_last_warning_of_each_robot(service):
         for seq in range(stop + 1):
             response = send_one(session, service.responses, robot, scene.frames[seq], seq)
         assert response.collision
-    late = []
-    with WarningListener(service.spoke(), late.append):
-        wait_for(lambda: {w.robot for w in late} == set(last), what="the cached warnings")
+    late, only_b = [], []
+    late_session = service.spoke()
+    with WarningListener(late_session, late.append), \
+            WarningListener(late_session, only_b.append, robot="b"):
+        wait_for(lambda: {w.robot for w in late} == set(last) and only_b,
+                 what="the cached warnings")
         time.sleep(0.3)  # anything further would arrive now
     assert sorted((w.robot, w.seq) for w in late) == sorted(last.items())
+    assert [(w.robot, w.seq) for w in only_b] == [("b", 30)]
+
+
+def test_camera_sources_open_files_scenes_and_fail_clearly(tmp_path):
+    scene = make_scene("looming", size=(64, 48))
+    path = tmp_path / "clip.avi"
+    write_video(scene.frames, path, fps=25.0)
+    source = open_source(str(path))
+    frames = list(source.frames())
+    assert source.fps == 25.0 and not source.live
+    assert len(frames) == len(scene.frames) and frames[0].shape[:2] == (48, 64)
+    assert len(list(open_source("synthetic:receding").frames())) == len(make_scene("receding")
+                                                                          .frames)
+    for bad in (str(tmp_path / "missing.mp4"), "synthetic:nothing", "rtsp://127.0.0.1:1/none"):
+        with pytest.raises(SourceError):
+            open_source(bad)
 
 
 def test_demo_prints_warnings_and_exits_0(capsys):
