@@ -3,6 +3,8 @@
 ``<prefix>/<robot>/frame``     camera -> worker     Frame
 ``<prefix>/<robot>/response``  worker -> anyone     Response, one per processed frame
 ``<prefix>/<robot>/warning``   worker -> fleet      Response, only when ``collision`` is true
+``<prefix>/<robot>/preview``   camera -> dashboards Preview, a low-rate thumbnail (optional
+                                                    extension, docs/contract.md)
 """
 
 from __future__ import annotations
@@ -10,10 +12,11 @@ from __future__ import annotations
 import re
 
 __all__ = ["DEFAULT_PREFIX", "KINDS", "KeySchemeError", "check_prefix", "check_robot", "frame_key",
-           "parse_key", "response_key", "warning_key", "frames", "responses", "warnings"]
+           "parse_key", "response_key", "warning_key", "frames", "responses", "warnings",
+           "preview_key", "previews"]
 
 DEFAULT_PREFIX = "asnn"
-KINDS = ("frame", "response", "warning")
+KINDS = ("frame", "response", "warning", "preview")
 ROBOT_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 _CHUNK = re.compile(r"[^/*$?#\s]+")
 
@@ -64,6 +67,14 @@ def responses(prefix: str = DEFAULT_PREFIX, robot: str | None = None) -> str:
 
 def warnings(prefix: str = DEFAULT_PREFIX, robot: str | None = None) -> str:
     return warning_key(robot or "*", prefix)
+
+
+def preview_key(robot: str, prefix: str = DEFAULT_PREFIX) -> str:
+    return _key(prefix, robot, "preview")
+
+
+def previews(prefix: str = DEFAULT_PREFIX, robot: str | None = None) -> str:
+    return preview_key(robot or "*", prefix)
 
 
 def parse_key(key: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str]:
