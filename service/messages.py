@@ -209,3 +209,46 @@ def _finite(fields: dict) -> dict:
         else:
             out[key] = value
     return out
+
+
+# ---------------------------------------------------------------- Preview (optional extension)
+# ``<prefix>/<robot>/preview``: a low-rate thumbnail of the camera's frames for dashboards
+# (docs/contract.md; not part of CONTRACT.md's required interface, the worker ignores it).
+
+__all__ += ["PREVIEW_FORMATS", "Preview", "decode_preview"]
+
+PREVIEW_FORMATS = ("jpeg", "png")
+PREVIEW_QUALITY = 70
+
+
+class Preview(Frame):
+    """A thumbnail of the frame ``seq``: a Frame whose data is a small jpeg (or png) image.
+
+    ``frame_width`` x ``frame_height`` is the size of the published frame, the coordinate system
+    of the worker's targets (default: the thumbnail's own size).
+    """
+
+    format: Literal["jpeg", "png"]
+    frame_width: int | None = Field(None, ge=1, le=MAX_SIDE)
+    frame_height: int | None = Field(None, ge=1, le=MAX_SIDE)
+
+    @classmethod
+    def from_frame_image(cls, image: np.ndarray, *, seq: int, stamp: float, width: int = 160,
+                         format: str = "jpeg") -> Preview:
+        """Scale a gray or BGR uint8 frame down to ``width`` pixels (never up) and encode it."""
+        h, w = image.shape[:2]
+        tw = max(1, min(int(width), w))
+        th = max(1, round(h * tw / w))
+        small = image if tw == w else cv2.resize(image, (tw, th), interpolation=cv2.INTER_AREA)
+        if format == "jpeg":
+            ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, PREVIEW_QUALITY])
+            data = buf.tobytes() if ok else b""
+        else:
+            data = encode_image(small, format)
+        return cls(seq=seq, stamp=stamp, width=tw, height=th, format=format, data=data,
+                   frame_width=w, frame_height=h)
+
+
+def decode_preview(payload: bytes) -> Preview:
+    """Validate a Preview payload (the image is checked by :meth:`Preview.image`)."""
+    return _validate(Preview, _unpack(payload, "preview"), "preview")
