@@ -3,6 +3,10 @@
 Frames go to ``<prefix>/<robot>/frame``, best effort (congestion control drop, lowest data
 priority): a late frame is worth less than the next one. ``seq`` counts from 0 and keeps
 increasing across ``--loop`` repetitions; ``stamp`` is the wall-clock time of capture.
+
+Optionally (``preview_hz`` > 0), a small jpeg thumbnail of the current frame goes to
+``<prefix>/<robot>/preview`` a few times a second for dashboards (docs/contract.md), with the
+same best-effort delivery as frames.
 """
 
 from __future__ import annotations
@@ -21,15 +25,18 @@ from asnn.stimuli import SCENE_NAMES, make_scene
 from asnn.video import VideoError, open_video
 
 from . import keys
-from .messages import FORMATS, Frame, encode
+from .messages import FORMATS, Frame, Preview, encode
 
-__all__ = ["FRAME_QOS", "Source", "SourceError", "open_source", "publish_frames"]
+__all__ = ["FRAME_QOS", "PREVIEW_HZ", "PREVIEW_WIDTH", "Source", "SourceError", "open_source",
+           "publish_frames"]
 
 log = logging.getLogger("asnn.camera")
 
 FRAME_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
                  priority=zenoh.Priority.DATA_LOW, reliability=zenoh.Reliability.BEST_EFFORT)
 SYNTHETIC = "synthetic:"
+PREVIEW_HZ = 2.0     # thumbnails per second on <prefix>/<robot>/preview (0: none)
+PREVIEW_WIDTH = 160  # thumbnail width in pixels (never scaled up)
 
 
 class SourceError(OSError):
@@ -97,10 +104,13 @@ def _capture(cap) -> Iterator[np.ndarray]:
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    prefix: str = keys.DEFAULT_PREFIX, fps: float | None = None,
                    loop: bool = False, format: str = "gray8", wait: float = 0.0,
-                   stop: threading.Event | None = None, max_frames: int | None = None) -> int:
+                   stop: threading.Event | None = None, max_frames: int | None = None,
+                   preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH) -> int:
     """Publish the source's frames paced at ``fps`` (default: the source's rate).
 
     ``wait``: seconds to wait, at most, for a subscriber (a worker) before the first frame.
+    ``preview_hz``: thumbnails (``preview_width`` pixels wide) per second on the preview key,
+    at most one per frame; 0 publishes none.
     Returns the number of frames published. Ends at the end of the source unless ``loop``
     (a live source is never replayed), when ``stop`` is set, or after ``max_frames``.
     """
@@ -109,10 +119,16 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     rate = float(fps or source.fps)
     if not rate > 0:
         raise ValueError(f"frame rate must be positive, got {rate}")
+    if not preview_hz >= 0 or preview_width < 1:
+        raise ValueError(f"need preview_hz >= 0 and preview_width >= 1, got {preview_hz}, "
+                         f"{preview_width}")
     period = 1.0 / rate
     stop = stop or threading.Event()
     key = keys.frame_key(robot, prefix)
     publisher = session.declare_publisher(key, **FRAME_QOS)
+    previews = (session.declare_publisher(keys.preview_key(robot, prefix), **FRAME_QOS)
+                if preview_hz > 0 else None)
+    next_preview = time.monotonic()
     try:
         deadline = time.monotonic() + wait
         while not publisher.matching_status and time.monotonic() < deadline and not stop.is_set():
@@ -141,9 +157,18 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                 frame = Frame.from_image(np.ascontiguousarray(image), seq=seq,
                                          stamp=time.time(), format=format)
                 publisher.put(encode(frame))
+                if previews is not None and time.monotonic() >= next_preview:
+                    next_preview = max(next_preview + 1.0 / preview_hz, time.monotonic())
+                    try:
+                        previews.put(encode(Preview.from_frame_image(
+                            image, seq=seq, stamp=frame.stamp, width=preview_width)))
+                    except Exception:  # a thumbnail is never worth losing the frames over
+                        log.exception("camera %s: preview of frame %d failed", robot, seq)
                 seq += 1
             if not loop or source.live or seq == 0:
                 break
         return seq
     finally:
         publisher.undeclare()
+        if previews is not None:
+            previews.undeclare()
