@@ -5,6 +5,13 @@
 ``<prefix>/<robot>/warning``   worker -> fleet      Response, only when ``collision`` is true
 ``<prefix>/<robot>/preview``   camera -> dashboards Preview, a low-rate thumbnail (optional
                                                     extension, docs/contract.md)
+
+Worker coordination (docs/operations.md); the ``@worker`` chunk is *verbatim* in Zenoh (it starts
+with ``@``), so ``<prefix>/*/...`` and ``<prefix>/**`` never match these keys, and no robot id
+(``[A-Za-z0-9_-]``) can collide with them:
+
+``<prefix>/@worker/<id>``         liveliness token of a running worker (ownership of robots)
+``<prefix>/@worker/<id>/status``  queryable: the worker's counters and robots (msgpack map)
 """
 
 from __future__ import annotations
@@ -13,7 +20,8 @@ import re
 
 __all__ = ["DEFAULT_PREFIX", "KINDS", "KeySchemeError", "check_prefix", "check_robot", "frame_key",
            "parse_key", "response_key", "warning_key", "frames", "responses", "warnings",
-           "preview_key", "previews"]
+           "preview_key", "previews", "WORKER_CHUNK", "worker_token_key", "worker_tokens",
+           "worker_status_key", "worker_statuses", "parse_worker_token"]
 
 DEFAULT_PREFIX = "asnn"
 KINDS = ("frame", "response", "warning", "preview")
@@ -93,3 +101,44 @@ def parse_key(key: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str]:
     if len(parts) != 2 or parts[1] not in KINDS:
         raise KeySchemeError(f"key {key!r} is not <prefix>/<robot>/<{'|'.join(KINDS)}>")
     return check_robot(parts[0]), parts[1]
+
+
+# ---------------------------------------------------------------- workers (docs/operations.md)
+
+WORKER_CHUNK = "@worker"
+
+
+def worker_token_key(worker: str, prefix: str = DEFAULT_PREFIX) -> str:
+    """``<prefix>/@worker/<id>``: the liveliness token of worker ``id`` (a robot-id-like chunk)."""
+    worker = worker if worker == "*" else check_robot(worker)
+    return f"{check_prefix(prefix)}/{WORKER_CHUNK}/{worker}"
+
+
+def worker_tokens(prefix: str = DEFAULT_PREFIX) -> str:
+    """Liveliness subscription key for every worker under ``prefix``."""
+    return worker_token_key("*", prefix)
+
+
+def worker_status_key(worker: str, prefix: str = DEFAULT_PREFIX) -> str:
+    """``<prefix>/@worker/<id>/status``: the status queryable of worker ``id``."""
+    return worker_token_key(worker, prefix) + "/status"
+
+
+def worker_statuses(prefix: str = DEFAULT_PREFIX) -> str:
+    """Query key reaching the status queryable of every worker under ``prefix``."""
+    return worker_status_key("*", prefix)
+
+
+def parse_worker_token(key: str, prefix: str = DEFAULT_PREFIX) -> str:
+    """The worker id of a ``<prefix>/@worker/<id>`` token key.
+
+    Raises
+    ------
+    KeySchemeError
+        If the key is not a worker token under ``prefix``.
+    """
+    head = f"{check_prefix(prefix)}/{WORKER_CHUNK}/"
+    key = str(key)
+    if not key.startswith(head) or "/" in key[len(head):]:
+        raise KeySchemeError(f"key {key!r} is not {head}<id>")
+    return check_robot(key[len(head):])
