@@ -21,8 +21,20 @@ sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten).
 Newest frame wins: each robot has one pending slot. A frame that arrives while the previous one
 is still waiting replaces it, and the replaced one is counted in the next response's ``dropped``.
 
-Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``)
-and logged (the first few of each reason, then every power of ten).
+Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``,
+the labels of :data:`service.messages.REASONS` plus ``bad-key``, ``frame-rejected`` and
+``too-many-robots``) and logged at WARNING, rate-limited: the first rejection of a reason at once,
+then at most one line per reason every ``log_interval`` seconds, with the count of those not
+shown.
+
+Ownership: with ``owns`` (a predicate on robot ids, see :mod:`service.ownership`), frames of
+robots the worker does not own are skipped before they are decoded and counted in ``foreign``;
+:meth:`WorkerCore.release_unowned` forgets the robots it no longer owns.
+
+Memory: at most two frames per robot are held (the pending one and the one being processed), for
+at most ``max_robots`` robots, each frame at most ``messages.MAX_PAYLOAD`` bytes; plus one model
+state per robot (docs/operations.md gives the numbers). Overload never grows it: a frame that
+arrives while one waits replaces it.
 """
 
 from __future__ import annotations
@@ -42,9 +54,10 @@ from asnn.detectors import make_detector
 from asnn.params import DEFAULT_PRESET
 
 from . import keys
-from .messages import Frame, MessageError, Response, decode_frame, response_from
+from .messages import (MAX_PAYLOAD, MAX_SIDE, Frame, MessageError, Response, decode_frame,
+                       response_from)
 
-__all__ = ["Job", "RESET_REASONS", "WorkerCore", "default_worker_id"]
+__all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "WorkerCore", "default_worker_id"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -90,8 +103,40 @@ class _Stats:
     dropped: int = 0
     warnings: int = 0
     evicted: int = 0
+    foreign: int = 0  # frames of robots another worker owns
+    released: int = 0  # robots handed over to another worker
     invalid: Counter = field(default_factory=Counter)
     resets: Counter = field(default_factory=Counter)
+
+
+class RateLimitedLog:
+    """WARNING lines per reason: the first at once, then at most one every ``interval`` seconds,
+    each saying how many were not shown since the previous one."""
+
+    def __init__(self, logger: logging.Logger, interval: float = 10.0,
+                 clock: Callable[[], float] = time.monotonic):
+        self.logger = logger
+        self.interval = float(interval)
+        self.clock = clock
+        self._last: dict[str, float] = {}
+        self._hidden: Counter = Counter()
+        self._lock = threading.Lock()
+
+    def warning(self, reason: str, message: str, *args) -> bool:
+        """Log (or count) one event of ``reason``; True if a line was written."""
+        now = self.clock()
+        with self._lock:
+            last = self._last.get(reason)
+            if last is not None and now - last < self.interval:
+                self._hidden[reason] += 1
+                return False
+            hidden = self._hidden.pop(reason, 0)
+            self._last[reason] = now
+        if hidden:
+            message += " (%d more %s since the last line)"
+            args = (*args, hidden, reason)
+        self.logger.warning(message, *args)
+        return True
 
 
 class WorkerCore:
@@ -114,6 +159,10 @@ class WorkerCore:
         Robots tracked at once; frames of further robots are rejected (``too-many-robots``).
     clock : callable
         Monotonic seconds (tests may pass a fake one).
+    owns : callable, optional
+        ``owns(robot) -> bool``: whether this worker serves the robot (default: every robot).
+    log_interval : float
+        Seconds between two WARNING lines about rejected frames of the same reason.
 
     Raises
     ------
@@ -124,7 +173,8 @@ class WorkerCore:
     def __init__(self, model: str = "asnn", preset: str | None = None, *,
                  worker_id: str | None = None, prefix: str = keys.DEFAULT_PREFIX,
                  idle_timeout: float = 60.0, max_gap: int = 20, max_robots: int = 256,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic,
+                 owns: Callable[[str], bool] | None = None, log_interval: float = 10.0):
         make_detector(model, preset)  # fail now, not on the first frame
         self.model = model
         self.preset = (DEFAULT_PRESET if preset in (None, "default") else preset) \
@@ -135,6 +185,9 @@ class WorkerCore:
         self.max_gap = int(max_gap)
         self.max_robots = int(max_robots)
         self.clock = clock
+        self.owns = owns
+        self.started = clock()
+        self._rejections = RateLimitedLog(log, log_interval, clock)
         self._robots: dict[str, _Robot] = {}
         self._stats = _Stats()
         self._lock = threading.Lock()
@@ -153,6 +206,10 @@ class WorkerCore:
             robot, kind = keys.parse_key(key, self.prefix)
             if kind != "frame":
                 raise MessageError("bad-key", f"{key!r} is not a frame key")
+            if self.owns is not None and not self.owns(robot):
+                with self._lock:
+                    self._stats.foreign += 1
+                return None
             frame = decode_frame(payload)
             frame.check_size()
         except keys.KeySchemeError as exc:
@@ -187,8 +244,8 @@ class WorkerCore:
     def _reject_locked(self, reason: str, detail: str, key: str) -> None:
         self._stats.invalid[reason] += 1
         n = self._stats.invalid[reason]
-        if n <= 5 or _power_of_ten(n):
-            log.warning("invalid frame on %s (%s, #%d): %s", key, reason, n, detail)
+        self._rejections.warning(reason, "invalid frame on %s (%s, #%d): %s", str(key)[:200],
+                                 reason, n, detail[:300])
 
     # ------------------------------------------------------------------ processing side
 
@@ -202,7 +259,8 @@ class WorkerCore:
         with self._ready:
             while True:
                 ready = [(s.pending[1], r) for r, s in self._robots.items()
-                         if s.pending is not None and not s.busy]
+                         if s.pending is not None and not s.busy
+                         and (self.owns is None or self.owns(r))]
                 if ready:
                     robot = min(ready)[1]
                     state = self._robots[robot]
@@ -224,7 +282,10 @@ class WorkerCore:
                 state = self._robots.get(job.robot)
                 if state is not None:
                     state.busy = False
-                    if state.pending is not None:
+                    if self.owns is not None and not self.owns(job.robot):
+                        del self._robots[job.robot]  # handed over while it was processed
+                        self._stats.released += 1
+                    elif state.pending is not None:
                         self._ready.notify()
 
     def _process(self, job: Job) -> Response | None:
@@ -305,6 +366,25 @@ class WorkerCore:
             log.info("robot %s: evicted after %.0f s without frames", robot, self.idle_timeout)
         return gone
 
+    def release_unowned(self) -> list[str]:
+        """Forget the robots this worker no longer owns (their pending frames are discarded;
+        one being processed is forgotten when it is done); returns their ids."""
+        if self.owns is None:
+            return []
+        with self._lock:
+            gone = [r for r, s in self._robots.items() if not self.owns(r)]
+            released = []
+            for robot in gone:
+                state = self._robots[robot]
+                state.pending = None
+                if not state.busy:
+                    del self._robots[robot]
+                    released.append(robot)
+            self._stats.released += len(released)
+        for robot in released:
+            log.info("robot %s: handed over to another worker", robot)
+        return released
+
     def robots(self) -> list[str]:
         """Robots currently tracked."""
         with self._lock:
@@ -316,17 +396,29 @@ class WorkerCore:
             return sum((s.pending is not None) + s.busy for s in self._robots.values())
 
     def stats(self) -> dict:
-        """Counters: received, processed, dropped, warnings, evicted, robots, invalid{reason},
-        resets{reason}."""
+        """Counters: received, processed, dropped, warnings, evicted, foreign, released, robots,
+        invalid{reason}, resets{reason}."""
         with self._lock:
             s = self._stats
             return {"received": s.received, "processed": s.processed, "dropped": s.dropped,
-                    "warnings": s.warnings, "evicted": s.evicted, "robots": len(self._robots),
+                    "warnings": s.warnings, "evicted": s.evicted, "foreign": s.foreign,
+                    "released": s.released, "robots": len(self._robots),
                     "invalid": dict(s.invalid), "resets": dict(s.resets)}
 
-
-def _power_of_ten(n: int) -> bool:
-    while n % 10 == 0 and n > 1:
-        n //= 10
-    return n == 1
+    def status(self) -> dict:
+        """What the status queryable answers (docs/operations.md): identity, limits, counters
+        and the robots tracked, with their pending work."""
+        with self._lock:
+            robots = {r: {"processed": s.processed, "resets": s.resets,
+                          "pending": s.pending is not None, "busy": s.busy,
+                          "last_seq": s.last_seq,
+                          "size": list(s.shape) if s.shape else None}
+                      for r, s in sorted(self._robots.items())}
+            backlog = sum((s.pending is not None) + s.busy for s in self._robots.values())
+        return {"v": 1, "worker": self.worker_id, "model": self.model, "preset": self.preset,
+                "prefix": self.prefix, "uptime_s": round(self.clock() - self.started, 3),
+                "limits": {"max_side": MAX_SIDE, "max_payload": MAX_PAYLOAD,
+                           "max_robots": self.max_robots, "max_gap": self.max_gap,
+                           "idle_timeout": self.idle_timeout},
+                "backlog": backlog, "stats": self.stats(), "robots": robots}
 

@@ -2,8 +2,20 @@
 
 All payloads are msgpack maps (CONTRACT.md). Unknown fields are ignored; a missing or ill-typed
 required field makes the message invalid. Decoding raises :class:`MessageError`, whose ``reason``
-is a short stable label that receivers count (``undecodable``, ``not-a-map``, ``invalid-field``,
-``unsupported-version``, ``bad-pixels``).
+is a short stable label that receivers count (REASONS; docs/operations.md):
+
+``oversized``            payload larger than MAX_PAYLOAD bytes (checked before anything else)
+``undecodable``          not msgpack
+``not-a-map``            msgpack, but not a map
+``unsupported-version``  ``v`` is not 1
+``missing-field``        a required field is absent
+``invalid-field``        a field of the wrong type or out of range (e.g. ``seq`` < 0)
+``bad-stamp``            ``stamp`` NaN, infinite or not a number
+``bad-size``             ``width`` or ``height`` not an int in 1..MAX_SIDE (4096)
+``bad-format``           ``format`` not one of FORMATS
+``bad-pixels``           raw data length is not width x height x channels, or an encoded image
+                         of another size than the message says
+``bad-image``            jpeg/png data that does not decode to an 8-bit image
 """
 
 from __future__ import annotations
@@ -16,13 +28,18 @@ import msgpack
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-__all__ = ["FORMATS", "Frame", "MessageError", "Response", "TargetMsg", "VERSION",
-           "decode_frame", "decode_response", "encode", "encode_image"]
+__all__ = ["FORMATS", "Frame", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS", "Response",
+           "TargetMsg", "VERSION", "decode_frame", "decode_response", "encode", "encode_image",
+           "encoded_size"]
 
 VERSION = 1
 FORMATS = ("gray8", "bgr8", "jpeg", "png")
-MAX_SIDE = 8192  # largest accepted frame width or height
+MAX_SIDE = 4096  # largest accepted frame width or height
+# the largest valid frame (4096 x 4096 bgr8) plus room for the other fields
+MAX_PAYLOAD = MAX_SIDE * MAX_SIDE * 3 + 64 * 1024
 JPEG_QUALITY = 90
+REASONS = ("oversized", "undecodable", "not-a-map", "unsupported-version", "missing-field",
+           "invalid-field", "bad-stamp", "bad-size", "bad-format", "bad-pixels", "bad-image")
 
 
 class MessageError(ValueError):
@@ -63,14 +80,29 @@ class Frame(_Message):
             self.check_size()
             pixels = np.frombuffer(self.data, dtype=np.uint8)
             return pixels.reshape((h, w) if self.format == "gray8" else (h, w, 3))
-        image = cv2.imdecode(np.frombuffer(self.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+        # the header first: a lying or hostile size is refused before any pixel is decoded
+        size = encoded_size(self.data, self.format)
+        if size is None:
+            raise MessageError("bad-image", f"data is not a {self.format} file")
+        if size != (w, h):
+            raise MessageError("bad-pixels", f"{self.format} image is {size[0]}x{size[1]}, "
+                               f"the message says {w}x{h}")
+        try:
+            image = cv2.imdecode(np.frombuffer(self.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+        except cv2.error as exc:
+            raise MessageError("bad-image", f"{self.format} data does not decode "
+                               f"({str(exc).strip().splitlines()[-1][:80]})") from None
         if image is None:
-            raise MessageError("bad-pixels", f"data is not a decodable {self.format} image")
+            raise MessageError("bad-image", f"data is not a decodable {self.format} image")
         if image.dtype != np.uint8:
-            raise MessageError("bad-pixels", f"{self.format} image is {image.dtype}, not 8-bit")
-        if image.ndim == 3 and image.shape[2] == 4:
-            image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
-        if image.shape[:2] != (h, w):
+            raise MessageError("bad-image", f"{self.format} image is {image.dtype}, not 8-bit")
+        if image.ndim == 3:
+            channels = image.shape[2]
+            if channels == 4:
+                image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+            elif channels != 3:  # gray + alpha, or anything else: keep the first channel
+                image = np.ascontiguousarray(image[:, :, 0])
+        if image.ndim not in (2, 3) or image.shape[:2] != (h, w):
             raise MessageError("bad-pixels", f"{self.format} image is {image.shape[1]}x"
                                f"{image.shape[0]}, the message says {w}x{h}")
         return image
@@ -154,6 +186,9 @@ def encode(message: BaseModel) -> bytes:
 
 
 def _unpack(payload: bytes, what: str) -> dict[str, Any]:
+    if len(payload) > MAX_PAYLOAD:
+        raise MessageError("oversized", f"{what} of {len(payload)} bytes, the limit is "
+                           f"{MAX_PAYLOAD}")
     try:
         obj = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=False)
     except Exception as exc:  # msgpack raises several unrelated types on garbage
@@ -171,9 +206,61 @@ def _validate(model: type[BaseModel], obj: dict, what: str):
     try:
         return model.model_validate(obj)
     except ValidationError as exc:
+        errors = exc.errors()
         fields = "; ".join(f"{'.'.join(map(str, e['loc'])) or '?'}: {e['msg']}"
-                           for e in exc.errors()[:3])
-        raise MessageError("invalid-field", f"{what}: {fields}") from None
+                           for e in errors[:3])
+        raise MessageError(_reason(errors[0]) if errors else "invalid-field",
+                           f"{what}: {fields}") from None
+
+
+_FIELD_REASONS = {"stamp": "bad-stamp", "width": "bad-size", "height": "bad-size",
+                  "format": "bad-format"}
+
+
+def _reason(error: dict) -> str:
+    """The counting label of pydantic's first validation error."""
+    loc = error.get("loc") or ("?",)
+    if len(loc) > 1:  # inside a nested field (a target of a response)
+        return "invalid-field"
+    if error.get("type") == "missing":
+        return "missing-field"
+    return _FIELD_REASONS.get(str(loc[0]), "invalid-field")
+
+
+def encoded_size(data: bytes, format: str) -> tuple[int, int] | None:
+    """(width, height) from a png or jpeg file's header without decoding it; None if the data
+    does not start like such a file."""
+    data = memoryview(data).cast("B") if format == "jpeg" else bytes(data[:32])
+    if format == "png":
+        if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
+            return None
+        return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    if format != "jpeg" or bytes(data[:2]) != b"\xff\xd8":
+        return None
+    i = 2
+    while i + 4 <= len(data):
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        if marker in (0x01, 0xD8) or 0xD0 <= marker <= 0xD7:  # no length field
+            i += 2
+            continue
+        if marker in (0xD9, 0xDA):  # end of image, start of scan: no frame header before
+            return None
+        length = int.from_bytes(data[i + 2:i + 4], "big")
+        if length < 2:
+            return None
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # a start of frame
+            if i + 9 > len(data) or length < 7:
+                return None
+            height = int.from_bytes(data[i + 5:i + 7], "big")
+            width = int.from_bytes(data[i + 7:i + 9], "big")
+            return width, height
+        i += 2 + length
+    return None
 
 
 def decode_frame(payload: bytes) -> Frame:

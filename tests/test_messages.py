@@ -11,8 +11,9 @@ from asnn import ASNN
 from asnn.stimuli import make_scene
 from service import keys
 from service.config import ConfigError, ZenohOptions, make_config
-from service.messages import (FORMATS, Frame, MessageError, Response, decode_frame,
-                              decode_response, encode, response_from)
+from service.messages import (FORMATS, MAX_PAYLOAD, REASONS, Frame, MessageError, Response,
+                              decode_frame, decode_response, encode, encode_image, encoded_size,
+                              response_from)
 
 RNG = np.random.default_rng(4)
 IMAGE = RNG.integers(0, 256, size=(40, 56, 3), dtype=np.uint8)
@@ -68,20 +69,61 @@ def test_unknown_fields_are_ignored():
     (b"", "undecodable"),
     (msgpack.packb([1, 2, 3]), "not-a-map"),
     (msgpack.packb(frame_dict(v=2)), "unsupported-version"),
-    (msgpack.packb(frame_dict(seq=...)), "invalid-field"),
+    (msgpack.packb(frame_dict(v=True)), "unsupported-version"),
+    (msgpack.packb(frame_dict(seq=...)), "missing-field"),
+    (msgpack.packb(frame_dict(data=...)), "missing-field"),
+    (msgpack.packb(frame_dict(format=...)), "missing-field"),
     (msgpack.packb(frame_dict(seq="3")), "invalid-field"),
     (msgpack.packb(frame_dict(seq=3.5)), "invalid-field"),
     (msgpack.packb(frame_dict(seq=True)), "invalid-field"),
     (msgpack.packb(frame_dict(seq=-1)), "invalid-field"),
-    (msgpack.packb(frame_dict(stamp=math.nan)), "invalid-field"),
-    (msgpack.packb(frame_dict(width=0)), "invalid-field"),
-    (msgpack.packb(frame_dict(format="yuv")), "invalid-field"),
+    (msgpack.packb(frame_dict(stamp=math.nan)), "bad-stamp"),
+    (msgpack.packb(frame_dict(stamp=math.inf)), "bad-stamp"),
+    (msgpack.packb(frame_dict(stamp=-math.inf)), "bad-stamp"),
+    (msgpack.packb(frame_dict(stamp="now")), "bad-stamp"),
+    (msgpack.packb(frame_dict(width=0)), "bad-size"),
+    (msgpack.packb(frame_dict(height=-2)), "bad-size"),
+    (msgpack.packb(frame_dict(width=4097)), "bad-size"),
+    (msgpack.packb(frame_dict(height=2 ** 40)), "bad-size"),
+    (msgpack.packb(frame_dict(width=4.0)), "bad-size"),
+    (msgpack.packb(frame_dict(format="yuv")), "bad-format"),
+    (msgpack.packb(frame_dict(format=3)), "bad-format"),
     (msgpack.packb(frame_dict(data="text, not bytes")), "invalid-field"),
     (msgpack.packb(frame_dict(data=b"short")), "bad-pixels"),
-    (msgpack.packb(frame_dict(format="jpeg", data=b"not a jpeg")), "bad-pixels"),
-])
+    (msgpack.packb(frame_dict(data=bytes(9))), "bad-pixels"),
+    (msgpack.packb(frame_dict(format="bgr8")), "bad-pixels"),  # 8 bytes for 4x2x3
+    (msgpack.packb(frame_dict(format="jpeg", data=b"not a jpeg")), "bad-image"),
+    (msgpack.packb(frame_dict(format="png", data=b"\x89PNG\r\n\x1a\n" + bytes(30))),
+     "bad-image"),
+], ids=lambda v: v if isinstance(v, str) else "")
 def test_invalid_frames_are_rejected_with_a_reason(payload, expected):
+    assert expected in REASONS
     assert reason(payload) == expected
+
+
+def test_oversized_payloads_are_refused_before_unpacking():
+    assert reason(b"\x80" + bytes(MAX_PAYLOAD)) == "oversized"
+
+
+def test_the_largest_frame_is_accepted_and_one_pixel_more_is_not():
+    big = frame_dict(width=4096, height=4096, format="gray8", data=bytes(4096 * 4096))
+    assert decode_frame(msgpack.packb(big)).image().shape == (4096, 4096)
+    assert len(msgpack.packb({**big, "format": "bgr8", "data": bytes(4096 * 4096 * 3)})) \
+        <= MAX_PAYLOAD
+    assert reason(msgpack.packb({**big, "width": 4097})) == "bad-size"
+
+
+@pytest.mark.parametrize("fmt", ["jpeg", "png"])
+def test_encoded_size_reads_the_header_without_decoding(fmt):
+    data = encode_image(IMAGE, fmt)
+    assert encoded_size(data, fmt) == (56, 40)
+    assert encoded_size(data[:5], fmt) is None
+    assert encoded_size(b"GIF89a" + data, fmt) is None
+    # a header promising a huge image is refused before decoding (no allocation)
+    if fmt == "png":
+        bomb = data[:16] + (60000).to_bytes(4, "big") + (60000).to_bytes(4, "big") + data[24:]
+        frame = frame_dict(width=56, height=40, format="png", data=bomb)
+        assert reason(msgpack.packb(frame)) == "bad-pixels"
 
 
 def test_an_encoded_image_of_another_size_is_rejected():
@@ -117,7 +159,9 @@ def test_invalid_responses_are_rejected():
     assert decode_response(msgpack.packb(good)).collision
     assert reason(msgpack.packb({**good, "collision": "yes"}), decode_response) == "invalid-field"
     assert reason(msgpack.packb({**good, "targets": [{"x": 1}]}), decode_response) == \
-        "invalid-field"
+        "invalid-field"  # a nested field: the reason is about the field that holds it
+    assert reason(msgpack.packb({k: v for k, v in good.items() if k != "robot"}),
+                  decode_response) == "missing-field"
 
 
 def test_keys_follow_the_contract():

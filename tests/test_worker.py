@@ -1,13 +1,16 @@
 """The worker's core without Zenoh: per-robot state, newest frame wins, resets, counters."""
 
+import logging
+
 import msgpack
 import numpy as np
 import pytest
 
 from asnn import ASNN
 from asnn.stimuli import make_scene
-from service.core import WorkerCore
-from service.messages import Frame, encode
+from service.core import RateLimitedLog, WorkerCore
+from service.messages import MAX_PAYLOAD, Frame, encode
+from service.ownership import Membership, owner
 
 
 class FakeClock:
@@ -168,7 +171,7 @@ def test_compressed_frames_with_bad_data_are_counted_at_processing(looming):
     core.offer("asnn/r1/frame", payload(looming.frames[0], 0))
     core.offer("asnn/r1/frame", junk)  # replaces the valid one
     assert core.process(core.take()) is None
-    assert core.stats()["invalid"] == {"bad-pixels": 1}
+    assert core.stats()["invalid"] == {"bad-image": 1}
     response = feed(core, "r1", looming.frames[1], 1)
     assert response is not None and response.dropped == 1  # the replaced frame still counts
 
@@ -201,3 +204,101 @@ def test_unknown_model_or_preset_fails_at_start():
         WorkerCore(model="nope")
     with pytest.raises(ValueError):
         WorkerCore(preset="nope")
+
+
+def test_every_kind_of_bad_input_is_counted_under_its_reason(looming):
+    core = WorkerCore()
+    good = msgpack.unpackb(payload(looming.frames[0], 0))
+    bad = {
+        "oversized": b"\x80" + bytes(MAX_PAYLOAD),
+        "missing-field": msgpack.packb({k: v for k, v in good.items() if k != "stamp"}),
+        "bad-stamp": msgpack.packb({**good, "stamp": float("inf")}),
+        "bad-size": msgpack.packb({**good, "width": 5000}),
+        "bad-format": msgpack.packb({**good, "format": "rgb565"}),
+        "bad-pixels": msgpack.packb({**good, "data": good["data"][:-1]}),
+    }
+    for reason, junk in bad.items():
+        assert core.offer("asnn/r1/frame", junk) is None, reason
+    assert core.offer("asnn/r1/response", payload(looming.frames[0], 0)) is None
+    assert core.offer("asnn/" + "r" * 65 + "/frame", payload(looming.frames[0], 0)) is None
+    assert core.stats()["invalid"] == {**{r: 1 for r in bad}, "bad-key": 2}
+    assert core.robots() == [] and core.take() is None
+
+
+def test_rejections_are_logged_at_a_limited_rate(caplog, looming):
+    clock = FakeClock()
+    core = WorkerCore(clock=clock, log_interval=10.0)
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for _ in range(500):
+            core.offer("asnn/r1/frame", b"\xc1")
+            core.offer("asnn/r1/frame", msgpack.packb([1]))
+        clock.now += 11
+        core.offer("asnn/r1/frame", b"\xc1")
+    lines = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(lines) == 3  # one per reason at once, then one after the interval
+    assert "undecodable" in lines[0] and "not-a-map" in lines[1]
+    assert "499 more undecodable" in lines[2]
+    assert core.stats()["invalid"] == {"undecodable": 501, "not-a-map": 500}
+
+
+def test_rate_limited_log_counts_what_it_hides():
+    clock = FakeClock()
+    logger = logging.getLogger("test.ratelimit")
+    limited = RateLimitedLog(logger, interval=5.0, clock=clock)
+    assert limited.warning("a", "first") and not limited.warning("a", "second")
+    assert limited.warning("b", "other reason")
+    clock.now += 5
+    assert limited.warning("a", "later")
+
+
+def test_a_worker_takes_only_the_robots_it_owns(looming):
+    membership = Membership("w1", ["w2"])
+    core = WorkerCore(worker_id="w1", owns=membership.owns)
+    robots = [f"r{i}" for i in range(12)]
+    mine = [r for r in robots if owner(r, ["w1", "w2"]) == "w1"]
+    assert 0 < len(mine) < len(robots)
+    for robot in robots:
+        core.offer(f"asnn/{robot}/frame", payload(looming.frames[0], 0))
+    assert core.robots() == sorted(mine)
+    assert core.stats()["foreign"] == len(robots) - len(mine)
+    assert core.stats()["invalid"] == {}
+    # w1 goes alone: it takes every robot; w3 joins: w1 hands over the ones w3 outscores
+    membership.remove("w2")
+    for robot in robots:
+        core.offer(f"asnn/{robot}/frame", payload(looming.frames[1], 1))
+    assert core.robots() == sorted(robots)
+    job = core.take()
+    membership.add("w3")
+    released = core.release_unowned()
+    kept = [r for r in robots if owner(r, ["w1", "w3"]) == "w1"]
+    assert sorted(set(core.robots()) - {job.robot}) == sorted(set(kept) - {job.robot})
+    core.process(job)  # a robot handed over while busy is forgotten when its frame is done
+    assert core.robots() == sorted(kept)
+    assert core.stats()["released"] == len(robots) - len(kept)
+    assert set(released) | {job.robot} >= set(robots) - set(kept)
+    while (next_job := core.take()) is not None:
+        assert next_job.robot in kept
+        core.process(next_job)
+
+
+def test_rendezvous_ownership_is_stable_and_moves_only_what_it_must():
+    robots = [f"robot-{i}" for i in range(300)]
+    two = {r: owner(r, ["a", "b"]) for r in robots}
+    three = {r: owner(r, ["a", "b", "c"]) for r in robots}
+    assert two == {r: owner(r, ["b", "a"]) for r in robots}  # order does not matter
+    moved = [r for r in robots if two[r] != three[r]]
+    assert all(three[r] == "c" for r in moved)  # only to the newcomer
+    assert 60 <= len(moved) <= 140  # about a third
+    assert owner("r", []) is None
+
+
+def test_status_reports_counters_limits_and_robots(looming):
+    core = WorkerCore(worker_id="w9")
+    feed(core, "r1", looming.frames[0], 0)
+    core.offer("asnn/r1/frame", b"junk")
+    status = core.status()
+    assert status["worker"] == "w9" and status["model"] == "asnn"
+    assert status["limits"]["max_side"] == 4096
+    assert status["stats"]["processed"] == 1 and status["stats"]["invalid"] == {"undecodable": 1}
+    assert status["robots"]["r1"]["last_seq"] == 0
+    assert msgpack.unpackb(msgpack.packb(status)) == status
