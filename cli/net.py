@@ -1,4 +1,4 @@
-"""The networked commands: camera, worker, alerts, router and the one-process demo."""
+"""The networked commands: camera, worker, alerts, status, router and the one-process demo."""
 
 from __future__ import annotations
 
@@ -124,21 +124,62 @@ def cmd_camera(args: argparse.Namespace) -> int:
 def cmd_worker(args: argparse.Namespace) -> int:
     from service.config import make_config
     from service.core import WorkerCore
-    from service.worker import Worker
+    from service.worker import Worker, WorkerIdTaken
 
     _setup_logging(args)
     try:
         core = WorkerCore(args.model, args.preset, worker_id=args.id, prefix=args.prefix,
-                          idle_timeout=args.idle_timeout, max_gap=args.max_gap)
+                          idle_timeout=args.idle_timeout, max_gap=args.max_gap,
+                          max_robots=args.max_robots)
         session = _open_session(make_config(zenoh_options(args)))
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return _fail(str(exc))
     stop = _stop_on_signals()
-    with session, Worker(session, core):
-        print(f"worker {core.worker_id} ready", file=sys.stderr, flush=True)
-        while not stop.wait(0.5):
-            pass
+    with session:
+        worker = Worker(session, core)
+        try:
+            worker.start()
+        except WorkerIdTaken as exc:
+            worker.close()
+            return _fail(f"{exc}; give each worker its own --id")
+        try:
+            print(f"worker {core.worker_id} ready", file=sys.stderr, flush=True)
+            while not stop.wait(0.2):
+                pass
+        finally:
+            worker.close()  # hands the robots over at once
     log.info("worker stopped: %s", core.stats())
+    return 0
+
+
+def cmd_status(args: argparse.Namespace) -> int:
+    import json
+
+    from service.config import make_config
+    from service.worker import query_status
+
+    _setup_logging(args)
+    try:
+        session = _open_session(make_config(zenoh_options(args)))
+    except ConfigError as exc:
+        return _fail(str(exc))
+    with session:
+        statuses = query_status(session, args.prefix, args.worker, timeout=args.timeout)
+    for worker, status in sorted(statuses.items()):
+        if args.json:
+            print(json.dumps(status, separators=(", ", ": ")), flush=True)
+            continue
+        stats = status["stats"]
+        invalid = ", ".join(f"{k} {v}" for k, v in sorted(stats["invalid"].items())) or "none"
+        print(f"worker {worker}: {status['model']}/{status['preset'] or '-'}, up "
+              f"{status['uptime_s']:.0f} s, robots {', '.join(status['robots']) or 'none'}; "
+              f"processed {stats['processed']}, dropped {stats['dropped']}, warnings "
+              f"{stats['warnings']}, foreign {stats['foreign']}; invalid: {invalid}; "
+              f"live workers {', '.join(status.get('workers', []))}")
+    if not statuses:
+        print(f"no worker answered on {args.prefix}/@worker/"
+              f"{args.worker or '*'}/status", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -242,8 +283,22 @@ def register(subparsers) -> None:
     p.add_argument("--max-gap", type=int, default=20, metavar="N",
                    help="reset a robot's state when seq jumps ahead by more than N "
                         "(default: %(default)s)")
+    p.add_argument("--max-robots", type=int, default=256, metavar="N",
+                   help="robots tracked at once; frames of more are rejected "
+                        "(default: %(default)s)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_worker)
+
+    p = subparsers.add_parser("status", help="ask the workers for their status",
+                              description="Query <prefix>/@worker/<id>/status: each worker's "
+                              "counters (rejected frames per reason, dropped frames), robots "
+                              "and the live workers. Exit status 1 when no worker answers.")
+    p.add_argument("--worker", type=_robot, default=None, help="only this worker (default: all)")
+    p.add_argument("--json", action="store_true", help="one JSON object per worker")
+    p.add_argument("--timeout", type=_positive, default=2.0, metavar="SECONDS",
+                   help="how long to wait for answers (default: %(default)s)")
+    add_zenoh_options(p)
+    p.set_defaults(func=cmd_status)
 
     p = subparsers.add_parser("alerts", help="print the fleet's collision warnings",
                               description="Subscribe to <prefix>/<robot>/warning; one line per "

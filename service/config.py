@@ -1,9 +1,18 @@
 """The Zenoh configuration of every service part, built in one place.
 
-Precedence: Zenoh's defaults < ``--config FILE`` (a Zenoh JSON5 config) < the command-line
-options (``--mode``, ``--connect``, ``--listen``, scouting switches). Timestamping is always
-enabled, because the worker's warning publisher keeps a cache for late subscribers and Zenoh
-requires timestamps for that.
+Precedence: Zenoh's defaults < asnn's defaults below < ``--config FILE`` (a Zenoh JSON5 config)
+< the command-line options (``--mode``, ``--connect``, ``--listen``, scouting switches).
+Timestamping is always enabled, because the worker's warning publisher keeps a cache for late
+subscribers and Zenoh requires timestamps for that.
+
+asnn's defaults, applied only where the config file says nothing (docs/operations.md):
+
+* ``connect/retry``: a lost connection (a restarted router) is retried after 0.25 s, backing off
+  to every 2 s (Zenoh's own: 1 s to 4 s), so cameras, workers and subscribers reconnect by
+  themselves and re-declare their subscribers, publishers and liveliness tokens.
+
+The lease that decides how fast a dead worker's robots move (``transport/link/tx/lease``) is
+left to the config files: deploy/zenoh/*.json5 set 1 s with 4 keep-alives per lease.
 """
 
 from __future__ import annotations
@@ -15,9 +24,12 @@ from pathlib import Path
 
 import zenoh
 
-__all__ = ["MODES", "ConfigError", "ZenohOptions", "make_config"]
+__all__ = ["DEFAULTS", "MODES", "ConfigError", "ZenohOptions", "make_config"]
 
 MODES = ("peer", "client", "router")
+DEFAULTS: dict[str, object] = {
+    "connect/retry": {"period_init_ms": 250, "period_max_ms": 2000, "period_increase_factor": 2},
+}
 
 
 class ConfigError(ValueError):
@@ -58,6 +70,9 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
     except Exception as exc:  # zenoh.ZError, or an OS error surfaced by zenoh
         raise ConfigError(f"cannot load Zenoh config {opts.config_file}: {exc}") from None
     settings: list[tuple[str, object]] = [("timestamping/enabled", True)]
+    for key, value in DEFAULTS.items():
+        if json.loads(conf.get_json(key)) is None:
+            settings.append((key, value))
     if opts.mode is not None:
         if opts.mode not in MODES:
             raise ConfigError(f"unknown Zenoh mode {opts.mode!r}; choose one of {', '.join(MODES)}")

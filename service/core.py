@@ -273,6 +273,11 @@ class WorkerCore:
                     return None
                 self._ready.wait(remaining)
 
+    def notify(self) -> None:
+        """Wake a thread waiting in :meth:`take` (ownership changed, or the worker stops)."""
+        with self._ready:
+            self._ready.notify_all()
+
     def process(self, job: Job) -> Response | None:
         """Run the robot's model on the job's frame; the wire Response, or None if rejected."""
         try:

@@ -6,6 +6,13 @@ on a processing thread and publishes, for every processed frame, a Response on
 Responses and warnings are reliable, with blocking congestion control and a higher priority than
 frames. Warnings go through an advanced publisher that caches the robot's latest warning, so an
 advanced subscriber that joins late (``clients.alerts``) receives it.
+
+Several workers share the robots (:mod:`service.ownership`): each declares the liveliness token
+``<prefix>/@worker/<id>``, watches the others' and serves only the robots that rendezvous hashing
+gives it over the live set. A worker that stops withdraws its token first, so the others take its
+robots at once; one that dies loses its token when the router sees its session close or its
+lease expire. Each worker answers queries on ``<prefix>/@worker/<id>/status`` with a msgpack map
+(:meth:`service.core.WorkerCore.status` plus the live workers).
 """
 
 from __future__ import annotations
@@ -20,8 +27,10 @@ from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publish
 from . import keys
 from .core import WorkerCore
 from .messages import Response, encode
+from .ownership import Membership
 
-__all__ = ["RESPONSE_QOS", "WARNING_QOS", "Worker"]
+__all__ = ["RESPONSE_QOS", "WARNING_QOS", "Worker", "WorkerIdTaken", "live_workers",
+           "query_status"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -34,6 +43,39 @@ WARNING_QOS = dict(congestion_control=zenoh.CongestionControl.BLOCK,
 # most recent one (all warning publishers of a worker share its session). The sporadic heartbeat
 # also lets subscribers recover a warning they missed.
 MISS_DETECTION = MissDetectionConfig(heartbeat=None, sporadic_heartbeat=1.0)
+
+
+class WorkerIdTaken(RuntimeError):
+    """Another live worker already uses this worker id."""
+
+
+def live_workers(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
+                 timeout: float = 2.0) -> list[str]:
+    """Ids of the workers whose liveliness tokens are alive under ``prefix``."""
+    found = set()
+    for reply in session.liveliness().get(keys.worker_tokens(prefix), timeout=timeout):
+        try:
+            found.add(keys.parse_worker_token(str(reply.ok.key_expr), prefix))
+        except Exception:  # an error reply, or a token that is not a worker's
+            continue
+    return sorted(found)
+
+
+def query_status(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
+                 worker: str | None = None, timeout: float = 2.0) -> dict[str, dict]:
+    """The status maps of one worker or (``worker=None``) of all, by worker id."""
+    import msgpack
+
+    key = keys.worker_status_key(worker, prefix) if worker else keys.worker_statuses(prefix)
+    out = {}
+    for reply in session.get(key, target=zenoh.QueryTarget.ALL, timeout=timeout,
+                             consolidation=zenoh.ConsolidationMode.NONE):
+        try:
+            status = msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
+            out[str(status["worker"])] = status
+        except Exception:  # an error reply or a payload that is not a status map
+            continue
+    return out
 
 
 class _Outlets:
@@ -65,15 +107,22 @@ class Worker:
     """
 
     def __init__(self, session: zenoh.Session, core: WorkerCore, *, on_response=None,
-                 stats_every: float = 30.0):
+                 stats_every: float = 30.0, shared: bool = True):
         self.session = session
         self.core = core
         self.on_response = on_response
         self.stats_every = stats_every
+        self.shared = shared
+        self.membership = Membership(core.worker_id)
         self._outlets: dict[str, _Outlets] = {}
+        self._outlets_lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._subscriber = None
+        self._token = None
+        self._workers_sub = None
+        self._status = None
+        self._membership_changed = threading.Event()
 
     def __enter__(self) -> Worker:
         self.start()
@@ -83,12 +132,59 @@ class Worker:
         self.close()
 
     def start(self) -> None:
-        prefix = self.core.prefix
+        """Join the live worker set, then take frames.
+
+        Raises
+        ------
+        WorkerIdTaken
+            If a live worker already has this id (two workers with one id would both serve the
+            same robots).
+        """
+        prefix, me = self.core.prefix, self.core.worker_id
+        if self.shared:
+            # the live set first, so that no frame is taken while this worker thinks it is alone
+            others = live_workers(self.session, prefix)
+            if me in others:
+                raise WorkerIdTaken(f"worker id {me!r} is already live under {prefix!r}")
+            for worker in others:
+                self.membership.add(worker)
+            self.core.owns = self.membership.owns
+            self._workers_sub = self.session.liveliness().declare_subscriber(
+                keys.worker_tokens(prefix), self._on_worker, history=True)
+            self._token = self.session.liveliness().declare_token(keys.worker_token_key(me,
+                                                                                        prefix))
+        self._status = self.session.declare_queryable(keys.worker_status_key(me, prefix),
+                                                      self._on_status_query)
         self._thread = threading.Thread(target=self._run, name="asnn-worker", daemon=True)
         self._thread.start()
         self._subscriber = self.session.declare_subscriber(keys.frames(prefix), self._on_frame)
-        log.info("worker %s: %s/%s on %s", self.core.worker_id, self.core.model,
-                 self.core.preset or "-", keys.frames(prefix))
+        log.info("worker %s: %s/%s on %s; workers %s", me, self.core.model,
+                 self.core.preset or "-", keys.frames(prefix), self.membership.live())
+
+    def _on_worker(self, sample: zenoh.Sample) -> None:
+        try:
+            worker = keys.parse_worker_token(str(sample.key_expr), self.core.prefix)
+        except keys.KeySchemeError:
+            return
+        if sample.kind == zenoh.SampleKind.DELETE:
+            changed = self.membership.remove(worker)
+        else:
+            changed = self.membership.add(worker)
+        if changed:
+            log.info("workers now %s", self.membership.live())
+            self._membership_changed.set()
+            self.core.notify()
+
+    def _on_status_query(self, query: zenoh.Query) -> None:
+        import msgpack
+
+        try:
+            status = self.core.status()
+            status["workers"] = self.membership.live()
+            query.reply(keys.worker_status_key(self.core.worker_id, self.core.prefix),
+                        msgpack.packb(status, use_bin_type=True))
+        except Exception:
+            log.exception("status query failed")
 
     def _on_frame(self, sample: zenoh.Sample) -> None:
         try:
@@ -108,23 +204,36 @@ class Worker:
                             update={"latency_ms": self.core.latency_ms(job)}))
                 except Exception:
                     log.exception("robot %s: frame %d failed", job.robot, job.frame.seq)
+            if self._membership_changed.is_set():
+                self._membership_changed.clear()
+                self.core.release_unowned()
+                self._drop_outlets()
             now = time.monotonic()
             if now - last_evict >= 1.0:
                 last_evict = now
-                for robot in self.core.evict_idle():
-                    outlets = self._outlets.pop(robot, None)
-                    if outlets is not None:
-                        outlets.undeclare()
+                self.core.evict_idle()
+                self.core.release_unowned()
+                self._drop_outlets()
             if self.stats_every and now - last_stats >= self.stats_every:
                 last_stats = now
                 log.info("stats %s", self.core.stats())
 
+    def _drop_outlets(self) -> None:
+        """Undeclare the publishers of robots the core no longer tracks (evicted, handed over)."""
+        tracked = set(self.core.robots())
+        with self._outlets_lock:
+            gone = [r for r in self._outlets if r not in tracked]
+            outlets = [self._outlets.pop(r) for r in gone]
+        for outlet in outlets:
+            outlet.undeclare()
+
     def publish(self, response: Response) -> None:
         """Put a response (and, for a collision, the warning)."""
-        outlets = self._outlets.get(response.robot)
-        if outlets is None:
-            outlets = self._outlets[response.robot] = _Outlets(self.session, response.robot,
-                                                               self.core.prefix)
+        with self._outlets_lock:
+            outlets = self._outlets.get(response.robot)
+            if outlets is None:
+                outlets = self._outlets[response.robot] = _Outlets(self.session, response.robot,
+                                                                   self.core.prefix)
         payload = encode(response)
         outlets.response.put(payload)
         if response.collision:
@@ -137,14 +246,30 @@ class Worker:
         return self.core.backlog() == 0
 
     def close(self) -> None:
-        """Stop taking frames, finish the current one, undeclare everything."""
-        if self._subscriber is not None:
-            self._subscriber.undeclare()
-            self._subscriber = None
+        """Stop taking frames, hand the robots over (the token goes first, so the other workers
+        take them at once), finish the current frame, undeclare everything."""
+        for name in ("_subscriber", "_token"):
+            entity = getattr(self, name)
+            setattr(self, name, None)
+            if entity is not None:
+                try:
+                    entity.undeclare()
+                except Exception:  # the session may already be closed
+                    pass
         self._stop.set()
+        self.core.notify()
         if self._thread is not None:
             self._thread.join(timeout=30)
             self._thread = None
-        for outlets in self._outlets.values():
-            outlets.undeclare()
-        self._outlets.clear()
+        for name in ("_status", "_workers_sub"):
+            entity = getattr(self, name)
+            setattr(self, name, None)
+            if entity is not None:
+                try:
+                    entity.undeclare()
+                except Exception:
+                    pass
+        with self._outlets_lock:
+            outlets, self._outlets = list(self._outlets.values()), {}
+        for outlet in outlets:
+            outlet.undeclare()
