@@ -7,34 +7,46 @@ Why a second module
 definition; ``ASNN(params, optimised=False)`` runs it, ``asnn bench`` times it, and the
 equivalence tests (``tests/test_equivalence.py``) compare this module against it.
 
-The functions here compute the expensive stages of the same equations with fewer passes over
-memory. They define nothing new: every kernel they use is built by the retina functions
-(:func:`~asnn.retina.dog_kernel`, :func:`~asnn.retina.center_surround_kernel`) or is a factor of
-one (:func:`gabor_factors` of :func:`~asnn.retina.gabor_pair`), and each function names the
-retina function whose result it reproduces. What changes is only the order of the arithmetic:
+The functions here compute the same equations with fewer operations and fewer passes over
+memory. They define nothing new: every kernel they use is built by the retina functions or is a
+factor of one (:func:`dog_factors` of :func:`~asnn.retina.dog_kernel`, :func:`gabor_factors` of
+:func:`~asnn.retina.gabor_pair`, :func:`cs_classes` of
+:func:`~asnn.retina.center_surround_kernel`), and each function names the retina functions
+whose results it reproduces. What changes is only the order of the arithmetic:
 
-* Fusion. Rectification, the difference-of-Gaussians filter and the leaky-integrator cascade run
-  in one pass per row; centre-surround inhibition, rectifications and the weighted sum of the
-  approach map in another; thresholds, masks and the membrane potential in a third. No
-  full-frame temporaries.
-* Separability. On the [-1, 1] grid, the Gabor pair of orientation theta is one complex kernel,
+* One pass, row by row. :func:`front` runs rectification, the difference of Gaussians, the
+  leaky-integrator cascade, the Gabor pairs, centre-surround inhibition, the approach map and
+  grouping as a pipeline over the rows of the frame: row y enters the cascade while row y - 2
+  leaves the 5x5 filters and row y - 3 the grouping, so the intermediate rows live in small
+  ring buffers that stay in the CPU cache. Only the cascades (the state), R^theta, V and G are
+  whole images.
+* Separability. g_I is a difference of two Gaussians, two separable kernels. On the [-1, 1]
+  grid, the Gabor pair of orientation theta is one complex kernel,
   ``g^0 + i g^{pi/2} = e(y) e(x) exp(i a (x cos theta + y sin theta))``, with ``e`` the 1-D
   Gaussian envelope and ``a = 2 pi / lambda``: the product of a row kernel
   ``e(x) exp(i a cos(theta) x)`` and a column kernel ``e(y) exp(i a sin(theta) y)``. For the
   four orientations k pi / 4, five real row passes and eight real column passes replace 8
   two-dimensional 5x5 correlations per image (theta = pi/4 and 3 pi/4 share their passes:
   their row kernels are complex conjugates). ``E = A1 B2 - A2 B1 = Im(conj(Z_slow) Z_fast)``.
-* Symmetry. The 5-tap kernels are symmetric or antisymmetric: pairs are added before they are
-  multiplied.
-* Precision. The arrays have the dtype of the preset's ``precision`` (float64 for ``reference``,
-  whose outputs must match the published implementation; float32 elsewhere, where the
-  equivalence tests bound the difference to 1e-5 relative on u(t)).
+* Symmetry. The 5-tap kernels are symmetric or antisymmetric, and g_CS is radially symmetric
+  (six distinct weights): pairs are added before they are multiplied.
+* Differences. The temporal read-outs are differences of nearly equal integrator stages. The
+  cascade keeps its first integrating stage and the differences of consecutive stages instead
+  of the stages (:func:`to_differences`); they obey the same recursion, and the read-outs need
+  no subtraction.
+* Precision. Maps and cascades have the dtype of the preset's ``precision`` (float64 for
+  ``reference``, whose outputs must match the published implementation; float32 elsewhere,
+  within 1e-5 relative of float64 on u(t), ``tests/test_equivalence.py``; that needs the
+  difference form: stages kept in float32 lose up to 1e-5 on their own).
+* Less work where nothing is attended. The direction attention M_d is only needed where M_a is
+  set: :func:`attention` blurs V' only in M_a's bounding box (plus the blur's radius), and not
+  at all when M_a is empty.
 
 The fused kernels are written for the 5x5 kernels of Table I (every preset); other sizes fall
 back to the straightforward functions (:func:`supported`). Numba compiles them on first use and
 caches the machine code next to this file (or in ``NUMBA_CACHE_DIR``); no ``fastmath``, so
 IEEE semantics are kept and float64 results differ from the straightforward form only by
-rounding (about 1e-15 relative).
+rounding (about 1e-15 relative). Everything runs on the calling thread.
 
 Scratch arrays live in a per-thread :class:`Workspace` shared by all models of that thread, so
 a camera's own state is only its cascades and its previous frame.
@@ -48,17 +60,45 @@ import threading
 import numpy as np
 from numba import njit
 
-__all__ = ["supported", "gabor_factors", "Workspace", "workspace", "bipolar_cascade",
-           "gabor_energy", "approach_term", "group", "attend"]
+__all__ = ["supported", "dog_factors", "gabor_factors", "cs_classes", "Workspace", "workspace",
+           "front", "to_differences", "attention", "AttentionBlur"]
 
 RADIUS = 2  # the fused kernels are written for 5x5 kernels (Table I)
+DEPTH = 2 * RADIUS + 1  # rows kept by the ring buffers of the 5x5 filters
+
+# (excitation, inhibitor) read-outs of the four approach terms, in the order of
+# retina.approach_map; read-outs are numbered fast_on, slow_on, fast_off, slow_off
+_TERMS = np.array([[1, 2], [2, 1], [3, 0], [0, 3]], np.int64)
 
 _jit = dict(cache=True, boundscheck=False, nogil=True)
 
 
 def supported(params) -> bool:
     """Whether the fused kernels apply to a parameter set (5x5 g_I, g_DS, g_CS)."""
-    return params.dog_size == 2 * RADIUS + 1 and params.kernel_size == 2 * RADIUS + 1
+    return params.dog_size == DEPTH and params.kernel_size == DEPTH
+
+
+def dog_factors(gain: float, sigma1: float, sigma2: float, size: int,
+                normalisation: str = "paper") -> tuple[np.ndarray, np.ndarray]:
+    """Separable factors of :func:`asnn.retina.dog_kernel`.
+
+    Returns
+    -------
+    envelopes : ndarray (2, size)
+        ``exp(-t^2 / (2 sigma_i^2))`` on the integer offsets t.
+    scales : ndarray (2,)
+        ``F / norm_1`` and ``F / norm_2``: the kernel is
+        ``scales[0] outer(e1, e1) - scales[1] outer(e2, e2)``.
+    """
+    t = np.arange(size, dtype=np.float64) - size // 2
+    if normalisation == "paper":
+        norm1, norm2 = math.sqrt(2 * math.pi) * sigma1, math.sqrt(2 * math.pi) * sigma2
+    elif normalisation == "2d":
+        norm1, norm2 = 2 * math.pi * sigma1**2, 2 * math.pi * sigma2**2
+    else:
+        raise ValueError(f"unknown normalisation {normalisation!r}")
+    envelopes = np.array([np.exp(-t * t / (2 * sigma1**2)), np.exp(-t * t / (2 * sigma2**2))])
+    return envelopes, np.array([gain / norm1, gain / norm2])
 
 
 def gabor_factors(sigma: float, wavelength: float, size: int, extent: float = 1.0) -> np.ndarray:
@@ -80,27 +120,38 @@ def gabor_factors(sigma: float, wavelength: float, size: int, extent: float = 1.
     return np.array([e, e * np.cos(a * t), e * np.sin(a * t), e * np.cos(b * t), e * np.sin(b * t)])
 
 
+def cs_classes(kernel: np.ndarray) -> np.ndarray:
+    """The distinct weights of a radially symmetric 5x5 kernel: ``out[|dy|, |dx|]`` (3, 3)."""
+    if kernel.shape != (DEPTH, DEPTH) or not (
+            np.array_equal(kernel, kernel[::-1]) and np.array_equal(kernel, kernel[:, ::-1])):
+        raise ValueError("the fused centre-surround filter needs a symmetric 5x5 kernel")
+    return np.ascontiguousarray(kernel[RADIUS:, RADIUS:])
+
+
 # --------------------------------------------------------------------------- workspace
 
 
 class Workspace:
-    """Scratch arrays for one frame size and dtype, reused from frame to frame."""
+    """Scratch arrays and outputs for one frame size and dtype, reused from frame to frame."""
 
     def __init__(self, shape: tuple[int, int], dtype: np.dtype):
         h, w = shape
+        pw = w + 2 * RADIUS
         self.shape, self.dtype = shape, dtype
-        self.bipolar = np.empty((2, h, w), dtype)  # B+^0, B-^0
-        self.readout = np.empty((4, h, w), dtype)  # fast_on, slow_on, fast_off, slow_off
-        self.rows = np.empty((2, 5, h, w), dtype)  # Gabor row passes of slow and fast
-        self.acc = np.empty((2, 8, w), dtype)  # their column passes, one row
+        self.col = np.empty((4, pw), dtype)  # vertical g_I passes of B+ and B- (two Gaussians)
+        self.x0 = np.empty((2, w), dtype)  # B+^0, B-^0 of one row
+        self.ro = np.empty((4, DEPTH, pw), dtype)  # read-outs: fast_on, slow_on, fast_off, slow_off
+        self.gr = np.empty((4, 5, DEPTH, w), dtype)  # their five Gabor row passes
+        self.acc = np.empty((2, 8, w), dtype)  # column passes of one channel's slow and fast
+        self.csl = np.empty((2, pw), dtype)  # vertical pairs of the centre-surround filter
+        self.gring = np.empty((3, w + 2), dtype)  # G before grouping
+        self.gline = np.empty(w + 2, dtype)
+        self.colsum = np.empty((4, w), np.float64)  # column sums of R^theta
         self.r = np.empty((4, h, w), dtype)  # R^theta, theta = k pi / 4, k = 0..3
         self.v = np.empty((h, w), dtype)
         self.g = np.empty((h, w), dtype)
-        self.g_grouped = np.empty((h, w), dtype)
-        self.pad = np.empty((h + 2 * RADIUS, w + 2 * RADIUS), dtype)
-        self.line = np.empty((2, w + 2 * RADIUS), dtype)
-        self.row2 = np.empty((2, w), dtype)
-        self.mask = np.empty((h, w), np.bool_)
+        self.v_prime = np.empty((h, w), dtype)
+        self.mask = np.zeros((h, w), np.bool_)
 
 
 _local = threading.local()
@@ -133,268 +184,346 @@ def _reflect(i, n):
     return i
 
 
-@njit(**_jit)
-def _pad_line(src, out):
-    """A row padded by RADIUS on both sides with the reflect-101 border."""
-    w = src.shape[0]
-    for x in range(w):
-        out[RADIUS + x] = src[x]
-    for k in range(1, RADIUS + 1):
-        out[RADIUS - k] = src[k]
-        out[RADIUS + w - 1 + k] = src[w - 1 - k]
+@njit(inline="always", **_jit)
+def _pad(line, w, r):
+    """Fill the r-wide reflect-101 borders of a padded line whose middle holds w values."""
+    for k in range(1, r + 1):
+        line[r - k] = line[r + k]
+        line[r + w - 1 + k] = line[r + w - 1 - k]
 
 
-@njit(**_jit)
-def _pad2d(src, out):
-    """The image padded by RADIUS on every side with the reflect-101 border."""
-    h = src.shape[0]
-    for y in range(h + 2 * RADIUS):
-        _pad_line(src[_reflect(y - RADIUS, h)], out[y])
-
-
-# --------------------------------------------------------------------------- bipolar + cascade
-
-
-@njit(**_jit)
-def _bipolar(pad, dog, on, off):
-    h, w = on.shape
-    zero = on[0, 0] * 0
-    for y in range(h):
-        for x in range(w):
-            s_on = zero
-            s_off = zero
-            for j in range(2 * RADIUS + 1):
-                for i in range(2 * RADIUS + 1):
-                    v = pad[y + j, x + i]
-                    pos = v if v > zero else zero
-                    s_on += dog[j, i] * pos
-                    s_off += dog[j, i] * (pos - v)
-            on[y, x] = s_on
-            off[y, x] = s_off
-
-
-@njit(**_jit)
-def _cascade(stages, x0, rate, c, decay, leaky, gain, n_fast, n_slow, fast, slow):
-    n, h, w = stages.shape
-    for i in range(n):
-        for y in range(h):
-            cur = stages[i, y]
-            prev = x0[y] if i == 0 else stages[i - 1, y]
-            if i == 0 and not leaky:
-                for x in range(w):
-                    cur[x] = prev[x]
-            else:
-                for x in range(w):
-                    cur[x] += rate * (c * prev[x] - decay * cur[x])
-    for y in range(h):
-        af, bf, as_, bs = stages[n_fast, y], stages[n_fast + 1, y], stages[n_slow, y], \
-            stages[n_slow + 1, y]
-        f, s = fast[y], slow[y]
-        for x in range(w):
-            f[x] = gain * (af[x] - bf[x])
-            s[x] = gain * (as_[x] - bs[x])
-
-
-def bipolar_cascade(p, ws, dog, swap, stages_on, stages_off, rate, c, decay, leaky, gain,
-                    n_fast, n_slow):
-    """Bipolar inputs, one cascade step and the four temporal read-outs.
-
-    Reproduces :func:`~asnn.retina.bipolar`, :func:`~asnn.retina.temporal_filter_step` and
-    :func:`~asnn.retina.temporal_readout`. ``swap`` exchanges the ON and OFF inputs
-    (``target_polarity='light'``). Returns ``(fast_on, slow_on, fast_off, slow_off)``, views of
-    the workspace.
-    """
-    t = ws.dtype.type
-    _pad2d(p, ws.pad)
-    on, off = ws.bipolar
-    _bipolar(ws.pad, dog.astype(ws.dtype), on, off)
-    if swap:
-        on, off = off, on
-    for ch, (stages, x0) in enumerate(((stages_on, on), (stages_off, off))):
-        _cascade(stages, x0, t(rate), t(c), t(decay), bool(leaky), t(gain), int(n_fast),
-                 int(n_slow), ws.readout[2 * ch], ws.readout[2 * ch + 1])
-    return ws.readout[0], ws.readout[1], ws.readout[2], ws.readout[3]
-
-
-# --------------------------------------------------------------------------- Gabor energy
-
-
-@njit(**_jit)
-def _gabor_rows(src, k, line, out):
-    """Row passes of one image with the five 1-D factors (sym, sym, anti, sym, anti)."""
-    h, w = src.shape
-    k0, k1, k2, k3, k4 = k[0], k[1], k[2], k[3], k[4]
-    for y in range(h):
-        _pad_line(src[y], line)
-        o0, o1, o2, o3, o4 = out[0, y], out[1, y], out[2, y], out[3, y], out[4, y]
-        for x in range(w):
-            m = line[x + 2]
-            p1 = line[x + 3] + line[x + 1]
-            p2 = line[x + 4] + line[x]
-            d1 = line[x + 3] - line[x + 1]
-            d2 = line[x + 4] - line[x]
-            o0[x] = k0[2] * m + k0[3] * p1 + k0[4] * p2
-            o1[x] = k1[2] * m + k1[3] * p1 + k1[4] * p2
-            o2[x] = k2[3] * d1 + k2[4] * d2
-            o3[x] = k3[2] * m + k3[3] * p1 + k3[4] * p2
-            o4[x] = k4[3] * d1 + k4[4] * d2
+# --------------------------------------------------------------------------- stage 1: row y
 
 
 @njit(inline="always", **_jit)
-def _column_sym(src, y, ym1, yp1, ym2, yp2, k, out):
-    """out = symmetric 5-tap column pass of ``src`` at row y (rows clamped by the caller)."""
-    a0, a1, b1, a2, b2 = src[y], src[ym1], src[yp1], src[ym2], src[yp2]
+def _dog_row(p, y, env, sc, zero, col, on, off):
+    """B+^0 and B-^0 of row y: relu(+-P) (*) g_I with g_I = s1 e1 e1' - s2 e2 e2'."""
+    h, w = p.shape
+    a0, a1, b1 = p[y], p[_reflect(y - 1, h)], p[_reflect(y + 1, h)]
+    a2, b2 = p[_reflect(y - 2, h)], p[_reflect(y + 2, h)]
+    for m in range(2):  # vertical passes of relu(P) with e1, e2
+        e = env[m]
+        c = col[m]
+        for x in range(w):
+            c[x + 2] = e[2] * max(a0[x], zero) + e[3] * (max(a1[x], zero) + max(b1[x], zero)) \
+                + e[4] * (max(a2[x], zero) + max(b2[x], zero))
+    for m in range(2):  # ... and of relu(-P)
+        e = env[m]
+        c = col[2 + m]
+        for x in range(w):
+            c[x + 2] = e[2] * max(-a0[x], zero) + e[3] * (max(-a1[x], zero) + max(-b1[x], zero)) \
+                + e[4] * (max(-a2[x], zero) + max(-b2[x], zero))
+    for m in range(4):
+        _pad(col[m], w, 2)
+    e1, e2 = env[0], env[1]
+    s1, s2 = sc[0], sc[1]
+    for ch in range(2):
+        c1, c2 = col[2 * ch], col[2 * ch + 1]
+        out = on if ch == 0 else off
+        for x in range(w):
+            out[x] = s1 * (e1[2] * c1[x + 2] + e1[3] * (c1[x + 1] + c1[x + 3])
+                           + e1[4] * (c1[x] + c1[x + 4])) \
+                - s2 * (e2[2] * c2[x + 2] + e2[3] * (c2[x + 1] + c2[x + 3])
+                        + e2[4] * (c2[x] + c2[x + 4]))
+
+
+@njit(inline="always", **_jit)
+def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, slow):
+    """One frame of the cascade at row y, in difference form (see :func:`to_differences`).
+
+    With ``a = 1 - r A``, ``b = r C`` and z'_{j-1} = B^0 (z_{j-1} = the input), every stage
+    is ``z'_i = a z_i + b z'_{i-1}``, so the differences ``d_i = z_i - z_{i+1}`` follow the
+    same recursion, ``d'_i = a d_i + b d'_{i-1}``, started by
+    ``d'_{j-1} = B^0 - z'_j = a (B^0 - z_j) + (r A - r C) B^0``. The read-outs are ``K d_n``.
+    """
+    w = stages.shape[2]
+    s = stages[j, y]
+    if e_x == 0:
+        for x in range(w):
+            line[x] = a * (x0[x] - s[x])
+    else:
+        for x in range(w):
+            line[x] = a * (x0[x] - s[x]) + e_x * x0[x]
+    for x in range(w):
+        s[x] = a * s[x] + b * x0[x]
+    prev = line
+    for i in range(j, stages.shape[0] - 1):
+        d = stages[i + 1, y]
+        for x in range(w):
+            d[x] = a * d[x] + b * prev[x]
+        prev = d
+    df, ds = stages[n_fast + 1, y], stages[n_slow + 1, y]
+    for x in range(w):
+        fast[x + 2] = gain * df[x]
+    for x in range(w):
+        slow[x + 2] = gain * ds[x]
+    _pad(fast, w, 2)
+    _pad(slow, w, 2)
+
+
+@njit(inline="always", **_jit)
+def _gabor_row(line, k, out, slot):
+    """The five Gabor row passes (sym, sym, anti, sym, anti) of one padded line."""
+    w = out.shape[2]
+    for f in range(5):
+        kf = k[f]
+        o = out[f, slot]
+        if f == 2 or f == 4:
+            c1, c2 = kf[3], kf[4]
+            for x in range(w):
+                o[x] = c1 * (line[x + 3] - line[x + 1]) + c2 * (line[x + 4] - line[x])
+        else:
+            c0, c1, c2 = kf[2], kf[3], kf[4]
+            for x in range(w):
+                o[x] = c0 * line[x + 2] + c1 * (line[x + 3] + line[x + 1]) \
+                    + c2 * (line[x + 4] + line[x])
+
+
+# --------------------------------------------------------------------------- stage 2: row y - 2
+
+
+@njit(inline="always", **_jit)
+def _col_sym(src, s0, sm1, sp1, sm2, sp2, k, out):
+    a0, a1, b1, a2, b2 = src[s0], src[sm1], src[sp1], src[sm2], src[sp2]
     c0, c1, c2 = k[2], k[3], k[4]
     for x in range(out.shape[0]):
         out[x] = c0 * a0[x] + c1 * (b1[x] + a1[x]) + c2 * (b2[x] + a2[x])
 
 
 @njit(inline="always", **_jit)
-def _column_anti(src, ym1, yp1, ym2, yp2, k, out):
-    """out = antisymmetric 5-tap column pass of ``src`` at row y."""
-    a1, b1, a2, b2 = src[ym1], src[yp1], src[ym2], src[yp2]
+def _col_anti(src, sm1, sp1, sm2, sp2, k, out):
+    a1, b1, a2, b2 = src[sm1], src[sp1], src[sm2], src[sp2]
     c1, c2 = k[3], k[4]
     for x in range(out.shape[0]):
         out[x] = c1 * (b1[x] - a1[x]) + c2 * (b2[x] - a2[x])
 
 
+@njit(inline="always", **_jit)
+def _gabor_columns(gr, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, acc, r0, r1, r2, r3):
+    """One channel's ``weight E^theta`` at one row, set (``first``) or added into R^theta."""
+    w = r0.shape[0]
+    for im in range(2):
+        src = gr[slow] if im == 0 else gr[fast]
+        a = acc[im]
+        _col_sym(src[1], s0, sm1, sp1, sm2, sp2, k[0], a[0])   # Re Z^0
+        _col_sym(src[2], s0, sm1, sp1, sm2, sp2, k[0], a[1])   # Im Z^0
+        _col_sym(src[0], s0, sm1, sp1, sm2, sp2, k[1], a[2])   # Re Z^{pi/2}
+        _col_anti(src[0], sm1, sp1, sm2, sp2, k[2], a[3])      # Im Z^{pi/2}
+        _col_sym(src[3], s0, sm1, sp1, sm2, sp2, k[3], a[4])   # cb Cb
+        _col_anti(src[3], sm1, sp1, sm2, sp2, k[4], a[5])      # cb Sb
+        _col_anti(src[4], sm1, sp1, sm2, sp2, k[4], a[6])      # sb Sb
+        _col_sym(src[4], s0, sm1, sp1, sm2, sp2, k[3], a[7])   # sb Cb
+    s, f = acc[0], acc[1]
+    # E = Re Z_slow Im Z_fast - Re Z_fast Im Z_slow, with (a[4], a[5], a[6], a[7]) =
+    # (cb Cb, cb Sb, sb Sb, sb Cb): Z^{pi/4} = (cb Cb - sb Sb) + i (cb Sb + sb Cb) and
+    # Z^{3 pi/4} = (cb Cb + sb Sb) + i (cb Sb - sb Cb)
+    for q in range(2):
+        s0_, s1_, f0_, f1_ = s[2 * q], s[2 * q + 1], f[2 * q], f[2 * q + 1]
+        out = r0 if q == 0 else r2
+        if first:
+            for x in range(w):
+                out[x] = weight * (s0_[x] * f1_[x] - f0_[x] * s1_[x])
+        else:
+            for x in range(w):
+                out[x] += weight * (s0_[x] * f1_[x] - f0_[x] * s1_[x])
+    scc, scs, sss, ssc = s[4], s[5], s[6], s[7]
+    fcc, fcs, fss, fsc = f[4], f[5], f[6], f[7]
+    if first:
+        for x in range(w):
+            r1[x] = weight * ((scc[x] - sss[x]) * (fcs[x] + fsc[x])
+                              - (fcc[x] - fss[x]) * (scs[x] + ssc[x]))
+        for x in range(w):
+            r3[x] = weight * ((scc[x] + sss[x]) * (fcs[x] - fsc[x])
+                              - (fcc[x] + fss[x]) * (scs[x] - ssc[x]))
+    else:
+        for x in range(w):
+            r1[x] += weight * ((scc[x] - sss[x]) * (fcs[x] + fsc[x])
+                               - (fcc[x] - fss[x]) * (scs[x] + ssc[x]))
+        for x in range(w):
+            r3[x] += weight * ((scc[x] + sss[x]) * (fcs[x] - fsc[x])
+                               - (fcc[x] + fss[x]) * (scs[x] - ssc[x]))
+
+
+@njit(inline="always", **_jit)
+def _approach_row(ro, s0, sm1, sp1, sm2, sp2, kc, weights, terms, zero, csl, gl):
+    """G of one row, ``sum_i weight_i relu(relu(ex_i) - relu(inh_i (*) g_CS))``, into gl[1:w+1]."""
+    w = gl.shape[0] - 2
+    first = True
+    for t in range(4):
+        wt = weights[t]
+        if wt == 0:
+            continue
+        ex, inh = ro[terms[t, 0], s0], ro[terms[t, 1]]
+        c0 = inh[s0]
+        u1, d1, u2, d2 = inh[sm1], inh[sp1], inh[sm2], inh[sp2]
+        c1, c2 = csl[0], csl[1]
+        for x in range(w + 4):
+            c1[x] = u1[x] + d1[x]
+        for x in range(w + 4):
+            c2[x] = u2[x] + d2[x]
+        k00, k01, k02 = kc[0, 0], kc[0, 1], kc[0, 2]
+        k10, k11, k12 = kc[1, 0], kc[1, 1], kc[1, 2]
+        k20, k21, k22 = kc[2, 0], kc[2, 1], kc[2, 2]
+        for x in range(w):
+            s = (k00 * c0[x + 2] + k01 * (c0[x + 1] + c0[x + 3]) + k02 * (c0[x] + c0[x + 4])) \
+                + (k10 * c1[x + 2] + k11 * (c1[x + 1] + c1[x + 3]) + k12 * (c1[x] + c1[x + 4])) \
+                + (k20 * c2[x + 2] + k21 * (c2[x + 1] + c2[x + 3]) + k22 * (c2[x] + c2[x + 4]))
+            term = max(max(ex[x + 2], zero) - max(s, zero), zero)
+            if first:
+                gl[x + 1] = zero + wt * term
+            else:
+                gl[x + 1] += wt * term
+        first = False
+    if first:
+        for x in range(w + 2):
+            gl[x] = zero
+    _pad(gl, w, 1)
+
+
+@njit(inline="always", **_jit)
+def _group_row(a, b, c, ninth, line, out):
+    """``G (G (*) ones(3, 3) / 9)`` of one row from the padded rows above, at and below it."""
+    w = out.shape[0]
+    for x in range(w + 2):
+        line[x] = a[x] + b[x] + c[x]
+    for x in range(w):
+        out[x] = b[x + 1] * ((line[x] + line[x + 1] + line[x + 2]) * ninth)
+
+
 @njit(**_jit)
-def _gabor_columns(rows, k, weight, first, last, acc, r, v):
-    # Small loops with one output each: LLVM vectorises them (a single loop with all sixteen
-    # outputs is left scalar by its alias analysis).
-    h, w = r.shape[1], r.shape[2]
-    for y in range(h):
-        ym1, yp1 = _reflect(y - 1, h), _reflect(y + 1, h)
-        ym2, yp2 = _reflect(y - 2, h), _reflect(y + 2, h)
-        for im in range(2):
-            a = acc[im]
-            _column_sym(rows[im, 1], y, ym1, yp1, ym2, yp2, k[0], a[0])   # Re Z^0
-            _column_sym(rows[im, 2], y, ym1, yp1, ym2, yp2, k[0], a[1])   # Im Z^0
-            _column_sym(rows[im, 0], y, ym1, yp1, ym2, yp2, k[1], a[2])   # Re Z^{pi/2}
-            _column_anti(rows[im, 0], ym1, yp1, ym2, yp2, k[2], a[3])     # Im Z^{pi/2}
-            _column_sym(rows[im, 3], y, ym1, yp1, ym2, yp2, k[3], a[4])   # cb Cb
-            _column_anti(rows[im, 3], ym1, yp1, ym2, yp2, k[4], a[5])     # cb Sb
-            _column_anti(rows[im, 4], ym1, yp1, ym2, yp2, k[4], a[6])     # sb Sb
-            _column_sym(rows[im, 4], y, ym1, yp1, ym2, yp2, k[3], a[7])   # sb Cb
-        s, f = acc[0], acc[1]
-        r0, r1, r2, r3 = r[0, y], r[1, y], r[2, y], r[3, y]
-        # E = Re Z_slow Im Z_fast - Re Z_fast Im Z_slow, with (a[4], a[5], a[6], a[7]) =
-        # (cb Cb, cb Sb, sb Sb, sb Cb): Z^{pi/4} = (cb Cb - sb Sb) + i (cb Sb + sb Cb) and
-        # Z^{3 pi/4} = (cb Cb + sb Sb) + i (cb Sb - sb Cb)
-        s0, s1, f0, f1 = s[0], s[1], f[0], f[1]
-        if first:
-            for x in range(w):
-                r0[x] = weight * (s0[x] * f1[x] - f0[x] * s1[x])
-        else:
-            for x in range(w):
-                r0[x] += weight * (s0[x] * f1[x] - f0[x] * s1[x])
-        s0, s1, f0, f1 = s[2], s[3], f[2], f[3]
-        if first:
-            for x in range(w):
-                r2[x] = weight * (s0[x] * f1[x] - f0[x] * s1[x])
-        else:
-            for x in range(w):
-                r2[x] += weight * (s0[x] * f1[x] - f0[x] * s1[x])
-        scc, scs, sss, ssc = s[4], s[5], s[6], s[7]
-        fcc, fcs, fss, fsc = f[4], f[5], f[6], f[7]
-        if first:
-            for x in range(w):
-                r1[x] = weight * ((scc[x] - sss[x]) * (fcs[x] + fsc[x])
-                                  - (fcc[x] - fss[x]) * (scs[x] + ssc[x]))
-            for x in range(w):
-                r3[x] = weight * ((scc[x] + sss[x]) * (fcs[x] - fsc[x])
-                                  - (fcc[x] + fss[x]) * (scs[x] - ssc[x]))
-        else:
-            for x in range(w):
-                r1[x] += weight * ((scc[x] - sss[x]) * (fcs[x] + fsc[x])
-                                   - (fcc[x] - fss[x]) * (scs[x] + ssc[x]))
-            for x in range(w):
-                r3[x] += weight * ((scc[x] + sss[x]) * (fcs[x] - fsc[x])
-                                   - (fcc[x] + fss[x]) * (scs[x] - ssc[x]))
-        if last:
+def _front(p, env, sc, stages_on, stages_off, a, b, e_x, j, gain, n_fast, n_slow, swap,
+           gk, vw, kc, aw, terms, grouping, zero, ninth, col, x0, ro, gr, acc, csl, gring, gline, colsum,
+           r, v, g):
+    h, w = p.shape
+    for k in range(4):
+        for x in range(w):
+            colsum[k, x] = 0.0
+    for t in range(h + 3):
+        if t < h:  # stage 1: row t through g_I, the cascade and the Gabor row passes
+            slot = t % DEPTH
+            if swap:
+                _dog_row(p, t, env, sc, zero, col, x0[1], x0[0])
+            else:
+                _dog_row(p, t, env, sc, zero, col, x0[0], x0[1])
+            _cascade_row(stages_on, t, x0[0], a, b, e_x, j, gain, n_fast, n_slow, csl[0],
+                         ro[0, slot], ro[1, slot])
+            _cascade_row(stages_off, t, x0[1], a, b, e_x, j, gain, n_fast, n_slow, csl[0],
+                         ro[2, slot], ro[3, slot])
+            for img in range(4):
+                _gabor_row(ro[img, slot], gk, gr[img], slot)
+        y = t - RADIUS
+        if 0 <= y < h:  # stage 2: row t - 2 through the 5x5 column passes
+            s0 = y % DEPTH
+            sm1, sp1 = _reflect(y - 1, h) % DEPTH, _reflect(y + 1, h) % DEPTH
+            sm2, sp2 = _reflect(y - 2, h) % DEPTH, _reflect(y + 2, h) % DEPTH
+            r0, r1, r2, r3 = r[0, y], r[1, y], r[2, y], r[3, y]
+            _gabor_columns(gr, 1, 0, s0, sm1, sp1, sm2, sp2, gk, vw[0], True, acc, r0, r1, r2, r3)
+            _gabor_columns(gr, 3, 2, s0, sm1, sp1, sm2, sp2, gk, vw[1], False, acc,
+                           r0, r1, r2, r3)
             vv = v[y]
             for x in range(w):
                 vv[x] = max(max(abs(r0[x]), abs(r1[x])), max(abs(r2[x]), abs(r3[x])))
+            for k in range(4):
+                rk, ck = r[k, y], colsum[k]
+                for x in range(w):
+                    ck[x] += rk[x]
+            gl = gring[y % 3]
+            _approach_row(ro, s0, sm1, sp1, sm2, sp2, kc, aw, terms, zero, csl, gl)
+            if not grouping:
+                gy = g[y]
+                for x in range(w):
+                    gy[x] = gl[x + 1]
+        y = t - RADIUS - 1
+        if grouping and 0 <= y < h:  # stage 3: row t - 3 through the grouping
+            _group_row(gring[_reflect(y - 1, h) % 3], gring[y % 3], gring[_reflect(y + 1, h) % 3],
+                       ninth, gline, g[y])
 
 
-def gabor_energy(slow, fast, ws, factors, weight, first, last):
-    """Add ``weight E^theta`` of one channel to ``ws.r`` (or set it, ``first``).
+def front(p, ws, env, scales, stages_on, stages_off, rate, c, decay, leaky, gain, n_fast, n_slow,
+          swap, gk, v_weights, kc, a_weights, grouping):
+    """Everything from the photoreceptor output P to R^theta, V and G, in one pass.
 
-    Reproduces one channel's share of :func:`~asnn.retina.motion_energy` for the four computed
-    orientations; with ``last``, also ``V = max_theta R^theta = max_k |R^k|`` (R^{theta+pi} =
-    -R^theta) into ``ws.v``.
+    Reproduces :func:`~asnn.retina.bipolar`, :func:`~asnn.retina.temporal_filter_step` (on the
+    cascades in difference form, :func:`to_differences`), :func:`~asnn.retina.temporal_readout`,
+    :func:`~asnn.retina.motion_energy` (the four computed orientations;
+    R^{theta+pi} = -R^theta), ``V = max_theta R^theta = max_k |R^k|``,
+    :func:`~asnn.retina.approach_map` and (``grouping``) :func:`~asnn.retina.group`. ``swap``
+    exchanges the ON and OFF inputs (``target_polarity='light'``); ``a_weights`` are the signed
+    weights ``(w1+, -w2-, w1-, -w2+)``. Arrays and coefficients must have the workspace's
+    dtype. Returns ``(R, V, G, sums of R^theta)`` (workspace arrays; the sums in float64).
     """
-    k = factors.astype(ws.dtype)
-    _gabor_rows(slow, k, ws.line[0], ws.rows[0])
-    _gabor_rows(fast, k, ws.line[0], ws.rows[1])
-    _gabor_columns(ws.rows, k, ws.dtype.type(weight), bool(first), bool(last), ws.acc, ws.r,
-                   ws.v)
+    t = ws.dtype.type
+    _front(p, env, scales, stages_on, stages_off, t(1 - rate * decay), t(rate * c),
+           t(rate * decay - rate * c), 0 if leaky else 1, t(gain), int(n_fast), int(n_slow),
+           bool(swap), gk, v_weights, kc, a_weights, _TERMS, bool(grouping), t(0), t(1 / 9),
+           ws.col, ws.x0, ws.ro, ws.gr, ws.acc, ws.csl, ws.gring, ws.gline, ws.colsum, ws.r, ws.v,
+           ws.g)
+    return ws.r, ws.v, ws.g, ws.colsum.sum(axis=1)
 
 
-# --------------------------------------------------------------------------- approach map
+def to_differences(stages: np.ndarray, leaky: bool) -> np.ndarray:
+    """A cascade z_0..z_{n-1} (as :func:`~asnn.retina.temporal_filter_step` keeps it) in the
+    difference form of :func:`front`: ``z_j`` and ``d_i = z_i - z_{i+1}`` in slot i + 1, with
+    j = 0 for a leaky input stage and 1 otherwise (slot 0 then unused, zero).
 
-
-@njit(**_jit)
-def _approach_term(excitation, inhibitor, pad, kernel, weight, first, g):
-    h, w = g.shape
-    _pad2d(inhibitor, pad)
-    zero = g[0, 0] * 0
-    for y in range(h):
-        ex = excitation[y]
-        gy = g[y]
-        for x in range(w):
-            s = zero
-            for j in range(2 * RADIUS + 1):
-                prow = pad[y + j]
-                for i in range(2 * RADIUS + 1):
-                    s += kernel[j, i] * prow[x + i]
-            t = max(max(ex[x], zero) - max(s, zero), zero)
-            if first:
-                gy[x] = zero + weight * t
-            else:
-                gy[x] += weight * t
-
-
-def approach_term(excitation, inhibitor, ws, cs_kernel, weight, first):
-    """``G (+)= weight relu(relu(excitation) - relu(inhibitor (*) g_CS))`` into ``ws.g``.
-
-    One term of :func:`~asnn.retina.approach_map` (a subtracted term has a negative weight).
+    The read-outs ``K (z_n - z_{n+1})`` are differences of nearly equal stages; kept as such,
+    they need no subtraction and float32 keeps their relative precision (1e-6 on u(t) instead of
+    1e-5 for stages in float32).
     """
-    _approach_term(excitation, inhibitor, ws.pad, cs_kernel.astype(ws.dtype),
-                   ws.dtype.type(weight), bool(first), ws.g)
-
-
-@njit(**_jit)
-def _group(g, out):
-    h, w = g.shape
-    ninth = g[0, 0] * 0 + 1.0 / 9.0
-    for y in range(h):
-        a, b, c = g[_reflect(y - 1, h)], g[y], g[_reflect(y + 1, h)]
-        o = out[y]
-        for x in range(w):
-            xm, xp = _reflect(x - 1, w), _reflect(x + 1, w)
-            s = (a[xm] + a[x] + a[xp]) + (b[xm] + b[x] + b[xp]) + (c[xm] + c[x] + c[xp])
-            o[x] = b[x] * (s * ninth)
-
-
-def group(g, ws):
-    """:func:`~asnn.retina.group`: ``G (G (*) ones(3, 3) / 9)``, into ``ws.g_grouped``."""
-    _group(g, ws.g_grouped)
-    return ws.g_grouped
+    out = np.zeros_like(stages)
+    j = 0 if leaky else 1
+    out[j] = stages[j]
+    out[j + 1:] = stages[j:-1] - stages[j + 1:]
+    return out
 
 
 # --------------------------------------------------------------------------- attention, u(t)
 
 
 @njit(**_jit)
-def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, mask):
-    h, w = g.shape
+def _box(blur, gamma):
+    """Bounding box (y0, y1, x0, x1), exclusive ends, of ``blur > gamma``; y0 = h if empty."""
+    h, w = blur.shape
+    y0, y1, x0, x1 = h, 0, w, 0
+    for y in range(h):
+        row = blur[y]
+        first = -1
+        last = -1
+        for x in range(w):
+            if row[x] > gamma:
+                if first < 0:
+                    first = x
+                last = x
+        if first >= 0:
+            if y0 == h:
+                y0 = y
+            y1 = y + 1
+            x0 = min(x0, first)
+            x1 = max(x1, last + 1)
+    return y0, y1, x0, x1
+
+
+@njit(**_jit)
+def _v_prime(v, r, ks, signs, y0, y1, x0, x1, out):
+    """``V - max_j signs_j R^{ks_j}`` in the window, into ``out``."""
+    for y in range(y0, y1):
+        vv, o = v[y], out[y]
+        for x in range(x0, x1):
+            m = signs[0] * r[ks[0], y, x]
+            for j in range(1, ks.shape[0]):
+                m = max(m, signs[j] * r[ks[j], y, x])
+            o[x] = vv[x] - m
+
+
+@njit(**_jit)
+def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, y0, y1, x0, x1, mask):
+    """M_a M_d in the window (``blur_v`` indexed from the window's origin), and sum G M_a M_d."""
     total = 0.0
     count = 0
-    for y in range(h):
+    for y in range(y0, y1):
         row = 0.0
-        for x in range(w):
-            m = blur_g[y, x] > gamma_a and blur_v[y, x] > gamma_d
+        for x in range(x0, x1):
+            m = blur_g[y, x] > gamma_a and blur_v[y - y0, x - x0] > gamma_d
             mask[y, x] = m
             if m:
                 count += 1
@@ -403,13 +532,58 @@ def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, mask):
     return total, count
 
 
-def attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, ws):
-    """``M_a M_d`` into ``ws.mask`` and ``sum G M_a M_d`` (or of ``|G|``), in float64.
+def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=False):
+    """M_a, M_d and ``sum G M_a M_d`` (or of ``|G|``), in float64.
 
-    Reproduces :func:`~asnn.retina.approach_attention`, :func:`~asnn.retina.direction_attention`'s
-    threshold and :func:`~asnn.retina.membrane_potential` (before its scale). Returns
-    ``(sum, number of attended pixels)``.
+    Reproduces :func:`~asnn.retina.approach_attention`, :func:`~asnn.retina.direction_attention`
+    and :func:`~asnn.retina.membrane_potential` (before its scale). ``blur(image)`` is the
+    attention blur (:func:`~asnn.retina.attention_blur`), ``sums`` the sums of R^theta.
+    Unless ``full``, M_d is computed only in M_a's bounding box. Returns
+    ``(sum, number of attended pixels, blurred G, blurred V' or None, window)``; ``ws.mask``
+    holds M_a M_d (zero outside the window) and ``ws.v_prime`` V' (inside the window).
     """
-    total, count = _attend(blur_g, float(gamma_a), blur_v, float(gamma_d), g, bool(absolute),
-                           ws.mask)
-    return total, count
+    h, w = g.shape
+    blur_g = blur(g)
+    ws.mask.fill(False)
+    if full:
+        y0, y1, x0, x1 = 0, h, 0, w
+    else:
+        y0, y1, x0, x1 = _box(blur_g, g.dtype.type(gamma_a))
+        if y0 >= y1:
+            return 0.0, 0, blur_g, None, (0, 0, 0, 0)
+    if top_k:
+        half = r.shape[0]
+        totals = np.concatenate([sums, -sums])
+        chosen = np.argsort(-totals, kind="stable")[:top_k]
+        ks = np.array([k % half for k in chosen], np.int64)
+        signs = np.array([1 if k < half else -1 for k in chosen], dtype=g.dtype)
+    # the blur of V' is exact inside the window when the window extends by its radius
+    # (or reaches the frame's edge, where the border rule applies as in the whole frame)
+    margin = blur.radius
+    wy0, wy1, wx0, wx1 = max(y0 - margin, 0), min(y1 + margin, h), max(x0 - margin, 0), \
+        min(x1 + margin, w)
+    if top_k:
+        _v_prime(v, r, ks, signs, wy0, wy1, wx0, wx1, ws.v_prime)
+        window = ws.v_prime[wy0:wy1, wx0:wx1]
+    else:
+        window = v[wy0:wy1, wx0:wx1]
+    blur_v = blur(np.ascontiguousarray(window))
+    inner = blur_v[y0 - wy0:, x0 - wx0:]
+    total, count = _attend(blur_g, float(gamma_a), inner, float(gamma_d), g, bool(absolute),
+                           y0, y1, x0, x1, ws.mask)
+    return total, count, blur_g, blur_v, (wy0, wy1, wx0, wx1)
+
+
+class AttentionBlur:
+    """The attention blur g_sigma as a callable with its radius (see :func:`attention`)."""
+
+    def __init__(self, sigma: float, size: int, normalised: bool):
+        from . import retina
+
+        self.radius = size // 2
+        self._args = (sigma, size, normalised)
+        self._blur = retina.attention_blur
+
+    def __call__(self, image: np.ndarray) -> np.ndarray:
+        return self._blur(image, *self._args)
+

@@ -52,7 +52,8 @@ class ASNN:
         The last N_p photoreceptor activations, most recent first.
     stages_on, stages_off : ndarray (n_s + 2, H, W)
         Leaky-integrator cascades of the ON and OFF bipolar channels (z_0..z_{n_s+1}), in
-        :attr:`dtype`.
+        :attr:`dtype`; the optimised step keeps them in difference form
+        (:func:`asnn._fast.to_differences`).
     dtype : numpy dtype
         Floating-point type of the state and the computation.
     spike_window : deque of int
@@ -81,8 +82,18 @@ class ASNN:
                                          p.kernel_size, p.kernel_extent) for k in range(half)]
         self._cs = retina.center_surround_kernel(p.cs_sigma, p.cs_wavelength, p.cs_phase,
                                                  p.kernel_size, p.kernel_extent)
-        self._factors = _fast.gabor_factors(p.ds_sigma, p.ds_wavelength, p.kernel_size,
-                                            p.kernel_extent)
+        if self.optimised:
+            t = self.dtype
+            env, scales = _fast.dog_factors(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
+                                            p.dog_normalisation)
+            self._env, self._scales = env.astype(t), scales.astype(t)
+            self._factors = _fast.gabor_factors(p.ds_sigma, p.ds_wavelength, p.kernel_size,
+                                                p.kernel_extent).astype(t)
+            self._cs_classes = _fast.cs_classes(self._cs).astype(t)
+            self._v_weights = np.array([p.v_on, p.v_off], t)
+            self._a_weights = np.array([p.w1_on, -p.w2_off, p.w1_off, -p.w2_on], t)
+            self._blur = _fast.AttentionBlur(p.attention_sigma, p.attention_size,
+                                             p.attention_normalised)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -149,41 +160,14 @@ class ASNN:
         if p.n_p:
             self.history.appendleft(photo)
 
-        fast_on, slow_on, fast_off, slow_off = _fast.bipolar_cascade(
-            photo, ws, self._dog, p.target_polarity == "light", self.stages_on, self.stages_off,
-            p.dt / p.tau, p.c, p.decay, p.leaky_input, p.gain, p.n_fast, p.n_slow)
-
-        _fast.gabor_energy(slow_on, fast_on, ws, self._factors, p.v_on, first=True, last=False)
-        _fast.gabor_energy(slow_off, fast_off, ws, self._factors, p.v_off, first=False, last=True)
-        r, v = ws.r, ws.v  # R^theta for k = 0..3; R^{theta + pi} = -R^theta
-
-        terms = [(p.w1_on, slow_on, fast_off), (-p.w2_off, fast_off, slow_on),
-                 (p.w1_off, slow_off, fast_on), (-p.w2_on, fast_on, slow_off)]
-        terms = [t for t in terms if t[0]]
-        for i, (weight, excitation, inhibitor) in enumerate(terms):
-            _fast.approach_term(excitation, inhibitor, ws, self._cs, weight, first=i == 0)
-        g = ws.g
-        if not terms:
-            g.fill(0)
-        if p.grouping:
-            g = _fast.group(g, ws)
-
-        blur_g = retina.attention_blur(g, p.attention_sigma, p.attention_size,
-                                       p.attention_normalised)
-        v_prime = v
-        if p.top_k:
-            half = r.shape[0]
-            sums = r.sum(axis=(1, 2), dtype=np.float64)
-            totals = np.concatenate([sums, -sums])
-            chosen = np.argsort(-totals, kind="stable")[:p.top_k]
-            strongest = None
-            for k in chosen:
-                rk = r[k] if k < half else np.negative(r[k - half])
-                strongest = rk if strongest is None else np.maximum(strongest, rk)
-            v_prime = v - strongest
-        blur_v = retina.attention_blur(v_prime, p.attention_sigma, p.attention_size,
-                                       p.attention_normalised)
-        total, count = _fast.attend(blur_g, p.gamma_a, blur_v, p.gamma_d, g, p.u_abs, ws)
+        r, v, g, sums = _fast.front(
+            photo, ws, self._env, self._scales, self.stages_on, self.stages_off, p.dt / p.tau, p.c,
+            p.decay, p.leaky_input, p.gain, p.n_fast, p.n_slow, p.target_polarity == "light",
+            self._factors, self._v_weights, self._cs_classes, self._a_weights, p.grouping)
+        # r: R^theta for k = 0..3 (R^{theta + pi} = -R^theta); v = V; g = G after grouping
+        total, count, blur_g, blur_v, _ = _fast.attention(
+            g, r, v, sums, ws, self._blur, p.gamma_a, p.gamma_d, p.top_k, p.u_abs,
+            full=self.record_maps)
         attended = ws.mask
 
         u = float(p.u_scale * total)
@@ -202,7 +186,7 @@ class ASNN:
         maps = None
         if self.record_maps:
             m_a = blur_g > p.gamma_a
-            m_d = blur_v > p.gamma_d
+            m_d = blur_v > p.gamma_d  # full=True: the window is the whole frame
             mask = attended.copy()
             maps = Maps(P=photo.copy(), R=np.concatenate([r, -r]), V=v.copy(),
                         phi=np.arctan2(r[2], r[0]), G=g.copy(), M_a=m_a, M_d=m_d,

@@ -88,19 +88,57 @@ def test_gabor_factors_are_the_gabor_pairs():
         np.testing.assert_allclose(np.outer(cols[k], rows[k]), even + 1j * odd, atol=1e-15)
 
 
+def test_dog_factors_are_the_dog_kernel():
+    for norm in ("paper", "2d"):
+        env, (s1, s2) = _fast.dog_factors(5.0, 1.0, 3.0, 5, norm)
+        want = retina.dog_kernel(5.0, 1.0, 3.0, 5, norm)
+        got = s1 * np.outer(env[0], env[0]) - s2 * np.outer(env[1], env[1])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-15)
+
+
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_gabor_energy_matches_motion_energy(dtype):
+@pytest.mark.parametrize("grouping,swap", [(True, False), (False, True)])
+def test_front_matches_the_retina_stages(dtype, grouping, swap):
+    """Two frames of random P through the fused pass and through asnn.retina, stage by stage."""
     rng = np.random.default_rng(3)
-    so, fo, sf, ff = rng.standard_normal((4, 33, 47))
+    h, w = 33, 47
+    weights = (1.0, 0.4, 0.5, -0.3)  # w1+, w2-, w1-, w2+: every term
+    cs = retina.center_surround_kernel(0.3, 4.0, 0.0, 5)
+    dog = retina.dog_kernel(5.0, 1.0, 3.0, 5, "2d")
+    env, scales = _fast.dog_factors(5.0, 1.0, 3.0, 5, "2d")
     pairs = [retina.gabor_pair(k * math.pi / 4, 0.3, 4.0, 5) for k in range(4)]
-    want = retina.motion_energy(so, fo, sf, ff, pairs, 1.0, 0.5)
-    ws = _fast.workspace((33, 47), dtype)
-    factors = _fast.gabor_factors(0.3, 4.0, 5)
-    _fast.gabor_energy(so.astype(dtype), fo.astype(dtype), ws, factors, 1.0, True, False)
-    _fast.gabor_energy(sf.astype(dtype), ff.astype(dtype), ws, factors, 0.5, False, True)
-    tol = 1e-13 if dtype == np.float64 else 1e-5
-    np.testing.assert_allclose(ws.r, want[:4], atol=tol * np.abs(want).max())
-    np.testing.assert_allclose(ws.v, want.max(axis=0), atol=tol * np.abs(want).max())
+    gk = _fast.gabor_factors(0.3, 4.0, 5).astype(dtype)
+    a_weights = np.array([weights[0], -weights[1], weights[2], -weights[3]], dtype)
+    fast_state = np.zeros((2, 6, h, w), dtype)
+    slow_state = np.zeros((2, 6, h, w))
+    ws = _fast.workspace((h, w), dtype)
+    for _ in range(2):
+        p = rng.standard_normal((h, w)) * (rng.random((h, w)) < 0.05)  # sparse: G > 0
+        r, v, g, sums = _fast.front(p.astype(dtype), ws, env.astype(dtype), scales.astype(dtype),
+                                    fast_state[0], fast_state[1], 0.01, 60.0, 60.0, True, 5.0, 2, 4,
+                                    swap, gk, np.array([1.0, 0.5], dtype),
+                                    _fast.cs_classes(cs).astype(dtype), a_weights, grouping)
+        on, off = retina.bipolar(p, dog)
+        if swap:
+            on, off = off, on
+        for stages, x in ((slow_state[0], on), (slow_state[1], off)):
+            retina.temporal_filter_step(stages, x, 0.01, 60.0, 60.0, True)
+        fo, so, ff, sf = (retina.temporal_readout(slow_state[c], 5.0, n) for c in (0, 1)
+                          for n in (2, 4))
+        want_r = retina.motion_energy(so, fo, sf, ff, pairs, 1.0, 0.5)
+        want_g = retina.approach_map(so, fo, sf, ff, cs, weights)
+        if grouping:
+            want_g = retina.group(want_g)
+    tol = 1e-12 if dtype == np.float64 else 2e-6
+    for c in (0, 1):  # the fused cascade is kept in difference form
+        want = _fast.to_differences(slow_state[c], True)
+        np.testing.assert_allclose(fast_state[c], want, atol=tol * np.abs(want).max())
+    np.testing.assert_allclose(r, want_r[:4], atol=tol * np.abs(want_r).max())
+    np.testing.assert_allclose(v, want_r.max(axis=0), atol=tol * np.abs(want_r).max())
+    np.testing.assert_allclose(sums, want_r[:4].sum(axis=(1, 2)),
+                               atol=tol * np.abs(want_r).sum())
+    np.testing.assert_allclose(g, want_g, atol=tol * np.abs(want_g).max())
+    assert np.count_nonzero(want_g) > 50
 
 
 def test_other_kernel_sizes_fall_back_to_the_straightforward_form():
