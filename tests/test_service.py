@@ -15,6 +15,7 @@ from pathlib import Path
 
 import msgpack
 import pytest
+import zenoh
 
 from asnn.stimuli import make_scene, write_video
 from clients.alerts import WarningListener
@@ -137,6 +138,69 @@ def test_malformed_frames_are_counted_while_valid_frames_keep_flowing(service):
                                                "invalid-field": 25, "bad-pixels": 25,
                                                "bad-key": 25}
     assert any(r.collision for r in service.responses.of("r1"))
+
+
+def junk_messages(scene):
+    """(key, payload, reason) of every kind of bad input, cycled through by the live test."""
+    good = msgpack.unpackb(encode(Frame.from_image(scene.frames[0], seq=0, stamp=0.0)))
+    jpeg = msgpack.unpackb(encode(Frame.from_image(scene.frames[0], seq=0, stamp=0.0,
+                                                   format="jpeg")))
+    key = keys.frame_key("r1")
+    return [
+        (key, b"\xc1\xc1", "undecodable"),
+        (key, msgpack.packb([1, 2]), "not-a-map"),
+        (key, msgpack.packb({**good, "v": 7}), "unsupported-version"),
+        (key, msgpack.packb({k: v for k, v in good.items() if k != "seq"}), "missing-field"),
+        (key, msgpack.packb({**good, "seq": "x"}), "invalid-field"),
+        (key, msgpack.packb({**good, "stamp": float("nan")}), "bad-stamp"),
+        (key, msgpack.packb({**good, "stamp": float("-inf")}), "bad-stamp"),
+        (key, msgpack.packb({**good, "width": 0}), "bad-size"),
+        (key, msgpack.packb({**good, "height": 4097}), "bad-size"),
+        (key, msgpack.packb({**good, "format": "h264"}), "bad-format"),
+        (key, msgpack.packb({**good, "data": good["data"][:100]}), "bad-pixels"),
+        (key, msgpack.packb({**jpeg, "data": jpeg["data"][:2] + b"junk" * 20}), "bad-image"),
+        ("asnn/not a robot/frame", encode(Frame.from_image(scene.frames[0], seq=0, stamp=0.0)),
+         "bad-key"),
+        ("asnn/" + "x" * 65 + "/frame", msgpack.packb(good), "bad-key"),
+    ]
+
+
+def test_thousands_of_malformed_messages_never_stall_the_worker(service):
+    """2000+ malformed messages of every kind interleaved with valid frames: every valid frame
+    is answered, every bad one counted under its reason and visible in the status queryable."""
+    from service.worker import query_status
+
+    session = service.spoke()
+    scene = make_scene("looming")
+    junk = junk_messages(scene)
+    expected: dict[str, int] = {}
+    reliable = dict(congestion_control=zenoh.CongestionControl.BLOCK)
+    sent = 0
+    for seq in range(len(scene.frames)):
+        for _ in range(36):
+            key, payload, reason = junk[sent % len(junk)]
+            session.put(key, payload, **reliable)
+            expected[reason] = expected.get(reason, 0) + 1
+            sent += 1
+        assert send_one(session, service.responses, "good", scene.frames[seq], seq) is not None
+    assert sent >= 2000
+
+    def counted(stats):
+        # a jpeg that does not decode passes the checks on arrival and fails when processed;
+        # until then a newer frame of r1 may replace it (newest wins): it is counted as dropped
+        invalid = dict(stats["invalid"])
+        invalid["bad-image"] = invalid.get("bad-image", 0) + stats["dropped"]
+        return invalid
+
+    wait_for(lambda: counted(service.core.stats()) == expected and service.worker.idle(),
+             what="every malformed message to be counted")
+    status = query_status(session)[service.core.worker_id]
+    assert counted(status["stats"]) == expected
+    assert status["stats"]["processed"] == len(scene.frames)
+    assert set(status["robots"]) - {"r1"} == {"good"}
+    responses = service.responses.of("good")
+    assert [r.seq for r in responses] == list(range(len(scene.frames)))
+    assert any(r.collision for r in responses)
 
 
 def test_a_late_subscriber_receives_the_last_warning_of_each_robot(service):
