@@ -1,0 +1,61 @@
+"""Reconnection: the router restarts; camera, worker and subscribers (separate processes, and a
+session of this test) reconnect by themselves and the stream resumes."""
+
+import json
+import signal
+import time
+
+import pytest
+import zenoh
+
+from service.config import ZenohOptions, make_config
+from service.demo import free_port
+
+from netutil import SHORT_LEASE, Procs, Responses, wait_for
+
+
+@pytest.fixture
+def procs():
+    started = Procs()
+    yield started
+    started.cleanup()
+
+
+def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
+    config = tmp_path / "zenoh.json5"
+    config.write_text(SHORT_LEASE)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    common = ["--config", str(config), "--connect", endpoint, "--mode", "client"]
+    router = procs("router", "--listen", endpoint, "--config", str(config))
+    router.wait_line("listening on")
+    worker = procs("worker", "--id", "w1", *common)
+    alerts = procs("alerts", "--json", *common)
+    worker.wait_line("ready", timeout=60)
+    alerts.wait_line("listening on")
+    camera = procs("camera", "--robot", "r1", "--source", "synthetic:looming", "--loop",
+                   "--fps", "20", "--wait", "30", *common)
+    options = ZenohOptions(mode="client", connect=(endpoint,), config_file=config)
+    with zenoh.open(make_config(options)) as session:
+        responses = Responses(session)
+        wait_for(lambda: len(responses.since(0, "r1")) >= 20, what="the first responses")
+        wait_for(lambda: alerts.out, timeout=60, what="a first warning")
+
+        assert router.stop(signal.SIGKILL) != 0
+        time.sleep(2.0)  # longer than the lease: every session has seen the router go
+        down = len(responses.since(0))
+        warned = len(alerts.out)
+        restarted = time.monotonic()
+        router = procs("router", "--listen", endpoint, "--config", str(config))
+        router.wait_line("listening on")
+
+        wait_for(lambda: len(responses.since(restarted, "r1")) >= 20, timeout=60,
+                 what="responses after the restart")
+        wait_for(lambda: len(alerts.out) > warned, timeout=60, what="warnings after the restart")
+        resumed = min(t for t, _ in responses.items if t >= restarted) - restarted
+        print(f"\nstream resumed {resumed:.2f} s after the router restarted")
+        assert len(responses.since(0)) > down
+    for proc in (camera, worker, alerts):
+        assert proc.popen.poll() is None, "\n".join(proc.err[-20:])
+    new = [json.loads(line) for line in alerts.out[warned:]]
+    assert all(w["robot"] == "r1" and w["collision"] for w in new)
+    assert camera.stop() == 0 and worker.stop(signal.SIGTERM) == 0 and alerts.stop() == 0
