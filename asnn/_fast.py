@@ -152,6 +152,8 @@ class Workspace:
         self.g = np.empty((h, w), dtype)
         self.v_prime = np.empty((h, w), dtype)
         self.mask = np.zeros((h, w), np.bool_)
+        self.rows = np.empty(h * w, np.int64)  # the attended pixels
+        self.cols = np.empty(h * w, np.int64)
 
 
 _local = threading.local()
@@ -508,6 +510,11 @@ def _v_prime(v, r, ks, signs, y0, y1, x0, x1, out):
     """``V - max_j signs_j R^{ks_j}`` in the window, into ``out``."""
     for y in range(y0, y1):
         vv, o = v[y], out[y]
+        if ks.shape[0] == 1:
+            rk, sg = r[ks[0], y], signs[0]
+            for x in range(x0, x1):
+                o[x] = vv[x] - sg * rk[x]
+            continue
         for x in range(x0, x1):
             m = signs[0] * r[ks[0], y, x]
             for j in range(1, ks.shape[0]):
@@ -516,19 +523,31 @@ def _v_prime(v, r, ks, signs, y0, y1, x0, x1, out):
 
 
 @njit(**_jit)
-def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, y0, y1, x0, x1, mask):
-    """M_a M_d in the window (``blur_v`` indexed from the window's origin), and sum G M_a M_d."""
-    total = 0.0
+def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, y0, y1, x0, x1, mask, colsum, rows,
+            cols):
+    """M_a M_d in the window (``blur_v`` indexed from the window's origin) into ``mask``, the
+    attended pixels into ``rows``, ``cols`` (row-major), and sum G M_a M_d (in float64)."""
+    for x in range(x0, x1):
+        colsum[x] = 0.0
     count = 0
     for y in range(y0, y1):
-        row = 0.0
+        bg, bv, gy, my = blur_g[y], blur_v[y - y0], g[y], mask[y]
         for x in range(x0, x1):
-            m = blur_g[y, x] > gamma_a and blur_v[y - y0, x - x0] > gamma_d
-            mask[y, x] = m
-            if m:
+            my[x] = (bg[x] > gamma_a) & (bv[x - x0] > gamma_d)
+        if absolute:
+            for x in range(x0, x1):
+                colsum[x] += abs(gy[x]) if my[x] else 0.0
+        else:
+            for x in range(x0, x1):
+                colsum[x] += gy[x] if my[x] else 0.0
+        for x in range(x0, x1):
+            if my[x]:
+                rows[count] = y
+                cols[count] = x
                 count += 1
-                row += abs(g[y, x]) if absolute else g[y, x]
-        total += row
+    total = 0.0
+    for x in range(x0, x1):
+        total += colsum[x]
     return total, count
 
 
@@ -540,7 +559,8 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
     attention blur (:func:`~asnn.retina.attention_blur`), ``sums`` the sums of R^theta.
     Unless ``full``, M_d is computed only in M_a's bounding box. Returns
     ``(sum, number of attended pixels, blurred G, blurred V' or None, window)``; ``ws.mask``
-    holds M_a M_d (zero outside the window) and ``ws.v_prime`` V' (inside the window).
+    holds M_a M_d (zero outside the window), ``ws.rows[:count]``, ``ws.cols[:count]`` the
+    attended pixels in row-major order and ``ws.v_prime`` V' (inside the window).
     """
     h, w = g.shape
     blur_g = blur(g)
@@ -548,7 +568,7 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
     if full:
         y0, y1, x0, x1 = 0, h, 0, w
     else:
-        y0, y1, x0, x1 = _box(blur_g, g.dtype.type(gamma_a))
+        y0, y1, x0, x1 = _box(blur_g, float(gamma_a))
         if y0 >= y1:
             return 0.0, 0, blur_g, None, (0, 0, 0, 0)
     if top_k:
@@ -569,8 +589,9 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
         window = v[wy0:wy1, wx0:wx1]
     blur_v = blur(np.ascontiguousarray(window))
     inner = blur_v[y0 - wy0:, x0 - wx0:]
-    total, count = _attend(blur_g, float(gamma_a), inner, float(gamma_d), g, bool(absolute),
-                           y0, y1, x0, x1, ws.mask)
+    total, count = _attend(blur_g, float(gamma_a), inner, float(gamma_d), g,
+                           bool(absolute), y0, y1, x0, x1, ws.mask, ws.colsum[0], ws.rows,
+                           ws.cols)
     return total, count, blur_g, blur_v, (wy0, wy1, wx0, wx1)
 
 

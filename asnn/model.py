@@ -182,7 +182,8 @@ class ASNN:
                 return vv * np.cos(phi), vv * np.sin(phi)
 
             targets = extract_targets(attended, None, None, p.cluster_eps, p.cluster_min_samples,
-                                      p.origin_seed, vectors=vectors)
+                                      p.origin_seed, vectors=vectors,
+                                      points=(ws.rows[:count], ws.cols[:count]))
         maps = None
         if self.record_maps:
             m_a = blur_g > p.gamma_a

@@ -10,13 +10,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import cv2
-import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
+import math
 
-__all__ = ["Target", "dbscan_grid", "extract_targets"]
+import numpy as np
+from numba import njit
+
+__all__ = ["Target", "dbscan_points", "dbscan_grid", "extract_targets"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,27 +45,118 @@ class Target:
                 "pixels": self.pixels}
 
 
-def _disk(eps: float) -> np.ndarray:
-    r = int(np.floor(eps))
-    y, x = np.mgrid[-r:r + 1, -r:r + 1]
-    return ((x * x + y * y) <= eps * eps).astype(np.float32)
+@njit(cache=True, nogil=True)
+def _find(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
 
 
-def dbscan_grid(mask: np.ndarray, eps: float, min_samples: int,
-                seed: tuple[int, int] | None = None) -> tuple[np.ndarray, bool, int]:
-    """DBSCAN of the set pixels of a binary mask, with scikit-learn's semantics.
+@njit(cache=True, nogil=True)
+def _union(parent, i, j):
+    a, b = _find(parent, i), _find(parent, j)
+    if a < b:
+        parent[b] = a
+    elif b < a:
+        parent[a] = b
+
+
+@njit(cache=True, nogil=True)
+def _dbscan_points(rows, cols, eps, min_samples, has_seed, seed_row, seed_col):
+    """DBSCAN of pixels given in row-major order; see :func:`dbscan_points`."""
+    n = rows.shape[0]
+    labels = np.full(n, -1, np.int64)
+    r = int(math.floor(eps))
+    eps2 = eps * eps
+    half = np.zeros(r + 1, np.int64)  # the disk's half-width in each row offset
+    for dy in range(r + 1):
+        while (half[dy] + 1) ** 2 + dy * dy <= eps2:
+            half[dy] += 1
+    r0, r1 = rows[0], rows[n - 1]
+    c0, c1 = cols[0], cols[0]
+    for i in range(n):
+        c0 = min(c0, cols[i])
+        c1 = max(c1, cols[i])
+    bh, bw = r1 - r0 + 1, c1 - c0 + 1
+    index = np.full((bh, bw), -1, np.int64)
+    prefix = np.zeros((bh, bw + 1), np.int64)  # pixels left of column x in each row
+    for i in range(n):
+        index[rows[i] - r0, cols[i] - c0] = i
+    for y in range(bh):
+        row, pre = index[y], prefix[y]
+        for x in range(bw):
+            pre[x + 1] = pre[x] + (1 if row[x] >= 0 else 0)
+    # core samples: neighbours within eps, the point itself and the seed included
+    core = np.zeros(n, np.bool_)
+    seed_count = 1
+    for i in range(n):
+        y, x = rows[i] - r0, cols[i] - c0
+        count = 0
+        for dy in range(-r, r + 1):
+            yy = y + dy
+            if 0 <= yy < bh:
+                hw = half[abs(dy)]
+                count += prefix[yy, min(x + hw, bw - 1) + 1] - prefix[yy, max(x - hw, 0)]
+        if has_seed and (rows[i] - seed_row) ** 2 + (cols[i] - seed_col) ** 2 <= eps2:
+            count += 1
+            seed_count += 1
+        core[i] = count >= min_samples
+    seed_core = has_seed and seed_count >= min_samples
+    # core samples within eps of each other share a cluster: union-find over the grid
+    parent = np.arange(n + 1)  # n: the seed
+    for i in range(n):
+        if not core[i]:
+            continue
+        y, x = rows[i] - r0, cols[i] - c0
+        left = x > 0 and index[y, x - 1] >= 0 and core[index[y, x - 1]] and half[0] >= 1
+        for dy in range(0, r + 1):
+            yy = y + dy
+            if yy >= bh:
+                break
+            hw = half[dy]
+            # with a linked core pixel on the left, only the disk's new right edge is new
+            lo = x + hw if left else (x + 1 if dy == 0 else x - hw)
+            for xx in range(max(lo, 0), min(x + hw, bw - 1) + 1):
+                j = index[yy, xx]
+                if j >= 0 and core[j]:
+                    _union(parent, i, j)
+        if seed_core and (rows[i] - seed_row) ** 2 + (cols[i] - seed_col) ** 2 <= eps2:
+            _union(parent, i, n)
+    # clusters numbered by their first core sample (the seed comes after every pixel)
+    cluster = np.full(n + 1, -1, np.int64)
+    count = 0
+    for i in range(n):
+        if core[i]:
+            root = _find(parent, i)
+            if cluster[root] < 0:
+                cluster[root] = count
+                count += 1
+            labels[i] = cluster[root]
+    seed_label = -1
+    if seed_core:
+        root = _find(parent, n)
+        if cluster[root] < 0:
+            cluster[root] = count
+        seed_label = cluster[root]
+    return labels, seed_core, seed_label
+
+
+def dbscan_points(rows: np.ndarray, cols: np.ndarray, eps: float, min_samples: int,
+                  seed: tuple[int, int] | None = None) -> tuple[np.ndarray, bool, int]:
+    """DBSCAN of pixels (``rows``, ``cols`` in row-major order), with scikit-learn's semantics.
 
     A pixel is a core sample when at least ``min_samples`` points (itself included) lie within
     Euclidean distance ``eps``; core samples within ``eps`` of each other share a cluster.
-    Clusters are numbered in the order of their first core sample in row-major order, as
+    Clusters are numbered in the order of their first core sample, as
     ``sklearn.cluster.DBSCAN`` numbers them when given the pixels in that order. The search uses
-    the grid: 8-connected core pixels are joined directly, and only the boundary pixels of the
-    resulting components are compared in a k-d tree (the closest pair of two pixel sets always
-    lies on their boundaries).
+    the grid of the pixels' bounding box: neighbour counts from row prefix sums over the disk's
+    rows, clusters by union-find over the disk (a core pixel whose left neighbour is a core pixel
+    only looks at the disk's right edge: the rest was joined through that neighbour).
 
     Parameters
     ----------
-    mask : ndarray of bool (H, W)
+    rows, cols : ndarray of int
     eps : float
     min_samples : int
     seed : (row, col), optional
@@ -74,90 +164,45 @@ def dbscan_grid(mask: np.ndarray, eps: float, min_samples: int,
 
     Returns
     -------
-    labels : ndarray of int (H, W)
-        Cluster number of each *core* pixel, -1 elsewhere.
+    labels : ndarray of int (n,)
+        Cluster number of each *core* pixel, -1 for the others.
     seed_core : bool
         Whether the seed point is a core sample.
     seed_label : int
         The seed's cluster when it is a core sample, else -1.
     """
-    h, w = mask.shape
-    disk = _disk(eps)
-    counts = cv2.filter2D(mask.astype(np.float32), cv2.CV_32F, disk,
-                          borderType=cv2.BORDER_CONSTANT)
-    seed_count = 0
-    if seed is not None:
-        near_seed = np.zeros((h, w), np.float32)
-        near_seed[seed] = 1.0
-        near_seed = cv2.filter2D(near_seed, cv2.CV_32F, disk, borderType=cv2.BORDER_CONSTANT)
-        counts += near_seed
-        seed_count = 1 + int(round(float(counts[seed] - near_seed[seed])))  # itself + pixels
-    core = mask & (counts >= min_samples - 0.5)
-    seed_core = seed is not None and seed_count >= min_samples
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    cols = np.ascontiguousarray(cols, dtype=np.int64)
+    if len(rows) == 0:
+        return np.empty(0, np.int64), False, -1
+    sr, sc = seed if seed is not None else (0, 0)
+    labels, seed_core, seed_label = _dbscan_points(rows, cols, float(eps), int(min_samples),
+                                                   seed is not None, int(sr), int(sc))
+    return labels, bool(seed_core), int(seed_label)
 
-    n_comp, comp = cv2.connectedComponents(core.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
-    labels = np.full((h, w), -1, dtype=np.int64)
-    if n_comp <= 1:
-        return labels, seed_core, -1
-    comp = comp.astype(np.int64) - 1  # background -> -1, components 0..n_comp-2
-    n = n_comp - 1
 
-    # Merge components whose boundary pixels lie within eps of each other.
-    interior = cv2.erode(core.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3)),
-                         borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
-    rows, cols = np.nonzero(core & ~interior)
-    edges_a, edges_b = [], []
-    if n > 1:
-        points = np.column_stack([rows, cols]).astype(np.float64)
-        pairs = cKDTree(points).query_pairs(eps + 1e-9, output_type="ndarray")
-        if len(pairs):
-            ca, cb = comp[rows[pairs[:, 0]], cols[pairs[:, 0]]], comp[rows[pairs[:, 1]], cols[pairs[:, 1]]]
-            keep = ca != cb
-            edges_a.append(ca[keep])
-            edges_b.append(cb[keep])
-    if seed_core:
-        # the seed links every core pixel within eps of it
-        sr, sc = seed
-        r = int(np.floor(eps))
-        window = core[max(sr - r, 0):sr + r + 1, max(sc - r, 0):sc + r + 1]
-        wr, wc = np.nonzero(window)
-        wr, wc = wr + max(sr - r, 0), wc + max(sc - r, 0)
-        close = (wr - sr) ** 2 + (wc - sc) ** 2 <= eps * eps
-        linked = np.unique(comp[wr[close], wc[close]])
-        if len(linked) > 1:
-            edges_a.append(np.full(len(linked) - 1, linked[0]))
-            edges_b.append(linked[1:])
-    if edges_a:
-        a, b = np.concatenate(edges_a), np.concatenate(edges_b)
-        graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
-        _, merged = connected_components(graph, directed=False)
-    else:
-        merged = np.arange(n)
+def dbscan_grid(mask: np.ndarray, eps: float, min_samples: int,
+                seed: tuple[int, int] | None = None) -> tuple[np.ndarray, bool, int]:
+    """:func:`dbscan_points` of the set pixels of a binary mask.
 
-    # Renumber clusters by their first core pixel in row-major order.
-    flat = comp.ravel()
-    core_idx = np.flatnonzero(flat >= 0)
-    cluster_of_pixel = merged[flat[core_idx]]
-    first = np.full(merged.max() + 1, np.iinfo(np.int64).max)
-    np.minimum.at(first, cluster_of_pixel, core_idx)
-    order = np.argsort(first, kind="stable")
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    labels.ravel()[core_idx] = rank[cluster_of_pixel]
-
-    seed_label = -1
-    if seed_core:
-        sr, sc = seed
-        r = int(np.floor(eps))
-        sub = labels[max(sr - r, 0):sr + r + 1, max(sc - r, 0):sc + r + 1]
-        seed_label = int(sub.max())  # all linked core pixels share one label after merging
+    Returns
+    -------
+    labels : ndarray of int (H, W)
+        Cluster number of each *core* pixel, -1 elsewhere.
+    seed_core, seed_label : as :func:`dbscan_points`.
+    """
+    rows, cols = np.nonzero(mask)
+    point_labels, seed_core, seed_label = dbscan_points(rows, cols, eps, min_samples, seed)
+    labels = np.full(mask.shape, -1, dtype=np.int64)
+    labels[rows, cols] = point_labels
     return labels, seed_core, seed_label
 
 
 def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | None, eps: float,
                     min_samples: int, origin_seed: bool = False, *,
                     vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
-                    | None = None) -> list[Target]:
+                    | None = None, points: tuple[np.ndarray, np.ndarray] | None = None
+                    ) -> list[Target]:
     """Targets of the attended pixels ``M_a M_d = 1`` (paper eqs. 30-32).
 
     Parameters
@@ -172,20 +217,23 @@ def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | No
         so that the motion vectors are computed for the core samples only.
     origin_seed : bool
         Add the point (0, 0) and drop clusters centred within 1 px of it (published variant).
+    points : (rows, cols), optional
+        The set pixels of ``mask`` in row-major order, when the caller has them.
 
     Returns
     -------
     list of Target, in cluster order; centre and motion are means over the core samples.
     """
-    if not mask.any():
+    rows, cols = np.nonzero(mask) if points is None else points
+    if not len(rows):
         return []
     seed = (0, 0) if origin_seed else None
-    labels, seed_core, seed_label = dbscan_grid(mask, eps, min_samples, seed)
+    labels, seed_core, seed_label = dbscan_points(rows, cols, eps, min_samples, seed)
     core = labels >= 0
     if not core.any():
         return []
     lab = labels[core]
-    rows, cols = np.nonzero(core)
+    rows, cols = rows[core], cols[core]
     if vectors is None:
         vx, vy = dx[rows, cols], dy[rows, cols]
         vx0, vy0 = (dx[0, 0], dy[0, 0]) if seed_core else (0.0, 0.0)
@@ -196,7 +244,7 @@ def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | No
             vx, vy, vx0, vy0 = vx[:-1], vy[:-1], vx[-1], vy[-1]
         else:
             vx, vy = vectors(rows, cols)
-    n = int(lab.max()) + 1
+    n = max(int(lab.max()), seed_label) + 1
     count = np.bincount(lab, minlength=n).astype(np.float64)
     sum_x = np.bincount(lab, cols, n)
     sum_y = np.bincount(lab, rows, n)

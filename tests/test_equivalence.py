@@ -145,3 +145,44 @@ def test_other_kernel_sizes_fall_back_to_the_straightforward_form():
     from asnn.params import preset
     model = ASNN(preset("paper", kernel_size=7))
     assert not model.optimised and model.dtype == np.float64
+
+
+def _dbscan_brute_force(points: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
+    """scikit-learn's DBSCAN, written out: labels of the core samples, -1 elsewhere."""
+    d2 = ((points[:, None, :] - points[None, :, :]) ** 2).sum(axis=2)
+    near = d2 <= eps * eps
+    core = near.sum(axis=1) >= min_samples
+    labels = np.full(len(points), -1)
+    label = 0
+    for i in range(len(points)):
+        if not core[i] or labels[i] >= 0:
+            continue
+        labels[i], stack = label, [i]
+        while stack:
+            j = stack.pop()
+            for k in np.flatnonzero(near[j] & core):
+                if labels[k] < 0:
+                    labels[k] = label
+                    stack.append(k)
+        label += 1
+    return labels
+
+
+@pytest.mark.parametrize("eps,min_samples", [(5.0, 2), (2.5, 4), (1.5, 3), (0.9, 1)])
+def test_dbscan_matches_brute_force(eps, min_samples):
+    from asnn.targets import dbscan_points
+
+    rng = np.random.default_rng(int(eps * 10) + min_samples)
+    for density in (0.01, 0.05, 0.3):
+        mask = rng.random((40, 57)) < density
+        mask[:3, :3] |= rng.random((3, 3)) < 0.5  # near the seed
+        rows, cols = np.nonzero(mask)
+        for seed in (None, (0, 0)):
+            points = np.column_stack([rows, cols])
+            if seed is not None:
+                points = np.vstack([points, seed])
+            want = _dbscan_brute_force(points.astype(float), eps, min_samples)
+            labels, seed_core, seed_label = dbscan_points(rows, cols, eps, min_samples, seed)
+            np.testing.assert_array_equal(labels, want[:len(rows)], err_msg=f"{density} {seed}")
+            if seed is not None:
+                assert seed_core == (want[-1] >= 0) and seed_label == want[-1]
