@@ -50,7 +50,7 @@ def test_looming_stream_warns_inside_the_stimulus_window_with_targets(looming):
     warned = [r for r in responses if r.collision]
     assert warned
     assert looming.onset_frame <= warned[0].seq <= looming.contact_frame
-    assert all(r.robot == "r1" and r.model == "asnn" and r.preset == "reference" for r in warned)
+    assert all(r.robot == "r1" and r.model == "asnn" and r.preset == "reference32" for r in warned)
     assert any(r.targets for r in warned)
     assert [r.seq for r in responses] == list(range(len(looming.frames)))
     assert core.stats()["warnings"] == len(warned)
