@@ -1,0 +1,237 @@
+"""The secured fleet: an in-process router with deploy/zenoh/secure/router.json5 (TLS, user and
+password, access control by role) and certificates made at test time by
+deploy/scripts/gen-dev-certs.sh."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import shutil
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from asnn.stimuli import make_scene
+from clients.alerts import WarningListener
+from service import keys
+from service.core import WorkerCore
+from service.demo import free_port
+from service.messages import Frame, Response, encode
+from service.worker import Worker, live_workers, query_status
+
+from netutil import Responses, wait_for
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "deploy" / "scripts" / "gen-dev-certs.sh"
+ROUTER = ROOT / "deploy" / "zenoh" / "secure" / "router.json5"
+QUIET = 1.5  # seconds to wait for a message that must not arrive
+
+pytestmark = pytest.mark.skipif(not (shutil.which("openssl") and shutil.which("bash")),
+                                reason="needs openssl and bash for the certificates")
+
+
+def generate(directory: Path) -> Path:
+    subprocess.run(["bash", str(SCRIPT), str(directory)], check=True, capture_output=True,
+                   timeout=120)
+    return directory
+
+
+@pytest.fixture(scope="module")
+def certs(tmp_path_factory):
+    return generate(tmp_path_factory.mktemp("secrets"))
+
+
+@pytest.fixture(scope="module")
+def rogue(tmp_path_factory):
+    """Another CA with certificates for the same roles: valid, but not trusted by the router."""
+    return generate(tmp_path_factory.mktemp("rogue"))
+
+
+def set_json(conf: zenoh.Config, key: str, value) -> None:
+    conf.insert_json5(key, json.dumps(value))
+
+
+def router_config(certs: Path, port: int, mtls: bool = False) -> zenoh.Config:
+    conf = zenoh.Config.from_file(str(ROUTER))
+    set_json(conf, "listen/endpoints", [f"tls/127.0.0.1:{port}"])
+    set_json(conf, "transport/link/tls/listen_certificate", str(certs / "router.pem"))
+    set_json(conf, "transport/link/tls/listen_private_key", str(certs / "router.key"))
+    set_json(conf, "transport/link/tls/root_ca_certificate", str(certs / "ca.pem"))
+    set_json(conf, "transport/link/tls/enable_mtls", mtls)
+    set_json(conf, "transport/auth/usrpwd/dictionary_file", str(certs / "credentials.txt"))
+    return conf
+
+
+def client_config(certs: Path, role: str, port: int, *, password: str | None = None,
+                  ca: Path | None = None, cert_from: Path | None = None) -> zenoh.Config:
+    """The generated config of ``role``, pointed at the test router (optionally with another
+    password, another trusted CA, or the client certificate of another CA)."""
+    conf = zenoh.Config.from_file(str(certs / f"{role}.json5"))
+    set_json(conf, "connect/endpoints", [f"tls/127.0.0.1:{port}"])
+    set_json(conf, "timestamping/enabled", True)
+    if password is not None:
+        set_json(conf, "transport/auth/usrpwd/password", password)
+    if ca is not None:
+        set_json(conf, "transport/link/tls/root_ca_certificate", str(ca))
+    if cert_from is not None:
+        set_json(conf, "transport/link/tls/connect_certificate", str(cert_from / f"{role}.pem"))
+        set_json(conf, "transport/link/tls/connect_private_key", str(cert_from / f"{role}.key"))
+    return conf
+
+
+@pytest.fixture
+def fleet(certs):
+    """A secured router and a function opening a session of a role."""
+    port = free_port()
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(zenoh.open(router_config(certs, port)))
+
+        def session(role):
+            return stack.enter_context(zenoh.open(client_config(certs, role, port)))
+
+        yield session, port
+
+
+def fails_to_open(conf: zenoh.Config) -> bool:
+    try:
+        session = zenoh.open(conf)
+    except zenoh.ZError:
+        return True
+    session.close()
+    return False
+
+
+def collector(session, key):
+    got, lock = [], threading.Lock()
+
+    def on(sample):
+        with lock:
+            got.append(sample.payload.to_bytes())
+
+    session.declare_subscriber(key, on)
+    return got
+
+
+def fake_response(robot="r1") -> bytes:
+    return encode(Response(robot=robot, seq=999, stamp=1.0, model="asnn", preset="x", u=1.0,
+                           out=1.0, spikes=9, spike_rate=99.0, collision=True,
+                           worker="intruder", latency_ms=0.0, dropped=0))
+
+
+def test_each_role_does_its_job_and_nothing_else(fleet):
+    session, _ = fleet
+    worker_session, camera, dashboard, alerts = (session(r) for r in
+                                                 ("worker", "camera", "dashboard", "alerts"))
+    core = WorkerCore(worker_id="secure-w1", idle_timeout=600)
+    with Worker(worker_session, core, stats_every=0):
+        responses = Responses(dashboard)
+        warnings = []
+        listener = WarningListener(alerts, warnings.append)
+        wait_for(lambda: live_workers(dashboard) == ["secure-w1"], what="the worker's token")
+
+        # the allowed path: camera -> worker -> dashboard and alerts
+        scene = make_scene("looming")
+        publisher = camera.declare_publisher(keys.frame_key("r1"))
+        wait_for(lambda: publisher.matching_status.matching, what="the camera to see the worker")
+        for seq, image in enumerate(scene.frames):
+            publisher.put(encode(Frame.from_image(image, seq=seq, stamp=seq * 0.05)))
+            wait_for(lambda: any(r.seq == seq for r in responses.since(0, "r1")),
+                     what=f"response {seq}")
+        sent = [r for r in responses.since(0, "r1") if r.collision]
+        assert sent
+        wait_for(lambda: len(warnings) >= len(sent), what="the warnings at the alerts client")
+        status = query_status(dashboard)
+        assert status["secure-w1"]["stats"]["processed"] == len(scene.frames)
+
+        # (the collectors are on other sessions: a session delivers its own puts locally)
+        # a camera cannot publish a warning or a response, nor read the responses
+        camera_reads = collector(session("camera"), keys.responses())
+        dashboard_warnings = collector(alerts, keys.warnings())
+        camera.put(keys.warning_key("r1"), fake_response())
+        camera.put(keys.response_key("r1"), fake_response())
+        # a dashboard cannot inject frames, nor read them
+        dashboard_frames = collector(session("dashboard"), keys.frames())
+        injected = encode(Frame.from_image(scene.frames[30], seq=0, stamp=0.0))
+        dashboard.put(keys.frame_key("r9"), injected)
+        alerts.put(keys.frame_key("r8"), injected)
+        dashboard.put(keys.warning_key("r1"), fake_response())
+        # a worker's status is answered, but a dashboard cannot pose as a worker
+        dashboard.liveliness().declare_token(keys.worker_token_key("fake"))
+        time.sleep(QUIET)
+        publisher.put(encode(Frame.from_image(scene.frames[0], seq=1000, stamp=100.0)))
+        wait_for(lambda: any(r.seq == 1000 for r in responses.since(0, "r1")),
+                 what="a frame after the attempts")
+        time.sleep(0.3)
+
+        assert camera_reads == [] and dashboard_frames == [] and dashboard_warnings == []
+        assert all(r.worker == "secure-w1" for r in responses.since(0))
+        assert all(w.worker == "secure-w1" for w in warnings)
+        assert core.robots() == ["r1"]  # r9 and r8 never reached the worker
+        assert core.stats()["received"] == len(scene.frames) + 1
+        assert live_workers(dashboard) == ["secure-w1"]
+        assert worker_session.info.zid() and len(live_workers(worker_session)) == 1
+        listener.close()
+
+
+def test_wrong_or_unknown_credentials_cannot_connect(fleet, certs):
+    _, port = fleet
+    assert fails_to_open(client_config(certs, "camera", port, password="not-the-password"))
+    conf = client_config(certs, "camera", port)
+    set_json(conf, "transport/auth/usrpwd/user", "mallory")
+    assert fails_to_open(conf)
+    conf = client_config(certs, "camera", port)
+    set_json(conf, "transport/auth/usrpwd", {"user": None, "password": None})
+    assert fails_to_open(conf)
+    assert not fails_to_open(client_config(certs, "camera", port))  # the control
+
+
+def test_a_router_with_an_untrusted_certificate_is_refused(fleet, certs, rogue):
+    _, port = fleet
+    assert fails_to_open(client_config(certs, "alerts", port, ca=rogue / "ca.pem"))
+
+
+def test_plain_tcp_is_not_served(certs):
+    port = free_port()
+    conf = router_config(certs, port)
+    set_json(conf, "listen/endpoints", [f"tls/127.0.0.1:{port}", f"tcp/127.0.0.1:{free_port()}"])
+    # the router only speaks TLS: a tcp listener is refused outright
+    assert fails_to_open(conf)
+
+
+def test_mtls_refuses_clients_without_a_trusted_certificate(certs, rogue):
+    port = free_port()
+    with zenoh.open(router_config(certs, port, mtls=True)):
+        assert not fails_to_open(client_config(certs, "dashboard", port))
+        assert fails_to_open(client_config(certs, "dashboard", port, cert_from=rogue))
+        conf = client_config(certs, "dashboard", port)
+        set_json(conf, "transport/link/tls/enable_mtls", False)  # no client certificate
+        assert fails_to_open(conf)
+
+
+def test_no_secret_is_committed():
+    tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
+    if tracked.returncode != 0:
+        pytest.skip("not a git checkout")
+    for name in tracked.stdout.split():
+        assert not name.endswith((".key", ".pem", ".crt", "credentials.txt")), name
+
+
+def test_the_secure_compose_override_parses_and_names_existing_files():
+    yaml = pytest.importorskip("ruamel.yaml")
+    from cli.main import build_parser
+
+    override = yaml.YAML(typ="safe").load((ROOT / "deploy" / "compose.secure.yml").read_text())
+    parser = build_parser()
+    for name, service in override["services"].items():
+        if name == "router":
+            assert service["volumes"][0].startswith("./deploy/zenoh/secure/router.json5:")
+            continue
+        args = parser.parse_args(service["command"])
+        assert args.connect == ["tls/router:7447"] and args.config.endswith(f"/{name}.json5")
+    for name in ("router.json5", "client.json5"):
+        conf = zenoh.Config.from_file(str(ROOT / "deploy" / "zenoh" / name))
+        assert json.loads(conf.get_json("transport/link/tx/lease")) == 1000
