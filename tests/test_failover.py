@@ -131,6 +131,33 @@ def test_workers_share_robots_and_fail_over(net, capsys):
     assert w2.stop(signal.SIGTERM) == 0
 
 
+def test_a_hung_worker_loses_its_robots_after_the_lease_and_takes_them_back(net, capsys):
+    """SIGSTOP: the connection stays open but silent; the router drops the session when the
+    1 s lease expires. After SIGCONT the worker reconnects and rejoins."""
+    w1, w2 = net.worker("w1"), net.worker("w2")
+    with zenoh.open(make_config(net.options)) as session:
+        wait_for(lambda: live_workers(session) == ["w1", "w2"], what="both workers live")
+        responses = Responses(session)
+        with FramePump(session, ROBOTS, fps=20):
+            settle(responses, ["w1", "w2"])
+            lost = [r for r in ROBOTS if owner(r, ["w1", "w2"]) == "w1"]
+            t_stop = time.monotonic()
+            w1.popen.send_signal(signal.SIGSTOP)
+            try:
+                hung = handover_time(responses, t_stop, lost, ["w2"])
+                settle(responses, ["w2"])
+            finally:
+                w1.popen.send_signal(signal.SIGCONT)
+            t_cont = time.monotonic()
+            back = handover_time(responses, t_cont, lost, ["w1", "w2"])
+            settle(responses, ["w1", "w2"])
+    with capsys.disabled():
+        print(f"\nhung worker (SIGSTOP): robots moved after {hung:.2f} s (lease 1 s), "
+              f"back {back:.2f} s after SIGCONT")
+    assert hung < FAILOVER_LIMIT
+    assert w1.stop(signal.SIGTERM) == 0 and w2.stop(signal.SIGTERM) == 0
+
+
 def test_a_second_worker_with_the_same_id_is_refused(net):
     net.worker("same")
     second = Procs()
