@@ -26,8 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="skip the straightforward float64 form")
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.add_argument("--service", action="store_true",
-                   help="cameras at --fps through a worker over Zenoh on loopback, ramping the "
-                   "number of cameras")
+                   help="cameras at --fps through one worker process over Zenoh on loopback, "
+                   "ramping the number of cameras (first --size, default 320x240; first --preset, "
+                   "default the default preset)")
     p.add_argument("--fps", type=float, default=25.0, help="camera rate for --service")
     p.add_argument("--seconds", type=float, default=4.0,
                    help="duration of each --service step")
@@ -47,19 +48,26 @@ def run(args: argparse.Namespace) -> int:
         return 2
     sizes = args.size or list(bench.DEFAULT_SIZES)
     if args.service:
-        try:
-            from service import bench as service_bench
-        except ImportError:
-            print("asnn bench --service: not available yet (service/bench.py is missing)",
+        from service import bench as service_bench
+
+        if args.fps <= 0 or args.seconds <= 0 or any(n < 1 for n in args.cameras or []):
+            print("asnn bench --service: --fps, --seconds and --cameras must be positive",
                   file=sys.stderr)
             return 2
-        report = service_bench.run(size=sizes[0], fps=args.fps, seconds=args.seconds,
-                                   counts=args.cameras, progress=_progress(args))
+        try:
+            report = service_bench.run(size=args.size[0] if args.size else (320, 240),
+                                       fps=args.fps, seconds=args.seconds, counts=args.cameras,
+                                       preset=args.preset[0] if args.preset else None,
+                                       progress=_progress(args))
+        except (RuntimeError, ValueError) as exc:
+            print(f"asnn bench --service: {exc}", file=sys.stderr)
+            return 2
         report["threads"] = pinning
         report["machine"] = bench.machine()
         if args.json:
             print(json.dumps(report, indent=1))
         else:
+            print(f"# threads: {pinning}")
             print(service_bench.format_report(report))
         return 0
     try:

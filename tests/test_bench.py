@@ -18,3 +18,18 @@ def test_bench_json_report_shape(capsys):
     assert len(slow) == 1 and slow[0]["preset"] == report["default_preset"]
     assert slow[0]["speedup"] > 0
     assert all(r["state_mb"] > 0 for r in rows if r["model"] == "asnn")
+
+
+def test_service_report_format():
+    from service.bench import format_report
+
+    step = {"cameras": 2, "frames": 200, "responses": 199, "answered": 0.995,
+            "latency_p50_ms": 3.0, "latency_p99_ms": 6.0, "added_p50_ms": 1.0,
+            "added_p99_ms": 4.0, "keeps_up": True}
+    report = {"size": "320x240", "fps": 25.0, "seconds": 4.0, "preset": "reference32",
+              "worker": "separate process", "transport": "tcp/127.0.0.1",
+              "model_ms": {"median_ms": 2.0, "p99_ms": 3.0}, "steps": [step],
+              "max_cameras": 2, "added_p99_ms_at_max": 4.0}
+    text = format_report(report)
+    assert "| 2 | 200 | 99.5 % | 3.0 | 6.0 | 4.0 | yes |" in text
+    assert "keeps up: 2 (p99 added latency 4.0 ms)" in text

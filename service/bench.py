@@ -1,0 +1,255 @@
+"""``asnn bench --service``: how many cameras one worker process keeps up with, over Zenoh.
+
+A worker runs as its own OS process (``asnn worker``, as deployed), listening on a free TCP port
+on 127.0.0.1 with multicast scouting and gossip off. This process opens a peer session to it,
+warms it up with one camera for 1.5 s (not reported) and, for N = 1, 2, 4, ... cameras, runs N :func:`service.camera.publish_frames` threads (a generated
+scene, gray8, ``fps`` each, no previews) for ``seconds`` while a subscriber collects every
+response. Each step uses new robot names, so every camera starts a fresh stream.
+
+Per step:
+
+* answered: responses received / frames published;
+* end-to-end latency: response received minus the frame's ``stamp`` (wall clock at publication;
+  same machine, same clock);
+* added latency: end-to-end minus the model's time for one frame. The worker does not report
+  its model time, so it is measured here: the same detector and preset on the same frames, one
+  thread, median per frame (``model_ms``); added latency = end-to-end - model_ms;
+* keeps up: at least 95 % of the frames answered and no growing backlog (the median end-to-end
+  latency of the step's last quarter is within 2 frame periods of its first quarter's).
+
+The report's ``max_cameras`` is the largest N that keeps up (``None`` if even the first does
+not); the ramp stops after the first step that does not.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["DEFAULT_COUNTS", "run", "format_report", "model_time"]
+
+DEFAULT_COUNTS = (1, 2, 4, 8, 12, 16, 20, 24)
+SCENE = "looming_over_stripes"
+ROOT = Path(__file__).resolve().parents[1]
+ANSWERED = 0.95
+
+
+def model_time(size: tuple[int, int], preset: str | None, frames: np.ndarray) -> dict:
+    """Median and p99 milliseconds of one detector step on ``frames`` (after two warm-up frames)."""
+    from asnn.bench import time_detector
+    from asnn.detectors import make_detector
+
+    seconds = time_detector(lambda: make_detector("asnn", preset), frames, warmup=2)
+    ms = seconds * 1e3
+    return {"median_ms": float(np.median(ms)), "p99_ms": float(np.percentile(ms, 99))}
+
+
+class _WorkerProcess:
+    """``asnn worker`` in its own process, listening on ``endpoint``."""
+
+    def __init__(self, endpoint: str, config: Path, preset: str | None):
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        env.pop("RUST_LOG", None)
+        args = [sys.executable, "-m", "cli.main", "worker", "--listen", endpoint, "--mode", "peer",
+                "--config", str(config), "--log-level", "warning", "--id", "bench"]
+        if preset:
+            args += ["--preset", preset]
+        self.popen = subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.PIPE, text=True)
+        self.lines: list[str] = []
+        self._ready = threading.Event()
+        threading.Thread(target=self._drain, daemon=True).start()
+
+    def _drain(self):
+        for line in self.popen.stderr:
+            self.lines.append(line.rstrip())
+            if "ready" in line:
+                self._ready.set()
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout
+        while not self._ready.wait(0.1):
+            if self.popen.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError("the worker did not start: " + " | ".join(self.lines[-5:]))
+
+    def stop(self) -> None:
+        if self.popen.poll() is None:
+            self.popen.terminate()
+            try:
+                self.popen.wait(10)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait()
+
+
+class _Collector:
+    """Every response on ``<prefix>/*/response``: (robot, seq, received wall time, stamp)."""
+
+    def __init__(self, session, prefix: str):
+        from . import keys
+        from .messages import decode_response
+
+        self._decode = decode_response
+        self._lock = threading.Lock()
+        self.records: list[tuple[str, int, float, float]] = []
+        self._sub = session.declare_subscriber(keys.responses(prefix), self._on)
+
+    def _on(self, sample) -> None:
+        now = time.time()
+        try:
+            r = self._decode(bytes(sample.payload.to_bytes()))
+        except Exception:
+            return
+        with self._lock:
+            self.records.append((r.robot, r.seq, now, r.stamp))
+
+    def take(self) -> list[tuple[str, int, float, float]]:
+        with self._lock:
+            records, self.records = self.records, []
+        return records
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def _step(session, collector, n: int, step: int, frames, fps: float, seconds: float,
+          model_ms: float, prefix: str) -> dict:
+    from .camera import Source, publish_frames
+
+    source = Source(f"synthetic:{SCENE}", fps, False, lambda: iter(frames))
+    stop = threading.Event()
+    published: dict[str, int] = {}
+
+    def camera(robot: str):
+        published[robot] = publish_frames(session, robot, source, prefix=prefix, fps=fps,
+                                          loop=True, stop=stop, preview_hz=0, wait=2.0)
+
+    robots = [f"bench{step + 1}-{i}" for i in range(n)]
+    collector.take()
+    threads = [threading.Thread(target=camera, args=(r,), daemon=True) for r in robots]
+    start = time.time()
+    for i, t in enumerate(threads):
+        t.start()
+        time.sleep(1.0 / fps / n)  # cameras out of phase, as independent ones are
+    time.sleep(seconds)
+    stop.set()
+    for t in threads:
+        t.join()
+    time.sleep(0.5 + 2.0 / fps)  # the last responses
+    records = [r for r in collector.take() if r[0] in published]
+    sent = sum(published.values())
+    latency = np.array([(now - stamp) * 1e3 for _, _, now, stamp in records])
+    report = {"cameras": n, "frames": sent, "responses": len(records),
+              "answered": len(records) / sent if sent else 0.0}
+    if len(latency):
+        stamps = np.array([stamp for *_, stamp in records])
+        span = stamps.max() - stamps.min()
+        first = latency[stamps <= stamps.min() + span / 4]
+        last = latency[stamps >= stamps.max() - span / 4]
+        added = latency - model_ms
+        report.update({
+            "latency_p50_ms": float(np.median(latency)),
+            "latency_p99_ms": float(np.percentile(latency, 99)),
+            "added_p50_ms": float(np.median(added)),
+            "added_p99_ms": float(np.percentile(added, 99)),
+            "first_quarter_p50_ms": float(np.median(first)),
+            "last_quarter_p50_ms": float(np.median(last)),
+        })
+        growing = report["last_quarter_p50_ms"] > report["first_quarter_p50_ms"] + 2e3 / fps
+    else:
+        growing = True
+    report["keeps_up"] = bool(report["answered"] >= ANSWERED and not growing)
+    report["wall_s"] = time.time() - start
+    return report
+
+
+def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
+        preset: str | None = None, progress=None) -> dict:
+    """Ramp the number of cameras; returns the report as a dict (see the module notes)."""
+    import zenoh
+
+    from asnn.params import DEFAULT_PRESET
+    from asnn.stimuli import make_scene
+
+    from .config import make_config
+    from .demo import free_port, loopback_options
+    from .keys import DEFAULT_PREFIX
+
+    counts = sorted(set(counts or DEFAULT_COUNTS))
+    w, h = size
+    frames = make_scene(SCENE, size=(w, h), frames=50, start=2, stop=48).frames
+    model = model_time(size, preset, frames)
+    port = free_port()
+    hub, spoke = loopback_options(port)
+    steps = []
+    with tempfile.TemporaryDirectory() as tmp:
+        config = Path(tmp) / "zenoh.json5"
+        config.write_text("{ scouting: { multicast: { enabled: false }, "
+                          "gossip: { enabled: false } } }")
+        worker = _WorkerProcess(f"tcp/127.0.0.1:{port}", config, preset)
+        try:
+            worker.wait_ready()
+            with zenoh.open(make_config(spoke)) as session:
+                collector = _Collector(session, DEFAULT_PREFIX)
+                try:
+                    # warm-up, not reported: the worker loads its compiled kernels, the
+                    # sessions match
+                    _step(session, collector, 1, -1, frames, fps, 1.5, model["median_ms"],
+                          DEFAULT_PREFIX)
+                    for step, n in enumerate(counts):
+                        if progress:
+                            progress(f"{n} cameras")
+                        result = _step(session, collector, n, step, frames, fps, seconds,
+                                       model["median_ms"], DEFAULT_PREFIX)
+                        steps.append(result)
+                        if not result["keeps_up"]:
+                            break
+                finally:
+                    collector.close()
+        finally:
+            worker.stop()
+    if progress:
+        progress("done\n")
+    kept = [s["cameras"] for s in steps if s["keeps_up"]]
+    best = max(kept) if kept else None
+    best_step = next((s for s in steps if s["cameras"] == best), None)
+    return {"size": f"{w}x{h}", "fps": fps, "seconds": seconds, "scene": SCENE,
+            "preset": preset or DEFAULT_PRESET, "model_ms": model, "worker": "separate process",
+            "transport": "tcp/127.0.0.1, peer sessions, no scouting, no gossip",
+            "steps": steps, "max_cameras": best,
+            "added_p99_ms_at_max": best_step.get("added_p99_ms") if best_step else None}
+
+
+def format_report(report: dict) -> str:
+    """The report as text: a header and a Markdown table of the steps."""
+    m = report.get("machine", {})
+    lines = []
+    if m:
+        lines.append(f"# asnn bench --service: {m['cpu']}, {m['cores']} logical cores")
+    lines += [f"# {report['size']} at {report['fps']:g} fps per camera, {report['seconds']:g} s "
+              f"per step, preset {report['preset']}, worker in a {report['worker']}; "
+              f"{report['transport']}",
+              f"# model time per frame (one thread, this process): median "
+              f"{report['model_ms']['median_ms']:.2f} ms, p99 {report['model_ms']['p99_ms']:.2f} ms",
+              "| cameras | frames | answered | latency p50 ms | latency p99 ms | added p99 ms "
+              "| keeps up |",
+              "| ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+    for s in report["steps"]:
+        lat = (f"{s['latency_p50_ms']:.1f} | {s['latency_p99_ms']:.1f} | {s['added_p99_ms']:.1f}"
+               if "latency_p50_ms" in s else "- | - | -")
+        lines.append(f"| {s['cameras']} | {s['frames']} | {100 * s['answered']:.1f} % | {lat} | "
+                     f"{'yes' if s['keeps_up'] else 'no'} |")
+    best = report["max_cameras"]
+    if best is None:
+        lines.append("largest number of cameras that keeps up: none")
+    else:
+        lines.append(f"largest number of cameras that keeps up: {best} "
+                     f"(p99 added latency {report['added_p99_ms_at_max']:.1f} ms)")
+    return "\n".join(lines)
