@@ -7,7 +7,8 @@ import importlib
 import sys
 
 # Each module defines ``register(subparsers)``, adding its sub-commands with ``func`` set.
-COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.bench"]
+COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.bench",
+                   "cli.dashboard"]
 
 
 def build_parser() -> argparse.ArgumentParser:

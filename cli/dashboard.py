@@ -1,0 +1,74 @@
+"""``asnn dashboard``: the fleet in a browser (clients.dashboard), with the common Zenoh options."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from cli.net import (_fail, _open_session, _positive, _setup_logging, _stop_on_signals,
+                     add_zenoh_options, zenoh_options)
+from service.config import ConfigError
+
+__all__ = ["register"]
+
+log = logging.getLogger("asnn")
+
+
+def _port(value: str) -> int:
+    try:
+        port = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {value!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"not a port number: {value!r}")
+    return port
+
+
+def cmd_dashboard(args: argparse.Namespace) -> int:
+    from clients.dashboard import DashboardServer, FleetStore, FleetSubscriber
+    from service.config import make_config
+
+    _setup_logging(args)
+    store = FleetStore(args.prefix, stale_after=args.stale_after, hold=args.hold)
+    try:
+        server = DashboardServer(store, args.host, args.port)
+    except OSError as exc:  # the port is taken, or the address is not ours
+        return _fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
+    try:
+        session = _open_session(make_config(zenoh_options(args)))
+    except ConfigError as exc:
+        server.close()
+        return _fail(str(exc))
+    stop = _stop_on_signals()
+    with session, FleetSubscriber(session, store) as subscriber, server:
+        host, port = server.address
+        print(f"dashboard on http://{host}:{port}/ showing {', '.join(subscriber.keys)}",
+              file=sys.stderr, flush=True)
+        while not stop.wait(0.5):
+            pass
+    log.info("dashboard stopped: received %s, invalid %s", dict(store.received),
+             dict(store.invalid))
+    return 0
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser("dashboard", help="the fleet in a web browser",
+                              description="Serve a live page showing every robot on "
+                              "<prefix>/*/response, warning and preview: thumbnail with the "
+                              "looming targets, spike-rate sparkline, collision and stale "
+                              "markers, and the latest warnings. Every asset comes from the "
+                              "package (works offline).")
+    p.add_argument("--port", type=_port, default=8080,
+                   help="HTTP port (default: %(default)s; 0 picks a free one)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to serve on (default: %(default)s; 0.0.0.0 for every "
+                        "interface, as in a container)")
+    p.add_argument("--stale-after", type=_positive, default=3.0, metavar="SECONDS",
+                   help="mark a robot stale after SECONDS without a response or preview "
+                        "(default: %(default)s)")
+    p.add_argument("--hold", type=_positive, default=3.0, metavar="SECONDS",
+                   help="keep a robot in the collision state for SECONDS (camera clock) after "
+                        "its latest warning (default: %(default)s)")
+    add_zenoh_options(p)
+    p.set_defaults(func=cmd_dashboard)

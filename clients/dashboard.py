@@ -1,0 +1,548 @@
+"""The fleet dashboard: every robot seen on the wildcard keys, live in a browser.
+
+Three parts, each usable alone:
+
+- :class:`FleetStore` keeps the per-robot state (latest response, a ten-second spike-rate
+  history, the latest warning, the latest preview thumbnail) and the log of the latest warnings.
+  It validates every inbound message (a bad one is counted per reason, never raised), is thread
+  safe, and hands out *deltas*: what changed since a version number. It needs neither Zenoh nor
+  a browser.
+- :class:`FleetSubscriber` feeds a store from a Zenoh session: ``<prefix>/*/response``,
+  ``<prefix>/*/preview`` and ``<prefix>/*/warning`` (an advanced subscriber asking the workers'
+  caches for history, so the latest warning of each robot shows at once, as in ``asnn alerts``).
+- :class:`DashboardServer` serves the page (one HTML, one script, one style sheet, all from this
+  package: nothing from the network) and Server-Sent Events from the standard library's
+  ``ThreadingHTTPServer``. Each browser gets one full snapshot, then coalesced deltas, at most
+  ``push_hz`` a second plus a heartbeat every second, so fifty robots at twenty responses a
+  second stay cheap for the server and the page.
+
+HTTP routes: ``/`` the page, ``/static/dashboard.js`` and ``/static/dashboard.css``, ``/events``
+(``text/event-stream``: event ``snapshot`` then ``update``), ``/state`` (the full snapshot as JSON,
+for scripts).
+
+Robot state as shown: **collision** when the latest response says so, or the robot's latest
+warning is at most ``hold`` seconds older (camera clock) than its latest response, so a warning
+that lasts a few frames stays visible; **stale** when no response or preview arrived for
+``stale_after`` seconds (or none ever did: a robot known only from a cached warning).
+"""
+
+from __future__ import annotations
+
+import base64
+import http.server
+import json
+import logging
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib import resources
+
+from service import keys
+from service.messages import (MessageError, Preview, Response, decode_preview,
+                              decode_response)
+
+__all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES"]
+
+log = logging.getLogger("asnn.dashboard")
+
+HISTORY_S = 10.0      # spike-rate sparkline span, camera clock
+HOLD_S = 3.0          # a warning keeps the robot in the collision state this long
+STALE_S = 3.0         # no response or preview for this long: stale
+FORGET_S = 600.0      # a robot silent this long is dropped from the dashboard
+MAX_ROBOTS = 1000     # bound on the state a misbehaving publisher can make us keep
+MAX_POINTS = 2000     # per robot, whatever the stamps say
+LOG_SIZE = 50         # warning episodes kept in the log
+EPISODE_GAP = 20      # a warning at most this many frames after a robot's previous one extends
+                      # the same log entry (one row per episode, not twenty rows a second)
+RECENT_TARGETS = 64   # responses whose targets are kept to match a preview's seq
+MAX_PREVIEW_BYTES = 256 * 1024
+
+STATIC_FILES = {  # the only files served: name -> content type
+    "index.html": "text/html; charset=utf-8",
+    "dashboard.js": "text/javascript; charset=utf-8",
+    "dashboard.css": "text/css; charset=utf-8",
+}
+SECURITY_HEADERS = {
+    "Content-Security-Policy": "default-src 'self'; img-src 'self' data:; object-src 'none'; "
+                               "base-uri 'none'; frame-ancestors 'none'",
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+}
+
+
+def _target(t) -> dict:
+    return {"x": t.x, "y": t.y, "direction": t.direction, "energy": t.energy,
+            "pixels": t.pixels}
+
+
+@dataclass
+class _Robot:
+    name: str
+    changed: int = 0                  # version of the last change shown on the tile
+    preview_changed: int = 0          # version of the last new preview
+    points_reset: int = 0             # version at which the spike history was cleared
+    response: Response | None = None
+    warning: Response | None = None   # the latest warning
+    preview: dict | None = None
+    seen: float | None = None         # arrival (store clock) of the latest response or preview
+    touched: float = 0.0              # arrival of anything, for forgetting
+    points: deque = field(default_factory=deque)  # (version, stamp, spike_rate)
+    recent_targets: deque = field(default_factory=lambda: deque(maxlen=RECENT_TARGETS))
+    episode: dict | None = None       # its latest entry in the warning log
+    responses: int = 0
+    warnings: int = 0
+    previews: int = 0
+
+    def latest_stamp(self) -> float | None:
+        stamps = [m.stamp for m in (self.response, self.warning) if m is not None]
+        return max(stamps) if stamps else None
+
+    def collision(self, hold: float) -> bool:
+        if self.response is not None and self.response.collision:
+            return True
+        if self.warning is None:
+            return False
+        return self.warning.stamp >= self.latest_stamp() - hold
+
+
+class FleetStore:
+    """Per-robot state of the fleet, fed with raw Zenoh samples, read as JSON-ready deltas.
+
+    Parameters
+    ----------
+    prefix : str
+        Key prefix of the samples given to :meth:`offer`.
+    clock : callable
+        Seconds, monotonic (arrival times, staleness); injectable for tests.
+    """
+
+    def __init__(self, prefix: str = keys.DEFAULT_PREFIX, *, history: float = HISTORY_S,
+                 hold: float = HOLD_S, stale_after: float = STALE_S,
+                 forget_after: float = FORGET_S, max_robots: int = MAX_ROBOTS,
+                 log_size: int = LOG_SIZE, clock: Callable[[], float] = time.monotonic):
+        self.prefix = keys.check_prefix(prefix)
+        self.history, self.hold, self.stale_after = history, hold, stale_after
+        self.forget_after, self.max_robots = forget_after, max_robots
+        self.clock = clock
+        self.invalid: Counter = Counter()
+        self.received: Counter = Counter()
+        self._robots: dict[str, _Robot] = {}
+        self._log: deque = deque(maxlen=log_size)  # (version, entry)
+        self._version = 0
+        self._next_entry = 0
+        self._lock = threading.Lock()
+        self._changed = threading.Condition(self._lock)
+
+    # ------------------------------------------------------------------ input
+
+    def offer(self, key: str, payload: bytes) -> str | None:
+        """Take one sample of ``<prefix>/<robot>/(response|warning|preview)``.
+
+        Returns the robot id, or ``None`` when the message was invalid (counted in
+        ``invalid`` by reason and logged). Never raises for bad input.
+        """
+        try:
+            robot, kind = keys.parse_key(str(key), self.prefix)
+            if kind == "preview":
+                message = decode_preview(payload)
+                self._check_preview(message)
+            elif kind in ("response", "warning"):
+                message = decode_response(payload)
+                if message.robot != robot:
+                    raise MessageError("bad-key", f"{kind} of robot {message.robot!r} on {key}")
+                if kind == "warning" and not message.collision:
+                    raise MessageError("invalid-field", "a warning without collision: true")
+            else:
+                raise MessageError("bad-key", f"{key!r} is not a response, warning or preview")
+        except keys.KeySchemeError as exc:
+            return self._reject("bad-key", str(exc), key)
+        except MessageError as exc:
+            return self._reject(exc.reason, exc.detail, key)
+        except Exception as exc:  # a bug here must not take the subscriber down
+            log.exception("unexpected error on %s", key)
+            return self._reject("internal", repr(exc), key)
+        with self._lock:
+            state = self._robot_locked(robot)
+            if state is None:
+                self.invalid["too-many-robots"] += 1
+                log.warning("dropped a %s of %s: already showing %d robots", kind, robot,
+                            self.max_robots)
+                return None
+            self.received[kind] += 1
+            version = self._bump_locked()
+            now = self.clock()
+            state.touched = now
+            if kind == "preview":
+                self._add_preview_locked(state, message, version, now)
+            elif kind == "response":
+                self._add_response_locked(state, message, version, now)
+            else:
+                self._add_warning_locked(state, message, version)
+            self._changed.notify_all()
+        return robot
+
+    @staticmethod
+    def _check_preview(preview: Preview) -> None:
+        if len(preview.data) > MAX_PREVIEW_BYTES:
+            raise MessageError("oversized", f"preview of {len(preview.data)} bytes, more than "
+                               f"{MAX_PREVIEW_BYTES}")
+        preview.image()  # decodes: the browser only ever gets images of the announced size
+
+    def _reject(self, reason: str, detail: str, key) -> None:
+        with self._lock:
+            self.invalid[reason] += 1
+        log.warning("invalid message on %s (%s): %s", key, reason, detail)
+        return None
+
+    def _robot_locked(self, robot: str) -> _Robot | None:
+        state = self._robots.get(robot)
+        if state is None:
+            if len(self._robots) >= self.max_robots:
+                return None
+            state = self._robots[robot] = _Robot(robot)
+        return state
+
+    def _bump_locked(self) -> int:
+        self._version += 1
+        return self._version
+
+    def _add_response_locked(self, state: _Robot, response: Response, version: int,
+                             now: float) -> None:
+        previous = state.response
+        if previous is not None and response.stamp < previous.stamp:
+            state.points.clear()  # the camera's clock went back (restart): a new history
+            state.points_reset = version
+        state.response, state.seen, state.changed = response, now, version
+        state.responses += 1
+        state.points.append((version, response.stamp, response.spike_rate))
+        state.recent_targets.append((response.seq, response.targets))
+        horizon = response.stamp - self.history
+        while state.points and (state.points[0][1] < horizon or len(state.points) > MAX_POINTS):
+            state.points.popleft()
+
+    def _add_warning_locked(self, state: _Robot, warning: Response, version: int) -> None:
+        if state.warning is None or warning.stamp >= state.warning.stamp:
+            state.warning = warning
+        state.warnings += 1
+        state.changed = version
+        self._log_warning_locked(state, warning, version)
+
+    def _log_warning_locked(self, state: _Robot, w: Response, version: int) -> None:
+        """One log entry per warning episode: consecutive warnings of a robot extend it."""
+        entry = state.episode
+        if (entry is not None and self._log and entry["id"] >= self._log[0][1]["id"]
+                and entry["first_seq"] <= w.seq <= entry["seq"] + EPISODE_GAP
+                and w.stamp >= entry["first_stamp"]):
+            entry["count"] += 1
+            entry["peak_rate"] = max(entry["peak_rate"], w.spike_rate)
+            entry["peak_out"] = max(entry["peak_out"], w.out)
+            if w.seq >= entry["seq"]:
+                entry.update(seq=w.seq, stamp=w.stamp, out=w.out, spike_rate=w.spike_rate,
+                             targets=len(w.targets))
+            # move it to the end: the log is ordered by the last change
+            for i, (_, item) in enumerate(self._log):
+                if item is entry:
+                    del self._log[i]
+                    break
+            self._log.append((version, entry))
+            return
+        self._next_entry += 1
+        entry = state.episode = {
+            "id": self._next_entry, "robot": w.robot, "first_seq": w.seq, "seq": w.seq,
+            "first_stamp": w.stamp, "stamp": w.stamp, "count": 1, "out": w.out,
+            "spike_rate": w.spike_rate, "peak_rate": w.spike_rate, "peak_out": w.out,
+            "targets": len(w.targets),
+            "worker": w.worker}
+        self._log.append((version, entry))
+
+    def _add_preview_locked(self, state: _Robot, preview: Preview, version: int,
+                            now: float) -> None:
+        state.preview = {
+            "seq": preview.seq, "stamp": preview.stamp, "width": preview.width,
+            "height": preview.height, "frame_width": preview.frame_width or preview.width,
+            "frame_height": preview.frame_height or preview.height,
+            "src": f"data:image/{preview.format};base64,"
+                   + base64.b64encode(preview.data).decode("ascii")}
+        state.seen, state.preview_changed, state.changed = now, version, version
+        state.previews += 1
+
+    # ------------------------------------------------------------------ output
+
+    @property
+    def version(self) -> int:
+        with self._lock:
+            return self._version
+
+    def wait(self, since: int, timeout: float) -> int:
+        """Block until the version passes ``since`` or ``timeout`` elapses; the version."""
+        with self._lock:
+            self._changed.wait_for(lambda: self._version > since, timeout)
+            return self._version
+
+    def robots(self) -> list[str]:
+        with self._lock:
+            return sorted(self._robots)
+
+    def delta(self, since: int = 0) -> dict:
+        """What changed after version ``since`` (0: everything), JSON-ready.
+
+        ``robots``: the tile of every robot changed since then, with the spike-rate points and
+        (if new) the preview added since then; ``live``: for every robot, ``[age, stale,
+        collision]`` (age in seconds since its last response or preview, ``None`` if none);
+        ``warnings``: log entries added since then, oldest first; ``full``: whether this
+        replaces everything the receiver had.
+        """
+        with self._lock:
+            now = self.clock()
+            self._forget_locked(now)
+            full = since <= 0
+            robots, live = {}, {}
+            for name in sorted(self._robots):
+                state = self._robots[name]
+                age = None if state.seen is None else max(now - state.seen, 0.0)
+                stale = age is None or age > self.stale_after
+                collision = state.collision(self.hold)
+                live[name] = [None if age is None else round(age, 3), stale, collision]
+                if full or state.changed > since:
+                    robots[name] = self._tile_locked(state, since, full, collision, stale)
+            warnings = [dict(entry) for version, entry in self._log if full or version > since]
+            return {
+                "version": self._version, "full": full, "robots": robots, "live": live,
+                "warnings": warnings,
+                "config": {"history": self.history, "hold": self.hold,
+                           "stale_after": self.stale_after},
+                "counts": {"robots": len(self._robots),
+                           "collision": sum(v[2] for v in live.values()),
+                           "stale": sum(v[1] for v in live.values()),
+                           "received": dict(self.received), "invalid": dict(self.invalid)},
+            }
+
+    def _tile_locked(self, state: _Robot, since: int, full: bool, collision: bool,
+                     stale: bool) -> dict:
+        r, w = state.response, state.warning
+        reset = full or state.points_reset > since
+        tile = {
+            "robot": state.name, "collision": collision, "stale": stale,
+            "responses": state.responses, "warnings": state.warnings, "previews": state.previews,
+            "latest_stamp": state.latest_stamp(),
+            "points_reset": reset,
+            "points": [[stamp, rate] for version, stamp, rate in state.points
+                       if reset or version > since],
+            "response": None if r is None else {
+                "seq": r.seq, "stamp": r.stamp, "u": r.u, "out": r.out, "spikes": r.spikes,
+                "spike_rate": r.spike_rate, "collision": r.collision, "model": r.model,
+                "preset": r.preset, "worker": r.worker, "latency_ms": r.latency_ms,
+                "dropped": r.dropped},
+            "last_warning": None if w is None else {"seq": w.seq, "stamp": w.stamp},
+            "targets": self._targets_locked(state, collision),
+        }
+        if state.preview is not None:
+            fresh = full or state.preview_changed > since
+            tile["preview"] = state.preview if fresh else {
+                k: v for k, v in state.preview.items() if k != "src"}
+        return tile
+
+    @staticmethod
+    def _targets_locked(state: _Robot, collision: bool) -> list[dict]:
+        """What to draw on the thumbnail: the looming targets of the response to the previewed
+        frame when known; else the latest response's; else, while a warning holds the
+        collision state, that warning's."""
+        if state.preview is not None:
+            for seq, targets in reversed(state.recent_targets):
+                if seq == state.preview["seq"]:
+                    return [_target(t) for t in targets]
+        r, w = state.response, state.warning
+        if r is not None and r.targets:
+            return [_target(t) for t in r.targets]
+        if w is not None and collision:
+            return [_target(t) for t in w.targets]
+        return []
+
+    def _forget_locked(self, now: float) -> None:
+        for name in [n for n, s in self._robots.items() if now - s.touched > self.forget_after]:
+            del self._robots[name]
+            log.info("robot %s: silent for %.0f s, forgotten", name, self.forget_after)
+
+
+class FleetSubscriber:
+    """Declares the dashboard's three subscribers on ``session``, feeding ``store``."""
+
+    def __init__(self, session, store: FleetStore):
+        from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
+
+        prefix = store.prefix
+        self.store = store
+        self.keys = [keys.responses(prefix), keys.warnings(prefix), keys.previews(prefix)]
+        self._subscribers = [
+            session.declare_subscriber(keys.responses(prefix), self._on_sample),
+            session.declare_subscriber(keys.previews(prefix), self._on_sample),
+            declare_advanced_subscriber(
+                session, keys.warnings(prefix), self._on_sample,
+                history=HistoryConfig(detect_late_publishers=True, max_samples=1),
+                recovery=RecoveryConfig(periodic_queries=None, heartbeat=True)),
+        ]
+
+    def _on_sample(self, sample) -> None:
+        try:
+            self.store.offer(str(sample.key_expr), sample.payload.to_bytes())
+        except Exception:  # offer never raises for bad input; this is a bug, keep listening
+            log.exception("unexpected error on %s", sample.key_expr)
+
+    def __enter__(self) -> FleetSubscriber:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        for subscriber in self._subscribers:
+            try:
+                subscriber.undeclare()
+            except Exception:  # the session may already be closed
+                pass
+        self._subscribers = []
+
+
+def load_static() -> dict[str, bytes]:
+    """The page's files, from the installed package."""
+    folder = resources.files("clients") / "dashboard_static"
+    return {name: (folder / name).read_bytes() for name in STATIC_FILES}
+
+
+class DashboardServer:
+    """The page and its event stream on ``host:port`` (``port=0``: a free one, see ``url``).
+
+    Use as a context manager, or call ``start`` and ``close``.
+    """
+
+    def __init__(self, store: FleetStore, host: str = "127.0.0.1", port: int = 8080, *,
+                 push_hz: float = 5.0, heartbeat: float = 1.0, max_clients: int = 64):
+        self.store = store
+        self.min_interval = 1.0 / push_hz
+        self.heartbeat = heartbeat
+        self.max_clients = max_clients
+        self.closing = threading.Event()
+        self.clients = 0
+        self._clients_lock = threading.Lock()
+        self._static = load_static()
+        self._httpd = http.server.ThreadingHTTPServer((host, port), self._handler_class())
+        self._httpd.daemon_threads = True
+        self._thread: threading.Thread | None = None
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self._httpd.server_address[:2]
+
+    @property
+    def url(self) -> str:
+        host, port = self.address
+        return f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{port}/"
+
+    def start(self) -> DashboardServer:
+        self._thread = threading.Thread(target=self._httpd.serve_forever, kwargs={
+            "poll_interval": 0.2}, name="asnn-dashboard-http", daemon=True)
+        self._thread.start()
+        return self
+
+    def __enter__(self) -> DashboardServer:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop serving; open event streams end within a heartbeat."""
+        self.closing.set()
+        if self._thread is not None:
+            self._httpd.shutdown()
+            self._thread.join(timeout=10)
+            self._thread = None
+        self._httpd.server_close()
+
+    # ------------------------------------------------------------------ requests
+
+    def _handler_class(self):
+        server = self
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1"
+            server_version = "asnn-dashboard"
+            sys_version = ""
+
+            def log_message(self, format, *args):  # noqa: A002 (the base class's name)
+                log.debug("%s %s", self.address_string(), format % args)
+
+            def do_HEAD(self):
+                self.do_GET(head=True)
+
+            def do_GET(self, head: bool = False):
+                path = self.path.split("?", 1)[0]
+                if path in ("/", "/index.html"):
+                    self._send(200, STATIC_FILES["index.html"], server._static["index.html"],
+                               head)
+                elif path.startswith("/static/") and path[8:] in STATIC_FILES:
+                    name = path[8:]
+                    self._send(200, STATIC_FILES[name], server._static[name], head)
+                elif path == "/state":
+                    body = json.dumps(server.store.delta(0)).encode()
+                    self._send(200, "application/json", body, head, cache=False)
+                elif path == "/events" and not head:
+                    server._stream(self)
+                else:
+                    self._send(404, "text/plain; charset=utf-8", b"not found\n", head)
+
+            def _send(self, status, ctype, body, head, cache=True):
+                self.send_response(status)
+                self.send_header("Content-Type", ctype)
+                self.send_header("Content-Length", str(len(body)))
+                self.send_header("Cache-Control", "no-cache" if cache else "no-store")
+                for name, value in SECURITY_HEADERS.items():
+                    self.send_header(name, value)
+                self.end_headers()
+                if not head:
+                    self.wfile.write(body)
+
+        return Handler
+
+    def _stream(self, handler) -> None:
+        """Server-Sent Events: a snapshot, then deltas at most every ``min_interval``."""
+        with self._clients_lock:
+            if self.clients >= self.max_clients:
+                full = True
+            else:
+                full = False
+                self.clients += 1
+        if full:
+            handler._send(503, "text/plain; charset=utf-8", b"too many dashboards open\n",
+                          False, cache=False)
+            return
+        try:
+            handler.send_response(200)
+            handler.send_header("Content-Type", "text/event-stream; charset=utf-8")
+            handler.send_header("Cache-Control", "no-store")
+            handler.send_header("X-Accel-Buffering", "no")
+            for name, value in SECURITY_HEADERS.items():
+                handler.send_header(name, value)
+            handler.end_headers()
+            handler.close_connection = True
+            out = handler.wfile
+            out.write(b"retry: 2000\n\n")
+            since, event, last = 0, "snapshot", 0.0
+            while not self.closing.is_set():
+                delta = self.store.delta(since)
+                since = delta["version"]
+                out.write(f"event: {event}\ndata: {json.dumps(delta)}\n\n".encode())
+                out.flush()
+                event, last = "update", time.monotonic()
+                self.store.wait(since, self.heartbeat)
+                # coalesce: everything that arrives within the interval goes in one delta
+                pause = self.min_interval - (time.monotonic() - last)
+                if pause > 0 and self.closing.wait(pause):
+                    break
+        except (BrokenPipeError, ConnectionResetError, ConnectionAbortedError, TimeoutError):
+            pass  # the browser went away
+        finally:
+            with self._clients_lock:
+                self.clients -= 1

@@ -1,0 +1,322 @@
+// ASNN fleet dashboard: one tile per robot, fed by Server-Sent Events from /events.
+// The server sends a full "snapshot", then "update" deltas (only the robots that changed, plus
+// every robot's [age, stale, collision]). Drawing happens once per animation frame, only for the
+// tiles that changed, so fifty robots stay cheap.
+"use strict";
+
+(() => {
+  const LOG_SIZE = 50;
+  const fleet = document.getElementById("fleet");
+  const empty = document.getElementById("empty");
+  const template = document.getElementById("tile-template");
+  const logBody = document.querySelector("#warnings tbody");
+  const summary = document.getElementById("summary");
+  const conn = document.getElementById("conn");
+
+  const robots = new Map(); // name -> view
+  const dirty = new Set();
+  let config = { history: 10, hold: 3, stale_after: 3 };
+  let counts = null;
+  let framePending = false;
+
+  function clock(stamp) {
+    const d = new Date(stamp * 1000);
+    const pad = (n, w = 2) => String(n).padStart(w, "0");
+    return `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}.` +
+      pad(d.getMilliseconds(), 3);
+  }
+
+  function fmt(x, digits = 2) {
+    return x === null || x === undefined ? "-" : Number(x).toFixed(digits);
+  }
+
+  // ---------------------------------------------------------------- tiles
+
+  function view(name) {
+    let v = robots.get(name);
+    if (v) return v;
+    const el = template.content.firstElementChild.cloneNode(true);
+    el.dataset.robot = name;
+    el.querySelector(".name").textContent = name;
+    v = {
+      name, el, tile: null, points: [], image: null, imageSrc: null,
+      thumb: el.querySelector(".thumb"), spark: el.querySelector(".spark"),
+      stats: el.querySelector(".stats"), age: null, ageAt: 0, stale: true, collision: false,
+    };
+    robots.set(name, v);
+    // keep tiles in name order, so a robot does not move around
+    const after = [...robots.keys()].sort().find((other) => other > name);
+    fleet.insertBefore(el, after ? robots.get(after).el : null);
+    empty.hidden = true;
+    return v;
+  }
+
+  function remove(name) {
+    const v = robots.get(name);
+    if (!v) return;
+    v.el.remove();
+    robots.delete(name);
+    dirty.delete(name);
+    empty.hidden = robots.size > 0;
+  }
+
+  function setFlags(v, stale, collision) {
+    if (v.stale !== stale || v.el.dataset.stale !== String(stale)) {
+      v.stale = stale;
+      v.el.dataset.stale = String(stale);
+      v.el.classList.toggle("stale", stale);
+    }
+    if (v.collision !== collision || v.el.dataset.collision !== String(collision)) {
+      v.collision = collision;
+      v.el.dataset.collision = String(collision);
+      v.el.classList.toggle("collision", collision);
+      dirty.add(v.name);
+    }
+  }
+
+  function applyTile(tile) {
+    const v = view(tile.robot);
+    if (tile.points_reset) v.points = [];
+    for (const p of tile.points) v.points.push(p);
+    const latest = tile.latest_stamp;
+    if (latest !== null) {
+      const horizon = latest - config.history;
+      let drop = 0;
+      while (drop < v.points.length && v.points[drop][0] < horizon) drop++;
+      if (drop) v.points.splice(0, drop);
+    }
+    if (tile.preview && tile.preview.src && tile.preview.src !== v.imageSrc) {
+      const img = new Image();
+      const src = tile.preview.src;
+      v.imageSrc = src;
+      img.onload = () => {
+        if (v.imageSrc === src) {
+          v.image = img;
+          v.el.dataset.preview = "true";
+          dirty.add(v.name);
+          schedule();
+        }
+      };
+      img.src = src;
+    }
+    if (tile.preview && !tile.preview.src) {
+      tile.preview.src = v.tile && v.tile.preview ? v.tile.preview.src : null;
+    }
+    v.tile = tile;
+    v.el.dataset.responses = String(tile.responses);
+    v.el.dataset.warnings = String(tile.warnings);
+    v.el.dataset.targets = String(tile.targets.length);
+    dirty.add(v.name);
+  }
+
+  // ---------------------------------------------------------------- drawing
+
+  function sized(canvas) {
+    const ratio = window.devicePixelRatio || 1;
+    const w = canvas.clientWidth || canvas.width, h = canvas.clientHeight || canvas.height;
+    if (canvas.width !== Math.round(w * ratio) || canvas.height !== Math.round(h * ratio)) {
+      canvas.width = Math.round(w * ratio);
+      canvas.height = Math.round(h * ratio);
+    }
+    const ctx = canvas.getContext("2d");
+    ctx.setTransform(ratio, 0, 0, ratio, 0, 0);
+    return [ctx, w, h];
+  }
+
+  function drawThumb(v) {
+    const [ctx, w, h] = sized(v.thumb);
+    ctx.fillStyle = "#0b0f14";
+    ctx.fillRect(0, 0, w, h);
+    const preview = v.tile && v.tile.preview;
+    if (!v.image || !preview) {
+      ctx.fillStyle = "#5b6775";
+      ctx.font = "12px sans-serif";
+      ctx.textAlign = "center";
+      ctx.fillText("no preview", w / 2, h / 2);
+      return;
+    }
+    const scale = Math.min(w / preview.width, h / preview.height);
+    const dw = preview.width * scale, dh = preview.height * scale;
+    const ox = (w - dw) / 2, oy = (h - dh) / 2;
+    ctx.imageSmoothingEnabled = true;
+    ctx.drawImage(v.image, ox, oy, dw, dh);
+    // targets are in pixels of the published frame
+    const sx = dw / preview.frame_width, sy = dh / preview.frame_height;
+    ctx.lineWidth = 2;
+    for (const t of v.tile.targets) {
+      const x = ox + t.x * sx, y = oy + t.y * sy;
+      const r = Math.max(5, Math.sqrt(t.pixels / Math.PI) * Math.min(sx, sy));
+      ctx.strokeStyle = "#ff3b30";
+      ctx.beginPath();
+      ctx.arc(x, y, r, 0, 2 * Math.PI);
+      ctx.stroke();
+      ctx.beginPath(); // heading, image coordinates (x right, y down)
+      ctx.moveTo(x, y);
+      ctx.lineTo(x + Math.cos(t.direction) * (r + 8), y + Math.sin(t.direction) * (r + 8));
+      ctx.stroke();
+    }
+  }
+
+  function drawSpark(v) {
+    const [ctx, w, h] = sized(v.spark);
+    ctx.clearRect(0, 0, w, h);
+    ctx.fillStyle = "#121820";
+    ctx.fillRect(0, 0, w, h);
+    const pts = v.points;
+    if (!pts.length || !v.tile || v.tile.latest_stamp === null) return;
+    const end = Math.max(v.tile.latest_stamp, pts[pts.length - 1][0]);
+    const start = end - config.history;
+    let top = 20;
+    for (const p of pts) top = Math.max(top, p[1]);
+    top *= 1.1;
+    const X = (t) => ((t - start) / config.history) * (w - 2) + 1;
+    const Y = (r) => h - 2 - (r / top) * (h - 4);
+    ctx.beginPath();
+    ctx.moveTo(X(pts[0][0]), h);
+    for (const p of pts) ctx.lineTo(X(p[0]), Y(p[1]));
+    ctx.lineTo(X(pts[pts.length - 1][0]), h);
+    ctx.closePath();
+    ctx.fillStyle = v.collision ? "rgba(255, 59, 48, 0.35)" : "rgba(90, 200, 250, 0.25)";
+    ctx.fill();
+    ctx.beginPath();
+    pts.forEach((p, i) => (i ? ctx.lineTo(X(p[0]), Y(p[1])) : ctx.moveTo(X(p[0]), Y(p[1]))));
+    ctx.strokeStyle = v.collision ? "#ff3b30" : "#5ac8fa";
+    ctx.lineWidth = 1.5;
+    ctx.stroke();
+    ctx.fillStyle = "#9aa7b4";
+    ctx.font = "10px sans-serif";
+    ctx.textAlign = "right";
+    ctx.fillText(`${Math.round(pts[pts.length - 1][1])} spikes/s`, w - 4, 11);
+  }
+
+  function drawStats(v) {
+    const r = v.tile && v.tile.response;
+    if (!r) {
+      v.stats.textContent = v.tile && v.tile.last_warning
+        ? `last warning seq ${v.tile.last_warning.seq} at ${clock(v.tile.last_warning.stamp)}`
+        : "no response yet";
+      return;
+    }
+    v.stats.textContent = `seq ${r.seq} · out ${fmt(r.out)} · ${Math.round(r.spike_rate)} ` +
+      `spikes/s · ${fmt(r.latency_ms, 0)} ms` + (r.dropped ? ` · ${r.dropped} dropped` : "") +
+      ` · ${r.model}${r.preset ? "/" + r.preset : ""}`;
+    v.stats.title = `worker ${r.worker}, frame at ${clock(r.stamp)}`;
+  }
+
+  function draw() {
+    framePending = false;
+    for (const name of dirty) {
+      const v = robots.get(name);
+      if (!v) continue;
+      drawThumb(v);
+      drawSpark(v);
+      drawStats(v);
+    }
+    dirty.clear();
+  }
+
+  function schedule() {
+    if (!framePending && dirty.size) {
+      framePending = true;
+      requestAnimationFrame(draw);
+    }
+  }
+
+  // ---------------------------------------------------------------- log and summary
+
+  // One row per warning episode (consecutive warnings of a robot); an updated episode moves
+  // to the top.
+  function addWarnings(entries, full) {
+    if (full) logBody.replaceChildren();
+    for (const e of entries) {
+      const old = logBody.querySelector(`tr[data-entry="${e.id}"]`);
+      if (old) old.remove();
+      const row = document.createElement("tr");
+      row.dataset.entry = String(e.id);
+      row.dataset.robot = e.robot;
+      const frames = e.count > 1 ? `${e.first_seq}–${e.seq} (${e.count})` : String(e.seq);
+      for (const text of [clock(e.stamp), e.robot, frames, fmt(e.peak_out),
+                          Math.round(e.peak_rate), e.targets]) {
+        const cell = document.createElement("td");
+        cell.textContent = String(text);
+        row.appendChild(cell);
+      }
+      row.title = `from ${clock(e.first_stamp)}, worker ${e.worker}`;
+      logBody.insertBefore(row, logBody.firstChild);
+    }
+    while (logBody.rows.length > LOG_SIZE) logBody.deleteRow(-1);
+  }
+
+  function showSummary() {
+    if (!counts) return;
+    let stale = 0, collision = 0;
+    for (const v of robots.values()) {
+      stale += v.stale;
+      collision += v.collision;
+    }
+    const invalid = Object.values(counts.invalid).reduce((a, b) => a + b, 0);
+    summary.textContent = `${robots.size} robot${robots.size === 1 ? "" : "s"} · ` +
+      `${collision} in collision · ${stale} stale` +
+      (invalid ? ` · ${invalid} invalid message${invalid === 1 ? "" : "s"}` : "");
+    summary.title = invalid ? JSON.stringify(counts.invalid) : "";
+    summary.classList.toggle("alarm", collision > 0);
+  }
+
+  // ---------------------------------------------------------------- events
+
+  function apply(delta) {
+    config = delta.config || config;
+    counts = delta.counts;
+    if (delta.full) {
+      for (const name of [...robots.keys()]) if (!(name in delta.live)) remove(name);
+    }
+    for (const tile of Object.values(delta.robots)) applyTile(tile);
+    const now = performance.now();
+    for (const [name, [age, stale, collision]] of Object.entries(delta.live)) {
+      const v = view(name);
+      v.age = age;
+      v.ageAt = now;
+      setFlags(v, stale, collision);
+    }
+    for (const name of [...robots.keys()]) if (!(name in delta.live)) remove(name);
+    addWarnings(delta.warnings, delta.full);
+    showSummary();
+    document.body.dataset.version = String(delta.version);
+    schedule();
+  }
+
+  // Staleness also advances between events (a dashboard whose server went quiet must not show
+  // old tiles as live).
+  setInterval(() => {
+    const now = performance.now();
+    for (const v of robots.values()) {
+      const age = v.age === null ? null : v.age + (now - v.ageAt) / 1000;
+      if (age === null || age > config.stale_after) setFlags(v, true, v.collision);
+    }
+    showSummary();
+    schedule();
+  }, 500);
+
+  function connect() {
+    const source = new EventSource("/events");
+    const handle = (event) => {
+      try {
+        apply(JSON.parse(event.data));
+      } catch (err) {
+        console.error("bad event", err);
+      }
+    };
+    source.addEventListener("snapshot", handle);
+    source.addEventListener("update", handle);
+    source.onopen = () => {
+      conn.dataset.state = "live";
+      conn.textContent = "live";
+    };
+    source.onerror = () => {
+      conn.dataset.state = "lost";
+      conn.textContent = "reconnecting";
+    };
+  }
+
+  connect();
+})();

@@ -1,0 +1,429 @@
+"""The fleet dashboard without a browser: the store (no Zenoh), the HTTP server and its event
+stream, the preview message and the camera's preview publishing, and the ``asnn dashboard``
+command as a process. The page itself is tested in headless Chromium (test_dashboard_browser).
+"""
+
+from __future__ import annotations
+
+import http.client
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import msgpack
+import numpy as np
+import pytest
+
+from asnn.stimuli import make_scene
+from cli.main import build_parser
+from clients.dashboard import STATIC_FILES, DashboardServer, FleetStore, FleetSubscriber
+from service import keys
+from service.camera import Source, publish_frames
+from service.demo import free_port
+from service.messages import Preview, Response, TargetMsg, decode_preview, encode
+
+ROOT = Path(__file__).resolve().parents[1]
+TIMEOUT = 20.0
+
+
+class Clock:
+    def __init__(self):
+        self.now = 100.0
+
+    def __call__(self):
+        return self.now
+
+
+def response(robot="r1", seq=0, stamp=None, collision=False, rate=0.0, targets=()):
+    return Response(robot=robot, seq=seq, stamp=1000.0 + seq * 0.05 if stamp is None else stamp,
+                    model="asnn", preset="default", u=1.0, out=0.9 if collision else 0.1,
+                    spikes=1, spike_rate=rate, collision=collision, worker="w1",
+                    latency_ms=2.0, dropped=0,
+                    targets=[TargetMsg(x=x, y=y, direction=0.0, energy=1.0, pixels=50)
+                             for x, y in targets])
+
+
+def preview(seq=0, size=(64, 48), stamp=1000.0):
+    image = np.zeros(size[::-1], np.uint8)
+    image[10:30, 20:40] = 255
+    return Preview.from_frame_image(image, seq=seq, stamp=stamp, width=32)
+
+
+def offer_response(store, r, kind="response"):
+    return store.offer(f"asnn/{r.robot}/{kind}", encode(r))
+
+
+# ---------------------------------------------------------------- the store
+
+def test_responses_make_a_tile_with_a_ten_second_spike_history():
+    clock = Clock()
+    store = FleetStore(clock=clock)
+    for seq in range(300):  # 15 s of camera time at 20 fps
+        assert offer_response(store, response(seq=seq, rate=float(seq))) == "r1"
+    delta = store.delta(0)
+    tile = delta["robots"]["r1"]
+    assert delta["full"] and tile["responses"] == 300 and tile["response"]["seq"] == 299
+    stamps = [t for t, _ in tile["points"]]
+    assert stamps[-1] - stamps[0] <= 10.0 and len(stamps) >= 199
+    assert tile["points"][-1] == [1000.0 + 299 * 0.05, 299.0]
+    assert delta["live"]["r1"] == [0.0, False, False]
+    assert delta["counts"]["received"] == {"response": 300}
+
+
+def test_deltas_carry_only_what_changed_since_a_version():
+    store = FleetStore(clock=Clock())
+    for robot in ("a", "b"):
+        offer_response(store, response(robot, 0))
+    version = store.delta(0)["version"]
+    offer_response(store, response("b", 1, rate=7.0))
+    delta = store.delta(version)
+    assert not delta["full"] and set(delta["robots"]) == {"b"}
+    assert delta["robots"]["b"]["points"] == [[1000.05, 7.0]]
+    assert not delta["robots"]["b"]["points_reset"]
+    assert set(delta["live"]) == {"a", "b"}  # every robot's flags, every time
+    assert store.delta(delta["version"])["robots"] == {}
+
+
+def test_a_camera_restart_starts_a_new_spike_history():
+    store = FleetStore(clock=Clock())
+    for seq in range(5):
+        offer_response(store, response(seq=seq))
+    version = store.version
+    offer_response(store, response(seq=0, stamp=900.0))  # the clock went back
+    tile = store.delta(version)["robots"]["r1"]
+    assert tile["points_reset"] and tile["points"] == [[900.0, 0.0]]
+
+
+def test_collision_is_held_for_a_while_after_the_latest_warning_camera_clock():
+    store = FleetStore(hold=3.0, clock=Clock())
+    offer_response(store, response(seq=10, collision=True))
+    offer_response(store, response(seq=10, collision=True), "warning")
+    assert store.delta(0)["live"]["r1"][2] is True
+    offer_response(store, response(seq=11, stamp=1000.0 + 10 * 0.05 + 2.9))
+    assert store.delta(0)["live"]["r1"][2] is True  # 2.9 s after the warning: held
+    offer_response(store, response(seq=12, stamp=1000.0 + 10 * 0.05 + 3.1))
+    assert store.delta(0)["live"]["r1"][2] is False
+    assert store.delta(0)["robots"]["r1"]["last_warning"]["seq"] == 10
+
+
+def test_stale_when_no_response_or_preview_arrives_and_for_a_warning_only_robot():
+    clock = Clock()
+    store = FleetStore(stale_after=3.0, clock=clock)
+    offer_response(store, response("live"))
+    offer_response(store, response("old", collision=True), "warning")  # a cached warning
+    live = store.delta(0)["live"]
+    assert live["live"] == [0.0, False, False]
+    assert live["old"] == [None, True, True]  # known only from its warning: stale
+    clock.now += 2.0
+    store.offer("asnn/live/preview", encode(preview()))
+    clock.now += 2.0
+    assert store.delta(0)["live"]["live"] == [2.0, False, False]  # the preview counts
+    clock.now += 1.5
+    assert store.delta(0)["live"]["live"] == [3.5, True, False]
+
+
+def test_silent_robots_are_forgotten_and_the_number_of_robots_is_bounded():
+    clock = Clock()
+    store = FleetStore(forget_after=60.0, max_robots=3, clock=clock)
+    for robot in ("a", "b", "c", "d"):
+        offer_response(store, response(robot))
+    assert store.robots() == ["a", "b", "c"] and store.invalid == {"too-many-robots": 1}
+    clock.now += 30.0
+    offer_response(store, response("a", 1))
+    clock.now += 31.0
+    assert list(store.delta(0)["live"]) == ["a"]
+
+
+def test_previews_are_sent_once_and_targets_match_the_previewed_frame():
+    store = FleetStore(clock=Clock())
+    offer_response(store, response(seq=3, targets=[(5.0, 6.0)]))
+    offer_response(store, response(seq=4, targets=[(50.0, 40.0)]))
+    store.offer("asnn/r1/preview", encode(preview(seq=3)))
+    tile = store.delta(0)["robots"]["r1"]
+    p = tile["preview"]
+    assert (p["width"], p["height"], p["frame_width"], p["frame_height"]) == (32, 24, 64, 48)
+    assert p["src"].startswith("data:image/jpeg;base64,")
+    assert [(t["x"], t["y"]) for t in tile["targets"]] == [(5.0, 6.0)]  # seq 3's, not 4's
+    version = store.version
+    offer_response(store, response(seq=5))
+    tile = store.delta(version)["robots"]["r1"]
+    assert "src" not in tile["preview"] and tile["preview"]["seq"] == 3  # not sent again
+
+
+def test_consecutive_warnings_make_one_log_entry_per_episode():
+    store = FleetStore(clock=Clock())
+    for seq in range(10, 20):
+        offer_response(store, response("a", seq, collision=True, rate=seq), "warning")
+    offer_response(store, response("b", 5, collision=True), "warning")
+    version = store.version
+    offer_response(store, response("a", 25, collision=True, rate=1.0), "warning")  # same episode
+    offer_response(store, response("a", 80, collision=True), "warning")  # a new one
+    log = store.delta(0)["warnings"]
+    assert [(e["robot"], e["first_seq"], e["seq"], e["count"]) for e in log] == [
+        ("b", 5, 5, 1), ("a", 10, 25, 11), ("a", 80, 80, 1)]
+    assert log[1]["peak_rate"] == 19.0 and log[1]["peak_out"] == 0.9
+    assert [e["seq"] for e in store.delta(version)["warnings"]] == [25, 80]
+
+
+def test_invalid_messages_are_counted_never_raised():
+    store = FleetStore(clock=Clock())
+    good = encode(response())
+    bad_jpeg = msgpack.packb({**preview().model_dump(), "data": b"\xff\xd8 not a jpeg"})
+    wrong_size = msgpack.packb({**preview().model_dump(), "width": 31})
+    raw_preview = msgpack.packb({**preview().model_dump(), "format": "gray8"})
+    huge = msgpack.packb({**preview().model_dump(), "data": b"\0" * 300_000})
+    cases = [
+        ("asnn/r1/response", b"\xc1"), ("asnn/r1/response", msgpack.packb([1])),
+        ("asnn/r1/response", msgpack.packb({"robot": "r1", "seq": "1"})),
+        ("asnn/r1/response", msgpack.packb({**response().model_dump(), "v": 2})),
+        ("asnn/r2/response", good),  # the message names another robot
+        ("asnn/r1/warning", good),  # a warning without a collision
+        ("asnn/r 1/response", good), ("other/r1/response", good), ("asnn/r1/frame", good),
+        ("asnn/r1/preview", bad_jpeg), ("asnn/r1/preview", wrong_size),
+        ("asnn/r1/preview", raw_preview), ("asnn/r1/preview", huge),
+    ]
+    for key, payload in cases:
+        assert store.offer(key, payload) is None
+    assert store.invalid == {"undecodable": 1, "not-a-map": 1, "invalid-field": 2,
+                             "unsupported-version": 1, "bad-key": 4, "bad-image": 1,
+                             "bad-pixels": 1, "bad-format": 1, "oversized": 1}
+    assert store.robots() == [] and store.delta(0)["counts"]["invalid"] == store.invalid
+    assert store.offer("asnn/r1/response", good) == "r1"
+
+
+def test_the_store_is_safe_from_many_threads():
+    store = FleetStore(clock=time.monotonic)
+    names = [f"robot{i:02d}" for i in range(50)]
+
+    def feed(name):
+        for seq in range(40):
+            offer_response(store, response(name, seq, collision=seq % 7 == 0), "response")
+
+    seen = 0
+    threads = [threading.Thread(target=feed, args=(n,)) for n in names]
+    for t in threads:
+        t.start()
+    while any(t.is_alive() for t in threads):
+        seen = store.delta(seen)["version"]
+    for t in threads:
+        t.join()
+    delta = store.delta(0)
+    assert set(delta["robots"]) == set(names)
+    assert all(t["responses"] == 40 for t in delta["robots"].values())
+    assert store.version == 50 * 40
+
+
+# ---------------------------------------------------------------- preview message and camera
+
+def test_preview_is_a_small_jpeg_of_the_frame_never_scaled_up():
+    image = (np.arange(200 * 120) % 251).astype(np.uint8).reshape(120, 200)
+    p = decode_preview(encode(Preview.from_frame_image(image, seq=7, stamp=1.5)))
+    assert (p.seq, p.stamp, p.width, p.height, p.format) == (7, 1.5, 160, 96, "jpeg")
+    assert (p.frame_width, p.frame_height) == (200, 120) and p.image().shape == (96, 160)
+    small = Preview.from_frame_image(np.zeros((20, 30, 3), np.uint8), seq=0, stamp=0.0)
+    assert (small.width, small.height) == (30, 20)
+
+
+def test_camera_publishes_previews_at_a_low_rate_and_none_when_disabled(zenoh_net):
+    scene = make_scene("looming")
+    source = Source("synthetic:looming", scene.fps, False, lambda: iter(scene.frames))
+    got: dict[str, list] = {"frame": [], "preview": []}
+
+    def on(sample):
+        robot, kind = keys.parse_key(str(sample.key_expr))
+        got[kind].append((robot, sample.payload.to_bytes()))
+
+    zenoh_net.hub.declare_subscriber("asnn/*/*", on)
+    camera = zenoh_net.spoke()
+    # 60 frames in 1.5 s at 40 fps, previews at 2 Hz: 3 or 4 of them
+    assert publish_frames(camera, "cam", source, fps=40, wait=TIMEOUT, preview_hz=2.0) == 60
+    assert publish_frames(camera, "nopv", source, fps=200, wait=TIMEOUT, preview_hz=0) == 60
+    deadline = time.monotonic() + TIMEOUT
+    while len(got["frame"]) < 100 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    previews = [decode_preview(p) for robot, p in got["preview"]]
+    assert {robot for robot, _ in got["preview"]} == {"cam"}
+    assert 2 <= len(previews) <= 5 and previews[0].seq == 0
+    assert all(p.width == 128 and p.frame_width == 128 for p in previews)  # 128 px: as is
+
+
+# ---------------------------------------------------------------- the HTTP server
+
+def get(server, path, method="GET"):
+    host, port = server.address
+    conn = http.client.HTTPConnection(host, port, timeout=TIMEOUT)
+    try:
+        conn.request(method, path)
+        reply = conn.getresponse()
+        return reply.status, dict(reply.getheaders()), reply.read()
+    finally:
+        conn.close()
+
+
+def test_server_serves_the_packaged_page_and_nothing_else():
+    store = FleetStore(clock=Clock())
+    offer_response(store, response())
+    with DashboardServer(store, "127.0.0.1", 0) as server:
+        status, headers, body = get(server, "/")
+        assert status == 200 and headers["Content-Type"].startswith("text/html")
+        assert b"/static/dashboard.js" in body and b"/static/dashboard.css" in body
+        assert "default-src 'self'" in headers["Content-Security-Policy"]
+        for name, ctype in STATIC_FILES.items():
+            status, headers, body = get(server, f"/static/{name}")
+            assert status == 200 and headers["Content-Type"] == ctype and body
+            assert b"http://" not in body and b"https://" not in body  # no CDN, works offline
+        status, headers, body = get(server, "/state")
+        assert status == 200 and json.loads(body)["robots"]["r1"]["responses"] == 1
+        for path in ("/static/../dashboard.py", "/static/", "/nothing", "/../pyproject.toml"):
+            assert get(server, path)[0] == 404
+        assert get(server, "/", "HEAD")[0] == 200
+
+
+class EventReader:
+    """Reads Server-Sent Events from /events on a raw socket."""
+
+    def __init__(self, server):
+        self.sock = socket.create_connection(server.address, timeout=TIMEOUT)
+        self.sock.sendall(b"GET /events HTTP/1.1\r\nHost: x\r\nAccept: text/event-stream\r\n\r\n")
+        self.file = self.sock.makefile("rb")
+        self.status = self.file.readline()
+        while self.file.readline() not in (b"\r\n", b""):
+            pass
+
+    def next(self):
+        event, data = None, None
+        for raw in self.file:
+            line = raw.decode().rstrip("\n")
+            if line.startswith("event: "):
+                event = line[7:]
+            elif line.startswith("data: "):
+                data = json.loads(line[6:])
+            elif line == "" and event:
+                return event, data
+        return None, None
+
+    def close(self):
+        self.file.close()
+        self.sock.close()
+
+
+def test_event_stream_sends_a_snapshot_then_coalesced_deltas_losing_nothing():
+    store = FleetStore()
+    names = [f"robot{i:02d}" for i in range(50)]
+    offer_response(store, response(names[0], 0))
+    sent = 20
+    with DashboardServer(store, "127.0.0.1", 0, push_hz=5.0) as server:
+        reader = EventReader(server)
+        try:
+            assert b"200" in reader.status
+            event, snapshot = reader.next()
+            assert event == "snapshot" and snapshot["full"] and list(snapshot["robots"]) == [
+                names[0]]
+            start = time.monotonic()
+            for seq in range(1, sent):  # 50 robots x 20 responses, as fast as possible
+                for name in names:
+                    offer_response(store, response(name, seq, rate=float(seq)))
+            points = {name: len(snapshot["robots"].get(name, {"points": []})["points"])
+                      for name in names}
+            updates, deadline = 0, time.monotonic() + TIMEOUT
+            while sum(points.values()) < 50 * (sent - 1) + 1:
+                assert time.monotonic() < deadline, f"timed out, {points}"
+                event, delta = reader.next()
+                assert event == "update" and not delta["full"]
+                updates += 1
+                for name, tile in delta["robots"].items():
+                    points[name] += len(tile["points"])
+            elapsed = time.monotonic() - start
+        finally:
+            reader.close()
+    assert points == {name: sent if name == names[0] else sent - 1 for name in names}
+    # coalesced: 1000 messages arrived in a handful of deltas, at most 5 a second
+    assert updates <= elapsed * 5.0 + 2
+
+
+def test_closing_the_server_ends_open_event_streams():
+    with DashboardServer(FleetStore(), "127.0.0.1", 0, heartbeat=0.2) as server:
+        reader = EventReader(server)
+        assert reader.next()[0] == "snapshot"
+        assert server.clients == 1
+    assert reader.next() == (None, None)  # the stream ended
+    reader.close()
+
+
+def test_subscriber_feeds_the_store_over_zenoh(zenoh_net):
+    store = FleetStore()
+    with FleetSubscriber(zenoh_net.hub, store):
+        spoke = zenoh_net.spoke()
+        time.sleep(0.3)  # let the subscriptions reach the spoke
+        spoke.put("asnn/r1/response", encode(response(seq=1)))
+        spoke.put("asnn/r1/preview", encode(preview(seq=1)))
+        spoke.put("asnn/r1/response", b"garbage")
+        deadline = time.monotonic() + TIMEOUT
+        while (store.delta(0)["counts"]["received"].get("preview") is None
+               or not store.invalid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+    assert store.delta(0)["counts"]["received"] == {"response": 1, "preview": 1}
+    assert store.invalid == {"undecodable": 1}
+
+
+# ---------------------------------------------------------------- the command
+
+def test_dashboard_command_parses_with_the_common_zenoh_options():
+    args = build_parser().parse_args(["dashboard", "--port", "9000", "--host", "0.0.0.0",
+                                      "--connect", "tcp/router:7447", "--mode", "client",
+                                      "--prefix", "fleet/a"])
+    assert (args.port, args.host, args.connect, args.mode, args.prefix) == (
+        9000, "0.0.0.0", ["tcp/router:7447"], "client", "fleet/a")
+    assert build_parser().parse_args(["dashboard"]).port == 8080
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["dashboard", "--port", "70000"])
+
+
+def run_dashboard(*args):
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    env.pop("RUST_LOG", None)
+    return subprocess.Popen([sys.executable, "-m", "cli.main", "dashboard", *args], cwd=ROOT,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_dashboard_command_serves_and_stops_on_sigint(tmp_path):
+    config = tmp_path / "zenoh.json5"
+    config.write_text("{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
+    proc = run_dashboard("--port", "0", "--config", str(config),
+                         "--listen", f"tcp/127.0.0.1:{free_port()}")
+    try:
+        lines = []
+        for line in proc.stderr:
+            lines.append(line)
+            if "dashboard on http://" in line:
+                break
+        url = next(line for line in lines if "dashboard on" in line).split()[2]
+        host, port = url[len("http://"):].rstrip("/").split(":")
+        conn = http.client.HTTPConnection(host, int(port), timeout=TIMEOUT)
+        conn.request("GET", "/static/dashboard.js")
+        assert conn.getresponse().status == 200
+        conn.close()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=TIMEOUT) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stderr.close()
+        proc.stdout.close()
+
+
+def test_dashboard_command_fails_clearly_when_the_port_is_taken():
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        proc = run_dashboard("--port", str(taken.getsockname()[1]))
+        out, err = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 2
+    assert err.startswith("asnn: error: cannot serve on 127.0.0.1:") and err.count("\n") == 1

@@ -1,0 +1,295 @@
+"""The dashboard end to end in headless Chromium (Debian's ``chromium``; ``.ci/run`` installs it).
+
+Two generated streams run through a real worker over Zenoh (TCP loopback, free ports, scouting
+off): one looming, one translating. The page is loaded in headless Chromium, driven through the
+DevTools protocol over ``--remote-debugging-pipe`` (no WebSocket client, no downloads), and must
+show both robots with their previews, only the looming one in the collision state, fetch nothing
+but its own server's files, and throw no script error. A screenshot is kept in
+``test-artifacts/dashboard.png``. Skipped when no Chromium binary is installed.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from asnn.stimuli import make_scene
+from clients.dashboard import DashboardServer, FleetStore, FleetSubscriber
+from service.camera import Source, publish_frames
+from service.core import WorkerCore
+from service.messages import Response, encode
+from service.worker import Worker
+
+ROOT = Path(__file__).resolve().parents[1]
+ARTIFACTS = ROOT / "test-artifacts"
+TIMEOUT = 30.0
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+
+
+def find_chromium() -> str | None:
+    for name in (os.environ.get("CHROMIUM"), *BROWSERS):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+class Chromium:
+    """Headless Chromium driven over the DevTools protocol on a pipe (fds 3 and 4)."""
+
+    def __init__(self, exe: str, url: str, profile: str, size=(1400, 1000)):
+        to_browser_r, self._to_browser = os.pipe()
+        self._from_browser, from_browser_w = os.pipe()
+        # bash moves the pipe ends to the descriptors Chromium expects, then becomes Chromium
+        script = f'exec "$0" "$@" 3<&{to_browser_r} 4>&{from_browser_w} {to_browser_r}<&- ' \
+                 f'{from_browser_w}>&-'
+        args = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--disable-background-networking", "--disable-component-update",
+                "--disable-sync", "--disable-extensions", "--no-first-run",
+                "--no-default-browser-check", "--hide-scrollbars", "--mute-audio",
+                f"--user-data-dir={profile}", f"--window-size={size[0]},{size[1]}",
+                "--remote-debugging-pipe", "about:blank"]
+        self.proc = subprocess.Popen(["bash", "-c", script, *args],
+                                     pass_fds=(to_browser_r, from_browser_w),
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        os.close(to_browser_r)
+        os.close(from_browser_w)
+        self._next_id = 0
+        self._replies: dict[int, dict] = {}
+        self.events: list[dict] = []
+        self._cond = threading.Condition()
+        self._stderr: list[bytes] = []
+        threading.Thread(target=self._read, daemon=True).start()
+        threading.Thread(target=lambda: self._stderr.extend(self.proc.stderr), daemon=True).start()
+        self.session = None
+        self.session = self._attach(url)
+
+    def _read(self) -> None:
+        buffer = b""
+        with os.fdopen(self._from_browser, "rb", buffering=0) as pipe:
+            while True:
+                chunk = pipe.read(1 << 16)
+                if not chunk:
+                    break
+                buffer += chunk
+                *messages, buffer = buffer.split(b"\0")
+                with self._cond:
+                    for raw in messages:
+                        message = json.loads(raw)
+                        if "id" in message:
+                            self._replies[message["id"]] = message
+                        else:
+                            self.events.append(message)
+                    self._cond.notify_all()
+
+    def send(self, method: str, params: dict | None = None, *, session=True,
+             timeout: float = TIMEOUT) -> dict:
+        self._next_id += 1
+        call = {"id": self._next_id, "method": method, "params": params or {}}
+        if session and self.session:
+            call["sessionId"] = self.session
+        os.write(self._to_browser, json.dumps(call).encode() + b"\0")
+        with self._cond:
+            if not self._cond.wait_for(lambda: call["id"] in self._replies, timeout):
+                raise AssertionError(f"no reply to {method}; chromium stderr:\n{self.stderr()}")
+            reply = self._replies.pop(call["id"])
+        if "error" in reply:
+            raise AssertionError(f"{method}: {reply['error']}")
+        return reply["result"]
+
+    def _attach(self, url: str) -> str:
+        target = self.send("Target.createTarget", {"url": "about:blank"})["targetId"]
+        self.session = self.send("Target.attachToTarget", {"targetId": target, "flatten": True})[
+            "sessionId"]
+        for domain in ("Page", "Runtime", "Log", "Network"):
+            self.send(f"{domain}.enable")
+        self.send("Page.navigate", {"url": url})
+        return self.session
+
+    def evaluate(self, expression: str):
+        result = self.send("Runtime.evaluate", {"expression": expression,
+                                                "returnByValue": True})
+        if "exceptionDetails" in result:
+            raise AssertionError(f"page script failed: {result['exceptionDetails']}")
+        return result["result"].get("value")
+
+    def wait_for(self, expression: str, what: str, timeout: float = TIMEOUT):
+        deadline = time.monotonic() + timeout
+        value = None
+        while time.monotonic() < deadline:
+            value = self.evaluate(expression)
+            if value:
+                return value
+            time.sleep(0.2)
+        raise AssertionError(f"timed out waiting for {what}; last value {value!r}")
+
+    def screenshot(self, path: Path) -> None:
+        data = self.send("Page.captureScreenshot", {"format": "png"})["data"]
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(base64.b64decode(data))
+
+    def stderr(self) -> str:
+        return b"".join(self._stderr).decode(errors="replace")[-3000:]
+
+    def close(self) -> None:
+        try:
+            self.send("Browser.close", session=False, timeout=5)
+        except (AssertionError, OSError):
+            pass
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        os.close(self._to_browser)
+
+
+@pytest.fixture
+def chromium_exe():
+    exe = find_chromium()
+    if exe is None:
+        pytest.skip("no chromium binary found (apt-get install chromium; .ci/run does)")
+    return exe
+
+
+@pytest.fixture
+def browser(chromium_exe):
+    opened = []
+
+    def open_page(url):
+        profile = tempfile.mkdtemp(prefix="asnn-chromium-")
+        opened.append((Chromium(chromium_exe, url, profile), profile))
+        return opened[-1][0]
+
+    yield open_page
+    for chrome, profile in opened:
+        chrome.close()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+TILES = """JSON.stringify([...document.querySelectorAll('#fleet .tile')].map(t => ({
+  robot: t.dataset.robot, collision: t.dataset.collision, stale: t.dataset.stale,
+  preview: t.dataset.preview || null, responses: Number(t.dataset.responses || 0),
+  badge: getComputedStyle(t.querySelector('.collision-badge')).display})))"""
+
+
+def tiles(chrome) -> dict:
+    return {t["robot"]: t for t in json.loads(chrome.evaluate(TILES))}
+
+
+def check_page_health(chrome, server_url: str) -> None:
+    """No script error, no console error, and nothing fetched but the server's own files."""
+    errors = [e["params"] for e in chrome.events if e["method"] == "Runtime.exceptionThrown"]
+    assert not errors, errors
+    logged = [e["params"]["entry"] for e in chrome.events if e["method"] == "Log.entryAdded"
+              and e["params"]["entry"]["level"] == "error"]
+    assert not logged, logged
+    urls = {e["params"]["request"]["url"] for e in chrome.events
+            if e["method"] == "Network.requestWillBeSent"}
+    assert urls and all(u.startswith(server_url) or u.startswith("data:") for u in urls), urls
+    fetched = {u[len(server_url) - 1:].split("?")[0] for u in urls if u.startswith(server_url)}
+    assert {"/", "/static/dashboard.js", "/static/dashboard.css", "/events"} <= fetched
+
+
+def scene_source(name):
+    scene = make_scene(name)
+    return Source(f"synthetic:{name}", scene.fps, False, lambda: iter(scene.frames))
+
+
+def test_browser_shows_both_robots_and_only_the_looming_one_colliding(zenoh_net, browser):
+    stop = threading.Event()
+    cameras = [threading.Thread(target=publish_frames, daemon=True,
+                                args=(zenoh_net.spoke(), robot, scene_source(scene)),
+                                kwargs=dict(loop=True, stop=stop, wait=TIMEOUT, preview_hz=2.0))
+               for robot, scene in (("loom", "looming"), ("bar", "translating_bar"))]
+    store = FleetStore()
+    # peers do not route for each other: the dashboard shares the hub with the worker, so it
+    # hears the cameras' previews (spokes -> hub) and the worker's responses (local)
+    try:
+        with Worker(zenoh_net.hub, WorkerCore(), stats_every=0), \
+                FleetSubscriber(zenoh_net.hub, store), \
+                DashboardServer(store, "127.0.0.1", 0) as server:
+            for camera in cameras:
+                camera.start()
+            chrome = browser(server.url)
+            chrome.wait_for(
+                "(() => { const t = [...document.querySelectorAll('#fleet .tile')];"
+                " const loom = t.find(e => e.dataset.robot === 'loom');"
+                " const bar = t.find(e => e.dataset.robot === 'bar');"
+                " return loom && bar && loom.dataset.collision === 'true'"
+                " && loom.dataset.preview === 'true' && bar.dataset.preview === 'true'"
+                " && Number(bar.dataset.responses) >= 60"
+                " && document.querySelectorAll('#warnings tbody tr').length > 0; })()",
+                "both robots with previews, the looming one colliding, a bar cycle answered")
+            time.sleep(0.6)  # let the next animation frame draw the latest state
+            shown = tiles(chrome)
+            chrome.screenshot(ARTIFACTS / "dashboard.png")
+            log_robots = set(json.loads(chrome.evaluate(
+                "JSON.stringify([...document.querySelectorAll('#warnings tbody tr')]"
+                ".map(r => r.dataset.robot))")))
+            check_page_health(chrome, server.url)
+    finally:
+        stop.set()
+        for camera in cameras:
+            camera.join(timeout=TIMEOUT)
+    assert set(shown) == {"loom", "bar"}
+    assert shown["loom"]["collision"] == "true" and shown["loom"]["badge"] != "none"
+    assert shown["bar"]["collision"] == "false" and shown["bar"]["badge"] == "none"
+    assert shown["loom"]["stale"] == shown["bar"]["stale"] == "false"
+    assert log_robots == {"loom"}
+    assert store.invalid == {}
+    assert (ARTIFACTS / "dashboard.png").stat().st_size > 10_000
+
+
+def fake_response(robot: str, seq: int, stamp: float, collision: bool) -> bytes:
+    return encode(Response(robot=robot, seq=seq, stamp=stamp, model="asnn", preset="default",
+                           u=1.0, out=0.9 if collision else 0.1, spikes=2 if collision else 0,
+                           spike_rate=40.0 if collision else 0.0, collision=collision,
+                           targets=[], worker="w", latency_ms=1.0, dropped=0))
+
+
+def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
+    """Fifty robots fed straight into the store (no Zenoh): fifty tiles, the colliding ones
+    marked; robots that stop reporting turn stale on the page."""
+    store = FleetStore(stale_after=1.0)
+    names = [f"robot{i:02d}" for i in range(50)]
+    stop = threading.Event()
+    silent = {"robot07", "robot33"}
+
+    def feed():
+        seq = 0
+        while not stop.is_set():
+            for i, name in enumerate(names):
+                if name in silent and seq > 5:
+                    continue
+                key = f"asnn/{name}/response"
+                store.offer(key, fake_response(name, seq, 1000.0 + seq * 0.05, i % 10 == 0))
+            seq += 1
+            stop.wait(0.05)
+
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    try:
+        with DashboardServer(store, "127.0.0.1", 0) as server:
+            chrome = browser(server.url)
+            chrome.wait_for(
+                "document.querySelectorAll('#fleet .tile').length === 50 &&"
+                " document.querySelectorAll('#fleet .tile[data-stale=\"true\"]').length === 2",
+                "fifty tiles, two of them stale")
+            shown = tiles(chrome)
+            chrome.screenshot(ARTIFACTS / "dashboard-fifty.png")
+            check_page_health(chrome, server.url)
+    finally:
+        stop.set()
+        feeder.join(timeout=TIMEOUT)
+    assert set(shown) == set(names)
+    assert {n for n, t in shown.items() if t["collision"] == "true"} == set(names[::10])
+    assert {n for n, t in shown.items() if t["stale"] == "true"} == silent
