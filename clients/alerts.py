@@ -19,6 +19,7 @@ import zenoh
 from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
 
 from service import keys
+from service.logutil import RateLimitedLog
 from service.messages import MessageError, Response, decode_response
 
 __all__ = ["WarningListener", "format_warning"]
@@ -46,7 +47,8 @@ def format_json(r: Response) -> str:
 class WarningListener:
     """Declares the warning subscriber on a session and calls ``on_warning(Response)``.
 
-    Invalid payloads are counted per reason in ``invalid`` and logged; they never raise.
+    Invalid payloads are counted per reason in ``invalid`` and logged (at most one WARNING line per
+    reason every 10 s); they never raise.
     Use as a context manager (or call ``close``).
     """
 
@@ -55,6 +57,7 @@ class WarningListener:
         self.on_warning = on_warning
         self.invalid: Counter = Counter()
         self.received = 0
+        self._log = RateLimitedLog(log)
         self._lock = threading.Lock()
         self.key = keys.warnings(prefix, robot)
         self._subscriber = declare_advanced_subscriber(
@@ -68,7 +71,8 @@ class WarningListener:
         except MessageError as exc:
             with self._lock:
                 self.invalid[exc.reason] += 1
-            log.warning("invalid warning on %s (%s): %s", sample.key_expr, exc.reason, exc.detail)
+            self._log.warning(exc.reason, "invalid warning on %s (%s): %s",
+                              str(sample.key_expr)[:200], exc.reason, exc.detail[:300])
             return
         with self._lock:
             self.received += 1
