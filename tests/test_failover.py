@@ -6,6 +6,7 @@ asks for 2 s; the test allows 5 s for a loaded machine and prints the measured t
 worker takes its share; SIGTERM hands over at once.
 """
 
+import json
 import signal
 import time
 
@@ -158,13 +159,23 @@ def test_a_hung_worker_loses_its_robots_after_the_lease_and_takes_them_back(net,
     assert w1.stop(signal.SIGTERM) == 0 and w2.stop(signal.SIGTERM) == 0
 
 
-def test_a_second_worker_with_the_same_id_is_refused(net):
+def test_a_second_worker_with_the_same_id_is_refused_and_status_lists_the_first(net):
     net.worker("same")
-    second = Procs()
+    more = Procs()
     try:
-        dup = second("worker", "--id", "same", *net.common)
+        dup = more("worker", "--id", "same", *net.common)
         assert dup.popen.wait(timeout=60) == 2
         dup.stop()
         assert "already live" in "\n".join(dup.err)
+        status = more("status", "--json", *net.common)
+        assert status.popen.wait(timeout=60) == 0
+        status.stop()
+        (line,) = status.out
+        answer = json.loads(line)
+        assert answer["worker"] == "same" and answer["workers"] == ["same"]
+        assert answer["limits"]["max_side"] == 4096 and "invalid" in answer["stats"]
+        nobody = more("status", "--worker", "other", "--timeout", "1", *net.common)
+        assert nobody.popen.wait(timeout=60) == 1
+        nobody.stop()
     finally:
-        second.cleanup()
+        more.cleanup()
