@@ -46,7 +46,7 @@ def test_every_asnn_service_command_parses_with_the_cli_parser():
         args = parser.parse_args(command)
         assert callable(args.func)
         commands[args.command] = args
-    assert set(commands) == {"camera", "worker", "alerts"}
+    assert set(commands) == {"camera", "worker", "alerts", "dashboard"}
     assert commands["camera"].loop and commands["camera"].source.startswith("/")
     for args in commands.values():
         assert args.connect == ["tcp/router:7447"] and args.mode == "client"
