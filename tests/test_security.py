@@ -175,6 +175,11 @@ def test_each_role_does_its_job_and_nothing_else(fleet):
         assert live_workers(dashboard) == ["secure-w1"]
         assert worker_session.info.zid() and len(live_workers(worker_session)) == 1
         listener.close()
+        # a late alerts client still gets the cached last warning through the access control
+        late = []
+        with WarningListener(session("alerts"), late.append):
+            wait_for(lambda: late, what="the cached warning for a late subscriber")
+        assert (late[0].robot, late[0].seq) == ("r1", sent[-1].seq)
 
 
 def test_wrong_or_unknown_credentials_cannot_connect(fleet, certs):
