@@ -20,8 +20,7 @@ import numpy as np
 
 __all__ = ["THREAD_VARIABLES", "pin_threads", "machine", "time_detector", "run"]
 
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
-                    "NUMBA_NUM_THREADS")
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 DEFAULT_SIZES = ((128, 128), (320, 240), (640, 480))
 SCENE = "looming_over_stripes"
 
@@ -29,8 +28,10 @@ SCENE = "looming_over_stripes"
 def pin_threads() -> str:
     """One thread everywhere; returns a description for the report.
 
-    Must run before numba (and ideally NumPy's BLAS) is first imported to fully apply; the
-    ``asnn bench`` command calls it first thing.
+    The environment variables apply fully only before NumPy's BLAS is loaded; the ``asnn bench``
+    command calls this first thing. Numba's pool is set with ``numba.set_num_threads`` (its kernels
+    here are not parallel anyway): setting ``NUMBA_NUM_THREADS`` after numba has started its
+    threads makes every later compilation fail.
     """
     for name in THREAD_VARIABLES:
         os.environ[name] = "1"
@@ -43,7 +44,8 @@ def pin_threads() -> str:
         numba.set_num_threads(1)
     except (ImportError, ValueError):
         pass
-    return "cv2.setNumThreads(1); " + ", ".join(f"{n}=1" for n in THREAD_VARIABLES)
+    return ("cv2.setNumThreads(1); numba.set_num_threads(1); "
+            + ", ".join(f"{n}=1" for n in THREAD_VARIABLES))
 
 
 def machine() -> dict:

@@ -2,10 +2,13 @@
 
 import json
 
+from asnn.bench import THREAD_VARIABLES
 from cli.main import main
 
 
-def test_bench_json_report_shape(capsys):
+def test_bench_json_report_shape(capsys, monkeypatch):
+    for name in THREAD_VARIABLES:  # the bench pins threads for the process: restore afterwards
+        monkeypatch.delenv(name, raising=False)
     assert main(["bench", "--frames", "3", "--size", "64x64", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert "setNumThreads(1)" in report["threads"] and report["machine"]["cores"] >= 1
