@@ -1,10 +1,25 @@
-"""Zenoh fixtures: in-process sessions on TCP loopback, free ports, no multicast, no gossip."""
+"""Session set-up (compiled kernels) and Zenoh fixtures: in-process sessions on TCP loopback,
+free ports, no multicast, no gossip."""
 
 from __future__ import annotations
 
 import contextlib
 
 import pytest
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels():
+    """Compile the numba kernels once (numba caches them on disk) before any test starts worker
+    processes: on a fresh checkout a worker's first frame would otherwise wait seconds for the
+    compiler, which time-bounded service tests mistake for a failure."""
+    from asnn import ASNN
+    from asnn.stimuli import make_scene
+
+    frames = make_scene("looming", size=(64, 64), start=2, stop=12, center=(30.0, 33.0)).frames
+    for name in ("default", "reference"):
+        model = ASNN(name)
+        assert any(model.step(f).targets for f in frames)
 
 
 @pytest.fixture
