@@ -61,6 +61,16 @@ def _positive(value: str) -> float:
     return number
 
 
+def _non_negative(value: str) -> float:
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
+    if not number >= 0:
+        raise argparse.ArgumentTypeError(f"must be zero or more: {value!r}")
+    return number
+
+
 def zenoh_options(args: argparse.Namespace) -> ZenohOptions:
     return ZenohOptions(mode=getattr(args, "mode", None), connect=tuple(args.connect),
                         listen=tuple(args.listen), config_file=args.config)
@@ -116,7 +126,8 @@ def cmd_camera(args: argparse.Namespace) -> int:
     stop = _stop_on_signals()
     with session:
         count = publish_frames(session, args.robot, source, prefix=args.prefix, fps=args.fps,
-                               loop=args.loop, format=args.format, wait=args.wait, stop=stop)
+                               loop=args.loop, format=args.format, wait=args.wait, stop=stop,
+                               preview_hz=args.preview_hz)
     log.info("camera %s: %d frames published", args.robot, count)
     return 0
 
@@ -268,6 +279,9 @@ def register(subparsers) -> None:
     p.add_argument("--wait", type=float, default=2.0, metavar="SECONDS",
                    help="wait up to SECONDS for a subscriber before the first frame "
                         "(default: %(default)s)")
+    p.add_argument("--preview-hz", type=_non_negative, default=2.0, metavar="HZ",
+                   help="thumbnails per second on <prefix>/<robot>/preview for dashboards "
+                        "(docs/contract.md; default: %(default)s; 0: none)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_camera)
 

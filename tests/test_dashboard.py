@@ -385,6 +385,31 @@ def test_dashboard_command_parses_with_the_common_zenoh_options():
         build_parser().parse_args(["dashboard", "--port", "70000"])
 
 
+@pytest.mark.parametrize("flag, expected", [([], 2.0), (["--preview-hz", "0"], 0.0),
+                                            (["--preview-hz", "0.5"], 0.5)])
+def test_camera_command_passes_its_preview_rate_on(monkeypatch, flag, expected):
+    import contextlib
+
+    import cli.net
+    import service.camera
+
+    calls = []
+    monkeypatch.setattr(cli.net, "_open_session", lambda config: contextlib.nullcontext())
+    monkeypatch.setattr(service.camera, "publish_frames",
+                        lambda *a, **kw: calls.append(kw) or 0)
+    args = build_parser().parse_args(["camera", "--robot", "r1", "--source",
+                                      "synthetic:looming", *flag])
+    assert args.func(args) == 0
+    assert calls[0]["preview_hz"] == expected
+
+
+def test_camera_command_refuses_a_negative_preview_rate(capsys):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["camera", "--robot", "r1", "--source", "synthetic:looming",
+                                   "--preview-hz", "-1"])
+    assert "zero or more" in capsys.readouterr().err
+
+
 def run_dashboard(*args):
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     env.pop("RUST_LOG", None)
