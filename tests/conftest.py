@@ -44,3 +44,13 @@ def zenoh_net():
                 return stack.enter_context(zenoh.open(make_config(spoke_options)))
 
         yield Net
+
+
+@pytest.fixture
+def procs():
+    """Starts child ``asnn`` processes (``procs("worker", ...)``) and kills what still runs."""
+    from netutil import Procs
+
+    started = Procs()
+    yield started
+    started.cleanup()

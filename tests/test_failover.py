@@ -18,17 +18,10 @@ from service.demo import free_port
 from service.ownership import owner
 from service.worker import live_workers, query_status
 
-from netutil import SHORT_LEASE, FramePump, Procs, Responses, wait_for
+from netutil import SHORT_LEASE, Procs, FramePump, Responses, wait_for
 
 ROBOTS = [f"r{i}" for i in range(8)]
 FAILOVER_LIMIT = 5.0  # seconds; the requirement is 2 s, the margin is for loaded CI machines
-
-
-@pytest.fixture
-def procs():
-    started = Procs()
-    yield started
-    started.cleanup()
 
 
 @pytest.fixture

@@ -5,20 +5,12 @@ import json
 import signal
 import time
 
-import pytest
 import zenoh
 
 from service.config import ZenohOptions, make_config
 from service.demo import free_port
 
-from netutil import SHORT_LEASE, Procs, Responses, wait_for
-
-
-@pytest.fixture
-def procs():
-    started = Procs()
-    yield started
-    started.cleanup()
+from netutil import SHORT_LEASE, Responses, wait_for
 
 
 def test_everything_reconnects_after_a_router_restart(procs, tmp_path):

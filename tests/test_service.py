@@ -5,13 +5,9 @@ stopped at the end of its test. Waits are generous timeouts on messages, never t
 """
 
 import json
-import os
 import signal
-import subprocess
-import sys
 import threading
 import time
-from pathlib import Path
 
 import msgpack
 import pytest
@@ -27,17 +23,9 @@ from service.demo import free_port
 from service.messages import Frame, decode_response, encode
 from service.worker import Worker
 
-ROOT = Path(__file__).resolve().parents[1]
-TIMEOUT = 20.0
+from netutil import TIMEOUT, wait_for
 
 
-def wait_for(predicate, timeout=TIMEOUT, what="condition"):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 class Responses:
@@ -246,61 +234,6 @@ def test_demo_prints_warnings_and_exits_0(capsys):
 
 
 # ---------------------------------------------------------------- separate processes
-
-class Proc:
-    """A child ``asnn`` process whose output is drained by threads into queues."""
-
-    def __init__(self, *args):
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-        env.pop("RUST_LOG", None)
-        self.popen = subprocess.Popen([sys.executable, "-m", "cli.main", *args], cwd=ROOT,
-                                      env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                      text=True)
-        self.out, self.err = [], []
-        self.threads = [threading.Thread(target=self._drain, args=(s, lines), daemon=True)
-                        for s, lines in ((self.popen.stdout, self.out),
-                                         (self.popen.stderr, self.err))]
-        for thread in self.threads:
-            thread.start()
-
-    @staticmethod
-    def _drain(stream, lines):
-        for line in stream:
-            lines.append(line.rstrip("\n"))
-
-    def wait_line(self, text, stream="err"):
-        lines = self.err if stream == "err" else self.out
-        wait_for(lambda: any(text in line for line in lines) or self.popen.poll() is not None,
-                 what=f"{text!r}")
-        assert any(text in line for line in lines), "\n".join(self.err)
-
-    def stop(self, sig=signal.SIGINT):
-        if self.popen.poll() is None:
-            self.popen.send_signal(sig)
-        try:
-            code = self.popen.wait(timeout=TIMEOUT)
-        except subprocess.TimeoutExpired:
-            self.popen.kill()
-            code = self.popen.wait()
-        for thread in self.threads:
-            thread.join(timeout=5)
-        return code
-
-
-@pytest.fixture
-def procs():
-    started: list[Proc] = []
-
-    def start(*args):
-        started.append(Proc(*args))
-        return started[-1]
-
-    yield start
-    for proc in started:
-        if proc.popen.poll() is None:
-            proc.popen.kill()
-            proc.popen.wait()
-
 
 def test_router_worker_camera_alerts_as_separate_processes(procs, tmp_path):
     config = tmp_path / "zenoh.json5"
