@@ -60,6 +60,8 @@ import threading
 import numpy as np
 from numba import njit
 
+from . import retina
+
 __all__ = ["supported", "dog_factors", "gabor_factors", "cs_classes", "Workspace", "workspace",
            "front", "to_differences", "attention", "AttentionBlur"]
 
@@ -91,12 +93,7 @@ def dog_factors(gain: float, sigma1: float, sigma2: float, size: int,
         ``scales[0] outer(e1, e1) - scales[1] outer(e2, e2)``.
     """
     t = np.arange(size, dtype=np.float64) - size // 2
-    if normalisation == "paper":
-        norm1, norm2 = math.sqrt(2 * math.pi) * sigma1, math.sqrt(2 * math.pi) * sigma2
-    elif normalisation == "2d":
-        norm1, norm2 = 2 * math.pi * sigma1**2, 2 * math.pi * sigma2**2
-    else:
-        raise ValueError(f"unknown normalisation {normalisation!r}")
+    norm1, norm2 = retina.dog_norms(sigma1, sigma2, normalisation)
     envelopes = np.array([np.exp(-t * t / (2 * sigma1**2)), np.exp(-t * t / (2 * sigma2**2))])
     return envelopes, np.array([gain / norm1, gain / norm2])
 

@@ -24,6 +24,7 @@ __all__ = [
     "photoreceptor_weights",
     "photoreceptor",
     "dog_kernel",
+    "dog_norms",
     "bipolar",
     "temporal_filter_step",
     "temporal_readout",
@@ -97,13 +98,18 @@ def dog_kernel(gain: float, sigma1: float, sigma2: float, size: int,
     r = size // 2
     y, x = np.mgrid[-r:r + 1, -r:r + 1].astype(np.float64)
     r2 = x * x + y * y
-    if normalisation == "paper":
-        norm1, norm2 = math.sqrt(2 * math.pi) * sigma1, math.sqrt(2 * math.pi) * sigma2
-    elif normalisation == "2d":
-        norm1, norm2 = 2 * math.pi * sigma1**2, 2 * math.pi * sigma2**2
-    else:
-        raise ValueError(f"unknown normalisation {normalisation!r}")
+    norm1, norm2 = dog_norms(sigma1, sigma2, normalisation)
     return gain * (np.exp(-r2 / (2 * sigma1**2)) / norm1 - np.exp(-r2 / (2 * sigma2**2)) / norm2)
+
+
+def dog_norms(sigma1: float, sigma2: float, normalisation: str) -> tuple[float, float]:
+    """Denominators of the two Gaussians of g_I: ``sqrt(2 pi) sigma`` ('paper') or ``2 pi sigma^2``
+    ('2d')."""
+    if normalisation == "paper":
+        return math.sqrt(2 * math.pi) * sigma1, math.sqrt(2 * math.pi) * sigma2
+    if normalisation == "2d":
+        return 2 * math.pi * sigma1**2, 2 * math.pi * sigma2**2
+    raise ValueError(f"unknown normalisation {normalisation!r}")
 
 
 def bipolar(p: np.ndarray, dog: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["VideoError", "VideoClip", "open_video"]
+__all__ = ["VideoError", "VideoClip", "open_video", "read_frames"]
 
 # FFmpeg prints its own decoder complaints on stderr; our errors say it in one line instead.
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
@@ -48,15 +48,19 @@ class VideoClip:
         cap.release()
 
     def __iter__(self) -> Iterator[np.ndarray]:
-        cap = cv2.VideoCapture(str(self.path))
-        try:
-            while True:
-                ok, frame = cap.read()
-                if not ok:
-                    return
-                yield frame
-        finally:
-            cap.release()
+        return read_frames(cv2.VideoCapture(str(self.path)))
+
+
+def read_frames(capture: cv2.VideoCapture) -> Iterator[np.ndarray]:
+    """Frames of an open OpenCV capture until it ends; the capture is released afterwards."""
+    try:
+        while True:
+            ok, frame = capture.read()
+            if not ok:
+                return
+            yield frame
+    finally:
+        capture.release()
 
 
 def open_video(path: str | Path) -> VideoClip:

@@ -22,7 +22,7 @@ import numpy as np
 import zenoh
 
 from asnn.stimuli import SCENE_NAMES, make_scene
-from asnn.video import VideoError, open_video
+from asnn.video import VideoError, open_video, read_frames
 
 from . import keys
 from .messages import FORMATS, Frame, Preview, encode
@@ -82,23 +82,12 @@ def open_source(spec: str) -> Source:
             raise SourceError(f"cannot open capture source {spec!r}")
         fps = cap.get(cv2.CAP_PROP_FPS)
         fps = float(fps) if fps and np.isfinite(fps) and 0 < fps <= 240 else 20.0
-        return Source(spec, fps, True, lambda: _capture(cap))
+        return Source(spec, fps, True, lambda: read_frames(cap))
     try:
         clip = open_video(spec)
     except VideoError as exc:
         raise SourceError(str(exc)) from None
     return Source(spec, clip.fps, False, lambda: iter(clip))
-
-
-def _capture(cap) -> Iterator[np.ndarray]:
-    try:
-        while True:
-            ok, frame = cap.read()
-            if not ok:
-                return
-            yield frame
-    finally:
-        cap.release()
 
 
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
