@@ -47,7 +47,7 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from .frames import FrameError, to_luminance
+from .frames import to_luminance
 from .response import Response
 
 __all__ = [
@@ -216,11 +216,7 @@ class _LGMDBase:
     params: LGMD1Params | LGMD2Params
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
-        lum = to_luminance(frame, _MIN_SIDE) * 255.0
-        if self.shape is not None and lum.shape != self.shape:
-            h, w = self.shape
-            raise FrameError(f"frame {lum.shape[1]}x{lum.shape[0]} differs from the stream's {w}x{h};"
-                             " reset() the model or start a new one")
+        lum = to_luminance(frame, _MIN_SIDE, self.shape) * 255.0
         return lum
 
     def reset(self) -> None:
@@ -248,7 +244,7 @@ class _LGMDBase:
         if self.previous is None:
             self.shape = lum.shape
             self.previous = lum
-            return Response(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False)
+            return Response.silent(index)
         p = lum - self.previous
         self.previous = lum
         u, out, spikes, collision = self._respond(p)

@@ -14,7 +14,8 @@ class FrameError(ValueError):
     """A frame the model cannot take: wrong type, shape, range or size."""
 
 
-def to_luminance(frame: np.ndarray, min_side: int) -> np.ndarray:
+def to_luminance(frame: np.ndarray, min_side: int,
+                 stream_shape: tuple[int, int] | None = None) -> np.ndarray:
     """Validate a frame and return its luminance as float64 on the [0, 1] scale.
 
     Parameters
@@ -25,6 +26,8 @@ def to_luminance(frame: np.ndarray, min_side: int) -> np.ndarray:
         (0.299 R + 0.587 G + 0.114 B) before scaling, as the published implementation does.
     min_side : int
         Smallest accepted height and width (the largest kernel of the model).
+    stream_shape : (H, W), optional
+        The stream's frame size, which the frame must have.
 
     Raises
     ------
@@ -38,6 +41,10 @@ def to_luminance(frame: np.ndarray, min_side: int) -> np.ndarray:
     if frame.ndim not in (2, 3) or (frame.ndim == 3 and frame.shape[2] != 3):
         raise FrameError(f"a frame must be gray (H, W) or BGR (H, W, 3), got shape {frame.shape}")
     h, w = frame.shape[:2]
+    if stream_shape is not None and (h, w) != tuple(stream_shape):
+        sh, sw = stream_shape
+        raise FrameError(f"frame {w}x{h} differs from the stream's {sw}x{sh};"
+                         " reset() the model or start a new one")
     if h < min_side or w < min_side:
         raise FrameError(f"frame {w}x{h} is smaller than the model's {min_side}x{min_side} kernels")
     if frame.dtype == np.uint8:

@@ -111,11 +111,7 @@ class ASNN:
     # ------------------------------------------------------------------ step
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
-        lum = to_luminance(frame, self._min_side)
-        if self.shape is not None and lum.shape != self.shape:
-            h, w = self.shape
-            raise FrameError(f"frame {lum.shape[1]}x{lum.shape[0]} differs from the stream's {w}x{h};"
-                             " reset() the model or start a new one")
+        lum = to_luminance(frame, self._min_side, self.shape)
         if lum.dtype != self.dtype:
             lum = lum.astype(self.dtype)
         if self.params.input_blur:
@@ -139,7 +135,7 @@ class ASNN:
             self.previous = lum
             self.stages_on = np.zeros((p.n_slow + 2, *lum.shape), self.dtype)
             self.stages_off = np.zeros_like(self.stages_on)
-            return Response(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False)
+            return Response.silent(index)
         if self.optimised:
             return self._respond_optimised(index, lum)
         return self._respond(index, lum)

@@ -69,6 +69,11 @@ class Response:
     targets: list[Target] = field(default_factory=list)
     maps: Maps | None = None
 
+    @classmethod
+    def silent(cls, index: int) -> "Response":
+        """The response to a frame that only primes a stream (its first): u = 0, no spikes."""
+        return cls(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False)
+
     def to_dict(self) -> dict:
         """JSON-ready fields (maps excluded)."""
         return {"u": self.u, "out": self.out, "spikes": self.spikes,
