@@ -34,6 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="duration of each --service step")
     p.add_argument("--cameras", type=int, action="append", metavar="N",
                    help="camera counts for --service (repeatable; default 1, 2, 4, 8, 12, 16, 20, 24)")
+    p.add_argument("--worker-threads", type=int, default=1, metavar="N",
+                   help="processing threads of the --service worker (asnn worker --threads)")
     p.set_defaults(func=run)
 
 
@@ -50,15 +52,18 @@ def run(args: argparse.Namespace) -> int:
     if args.service:
         from service import bench as service_bench
 
-        if args.fps <= 0 or args.seconds <= 0 or any(n < 1 for n in args.cameras or []):
-            print("asnn bench --service: --fps, --seconds and --cameras must be positive",
+        if (args.fps <= 0 or args.seconds <= 0 or args.worker_threads < 1
+                or any(n < 1 for n in args.cameras or [])):
+            print("asnn bench --service: --fps, --seconds, --cameras and --worker-threads must "
+                  "be positive",
                   file=sys.stderr)
             return 2
         try:
             report = service_bench.run(size=args.size[0] if args.size else (320, 240),
                                        fps=args.fps, seconds=args.seconds, counts=args.cameras,
                                        preset=args.preset[0] if args.preset else None,
-                                       progress=_progress(args))
+                                       progress=_progress(args),
+                                       worker_threads=args.worker_threads)
         except (RuntimeError, ValueError) as exc:
             print(f"asnn bench --service: {exc}", file=sys.stderr)
             return 2

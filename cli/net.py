@@ -61,6 +61,16 @@ def _positive(value: str) -> float:
     return number
 
 
+def _count(value: str) -> int:
+    try:
+        number = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {value!r}") from None
+    if number < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1: {value!r}")
+    return number
+
+
 def _non_negative(value: str) -> float:
     try:
         number = float(value)
@@ -147,7 +157,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     stop = _stop_on_signals()
     with session:
-        worker = Worker(session, core)
+        worker = Worker(session, core, threads=args.threads)
         try:
             worker.start()
         except WorkerIdTaken as exc:
@@ -300,6 +310,9 @@ def register(subparsers) -> None:
     p.add_argument("--max-robots", type=int, default=256, metavar="N",
                    help="robots tracked at once; frames of more are rejected "
                         "(default: %(default)s)")
+    p.add_argument("--threads", type=_count, default=1, metavar="N",
+                   help="processing threads (default: %(default)s; one robot is never processed "
+                        "by two at once)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_worker)
 

@@ -54,11 +54,12 @@ def model_time(size: tuple[int, int], preset: str | None, frames: np.ndarray) ->
 class _WorkerProcess:
     """``asnn worker`` in its own process, listening on ``endpoint``."""
 
-    def __init__(self, endpoint: str, config: Path, preset: str | None):
+    def __init__(self, endpoint: str, config: Path, preset: str | None, threads: int = 1):
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         env.pop("RUST_LOG", None)
         args = [sys.executable, "-m", "cli.main", "worker", "--listen", endpoint, "--mode", "peer",
-                "--config", str(config), "--log-level", "warning", "--id", "bench"]
+                "--config", str(config), "--log-level", "warning", "--id", "bench",
+                "--threads", str(threads)]
         if preset:
             args += ["--preset", preset]
         self.popen = subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
@@ -171,7 +172,7 @@ def _step(session, collector, n: int, step: int, frames, fps: float, seconds: fl
 
 
 def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
-        preset: str | None = None, progress=None) -> dict:
+        preset: str | None = None, progress=None, worker_threads: int = 1) -> dict:
     """Ramp the number of cameras; returns the report as a dict (see the module notes)."""
     import zenoh
 
@@ -193,7 +194,7 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
         config = Path(tmp) / "zenoh.json5"
         config.write_text("{ scouting: { multicast: { enabled: false }, "
                           "gossip: { enabled: false } } }")
-        worker = _WorkerProcess(f"tcp/127.0.0.1:{port}", config, preset)
+        worker = _WorkerProcess(f"tcp/127.0.0.1:{port}", config, preset, worker_threads)
         try:
             worker.wait_ready()
             with zenoh.open(make_config(spoke)) as session:
@@ -221,7 +222,8 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
     best = max(kept) if kept else None
     best_step = next((s for s in steps if s["cameras"] == best), None)
     return {"size": f"{w}x{h}", "fps": fps, "seconds": seconds, "scene": SCENE,
-            "preset": preset or DEFAULT_PRESET, "model_ms": model, "worker": "separate process",
+            "preset": preset or DEFAULT_PRESET, "model_ms": model,
+            "worker": f"separate process, {worker_threads} processing thread(s)",
             "transport": "tcp/127.0.0.1, peer sessions, no scouting, no gossip",
             "steps": steps, "max_cameras": best,
             "added_p99_ms_at_max": best_step.get("added_p99_ms") if best_step else None}

@@ -104,10 +104,16 @@ class Worker:
     core : WorkerCore
     on_response : callable, optional
         Called with every published Response (for the demo and tests).
+    threads : int
+        Processing threads. The model's kernels release the GIL, so on a machine with spare
+        cores a second thread shortens the queue behind a busy one; a robot is still processed
+        by one thread at a time (:class:`WorkerCore`).
     """
 
     def __init__(self, session: zenoh.Session, core: WorkerCore, *, on_response=None,
-                 stats_every: float = 30.0, shared: bool = True):
+                 stats_every: float = 30.0, shared: bool = True, threads: int = 1):
+        if threads < 1:
+            raise ValueError(f"a worker needs at least one processing thread, got {threads}")
         self.session = session
         self.core = core
         self.on_response = on_response
@@ -117,7 +123,8 @@ class Worker:
         self._outlets: dict[str, _Outlets] = {}
         self._outlets_lock = threading.Lock()
         self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
+        self.threads = threads
+        self._threads: list[threading.Thread] = []
         self._subscriber = None
         self._token = None
         self._workers_sub = None
@@ -155,8 +162,10 @@ class Worker:
                                                                                         prefix))
         self._status = self.session.declare_queryable(keys.worker_status_key(me, prefix),
                                                       self._on_status_query)
-        self._thread = threading.Thread(target=self._run, name="asnn-worker", daemon=True)
-        self._thread.start()
+        self._threads = [threading.Thread(target=self._run, args=(i == 0,), daemon=True,
+                                          name=f"asnn-worker-{i}") for i in range(self.threads)]
+        for thread in self._threads:
+            thread.start()
         self._subscriber = self.session.declare_subscriber(keys.frames(prefix), self._on_frame)
         log.info("worker %s: %s/%s on %s; workers %s", me, self.core.model,
                  self.core.preset or "-", keys.frames(prefix), self.membership.live())
@@ -192,7 +201,8 @@ class Worker:
         except Exception:  # never let a bug in one message kill the subscriber
             log.exception("unexpected error on a frame from %s", sample.key_expr)
 
-    def _run(self) -> None:
+    def _run(self, housekeeping: bool) -> None:
+        """Process frames; the first thread also follows membership, evicts and logs stats."""
         last_stats = last_evict = time.monotonic()
         while not self._stop.is_set():
             job = self.core.take(timeout=0.2)
@@ -204,6 +214,8 @@ class Worker:
                             update={"latency_ms": self.core.latency_ms(job)}))
                 except Exception:
                     log.exception("robot %s: frame %d failed", job.robot, job.frame.seq)
+            if not housekeeping:
+                continue
             if self._membership_changed.is_set():
                 self._membership_changed.clear()
                 self.core.release_unowned()
@@ -258,9 +270,9 @@ class Worker:
                     pass
         self._stop.set()
         self.core.notify()
-        if self._thread is not None:
-            self._thread.join(timeout=30)
-            self._thread = None
+        for thread in self._threads:
+            thread.join(timeout=30)
+        self._threads = []
         for name in ("_status", "_workers_sub"):
             entity = getattr(self, name)
             setattr(self, name, None)

@@ -97,6 +97,31 @@ def test_two_cameras_at_once_looming_warns_with_targets_translating_does_not(ser
     assert service.core.stats()["invalid"] == {}
 
 
+def test_two_processing_threads_keep_each_robot_exact(zenoh_net):
+    from asnn import ASNN
+
+    scenes = {"a": make_scene("looming", size=(96, 96), stop=30),
+              "b": make_scene("looming_over_stripes", size=(96, 96), stop=30, polarity="light")}
+    expected = {}
+    for robot, scene in scenes.items():
+        model = ASNN()
+        expected[robot] = [model.step(f).u for f in scene.frames]
+    core = WorkerCore()
+    with Worker(zenoh_net.hub, core, stats_every=0, threads=2):
+        responses = Responses(zenoh_net.spoke())
+        session = zenoh_net.spoke()
+        for seq in range(len(scenes["a"].frames)):
+            for robot, scene in scenes.items():  # both robots' frames wait together
+                session.put(keys.frame_key(robot),
+                            encode(Frame.from_image(scene.frames[seq], seq=seq, stamp=seq * 0.05)))
+            wait_for(lambda: all(any(r.seq == seq for r in responses.of(robot)) for robot in scenes),
+                     what=f"responses to seq {seq}")
+    for robot in scenes:
+        got = {r.seq: r.u for r in responses.of(robot)}
+        assert [got[seq] for seq in range(len(expected[robot]))] == expected[robot]
+    assert max(expected["a"]) > 0 and max(expected["b"]) > 0
+
+
 def test_frame_size_change_resets_the_robot_over_zenoh(service):
     session = service.spoke()
     big, small = make_scene("looming"), make_scene("looming", size=(80, 96))
@@ -267,3 +292,12 @@ def test_router_worker_camera_alerts_as_separate_processes(procs, tmp_path):
     assert all(w["collision"] and w["worker"] == "w1" for w in warnings)
     assert any(w["targets"] for w in warnings)
     assert "worker stopped" in "\n".join(worker.err)
+
+
+def test_worker_threads_option():
+    from cli.main import build_parser
+
+    assert build_parser().parse_args(["worker", "--threads", "2"]).threads == 2
+    assert build_parser().parse_args(["worker"]).threads == 1
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["worker", "--threads", "0"])
