@@ -44,7 +44,8 @@ whose results it reproduces. What changes is only the order of the arithmetic:
 
 The fused kernels are written for the 5x5 kernels of Table I (every preset); other sizes fall
 back to the straightforward functions (:func:`supported`). Numba compiles them on first use and
-caches the machine code next to this file (or in ``NUMBA_CACHE_DIR``); no ``fastmath``, so
+caches the machine code next to this file (or in ``NUMBA_CACHE_DIR``; without a writable place,
+it compiles at first use, see :mod:`asnn._jit`); no ``fastmath``, so
 IEEE semantics are kept and float64 results differ from the straightforward form only by
 rounding (about 1e-15 relative). Everything runs on the calling thread.
 
@@ -58,9 +59,9 @@ import math
 import threading
 
 import numpy as np
-from numba import njit
 
 from . import retina
+from ._jit import kernel
 
 __all__ = ["supported", "dog_factors", "gabor_factors", "cs_classes", "Workspace", "workspace",
            "front", "to_differences", "attention", "AttentionBlur"]
@@ -72,7 +73,7 @@ DEPTH = 2 * RADIUS + 1  # rows kept by the ring buffers of the 5x5 filters
 # retina.approach_map; read-outs are numbered fast_on, slow_on, fast_off, slow_off
 _TERMS = np.array([[1, 2], [2, 1], [3, 0], [0, 3]], np.int64)
 
-_jit = dict(cache=True, boundscheck=False, nogil=True)
+_jit = dict(boundscheck=False)
 
 
 def supported(params) -> bool:
@@ -173,7 +174,7 @@ def workspace(shape: tuple[int, int], dtype) -> Workspace:
 # --------------------------------------------------------------------------- helpers
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _reflect(i, n):
     """Reflect-101 index (OpenCV's default border) for |overshoot| < n."""
     if i < 0:
@@ -183,7 +184,7 @@ def _reflect(i, n):
     return i
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _pad(line, w, r):
     """Fill the r-wide reflect-101 borders of a padded line whose middle holds w values."""
     for k in range(1, r + 1):
@@ -194,7 +195,7 @@ def _pad(line, w, r):
 # --------------------------------------------------------------------------- stage 1: row y
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _dog_row(p, y, env, sc, zero, col, on, off):
     """B+^0 and B-^0 of row y: relu(+-P) (*) g_I with g_I = s1 e1 e1' - s2 e2 e2'."""
     h, w = p.shape
@@ -226,7 +227,7 @@ def _dog_row(p, y, env, sc, zero, col, on, off):
                         + e2[4] * (c2[x] + c2[x + 4]))
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, slow):
     """One frame of the cascade at row y, in difference form (see :func:`to_differences`).
 
@@ -260,7 +261,7 @@ def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, 
     _pad(slow, w, 2)
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _gabor_row(line, k, out, slot):
     """The five Gabor row passes (sym, sym, anti, sym, anti) of one padded line."""
     w = out.shape[2]
@@ -281,7 +282,7 @@ def _gabor_row(line, k, out, slot):
 # --------------------------------------------------------------------------- stage 2: row y - 2
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _col_sym(src, s0, sm1, sp1, sm2, sp2, k, out):
     a0, a1, b1, a2, b2 = src[s0], src[sm1], src[sp1], src[sm2], src[sp2]
     c0, c1, c2 = k[2], k[3], k[4]
@@ -289,7 +290,7 @@ def _col_sym(src, s0, sm1, sp1, sm2, sp2, k, out):
         out[x] = c0 * a0[x] + c1 * (b1[x] + a1[x]) + c2 * (b2[x] + a2[x])
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _col_anti(src, sm1, sp1, sm2, sp2, k, out):
     a1, b1, a2, b2 = src[sm1], src[sp1], src[sm2], src[sp2]
     c1, c2 = k[3], k[4]
@@ -297,7 +298,7 @@ def _col_anti(src, sm1, sp1, sm2, sp2, k, out):
         out[x] = c1 * (b1[x] - a1[x]) + c2 * (b2[x] - a2[x])
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _gabor_columns(gr, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, acc, r0, r1, r2, r3):
     """One channel's ``weight E^theta`` at one row, set (``first``) or added into R^theta."""
     w = r0.shape[0]
@@ -343,7 +344,7 @@ def _gabor_columns(gr, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, acc
                                - (fcc[x] + fss[x]) * (scs[x] - ssc[x]))
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _approach_row(ro, s0, sm1, sp1, sm2, sp2, kc, weights, terms, zero, csl, gl):
     """G of one row, ``sum_i weight_i relu(relu(ex_i) - relu(inh_i (*) g_CS))``, into gl[1:w+1]."""
     w = gl.shape[0] - 2
@@ -379,7 +380,7 @@ def _approach_row(ro, s0, sm1, sp1, sm2, sp2, kc, weights, terms, zero, csl, gl)
     _pad(gl, w, 1)
 
 
-@njit(inline="always", **_jit)
+@kernel(inline="always", **_jit)
 def _group_row(a, b, c, ninth, line, out):
     """``G (G (*) ones(3, 3) / 9)`` of one row from the padded rows above, at and below it."""
     w = out.shape[0]
@@ -389,7 +390,7 @@ def _group_row(a, b, c, ninth, line, out):
         out[x] = b[x + 1] * ((line[x] + line[x + 1] + line[x + 2]) * ninth)
 
 
-@njit(**_jit)
+@kernel(**_jit)
 def _front(p, env, sc, stages_on, stages_off, a, b, e_x, j, gain, n_fast, n_slow, swap,
            gk, vw, kc, aw, terms, grouping, zero, ninth, col, x0, ro, gr, acc, csl, gring, gline, colsum,
            r, v, g):
@@ -479,7 +480,7 @@ def to_differences(stages: np.ndarray, leaky: bool) -> np.ndarray:
 # --------------------------------------------------------------------------- attention, u(t)
 
 
-@njit(**_jit)
+@kernel(**_jit)
 def _box(blur, gamma):
     """Bounding box (y0, y1, x0, x1), exclusive ends, of ``blur > gamma``; y0 = h if empty."""
     h, w = blur.shape
@@ -502,7 +503,7 @@ def _box(blur, gamma):
     return y0, y1, x0, x1
 
 
-@njit(**_jit)
+@kernel(**_jit)
 def _v_prime(v, r, ks, signs, y0, y1, x0, x1, out):
     """``V - max_j signs_j R^{ks_j}`` in the window, into ``out``."""
     for y in range(y0, y1):
@@ -519,7 +520,7 @@ def _v_prime(v, r, ks, signs, y0, y1, x0, x1, out):
             o[x] = vv[x] - m
 
 
-@njit(**_jit)
+@kernel(**_jit)
 def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, y0, y1, x0, x1, mask, colsum, rows,
             cols):
     """M_a M_d in the window (``blur_v`` indexed from the window's origin) into ``mask``, the

@@ -22,7 +22,7 @@ from .params import ASNNParams, preset
 from .response import Maps, Response
 from .targets import extract_targets
 
-__all__ = ["ASNN", "FrameError"]
+__all__ = ["ASNN", "FrameError", "compile_kernels"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
 
@@ -238,3 +238,20 @@ class ASNN:
                     G_prime=g_prime) if self.record_maps else None
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps)
+
+
+def compile_kernels() -> None:
+    """Compile the optimised step's numba kernels for both precisions, or load them from numba's
+    on-disk cache (seconds on a fresh install, milliseconds afterwards).
+
+    Long-running processes call it before they take their first frame, so that frame does not
+    wait for the compiler.
+    """
+    from .stimuli import make_scene
+
+    # a small off-centre looming disk: every stage, including the clustering, has work
+    frames = make_scene("looming", size=(64, 64), start=2, stop=12, center=(30.0, 33.0)).frames
+    for name in ("default", "reference"):  # float32 and float64
+        model = ASNN(name)
+        for frame in frames:
+            model.step(frame)

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
-from numba import njit
+
+from ._jit import kernel
 
 __all__ = ["Target", "dbscan_points", "dbscan_grid", "extract_targets"]
 
@@ -45,7 +46,7 @@ class Target:
                 "pixels": self.pixels}
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _find(parent, i):
     while parent[i] != i:
         parent[i] = parent[parent[i]]
@@ -53,7 +54,7 @@ def _find(parent, i):
     return i
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _union(parent, i, j):
     a, b = _find(parent, i), _find(parent, j)
     if a < b:
@@ -62,7 +63,7 @@ def _union(parent, i, j):
         parent[a] = b
 
 
-@njit(cache=True, nogil=True)
+@kernel()
 def _dbscan_points(rows, cols, eps, min_samples, has_seed, seed_row, seed_col):
     """DBSCAN of pixels given in row-major order; see :func:`dbscan_points`."""
     n = rows.shape[0]

@@ -155,6 +155,10 @@ def cmd_worker(args: argparse.Namespace) -> int:
         session = _open_session(make_config(zenoh_options(args)))
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return _fail(str(exc))
+    if args.model == "asnn":  # before joining: the first frame must not wait for the compiler
+        from asnn.model import compile_kernels
+
+        compile_kernels()
     stop = _stop_on_signals()
     with session:
         worker = Worker(session, core, threads=args.threads)

@@ -13,13 +13,9 @@ def compiled_kernels():
     """Compile the numba kernels once (numba caches them on disk) before any test starts worker
     processes: on a fresh checkout a worker's first frame would otherwise wait seconds for the
     compiler, which time-bounded service tests mistake for a failure."""
-    from asnn import ASNN
-    from asnn.stimuli import make_scene
+    from asnn.model import compile_kernels
 
-    frames = make_scene("looming", size=(64, 64), start=2, stop=12, center=(30.0, 33.0)).frames
-    for name in ("default", "reference"):
-        model = ASNN(name)
-        assert any(model.step(f).targets for f in frames)
+    compile_kernels()
 
 
 @pytest.fixture

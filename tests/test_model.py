@@ -110,3 +110,20 @@ def test_maps_are_recorded_on_request_only():
     assert m.R.shape == (8, 48, 48) and m.G.shape == m.V.shape == m.phi.shape == (48, 48)
     np.testing.assert_array_equal(m.G_prime, m.G * (m.M_a & m.M_d))
     np.testing.assert_allclose(m.R[4:], -m.R[:4])
+
+
+def test_model_runs_where_numba_can_write_no_cache():
+    """A read-only install without a writable home (a locked-down container): numba finds no
+    cache locator; the kernels must still import and compile."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("from asnn import ASNN; from asnn.stimuli import make_scene; m = ASNN(); "
+            "print(max(m.step(f).u for f in make_scene('looming', size=(64, 64), start=2, "
+            "stop=12).frames))")
+    env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "ZipCacheLocator"}  # never applies
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert float(proc.stdout) > 0
