@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from service import keys
+
 
 def frame_size(text: str) -> tuple[int, int]:
     """``WxH`` (or ``N`` for NxN) as (width, height); at least 32x32, the model's smallest frame."""
@@ -15,3 +17,52 @@ def frame_size(text: str) -> tuple[int, int]:
     if min(size) < 32:
         raise argparse.ArgumentTypeError(f"frames must be at least 32x32, got {text!r}")
     return size
+
+
+def key_prefix(value: str) -> str:
+    """A key-expression prefix (``--prefix``)."""
+    try:
+        return keys.check_prefix(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def robot_id(value: str) -> str:
+    """A robot id: one key chunk of ``[A-Za-z0-9_-]{1,64}``."""
+    try:
+        return keys.check_robot(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def positive(value: str) -> float:
+    """A number greater than 0."""
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
+    if not number > 0:
+        raise argparse.ArgumentTypeError(f"must be positive: {value!r}")
+    return number
+
+
+def non_negative(value: str) -> float:
+    """A number of 0 or more."""
+    try:
+        number = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
+    if not number >= 0:
+        raise argparse.ArgumentTypeError(f"must be zero or more: {value!r}")
+    return number
+
+
+def count(value: str) -> int:
+    """A whole number of at least 1."""
+    try:
+        number = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {value!r}") from None
+    if number < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1: {value!r}")
+    return number

@@ -6,8 +6,9 @@ import argparse
 import logging
 import sys
 
-from cli.net import (_fail, _open_session, _positive, _setup_logging, _stop_on_signals,
-                     add_zenoh_options, zenoh_options)
+from cli.arguments import positive
+from cli.session import add_zenoh_options, fail, open_session, setup_logging, stop_on_signals, \
+    zenoh_options
 from service.config import ConfigError
 
 __all__ = ["register"]
@@ -29,18 +30,18 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     from clients.dashboard import DashboardServer, FleetStore, FleetSubscriber
     from service.config import make_config
 
-    _setup_logging(args)
+    setup_logging(args)
     store = FleetStore(args.prefix, stale_after=args.stale_after, hold=args.hold)
     try:
         server = DashboardServer(store, args.host, args.port)
     except OSError as exc:  # the port is taken, or the address is not ours
-        return _fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
+        return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
     try:
-        session = _open_session(make_config(zenoh_options(args)))
+        session = open_session(make_config(zenoh_options(args)))
     except ConfigError as exc:
         server.close()
-        return _fail(str(exc))
-    stop = _stop_on_signals()
+        return fail(str(exc))
+    stop = stop_on_signals()
     with session, FleetSubscriber(session, store) as subscriber, server:
         host, port = server.address
         print(f"dashboard on http://{host}:{port}/ showing {', '.join(subscriber.keys)}",
@@ -64,10 +65,10 @@ def register(subparsers) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default: %(default)s; 0.0.0.0 for every "
                         "interface, as in a container)")
-    p.add_argument("--stale-after", type=_positive, default=3.0, metavar="SECONDS",
+    p.add_argument("--stale-after", type=positive, default=3.0, metavar="SECONDS",
                    help="mark a robot stale after SECONDS without a response or preview "
                         "(default: %(default)s)")
-    p.add_argument("--hold", type=_positive, default=3.0, metavar="SECONDS",
+    p.add_argument("--hold", type=positive, default=3.0, metavar="SECONDS",
                    help="keep a robot in the collision state for SECONDS (camera clock) after "
                         "its latest warning (default: %(default)s)")
     add_zenoh_options(p)

@@ -4,121 +4,17 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
-import threading
 
-from service import keys
-from service.config import ConfigError, ZenohOptions
+from service.config import ConfigError
 
-__all__ = ["add_zenoh_options", "register", "zenoh_options"]
+from .arguments import count, non_negative, positive, robot_id
+from .session import add_zenoh_options, fail, open_session, setup_logging, stop_on_signals, \
+    zenoh_options
+
+__all__ = ["register"]
 
 log = logging.getLogger("asnn")
-
-
-# ---------------------------------------------------------------- shared options
-
-def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client")) -> None:
-    """The common Zenoh options of every networked command (CONTRACT.md)."""
-    group = parser.add_argument_group("Zenoh")
-    group.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                       help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
-    group.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
-                       help="endpoint to listen on, e.g. tcp/0.0.0.0:7448 (repeatable)")
-    if modes:
-        group.add_argument("--mode", choices=modes, default=None,
-                           help="Zenoh session mode (default: the config's, else peer)")
-    group.add_argument("--config", metavar="FILE", default=None,
-                       help="Zenoh JSON5 configuration file (options above override it)")
-    group.add_argument("--prefix", default=keys.DEFAULT_PREFIX, type=_prefix,
-                       help="key expression prefix (default: %(default)s)")
-    group.add_argument("--log-level", default="info",
-                       choices=("debug", "info", "warning", "error"),
-                       help="log level on stderr (default: %(default)s)")
-
-
-def _prefix(value: str) -> str:
-    try:
-        return keys.check_prefix(value)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _robot(value: str) -> str:
-    try:
-        return keys.check_robot(value)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _positive(value: str) -> float:
-    try:
-        number = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
-    if not number > 0:
-        raise argparse.ArgumentTypeError(f"must be positive: {value!r}")
-    return number
-
-
-def _count(value: str) -> int:
-    try:
-        number = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {value!r}") from None
-    if number < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1: {value!r}")
-    return number
-
-
-def _non_negative(value: str) -> float:
-    try:
-        number = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
-    if not number >= 0:
-        raise argparse.ArgumentTypeError(f"must be zero or more: {value!r}")
-    return number
-
-
-def zenoh_options(args: argparse.Namespace) -> ZenohOptions:
-    return ZenohOptions(mode=getattr(args, "mode", None), connect=tuple(args.connect),
-                        listen=tuple(args.listen), config_file=args.config)
-
-
-def _setup_logging(args: argparse.Namespace) -> None:
-    import zenoh
-
-    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
-                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    zenoh.try_init_log_from_env()  # Zenoh's own logs only when RUST_LOG is set
-
-
-def _stop_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM (docker stop), for a clean shutdown."""
-    stop = threading.Event()
-
-    def handler(signum, frame):
-        stop.set()
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, handler)
-    return stop
-
-
-def _open_session(config):
-    """zenoh.open, with Zenoh's failures (no router reachable, port taken) as one clear line."""
-    import zenoh
-
-    try:
-        return zenoh.open(config)
-    except zenoh.ZError as exc:
-        raise ConfigError(f"cannot open a Zenoh session: {str(exc).split(' at /')[0]}") from None
-
-
-def _fail(message: str, status: int = 2) -> int:
-    print(f"asnn: error: {message}", file=sys.stderr)
-    return status
 
 
 # ---------------------------------------------------------------- commands
@@ -127,13 +23,13 @@ def cmd_camera(args: argparse.Namespace) -> int:
     from service.camera import SourceError, open_source, publish_frames
     from service.config import make_config
 
-    _setup_logging(args)
+    setup_logging(args)
     try:
         source = open_source(args.source)
-        session = _open_session(make_config(zenoh_options(args)))
+        session = open_session(make_config(zenoh_options(args)))
     except (SourceError, ConfigError) as exc:
-        return _fail(str(exc))
-    stop = _stop_on_signals()
+        return fail(str(exc))
+    stop = stop_on_signals()
     with session:
         count = publish_frames(session, args.robot, source, prefix=args.prefix, fps=args.fps,
                                loop=args.loop, format=args.format, wait=args.wait, stop=stop,
@@ -147,26 +43,26 @@ def cmd_worker(args: argparse.Namespace) -> int:
     from service.core import WorkerCore
     from service.worker import Worker, WorkerIdTaken
 
-    _setup_logging(args)
+    setup_logging(args)
     try:
         core = WorkerCore(args.model, args.preset, worker_id=args.id, prefix=args.prefix,
                           idle_timeout=args.idle_timeout, max_gap=args.max_gap,
                           max_robots=args.max_robots)
-        session = _open_session(make_config(zenoh_options(args)))
+        session = open_session(make_config(zenoh_options(args)))
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
-        return _fail(str(exc))
+        return fail(str(exc))
     if args.model == "asnn":  # before joining: the first frame must not wait for the compiler
         from asnn.model import compile_kernels
 
         compile_kernels()
-    stop = _stop_on_signals()
+    stop = stop_on_signals()
     with session:
         worker = Worker(session, core, threads=args.threads)
         try:
             worker.start()
         except WorkerIdTaken as exc:
             worker.close()
-            return _fail(f"{exc}; give each worker its own --id")
+            return fail(f"{exc}; give each worker its own --id")
         try:
             print(f"worker {core.worker_id} ready", file=sys.stderr, flush=True)
             while not stop.wait(0.2):
@@ -183,11 +79,11 @@ def cmd_status(args: argparse.Namespace) -> int:
     from service.config import make_config
     from service.worker import query_status
 
-    _setup_logging(args)
+    setup_logging(args)
     try:
-        session = _open_session(make_config(zenoh_options(args)))
+        session = open_session(make_config(zenoh_options(args)))
     except ConfigError as exc:
-        return _fail(str(exc))
+        return fail(str(exc))
     with session:
         statuses = query_status(session, args.prefix, args.worker, timeout=args.timeout)
     for worker, status in sorted(statuses.items()):
@@ -212,12 +108,12 @@ def cmd_alerts(args: argparse.Namespace) -> int:
     from clients.alerts import WarningListener, printer
     from service.config import make_config
 
-    _setup_logging(args)
+    setup_logging(args)
     try:
-        session = _open_session(make_config(zenoh_options(args)))
+        session = open_session(make_config(zenoh_options(args)))
     except ConfigError as exc:
-        return _fail(str(exc))
-    stop = _stop_on_signals()
+        return fail(str(exc))
+    stop = stop_on_signals()
     with session, \
             WarningListener(session, printer(args.json, sys.stdout), prefix=args.prefix,
                             robot=args.robot) as listener:
@@ -230,14 +126,14 @@ def cmd_alerts(args: argparse.Namespace) -> int:
 def cmd_router(args: argparse.Namespace) -> int:
     from service.router import DEFAULT_LISTEN, open_router
 
-    _setup_logging(args)
-    stop = _stop_on_signals()
+    setup_logging(args)
+    stop = stop_on_signals()
     try:
         session = open_router(zenoh_options(args))
     except ConfigError as exc:
-        return _fail(str(exc))
+        return fail(str(exc))
     except Exception as exc:  # zenoh.ZError: e.g. the port is taken
-        return _fail(f"cannot start the router: {str(exc).split(' at /')[0]}")
+        return fail(f"cannot start the router: {str(exc).split(' at /')[0]}")
     with session:
         listen = ", ".join(args.listen or [DEFAULT_LISTEN])
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)
@@ -258,7 +154,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         core = WorkerCore(args.model, args.preset)
         source = open_source(f"synthetic:{args.scene}")
     except (ValueError, ImportError, OSError) as exc:
-        return _fail(str(exc))
+        return fail(str(exc))
     info = sys.stderr if args.json else sys.stdout
     print(f"asnn demo: camera -> worker ({core.model}, preset {core.preset or '-'}) -> alerts, "
           f"scene {args.scene!r}, {source.fps:g} fps, over Zenoh on 127.0.0.1", file=info,
@@ -281,11 +177,11 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("camera", help="publish a camera's frames",
                               description="Publish frames of a video file, a capture device, "
                               "a stream URL or a generated scene on <prefix>/<robot>/frame.")
-    p.add_argument("--robot", required=True, type=_robot, help="robot id ([A-Za-z0-9_-]{1,64})")
+    p.add_argument("--robot", required=True, type=robot_id, help="robot id ([A-Za-z0-9_-]{1,64})")
     p.add_argument("--source", required=True,
                    help="FILE, DEVICE_INDEX, URL or synthetic:SCENE "
                         f"(SCENE: {', '.join(SCENE_NAMES)})")
-    p.add_argument("--fps", type=_positive, default=None,
+    p.add_argument("--fps", type=positive, default=None,
                    help="publishing rate (default: the source's frame rate)")
     p.add_argument("--loop", action="store_true", help="replay a file or scene forever")
     p.add_argument("--format", choices=FORMATS, default="gray8",
@@ -293,7 +189,7 @@ def register(subparsers) -> None:
     p.add_argument("--wait", type=float, default=2.0, metavar="SECONDS",
                    help="wait up to SECONDS for a subscriber before the first frame "
                         "(default: %(default)s)")
-    p.add_argument("--preview-hz", type=_non_negative, default=2.0, metavar="HZ",
+    p.add_argument("--preview-hz", type=non_negative, default=2.0, metavar="HZ",
                    help="thumbnails per second on <prefix>/<robot>/preview for dashboards "
                         "(docs/contract.md; default: %(default)s; 0: none)")
     add_zenoh_options(p)
@@ -304,9 +200,9 @@ def register(subparsers) -> None:
                               "per processed frame and a warning per collision.")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
     p.add_argument("--preset", default=None, help="ASNN preset (default: the default preset)")
-    p.add_argument("--id", type=_robot, default=None,
+    p.add_argument("--id", type=robot_id, default=None,
                    help="worker id reported in responses (default: <host>-<pid>)")
-    p.add_argument("--idle-timeout", type=_positive, default=60.0, metavar="SECONDS",
+    p.add_argument("--idle-timeout", type=positive, default=60.0, metavar="SECONDS",
                    help="forget a robot after SECONDS without frames (default: %(default)s)")
     p.add_argument("--max-gap", type=int, default=20, metavar="N",
                    help="reset a robot's state when seq jumps ahead by more than N "
@@ -314,7 +210,7 @@ def register(subparsers) -> None:
     p.add_argument("--max-robots", type=int, default=256, metavar="N",
                    help="robots tracked at once; frames of more are rejected "
                         "(default: %(default)s)")
-    p.add_argument("--threads", type=_count, default=1, metavar="N",
+    p.add_argument("--threads", type=count, default=1, metavar="N",
                    help="processing threads (default: %(default)s; one robot is never processed "
                         "by two at once)")
     add_zenoh_options(p)
@@ -324,9 +220,9 @@ def register(subparsers) -> None:
                               description="Query <prefix>/@worker/<id>/status: each worker's "
                               "counters (rejected frames per reason, dropped frames), robots "
                               "and the live workers. Exit status 1 when no worker answers.")
-    p.add_argument("--worker", type=_robot, default=None, help="only this worker (default: all)")
+    p.add_argument("--worker", type=robot_id, default=None, help="only this worker (default: all)")
     p.add_argument("--json", action="store_true", help="one JSON object per worker")
-    p.add_argument("--timeout", type=_positive, default=2.0, metavar="SECONDS",
+    p.add_argument("--timeout", type=positive, default=2.0, metavar="SECONDS",
                    help="how long to wait for answers (default: %(default)s)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_status)
@@ -334,7 +230,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("alerts", help="print the fleet's collision warnings",
                               description="Subscribe to <prefix>/<robot>/warning; one line per "
                               "warning. A late subscriber first receives each robot's latest.")
-    p.add_argument("--robot", type=_robot, default=None, help="only this robot (default: all)")
+    p.add_argument("--robot", type=robot_id, default=None, help="only this robot (default: all)")
     p.add_argument("--json", action="store_true", help="JSON lines (the Response fields)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_alerts)
@@ -350,7 +246,7 @@ def register(subparsers) -> None:
                               "over in-process Zenoh sessions and print the warnings.")
     p.add_argument("--scene", choices=SCENE_NAMES, default="looming",
                    help="generated scene (default: %(default)s)")
-    p.add_argument("--fps", type=_positive, default=None,
+    p.add_argument("--fps", type=positive, default=None,
                    help="playback rate (default: the scene's, 20)")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
     p.add_argument("--preset", default=None, help="ASNN preset (default: the default preset)")

@@ -1,0 +1,78 @@
+"""What every networked command shares: the common Zenoh options, logging, signals, errors."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+
+from service import keys
+from service.config import ConfigError, ZenohOptions
+
+from .arguments import key_prefix
+
+__all__ = ["add_zenoh_options", "zenoh_options", "setup_logging", "stop_on_signals",
+           "open_session", "fail"]
+
+
+def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client")) -> None:
+    """The common Zenoh options of every networked command (CONTRACT.md)."""
+    group = parser.add_argument_group("Zenoh")
+    group.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                       help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
+    group.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                       help="endpoint to listen on, e.g. tcp/0.0.0.0:7448 (repeatable)")
+    if modes:
+        group.add_argument("--mode", choices=modes, default=None,
+                           help="Zenoh session mode (default: the config's, else peer)")
+    group.add_argument("--config", metavar="FILE", default=None,
+                       help="Zenoh JSON5 configuration file (options above override it)")
+    group.add_argument("--prefix", default=keys.DEFAULT_PREFIX, type=key_prefix,
+                       help="key expression prefix (default: %(default)s)")
+    group.add_argument("--log-level", default="info",
+                       choices=("debug", "info", "warning", "error"),
+                       help="log level on stderr (default: %(default)s)")
+
+
+def zenoh_options(args: argparse.Namespace) -> ZenohOptions:
+    """The parsed common options, for :func:`service.config.make_config`."""
+    return ZenohOptions(mode=getattr(args, "mode", None), connect=tuple(args.connect),
+                        listen=tuple(args.listen), config_file=args.config)
+
+
+def setup_logging(args: argparse.Namespace) -> None:
+    import zenoh
+
+    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    zenoh.try_init_log_from_env()  # Zenoh's own logs only when RUST_LOG is set
+
+
+def stop_on_signals() -> threading.Event:
+    """An event set by SIGINT or SIGTERM (docker stop), for a clean shutdown."""
+    stop = threading.Event()
+
+    def handler(signum, frame):
+        stop.set()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, handler)
+    return stop
+
+
+def open_session(config):
+    """zenoh.open, with Zenoh's failures (no router reachable, port taken) as one clear line."""
+    import zenoh
+
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        raise ConfigError(f"cannot open a Zenoh session: {str(exc).split(' at /')[0]}") from None
+
+
+def fail(message: str, status: int = 2) -> int:
+    """Print a one-line error and return the exit status."""
+    print(f"asnn: error: {message}", file=sys.stderr)
+    return status
