@@ -51,10 +51,6 @@ def cmd_worker(args: argparse.Namespace) -> int:
         session = open_session(make_config(zenoh_options(args)))
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(str(exc))
-    if args.model == "asnn":  # before joining: the first frame must not wait for the compiler
-        from asnn.model import compile_kernels
-
-        compile_kernels()
     stop = stop_on_signals()
     with session:
         worker = Worker(session, core, threads=args.threads)

@@ -24,6 +24,8 @@ import time
 import zenoh
 from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
+from asnn.model import compile_kernels
+
 from . import keys
 from .core import WorkerCore
 from .messages import Response, encode
@@ -139,7 +141,7 @@ class Worker:
         self.close()
 
     def start(self) -> None:
-        """Join the live worker set, then take frames.
+        """Compile the model's kernels, join the live worker set, then take frames.
 
         Raises
         ------
@@ -147,6 +149,9 @@ class Worker:
             If a live worker already has this id (two workers with one id would both serve the
             same robots).
         """
+        if self.core.model == "asnn":
+            # a cold numba cache takes seconds: frames waiting that long would all be dropped
+            compile_kernels()
         prefix, me = self.core.prefix, self.core.worker_id
         if self.shared:
             # the live set first, so that no frame is taken while this worker thinks it is alone

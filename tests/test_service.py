@@ -301,3 +301,20 @@ def test_worker_threads_option():
     assert build_parser().parse_args(["worker"]).threads == 1
     with pytest.raises(SystemExit):
         build_parser().parse_args(["worker", "--threads", "0"])
+
+
+def test_demo_on_a_fresh_install_warns(tmp_path):
+    """README's first command on a new machine: nothing compiled yet (an empty numba cache).
+    The worker compiles before it takes frames, so the looming clip still raises warnings."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
+    env.pop("RUST_LOG", None)
+    proc = subprocess.run([sys.executable, "-m", "cli.main", "demo"], env=env, timeout=600,
+                          capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = proc.stdout.strip().splitlines()[-1]  # "60 frames published, ..., N warnings received"
+    assert summary.endswith("warnings received"), summary
+    assert int(summary.split(",")[-1].split()[0]) > 10, summary
