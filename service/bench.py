@@ -11,9 +11,10 @@ Per step:
 * answered: responses received / frames published;
 * end-to-end latency: response received minus the frame's ``stamp`` (wall clock at publication;
   same machine, same clock);
-* added latency: end-to-end minus the model's time for one frame. The worker does not report
-  its model time, so it is measured here: the same detector and preset on the same frames, one
-  thread, median per frame (``model_ms``); added latency = end-to-end - model_ms;
+* added latency: end-to-end minus the model's time for that frame, as the worker reports it in
+  each response (``model_ms``, an optional Response field: docs/contract.md). The same detector
+  on the same frames is also timed here, one thread (the report's ``model_ms``: median and
+  p99), and its median stands in for a response without the field;
 * keeps up: at least 95 % of the frames answered and no growing backlog (the median end-to-end
   latency of the step's last quarter is within 2 frame periods of its first quarter's).
 
@@ -99,7 +100,7 @@ class _Collector:
 
         self._decode = decode_response
         self._lock = threading.Lock()
-        self.records: list[tuple[str, int, float, float]] = []
+        self.records: list[tuple[str, int, float, float, float | None]] = []
         self._sub = session.declare_subscriber(keys.responses(prefix), self._on)
 
     def _on(self, sample) -> None:
@@ -109,9 +110,9 @@ class _Collector:
         except Exception:
             return
         with self._lock:
-            self.records.append((r.robot, r.seq, now, r.stamp))
+            self.records.append((r.robot, r.seq, now, r.stamp, r.model_ms))
 
-    def take(self) -> list[tuple[str, int, float, float]]:
+    def take(self) -> list[tuple[str, int, float, float, float | None]]:
         with self._lock:
             records, self.records = self.records, []
         return records
@@ -146,15 +147,17 @@ def _step(session, collector, n: int, step: int, frames, fps: float, seconds: fl
     time.sleep(0.5 + 2.0 / fps)  # the last responses
     records = [r for r in collector.take() if r[0] in published]
     sent = sum(published.values())
-    latency = np.array([(now - stamp) * 1e3 for _, _, now, stamp in records])
+    latency = np.array([(now - stamp) * 1e3 for _, _, now, stamp, _ in records])
+    # the worker reports each step's model time; without it, the median measured here
+    model = np.array([model_ms if ms is None else ms for *_, ms in records])
     report = {"cameras": n, "frames": sent, "responses": len(records),
               "answered": len(records) / sent if sent else 0.0}
     if len(latency):
-        stamps = np.array([stamp for *_, stamp in records])
+        stamps = np.array([stamp for _, _, _, stamp, _ in records])
         span = stamps.max() - stamps.min()
         first = latency[stamps <= stamps.min() + span / 4]
         last = latency[stamps >= stamps.max() - span / 4]
-        added = latency - model_ms
+        added = latency - model
         report.update({
             "latency_p50_ms": float(np.median(latency)),
             "latency_p99_ms": float(np.percentile(latency, 99)),

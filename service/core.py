@@ -286,6 +286,7 @@ class WorkerCore:
                 with self._lock:
                     self._stats.resets[reason] += 1
                 log.info("robot %s: state reset (%s) at seq %d", job.robot, reason, frame.seq)
+        started = self.clock()
         try:
             result = state.detector.step(image)
         except FrameError as exc:
@@ -298,7 +299,7 @@ class WorkerCore:
         response = response_from(result, robot=job.robot, frame=frame, model=self.model,
                                  preset=self.preset, worker=self.worker_id,
                                  latency_ms=(self.clock() - job.received) * 1e3,
-                                 dropped=job.dropped)
+                                 dropped=job.dropped, model_ms=(self.clock() - started) * 1e3)
         with self._lock:
             self._stats.processed += 1
             self._stats.warnings += response.collision

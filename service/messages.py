@@ -157,6 +157,8 @@ class Response(_Message):
     worker: str
     latency_ms: float = Field(ge=0)
     dropped: int = Field(ge=0)
+    # optional extension (docs/contract.md): the model step's own share of latency_ms
+    model_ms: float | None = Field(default=None, ge=0)
 
 
 def encode_image(image: np.ndarray, format: str) -> bytes:
@@ -274,13 +276,15 @@ def decode_response(payload: bytes) -> Response:
 
 
 def response_from(result, *, robot: str, frame: Frame, model: str, preset: str, worker: str,
-                  latency_ms: float, dropped: int) -> Response:
+                  latency_ms: float, dropped: int, model_ms: float | None = None) -> Response:
     """Wrap an ``asnn.Response`` (the model's output) for the wire."""
     fields = result.to_dict()
     targets = [TargetMsg(**_finite(t)) for t in fields.pop("targets")]
     return Response(robot=robot, seq=frame.seq, stamp=frame.stamp, model=model, preset=preset,
                     targets=targets, worker=worker, latency_ms=max(latency_ms, 0.0),
-                    dropped=dropped, **_finite(fields))
+                    dropped=dropped,
+                    model_ms=None if model_ms is None else max(model_ms, 0.0),
+                    **_finite(fields))
 
 
 def _finite(fields: dict) -> dict:

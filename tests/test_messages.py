@@ -141,14 +141,15 @@ def test_response_from_a_model_step_round_trips_with_targets():
     assert result.collision and result.targets
     frame = Frame.from_image(scene.frames[29], seq=29, stamp=100.0)
     response = response_from(result, robot="r1", frame=frame, model="asnn", preset="reference",
-                             worker="w", latency_ms=3.0, dropped=2)
+                             worker="w", latency_ms=3.0, dropped=2, model_ms=1.25)
     back = decode_response(encode(response))
     assert back == response
     assert back.seq == 29 and back.stamp == 100.0 and back.dropped == 2 and back.collision
     assert back.targets[0].pixels == result.targets[0].pixels
     assert set(back.model_dump()) == {"v", "robot", "seq", "stamp", "model", "preset", "u", "out",
                                       "spikes", "spike_rate", "collision", "targets", "worker",
-                                      "latency_ms", "dropped"}
+                                      "latency_ms", "dropped", "model_ms"}
+    assert back.model_ms == 1.25
     json.dumps(back.model_dump())  # JSON-ready for `asnn alerts --json`
 
 
@@ -157,6 +158,8 @@ def test_invalid_responses_are_rejected():
         robot="r", seq=1, stamp=1.0, model="asnn", preset="p", u=1.0, out=0.5, spikes=0,
         spike_rate=0.0, collision=True, worker="w", latency_ms=1.0, dropped=0)))
     assert decode_response(msgpack.packb(good)).collision
+    assert decode_response(msgpack.packb(good)).model_ms is None  # optional: older workers
+    assert reason(msgpack.packb({**good, "model_ms": -1.0}), decode_response) == "invalid-field"
     assert reason(msgpack.packb({**good, "collision": "yes"}), decode_response) == "invalid-field"
     assert reason(msgpack.packb({**good, "targets": [{"x": 1}]}), decode_response) == \
         "invalid-field"  # a nested field: the reason is about the field that holds it

@@ -56,6 +56,28 @@ def test_looming_stream_warns_inside_the_stimulus_window_with_targets(looming):
     assert core.stats()["warnings"] == len(warned)
 
 
+def test_responses_say_how_much_of_their_latency_the_model_took(looming):
+    clock = FakeClock()
+    core = WorkerCore(clock=clock)
+    core_step = None
+    assert core.offer("asnn/r1/frame", payload(looming.frames[0], 0)) == "r1"
+    clock.now += 0.004  # waits 4 ms in the queue
+    job = core.take()
+
+    def slow_step(frame):  # the model takes 6 ms by the fake clock
+        clock.now += 0.006
+        return core_step(frame)
+
+    response = core.process(job)  # creates the model
+    assert response.model_ms == 0.0 and response.latency_ms == pytest.approx(4.0)
+    model = core._robots["r1"].detector
+    core_step, model.step = model.step, slow_step
+    core.offer("asnn/r1/frame", payload(looming.frames[1], 1))
+    clock.now += 0.002
+    response = core.process(core.take())
+    assert response.model_ms == pytest.approx(6.0) and response.latency_ms == pytest.approx(8.0)
+
+
 def test_translating_stream_yields_no_warning(bar):
     core = WorkerCore()
     responses = [feed(core, "r1", image, i) for i, image in enumerate(bar.frames)]
