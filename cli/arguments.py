@@ -35,12 +35,16 @@ def robot_id(value: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def positive(value: str) -> float:
-    """A number greater than 0."""
+def _number(value: str) -> float:
     try:
-        number = float(value)
+        return float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
+
+
+def positive(value: str) -> float:
+    """A number greater than 0."""
+    number = _number(value)
     if not number > 0:
         raise argparse.ArgumentTypeError(f"must be positive: {value!r}")
     return number
@@ -48,10 +52,7 @@ def positive(value: str) -> float:
 
 def non_negative(value: str) -> float:
     """A number of 0 or more."""
-    try:
-        number = float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
+    number = _number(value)
     if not number >= 0:
         raise argparse.ArgumentTypeError(f"must be zero or more: {value!r}")
     return number
