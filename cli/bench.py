@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from cli.arguments import frame_size
+from cli.arguments import count, frame_size, positive
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,7 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "ratio. --service instead measures cameras through Zenoh on loopback.")
     p.add_argument("--size", type=frame_size, action="append", metavar="WxH",
                    help="frame size (repeatable; default 128x128, 320x240 and 640x480)")
-    p.add_argument("--frames", type=int, default=40, help="timed frames per run (default 40)")
+    p.add_argument("--frames", type=count, default=40, help="timed frames per run (default 40)")
     p.add_argument("--preset", action="append", metavar="NAME",
                    help="ASNN preset to time (repeatable; default: all)")
     p.add_argument("--model", action="append", choices=("asnn", "lgmd1", "lgmd2"),
@@ -29,12 +29,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="cameras at --fps through one worker process over Zenoh on loopback, "
                    "ramping the number of cameras (first --size, default 320x240; first --preset, "
                    "default the default preset)")
-    p.add_argument("--fps", type=float, default=25.0, help="camera rate for --service")
-    p.add_argument("--seconds", type=float, default=4.0,
+    p.add_argument("--fps", type=positive, default=25.0, help="camera rate for --service")
+    p.add_argument("--seconds", type=positive, default=4.0,
                    help="duration of each --service step")
-    p.add_argument("--cameras", type=int, action="append", metavar="N",
+    p.add_argument("--cameras", type=count, action="append", metavar="N",
                    help="camera counts for --service (repeatable; default 1, 2, 4, 8, 12, 16, 20, 24)")
-    p.add_argument("--worker-threads", type=int, default=1, metavar="N",
+    p.add_argument("--worker-threads", type=count, default=1, metavar="N",
                    help="processing threads of the --service worker (asnn worker --threads)")
     p.set_defaults(func=run)
 
@@ -45,47 +45,32 @@ def run(args: argparse.Namespace) -> int:
     pinning = pin_threads()  # before numba and the models are imported
     from asnn import bench
 
-    if args.frames < 1:
-        print("asnn bench: --frames must be at least 1", file=sys.stderr)
-        return 2
-    sizes = args.size or list(bench.DEFAULT_SIZES)
-    if args.service:
-        from service import bench as service_bench
+    name = "asnn bench --service" if args.service else "asnn bench"
+    try:
+        if args.service:
+            from service import bench as service_bench
 
-        if (args.fps <= 0 or args.seconds <= 0 or args.worker_threads < 1
-                or any(n < 1 for n in args.cameras or [])):
-            print("asnn bench --service: --fps, --seconds, --cameras and --worker-threads must "
-                  "be positive",
-                  file=sys.stderr)
-            return 2
-        try:
             report = service_bench.run(size=args.size[0] if args.size else (320, 240),
                                        fps=args.fps, seconds=args.seconds, counts=args.cameras,
                                        preset=args.preset[0] if args.preset else None,
                                        progress=_progress(args),
                                        worker_threads=args.worker_threads)
-        except (RuntimeError, ValueError) as exc:
-            print(f"asnn bench --service: {exc}", file=sys.stderr)
-            return 2
-        report["threads"] = pinning
-        report["machine"] = bench.machine()
-        if args.json:
-            print(json.dumps(report, indent=1))
         else:
-            print(f"# threads: {pinning}")
-            print(service_bench.format_report(report))
-        return 0
-    try:
-        report = bench.run(sizes=sizes, frames=args.frames, presets=args.preset,
-                           models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
-                           straightforward=not args.no_straightforward, progress=_progress(args))
-    except ValueError as exc:
-        print(f"asnn bench: {exc}", file=sys.stderr)
+            report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES), frames=args.frames,
+                               presets=args.preset,
+                               models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
+                               straightforward=not args.no_straightforward,
+                               progress=_progress(args))
+    except (RuntimeError, ValueError) as exc:
+        print(f"{name}: {exc}", file=sys.stderr)
         return 2
     report["threads"] = pinning
     report["machine"] = bench.machine()
     if args.json:
         print(json.dumps(report, indent=1))
+    elif args.service:
+        print(f"# threads: {pinning}")
+        print(service_bench.format_report(report))
     else:
         m = report["machine"]
         print(f"# asnn bench: {m['cpu']}, {m['cores']} logical cores; Python {m['python']}, "

@@ -7,8 +7,7 @@ import logging
 import sys
 
 from cli.arguments import positive
-from cli.session import add_zenoh_options, fail, open_session, setup_logging, stop_on_signals, \
-    zenoh_options
+from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
 from service.config import ConfigError
 
 __all__ = ["register"]
@@ -28,7 +27,6 @@ def _port(value: str) -> int:
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
     from clients.dashboard import DashboardServer, FleetStore, FleetSubscriber
-    from service.config import make_config
 
     setup_logging(args)
     store = FleetStore(args.prefix, stale_after=args.stale_after, hold=args.hold)
@@ -37,7 +35,7 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     except OSError as exc:  # the port is taken, or the address is not ours
         return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
     try:
-        session = open_session(make_config(zenoh_options(args)))
+        session = session_for(args)
     except ConfigError as exc:
         server.close()
         return fail(str(exc))

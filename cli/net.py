@@ -9,7 +9,7 @@ import sys
 from service.config import ConfigError
 
 from .arguments import count, non_negative, positive, robot_id
-from .session import add_zenoh_options, fail, open_session, setup_logging, stop_on_signals, \
+from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
     zenoh_options
 
 __all__ = ["register"]
@@ -21,12 +21,11 @@ log = logging.getLogger("asnn")
 
 def cmd_camera(args: argparse.Namespace) -> int:
     from service.camera import SourceError, open_source, publish_frames
-    from service.config import make_config
 
     setup_logging(args)
     try:
         source = open_source(args.source)
-        session = open_session(make_config(zenoh_options(args)))
+        session = session_for(args)
     except (SourceError, ConfigError) as exc:
         return fail(str(exc))
     stop = stop_on_signals()
@@ -39,7 +38,6 @@ def cmd_camera(args: argparse.Namespace) -> int:
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
-    from service.config import make_config
     from service.core import WorkerCore
     from service.worker import Worker, WorkerIdTaken
 
@@ -48,7 +46,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
         core = WorkerCore(args.model, args.preset, worker_id=args.id, prefix=args.prefix,
                           idle_timeout=args.idle_timeout, max_gap=args.max_gap,
                           max_robots=args.max_robots)
-        session = open_session(make_config(zenoh_options(args)))
+        session = session_for(args)
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(str(exc))
     stop = stop_on_signals()
@@ -72,12 +70,11 @@ def cmd_worker(args: argparse.Namespace) -> int:
 def cmd_status(args: argparse.Namespace) -> int:
     import json
 
-    from service.config import make_config
     from service.worker import query_status
 
     setup_logging(args)
     try:
-        session = open_session(make_config(zenoh_options(args)))
+        session = session_for(args)
     except ConfigError as exc:
         return fail(str(exc))
     with session:
@@ -102,11 +99,10 @@ def cmd_status(args: argparse.Namespace) -> int:
 
 def cmd_alerts(args: argparse.Namespace) -> int:
     from clients.alerts import WarningListener, printer
-    from service.config import make_config
 
     setup_logging(args)
     try:
-        session = open_session(make_config(zenoh_options(args)))
+        session = session_for(args)
     except ConfigError as exc:
         return fail(str(exc))
     stop = stop_on_signals()

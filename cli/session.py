@@ -14,7 +14,7 @@ from service.config import ConfigError, ZenohOptions
 from .arguments import key_prefix
 
 __all__ = ["add_zenoh_options", "zenoh_options", "setup_logging", "stop_on_signals",
-           "open_session", "fail"]
+           "open_session", "session_for", "fail"]
 
 
 def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client")) -> None:
@@ -70,6 +70,13 @@ def open_session(config):
         return zenoh.open(config)
     except zenoh.ZError as exc:
         raise ConfigError(f"cannot open a Zenoh session: {str(exc).split(' at /')[0]}") from None
+
+
+def session_for(args: argparse.Namespace):
+    """The Zenoh session a command's common options describe (raises ConfigError)."""
+    from service.config import make_config
+
+    return open_session(make_config(zenoh_options(args)))
 
 
 def fail(message: str, status: int = 2) -> int:

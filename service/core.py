@@ -324,10 +324,6 @@ class WorkerCore:
             return "stamp-backwards"
         return None
 
-    def latency_ms(self, job: Job) -> float:
-        """Milliseconds since the job's frame arrived."""
-        return max((self.clock() - job.received) * 1e3, 0.0)
-
     # ------------------------------------------------------------------ housekeeping
 
     def evict_idle(self, now: float | None = None) -> list[str]:

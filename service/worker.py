@@ -215,8 +215,7 @@ class Worker:
                 try:
                     response = self.core.process(job)
                     if response is not None:
-                        self.publish(response.model_copy(
-                            update={"latency_ms": self.core.latency_ms(job)}))
+                        self.publish(response)
                 except Exception:
                     log.exception("robot %s: frame %d failed", job.robot, job.frame.seq)
             if not housekeeping:

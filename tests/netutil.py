@@ -96,6 +96,31 @@ class Procs:
                 thread.join(timeout=5)
 
 
+class Fleet:
+    """``asnn router``, ``asnn worker --id w1`` and ``asnn alerts --json`` as OS processes on a free
+    loopback port, as in the compose topology; ``common`` are the client options for more parts."""
+
+    def __init__(self, procs: Procs, tmp_path: Path, config_text: str):
+        from service.demo import free_port
+
+        self.config = tmp_path / "zenoh.json5"
+        self.config.write_text(config_text)
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
+        self.common = ["--config", str(self.config), "--connect", self.endpoint,
+                       "--mode", "client"]
+        self.procs = procs
+        self.router = self.start_router()
+        self.worker = procs("worker", "--id", "w1", *self.common)
+        self.alerts = procs("alerts", "--json", *self.common)
+        self.worker.wait_line("ready", timeout=60)
+        self.alerts.wait_line("listening on")
+
+    def start_router(self) -> Proc:
+        router = self.procs("router", "--listen", self.endpoint, "--config", str(self.config))
+        router.wait_line("listening on")
+        return router
+
+
 class Responses:
     """Every response of every robot from a plain subscriber, with its arrival time."""
 

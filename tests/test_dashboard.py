@@ -394,7 +394,7 @@ def test_camera_command_passes_its_preview_rate_on(monkeypatch, flag, expected):
     import service.camera
 
     calls = []
-    monkeypatch.setattr(cli.net, "open_session", lambda config: contextlib.nullcontext())
+    monkeypatch.setattr(cli.net, "session_for", lambda args: contextlib.nullcontext())
     monkeypatch.setattr(service.camera, "publish_frames",
                         lambda *a, **kw: calls.append(kw) or 0)
     args = build_parser().parse_args(["camera", "--robot", "r1", "--source",

@@ -6,6 +6,7 @@ asks for 2 s; the test allows 5 s for a loaded machine and prints the measured t
 worker takes its share; SIGTERM hands over at once.
 """
 
+import contextlib
 import json
 import signal
 import time
@@ -79,44 +80,52 @@ def handover_time(responses, t0, robots, to_workers):
     return max(responses.first_after(t0, r, owner(r, to_workers)) for r in robots) - t0
 
 
-def test_workers_share_robots_and_fail_over(net, capsys):
+@contextlib.contextmanager
+def two_workers_serving(net):
+    """Workers w1 and w2 sharing ROBOTS, whose frames keep flowing: (w1, w2, session, responses)
+    once every robot is answered by its owner."""
     w1, w2 = net.worker("w1"), net.worker("w2")
     with zenoh.open(make_config(net.options)) as session:
         wait_for(lambda: live_workers(session) == ["w1", "w2"], what="both workers live")
         responses = Responses(session)
         with FramePump(session, ROBOTS, fps=20):
             settle(responses, ["w1", "w2"])
-            mine = {w: [r for r in ROBOTS if owner(r, ["w1", "w2"]) == w] for w in ("w1", "w2")}
-            assert mine["w1"] and mine["w2"], mine
+            yield w1, w2, session, responses
 
-            # the status queryable of each worker tells its robots and the live set
-            status = query_status(session)
-            assert set(status) == {"w1", "w2"}
-            assert sorted(status["w1"]["robots"]) == mine["w1"]
-            assert status["w2"]["workers"] == ["w1", "w2"]
-            assert status["w1"]["stats"]["foreign"] > 0
 
-            # SIGKILL: no goodbye; the router drops the session and its liveliness token
-            t_kill = time.monotonic()
-            w1.popen.send_signal(signal.SIGKILL)
-            killed = handover_time(responses, t_kill, mine["w1"], ["w2"])
-            settle(responses, ["w2"])
+def test_workers_share_robots_and_fail_over(net, capsys):
+    with two_workers_serving(net) as (w1, w2, session, responses):
+        mine = {w: [r for r in ROBOTS if owner(r, ["w1", "w2"]) == w] for w in ("w1", "w2")}
+        assert mine["w1"] and mine["w2"], mine
 
-            # a new worker takes its share
-            w3 = net.worker("w3")
-            t_join = time.monotonic()
-            moved = [r for r in ROBOTS if owner(r, ["w2", "w3"]) == "w3"]
-            assert moved
-            joined = handover_time(responses, t_join, moved, ["w2", "w3"])
-            settle(responses, ["w2", "w3"])
+        # the status queryable of each worker tells its robots and the live set
+        status = query_status(session)
+        assert set(status) == {"w1", "w2"}
+        assert sorted(status["w1"]["robots"]) == mine["w1"]
+        assert status["w2"]["workers"] == ["w1", "w2"]
+        assert status["w1"]["stats"]["foreign"] > 0
 
-            # SIGTERM: the token goes first, the other worker takes over at once
-            t_term = time.monotonic()
-            w3.popen.send_signal(signal.SIGTERM)
-            terminated = handover_time(responses, t_term, moved, ["w2"])
-            assert w3.stop() == 0
-            settle(responses, ["w2"])
-            assert "worker stopped" in "\n".join(w3.err)
+        # SIGKILL: no goodbye; the router drops the session and its liveliness token
+        t_kill = time.monotonic()
+        w1.popen.send_signal(signal.SIGKILL)
+        killed = handover_time(responses, t_kill, mine["w1"], ["w2"])
+        settle(responses, ["w2"])
+
+        # a new worker takes its share
+        w3 = net.worker("w3")
+        t_join = time.monotonic()
+        moved = [r for r in ROBOTS if owner(r, ["w2", "w3"]) == "w3"]
+        assert moved
+        joined = handover_time(responses, t_join, moved, ["w2", "w3"])
+        settle(responses, ["w2", "w3"])
+
+        # SIGTERM: the token goes first, the other worker takes over at once
+        t_term = time.monotonic()
+        w3.popen.send_signal(signal.SIGTERM)
+        terminated = handover_time(responses, t_term, moved, ["w2"])
+        assert w3.stop() == 0
+        settle(responses, ["w2"])
+        assert "worker stopped" in "\n".join(w3.err)
         assert responses.invalid == 0
     with capsys.disabled():
         print(f"\nfailover: SIGKILL {killed:.2f} s, join {joined:.2f} s, "
@@ -128,23 +137,18 @@ def test_workers_share_robots_and_fail_over(net, capsys):
 def test_a_hung_worker_loses_its_robots_after_the_lease_and_takes_them_back(net, capsys):
     """SIGSTOP: the connection stays open but silent; the router drops the session when the
     1 s lease expires. After SIGCONT the worker reconnects and rejoins."""
-    w1, w2 = net.worker("w1"), net.worker("w2")
-    with zenoh.open(make_config(net.options)) as session:
-        wait_for(lambda: live_workers(session) == ["w1", "w2"], what="both workers live")
-        responses = Responses(session)
-        with FramePump(session, ROBOTS, fps=20):
-            settle(responses, ["w1", "w2"])
-            lost = [r for r in ROBOTS if owner(r, ["w1", "w2"]) == "w1"]
-            t_stop = time.monotonic()
-            w1.popen.send_signal(signal.SIGSTOP)
-            try:
-                hung = handover_time(responses, t_stop, lost, ["w2"])
-                settle(responses, ["w2"])
-            finally:
-                w1.popen.send_signal(signal.SIGCONT)
-            t_cont = time.monotonic()
-            back = handover_time(responses, t_cont, lost, ["w1", "w2"])
-            settle(responses, ["w1", "w2"])
+    with two_workers_serving(net) as (w1, w2, session, responses):
+        lost = [r for r in ROBOTS if owner(r, ["w1", "w2"]) == "w1"]
+        t_stop = time.monotonic()
+        w1.popen.send_signal(signal.SIGSTOP)
+        try:
+            hung = handover_time(responses, t_stop, lost, ["w2"])
+            settle(responses, ["w2"])
+        finally:
+            w1.popen.send_signal(signal.SIGCONT)
+        t_cont = time.monotonic()
+        back = handover_time(responses, t_cont, lost, ["w1", "w2"])
+        settle(responses, ["w1", "w2"])
     with capsys.disabled():
         print(f"\nhung worker (SIGSTOP): robots moved after {hung:.2f} s (lease 1 s), "
               f"back {back:.2f} s after SIGCONT")

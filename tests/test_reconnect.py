@@ -8,25 +8,16 @@ import time
 import zenoh
 
 from service.config import ZenohOptions, make_config
-from service.demo import free_port
 
-from netutil import SHORT_LEASE, Responses, wait_for
+from netutil import SHORT_LEASE, Fleet, Responses, wait_for
 
 
 def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
-    config = tmp_path / "zenoh.json5"
-    config.write_text(SHORT_LEASE)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    common = ["--config", str(config), "--connect", endpoint, "--mode", "client"]
-    router = procs("router", "--listen", endpoint, "--config", str(config))
-    router.wait_line("listening on")
-    worker = procs("worker", "--id", "w1", *common)
-    alerts = procs("alerts", "--json", *common)
-    worker.wait_line("ready", timeout=60)
-    alerts.wait_line("listening on")
+    fleet = Fleet(procs, tmp_path, SHORT_LEASE)
+    router, worker, alerts, common = fleet.router, fleet.worker, fleet.alerts, fleet.common
     camera = procs("camera", "--robot", "r1", "--source", "synthetic:looming", "--loop",
                    "--fps", "20", "--wait", "30", *common)
-    options = ZenohOptions(mode="client", connect=(endpoint,), config_file=config)
+    options = ZenohOptions(mode="client", connect=(fleet.endpoint,), config_file=fleet.config)
     with zenoh.open(make_config(options)) as session:
         responses = Responses(session)
         wait_for(lambda: len(responses.since(0, "r1")) >= 20, what="the first responses")
@@ -37,8 +28,7 @@ def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
         down = len(responses.since(0))
         warned = len(alerts.out)
         restarted = time.monotonic()
-        router = procs("router", "--listen", endpoint, "--config", str(config))
-        router.wait_line("listening on")
+        router = fleet.start_router()
 
         wait_for(lambda: len(responses.since(restarted, "r1")) >= 20, timeout=60,
                  what="responses after the restart")

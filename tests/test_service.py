@@ -19,11 +19,10 @@ from cli.main import main
 from service import keys
 from service.camera import Source, SourceError, open_source, publish_frames
 from service.core import WorkerCore
-from service.demo import free_port
 from service.messages import Frame, decode_response, encode
 from service.worker import Worker
 
-from netutil import TIMEOUT, wait_for
+from netutil import TIMEOUT, Fleet, wait_for
 
 
 
@@ -261,16 +260,9 @@ def test_demo_prints_warnings_and_exits_0(capsys):
 # ---------------------------------------------------------------- separate processes
 
 def test_router_worker_camera_alerts_as_separate_processes(procs, tmp_path):
-    config = tmp_path / "zenoh.json5"
-    config.write_text("{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    common = ["--config", str(config), "--connect", endpoint, "--mode", "client"]
-    router = procs("router", "--listen", endpoint, "--config", str(config))
-    router.wait_line("listening on")
-    worker = procs("worker", "--id", "w1", *common)
-    alerts = procs("alerts", "--json", *common)
-    worker.wait_line("ready")
-    alerts.wait_line("listening on")
+    fleet = Fleet(procs, tmp_path,
+                  "{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
+    router, worker, alerts, common = fleet.router, fleet.worker, fleet.alerts, fleet.common
     loom = procs("camera", "--robot", "loom", "--source", "synthetic:looming", "--fps", "40",
                  "--wait", str(TIMEOUT), *common)
     bar = procs("camera", "--robot", "bar", "--source", "synthetic:translating_bar",
