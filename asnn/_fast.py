@@ -25,9 +25,12 @@ whose results it reproduces. What changes is only the order of the arithmetic:
   ``g^0 + i g^{pi/2} = e(y) e(x) exp(i a (x cos theta + y sin theta))``, with ``e`` the 1-D
   Gaussian envelope and ``a = 2 pi / lambda``: the product of a row kernel
   ``e(x) exp(i a cos(theta) x)`` and a column kernel ``e(y) exp(i a sin(theta) y)``. For the
-  four orientations k pi / 4, five real row passes and eight real column passes replace 8
+  four orientations k pi / 4, five real column passes and eight real row passes replace 8
   two-dimensional 5x5 correlations per image (theta = pi/4 and 3 pi/4 share their passes:
-  their row kernels are complex conjugates). ``E = A1 B2 - A2 B1 = Im(conj(Z_slow) Z_fast)``.
+  their column kernels are equal, their row kernels complex conjugates). The column passes
+  come first, on the read-out rows that the cascade has just produced, so that the passes of
+  one output row only touch a few rows held in the L1 cache.
+  ``E = A1 B2 - A2 B1 = Im(conj(Z_slow) Z_fast)``.
 * Symmetry. The 5-tap kernels are symmetric or antisymmetric, and g_CS is radially symmetric
   (six distinct weights): pairs are added before they are multiplied.
 * Differences. The temporal read-outs are differences of nearly equal integrator stages. The
@@ -139,8 +142,8 @@ class Workspace:
         self.col = np.empty((4, pw), dtype)  # vertical g_I passes of B+ and B- (two Gaussians)
         self.x0 = np.empty((2, w), dtype)  # B+^0, B-^0 of one row
         self.ro = np.empty((4, DEPTH, pw), dtype)  # read-outs: fast_on, slow_on, fast_off, slow_off
-        self.gr = np.empty((4, 5, DEPTH, w), dtype)  # their five Gabor row passes
-        self.acc = np.empty((2, 8, w), dtype)  # column passes of one channel's slow and fast
+        self.gabor = np.empty((2, 5, pw), dtype)  # five Gabor column passes of slow and fast
+        self.acc = np.empty((2, 8, w), dtype)  # Z^theta parts of one channel's slow and fast
         self.csl = np.empty((2, pw), dtype)  # vertical pairs of the centre-surround filter
         self.gring = np.empty((3, w + 2), dtype)  # G before grouping
         self.gline = np.empty(w + 2, dtype)
@@ -261,24 +264,6 @@ def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, 
     _pad(slow, w, 2)
 
 
-@kernel(inline="always", **_jit)
-def _gabor_row(line, k, out, slot):
-    """The five Gabor row passes (sym, sym, anti, sym, anti) of one padded line."""
-    w = out.shape[2]
-    for f in range(5):
-        kf = k[f]
-        o = out[f, slot]
-        if f == 2 or f == 4:
-            c1, c2 = kf[3], kf[4]
-            for x in range(w):
-                o[x] = c1 * (line[x + 3] - line[x + 1]) + c2 * (line[x + 4] - line[x])
-        else:
-            c0, c1, c2 = kf[2], kf[3], kf[4]
-            for x in range(w):
-                o[x] = c0 * line[x + 2] + c1 * (line[x + 3] + line[x + 1]) \
-                    + c2 * (line[x + 4] + line[x])
-
-
 # --------------------------------------------------------------------------- stage 2: row y - 2
 
 
@@ -299,23 +284,48 @@ def _col_anti(src, sm1, sp1, sm2, sp2, k, out):
 
 
 @kernel(inline="always", **_jit)
-def _gabor_columns(gr, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, acc, r0, r1, r2, r3):
-    """One channel's ``weight E^theta`` at one row, set (``first``) or added into R^theta."""
-    w = r0.shape[0]
+def _row_sym(line, k, out):
+    c0, c1, c2 = k[2], k[3], k[4]
+    for x in range(out.shape[0]):
+        out[x] = c0 * line[x + 2] + c1 * (line[x + 3] + line[x + 1]) + c2 * (line[x + 4] + line[x])
+
+
+@kernel(inline="always", **_jit)
+def _row_anti(line, k, out):
+    c1, c2 = k[3], k[4]
+    for x in range(out.shape[0]):
+        out[x] = c1 * (line[x + 3] - line[x + 1]) + c2 * (line[x + 4] - line[x])
+
+
+@kernel(inline="always", **_jit)
+def _gabor_channel(ro, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, gabor, acc,
+                   r0, r1, r2, r3):
+    """One channel's ``weight E^theta`` at one row, set (``first``) or added into R^theta.
+
+    Column passes first, over the padded read-out rows of the ring (so their output keeps the
+    padding), then the row passes: every buffer involved is a few rows long and stays in the L1
+    cache.
+    """
     for im in range(2):
-        src = gr[slow] if im == 0 else gr[fast]
-        a = acc[im]
-        _col_sym(src[1], s0, sm1, sp1, sm2, sp2, k[0], a[0])   # Re Z^0
-        _col_sym(src[2], s0, sm1, sp1, sm2, sp2, k[0], a[1])   # Im Z^0
-        _col_sym(src[0], s0, sm1, sp1, sm2, sp2, k[1], a[2])   # Re Z^{pi/2}
-        _col_anti(src[0], sm1, sp1, sm2, sp2, k[2], a[3])      # Im Z^{pi/2}
-        _col_sym(src[3], s0, sm1, sp1, sm2, sp2, k[3], a[4])   # cb Cb
-        _col_anti(src[3], sm1, sp1, sm2, sp2, k[4], a[5])      # cb Sb
-        _col_anti(src[4], sm1, sp1, sm2, sp2, k[4], a[6])      # sb Sb
-        _col_sym(src[4], s0, sm1, sp1, sm2, sp2, k[3], a[7])   # sb Cb
+        src = ro[slow] if im == 0 else ro[fast]
+        c, a = gabor[im], acc[im]
+        _col_sym(src, s0, sm1, sp1, sm2, sp2, k[0], c[0])   # e
+        _col_sym(src, s0, sm1, sp1, sm2, sp2, k[1], c[1])   # Ca
+        _col_anti(src, sm1, sp1, sm2, sp2, k[2], c[2])      # Sa
+        _col_sym(src, s0, sm1, sp1, sm2, sp2, k[3], c[3])   # Cb
+        _col_anti(src, sm1, sp1, sm2, sp2, k[4], c[4])      # Sb
+        _row_sym(c[0], k[1], a[0])    # Re Z^0 = e (x) ca
+        _row_anti(c[0], k[2], a[1])   # Im Z^0 = e (x) sa
+        _row_sym(c[1], k[0], a[2])    # Re Z^{pi/2} = Ca (x) e
+        _row_sym(c[2], k[0], a[3])    # Im Z^{pi/2} = Sa (x) e
+        _row_sym(c[3], k[3], a[4])    # Cb (x) cb
+        _row_sym(c[4], k[3], a[5])    # Sb (x) cb
+        _row_anti(c[4], k[4], a[6])   # Sb (x) sb
+        _row_anti(c[3], k[4], a[7])   # Cb (x) sb
+    w = r0.shape[0]
     s, f = acc[0], acc[1]
     # E = Re Z_slow Im Z_fast - Re Z_fast Im Z_slow, with (a[4], a[5], a[6], a[7]) =
-    # (cb Cb, cb Sb, sb Sb, sb Cb): Z^{pi/4} = (cb Cb - sb Sb) + i (cb Sb + sb Cb) and
+    # (Cb cb, Sb cb, Sb sb, Cb sb): Z^{pi/4} = (cb Cb - sb Sb) + i (cb Sb + sb Cb) and
     # Z^{3 pi/4} = (cb Cb + sb Sb) + i (cb Sb - sb Cb)
     for q in range(2):
         s0_, s1_, f0_, f1_ = s[2 * q], s[2 * q + 1], f[2 * q], f[2 * q + 1]
@@ -392,14 +402,15 @@ def _group_row(a, b, c, ninth, line, out):
 
 @kernel(**_jit)
 def _front(p, env, sc, stages_on, stages_off, a, b, e_x, j, gain, n_fast, n_slow, swap,
-           gk, vw, kc, aw, terms, grouping, zero, ninth, col, x0, ro, gr, acc, csl, gring, gline, colsum,
+           gk, vw, kc, aw, terms, grouping, zero, ninth, col, x0, ro, gabor, acc, csl, gring, gline,
+           colsum,
            r, v, g):
     h, w = p.shape
     for k in range(4):
         for x in range(w):
             colsum[k, x] = 0.0
     for t in range(h + 3):
-        if t < h:  # stage 1: row t through g_I, the cascade and the Gabor row passes
+        if t < h:  # stage 1: row t through g_I and the cascade
             slot = t % DEPTH
             if swap:
                 _dog_row(p, t, env, sc, zero, col, x0[1], x0[0])
@@ -409,16 +420,15 @@ def _front(p, env, sc, stages_on, stages_off, a, b, e_x, j, gain, n_fast, n_slow
                          ro[0, slot], ro[1, slot])
             _cascade_row(stages_off, t, x0[1], a, b, e_x, j, gain, n_fast, n_slow, csl[0],
                          ro[2, slot], ro[3, slot])
-            for img in range(4):
-                _gabor_row(ro[img, slot], gk, gr[img], slot)
         y = t - RADIUS
-        if 0 <= y < h:  # stage 2: row t - 2 through the 5x5 column passes
+        if 0 <= y < h:  # stage 2: row t - 2 through the 5x5 filters
             s0 = y % DEPTH
             sm1, sp1 = _reflect(y - 1, h) % DEPTH, _reflect(y + 1, h) % DEPTH
             sm2, sp2 = _reflect(y - 2, h) % DEPTH, _reflect(y + 2, h) % DEPTH
             r0, r1, r2, r3 = r[0, y], r[1, y], r[2, y], r[3, y]
-            _gabor_columns(gr, 1, 0, s0, sm1, sp1, sm2, sp2, gk, vw[0], True, acc, r0, r1, r2, r3)
-            _gabor_columns(gr, 3, 2, s0, sm1, sp1, sm2, sp2, gk, vw[1], False, acc,
+            _gabor_channel(ro, 1, 0, s0, sm1, sp1, sm2, sp2, gk, vw[0], True, gabor, acc,
+                           r0, r1, r2, r3)
+            _gabor_channel(ro, 3, 2, s0, sm1, sp1, sm2, sp2, gk, vw[1], False, gabor, acc,
                            r0, r1, r2, r3)
             vv = v[y]
             for x in range(w):
@@ -456,7 +466,7 @@ def front(p, ws, env, scales, stages_on, stages_off, rate, c, decay, leaky, gain
     _front(p, env, scales, stages_on, stages_off, t(1 - rate * decay), t(rate * c),
            t(rate * decay - rate * c), 0 if leaky else 1, t(gain), int(n_fast), int(n_slow),
            bool(swap), gk, v_weights, kc, a_weights, _TERMS, bool(grouping), t(0), t(1 / 9),
-           ws.col, ws.x0, ws.ro, ws.gr, ws.acc, ws.csl, ws.gring, ws.gline, ws.colsum, ws.r, ws.v,
+           ws.col, ws.x0, ws.ro, ws.gabor, ws.acc, ws.csl, ws.gring, ws.gline, ws.colsum, ws.r, ws.v,
            ws.g)
     return ws.r, ws.v, ws.g, ws.colsum.sum(axis=1)
 
