@@ -39,7 +39,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
 
 def cmd_worker(args: argparse.Namespace) -> int:
     from service.core import WorkerCore
-    from service.worker import Worker, WorkerIdTaken
+    from service.worker import Worker, WorkerIdTaken, tune_process
 
     setup_logging(args)
     try:
@@ -50,6 +50,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(str(exc))
     stop = stop_on_signals()
+    tune_process()
     with session:
         worker = Worker(session, core, threads=args.threads)
         try:
@@ -164,6 +165,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def register(subparsers) -> None:
     from asnn.detectors import MODELS
     from asnn.stimuli import SCENE_NAMES
+    from service.core import default_threads
     from service.messages import FORMATS
 
     p = subparsers.add_parser("camera", help="publish a camera's frames",
@@ -202,9 +204,9 @@ def register(subparsers) -> None:
     p.add_argument("--max-robots", type=int, default=256, metavar="N",
                    help="robots tracked at once; frames of more are rejected "
                         "(default: %(default)s)")
-    p.add_argument("--threads", type=count, default=1, metavar="N",
-                   help="processing threads (default: %(default)s; one robot is never processed "
-                        "by two at once)")
+    p.add_argument("--threads", type=count, default=default_threads(), metavar="N",
+                   help="processing threads (default: the cores available, here %(default)s; "
+                        "one robot is never processed by two at once)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_worker)
 

@@ -58,7 +58,8 @@ from .logutil import RateLimitedLog
 from .messages import (MAX_PAYLOAD, MAX_SIDE, Frame, MessageError, Response, decode_frame,
                        response_from)
 
-__all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "WorkerCore", "default_worker_id"]
+__all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "WorkerCore", "default_threads",
+           "default_worker_id"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -69,6 +70,14 @@ def default_worker_id() -> str:
     """``<host>-<pid>``, restricted to the robot-id alphabet."""
     host = re.sub(r"[^A-Za-z0-9_-]", "-", socket.gethostname())[:40] or "worker"
     return f"{host}-{os.getpid()}"
+
+
+def default_threads() -> int:
+    """A worker's processing threads by default: the cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
 
 
 @dataclass

@@ -18,6 +18,7 @@ lease expire. Each worker answers queries on ``<prefix>/@worker/<id>/status`` wi
 from __future__ import annotations
 
 import logging
+import sys
 import threading
 import time
 
@@ -31,8 +32,8 @@ from .core import WorkerCore
 from .messages import Response, encode
 from .ownership import Membership
 
-__all__ = ["RESPONSE_QOS", "WARNING_QOS", "Worker", "WorkerIdTaken", "live_workers",
-           "query_status"]
+__all__ = ["RESPONSE_QOS", "SWITCH_INTERVAL", "WARNING_QOS", "Worker", "WorkerIdTaken",
+           "live_workers", "query_status", "tune_process"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -45,6 +46,24 @@ WARNING_QOS = dict(congestion_control=zenoh.CongestionControl.BLOCK,
 # most recent one (all warning publishers of a worker share its session). The sporadic heartbeat
 # also lets subscribers recover a warning they missed.
 MISS_DETECTION = MissDetectionConfig(heartbeat=None, sporadic_heartbeat=1.0)
+# The processing threads give the GIL up inside every model kernel and need it back after each
+# one. With the interpreter's default 5 ms switch interval, a thread running Python (another
+# processing thread, a Zenoh callback decoding a frame) can keep it for up to 5 ms meanwhile:
+# that wait was most of the worker's p99 latency at 16 cameras (docs/operations.md).
+SWITCH_INTERVAL = 0.0005
+
+
+def tune_process() -> None:
+    """Process-wide settings for a worker process (the ``asnn worker`` command calls it).
+
+    Parallelism comes from the processing threads, one robot each: OpenCV's own thread pool
+    (for the attention blur) would only compete with them, so it is set to one thread; and the
+    interpreter's switch interval is shortened to :data:`SWITCH_INTERVAL`.
+    """
+    import cv2
+
+    cv2.setNumThreads(1)
+    sys.setswitchinterval(SWITCH_INTERVAL)
 
 
 class WorkerIdTaken(RuntimeError):
@@ -107,9 +126,9 @@ class Worker:
     on_response : callable, optional
         Called with every published Response (for the demo and tests).
     threads : int
-        Processing threads. The model's kernels release the GIL, so on a machine with spare
-        cores a second thread shortens the queue behind a busy one; a robot is still processed
-        by one thread at a time (:class:`WorkerCore`).
+        Processing threads. The model's kernels release the GIL, so each core can run one
+        (:func:`service.core.default_threads`, with :func:`tune_process`); a robot is still processed by one
+        thread at a time (:class:`WorkerCore`).
     """
 
     def __init__(self, session: zenoh.Session, core: WorkerCore, *, on_response=None,

@@ -5,6 +5,7 @@ stopped at the end of its test. Waits are generous timeouts on messages, never t
 """
 
 import json
+import os
 import signal
 import threading
 import time
@@ -290,9 +291,27 @@ def test_worker_threads_option():
     from cli.main import build_parser
 
     assert build_parser().parse_args(["worker", "--threads", "2"]).threads == 2
-    assert build_parser().parse_args(["worker"]).threads == 1
+    # by default one per core this process may use
+    assert build_parser().parse_args(["worker"]).threads == len(os.sched_getaffinity(0))
     with pytest.raises(SystemExit):
         build_parser().parse_args(["worker", "--threads", "0"])
+
+
+def test_tune_process_shortens_the_switch_interval():
+    import sys
+
+    import cv2
+
+    from service.worker import SWITCH_INTERVAL, tune_process
+
+    before = sys.getswitchinterval(), cv2.getNumThreads()
+    try:
+        tune_process()
+        assert sys.getswitchinterval() == pytest.approx(SWITCH_INTERVAL)
+        assert cv2.getNumThreads() == 1
+    finally:
+        sys.setswitchinterval(before[0])
+        cv2.setNumThreads(before[1])
 
 
 def test_demo_on_a_fresh_install_warns(tmp_path):
