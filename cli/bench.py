@@ -34,8 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="duration of each --service step")
     p.add_argument("--cameras", type=count, action="append", metavar="N",
                    help="camera counts for --service (repeatable; default 1, 2, 4, 8, 12, 16, 20, 24)")
-    p.add_argument("--worker-threads", type=count, default=1, metavar="N",
-                   help="processing threads of the --service worker (asnn worker --threads)")
+    p.add_argument("--worker-threads", type=count, default=None, metavar="N",
+                   help="processing threads of the --service worker (asnn worker --threads; "
+                        "default: the worker's default, the cores available)")
     p.set_defaults(func=run)
 
 

@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from asnn.bench import THREAD_VARIABLES
 from cli.main import main
 
@@ -28,11 +30,43 @@ def test_service_report_format():
 
     step = {"cameras": 2, "frames": 200, "responses": 199, "answered": 0.995,
             "latency_p50_ms": 3.0, "latency_p99_ms": 6.0, "added_p50_ms": 1.0,
-            "added_p99_ms": 4.0, "keeps_up": True}
+            "added_p99_ms": 4.0, "start_added_p99_ms": 12.5, "keeps_up": True}
     report = {"size": "320x240", "fps": 25.0, "seconds": 4.0, "preset": "reference32",
               "worker": "separate process", "transport": "tcp/127.0.0.1",
               "model_ms": {"median_ms": 2.0, "p99_ms": 3.0}, "steps": [step],
               "max_cameras": 2, "added_p99_ms_at_max": 4.0}
     text = format_report(report)
-    assert "| 2 | 200 | 99.5 % | 3.0 | 6.0 | 4.0 | yes |" in text
-    assert "keeps up: 2 (p99 added latency 4.0 ms)" in text
+    assert "| 2 | 200 | 99.5 % | 3.0 | 6.0 | 4.0 | 12.5 | yes |" in text
+    assert "keeps up: 2 (steady-state p99 added latency 4.0 ms)" in text
+    assert "first 1 s" in text
+
+
+def test_service_summary_separates_the_start_from_the_steady_state():
+    from service.bench import START_S, summarise
+
+    fps, t0 = 25.0, 1000.0
+    records = []
+    for k in range(100):  # 4 s of one camera: slow answers in the first second only
+        stamp = t0 + k / fps
+        latency = 0.030 if stamp < t0 + START_S else 0.004
+        records.append(("r", k, stamp + latency, stamp, 2.0 if k % 2 else None))
+    out = summarise(records, sent=100, fps=fps, model_ms=1.0)
+    assert out["answered"] == 1.0 and out["keeps_up"]
+    # steady state: 4 ms end to end, minus 2 ms (reported) or 1 ms (the fallback)
+    assert out["latency_p99_ms"] == pytest.approx(4.0)
+    assert round(out["added_p50_ms"], 6) in (2.0, 3.0)
+    assert out["added_p99_ms"] == pytest.approx(3.0)
+    assert out["start_added_p99_ms"] == pytest.approx(29.0)
+
+
+def test_service_summary_flags_a_growing_backlog_and_missing_answers():
+    from service.bench import summarise
+
+    fps, t0 = 25.0, 1000.0
+    growing = [("r", k, t0 + k / fps + 0.002 + k * 0.004, t0 + k / fps, 1.0) for k in range(100)]
+    assert not summarise(growing, sent=100, fps=fps, model_ms=1.0)["keeps_up"]
+    steady = [("r", k, t0 + k / fps + 0.002, t0 + k / fps, 1.0) for k in range(90)]
+    out = summarise(steady, sent=100, fps=fps, model_ms=1.0)
+    assert out["answered"] == 0.9 and not out["keeps_up"]
+    assert summarise([], sent=10, fps=fps, model_ms=1.0) == {
+        "frames": 10, "responses": 0, "answered": 0.0, "keeps_up": False}
