@@ -34,6 +34,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="duration of each --service step")
     p.add_argument("--cameras", type=count, action="append", metavar="N",
                    help="camera counts for --service (repeatable; default 1, 2, 4, 8, 12, 16, 20, 24)")
+    p.add_argument("--phases", choices=("spread", "random"), default="spread",
+                   help="when each --service camera publishes within a frame period: evenly "
+                        "spread, or at random (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of --phases random (default: %(default)s)")
     p.add_argument("--worker-threads", type=count, default=None, metavar="N",
                    help="processing threads of the --service worker (asnn worker --threads; "
                         "default: the worker's default, the cores available)")
@@ -55,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
                                        fps=args.fps, seconds=args.seconds, counts=args.cameras,
                                        preset=args.preset[0] if args.preset else None,
                                        progress=_progress(args),
-                                       worker_threads=args.worker_threads)
+                                       worker_threads=args.worker_threads,
+                                       phases=args.phases, seed=args.seed)
         else:
             report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES), frames=args.frames,
                                presets=args.preset,

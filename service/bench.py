@@ -3,13 +3,26 @@
 A worker runs as its own OS process (``asnn worker``, as deployed, with its default processing
 threads unless ``worker_threads`` says otherwise), listening on a free TCP port on 127.0.0.1
 with multicast scouting and gossip off. This process opens a peer session to it, warms it up
-with one camera for 1.5 s (not reported) and, for N = 1, 2, 4, ... cameras, runs N
-:func:`service.camera.publish_frames` threads (a generated scene, gray8, ``fps`` each, no
-previews) for ``seconds`` while a subscriber collects every response. Each step uses new robot
+with one camera for 1.5 s (not reported) and, for N = 1, 2, 4, ... cameras, publishes N camera
+streams for ``seconds`` while a subscriber collects every response. Each step uses new robot
 names, so every camera starts a fresh stream.
 
-Per step:
+The cameras
+-----------
+Deployed cameras run on the robots, not on the worker's machine; here they share its two
+cores, so they must cost as little as possible. One thread plays all N: each camera has its
+own publisher, ``seq`` and stamps, and publishes gray8 frames at ``fps`` on its own schedule.
+Each loops over a generated scene played forwards then backwards (a loop without a jump, whose
+first frame would be an artificial whole-frame change), from its own point of the loop, as
+independent cameras do not all see an approach at the same moment.
 
+``phases`` sets when, within a frame period, each camera publishes: ``"spread"`` evenly, the
+arrangement that loads the worker most evenly; ``"random"`` uniformly at random (``seed``), as
+free-running cameras drift into any arrangement over time. Random phases bunch some frames
+together, and a frame then waits for the steps of the ones ahead of it.
+
+Per step
+--------
 * answered: responses received / frames published;
 * end-to-end latency: response received minus the frame's ``stamp`` (wall clock at publication;
   same machine, same clock);
@@ -22,9 +35,9 @@ Per step:
   period, and each new stream's first steps cost the worker several times a normal one (the
   model state is allocated and first touched); ``start_added_p99_ms`` reports that second
   separately;
-* the cameras and the collector share this process's GIL, so this process shortens the
-  interpreter's switch interval as the worker does (:data:`service.worker.SWITCH_INTERVAL`):
-  a response must not wait 5 ms for a camera thread to let go of the GIL before it is timed;
+* this process shortens the interpreter's switch interval as the worker does
+  (:data:`service.worker.SWITCH_INTERVAL`), so that a response is not timed late because the
+  camera thread held the GIL;
 * keeps up: at least 95 % of the frames answered and no growing backlog (the median end-to-end
   latency of the step's last quarter is within 2 frame periods of its first quarter's).
 
@@ -45,7 +58,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["DEFAULT_COUNTS", "run", "format_report", "model_time", "summarise"]
+__all__ = ["DEFAULT_COUNTS", "camera_phases", "format_report", "model_time",
+           "publish_cameras", "run", "summarise"]
 
 DEFAULT_COUNTS = (1, 2, 4, 8, 12, 16, 20, 24)
 SCENE = "looming_over_stripes"
@@ -176,33 +190,70 @@ def summarise(records, sent: int, fps: float, model_ms: float) -> dict:
     return out
 
 
+def publish_cameras(session, robots: list[str], frames: np.ndarray, fps: float,
+                    seconds: float, phases: np.ndarray, prefix: str,
+                    wait: float = 2.0) -> dict[str, int]:
+    """Play ``len(robots)`` cameras from this thread for ``seconds``; frames published per robot.
+
+    Camera i publishes ``frames`` in a loop from frame ``i * len(frames) // n``, at ``fps``, its
+    first frame ``phases[i]`` frame periods (0 <= phase < 1) after the start. A camera that
+    falls more than a period behind (this thread was held up) skips ahead instead of bursting.
+    """
+    import heapq
+
+    from . import keys
+    from .camera import FRAME_QOS
+    from .messages import Frame, encode
+
+    n, period = len(robots), 1.0 / fps
+    publishers = [session.declare_publisher(keys.frame_key(r, prefix), **FRAME_QOS)
+                  for r in robots]
+    try:
+        deadline = time.monotonic() + wait
+        while not all(p.matching_status for p in publishers) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        sent = [0] * n
+        start = time.monotonic() + period
+        end = start + seconds
+        due = [(start + phases[i] * period, i) for i in range(n)]
+        heapq.heapify(due)
+        while due[0][0] < end:
+            at, i = heapq.heappop(due)
+            now = time.monotonic()
+            if at > now:
+                time.sleep(at - now)
+            elif now - at > period:
+                at = now
+            image = frames[(i * len(frames) // n + sent[i]) % len(frames)]
+            publishers[i].put(encode(Frame.from_image(image, seq=sent[i], stamp=time.time())))
+            sent[i] += 1
+            heapq.heappush(due, (at + period, i))
+        return dict(zip(robots, sent))
+    finally:
+        for p in publishers:
+            p.undeclare()
+
+
+def camera_phases(n: int, phases: str, seed: int = 0) -> np.ndarray:
+    """Start phases of n cameras, in frame periods: ``"spread"`` (i / n) or ``"random"``."""
+    if phases == "spread":
+        return np.arange(n) / n
+    if phases == "random":
+        return np.random.default_rng(seed).uniform(0.0, 1.0, n)
+    raise ValueError(f"phases must be 'spread' or 'random', got {phases!r}")
+
+
 def _step(session, collector, n: int, step: int, frames, fps: float, seconds: float,
-          model_ms: float, prefix: str) -> dict:
-    from .camera import Source, publish_frames
-
-    source = Source(f"synthetic:{SCENE}", fps, False, lambda: iter(frames))
-    stop = threading.Event()
-    published: dict[str, int] = {}
-
-    def camera(robot: str):
-        published[robot] = publish_frames(session, robot, source, prefix=prefix, fps=fps,
-                                          loop=True, stop=stop, preview_hz=0, wait=2.0)
-
+          model_ms: float, prefix: str, phases: str, seed: int) -> dict:
     robots = [f"bench{step + 1}-{i}" for i in range(n)]
     collector.take()
-    threads = [threading.Thread(target=camera, args=(r,), daemon=True) for r in robots]
-    start = time.time()
-    for i, t in enumerate(threads):
-        t.start()
-        time.sleep(1.0 / fps / n)  # cameras out of phase, as independent ones are
-    time.sleep(seconds)
-    stop.set()
-    for t in threads:
-        t.join()
+    started = time.time()
+    published = publish_cameras(session, robots, frames, fps, seconds,
+                                camera_phases(n, phases, seed), prefix)
     time.sleep(0.5 + 2.0 / fps)  # the last responses
     records = [r for r in collector.take() if r[0] in published]
     report = {"cameras": n, **summarise(records, sum(published.values()), fps, model_ms)}
-    report["wall_s"] = time.time() - start
+    report["wall_s"] = time.time() - started
     return report
 
 
@@ -217,7 +268,8 @@ def _switch_interval(seconds: float):
 
 
 def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
-        preset: str | None = None, progress=None, worker_threads: int | None = None) -> dict:
+        preset: str | None = None, progress=None, worker_threads: int | None = None,
+        phases: str = "spread", seed: int = 0) -> dict:
     """Ramp the number of cameras; returns the report as a dict (see the module notes)."""
     import zenoh
 
@@ -232,8 +284,10 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
     from .worker import SWITCH_INTERVAL
 
     counts = sorted(set(counts or DEFAULT_COUNTS))
+    camera_phases(1, phases)  # fail now on a bad value
     w, h = size
-    frames = make_scene(SCENE, size=(w, h), frames=50, start=2, stop=48).frames
+    scene = make_scene(SCENE, size=(w, h), frames=50, start=2, stop=48).frames
+    frames = np.concatenate([scene, scene[-2:0:-1]])  # forwards then backwards: no jump
     model = model_time(size, preset, frames)
     port = free_port()
     hub, spoke = loopback_options(port)
@@ -251,12 +305,12 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
                     # warm-up, not reported: the worker loads its compiled kernels, the
                     # sessions match
                     _step(session, collector, 1, -1, frames, fps, 1.5, model["median_ms"],
-                          DEFAULT_PREFIX)
+                          DEFAULT_PREFIX, phases, seed)
                     for step, n in enumerate(counts):
                         if progress:
                             progress(f"{n} cameras")
                         result = _step(session, collector, n, step, frames, fps, seconds,
-                                       model["median_ms"], DEFAULT_PREFIX)
+                                       model["median_ms"], DEFAULT_PREFIX, phases, seed)
                         steps.append(result)
                         if not result["keeps_up"]:
                             break
@@ -274,6 +328,8 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
             "worker": f"separate process, {worker_threads or default_threads()} processing "
                       "thread(s)",
             "steady_state_after_s": START_S,
+            "cameras": f"one thread, phases {phases}" + (f" (seed {seed})"
+                                                          if phases == "random" else ""),
             "transport": "tcp/127.0.0.1, peer sessions, no scouting, no gossip",
             "steps": steps, "max_cameras": best,
             "added_p99_ms_at_max": best_step.get("added_p99_ms") if best_step else None}
@@ -287,7 +343,7 @@ def format_report(report: dict) -> str:
         lines.append(f"# asnn bench --service: {m['cpu']}, {m['cores']} logical cores")
     lines += [f"# {report['size']} at {report['fps']:g} fps per camera, {report['seconds']:g} s "
               f"per step, preset {report['preset']}, worker in a {report['worker']}; "
-              f"{report['transport']}",
+              f"cameras: {report.get('cameras', 'one thread')}; {report['transport']}",
               f"# model time per frame (one thread, this process): median "
               f"{report['model_ms']['median_ms']:.2f} ms, p99 {report['model_ms']['p99_ms']:.2f} ms",
               f"# latencies of the steady state: frames published after each step's first "

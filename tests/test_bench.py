@@ -6,6 +6,7 @@ import pytest
 
 from asnn.bench import THREAD_VARIABLES
 from cli.main import main
+from netutil import wait_for
 
 
 def test_bench_json_report_shape(capsys, monkeypatch):
@@ -70,3 +71,45 @@ def test_service_summary_flags_a_growing_backlog_and_missing_answers():
     assert out["answered"] == 0.9 and not out["keeps_up"]
     assert summarise([], sent=10, fps=fps, model_ms=1.0) == {
         "frames": 10, "responses": 0, "answered": 0.0, "keeps_up": False}
+
+
+def test_camera_phases():
+    from service.bench import camera_phases
+
+    assert camera_phases(4, "spread").tolist() == [0.0, 0.25, 0.5, 0.75]
+    a, b = camera_phases(16, "random", seed=3), camera_phases(16, "random", seed=3)
+    assert (a == b).all() and ((a >= 0) & (a < 1)).all() and len(set(a)) == 16
+    with pytest.raises(ValueError, match="spread"):
+        camera_phases(2, "bunched")
+
+
+def test_cameras_play_their_own_streams_from_their_own_point_of_the_loop(zenoh_net):
+    import threading
+
+    import numpy as np
+
+    from service import keys
+    from service.bench import publish_cameras
+    from service.messages import decode_frame
+
+    frames = np.stack([np.full((24, 32), v, np.uint8) for v in (10, 20, 30, 40)])
+    got, lock = {}, threading.Lock()
+
+    def on_frame(sample):
+        frame = decode_frame(sample.payload.to_bytes())
+        robot = str(sample.key_expr).split("/")[1]
+        with lock:
+            got.setdefault(robot, []).append((frame.seq, int(frame.image()[0, 0])))
+
+    sub = zenoh_net.hub.declare_subscriber(keys.frames(), on_frame)
+    try:
+        sent = publish_cameras(zenoh_net.spoke(), ["c0", "c1"], frames, fps=50.0, seconds=0.3,
+                               phases=np.array([0.0, 0.5]), prefix=keys.DEFAULT_PREFIX)
+        wait_for(lambda: all(len(got.get(r, [])) == sent[r] for r in sent),
+                 what="every published frame")
+    finally:
+        sub.undeclare()
+    for robot, start in (("c0", 0), ("c1", 2)):  # camera i starts at frame i * 4 // 2
+        seqs, values = zip(*sorted(got[robot]))
+        assert sent[robot] >= 2 and list(seqs) == list(range(sent[robot]))
+        assert list(values) == [frames[(start + k) % 4, 0, 0] for k in range(sent[robot])]
