@@ -466,8 +466,8 @@ def front(p, ws, env, scales, stages_on, stages_off, rate, c, decay, leaky, gain
     _front(p, env, scales, stages_on, stages_off, t(1 - rate * decay), t(rate * c),
            t(rate * decay - rate * c), 0 if leaky else 1, t(gain), int(n_fast), int(n_slow),
            bool(swap), gk, v_weights, kc, a_weights, _TERMS, bool(grouping), t(0), t(1 / 9),
-           ws.col, ws.x0, ws.ro, ws.gabor, ws.acc, ws.csl, ws.gring, ws.gline, ws.colsum, ws.r, ws.v,
-           ws.g)
+           ws.col, ws.x0, ws.ro, ws.gabor, ws.acc, ws.csl, ws.gring, ws.gline, ws.colsum, ws.r,
+           ws.v, ws.g)
     return ws.r, ws.v, ws.g, ws.colsum.sum(axis=1)
 
 

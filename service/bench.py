@@ -280,7 +280,6 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
     from .core import default_threads
     from .demo import free_port, loopback_options
     from .keys import DEFAULT_PREFIX
-
     from .worker import SWITCH_INTERVAL
 
     counts = sorted(set(counts or DEFAULT_COUNTS))

@@ -33,8 +33,8 @@ from .core import WorkerCore
 from .messages import Response, encode
 from .ownership import Membership
 
-__all__ = ["COMPUTE_NICENESS", "RESPONSE_QOS", "SWITCH_INTERVAL", "WARNING_QOS", "Worker", "WorkerIdTaken",
-           "live_workers", "query_status", "tune_process"]
+__all__ = ["COMPUTE_NICENESS", "RESPONSE_QOS", "SWITCH_INTERVAL", "WARNING_QOS", "Worker",
+           "WorkerIdTaken", "live_workers", "query_status", "tune_process"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -49,8 +49,9 @@ WARNING_QOS = dict(congestion_control=zenoh.CongestionControl.BLOCK,
 MISS_DETECTION = MissDetectionConfig(heartbeat=None, sporadic_heartbeat=1.0)
 # The processing threads give the GIL up inside every model kernel and need it back after each
 # one. With the interpreter's default 5 ms switch interval, a thread running Python (another
-# processing thread, a Zenoh callback decoding a frame) can keep it for up to 5 ms meanwhile:
-# that wait was most of the worker's p99 latency at 16 cameras (docs/operations.md).
+# processing thread, a Zenoh callback decoding a frame) can keep it for up to 5 ms meanwhile.
+# With this interval and two threads, the worker's p99 at 16 cameras went from 18-20 ms (one
+# thread) to 4-8 ms (docs/operations.md).
 SWITCH_INTERVAL = 0.0005
 # The processing threads run at this niceness above the process's (Linux, per thread), so that
 # the threads that move messages (Zenoh's, the frame callback, liveliness and status) take a
@@ -146,8 +147,8 @@ class Worker:
         Called with every published Response (for the demo and tests).
     threads : int
         Processing threads. The model's kernels release the GIL, so each core can run one
-        (:func:`service.core.default_threads`, with :func:`tune_process`); a robot is still processed by one
-        thread at a time (:class:`WorkerCore`).
+        (:func:`service.core.default_threads`, with :func:`tune_process`); a robot is still
+        processed by one thread at a time (:class:`WorkerCore`).
     """
 
     def __init__(self, session: zenoh.Session, core: WorkerCore, *, on_response=None,
