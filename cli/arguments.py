@@ -58,12 +58,21 @@ def non_negative(value: str) -> float:
     return number
 
 
-def count(value: str) -> int:
-    """A whole number of at least 1."""
+def _whole(value: str, at_least: int) -> int:
     try:
         number = int(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {value!r}") from None
-    if number < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1: {value!r}")
+    if number < at_least:
+        raise argparse.ArgumentTypeError(f"must be at least {at_least}: {value!r}")
     return number
+
+
+def count(value: str) -> int:
+    """A whole number of at least 1."""
+    return _whole(value, 1)
+
+
+def seed(value: str) -> int:
+    """A random seed: a whole number of 0 or more."""
+    return _whole(value, 0)

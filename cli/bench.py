@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from cli.arguments import count, frame_size, positive
+from cli.arguments import count, frame_size, positive, seed
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--phases", choices=("spread", "random"), default="spread",
                    help="when each --service camera publishes within a frame period: evenly "
                         "spread, or at random (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=seed, default=0,
                    help="seed of --phases random (default: %(default)s)")
     p.add_argument("--worker-threads", type=count, default=None, metavar="N",
                    help="processing threads of the --service worker (asnn worker --threads; "

@@ -283,7 +283,7 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
     from .worker import SWITCH_INTERVAL
 
     counts = sorted(set(counts or DEFAULT_COUNTS))
-    camera_phases(1, phases)  # fail now on a bad value
+    camera_phases(1, phases, seed)  # fail now on a bad value
     w, h = size
     scene = make_scene(SCENE, size=(w, h), frames=50, start=2, stop=48).frames
     frames = np.concatenate([scene, scene[-2:0:-1]])  # forwards then backwards: no jump

@@ -113,3 +113,14 @@ def test_cameras_play_their_own_streams_from_their_own_point_of_the_loop(zenoh_n
         seqs, values = zip(*sorted(got[robot]))
         assert sent[robot] >= 2 and list(seqs) == list(range(sent[robot]))
         assert list(values) == [frames[(start + k) % 4, 0, 0] for k in range(sent[robot])]
+
+
+@pytest.mark.parametrize("bad", [["--phases", "bunched"], ["--seed", "-1"], ["--seed", "x"],
+                                 ["--worker-threads", "0"]])
+def test_service_bench_options_are_checked(bad):
+    from cli.main import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bench", "--service", *bad])
+    args = build_parser().parse_args(["bench", "--service", "--phases", "random", "--seed", "7"])
+    assert (args.phases, args.seed, args.worker_threads) == ("random", 7, None)
