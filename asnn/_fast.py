@@ -291,10 +291,16 @@ def _row_sym(line, k, out):
 
 
 @kernel(inline="always", **_jit)
-def _row_anti(line, k, out):
-    c1, c2 = k[3], k[4]
-    for x in range(out.shape[0]):
-        out[x] = c1 * (line[x + 3] - line[x + 1]) + c2 * (line[x + 4] - line[x])
+def _row_pair(line, ks, ka, out_sym, out_anti):
+    """A symmetric and an antisymmetric row pass of the same line in one loop: the five taps
+    are loaded once. (Loops with more outputs, or more input rows, stop vectorising: LLVM
+    gives up on the runtime checks that the rows do not overlap.)"""
+    s0, s1, s2 = ks[2], ks[3], ks[4]
+    a1, a2 = ka[3], ka[4]
+    for x in range(out_sym.shape[0]):
+        l0, l1, l2, l3, l4 = line[x], line[x + 1], line[x + 2], line[x + 3], line[x + 4]
+        out_sym[x] = s0 * l2 + s1 * (l3 + l1) + s2 * (l4 + l0)
+        out_anti[x] = a1 * (l3 - l1) + a2 * (l4 - l0)
 
 
 @kernel(inline="always", **_jit)
@@ -314,14 +320,11 @@ def _gabor_channel(ro, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, gab
         _col_anti(src, sm1, sp1, sm2, sp2, k[2], c[2])      # Sa
         _col_sym(src, s0, sm1, sp1, sm2, sp2, k[3], c[3])   # Cb
         _col_anti(src, sm1, sp1, sm2, sp2, k[4], c[4])      # Sb
-        _row_sym(c[0], k[1], a[0])    # Re Z^0 = e (x) ca
-        _row_anti(c[0], k[2], a[1])   # Im Z^0 = e (x) sa
-        _row_sym(c[1], k[0], a[2])    # Re Z^{pi/2} = Ca (x) e
-        _row_sym(c[2], k[0], a[3])    # Im Z^{pi/2} = Sa (x) e
-        _row_sym(c[3], k[3], a[4])    # Cb (x) cb
-        _row_sym(c[4], k[3], a[5])    # Sb (x) cb
-        _row_anti(c[4], k[4], a[6])   # Sb (x) sb
-        _row_anti(c[3], k[4], a[7])   # Cb (x) sb
+        _row_pair(c[0], k[1], k[2], a[0], a[1])   # Re, Im Z^0 = e (x) (ca, sa)
+        _row_sym(c[1], k[0], a[2])                # Re Z^{pi/2} = Ca (x) e
+        _row_sym(c[2], k[0], a[3])                # Im Z^{pi/2} = Sa (x) e
+        _row_pair(c[3], k[3], k[4], a[4], a[7])   # Cb (x) (cb, sb)
+        _row_pair(c[4], k[3], k[4], a[5], a[6])   # Sb (x) (cb, sb)
     w = r0.shape[0]
     s, f = acc[0], acc[1]
     # E = Re Z_slow Im Z_fast - Re Z_fast Im Z_slow, with (a[4], a[5], a[6], a[7]) =
