@@ -86,6 +86,14 @@ def _lower_priority(increment: int) -> None:
         log.debug("could not lower the priority of thread %d", tid)
 
 
+def _undeclare(entity) -> None:
+    """Undeclare a Zenoh entity; the session may already be closed."""
+    try:
+        entity.undeclare()
+    except Exception:
+        pass
+
+
 class WorkerIdTaken(RuntimeError):
     """Another live worker already uses this worker id."""
 
@@ -129,11 +137,8 @@ class _Outlets:
             publisher_detection=True, sample_miss_detection=MISS_DETECTION, **WARNING_QOS)
 
     def undeclare(self) -> None:
-        for pub in (self.response, self.warning):
-            try:
-                pub.undeclare()
-            except Exception:  # the session may already be closed
-                pass
+        _undeclare(self.response)
+        _undeclare(self.warning)
 
 
 class Worker:
@@ -301,30 +306,24 @@ class Worker:
         """True when no frame is waiting or being processed."""
         return self.core.backlog() == 0
 
-    def close(self) -> None:
-        """Stop taking frames, hand the robots over (the token goes first, so the other workers
-        take them at once), finish the current frame, undeclare everything."""
-        for name in ("_subscriber", "_token"):
+    def _release(self, *names: str) -> None:
+        """Undeclare the named entities of this worker, once each."""
+        for name in names:
             entity = getattr(self, name)
             setattr(self, name, None)
             if entity is not None:
-                try:
-                    entity.undeclare()
-                except Exception:  # the session may already be closed
-                    pass
+                _undeclare(entity)
+
+    def close(self) -> None:
+        """Stop taking frames, hand the robots over (the token goes first, so the other workers
+        take them at once), finish the current frame, undeclare everything."""
+        self._release("_subscriber", "_token")
         self._stop.set()
         self.core.notify()
         for thread in self._threads:
             thread.join(timeout=30)
         self._threads = []
-        for name in ("_status", "_workers_sub"):
-            entity = getattr(self, name)
-            setattr(self, name, None)
-            if entity is not None:
-                try:
-                    entity.undeclare()
-                except Exception:
-                    pass
+        self._release("_status", "_workers_sub")
         with self._outlets_lock:
             outlets, self._outlets = list(self._outlets.values()), {}
         for outlet in outlets:
