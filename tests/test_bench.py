@@ -124,3 +124,23 @@ def test_service_bench_options_are_checked(bad):
         build_parser().parse_args(["bench", "--service", *bad])
     args = build_parser().parse_args(["bench", "--service", "--phases", "random", "--seed", "7"])
     assert (args.phases, args.seed, args.worker_threads) == ("random", 7, None)
+
+
+@pytest.mark.parametrize("presets, timed", [(["default"], {"reference32"}),
+                                            (["reference"], {"reference", "reference32"}),
+                                            (["paper", "paper"], {"paper", "reference32"})])
+def test_bench_times_the_default_preset_for_the_ratio(presets, timed):
+    from asnn.bench import run
+
+    report = run(sizes=[(48, 48)], frames=2, presets=presets, models=("asnn",))
+    rows = report["results"]
+    assert {r["preset"] for r in rows if r["form"] == "optimised"} == timed
+    assert len([r for r in rows if r["form"] == "optimised"]) == len(timed)
+    assert [r["speedup"] > 0 for r in rows if r["form"] == "straightforward"] == [True]
+
+
+def test_bench_rejects_an_unknown_preset(capsys, monkeypatch):
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert main(["bench", "--preset", "nope", "--size", "48x48", "--frames", "2"]) == 2
+    assert "unknown preset 'nope'" in capsys.readouterr().err
