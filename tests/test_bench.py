@@ -144,3 +144,29 @@ def test_bench_rejects_an_unknown_preset(capsys, monkeypatch):
         monkeypatch.delenv(name, raising=False)
     assert main(["bench", "--preset", "nope", "--size", "48x48", "--frames", "2"]) == 2
     assert "unknown preset 'nope'" in capsys.readouterr().err
+
+
+def test_kernels_are_loaded_before_anything_is_timed(monkeypatch):
+    """A kernel first called on a later frame (the clustering) must not be timed as a step."""
+    import numpy as np
+
+    import asnn.bench
+    import asnn.model
+    from service.bench import model_time
+
+    calls = []
+    monkeypatch.setattr(asnn.model, "compile_kernels", lambda: calls.append("compile"))
+    timed = asnn.bench.time_detector
+
+    def time_detector(*args, **kwargs):
+        calls.append("time")
+        return timed(*args, **kwargs)
+
+    monkeypatch.setattr(asnn.bench, "time_detector", time_detector)
+    asnn.bench.run(sizes=[(32, 32)], frames=2, presets=["default"], models=("asnn",),
+                   straightforward=False)
+    assert calls == ["compile", "time"]
+    calls.clear()
+    frames = np.zeros((4, 32, 32), np.uint8)
+    assert model_time((32, 32), None, frames)["median_ms"] > 0
+    assert calls == ["compile", "time"]
