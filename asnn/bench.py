@@ -99,16 +99,6 @@ def _state_bytes(model) -> int:
     return total
 
 
-def _preset_key(name: str) -> str:
-    """The preset's key in ``PRESETS`` (``default`` is the default preset's)."""
-    from .params import DEFAULT_PRESET, PRESETS, preset_names
-
-    key = DEFAULT_PRESET if name == "default" else name
-    if key not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(preset_names())}")
-    return key
-
-
 def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
         models=("asnn", "lgmd1", "lgmd2"), straightforward: bool = True,
         progress=None) -> dict:
@@ -124,10 +114,10 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     """
     from .detectors import make_detector
     from .model import ASNN, compile_kernels
-    from .params import DEFAULT_PRESET, PRESETS
+    from .params import DEFAULT_PRESET, PRESETS, preset_key
     from .stimuli import make_scene
 
-    presets = list(PRESETS) if presets is None else list(dict.fromkeys(map(_preset_key, presets)))
+    presets = list(PRESETS) if presets is None else list(dict.fromkeys(map(preset_key, presets)))
     if straightforward and "asnn" in models and DEFAULT_PRESET not in presets:
         presets.append(DEFAULT_PRESET)  # the straightforward form's ratio is against it
     warmup = 2  # the first frame only primes the state

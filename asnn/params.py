@@ -37,7 +37,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "preset", "preset_names"]
+__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "preset", "preset_key", "preset_names"]
 
 
 class ASNNParams(BaseModel):
@@ -220,6 +220,20 @@ def preset_names() -> list[str]:
     return ["default", *PRESETS]
 
 
+def preset_key(name: str) -> str:
+    """The key in :data:`PRESETS` of a name :func:`preset` accepts (``default``: the default's).
+
+    Raises
+    ------
+    ValueError
+        If the name is unknown.
+    """
+    key = DEFAULT_PRESET if name == "default" else name
+    if key not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(preset_names())}")
+    return key
+
+
 def preset(name: str, **overrides) -> ASNNParams:
     """Return the named preset, optionally with some parameters overridden.
 
@@ -228,10 +242,7 @@ def preset(name: str, **overrides) -> ASNNParams:
     ValueError
         If the name is unknown or an override is invalid.
     """
-    key = DEFAULT_PRESET if name == "default" else name
-    if key not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(preset_names())}")
-    base = PRESETS[key]
+    base = PRESETS[preset_key(name)]
     if not overrides:
         return base
     return ASNNParams(**{**base.model_dump(), **overrides})
