@@ -1,4 +1,4 @@
-"""``asnn bench``: per-frame cost of every model and preset, one thread (see :mod:`asnn.bench`)."""
+"""``asnn bench``: per-frame cost of every model and preset, one thread (see :mod:`asnn.evaluation.bench`)."""
 
 from __future__ import annotations
 
@@ -46,10 +46,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asnn.bench import pin_threads
+    from asnn.evaluation.bench import pin_threads
 
     pinning = pin_threads()  # before numba and the models are imported
-    from asnn import bench
+    from asnn.evaluation import bench
 
     name = "asnn bench --service" if args.service else "asnn bench"
     try:

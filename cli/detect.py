@@ -12,9 +12,9 @@ import cv2
 
 from asnn.detectors import MODELS, make_detector
 from asnn.params import preset_names
-from asnn.progress import ProgressPrinter
-from asnn.video import VideoError, open_video
-from asnn.visualize import annotate_frame, plot_responses
+from asnn.evaluation.progress import ProgressPrinter
+from asnn.io.video import VideoError, open_video
+from asnn.io.visualize import annotate_frame, plot_responses
 
 
 def register(sub: argparse._SubParsersAction) -> None:

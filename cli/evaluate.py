@@ -10,10 +10,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from asnn import scoring
+from asnn.evaluation import scoring
 from asnn.detectors import MODELS
 from asnn.params import preset_names
-from asnn.progress import ProgressPrinter
+from asnn.evaluation.progress import ProgressPrinter
 
 from .arguments import frame_size
 
@@ -60,14 +60,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asnn import evaluation  # imports matplotlib: only when the command runs
+    from asnn.evaluation import clips, paper  # import matplotlib: only when the command runs
 
     progress = ProgressPrinter(sys.stderr)
     if args.synthetic:
         if args.clips_dir:
             print("asnn eval: give either CLIPS_DIR or --synthetic", file=sys.stderr)
             return 2
-        evaluation.synthetic_suite(args.out, preset_name=args.preset, models=args.models,
+        paper.synthetic_suite(args.out, preset_name=args.preset, models=args.models,
                                    size=args.size, warmup=args.warmup, progress=progress)
         print(f"{args.out}/report.md")
         return 0
@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        results = evaluation.evaluate_clips(
+        results = clips.evaluate_clips(
             args.clips_dir, args.out, labels_path=args.labels, models=args.models,
             preset_name=args.preset, early_tolerance_s=args.early_tolerance,
             warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots, progress=progress)

@@ -71,7 +71,7 @@ START_S = 1.0
 def model_time(size: tuple[int, int], preset: str | None, frames: np.ndarray) -> dict:
     """Median and p99 milliseconds of one detector step on ``frames`` (after two warm-up frames;
     the kernels are loaded first, as the worker does before it takes frames)."""
-    from asnn.bench import time_detector
+    from asnn.evaluation.bench import time_detector
     from asnn.detectors import make_detector
     from asnn.model import compile_kernels
 

@@ -22,7 +22,7 @@ import numpy as np
 import zenoh
 
 from asnn.stimuli import SCENE_NAMES, make_scene
-from asnn.video import VideoError, open_video, read_frames
+from asnn.io.video import VideoError, open_video, read_frames
 
 from . import keys
 from .messages import FORMATS, Frame, Preview, encode

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from asnn.bench import THREAD_VARIABLES
+from asnn.evaluation.bench import THREAD_VARIABLES
 from cli.main import main
 from netutil import wait_for
 
@@ -130,7 +130,7 @@ def test_service_bench_options_are_checked(bad):
                                             (["reference"], {"reference", "reference32"}),
                                             (["paper", "paper"], {"paper", "reference32"})])
 def test_bench_times_the_default_preset_for_the_ratio(presets, timed):
-    from asnn.bench import run
+    from asnn.evaluation.bench import run
 
     report = run(sizes=[(48, 48)], frames=2, presets=presets, models=("asnn",))
     rows = report["results"]
@@ -150,21 +150,21 @@ def test_kernels_are_loaded_before_anything_is_timed(monkeypatch):
     """A kernel first called on a later frame (the clustering) must not be timed as a step."""
     import numpy as np
 
-    import asnn.bench
+    import asnn.evaluation.bench
     import asnn.model
     from service.bench import model_time
 
     calls = []
     monkeypatch.setattr(asnn.model, "compile_kernels", lambda: calls.append("compile"))
-    timed = asnn.bench.time_detector
+    timed = asnn.evaluation.bench.time_detector
 
     def time_detector(*args, **kwargs):
         calls.append("time")
         return timed(*args, **kwargs)
 
-    monkeypatch.setattr(asnn.bench, "time_detector", time_detector)
-    asnn.bench.run(sizes=[(32, 32)], frames=2, presets=["default"], models=("asnn",),
-                   straightforward=False)
+    monkeypatch.setattr(asnn.evaluation.bench, "time_detector", time_detector)
+    asnn.evaluation.bench.run(sizes=[(32, 32)], frames=2, presets=["default"], models=("asnn",),
+                              straightforward=False)
     assert calls == ["compile", "time"]
     calls.clear()
     frames = np.zeros((4, 32, 32), np.uint8)

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asnn import evaluation, scoring
+from asnn.evaluation import paper, scoring
 from asnn.params import preset
-from asnn.progress import ProgressPrinter
+from asnn.evaluation.progress import ProgressPrinter
 from asnn.stimuli import make_scene, write_video
 from cli.main import main
 
@@ -140,7 +140,7 @@ def test_progress_printer_draws_a_bar_on_a_terminal():
 
 
 def test_temporal_filter_responses_are_band_pass_and_slower_for_larger_n():
-    data = evaluation.temporal_filter_responses(preset("paper"), orders=(1, 2, 3, 4), steps=200)
+    data = paper.temporal_filter_responses(preset("paper"), orders=(1, 2, 3, 4), steps=200)
     peaks = [int(np.argmax(data["impulse"][str(n)])) for n in (1, 2, 3, 4)]
     assert peaks == sorted(peaks) and peaks[0] < peaks[-1]
     for n in (1, 2, 3, 4):
@@ -166,12 +166,12 @@ def test_synthetic_suite_writes_every_figure_with_its_numbers(tmp_path, capsys):
         assert table[("translation", polarity, "lgmd2")]["outcome"] == "quiet"
 
     fig5 = json.loads((out / "fig5_dark_responses.json").read_text())
-    assert [s["scene"] for s in fig5["scenes"]] == [s for s, _ in evaluation.SYNTHETIC_SCENES]
+    assert [s["scene"] for s in fig5["scenes"]] == [s for s, _ in paper.SYNTHETIC_SCENES]
     for scene in fig5["scenes"]:
         assert set(scene["models"]) == set(MODELS)
         assert all(len(m["out"]) == 130 for m in scene["models"].values())
     sweeps = json.loads((out / "fig7_contrast_speed.json").read_text())
-    assert sweeps["contrast"]["values"] == list(evaluation.CONTRAST_SWEEP)
+    assert sweeps["contrast"]["values"] == list(paper.CONTRAST_SWEEP)
     assert sweeps["speed"]["peak"] == [max(u) for u in sweeps["speed"]["u"]]
     maps = json.loads((out / "fig4_maps.json").read_text())
     assert np.asarray(maps["V"]).shape == (64, 64)

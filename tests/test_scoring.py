@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from asnn import scoring
+from asnn.evaluation import scoring
 
 # fps 20: the 0.5 s tolerance is 10 frames, so the hit window of onset 20, contact 40 is [10, 42]
 COLLISION = {"file": "c.mp4", "fps": 20.0, "frames": 60, "collision": True, "onset_frame": 20,

@@ -112,10 +112,10 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     ValueError
         If a preset name is unknown.
     """
-    from .detectors import make_detector
-    from .model import ASNN, compile_kernels
-    from .params import DEFAULT_PRESET, PRESETS, preset_key
-    from .stimuli import make_scene
+    from ..detectors import make_detector
+    from ..model import ASNN, compile_kernels
+    from ..params import DEFAULT_PRESET, PRESETS, preset_key
+    from ..stimuli import make_scene
 
     presets = list(PRESETS) if presets is None else list(dict.fromkeys(map(preset_key, presets)))
     if straightforward and "asnn" in models and DEFAULT_PRESET not in presets:

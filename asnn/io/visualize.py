@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .response import Response
+from ..response import Response
 
 __all__ = ["annotate_frame", "warning_intervals", "plot_responses"]
 

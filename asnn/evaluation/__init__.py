@@ -1,0 +1,16 @@
+"""Measuring the detectors: scoring, evaluation runs, figures and benchmarks.
+
+Nothing here is imported by the model. The submodules are imported explicitly (``figures``
+loads matplotlib):
+
+:mod:`~asnn.evaluation.scoring`
+    Outcomes of per-frame results against clip labels (SPEC.md section 5).
+:mod:`~asnn.evaluation.clips`
+    Every model over a folder of labelled clips (``asnn eval CLIPS_DIR``).
+:mod:`~asnn.evaluation.paper`
+    The paper's synthetic experiments, Figs. 2 and 4-7 (``asnn eval --synthetic``).
+:mod:`~asnn.evaluation.bench`
+    Per-frame timing of every model and preset (``asnn bench``).
+:mod:`~asnn.evaluation.figures`, :mod:`~asnn.evaluation.progress`
+    Plots, and the progress bar of the long-running commands.
+"""
