@@ -6,35 +6,68 @@ so tests can drive it directly.
 
 Per-robot state and its reset rule
 ----------------------------------
-A robot's model state is created on its first valid frame. Before each frame is processed, the
-state is **reset** (a new stream starts, whose first frame only primes the model) when
+A robot's model state is created on its first valid frame. Each frame that arrives is compared
+with the previous frame that arrived for the robot (not with the last one processed, so the
+frames the worker skips itself never count as a gap). It continues the robot's **stream** when
+its size is the same, its ``seq`` is greater by at most ``max_gap`` and its ``stamp`` is not
+smaller. Otherwise a new stream starts, for the first rule that failed:
 
-* the frame size (width x height) differs from the stream's (``size``);
-* ``seq`` is not greater than the last processed one (``seq-backwards``: the camera restarted);
-* ``seq`` jumps ahead by more than ``max_gap`` frames (``seq-gap``: the stream was interrupted;
-  the gaps that the worker makes itself by skipping frames are normally far smaller);
-* ``stamp`` is smaller than the last processed one (``stamp-backwards``).
+* ``size``: the frame size (width x height) differs;
+* ``seq-backwards``: ``seq`` is not greater (the camera restarted);
+* ``seq-gap``: ``seq`` jumps ahead by more than ``max_gap`` (frames were lost on the way);
+* ``stamp-backwards``: ``stamp`` is smaller.
+
+When the worker processes the first frame of a new stream, the model state is **reset** (that
+frame only primes the model) and the reset is counted under the rule.
 
 The model integrates with its fixed time step (0.05 s), whatever the stamps say. A robot that
 sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten).
 
-Newest frame wins: each robot has one pending slot. A frame that arrives while the previous one
-is still waiting replaces it, and the replaced one is counted in the next response's ``dropped``.
+Two publishers on one key
+-------------------------
+A second publisher on a robot's key (a stray camera, or an attacker in an open deployment)
+interleaves its frames with the robot's: every frame of one breaks the other's stream. The
+worker detects it when the stream that a frame has just replaced continues (a frame fits the
+previous stream, which sent a frame less than ``takeover_after`` seconds ago): it counts an
+intrusion, logs it (rate-limited), marks the robot *contested* and returns to the stream that
+was there first (a ``second-publisher`` reset if the other's frame was processed meanwhile).
+From then on, while the robot's stream keeps sending (a frame less than ``takeover_after``
+seconds ago), a frame that does not continue it is refused as ``second-publisher``. So an
+intruder costs the robot at most two resets, however long it keeps publishing. A camera that
+really restarts is followed as soon as its previous stream has been silent for
+``takeover_after`` seconds. A publisher that copies the robot's ``seq`` and ``stamp`` cannot be
+told apart this way: only the secured deployment (one credential per camera, allowed to publish
+its own robot's key only) stops it (docs/operations.md).
+
+Newest frame wins, robots in turn
+---------------------------------
+Each robot has one pending slot. A frame that arrives while the previous one is still waiting
+replaces it, and the replaced one is counted in the next response's ``dropped``. The robot keeps
+its place in the queue: the next robot served is the one that has waited longest, counted from
+the arrival of the first frame it has been waiting with, so under overload robots are taken in
+turn instead of by the arrival time of their newest frame.
+
+Slots
+-----
+``max_robots`` bounds the robots with a model state. A robot takes a slot only once one of its
+frames was valid (decoded and accepted by the model): until then it is a *candidate*, with at
+most its pending frame held (at most ``max_robots`` candidates at once), and it is forgotten as
+soon as a frame of it fails. So ids that send only undecodable frames cannot lock new robots out.
 
 Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``,
-the labels of :data:`service.messages.REASONS` plus ``bad-key``, ``frame-rejected`` and
-``too-many-robots``) and logged at WARNING, rate-limited: the first rejection of a reason at once,
-then at most one line per reason every ``log_interval`` seconds, with the count of those not
-shown.
+the labels of :data:`service.messages.REASONS` plus ``bad-key``, ``frame-rejected``,
+``too-many-robots`` and ``second-publisher``) and logged at WARNING, rate-limited: the first
+rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
+with the count of those not shown.
 
 Ownership: with ``owns`` (a predicate on robot ids, see :mod:`service.ownership`), frames of
 robots the worker does not own are skipped before they are decoded and counted in ``foreign``;
 :meth:`WorkerCore.release_unowned` forgets the robots it no longer owns.
 
 Memory: at most two frames per robot are held (the pending one and the one being processed), for
-at most ``max_robots`` robots, each frame at most ``messages.MAX_PAYLOAD`` bytes; plus one model
-state per robot (docs/operations.md gives the numbers). Overload never grows it: a frame that
-arrives while one waits replaces it.
+at most ``max_robots`` robots, plus one pending frame per candidate, each frame at most
+``messages.MAX_PAYLOAD`` bytes; plus one model state per robot (docs/operations.md gives the
+numbers). Overload never grows it: a frame that arrives while one waits replaces it.
 """
 
 from __future__ import annotations
@@ -63,7 +96,7 @@ __all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "WorkerCore", "default_thre
 
 log = logging.getLogger("asnn.worker")
 
-RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards")
+RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-publisher")
 
 
 def default_worker_id() -> str:
@@ -81,15 +114,51 @@ def default_threads() -> int:
 
 
 @dataclass
+class _Stream:
+    """The frames of one source as they arrive: the latest one's seq, stamp, size and time."""
+
+    number: int          # the robot's stream counter when it started
+    reason: str | None   # why the robot switched to it (a reset rule); None for the first
+    seq: int
+    stamp: float
+    size: tuple[int, int]
+    arrival: float
+
+    def continues(self, frame: Frame, max_gap: int) -> str | None:
+        """None if ``frame`` continues this stream, else the rule it breaks."""
+        if (frame.width, frame.height) != self.size:
+            return "size"
+        if frame.seq <= self.seq:
+            return "seq-backwards"
+        if frame.seq - self.seq > max_gap:
+            return "seq-gap"
+        if frame.stamp < self.stamp:
+            return "stamp-backwards"
+        return None
+
+    def advance(self, frame: Frame, arrival: float) -> None:
+        self.seq, self.stamp, self.arrival = frame.seq, frame.stamp, arrival
+        self.size = (frame.width, frame.height)
+
+
+@dataclass
 class _Robot:
     """What the worker knows about one robot."""
 
     detector: object | None = None
-    shape: tuple[int, int] | None = None  # (width, height) of the stream
+    proven: bool = False  # one of its frames was valid: it holds a slot
+    shape: tuple[int, int] | None = None  # (width, height) of the stream being processed
     last_seq: int | None = None
     last_stamp: float | None = None
     last_seen: float = 0.0
-    pending: tuple[Frame, float] | None = None  # (frame, received) waiting to be processed
+    stream: _Stream | None = None  # the stream its frames arrive in
+    previous: _Stream | None = None  # the stream the latest break replaced
+    streams: int = 0  # streams started
+    processed_stream: int | None = None  # number of the stream the model state belongs to
+    contested: bool = False  # a second publisher was seen on its key
+    intrusions: int = 0
+    pending: tuple[Frame, float, _Stream] | None = None  # (frame, received, its stream)
+    waiting_since: int = 0  # arrival order of the first frame it has been waiting with
     dropped: int = 0  # frames replaced since the last response
     busy: bool = False
     processed: int = 0
@@ -104,6 +173,8 @@ class Job:
     frame: Frame
     received: float  # clock() when the frame arrived
     dropped: int  # frames of this robot skipped since its previous response
+    stream: int = 0  # the robot's stream the frame belongs to
+    reset_reason: str | None = None  # why that stream started
 
 
 @dataclass
@@ -115,6 +186,7 @@ class _Stats:
     evicted: int = 0
     foreign: int = 0  # frames of robots another worker owns
     released: int = 0  # robots handed over to another worker
+    intrusions: int = 0  # second publishers detected on a robot's key
     invalid: Counter = field(default_factory=Counter)
     resets: Counter = field(default_factory=Counter)
 
@@ -136,7 +208,12 @@ class WorkerCore:
     max_gap : int
         Largest forward jump of ``seq`` that keeps the state (see the module notes).
     max_robots : int
-        Robots tracked at once; frames of further robots are rejected (``too-many-robots``).
+        Robots with a model state at once; frames of further robots are rejected
+        (``too-many-robots``). As many candidates (robots none of whose frames was valid yet)
+        may wait besides.
+    takeover_after : float
+        Seconds a robot's stream must be silent before the frames of another publisher on its
+        key may replace it, once two publishers were seen there (see the module notes).
     clock : callable
         Monotonic seconds (tests may pass a fake one).
     owns : callable, optional
@@ -153,7 +230,7 @@ class WorkerCore:
     def __init__(self, model: str = "asnn", preset: str | None = None, *,
                  worker_id: str | None = None, prefix: str = keys.DEFAULT_PREFIX,
                  idle_timeout: float = 60.0, max_gap: int = 20, max_robots: int = 256,
-                 clock: Callable[[], float] = time.monotonic,
+                 takeover_after: float = 3.0, clock: Callable[[], float] = time.monotonic,
                  owns: Callable[[str], bool] | None = None, log_interval: float = 10.0):
         make_detector(model, preset)  # fail now, not on the first frame
         self.model = model
@@ -164,12 +241,14 @@ class WorkerCore:
         self.idle_timeout = float(idle_timeout)
         self.max_gap = int(max_gap)
         self.max_robots = int(max_robots)
+        self.takeover_after = float(takeover_after)
         self.clock = clock
         self.owns = owns
         self.started = clock()
         self._rejections = RateLimitedLog(log, log_interval, clock)
         self._robots: dict[str, _Robot] = {}
         self._stats = _Stats()
+        self._arrivals = 0  # frames taken in, for the order of the queue
         self._lock = threading.Lock()
         self._ready = threading.Condition(self._lock)
 
@@ -199,23 +278,75 @@ class WorkerCore:
             self._reject(exc.reason, exc.detail, key)
             return None
         with self._lock:
-            self._stats.received += 1
             state = self._robots.get(robot)
             if state is None:
-                if len(self._robots) >= self.max_robots:
-                    self._reject_locked("too-many-robots",
-                                        f"already tracking {self.max_robots} robots", key)
+                full = self._full_locked(candidate=True)
+                if full:
+                    self._reject_locked("too-many-robots", full, key)
                     return None
                 state = self._robots[robot] = _Robot()
-                log.info("robot %s: first frame (%dx%d %s)", robot, frame.width, frame.height,
-                         frame.format)
+            stream = self._stream_locked(robot, state, frame, received)
+            if stream is None:
+                self._reject_locked("second-publisher", f"frame {frame.seq} does not continue "
+                                    f"the stream of {robot} (last seq {state.stream.seq})",
+                                    key)
+                return None
+            self._stats.received += 1
             if state.pending is not None:
                 state.dropped += 1
                 self._stats.dropped += 1
-            state.pending = (frame, received)
+            else:
+                self._arrivals += 1
+                state.waiting_since = self._arrivals
+            state.pending = (frame, received, stream)
             state.last_seen = received
             self._ready.notify()
         return robot
+
+    def _full_locked(self, candidate: bool = False) -> str | None:
+        """Why a new robot cannot take a slot (or, ``candidate``, wait for one) now; None if
+        it can."""
+        proven = sum(s.proven for s in self._robots.values())
+        if proven >= self.max_robots:
+            return f"already tracking {self.max_robots} robots"
+        if candidate and len(self._robots) - proven >= self.max_robots:
+            return f"already {self.max_robots} new robots waiting for a first valid frame"
+        return None
+
+    def _stream_locked(self, robot: str, state: _Robot, frame: Frame,
+                       received: float) -> _Stream | None:
+        """Place an arriving frame in the robot's streams (see the module notes); the stream it
+        belongs to, or None when it is refused as a second publisher's."""
+        current = state.stream
+        broken = None if current is None else current.continues(frame, self.max_gap)
+        if current is not None and broken is None:
+            current.advance(frame, received)
+            return current
+        previous = state.previous
+        if (current is not None and previous is not None
+                and received - previous.arrival <= self.takeover_after
+                and previous.continues(frame, self.max_gap) is None):
+            # the stream this one replaced goes on: two publishers interleave on the key
+            state.contested = True
+            state.intrusions += 1
+            self._stats.intrusions += 1
+            self._rejections.warning(
+                f"intrusion:{robot}", "robot %s: two publishers interleave frames on %s (seq "
+                "%d after %d); following the stream that was there first and refusing "
+                "frames that do not continue it", robot, keys.frame_key(robot, self.prefix),
+                frame.seq, current.seq)
+            previous.reason = "second-publisher"
+            previous.advance(frame, received)
+            state.stream, state.previous = previous, current
+            return previous
+        if (state.contested and current is not None
+                and received - current.arrival <= self.takeover_after):
+            return None
+        state.streams += 1
+        state.previous = current
+        state.stream = _Stream(state.streams, broken, frame.seq, frame.stamp,
+                               (frame.width, frame.height), received)
+        return state.stream
 
     def _reject(self, reason: str, detail: str, key: str) -> None:
         with self._lock:
@@ -230,22 +361,24 @@ class WorkerCore:
     # ------------------------------------------------------------------ processing side
 
     def take(self, timeout: float | None = 0.0) -> Job | None:
-        """The pending frame that has waited longest (of a robot not being processed), or None.
+        """The frame of the robot that has waited longest (not being processed), or None.
 
-        Waits up to ``timeout`` seconds for one (``None``: forever). The robot stays busy until
-        :meth:`process` finishes with the job.
+        A robot's wait starts with the first frame it waits with, however often a newer frame
+        replaces it. Waits up to ``timeout`` seconds for one (``None``: forever). The robot
+        stays busy until :meth:`process` finishes with the job.
         """
         deadline = None if timeout is None else time.monotonic() + timeout
         with self._ready:
             while True:
-                ready = [(s.pending[1], r) for r, s in self._robots.items()
+                ready = [(s.waiting_since, r) for r, s in self._robots.items()
                          if s.pending is not None and not s.busy
                          and (self.owns is None or self.owns(r))]
                 if ready:
                     robot = min(ready)[1]
                     state = self._robots[robot]
-                    frame, received = state.pending
-                    job = Job(robot, frame, received, state.dropped)
+                    frame, received, stream = state.pending
+                    job = Job(robot, frame, received, state.dropped, stream.number,
+                              stream.reason)
                     state.pending, state.dropped, state.busy = None, 0, True
                     return job
                 remaining = None if deadline is None else deadline - time.monotonic()
@@ -270,6 +403,8 @@ class WorkerCore:
                     if self.owns is not None and not self.owns(job.robot):
                         del self._robots[job.robot]  # handed over while it was processed
                         self._stats.released += 1
+                    elif not state.proven and state.pending is None:
+                        del self._robots[job.robot]  # a candidate whose frame failed
                     elif state.pending is not None:
                         self._ready.notify()
 
@@ -285,25 +420,39 @@ class WorkerCore:
             self._give_back(state, job.dropped)
             self._reject(exc.reason, exc.detail, keys.frame_key(job.robot, self.prefix))
             return None
-        reason = self._reset_reason(state, frame)
-        if reason is not None or state.detector is None:
-            if state.detector is None:
-                state.detector = make_detector(self.model, self.preset or None)
-            else:
-                state.detector.reset()
-                state.resets += 1
-                with self._lock:
-                    self._stats.resets[reason] += 1
-                log.info("robot %s: state reset (%s) at seq %d", job.robot, reason, frame.seq)
+        if not state.proven:
+            with self._lock:
+                full = self._full_locked()
+                if full is None:
+                    state.proven = True  # counted from now on; undone if the model refuses
+            if full:
+                self._reject("too-many-robots", full, keys.frame_key(job.robot, self.prefix))
+                return None
+        if state.detector is None:
+            state.detector = make_detector(self.model, self.preset or None)
+        elif state.processed_stream not in (None, job.stream):
+            reason = job.reset_reason or "seq-backwards"
+            state.detector.reset()
+            state.resets += 1
+            with self._lock:
+                self._stats.resets[reason] += 1
+            log.info("robot %s: state reset (%s) at seq %d", job.robot, reason, frame.seq)
         started = self.clock()
         try:
             result = state.detector.step(image)
         except FrameError as exc:
             self._give_back(state, job.dropped)
+            if state.processed == 0:
+                with self._lock:
+                    state.proven = False
             self._reject("frame-rejected", str(exc), keys.frame_key(job.robot, self.prefix))
             return None
+        if state.processed == 0:
+            log.info("robot %s: first frame (%dx%d %s)", job.robot, frame.width, frame.height,
+                     frame.format)
         state.shape = (frame.width, frame.height)
         state.last_seq, state.last_stamp = frame.seq, frame.stamp
+        state.processed_stream = job.stream
         state.processed += 1
         response = response_from(result, robot=job.robot, frame=frame, model=self.model,
                                  preset=self.preset, worker=self.worker_id,
@@ -318,20 +467,6 @@ class WorkerCore:
         """A taken frame produced no response: its skipped count moves to the next one."""
         with self._lock:
             state.dropped += dropped
-
-    def _reset_reason(self, state: _Robot, frame: Frame) -> str | None:
-        """Which rule (if any) says this frame starts a new stream (see the module notes)."""
-        if state.shape is None:
-            return None
-        if (frame.width, frame.height) != state.shape:
-            return "size"
-        if frame.seq <= state.last_seq:
-            return "seq-backwards"
-        if frame.seq - state.last_seq > self.max_gap:
-            return "seq-gap"
-        if frame.stamp < state.last_stamp:
-            return "stamp-backwards"
-        return None
 
     # ------------------------------------------------------------------ housekeeping
 
@@ -378,13 +513,16 @@ class WorkerCore:
             return sum((s.pending is not None) + s.busy for s in self._robots.values())
 
     def stats(self) -> dict:
-        """Counters: received, processed, dropped, warnings, evicted, foreign, released, robots,
-        invalid{reason}, resets{reason}."""
+        """Counters: received, processed, dropped, warnings, evicted, foreign, released, robots
+        (with a slot), candidates (waiting for a first valid frame), intrusions (second
+        publishers detected), invalid{reason}, resets{reason}."""
         with self._lock:
             s = self._stats
+            proven = sum(r.proven for r in self._robots.values())
             return {"received": s.received, "processed": s.processed, "dropped": s.dropped,
                     "warnings": s.warnings, "evicted": s.evicted, "foreign": s.foreign,
-                    "released": s.released, "robots": len(self._robots),
+                    "released": s.released, "robots": proven,
+                    "candidates": len(self._robots) - proven, "intrusions": s.intrusions,
                     "invalid": dict(s.invalid), "resets": dict(s.resets)}
 
     def status(self) -> dict:
@@ -394,13 +532,16 @@ class WorkerCore:
             robots = {r: {"processed": s.processed, "resets": s.resets,
                           "pending": s.pending is not None, "busy": s.busy,
                           "last_seq": s.last_seq,
-                          "size": list(s.shape) if s.shape else None}
+                          "size": list(s.shape) if s.shape else None,
+                          "candidate": not s.proven, "contested": s.contested,
+                          "intrusions": s.intrusions}
                       for r, s in sorted(self._robots.items())}
             backlog = sum((s.pending is not None) + s.busy for s in self._robots.values())
         return {"v": 1, "worker": self.worker_id, "model": self.model, "preset": self.preset,
                 "prefix": self.prefix, "uptime_s": round(self.clock() - self.started, 3),
                 "limits": {"max_side": MAX_SIDE, "max_payload": MAX_PAYLOAD,
                            "max_robots": self.max_robots, "max_gap": self.max_gap,
-                           "idle_timeout": self.idle_timeout},
+                           "idle_timeout": self.idle_timeout,
+                           "takeover_after": self.takeover_after},
                 "backlog": backlog, "stats": self.stats(), "robots": robots}
 

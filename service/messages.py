@@ -15,12 +15,27 @@ is a short stable label that receivers count (REASONS; docs/operations.md):
 ``bad-format``           ``format`` not one of FORMATS
 ``bad-pixels``           raw data length is not width x height x channels, or an encoded image
                          of another size than the message says
-``bad-image``            jpeg/png data that does not decode to an 8-bit image
+``bad-image``            jpeg/png data that does not decode to an 8-bit image, or whose header
+                         already shows it cannot be a whole image of its size (see below)
+
+Bounds on what a message makes a receiver allocate (docs/operations.md, "Hostile input"):
+
+* msgpack: a map may have at most MAX_MAP_LEN entries, an array MAX_ARRAY_LEN items, a string
+  MAX_STR_LEN bytes, and a whole message at most MAX_ITEMS container entries in all, so an
+  8-million-entry map (under MAX_PAYLOAD) is refused when its header is read
+  (``undecodable``), not built;
+* jpeg/png: the header is read before anything is decoded. Its size must be the message's, the
+  file must be an 8-bit image of a kind cameras make (baseline or progressive Huffman jpeg; png
+  of bit depth <= 8), and it must be long enough to hold that many pixels at the best
+  compression its coding allows (:func:`min_encoded_bytes`): a truncated file whose header
+  declares 4096x4096 is refused before the decoder allocates 48 MiB for it and the worker a
+  model state of 0.9 GB.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import cv2
@@ -28,9 +43,9 @@ import msgpack
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-__all__ = ["FORMATS", "Frame", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS", "Response",
-           "TargetMsg", "VERSION", "decode_frame", "decode_response", "encode", "encode_image",
-           "encoded_size"]
+__all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
+           "Response", "TargetMsg", "VERSION", "check_encoded", "decode_frame", "decode_response",
+           "encode", "encode_image", "encoded_size", "min_encoded_bytes", "unpack_map"]
 
 VERSION = 1
 FORMATS = ("gray8", "bgr8", "jpeg", "png")
@@ -38,6 +53,12 @@ MAX_SIDE = 4096  # largest accepted frame width or height
 # the largest valid frame (4096 x 4096 bgr8) plus room for the other fields
 MAX_PAYLOAD = MAX_SIDE * MAX_SIDE * 3 + 64 * 1024
 JPEG_QUALITY = 90
+# msgpack bounds: a frame has 7 fields, a response 16 and up to one map per looming target
+MAX_MAP_LEN = 256
+MAX_ARRAY_LEN = 4096
+MAX_ITEMS = 16384  # container entries (map pairs and array items) in one message, in all
+MAX_STR_LEN = 64 * 1024
+MAX_EXT_LEN = 64
 REASONS = ("oversized", "undecodable", "not-a-map", "unsupported-version", "missing-field",
            "invalid-field", "bad-stamp", "bad-size", "bad-format", "bad-pixels", "bad-image")
 
@@ -81,12 +102,7 @@ class Frame(_Message):
             pixels = np.frombuffer(self.data, dtype=np.uint8)
             return pixels.reshape((h, w) if self.format == "gray8" else (h, w, 3))
         # the header first: a lying or hostile size is refused before any pixel is decoded
-        size = encoded_size(self.data, self.format)
-        if size is None:
-            raise MessageError("bad-image", f"data is not a {self.format} file")
-        if size != (w, h):
-            raise MessageError("bad-pixels", f"{self.format} image is {size[0]}x{size[1]}, "
-                               f"the message says {w}x{h}")
+        self.check_size()
         try:
             image = cv2.imdecode(np.frombuffer(self.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
         except cv2.error as exc:
@@ -108,18 +124,23 @@ class Frame(_Message):
         return image
 
     def check_size(self) -> None:
-        """Cheap check of a raw frame's data length (encoded formats are checked by image()).
+        """Cheap checks of the data without decoding it: a raw frame's length, an encoded
+        frame's header (:func:`check_encoded`).
 
         Raises
         ------
         MessageError
-            ``bad-pixels`` when a gray8 or bgr8 frame's data is not width x height pixels.
+            ``bad-pixels`` when a gray8 or bgr8 frame's data is not width x height pixels, or
+            an encoded image's header gives another size; ``bad-image`` when an encoded image
+            cannot be a whole 8-bit image of that size.
         """
         if self.format in ("gray8", "bgr8"):
             need = self.width * self.height * (1 if self.format == "gray8" else 3)
             if len(self.data) != need:
                 raise MessageError("bad-pixels", f"{self.format} {self.width}x{self.height} "
                                    f"needs {need} bytes, got {len(self.data)}")
+        else:
+            check_encoded(self.data, self.format, self.width, self.height)
 
     @classmethod
     def from_image(cls, image: np.ndarray, *, seq: int, stamp: float,
@@ -187,17 +208,51 @@ def encode(message: BaseModel) -> bytes:
     return msgpack.packb(message.model_dump(), use_bin_type=True)
 
 
-def _unpack(payload: bytes, what: str) -> dict[str, Any]:
+class _TooManyItems(ValueError):
+    pass
+
+
+def unpack_map(payload: bytes, what: str = "message") -> dict:
+    """The msgpack map of a payload, unpacked within this module's bounds.
+
+    The per-container limits (MAX_MAP_LEN, MAX_ARRAY_LEN, MAX_STR_LEN, MAX_EXT_LEN) make msgpack
+    refuse a container when it reads its header, before building it; the total (MAX_ITEMS) is
+    counted as containers complete, so nested containers cannot multiply the per-container
+    limits. What is built is therefore at most about 2 x MAX_ITEMS objects plus the bytes of
+    the strings and binaries, which the payload holds anyway.
+
+    Raises
+    ------
+    MessageError
+        ``oversized``, ``undecodable`` (including a container over a bound) or ``not-a-map``.
+    """
     if len(payload) > MAX_PAYLOAD:
         raise MessageError("oversized", f"{what} of {len(payload)} bytes, the limit is "
                            f"{MAX_PAYLOAD}")
+    items = 0
+
+    def count(container):
+        nonlocal items
+        items += len(container) + 1
+        if items > MAX_ITEMS:
+            raise _TooManyItems(f"more than {MAX_ITEMS} entries in all")
+        return container
+
     try:
-        obj = msgpack.unpackb(bytes(payload), raw=False, strict_map_key=False)
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False, object_hook=count,
+                              list_hook=count, max_str_len=MAX_STR_LEN,
+                              max_bin_len=MAX_PAYLOAD, max_array_len=MAX_ARRAY_LEN,
+                              max_map_len=MAX_MAP_LEN, max_ext_len=MAX_EXT_LEN)
     except Exception as exc:  # msgpack raises several unrelated types on garbage
         why = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         raise MessageError("undecodable", f"{what} is not msgpack ({why})") from None
     if not isinstance(obj, dict):
         raise MessageError("not-a-map", f"{what} is a msgpack {type(obj).__name__}, not a map")
+    return obj
+
+
+def _unpack(payload: bytes, what: str) -> dict[str, Any]:
+    obj = unpack_map(payload, what)
     version = obj.get("v", VERSION)
     if version != VERSION or isinstance(version, bool):
         raise MessageError("unsupported-version", f"{what} version {version!r}, expected {VERSION}")
@@ -229,17 +284,37 @@ def _reason(error: dict) -> str:
     return _FIELD_REASONS.get(str(loc[0]), "invalid-field")
 
 
-def encoded_size(data: bytes, format: str) -> tuple[int, int] | None:
-    """(width, height) from a png or jpeg file's header without decoding it; None if the data
-    does not start like such a file."""
-    data = memoryview(data).cast("B") if format == "jpeg" else bytes(data[:32])
+@dataclass(frozen=True)
+class _Header:
+    """What an encoded image's header says, read without decoding it."""
+
+    width: int
+    height: int
+    kind: str       # "png": its colour type; "jpeg": the start-of-frame marker, e.g. "sof0"
+    depth: int      # bits per sample
+    channels: int   # samples per pixel (png: before palette expansion)
+    body: int       # offset of the compressed pixels (jpeg: after the first start of scan;
+                    # png: after the header; -1 when the header ends before them)
+
+
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}  # colour type -> samples per pixel
+# baseline, extended and progressive Huffman coding: what cameras and encoders produce.
+# Lossless, hierarchical and arithmetic-coded jpeg are refused (OpenCV need not decode them,
+# and arithmetic coding can make a large image from a few bytes).
+_JPEG_PROCESSES = {0xC0: "sof0", 0xC1: "sof1", 0xC2: "sof2"}
+
+
+def _read_header(data: bytes, format: str) -> _Header | None:
     if format == "png":
-        if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
+        head = bytes(data[:29])
+        if len(head) < 29 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
             return None
-        return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+        return _Header(int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"),
+                       f"png{head[25]}", head[24], _PNG_CHANNELS.get(head[25], 0), 33)
+    data = memoryview(data).cast("B")
     if format != "jpeg" or bytes(data[:2]) != b"\xff\xd8":
         return None
-    i = 2
+    i, frame = 2, None
     while i + 4 <= len(data):
         if data[i] != 0xFF:
             return None
@@ -250,19 +325,94 @@ def encoded_size(data: bytes, format: str) -> tuple[int, int] | None:
         if marker in (0x01, 0xD8) or 0xD0 <= marker <= 0xD7:  # no length field
             i += 2
             continue
-        if marker in (0xD9, 0xDA):  # end of image, start of scan: no frame header before
-            return None
+        if marker == 0xD9:  # end of image
+            break
         length = int.from_bytes(data[i + 2:i + 4], "big")
         if length < 2:
             return None
-        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # a start of frame
-            if i + 9 > len(data) or length < 7:
+        if marker == 0xDA:  # start of scan: the compressed pixels follow its header
+            if frame is None:
                 return None
-            height = int.from_bytes(data[i + 5:i + 7], "big")
-            width = int.from_bytes(data[i + 7:i + 9], "big")
-            return width, height
+            return _Header(*frame, body=min(i + 2 + length, len(data)))
+        if frame is None and 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            if i + 10 > len(data) or length < 8:
+                return None
+            frame = (int.from_bytes(data[i + 7:i + 9], "big"),  # width
+                     int.from_bytes(data[i + 5:i + 7], "big"),  # height
+                     _JPEG_PROCESSES.get(marker, f"0x{marker:02x}"), data[i + 4], data[i + 9])
         i += 2 + length
-    return None
+    return None if frame is None else _Header(*frame, body=-1)
+
+
+def encoded_size(data: bytes, format: str) -> tuple[int, int] | None:
+    """(width, height) from a png or jpeg file's header without decoding it; None if the data
+    does not start like such a file."""
+    header = _read_header(data, format)
+    return None if header is None else (header.width, header.height)
+
+
+def min_encoded_bytes(format: str, width: int, height: int, channels: int = 1,
+                      depth: int = 8) -> int:
+    """The fewest bytes of compressed pixels that can hold a whole ``width`` x ``height`` image.
+
+    jpeg (Huffman coded): every 8x8 block of the full-resolution component costs at least one
+    bit (its DC code; a progressive file may leave every AC coefficient out). png: deflate
+    cannot compress better than 1032:1, and each row holds a filter byte and
+    ``width x channels x depth`` bits.
+
+    Parameters
+    ----------
+    format : {'jpeg', 'png'}
+    width, height : int
+    channels, depth : int
+        png only: samples per pixel and bits per sample.
+
+    Returns
+    -------
+    int
+    """
+    if format == "jpeg":
+        blocks = -(-width // 8) * -(-height // 8)
+        return blocks // 8
+    raw = height * (1 + -(-width * channels * depth // 8))
+    return raw // 1032
+
+
+def check_encoded(data: bytes, format: str, width: int, height: int) -> None:
+    """Check an encoded image's header against the size a message gives, before decoding.
+
+    Raises
+    ------
+    MessageError
+        ``bad-image`` when the data is not a file of ``format``, not an 8-bit image of a
+        supported kind, or too short to hold a whole image of its size
+        (:func:`min_encoded_bytes`: a truncated file would be padded by the decoder);
+        ``bad-pixels`` when the header gives another size than ``width`` x ``height``.
+    """
+    header = _read_header(data, format)
+    if header is None:
+        raise MessageError("bad-image", f"data is not a {format} file")
+    if (header.width, header.height) != (width, height):
+        raise MessageError("bad-pixels", f"{format} image is {header.width}x{header.height}, "
+                           f"the message says {width}x{height}")
+    if format == "jpeg":
+        if header.kind not in _JPEG_PROCESSES.values():
+            raise MessageError("bad-image", f"jpeg coding {header.kind} is not supported "
+                               "(baseline or progressive Huffman only)")
+        if header.depth != 8 or header.channels not in (1, 3):
+            raise MessageError("bad-image", f"jpeg of {header.channels} components of "
+                               f"{header.depth} bits, not 8-bit gray or colour")
+        if header.body < 0:
+            raise MessageError("bad-image", "jpeg without a start of scan: no pixels")
+    elif header.depth not in (1, 2, 4, 8) or not header.channels:
+        raise MessageError("bad-image", f"png of {header.depth}-bit samples (colour type "
+                           f"{header.kind[3:]}), not an 8-bit image")
+    need = min_encoded_bytes(format, width, height, header.channels, header.depth)
+    have = len(data) - header.body
+    if have < need:
+        raise MessageError("bad-image", f"{format} of {len(data)} bytes cannot hold a whole "
+                           f"{width}x{height} image (at least {need} bytes of compressed "
+                           "pixels): truncated")
 
 
 def decode_frame(payload: bytes) -> Frame:

@@ -9,7 +9,7 @@ import pytest
 from asnn import ASNN
 from asnn.stimuli import make_scene
 from service.core import RateLimitedLog, WorkerCore
-from service.messages import MAX_PAYLOAD, Frame, encode
+from service.messages import MAX_PAYLOAD, Frame, encode, encode_image
 from service.ownership import Membership, owner
 
 
@@ -186,16 +186,39 @@ def test_frames_the_model_refuses_are_counted_not_raised(looming):
     assert feed(core, "r1", looming.frames[0], 1) is not None
 
 
+def undecodable_jpeg(image, seq, stamp=None) -> bytes:
+    """A jpeg frame whose header is sound (its size, coding, length) but whose quantization
+    tables are missing: only the decoder finds out."""
+    data = encode_image(image, "jpeg")
+    out, i = bytearray(data[:2]), 2
+    while data[i + 1] != 0xDA:  # copy every segment before the scan but the tables (DQT)
+        length = int.from_bytes(data[i + 2:i + 4], "big")
+        if data[i + 1] != 0xDB:
+            out += data[i:i + 2 + length]
+        i += 2 + length
+    h, w = image.shape[:2]
+    return msgpack.packb({"seq": seq, "stamp": seq * 0.05 if stamp is None else stamp,
+                          "width": w, "height": h, "format": "jpeg",
+                          "data": bytes(out + data[i:])})
+
+
 def test_compressed_frames_with_bad_data_are_counted_at_processing(looming):
+    core = WorkerCore()
+    feed(core, "r1", looming.frames[0], 0)
+    core.offer("asnn/r1/frame", payload(looming.frames[1], 1))
+    assert core.offer("asnn/r1/frame", undecodable_jpeg(looming.frames[2], 2)) == "r1"
+    assert core.process(core.take()) is None  # the newer, undecodable frame replaced it
+    assert core.stats()["invalid"] == {"bad-image": 1}
+    response = feed(core, "r1", looming.frames[3], 3)
+    assert response is not None and response.dropped == 1  # the replaced frame still counts
+
+
+def test_an_encoded_frame_whose_header_cannot_be_whole_is_refused_on_arrival(looming):
     core = WorkerCore()
     junk = msgpack.packb({"seq": 0, "stamp": 0.0, "width": 128, "height": 128,
                           "format": "jpeg", "data": b"\xff\xd8 broken"})
-    core.offer("asnn/r1/frame", payload(looming.frames[0], 0))
-    core.offer("asnn/r1/frame", junk)  # replaces the valid one
-    assert core.process(core.take()) is None
-    assert core.stats()["invalid"] == {"bad-image": 1}
-    response = feed(core, "r1", looming.frames[1], 1)
-    assert response is not None and response.dropped == 1  # the replaced frame still counts
+    assert core.offer("asnn/r1/frame", junk) is None
+    assert core.stats()["invalid"] == {"bad-image": 1} and core.robots() == []
 
 
 def test_idle_robots_are_evicted_and_start_afresh():
