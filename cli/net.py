@@ -45,7 +45,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
     try:
         core = WorkerCore(args.model, args.preset, worker_id=args.id, prefix=args.prefix,
                           idle_timeout=args.idle_timeout, max_gap=args.max_gap,
-                          max_robots=args.max_robots)
+                          max_robots=args.max_robots, takeover_after=args.takeover_after)
         session = session_for(args)
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(str(exc))
@@ -83,19 +83,35 @@ def cmd_status(args: argparse.Namespace) -> int:
     for worker, status in sorted(statuses.items()):
         if args.json:
             print(json.dumps(status, separators=(", ", ": ")), flush=True)
-            continue
-        stats = status["stats"]
-        invalid = ", ".join(f"{k} {v}" for k, v in sorted(stats["invalid"].items())) or "none"
-        print(f"worker {worker}: {status['model']}/{status['preset'] or '-'}, up "
-              f"{status['uptime_s']:.0f} s, robots {', '.join(status['robots']) or 'none'}; "
-              f"processed {stats['processed']}, dropped {stats['dropped']}, warnings "
-              f"{stats['warnings']}, foreign {stats['foreign']}; invalid: {invalid}; "
-              f"live workers {', '.join(status.get('workers', []))}")
+        else:
+            print(format_status(status), flush=True)
     if not statuses:
         print(f"no worker answered on {args.prefix}/@worker/"
               f"{args.worker or '*'}/status", file=sys.stderr)
         return 1
     return 0
+
+
+def format_status(status: dict) -> str:
+    """One line of ``asnn status``: a worker's identity, robots, counters and what it refused.
+
+    Robots on whose key a second publisher was seen are listed under ``contested`` with the
+    number of intrusions (docs/operations.md); fields an older worker does not report are
+    left out.
+    """
+    stats = status["stats"]
+    robots = status.get("robots", {})
+    invalid = ", ".join(f"{k} {v}" for k, v in sorted(stats["invalid"].items())) or "none"
+    tracked = [r for r, s in robots.items() if not s.get("candidate")]
+    contested = ", ".join(f"{r} ({s.get('intrusions', 0)} intrusions)"
+                          for r, s in robots.items() if s.get("contested")) or "none"
+    return (f"worker {status['worker']}: {status['model']}/{status['preset'] or '-'}, up "
+            f"{status['uptime_s']:.0f} s, robots {', '.join(tracked) or 'none'}"
+            f" (+{stats.get('candidates', 0)} waiting for a valid frame); "
+            f"processed {stats['processed']}, dropped {stats['dropped']}, warnings "
+            f"{stats['warnings']}, foreign {stats['foreign']}; invalid: {invalid}; "
+            f"second publishers: {stats.get('intrusions', 0)}, contested: {contested}; "
+            f"live workers {', '.join(status.get('workers', []))}")
 
 
 def cmd_alerts(args: argparse.Namespace) -> int:
@@ -117,18 +133,21 @@ def cmd_alerts(args: argparse.Namespace) -> int:
 
 
 def cmd_router(args: argparse.Namespace) -> int:
-    from service.router import DEFAULT_LISTEN, open_router
+    import zenoh
+
+    from service.router import listen_endpoints, router_config
 
     setup_logging(args)
     stop = stop_on_signals()
     try:
-        session = open_router(zenoh_options(args))
+        config = router_config(zenoh_options(args))
+        session = zenoh.open(config)
     except ConfigError as exc:
         return fail(str(exc))
     except Exception as exc:  # zenoh.ZError: e.g. the port is taken
         return fail(f"cannot start the router: {str(exc).split(' at /')[0]}")
     with session:
-        listen = ", ".join(args.listen or [DEFAULT_LISTEN])
+        listen = ", ".join(listen_endpoints(config))
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
@@ -201,9 +220,13 @@ def register(subparsers) -> None:
     p.add_argument("--max-gap", type=int, default=20, metavar="N",
                    help="reset a robot's state when seq jumps ahead by more than N "
                         "(default: %(default)s)")
-    p.add_argument("--max-robots", type=int, default=256, metavar="N",
-                   help="robots tracked at once; frames of more are rejected "
-                        "(default: %(default)s)")
+    p.add_argument("--max-robots", type=count, default=256, metavar="N",
+                   help="robots tracked at once; frames of more are rejected. A robot takes "
+                        "a place once one of its frames is valid (default: %(default)s)")
+    p.add_argument("--takeover-after", type=positive, default=3.0, metavar="SECONDS",
+                   help="once a second publisher was seen on a robot's key, refuse frames that "
+                        "do not continue the robot's stream until it has been silent for "
+                        "SECONDS (default: %(default)s)")
     p.add_argument("--threads", type=count, default=default_threads(), metavar="N",
                    help="processing threads (default: the cores available, here %(default)s; "
                         "one robot is never processed by two at once)")

@@ -22,14 +22,27 @@ from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import MessageError, Response, decode_response
 
-__all__ = ["WarningListener", "format_warning"]
+__all__ = ["WarningListener", "format_stamp", "format_warning"]
 
 log = logging.getLogger("asnn.alerts")
 
 
+# stamps between these (2000-01-01 and 2200-01-01 UTC) are shown as a local time of day
+PLAUSIBLE_EPOCH = (946_684_800.0, 7_258_118_400.0)
+
+
+def format_stamp(stamp: float) -> str:
+    """A capture time as ``HH:MM:SS.mmm`` (local time) when it is a plausible epoch time in
+    seconds, else as the number itself (a camera clock in nanoseconds, or counting from its
+    start), so that no stamp can make a warning unprintable."""
+    if PLAUSIBLE_EPOCH[0] <= stamp < PLAUSIBLE_EPOCH[1]:
+        return time.strftime("%H:%M:%S", time.localtime(stamp)) + f".{int(stamp % 1 * 1000):03d}"
+    return f"t={stamp:.3f}" if abs(stamp) < 1e9 else f"t={stamp:.6g}"
+
+
 def format_warning(r: Response) -> str:
     """One readable line: time of capture, robot, seq, output and the looming targets."""
-    clock = time.strftime("%H:%M:%S", time.localtime(r.stamp)) + f".{int(r.stamp % 1 * 1000):03d}"
+    clock = format_stamp(r.stamp)
     if r.targets:
         targets = "; ".join(
             f"({t.x:.0f}, {t.y:.0f}) heading {math.degrees(t.direction):+.0f} deg"
@@ -99,7 +112,11 @@ def printer(json_lines: bool, out) -> Callable[[Response], None]:
     fmt = format_json if json_lines else format_warning
 
     def show(response: Response) -> None:
-        line = fmt(response)
+        try:
+            line = fmt(response)
+        except Exception:  # never lose a warning to its formatting: fall back to JSON
+            log.exception("cannot format a warning of %s; printed as JSON", response.robot)
+            line = format_json(response)
         with lock:
             out.write(line + "\n")
             out.flush()

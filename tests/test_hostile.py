@@ -366,3 +366,66 @@ def test_overloaded_worker_over_zenoh_serves_every_camera_in_turn(zenoh_net):
         print(robot, "largest gap", gaps.max())
         assert gaps.max() <= 8, (robot, seqs)
     assert stats["resets"] == {}, (stats, offered)
+
+
+def test_status_shows_candidates_and_second_publishers():
+    from cli.net import format_status
+
+    scene = make_scene("looming")
+    clock = FakeClock()
+    core = WorkerCore(worker_id="w1", clock=clock)
+    for seq in range(6):
+        clock.now += 0.05
+        feed(core, "r1", scene.frames[seq], 100 + seq)
+        if seq in (3, 4):
+            core.offer("asnn/r1/frame", payload(scene.frames[0], 0))
+    core.offer("asnn/new/frame", payload(scene.frames[0], 0))
+    line = format_status(msgpack.unpackb(msgpack.packb(core.status())))
+    assert "robots r1 (+1 waiting for a valid frame)" in line
+    assert "second publishers: 1, contested: r1 (1 intrusions)" in line
+    assert "second-publisher 1" in line
+
+
+# ---------------------------------------------------------------- 7. alerts
+
+@pytest.mark.parametrize("stamp, shown", [(1.7e18, "t=1.7e+18"), (1.7e15, "t=1.7e+15"),
+                                          (-5.0, "t=-5.000"), (1e308, "t=1e+308"),
+                                          (12.25, "t=12.250"), (0.0, "t=0.000")])
+def test_every_warning_is_printed_whatever_its_stamp(stamp, shown):
+    """Issue 13 (7): a stamp in nanoseconds made time.localtime raise for every warning."""
+    import io
+
+    from clients.alerts import printer
+    from service.messages import Response
+
+    out = io.StringIO()
+    show = printer(False, out)
+    show(Response(robot="r1", seq=7, stamp=stamp, model="asnn", preset="p", u=1.0, out=0.9,
+                  spikes=3, spike_rate=60.0, collision=True, worker="w", latency_ms=1.0,
+                  dropped=0))
+    line = out.getvalue()
+    assert line.count("\n") == 1 and "WARNING robot r1 seq 7" in line
+    assert line.split()[0] == shown
+
+
+def test_a_plausible_epoch_stamp_is_a_time_of_day():
+    from clients.alerts import format_stamp
+
+    assert format_stamp(1_700_000_000.25).count(":") == 2
+    assert format_stamp(1_700_000_000.25).endswith(".250")
+
+
+# ---------------------------------------------------------------- 9. router endpoints
+
+def test_router_prints_the_endpoints_of_its_config_file(procs, tmp_path):
+    """Issue 13 (9): it printed tcp/[::]:7447 whatever the file said."""
+    from service.demo import free_port
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    config = tmp_path / "router.json5"
+    config.write_text(f'{{ listen: {{ endpoints: ["{endpoint}"] }}, scouting: {{ multicast: '
+                      '{ enabled: false }, gossip: { enabled: false } } }')
+    router = procs("router", "--config", str(config))
+    router.wait_line("listening on")
+    line = next(line for line in router.err if "listening on" in line)
+    assert line.endswith(f"listening on {endpoint}"), line
