@@ -20,6 +20,19 @@ HTTP routes: ``/`` the page, ``/static/dashboard.js`` and ``/static/dashboard.cs
 (``text/event-stream``: event ``snapshot`` then ``update``), ``/state`` (the full snapshot as JSON,
 for scripts).
 
+Bounds (docs/operations.md, "Hostile input"): at most ``max_robots`` robots (when the table is
+full, the one silent longest makes room if it is stale); per robot a preview of at most
+MAX_PREVIEW_BYTES, at most MAX_POINTS spike-rate points and MAX_TARGETS targets per response;
+all previews together at most ``max_preview_total`` bytes (the oldest previews are forgotten
+first). The server closes connections idle for ``idle_timeout`` seconds (a request that does not
+arrive whole, a kept-alive connection without a next request), drops an event stream whose
+client has not taken an event within ``send_timeout`` seconds (at most SEND_BUFFER bytes wait in
+the kernel for each), holds at most ``max_streams`` event streams (``max_streams_per_address``
+from one address) and ``max_streams + spare_connections`` connections in all
+(``max_streams_per_address + spare_connections / 2`` from one address), so that a browser can
+still load the page while another address holds what it may. Invalid messages and dropped connections
+are logged rate-limited, without tracebacks.
+
 Robot state as shown: **collision** when the latest response says so, or the robot's latest
 warning is at most ``hold`` seconds older (camera clock) than its latest response, so a warning
 that lasts a few frames stays visible; **stale** when no response or preview arrived for
@@ -32,6 +45,7 @@ import base64
 import http.server
 import json
 import logging
+import socket
 import threading
 import time
 from collections import Counter, deque
@@ -40,6 +54,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 
 from service import keys
+from service.logutil import RateLimitedLog
 from service.messages import (MessageError, Preview, Response, decode_preview,
                               decode_response)
 
@@ -52,12 +67,20 @@ HOLD_S = 3.0          # a warning keeps the robot in the collision state this lo
 STALE_S = 3.0         # no response or preview for this long: stale
 FORGET_S = 600.0      # a robot silent this long is dropped from the dashboard
 MAX_ROBOTS = 1000     # bound on the state a misbehaving publisher can make us keep
-MAX_POINTS = 2000     # per robot, whatever the stamps say
+MAX_POINTS = 400      # per robot, whatever the stamps say (10 s at 40 responses a second)
+MAX_TARGETS = 16      # targets kept per response (the worker finds a few)
 LOG_SIZE = 50         # warning episodes kept in the log
 EPISODE_GAP = 20      # a warning at most this many frames after a robot's previous one extends
                       # the same log entry (one row per episode, not twenty rows a second)
-RECENT_TARGETS = 64   # responses whose targets are kept to match a preview's seq
-MAX_PREVIEW_BYTES = 256 * 1024
+RECENT_TARGETS = 32   # responses whose targets are kept to match a preview's seq
+MAX_PREVIEW_BYTES = 64 * 1024          # one thumbnail (asnn camera's are about 5 KiB)
+MAX_PREVIEW_TOTAL = 16 * 1024 * 1024   # all thumbnails held, encoded
+IDLE_TIMEOUT = 10.0   # seconds a connection may wait for a whole request
+SEND_TIMEOUT = 10.0   # seconds an event stream may wait for its client to take an event
+SEND_BUFFER = 256 * 1024  # bytes the kernel may hold for one event stream
+MAX_STREAMS = 32
+MAX_STREAMS_PER_ADDRESS = 8
+SPARE_CONNECTIONS = 32  # connections beyond the streams: page loads, /state
 
 STATIC_FILES = {  # the only files served: name -> content type
     "index.html": "text/html; charset=utf-8",
@@ -121,11 +144,15 @@ class FleetStore:
     def __init__(self, prefix: str = keys.DEFAULT_PREFIX, *, history: float = HISTORY_S,
                  hold: float = HOLD_S, stale_after: float = STALE_S,
                  forget_after: float = FORGET_S, max_robots: int = MAX_ROBOTS,
-                 log_size: int = LOG_SIZE, clock: Callable[[], float] = time.monotonic):
+                 max_preview_total: int = MAX_PREVIEW_TOTAL, log_size: int = LOG_SIZE,
+                 log_interval: float = 10.0, clock: Callable[[], float] = time.monotonic):
         self.prefix = keys.check_prefix(prefix)
         self.history, self.hold, self.stale_after = history, hold, stale_after
         self.forget_after, self.max_robots = forget_after, max_robots
+        self.max_preview_total = max_preview_total
         self.clock = clock
+        self._log_limited = RateLimitedLog(log, log_interval, clock)
+        self._preview_bytes = 0  # encoded bytes of every preview held
         self.invalid: Counter = Counter()
         self.received: Counter = Counter()
         self._robots: dict[str, _Robot] = {}
@@ -161,14 +188,15 @@ class FleetStore:
         except MessageError as exc:
             return self._reject(exc.reason, exc.detail, key)
         except Exception as exc:  # a bug here must not take the subscriber down
-            log.exception("unexpected error on %s", key)
             return self._reject("internal", repr(exc), key)
+        if kind != "preview" and len(message.targets) > MAX_TARGETS:
+            message = message.model_copy(update={"targets": message.targets[:MAX_TARGETS]})
         with self._lock:
             state = self._robot_locked(robot)
             if state is None:
                 self.invalid["too-many-robots"] += 1
-                log.warning("dropped a %s of %s: already showing %d robots", kind, robot,
-                            self.max_robots)
+                self._log_limited.warning("too-many-robots", "dropped a %s of %s: already "
+                                          "showing %d robots", kind, robot, self.max_robots)
                 return None
             self.received[kind] += 1
             version = self._bump_locked()
@@ -193,16 +221,28 @@ class FleetStore:
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:
             self.invalid[reason] += 1
-        log.warning("invalid message on %s (%s): %s", key, reason, detail)
+        self._log_limited.warning(reason, "invalid message on %s (%s): %s", str(key)[:200],
+                                  reason, detail[:300])
         return None
 
     def _robot_locked(self, robot: str) -> _Robot | None:
+        """The robot's state, made if there is room: when the table is full, the robot silent
+        longest makes room if it is stale (a burst of ids cannot hide new robots for long)."""
         state = self._robots.get(robot)
         if state is None:
             if len(self._robots) >= self.max_robots:
-                return None
+                now = self.clock()
+                quiet = min(self._robots.values(), key=lambda s: s.touched)
+                if now - quiet.touched <= self.stale_after:
+                    return None
+                self._forget_robot_locked(quiet.name)
             state = self._robots[robot] = _Robot(robot)
         return state
+
+    def _forget_robot_locked(self, name: str) -> None:
+        state = self._robots.pop(name)
+        if state.preview is not None:
+            self._preview_bytes -= state.preview["bytes"]
 
     def _bump_locked(self) -> int:
         self._version += 1
@@ -217,7 +257,7 @@ class FleetStore:
         state.response, state.seen, state.changed = response, now, version
         state.responses += 1
         state.points.append((version, response.stamp, response.spike_rate))
-        state.recent_targets.append((response.seq, response.targets))
+        state.recent_targets.append((response.seq, response.targets))  # at most MAX_TARGETS
         horizon = response.stamp - self.history
         while state.points and (state.points[0][1] < horizon or len(state.points) > MAX_POINTS):
             state.points.popleft()
@@ -259,14 +299,31 @@ class FleetStore:
 
     def _add_preview_locked(self, state: _Robot, preview: Preview, version: int,
                             now: float) -> None:
+        if state.preview is not None:
+            self._preview_bytes -= state.preview["bytes"]
         state.preview = {
             "seq": preview.seq, "stamp": preview.stamp, "width": preview.width,
             "height": preview.height, "frame_width": preview.frame_width or preview.width,
             "frame_height": preview.frame_height or preview.height,
+            "bytes": len(preview.data),
             "src": f"data:image/{preview.format};base64,"
                    + base64.b64encode(preview.data).decode("ascii")}
+        self._preview_bytes += len(preview.data)
         state.seen, state.preview_changed, state.changed = now, version, version
         state.previews += 1
+        if self._preview_bytes > self.max_preview_total:  # forget the oldest previews first
+            for other in sorted(self._robots.values(), key=lambda s: s.preview_changed):
+                if self._preview_bytes <= self.max_preview_total:
+                    break
+                if other.preview is not None and other is not state:
+                    self._preview_bytes -= other.preview["bytes"]
+                    other.preview, other.changed = None, version
+
+    @property
+    def preview_bytes(self) -> int:
+        """Encoded bytes of every preview held (at most ``max_preview_total``)."""
+        with self._lock:
+            return self._preview_bytes
 
     # ------------------------------------------------------------------ output
 
@@ -362,7 +419,7 @@ class FleetStore:
 
     def _forget_locked(self, now: float) -> None:
         for name in [n for n, s in self._robots.items() if now - s.touched > self.forget_after]:
-            del self._robots[name]
+            self._forget_robot_locked(name)
             log.info("robot %s: silent for %.0f s, forgotten", name, self.forget_after)
 
 
@@ -411,25 +468,113 @@ def load_static() -> dict[str, bytes]:
     return {name: (folder / name).read_bytes() for name in STATIC_FILES}
 
 
+class _HTTPServer(http.server.ThreadingHTTPServer):
+    """The standard threading server with a cap on connections and quiet error handling."""
+
+    daemon_threads = True
+    request_queue_size = 128  # the listen backlog (5 by default): bursts of page loads
+
+    def __init__(self, address, handler, *, max_connections: int, max_per_address: int,
+                 log_limited: RateLimitedLog):
+        self.max_connections = max_connections
+        self.max_per_address = max_per_address
+        self.connections = 0
+        self.refused = 0
+        self._by_address: Counter = Counter()
+        self._count_lock = threading.Lock()
+        self._log_limited = log_limited
+        super().__init__(address, handler)
+
+    def process_request(self, request, client_address):
+        address = client_address[0]
+        with self._count_lock:
+            full = (self.connections >= self.max_connections
+                    or self._by_address[address] >= self.max_per_address)
+            if full:
+                self.refused += 1
+            else:
+                self.connections += 1
+                self._by_address[address] += 1
+        if full:  # answered here, on the accepting thread: no thread per refused connection
+            self._log_limited.warning("connections", "refused a connection from %s: %d open "
+                                      "(at most %d, %d from one address)", address,
+                                      self.connections, self.max_connections,
+                                      self.max_per_address)
+            try:
+                request.settimeout(0.5)
+                request.sendall(b"HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\n"
+                                b"Connection: close\r\n\r\n")
+            except OSError:
+                pass
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except Exception:
+            self._release(address)
+            raise
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._release(client_address[0])
+
+    def _release(self, address: str) -> None:
+        with self._count_lock:
+            self.connections -= 1
+            self._by_address[address] -= 1
+            if not self._by_address[address]:
+                del self._by_address[address]
+
+    def handle_error(self, request, client_address):
+        """A connection that failed (reset, timed out): one rate-limited line, no traceback."""
+        import sys
+
+        exc = sys.exc_info()[1]
+        self._log_limited.warning("connection-error", "connection from %s ended: %s",
+                                  client_address[0], f"{type(exc).__name__}: {exc}"[:200])
+
+
 class DashboardServer:
     """The page and its event stream on ``host:port`` (``port=0``: a free one, see ``url``).
 
-    Use as a context manager, or call ``start`` and ``close``.
+    Use as a context manager, or call ``start`` and ``close``. The limits are described in the
+    module notes.
     """
 
     def __init__(self, store: FleetStore, host: str = "127.0.0.1", port: int = 8080, *,
-                 push_hz: float = 5.0, heartbeat: float = 1.0, max_clients: int = 64):
+                 push_hz: float = 5.0, heartbeat: float = 1.0, max_streams: int = MAX_STREAMS,
+                 max_streams_per_address: int = MAX_STREAMS_PER_ADDRESS,
+                 spare_connections: int = SPARE_CONNECTIONS,
+                 idle_timeout: float = IDLE_TIMEOUT, send_timeout: float = SEND_TIMEOUT,
+                 send_buffer: int = SEND_BUFFER, log_interval: float = 10.0):
         self.store = store
         self.min_interval = 1.0 / push_hz
         self.heartbeat = heartbeat
-        self.max_clients = max_clients
+        self.max_streams = max_streams
+        self.max_streams_per_address = max_streams_per_address
+        self.idle_timeout = idle_timeout
+        self.send_timeout = send_timeout
+        self.send_buffer = send_buffer
         self.closing = threading.Event()
         self.clients = 0
+        self.dropped_streams = 0  # event streams dropped because their client did not read
+        self._streams_by_address: Counter = Counter()
         self._clients_lock = threading.Lock()
+        self._log_limited = RateLimitedLog(log, log_interval)
         self._static = load_static()
-        self._httpd = http.server.ThreadingHTTPServer((host, port), self._handler_class())
-        self._httpd.daemon_threads = True
+        self._httpd = _HTTPServer((host, port), self._handler_class(),
+                                  max_connections=max_streams + spare_connections,
+                                  max_per_address=max_streams_per_address
+                                  + spare_connections // 2,
+                                  log_limited=self._log_limited)
         self._thread: threading.Thread | None = None
+
+    @property
+    def connections(self) -> int:
+        """Connections open now (event streams included)."""
+        return self._httpd.connections
 
     @property
     def address(self) -> tuple[str, int]:
@@ -470,6 +615,7 @@ class DashboardServer:
             protocol_version = "HTTP/1.1"
             server_version = "asnn-dashboard"
             sys_version = ""
+            timeout = server.idle_timeout  # the socket's: a request must arrive whole in time
 
             def log_message(self, format, *args):  # noqa: A002 (the base class's name)
                 log.debug("%s %s", self.address_string(), format % args)
@@ -508,17 +654,23 @@ class DashboardServer:
 
     def _stream(self, handler) -> None:
         """Server-Sent Events: a snapshot, then deltas at most every ``min_interval``."""
+        address = handler.client_address[0]
         with self._clients_lock:
-            if self.clients >= self.max_clients:
-                full = True
-            else:
-                full = False
+            full = (self.clients >= self.max_streams
+                    or self._streams_by_address[address] >= self.max_streams_per_address)
+            if not full:
                 self.clients += 1
+                self._streams_by_address[address] += 1
         if full:
+            handler.close_connection = True
             handler._send(503, "text/plain; charset=utf-8", b"too many dashboards open\n",
                           False, cache=False)
             return
         try:
+            sock = handler.connection
+            # what a client that does not read can make us hold: the kernel's buffer, one event
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.send_buffer)
+            sock.settimeout(self.send_timeout)
             handler.send_response(200)
             handler.send_header("Content-Type", "text/event-stream; charset=utf-8")
             handler.send_header("Cache-Control", "no-store")
@@ -541,8 +693,16 @@ class DashboardServer:
                 pause = self.min_interval - (time.monotonic() - last)
                 if pause > 0 and self.closing.wait(pause):
                     break
-        except (BrokenPipeError, ConnectionResetError, ConnectionAbortedError, TimeoutError):
+        except TimeoutError:  # the client took no event for send_timeout seconds
+            with self._clients_lock:
+                self.dropped_streams += 1
+            self._log_limited.warning("slow-client", "dropped the event stream of %s: it took "
+                                      "no event for %.0f s", address, self.send_timeout)
+        except (BrokenPipeError, ConnectionResetError, ConnectionAbortedError):
             pass  # the browser went away
         finally:
             with self._clients_lock:
                 self.clients -= 1
+                self._streams_by_address[address] -= 1
+                if not self._streams_by_address[address]:
+                    del self._streams_by_address[address]

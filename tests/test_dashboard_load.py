@@ -1,0 +1,155 @@
+"""The dashboard under load and abuse (issue 13, item 8): state bounded in bytes, new robots not
+hidden by a burst of ids, slow, idle and half-open connections closed, a connection cap that
+leaves room for a browser, and logs that do not grow with a flood."""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import struct
+import time
+
+import cv2
+import numpy as np
+
+from clients.dashboard import (MAX_PREVIEW_TOTAL, MAX_TARGETS, DashboardServer, FleetStore)
+from service.messages import Preview, encode
+
+from netutil import wait_for
+from test_dashboard import Clock, get, offer_response, response
+
+
+def big_preview(seq=0) -> bytes:
+    """A valid preview of about 56 KiB (noise does not compress), under the per-robot bound."""
+    noise = np.random.default_rng(seq).integers(0, 256, (120, 160, 3), dtype=np.uint8)
+    data = cv2.imencode(".png", noise)[1].tobytes()
+    assert 50_000 < len(data) < 64 * 1024
+    return encode(Preview(seq=seq, stamp=1000.0, width=160, height=120, format="png",
+                          data=data))
+
+
+def test_previews_and_state_are_bounded_in_bytes_per_robot_and_in_total():
+    """1,000 robot ids with big previews made /state 335 MB."""
+    store = FleetStore(clock=Clock())
+    payload = big_preview()
+    for i in range(1000):
+        assert store.offer(f"asnn/r{i}/preview", payload) == f"r{i}"
+    offer_response(store, response("r0", targets=[(i, i) for i in range(500)]))
+    assert store.preview_bytes <= MAX_PREVIEW_TOTAL
+    state = json.dumps(store.delta(0))
+    assert len(state) < 2 * MAX_PREVIEW_TOTAL
+    assert len(json.loads(state)["robots"]) == 1000  # every robot still shown
+    assert len(json.loads(state)["robots"]["r0"]["targets"]) == MAX_TARGETS
+    # the newest previews are the ones kept
+    assert "src" in json.loads(state)["robots"]["r999"]["preview"]
+
+
+def test_a_burst_of_ids_does_not_hide_new_robots_once_it_is_stale():
+    clock = Clock()
+    store = FleetStore(clock=clock, max_robots=10, stale_after=3.0)
+    for i in range(10):
+        offer_response(store, response(f"junk{i}"))
+    assert offer_response(store, response("real")) is None  # all ten are live: no room
+    clock.now += 5.0
+    assert offer_response(store, response("real")) == "real"
+    assert "real" in store.robots() and len(store.robots()) == 10
+
+
+def raw_client(server, source="127.0.0.1", rcvbuf=None):
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    if rcvbuf:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+    sock.bind((source, 0))
+    sock.settimeout(20)
+    sock.connect(server.address)
+    return sock
+
+
+def closed_by_server(sock, timeout=20.0) -> bool:
+    """True once the server has closed the connection (reads end), within ``timeout``."""
+    sock.settimeout(timeout)
+    try:
+        while sock.recv(65536):
+            pass
+    except (TimeoutError, ConnectionResetError):
+        return False
+    return True
+
+
+def test_an_event_stream_that_is_never_read_is_dropped():
+    """A client that never reads held a full snapshot (330 MB) and a thread forever."""
+    store = FleetStore()
+    payload = big_preview()
+    for i in range(40):  # about 3 MB of state: far more than the socket buffers
+        store.offer(f"asnn/r{i}/preview", payload)
+    with DashboardServer(store, "127.0.0.1", 0, send_timeout=1.0,
+                         send_buffer=16 * 1024) as server:
+        sock = raw_client(server, rcvbuf=4096)
+        sock.sendall(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+        wait_for(lambda: server.clients == 1, what="the stream to start")
+        wait_for(lambda: server.clients == 0, what="the unread stream to be dropped")
+        assert server.dropped_streams == 1
+        sock.close()
+
+
+def test_idle_and_half_open_connections_are_closed():
+    with DashboardServer(FleetStore(), "127.0.0.1", 0, idle_timeout=0.5) as server:
+        half = raw_client(server)
+        half.sendall(b"GET / HTTP/1.1\r\nHost:")  # and nothing more
+        idle = raw_client(server)
+        idle.sendall(b"GET /state HTTP/1.1\r\nHost: x\r\n\r\n")  # kept alive, then silent
+        assert idle.recv(65536).startswith(b"HTTP/1.1 200")
+        silent = raw_client(server)  # connects and never says anything
+        for sock in (half, idle, silent):
+            assert closed_by_server(sock)
+            sock.close()
+        wait_for(lambda: server.connections == 0, what="the connections to be released")
+
+
+def test_held_event_streams_leave_room_for_a_browser():
+    """200 held event streams made a real browser get 503."""
+    store = FleetStore()
+    offer_response(store, response())
+    with DashboardServer(store, "127.0.0.1", 0, max_streams=16, max_streams_per_address=4,
+                         spare_connections=16) as server:
+        held = []
+        for _ in range(100):  # from another loopback address than the browser's
+            sock = raw_client(server, source="127.0.0.2")
+            try:
+                sock.sendall(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+            except OSError:
+                pass
+            held.append(sock)
+        wait_for(lambda: server.clients == 4, what="the attacker's streams")
+        assert server.connections <= 32
+        # the browser: the page, its assets, the state and its own event stream
+        for path in ("/", "/static/dashboard.js", "/static/dashboard.css", "/state"):
+            assert get(server, path)[0] == 200, path
+        browser = raw_client(server)
+        browser.sendall(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+        assert browser.recv(4096).startswith(b"HTTP/1.1 200")
+        browser.close()
+        for sock in held:
+            sock.close()
+
+
+def test_floods_of_invalid_messages_and_dropped_connections_log_a_few_lines(caplog, capfd):
+    store = FleetStore()
+    for i in range(40):
+        store.offer(f"asnn/r{i}/preview", big_preview())
+    with caplog.at_level(logging.DEBUG, logger="asnn.dashboard"):
+        for _ in range(1000):
+            store.offer("asnn/r1/response", b"\xc1")
+        assert store.invalid["undecodable"] == 1000
+        with DashboardServer(store, "127.0.0.1", 0) as server:
+            for _ in range(20):  # ask for 3 MB and reset the connection at once
+                sock = raw_client(server)
+                sock.sendall(b"GET /state HTTP/1.1\r\nHost: x\r\n\r\n")
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                sock.close()
+            time.sleep(0.5)
+            assert get(server, "/")[0] == 200
+    warnings = [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(warnings) <= 3, [r.getMessage() for r in warnings]
+    assert "Traceback" not in capfd.readouterr().err
