@@ -1,6 +1,6 @@
-"""The secured fleet: an in-process router with deploy/zenoh/secure/router.json5 (TLS, user and
-password, access control by role) and certificates made at test time by
-deploy/scripts/gen-dev-certs.sh."""
+"""The secured fleet: an in-process router with the config deploy/scripts/gen-dev-certs.sh makes
+from deploy/zenoh/secure/router.json5 (TLS with client certificates, user and password, access
+control by identity: one per camera, bound to its robot) and certificates made at test time."""
 
 from __future__ import annotations
 
@@ -34,9 +34,12 @@ pytestmark = pytest.mark.skipif(not (shutil.which("openssl") and shutil.which("b
                                 reason="needs openssl and bash for the certificates")
 
 
+ROBOTS = ("r1", "r2")
+
+
 def generate(directory: Path) -> Path:
-    subprocess.run(["bash", str(SCRIPT), str(directory)], check=True, capture_output=True,
-                   timeout=120)
+    subprocess.run(["bash", str(SCRIPT), "--robots", ",".join(ROBOTS), str(directory)],
+                   check=True, capture_output=True, timeout=180)
     return directory
 
 
@@ -55,14 +58,10 @@ def set_json(conf: zenoh.Config, key: str, value) -> None:
     conf.insert_json5(key, json.dumps(value))
 
 
-def router_config(certs: Path, port: int, mtls: bool = False) -> zenoh.Config:
-    conf = zenoh.Config.from_file(str(ROUTER))
+def router_config(certs: Path, port: int) -> zenoh.Config:
+    """The generated router config (paths already in ``certs``), on a free loopback port."""
+    conf = zenoh.Config.from_file(str(certs / "router.json5"))
     set_json(conf, "listen/endpoints", [f"tls/127.0.0.1:{port}"])
-    set_json(conf, "transport/link/tls/listen_certificate", str(certs / "router.pem"))
-    set_json(conf, "transport/link/tls/listen_private_key", str(certs / "router.key"))
-    set_json(conf, "transport/link/tls/root_ca_certificate", str(certs / "ca.pem"))
-    set_json(conf, "transport/link/tls/enable_mtls", mtls)
-    set_json(conf, "transport/auth/usrpwd/dictionary_file", str(certs / "credentials.txt"))
     return conf
 
 
@@ -125,7 +124,7 @@ def fake_response(robot="r1") -> bytes:
 def test_each_role_does_its_job_and_nothing_else(fleet):
     session, _ = fleet
     worker_session, camera, dashboard, alerts = (session(r) for r in
-                                                 ("worker", "camera", "dashboard", "alerts"))
+                                                 ("worker", "camera-r1", "dashboard", "alerts"))
     core = WorkerCore(worker_id="secure-w1", idle_timeout=600)
     with Worker(worker_session, core, stats_every=0):
         responses = Responses(dashboard)
@@ -149,7 +148,7 @@ def test_each_role_does_its_job_and_nothing_else(fleet):
 
         # (the collectors are on other sessions: a session delivers its own puts locally)
         # a camera cannot publish a warning or a response, nor read the responses
-        camera_reads = collector(session("camera"), keys.responses())
+        camera_reads = collector(session("camera-r1"), keys.responses())
         dashboard_warnings = collector(alerts, keys.warnings())
         camera.put(keys.warning_key("r1"), fake_response())
         camera.put(keys.response_key("r1"), fake_response())
@@ -184,14 +183,14 @@ def test_each_role_does_its_job_and_nothing_else(fleet):
 
 def test_wrong_or_unknown_credentials_cannot_connect(fleet, certs):
     _, port = fleet
-    assert fails_to_open(client_config(certs, "camera", port, password="not-the-password"))
-    conf = client_config(certs, "camera", port)
+    assert fails_to_open(client_config(certs, "camera-r1", port, password="not-the-password"))
+    conf = client_config(certs, "camera-r1", port)
     set_json(conf, "transport/auth/usrpwd/user", "mallory")
     assert fails_to_open(conf)
-    conf = client_config(certs, "camera", port)
+    conf = client_config(certs, "camera-r1", port)
     set_json(conf, "transport/auth/usrpwd", {"user": None, "password": None})
     assert fails_to_open(conf)
-    assert not fails_to_open(client_config(certs, "camera", port))  # the control
+    assert not fails_to_open(client_config(certs, "camera-r1", port))  # the control
 
 
 def test_a_router_with_an_untrusted_certificate_is_refused(fleet, certs, rogue):
@@ -209,7 +208,7 @@ def test_plain_tcp_is_not_served(certs):
 
 def test_mtls_refuses_clients_without_a_trusted_certificate(certs, rogue):
     port = free_port()
-    with zenoh.open(router_config(certs, port, mtls=True)):
+    with zenoh.open(router_config(certs, port)):
         assert not fails_to_open(client_config(certs, "dashboard", port))
         assert fails_to_open(client_config(certs, "dashboard", port, cert_from=rogue))
         conf = client_config(certs, "dashboard", port)
@@ -233,10 +232,71 @@ def test_the_secure_compose_override_parses_and_names_existing_files():
     parser = build_parser()
     for name, service in override["services"].items():
         if name == "router":
-            assert service["volumes"][0].startswith("./deploy/zenoh/secure/router.json5:")
+            assert service["command"] == ["--config", "/etc/asnn/secrets/router.json5"]
             continue
         args = parser.parse_args(service["command"])
-        assert args.connect == ["tls/router:7447"] and args.config.endswith(f"/{name}.json5")
+        identity = f"camera-{args.robot}" if name == "camera" else name
+        assert args.connect == ["tls/router:7447"]
+        assert args.config.endswith(f"/{identity}.json5")
     for name in ("router.json5", "client.json5"):
         conf = zenoh.Config.from_file(str(ROOT / "deploy" / "zenoh" / name))
         assert json.loads(conf.get_json("transport/link/tx/lease")) == 1000
+
+
+def frames_reaching_the_worker(session, worker_session, port, attempts):
+    """Frames put by ``session`` on each robot's key in ``attempts`` that a subscriber on the
+    worker's session receives (the worker identity may subscribe to every frame)."""
+    got = collector(worker_session, keys.frames())
+    image = make_scene("looming").frames[0]
+    for seq, robot in enumerate(attempts):
+        session.put(keys.frame_key(robot), encode(Frame.from_image(image, seq=seq, stamp=0.0)))
+    time.sleep(QUIET)
+    return [msgpack_seq(p) for p in got]
+
+
+def msgpack_seq(payload: bytes) -> int:
+    from service.messages import decode_frame
+
+    return decode_frame(payload).seq
+
+
+def test_a_camera_publishes_only_its_own_robots_frames(fleet):
+    """Issue 13 (5, 6): any camera credential could publish frames for any robot id."""
+    session, port = fleet
+    worker_session = session("worker")
+    r1 = session("camera-r1")
+    # seq 0 and 2 on r1's key (its own), seq 1 and 3 on r2's and another robot's
+    got = frames_reaching_the_worker(r1, worker_session, port, ["r1", "r2", "r1", "r9"])
+    assert sorted(got) == [0, 2]
+    r2 = session("camera-r2")
+    assert frames_reaching_the_worker(r2, worker_session, port, ["r1", "r2"]) == [1]
+
+
+def test_a_password_is_bound_to_its_certificate(fleet, certs):
+    """robot A's certificate with robot B's user and password: Zenoh admits the session (its
+    authentication checks each on its own) but no subject matches both, so it may do nothing."""
+    session, port = fleet
+    worker_session = session("worker")
+    password = client_config(certs, "camera-r2", port).get_json("transport/auth/usrpwd/password")
+    conf = client_config(certs, "camera-r1", port, password=json.loads(password))
+    set_json(conf, "transport/auth/usrpwd/user", "camera-r2")
+    try:
+        mixed = zenoh.open(conf)
+    except zenoh.ZError:
+        return  # refused outright: bound all the more
+    with mixed:
+        assert frames_reaching_the_worker(mixed, worker_session, port, ["r1", "r2"]) == []
+
+
+def test_the_template_admits_no_camera_until_cameras_are_generated():
+    conf = zenoh.Config.from_file(str(ROUTER))
+    subjects = json.loads(conf.get_json("access_control/subjects"))
+    assert all(s["usernames"] == s["cert_common_names"] for s in subjects)
+    assert not any(s["id"].startswith("camera") for s in subjects)
+    assert json.loads(conf.get_json("transport/link/tls/enable_mtls")) is True
+
+
+def test_the_generator_refuses_bad_robot_ids(tmp_path):
+    out = subprocess.run(["bash", str(SCRIPT), "--robots", "r1,bad/id", str(tmp_path / "s")],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "invalid robot id" in out.stderr
