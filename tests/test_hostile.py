@@ -14,8 +14,8 @@ import pytest
 
 from asnn.stimuli import make_scene
 from service.core import WorkerCore
-from service.messages import (MAX_ITEMS, MAX_PAYLOAD, Frame, MessageError, check_encoded,
-                              decode_frame, encode, encode_image, min_encoded_bytes)
+from service.messages import (MAX_ITEMS, MAX_PAYLOAD, MessageError, check_encoded, decode_frame,
+                              encode_image, min_encoded_bytes)
 
 from service.worker import Worker
 

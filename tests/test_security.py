@@ -20,7 +20,7 @@ from clients.alerts import WarningListener
 from service import keys
 from service.core import WorkerCore
 from service.demo import free_port
-from service.messages import Frame, Response, encode
+from service.messages import Frame, Response, decode_frame, encode
 from service.worker import Worker, live_workers, query_status
 
 from netutil import Responses, wait_for
@@ -243,33 +243,28 @@ def test_the_secure_compose_override_parses_and_names_existing_files():
         assert json.loads(conf.get_json("transport/link/tx/lease")) == 1000
 
 
-def frames_reaching_the_worker(session, worker_session, port, attempts):
-    """Frames put by ``session`` on each robot's key in ``attempts`` that a subscriber on the
-    worker's session receives (the worker identity may subscribe to every frame)."""
+def frames_reaching_the_worker(session, worker_session, attempts):
+    """The seqs of the frames put by ``session``, the i-th with seq i on the key of robot
+    ``attempts[i]``, that a subscriber on the worker's session receives (the worker identity
+    may subscribe to every frame)."""
     got = collector(worker_session, keys.frames())
     image = make_scene("looming").frames[0]
     for seq, robot in enumerate(attempts):
         session.put(keys.frame_key(robot), encode(Frame.from_image(image, seq=seq, stamp=0.0)))
     time.sleep(QUIET)
-    return [msgpack_seq(p) for p in got]
-
-
-def msgpack_seq(payload: bytes) -> int:
-    from service.messages import decode_frame
-
-    return decode_frame(payload).seq
+    return [decode_frame(payload).seq for payload in got]
 
 
 def test_a_camera_publishes_only_its_own_robots_frames(fleet):
     """Issue 13 (5, 6): any camera credential could publish frames for any robot id."""
-    session, port = fleet
+    session, _ = fleet
     worker_session = session("worker")
     r1 = session("camera-r1")
     # seq 0 and 2 on r1's key (its own), seq 1 and 3 on r2's and another robot's
-    got = frames_reaching_the_worker(r1, worker_session, port, ["r1", "r2", "r1", "r9"])
+    got = frames_reaching_the_worker(r1, worker_session, ["r1", "r2", "r1", "r9"])
     assert sorted(got) == [0, 2]
     r2 = session("camera-r2")
-    assert frames_reaching_the_worker(r2, worker_session, port, ["r1", "r2"]) == [1]
+    assert frames_reaching_the_worker(r2, worker_session, ["r1", "r2"]) == [1]
 
 
 def test_a_password_is_bound_to_its_certificate(fleet, certs):
@@ -285,7 +280,7 @@ def test_a_password_is_bound_to_its_certificate(fleet, certs):
     except zenoh.ZError:
         return  # refused outright: bound all the more
     with mixed:
-        assert frames_reaching_the_worker(mixed, worker_session, port, ["r1", "r2"]) == []
+        assert frames_reaching_the_worker(mixed, worker_session, ["r1", "r2"]) == []
 
 
 def test_the_template_admits_no_camera_until_cameras_are_generated():
