@@ -221,7 +221,7 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
                   curvature: float = 0.0, bumps_deg: float = 0.0, night: bool = False,
                   vehicles: Sequence[Vehicle] = (), target: int | None = None, onset: int = 0,
                   roadside: float = 1.0, hfov_deg: float = 70.0, camera_height: float = 1.3,
-                  pitch_deg: float = 2.0, front: float = 2.0, tail: int = 3, seed: int = 0,
+                  pitch_deg: float = 2.0, front: float = 2.0, tail: int = 2, seed: int = 0,
                   category: Sequence[str] = (), twin: str | None = None) -> Scene:
     """Render a labelled driving clip.
 

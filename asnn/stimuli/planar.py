@@ -36,7 +36,7 @@ scales by ``s(t) = Z0 / Z(t)``:
 Labels: ``loom``, ``halt`` and ``approach-recede`` are collisions, everything else is not. The
 approach starts at ``onset``. For ``loom`` the contact frame is the first frame where the image is
 as tall as the frame (the object fills the view; its time to contact is then
-``tau * height / H``, 0.1-0.4 s in the suite); for ``halt`` and ``approach-recede`` it is the frame
+``tau * height / H``, 0.1-0.6 s in the suite); for ``halt`` and ``approach-recede`` it is the frame
 the approach ends. ``ttc`` is ``Z / v`` in seconds in every frame with the object closing in,
 NaN elsewhere.
 """
@@ -198,7 +198,7 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
                  height: float = 12.0, aspect: float = 1.0,
                  position: tuple[float, float] | None = None, tau: float = 3.0,
                  velocity: tuple[float, float] = (2.0, 0.0), stop_height: float | None = None,
-                 hold: int = 10, tail: int = 3, background: Background = Background(),
+                 hold: int = 10, tail: int = 2, background: Background = Background(),
                  props: Sequence[Prop] = (), camera=None, lighting: Sequence = (),
                  noise: float = 0.0, jpeg_quality: int | None = None, seed: int = 0,
                  category: Sequence[str] = (), twin: str | None = None) -> Scene:

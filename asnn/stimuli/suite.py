@@ -90,7 +90,10 @@ class Case:
 
 
 def _planar(name: str, group: str, *tags: str, twin: str | None = None, **options) -> Case:
-    return Case(name, planar_scene, {"size": PLANAR_SIZE, **options}, (group, *tags), twin)
+    # a second of still scene (with any background motion, shake or lighting) before an approach
+    # starts: a detector disturbed by the clutter alone warns early
+    return Case(name, planar_scene, {"size": PLANAR_SIZE, "onset": 20, **options},
+                (group, *tags), twin)
 
 
 def _driving(name: str, group: str, *tags: str, twin: str | None = None, **options) -> Case:
@@ -102,6 +105,7 @@ def _c(contrast: float) -> str:
 
 
 # static clutter for the camera and lighting scenes: levels 50-170, so a gain of 1.4 never clips
+# (2.0, the strongest step, clips the lightest parts as a camera would)
 _PROPS = (Prop("disk", 30.0, 40.0, 20.0, 60.0), Prop("square", 122.0, 32.0, 18.0, 165.0),
           Prop("car", 62.0, 90.0, 14.0, 55.0, 1.4), Prop("rect", 140.0, 82.0, 50.0, 150.0, 0.2))
 _STILL_TEXTURE = Background("texture", 0.3, 1.5, mean=110.0)
@@ -138,10 +142,10 @@ def _approach_cases() -> list[Case]:
                              background=Background("texture", 0.2, 1.5)))
     for polarity in ("dark", "light"):
         cases.append(_planar(f"halt-{polarity}-c0.6", "approach-stops", polarity, "halt",
-                             motion="halt", polarity=polarity, stop_height=40.0))
+                             motion="halt", polarity=polarity, stop_height=72.0))
         cases.append(_planar(f"approach-recede-{polarity}-c0.6", "approach-stops", polarity,
                              "recede-after", motion="approach-recede", polarity=polarity,
-                             stop_height=40.0))
+                             stop_height=72.0))
     return cases
 
 
@@ -302,6 +306,9 @@ def _brightness_cases() -> list[Case]:
                 **_scene(lighting=(Flicker(0.0, 0.1, "random", seed=3),))),
         _planar("exposure-step-up-1.4", g, "step", **_scene(lighting=(Step(30, 1.4),))),
         _planar("exposure-step-down-0.6", g, "step", **_scene(lighting=(Step(30, 0.6),))),
+        _planar("exposure-step-up-2.0", g, "step", **_scene(lighting=(Step(30, 2.0),))),
+        _planar("flicker-sine-8hz-30pct", g, "flicker",
+                **_scene(lighting=(Flicker(8.0, 0.3),))),
         _planar("headlights-sweep-day", g, "headlights", **_scene(
             lighting=(Headlights(10, 50, (-40.0, 60.0), (200.0, 60.0), 30.0, 100.0),))),
         _planar("headlights-sweep-night", g, "headlights", "night", motion="none",
@@ -343,26 +350,26 @@ def _clutter_cases() -> list[Case]:
                 background=still, camera=Shake(2.0, 1.0, smooth=2)),
         _planar("loom-dark-c0.6-pan-h1px", g, "dark", "pan", background=still,
                 position=(100.0, 60.0), camera=Pan((-1.0, 0.0))),
-        _planar("loom-dark-c0.6-flicker-4hz", g, "dark", "lighting", background=still,
+        _planar("loom-dark-c0.6-flicker-4hz", g, "dark", "flicker", background=still,
                 lighting=(Flicker(4.0, 0.15),)),
-        _planar("loom-light-c0.6-ramp-down", g, "light", "lighting", polarity="light",
-                background=still, lighting=(Ramp(10, 60, 1.0, 0.6),)),
-        _planar("loom-dark-c0.6-exposure-step", g, "dark", "lighting", background=still,
-                lighting=(Step(35, 0.75),)),
-        _planar("loom-dark-c0.6-headlights", g, "dark", "lighting", background=still,
-                lighting=(Headlights(15, 50, (200.0, 40.0), (-40.0, 70.0), 30.0, 60.0),)),
-        _planar("loom-dark-c0.3-noise-6", g, "dark", "noise", contrast=0.3, background=still,
+        _planar("loom-light-c0.6-ramp-down", g, "light", "ramp", polarity="light",
+                background=still, lighting=(Ramp(20, 70, 1.0, 0.6),)),
+        _planar("loom-dark-c0.6-exposure-step", g, "dark", "step", background=still,
+                lighting=(Step(45, 0.75),)),
+        _planar("loom-dark-c0.6-headlights", g, "dark", "headlights", background=still,
+                lighting=(Headlights(25, 60, (200.0, 40.0), (-40.0, 70.0), 30.0, 60.0),)),
+        _planar("loom-dark-c0.3-noise-6", g, "dark", "gauss", contrast=0.3, background=still,
                 noise=6.0),
         _planar("loom-light-c0.5-jpeg-q20", g, "light", "jpeg", polarity="light", contrast=0.5,
                 background=still, jpeg_quality=20),
-        _planar("loom-dark-c0.5-noise-4-jpeg-q30", g, "dark", "noise", "jpeg", contrast=0.5,
+        _planar("loom-dark-c0.5-noise-4-jpeg-q30", g, "dark", "gauss", "jpeg", contrast=0.5,
                 background=still, noise=4.0, jpeg_quality=30),
         _planar("halt-dark-c0.5-over-stripes-h2px", "approach-stops", "dark", "halt",
-                "moving-background", motion="halt", contrast=0.5, stop_height=40.0,
+                "moving-background", motion="halt", contrast=0.5, stop_height=72.0,
                 background=stripes),
         _planar("approach-recede-light-c0.5-over-stripes-h2px", "approach-stops", "light",
                 "recede-after", "moving-background", motion="approach-recede",
-                polarity="light", contrast=0.5, stop_height=40.0, background=stripes),
+                polarity="light", contrast=0.5, stop_height=72.0, background=stripes),
     ]
 
 
