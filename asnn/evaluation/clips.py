@@ -15,8 +15,8 @@ from pathlib import Path
 from ..io.video import VideoError, open_video
 from . import figures, scoring
 from .progress import Silent
-from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, parse_detectors, rate, run_detector,
-                   write_json, write_jsonl)
+from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_detectors, rate,
+                   run_detector, write_json, write_jsonl)
 
 __all__ = ["evaluate_clips"]
 
@@ -69,14 +69,7 @@ def _clips_report(results: Mapping) -> str:
         lab = labels.get(clip["clip"], {})
         cells = []
         for m in names:
-            c = results["detectors"][m]["clips"][index]
-            cell = c["outcome"]
-            if c["first_warning"] is not None:
-                cell += f" @{c['first_warning']}"
-                if c["lead_s"] is not None:
-                    cell += f" ({c['lead_s']:+.2f} s)"
-                cell += f", {c['warning_frames']} fr"
-            cells.append(cell)
+            cells.append(outcome_cell(results["detectors"][m]["clips"][index]))
         lines.append(f"| {clip['clip']} | {fmt(lab.get('onset_frame'))} | "
                      f"{fmt(lab.get('contact_frame'))} | " + " | ".join(cells) + " |")
     if results.get("errors"):

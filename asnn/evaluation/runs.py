@@ -18,7 +18,7 @@ from ..detectors import MODELS, Detector, make_detector
 from ..params import preset_key
 
 __all__ = ["DEFAULT_DETECTORS", "DetectorSpec", "parse_detector", "parse_detectors",
-           "run_detector", "write_json", "write_jsonl", "fmt", "rate"]
+           "run_detector", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
 
 DEFAULT_DETECTORS = ("asnn", "asnn:reference", "lgmd1", "lgmd2")
 
@@ -148,3 +148,17 @@ def fmt(value, digits: int = 2, suffix: str = "") -> str:
 def rate(value) -> str:
     """A fraction as a percentage for a report table (``–`` for None)."""
     return "–" if value is None else f"{100 * value:.0f}%"
+
+
+def outcome_cell(score: Mapping) -> str:
+    """One clip's score for a report table: outcome, first warning frame (lead), warning frames
+    (and those after the approach)."""
+    cell = score["outcome"]
+    if score["first_warning"] is not None:
+        cell += f" @{score['first_warning']}"
+        if score["lead_s"] is not None:
+            cell += f" ({score['lead_s']:+.2f} s)"
+        cell += f", {score['warning_frames']} fr"
+        if score.get("after_warning_frames"):
+            cell += f" ({score['after_warning_frames']} after)"
+    return cell

@@ -25,8 +25,8 @@ from pathlib import Path
 from ..stimuli.suite import GROUPS, SUITE_CASES, SUITE_VERSION, make_case, suite_cases
 from . import scoring
 from .progress import Silent
-from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, parse_detectors, rate, run_detector,
-                   write_json, write_jsonl)
+from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_detectors, rate,
+                   run_detector, write_json, write_jsonl)
 
 __all__ = ["EARLY_TOLERANCE_S", "evaluate_suite", "near_miss_pairs", "category_summaries",
            "suite_report"]
@@ -244,18 +244,6 @@ def _category_cell(s: Mapping) -> str:
     return ", ".join(parts)
 
 
-def _case_cell(c: Mapping) -> str:
-    cell = c["outcome"]
-    if c["first_warning"] is not None:
-        cell += f" @{c['first_warning']}"
-        if c["lead_s"] is not None:
-            cell += f" ({c['lead_s']:+.2f} s)"
-        cell += f", {c['warning_frames']} fr"
-        if c.get("after_warning_frames"):
-            cell += f" ({c['after_warning_frames']} after)"
-    return cell
-
-
 def suite_report(results: Mapping) -> str:
     """``report.md`` of a suite run (what :func:`evaluate_suite` returns)."""
     settings = results["settings"]
@@ -325,11 +313,9 @@ def suite_report(results: Mapping) -> str:
               "", ""]
     rows = []
     for index, c in enumerate(cases):
-        label_cells = []
-        for n in names:
-            label_cells.append(_case_cell(results["detectors"][n]["clips"][index]))
+        cells = [outcome_cell(results["detectors"][n]["clips"][index]) for n in names]
         rows.append([c["name"], c["group"], "yes" if c["collision"] else "no",
                      f"{c['onset_frame']}–{c['contact_frame']}" if c["collision"] else "–",
-                     *label_cells])
+                     *cells])
     lines += _table(["case", "group", "collision", "onset–contact", *names], rows)
     return "\n".join(lines) + "\n"
