@@ -192,6 +192,100 @@ def _spec(value):
     return value
 
 
+@dataclass(frozen=True)
+class _Path:
+    """Where the mover is in every frame of a long horizon, and the frames that matter."""
+
+    z: np.ndarray           # Z / Z0
+    sizes: np.ndarray       # image height
+    centres: np.ndarray     # (T, 2) image centre, rest view
+    contact: int | None     # contact, or where the approach ends (collisions)
+    end: int                # default clip length
+    clearance: float | None
+
+
+def _mover_path(motion: str, name: str, size: tuple[int, int], horizon: int, onset: int,
+                n_tau: float, height: float, extent: np.ndarray, x0: np.ndarray,
+                velocity: tuple[float, float], stop_height: float | None, hold: int,
+                tail: int) -> _Path:
+    w, h = size
+    center = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    stop_ratio = height / stop_height if stop_height else None
+    z = distance_ratio(motion, horizon, onset, n_tau, stop_ratio, hold)
+    sizes = height / z
+    centres = np.broadcast_to(x0, (horizon, 2)).copy()
+    contact = clearance = None
+    end = 70
+    if motion == "loom":
+        contact = _first(sizes >= h)
+        if contact is None:
+            raise ValueError(f"{name}: the looming image never fills the frame height")
+        end = contact + tail + 1
+    elif motion in ("halt", "approach-recede"):
+        contact = _first(z <= stop_ratio + 1e-12)
+        back = _first((np.arange(horizon) > contact) & (z >= 1.0))
+        end = contact + 30 if motion == "halt" else (back or horizon - 10) + 10
+    elif motion == "recede":
+        end = onset + int(round(n_tau)) + 5
+    elif motion == "translate":
+        centres += np.clip(np.arange(horizon) - onset, 0, None)[:, None] * np.asarray(velocity)
+    elif motion == "nearmiss":
+        # the gap between the object's edge and the camera's line of sight, in object sizes,
+        # along the axis where it passes: not positive means it would hit
+        clearance = float(np.max((np.abs(x0 - center) - extent / 2) / extent))
+        if clearance <= 0:
+            raise ValueError(f"{name}: a near miss must start further off-centre (clearance "
+                             f"{clearance:.2f} object sizes)")
+        centres = center + (x0 - center) / z[:, None]
+        half = np.outer(1.0 / z, extent / 2)
+        gone = np.any((centres - half > np.array([w, h]) - 0.5) | (centres + half < -0.5), axis=1)
+        exit_frame = _first(gone)
+        if exit_frame is None:
+            raise ValueError(f"{name}: the near miss never leaves the frame; move it off-centre")
+        end = exit_frame + tail + 1
+    return _Path(z, sizes, centres, contact, min(end, horizon), clearance)
+
+
+def _render(frames: int, size: tuple[int, int], fps: float, background: Background,
+            mean: float, props: Sequence[Prop], mover, camera, lighting: Sequence) -> tuple:
+    """Float frames (T, H, W) and the camera path: the rest view (background, props and
+    ``mover`` = (shape, level, aspect, centres, sizes) or None) seen by the moving camera under
+    the lighting."""
+    w, h = size
+    path = effects.camera_path(camera, frames, fps)
+    left, top, right, bottom = effects.canvas_margins(path, size) if camera else (0, 0, 0, 0)
+    canvas_shape = (h + top + bottom, w + left + right)
+    origin = (float(left), float(top))
+    gain = effects.gains(lighting, frames, fps)
+    glows = [g for g in lighting if hasattr(g, "glow")]
+
+    def scenery(t: int) -> np.ndarray:
+        canvas = background.render(t, canvas_shape, origin, mean)
+        for prop in props:
+            paint_object(canvas, prop.shape, prop.x + left, prop.y + top, prop.height,
+                         prop.level, prop.aspect)
+        return canvas
+
+    still = None if background.moving else scenery(0)
+    clip = np.empty((frames, h, w))
+    for t in range(frames):
+        canvas = still.copy() if still is not None else scenery(t)
+        if mover is not None:
+            shape, level, aspect, centres, sizes = mover
+            paint_object(canvas, shape, centres[t, 0] + left, centres[t, 1] + top, sizes[t],
+                         level, aspect)
+        if camera is not None:
+            canvas = cv2.warpAffine(canvas, effects.camera_matrix(*path[t], size, origin), (w, h),
+                                    flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        frame = canvas * gain[t]
+        for light in glows:
+            glow = light.glow(t, (h, w))
+            if glow is not None:
+                frame = frame + glow
+        clip[t] = frame
+    return clip, path
+
+
 def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int, int] = (160, 120),
                  fps: float = 20.0, frames: int | None = None, onset: int = 10,
                  shape: str = "disk", polarity: str = "dark", contrast: float = 0.6,
@@ -275,100 +369,32 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
         background_level, level = 127.5, None
     mean = background.mean if background.mean is not None else background_level
     background.check(mean)
-    center = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
-    x0 = np.asarray(position if position is not None else center, dtype=np.float64)
+    x0 = np.asarray(position if position is not None else ((w - 1) / 2.0, (h - 1) / 2.0),
+                    dtype=np.float64)
+    extent = height * np.array([aspect if shape in ("rect", "car") else 1.0, 1.0])
     n_tau = tau * fps
-    stop_ratio = height / stop_height if stop_height else None
-
-    # the clip's length follows from the motion unless given
     horizon = frames or onset + int(math.ceil(n_tau)) + 400
-    z = distance_ratio(motion, horizon, onset, n_tau, stop_ratio, hold)
-    sizes = height / z
-    rest = np.broadcast_to(x0, (horizon, 2)).copy()
-    if motion == "nearmiss":
-        rest = center + (x0 - center) / z[:, None]
-    elif motion == "translate":
-        rest += np.clip(np.arange(horizon) - onset, 0, None)[:, None] * np.asarray(velocity)
-    extent0 = height * np.array([aspect if shape in ("rect", "car") else 1.0, 1.0])
-    clearance = None
-    if motion == "nearmiss":
-        # the gap between the object's edge and the camera's line of sight, in object sizes,
-        # along the axis where it passes: not positive means it would hit
-        clearance = float(np.max((np.abs(x0 - center) - extent0 / 2) / extent0))
-        if clearance <= 0:
-            raise ValueError(f"{name}: a near miss must start further off-centre (clearance "
-                             f"{clearance:.2f} object sizes)")
-    contact = exit_frame = None
-    if motion == "loom":
-        contact = _first(sizes >= h)
-        if contact is None:
-            raise ValueError(f"{name}: the looming image never fills the frame height")
-    elif motion in ("halt", "approach-recede"):
-        contact = _first(z <= stop_ratio + 1e-12)
-    elif motion == "nearmiss":
-        half = np.outer(1.0 / z, extent0 / 2)
-        outside = np.any((rest - half > np.array([w, h]) - 0.5) | (rest + half < -0.5), axis=1)
-        exit_frame = _first(outside)
-        if exit_frame is None:
-            raise ValueError(f"{name}: the near miss never leaves the frame; move it off-centre")
-    if frames is None:
-        frames = {"loom": (contact or 0) + tail + 1,
-                  "nearmiss": (exit_frame or 0) + tail + 1,
-                  "halt": (contact or 0) + 30,
-                  "approach-recede": (_first((np.arange(horizon) > (contact or 0))
-                                             & (z >= 1.0)) or horizon - 10) + 10,
-                  "recede": onset + int(round(n_tau)) + 5}.get(motion, 70)
-        frames = min(frames, horizon)
-    z, sizes, rest = z[:frames], sizes[:frames], rest[:frames]
+    move = _mover_path(motion, name, size, horizon, onset, n_tau, height, extent, x0, velocity,
+                       stop_height, hold, tail)
+    frames = frames or move.end
+    z, sizes, centres = move.z[:frames], move.sizes[:frames], move.centres[:frames]
 
-    path = effects.camera_path(camera, frames, fps)
-    left, top, right, bottom = effects.canvas_margins(path, size) if camera else (0, 0, 0, 0)
-    canvas_shape = (h + top + bottom, w + left + right)
-    origin = (float(left), float(top))
-    gain = effects.gains(lighting, frames, fps)
-    glows = [g for g in lighting if hasattr(g, "glow")]
-
-    still = None if background.moving else background.render(0, canvas_shape, origin, mean)
-    if still is not None:
-        for prop in props:
-            paint_object(still, prop.shape, prop.x + left, prop.y + top, prop.height, prop.level,
-                         prop.aspect)
-    clip = np.empty((frames, h, w))
-    for t in range(frames):
-        if still is not None:
-            canvas = still.copy()
-        else:
-            canvas = background.render(t, canvas_shape, origin, mean)
-            for prop in props:
-                paint_object(canvas, prop.shape, prop.x + left, prop.y + top, prop.height,
-                             prop.level, prop.aspect)
-        if has_mover:
-            paint_object(canvas, shape, rest[t, 0] + left, rest[t, 1] + top, sizes[t], level,
-                         aspect)
-        if camera is not None:
-            matrix = effects.camera_matrix(*path[t], size, origin)
-            frame = cv2.warpAffine(canvas, matrix, (w, h), flags=cv2.INTER_LINEAR,
-                                   borderMode=cv2.BORDER_REPLICATE)
-        else:
-            frame = canvas
-        frame = frame * gain[t]
-        for light in glows:
-            glow = light.glow(t, (h, w))
-            if glow is not None:
-                frame = frame + glow
-        clip[t] = frame
+    mover = (shape, level, aspect, centres, sizes) if has_mover else None
+    clip, path = _render(frames, size, fps, background, mean, props, mover, camera, lighting)
     clip = effects.sensor_noise(clip, noise, seed)
     video = np.clip(np.rint(clip), 0, 255).astype(np.uint8)
     if jpeg_quality is not None:
         video = effects.jpeg(video, jpeg_quality)
 
     collision = motion in COLLISION_MOTIONS
+    contact = move.contact
+    if collision and contact >= frames:
+        raise ValueError(f"{name}: {frames} frames end before the approach does ({contact})")
     track = sizes_label = ttc = None
     if has_mover:
-        track = effects.transform_points(rest, path, size)
+        track = effects.transform_points(centres, path, size)
         sizes_label = sizes.copy()
-        closing = np.append(z[1:] < z[:-1], False)
-        closing[-1] = len(z) > 1 and z[-1] < z[-2]
+        closing = np.append(z[1:] < z[:-1], len(z) > 1 and z[-1] < z[-2])  # closing in next
         ttc = np.where(closing, z * tau, np.nan)
     params = dict(motion=motion, size=size, fps=fps, frames=frames, onset=onset, shape=shape,
                   polarity=polarity, contrast=contrast, height=height, aspect=aspect,
@@ -376,8 +402,8 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
                   stop_height=stop_height, hold=hold, background=_spec(background),
                   props=_spec(list(props)), camera=_spec(camera), lighting=_spec(list(lighting)),
                   noise=noise, jpeg_quality=jpeg_quality, seed=seed)
-    if clearance is not None:
-        params["clearance"] = round(clearance, 3)
+    if move.clearance is not None:
+        params["clearance"] = round(move.clearance, 3)
     return Scene(name=name, frames=video, fps=fps, collision=collision,
                  onset_frame=onset if collision else None,
                  contact_frame=contact if collision else None,
