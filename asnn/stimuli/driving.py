@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass
 import cv2
 import numpy as np
 
-from .render import noise_tile, paint_disk, paint_object
+from .render import car_lamps, noise_tile, paint_disk, paint_object
 from .scene import Scene
 
 __all__ = ["LANE_WIDTH", "Vehicle", "driving_scene", "road_coordinates", "path_pose"]
@@ -216,6 +216,141 @@ def _billboards(item: dict) -> list[tuple]:
     return [("rect", 1.2, 0.0, 1.0, 0.55 * shade)]
 
 
+@dataclass(frozen=True)
+class _Camera:
+    """Our camera in every frame: intrinsics, pose on the road and pitch."""
+
+    size: tuple[int, int]
+    f: float
+    height: float
+    curvature: float
+    s: np.ndarray          # distance travelled along our lane
+    x: np.ndarray          # world position and heading
+    z: np.ndarray
+    heading: np.ndarray
+    pitch: np.ndarray
+
+    @property
+    def center(self) -> tuple[float, float]:
+        w, h = self.size
+        return (w - 1) / 2.0, (h - 1) / 2.0
+
+    def point(self, s: float, d: float, up: float, k: int) -> tuple[float, float, float]:
+        """Camera coordinates (x right, y down, z ahead) of the point at road (s, d), ``up`` m
+        above the road, in frame k."""
+        wx, wz = _world(s, d, self.curvature)
+        rx, rz = wx - self.x[k], wz - self.z[k]
+        c, sn = math.cos(self.heading[k]), math.sin(self.heading[k])
+        x_e, z_e = c * rx - sn * rz, sn * rx + c * rz
+        y_e = self.height - up
+        cp, sp = math.cos(self.pitch[k]), math.sin(self.pitch[k])
+        return x_e, y_e * cp - z_e * sp, y_e * sp + z_e * cp
+
+    def box(self, s: float, d: float, bottom: float, top: float, k: int):
+        """(x, z) of an upright box's base and the image rows of its bottom and top, or None
+        when it is not in front of us."""
+        x, yb, z = self.point(s, d, bottom, k)
+        _, yt, zt = self.point(s, d, top, k)
+        if min(z, zt) < _NEAR:
+            return None
+        _, cy = self.center
+        return x, z, cy + self.f * yb / z, cy + self.f * yt / zt
+
+
+def _ground(camera: _Camera, k: int, look: _Look, pyramid) -> np.ndarray:
+    """Sky and road of frame k: each pixel's ray hits the ground plane (or the sky)."""
+    w, h = camera.size
+    cx, cy = camera.center
+    ray_x = np.broadcast_to((np.arange(w) - cx)[None, :] / camera.f, (h, w))
+    rows = np.arange(h, dtype=np.float64)[:, None]
+    ray_y = np.broadcast_to((rows - cy) / camera.f, (h, w))
+    cp, sp = math.cos(camera.pitch[k]), math.sin(camera.pitch[k])
+    down = ray_y * cp + sp            # the ray in our (level) frame: down and ahead
+    ahead = -ray_y * sp + cp
+    ground = down > 1e-4
+    scale = np.where(ground, camera.height / np.where(ground, down, 1.0), 0.0)
+    gx, gz = ray_x * scale, ahead * scale
+    distance = np.hypot(gx, gz)
+    c, sn = math.cos(camera.heading[k]), math.sin(camera.heading[k])
+    wx = camera.x[k] + c * gx + sn * gz
+    wz = camera.z[k] - sn * gx + c * gz
+    s_road, d_road = road_coordinates(wx, wz, camera.curvature)
+    foot_d = np.abs(np.gradient(d_road, axis=1)) + np.abs(np.gradient(d_road, axis=0)) + 1e-4
+    foot_s = np.abs(np.gradient(s_road, axis=1)) + np.abs(np.gradient(s_road, axis=0)) + 1e-4
+
+    lod = np.log2(np.maximum(foot_d, foot_s) / _TEXEL)
+    fine = _mip_sample(pyramid, wx / _TEXEL, wz / _TEXEL, lod)
+    coarse = _mip_sample(pyramid, wx / (8 * _TEXEL) + 97.0, wz / (8 * _TEXEL), lod - 3.0)
+    asphalt = look.asphalt + 14.0 * fine + 8.0 * coarse
+    verge = look.verge + 18.0 * fine + 22.0 * coarse
+    surface = verge + _band(d_road, -_ROAD_HALF, _ROAD_HALF, foot_d) * (asphalt - verge)
+    dash = _band(np.mod(s_road, _DASH_PERIOD), 0.0, _DASH_PERIOD * _DASH_DUTY, foot_s)
+    marks = np.zeros_like(surface)
+    for line in _LANE_LINES:
+        marks = np.maximum(marks, dash * _band(d_road, line - _LINE_WIDTH / 2,
+                                               line + _LINE_WIDTH / 2, foot_d))
+    for edge in (-_ROAD_HALF + 0.1, _ROAD_HALF - 0.1):
+        marks = np.maximum(marks, _band(d_road, edge - _EDGE_WIDTH / 2, edge + _EDGE_WIDTH / 2,
+                                        foot_d))
+    surface += marks * (look.marking - surface)
+    surface = _haze(look, surface * _light(look, gx, gz, distance), distance)
+    horizon = cy - camera.f * math.tan(camera.pitch[k])
+    sky = look.sky_top + (look.sky_horizon - look.sky_top) * np.clip(
+        1.0 - (horizon - rows) / (0.6 * h), 0.0, 1.0)
+    below = np.clip(rows + 0.5 - horizon, 0.0, 1.0)
+    return sky * (1.0 - below) + np.where(ground, surface, look.haze) * below
+
+
+def _draw_boxes(image: np.ndarray, camera: _Camera, k: int, look: _Look, boxes) -> None:
+    """Draw upright boxes (s, d, shape, width, bottom, top, albedo, vehicle) far to near, and at
+    night the vehicles' lamps."""
+    cx, _ = camera.center
+    drawn = []
+    for s, d, shape, width, bottom, top, albedo, vehicle in boxes:
+        if -30.0 < s - camera.s[k] < 220.0:
+            seen = camera.box(s, d, bottom, top, k)
+            if seen is not None and seen[2] > seen[3]:
+                drawn.append((seen, shape, width, top - bottom, albedo, vehicle))
+    drawn.sort(key=lambda b: -b[0][1])
+    lamps = []
+    for (x, z, v_bottom, v_top), shape, width, tall, albedo, vehicle in drawn:
+        u = cx + camera.f * x / z
+        v, height_px, width_px = (v_top + v_bottom) / 2, v_bottom - v_top, camera.f * width / z
+        level = float(_haze(look, 255.0 * albedo * float(_light(look, x, z, z)), z))
+        if shape == "disk":
+            paint_disk(image, u, v, height_px / 2 * width / tall, level)
+        else:
+            paint_object(image, shape, u, v, height_px, level, width_px / height_px)
+        if vehicle is not None and look.night:
+            lamps += [(lamp, width_px, vehicle.speed < 0)
+                      for lamp in car_lamps(u, v, width_px, height_px)]
+    for (x, y), width_px, oncoming in lamps:  # head lamps glare, tail lamps glow
+        sigma = max(0.6, 0.04 * width_px) * (3.0 if oncoming else 1.0)
+        _glow(image, x, y, sigma, 255.0 if oncoming else 170.0)
+
+
+def _target_label(camera: _Camera, vehicle: Vehicle, s_v: np.ndarray, fps: float):
+    """Image centre (of the near face), image height and time to contact of a vehicle."""
+    cx, cy = camera.center
+    f = camera.f
+    x, yb, z = np.array([camera.point(s, vehicle.lane, 0.0, k) for k, s in enumerate(s_v)]).T
+    _, yt, zt = np.array([camera.point(s, vehicle.lane, vehicle.height, k)
+                          for k, s in enumerate(s_v)]).T
+    seen = np.minimum(z, zt) >= _NEAR  # NaN once it is beside or behind us
+    with np.errstate(divide="ignore", invalid="ignore"):
+        track = np.where(seen[:, None],
+                         np.stack([cx + f * x / z, cy + f * (yb / z + yt / zt) / 2], axis=1),
+                         np.nan)
+        size = np.where(seen, f * (yb / z - yt / zt), np.nan)
+    # closing speed over the step into each frame (out of it for the first frame)
+    closing = np.empty(len(z))
+    closing[1:] = (z[:-1] - z[1:]) * fps
+    closing[0] = closing[1] if len(z) > 1 else 0.0
+    moving_in = seen & (closing > 0.05)
+    ttc = np.where(moving_in, z / np.where(moving_in, closing, 1.0), np.nan)
+    return track, size, ttc
+
+
 def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
                   fps: float = 20.0, frames: int = 90, speed: float = 12.0,
                   curvature: float = 0.0, bumps_deg: float = 0.0, night: bool = False,
@@ -273,8 +408,7 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
         raise ValueError(f"target {target} is not one of the {len(vehicles)} vehicles")
     look = _NIGHT if night else _DAY
     f = (w / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
-    cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
-    # ---- the target's contact, which ends the clip and stops every motion (the crash)
+    # the target's contact ends the clip and stops every motion (the crash)
     t = np.arange(frames, dtype=np.float64)
     contact = None
     if target is not None:
@@ -287,129 +421,28 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
             frames = min(frames, contact + tail + 1)
             t = np.minimum(t[:frames], contact)
     ego_s = speed * t / fps
-    ego_x, ego_z, ego_heading = path_pose(ego_s, curvature)
     pitch = math.radians(pitch_deg) + math.radians(bumps_deg) * (
         np.sin(2 * math.pi * 1.3 * t / fps) + 0.5 * np.sin(2 * math.pi * 3.1 * t / fps + 1.0))
-
-    def camera_coords(s, d, up, k):
-        """Camera (x right, y down, z ahead) of the point at road (s, d), ``up`` m high, frame k."""
-        wx, wz = _world(s, d, curvature)
-        rx, rz = wx - ego_x[k], wz - ego_z[k]
-        c, sn = math.cos(ego_heading[k]), math.sin(ego_heading[k])
-        x_e, z_e = c * rx - sn * rz, sn * rx + c * rz
-        y_e = camera_height - up
-        cp, sp = math.cos(pitch[k]), math.sin(pitch[k])
-        return x_e, y_e * cp - z_e * sp, y_e * sp + z_e * cp
-
+    camera = _Camera(size, f, camera_height, curvature, ego_s, *path_pose(ego_s, curvature),
+                     pitch)
     vehicle_s = [v.distance + v.travelled(t, fps) for v in vehicles]
-
-    # ---- per-pixel rays
-    u = np.arange(w, dtype=np.float64)[None, :]
-    vv = np.arange(h, dtype=np.float64)[:, None]
-    ray_x = np.broadcast_to((u - cx) / f, (h, w))
-    ray_y = np.broadcast_to((vv - cy) / f, (h, w))
     pyramid = _pyramid(seed)
-    items = _roadside(seed + 1, ego_s[-1] + 200.0, roadside) if roadside > 0 else []
+    scenery = [(item["s"], item["d"], *box, None)
+               for item in (_roadside(seed + 1, ego_s[-1] + 200.0, roadside) if roadside else [])
+               for box in _billboards(item)]
 
     clip = np.empty((frames, h, w))
     for k in range(frames):
-        cp, sp = math.cos(pitch[k]), math.sin(pitch[k])
-        down = ray_y * cp + sp            # ego y (down) of the ray
-        ahead = -ray_y * sp + cp          # ego z of the ray
-        ground = down > 1e-4
-        scale = np.where(ground, camera_height / np.where(ground, down, 1.0), 0.0)
-        gx, gz = ray_x * scale, ahead * scale
-        distance = np.hypot(gx, gz)
-        c, sn = math.cos(ego_heading[k]), math.sin(ego_heading[k])
-        wx = ego_x[k] + c * gx + sn * gz
-        wz = ego_z[k] - sn * gx + c * gz
-        s_road, d_road = road_coordinates(wx, wz, curvature)
-        foot_d = np.abs(np.gradient(d_road, axis=1)) + np.abs(np.gradient(d_road, axis=0)) + 1e-4
-        foot_s = np.abs(np.gradient(s_road, axis=1)) + np.abs(np.gradient(s_road, axis=0)) + 1e-4
-        foot = np.maximum(foot_d, foot_s)
-
-        lod = np.log2(foot / _TEXEL)
-        fine = _mip_sample(pyramid, wx / _TEXEL, wz / _TEXEL, lod)
-        coarse = _mip_sample(pyramid, wx / (8 * _TEXEL) + 97.0, wz / (8 * _TEXEL), lod - 3.0)
-        asphalt = look.asphalt + 14.0 * fine + 8.0 * coarse
-        verge = look.verge + 18.0 * fine + 22.0 * coarse
-        on_road = _band(d_road, -_ROAD_HALF, _ROAD_HALF, foot_d)
-        surface = verge + on_road * (asphalt - verge)
-        dash = _band(np.mod(s_road, _DASH_PERIOD), 0.0, _DASH_PERIOD * _DASH_DUTY, foot_s)
-        marks = np.zeros_like(surface)
-        for line in _LANE_LINES:
-            marks = np.maximum(marks, dash * _band(d_road, line - _LINE_WIDTH / 2,
-                                                   line + _LINE_WIDTH / 2, foot_d))
-        for edge in (-_ROAD_HALF + 0.1, _ROAD_HALF - 0.1):
-            marks = np.maximum(marks, _band(d_road, edge - _EDGE_WIDTH / 2, edge + _EDGE_WIDTH / 2,
-                                            foot_d))
-        surface += marks * (look.marking - surface)
-        surface *= _light(look, gx, gz, distance)
-        surface = _haze(look, surface, distance)
-        horizon = cy - f * math.tan(pitch[k])
-        sky = look.sky_top + (look.sky_horizon - look.sky_top) * np.clip(
-            1.0 - (horizon - vv) / (0.6 * h), 0.0, 1.0)
-        below = np.clip(vv + 0.5 - horizon, 0.0, 1.0)
-        image = sky * (1.0 - below) + np.where(ground, surface, look.haze) * below
-
-        # ---- roadside objects and vehicles, far to near
-        boxes = []
-        for item in items:
-            for shape, width, bottom, top, albedo in _billboards(item):
-                boxes.append((item["s"], item["d"], shape, width, bottom, top, albedo, None))
-        for v, s_v in zip(vehicles, vehicle_s):
-            boxes.append((s_v[k], v.lane, v.shape, v.width, 0.0, v.height, v.albedo, v))
-        drawn = []
-        for s_item, d_item, shape, width, bottom, top, albedo, vehicle in boxes:
-            if not -30.0 < s_item - ego_s[k] < 220.0:
-                continue
-            x, yb, z = camera_coords(s_item, d_item, bottom, k)
-            _, yt, zt = camera_coords(s_item, d_item, top, k)
-            if min(z, zt) < _NEAR:
-                continue
-            drawn.append((z, x, yb, yt, zt, shape, width, top - bottom, albedo, vehicle))
-        drawn.sort(key=lambda b: -b[0])
-        lamps = []
-        for z, x, yb, yt, zt, shape, width, tall, albedo, vehicle in drawn:
-            u_c = cx + f * x / z
-            v_bottom, v_top = cy + f * yb / z, cy + f * yt / zt
-            height_px = v_bottom - v_top
-            if height_px <= 0:
-                continue
-            light = float(_light(look, np.array(x), np.array(z), np.array(z)))
-            level = float(_haze(look, 255.0 * albedo * light, z))
-            if shape == "disk":
-                paint_disk(image, u_c, (v_top + v_bottom) / 2, height_px / 2 * width / tall, level)
-            else:
-                paint_object(image, shape, u_c, (v_top + v_bottom) / 2, height_px, level,
-                             f * width / z / height_px)
-            if vehicle is not None and night:
-                lamps.append((u_c, v_top + 0.65 * height_px, f * width / z, vehicle.speed < 0))
-        for u_c, v_l, width_px, oncoming in lamps:
-            for side in (-1.0, 1.0):
-                sigma = max(0.6, 0.04 * width_px) * (3.0 if oncoming else 1.0)
-                _glow(image, u_c + side * 0.36 * width_px, v_l, sigma, 255.0 if oncoming else 170.0)
+        image = _ground(camera, k, look, pyramid)
+        traffic = [(s_v[k], v.lane, v.shape, v.width, 0.0, v.height, v.albedo, v)
+                   for v, s_v in zip(vehicles, vehicle_s)]
+        _draw_boxes(image, camera, k, look, scenery + traffic)
         clip[k] = image
-
     video = np.clip(np.rint(clip), 0, 255).astype(np.uint8)
 
     track = target_size = ttc = None
     if target is not None:
-        vehicle = vehicles[target]
-        x, yb, z = np.array([camera_coords(s_v, vehicle.lane, 0.0, k)
-                             for k, s_v in enumerate(vehicle_s[target])]).T
-        _, yt, zt = np.array([camera_coords(s_v, vehicle.lane, vehicle.height, k)
-                              for k, s_v in enumerate(vehicle_s[target])]).T
-        seen = np.minimum(z, zt) >= _NEAR  # NaN once it is beside or behind us
-        with np.errstate(divide="ignore", invalid="ignore"):
-            track = np.where(seen[:, None], np.stack(
-                [cx + f * x / z, cy + f * (yb / z + yt / zt) / 2], axis=1), np.nan)
-            target_size = np.where(seen, f * (yb / z - yt / zt), np.nan)
-        # closing speed over the step into each frame (out of it for the first frame)
-        closing = np.empty(frames)
-        closing[1:] = (z[:-1] - z[1:]) * fps
-        closing[0] = closing[1] if frames > 1 else 0.0
-        ttc = np.where(seen & (closing > 0.05), z / np.where(closing > 0.05, closing, 1.0), np.nan)
+        track, target_size, ttc = _target_label(camera, vehicles[target], vehicle_s[target], fps)
     collision = contact is not None
     params = dict(size=size, fps=fps, frames=frames, speed=speed, curvature=curvature,
                   bumps_deg=bumps_deg, night=night, vehicles=[asdict(v) for v in vehicles],

@@ -19,6 +19,7 @@ __all__ = [
     "SHAPES",
     "levels",
     "car_levels",
+    "car_lamps",
     "paint_disk",
     "paint_box",
     "paint_object",
@@ -73,8 +74,14 @@ def car_levels(body: float) -> tuple[float, float]:
     return 0.45 * body, body + 0.6 * (255.0 - body)
 
 
+def car_lamps(cx: float, cy: float, width: float, height: float) -> list[tuple[float, float]]:
+    """Image centres of the two lamps of a car drawn at (cx, cy) with this width and height."""
+    y = cy + _LAMP["dy"] * height
+    return [(cx - _LAMP["dx"] * width, y), (cx + _LAMP["dx"] * width, y)]
+
+
 def _pixel_range(lo: float, hi: float, n: int) -> slice:
-    """Pixels (centred on integers, each 1 wide) that may overlap the interval (lo, hi)."""
+    """The pixels (centred on integers) whose centres may lie in the interval (lo, hi)."""
     return slice(min(max(int(math.floor(lo)), 0), n), max(min(int(math.ceil(hi)) + 1, n), 0))
 
 
@@ -170,9 +177,8 @@ def paint_object(image: np.ndarray, shape: str, cx: float, cy: float, height: fl
             window, lamps = car_levels(level)
             paint_box(image, cx, cy + _WINDOW["dy"] * height, _WINDOW["width"] * width,
                       _WINDOW["height"] * height, window)
-            for side in (-1.0, 1.0):
-                paint_box(image, cx + side * _LAMP["dx"] * width, cy + _LAMP["dy"] * height,
-                          _LAMP["width"] * width, _LAMP["height"] * height, lamps)
+            for x, y in car_lamps(cx, cy, width, height):
+                paint_box(image, x, y, _LAMP["width"] * width, _LAMP["height"] * height, lamps)
     else:
         raise ValueError(f"unknown shape {shape!r}; choose one of {', '.join(SHAPES)}")
 
