@@ -342,12 +342,16 @@ def _clutter_cases() -> list[Case]:
                 polarity="light", contrast=0.5, background=stripes),
         _planar("loom-dark-c0.5-over-texture-diag2px", g, "dark", "moving-background",
                 contrast=0.5, background=Background("texture", 0.4, 1.5, velocity=(1.4, 1.4))),
+        _planar("loom-dark-c0.3-over-texture-h1px", g, "dark", "moving-background", "contrast",
+                contrast=0.3, background=Background("texture", 0.2, 1.5, velocity=(1.0, 0.0))),
         _planar("loom-dark-c0.5-over-checker-diag2px", g, "dark", "moving-background",
                 contrast=0.5, background=Background("checker", 0.5, 16.0, 0.0, (2.0, 2.0))),
         _planar("loom-dark-c0.6-shake-3px", g, "dark", "shake", background=still,
                 camera=Shake(3.0)),
         _planar("loom-light-c0.6-shake-2px-rot1deg", g, "light", "shake", polarity="light",
                 background=still, camera=Shake(2.0, 1.0, smooth=2)),
+        _planar("loom-light-c0.3-shake-2px", g, "light", "shake", "contrast", polarity="light",
+                contrast=0.3, background=still, camera=Shake(2.0)),
         _planar("loom-dark-c0.6-pan-h1px", g, "dark", "pan", background=still,
                 position=(100.0, 60.0), camera=Pan((-1.0, 0.0))),
         _planar("loom-dark-c0.6-flicker-4hz", g, "dark", "flicker", background=still,
@@ -378,6 +382,10 @@ def _driving_cases() -> list[Case]:
     lit = dict(albedo=0.45)  # a body our headlights light up at night
     truck = dict(width=2.5, height=3.2, shape="rect", albedo=0.3)
     brake = dict(brake=7.0, brake_frame=15)
+    # a lead car at constant distance, a car in the right lane we slowly gain on, oncoming cars
+    traffic = (Vehicle(0.0, 16.0, 12.0), Vehicle(LANE_WIDTH, 30.0, 11.0, albedo=0.5),
+               Vehicle(-LANE_WIDTH, 60.0, -12.0, albedo=0.35),
+               Vehicle(-LANE_WIDTH, 130.0, -14.0, **truck))
     return [
         _driving("drive-day-straight", "driving-clear", "day"),
         _driving("drive-night-straight", "driving-clear", "night", night=True),
@@ -416,6 +424,11 @@ def _driving_cases() -> list[Case]:
         _driving("drive-day-brake-bumps", "driving-threat", "day", "brake", "bumps",
                  bumps_deg=1.0, vehicles=(Vehicle(0.0, 14.0, 12.0, **brake),), target=0,
                  onset=15),
+        _driving("drive-day-traffic", "driving-clear", "day", "traffic", vehicles=traffic,
+                 target=0),
+        _driving("drive-day-traffic-brake", "driving-threat", "day", "traffic", "brake",
+                 vehicles=(Vehicle(0.0, 16.0, 12.0, brake=7.0, brake_frame=20), *traffic[1:]),
+                 target=0, onset=20),
         _driving("drive-day-stopped-car", "driving-threat", "day",
                  vehicles=(Vehicle(0.0, 40.0, 0.0),), target=0),
         _driving("drive-day-turn-stopped-car", "driving-threat", "day", "turn",
