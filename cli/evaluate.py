@@ -55,16 +55,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "e.g. 'loom-*,nearmiss-*' or 'driving-*' (default: every case)")
     p.add_argument("--out", metavar="DIR", default="eval-out",
                    help="output directory (default: %(default)s)")
-    p.add_argument("--early-tolerance", type=float, default=scoring.EARLY_TOLERANCE_S,
-                   metavar="SECONDS",
-                   help="a first warning up to this long before the labelled onset still counts "
-                        "as a hit (default: %(default)s, for onsets judged by eye; the suite "
-                        "always uses 0)")
+    p.add_argument("--early-tolerance", type=float, metavar="SECONDS",
+                   help="with CLIPS_DIR: a first warning up to this long before the labelled "
+                        f"onset still counts as a hit (default: {scoring.EARLY_TOLERANCE_S}, for "
+                        "onsets judged by eye; the suite's onsets are exact and use 0)")
     p.add_argument("--warmup", type=int, default=scoring.WARMUP_FRAMES, metavar="FRAMES",
                    help="frames ignored at the start of each clip (default: %(default)s)")
     p.add_argument("--jobs", type=count, default=1, metavar="N",
                    help="clips or cases evaluated in parallel processes (default: %(default)s)")
-    p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH",
+    p.add_argument("--size", type=frame_size, metavar="WxH",
                    help="with --paper: frame size of the scenes (default: 128x128, the paper's)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNGs")
     p.add_argument("--case-plots", action="store_true",
@@ -80,16 +79,26 @@ def run(args: argparse.Namespace) -> int:
     if (args.synthetic or args.paper) and args.clips_dir:
         print("asnn eval: give either CLIPS_DIR, --synthetic or --paper", file=sys.stderr)
         return 2
-    if (args.cases or args.case_plots) and not args.synthetic:
-        print("asnn eval: --cases and --case-plots go with --synthetic", file=sys.stderr)
+    misplaced = [flag for flag, given, mode in (
+        ("--cases", args.cases, args.synthetic), ("--case-plots", args.case_plots, args.synthetic),
+        ("--size", args.size, args.paper),
+        ("--labels", args.labels, not (args.synthetic or args.paper)),
+        ("--early-tolerance", args.early_tolerance is not None,
+         not (args.synthetic or args.paper))) if given and not mode]
+    if misplaced:
+        print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
+              file=sys.stderr)
         return 2
-    if args.early_tolerance < 0 or args.warmup < 0:
+    tolerance = (scoring.EARLY_TOLERANCE_S if args.early_tolerance is None
+                 else args.early_tolerance)
+    if tolerance < 0 or args.warmup < 0:
         print("asnn eval: --early-tolerance and --warmup must be >= 0", file=sys.stderr)
         return 2
     try:
         if args.paper:
             paper.paper_figures(args.out, preset_name=preset_name, detectors=args.detectors,
-                                size=args.size, warmup=args.warmup, progress=progress)
+                                size=args.size or (128, 128), warmup=args.warmup,
+                                progress=progress)
         elif args.synthetic:
             suite.evaluate_suite(args.out, detectors=args.detectors, preset_name=preset_name,
                                  cases=args.cases, jobs=args.jobs, warmup=args.warmup,
@@ -101,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             results = clips.evaluate_clips(
                 args.clips_dir, args.out, labels_path=args.labels, detectors=args.detectors,
-                preset_name=preset_name, early_tolerance_s=args.early_tolerance,
+                preset_name=preset_name, early_tolerance_s=tolerance,
                 warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots, progress=progress)
             if results["errors"] and len(results["errors"]) == sum(
                     len(d["clips"]) for d in results["detectors"].values()):

@@ -140,6 +140,10 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
         main(["eval", "--paper", "--synthetic"])
     assert main(["eval", str(tmp_path), "--synthetic", "--out", str(tmp_path / "o")]) == 2
     assert main(["eval", str(tmp_path), "--cases", "loom-*", "--out", str(tmp_path / "o")]) == 2
+    for misplaced in (["--synthetic", "--size", "64x64"], ["--paper", "--cases", "loom-*"],
+                      ["--synthetic", "--early-tolerance", "0.5"], ["--paper", "--labels", "x"]):
+        assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
+        assert "does not go with" in capsys.readouterr().err
 
 
 def test_progress_printer_draws_a_bar_on_a_terminal():
