@@ -145,7 +145,7 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
     own = parse_detector("asnn", preset_name)
     progress = progress or Silent()
     n_runs = 2 * len(SYNTHETIC_SCENES) * len(specs) + len(CONTRAST_SWEEP) + len(SPEED_SWEEP) + 2
-    progress.start(n_runs, "eval --synthetic")
+    progress.start(n_runs, "eval --paper")
     written = []
 
     # Fig. 2: the temporal filter
