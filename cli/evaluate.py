@@ -1,8 +1,11 @@
-"""``asnn eval``: the paper's comparisons as numbers and figures.
+"""``asnn eval``: the detectors compared on labelled clips, the generated suite and the paper.
 
-``asnn eval CLIPS_DIR [--labels FILE] [--models asnn,lgmd1,lgmd2] [--preset P] [--out DIR]``
-scores every model on labelled clips (SPEC.md section 5); ``asnn eval --synthetic --out DIR``
-regenerates the paper's synthetic experiments. Exit status 2 for unusable input.
+``asnn eval CLIPS_DIR [--labels FILE] [--detectors LIST] [--preset P] [--out DIR]`` scores every
+detector on labelled clips (SPEC.md section 5); ``asnn eval --synthetic [--cases PATTERN]``
+generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper``
+regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
+default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``, ``lgmd2``. Exit status 2 for unusable
+input.
 """
 
 from __future__ import annotations
@@ -11,81 +14,110 @@ import argparse
 import sys
 
 from asnn.evaluation import scoring
-from asnn.detectors import MODELS
-from asnn.params import preset_names
 from asnn.evaluation.progress import ProgressPrinter
+from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detectors
+from asnn.params import preset_names
 
-from .arguments import frame_size
+from .arguments import count, frame_size
 
 
-def _models(text: str) -> list[str]:
-    models = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = [m for m in models if m not in MODELS]
-    if not models or unknown:
-        raise argparse.ArgumentTypeError(
-            f"expected a comma-separated subset of {','.join(MODELS)}, got {text!r}")
-    return list(dict.fromkeys(models))
+def _detectors(text: str) -> list[str]:
+    try:
+        return [spec.name for spec in parse_detectors(text)]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "eval", help="score the models on labelled clips, or rerun the synthetic experiments",
-        description="Run ASNN and the LGMD baselines over labelled clips and score them "
-                    "(hit / early / late / miss, false alarms, lead time, localisation), or "
-                    "regenerate the paper's synthetic figures with --synthetic.")
+        "eval", help="score the detectors on labelled clips, the generated suite or the paper's "
+                     "experiments",
+        description="Run ASNN and the LGMD baselines over labelled clips (CLIPS_DIR) or the "
+                    "labelled suite of generated scenes (--synthetic) and score them (hit / "
+                    "early / late / miss, false alarms, lead time, localisation), or regenerate "
+                    "the paper's synthetic figures (--paper).")
     p.add_argument("clips_dir", nargs="?", metavar="CLIPS_DIR",
-                   help="directory of the clips (not with --synthetic)")
+                   help="directory of the clips (not with --synthetic or --paper)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--synthetic", action="store_true",
+                      help="score the labelled suite of generated scenes instead")
+    mode.add_argument("--paper", action="store_true",
+                      help="regenerate the paper's synthetic figures (Figs. 2, 4-7) instead")
     p.add_argument("--labels", metavar="FILE", help="labels file (default: CLIPS_DIR/labels.json)")
-    p.add_argument("--models", type=_models, default=list(MODELS), metavar="LIST",
-                   help="comma-separated models (default: %(default)s)")
+    p.add_argument("--detectors", "--models", dest="detectors", type=_detectors,
+                   default=list(DEFAULT_DETECTORS), metavar="LIST",
+                   help="comma-separated detector specs: asnn, asnn:PRESET, lgmd1, lgmd2 "
+                        "(default: %(default)s)")
     p.add_argument("--preset", choices=preset_names(), default="default",
-                   help="ASNN parameter preset (default: %(default)s)")
+                   help="the ASNN preset a bare 'asnn' stands for (default: %(default)s)")
+    p.add_argument("--cases", metavar="PATTERN",
+                   help="with --synthetic: comma-separated patterns of case names or groups, "
+                        "e.g. 'loom-*,nearmiss-*' or 'driving-*' (default: every case)")
     p.add_argument("--out", metavar="DIR", default="eval-out",
                    help="output directory (default: %(default)s)")
-    p.add_argument("--synthetic", action="store_true",
-                   help="regenerate the synthetic experiments (Figs. 2, 4-7) instead")
-    p.add_argument("--early-tolerance", type=float, default=scoring.EARLY_TOLERANCE_S,
-                   metavar="SECONDS",
-                   help="a first warning up to this long before the labelled onset still counts "
-                        "as a hit (default: %(default)s, for onsets judged by eye; use 0 for "
-                        "generated clips)")
+    p.add_argument("--early-tolerance", type=float, metavar="SECONDS",
+                   help="with CLIPS_DIR: a first warning up to this long before the labelled "
+                        f"onset still counts as a hit (default: {scoring.EARLY_TOLERANCE_S}, for "
+                        "onsets judged by eye; the suite's onsets are exact and use 0)")
     p.add_argument("--warmup", type=int, default=scoring.WARMUP_FRAMES, metavar="FRAMES",
                    help="frames ignored at the start of each clip (default: %(default)s)")
-    p.add_argument("--jobs", type=int, default=1, metavar="N",
-                   help="clips evaluated in parallel processes (default: %(default)s)")
-    p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH",
-                   help="frame size of the synthetic scenes (default: 128x128, the paper's)")
-    p.add_argument("--no-plots", action="store_true", help="skip the per-clip PNGs")
+    p.add_argument("--jobs", type=count, default=1, metavar="N",
+                   help="clips or cases evaluated in parallel processes (default: %(default)s)")
+    p.add_argument("--size", type=frame_size, metavar="WxH",
+                   help="with --paper: frame size of the scenes (default: 128x128, the paper's)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNGs")
+    p.add_argument("--case-plots", action="store_true",
+                   help="with --synthetic: also plot every case's responses (slower)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from asnn.evaluation import clips, paper  # import matplotlib: only when the command runs
+    from asnn.evaluation import clips, paper, suite  # import matplotlib: only when it runs
 
     progress = ProgressPrinter(sys.stderr)
-    if args.synthetic:
-        if args.clips_dir:
-            print("asnn eval: give either CLIPS_DIR or --synthetic", file=sys.stderr)
-            return 2
-        paper.synthetic_suite(args.out, preset_name=args.preset, models=args.models,
-                                   size=args.size, warmup=args.warmup, progress=progress)
-        print(f"{args.out}/report.md")
-        return 0
-    if not args.clips_dir:
-        print("asnn eval: CLIPS_DIR is required (or --synthetic)", file=sys.stderr)
+    preset_name = None if args.preset == "default" else args.preset
+    if (args.synthetic or args.paper) and args.clips_dir:
+        print("asnn eval: give either CLIPS_DIR, --synthetic or --paper", file=sys.stderr)
         return 2
-    if args.early_tolerance < 0 or args.warmup < 0 or args.jobs < 1:
-        print("asnn eval: --early-tolerance and --warmup must be >= 0, --jobs >= 1",
+    misplaced = [flag for flag, given, mode in (
+        ("--cases", args.cases, args.synthetic), ("--case-plots", args.case_plots, args.synthetic),
+        ("--size", args.size, args.paper),
+        ("--labels", args.labels, not (args.synthetic or args.paper)),
+        ("--early-tolerance", args.early_tolerance is not None,
+         not (args.synthetic or args.paper))) if given and not mode]
+    if misplaced:
+        print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
               file=sys.stderr)
         return 2
+    tolerance = (scoring.EARLY_TOLERANCE_S if args.early_tolerance is None
+                 else args.early_tolerance)
+    if tolerance < 0 or args.warmup < 0:
+        print("asnn eval: --early-tolerance and --warmup must be >= 0", file=sys.stderr)
+        return 2
     try:
-        results = clips.evaluate_clips(
-            args.clips_dir, args.out, labels_path=args.labels, models=args.models,
-            preset_name=args.preset, early_tolerance_s=args.early_tolerance,
-            warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots, progress=progress)
+        if args.paper:
+            paper.paper_figures(args.out, preset_name=preset_name, detectors=args.detectors,
+                                size=args.size or (128, 128), warmup=args.warmup,
+                                progress=progress)
+        elif args.synthetic:
+            suite.evaluate_suite(args.out, detectors=args.detectors, preset_name=preset_name,
+                                 cases=args.cases, jobs=args.jobs, warmup=args.warmup,
+                                 plots=not args.no_plots, case_plots=args.case_plots,
+                                 progress=progress)
+        elif not args.clips_dir:
+            print("asnn eval: CLIPS_DIR is required (or --synthetic, or --paper)", file=sys.stderr)
+            return 2
+        else:
+            results = clips.evaluate_clips(
+                args.clips_dir, args.out, labels_path=args.labels, detectors=args.detectors,
+                preset_name=preset_name, early_tolerance_s=tolerance,
+                warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots, progress=progress)
+            if results["errors"] and len(results["errors"]) == sum(
+                    len(d["clips"]) for d in results["detectors"].values()):
+                print(f"{args.out}/report.md")
+                return 2
     except (OSError, ValueError) as exc:
         print(f"asnn eval: {exc}", file=sys.stderr)
         return 2
     print(f"{args.out}/report.md")
-    return 2 if results["errors"] and len(results["errors"]) == sum(
-        len(m["clips"]) for m in results["models"].values()) else 0
+    return 0

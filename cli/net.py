@@ -193,7 +193,8 @@ def register(subparsers) -> None:
     p.add_argument("--robot", required=True, type=robot_id, help="robot id ([A-Za-z0-9_-]{1,64})")
     p.add_argument("--source", required=True,
                    help="FILE, DEVICE_INDEX, URL or synthetic:SCENE "
-                        f"(SCENE: {', '.join(SCENE_NAMES)})")
+                        f"(SCENE: {', '.join(SCENE_NAMES)}, or a case of the labelled suite: "
+                        "asnn scene --list)")
     p.add_argument("--fps", type=positive, default=None,
                    help="publishing rate (default: the source's frame rate)")
     p.add_argument("--loop", action="store_true", help="replay a file or scene forever")

@@ -1,4 +1,9 @@
-"""``asnn scene NAME OUT``: write one of the paper's generated scenes as a video file."""
+"""``asnn scene``: write a generated scene as a video file.
+
+``asnn scene NAME OUT`` writes one of the paper's scenes; ``asnn scene --case CASE OUT`` one case of
+the labelled suite (:mod:`asnn.stimuli.suite`); ``asnn scene --list [PATTERN]`` lists the suite's
+cases with their groups.
+"""
 
 from __future__ import annotations
 
@@ -7,34 +12,62 @@ import json
 import sys
 
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
+from asnn.stimuli.suite import SUITE_CASES, make_case, suite_cases
 
 from .arguments import frame_size
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("scene", help="write a generated test scene as a video file",
-                       description="Generate one of the paper's synthetic scenes (asnn.stimuli).")
-    p.add_argument("name", choices=SCENE_NAMES)
-    p.add_argument("out", metavar="OUT", help="video file to write (.mp4 or .avi)")
-    p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH")
-    p.add_argument("--polarity", choices=("dark", "light"), default="dark")
-    p.add_argument("--contrast", type=float, default=1.0)
-    p.add_argument("--speed", type=float, help="edge speed, px/frame")
-    p.add_argument("--fps", type=float, default=20.0)
+                       description="Generate one of the paper's synthetic scenes, or a case of "
+                                   "the labelled suite (--case), as a video file.")
+    p.add_argument("args", nargs="*", metavar="[NAME] OUT",
+                   help=f"a paper scene ({', '.join(SCENE_NAMES)}) and the video file to write "
+                        "(.mp4 or .avi); with --case only OUT")
+    p.add_argument("--case", metavar="CASE", help="a case of the labelled suite instead")
+    p.add_argument("--list", nargs="?", const="all", metavar="PATTERN",
+                   help="list the suite's cases (matching PATTERN) and exit")
+    p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH",
+                   help="paper scenes only (default: 128x128)")
+    p.add_argument("--polarity", choices=("dark", "light"), default="dark",
+                   help="paper scenes only")
+    p.add_argument("--contrast", type=float, default=1.0, help="paper scenes only")
+    p.add_argument("--speed", type=float, help="paper scenes only: edge speed, px/frame")
+    p.add_argument("--fps", type=float, default=20.0, help="paper scenes only")
     p.add_argument("--labels", metavar="FILE", help="also write a labels.json for asnn eval")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     try:
-        scene = make_scene(args.name, size=args.size, polarity=args.polarity,
-                           contrast=args.contrast, speed=args.speed, fps=args.fps)
-        write_video(scene.frames, args.out, fps=args.fps)
+        if args.list is not None:
+            for name in suite_cases(args.list):
+                case = SUITE_CASES[name]
+                print(f"{name}\t{' '.join(case.category)}")
+            return 0
+        if args.case is not None:
+            if len(args.args) != 1:
+                print("asnn scene: --case takes one OUT file", file=sys.stderr)
+                return 2
+            out = args.args[0]
+            scene = make_case(args.case)
+        else:
+            if len(args.args) != 2:
+                print("asnn scene: give NAME OUT, or --case CASE OUT", file=sys.stderr)
+                return 2
+            name, out = args.args
+            if name not in SCENE_NAMES:
+                print(f"asnn scene: unknown scene {name!r}; choose one of "
+                      f"{', '.join(SCENE_NAMES)} (or --case for the suite)", file=sys.stderr)
+                return 2
+            scene = make_scene(name, size=args.size, polarity=args.polarity,
+                               contrast=args.contrast, speed=args.speed, fps=args.fps)
+        write_video(scene.frames, out, fps=scene.fps)
     except (ValueError, OSError) as exc:
         print(f"asnn scene: {exc}", file=sys.stderr)
         return 2
     if args.labels:
         with open(args.labels, "w", encoding="utf-8") as fh:
-            json.dump([scene.label(args.out)], fh, indent=1)
-    print(f"asnn scene: wrote {len(scene.frames)} frames to {args.out}", file=sys.stderr)
+            json.dump([scene.label(out)], fh, indent=1)
+    print(f"asnn scene: wrote {len(scene.frames)} frames to {out}", file=sys.stderr)
     return 0

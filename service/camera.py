@@ -22,6 +22,7 @@ import numpy as np
 import zenoh
 
 from asnn.stimuli import SCENE_NAMES, make_scene
+from asnn.stimuli.suite import SUITE_CASES, make_case
 from asnn.io.video import VideoError, open_video, read_frames
 
 from . import keys
@@ -62,7 +63,8 @@ class Source:
 
 def open_source(spec: str) -> Source:
     """Open ``FILE``, ``DEVICE_INDEX`` (an integer), ``URL`` (``scheme://...``) or
-    ``synthetic:SCENE`` (one of ``asnn.stimuli.SCENE_NAMES``, 128x128, 20 fps).
+    ``synthetic:SCENE`` (one of ``asnn.stimuli.SCENE_NAMES``, 128x128, 20 fps, or a case of the
+    labelled suite, ``asnn.stimuli.suite.SUITE_CASES``).
 
     Raises
     ------
@@ -71,9 +73,13 @@ def open_source(spec: str) -> Source:
     """
     if spec.startswith(SYNTHETIC):
         name = spec[len(SYNTHETIC):]
-        if name not in SCENE_NAMES:
-            raise SourceError(f"unknown scene {name!r}; choose one of {', '.join(SCENE_NAMES)}")
-        scene = make_scene(name)
+        if name in SCENE_NAMES:
+            scene = make_scene(name)
+        elif name in SUITE_CASES:
+            scene = make_case(name)
+        else:
+            raise SourceError(f"unknown scene {name!r}; choose one of {', '.join(SCENE_NAMES)} "
+                              "or a suite case (asnn scene --list)")
         return Source(spec, scene.fps, False, lambda: iter(scene.frames))
     if spec.isdigit() or "://" in spec:
         target = int(spec) if spec.isdigit() else spec

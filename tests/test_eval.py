@@ -1,4 +1,4 @@
-"""``asnn eval`` end to end on generated clips, and the synthetic suite."""
+"""``asnn eval`` end to end on generated clips, and the paper's figures."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.stimuli import make_scene, write_video
 from cli.main import main
 
-MODELS = ("asnn", "lgmd1", "lgmd2")
+DETECTORS = ("asnn", "asnn:reference", "lgmd1", "lgmd2")
+SLUGS = {"asnn": "asnn", "asnn:reference": "asnn-reference", "lgmd1": "lgmd1", "lgmd2": "lgmd2"}
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 REAL = Path("/work/shared/data/real")
 
@@ -57,40 +58,40 @@ def test_eval_end_to_end_writes_results_report_and_plots(clips, evaluated):
     status, out, stdout, stderr = evaluated
     assert status == 0
     assert "report.md" in stdout
-    for model in MODELS:  # the progress printer names every run
+    for model in DETECTORS:  # the progress printer names every run
         for label in labels:
             assert f"{model} {label['file']}" in stderr
 
     results = json.loads((out / "results.json").read_text())
-    assert list(results["models"]) == list(MODELS)
+    assert list(results["detectors"]) == list(DETECTORS)  # the default set
     assert results["errors"] == []
     assert results["settings"]["early_tolerance_s"] == 0.0
-    for model in MODELS:
-        entry = results["models"][model]
+    for model in DETECTORS:
+        entry = results["detectors"][model]
         assert [c["clip"] for c in entry["clips"]] == ["loom.mp4", "bar.mp4"]
         assert entry["summary"]["scored"] == 2
         assert {c["outcome"] for c in entry["clips"]} <= set(scoring.OUTCOMES)
         # the per-frame results are kept in the detect --jsonl format, one record per frame
         for label in labels:
-            path = out / "results" / model / f"{Path(label['file']).stem}.jsonl"
+            path = out / "results" / SLUGS[model] / f"{Path(label['file']).stem}.jsonl"
             records = scoring.load_records(path)
             assert [r["frame"] for r in records] == list(range(label["frames"]))
             assert set(records[0]) >= {"frame", "t", "u", "out", "spikes", "spike_rate",
                                        "collision", "targets"}
-            if model != "asnn":
+            if not model.startswith("asnn"):
                 assert all(r["targets"] == [] for r in records)
         # and scoring them again reproduces the report's numbers
-        rescored = scoring.score_directory(out / "results" / model, labels,
+        rescored = scoring.score_directory(out / "results" / SLUGS[model], labels,
                                            early_tolerance_s=0.0)
         assert [s.to_dict() for s in rescored] == entry["clips"]
 
     # LGMD1-1 sees the approach and also warns on the translating bar
-    lgmd1 = {c["clip"]: c for c in results["models"]["lgmd1"]["clips"]}
+    lgmd1 = {c["clip"]: c for c in results["detectors"]["lgmd1"]["clips"]}
     assert lgmd1["loom.mp4"]["first_warning"] is not None
     assert lgmd1["bar.mp4"]["outcome"] == "false"
 
     report = (out / "report.md").read_text()
-    for model in MODELS:
+    for model in DETECTORS:
         assert f"| {model} |" in report
     assert "| loom.mp4 |" in report and "| bar.mp4 |" in report
     for name in ("loom.png", "bar.png", "summary.png"):
@@ -102,24 +103,47 @@ def test_eval_subset_of_models_and_a_clip_without_video(clips, tmp_path):
     extra = tmp_path / "labels.json"
     extra.write_text(json.dumps([labels[1], {**labels[0], "file": "gone.mp4"}]))
     out = tmp_path / "out"
-    status = main(["eval", str(root), "--labels", str(extra), "--models", "lgmd1",
+    status = main(["eval", str(root), "--labels", str(extra), "--detectors", "lgmd1",
                    "--out", str(out), "--no-plots"])
     assert status == 0
     results = json.loads((out / "results.json").read_text())
-    assert list(results["models"]) == ["lgmd1"]
+    assert list(results["detectors"]) == ["lgmd1"]
     assert len(results["errors"]) == 1 and "gone.mp4" in results["errors"][0]
-    outcomes = [c["outcome"] for c in results["models"]["lgmd1"]["clips"]]
+    outcomes = [c["outcome"] for c in results["detectors"]["lgmd1"]["clips"]]
     assert outcomes == ["false", "missing"]
-    assert results["models"]["lgmd1"]["summary"]["missing"] == 1
+    assert results["detectors"]["lgmd1"]["summary"]["missing"] == 1
     assert not (out / "plots").exists()
+
+
+def test_eval_detector_specs_name_presets_and_their_result_directories(clips, tmp_path):
+    root, labels = clips
+    out = tmp_path / "out"
+    # --preset says what a bare asnn stands for; --models is the old name of --detectors
+    status = main(["eval", str(root), "--models", "asnn,asnn:paper,lgmd2", "--preset", "vehicle",
+                   "--out", str(out), "--no-plots"])
+    assert status == 0
+    results = json.loads((out / "results.json").read_text())
+    assert list(results["detectors"]) == ["asnn:vehicle", "asnn:paper", "lgmd2"]
+    for slug in ("asnn-vehicle", "asnn-paper", "lgmd2"):
+        assert sorted(p.name for p in (out / "results" / slug).iterdir()) == \
+            ["bar.jsonl", "loom.jsonl"]
 
 
 def test_eval_rejects_bad_input(tmp_path, capsys):
     assert main(["eval", str(tmp_path), "--out", str(tmp_path / "o")]) == 2  # no labels.json
     assert "labels.json" in capsys.readouterr().err
     assert main(["eval", "--out", str(tmp_path / "o")]) == 2                  # nothing to do
-    with pytest.raises(SystemExit):
-        main(["eval", str(tmp_path), "--models", "asnn,nope"])
+    for bad in ("asnn,nope", "asnn:nope", "lgmd1:paper", ""):
+        with pytest.raises(SystemExit):
+            main(["eval", str(tmp_path), "--detectors", bad])
+    with pytest.raises(SystemExit):  # one mode at a time
+        main(["eval", "--paper", "--synthetic"])
+    assert main(["eval", str(tmp_path), "--synthetic", "--out", str(tmp_path / "o")]) == 2
+    assert main(["eval", str(tmp_path), "--cases", "loom-*", "--out", str(tmp_path / "o")]) == 2
+    for misplaced in (["--synthetic", "--size", "64x64"], ["--paper", "--cases", "loom-*"],
+                      ["--synthetic", "--early-tolerance", "0.5"], ["--paper", "--labels", "x"]):
+        assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
+        assert "does not go with" in capsys.readouterr().err
 
 
 def test_progress_printer_draws_a_bar_on_a_terminal():
@@ -148,9 +172,10 @@ def test_temporal_filter_responses_are_band_pass_and_slower_for_larger_n():
         assert step.max() > 0.1 and abs(step[-1]) < 1e-3 * step.max()  # transient: no DC
 
 
-def test_synthetic_suite_writes_every_figure_with_its_numbers(tmp_path, capsys):
+def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
     out = tmp_path / "syn"
-    assert main(["eval", "--synthetic", "--size", "64x64", "--out", str(out)]) == 0
+    assert main(["eval", "--paper", "--detectors", "asnn,lgmd1,lgmd2", "--size", "64x64",
+                 "--out", str(out)]) == 0
     for stem in ("fig2_temporal_filter", "fig4_maps", "fig5_dark_responses",
                  "fig6_light_responses", "fig7_contrast_speed"):
         assert _png(out / f"{stem}.png")
@@ -158,7 +183,7 @@ def test_synthetic_suite_writes_every_figure_with_its_numbers(tmp_path, capsys):
     assert "report.md" in capsys.readouterr().out
 
     results = json.loads((out / "results.json").read_text())
-    table = {(r["scene"], r["polarity"], r["model"]): r for r in results["table"]}
+    table = {(r["scene"], r["polarity"], r["detector"]): r for r in results["table"]}
     assert len(table) == 3 * 2 * 3
     for polarity in ("dark", "light"):
         # the paper's Fig. 5b/6b: LGMD1-1 keeps firing on translation, LGMD1-2 adapts
@@ -168,7 +193,7 @@ def test_synthetic_suite_writes_every_figure_with_its_numbers(tmp_path, capsys):
     fig5 = json.loads((out / "fig5_dark_responses.json").read_text())
     assert [s["scene"] for s in fig5["scenes"]] == [s for s, _ in paper.SYNTHETIC_SCENES]
     for scene in fig5["scenes"]:
-        assert set(scene["models"]) == set(MODELS)
+        assert set(scene["models"]) == {"asnn", "lgmd1", "lgmd2"}
         assert all(len(m["out"]) == 130 for m in scene["models"].values())
     sweeps = json.loads((out / "fig7_contrast_speed.json").read_text())
     assert sweeps["contrast"]["values"] == list(paper.CONTRAST_SWEEP)

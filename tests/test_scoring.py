@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
@@ -137,3 +138,35 @@ def test_load_records_rejects_records_without_frames(tmp_path):
     labels.write_text('{"clips": [{"nofile": 1}]}')
     with pytest.raises(ValueError):
         scoring.load_labels(labels)
+
+
+def test_localisation_follows_the_labelled_track_where_there_is_one():
+    track = [[float(i), 2.0 * i] for i in range(60)]
+    track[26] = None  # no target in this frame
+    label = {**COLLISION, "track": track}
+    targets = {25: [(28.0, 50.0)], 26: [(30.0, 40.0)]}
+    score = scoring.score_clip(records((25,), targets=targets), label)
+    assert score.localisation_px == pytest.approx(math.hypot(3.0, 0.0))  # track at 25: (25, 50)
+    assert scoring.score_clip(records((26,), targets=targets), label).localisation_px is None
+    # without a track, the fixed centre
+    assert scoring.score_clip(records((26,), targets=targets), COLLISION).localisation_px == 0.0
+
+
+def test_warnings_after_the_approach_are_counted_apart():
+    score = scoring.score_clip(records((3, 30, 41, 42, 43, 50)), COLLISION)
+    assert (score.warning_frames, score.window_warning_frames, score.after_warning_frames) == \
+        (5, 3, 2)                                   # 43 and 50 come after contact + 2
+    quiet_after = scoring.score_clip(records((30, 42)), COLLISION)
+    assert quiet_after.after_warning_frames == 0
+    assert scoring.score_clip(records((50,)), QUIET).after_warning_frames == 0
+    summary = scoring.summarize([score, quiet_after])
+    assert (summary["after_warning_frames"], summary["after_warning_clips"]) == (2, 1)
+
+
+def test_summary_gives_the_median_lead_of_the_hits():
+    leads = [(20,), (30,), (39,)]  # leads 20, 10, 1 frames
+    scores = [scoring.score_clip(records(w), COLLISION) for w in leads]
+    scores.append(scoring.score_clip(records((45,)), COLLISION))  # late: not a hit
+    s = scoring.summarize(scores)
+    assert s["median_lead_frames"] == 10 and s["median_lead_s"] == pytest.approx(0.5)
+    assert s["mean_lead_frames"] == pytest.approx(31 / 3)

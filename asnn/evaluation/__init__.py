@@ -5,10 +5,14 @@ loads matplotlib):
 
 :mod:`~asnn.evaluation.scoring`
     Outcomes of per-frame results against clip labels (SPEC.md section 5).
+:mod:`~asnn.evaluation.runs`
+    Detector specs (``asnn``, ``asnn:PRESET``, ``lgmd1``, ``lgmd2``) and running them over frames.
 :mod:`~asnn.evaluation.clips`
-    Every model over a folder of labelled clips (``asnn eval CLIPS_DIR``).
+    Every detector over a folder of labelled clips (``asnn eval CLIPS_DIR``).
+:mod:`~asnn.evaluation.suite`
+    Every detector over the labelled suite of generated scenes (``asnn eval --synthetic``).
 :mod:`~asnn.evaluation.paper`
-    The paper's synthetic experiments, Figs. 2 and 4-7 (``asnn eval --synthetic``).
+    The paper's synthetic experiments, Figs. 2 and 4-7 (``asnn eval --paper``).
 :mod:`~asnn.evaluation.bench`
     Per-frame timing of every model and preset (``asnn bench``).
 :mod:`~asnn.evaluation.figures`, :mod:`~asnn.evaluation.progress`

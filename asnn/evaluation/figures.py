@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 
 __all__ = [
     "MODEL_COLOURS",
+    "response_series",
     "plot_clip_responses",
     "plot_summary",
     "plot_synthetic_responses",
@@ -24,7 +25,9 @@ __all__ = [
     "plot_temporal_filter",
 ]
 
-MODEL_COLOURS = {"asnn": "tab:red", "lgmd1": "tab:blue", "lgmd2": "tab:green"}
+MODEL_COLOURS = {"asnn": "tab:red", "asnn:reference": "tab:orange", "lgmd1": "tab:blue",
+                 "lgmd2": "tab:green"}
+_OTHER_COLOURS = ("tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "black")
 _OUTCOME_COLOURS = {"hit": "tab:green", "early": "tab:orange", "late": "tab:purple",
                     "miss": "tab:gray", "false": "tab:red", "quiet": "tab:cyan"}
 
@@ -42,8 +45,26 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return path
 
 
-def _colour(model: str) -> str:
-    return MODEL_COLOURS.get(model, "black")
+def _colour(detector: str) -> str:
+    if detector in MODEL_COLOURS:
+        return MODEL_COLOURS[detector]
+    return _OTHER_COLOURS[sum(detector.encode()) % len(_OTHER_COLOURS)]
+
+
+def response_series(records: Sequence[Mapping], outcome: str | None = None) -> dict:
+    """The per-frame series the response plots draw, from a detector's records.
+
+    Returns
+    -------
+    dict
+        ``u``, ``out``, ``spikes``, ``spike_rate`` and ``collision`` lists, and ``outcome``
+        when given.
+    """
+    series = {key: [r[key] for r in records] for key in ("u", "out", "spikes", "spike_rate")}
+    series["collision"] = [bool(r["collision"]) for r in records]
+    if outcome is not None:
+        series["outcome"] = outcome
+    return series
 
 
 def _mark_events(ax, onset: int | None, contact: int | None, window: Sequence[int] | None = None):
@@ -95,7 +116,7 @@ def plot_clip_responses(path: str | Path, clip: Mapping) -> Path:
 
 
 def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
-    """Stacked bars of the outcomes per model, and the mean lead time of the hits.
+    """Stacked bars of the outcomes per detector, and the median lead time of the hits.
 
     Parameters
     ----------
@@ -116,12 +137,12 @@ def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
     counts_ax.set_title("outcomes (early and false are false alarms)")
     counts_ax.legend(fontsize=8, ncol=3, loc="upper right")
     counts_ax.set_ylim(0, max(bottom.max(), 1) * 1.35)
-    lead = [summaries[m].get("mean_lead_s") for m in models]
+    lead = [summaries[m].get("median_lead_s") for m in models]
     lead_ax.bar(x, [v if v is not None else 0.0 for v in lead],
                 color=[_colour(m) for m in models], width=0.6)
     lead_ax.set_xticks(x, models)
     lead_ax.set_ylabel("seconds")
-    lead_ax.set_title("mean lead time of hits")
+    lead_ax.set_title("median lead time of hits")
     return _save(fig, path)
 
 

@@ -1,8 +1,9 @@
-"""The paper's synthetic experiments as figures and numbers (``asnn eval --synthetic``).
+"""The paper's synthetic experiments as figures and numbers (``asnn eval --paper``).
 
-:func:`synthetic_suite` regenerates the experiments of Figs. 2, 4, 5, 6 and 7 from
-:mod:`asnn.stimuli`: each figure as a PNG with the numbers behind it as JSON, plus
-``results.json`` and ``report.md``.
+:func:`paper_figures` regenerates the experiments of Figs. 2, 4, 5, 6 and 7 from
+:mod:`asnn.stimuli.paper`: each figure as a PNG with the numbers behind it as JSON, plus
+``results.json`` and ``report.md``. The labelled suite of generated scenes is
+:mod:`asnn.evaluation.suite` (``asnn eval --synthetic``).
 """
 
 from __future__ import annotations
@@ -13,15 +14,14 @@ from pathlib import Path
 import numpy as np
 
 from .. import retina
-from ..detectors import MODELS
 from ..model import ASNN
 from ..params import preset
 from ..stimuli import make_scene
 from . import figures, scoring
-from .clips import _fmt, _write_json, run_detector
 from .progress import Silent
+from .runs import DEFAULT_DETECTORS, fmt, parse_detector, parse_detectors, run_detector, write_json
 
-__all__ = ["synthetic_suite", "temporal_filter_responses", "SYNTHETIC_SCENES", "CONTRAST_SWEEP",
+__all__ = ["paper_figures", "temporal_filter_responses", "SYNTHETIC_SCENES", "CONTRAST_SWEEP",
            "SPEED_SWEEP"]
 
 SYNTHETIC_SCENES = (
@@ -64,13 +64,6 @@ def temporal_filter_responses(params, orders: Sequence[int] = FILTER_ORDERS,
     return out
 
 
-def _series(records: Sequence[Mapping]) -> dict:
-    return {"u": [r["u"] for r in records], "out": [r["out"] for r in records],
-            "spikes": [r["spikes"] for r in records],
-            "spike_rate": [r["spike_rate"] for r in records],
-            "collision": [bool(r["collision"]) for r in records]}
-
-
 def _phase_warnings(collision: Sequence[bool], label: Mapping, warmup: int) -> tuple[int, int]:
     """Warnings inside the approach phase [onset, contact + 2] and elsewhere after warm-up."""
     onset, contact = label.get("onset_frame"), label.get("contact_frame")
@@ -91,9 +84,9 @@ def _round_map(array: np.ndarray, digits: int = 5) -> list:
     return [[float(f"{v:.{digits}g}") for v in row] for row in array.tolist()]
 
 
-def _synthetic_report(results: Mapping) -> str:
+def _paper_report(results: Mapping) -> str:
     lines = [
-        "# Synthetic experiments",
+        "# The paper's synthetic experiments",
         "",
         f"Scenes {results['size'][0]}x{results['size'][1]}, {results['frames']} steps; ASNN preset "
         f"`{results['preset']}`. Approach-recession: the disk grows over steps 10-55 and shrinks "
@@ -101,12 +94,12 @@ def _synthetic_report(results: Mapping) -> str:
         "with no early tolerance (generated clips); `approach` counts warning frames in "
         "[onset, contact + 2], `other` the warning frames elsewhere after the warm-up.",
         "",
-        "| scene | target | model | outcome | first warning | approach | other | peak out |",
+        "| scene | target | detector | outcome | first warning | approach | other | peak out |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for row in results["table"]:
-        lines.append(f"| {row['scene']} | {row['polarity']} | {row['model']} | {row['outcome']} | "
-                     f"{_fmt(row['first_warning'])} | {row['approach_warnings']} | "
+        lines.append(f"| {row['scene']} | {row['polarity']} | {row['detector']} | {row['outcome']} | "
+                     f"{fmt(row['first_warning'])} | {row['approach_warnings']} | "
                      f"{row['other_warnings']} | {row['peak_out']:.3f} |")
     lines += ["", "Contrast sweep (dark disk, 1 px/step), ASNN peak u: " + ", ".join(
         f"c={c:g}: {p:.4g}" for c, p in zip(results["contrast"]["values"],
@@ -118,9 +111,9 @@ def _synthetic_report(results: Mapping) -> str:
     return "\n".join(lines)
 
 
-def synthetic_suite(out_dir: str | Path, *, preset_name: str | None = None,
-                    models: Sequence[str] = MODELS, size: tuple[int, int] = (128, 128),
-                    warmup: int = scoring.WARMUP_FRAMES, progress=None) -> dict:
+def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
+                  detectors: Sequence[str] = DEFAULT_DETECTORS, size: tuple[int, int] = (128, 128),
+                  warmup: int = scoring.WARMUP_FRAMES, progress=None) -> dict:
     """Regenerate the paper's synthetic experiments and write figures, JSON and a report.
 
     Writes to ``out_dir``: ``fig2_temporal_filter``, ``fig4_maps`` (step 32 of the dark
@@ -132,8 +125,9 @@ def synthetic_suite(out_dir: str | Path, *, preset_name: str | None = None,
     out_dir : path
     preset_name : str, optional
         ASNN preset for every scene; None means ``default``.
-    models : sequence of str
-        Models of Figs. 5 and 6 (the sweeps and maps are ASNN's).
+    detectors : sequence of str
+        Detector specs of Figs. 5 and 6 (a bare ``asnn`` stands for ``preset_name``); the
+        sweeps and maps are ASNN's with ``preset_name``.
     size : (width, height)
         Frame size; the paper's is 128x128.
     warmup : int
@@ -147,15 +141,17 @@ def synthetic_suite(out_dir: str | Path, *, preset_name: str | None = None,
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     params = preset(preset_name or "default")
+    specs = parse_detectors(detectors, preset_name)
+    own = parse_detector("asnn", preset_name)
     progress = progress or Silent()
-    n_runs = 2 * len(SYNTHETIC_SCENES) * len(models) + len(CONTRAST_SWEEP) + len(SPEED_SWEEP) + 2
-    progress.start(n_runs, "eval --synthetic")
+    n_runs = 2 * len(SYNTHETIC_SCENES) * len(specs) + len(CONTRAST_SWEEP) + len(SPEED_SWEEP) + 2
+    progress.start(n_runs, "eval --paper")
     written = []
 
     # Fig. 2: the temporal filter
     filt = temporal_filter_responses(params)
     filt["title"] = f"temporal filter L(K, n, z0), preset {preset_name or 'default'}"
-    _write_json(out_dir / "fig2_temporal_filter.json", filt)
+    write_json(out_dir / "fig2_temporal_filter.json", filt)
     written.append(figures.plot_temporal_filter(out_dir / "fig2_temporal_filter.png", filt).name)
     progress.advance(1, "fig. 2")
 
@@ -163,7 +159,7 @@ def synthetic_suite(out_dir: str | Path, *, preset_name: str | None = None,
     table = []
     frames = None
     for polarity, fig_name in (("dark", "fig5_dark_responses"), ("light", "fig6_light_responses")):
-        data = {"title": f"{polarity} target: responses of {', '.join(models)}"
+        data = {"title": f"{polarity} target: responses of {', '.join(s.name for s in specs)}"
                          f" (ASNN preset {preset_name or 'default'})", "scenes": []}
         for scene_name, title in SYNTHETIC_SCENES:
             scene = make_scene(scene_name, polarity=polarity, size=size)
@@ -173,18 +169,19 @@ def synthetic_suite(out_dir: str | Path, *, preset_name: str | None = None,
             entry = {"title": title, "scene": scene_name, "snapshot_frame": snap,
                      "snapshot": scene.frames[snap].tolist(), "onset": scene.onset_frame,
                      "contact": scene.contact_frame, "collision": scene.collision, "models": {}}
-            for m in models:
-                records = run_detector(scene.frames, m, preset_name, scene.fps)
-                entry["models"][m] = _series(records)
+            for spec in specs:
+                m = spec.name
+                records = run_detector(scene.frames, spec, scene.fps)
+                entry["models"][m] = figures.response_series(records)
                 score = scoring.score_clip(records, label, warmup=warmup, early_tolerance_s=0.0)
                 inside, other = _phase_warnings(entry["models"][m]["collision"], label, warmup)
-                table.append({"scene": scene_name, "polarity": polarity, "model": m,
+                table.append({"scene": scene_name, "polarity": polarity, "detector": m,
                               "outcome": score.outcome, "first_warning": score.first_warning,
                               "approach_warnings": inside, "other_warnings": other,
                               "peak_out": max(entry["models"][m]["out"])})
                 progress.advance(1, f"{scene_name} {polarity} {m}")
             data["scenes"].append(entry)
-        _write_json(out_dir / f"{fig_name}.json", data)
+        write_json(out_dir / f"{fig_name}.json", data)
         written.append(figures.plot_synthetic_responses(out_dir / f"{fig_name}.png", data).name)
 
     # Fig. 7: contrast and speed sweeps of ASNN on the dark approach-recession
@@ -195,12 +192,12 @@ def synthetic_suite(out_dir: str | Path, *, preset_name: str | None = None,
         for value in values:
             kwargs = {"contrast": value} if key == "contrast" else {"speed": value}
             scene = make_scene("approach_recession", polarity="dark", size=size, **kwargs)
-            u = [r["u"] for r in run_detector(scene.frames, "asnn", preset_name, scene.fps)]
+            u = [r["u"] for r in run_detector(scene.frames, own, scene.fps)]
             sweep["u"].append(u)
             sweep["peak"].append(max(u))
             progress.advance(1, f"{key} {value:g}")
         sweeps[key] = sweep
-    _write_json(out_dir / "fig7_contrast_speed.json", sweeps)
+    write_json(out_dir / "fig7_contrast_speed.json", sweeps)
     written.append(figures.plot_sweeps(out_dir / "fig7_contrast_speed.png", sweeps).name)
 
     # Fig. 4: intermediate maps at step 32 of the dark approach-recession over stripes
@@ -217,16 +214,16 @@ def synthetic_suite(out_dir: str | Path, *, preset_name: str | None = None,
             "M_a": _round_map(maps.M_a), "M_d": _round_map(maps.M_d),
             "G_prime": _round_map(maps.G_prime), "u": response.u,
             "targets": [t.to_dict() for t in response.targets]}
-    _write_json(out_dir / "fig4_maps.json", data)
+    write_json(out_dir / "fig4_maps.json", data)
     written.append(figures.plot_maps(out_dir / "fig4_maps.png", data).name)
     progress.advance(1, "fig. 4")
     progress.finish()
 
     results = {"preset": preset_name or "default", "size": list(size), "frames": frames,
-               "models": list(models), "warmup": warmup, "table": table,
+               "detectors": [spec.name for spec in specs], "warmup": warmup, "table": table,
                "contrast": {k: sweeps["contrast"][k] for k in ("values", "peak")},
                "speed": {k: sweeps["speed"][k] for k in ("values", "peak")},
                "figures": written}
-    _write_json(out_dir / "results.json", results)
-    (out_dir / "report.md").write_text(_synthetic_report(results), encoding="utf-8")
+    write_json(out_dir / "results.json", results)
+    (out_dir / "report.md").write_text(_paper_report(results), encoding="utf-8")
     return results

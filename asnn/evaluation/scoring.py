@@ -4,7 +4,8 @@ The per-frame results of one detector on one clip are the records ``asnn detect 
 (CONTRACT.md): dicts with at least ``frame`` and ``collision``, and ``targets`` (a list of dicts
 with ``x`` and ``y``) where the detector reports them. A label is an entry of ``labels.json``
 (see ``data/real/README.md``): ``file``, ``fps``, ``collision``, ``onset_frame``,
-``contact_frame``, ``center``.
+``contact_frame``, ``center``, and optionally ``track`` (the target's centre ``[x, y]`` in every
+frame, or null where it has none; generated clips have it).
 
 Rules, with W the warm-up, T the early tolerance in frames (``round(tolerance_s * fps)``), and
 ``first`` the first frame at or after W whose record has ``collision`` true:
@@ -23,7 +24,10 @@ missing    no results for the clip: excluded from every rate, counted on its own
 
 Lead time is ``contact - first`` (frames, and seconds at the clip's fps) for every first warning
 on a collision clip (negative when late). The localisation error is the distance from the
-nearest target of the first warning's frame to the labelled centre, where that frame has targets.
+nearest target of the first warning's frame to the labelled centre (the track's centre at that
+frame where the label has a track), where that frame has targets. Warning frames after
+``contact + 2`` on a collision clip are counted apart: the warning should end when the approach
+does (for an approach that stops short, ``contact_frame`` is the frame it stops).
 """
 
 from __future__ import annotations
@@ -75,12 +79,16 @@ class ClipScore:
     window_warning_frames : int
         Of those, the frames inside the hit window (always 0 on a non-collision clip): how much
         of a detector's warning falls where a warning is due.
+    after_warning_frames : int
+        Of those, the frames after ``contact + 2`` on a collision clip: warnings that outlast the
+        approach.
     false_alarm : bool
         An early warning on a collision clip, or any warning on a non-collision clip.
     lead_frames, lead_s : float or None
         ``contact - first_warning``, in frames and seconds (collision clips with a warning).
     localisation_px : float or None
-        Distance from the nearest target at the first warning to the labelled centre.
+        Distance from the nearest target at the first warning to the labelled centre (or the
+        track's centre at that frame).
     window : (int, int) or None
         The frames a first warning must lie in to be a hit.
     """
@@ -91,6 +99,7 @@ class ClipScore:
     first_warning: int | None = None
     warning_frames: int = 0
     window_warning_frames: int = 0
+    after_warning_frames: int = 0
     false_alarm: bool = False
     lead_frames: float | None = None
     lead_s: float | None = None
@@ -121,6 +130,14 @@ def first_warning(records: Iterable[Mapping], warmup: int = WARMUP_FRAMES) -> tu
     frames = sorted(int(r["frame"]) for r in records
                     if r.get("collision") and int(r["frame"]) >= warmup)
     return (frames[0] if frames else None), len(frames)
+
+
+def _labelled_center(label: Mapping, frame: int) -> Sequence[float] | None:
+    """The target's centre at ``frame``: from the label's track where it has one."""
+    track = label.get("track")
+    if track is not None:
+        return track[frame] if 0 <= frame < len(track) else None
+    return label.get("center")
 
 
 def _nearest_target_distance(records: Sequence[Mapping], frame: int,
@@ -187,13 +204,15 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     else:
         outcome = "late"
     lead = float(int(contact) - first)
-    in_window = sum(1 for r in records if r.get("collision")
-                    and max(warmup, window[0]) <= int(r["frame"]) <= window[1])
+    warned = [int(r["frame"]) for r in records if r.get("collision") and int(r["frame"]) >= warmup]
+    in_window = sum(1 for f in warned if window[0] <= f <= window[1])
     return ClipScore(clip=clip, collision=True, outcome=outcome, first_warning=first,
                      warning_frames=count, window_warning_frames=in_window,
+                     after_warning_frames=sum(1 for f in warned if f > window[1]),
                      false_alarm=outcome == "early",
                      lead_frames=lead, lead_s=lead / fps if fps > 0 else None,
-                     localisation_px=_nearest_target_distance(records, first, label.get("center")),
+                     localisation_px=_nearest_target_distance(records, first,
+                                                              _labelled_center(label, first)),
                      window=window)
 
 
@@ -225,9 +244,11 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         ``noncollision_clips`` (scored only); the count of each outcome; ``false_alarms``
         (early warnings plus warned non-collision clips); ``hit_rate`` (hits over scored collision
         clips), ``false_alarm_rate`` (false alarms over scored clips), ``specificity`` (quiet over
-        scored non-collision clips), each None without a denominator; ``warning_frames`` and
-        ``window_warning_frames`` summed over the scored clips; ``mean_lead_s`` and
-        ``mean_lead_frames`` over hits; ``median_localisation_px`` over hits with targets.
+        scored non-collision clips), each None without a denominator; ``warning_frames``,
+        ``window_warning_frames`` and ``after_warning_frames`` summed over the scored clips, and
+        ``after_warning_clips``, the collision clips with warnings after the approach;
+        ``mean_lead_s``, ``mean_lead_frames``, ``median_lead_s`` and ``median_lead_frames`` over
+        hits; ``median_localisation_px`` over hits with targets.
     """
     scores = list(scores)
     scored = [s for s in scores if s.outcome != "missing"]
@@ -249,8 +270,12 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         "specificity": counts["quiet"] / n_non if n_non else None,
         "warning_frames": sum(s.warning_frames for s in scored),
         "window_warning_frames": sum(s.window_warning_frames for s in scored),
+        "after_warning_frames": sum(s.after_warning_frames for s in scored),
+        "after_warning_clips": sum(s.after_warning_frames > 0 for s in scored),
         "mean_lead_frames": _mean([s.lead_frames for s in hits]),
         "mean_lead_s": _mean([s.lead_s for s in hits if s.lead_s is not None]),
+        "median_lead_frames": _median([s.lead_frames for s in hits]),
+        "median_lead_s": _median([s.lead_s for s in hits if s.lead_s is not None]),
         "median_localisation_px": _median([s.localisation_px for s in hits
                                            if s.localisation_px is not None]),
     }

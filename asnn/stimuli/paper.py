@@ -1,8 +1,10 @@
-"""Synthetic scenes of the paper's experiments, generated in code (no video files are shipped).
+"""The synthetic scenes of the paper's experiments (Figs. 5-7), generated in code.
 
-Every scene is a :class:`Scene`: uint8 gray frames plus the ground truth a scorer needs. Targets
-are drawn anti-aliased (pixel coverage of the exact disk or bar), so sub-pixel growth and motion
-change the image smoothly, as a camera would see them.
+Every scene is a :class:`~asnn.stimuli.scene.Scene`: uint8 gray frames plus the ground truth a
+scorer needs. Targets are drawn anti-aliased (pixel coverage of the exact disk or bar), so
+sub-pixel growth and motion change the image smoothly, as a camera would see them. The drawing
+here is kept as it was first written (pixel ``i`` spans ``[i, i + 1)`` for the bar), so these
+scenes, and the fixtures made from them, stay the same to the byte.
 
 Scenes (``make_scene(name, ...)``):
 
@@ -27,62 +29,13 @@ dark target on a light background, ``'light'`` the reverse.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
 
-import cv2
 import numpy as np
 
-__all__ = ["Scene", "SCENE_NAMES", "make_scene", "write_video", "write_frames"]
+from .render import levels
+from .scene import Scene
 
-
-@dataclass
-class Scene:
-    """A generated clip and its ground truth.
-
-    Attributes
-    ----------
-    name : str
-    frames : ndarray of uint8 (T, H, W)
-    fps : float
-    collision : bool
-        Whether something approaches (a looming phase exists).
-    onset_frame, contact_frame : int or None
-        First and last frame of the (first) looming phase.
-    center : (x, y) or None
-        Centre of the looming object, pixels.
-    params : dict
-        The arguments the scene was made with.
-    """
-
-    name: str
-    frames: np.ndarray
-    fps: float
-    collision: bool
-    onset_frame: int | None = None
-    contact_frame: int | None = None
-    center: tuple[float, float] | None = None
-    params: dict = field(default_factory=dict)
-
-    def label(self, file: str) -> dict:
-        """An entry in the format of ``labels.json`` for this clip saved as ``file``."""
-        t, h, w = self.frames.shape
-        return {"file": file, "width": w, "height": h, "fps": self.fps, "frames": t,
-                "collision": self.collision, "onset_frame": self.onset_frame,
-                "contact_frame": self.contact_frame,
-                "center": list(self.center) if self.center else None,
-                "description": f"generated scene {self.name} {self.params}"}
-
-
-def _levels(contrast: float, polarity: str) -> tuple[float, float]:
-    """(background, target) gray levels for a Weber contrast, centred on mid-gray."""
-    if not 0.0 <= contrast <= 1.0:
-        raise ValueError(f"contrast must lie in [0, 1], got {contrast}")
-    if polarity not in ("dark", "light"):
-        raise ValueError(f"polarity must be 'dark' or 'light', got {polarity!r}")
-    delta = contrast * 255.0
-    light, dark = 127.5 + delta / 2, 127.5 - delta / 2
-    return (light, dark) if polarity == "dark" else (dark, light)
+__all__ = ["SCENE_NAMES", "make_scene"]
 
 
 def _disk_coverage(h: int, w: int, cx: float, cy: float, radius: float) -> np.ndarray:
@@ -171,7 +124,7 @@ def make_scene(name: str, *, size: tuple[int, int] = (128, 128), frames: int | N
     if frames is None:
         frames = 130 if two_phase else (stop + 5 if name in ("looming", "looming_over_stripes")
                                         else 70)
-    background, target = _levels(contrast, polarity)
+    background, target = levels(contrast, polarity)
     cx, cy = center if center is not None else (w / 2.0, h / 2.0)
     params = dict(size=size, frames=frames, contrast=contrast, polarity=polarity, speed=speed,
                   start=start, stop=stop, hold=hold)
@@ -217,38 +170,3 @@ def make_scene(name: str, *, size: tuple[int, int] = (128, 128), frames: int | N
 
 SCENE_NAMES = ("approach_recession", "looming", "receding", "translation", "translating_bar",
                "stripes", "looming_over_stripes", "approach_recession_over_stripes")
-
-
-def write_video(frames: np.ndarray, path: str | Path, fps: float = 20.0) -> Path:
-    """Write gray uint8 frames (T, H, W) to a video file (mp4v for .mp4, MJPG for .avi).
-
-    Raises
-    ------
-    OSError
-        If OpenCV cannot open a writer for the path.
-    """
-    path = Path(path)
-    t, h, w = frames.shape
-    fourcc = cv2.VideoWriter_fourcc(*("MJPG" if path.suffix.lower() == ".avi" else "mp4v"))
-    writer = cv2.VideoWriter(str(path), fourcc, fps, (w, h), isColor=True)
-    if not writer.isOpened():
-        raise OSError(f"cannot write video {path}")
-    try:
-        for frame in frames:
-            writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
-    finally:
-        writer.release()
-    return path
-
-
-def write_frames(frames: np.ndarray, directory: str | Path) -> list[Path]:
-    """Write frames as numbered PNG files (lossless) and return their paths."""
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for i, frame in enumerate(frames):
-        path = directory / f"frame_{i:05d}.png"
-        if not cv2.imwrite(str(path), frame):
-            raise OSError(f"cannot write {path}")
-        paths.append(path)
-    return paths

@@ -1,0 +1,487 @@
+"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 1).
+
+Every case has a stable name that says what it is, a generator (:func:`.planar.planar_scene`
+at 160x120 or :func:`.driving.driving_scene` at 192x128, both at 20 fps, the model's
+dt = 0.05 s), fixed options and seed, and category tags; :func:`make_case` builds its
+:class:`~asnn.stimuli.scene.Scene`, labels included. The first tag is the case's group:
+
+=====================  =======================================================================
+group                  what it holds
+=====================  =======================================================================
+approach               collision course, constant bearing: both polarities, Weber contrast
+                       0.2-1, image sizes, speeds (time to contact 2-4 s at onset), positions,
+                       shapes (disk, square, car), static textures; and the collision-course
+                       twins of the near misses (tag ``twin``)
+approach-stops         approaches that halt, or turn back, short of contact: the warning must
+                       end when the approach ends
+approach-in-clutter    approaches over moving stripes, textures and checkerboards, under camera
+                       shake and pans, brightness changes, sensor noise and JPEG artefacts
+nearmiss               the same objects, distances and speeds as their twins, offset so their
+                       images drift out of the frame (``twin`` names the collision course)
+recession              objects moving away
+translation            objects and bars crossing the view (horizontal, vertical, diagonal)
+moving-pattern         stripes, gratings, checkerboards and random textures translating
+camera                 camera shake (jitter and small rotations), pans, tilts and sweeps
+brightness             ramps, flicker, exposure steps, headlights sweeping
+noise                  Gaussian sensor noise and JPEG re-encoding
+driving-threat         driving scenes with a vehicle on a collision course
+driving-pass           driving scenes with a vehicle passing in the next lane (near misses)
+driving-clear          driving with nothing on a collision course: straight, turns, bumps,
+                       following at constant distance, being overtaken; day and night
+=====================  =======================================================================
+
+The suite changes only with :data:`SUITE_VERSION`: results of one version compare.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import zlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from .driving import LANE_WIDTH, Vehicle, driving_scene
+from .effects import Flicker, Headlights, Pan, Ramp, Shake, Step, Sweep
+from .planar import Background, Prop, planar_scene
+from .scene import Scene
+
+__all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case"]
+
+SUITE_VERSION = "1"
+GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
+          "translation", "moving-pattern", "camera", "brightness", "noise", "driving-threat",
+          "driving-pass", "driving-clear")
+PLANAR_SIZE = (160, 120)
+DRIVING_SIZE = (192, 128)
+_CENTER = ((PLANAR_SIZE[0] - 1) / 2, (PLANAR_SIZE[1] - 1) / 2)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One scene of the suite: how to make it and what it tests.
+
+    Attributes
+    ----------
+    name : str
+    generator : callable
+        ``planar_scene`` or ``driving_scene``.
+    options : dict
+        Keyword arguments of the generator.
+    category : tuple of str
+        The group first, then modifiers (``dark``, ``light``, ``contrast``, ``night``, ...).
+    twin : str or None
+        The collision-course twin of a near miss.
+    """
+
+    name: str
+    generator: Callable[..., Scene]
+    options: Mapping = field(default_factory=dict)
+    category: tuple[str, ...] = ()
+    twin: str | None = None
+
+    @property
+    def group(self) -> str:
+        return self.category[0]
+
+    def make(self) -> Scene:
+        seed = self.options.get("seed", zlib.crc32(self.name.encode()) & 0xFFFF)
+        return self.generator(name=self.name, category=self.category, twin=self.twin,
+                              **{**self.options, "seed": seed})
+
+
+def _planar(name: str, group: str, *tags: str, twin: str | None = None, **options) -> Case:
+    # a second of still scene (with any background motion, shake or lighting) before an approach
+    # starts: a detector disturbed by the clutter alone warns early
+    return Case(name, planar_scene, {"size": PLANAR_SIZE, "onset": 20, **options},
+                (group, *tags), twin)
+
+
+def _driving(name: str, group: str, *tags: str, twin: str | None = None, **options) -> Case:
+    return Case(name, driving_scene, {"size": DRIVING_SIZE, **options}, (group, *tags), twin)
+
+
+def _c(contrast: float) -> str:
+    return f"c{contrast:.1f}"
+
+
+# static clutter for the camera and lighting scenes: levels 50-170, so a gain of 1.4 never clips
+# (2.0, the strongest step, clips the lightest parts as a camera would)
+_PROPS = (Prop("disk", 30.0, 40.0, 20.0, 60.0), Prop("square", 122.0, 32.0, 18.0, 165.0),
+          Prop("car", 62.0, 90.0, 14.0, 55.0, 1.4), Prop("rect", 140.0, 82.0, 50.0, 150.0, 0.2))
+_STILL_TEXTURE = Background("texture", 0.3, 1.5, mean=110.0)
+_NIGHT_TEXTURE = Background("texture", 0.12, 1.5, mean=40.0)
+
+
+def _approach_cases() -> list[Case]:
+    cases = []
+    for polarity in ("dark", "light"):
+        for contrast in (0.2, 0.3, 0.5, 0.7, 1.0):
+            cases.append(_planar(f"loom-{polarity}-{_c(contrast)}-d12-center", "approach",
+                                 polarity, "contrast", polarity=polarity, contrast=contrast))
+        for height in (6.0, 24.0):
+            cases.append(_planar(f"loom-{polarity}-c0.6-d{height:.0f}-center", "approach",
+                                 polarity, "size", polarity=polarity, height=height))
+        for tau in (2.0, 4.0):
+            cases.append(_planar(f"loom-{polarity}-c0.6-d12-tau{tau:.0f}s-center", "approach",
+                                 polarity, "speed", polarity=polarity, tau=tau))
+    for polarity, where, position in (("dark", "topleft", (40.0, 30.0)),
+                                      ("dark", "right", (125.0, 60.0)),
+                                      ("light", "bottomleft", (35.0, 95.0)),
+                                      ("light", "top", (80.0, 25.0))):
+        cases.append(_planar(f"loom-{polarity}-c0.6-d12-{where}", "approach", polarity,
+                             "position", polarity=polarity, position=position))
+    for polarity, shape, height, aspect in (("dark", "square", 12.0, 1.0),
+                                            ("dark", "car", 10.0, 1.4),
+                                            ("light", "car", 10.0, 1.4)):
+        cases.append(_planar(f"loom-{polarity}-c0.6-{shape}-center", "approach", polarity,
+                             "shape", polarity=polarity, shape=shape, height=height,
+                             aspect=aspect))
+    for polarity, contrast in (("dark", 0.3), ("light", 0.3), ("dark", 0.6)):
+        cases.append(_planar(f"loom-{polarity}-{_c(contrast)}-d12-texture", "approach",
+                             polarity, "texture", polarity=polarity, contrast=contrast,
+                             background=Background("texture", 0.2, 1.5)))
+    for polarity in ("dark", "light"):
+        cases.append(_planar(f"halt-{polarity}-c0.6", "approach-stops", polarity, "halt",
+                             motion="halt", polarity=polarity, stop_height=72.0))
+        cases.append(_planar(f"approach-recede-{polarity}-c0.6", "approach-stops", polarity,
+                             "recede-after", motion="approach-recede", polarity=polarity,
+                             stop_height=72.0))
+    return cases
+
+
+# near misses and their collision-course twins: (name, polarity, options)
+_PAIRS = (
+    ("disk-dark-right", "dark", dict(position=(_CENTER[0] + 20, _CENTER[1]))),
+    ("disk-light-left", "light", dict(position=(_CENTER[0] - 20, _CENTER[1]))),
+    ("truck-dark-right-close", "dark", dict(shape="rect", height=16.0, aspect=0.9,
+                                            position=(_CENTER[0] + 12, _CENTER[1]))),
+    ("car-dark-left-nextlane", "dark", dict(shape="car", height=8.0, aspect=1.4, tau=2.5,
+                                            position=(_CENTER[0] - 24, _CENTER[1] + 3))),
+    ("car-light-right-nextlane", "light", dict(shape="car", height=8.0, aspect=1.4, tau=2.5,
+                                               position=(_CENTER[0] + 24, _CENTER[1] + 3))),
+    ("disk-dark-diagonal", "dark", dict(position=(_CENTER[0] + 16, _CENTER[1] - 14))),
+    ("disk-dark-up", "dark", dict(position=(_CENTER[0], _CENTER[1] - 20))),
+    ("disk-dark-right-fast", "dark", dict(tau=2.0, position=(_CENTER[0] + 20, _CENTER[1]))),
+    ("disk-dark-c0.3-right", "dark", dict(contrast=0.3,
+                                          position=(_CENTER[0] + 20, _CENTER[1]))),
+    ("disk-light-c0.3-left-texture", "light", dict(
+        contrast=0.3, position=(_CENTER[0] - 20, _CENTER[1]),
+        background=Background("texture", 0.2, 1.5, seed=7))),
+)
+
+
+def _pair_cases() -> list[Case]:
+    cases = []
+    for name, polarity, options in _PAIRS:
+        twin = f"course-{name}"
+        seed = zlib.crc32(name.encode()) & 0xFFFF  # the pair shares its textures and noise
+        cases.append(_planar(twin, "approach", polarity, "twin", polarity=polarity, seed=seed,
+                             **options))
+        cases.append(_planar(f"nearmiss-{name}", "nearmiss", polarity, twin=twin,
+                             motion="nearmiss", polarity=polarity, seed=seed, **options))
+    return cases
+
+
+def _recession_cases() -> list[Case]:
+    return [
+        _planar("recede-dark-c0.6-d48", "recession", "dark", motion="recede", height=48.0),
+        _planar("recede-light-c0.6-d48", "recession", "light", motion="recede", height=48.0,
+                polarity="light"),
+        _planar("recede-dark-c1.0-d24-tau2s", "recession", "dark", motion="recede",
+                height=24.0, contrast=1.0, tau=2.0),
+        _planar("recede-light-c0.3-d48-texture", "recession", "light", "texture",
+                motion="recede", height=48.0, polarity="light", contrast=0.3,
+                background=Background("texture", 0.2, 1.5)),
+    ]
+
+
+def _translation_cases() -> list[Case]:
+    move = dict(motion="translate", onset=0)
+    return [
+        _planar("translate-disk-dark-c0.6-h2px", "translation", "dark", **move, height=16.0,
+                position=(20.0, 60.0), velocity=(2.0, 0.0), frames=60),
+        _planar("translate-disk-light-c0.6-h2px", "translation", "light", **move,
+                polarity="light", height=16.0, position=(140.0, 50.0), velocity=(-2.0, 0.0),
+                frames=60),
+        _planar("translate-square-dark-c0.6-diag3px", "translation", "dark", **move,
+                shape="square", height=16.0, position=(20.0, 15.0), velocity=(2.1, 2.1),
+                frames=45),
+        _planar("translate-car-dark-c0.6-h4px", "translation", "dark", **move, shape="car",
+                height=20.0, aspect=1.4, position=(-10.0, 70.0), velocity=(4.0, 0.0),
+                frames=45),
+        _planar("translate-car-light-c0.6-h4px-left", "translation", "light", **move,
+                polarity="light", shape="car", height=20.0, aspect=1.4, position=(170.0, 55.0),
+                velocity=(-4.0, 0.0), frames=45),
+        _planar("bar-dark-c1.0-h1px", "translation", "dark", "bar", **move, shape="rect",
+                contrast=1.0, height=48.0, aspect=0.25, position=(40.0, 60.0),
+                velocity=(1.0, 0.0), frames=70),
+        _planar("bar-dark-c1.0-h3px", "translation", "dark", "bar", **move, shape="rect",
+                contrast=1.0, height=48.0, aspect=0.25, position=(20.0, 60.0),
+                velocity=(3.0, 0.0), frames=45),
+        _planar("bar-light-c1.0-h6px", "translation", "light", "bar", **move, shape="rect",
+                polarity="light", contrast=1.0, height=48.0, aspect=0.25,
+                position=(0.0, 60.0), velocity=(6.0, 0.0), frames=30),
+        _planar("bar-dark-c1.0-v2px", "translation", "dark", "bar", **move, shape="rect",
+                contrast=1.0, height=12.0, aspect=4.0, position=(80.0, 10.0),
+                velocity=(0.0, 2.0), frames=50),
+    ]
+
+
+def _pattern(kind: str, contrast: float, period: float, angle: float,
+             velocity: tuple[float, float], duty: float = 0.5) -> dict:
+    return dict(motion="none", background=Background(kind, contrast, period, angle, velocity,
+                                                      duty, mean=127.5))
+
+
+def _pattern_cases() -> list[Case]:
+    g = "moving-pattern"
+    return [
+        _planar("stripes-vertical-c1.0-h1px", g, "stripes",
+                **_pattern("stripes", 1.0, 16.0, 0.0, (1.0, 0.0), 0.25)),
+        _planar("stripes-vertical-c1.0-h3px", g, "stripes",
+                **_pattern("stripes", 1.0, 16.0, 0.0, (3.0, 0.0), 0.25)),
+        _planar("stripes-horizontal-c1.0-v2px", g, "stripes",
+                **_pattern("stripes", 1.0, 12.0, 90.0, (0.0, 2.0))),
+        _planar("stripes-diagonal-c1.0-3px", g, "stripes",
+                **_pattern("stripes", 1.0, 16.0, 45.0, (2.1, 2.1), 0.25)),
+        _planar("stripes-vertical-c0.3-h2px", g, "stripes", "contrast",
+                **_pattern("stripes", 0.3, 20.0, 0.0, (2.0, 0.0))),
+        _planar("grating-vertical-c0.6-h2px", g, "grating",
+                **_pattern("grating", 0.6, 20.0, 0.0, (2.0, 0.0))),
+        _planar("grating-diagonal-c0.6-2px", g, "grating",
+                **_pattern("grating", 0.6, 16.0, -45.0, (1.4, -1.4))),
+        _planar("checker-c1.0-diag2px", g, "checker",
+                **_pattern("checker", 1.0, 16.0, 0.0, (2.0, 2.0))),
+        _planar("checker-c0.5-h3px", g, "checker",
+                **_pattern("checker", 0.5, 12.0, 0.0, (3.0, 0.0))),
+        _planar("texture-c0.5-h2px", g, "texture",
+                **_pattern("texture", 0.5, 1.5, 0.0, (2.0, 0.0))),
+        _planar("texture-c0.5-diag3px", g, "texture",
+                **_pattern("texture", 0.5, 1.5, 0.0, (2.1, 2.1))),
+        _planar("texture-c0.3-v1px", g, "texture",
+                **_pattern("texture", 0.3, 1.0, 0.0, (0.0, 1.0))),
+        _planar("texture-c0.8-h5px", g, "texture",
+                **_pattern("texture", 0.8, 2.0, 0.0, (5.0, 0.0))),
+    ]
+
+
+def _scene(**options) -> dict:
+    """The still clutter scene (texture and props), nothing approaching."""
+    return dict(motion="none", background=_STILL_TEXTURE, props=_PROPS, **options)
+
+
+def _camera_cases() -> list[Case]:
+    g = "camera"
+    return [
+        _planar("shake-texture-2px", g, "shake", motion="none",
+                background=Background("texture", 0.5, 1.5, mean=127.5), camera=Shake(2.0)),
+        _planar("shake-texture-4px-rot1deg", g, "shake", motion="none",
+                background=Background("texture", 0.5, 1.5, mean=127.5),
+                camera=Shake(4.0, 1.0, smooth=2)),
+        _planar("shake-scene-3px", g, "shake", **_scene(camera=Shake(3.0, 0.5))),
+        _planar("shake-stripes-3px-rot0.5deg", g, "shake", motion="none",
+                background=Background("stripes", 0.6, 16.0, 30.0, mean=127.5),
+                camera=Shake(3.0, 0.5)),
+        _planar("pan-texture-h2px", g, "pan", motion="none",
+                background=Background("texture", 0.5, 1.5, mean=127.5), camera=Pan((-2.0, 0.0))),
+        _planar("pan-texture-diag2px", g, "pan", motion="none",
+                background=Background("texture", 0.5, 1.5, mean=127.5),
+                camera=Pan((-1.4, 1.4))),
+        _planar("pan-scene-h3px", g, "pan", **_scene(camera=Pan((3.0, 0.0)))),
+        _planar("tilt-texture-v2px", g, "pan", motion="none",
+                background=Background("texture", 0.5, 1.5, mean=127.5), camera=Pan((0.0, 2.0))),
+        _planar("sweep-scene-20px", g, "pan", **_scene(camera=Sweep((20.0, 0.0), 2.0))),
+    ]
+
+
+def _brightness_cases() -> list[Case]:
+    g = "brightness"
+    night_props = (Prop("disk", 40.0, 50.0, 16.0, 25.0), Prop("car", 110.0, 70.0, 14.0, 60.0, 1.4))
+    return [
+        _planar("brightness-ramp-down", g, "ramp", **_scene(lighting=(Ramp(10, 50, 1.0, 0.5),))),
+        _planar("brightness-ramp-up", g, "ramp", **_scene(lighting=(Ramp(10, 50, 1.0, 1.4),))),
+        _planar("flicker-sine-4hz-15pct", g, "flicker",
+                **_scene(lighting=(Flicker(4.0, 0.15),))),
+        _planar("flicker-random-10pct", g, "flicker",
+                **_scene(lighting=(Flicker(0.0, 0.1, "random", seed=3),))),
+        _planar("exposure-step-up-1.4", g, "step", **_scene(lighting=(Step(30, 1.4),))),
+        _planar("exposure-step-down-0.6", g, "step", **_scene(lighting=(Step(30, 0.6),))),
+        _planar("exposure-step-up-2.0", g, "step", **_scene(lighting=(Step(30, 2.0),))),
+        _planar("flicker-sine-8hz-30pct", g, "flicker",
+                **_scene(lighting=(Flicker(8.0, 0.3),))),
+        _planar("headlights-sweep-day", g, "headlights", **_scene(
+            lighting=(Headlights(10, 50, (-40.0, 60.0), (200.0, 60.0), 30.0, 100.0),))),
+        _planar("headlights-sweep-night", g, "headlights", "night", motion="none",
+                background=_NIGHT_TEXTURE, props=night_props,
+                lighting=(Headlights(10, 45, (200.0, 70.0), (-40.0, 50.0), 25.0, 150.0),)),
+    ]
+
+
+def _noise_cases() -> list[Case]:
+    g = "noise"
+    return [
+        _planar("noise-gauss-4", g, "gauss", **_scene(noise=4.0)),
+        _planar("noise-gauss-10", g, "gauss", **_scene(noise=10.0)),
+        _planar("jpeg-q20", g, "jpeg", **_scene(jpeg_quality=20)),
+        _planar("jpeg-q8", g, "jpeg", **_scene(jpeg_quality=8)),
+        _planar("noise-gauss-6-jpeg-q30", g, "gauss", "jpeg", **_scene(noise=6.0,
+                                                                       jpeg_quality=30)),
+        _planar("noise-gauss-8-uniform", g, "gauss", motion="none",
+                props=(Prop("disk", 80.0, 60.0, 24.0, 60.0),), noise=8.0),
+    ]
+
+
+def _clutter_cases() -> list[Case]:
+    g = "approach-in-clutter"
+    stripes = Background("stripes", 0.5, 16.0, 0.0, (2.0, 0.0), 0.25)
+    still = Background("texture", 0.2, 1.5)
+    return [
+        _planar("loom-dark-c0.5-over-stripes-h2px", g, "dark", "moving-background",
+                contrast=0.5, background=stripes),
+        _planar("loom-light-c0.5-over-stripes-h2px", g, "light", "moving-background",
+                polarity="light", contrast=0.5, background=stripes),
+        _planar("loom-dark-c0.5-over-texture-diag2px", g, "dark", "moving-background",
+                contrast=0.5, background=Background("texture", 0.4, 1.5, velocity=(1.4, 1.4))),
+        _planar("loom-dark-c0.3-over-texture-h1px", g, "dark", "moving-background", "contrast",
+                contrast=0.3, background=Background("texture", 0.2, 1.5, velocity=(1.0, 0.0))),
+        _planar("loom-dark-c0.5-over-checker-diag2px", g, "dark", "moving-background",
+                contrast=0.5, background=Background("checker", 0.5, 16.0, 0.0, (2.0, 2.0))),
+        _planar("loom-dark-c0.6-shake-3px", g, "dark", "shake", background=still,
+                camera=Shake(3.0)),
+        _planar("loom-light-c0.6-shake-2px-rot1deg", g, "light", "shake", polarity="light",
+                background=still, camera=Shake(2.0, 1.0, smooth=2)),
+        _planar("loom-light-c0.3-shake-2px", g, "light", "shake", "contrast", polarity="light",
+                contrast=0.3, background=still, camera=Shake(2.0)),
+        _planar("loom-dark-c0.6-pan-h1px", g, "dark", "pan", background=still,
+                position=(100.0, 60.0), camera=Pan((-1.0, 0.0))),
+        _planar("loom-dark-c0.6-flicker-4hz", g, "dark", "flicker", background=still,
+                lighting=(Flicker(4.0, 0.15),)),
+        _planar("loom-light-c0.6-ramp-down", g, "light", "ramp", polarity="light",
+                background=still, lighting=(Ramp(20, 70, 1.0, 0.6),)),
+        _planar("loom-dark-c0.6-exposure-step", g, "dark", "step", background=still,
+                lighting=(Step(45, 0.75),)),
+        _planar("loom-dark-c0.6-headlights", g, "dark", "headlights", background=still,
+                lighting=(Headlights(25, 60, (200.0, 40.0), (-40.0, 70.0), 30.0, 60.0),)),
+        _planar("loom-dark-c0.3-noise-6", g, "dark", "gauss", contrast=0.3, background=still,
+                noise=6.0),
+        _planar("loom-light-c0.5-jpeg-q20", g, "light", "jpeg", polarity="light", contrast=0.5,
+                background=still, jpeg_quality=20),
+        _planar("loom-dark-c0.5-noise-4-jpeg-q30", g, "dark", "gauss", "jpeg", contrast=0.5,
+                background=still, noise=4.0, jpeg_quality=30),
+        _planar("halt-dark-c0.5-over-stripes-h2px", "approach-stops", "dark", "halt",
+                "moving-background", motion="halt", contrast=0.5, stop_height=72.0,
+                background=stripes),
+        _planar("approach-recede-light-c0.5-over-stripes-h2px", "approach-stops", "light",
+                "recede-after", "moving-background", motion="approach-recede",
+                polarity="light", contrast=0.5, stop_height=72.0, background=stripes),
+    ]
+
+
+def _driving_cases() -> list[Case]:
+    lead = Vehicle(0.0, 15.0, 12.0)
+    lit = dict(albedo=0.45)  # a body our headlights light up at night
+    truck = dict(width=2.5, height=3.2, shape="rect", albedo=0.3)
+    brake = dict(brake=7.0, brake_frame=15)
+    # a lead car at constant distance, a car in the right lane we slowly gain on, oncoming cars
+    traffic = (Vehicle(0.0, 16.0, 12.0), Vehicle(LANE_WIDTH, 30.0, 11.0, albedo=0.5),
+               Vehicle(-LANE_WIDTH, 60.0, -12.0, albedo=0.35),
+               Vehicle(-LANE_WIDTH, 130.0, -14.0, **truck))
+    return [
+        _driving("drive-day-straight", "driving-clear", "day"),
+        _driving("drive-night-straight", "driving-clear", "night", night=True),
+        _driving("drive-day-turn-left", "driving-clear", "day", "turn", curvature=-1 / 80),
+        _driving("drive-day-turn-right", "driving-clear", "day", "turn", curvature=1 / 60),
+        _driving("drive-day-bumps", "driving-clear", "day", "bumps", bumps_deg=1.0),
+        _driving("drive-night-bumps", "driving-clear", "night", "bumps", night=True,
+                 bumps_deg=1.0),
+        _driving("drive-day-follow", "driving-clear", "day", "follow", vehicles=(lead,),
+                 target=0),
+        _driving("drive-night-follow", "driving-clear", "night", "follow", night=True,
+                 vehicles=(Vehicle(0.0, 15.0, 12.0, **lit),), target=0),
+        _driving("drive-day-passed-by-right", "driving-clear", "day",
+                 vehicles=(Vehicle(LANE_WIDTH, -4.0, 18.0),), target=0),
+        _driving("drive-day-turn-oncoming-nextlane", "driving-pass", "day", "turn",
+                 curvature=1 / 80, vehicles=(Vehicle(-LANE_WIDTH, 70.0, -10.0),), target=0),
+        _driving("drive-day-overtake-truck-right", "driving-pass", "day",
+                 twin="drive-day-truck-ahead", speed=12.0,
+                 vehicles=(Vehicle(LANE_WIDTH, 22.0, 6.0, **truck),), target=0),
+        _driving("drive-day-truck-ahead", "driving-threat", "day", "twin", speed=12.0,
+                 vehicles=(Vehicle(0.0, 22.0, 6.0, **truck),), target=0),
+        _driving("drive-day-oncoming-nextlane", "driving-pass", "day",
+                 twin="drive-day-oncoming-headon",
+                 vehicles=(Vehicle(-LANE_WIDTH, 84.0, -12.0),), target=0),
+        _driving("drive-day-oncoming-headon", "driving-threat", "day", "twin",
+                 vehicles=(Vehicle(0.0, 84.0, -12.0),), target=0),
+        _driving("drive-night-oncoming-nextlane", "driving-pass", "night",
+                 twin="drive-night-oncoming-headon", night=True,
+                 vehicles=(Vehicle(-LANE_WIDTH, 84.0, -12.0, **lit),), target=0),
+        _driving("drive-night-oncoming-headon", "driving-threat", "night", "twin", night=True,
+                 vehicles=(Vehicle(0.0, 84.0, -12.0, **lit),), target=0),
+        _driving("drive-day-brake", "driving-threat", "day", "brake",
+                 vehicles=(Vehicle(0.0, 14.0, 12.0, **brake),), target=0, onset=15),
+        _driving("drive-night-brake", "driving-threat", "night", "brake", night=True,
+                 vehicles=(Vehicle(0.0, 14.0, 12.0, **brake, **lit),), target=0, onset=15),
+        _driving("drive-day-brake-bumps", "driving-threat", "day", "brake", "bumps",
+                 bumps_deg=1.0, vehicles=(Vehicle(0.0, 14.0, 12.0, **brake),), target=0,
+                 onset=15),
+        _driving("drive-day-traffic", "driving-clear", "day", "traffic", vehicles=traffic,
+                 target=0),
+        _driving("drive-day-traffic-brake", "driving-threat", "day", "traffic", "brake",
+                 vehicles=(Vehicle(0.0, 16.0, 12.0, brake=7.0, brake_frame=20), *traffic[1:]),
+                 target=0, onset=20),
+        _driving("drive-day-stopped-car", "driving-threat", "day",
+                 vehicles=(Vehicle(0.0, 40.0, 0.0),), target=0),
+        _driving("drive-day-turn-stopped-car", "driving-threat", "day", "turn",
+                 curvature=1 / 80, vehicles=(Vehicle(0.0, 36.0, 0.0),), target=0),
+    ]
+
+
+SUITE_CASES: dict[str, Case] = {
+    case.name: case
+    for case in (_approach_cases() + _pair_cases() + _clutter_cases() + _recession_cases()
+                 + _translation_cases() + _pattern_cases() + _camera_cases()
+                 + _brightness_cases() + _noise_cases() + _driving_cases())
+}
+
+
+def suite_cases(pattern: str | None = None) -> list[str]:
+    """Names of the suite's cases, in suite order, optionally filtered.
+
+    Parameters
+    ----------
+    pattern : str, optional
+        Comma-separated shell-style patterns on the name or the group (``loom-*``,
+        ``nearmiss-*,course-*``, ``driving-*``); None or ``all`` selects every case.
+
+    Raises
+    ------
+    ValueError
+        If a pattern matches no case.
+    """
+    if pattern is None or pattern.strip() in ("", "all"):
+        return list(SUITE_CASES)
+    patterns = [p.strip() for p in pattern.split(",") if p.strip()]
+    selected = []
+    for p in patterns:
+        matched = [name for name, case in SUITE_CASES.items()
+                   if fnmatch.fnmatchcase(name, p) or fnmatch.fnmatchcase(case.group, p)]
+        if not matched:
+            raise ValueError(f"no suite case matches {p!r}")
+        selected += matched
+    chosen = set(selected)
+    return [name for name in SUITE_CASES if name in chosen]
+
+
+def make_case(name: str) -> Scene:
+    """Generate the suite case ``name`` with its label.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name.
+    """
+    try:
+        case = SUITE_CASES[name]
+    except KeyError:
+        raise ValueError(f"unknown suite case {name!r} (see asnn.stimuli.suite.SUITE_CASES)") from None
+    return case.make()

@@ -1,0 +1,320 @@
+"""Generated scenes and their labels: drawing, planar and driving scenes, the labelled suite."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from asnn.stimuli import render
+from asnn.stimuli.driving import LANE_WIDTH, Vehicle, driving_scene, path_pose, road_coordinates
+from asnn.stimuli.effects import Pan, Shake, Step
+from asnn.stimuli.planar import Background, planar_scene
+from asnn.stimuli.suite import GROUPS, SUITE_CASES, make_case, suite_cases
+
+CENTER = (79.5, 59.5)  # of a 160x120 frame
+
+
+@pytest.fixture(scope="module")
+def suite():
+    """Every case of the suite, generated once."""
+    return {name: make_case(name) for name in SUITE_CASES}
+
+
+# --------------------------------------------------------------------------- drawing
+
+
+def test_anti_aliased_shapes_cover_their_exact_area_and_move_smoothly():
+    image = np.zeros((40, 40))
+    render.paint_disk(image, 19.3, 20.6, 7.0, 1.0)
+    assert image.sum() == pytest.approx(math.pi * 49, rel=5e-3)  # radial ramp: near exact
+    image = np.zeros((40, 40))
+    render.paint_box(image, 20.25, 10.0, 6.5, 3.0, 1.0)
+    assert image.sum() == pytest.approx(6.5 * 3.0)
+    xs = np.arange(40)
+    centroids = []
+    for shift in np.linspace(0.0, 1.0, 5):  # sub-pixel steps move the centroid by as much
+        image = np.zeros((40, 40))
+        render.paint_disk(image, 15.0 + shift, 20.0, 5.0, 1.0)
+        centroids.append((image.sum(axis=0) * xs).sum() / image.sum())
+    assert np.diff(centroids) == pytest.approx(np.full(4, 0.25), abs=0.015)
+    assert centroids[-1] - centroids[0] == pytest.approx(1.0)
+
+
+def test_car_shape_has_a_darker_window_and_lighter_lamps():
+    image = np.full((60, 80), 200.0)
+    render.paint_object(image, "car", 40.0, 30.0, 30.0, 60.0, aspect=1.4)
+    window, lamps = render.car_levels(60.0)
+    assert window < 60.0 < lamps
+    assert image.min() == pytest.approx(window) and image.max() == 200.0
+    assert np.any(np.isclose(image, lamps))
+    with pytest.raises(ValueError):
+        render.paint_object(image, "star", 40.0, 30.0, 30.0, 60.0)
+
+
+@pytest.mark.parametrize("kind, mean", [("stripes", 0.25), ("grating", 0.5), ("checker", 0.5)])
+def test_patterns_have_their_duty_and_move_with_the_offset(kind, mean):
+    a = render.pattern((64, 64), kind, 16.0, 0.0, (0.0, 0.0), duty=0.25)
+    b = render.pattern((64, 64), kind, 16.0, 0.0, (3.0, 0.0), duty=0.25)
+    assert a.mean() == pytest.approx(mean, abs=1e-6)
+    assert np.allclose(b[:, 3:], a[:, :-3])
+    assert 0.0 <= a.min() and a.max() <= 1.0
+
+
+def test_levels_and_noise_tile():
+    assert render.levels(0.4, "dark") == (178.5, 76.5)
+    assert render.levels(0.4, "light", mid=100.0) == (49.0, 151.0)
+    with pytest.raises(ValueError):
+        render.levels(0.4, "light", mid=40.0)
+    tile = render.noise_tile(3, 1.5, size=64)
+    assert np.abs(tile).max() == pytest.approx(1.0) and abs(tile.mean()) < 1e-6
+    assert np.array_equal(tile, render.noise_tile(3, 1.5, size=64))
+    # periodic: the texture sampled one tile further on is the same
+    assert np.allclose(render.sample_tile(tile, (32, 32), (64.0, 0.0)),
+                       render.sample_tile(tile, (32, 32)), atol=1e-6)
+
+
+# --------------------------------------------------------------------------- planar scenes
+
+
+def test_collision_course_keeps_its_centre_and_grows_until_it_fills_the_frame():
+    scene = planar_scene("loom", position=(40.0, 30.0), height=12.0, tau=3.0, onset=10)
+    assert scene.collision and scene.onset_frame == 10
+    assert np.all(scene.track == (40.0, 30.0))
+    size, ttc, contact = scene.target_size, scene.ttc, scene.contact_frame
+    assert size[contact] >= 120 > size[contact - 1]          # the contact rule
+    assert np.all(size[:11] == 12.0) and np.all(np.diff(size[10:]) > 0)
+    assert np.isnan(ttc[:10]).all() and ttc[10] == pytest.approx(3.0)
+    approach = slice(10, contact + 1)  # ttc = Z / v: ttc * size stays tau * size0
+    assert ttc[approach] * size[approach] == pytest.approx(np.full(contact - 9, 36.0))
+    assert np.diff(ttc[approach]) == pytest.approx(np.full(contact - 10, -0.05))
+    assert len(scene.frames) == contact + 3
+
+
+def test_near_miss_is_its_twin_drifting_out_of_the_frame():
+    common = dict(position=(CENTER[0] + 20, CENTER[1]), height=12.0, tau=3.0, onset=10)
+    twin = planar_scene("loom", **common)
+    near = planar_scene("nearmiss", **common, twin="twin")
+    assert not near.collision and near.twin == "twin" and near.contact_frame is None
+    assert np.array_equal(near.frames[:11], twin.frames[:11])  # same object, same place
+    n = min(len(near.frames), len(twin.frames))
+    assert np.array_equal(near.target_size[:n], twin.target_size[:n])  # same distance
+    offset = near.track[:, 0] - CENTER[0]
+    assert np.all(near.track[:, 1] == CENTER[1])
+    assert np.all(np.diff(offset[10:]) > 0) and np.all(np.diff(offset[10:], 2) > 0)  # faster
+    last = near.track[-1, 0] - near.target_size[-1] / 2
+    assert last > 159.5                                        # wholly past the right edge
+    assert np.all(near.frames[-1] == near.frames[0][0, 0])     # nothing left in the image
+    assert near.params["clearance"] == pytest.approx((20 - 6) / 12, abs=1e-3)
+    with pytest.raises(ValueError, match="off-centre"):
+        planar_scene("nearmiss", position=(CENTER[0] + 5, CENTER[1]), height=12.0)
+
+
+def test_recession_halt_and_approach_recede():
+    recede = planar_scene("recede", height=48.0, tau=3.0)
+    assert not recede.collision and np.isnan(recede.ttc).all()
+    assert np.all(np.diff(recede.target_size[10:]) < 0)
+    assert recede.target_size[-1] < 0.55 * 48
+    halt = planar_scene("halt", stop_height=72.0)
+    c = halt.contact_frame
+    assert halt.collision and halt.target_size[c] == pytest.approx(72.0)
+    assert np.all(halt.target_size[c:] == halt.target_size[c]) and len(halt.frames) == c + 30
+    assert np.isnan(halt.ttc[c:]).all() and np.isfinite(halt.ttc[10:c]).all()
+    back = planar_scene("approach-recede", stop_height=72.0, hold=10)
+    assert back.contact_frame == c
+    assert np.all(back.target_size[c:c + 11] == pytest.approx(72.0))
+    assert back.target_size[-1] == pytest.approx(12.0) and np.all(np.diff(back.target_size[c + 11:]) <= 0)
+
+
+def test_translation_keeps_its_size_and_moves_at_its_velocity():
+    scene = planar_scene("translate", shape="car", aspect=1.4, height=20.0, onset=0,
+                         position=(-10.0, 70.0), velocity=(4.0, 0.5), frames=40)
+    assert not scene.collision and np.all(scene.target_size == 20.0)
+    assert np.diff(scene.track, axis=0) == pytest.approx(np.tile([4.0, 0.5], (39, 1)))
+    assert np.isnan(scene.ttc).all()
+
+
+def test_camera_motion_moves_the_image_and_the_label_together():
+    still = Background("texture", 0.3, 1.5)
+    shaken = planar_scene("loom", background=still, camera=Shake(3.0, 1.0, seed=2))
+    plain = planar_scene("loom", background=still)
+    offsets = shaken.track - plain.track
+    assert 0 < np.abs(offsets).max() <= 3.0 + 60 * math.radians(1.0) + 1e-9
+    assert shaken.contact_frame == plain.contact_frame
+    panned = planar_scene("loom", background=still, position=(100.0, 60.0),
+                          camera=Pan((-1.0, 0.0), start=0))
+    assert np.diff(panned.track[:, 0]) == pytest.approx(np.full(len(panned.frames) - 1, -1.0))
+    # the textured background moved with the pan: frame t+1 is frame t shifted left by 1 px
+    assert np.abs(panned.frames[1][:, :100].astype(float) - panned.frames[0][:, 1:101]).mean() < 1.0
+
+
+def test_lighting_changes_the_mean_brightness_as_stated():
+    scene = planar_scene("none", background=Background("texture", 0.3, 1.5, mean=110.0),
+                         lighting=(Step(30, 1.4),), frames=40)
+    means = scene.frames.reshape(40, -1).mean(axis=1)
+    assert np.allclose(means[:30], means[0], rtol=1e-3)
+    assert means[30:] / means[0] == pytest.approx(np.full(10, 1.4), rel=0.01)
+    with pytest.raises(ValueError):
+        planar_scene("none", background=Background("stripes", 1.0, mean=200.0))
+
+
+def test_sensor_noise_and_jpeg_degrade_the_clean_clip_as_intended():
+    options = dict(motion="none", background=Background("texture", 0.3, 1.5, mean=110.0),
+                   frames=8, seed=5)
+    clean = planar_scene(**options).frames.astype(float)
+    noisy = planar_scene(**options, noise=6.0).frames.astype(float)
+    residual = noisy - clean
+    assert residual.std() == pytest.approx(6.0, rel=0.05) and abs(residual.mean()) < 0.2
+    assert not np.array_equal(residual[0], residual[1])  # fresh noise every frame
+    assert np.array_equal(noisy, planar_scene(**options, noise=6.0).frames)  # seeded
+    errors = [np.abs(planar_scene(**options, jpeg_quality=q).frames - clean).mean()
+              for q in (60, 20, 8)]
+    assert 0 < errors[0] < errors[1] < errors[2] < 10
+
+
+# --------------------------------------------------------------------------- driving
+
+
+def test_road_coordinates_invert_the_path():
+    for curvature in (0.0, 1 / 60, -1 / 80):
+        s = np.array([0.0, 10.0, 45.0])
+        x, z, heading = path_pose(s, curvature)
+        d = 2.0
+        s_back, d_back = road_coordinates(x + d * np.cos(heading), z - d * np.sin(heading),
+                                          curvature)
+        assert s_back == pytest.approx(s) and d_back == pytest.approx(np.full(3, d))
+
+
+def test_driving_collision_course_keeps_its_bearing_and_ends_at_the_bumper():
+    scene = driving_scene(vehicles=(Vehicle(0.0, 40.0, 0.0),), target=0, speed=12.0,
+                          frames=80, roadside=0.5)
+    c = scene.contact_frame
+    assert scene.collision and c == math.ceil((40.0 - 2.0) / 12.0 * 20)
+    assert np.allclose(scene.track[:, 0], (192 - 1) / 2)   # straight ahead all along
+    assert scene.target_size[c] > 0.75 * 128                # it fills most of the view
+    assert scene.ttc[0] == pytest.approx(40.0 / 12.0, rel=0.02)
+    assert np.all(np.diff(scene.target_size[:c + 1]) > 0)
+    assert len(scene.frames) == c + 3
+    assert np.array_equal(scene.frames[-1], scene.frames[-2])  # the crash stops the motion
+
+
+def test_driving_pass_in_the_next_lane_drifts_out_and_is_no_collision():
+    scene = driving_scene(vehicles=(Vehicle(-LANE_WIDTH, 84.0, -12.0),), target=0, frames=90)
+    assert not scene.collision
+    seen = np.isfinite(scene.track[:, 0])
+    assert seen[0] and not seen[-1]                         # it passed us
+    x = scene.track[seen, 0]
+    assert np.all(np.diff(x) < 0) and x[-1] < 0             # out over the left edge
+    follow = driving_scene(vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0, frames=30)
+    assert not follow.collision and np.isnan(follow.ttc).all()
+    assert np.ptp(follow.target_size) < 1e-6
+
+
+def test_night_scenes_are_dark_with_bright_lamps():
+    day = driving_scene(frames=3, vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0)
+    night = driving_scene(frames=3, night=True, vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0)
+    assert night.frames.mean() < 0.5 * day.frames.mean()
+    x, y = night.track[0]
+    lamps = night.frames[0][int(y) - 6:int(y) + 6, int(x) - 12:int(x) + 12]
+    assert lamps.max() >= 200 and np.median(night.frames[0]) < 60
+
+
+# --------------------------------------------------------------------------- the suite
+
+
+def test_suite_is_balanced_and_covers_every_group(suite):
+    assert 100 <= len(suite) <= 200
+    collisions = sum(s.collision for s in suite.values())
+    assert 0.4 <= collisions / len(suite) <= 0.6
+    assert {case.group for case in SUITE_CASES.values()} == set(GROUPS)
+    for name, case in SUITE_CASES.items():
+        assert suite[name].category == case.category and suite[name].name == name
+    tags = {t for case in SUITE_CASES.values() for t in case.category}
+    assert {"dark", "light", "contrast", "size", "speed", "position", "shape", "texture",
+            "shake", "pan", "flicker", "ramp", "step", "headlights", "gauss", "jpeg", "night",
+            "turn", "bumps", "halt"} <= tags
+    contrasts = {case.options.get("contrast") for case in SUITE_CASES.values()
+                 if case.group == "approach" and "contrast" in case.category}
+    assert min(contrasts) == 0.2 and max(contrasts) == 1.0
+
+
+def test_every_label_is_consistent(suite):
+    for name, scene in suite.items():
+        t, h, w = scene.frames.shape
+        assert scene.frames.dtype == np.uint8 and scene.fps == 20.0, name
+        label = json.loads(json.dumps(scene.label(f"{name}.mp4"), allow_nan=False))
+        assert label["frames"] == t and len(label.get("track", [None] * t)) == t, name
+        if not scene.collision:
+            assert scene.onset_frame is None and scene.contact_frame is None, name
+            continue
+        onset, contact = scene.onset_frame, scene.contact_frame
+        assert 0 <= onset < contact <= t - 3, name            # contact + 2 lies in the clip
+        size = scene.target_size[contact]
+        if scene.name.startswith(("halt", "approach-recede")):
+            assert size == pytest.approx(72.0), name
+        else:
+            assert size >= (h if SUITE_CASES[name].generator is planar_scene else 0.75 * h), name
+        # time to contact at onset (or once closing in) lies in 2-4 s, falling to contact
+        ttc = scene.ttc[onset:contact + 1]
+        finite = ttc[np.isfinite(ttc)]
+        if "brake" not in scene.category:
+            assert 2.0 <= finite[0] <= 4.0 + 1e-9, name
+        assert finite[-1] < 1.0 and np.all(np.diff(finite[-10:]) < 0), name
+        assert label["center"] == pytest.approx(list(scene.track[contact]), abs=1e-3), name
+
+
+def test_near_misses_pair_with_their_collision_course_twins(suite):
+    twins = {name: case.twin for name, case in SUITE_CASES.items() if case.twin}
+    assert len(twins) >= 12
+    assert all(SUITE_CASES[n].group in ("nearmiss", "driving-pass") for n in twins)
+    for near, twin in twins.items():
+        a, b = suite[near], suite[twin]
+        assert not a.collision and b.collision and "twin" in b.category
+        options = {k: v for k, v in SUITE_CASES[near].options.items() if k != "motion"}
+        twin_options = dict(SUITE_CASES[twin].options)
+        if "vehicles" in options:  # the same vehicle, speed and distance, in our lane
+            assert [replace(v, lane=0.0) for v in options.pop("vehicles")] == \
+                list(twin_options.pop("vehicles"))
+        assert options == twin_options
+        n = min(len(a.frames), len(b.frames), 20)
+        assert np.allclose(a.target_size[:n], b.target_size[:n], rtol=0.02, equal_nan=True)
+
+
+def test_suite_cases_are_deterministic_and_selectable(suite):
+    for name in ("noise-gauss-10", "shake-texture-4px-rot1deg", "flicker-random-10pct",
+                 "drive-night-bumps", "loom-light-c0.5-jpeg-q20"):
+        again = make_case(name)
+        assert np.array_equal(again.frames, suite[name].frames)
+        assert again.label("x") == suite[name].label("x")
+    assert suite_cases("driving-pass") == [n for n, c in SUITE_CASES.items()
+                                           if c.group == "driving-pass"]
+    picked = suite_cases("nearmiss-disk-dark-right,course-*")
+    assert picked[0] == "course-disk-dark-right" and "nearmiss-disk-dark-right" in picked
+    assert suite_cases() == suite_cases("all") == list(SUITE_CASES)
+    with pytest.raises(ValueError):
+        suite_cases("no-such-*")
+    with pytest.raises(ValueError):
+        make_case("no-such-case")
+
+
+def test_brightness_and_noise_cases_of_the_suite_do_what_their_names_say(suite):
+    def means(name):
+        return suite[name].frames.reshape(len(suite[name].frames), -1).mean(axis=1)
+
+    assert means("exposure-step-up-1.4")[40] / means("exposure-step-up-1.4")[20] == \
+        pytest.approx(1.4, rel=0.01)
+    assert means("exposure-step-down-0.6")[40] / means("exposure-step-down-0.6")[20] == \
+        pytest.approx(0.6, rel=0.01)
+    ramp = means("brightness-ramp-down")
+    assert ramp[60] / ramp[5] == pytest.approx(0.5, rel=0.01)
+    assert np.all(np.diff(ramp[10:51]) < 0)
+    flicker = means("flicker-sine-4hz-15pct")
+    assert flicker.max() / flicker.min() == pytest.approx(1.15 / 0.85, rel=0.02)
+    sweep = means("headlights-sweep-night")
+    assert sweep[27] > sweep[5] + 5 and sweep[60] == pytest.approx(sweep[5], abs=0.5)
+    # the still scene of the noise cases is the same scene as the lighting cases'
+    clean = suite["jpeg-q20"].frames.astype(float) - suite["jpeg-q8"].frames
+    assert 0 < np.abs(clean).mean() < 10

@@ -1,0 +1,143 @@
+"""``asnn eval --synthetic``: the suite runner, its tables, and ``asnn scene --case``."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+import pytest
+
+from asnn.evaluation import scoring, suite
+from asnn.evaluation.runs import parse_detector, parse_detectors
+from asnn.stimuli.suite import make_case
+from cli.main import main
+from service.camera import open_source
+
+CASES = ("loom-dark-c1.0-d12-center", "halt-dark-c0.6", "course-disk-dark-right",
+         "nearmiss-disk-dark-right", "translate-car-dark-c0.6-h4px")  # in suite order
+
+
+def clip(first=None, frames=0, peak=0.6, outcome="quiet"):
+    return {"first_warning": first, "warning_frames": frames, "peak_out": peak,
+            "outcome": outcome}
+
+
+def test_near_miss_passes_only_when_quiet_or_later_and_weaker_than_its_twin():
+    cases = [{"name": "course-a"}, {"name": "nearmiss-a", "twin": "course-a"},
+             {"name": "nearmiss-b", "twin": "not-run"}]
+    detectors = {
+        "quiet": [clip(50, 5, 0.9), clip(None, 0, 0.55), clip()],
+        "later-weaker": [clip(50, 5, 0.9), clip(52, 2, 0.8), clip()],
+        "later-as-strong": [clip(50, 5, 0.9), clip(52, 2, 0.9), clip()],
+        "earlier": [clip(50, 5, 0.9), clip(45, 2, 0.7), clip()],
+        "twin-missed": [clip(None, 0, 0.6), clip(55, 1, 0.5), clip()],
+    }
+    pairs = suite.near_miss_pairs(cases, detectors)
+    assert [p["nearmiss"] for p in pairs] == ["nearmiss-a"]  # the pair without its twin is left out
+    verdicts = {name: d["passes"] for name, d in pairs[0]["detectors"].items()}
+    assert verdicts == {"quiet": True, "later-weaker": True, "later-as-strong": False,
+                        "earlier": False, "twin-missed": False}
+    assert pairs[0]["detectors"]["earlier"]["twin_first"] == 50
+
+
+def test_category_summaries_count_each_tag_over_its_cases():
+    label = {"fps": 20.0, "collision": True, "onset_frame": 10, "contact_frame": 30}
+    records = [{"frame": i, "collision": i == 25} for i in range(40)]
+    hit = scoring.score_clip(records, {**label, "file": "a"})
+    quiet = scoring.score_clip([{"frame": 0, "collision": False}], {"file": "b", "collision": False})
+    false = scoring.score_clip(records, {"file": "c", "collision": False})
+    cases = [{"category": ["approach", "dark"]}, {"category": ["translation", "dark"]},
+             {"category": ["translation", "light"]}]
+    table = suite.category_summaries(cases, [hit, quiet, false])
+    assert list(table) == ["approach", "translation", "dark", "light"]  # groups first
+    assert (table["dark"]["hit"], table["dark"]["false_alarms"], table["dark"]["scored"]) == (1, 0, 2)
+    assert (table["translation"]["false"], table["translation"]["quiet"]) == (1, 1)
+    assert table["light"]["false_alarm_rate"] == 1.0
+
+
+def test_detector_specs():
+    assert parse_detector("asnn").name == "asnn"
+    assert parse_detector("asnn:default").name == "asnn"
+    assert parse_detector("asnn", "paper").name == "asnn:paper"
+    spec = parse_detector("asnn:reference")
+    assert (spec.model, spec.preset, spec.slug) == ("asnn", "reference", "asnn-reference")
+    assert [s.name for s in parse_detectors("lgmd1, asnn,lgmd1")] == ["lgmd1", "asnn"]
+    for bad in ("lgmd3", "asnn:nope", "lgmd2:paper", " , "):
+        with pytest.raises(ValueError):
+            parse_detectors(bad)
+
+
+@pytest.fixture(scope="module")
+def evaluated(tmp_path_factory):
+    out = tmp_path_factory.mktemp("suite")
+    stderr, stdout = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(stdout):
+        status = main(["eval", "--synthetic", "--cases", ",".join(reversed(CASES)), "--detectors",
+                       "asnn,lgmd1", "--jobs", "2", "--case-plots", "--out", str(out)])
+    return status, out, stdout.getvalue(), stderr.getvalue()
+
+
+def test_synthetic_eval_end_to_end(evaluated):
+    status, out, stdout, stderr = evaluated
+    assert status == 0 and "report.md" in stdout
+    assert all(name in stderr for name in CASES)
+    results = json.loads((out / "results.json").read_text())
+    assert [c["name"] for c in results["cases"]] == list(CASES)
+    assert list(results["detectors"]) == ["asnn", "lgmd1"]
+    labels = json.loads((out / "labels.json").read_text())
+    assert [lab["file"] for lab in labels] == [f"{name}.mp4" for name in CASES]
+    assert labels[3]["twin"] == "course-disk-dark-right" and labels[3]["collision"] is False
+    for name, entry in results["detectors"].items():
+        summary = entry["summary"]
+        assert (summary["collision_clips"], summary["noncollision_clips"]) == (3, 2)
+        # the per-frame results are kept, and scoring them again gives the same scores
+        rescored = scoring.score_directory(out / "results" / name, labels, early_tolerance_s=0.0)
+        assert [s.to_dict() for s in rescored] == \
+            [{k: v for k, v in c.items() if k != "peak_out"} for c in entry["clips"]]
+        assert set(entry["categories"]) >= {"approach", "approach-stops", "nearmiss",
+                                            "translation", "dark", "twin"}
+        assert all(0.5 <= c["peak_out"] <= 1.0 for c in entry["clips"])
+    assert [p["nearmiss"] for p in results["pairs"]] == ["nearmiss-disk-dark-right"]
+    # the paper's approach on a dark disk at full contrast is a hit for the published variant
+    asnn = {c["clip"]: c for c in results["detectors"]["asnn"]["clips"]}
+    assert asnn["loom-dark-c1.0-d12-center.mp4"]["outcome"] == "hit"
+    assert asnn["loom-dark-c1.0-d12-center.mp4"]["localisation_px"] < 10
+    lgmd1 = {c["clip"]: c for c in results["detectors"]["lgmd1"]["clips"]}
+    assert lgmd1["translate-car-dark-c0.6-h4px.mp4"]["outcome"] == "false"  # as in the paper
+
+    report = (out / "report.md").read_text()
+    for heading in ("## Near misses against their collision-course twins", "## By category",
+                    "## Every case"):
+        assert heading in report
+    assert "| `asnn` | " in report and "| nearmiss-disk-dark-right |" in report
+    for name in CASES:
+        assert (out / "plots" / f"{name}.png").read_bytes()[:4] == b"\x89PNG"
+    assert (out / "plots" / "summary.png").is_file()
+
+
+def test_synthetic_eval_rejects_an_unknown_case(tmp_path, capsys):
+    assert main(["eval", "--synthetic", "--cases", "no-such-*", "--out", str(tmp_path)]) == 2
+    assert "no suite case matches" in capsys.readouterr().err
+
+
+def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):
+    out, labels = tmp_path / "case.avi", tmp_path / "labels.json"
+    assert main(["scene", "--case", "nearmiss-disk-dark-right", str(out), "--labels",
+                 str(labels)]) == 0
+    label = json.loads(labels.read_text())[0]
+    scene = make_case("nearmiss-disk-dark-right")
+    assert label["frames"] == len(scene.frames) and label["twin"] == "course-disk-dark-right"
+    assert out.stat().st_size > 0
+    assert main(["scene", "--list", "driving-pass"]) == 0
+    listed = capsys.readouterr().out.splitlines()
+    assert listed and all(line.split("\t")[1].startswith("driving-pass") for line in listed)
+    assert main(["scene", "--case", "no-such-case", str(out)]) == 2
+    assert main(["scene", "--case", "halt-dark-c0.6"]) == 2          # no OUT
+    assert main(["scene", "bogus", str(out)]) == 2
+
+
+def test_cameras_publish_suite_cases():
+    source = open_source("synthetic:drive-day-brake")
+    frames = list(source.frames())
+    assert source.fps == 20.0 and len(frames) == len(make_case("drive-day-brake").frames)
