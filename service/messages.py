@@ -28,13 +28,14 @@ import msgpack
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from asnn.io.images import MAX_SIDE, ImageError, decode_encoded, encoded_size
+
 __all__ = ["FORMATS", "Frame", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS", "Response",
            "TargetMsg", "VERSION", "decode_frame", "decode_response", "encode", "encode_image",
            "encoded_size"]
 
 VERSION = 1
 FORMATS = ("gray8", "bgr8", "jpeg", "png")
-MAX_SIDE = 4096  # largest accepted frame width or height
 # the largest valid frame (4096 x 4096 bgr8) plus room for the other fields
 MAX_PAYLOAD = MAX_SIDE * MAX_SIDE * 3 + 64 * 1024
 JPEG_QUALITY = 90
@@ -88,23 +89,12 @@ class Frame(_Message):
             raise MessageError("bad-pixels", f"{self.format} image is {size[0]}x{size[1]}, "
                                f"the message says {w}x{h}")
         try:
-            image = cv2.imdecode(np.frombuffer(self.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-        except cv2.error as exc:
-            raise MessageError("bad-image", f"{self.format} data does not decode "
-                               f"({str(exc).strip().splitlines()[-1][:80]})") from None
-        if image is None:
-            raise MessageError("bad-image", f"data is not a decodable {self.format} image")
+            image = decode_encoded(self.data, self.format, MAX_SIDE)
+        except ImageError as exc:
+            raise MessageError("bad-image" if exc.reason == "bad-image" else "bad-pixels",
+                               exc.detail) from None
         if image.dtype != np.uint8:
             raise MessageError("bad-image", f"{self.format} image is {image.dtype}, not 8-bit")
-        if image.ndim == 3:
-            channels = image.shape[2]
-            if channels == 4:
-                image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
-            elif channels != 3:  # gray + alpha, or anything else: keep the first channel
-                image = np.ascontiguousarray(image[:, :, 0])
-        if image.ndim not in (2, 3) or image.shape[:2] != (h, w):
-            raise MessageError("bad-pixels", f"{self.format} image is {image.shape[1]}x"
-                               f"{image.shape[0]}, the message says {w}x{h}")
         return image
 
     def check_size(self) -> None:
@@ -227,42 +217,6 @@ def _reason(error: dict) -> str:
     if error.get("type") == "missing":
         return "missing-field"
     return _FIELD_REASONS.get(str(loc[0]), "invalid-field")
-
-
-def encoded_size(data: bytes, format: str) -> tuple[int, int] | None:
-    """(width, height) from a png or jpeg file's header without decoding it; None if the data
-    does not start like such a file."""
-    data = memoryview(data).cast("B") if format == "jpeg" else bytes(data[:32])
-    if format == "png":
-        if len(data) < 24 or data[:8] != b"\x89PNG\r\n\x1a\n" or data[12:16] != b"IHDR":
-            return None
-        return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
-    if format != "jpeg" or bytes(data[:2]) != b"\xff\xd8":
-        return None
-    i = 2
-    while i + 4 <= len(data):
-        if data[i] != 0xFF:
-            return None
-        marker = data[i + 1]
-        if marker == 0xFF:  # fill byte
-            i += 1
-            continue
-        if marker in (0x01, 0xD8) or 0xD0 <= marker <= 0xD7:  # no length field
-            i += 2
-            continue
-        if marker in (0xD9, 0xDA):  # end of image, start of scan: no frame header before
-            return None
-        length = int.from_bytes(data[i + 2:i + 4], "big")
-        if length < 2:
-            return None
-        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # a start of frame
-            if i + 9 > len(data) or length < 7:
-                return None
-            height = int.from_bytes(data[i + 5:i + 7], "big")
-            width = int.from_bytes(data[i + 7:i + 9], "big")
-            return width, height
-        i += 2 + length
-    return None
 
 
 def decode_frame(payload: bytes) -> Frame:
