@@ -6,23 +6,13 @@ import argparse
 import logging
 import sys
 
-from cli.arguments import positive
+from cli.arguments import port, positive
 from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
 from service.config import ConfigError
 
 __all__ = ["register"]
 
 log = logging.getLogger("asnn")
-
-
-def _port(value: str) -> int:
-    try:
-        port = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a port number: {value!r}") from None
-    if not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"not a port number: {value!r}")
-    return port
 
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
@@ -58,7 +48,7 @@ def register(subparsers) -> None:
                               "looming targets, spike-rate sparkline, collision and stale "
                               "markers, and the latest warnings. Every asset comes from the "
                               "package (works offline).")
-    p.add_argument("--port", type=_port, default=8080,
+    p.add_argument("--port", type=port, default=8080,
                    help="HTTP port (default: %(default)s; 0 picks a free one)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default: %(default)s; 0.0.0.0 for every "

@@ -40,10 +40,11 @@ from dataclasses import dataclass, field
 from importlib import resources
 
 from service import keys
-from service.messages import (MessageError, Preview, Response, decode_preview,
+from service.messages import (MessageError, Preview, Response, check_preview, decode_preview,
                               decode_response)
 
-__all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES"]
+__all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES",
+           "decode_fleet_sample"]
 
 log = logging.getLogger("asnn.dashboard")
 
@@ -57,7 +58,6 @@ LOG_SIZE = 50         # warning episodes kept in the log
 EPISODE_GAP = 20      # a warning at most this many frames after a robot's previous one extends
                       # the same log entry (one row per episode, not twenty rows a second)
 RECENT_TARGETS = 64   # responses whose targets are kept to match a preview's seq
-MAX_PREVIEW_BYTES = 256 * 1024
 
 STATIC_FILES = {  # the only files served: name -> content type
     "index.html": "text/html; charset=utf-8",
@@ -70,6 +70,35 @@ SECURITY_HEADERS = {
     "X-Content-Type-Options": "nosniff",
     "Referrer-Policy": "no-referrer",
 }
+
+
+def decode_fleet_sample(key: str, payload: bytes, prefix: str
+                        ) -> tuple[str, str, Response | Preview]:
+    """Validate a sample of ``<prefix>/<robot>/(response|warning|preview)``: ``(robot, kind,
+    message)``. A preview's image is decoded (:func:`service.messages.check_preview`); a
+    response or warning must name the robot of its key, and a warning must say ``collision``.
+
+    Raises
+    ------
+    MessageError
+        With ``reason`` ``bad-key`` for a key outside the scheme, else the message's reason.
+    """
+    try:
+        robot, kind = keys.parse_key(str(key), prefix)
+    except keys.KeySchemeError as exc:
+        raise MessageError("bad-key", str(exc)) from None
+    if kind == "preview":
+        message = decode_preview(payload)
+        check_preview(message)  # the viewers only ever get images of the announced size
+    elif kind in ("response", "warning"):
+        message = decode_response(payload)
+        if message.robot != robot:
+            raise MessageError("bad-key", f"{kind} of robot {message.robot!r} on {key}")
+        if kind == "warning" and not message.collision:
+            raise MessageError("invalid-field", "a warning without collision: true")
+    else:
+        raise MessageError("bad-key", f"{key!r} is not a response, warning or preview")
+    return robot, kind, message
 
 
 def _target(t) -> dict:
@@ -144,20 +173,7 @@ class FleetStore:
         ``invalid`` by reason and logged). Never raises for bad input.
         """
         try:
-            robot, kind = keys.parse_key(str(key), self.prefix)
-            if kind == "preview":
-                message = decode_preview(payload)
-                self._check_preview(message)
-            elif kind in ("response", "warning"):
-                message = decode_response(payload)
-                if message.robot != robot:
-                    raise MessageError("bad-key", f"{kind} of robot {message.robot!r} on {key}")
-                if kind == "warning" and not message.collision:
-                    raise MessageError("invalid-field", "a warning without collision: true")
-            else:
-                raise MessageError("bad-key", f"{key!r} is not a response, warning or preview")
-        except keys.KeySchemeError as exc:
-            return self._reject("bad-key", str(exc), key)
+            robot, kind, message = decode_fleet_sample(key, payload, self.prefix)
         except MessageError as exc:
             return self._reject(exc.reason, exc.detail, key)
         except Exception as exc:  # a bug here must not take the subscriber down
@@ -182,13 +198,6 @@ class FleetStore:
                 self._add_warning_locked(state, message, version)
             self._changed.notify_all()
         return robot
-
-    @staticmethod
-    def _check_preview(preview: Preview) -> None:
-        if len(preview.data) > MAX_PREVIEW_BYTES:
-            raise MessageError("oversized", f"preview of {len(preview.data)} bytes, more than "
-                               f"{MAX_PREVIEW_BYTES}")
-        preview.image()  # decodes: the browser only ever gets images of the announced size
 
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:
@@ -367,7 +376,9 @@ class FleetStore:
 
 
 class FleetSubscriber:
-    """Declares the dashboard's three subscribers on ``session``, feeding ``store``."""
+    """Declares the dashboard's three subscribers on ``session``, feeding ``store`` (a
+    :class:`FleetStore`, or anything with a ``prefix`` and an ``offer(key, payload)`` that never
+    raises, such as the Foxglove bridge of :mod:`clients.foxglove`)."""
 
     def __init__(self, session, store: FleetStore):
         from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber

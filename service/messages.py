@@ -260,10 +260,11 @@ def _finite(fields: dict) -> dict:
 # ``<prefix>/<robot>/preview``: a low-rate thumbnail of the camera's frames for dashboards
 # (docs/contract.md; not part of CONTRACT.md's required interface, the worker ignores it).
 
-__all__ += ["PREVIEW_FORMATS", "Preview", "decode_preview"]
+__all__ += ["MAX_PREVIEW_BYTES", "PREVIEW_FORMATS", "Preview", "check_preview", "decode_preview"]
 
 PREVIEW_FORMATS = ("jpeg", "png")
 PREVIEW_QUALITY = 70
+MAX_PREVIEW_BYTES = 256 * 1024  # receivers refuse larger thumbnails (docs/contract.md)
 
 
 class Preview(Frame):
@@ -297,3 +298,18 @@ class Preview(Frame):
 def decode_preview(payload: bytes) -> Preview:
     """Validate a Preview payload (the image is checked by :meth:`Preview.image`)."""
     return _validate(Preview, _unpack(payload, "preview"), "preview")
+
+
+def check_preview(preview: Preview) -> np.ndarray:
+    """What a viewer checks before it shows a thumbnail: at most MAX_PREVIEW_BYTES, and an
+    image of the announced size (decoded, and returned).
+
+    Raises
+    ------
+    MessageError
+        ``oversized``, or as :meth:`Preview.image`.
+    """
+    if len(preview.data) > MAX_PREVIEW_BYTES:
+        raise MessageError("oversized", f"preview of {len(preview.data)} bytes, more than "
+                           f"{MAX_PREVIEW_BYTES}")
+    return preview.image()

@@ -33,7 +33,7 @@ except ImportError as exc:  # the optional extra is missing: say which one, in o
                       f" ({exc.name} is missing)") from exc
 
 __all__ = ["DEFAULT_TOPIC_PREFIX", "IMAGE_FORMATS", "RESPONSE_SCHEMA", "FoxgloveMcapWriter",
-           "image_message", "response_message", "target_annotations", "timestamp"]
+           "image_message", "response_message", "target_annotations", "time_ns", "timestamp"]
 
 DEFAULT_TOPIC_PREFIX = "/asnn"
 IMAGE_FORMATS = ("jpeg", "png")
@@ -67,9 +67,20 @@ RESPONSE_SCHEMA = {
 }
 
 
+MAX_TIME_NS = (2**32 - 1) * 1_000_000_000  # Foxglove times count unsigned 32-bit seconds
+
+
+def time_ns(seconds: float) -> int:
+    """Nanoseconds since the epoch from seconds, clamped to the times Foxglove represents."""
+    seconds = float(seconds)
+    if math.isnan(seconds):
+        return 0
+    return min(int(min(max(seconds, 0.0), MAX_TIME_NS / 1e9) * 1e9), MAX_TIME_NS)
+
+
 def timestamp(ns: int) -> Timestamp:
-    """A Foxglove time from nanoseconds since the epoch."""
-    ns = max(int(ns), 0)
+    """A Foxglove time from nanoseconds since the epoch (clamped to its range)."""
+    ns = min(max(int(ns), 0), MAX_TIME_NS)
     return Timestamp(ns // 1_000_000_000, ns % 1_000_000_000)
 
 
@@ -143,8 +154,8 @@ def target_annotations(targets: Sequence[Mapping], stamp_ns: int, size: tuple[in
 def response_message(fields: Mapping, stamp_ns: int) -> dict:
     """A response's fields as the ``asnn.Response`` JSON message (:data:`RESPONSE_SCHEMA`),
     with the frame's time as ``timestamp``; non-finite numbers become null."""
-    message = {"timestamp": {"sec": max(int(stamp_ns), 0) // 1_000_000_000,
-                             "nsec": max(int(stamp_ns), 0) % 1_000_000_000}}
+    stamp = timestamp(stamp_ns)
+    message = {"timestamp": {"sec": stamp.sec, "nsec": stamp.nsec}}
     for key, value in fields.items():
         message[key] = _plain(value)
     return message
@@ -209,7 +220,7 @@ class FoxgloveMcapWriter:
 
     def write(self, image: np.ndarray, record: Mapping, stamp_ns: int) -> None:
         """One frame and its response record (the ``asnn detect --jsonl`` fields)."""
-        stamp_ns = max(int(stamp_ns), 0)
+        stamp_ns = min(max(int(stamp_ns), 0), MAX_TIME_NS)
         height, width = image.shape[:2]
         self._image.log(image_message(image, stamp_ns, frame_id=self.frame_id,
                                       format=self.image_format), log_time=stamp_ns)

@@ -371,8 +371,10 @@ class BagClip:
         self.frame_count = info.count or 0
         self.clock = "header"
         self.start_ns = 0
-        first, stamps = None, []
-        for index, item in enumerate(self._messages(None)):
+        first, stamps, errors = None, [], []
+        # a cut within the first frames is reported when they are read, not here
+        probe = self._messages(lambda reason, message: errors.append(SourceError(message, reason)))
+        for index, item in enumerate(probe):
             if index == 0:
                 message, log_time = item
                 if _stamp_ns(message) == 0:
@@ -382,8 +384,10 @@ class BagClip:
             stamps.append(self._time_ns(*item))
             if len(stamps) >= FPS_PROBE:
                 break
+        probe.close()
         if first is None:
-            raise SourceError(f"{self.path}: topic {self.topic} holds no message", "empty-topic")
+            raise errors[0] if errors else SourceError(
+                f"{self.path}: topic {self.topic} holds no message", "empty-topic")
         self.height, self.width = first.shape[:2]
         self.start_ns = stamps[0]
         steps = np.diff(np.asarray(stamps, dtype=np.int64))
