@@ -41,6 +41,7 @@ JPEG_QUALITY = 90
 TARGET_COLOR = Color(r=0.0, g=0.31, b=1.0, a=1.0)   # the blue of the annotated videos
 WARNING_COLOR = Color(r=1.0, g=0.0, b=0.0, a=1.0)
 LABEL_BACKGROUND = Color(r=1.0, g=1.0, b=1.0, a=0.7)
+TARGET_MARK = 7.0  # diameter of a target's dot, picture pixels
 
 _NUMBER, _INTEGER = {"type": "number"}, {"type": "integer"}
 _TIME = {"type": "object", "description": "the frame's time (header stamp of a bag, capture "
@@ -103,9 +104,10 @@ def target_annotations(targets: Sequence[Mapping], stamp_ns: int, size: tuple[in
                        ) -> ImageAnnotations:
     """A frame's targets as a ``foxglove.ImageAnnotations``.
 
-    Each target is a circle of the cluster's area at its position, an arrow along its direction
-    (as in the annotated videos), and, where the target has an ``id`` or a ``ttc``, a label
-    (``#3 ttc 1.2 s``); every field of the target is in the circle's metadata. A red border
+    Each target is a dot at its position with an arrow along its direction, longer for more
+    motion energy (as in the annotated videos and the paper's Fig. 8), and, where the target has
+    an ``id`` or a ``ttc``, a label (``#3 ttc 1.2 s``); every field of the target is in the
+    dot's metadata. A red border
     frames the picture while the warning is on.
 
     Parameters
@@ -128,19 +130,17 @@ def target_annotations(targets: Sequence[Mapping], stamp_ns: int, size: tuple[in
         x, y = float(target["x"]), float(target["y"])
         tip_x, tip_y = target_arrow(x, y, float(target["direction"]), float(target["energy"]),
                                     (height / sy, width / sx))
-        diameter = 2.0 * math.sqrt(max(float(target["pixels"]), 1.0) / math.pi) * sx
-        centre = Point2(x=x * sx, y=y * sy)
         circles.append(CircleAnnotation(
-            timestamp=stamp, position=centre, diameter=diameter, thickness=2.0,
-            outline_color=TARGET_COLOR, fill_color=Color(r=0.0, g=0.31, b=1.0, a=0.2),
+            timestamp=stamp, position=Point2(x=x * sx, y=y * sy), diameter=TARGET_MARK, thickness=2.0,
+            outline_color=TARGET_COLOR, fill_color=TARGET_COLOR,
             metadata=[KeyValuePair(key=str(k), value=str(v)) for k, v in target.items()]))
         points.append(PointsAnnotation(
             timestamp=stamp, type=PointsAnnotationType.LineList, thickness=2.0,
-            points=[centre, Point2(x=tip_x * sx, y=tip_y * sy)], outline_color=TARGET_COLOR))
+            points=_arrow(x * sx, y * sy, tip_x * sx, tip_y * sy), outline_color=TARGET_COLOR))
         label = target_label(dict(target))
         if label:
             texts.append(TextAnnotation(
-                timestamp=stamp, position=Point2(x=x * sx + diameter / 2, y=y * sy), text=label,
+                timestamp=stamp, position=Point2(x=x * sx + TARGET_MARK, y=y * sy), text=label,
                 font_size=12.0, text_color=TARGET_COLOR, background_color=LABEL_BACKGROUND))
     if collision:
         corners = [(0.5, 0.5), (width - 0.5, 0.5), (width - 0.5, height - 0.5),
@@ -149,6 +149,19 @@ def target_annotations(targets: Sequence[Mapping], stamp_ns: int, size: tuple[in
             timestamp=stamp, type=PointsAnnotationType.LineLoop, thickness=3.0,
             points=[Point2(x=px, y=py) for px, py in corners], outline_color=WARNING_COLOR))
     return ImageAnnotations(timestamp=stamp, circles=circles, points=points, texts=texts)
+
+
+def _arrow(x: float, y: float, tip_x: float, tip_y: float) -> list[Point2]:
+    """A LineList arrow: the shaft, and two barbs from the tip, back at +-30 degrees, 30% of the
+    shaft long."""
+    dx, dy = x - tip_x, y - tip_y
+    tip = Point2(x=tip_x, y=tip_y)
+    points = [Point2(x=x, y=y), tip]
+    for turn in (math.pi / 6, -math.pi / 6):
+        c, s = math.cos(turn), math.sin(turn)
+        points += [tip, Point2(x=tip_x + 0.3 * (c * dx - s * dy),
+                               y=tip_y + 0.3 * (s * dx + c * dy))]
+    return points
 
 
 def response_message(fields: Mapping, stamp_ns: int) -> dict:
