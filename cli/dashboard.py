@@ -15,15 +15,11 @@ __all__ = ["register"]
 log = logging.getLogger("asnn")
 
 
-def cmd_dashboard(args: argparse.Namespace) -> int:
-    from clients.dashboard import DashboardServer, FleetStore, FleetSubscriber
+def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str) -> int:
+    """Feed ``store`` from the fleet's subscribers while ``server`` (a context manager that
+    serves it) runs, until SIGINT or SIGTERM; ``server`` is closed on every path."""
+    from clients.dashboard import FleetSubscriber
 
-    setup_logging(args)
-    store = FleetStore(args.prefix, stale_after=args.stale_after, hold=args.hold)
-    try:
-        server = DashboardServer(store, args.host, args.port)
-    except OSError as exc:  # the port is taken, or the address is not ours
-        return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
     try:
         session = session_for(args)
     except ConfigError as exc:
@@ -31,14 +27,26 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
         return fail(str(exc))
     stop = stop_on_signals()
     with session, FleetSubscriber(session, store) as subscriber, server:
-        host, port = server.address
-        print(f"dashboard on http://{host}:{port}/ showing {', '.join(subscriber.keys)}",
-              file=sys.stderr, flush=True)
+        print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
+              flush=True)
         while not stop.wait(0.5):
             pass
-    log.info("dashboard stopped: received %s, invalid %s", dict(store.received),
+    log.info("%s stopped: received %s, invalid %s", name, dict(store.received),
              dict(store.invalid))
     return 0
+
+
+def cmd_dashboard(args: argparse.Namespace) -> int:
+    from clients.dashboard import DashboardServer, FleetStore
+
+    setup_logging(args)
+    store = FleetStore(args.prefix, stale_after=args.stale_after, hold=args.hold)
+    try:
+        server = DashboardServer(store, args.host, args.port)
+    except OSError as exc:  # the port is taken, or the address is not ours
+        return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
+    host, port = server.address
+    return serve_fleet(args, store, server, "dashboard", f"http://{host}:{port}/")
 
 
 def register(subparsers) -> None:

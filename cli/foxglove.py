@@ -4,23 +4,18 @@ options."""
 from __future__ import annotations
 
 import argparse
-import logging
-import sys
 
 from cli.arguments import count, port
-from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
-from service.config import ConfigError
+from cli.dashboard import serve_fleet
+from cli.session import add_zenoh_options, fail, setup_logging
 
 __all__ = ["register"]
-
-log = logging.getLogger("asnn")
 
 
 def cmd_foxglove(args: argparse.Namespace) -> int:
     setup_logging(args)
     try:
         from clients.foxglove import FoxgloveBridge
-        from clients.dashboard import FleetSubscriber
     except ImportError as exc:  # the message names the extra to install
         return fail(str(exc))
     try:
@@ -28,20 +23,7 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
                                 max_robots=args.max_robots)
     except OSError as exc:
         return fail(str(exc))
-    try:
-        session = session_for(args)
-    except ConfigError as exc:
-        bridge.close()
-        return fail(str(exc))
-    stop = stop_on_signals()
-    with session, bridge, FleetSubscriber(session, bridge) as subscriber:
-        print(f"foxglove on {bridge.url} showing {', '.join(subscriber.keys)}; in Foxglove: "
-              f"Open connection, Foxglove WebSocket, {bridge.url}", file=sys.stderr, flush=True)
-        while not stop.wait(0.5):
-            pass
-    log.info("foxglove stopped: received %s, invalid %s", dict(bridge.received),
-             dict(bridge.invalid))
-    return 0
+    return serve_fleet(args, bridge, bridge, "foxglove", bridge.url)
 
 
 def register(subparsers) -> None:

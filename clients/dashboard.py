@@ -44,7 +44,7 @@ from service.messages import (MessageError, Preview, Response, check_preview, de
                               decode_response)
 
 __all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES",
-           "decode_fleet_sample"]
+           "decode_fleet_sample", "take_fleet_sample"]
 
 log = logging.getLogger("asnn.dashboard")
 
@@ -99,6 +99,21 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
     else:
         raise MessageError("bad-key", f"{key!r} is not a response, warning or preview")
     return robot, kind, message
+
+
+def take_fleet_sample(key: str, payload: bytes, prefix: str,
+                      reject: Callable[[str, str, str], None]
+                      ) -> tuple[str, str, Response | Preview] | None:
+    """:func:`decode_fleet_sample` for receivers that never raise: an invalid sample goes to
+    ``reject(reason, detail, key)`` and gives None."""
+    try:
+        return decode_fleet_sample(key, payload, prefix)
+    except MessageError as exc:
+        reject(exc.reason, exc.detail, key)
+    except Exception as exc:  # a bug here must not take the subscriber down
+        log.exception("unexpected error on %s", key)
+        reject("internal", repr(exc), key)
+    return None
 
 
 def _target(t) -> dict:
@@ -172,13 +187,10 @@ class FleetStore:
         Returns the robot id, or ``None`` when the message was invalid (counted in
         ``invalid`` by reason and logged). Never raises for bad input.
         """
-        try:
-            robot, kind, message = decode_fleet_sample(key, payload, self.prefix)
-        except MessageError as exc:
-            return self._reject(exc.reason, exc.detail, key)
-        except Exception as exc:  # a bug here must not take the subscriber down
-            log.exception("unexpected error on %s", key)
-            return self._reject("internal", repr(exc), key)
+        sample = take_fleet_sample(key, payload, self.prefix, self._reject)
+        if sample is None:
+            return None
+        robot, kind, message = sample
         with self._lock:
             state = self._robot_locked(robot)
             if state is None:

@@ -39,9 +39,9 @@ from foxglove.messages import CompressedImage
 
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import MessageError, Preview, Response
+from service.messages import Preview, Response
 
-from .dashboard import decode_fleet_sample
+from .dashboard import take_fleet_sample
 
 __all__ = ["DEFAULT_PORT", "FoxgloveBridge", "robot_topics"]
 
@@ -131,13 +131,10 @@ class FoxgloveBridge:
         """Take one sample of ``<prefix>/<robot>/(response|warning|preview)`` and log it on the
         robot's topics. Returns the robot id, or ``None`` when the message was invalid (counted
         in ``invalid`` by reason and logged). Never raises for bad input."""
-        try:
-            robot, kind, message = decode_fleet_sample(key, payload, self.prefix)
-        except MessageError as exc:
-            return self._reject(exc.reason, exc.detail, key)
-        except Exception as exc:  # a bug here must not take the subscriber down
-            log.exception("unexpected error on %s", key)
-            return self._reject("internal", repr(exc), key)
+        sample = take_fleet_sample(key, payload, self.prefix, self._reject)
+        if sample is None:
+            return None
+        robot, kind, message = sample
         with self._lock:
             now = self.clock()
             self._forget_locked(now)
