@@ -131,8 +131,8 @@ def target_annotations(targets: Sequence[Mapping], stamp_ns: int, size: tuple[in
         tip_x, tip_y = target_arrow(x, y, float(target["direction"]), float(target["energy"]),
                                     (height / sy, width / sx))
         circles.append(CircleAnnotation(
-            timestamp=stamp, position=Point2(x=x * sx, y=y * sy), diameter=TARGET_MARK, thickness=2.0,
-            outline_color=TARGET_COLOR, fill_color=TARGET_COLOR,
+            timestamp=stamp, position=Point2(x=x * sx, y=y * sy), diameter=TARGET_MARK,
+            thickness=2.0, outline_color=TARGET_COLOR, fill_color=TARGET_COLOR,
             metadata=[KeyValuePair(key=str(k), value=str(v)) for k, v in target.items()]))
         points.append(PointsAnnotation(
             timestamp=stamp, type=PointsAnnotationType.LineList, thickness=2.0,

@@ -306,8 +306,11 @@ def _schema_name(schema: Schema | None) -> str:
     return schema.name if schema is not None else ""
 
 
-def _topic_list(topics: dict[str, TopicInfo]) -> str:
-    return ", ".join(f"{t.name} ({t.schema or 'no schema'})" for t in topics.values()) or "none"
+def _topic_list(topics: dict[str, TopicInfo], most: int = 20) -> str:
+    """The first ``most`` topics with their types, for a one-line error."""
+    names = [f"{t.name} ({t.schema or 'no schema'})" for t in list(topics.values())[:most]]
+    more = f" and {len(topics) - most} more" if len(topics) > most else ""
+    return (", ".join(names) or "none") + more
 
 
 def choose_topic(path: Path, topics: dict[str, TopicInfo], topic: str | None) -> TopicInfo:
@@ -547,10 +550,10 @@ def write_bag(frames, path: str | Path, *, topic: str = "/camera/image_raw", fps
                       "frame_id": frame_id}
             frame = np.ascontiguousarray(frame)
             if raw:
+                gray = frame.ndim == 2
                 message = {"header": header, "height": frame.shape[0], "width": frame.shape[1],
-                           "encoding": "mono8" if frame.ndim == 2 else "bgr8",
-                           "is_bigendian": 0, "step": frame.shape[1] * (1 if frame.ndim == 2 else 3),
-                           "data": frame.tobytes()}
+                           "encoding": "mono8" if gray else "bgr8", "is_bigendian": 0,
+                           "step": frame.shape[1] * (1 if gray else 3), "data": frame.tobytes()}
             else:
                 ok, data = cv2.imencode(".png" if format == "png" else ".jpg", frame)
                 if not ok:
