@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..detectors import MODELS, make_detector
-from ..io.video import VideoError, open_video
+from ..io.sources import SourceError, open_source
 from ..params import preset
 from . import figures, scoring
 from .progress import Silent
@@ -72,12 +72,14 @@ def _write_json(path: Path, data) -> Path:
     return path
 
 
-def _run_clip(video: str, model: str, preset_name: str | None, out_path: str) -> tuple[int, str | None]:
-    """Worker: one model on one clip, results to ``out_path``. Returns (frames, error)."""
+def _run_clip(video: str, model: str, preset_name: str | None, out_path: str,
+              topic: str | None = None) -> tuple[int, str | None]:
+    """Worker: one model on one clip (a bag's ``topic``), results to ``out_path``.
+    Returns (frames, error)."""
     try:
-        clip = open_video(video)
-        records = run_detector(clip, model, preset_name, clip.fps)
-    except (VideoError, ValueError) as exc:
+        clip = open_source(video, topic=topic)
+        records = run_detector(clip.frames(), model, preset_name, clip.fps)
+    except (SourceError, ValueError) as exc:
         return 0, str(exc)
     _write_jsonl(Path(out_path), records)
     return len(records), None
@@ -157,7 +159,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     Parameters
     ----------
     clips_dir : path
-        Directory of the clips; each label's ``file`` is relative to it.
+        Directory of the clips; each label's ``file`` is relative to it: a video, or a ROS 2
+        bag whose image topic the label's ``topic`` names (needed when it has several).
     out_dir : path
         Where ``results.json``, ``report.md``, ``results/<model>/<clip>.jsonl`` and
         ``plots/*.png`` go.
@@ -194,10 +197,10 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     progress = progress or Silent()
 
     tasks = [(str(clips_dir / lab["file"]), m, preset_name,
-              str(out_dir / "results" / m / f"{Path(lab['file']).stem}.jsonl"))
+              str(out_dir / "results" / m / f"{Path(lab['file']).stem}.jsonl"), lab.get("topic"))
              for m in models for lab in labels]
-    for _, _, _, path in tasks:  # stale results of an earlier run must not be scored
-        Path(path).unlink(missing_ok=True)
+    for task in tasks:  # stale results of an earlier run must not be scored
+        Path(task[3]).unlink(missing_ok=True)
     expected = [int(lab.get("frames") or 1) for m in models for lab in labels]
     progress.start(sum(expected), "eval")
     errors = []
