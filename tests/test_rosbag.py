@@ -157,7 +157,7 @@ def test_bad_raw_images_are_refused_with_a_reason(args, reason):
     ("tiff", b"II*\x00", "unknown-encoding"),
     ("jpeg", b"not a jpeg", "bad-image"),
     ("png", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x01\x00\x00\x00\x01\x00\x00"
-     b"\x08\x00\x00\x00\x00" + bytes(4) + bytes(10**6),
+     b"\x08\x00\x00\x00\x00" + bytes(4),
      "bad-size"),  # a header claiming 65536 x 65536: refused before decoding
     ("png", cv2.imencode(".png", np.zeros((4, 4), np.uint8))[1].tobytes()[:20],
      "bad-image"),  # a header cut short
