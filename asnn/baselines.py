@@ -230,8 +230,11 @@ class _LGMDBase:
     def _reset_state(self) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
-    def step(self, frame: np.ndarray) -> Response:
+    def step(self, frame: np.ndarray, t: float | None = None) -> Response:
         """Process one frame and return the model's response to it (targets always empty).
+
+        ``t``, the frame's time, is accepted for a common interface with :class:`asnn.ASNN`
+        and not used: the LGMD models count frames.
 
         Raises
         ------

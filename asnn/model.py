@@ -118,8 +118,10 @@ class ASNN:
             lum = cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
         return lum
 
-    def step(self, frame: np.ndarray) -> Response:
+    def step(self, frame: np.ndarray, t: float | None = None) -> Response:
         """Process one frame and return the model's response to it.
+
+        ``t``, the frame's time in seconds, is not used yet.
 
         Raises
         ------

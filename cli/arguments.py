@@ -19,6 +19,17 @@ def frame_size(text: str) -> tuple[int, int]:
     return size
 
 
+def port(value: str) -> int:
+    """A TCP port number, 0..65535 (0: a free one)."""
+    try:
+        number = int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {value!r}") from None
+    if not 0 <= number <= 65535:
+        raise argparse.ArgumentTypeError(f"not a port number: {value!r}")
+    return number
+
+
 def key_prefix(value: str) -> str:
     """A key-expression prefix (``--prefix``)."""
     try:

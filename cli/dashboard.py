@@ -6,7 +6,7 @@ import argparse
 import logging
 import sys
 
-from cli.arguments import positive
+from cli.arguments import port, positive
 from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
 from service.config import ConfigError
 
@@ -15,25 +15,11 @@ __all__ = ["register"]
 log = logging.getLogger("asnn")
 
 
-def _port(value: str) -> int:
-    try:
-        port = int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a port number: {value!r}") from None
-    if not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"not a port number: {value!r}")
-    return port
+def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str) -> int:
+    """Feed ``store`` from the fleet's subscribers while ``server`` (a context manager that
+    serves it) runs, until SIGINT or SIGTERM; ``server`` is closed on every path."""
+    from clients.dashboard import FleetSubscriber
 
-
-def cmd_dashboard(args: argparse.Namespace) -> int:
-    from clients.dashboard import DashboardServer, FleetStore, FleetSubscriber
-
-    setup_logging(args)
-    store = FleetStore(args.prefix, stale_after=args.stale_after, hold=args.hold)
-    try:
-        server = DashboardServer(store, args.host, args.port)
-    except OSError as exc:  # the port is taken, or the address is not ours
-        return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
     try:
         session = session_for(args)
     except ConfigError as exc:
@@ -41,14 +27,26 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
         return fail(str(exc))
     stop = stop_on_signals()
     with session, FleetSubscriber(session, store) as subscriber, server:
-        host, port = server.address
-        print(f"dashboard on http://{host}:{port}/ showing {', '.join(subscriber.keys)}",
-              file=sys.stderr, flush=True)
+        print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
+              flush=True)
         while not stop.wait(0.5):
             pass
-    log.info("dashboard stopped: received %s, invalid %s", dict(store.received),
+    log.info("%s stopped: received %s, invalid %s", name, dict(store.received),
              dict(store.invalid))
     return 0
+
+
+def cmd_dashboard(args: argparse.Namespace) -> int:
+    from clients.dashboard import DashboardServer, FleetStore
+
+    setup_logging(args)
+    store = FleetStore(args.prefix, stale_after=args.stale_after, hold=args.hold)
+    try:
+        server = DashboardServer(store, args.host, args.port)
+    except OSError as exc:  # the port is taken, or the address is not ours
+        return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
+    host, port = server.address
+    return serve_fleet(args, store, server, "dashboard", f"http://{host}:{port}/")
 
 
 def register(subparsers) -> None:
@@ -58,7 +56,7 @@ def register(subparsers) -> None:
                               "looming targets, spike-rate sparkline, collision and stale "
                               "markers, and the latest warnings. Every asset comes from the "
                               "package (works offline).")
-    p.add_argument("--port", type=_port, default=8080,
+    p.add_argument("--port", type=port, default=8080,
                    help="HTTP port (default: %(default)s; 0 picks a free one)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default: %(default)s; 0.0.0.0 for every "

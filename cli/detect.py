@@ -1,4 +1,4 @@
-"""``asnn detect VIDEO``: offline detection on a video file (CONTRACT.md)."""
+"""``asnn detect VIDEO``: offline detection on a video file or a ROS 2 bag (CONTRACT.md)."""
 
 from __future__ import annotations
 
@@ -10,36 +10,50 @@ from pathlib import Path
 
 import cv2
 
+from asnn import FrameError
 from asnn.detectors import MODELS, make_detector
 from asnn.params import preset_names
 from asnn.evaluation.progress import ProgressPrinter
-from asnn.io.video import VideoError, open_video
+from asnn.io.sources import SourceError, open_source
 from asnn.io.visualize import annotate_frame, plot_responses
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("detect", help="offline detection on a video file",
-                       description="Run a detector over a video file; one JSON object per frame.")
-    p.add_argument("video", metavar="VIDEO", help="any video OpenCV reads")
+    p = sub.add_parser("detect", help="offline detection on a video file or a ROS 2 bag",
+                       description="Run a detector over a video file or an image topic of a "
+                                   "ROS 2 bag (MCAP); one JSON object per frame.")
+    p.add_argument("video", metavar="VIDEO",
+                   help="any video OpenCV reads, or a ROS 2 bag: BAG.mcap[#TOPIC] (the 'ros' "
+                        "extra)")
+    p.add_argument("--topic", metavar="NAME",
+                   help="image topic of a bag (sensor_msgs/msg/Image or CompressedImage); "
+                        "needed when it has several")
     p.add_argument("--model", choices=MODELS, default="asnn")
     p.add_argument("--preset", choices=preset_names(), default="default",
                    help="ASNN parameter preset (default: %(default)s)")
     p.add_argument("--jsonl", metavar="PATH|-", help="write one JSON object per frame ('-': stdout)")
     p.add_argument("--annotate", metavar="OUT.mp4", help="write the input with overlays")
     p.add_argument("--plot", metavar="OUT.png", help="plot u(t) and the spike rate")
+    p.add_argument("--mcap", metavar="OUT.mcap",
+                   help="write the frames, targets, warnings and response numbers as an MCAP "
+                        "for Foxglove (docs/foxglove.md; the 'ros' extra)")
     p.set_defaults(func=run)
 
 
-def _record(index: int, fps: float, response) -> dict:
-    return {"frame": index, "t": round(index / fps, 6), **response.to_dict()}
+def _record(index: int, t: float, response) -> dict:
+    return {"frame": index, "t": round(t, 6), **response.to_dict()}
+
+
+def _fail(message: str) -> int:
+    print(f"asnn detect: {message}", file=sys.stderr)
+    return 2
 
 
 def run(args: argparse.Namespace) -> int:
     try:
-        clip = open_video(args.video)
-    except VideoError as exc:
-        print(f"asnn detect: {exc}", file=sys.stderr)
-        return 2
+        source = open_source(args.video, topic=args.topic)
+    except SourceError as exc:
+        return _fail(str(exc))
     detector = make_detector(args.model, args.preset,
                              **({"record_maps": True} if args.annotate and args.model == "asnn" else {}))
     records = []
@@ -49,29 +63,52 @@ def run(args: argparse.Namespace) -> int:
             jsonl = sys.stdout
         elif args.jsonl:
             jsonl = stack.enter_context(open(args.jsonl, "w", encoding="utf-8"))
+        mcap = None
+        if args.mcap:
+            try:
+                from asnn.io.foxglove_mcap import FoxgloveMcapWriter
+
+                mcap = stack.enter_context(FoxgloveMcapWriter(args.mcap,
+                                                              frame_id=source.frame_id))
+            except (ImportError, OSError) as exc:
+                return _fail(str(exc))
         writer = None
         progress = ProgressPrinter()
-        progress.start(clip.frame_count, "detect")
+        progress.start(source.frame_count, "detect")
         stack.callback(progress.finish)
-        for index, frame in enumerate(clip):
-            response = detector.step(frame)
-            record = _record(index, clip.fps, response)
+        frames = source.timed_frames()
+        index = 0
+        while True:
+            try:
+                t, frame = next(frames)
+            except StopIteration:
+                break
+            except SourceError as exc:  # a cut or corrupt bag: what was read is written
+                progress.finish()
+                return _fail(f"{exc} (results written for the {index} frames before)")
+            try:
+                response = detector.step(frame, t)
+            except FrameError as exc:  # e.g. a bag whose camera changed its resolution
+                progress.finish()
+                return _fail(f"{args.video}: frame {index}: {exc}")
+            record = _record(index, t, response)
             records.append(record)
             if jsonl is not None:
                 jsonl.write(json.dumps(record) + "\n")
+            if mcap is not None:
+                mcap.write(frame, record, (source.start_ns or 0) + round(t * 1e9))
             if args.annotate:
                 if writer is None:
                     writer = cv2.VideoWriter(args.annotate, cv2.VideoWriter_fourcc(*"mp4v"),
-                                             clip.fps, (clip.width, clip.height))
+                                             source.fps, frame.shape[1::-1])
                     if not writer.isOpened():
-                        print(f"asnn detect: cannot write {args.annotate}", file=sys.stderr)
-                        return 2
+                        return _fail(f"cannot write {args.annotate}")
                     stack.callback(writer.release)
                 writer.write(annotate_frame(frame, response))
             progress.advance()
+            index += 1
     if not records:
-        print(f"asnn detect: {args.video}: no frames decoded", file=sys.stderr)
-        return 2
+        return _fail(f"{args.video}: no frames decoded")
     if args.plot:
         plot_responses([r["t"] for r in records], [r["u"] for r in records],
                        [r["spike_rate"] for r in records], [r["collision"] for r in records],

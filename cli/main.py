@@ -8,7 +8,7 @@ import sys
 
 # Each module defines ``register(subparsers)``, adding its sub-commands with ``func`` set.
 COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.bench",
-                   "cli.dashboard"]
+                   "cli.dashboard", "cli.foxglove"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -20,11 +20,12 @@ log = logging.getLogger("asnn")
 # ---------------------------------------------------------------- commands
 
 def cmd_camera(args: argparse.Namespace) -> int:
-    from service.camera import SourceError, open_source, publish_frames
+    from service.camera import SourceError, SourceRejections, open_source, publish_frames
 
     setup_logging(args)
+    rejections = SourceRejections(args.robot)
     try:
-        source = open_source(args.source)
+        source = open_source(args.source, on_error=rejections)
         session = session_for(args)
     except (SourceError, ConfigError) as exc:
         return fail(str(exc))
@@ -33,7 +34,8 @@ def cmd_camera(args: argparse.Namespace) -> int:
         count = publish_frames(session, args.robot, source, prefix=args.prefix, fps=args.fps,
                                loop=args.loop, format=args.format, wait=args.wait, stop=stop,
                                preview_hz=args.preview_hz)
-    log.info("camera %s: %d frames published", args.robot, count)
+    rejected = ", ".join(f"{k} {v}" for k, v in sorted(rejections.counts.items())) or "none"
+    log.info("camera %s: %d frames published; rejected: %s", args.robot, count, rejected)
     return 0
 
 
@@ -189,15 +191,17 @@ def register(subparsers) -> None:
 
     p = subparsers.add_parser("camera", help="publish a camera's frames",
                               description="Publish frames of a video file, a capture device, "
-                              "a stream URL or a generated scene on <prefix>/<robot>/frame.")
+                              "a stream URL, a generated scene or a ROS 2 bag on "
+                              "<prefix>/<robot>/frame.")
     p.add_argument("--robot", required=True, type=robot_id, help="robot id ([A-Za-z0-9_-]{1,64})")
     p.add_argument("--source", required=True,
-                   help="FILE, DEVICE_INDEX, URL or synthetic:SCENE "
+                   help="FILE, DEVICE_INDEX, URL, synthetic:SCENE "
                         f"(SCENE: {', '.join(SCENE_NAMES)}, or a case of the labelled suite: "
-                        "asnn scene --list)")
+                        "asnn scene --list) or a ROS 2 bag BAG.mcap[#TOPIC], replayed at its "
+                        "recorded pace")
     p.add_argument("--fps", type=positive, default=None,
                    help="publishing rate (default: the source's frame rate)")
-    p.add_argument("--loop", action="store_true", help="replay a file or scene forever")
+    p.add_argument("--loop", action="store_true", help="replay a file, scene or bag forever")
     p.add_argument("--format", choices=FORMATS, default="gray8",
                    help="frame encoding on the wire (default: %(default)s)")
     p.add_argument("--wait", type=float, default=2.0, metavar="SECONDS",

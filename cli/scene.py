@@ -1,8 +1,8 @@
-"""``asnn scene``: write a generated scene as a video file.
+"""``asnn scene``: write a generated scene as a video file or a ROS 2 bag.
 
 ``asnn scene NAME OUT`` writes one of the paper's scenes; ``asnn scene --case CASE OUT`` one case of
 the labelled suite (:mod:`asnn.stimuli.suite`); ``asnn scene --list [PATTERN]`` lists the suite's
-cases with their groups.
+cases with their groups. ``OUT`` ending in ``.mcap`` writes a ROS 2 bag instead of a video.
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Generate one of the paper's synthetic scenes, or a case of "
                                    "the labelled suite (--case), as a video file.")
     p.add_argument("args", nargs="*", metavar="[NAME] OUT",
-                   help=f"a paper scene ({', '.join(SCENE_NAMES)}) and the video file to write "
-                        "(.mp4 or .avi); with --case only OUT")
+                   help=f"a paper scene ({', '.join(SCENE_NAMES)}) and the file to write: a "
+                        "video (.mp4 or .avi) or a ROS 2 bag (.mcap: sensor_msgs/msg/Image mono8 "
+                        "on /camera/image_raw; the 'ros' extra); with --case only OUT")
     p.add_argument("--case", metavar="CASE", help="a case of the labelled suite instead")
     p.add_argument("--list", nargs="?", const="all", metavar="PATTERN",
                    help="list the suite's cases (matching PATTERN) and exit")
@@ -62,8 +63,13 @@ def run(args: argparse.Namespace) -> int:
                 return 2
             scene = make_scene(name, size=args.size, polarity=args.polarity,
                                contrast=args.contrast, speed=args.speed, fps=args.fps)
-        write_video(scene.frames, out, fps=scene.fps)
-    except (ValueError, OSError) as exc:
+        if out.lower().endswith(".mcap"):
+            from asnn.io.rosbag import write_bag
+
+            write_bag(scene.frames, out, fps=scene.fps)
+        else:
+            write_video(scene.frames, out, fps=scene.fps)
+    except (ValueError, OSError, ImportError) as exc:
         print(f"asnn scene: {exc}", file=sys.stderr)
         return 2
     if args.labels:

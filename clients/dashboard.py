@@ -22,7 +22,8 @@ for scripts).
 
 Bounds (docs/operations.md, "Hostile input"): at most ``max_robots`` robots (when the table is
 full, the one silent longest makes room if it is stale); per robot a preview of at most
-MAX_PREVIEW_BYTES, at most MAX_POINTS spike-rate points and MAX_TARGETS targets per response;
+``service.messages.MAX_PREVIEW_BYTES`` (:func:`decode_fleet_sample`, shared with the Foxglove
+server), at most MAX_POINTS spike-rate points and MAX_TARGETS targets per response;
 all previews together at most ``max_preview_total`` bytes (the oldest previews are forgotten
 first). The server closes connections idle for ``idle_timeout`` seconds (a request that does not
 arrive whole, a kept-alive connection without a next request), drops an event stream whose
@@ -30,8 +31,8 @@ client has not taken an event within ``send_timeout`` seconds (at most SEND_BUFF
 the kernel for each), holds at most ``max_streams`` event streams (``max_streams_per_address``
 from one address) and ``max_streams + spare_connections`` connections in all
 (``max_streams_per_address + spare_connections / 2`` from one address), so that a browser can
-still load the page while another address holds what it may. Invalid messages and dropped connections
-are logged rate-limited, without tracebacks.
+still load the page while another address holds what it may. Invalid messages and dropped
+connections are logged rate-limited, without tracebacks.
 
 Robot state as shown: **collision** when the latest response says so, or the robot's latest
 warning is at most ``hold`` seconds older (camera clock) than its latest response, so a warning
@@ -55,10 +56,11 @@ from importlib import resources
 
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import (MessageError, Preview, Response, decode_preview,
+from service.messages import (MessageError, Preview, Response, check_preview, decode_preview,
                               decode_response)
 
-__all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES"]
+__all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES",
+           "decode_fleet_sample", "stale_robot", "take_fleet_sample"]
 
 log = logging.getLogger("asnn.dashboard")
 
@@ -73,7 +75,6 @@ LOG_SIZE = 50         # warning episodes kept in the log
 EPISODE_GAP = 20      # a warning at most this many frames after a robot's previous one extends
                       # the same log entry (one row per episode, not twenty rows a second)
 RECENT_TARGETS = 32   # responses whose targets are kept to match a preview's seq
-MAX_PREVIEW_BYTES = 64 * 1024          # one thumbnail (asnn camera's are about 5 KiB)
 MAX_PREVIEW_TOTAL = 16 * 1024 * 1024   # all thumbnails held, encoded
 IDLE_TIMEOUT = 10.0   # seconds a connection may wait for a whole request
 SEND_TIMEOUT = 10.0   # seconds an event stream may wait for its client to take an event
@@ -93,6 +94,64 @@ SECURITY_HEADERS = {
     "X-Content-Type-Options": "nosniff",
     "Referrer-Policy": "no-referrer",
 }
+
+
+def decode_fleet_sample(key: str, payload: bytes, prefix: str
+                        ) -> tuple[str, str, Response | Preview]:
+    """Validate a sample of ``<prefix>/<robot>/(response|warning|preview)``: ``(robot, kind,
+    message)``, as every fleet viewer takes it (this dashboard, :mod:`clients.foxglove`).
+
+    A preview must be at most MAX_PREVIEW_BYTES and its image is decoded
+    (:func:`service.messages.check_preview`); a response or warning must name the robot of its
+    key, and a warning must say ``collision``. Targets beyond MAX_TARGETS are left out (the
+    worker finds a few; a viewer keeps or draws no more).
+
+    Raises
+    ------
+    MessageError
+        With ``reason`` ``bad-key`` for a key outside the scheme, else the message's reason.
+    """
+    try:
+        robot, kind = keys.parse_key(str(key), prefix)
+    except keys.KeySchemeError as exc:
+        raise MessageError("bad-key", str(exc)) from None
+    if kind == "preview":
+        message = decode_preview(payload)
+        check_preview(message)  # the viewers only ever get images of the announced size
+    elif kind in ("response", "warning"):
+        message = decode_response(payload)
+        if message.robot != robot:
+            raise MessageError("bad-key", f"{kind} of robot {message.robot!r} on {key}")
+        if kind == "warning" and not message.collision:
+            raise MessageError("invalid-field", "a warning without collision: true")
+        if len(message.targets) > MAX_TARGETS:
+            message = message.model_copy(update={"targets": message.targets[:MAX_TARGETS]})
+    else:
+        raise MessageError("bad-key", f"{key!r} is not a response, warning or preview")
+    return robot, kind, message
+
+
+def take_fleet_sample(key: str, payload: bytes, prefix: str,
+                      reject: Callable[[str, str, str], None]
+                      ) -> tuple[str, str, Response | Preview] | None:
+    """:func:`decode_fleet_sample` for receivers that never raise: an invalid sample goes to
+    ``reject(reason, detail, key)`` (which counts it and logs it rate-limited) and gives None."""
+    try:
+        return decode_fleet_sample(key, payload, prefix)
+    except MessageError as exc:
+        reject(exc.reason, exc.detail, key)
+    except Exception as exc:  # a bug here must not take the subscriber down
+        reject("internal", repr(exc), key)
+    return None
+
+
+def stale_robot(robots: dict, now: float, stale_after: float) -> str | None:
+    """The robot of ``robots`` (name -> state with a ``touched`` time) silent longest, if it
+    has been silent for more than ``stale_after`` seconds: when a viewer's table of robots is
+    full, it makes room for a new one, so that a burst of ids cannot hide new robots for long.
+    """
+    name, quiet = min(robots.items(), key=lambda item: item[1].touched)
+    return name if now - quiet.touched > stale_after else None
 
 
 def _target(t) -> dict:
@@ -170,27 +229,10 @@ class FleetStore:
         Returns the robot id, or ``None`` when the message was invalid (counted in
         ``invalid`` by reason and logged). Never raises for bad input.
         """
-        try:
-            robot, kind = keys.parse_key(str(key), self.prefix)
-            if kind == "preview":
-                message = decode_preview(payload)
-                self._check_preview(message)
-            elif kind in ("response", "warning"):
-                message = decode_response(payload)
-                if message.robot != robot:
-                    raise MessageError("bad-key", f"{kind} of robot {message.robot!r} on {key}")
-                if kind == "warning" and not message.collision:
-                    raise MessageError("invalid-field", "a warning without collision: true")
-            else:
-                raise MessageError("bad-key", f"{key!r} is not a response, warning or preview")
-        except keys.KeySchemeError as exc:
-            return self._reject("bad-key", str(exc), key)
-        except MessageError as exc:
-            return self._reject(exc.reason, exc.detail, key)
-        except Exception as exc:  # a bug here must not take the subscriber down
-            return self._reject("internal", repr(exc), key)
-        if kind != "preview" and len(message.targets) > MAX_TARGETS:
-            message = message.model_copy(update={"targets": message.targets[:MAX_TARGETS]})
+        sample = take_fleet_sample(key, payload, self.prefix, self._reject)
+        if sample is None:
+            return None
+        robot, kind, message = sample
         with self._lock:
             state = self._robot_locked(robot)
             if state is None:
@@ -211,13 +253,6 @@ class FleetStore:
             self._changed.notify_all()
         return robot
 
-    @staticmethod
-    def _check_preview(preview: Preview) -> None:
-        if len(preview.data) > MAX_PREVIEW_BYTES:
-            raise MessageError("oversized", f"preview of {len(preview.data)} bytes, more than "
-                               f"{MAX_PREVIEW_BYTES}")
-        preview.image()  # decodes: the browser only ever gets images of the announced size
-
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:
             self.invalid[reason] += 1
@@ -231,11 +266,10 @@ class FleetStore:
         state = self._robots.get(robot)
         if state is None:
             if len(self._robots) >= self.max_robots:
-                now = self.clock()
-                quiet = min(self._robots.values(), key=lambda s: s.touched)
-                if now - quiet.touched <= self.stale_after:
+                quiet = stale_robot(self._robots, self.clock(), self.stale_after)
+                if quiet is None:
                     return None
-                self._forget_robot_locked(quiet.name)
+                self._forget_robot_locked(quiet)
             state = self._robots[robot] = _Robot(robot)
         return state
 
@@ -424,7 +458,9 @@ class FleetStore:
 
 
 class FleetSubscriber:
-    """Declares the dashboard's three subscribers on ``session``, feeding ``store``."""
+    """Declares the dashboard's three subscribers on ``session``, feeding ``store`` (a
+    :class:`FleetStore`, or anything with a ``prefix`` and an ``offer(key, payload)`` that never
+    raises, such as the Foxglove bridge of :mod:`clients.foxglove`)."""
 
     def __init__(self, session, store: FleetStore):
         from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber

@@ -1,8 +1,15 @@
-"""The camera: frames of a file, a device, a stream URL or a generated scene, published on Zenoh.
+"""The camera: frames of a file, a device, a stream URL, a generated scene or a ROS 2 bag,
+published on Zenoh.
 
-Frames go to ``<prefix>/<robot>/frame``, best effort (congestion control drop, lowest data
-priority): a late frame is worth less than the next one. ``seq`` counts from 0 and keeps
+Sources are opened by :func:`asnn.io.sources.open_source` (the one place every command opens its
+input). Frames go to ``<prefix>/<robot>/frame``, best effort (congestion control drop, lowest
+data priority): a late frame is worth less than the next one. ``seq`` counts from 0 and keeps
 increasing across ``--loop`` repetitions; ``stamp`` is the wall-clock time of capture.
+
+Files and scenes are replayed at their frame rate, bags at their recorded pace (the differences
+of their header stamps; a pause longer than :data:`MAX_REPLAY_GAP` is shortened to it), unless
+``fps`` sets a rate. A bag message that cannot be used, or a cut in the file, is a counted and
+logged rejection (:class:`SourceRejections`), never the end of the camera.
 
 Optionally (``preview_hz`` > 0), a small jpeg thumbnail of the current frame goes to
 ``<prefix>/<robot>/preview`` a few times a second for dashboards (docs/contract.md), with the
@@ -14,86 +21,44 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections import Counter
 
-import cv2
 import numpy as np
 import zenoh
 
-from asnn.stimuli import SCENE_NAMES, make_scene
-from asnn.stimuli.suite import SUITE_CASES, make_case
-from asnn.io.video import VideoError, open_video, read_frames
+from asnn.io.sources import Source, SourceError, open_source
 
 from . import keys
+from .logutil import RateLimitedLog
 from .messages import FORMATS, Frame, Preview, encode
 
-__all__ = ["FRAME_QOS", "PREVIEW_HZ", "PREVIEW_WIDTH", "Source", "SourceError", "open_source",
-           "publish_frames"]
+__all__ = ["FRAME_QOS", "MAX_REPLAY_GAP", "PREVIEW_HZ", "PREVIEW_WIDTH", "Source", "SourceError",
+           "SourceRejections", "open_source", "publish_frames"]
 
 log = logging.getLogger("asnn.camera")
 
 FRAME_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
                  priority=zenoh.Priority.DATA_LOW, reliability=zenoh.Reliability.BEST_EFFORT)
-SYNTHETIC = "synthetic:"
 PREVIEW_HZ = 2.0     # thumbnails per second on <prefix>/<robot>/preview (0: none)
 PREVIEW_WIDTH = 160  # thumbnail width in pixels (never scaled up)
+MAX_REPLAY_GAP = 5.0  # seconds: a longer pause between two recorded frames is shortened to this
 
 
-class SourceError(OSError):
-    """A source that cannot be opened."""
+class SourceRejections:
+    """What a camera could not publish, counted per reason (``counts``) and logged at WARNING,
+    at most one line per reason every 10 s. Pass it as ``on_error`` to :func:`open_source`."""
 
+    def __init__(self, robot: str):
+        self.robot = robot
+        self.counts: Counter = Counter()
+        self._log = RateLimitedLog(log)
+        self._lock = threading.Lock()
 
-@dataclass
-class Source:
-    """Frames (gray or BGR uint8) and their nominal rate.
-
-    ``frames()`` yields one pass over the source; ``live`` sources (devices, URLs) cannot be
-    replayed and are paced by their own capture.
-    """
-
-    name: str
-    fps: float
-    live: bool
-    _open: object
-
-    def frames(self) -> Iterator[np.ndarray]:
-        return self._open()
-
-
-def open_source(spec: str) -> Source:
-    """Open ``FILE``, ``DEVICE_INDEX`` (an integer), ``URL`` (``scheme://...``) or
-    ``synthetic:SCENE`` (one of ``asnn.stimuli.SCENE_NAMES``, 128x128, 20 fps, or a case of the
-    labelled suite, ``asnn.stimuli.suite.SUITE_CASES``).
-
-    Raises
-    ------
-    SourceError
-        If the source does not exist or yields no frame.
-    """
-    if spec.startswith(SYNTHETIC):
-        name = spec[len(SYNTHETIC):]
-        if name in SCENE_NAMES:
-            scene = make_scene(name)
-        elif name in SUITE_CASES:
-            scene = make_case(name)
-        else:
-            raise SourceError(f"unknown scene {name!r}; choose one of {', '.join(SCENE_NAMES)} "
-                              "or a suite case (asnn scene --list)")
-        return Source(spec, scene.fps, False, lambda: iter(scene.frames))
-    if spec.isdigit() or "://" in spec:
-        target = int(spec) if spec.isdigit() else spec
-        cap = cv2.VideoCapture(target)
-        if not cap.isOpened():
-            raise SourceError(f"cannot open capture source {spec!r}")
-        fps = cap.get(cv2.CAP_PROP_FPS)
-        fps = float(fps) if fps and np.isfinite(fps) and 0 < fps <= 240 else 20.0
-        return Source(spec, fps, True, lambda: read_frames(cap))
-    try:
-        clip = open_video(spec)
-    except VideoError as exc:
-        raise SourceError(str(exc)) from None
-    return Source(spec, clip.fps, False, lambda: iter(clip))
+    def __call__(self, reason: str, message: str) -> None:
+        with self._lock:
+            self.counts[reason] += 1
+        self._log.warning(reason, "camera %s: rejected (%s): %s", self.robot, reason,
+                          message[:300])
 
 
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
@@ -101,7 +66,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    loop: bool = False, format: str = "gray8", wait: float = 0.0,
                    stop: threading.Event | None = None, max_frames: int | None = None,
                    preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH) -> int:
-    """Publish the source's frames paced at ``fps`` (default: the source's rate).
+    """Publish the source's frames paced at ``fps`` (default: the source's own times).
 
     ``wait``: seconds to wait, at most, for a subscriber (a worker) before the first frame.
     ``preview_hz``: thumbnails (``preview_width`` pixels wide) per second on the preview key,
@@ -134,7 +99,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         seq = 0
         next_time = time.monotonic()
         while not stop.is_set():
-            for image in source.frames():
+            previous_t = None
+            for t, image in source.timed_frames():
                 if stop.is_set() or (max_frames is not None and seq >= max_frames):
                     return seq
                 now = time.monotonic()
@@ -143,6 +109,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                         continue
                     next_time = max(next_time + period, now) if fps else now
                 else:
+                    if previous_t is not None and not fps:  # the recorded pace
+                        next_time += min(max(t - previous_t, 0.0), MAX_REPLAY_GAP) - period
+                    previous_t = t
                     if next_time > now:
                         if stop.wait(next_time - now):
                             return seq

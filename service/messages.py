@@ -24,18 +24,18 @@ Bounds on what a message makes a receiver allocate (docs/operations.md, "Hostile
   MAX_STR_LEN bytes, and a whole message at most MAX_ITEMS container entries in all, so an
   8-million-entry map (under MAX_PAYLOAD) is refused when its header is read
   (``undecodable``), not built;
-* jpeg/png: the header is read before anything is decoded. Its size must be the message's, the
-  file must be an 8-bit image of a kind cameras make (baseline or progressive Huffman jpeg; png
-  of bit depth <= 8), and it must be long enough to hold that many pixels at the best
-  compression its coding allows (:func:`min_encoded_bytes`): a truncated file whose header
-  declares 4096x4096 is refused before the decoder allocates 48 MiB for it and the worker a
-  model state of 0.9 GB.
+* jpeg/png: the header is read before anything is decoded (:mod:`asnn.io.images`, shared with
+  the ROS 2 bag reader). Its size must be the message's, the file must be an 8-bit image of a
+  kind cameras make (baseline or progressive Huffman jpeg; png of bit depth <= 8), and it must
+  be long enough to hold that many pixels at the best compression its coding allows
+  (:func:`asnn.io.images.min_encoded_bytes`): a truncated file whose header declares
+  4096x4096 is refused before the decoder allocates 48 MiB for it and the worker a model state
+  of 0.9 GB.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any, Literal
 
 import cv2
@@ -43,13 +43,14 @@ import msgpack
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from asnn.io.images import MAX_SIDE, ImageError, check_encoded, decode_encoded, encoded_size
+
 __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
-           "Response", "TargetMsg", "VERSION", "check_encoded", "decode_frame", "decode_response",
-           "encode", "encode_image", "encoded_size", "min_encoded_bytes", "unpack_map"]
+           "Response", "TargetMsg", "VERSION", "decode_frame", "decode_response", "encode",
+           "encode_image", "encoded_size", "unpack_map"]
 
 VERSION = 1
 FORMATS = ("gray8", "bgr8", "jpeg", "png")
-MAX_SIDE = 4096  # largest accepted frame width or height
 # the largest valid frame (4096 x 4096 bgr8) plus room for the other fields
 MAX_PAYLOAD = MAX_SIDE * MAX_SIDE * 3 + 64 * 1024
 JPEG_QUALITY = 90
@@ -94,38 +95,23 @@ class Frame(_Message):
         Raises
         ------
         MessageError
-            ``bad-pixels`` when the data does not hold a ``width`` x ``height`` image.
+            ``bad-pixels`` when the data does not hold a ``width`` x ``height`` image,
+            ``bad-image`` when encoded data is not a whole 8-bit image (as :meth:`check_size`)
+            or does not decode.
         """
         w, h = self.width, self.height
         if self.format in ("gray8", "bgr8"):
             self.check_size()
             pixels = np.frombuffer(self.data, dtype=np.uint8)
             return pixels.reshape((h, w) if self.format == "gray8" else (h, w, 3))
-        # the header first: a lying or hostile size is refused before any pixel is decoded
-        self.check_size()
-        try:
-            image = cv2.imdecode(np.frombuffer(self.data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
-        except cv2.error as exc:
-            raise MessageError("bad-image", f"{self.format} data does not decode "
-                               f"({str(exc).strip().splitlines()[-1][:80]})") from None
-        if image is None:
-            raise MessageError("bad-image", f"data is not a decodable {self.format} image")
-        if image.dtype != np.uint8:
-            raise MessageError("bad-image", f"{self.format} image is {image.dtype}, not 8-bit")
-        if image.ndim == 3:
-            channels = image.shape[2]
-            if channels == 4:
-                image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
-            elif channels != 3:  # gray + alpha, or anything else: keep the first channel
-                image = np.ascontiguousarray(image[:, :, 0])
-        if image.ndim not in (2, 3) or image.shape[:2] != (h, w):
-            raise MessageError("bad-pixels", f"{self.format} image is {image.shape[1]}x"
-                               f"{image.shape[0]}, the message says {w}x{h}")
-        return image
+        try:  # the header first: a lying or hostile size is refused before any pixel is decoded
+            return decode_encoded(self.data, self.format, (w, h))
+        except ImageError as exc:
+            raise _message_error(exc) from None
 
     def check_size(self) -> None:
         """Cheap checks of the data without decoding it: a raw frame's length, an encoded
-        frame's header (:func:`check_encoded`).
+        frame's header (:func:`asnn.io.images.check_encoded`).
 
         Raises
         ------
@@ -140,7 +126,10 @@ class Frame(_Message):
                 raise MessageError("bad-pixels", f"{self.format} {self.width}x{self.height} "
                                    f"needs {need} bytes, got {len(self.data)}")
         else:
-            check_encoded(self.data, self.format, self.width, self.height)
+            try:
+                check_encoded(self.data, self.format, (self.width, self.height))
+            except ImageError as exc:
+                raise _message_error(exc) from None
 
     @classmethod
     def from_image(cls, image: np.ndarray, *, seq: int, stamp: float,
@@ -180,6 +169,12 @@ class Response(_Message):
     dropped: int = Field(ge=0)
     # optional extension (docs/contract.md): the model step's own share of latency_ms
     model_ms: float | None = Field(default=None, ge=0)
+
+
+def _message_error(exc: ImageError) -> MessageError:
+    """An encoded image's refusal as a message's: a size other than the message's (or out of
+    range) is ``bad-pixels``, anything else ``bad-image``."""
+    return MessageError("bad-pixels" if exc.reason == "bad-size" else "bad-image", exc.detail)
 
 
 def encode_image(image: np.ndarray, format: str) -> bytes:
@@ -284,137 +279,6 @@ def _reason(error: dict) -> str:
     return _FIELD_REASONS.get(str(loc[0]), "invalid-field")
 
 
-@dataclass(frozen=True)
-class _Header:
-    """What an encoded image's header says, read without decoding it."""
-
-    width: int
-    height: int
-    kind: str       # "png": its colour type; "jpeg": the start-of-frame marker, e.g. "sof0"
-    depth: int      # bits per sample
-    channels: int   # samples per pixel (png: before palette expansion)
-    body: int       # offset of the compressed pixels (jpeg: after the first start of scan;
-                    # png: after the header; -1 when the header ends before them)
-
-
-_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}  # colour type -> samples per pixel
-# baseline, extended and progressive Huffman coding: what cameras and encoders produce.
-# Lossless, hierarchical and arithmetic-coded jpeg are refused (OpenCV need not decode them,
-# and arithmetic coding can make a large image from a few bytes).
-_JPEG_PROCESSES = {0xC0: "sof0", 0xC1: "sof1", 0xC2: "sof2"}
-
-
-def _read_header(data: bytes, format: str) -> _Header | None:
-    if format == "png":
-        head = bytes(data[:29])
-        if len(head) < 29 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-            return None
-        return _Header(int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"),
-                       f"png{head[25]}", head[24], _PNG_CHANNELS.get(head[25], 0), 33)
-    data = memoryview(data).cast("B")
-    if format != "jpeg" or bytes(data[:2]) != b"\xff\xd8":
-        return None
-    i, frame = 2, None
-    while i + 4 <= len(data):
-        if data[i] != 0xFF:
-            return None
-        marker = data[i + 1]
-        if marker == 0xFF:  # fill byte
-            i += 1
-            continue
-        if marker in (0x01, 0xD8) or 0xD0 <= marker <= 0xD7:  # no length field
-            i += 2
-            continue
-        if marker == 0xD9:  # end of image
-            break
-        length = int.from_bytes(data[i + 2:i + 4], "big")
-        if length < 2:
-            return None
-        if marker == 0xDA:  # start of scan: the compressed pixels follow its header
-            if frame is None:
-                return None
-            return _Header(*frame, body=min(i + 2 + length, len(data)))
-        if frame is None and 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
-            if i + 10 > len(data) or length < 8:
-                return None
-            frame = (int.from_bytes(data[i + 7:i + 9], "big"),  # width
-                     int.from_bytes(data[i + 5:i + 7], "big"),  # height
-                     _JPEG_PROCESSES.get(marker, f"0x{marker:02x}"), data[i + 4], data[i + 9])
-        i += 2 + length
-    return None if frame is None else _Header(*frame, body=-1)
-
-
-def encoded_size(data: bytes, format: str) -> tuple[int, int] | None:
-    """(width, height) from a png or jpeg file's header without decoding it; None if the data
-    does not start like such a file."""
-    header = _read_header(data, format)
-    return None if header is None else (header.width, header.height)
-
-
-def min_encoded_bytes(format: str, width: int, height: int, channels: int = 1,
-                      depth: int = 8) -> int:
-    """The fewest bytes of compressed pixels that can hold a whole ``width`` x ``height`` image.
-
-    jpeg (Huffman coded): every 8x8 block of the full-resolution component costs at least one
-    bit (its DC code; a progressive file may leave every AC coefficient out). png: deflate
-    cannot compress better than 1032:1, and each row holds a filter byte and
-    ``width x channels x depth`` bits.
-
-    Parameters
-    ----------
-    format : {'jpeg', 'png'}
-    width, height : int
-    channels, depth : int
-        png only: samples per pixel and bits per sample.
-
-    Returns
-    -------
-    int
-    """
-    if format == "jpeg":
-        blocks = -(-width // 8) * -(-height // 8)
-        return blocks // 8
-    raw = height * (1 + -(-width * channels * depth // 8))
-    return raw // 1032
-
-
-def check_encoded(data: bytes, format: str, width: int, height: int) -> None:
-    """Check an encoded image's header against the size a message gives, before decoding.
-
-    Raises
-    ------
-    MessageError
-        ``bad-image`` when the data is not a file of ``format``, not an 8-bit image of a
-        supported kind, or too short to hold a whole image of its size
-        (:func:`min_encoded_bytes`: a truncated file would be padded by the decoder);
-        ``bad-pixels`` when the header gives another size than ``width`` x ``height``.
-    """
-    header = _read_header(data, format)
-    if header is None:
-        raise MessageError("bad-image", f"data is not a {format} file")
-    if (header.width, header.height) != (width, height):
-        raise MessageError("bad-pixels", f"{format} image is {header.width}x{header.height}, "
-                           f"the message says {width}x{height}")
-    if format == "jpeg":
-        if header.kind not in _JPEG_PROCESSES.values():
-            raise MessageError("bad-image", f"jpeg coding {header.kind} is not supported "
-                               "(baseline or progressive Huffman only)")
-        if header.depth != 8 or header.channels not in (1, 3):
-            raise MessageError("bad-image", f"jpeg of {header.channels} components of "
-                               f"{header.depth} bits, not 8-bit gray or colour")
-        if header.body < 0:
-            raise MessageError("bad-image", "jpeg without a start of scan: no pixels")
-    elif header.depth not in (1, 2, 4, 8) or not header.channels:
-        raise MessageError("bad-image", f"png of {header.depth}-bit samples (colour type "
-                           f"{header.kind[3:]}), not an 8-bit image")
-    need = min_encoded_bytes(format, width, height, header.channels, header.depth)
-    have = len(data) - header.body
-    if have < need:
-        raise MessageError("bad-image", f"{format} of {len(data)} bytes cannot hold a whole "
-                           f"{width}x{height} image (at least {need} bytes of compressed "
-                           "pixels): truncated")
-
-
 def decode_frame(payload: bytes) -> Frame:
     """Validate a Frame payload (the pixels are checked by :meth:`Frame.image`)."""
     return _validate(Frame, _unpack(payload, "frame"), "frame")
@@ -456,10 +320,11 @@ def _finite(fields: dict) -> dict:
 # ``<prefix>/<robot>/preview``: a low-rate thumbnail of the camera's frames for dashboards
 # (docs/contract.md; not part of CONTRACT.md's required interface, the worker ignores it).
 
-__all__ += ["PREVIEW_FORMATS", "Preview", "decode_preview"]
+__all__ += ["MAX_PREVIEW_BYTES", "PREVIEW_FORMATS", "Preview", "check_preview", "decode_preview"]
 
 PREVIEW_FORMATS = ("jpeg", "png")
 PREVIEW_QUALITY = 70
+MAX_PREVIEW_BYTES = 64 * 1024  # receivers refuse larger thumbnails (asnn camera's are ~5 KiB)
 
 
 class Preview(Frame):
@@ -493,3 +358,18 @@ class Preview(Frame):
 def decode_preview(payload: bytes) -> Preview:
     """Validate a Preview payload (the image is checked by :meth:`Preview.image`)."""
     return _validate(Preview, _unpack(payload, "preview"), "preview")
+
+
+def check_preview(preview: Preview) -> np.ndarray:
+    """What a viewer checks before it shows a thumbnail: at most MAX_PREVIEW_BYTES, and an
+    image of the announced size (decoded, and returned).
+
+    Raises
+    ------
+    MessageError
+        ``oversized``, or as :meth:`Preview.image`.
+    """
+    if len(preview.data) > MAX_PREVIEW_BYTES:
+        raise MessageError("oversized", f"preview of {len(preview.data)} bytes, more than "
+                           f"{MAX_PREVIEW_BYTES}")
+    return preview.image()

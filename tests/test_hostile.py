@@ -12,10 +12,10 @@ import msgpack
 import numpy as np
 import pytest
 
+from asnn.io.images import ImageError, check_encoded, min_encoded_bytes
 from asnn.stimuli import make_scene
 from service.core import WorkerCore
-from service.messages import (MAX_ITEMS, MAX_PAYLOAD, MessageError, check_encoded, decode_frame,
-                              encode_image, min_encoded_bytes)
+from service.messages import MAX_ITEMS, MAX_PAYLOAD, Frame, MessageError, decode_frame, encode_image
 
 from service.worker import Worker
 
@@ -43,24 +43,29 @@ def frame_map(**fields) -> bytes:
 def test_the_header_must_allow_a_whole_image_of_its_size():
     data = lying_jpeg()
     assert len(data) < 400
-    with pytest.raises(MessageError) as err:
-        check_encoded(data, "jpeg", 4096, 4096)
+    with pytest.raises(ImageError) as err:
+        check_encoded(data, "jpeg", (4096, 4096))
     assert err.value.reason == "bad-image" and "truncated" in err.value.detail
+    frame = Frame(seq=0, stamp=0.0, width=4096, height=4096, format="jpeg", data=data)
+    for check in (frame.check_size, frame.image):  # on the wire: a counted bad-image
+        with pytest.raises(MessageError) as err:
+            check()
+        assert err.value.reason == "bad-image" and "truncated" in err.value.detail
     # what real encoders make of the worst case, a uniform image, is well above the bounds
     for fmt in ("jpeg", "png"):
         flat = encode_image(np.zeros((1024, 1024), np.uint8), fmt)
-        check_encoded(flat, fmt, 1024, 1024)
+        check_encoded(flat, fmt, (1024, 1024))
         assert len(flat) > 1.3 * min_encoded_bytes(fmt, 1024, 1024)
     # 16-bit png, arithmetic-coded or lossless jpeg: refused from the header
     import cv2
     ok, deep = cv2.imencode(".png", np.zeros((64, 64), np.uint16))
-    with pytest.raises(MessageError, match="8-bit"):
-        check_encoded(deep.tobytes(), "png", 64, 64)
+    with pytest.raises(ImageError, match="8-bit"):
+        check_encoded(deep.tobytes(), "png", (64, 64))
     arith = bytearray(encode_image(np.zeros((64, 64), np.uint8), "jpeg"))
     sof = arith.index(b"\xff\xc0")
     arith[sof + 1] = 0xC9
-    with pytest.raises(MessageError, match="not supported"):
-        check_encoded(bytes(arith), "jpeg", 64, 64)
+    with pytest.raises(ImageError, match="not supported"):
+        check_encoded(bytes(arith), "jpeg", (64, 64))
 
 
 CHILD = r"""

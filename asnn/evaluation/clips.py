@@ -12,7 +12,7 @@ from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from ..io.video import VideoError, open_video
+from ..io.sources import SourceError, open_source
 from . import figures, scoring
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_detectors, rate,
@@ -21,12 +21,14 @@ from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_det
 __all__ = ["evaluate_clips"]
 
 
-def _run_clip(video: str, detector: DetectorSpec, out_path: str) -> tuple[int, str | None]:
-    """Worker: one detector on one clip, results to ``out_path``. Returns (frames, error)."""
+def _run_clip(video: str, detector: DetectorSpec, out_path: str,
+              topic: str | None = None) -> tuple[int, str | None]:
+    """Worker: one detector on one clip (a bag's ``topic``), results to ``out_path``.
+    Returns (frames, error)."""
     try:
-        clip = open_video(video)
-        records = run_detector(clip, detector, clip.fps)
-    except (VideoError, ValueError) as exc:
+        clip = open_source(video, topic=topic)
+        records = run_detector(clip.timed_frames(), detector)
+    except (SourceError, ValueError) as exc:
         return 0, str(exc)
     write_jsonl(Path(out_path), records)
     return len(records), None
@@ -88,7 +90,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     Parameters
     ----------
     clips_dir : path
-        Directory of the clips; each label's ``file`` is relative to it.
+        Directory of the clips; each label's ``file`` is relative to it: a video, or a ROS 2
+        bag whose image topic the label's ``topic`` names (needed when it has several).
     out_dir : path
         Where ``results.json``, ``report.md``, ``results/<detector>/<clip>.jsonl`` and
         ``plots/*.png`` go (``<detector>`` is the spec with ``:`` replaced by ``-``).
@@ -123,10 +126,11 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     progress = progress or Silent()
 
     tasks = [(str(clips_dir / lab["file"]), spec,
-              str(out_dir / "results" / spec.slug / f"{Path(lab['file']).stem}.jsonl"))
+              str(out_dir / "results" / spec.slug / f"{Path(lab['file']).stem}.jsonl"),
+              lab.get("topic"))
              for spec in specs for lab in labels]
-    for _, _, path in tasks:  # stale results of an earlier run must not be scored
-        Path(path).unlink(missing_ok=True)
+    for task in tasks:  # stale results of an earlier run must not be scored
+        Path(task[2]).unlink(missing_ok=True)
     expected = [int(lab.get("frames") or 1) for _ in specs for lab in labels]
     progress.start(sum(expected), "eval")
     errors = []

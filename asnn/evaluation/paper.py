@@ -19,7 +19,8 @@ from ..params import preset
 from ..stimuli import make_scene
 from . import figures, scoring
 from .progress import Silent
-from .runs import DEFAULT_DETECTORS, fmt, parse_detector, parse_detectors, run_detector, write_json
+from .runs import (DEFAULT_DETECTORS, at_rate, fmt, parse_detector, parse_detectors, run_detector,
+                   write_json)
 
 __all__ = ["paper_figures", "temporal_filter_responses", "SYNTHETIC_SCENES", "CONTRAST_SWEEP",
            "SPEED_SWEEP"]
@@ -171,7 +172,7 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
                      "contact": scene.contact_frame, "collision": scene.collision, "models": {}}
             for spec in specs:
                 m = spec.name
-                records = run_detector(scene.frames, spec, scene.fps)
+                records = run_detector(at_rate(scene.frames, scene.fps), spec)
                 entry["models"][m] = figures.response_series(records)
                 score = scoring.score_clip(records, label, warmup=warmup, early_tolerance_s=0.0)
                 inside, other = _phase_warnings(entry["models"][m]["collision"], label, warmup)
@@ -192,7 +193,7 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
         for value in values:
             kwargs = {"contrast": value} if key == "contrast" else {"speed": value}
             scene = make_scene("approach_recession", polarity="dark", size=size, **kwargs)
-            u = [r["u"] for r in run_detector(scene.frames, own, scene.fps)]
+            u = [r["u"] for r in run_detector(at_rate(scene.frames, scene.fps), own)]
             sweep["u"].append(u)
             sweep["peak"].append(max(u))
             progress.advance(1, f"{key} {value:g}")

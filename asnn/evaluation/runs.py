@@ -8,7 +8,7 @@ go to a directory named by :attr:`DetectorSpec.slug` (``asnn-reference``: no col
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,7 +18,7 @@ from ..detectors import MODELS, Detector, make_detector
 from ..params import preset_key
 
 __all__ = ["DEFAULT_DETECTORS", "DetectorSpec", "parse_detector", "parse_detectors",
-           "run_detector", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
+           "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
 
 DEFAULT_DETECTORS = ("asnn", "asnn:reference", "lgmd1", "lgmd2")
 
@@ -89,17 +89,23 @@ def parse_detectors(specs: str | Iterable[str],
     return list({p.name: p for p in parsed}.values())
 
 
-def run_detector(frames: Iterable[np.ndarray], detector: DetectorSpec | str = "asnn",
-                 fps: float = 20.0, on_frame: Callable[[], None] | None = None) -> list[dict]:
+def at_rate(frames: Iterable[np.ndarray], fps: float) -> Iterator[tuple[float, np.ndarray]]:
+    """``(index / fps, frame)`` for frames without their own times."""
+    for index, frame in enumerate(frames):
+        yield index / fps, frame
+
+
+def run_detector(timed_frames: Iterable[tuple[float, np.ndarray]],
+                 detector: DetectorSpec | str = "asnn",
+                 on_frame: Callable[[], None] | None = None) -> list[dict]:
     """Run one fresh detector over frames and return its per-frame records.
 
     Parameters
     ----------
-    frames : iterable of ndarray
+    timed_frames : iterable of (float, ndarray)
+        Each frame with its time in seconds (``Source.timed_frames()``, or :func:`at_rate`).
     detector : DetectorSpec or str
         A spec (see :func:`parse_detector`).
-    fps : float
-        Frame rate, for the ``t`` field.
     on_frame : callable, optional
         Called after each frame (progress).
 
@@ -112,9 +118,9 @@ def run_detector(frames: Iterable[np.ndarray], detector: DetectorSpec | str = "a
     spec = parse_detector(detector) if isinstance(detector, str) else detector
     model = spec.make()
     records = []
-    for index, frame in enumerate(frames):
-        response = model.step(frame)
-        records.append({"frame": index, "t": round(index / fps, 6), **response.to_dict()})
+    for index, (t, frame) in enumerate(timed_frames):
+        response = model.step(frame, t)
+        records.append({"frame": index, "t": round(t, 6), **response.to_dict()})
         if on_frame is not None:
             on_frame()
     return records

@@ -25,8 +25,8 @@ from pathlib import Path
 from ..stimuli.suite import GROUPS, SUITE_CASES, SUITE_VERSION, make_case, suite_cases
 from . import scoring
 from .progress import Silent
-from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_detectors, rate,
-                   run_detector, write_json, write_jsonl)
+from .runs import (DEFAULT_DETECTORS, DetectorSpec, at_rate, fmt, outcome_cell, parse_detectors,
+                   rate, run_detector, write_json, write_jsonl)
 
 __all__ = ["EARLY_TOLERANCE_S", "evaluate_suite", "near_miss_pairs", "category_summaries",
            "suite_report"]
@@ -43,7 +43,7 @@ def _run_case(name: str, specs: Sequence[DetectorSpec], out_dir: str, warmup: in
     entry = {"label": label, "scores": {}}
     series = {}
     for spec in specs:
-        records = run_detector(scene.frames, spec, scene.fps)
+        records = run_detector(at_rate(scene.frames, scene.fps), spec)
         write_jsonl(Path(out_dir) / "results" / spec.slug / f"{name}.jsonl", records)
         score = scoring.score_clip(records, label, warmup=warmup,
                                    early_tolerance_s=EARLY_TOLERANCE_S)

@@ -1,4 +1,5 @@
-"""Reading and writing pictures: video files in, annotated videos and plots out.
+"""Reading and writing pictures: frame sources in (video files, devices, streams, generated
+scenes, ROS 2 bags: :mod:`asnn.io.sources`), annotated videos, plots and Foxglove files out.
 
 The model never imports this package; the command line and the evaluation do.
 """

@@ -11,9 +11,30 @@ import numpy as np
 
 from ..response import Response
 
-__all__ = ["annotate_frame", "warning_intervals", "plot_responses"]
+__all__ = ["annotate_frame", "target_arrow", "target_label", "warning_intervals",
+           "plot_responses"]
 
 _ARROW_GAIN = 400.0  # pixels per unit of motion energy, clamped below
+
+
+def target_arrow(x: float, y: float, direction: float, energy: float,
+                 shape: tuple[int, ...]) -> tuple[float, float]:
+    """Tip of a target's arrow: from (x, y) along ``direction``, longer for more motion energy
+    (10 pixels plus 400 per unit, at most a quarter of the picture's larger side)."""
+    length = min(10.0 + _ARROW_GAIN * energy, 0.25 * max(shape[:2]))
+    return x + length * math.cos(direction), y + length * math.sin(direction)
+
+
+def target_label(target: dict) -> str:
+    """A target's optional identity and time to contact as a short text (``'#3 ttc 1.2 s'``),
+    from its ``id`` and ``ttc`` keys where present; empty without either."""
+    parts = []
+    if target.get("id") is not None:
+        parts.append(f"#{target['id']}")
+    ttc = target.get("ttc")
+    if ttc is not None and math.isfinite(ttc):
+        parts.append(f"ttc {ttc:.1f} s")
+    return " ".join(parts)
 
 
 def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
@@ -21,7 +42,8 @@ def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
 
     The approach map G is drawn in red where positive, the attended region M_a M_d is outlined in
     green, and each target gets a blue dot and an arrow along its direction whose length grows
-    with its energy (as in the paper's Fig. 8). A red border marks a collision warning.
+    with its energy (as in the paper's Fig. 8), labelled with its id and time to contact where
+    the target has them. A red border marks a collision warning.
 
     Parameters
     ----------
@@ -48,11 +70,14 @@ def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
         cv2.drawContours(image, contours, -1, (0, 220, 0), 1)
     for t in response.targets:
         centre = (int(round(t.x)), int(round(t.y)))
-        length = min(10.0 + _ARROW_GAIN * t.energy, 0.25 * max(image.shape[:2]))
-        tip = (int(round(t.x + length * math.cos(t.direction))),
-               int(round(t.y + length * math.sin(t.direction))))
+        tip_x, tip_y = target_arrow(t.x, t.y, t.direction, t.energy, image.shape)
+        tip = (int(round(tip_x)), int(round(tip_y)))
         cv2.circle(image, centre, 3, (255, 80, 0), -1)
         cv2.arrowedLine(image, centre, tip, (255, 80, 0), 2, tipLength=0.3)
+        label = target_label(t.to_dict())
+        if label:
+            cv2.putText(image, label, (centre[0] + 5, centre[1] - 5), cv2.FONT_HERSHEY_SIMPLEX,
+                        0.35, (255, 80, 0), 1, cv2.LINE_AA)
     if response.collision:
         cv2.rectangle(image, (0, 0), (image.shape[1] - 1, image.shape[0] - 1), (0, 0, 255), 3)
     text = f"#{response.index} spikes/s {response.spike_rate:.0f}" + (" WARNING" if response.collision else "")

@@ -1,0 +1,565 @@
+"""ROS 2 bags in MCAP (rosbag2's default storage): camera topics in, frames out.
+
+Reads ``sensor_msgs/msg/Image`` and ``sensor_msgs/msg/CompressedImage`` topics with the MCAP
+project's reader (``mcap``) and its ROS 2 decoder (``mcap-ros2-support``), the optional ``ros``
+extra. Everything read from a bag is bounded before it is allocated: records and decompressed
+chunks to :data:`MAX_RECORD_BYTES`, pictures to :data:`asnn.io.images.MAX_SIDE` per side with
+their pixel count checked against the data they come with (a compressed picture's header must
+describe a whole image its data can hold, :func:`asnn.io.images.check_encoded`).
+
+A frame's time is its ``header.stamp`` relative to the first frame's (the recorder's log time
+when the first stamp is zero: drivers that leave it unset).
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .images import MAX_SIDE, ImageError, decode_encoded, to_uint8
+from .sources import SourceError
+
+try:
+    from mcap.exceptions import McapError
+    from mcap.reader import SeekingReader
+    from mcap.records import Channel, Chunk, Message, Schema
+    from mcap.stream_reader import StreamReader, breakup_chunk
+    from mcap_ros2.decoder import DecoderFactory
+    from mcap_ros2.writer import Writer as Ros2Writer
+except ImportError as exc:  # the optional extra is missing: say which one, in one line
+    raise ImportError("reading ROS 2 bags needs the 'ros' extra: pip install 'asnn[ros]'"
+                      f" ({exc.name} is missing)") from exc
+
+__all__ = ["BagClip", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_SCHEMAS", "MAX_RECORD_BYTES",
+           "RAW_ENCODINGS", "TopicInfo", "bag_topics", "choose_topic", "image_from_compressed",
+           "image_from_raw", "open_bag", "write_bag", "IMAGE_MSGDEF",
+           "COMPRESSED_IMAGE_MSGDEF"]
+
+IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
+IMAGE_SCHEMAS = (IMAGE, COMPRESSED_IMAGE)
+MAX_RECORD_BYTES = 512 * 2**20  # largest MCAP record or decompressed chunk read
+FPS_PROBE = 30                  # frames whose stamps estimate a bag's nominal frame rate
+
+# The message definitions rosbag2 embeds as schemas (ros2msg: the type, then its dependencies).
+_HEADER_MSGDEF = """
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec"""
+IMAGE_MSGDEF = """std_msgs/Header header
+uint32 height
+uint32 width
+string encoding
+uint8 is_bigendian
+uint32 step
+uint8[] data""" + _HEADER_MSGDEF
+COMPRESSED_IMAGE_MSGDEF = """std_msgs/Header header
+string format
+uint8[] data""" + _HEADER_MSGDEF
+
+# sensor_msgs/image_encodings: bytes per pixel and the conversion to gray or BGR uint8
+_BAYER = {"bayer_rggb8": cv2.COLOR_BayerBG2BGR, "bayer_bggr8": cv2.COLOR_BayerRG2BGR,
+          "bayer_gbrg8": cv2.COLOR_BayerGR2BGR, "bayer_grbg8": cv2.COLOR_BayerGB2BGR}
+RAW_ENCODINGS: dict[str, int] = {
+    "mono8": 1, "8UC1": 1, "mono16": 2, "16UC1": 2, "bgr8": 3, "8UC3": 3, "rgb8": 3,
+    "bgra8": 4, "8UC4": 4, "rgba8": 4, "yuv422": 2, "uyvy": 2, "yuv422_yuy2": 2, "yuyv": 2,
+    **dict.fromkeys(_BAYER, 1)}
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """A topic of a bag: its name, message type, and message count (None when the bag has no
+    summary that says)."""
+
+    name: str
+    schema: str
+    count: int | None
+
+    @property
+    def is_image(self) -> bool:
+        return self.schema in IMAGE_SCHEMAS
+
+
+# --------------------------------------------------------------------------- pictures
+
+def image_from_raw(width: int, height: int, encoding: str, is_bigendian: int, step: int,
+                   data: bytes) -> np.ndarray:
+    """The pixels of a ``sensor_msgs/msg/Image`` as gray (H, W) or BGR (H, W, 3) uint8.
+
+    Parameters
+    ----------
+    width, height : int
+        Sides, 1..``MAX_SIDE``.
+    encoding : str
+        One of :data:`RAW_ENCODINGS` (mono8, mono16, rgb8, bgr8, rgba8, bgra8, their
+        ``8UC*``/``16UC1`` names, the 8-bit Bayer patterns, and yuv422 as UYVY or YUY2).
+    is_bigendian : int
+        Byte order of 16-bit pixels.
+    step : int
+        Bytes per row, at least ``width`` times the bytes per pixel (rows may be padded).
+    data : bytes
+        ``step * height`` bytes (the last row's padding may be missing).
+
+    Returns
+    -------
+    ndarray
+        A new array: gray for mono encodings (16-bit ones by their high byte), BGR otherwise.
+
+    Raises
+    ------
+    ImageError
+        ``unknown-encoding``, ``bad-size`` (sides, or a step shorter than a row) or
+        ``bad-pixels`` (data of another length than the sides and step say), all checked
+        before anything is allocated.
+    """
+    bpp = RAW_ENCODINGS.get(encoding)
+    if bpp is None:
+        raise ImageError("unknown-encoding", f"image encoding {encoding!r} is not one of "
+                         f"{', '.join(RAW_ENCODINGS)}")
+    if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
+        raise ImageError("bad-size", f"image of {width}x{height}; sides must be 1..{MAX_SIDE}")
+    row = width * bpp
+    if step < row:
+        raise ImageError("bad-size", f"step {step} is shorter than a row of {width} {encoding} "
+                         f"pixels ({row} bytes)")
+    least, most = step * (height - 1) + row, step * height
+    if not least <= len(data) <= most:
+        raise ImageError("bad-pixels", f"{width}x{height} {encoding} with step {step} needs "
+                         f"{most} bytes, got {len(data)}")
+    if bpp == 2 and encoding in ("mono16", "16UC1"):
+        pixels = np.ndarray((height, width), dtype=">u2" if is_bigendian else "<u2",
+                            buffer=data, strides=(step, 2))
+        return to_uint8(pixels.astype(np.uint16))
+    rows = np.ndarray((height, row), dtype=np.uint8, buffer=data, strides=(step, 1))
+    if bpp == 1 and encoding in _BAYER:
+        return cv2.cvtColor(np.ascontiguousarray(rows), _BAYER[encoding])
+    if bpp == 1:
+        return rows.copy()
+    pixels = np.ascontiguousarray(rows).reshape(height, width, bpp)
+    if encoding in ("yuv422", "uyvy", "yuv422_yuy2", "yuyv"):
+        if width % 2:
+            raise ImageError("bad-size", f"{encoding} needs an even width, got {width}")
+        code = cv2.COLOR_YUV2BGR_UYVY if encoding in ("yuv422", "uyvy") else cv2.COLOR_YUV2BGR_YUY2
+        return cv2.cvtColor(pixels, code)
+    if encoding == "rgb8":
+        return cv2.cvtColor(pixels, cv2.COLOR_RGB2BGR)
+    if encoding == "rgba8":
+        return cv2.cvtColor(pixels, cv2.COLOR_RGBA2BGR)
+    if bpp == 4:
+        return cv2.cvtColor(pixels, cv2.COLOR_BGRA2BGR)
+    return pixels  # bgr8, 8UC3: already a copy
+
+
+def image_from_compressed(format: str, data: bytes) -> np.ndarray:
+    """The pixels of a ``sensor_msgs/msg/CompressedImage`` (jpeg or png, as image_transport
+    names them: ``jpeg``, ``png``, ``rgb8; jpeg compressed bgr8``...) as gray or BGR uint8.
+
+    Raises
+    ------
+    ImageError
+        ``unknown-encoding`` for other formats (``compressedDepth`` included: a depth map is not
+        a camera picture), ``bad-image`` or ``bad-size`` as in
+        :func:`asnn.io.images.decode_encoded`.
+    """
+    name = format.lower()
+    if "compresseddepth" in name:
+        kind = None
+    elif "jpeg" in name or "jpg" in name:
+        kind = "jpeg"
+    elif "png" in name:
+        kind = "png"
+    else:
+        kind = None
+    if kind is None:
+        raise ImageError("unknown-encoding", f"compressed image format {format!r}; "
+                         "jpeg and png are read")
+    return to_uint8(decode_encoded(data, kind, max_depth=16))
+
+
+# --------------------------------------------------------------------------- the file
+
+class _BoundedFile:
+    """A binary file whose reads are refused beyond ``limit`` bytes at once: the length fields
+    of a corrupt bag cannot make the MCAP reader allocate more than that."""
+
+    def __init__(self, raw, limit: int = MAX_RECORD_BYTES):
+        self._raw, self._limit = raw, limit
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        return self._raw.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._raw.tell()
+
+    def read(self, size: int = -1) -> bytes:
+        if size is None or size < 0 or size > self._limit:
+            raise McapError(f"a record field of {size} bytes, more than the "
+                            f"{self._limit} this reader takes")
+        return self._raw.read(size)
+
+
+def _chunk_records(chunk: Chunk) -> list:
+    """The records of a chunk, its decompressed size checked before it is decompressed."""
+    try:
+        declared = [chunk.uncompressed_size]
+        if chunk.compression == "zstd":
+            import zstandard
+
+            declared.append(zstandard.frame_content_size(chunk.data))
+        elif chunk.compression == "lz4":
+            import lz4.frame
+
+            declared.append(lz4.frame.get_frame_info(chunk.data).get("content_size") or 0)
+        elif chunk.compression:
+            raise McapError(f"unknown chunk compression {chunk.compression!r}")
+        if max(declared) > MAX_RECORD_BYTES:
+            raise McapError(f"a chunk of {max(declared)} bytes uncompressed, more than "
+                            f"{MAX_RECORD_BYTES}")
+        return breakup_chunk(chunk)
+    except McapError:
+        raise
+    except Exception as exc:  # the decompressors' own error types
+        raise McapError(f"a chunk does not decompress ({type(exc).__name__}: {exc})") from None
+
+
+def _records(fh) -> Iterator:
+    """Schema, Channel and Message records of an MCAP file in file order (bounded)."""
+    reader = StreamReader(_BoundedFile(fh), emit_chunks=True, record_size_limit=MAX_RECORD_BYTES)
+    for record in reader.records:
+        if isinstance(record, Chunk):
+            yield from _chunk_records(record)
+        elif isinstance(record, (Schema, Channel, Message)):
+            yield record
+
+
+# reading errors a corrupt or truncated file raises from the MCAP library and the decompressors
+_CORRUPT = (McapError, OSError, ValueError, struct.error, KeyError, EOFError, RuntimeError,
+            MemoryError, OverflowError)
+_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _corrupt(path: Path, exc: BaseException, where: str) -> SourceError:
+    detail = str(exc).strip() or type(exc).__name__
+    return SourceError(f"{path}: truncated or corrupt bag {where} ({detail[:160]}); "
+                       "`mcap recover` can repair a bag whose recording was cut", "corrupt-bag")
+
+
+def bag_topics(path: str | Path) -> dict[str, TopicInfo]:
+    """The topics of a bag, from its summary, or by reading it through when it has none
+    (a recording that was cut). A cut bag lists the topics before the cut.
+
+    Raises
+    ------
+    SourceError
+        If the file is missing or not an MCAP file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise SourceError(f"{path}: no such file", "missing")
+    with open(path, "rb") as raw:
+        if raw.read(len(_MAGIC)) != _MAGIC:
+            raise SourceError(f"{path}: not an MCAP file", "not-a-bag")
+        try:
+            summary = SeekingReader(_BoundedFile(raw),
+                                    record_size_limit=MAX_RECORD_BYTES).get_summary()
+        except Exception:  # no footer (a recording that was cut): read it through below
+            summary = None
+        if summary is not None and summary.channels:
+            stats = summary.statistics
+            return {c.topic: TopicInfo(c.topic, _schema_name(summary.schemas.get(c.schema_id)),
+                                       stats.channel_message_counts.get(c.id, 0) if stats
+                                       else None)
+                    for c in summary.channels.values()}
+        raw.seek(0)
+        schemas: dict[int, str] = {}
+        channels: dict[int, Channel] = {}
+        counts: dict[int, int] = {}
+        try:
+            for record in _records(raw):
+                if isinstance(record, Schema):
+                    schemas[record.id] = record.name
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+        except _CORRUPT as exc:
+            if not channels:
+                raise _corrupt(path, exc, "before any topic") from None
+        return {c.topic: TopicInfo(c.topic, schemas.get(c.schema_id, ""), counts.get(c.id, 0))
+                for c in channels.values()}
+
+
+def _schema_name(schema: Schema | None) -> str:
+    return schema.name if schema is not None else ""
+
+
+def _topic_list(topics: dict[str, TopicInfo], most: int = 20) -> str:
+    """The first ``most`` topics with their types, for a one-line error."""
+    names = [f"{t.name} ({t.schema or 'no schema'})" for t in list(topics.values())[:most]]
+    more = f" and {len(topics) - most} more" if len(topics) > most else ""
+    return (", ".join(names) or "none") + more
+
+
+def choose_topic(path: Path, topics: dict[str, TopicInfo], topic: str | None) -> TopicInfo:
+    """The image topic to read: ``topic``, or the bag's only image topic.
+
+    Raises
+    ------
+    SourceError
+        For a topic the bag does not have, that is not an image topic or holds no message,
+        and, without ``topic``, for a bag with no image topic or several (the error lists them).
+    """
+    images = {name: t for name, t in topics.items() if t.is_image}
+    if topic is None:
+        if not images:
+            raise SourceError(f"{path}: no image topic ({' or '.join(IMAGE_SCHEMAS)}); "
+                              f"topics: {_topic_list(topics)}", "no-topic")
+        if len(images) > 1:
+            raise SourceError(f"{path}: several image topics, choose one with --topic (or "
+                              f"FILE.mcap#TOPIC): {', '.join(sorted(images))}", "no-topic")
+        topic = next(iter(images))
+    info = topics.get(topic)
+    if info is None:
+        raise SourceError(f"{path}: no topic {topic!r}; image topics: "
+                          f"{', '.join(sorted(images)) or 'none'}", "no-topic")
+    if not info.is_image:
+        raise SourceError(f"{path}: topic {topic} is {info.schema or 'schemaless'}, not "
+                          f"{' or '.join(IMAGE_SCHEMAS)}", "no-topic")
+    if info.count == 0:
+        raise SourceError(f"{path}: topic {topic} holds no message", "empty-topic")
+    return info
+
+
+class BagClip:
+    """The frames of one image topic of a bag, read lazily in file order.
+
+    Attributes
+    ----------
+    path : Path
+    topic : str
+    schema : str
+        ``sensor_msgs/msg/Image`` or ``sensor_msgs/msg/CompressedImage``.
+    frame_count : int
+        Messages on the topic, from the bag's summary (0 when it has none).
+    start_ns : int
+        Time of the first frame, nanoseconds since the epoch.
+    clock : {'header', 'log'}
+        Where frame times come from: ``header.stamp``, or the recorder's log time when the
+        first frame's stamp is zero.
+    fps : float
+        Nominal frame rate: the median rate of the first frames (20 when there is one).
+    width, height : int
+        Size of the first frame.
+    frame_id : str
+        ``header.frame_id`` of the first frame.
+    """
+
+    def __init__(self, path: str | Path, topic: str | None = None):
+        self.path = Path(path)
+        info = choose_topic(self.path, bag_topics(self.path), topic)
+        self.topic, self.schema = info.name, info.schema
+        self.frame_count = info.count or 0
+        self.clock = "header"
+        self.start_ns = 0
+        first, stamps, errors = None, [], []
+        # a cut within the first frames is reported when they are read, not here
+        probe = self._messages(lambda reason, message: errors.append(SourceError(message, reason)))
+        for index, item in enumerate(probe):
+            if index == 0:
+                message, log_time = item
+                if _stamp_ns(message) == 0:
+                    self.clock = "log"
+                first = self._decode(message, 0)
+                self.frame_id = str(getattr(message.header, "frame_id", ""))
+            stamps.append(self._time_ns(*item))
+            if len(stamps) >= FPS_PROBE:
+                break
+        probe.close()
+        if first is None:
+            raise errors[0] if errors else SourceError(
+                f"{self.path}: topic {self.topic} holds no message", "empty-topic")
+        self.height, self.width = first.shape[:2]
+        self.start_ns = stamps[0]
+        steps = np.diff(np.asarray(stamps, dtype=np.int64))
+        steps = steps[steps > 0]
+        self.fps = float(1e9 / np.median(steps)) if steps.size else 20.0
+
+    def _time_ns(self, message, log_time: int) -> int:
+        return _stamp_ns(message) if self.clock == "header" else int(log_time)
+
+    def _messages(self, on_error: Callable[[str, str], None] | None) -> Iterator:
+        """(decoded message, log time) of the topic; a corrupt message or a cut is reported
+        to ``on_error`` (the iteration ends at a cut) or raised when there is none."""
+        decoders = DecoderFactory()
+        channels: dict[int, tuple[Schema | None, Callable | None]] = {}
+        schemas: dict[int, Schema] = {}
+        index = 0
+        with open(self.path, "rb") as fh:
+            records = _records(fh)
+            while True:
+                try:
+                    record = next(records)
+                except StopIteration:
+                    return
+                except _CORRUPT as exc:
+                    error = _corrupt(self.path, exc, f"after {index} messages of {self.topic}")
+                    if on_error is None:
+                        raise error from None
+                    on_error(error.reason, str(error))
+                    return
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel) and record.topic == self.topic:
+                    try:
+                        channels[record.id] = self._decoder(decoders, record, schemas)
+                    except SourceError as error:
+                        if on_error is None:
+                            raise
+                        on_error(error.reason, str(error))
+                        return
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    decode = channels[record.channel_id]
+                    try:
+                        message = decode(record.data)
+                        _stamp_ns(message)  # a message without a header is not an image
+                    except Exception as exc:  # the decoder is generated from the bag's text
+                        error = SourceError(f"{self.path}: {self.topic} message {index} does "
+                                            f"not decode ({type(exc).__name__}: "
+                                            f"{str(exc)[:120]})", "bad-message")
+                        if on_error is None:
+                            raise error from None
+                        on_error(error.reason, str(error))
+                    else:
+                        yield message, record.log_time
+                    index += 1
+
+    def _decoder(self, decoders: DecoderFactory, channel: Channel,
+                 schemas: dict[int, Schema]) -> Callable:
+        schema = schemas.get(channel.schema_id)
+        if schema is None or schema.name not in IMAGE_SCHEMAS:
+            raise SourceError(f"{self.path}: topic {self.topic} changed its type to "
+                              f"{_schema_name(schema) or 'none'}", "no-topic")
+        try:
+            decode = decoders.decoder_for(channel.message_encoding, schema)
+        except Exception as exc:
+            decode, why = None, f"{type(exc).__name__}: {str(exc)[:120]}"
+        else:
+            why = f"messages in {channel.message_encoding!r} with a {schema.encoding!r} schema"
+        if decode is None:
+            raise SourceError(f"{self.path}: cannot decode {self.topic} ({why}); ROS 2 bags "
+                              "hold cdr messages with ros2msg schemas", "bad-schema")
+        return decode
+
+    def _decode(self, message, index: int) -> np.ndarray:
+        try:
+            if self.schema == IMAGE:
+                return image_from_raw(int(message.width), int(message.height),
+                                      str(message.encoding), int(message.is_bigendian),
+                                      int(message.step), bytes(message.data))
+            return image_from_compressed(str(message.format), bytes(message.data))
+        except ImageError as exc:
+            raise SourceError(f"{self.path}: {self.topic} message {index}: {exc.detail}",
+                              exc.reason) from None
+        except (AttributeError, TypeError, ValueError) as exc:
+            raise SourceError(f"{self.path}: {self.topic} message {index} is not a "
+                              f"{self.schema} ({exc})", "bad-message") from None
+
+    def frames(self, on_error: Callable[[str, str], None] | None = None
+               ) -> Iterator[tuple[float, np.ndarray]]:
+        """``(t, image)`` per message: seconds since the first frame, gray or BGR uint8.
+
+        Parameters
+        ----------
+        on_error : callable(reason, message), optional
+            Called for a message that cannot be used (it is skipped) and for a cut or corrupt
+            file (the frames end there). Without it, these raise :class:`SourceError`.
+        """
+        for index, (message, log_time) in enumerate(self._messages(on_error)):
+            try:
+                image = self._decode(message, index)
+            except SourceError as exc:
+                if on_error is None:
+                    raise
+                on_error(exc.reason, str(exc))
+                continue
+            yield (self._time_ns(message, log_time) - self.start_ns) / 1e9, image
+
+
+def _stamp_ns(message) -> int:
+    stamp = message.header.stamp
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def open_bag(path: str | Path, topic: str | None = None) -> BagClip:
+    """Open an image topic of a ROS 2 bag (an ``.mcap`` file, or a rosbag2 directory holding
+    one), checking that its first frame decodes.
+
+    Raises
+    ------
+    SourceError
+        If the bag is missing, not MCAP, cut before its first frame, has no such image topic
+        (or, without ``topic``, not exactly one), or its first frame does not decode.
+    """
+    path = Path(path)
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.suffix == ".mcap")
+        if len(files) != 1:
+            raise SourceError(f"{path}: a bag directory with {len(files)} .mcap files; give "
+                              "one file", "missing")
+        path = files[0]
+    return BagClip(path, topic)
+
+
+def write_bag(frames, path: str | Path, *, topic: str = "/camera/image_raw", fps: float = 20.0,
+              start_ns: int = 1_700_000_000_000_000_000, frame_id: str = "camera",
+              format: str = "raw") -> Path:
+    """Write gray or BGR uint8 frames as a ROS 2 bag (MCAP) with one image topic.
+
+    Parameters
+    ----------
+    frames : iterable of ndarray
+    topic : str
+    fps : float
+        The header stamps advance by ``1 / fps``, from ``start_ns``.
+    format : {'raw', 'png', 'jpeg'}
+        ``sensor_msgs/msg/Image`` (mono8 or bgr8) or ``sensor_msgs/msg/CompressedImage``.
+    """
+    if format not in ("raw", "png", "jpeg"):
+        raise ValueError(f"unknown bag image format {format!r}; choose raw, png or jpeg")
+    path = Path(path)
+    with open(path, "wb") as fh, Ros2Writer(fh) as writer:
+        raw = format == "raw"
+        schema = writer.register_msgdef(IMAGE if raw else COMPRESSED_IMAGE,
+                                        IMAGE_MSGDEF if raw else COMPRESSED_IMAGE_MSGDEF)
+        for index, frame in enumerate(frames):
+            stamp = start_ns + round(index * 1e9 / fps)
+            header = {"stamp": {"sec": stamp // 1_000_000_000, "nanosec": stamp % 1_000_000_000},
+                      "frame_id": frame_id}
+            frame = np.ascontiguousarray(frame)
+            if raw:
+                gray = frame.ndim == 2
+                message = {"header": header, "height": frame.shape[0], "width": frame.shape[1],
+                           "encoding": "mono8" if gray else "bgr8", "is_bigendian": 0,
+                           "step": frame.shape[1] * (1 if gray else 3), "data": frame.tobytes()}
+            else:
+                ok, data = cv2.imencode(".png" if format == "png" else ".jpg", frame)
+                if not ok:
+                    raise ValueError(f"cannot encode a {frame.shape} frame as {format}")
+                message = {"header": header, "format": format, "data": data.tobytes()}
+            writer.write_message(topic, schema, message, log_time=stamp, publish_time=stamp,
+                                 sequence=index)
+    return path

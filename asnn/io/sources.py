@@ -1,0 +1,193 @@
+"""Every kind of frame source, opened in one place: video files, capture devices, stream URLs,
+generated scenes and ROS 2 bags.
+
+``asnn detect``, ``asnn eval`` and ``asnn camera`` all open their input with
+:func:`open_source`, so a new kind of source is added here once. A :class:`Source` yields gray or
+BGR uint8 frames with their time in seconds since its first frame.
+
+Source specifications:
+
+``FILE``               any video OpenCV reads; time = frame index / the file's frame rate
+``DEVICE_INDEX``       an integer: a capture device (live)
+``URL``                ``scheme://...``: a stream OpenCV reads, e.g. rtsp (live)
+``synthetic:SCENE``    one of ``asnn.stimuli.SCENE_NAMES`` (128x128 at 20 fps), or a case of the
+                       labelled suite (``asnn scene --list``)
+``BAG.mcap[#TOPIC]``   a ROS 2 bag in MCAP (or a rosbag2 directory holding one), the image topic
+                       after ``#`` or given as ``topic``; time = the messages' header stamps
+                       (needs the ``ros`` extra, :mod:`asnn.io.rosbag`)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+__all__ = ["SYNTHETIC", "Source", "SourceError", "is_bag", "open_source", "split_topic"]
+
+SYNTHETIC = "synthetic:"
+BAG_SUFFIX = ".mcap"
+
+ErrorHandler = Callable[[str, str], None]
+
+
+class SourceError(OSError):
+    """A source that cannot be opened or read. ``reason`` is a short label for counting."""
+
+    def __init__(self, message: str, reason: str = "unreadable"):
+        super().__init__(message)
+        self.reason = reason
+
+
+@dataclass
+class Source:
+    """Frames (gray or BGR uint8), their times, and the source's nominal rate.
+
+    ``frames()`` and ``timed_frames()`` each make one pass over the source; ``live`` sources
+    (devices, URLs) cannot be replayed and are paced by their own capture.
+
+    Attributes
+    ----------
+    name : str
+        The specification it was opened from.
+    fps : float
+        Nominal frame rate (for a bag: the median rate of its first frames).
+    live : bool
+    _open : callable
+        Starts a pass: an iterator of images, or of ``(t, image)`` pairs when ``timed``.
+    timed : bool
+        Whether the source knows its frames' times (bags); otherwise ``t = index / fps``.
+    frame_count : int
+        Frames the source says it holds (0: unknown).
+    start_ns : int or None
+        The first frame's time, nanoseconds since the epoch, where the source records one.
+    frame_id : str
+        The camera's coordinate frame, where the source records one (ROS ``frame_id``).
+    """
+
+    name: str
+    fps: float
+    live: bool
+    _open: Callable[[], Iterable]
+    timed: bool = False
+    frame_count: int = 0
+    start_ns: int | None = None
+    frame_id: str = ""
+
+    def timed_frames(self) -> Iterator[tuple[float, np.ndarray]]:
+        """``(t, image)``: seconds since the first frame, and the frame."""
+        items = self._open()
+        if self.timed:
+            yield from items
+        else:
+            for index, image in enumerate(items):
+                yield index / self.fps, image
+
+    def frames(self) -> Iterator[np.ndarray]:
+        """The frames alone."""
+        for _, image in self.timed_frames():
+            yield image
+
+
+def split_topic(spec: str) -> tuple[str, str | None]:
+    """``'run.mcap#/camera/image_raw'`` -> ``('run.mcap', '/camera/image_raw')``; a spec without
+    a ``#TOPIC`` suffix -> ``(spec, None)``."""
+    head, sep, topic = spec.rpartition("#")
+    if sep and is_bag(head):
+        return head, topic or None
+    return spec, None
+
+
+def is_bag(path: str) -> bool:
+    """Whether a path names a ROS 2 bag: an ``.mcap`` file, or a rosbag2 directory (one with a
+    ``metadata.yaml``)."""
+    if path.lower().endswith(BAG_SUFFIX):
+        return True
+    return Path(path).is_dir() and (Path(path) / "metadata.yaml").is_file()
+
+
+def open_source(spec: str, *, topic: str | None = None,
+                on_error: ErrorHandler | None = None) -> Source:
+    """Open a source (see the module's list), checking that it yields a first frame.
+
+    Parameters
+    ----------
+    spec : str
+        ``FILE``, ``DEVICE_INDEX``, ``URL``, ``synthetic:SCENE`` or ``BAG.mcap[#TOPIC]``.
+    topic : str, optional
+        The image topic of a bag (instead of a ``#TOPIC`` suffix).
+    on_error : callable(reason, message), optional
+        For bags: called for a message that cannot be used (skipped) or a cut or corrupt file
+        (the frames end there), so that a long-running reader counts and goes on. Without it,
+        reading raises :class:`SourceError` there.
+
+    Raises
+    ------
+    SourceError
+        If the source does not exist or yields no frame, and for a bag also if the topic is
+        missing, empty, not an image topic, or not given while the bag has several. ``str()``
+        is one line naming the source.
+    """
+    spec = str(spec)
+    path, suffix_topic = split_topic(spec)
+    if is_bag(path):
+        return _open_bag(path, topic or suffix_topic, on_error)
+    if topic is not None:
+        raise SourceError(f"{spec}: a topic applies to ROS 2 bags (.mcap) only", "no-topic")
+    if spec.startswith(SYNTHETIC):
+        return _open_scene(spec)
+    if spec.isdigit() or "://" in spec:
+        return _open_capture(spec)
+    return _open_file(spec)
+
+
+def _open_scene(spec: str) -> Source:
+    from ..stimuli import SCENE_NAMES, make_scene
+    from ..stimuli.suite import SUITE_CASES, make_case
+
+    name = spec[len(SYNTHETIC):]
+    if name in SCENE_NAMES:
+        scene = make_scene(name)
+    elif name in SUITE_CASES:
+        scene = make_case(name)
+    else:
+        raise SourceError(f"unknown scene {name!r}; choose one of {', '.join(SCENE_NAMES)} "
+                          "or a case of the labelled suite (asnn scene --list)", "missing")
+    return Source(spec, scene.fps, False, lambda: iter(scene.frames),
+                  frame_count=len(scene.frames))
+
+
+def _open_capture(spec: str) -> Source:
+    from .video import read_frames
+
+    cap = cv2.VideoCapture(int(spec) if spec.isdigit() else spec)
+    if not cap.isOpened():
+        raise SourceError(f"cannot open capture source {spec!r}", "missing")
+    fps = cap.get(cv2.CAP_PROP_FPS)
+    fps = float(fps) if fps and np.isfinite(fps) and 0 < fps <= 240 else 20.0
+    return Source(spec, fps, True, lambda: read_frames(cap))
+
+
+def _open_file(spec: str) -> Source:
+    from .video import VideoError, open_video
+
+    try:
+        clip = open_video(spec)
+    except VideoError as exc:
+        raise SourceError(str(exc), "missing" if "no such file" in str(exc) else
+                          "undecodable") from None
+    return Source(spec, clip.fps, False, lambda: iter(clip), frame_count=clip.frame_count)
+
+
+def _open_bag(path: str, topic: str | None, on_error: ErrorHandler | None) -> Source:
+    try:
+        from . import rosbag
+    except ImportError as exc:  # the message names the extra to install
+        raise SourceError(f"{path}: {exc}", "missing-extra") from None
+    clip = rosbag.open_bag(path, topic)
+    return Source(f"{clip.path}#{clip.topic}", clip.fps, False,
+                  lambda: clip.frames(on_error), timed=True, frame_count=clip.frame_count,
+                  start_ns=clip.start_ns, frame_id=clip.frame_id)

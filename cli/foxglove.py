@@ -1,0 +1,46 @@
+"""``asnn foxglove``: the live fleet in the Foxglove app (clients.foxglove), with the common Zenoh
+options."""
+
+from __future__ import annotations
+
+import argparse
+
+from cli.arguments import count, port
+from cli.dashboard import serve_fleet
+from cli.session import add_zenoh_options, fail, setup_logging
+
+__all__ = ["register"]
+
+
+def cmd_foxglove(args: argparse.Namespace) -> int:
+    setup_logging(args)
+    try:
+        from clients.foxglove import FoxgloveBridge
+    except ImportError as exc:  # the message names the extra to install
+        return fail(str(exc))
+    try:
+        bridge = FoxgloveBridge(args.prefix, host=args.host, port=args.port,
+                                max_robots=args.max_robots)
+    except OSError as exc:
+        return fail(str(exc))
+    return serve_fleet(args, bridge, bridge, "foxglove", bridge.url)
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "foxglove", help="the fleet live in the Foxglove app",
+        description="Serve every robot seen on <prefix>/*/response, warning and preview to the "
+                    "Foxglove app over its WebSocket protocol (Foxglove SDK): per robot the "
+                    "preview image, the targets as image annotations, the response numbers and "
+                    "the warnings, on /<prefix>/<robot>/... topics (docs/foxglove.md). Needs "
+                    "the 'ros' extra.")
+    p.add_argument("--port", type=port, default=8765,
+                   help="WebSocket port (default: %(default)s; 0 picks a free one)")
+    p.add_argument("--host", default="127.0.0.1",
+                   help="address to serve on (default: %(default)s; the protocol has no "
+                        "authentication, so 0.0.0.0 shows the fleet to the whole network)")
+    p.add_argument("--max-robots", type=count, default=256, metavar="N",
+                   help="robots served at once; messages of more are counted and dropped "
+                        "(default: %(default)s)")
+    add_zenoh_options(p)
+    p.set_defaults(func=cmd_foxglove)

@@ -1,0 +1,245 @@
+"""The live fleet in Foxglove: the robots' previews, targets, responses and warnings served
+through the Foxglove SDK's WebSocket server (``asnn foxglove``).
+
+:class:`FoxgloveBridge` takes the samples of ``<prefix>/<robot>/(response|warning|preview)``
+(fed by :class:`clients.dashboard.FleetSubscriber`, the dashboard's subscribers) and logs them on
+topics named after the robot, in the schemas ``asnn detect --mcap`` writes
+(:mod:`asnn.io.foxglove_mcap`), so one Foxglove layout serves a recorded run and the fleet:
+
+``/<prefix>/<robot>/preview``      ``foxglove.CompressedImage``   the camera's thumbnail
+``/<prefix>/<robot>/annotations``  ``foxglove.ImageAnnotations``  each response's targets, scaled
+                                                                  to the thumbnail
+``/<prefix>/<robot>/response``     JSON ``asnn.Response``         every response (plottable)
+``/<prefix>/<robot>/warning``      JSON ``asnn.Response``         every warning
+
+Bounds (docs/operations.md, "Hostile input"), the dashboard's rules: every inbound message is
+validated by the dashboard's own :func:`clients.dashboard.decode_fleet_sample` (previews of at
+most ``service.messages.MAX_PREVIEW_BYTES``, decoded; at most ``MAX_TARGETS`` targets per
+response); invalid ones are counted per reason and logged rate-limited (one line per reason
+every ``log_interval`` seconds), never raised. A robot costs four channels and two numbers, for
+at most ``max_robots`` robots; when the table is full, the robot silent longest makes room if it
+has been silent for ``stale_after`` seconds, and robots silent for ``forget_after`` seconds are
+dropped (their channels unadvertised). No picture is kept, each is forwarded as it comes, and
+the server holds at most ``backlog`` messages per connected viewer (the oldest are dropped for a
+slow one), so a viewer costs at most ``backlog`` previews.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+
+# first: without the 'ros' extra, this import fails with a message naming it
+from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, response_message, target_annotations,
+                                   time_ns, timestamp)
+
+import foxglove
+from foxglove.channels import CompressedImageChannel, ImageAnnotationsChannel
+from foxglove.messages import CompressedImage
+
+from service import keys
+from service.logutil import RateLimitedLog
+from service.messages import Preview, Response
+
+from .dashboard import STALE_S, stale_robot, take_fleet_sample
+
+__all__ = ["DEFAULT_PORT", "FoxgloveBridge", "robot_topics"]
+
+log = logging.getLogger("asnn.foxglove")
+
+DEFAULT_PORT = 8765   # Foxglove's usual WebSocket port
+MAX_ROBOTS = 256
+FORGET_S = 600.0      # a robot silent this long loses its channels
+BACKLOG = 256         # messages queued per viewer before the oldest are dropped
+
+
+def robot_topics(prefix: str, robot: str) -> dict[str, str]:
+    """The Foxglove topics of a robot: ``/<prefix>/<robot>/<kind>`` per kind."""
+    return {kind: f"/{prefix}/{robot}/{kind}"
+            for kind in ("preview", "annotations", "response", "warning")}
+
+
+@dataclass
+class _Robot:
+    """The channels of one robot and what scaling its targets needs."""
+
+    preview: CompressedImageChannel
+    annotations: ImageAnnotationsChannel
+    response: foxglove.Channel
+    warning: foxglove.Channel
+    size: tuple[int, int] | None = None            # the latest thumbnail's (width, height)
+    scale: tuple[float, float] = (1.0, 1.0)        # frame pixels -> thumbnail pixels
+    touched: float = 0.0
+
+    def close(self) -> None:
+        for channel in (self.preview, self.annotations, self.response, self.warning):
+            channel.close()
+
+
+class FoxgloveBridge:
+    """A Foxglove WebSocket server showing the fleet, fed with raw Zenoh samples.
+
+    Parameters
+    ----------
+    prefix : str
+        Key prefix of the samples given to :meth:`offer`.
+    host, port : str, int
+        Where the server listens (``port=0``: a free one, see :attr:`port`). 127.0.0.1 by
+        default: the protocol has no authentication.
+    max_robots : int
+        Robots served at once; a message of one more is counted (``too-many-robots``) and
+        dropped unless a robot silent for ``stale_after`` seconds makes room.
+    forget_after : float
+        Seconds of silence after which a robot's channels are closed.
+    backlog : int
+        Messages queued per viewer (the SDK drops the oldest for a slow viewer).
+    log_interval : float
+        Seconds between two log lines of the same rejection reason.
+    clock : callable
+        Seconds, monotonic (staleness, forgetting, log rate); injectable for tests.
+
+    Use as a context manager, or call :meth:`close`.
+    """
+
+    def __init__(self, prefix: str = keys.DEFAULT_PREFIX, *, host: str = "127.0.0.1",
+                 port: int = DEFAULT_PORT, max_robots: int = MAX_ROBOTS,
+                 stale_after: float = STALE_S, forget_after: float = FORGET_S,
+                 backlog: int = BACKLOG, log_interval: float = 10.0,
+                 clock: Callable[[], float] = time.monotonic):
+        self.prefix = keys.check_prefix(prefix)
+        self.max_robots, self.stale_after = max_robots, stale_after
+        self.forget_after, self.clock = forget_after, clock
+        self.received: Counter = Counter()
+        self.invalid: Counter = Counter()
+        self._robots: dict[str, _Robot] = {}
+        self._lock = threading.Lock()
+        self._log = RateLimitedLog(log, log_interval, clock)
+        self._next_sweep = clock()
+        self._context = foxglove.Context()  # the fleet's channels reach this server only
+        try:
+            self.server = foxglove.start_server(
+                name=f"asnn fleet ({self.prefix})", host=host, port=port, context=self._context,
+                message_backlog_size=backlog)
+        except Exception as exc:  # the SDK's own error type: the port is taken, a bad address
+            raise OSError(f"cannot serve Foxglove on {host}:{port}: {exc}") from None
+        self.host = host
+
+    @property
+    def port(self) -> int:
+        return self.server.port
+
+    @property
+    def url(self) -> str:
+        return f"ws://{'127.0.0.1' if self.host in ('0.0.0.0', '') else self.host}:{self.port}"
+
+    def robots(self) -> list[str]:
+        with self._lock:
+            return sorted(self._robots)
+
+    # ------------------------------------------------------------------ input
+
+    def offer(self, key: str, payload: bytes) -> str | None:
+        """Take one sample of ``<prefix>/<robot>/(response|warning|preview)`` and log it on the
+        robot's topics. Returns the robot id, or ``None`` when the message was invalid (counted
+        in ``invalid`` by reason and logged). Never raises for bad input."""
+        sample = take_fleet_sample(key, payload, self.prefix, self._reject)
+        if sample is None:
+            return None
+        robot, kind, message = sample
+        with self._lock:
+            now = self.clock()
+            self._forget_locked(now)
+            state = self._robot_locked(robot, now)
+            if state is None:
+                self.invalid["too-many-robots"] += 1
+                self._log.warning("too-many-robots", "dropped a %s of %s: already serving %d "
+                                  "robots", kind, robot, self.max_robots)
+                return None
+            state.touched = now
+            self.received[kind] += 1
+            if kind == "preview":
+                self._log_preview_locked(state, message)
+            elif kind == "response":
+                self._log_response_locked(state, message)
+            else:
+                state.warning.log(response_message(message.model_dump(),
+                                                   time_ns(message.stamp)))
+        return robot
+
+    def _reject(self, reason: str, detail: str, key) -> None:
+        with self._lock:
+            self.invalid[reason] += 1
+        self._log.warning(reason, "invalid message on %s (%s): %s", str(key)[:200], reason,
+                          detail[:300])
+        return None
+
+    def _robot_locked(self, robot: str, now: float) -> _Robot | None:
+        """The robot's channels, made if there is room (as the dashboard makes it)."""
+        state = self._robots.get(robot)
+        if state is None:
+            if len(self._robots) >= self.max_robots:
+                quiet = stale_robot(self._robots, now, self.stale_after)
+                if quiet is None:
+                    return None
+                self._robots.pop(quiet).close()
+                log.info("robot %s: silent for more than %.0f s, its topics are closed to make "
+                         "room for %s", quiet, self.stale_after, robot)
+            topics = robot_topics(self.prefix, robot)
+            context = self._context
+            state = self._robots[robot] = _Robot(
+                preview=CompressedImageChannel(topics["preview"], context=context),
+                annotations=ImageAnnotationsChannel(topics["annotations"], context=context),
+                response=foxglove.Channel(topics["response"], schema=RESPONSE_SCHEMA,
+                                          context=context),
+                warning=foxglove.Channel(topics["warning"], schema=RESPONSE_SCHEMA,
+                                         context=context))
+            log.info("robot %s: serving %s", robot, ", ".join(topics.values()))
+        return state
+
+    @staticmethod
+    def _log_preview_locked(state: _Robot, preview: Preview) -> None:
+        state.size = (preview.width, preview.height)
+        state.scale = (preview.width / (preview.frame_width or preview.width),
+                       preview.height / (preview.frame_height or preview.height))
+        state.preview.log(CompressedImage(timestamp=timestamp(time_ns(preview.stamp)),
+                                          frame_id="camera", data=preview.data,
+                                          format=preview.format))
+
+    @staticmethod
+    def _log_response_locked(state: _Robot, response: Response) -> None:
+        stamp_ns = time_ns(response.stamp)
+        fields = response.model_dump()
+        state.response.log(response_message(fields, stamp_ns))
+        if state.size is not None:  # without a thumbnail there is no picture to draw on
+            state.annotations.log(target_annotations(
+                fields["targets"], stamp_ns, state.size, collision=response.collision,
+                scale=state.scale))
+
+    def _forget_locked(self, now: float) -> None:
+        if now < self._next_sweep:
+            return
+        self._next_sweep = now + min(self.forget_after / 10, 10.0)
+        for name in [n for n, s in self._robots.items() if now - s.touched > self.forget_after]:
+            self._robots.pop(name).close()
+            log.info("robot %s: silent for %.0f s, its topics are closed", name,
+                     self.forget_after)
+
+    # ------------------------------------------------------------------ lifetime
+
+    def __enter__(self) -> FoxgloveBridge:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Stop serving and close every robot's channels."""
+        with self._lock:
+            for state in self._robots.values():
+                state.close()
+            self._robots.clear()
+        self.server.stop()

@@ -1,0 +1,371 @@
+"""Foxglove output: the MCAP of ``asnn detect --mcap`` read back with the MCAP project's reader,
+the annotations of targets with and without id/ttc, and the live server (``asnn foxglove``)
+through a real Zenoh session and a WebSocket client."""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import subprocess
+import sys
+import time
+
+import msgpack
+import numpy as np
+import pytest
+
+pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+pytest.importorskip("mcap_protobuf", reason="the dev extra is not installed")
+
+from mcap.reader import make_reader  # noqa: E402
+from mcap.records import Schema  # noqa: E402
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoders  # noqa: E402
+
+from asnn.io import rosbag  # noqa: E402
+from asnn.io.foxglove_mcap import target_annotations  # noqa: E402
+from asnn.stimuli import make_scene  # noqa: E402
+from service import keys  # noqa: E402
+from service.messages import MAX_PREVIEW_BYTES, Preview, Response, TargetMsg, encode  # noqa: E402
+
+TOPICS = {"/asnn/image": ("foxglove.CompressedImage", "protobuf"),
+          "/asnn/annotations": ("foxglove.ImageAnnotations", "protobuf"),
+          "/asnn/response": ("asnn.Response", "json"),
+          "/asnn/warning": ("asnn.Response", "json")}
+
+
+def decode(schema_name: str, encoding: str, data: bytes, message: bytes):
+    """A message decoded with the schema it travels with (protobuf FileDescriptorSet)."""
+    schema = Schema(id=1, name=schema_name, encoding=encoding, data=data)
+    return ProtobufDecoders().decoder_for("protobuf", schema)(message)
+
+
+@pytest.fixture(scope="module")
+def detected(tmp_path_factory):
+    """A bag with a camera topic and another topic, through asnn detect --jsonl --mcap."""
+    from mcap_ros2.writer import Writer
+
+    tmp = tmp_path_factory.mktemp("fox")
+    scene = make_scene("looming", size=(96, 96), start=5, stop=30)
+    bag = tmp / "run.mcap"
+    start = 1_700_000_000_000_000_000
+    stamps = [start + round(i * 1e9 / 15) for i in range(len(scene.frames))]  # 15 fps
+    with open(bag, "wb") as fh, Writer(fh) as writer:
+        image = writer.register_msgdef(rosbag.IMAGE, rosbag.IMAGE_MSGDEF)
+        text = writer.register_msgdef("std_msgs/msg/String", "string data")
+        for i, (frame, ns) in enumerate(zip(scene.frames, stamps)):
+            header = {"stamp": {"sec": ns // 10**9, "nanosec": ns % 10**9},
+                      "frame_id": "front_camera"}
+            writer.write_message("/front/image_raw", image, {
+                "header": header, "height": 96, "width": 96, "encoding": "mono8",
+                "is_bigendian": 0, "step": 96, "data": frame.tobytes()}, log_time=ns + 5000)
+            writer.write_message("/chatter", text, {"data": f"hello {i}"}, log_time=ns)
+    out, jsonl = tmp / "out.mcap", tmp / "out.jsonl"
+    proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", str(bag), "--mcap",
+                           str(out), "--jsonl", str(jsonl)], capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    records = [json.loads(line) for line in jsonl.read_text().splitlines()]
+    return out, records, stamps, scene
+
+
+def read_all(path):
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[ProtobufDecoders()])
+        summary = reader.get_summary()
+        messages = {}
+        for schema, channel, message, decoded in reader.iter_decoded_messages(
+                topics=[t for t in TOPICS if TOPICS[t][1] == "protobuf"]):
+            messages.setdefault(channel.topic, []).append((message.log_time, decoded))
+        fh.seek(0)
+        for schema, channel, message in make_reader(fh).iter_messages(
+                topics=[t for t in TOPICS if TOPICS[t][1] == "json"]):
+            messages.setdefault(channel.topic, []).append((message.log_time,
+                                                           json.loads(message.data)))
+    return summary, messages
+
+
+def test_the_mcap_has_the_documented_topics_and_schemas_and_nothing_else(detected):
+    path, records, stamps, _ = detected
+    summary, messages = read_all(path)
+    channels = {c.topic: c for c in summary.channels.values()}
+    assert set(channels) == set(TOPICS)  # /chatter and the input image are not copied
+    for topic, (schema, encoding) in TOPICS.items():
+        record = summary.schemas[channels[topic].schema_id]
+        assert record.name == schema and channels[topic].message_encoding == encoding
+        assert record.encoding == ("protobuf" if encoding == "protobuf" else "jsonschema")
+    warned = sum(r["collision"] for r in records)
+    assert 0 < warned < len(records)
+    assert {t: len(m) for t, m in messages.items()} == {
+        "/asnn/image": len(records), "/asnn/annotations": len(records),
+        "/asnn/response": len(records), "/asnn/warning": warned}
+
+
+def test_every_message_is_stamped_with_its_frames_header_time(detected):
+    path, records, stamps, _ = detected
+    _, messages = read_all(path)
+    for topic in ("/asnn/image", "/asnn/annotations", "/asnn/response"):
+        assert [t for t, _ in messages[topic]] == stamps, topic
+    for (_, image), (_, annotations), ns in zip(messages["/asnn/image"],
+                                                messages["/asnn/annotations"], stamps):
+        assert image.timestamp.seconds * 10**9 + image.timestamp.nanos == ns
+        assert image.frame_id == "front_camera" and image.format == "jpeg"
+        for circle in annotations.circles:
+            assert circle.timestamp.seconds * 10**9 + circle.timestamp.nanos == ns
+    for (_, response), ns, record in zip(messages["/asnn/response"], stamps, records):
+        assert response["timestamp"] == {"sec": ns // 10**9, "nsec": ns % 10**9}
+        assert {k: response[k] for k in record} == record  # the jsonl record, plottable
+    warning_times = [t for t, _ in messages["/asnn/warning"]]
+    assert warning_times == [ns for ns, r in zip(stamps, records) if r["collision"]]
+
+
+def test_annotations_are_the_targets_and_a_border_while_warning(detected):
+    path, records, _, scene = detected
+    _, messages = read_all(path)
+    drawn = 0
+    for (_, annotations), record in zip(messages["/asnn/annotations"], records):
+        assert len(annotations.circles) == len(record["targets"])
+        for circle, target in zip(annotations.circles, record["targets"]):
+            assert (circle.position.x, circle.position.y) == pytest.approx(
+                (target["x"], target["y"]))
+            meta = {kv.key: kv.value for kv in circle.metadata}
+            assert float(meta["energy"]) == pytest.approx(target["energy"])
+            drawn += 1
+        borders = [p for p in annotations.points if len(p.points) == 4]
+        assert len(borders) == int(record["collision"])
+    assert drawn > 0
+    _, image = messages["/asnn/image"][20]
+    import cv2
+
+    decoded = cv2.imdecode(np.frombuffer(image.data, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert np.abs(decoded.astype(int) - scene.frames[20]).mean() < 3  # the input frame
+
+
+def test_target_ids_and_times_to_contact_are_labelled_where_present():
+    targets = [{"x": 40.0, "y": 20.0, "direction": 0.0, "energy": 0.01, "pixels": 100,
+                "id": 3, "ttc": 1.25},
+               {"x": 10.0, "y": 30.0, "direction": math.pi / 2, "energy": 0.0, "pixels": 50,
+                "id": 4, "ttc": None},
+               {"x": 5.0, "y": 5.0, "direction": 0.0, "energy": 0.0, "pixels": 9}]
+    annotations = target_annotations(targets, 1_500_000_000_250_000_000, (80, 60),
+                                     collision=True, scale=(0.5, 0.25))
+    message = decode("foxglove.ImageAnnotations", "protobuf",
+                     target_annotations.__globals__["ImageAnnotations"].get_schema().data,
+                     annotations.encode())
+    assert [t.text for t in message.texts] == ["#3 ttc 1.2 s", "#4"]
+    assert [(c.position.x, c.position.y) for c in message.circles] == [
+        (20.0, 5.0), (5.0, 7.5), (2.5, 1.25)]  # scaled to the picture
+    first = {kv.key: kv.value for kv in message.circles[0].metadata}
+    assert first["id"] == "3" and first["ttc"] == "1.25"
+    arrow = message.points[0].points
+    assert arrow[1].x - arrow[0].x == pytest.approx(0.5 * (10 + 400 * 0.01))  # along +x
+    border = message.points[-1]
+    assert len(border.points) == 4 and border.outline_color.r == 1.0
+    assert message.circles[0].timestamp.seconds == 1_500_000_000
+    assert message.circles[0].timestamp.nanos == 250_000_000
+
+
+# --------------------------------------------------------------------------- live
+
+class FoxgloveViewer:
+    """A minimal Foxglove WebSocket client (protocol ``foxglove.sdk.v1``)."""
+
+    def __init__(self, url: str):
+        from websockets.sync.client import connect
+
+        self._connection = connect(url, subprotocols=["foxglove.sdk.v1"], open_timeout=10)
+        self.channels: dict[str, dict] = {}
+        self.subscriptions: dict[int, str] = {}
+        self.received: dict[str, list[bytes]] = {}
+
+    def __enter__(self):
+        self.ws = self._connection.__enter__()
+        assert self.ws.subprotocol == "foxglove.sdk.v1"
+        return self
+
+    def __exit__(self, *exc):
+        self._connection.__exit__(*exc)
+
+    def pump(self, timeout: float):
+        """Read one message: advertisements are remembered; data is returned as (topic, bytes)."""
+        message = self.ws.recv(timeout=timeout)
+        if isinstance(message, str):
+            data = json.loads(message)
+            if data["op"] == "advertise":
+                for channel in data["channels"]:
+                    self.channels[channel["topic"]] = channel
+            return None
+        if message[0] == 1:  # message data: op, subscription id, log time, payload
+            sub = int.from_bytes(message[1:5], "little")
+            return self.subscriptions[sub], message[13:]
+        return None
+
+    def wait_channel(self, topic: str, timeout: float = 20.0) -> dict:
+        deadline = time.monotonic() + timeout
+        while topic not in self.channels:
+            assert time.monotonic() < deadline, f"{topic} never advertised: {self.channels}"
+            try:
+                self.pump(0.5)
+            except TimeoutError:
+                pass
+        return self.channels[topic]
+
+    def subscribe(self, topic: str) -> None:
+        sub = len(self.subscriptions) + 1
+        self.subscriptions[sub] = topic
+        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+            {"id": sub, "channelId": self.channels[topic]["id"]}]}))
+
+    def next_on(self, topic: str, timeout: float = 20.0) -> bytes:
+        deadline = time.monotonic() + timeout
+        while not self.received.get(topic):
+            assert time.monotonic() < deadline, f"nothing on {topic}"
+            try:
+                item = self.pump(0.5)
+            except TimeoutError:
+                continue
+            if item is not None:
+                self.received.setdefault(item[0], []).append(item[1])
+        return self.received[topic].pop(0)
+
+
+
+def response(robot: str, seq: int, stamp: float, collision: bool = True, **target) -> bytes:
+    targets = [TargetMsg(**{"x": 64.0, "y": 32.0, "direction": 0.0, "energy": 0.01,
+                            "pixels": 120, **target})]
+    return encode(Response(robot=robot, seq=seq, stamp=stamp, model="asnn", preset="default",
+                           u=12.5, out=0.8, spikes=3, spike_rate=60.0, collision=collision,
+                           targets=targets, worker="w1", latency_ms=4.0, dropped=0))
+
+
+def test_live_server_shows_a_robots_preview_annotations_and_numbers(zenoh_net):
+    from clients.dashboard import FleetSubscriber
+    from clients.foxglove import FoxgloveBridge
+
+    frame = np.full((64, 128), 200, np.uint8)
+    stamp = 1_700_000_123.5
+    preview = encode(Preview.from_frame_image(frame, seq=7, stamp=stamp, width=32))
+    with FoxgloveBridge(port=0) as bridge, FleetSubscriber(zenoh_net.hub, bridge):
+        robot_session = zenoh_net.spoke()
+        with FoxgloveViewer(bridge.url) as viewer:
+            deadline = time.monotonic() + 20
+            while "r1" not in bridge.robots():  # until the subscribers are matched
+                assert time.monotonic() < deadline
+                robot_session.put(keys.preview_key("r1"), preview)
+                time.sleep(0.1)
+            annotations_topic, numbers_topic = "/asnn/r1/annotations", "/asnn/r1/response"
+            channel = viewer.wait_channel(annotations_topic)
+            for kind in ("preview", "response", "warning"):
+                viewer.wait_channel(f"/asnn/r1/{kind}")
+            assert channel["schemaName"] == "foxglove.ImageAnnotations"
+            viewer.subscribe(annotations_topic)
+            viewer.subscribe(numbers_topic)
+            time.sleep(0.3)  # the subscription reaches the server
+            robot_session.put(keys.response_key("r1"), response("r1", 7, stamp))
+            payload = viewer.next_on(annotations_topic)
+            message = decode("foxglove.ImageAnnotations", "protobuf",
+                             base64.b64decode(channel["schema"]), payload)
+            circle = message.circles[0]
+            assert (circle.position.x, circle.position.y) == pytest.approx((16.0, 8.0))  # /4
+            assert circle.timestamp.seconds == 1_700_000_123
+            assert circle.timestamp.nanos == 500_000_000
+            assert len(message.points) == 2  # the arrow and the warning border
+            numbers = json.loads(viewer.next_on(numbers_topic))
+            assert numbers["robot"] == "r1" and numbers["spike_rate"] == 60.0
+            assert numbers["collision"] is True and numbers["targets"][0]["pixels"] == 120
+    assert bridge.received["preview"] >= 1 and bridge.received["response"] == 1
+
+
+def test_bridge_counts_bad_messages_and_bounds_its_robots():
+    from clients.foxglove import FoxgloveBridge
+
+    clock = [0.0]
+    with FoxgloveBridge(port=0, max_robots=2, forget_after=60.0,
+                        clock=lambda: clock[0]) as bridge:
+        big = np.random.default_rng(0).integers(0, 256, (600, 600), np.uint8)
+        huge = Preview.from_frame_image(big, seq=1, stamp=1.0, width=600, format="png")
+        assert len(huge.data) > MAX_PREVIEW_BYTES
+        lying = msgpack.packb({"v": 1, "seq": 1, "stamp": 1.0, "width": 4000, "height": 4000,
+                               "format": "png", "data": b"\x89PNG\r\n\x1a\n" + bytes(20)})
+        assert bridge.offer("asnn/r1/preview", encode(huge)) is None
+        assert bridge.offer("asnn/r1/preview", lying) is None
+        assert bridge.offer("asnn/r1/response", response("r2", 1, 1.0)) is None  # other robot
+        assert bridge.offer("asnn/r1/warning", response("r1", 1, 1.0, collision=False)) is None
+        assert bridge.offer("asnn/r1/response", b"\xc1garbage") is None
+        assert bridge.offer("elsewhere/r1/response", response("r1", 1, 1.0)) is None
+        assert bridge.offer("asnn/r1/response", response("r1", 1, 1e300)) == "r1"  # clamped
+        assert dict(bridge.invalid) == {"oversized": 1, "bad-image": 1, "bad-key": 2,
+                                        "invalid-field": 1, "undecodable": 1}
+        assert bridge.offer("asnn/r2/response", response("r2", 1, 1.0)) == "r2"
+        assert bridge.offer("asnn/r3/response", response("r3", 1, 1.0)) is None
+        assert bridge.invalid["too-many-robots"] == 1 and bridge.robots() == ["r1", "r2"]
+        clock[0] = 30.0
+        bridge.offer("asnn/r2/response", response("r2", 2, 2.0))
+        clock[0] = 80.0  # r1 silent for 80 s: forgotten, its place taken
+        assert bridge.offer("asnn/r3/response", response("r3", 1, 1.0)) == "r3"
+        assert bridge.robots() == ["r2", "r3"]
+
+
+def test_bridge_follows_the_dashboards_hostile_input_rules(caplog):
+    """docs/operations.md, "Hostile input": the Foxglove server takes samples as the dashboard
+    does: the same preview cap, targets per response bounded, a stale robot makes room for a new
+    one, and a flood of invalid messages logs a line or two."""
+    import logging
+
+    from clients.dashboard import MAX_TARGETS, FleetStore, decode_fleet_sample
+    from clients.foxglove import FoxgloveBridge
+
+    noise = np.random.default_rng(1).integers(0, 256, (200, 200, 3), np.uint8)
+    preview = Preview.from_frame_image(noise, seq=1, stamp=1.0, width=200, format="png")
+    assert MAX_PREVIEW_BYTES < len(preview.data) < 256 * 1024
+    many = Response.model_validate({**msgpack.unpackb(response("r1", 1, 1.0)),
+                                    "targets": [{"x": i, "y": i, "direction": 0.0,
+                                                 "energy": 0.1, "pixels": 9}
+                                                for i in range(40)]})
+    assert len(decode_fleet_sample("asnn/r1/response", encode(many), "asnn")[2].targets) \
+        == MAX_TARGETS
+    clock = [0.0]
+    store = FleetStore(max_robots=2, stale_after=3.0, clock=lambda: clock[0])
+    with FoxgloveBridge(port=0, max_robots=2, stale_after=3.0,
+                        clock=lambda: clock[0]) as bridge, caplog.at_level(logging.INFO):
+        for receiver in (store, bridge):
+            assert receiver.offer("asnn/r1/preview", encode(preview)) is None
+            assert dict(receiver.invalid) == {"oversized": 1}
+            for _ in range(300):
+                receiver.offer("asnn/r1/response", b"\xc1")
+            assert receiver.invalid["undecodable"] == 300
+            assert receiver.offer("asnn/r1/response", response("r1", 1, 1.0)) == "r1"
+            assert receiver.offer("asnn/r2/response", response("r2", 1, 1.0)) == "r2"
+            assert receiver.offer("asnn/r3/response", response("r3", 1, 1.0)) is None
+        clock[0] = 2.0
+        for receiver in (store, bridge):
+            receiver.offer("asnn/r2/response", response("r2", 2, 2.0))
+        clock[0] = 4.5  # r1 silent for 4.5 s: stale, it makes room; r2 is not
+        for receiver in (store, bridge):
+            assert receiver.offer("asnn/r3/response", response("r3", 1, 1.0)) == "r3"
+            assert receiver.robots() == ["r2", "r3"]
+    warnings = [r for r in caplog.records
+                if r.name == "asnn.foxglove" and r.levelno >= logging.WARNING]
+    assert 1 <= len(warnings) <= 4, [r.getMessage() for r in warnings]
+
+
+def test_asnn_foxglove_serves_on_127_0_0_1_and_fails_clearly_on_a_taken_port(procs, tmp_path):
+    import socket
+
+    from netutil import SHORT_LEASE
+    from service.demo import free_port
+
+    config = tmp_path / "zenoh.json5"
+    config.write_text(SHORT_LEASE)
+    zenoh_options = ["--config", str(config), "--listen", f"tcp/127.0.0.1:{free_port()}"]
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = subprocess.run([sys.executable, "-m", "cli.main", "foxglove", "--port", str(port),
+                               *zenoh_options], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert f"127.0.0.1:{port}" in proc.stderr.strip().splitlines()[-1]
+    server = procs("foxglove", "--port", "0", *zenoh_options)
+    server.wait_line("foxglove on ws://127.0.0.1:")
+    assert server.stop() == 0

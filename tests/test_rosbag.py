@@ -1,0 +1,430 @@
+"""ROS 2 bags (MCAP) as a source: decoding every supported encoding, detect on bags against the
+same frames from a lossless video, eval and camera on bags, and every kind of bad bag."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("mcap_ros2", reason="the 'ros' extra is not installed")
+
+from mcap_ros2.writer import Writer as Ros2Writer  # noqa: E402  (the third-party writer)
+
+from asnn.evaluation.clips import evaluate_clips  # noqa: E402
+from asnn.io import rosbag  # noqa: E402
+from asnn.io.images import ImageError  # noqa: E402
+from asnn.io.sources import SourceError, open_source  # noqa: E402
+from asnn.stimuli import make_scene  # noqa: E402
+from cli.main import main  # noqa: E402
+
+START_NS = 1_700_000_000_000_000_000
+
+
+def header(index: int, fps: float = 20.0, frame_id: str = "cam") -> dict:
+    ns = START_NS + round(index * 1e9 / fps)
+    return {"stamp": {"sec": ns // 10**9, "nanosec": ns % 10**9}, "frame_id": frame_id}
+
+
+def raw_message(image: np.ndarray, encoding: str, index: int = 0, *, pad: int = 0,
+                bigendian: bool = False, fps: float = 20.0) -> dict:
+    """A sensor_msgs/msg/Image dict of ``image`` (already in ``encoding``'s layout), each row
+    padded with ``pad`` bytes."""
+    h, w = image.shape[:2]
+    pixels = image.astype(image.dtype.newbyteorder(">" if bigendian else "<"))
+    rows = pixels.reshape(h, -1).view(np.uint8)
+    step = rows.shape[1] + pad
+    data = np.zeros((h, step), np.uint8)
+    data[:, :rows.shape[1]] = rows
+    return {"header": header(index, fps), "height": h, "width": w, "encoding": encoding,
+            "is_bigendian": int(bigendian), "step": step, "data": data.tobytes()}
+
+
+def write_messages(path, topics: dict[str, tuple[str, list[dict]]], fps: float = 20.0,
+                   chunk_size: int = 1024 * 1024):
+    """A bag with the third-party writer: {topic: (schema name, messages)}."""
+    definitions = {rosbag.IMAGE: rosbag.IMAGE_MSGDEF,
+                   rosbag.COMPRESSED_IMAGE: rosbag.COMPRESSED_IMAGE_MSGDEF,
+                   "std_msgs/msg/String": "string data"}
+    with open(path, "wb") as fh, Ros2Writer(fh, chunk_size=chunk_size) as writer:
+        schemas = {name: writer.register_msgdef(name, text) for name, text in definitions.items()}
+        for topic, (schema, messages) in topics.items():
+            for index, message in enumerate(messages):
+                ns = START_NS + round(index * 1e9 / fps)
+                writer.write_message(topic, schemas[schema], message, log_time=ns,
+                                     publish_time=ns, sequence=index)
+    return path
+
+
+@pytest.fixture(scope="module")
+def looming():
+    return make_scene("looming", size=(96, 96), start=5, stop=30)
+
+
+def detect_records(*args) -> list[dict]:
+    proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", *map(str, args),
+                           "--jsonl", "-"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return [json.loads(line) for line in proc.stdout.splitlines()]
+
+
+def write_ffv1(frames, path, fps=20.0):
+    """A lossless video (FFV1) of gray or BGR frames."""
+    h, w = frames[0].shape[:2]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (w, h))
+    assert writer.isOpened()
+    for frame in frames:
+        writer.write(frame if frame.ndim == 3 else cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
+    writer.release()
+    return path
+
+
+# --------------------------------------------------------------------------- decoding
+
+@pytest.mark.parametrize("pad", [0, 3])
+def test_raw_encodings_decode_to_gray_or_bgr_with_row_padding(pad):
+    rng = np.random.default_rng(0)
+    bgr = rng.integers(0, 256, (5, 7, 3), dtype=np.uint8)
+    gray = bgr[..., 0].copy()
+    rgb = bgr[..., ::-1].copy()
+    cases = {"mono8": gray, "8UC1": gray, "bgr8": bgr, "8UC3": bgr, "rgb8": rgb,
+             "rgba8": np.dstack([rgb, np.full((5, 7), 9, np.uint8)]),
+             "bgra8": np.dstack([bgr, np.full((5, 7), 9, np.uint8)])}
+    for encoding, pixels in cases.items():
+        m = raw_message(pixels, encoding, pad=pad)
+        out = rosbag.image_from_raw(m["width"], m["height"], encoding, 0, m["step"], m["data"])
+        expected = gray if encoding in ("mono8", "8UC1") else bgr
+        assert out.dtype == np.uint8 and np.array_equal(out, expected), encoding
+
+
+@pytest.mark.parametrize("bigendian", [False, True])
+def test_mono16_takes_the_high_byte_in_either_byte_order(bigendian):
+    values = np.array([[0, 255, 256, 65535], [4660, 32768, 1, 51966]], dtype=np.uint16)
+    m = raw_message(values, "mono16", pad=2, bigendian=bigendian)
+    out = rosbag.image_from_raw(4, 2, "mono16", int(bigendian), m["step"], m["data"])
+    assert np.array_equal(out, (values >> 8).astype(np.uint8))
+
+
+def test_bayer_and_yuv_decode_a_uniform_colour_to_itself():
+    b, g, r = 40, 120, 200
+    mosaic = np.zeros((8, 8), np.uint8)  # rggb: R at (even, even), B at (odd, odd)
+    mosaic[0::2, 0::2], mosaic[0::2, 1::2], mosaic[1::2, 0::2], mosaic[1::2, 1::2] = r, g, g, b
+    out = rosbag.image_from_raw(8, 8, "bayer_rggb8", 0, 8, mosaic.tobytes())
+    assert np.abs(out[2:-2, 2:-2].astype(int) - [b, g, r]).max() <= 1
+    uyvy = np.tile(np.array([128, 90, 128, 90], np.uint8), (4, 2))  # gray: Y 90, U = V = 128
+    out = rosbag.image_from_raw(4, 4, "yuv422", 0, 8, uyvy.tobytes())
+    assert np.abs(out.astype(int) - 1.164 * (90 - 16)).max() <= 1  # BT.601, video range
+    out = rosbag.image_from_raw(4, 4, "yuv422_yuy2", 0, 8, uyvy.tobytes())  # read as YUYV
+    assert np.ptp(out[0, 0]) > 50  # U = V = 90: not gray
+
+
+def test_compressed_images_decode_jpeg_and_png_of_any_depth():
+    rng = np.random.default_rng(1)
+    bgr = rng.integers(0, 256, (6, 9, 3), dtype=np.uint8)
+    png = cv2.imencode(".png", bgr)[1].tobytes()
+    assert np.array_equal(rosbag.image_from_compressed("png", png), bgr)
+    assert np.array_equal(rosbag.image_from_compressed("bgr8; png compressed bgr8", png), bgr)
+    deep = cv2.imencode(".png", np.full((4, 4), 0x1234, np.uint16))[1].tobytes()
+    assert np.array_equal(rosbag.image_from_compressed("mono16; png", deep),
+                          np.full((4, 4), 0x12, np.uint8))
+    jpeg = cv2.imencode(".jpg", bgr)[1].tobytes()
+    assert rosbag.image_from_compressed("rgb8; jpeg compressed bgr8", jpeg).shape == (6, 9, 3)
+
+
+@pytest.mark.parametrize("args, reason", [
+    ((4, 4, "32FC1", 0, 16, bytes(64)), "unknown-encoding"),
+    ((4, 4, "mono8", 0, 3, bytes(16)), "bad-size"),           # step shorter than a row
+    ((4, 4, "mono8", 0, 4, bytes(15)), "bad-pixels"),         # data too short
+    ((4, 4, "mono8", 0, 4, bytes(17)), "bad-pixels"),         # data too long
+    ((5000, 1, "mono8", 0, 5000, bytes(5000)), "bad-size"),   # wider than MAX_SIDE
+    ((0, 4, "mono8", 0, 0, b""), "bad-size"),
+    ((2**31, 2**31, "bgr8", 0, 3 * 2**31, bytes(10)), "bad-size"),  # nothing allocated
+    ((3, 2, "yuv422", 0, 6, bytes(12)), "bad-size"),          # odd width
+])
+def test_bad_raw_images_are_refused_with_a_reason(args, reason):
+    with pytest.raises(ImageError) as info:
+        rosbag.image_from_raw(*args)
+    assert info.value.reason == reason
+
+
+@pytest.mark.parametrize("format, data, reason", [
+    ("16UC1; compressedDepth png", b"\x89PNG", "unknown-encoding"),
+    ("tiff", b"II*\x00", "unknown-encoding"),
+    ("jpeg", b"not a jpeg", "bad-image"),
+    ("png", b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x01\x00\x00\x00\x01\x00\x00"
+     b"\x08\x00\x00\x00\x00" + bytes(4),
+     "bad-size"),  # a header claiming 65536 x 65536: refused before decoding
+    ("png", cv2.imencode(".png", np.zeros((4, 4), np.uint8))[1].tobytes()[:20],
+     "bad-image"),  # a header cut short
+])
+def test_bad_compressed_images_are_refused_with_a_reason(format, data, reason):
+    with pytest.raises(ImageError) as info:
+        rosbag.image_from_compressed(format, data)
+    assert info.value.reason == reason
+
+
+def lying_jpeg(width: int = 4096, height: int = 4096) -> bytes:
+    """A whole jpeg of an 8x8 black image (a few hundred bytes), its header edited to declare
+    width x height: a decoder pads the missing pixels into a huge picture."""
+    data = bytearray(cv2.imencode(".jpg", np.zeros((8, 8), np.uint8))[1].tobytes())
+    sof = data.index(b"\xff\xc0")
+    data[sof + 5:sof + 7] = height.to_bytes(2, "big")
+    data[sof + 7:sof + 9] = width.to_bytes(2, "big")
+    return bytes(data)
+
+
+def test_a_truncated_jpeg_declaring_4096x4096_is_refused_before_decoding(tmp_path, monkeypatch):
+    """The service's protection against amplification (docs/operations.md, "Hostile input")
+    holds for compressed images in bags: the header must describe a whole image its data can
+    hold, and a lying one never reaches the decoder."""
+    decoded = []  # the sizes the decoder made
+
+    def imdecode(*args):
+        image = real_imdecode(*args)
+        decoded.append(None if image is None else image.shape)
+        return image
+
+    real_imdecode = cv2.imdecode
+    monkeypatch.setattr(cv2, "imdecode", imdecode)
+    with pytest.raises(ImageError) as info:
+        rosbag.image_from_compressed("jpeg", lying_jpeg())
+    assert info.value.reason == "bad-image" and "truncated" in info.value.detail
+    assert not decoded
+    good = cv2.imencode(".jpg", np.full((8, 8), 128, np.uint8))[1].tobytes()
+    bag = write_messages(tmp_path / "lying.mcap", {"/cam": (rosbag.COMPRESSED_IMAGE, [
+        {"header": header(i), "format": "jpeg", "data": data}
+        for i, data in enumerate([good, lying_jpeg(), good])])})
+    rejected = []
+    frames = list(open_source(str(bag), on_error=lambda reason, _: rejected.append(reason))
+                  .frames())
+    assert [f.shape for f in frames] == [(8, 8), (8, 8)] and rejected == ["bad-image"]
+    assert decoded and set(decoded) == {(8, 8)}  # only the whole pictures were decoded
+
+
+# --------------------------------------------------------------------------- detect
+
+def test_detect_on_a_mono8_bag_equals_detect_on_the_same_frames_in_a_lossless_video(
+        tmp_path, looming):
+    frames = list(looming.frames)
+    bag = write_messages(tmp_path / "run.mcap", {"/camera/image_raw": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(frames)])})
+    video = write_ffv1(frames, tmp_path / "run.avi")
+    from_bag, from_video = detect_records(bag), detect_records(video)
+    assert len(from_bag) == len(frames) and from_bag == from_video
+    assert any(r["collision"] and r["targets"] for r in from_bag)  # the comparison is not empty
+
+
+def test_detect_on_colour_and_compressed_bags_equals_the_lossless_video(tmp_path, looming):
+    rng = np.random.default_rng(2)
+    tint = rng.integers(0, 30, 3)  # colour frames whose channels differ
+    frames = [np.clip(np.dstack([f, f, f]).astype(int) - tint, 0, 255).astype(np.uint8)
+              for f in looming.frames]
+    rgb = [raw_message(f[..., ::-1].copy(), "rgb8", i, pad=4) for i, f in enumerate(frames)]
+    png = [{"header": header(i), "format": "bgr8; png compressed bgr8",
+            "data": cv2.imencode(".png", f)[1].tobytes()} for i, f in enumerate(frames)]
+    bag = write_messages(tmp_path / "two.mcap", {"/cam/rgb": (rosbag.IMAGE, rgb),
+                                                 "/cam/png": (rosbag.COMPRESSED_IMAGE, png)})
+    expected = detect_records(write_ffv1(frames, tmp_path / "colour.avi"))
+    assert detect_records(bag, "--topic", "/cam/rgb") == expected
+    assert detect_records(f"{bag}#/cam/png") == expected
+
+
+def test_t_is_the_header_stamp_relative_to_the_first_frame(tmp_path, looming):
+    frames = list(looming.frames[:6])
+    stamps = [0.0, 0.1, 0.25, 0.3, 0.5, 0.55]  # jittery: not frame / fps
+    messages = []
+    for f, s in zip(frames, stamps):
+        m = raw_message(f, "mono8")
+        ns = START_NS + round(s * 1e9)
+        m["header"]["stamp"] = {"sec": ns // 10**9, "nanosec": ns % 10**9}
+        messages.append(m)
+    bag = write_messages(tmp_path / "jitter.mcap", {"/c": (rosbag.IMAGE, messages)})
+    assert [r["t"] for r in detect_records(bag)] == stamps
+    source = open_source(str(bag))
+    assert source.timed and source.start_ns == START_NS and source.frame_id == "cam"
+    assert source.frame_count == 6 and source.fps == pytest.approx(10.0)  # median step 0.1 s
+
+
+def test_a_rosbag2_directory_and_asnn_scene_bags_open(tmp_path, looming):
+    directory = tmp_path / "rosbag2_run"
+    directory.mkdir()
+    (directory / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    rosbag.write_bag(looming.frames, directory / "rosbag2_run_0.mcap")
+    assert len(list(open_source(str(directory)).frames())) == len(looming.frames)
+    assert main(["scene", "receding", str(tmp_path / "scene.mcap"), "--size", "64x48"]) == 0
+    frames = list(open_source(str(tmp_path / "scene.mcap")).frames())
+    assert len(frames) == len(make_scene("receding").frames) and frames[0].shape == (48, 64)
+
+
+# --------------------------------------------------------------------------- bad bags
+
+def detect_fails(*args) -> str:
+    proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", *map(str, args)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def two_topics(tmp_path_factory, looming):
+    path = tmp_path_factory.mktemp("bags") / "two.mcap"
+    messages = [raw_message(f, "mono8", i) for i, f in enumerate(looming.frames)]
+    return write_messages(path, {"/front/image": (rosbag.IMAGE, messages),
+                                 "/rear/image": (rosbag.IMAGE, messages),
+                                 "/chatter": ("std_msgs/msg/String", [{"data": "hi"}])})
+
+
+def test_several_image_topics_without_a_topic_is_an_error_listing_them(two_topics):
+    line = detect_fails(two_topics)
+    assert "/front/image" in line and "/rear/image" in line and "--topic" in line
+    assert "/chatter" not in line
+
+
+@pytest.mark.parametrize("topic, words", [("/side/image", "no topic"),
+                                          ("/chatter", "std_msgs/msg/String")])
+def test_a_missing_or_non_image_topic_is_an_error(two_topics, topic, words):
+    assert words in detect_fails(two_topics, "--topic", topic)
+
+
+def test_an_empty_topic_and_a_bag_without_images_are_errors(tmp_path):
+    with open(tmp_path / "empty.mcap", "wb") as fh, Ros2Writer(fh) as writer:
+        schema = writer.register_msgdef(rosbag.IMAGE, rosbag.IMAGE_MSGDEF)
+        writer._writer.register_channel("/camera/image_raw", "cdr", schema.id)
+    assert "holds no message" in detect_fails(tmp_path / "empty.mcap")
+    bag = write_messages(tmp_path / "text.mcap", {"/chatter": ("std_msgs/msg/String",
+                                                               [{"data": "hi"}])})
+    assert "no image topic" in detect_fails(bag)
+
+
+def test_an_unknown_encoding_is_an_error_for_detect(tmp_path):
+    bag = write_messages(tmp_path / "float.mcap", {"/depth": (rosbag.IMAGE, [
+        raw_message(np.zeros((40, 40), np.float32), "32FC1")])})
+    line = detect_fails(bag)
+    assert "32FC1" in line and "/depth" in line
+
+
+@pytest.mark.parametrize("cut", [0.4, 0.97])  # in the messages; in the summary after them
+def test_a_cut_bag_is_a_one_line_error_after_the_frames_before_the_cut(tmp_path, looming, cut):
+    whole = write_messages(tmp_path / "whole.mcap", {"/c": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(looming.frames)])},
+        chunk_size=20_000)  # a few frames per chunk, as a recorder's 768 KiB for larger ones
+    data = whole.read_bytes()
+    cut_bag = tmp_path / "cut.mcap"
+    cut_bag.write_bytes(data[:int(len(data) * cut)])
+    jsonl = tmp_path / "out.jsonl"
+    line = detect_fails(cut_bag, "--jsonl", jsonl)
+    assert "truncated or corrupt" in line and "mcap recover" in line
+    records = [json.loads(x) for x in jsonl.read_text().splitlines()]
+    assert 0 < len(records) <= len(looming.frames)
+    assert (len(records) < len(looming.frames)) == (cut < 0.9)
+    assert f"{len(records)} frames before" in line
+
+
+def test_corrupt_bytes_and_random_files_never_give_a_traceback(tmp_path, looming):
+    bag = write_messages(tmp_path / "ok.mcap", {"/c": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:8])])})
+    data = bytearray(bag.read_bytes())
+    rng = np.random.default_rng(3)
+    for trial in range(6):
+        damaged = bytearray(data)
+        for offset in rng.integers(8, len(data) - 8, size=20):
+            damaged[offset] ^= 0xFF
+        path = tmp_path / f"damaged{trial}.mcap"
+        path.write_bytes(bytes(damaged))
+        try:
+            source = open_source(str(path))
+            list(source.frames())
+        except SourceError as exc:
+            assert "\n" not in str(exc) and str(path) in str(exc)
+    (tmp_path / "random.mcap").write_bytes(rng.integers(0, 256, 4000, dtype=np.uint8).tobytes())
+    assert "not an MCAP file" in detect_fails(tmp_path / "random.mcap")
+    assert "no such file" in detect_fails(tmp_path / "missing.mcap")
+
+
+def test_a_huge_length_field_is_refused_before_it_is_allocated(tmp_path):
+    # magic, then a Header record claiming 2**62 bytes
+    path = tmp_path / "huge.mcap"
+    path.write_bytes(b"\x89MCAP0\r\n" + b"\x01" + (2**62).to_bytes(8, "little") + bytes(64))
+    line = detect_fails(path)
+    assert "truncated or corrupt" in line
+
+
+def test_a_missing_extra_is_named_in_one_line(tmp_path, monkeypatch, capsys):
+    import asnn.io
+
+    # as if the extra were not installed: mcap cannot be imported, asnn.io.rosbag not yet loaded
+    for name in [n for n in sys.modules if n.split(".")[0] in ("mcap", "mcap_ros2")]:
+        monkeypatch.setitem(sys.modules, name, None)
+    monkeypatch.delitem(sys.modules, "asnn.io.rosbag")
+    monkeypatch.delattr(asnn.io, "rosbag")
+    write_messages(tmp_path / "run.mcap", {})
+    assert main(["detect", str(tmp_path / "run.mcap")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "asnn[ros]" in err
+
+
+# --------------------------------------------------------------------------- eval, camera
+
+def test_eval_reads_bags_in_a_labelled_folder_and_a_label_names_the_topic(tmp_path, looming,
+                                                                          two_topics):
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    (clips / "two.mcap").write_bytes(two_topics.read_bytes())
+    label = looming.label("two.mcap")
+    (clips / "labels.json").write_text(json.dumps([{**label, "topic": "/rear/image"}]))
+    out = tmp_path / "out"
+    assert main(["eval", str(clips), "--models", "asnn", "--out", str(out), "--no-plots",
+                 "--early-tolerance", "0"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert not results["errors"]
+    assert results["detectors"]["asnn"]["clips"][0]["outcome"] == "hit"
+    assert len((out / "results" / "asnn" / "two.jsonl").read_text().splitlines()) == len(
+        looming.frames)
+    (clips / "labels.json").write_text(json.dumps([label]))  # two image topics, none named
+    results = evaluate_clips(clips, tmp_path / "out2", detectors=["asnn"], plots=False)
+    assert len(results["errors"]) == 1 and "/front/image" in results["errors"][0]
+
+
+def test_camera_skips_and_counts_bad_messages_and_a_cut_without_stopping(tmp_path, looming):
+    from service.camera import SourceRejections
+
+    messages = [raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:10])]
+    messages[3] = raw_message(np.zeros((4, 4), np.float32), "32FC1", 3)
+    messages[6]["data"] = messages[6]["data"][:-5]  # short data
+    bag = write_messages(tmp_path / "bad.mcap", {"/c": (rosbag.IMAGE, messages)},
+                         chunk_size=20_000)
+    rejections = SourceRejections("r1")
+    frames = list(open_source(str(bag), on_error=rejections).timed_frames())
+    assert [round(t, 2) for t, _ in frames] == [0.0, 0.05, 0.1, 0.2, 0.25, 0.35, 0.4, 0.45]
+    assert rejections.counts == {"unknown-encoding": 1, "bad-pixels": 1}
+    data = bag.read_bytes()
+    (tmp_path / "cut.mcap").write_bytes(data[:int(len(data) * 0.8)])
+    cut = SourceRejections("r1")
+    list(open_source(str(tmp_path / "cut.mcap"), on_error=cut).frames())
+    assert cut.counts["corrupt-bag"] == 1
+
+
+def test_camera_replays_a_bag_at_its_recorded_pace(zenoh_net, tmp_path, looming):
+    from service.camera import publish_frames
+
+    stamps = [0.0, 0.05, 0.35, 0.4, 0.45]  # a 0.3 s pause in the recording
+    messages = []
+    for i, s in enumerate(stamps):
+        m = raw_message(looming.frames[i], "mono8")
+        ns = START_NS + round(s * 1e9)
+        m["header"]["stamp"] = {"sec": ns // 10**9, "nanosec": ns % 10**9}
+        messages.append(m)
+    bag = write_messages(tmp_path / "pace.mcap", {"/c": (rosbag.IMAGE, messages)})
+    source = open_source(f"{bag}#/c")
+    start = time.monotonic()
+    published = publish_frames(zenoh_net.spoke(), "r1", source, wait=0.0, preview_hz=0)
+    # a lower bound only (a busy machine adds delay): 5 frames at the nominal 20 fps would take
+    # 0.2 s; the recorded pace, pause included, takes 0.45 s
+    assert published == len(stamps) and time.monotonic() - start >= 0.44
