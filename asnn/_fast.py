@@ -568,7 +568,8 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
     Reproduces :func:`~asnn.retina.approach_attention`, :func:`~asnn.retina.direction_attention`
     and :func:`~asnn.retina.membrane_potential` (before its scale). ``blur(image)`` is the
     attention blur (:func:`~asnn.retina.attention_blur`), ``sums`` the sums of R^theta.
-    Unless ``full``, M_d is computed only in M_a's bounding box. Returns
+    Unless ``full``, M_d is computed only in M_a's bounding box (V' is blurred there plus the
+    blur's radius, or over the whole frame for a blur on a coarser grid). Returns
     ``(sum, number of attended pixels, blurred G, blurred V' or None, window)``; ``ws.mask``
     holds M_a M_d (zero outside the window), ``ws.rows[:count]``, ``ws.cols[:count]`` the
     attended pixels in row-major order and ``ws.v_prime`` V' (inside the window).
@@ -593,6 +594,8 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
     margin = blur.radius
     wy0, wy1, wx0, wx1 = max(y0 - margin, 0), min(y1 + margin, h), max(x0 - margin, 0), \
         min(x1 + margin, w)
+    if blur.step > 1:  # a blur on a coarser grid is only exact over the whole frame
+        wy0, wy1, wx0, wx1 = 0, h, 0, w
     if top_k:
         _v_prime(v, r, ks, signs, wy0, wy1, wx0, wx1, ws.v_prime)
         window = ws.v_prime[wy0:wy1, wx0:wx1]
@@ -607,13 +610,15 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
 
 
 class AttentionBlur:
-    """The attention blur g_sigma as a callable with its radius (see :func:`attention`)."""
+    """The attention blur g_sigma as a callable with its radius and grid step (see
+    :func:`attention`)."""
 
-    def __init__(self, sigma: float, size: int, normalised: bool):
+    def __init__(self, sigma: float, size: int, normalised: bool, step: int = 1):
         from . import retina
 
         self.radius = size // 2
-        self._args = (sigma, size, normalised)
+        self.step = step
+        self._args = (sigma, size, normalised, step)
         self._blur = retina.attention_blur
 
     def __call__(self, image: np.ndarray) -> np.ndarray:

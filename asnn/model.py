@@ -10,6 +10,7 @@ functions. ``tests/test_equivalence.py`` keeps the two together.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import deque
 
@@ -18,13 +19,16 @@ import numpy as np
 
 from . import _fast, retina
 from .frames import FrameError, to_luminance
+from .looming import region_expansion
 from .params import ASNNParams, preset
 from .response import Maps, Response
-from .targets import extract_targets
+from .targets import Target, extract_objects, extract_targets
+from .tracking import Observation, TargetTracker
 
 __all__ = ["ASNN", "FrameError", "compile_kernels"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
+_MAX_ELAPSED = 1.0  # seconds between frames beyond which their times are not believed
 
 
 class ASNN:
@@ -58,12 +62,16 @@ class ASNN:
         Floating-point type of the state and the computation.
     spike_window : deque of int
         Spikes of the last N_t frames.
+    tracker : TargetTracker
+        The tracked objects (``params.targets == 'objects'``).
 
     Notes
     -----
-    The model integrates with the fixed step ``params.dt`` (0.05 s by default) whatever the
-    frames' timestamps: the paper assumes a constant frame rate. The first frame of a stream
-    only primes the state: its response is all zeros (u = 0, out = 0.5, no spikes).
+    The retina integrates with the fixed step ``params.dt`` (0.05 s by default) whatever the
+    frames' timestamps: the paper assumes a constant frame rate. Time to contact and expansion
+    rates are measured in the frames' own time: ``step(frame, t)`` with the frame's timestamp in
+    seconds, or ``params.dt`` per frame without one. The first frame of a stream only primes
+    the state: its response is all zeros (u = 0, out = 0.5, no spikes).
     """
 
     def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,
@@ -93,7 +101,7 @@ class ASNN:
             self._v_weights = np.array([p.v_on, p.v_off], t)
             self._a_weights = np.array([p.w1_on, -p.w2_off, p.w1_off, -p.w2_on], t)
             self._blur = _fast.AttentionBlur(p.attention_sigma, p.attention_size,
-                                             p.attention_normalised)
+                                             p.attention_normalised, p.attention_step)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -107,11 +115,26 @@ class ASNN:
         self.stages_off: np.ndarray | None = None
         self.spike_window: deque[int] = deque(maxlen=self.params.n_t)
         self.index = 0
+        self.tracker = TargetTracker(self.params.track_link, self.params.track_missed,
+                                     self.params.track_smoothing, self.params.track_box)
+        self._stamp: float | None = None
+        self._last: Response | None = None
+        self._repeats = 0
+        self._difference = 0.0
 
     # ------------------------------------------------------------------ step
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
         lum = to_luminance(frame, self._min_side, self.shape)
+        if self.shape is None:
+            self.shape = lum.shape
+        width = self.params.max_width
+        if width is not None and lum.shape[1] > width:
+            # the retina's kernels have a fixed size in pixels: a large frame is seen at the
+            # scale they were made for (targets are reported in the frame's own pixels)
+            h, w = lum.shape
+            lum = cv2.resize(lum, (width, max(round(h * width / w), self._min_side)),
+                             interpolation=cv2.INTER_AREA)
         if lum.dtype != self.dtype:
             lum = lum.astype(self.dtype)
         if self.params.input_blur:
@@ -121,7 +144,14 @@ class ASNN:
     def step(self, frame: np.ndarray, t: float | None = None) -> Response:
         """Process one frame and return the model's response to it.
 
-        ``t``, the frame's time in seconds, is not used yet.
+        Parameters
+        ----------
+        frame : ndarray
+            Gray (H, W) or BGR (H, W, 3), uint8 or float in [0, 1].
+        t : float, optional
+            The frame's time in seconds (any origin, increasing). Used for expansion rates and
+            time to contact; without it, or where it does not advance by more than 0 and at
+            most 1 s (a clock in other units, a stall), frames are ``params.dt`` apart.
 
         Raises
         ------
@@ -129,18 +159,49 @@ class ASNN:
             If the frame is not an image the model accepts, or its size differs from the stream's.
         """
         lum = self._luminance(frame)
+        p = self.params
         index = self.index
         self.index += 1
+        stamp = index * p.dt if t is None else float(t)
         if self.previous is None:
-            p = self.params
-            self.shape = lum.shape
             self.previous = lum
             self.stages_on = np.zeros((p.n_slow + 2, *lum.shape), self.dtype)
             self.stages_off = np.zeros_like(self.stages_on)
-            return Response.silent(index)
+            self._stamp = stamp
+            self._last = Response.silent(index)
+            return self._last
+        if p.skip_repeats and self._is_repeat(lum):
+            self._last = dataclasses.replace(self._last, index=index)
+            return self._last
+        elapsed = stamp - self._stamp
+        if not 0.0 < elapsed <= _MAX_ELAPSED:  # no usable timestamps: the nominal frame period
+            elapsed = p.dt
+        self._stamp = stamp
         if self.optimised:
-            return self._respond_optimised(index, lum)
-        return self._respond(index, lum)
+            self._last = self._respond_optimised(index, lum, elapsed)
+        else:
+            self._last = self._respond(index, lum, elapsed)
+        return self._last
+
+    def _is_repeat(self, lum: np.ndarray) -> bool:
+        """Whether a frame repeats the previous one (``params.skip_repeats``).
+
+        Video converted to a higher frame rate repeats frames, and a repeat would read as a
+        moment in which nothing moved: the model would see the world stop and start again.
+        A frame counts as a repeat when its mean absolute difference from the previous frame is
+        below ``repeat_level`` and below ``repeat_fraction`` of the difference the last frame
+        that was not a repeat had, so that a still scene with sensor noise is not a repeat; and
+        at most ``repeat_run`` frames in a row are repeats: a scene that stops moving is news.
+        """
+        p = self.params
+        diff = float(cv2.norm(lum, self.previous, cv2.NORM_L1)) / lum.size
+        if (diff < p.repeat_level and diff < p.repeat_fraction * self._difference
+                and self._repeats < p.repeat_run):
+            self._repeats += 1
+            return True
+        self._repeats = 0
+        self._difference = diff
+        return False
 
     def _spikes(self, u: float, n_cells: int) -> tuple[float, int, float]:
         p = self.params
@@ -149,14 +210,23 @@ class ASNN:
         self.spike_window.append(spikes)
         return out, spikes, sum(self.spike_window) / (p.n_t * p.window_dt)
 
-    def _respond_optimised(self, index: int, lum: np.ndarray) -> Response:
+    def _photoreceptors(self, lum: np.ndarray) -> np.ndarray:
+        """P (eq. 1), after the contrast gain control where the preset has it."""
+        p = self.params
+        photo = retina.photoreceptor(lum, self.previous, list(self.history), self._p_weights)
+        if p.n_p:
+            self.history.appendleft(photo)
+        if p.contrast_gain is not None:
+            photo = retina.contrast_gain_control(photo, p.contrast_gain, p.contrast_pool,
+                                                 p.contrast_scale)
+        return photo
+
+    def _respond_optimised(self, index: int, lum: np.ndarray, elapsed: float) -> Response:
         """:meth:`_respond` with the fused kernels of :mod:`asnn._fast`."""
         p = self.params
         ws = _fast.workspace(lum.shape, self.dtype)
-        photo = retina.photoreceptor(lum, self.previous, list(self.history), self._p_weights)
-        self.previous = lum
-        if p.n_p:
-            self.history.appendleft(photo)
+        photo = self._photoreceptors(lum)
+        previous, self.previous = self.previous, lum
 
         r, v, g, sums = _fast.front(
             photo, ws, self._env, self._scales, self.stages_on, self.stages_off, p.dt / p.tau, p.c,
@@ -168,20 +238,24 @@ class ASNN:
             full=self.record_maps)
         attended = ws.mask
 
+        def vectors(rows, cols):
+            rr = r[:, rows, cols].astype(np.float64)
+            vv = v[rows, cols].astype(np.float64)
+            phi = np.arctan2(rr[2], rr[0])
+            return vv * np.cos(phi), vv * np.sin(phi)
+
+        if p.targets == "objects":
+            total, targets = self._objects(attended if count else None, g, vectors, previous,
+                                           lum, elapsed, total,
+                                           points=(ws.rows[:count], ws.cols[:count]))
+        else:
+            targets = []
+            if count:
+                targets = extract_targets(attended, None, None, p.cluster_eps,
+                                          p.cluster_min_samples, p.origin_seed, vectors=vectors,
+                                          points=(ws.rows[:count], ws.cols[:count]))
         u = float(p.u_scale * total)
         out, spikes, spike_rate = self._spikes(u, g.size)
-
-        targets = []
-        if count:
-            def vectors(rows, cols):
-                rr = r[:, rows, cols].astype(np.float64)
-                vv = v[rows, cols].astype(np.float64)
-                phi = np.arctan2(rr[2], rr[0])
-                return vv * np.cos(phi), vv * np.sin(phi)
-
-            targets = extract_targets(attended, None, None, p.cluster_eps, p.cluster_min_samples,
-                                      p.origin_seed, vectors=vectors,
-                                      points=(ws.rows[:count], ws.cols[:count]))
         maps = None
         if self.record_maps:
             m_a = blur_g > p.gamma_a
@@ -193,13 +267,11 @@ class ASNN:
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps)
 
-    def _respond(self, index: int, lum: np.ndarray) -> Response:
+    def _respond(self, index: int, lum: np.ndarray, elapsed: float) -> Response:
         """One step in the straightforward float64 form (:mod:`asnn.retina`, stage by stage)."""
         p = self.params
-        photo = retina.photoreceptor(lum, self.previous, list(self.history), self._p_weights)
-        self.previous = lum
-        if p.n_p:
-            self.history.appendleft(photo)
+        photo = self._photoreceptors(lum)
+        previous, self.previous = self.previous, lum
 
         on0, off0 = retina.bipolar(photo, self._dog)
         if p.target_polarity == "light":
@@ -222,24 +294,78 @@ class ASNN:
         if p.grouping:
             g = retina.group(g)
         m_a = retina.approach_attention(g, p.attention_sigma, p.attention_size,
-                                        p.attention_normalised, p.gamma_a)
+                                        p.attention_normalised, p.gamma_a, p.attention_step)
         m_d = retina.direction_attention(r, v, p.top_k, p.attention_sigma, p.attention_size,
-                                         p.attention_normalised, p.gamma_d)
+                                         p.attention_normalised, p.gamma_d, p.attention_step)
         attended = m_a & m_d
         g_prime = g * attended
 
-        u = retina.membrane_potential(g_prime, p.u_scale, p.u_abs)
-        out = retina.sigmoid_output(u, g.size)
-        spikes = retina.spike_count(out, p.k_sp, p.t_sp)
-        self.spike_window.append(spikes)
-        spike_rate = sum(self.spike_window) / (p.n_t * p.window_dt)
-
-        targets = extract_targets(attended, v * np.cos(phi), v * np.sin(phi), p.cluster_eps,
-                                  p.cluster_min_samples, p.origin_seed)
+        if p.targets == "objects":
+            dx, dy = v * np.cos(phi), v * np.sin(phi)
+            total, targets = self._objects(
+                attended if attended.any() else None, g, lambda rows, cols: (dx[rows, cols],
+                                                                             dy[rows, cols]),
+                previous, lum, elapsed, retina.membrane_potential(g_prime, 1.0, p.u_abs))
+            u = float(p.u_scale * total)
+        else:
+            u = retina.membrane_potential(g_prime, p.u_scale, p.u_abs)
+            targets = extract_targets(attended, v * np.cos(phi), v * np.sin(phi), p.cluster_eps,
+                                      p.cluster_min_samples, p.origin_seed)
+        out, spikes, spike_rate = self._spikes(u, g.size)
         maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d,
                     G_prime=g_prime) if self.record_maps else None
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps)
+
+
+    def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, previous: np.ndarray,
+                 lum: np.ndarray, elapsed: float, total: float,
+                 points: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> tuple[float, list[Target]]:
+        """Objects of the attended mask, their expansion, the tracker, and the approach gate.
+
+        Returns the (unscaled) membrane potential, which with ``approach_gate`` sums ``G'``
+        over the approaching objects only, and the targets: with the gate, the approaching
+        objects; without it, every object.
+        """
+        p = self.params
+        if attended is None:
+            self.tracker.update([], elapsed)
+            return (0.0 if p.approach_gate else total), []
+        regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.object_reach,
+                                  points=points)
+        h, w = attended.shape
+        weights = None if p.looming_weights == "uniform" else \
+            cv2.blur(np.maximum(g, 0), (5, 5), borderType=cv2.BORDER_REFLECT_101)
+        observations = []
+        for k in range(len(regions)):
+            x0, y0, x1, y1 = (int(c) for c in regions.boxes[k])
+            pad = p.looming_margin * max(x1 - x0, y1 - y0) + 4
+            observations.append(Observation(
+                float(regions.x[k]), float(regions.y[k]), float(regions.size[k]),
+                float(regions.mass[k]), (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
+        tracks = self.tracker.update(observations, elapsed)
+        for tr in tracks:
+            x0, y0, x1, y1 = tr.box
+            est = region_expansion(previous, lum, (max(int(x0), 0), max(int(y0), 0),
+                                                   min(int(math.ceil(x1)), w),
+                                                   min(int(math.ceil(y1)), h)),
+                                   weights, p.looming_surround)
+            if est is not None:
+                tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed)
+        coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames) for tr in tracks]
+        if p.approach_gate:
+            per_region = regions.magnitude if p.u_abs else regions.mass
+            total = float(sum(per_region[k] for k in range(len(regions)) if coming[k]))
+        sx, sy = self.shape[1] / w, self.shape[0] / h  # the frame's pixels per model pixel
+        targets = [Target(x=float(regions.x[k] * sx), y=float(regions.y[k] * sy),
+                          direction=float(regions.direction[k]),
+                          energy=float(regions.energy[k]),
+                          pixels=int(round(regions.pixels[k] * sx * sy)),
+                          id=tr.id, expansion=tr.expansion, ttc=tr.ttc, offset=tr.offset,
+                          approaching=coming[k])
+                   for k, tr in enumerate(tracks) if coming[k] or not p.approach_gate]
+        return total, targets
 
 
 def compile_kernels() -> None:

@@ -45,6 +45,30 @@ class ASNNParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
+    # --- repeated frames (robust addition) ---
+    skip_repeats: bool = Field(
+        False,
+        description="treat a frame that hardly differs from the previous one, compared with the "
+        "stream's recent frame differences, as a repeat: the state is held and the previous "
+        "response repeated (video converted to a higher frame rate repeats frames)",
+    )
+    repeat_fraction: float = Field(
+        0.2, gt=0, description="a repeat differs from the previous frame by less than this "
+        "fraction of the mean absolute difference of the last frame that was not a repeat ...")
+    repeat_level: float = Field(
+        1.0 / 255, gt=0, description="... and by less than this mean absolute difference "
+        "([0, 1] intensity)")
+    repeat_run: int = Field(
+        2, ge=1, description="at most this many repeats in a row: after that the scene has "
+        "stopped moving, and the model sees it")
+
+    # --- input scale (robust addition) ---
+    max_width: int | None = Field(
+        None, ge=32, description="frames wider than this are averaged down to this width "
+        "(aspect kept) before the retina, whose kernels have a fixed size in pixels; targets "
+        "stay in the frame's pixels. None: every frame at its own size",
+    )
+
     # --- input and photoreceptors (paper eq. 1) ---
     target_polarity: Literal["dark", "light"] = Field(
         "dark",
@@ -56,6 +80,15 @@ class ASNNParams(BaseModel):
     )
     n_p: int = Field(0, ge=0, le=16, description="N_p: frames of photoreceptor history (paper eq. 1)")
     p_u: float = Field(1.0, description="u in p_i = 1/(1+exp(u i))")
+
+    # --- contrast gain control (robust addition) ---
+    contrast_gain: float | None = Field(
+        None, gt=0,
+        description="semi-saturation of the contrast gain control: P <- s P / (this + "
+        "g_pool * |P|); None switches the stage off (retina.contrast_gain_control)",
+    )
+    contrast_pool: float = Field(8.0, gt=0, description="sigma of the pooling Gaussian, px")
+    contrast_scale: float = Field(0.05, gt=0, description="s, the output scale")
 
     # --- bipolar cells (eqs. 2-4) ---
     dog_gain: float = Field(5.0, description="F, gain of the difference of Gaussians g_I")
@@ -112,6 +145,9 @@ class ASNNParams(BaseModel):
         description="False: g_sigma = exp(-r^2/2s^2)/(2 pi s^2) as printed (eq. 20); "
         "True: normalised to sum 1 (OpenCV GaussianBlur, reference)",
     )
+    attention_step: int = Field(
+        1, ge=1, le=4, description="g_sigma applied on a grid this many times coarser "
+        "(area-averaged, interpolated back): the blurred maps are smooth at that scale")
     gamma_a: float = Field(0.005, description="gamma_a, threshold of the approach attention M_a")
     gamma_d: float = Field(0.005, description="gamma_d, threshold of the direction attention M_d")
     top_k: int = Field(1, ge=0, le=7, description="k of the top-k inhibited orientations")
@@ -130,11 +166,50 @@ class ASNNParams(BaseModel):
     )
 
     # --- targets (SPEC section 1 item 10) ---
+    targets: Literal["clusters", "objects"] = Field(
+        "clusters",
+        description="'clusters': DBSCAN of the attended pixels (paper eqs. 30-32); 'objects': "
+        "connected regions of the attended mask, tracked across frames (robust)",
+    )
+    min_object_pixels: int = Field(30, ge=1, description="smallest region kept as an object")
+    object_reach: float = Field(
+        0.0, ge=0, description="attended pixels closer than about twice this many pixels form "
+        "one object (their density at this scale); 0: 8-connected regions of the mask")
+    looming_surround: float = Field(
+        0.0, ge=0, description="width of the ring around an object on which the background's "
+        "motion is fitted and discounted, in object box sides; 0: no ring (looming.py)")
+    looming_weights: Literal["uniform", "approach"] = Field(
+        "uniform", description="weights of the expansion fit's pixels: uniform over the box, or "
+        "the approach map G (a background moving otherwise inside the box counts less)")
     cluster_eps: float = Field(5.0, gt=0, description="DBSCAN eps, pixels of the model's grid")
     cluster_min_samples: int = Field(2, ge=1, description="DBSCAN min_samples (a point counts itself)")
     origin_seed: bool = Field(
         False, description="add the pixel (0, 0) to the clustered points, as the reference does"
     )
+
+    # --- looming and tracking of objects (robust additions; targets='objects') ---
+    looming_margin: float = Field(
+        0.25, ge=0, description="the expansion of an object is measured over its bounding box "
+        "widened by this fraction of its larger side (plus 4 px) on every side")
+    track_link: float = Field(1.0, gt=0, description="linking distance, in summed object sizes")
+    track_missed: int = Field(3, ge=0, description="frames a track survives unseen")
+    track_smoothing: float = Field(
+        0.5, gt=0, le=1, description="weight of a new expansion estimate in a track's average")
+    track_box: float = Field(
+        1.0, gt=0, le=1, description="weight of a new observation's box in a track's box, the "
+        "region its expansion is measured over (1: each frame's own box)")
+    approach_gate: bool = Field(
+        False,
+        description="u(t) sums G' only over objects coming at the camera (approaching tracks: "
+        "time to contact <= tau_max, offset <= offset_max, in approach_frames frames in a "
+        "row); needs targets='objects'",
+    )
+    tau_max: float = Field(1.5, gt=0, description="longest time to contact that warns, s")
+    offset_max: float = Field(
+        1.0, gt=0, description="largest drift/expansion offset of an approaching object, in "
+        "object sizes (0: dead ahead; a truck passing in the next lane: 2 or more)")
+    approach_frames: int = Field(3, ge=1, description="consecutive frames a track must pass "
+                                 "the approach test (ttc, offset) before it counts")
 
     # --- computation ---
     precision: Literal["float32", "float64"] = Field(
@@ -152,6 +227,8 @@ class ASNNParams(BaseModel):
                 raise ValueError(f"{name} must be odd, got {getattr(self, name)}")
         if self.n_fast >= self.n_slow:
             raise ValueError("n_fast must be smaller than n_slow")
+        if self.approach_gate and self.targets != "objects":
+            raise ValueError("approach_gate needs targets='objects'")
         return self
 
     @property
@@ -211,8 +288,18 @@ PRESETS: dict[str, ASNNParams] = {
 # reference's parameters computed in float32: within 2e-6 of float64 on u(t), same warnings
 # (tests/test_equivalence.py), about twice as fast; reference itself stays exact in float64
 PRESETS["reference32"] = PRESETS["reference"].model_copy(update={"precision": "float32"})
-DEFAULT_PRESET = "reference32"
-PRESETS["light"] = PRESETS[DEFAULT_PRESET].model_copy(update={"target_polarity": "light"})
+PRESETS["light"] = PRESETS["reference32"].model_copy(update={"target_polarity": "light"})
+# the published variant plus the robust additions (README, "The robust preset"): each addition
+# has the parameter that switches it off
+PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
+    skip_repeats=True,
+    contrast_gain=0.005,
+    w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
+    gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
+    targets="objects", approach_gate=True, origin_seed=False,
+    max_width=480, track_box=0.3, approach_frames=3, attention_step=2,
+))
+DEFAULT_PRESET = "robust"
 
 
 def preset_names() -> list[str]:

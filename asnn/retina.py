@@ -23,6 +23,7 @@ __all__ = [
     "correlate",
     "photoreceptor_weights",
     "photoreceptor",
+    "contrast_gain_control",
     "dog_kernel",
     "dog_norms",
     "bipolar",
@@ -43,6 +44,7 @@ __all__ = [
 ]
 
 _BORDER = cv2.BORDER_REFLECT_101
+_POOL_STEP = 4  # grid step of the contrast gain control's pool
 
 
 def correlate(image: np.ndarray, kernel: np.ndarray) -> np.ndarray:
@@ -83,6 +85,51 @@ def photoreceptor(current: np.ndarray, previous: np.ndarray, history: list[np.nd
     for w, past in zip(weights, history):
         p += w * past
     return p
+
+
+def contrast_gain_control(p: np.ndarray, semi_saturation: float, sigma: float,
+                          scale: float) -> np.ndarray:
+    """Divisive contrast gain control of the photoreceptor signal (robust addition).
+
+    ``P' = s P / (c + g_sigma * |P|)``: each pixel's change is divided by the pooled magnitude
+    of the changes around it. A moving edge then drives the bipolar cells by about the same
+    amount whatever its contrast (Weber contrast 0.2 or 1), and a faint approach is not cut off
+    by the fixed attention thresholds downstream; ``c`` keeps changes much smaller than it
+    (sensor noise) small. This is the retina's contrast adaptation [1]_, [2]_ in the canonical
+    divisive-normalisation form [3]_; the pool is a Gaussian of ``sigma`` pixels, computed on a
+    grid four times coarser (area-averaged down, blurred, bilinearly up): the pool is smooth at
+    that scale, and the full-resolution blur would cost more than the rest of the stage.
+
+    Parameters
+    ----------
+    p : ndarray (H, W)
+        Photoreceptor activation P.
+    semi_saturation : float
+        c, in [0, 1] intensity units.
+    sigma : float
+        Standard deviation of the pooling Gaussian, pixels.
+    scale : float
+        s, the output scale.
+
+    Returns
+    -------
+    ndarray (H, W)
+
+    References
+    ----------
+    .. [1] R. M. Shapley, J. D. Victor, "The effect of contrast on the transfer properties of
+       cat retinal ganglion cells", J. Physiol. 285, 1978, pp. 275-298.
+    .. [2] S. A. Baccus, M. Meister, "Fast and slow contrast adaptation in retinal circuitry",
+       Neuron 36, 2002, pp. 909-919.
+    .. [3] M. Carandini, D. J. Heeger, "Normalization as a canonical neural computation",
+       Nat. Rev. Neurosci. 13, 2012, pp. 51-62.
+    """
+    h, w = p.shape
+    coarse = cv2.resize(np.abs(p), (max(w // _POOL_STEP, 1), max(h // _POOL_STEP, 1)),
+                        interpolation=cv2.INTER_AREA)
+    coarse = cv2.GaussianBlur(coarse, (0, 0), sigma / _POOL_STEP, borderType=_BORDER)
+    pool = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_LINEAR)
+    return p * (scale / (semi_saturation + pool))
 
 
 # --------------------------------------------------------------------------- bipolar cells
@@ -289,13 +336,21 @@ def group(g: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- attention
 
 
-def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool) -> np.ndarray:
+def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
+                   step: int = 1) -> np.ndarray:
     """Smoothing with the attention Gaussian g_sigma (paper eqs. 20, 21).
 
     ``normalised=False`` uses the printed ``exp(-r^2/2 sigma^2) / (2 pi sigma^2)`` on a
     size x size window; ``True`` uses OpenCV's GaussianBlur (sampled, normalised to sum 1),
-    as the published implementation does.
+    as the published implementation does. With ``step`` > 1 the image is area-averaged onto a
+    grid ``step`` times coarser, blurred there with ``sigma / step`` and interpolated back
+    (bilinear): the blurred map is smooth at that scale, and the blur costs ``step**2`` less.
     """
+    if step > 1:
+        h, w = image.shape
+        coarse = cv2.resize(image, (-(-w // step), -(-h // step)), interpolation=cv2.INTER_AREA)
+        blurred = attention_blur(coarse, sigma / step, (size // step) | 1, normalised)
+        return cv2.resize(blurred, (w, h), interpolation=cv2.INTER_LINEAR)
     if normalised:
         return cv2.GaussianBlur(image, (size, size), sigma, borderType=_BORDER)
     r = size // 2
@@ -306,13 +361,13 @@ def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool)
 
 
 def approach_attention(g: np.ndarray, sigma: float, size: int, normalised: bool,
-                       gamma_a: float) -> np.ndarray:
+                       gamma_a: float, step: int = 1) -> np.ndarray:
     """Approach-sensitive attention mask M_a = B(G (*) g_sigma, gamma_a) (paper eqs. 21, 22)."""
-    return attention_blur(g, sigma, size, normalised) > gamma_a
+    return attention_blur(g, sigma, size, normalised, step) > gamma_a
 
 
 def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, size: int,
-                        normalised: bool, gamma_d: float) -> np.ndarray:
+                        normalised: bool, gamma_d: float, step: int = 1) -> np.ndarray:
     """Directionally selective attention M_d (paper eqs. 23-25).
 
     The top-k orientations by ``R_sum(theta) = sum_xy R^theta`` form Theta_I;
@@ -329,7 +384,7 @@ def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, 
         totals = r.sum(axis=(1, 2))
         inhibited = np.argsort(-totals, kind="stable")[:top_k]
         v = v - r[inhibited].max(axis=0)
-    return attention_blur(v, sigma, size, normalised) > gamma_d
+    return attention_blur(v, sigma, size, normalised, step) > gamma_d
 
 
 # --------------------------------------------------------------------------- output

@@ -1,8 +1,16 @@
-"""Looming-target extraction: clustering of the attended pixels and population-coded motion.
+"""Looming-target extraction: grouping of the attended pixels and population-coded motion.
 
 Implements SPEC.md section 1 item 10 (paper eqs. 30-32) with the cluster direction ruling
 ``direction = atan2(V_Y, V_X)`` in image coordinates (x right, y down, so a positive angle turns
-clockwise on screen).
+clockwise on screen). Two groupings:
+
+:func:`extract_targets`
+    DBSCAN of the attended pixels (the paper, the published variant): one target per dense
+    cluster, which on a looming object is often one per segment of its rim.
+:func:`extract_objects`
+    Connected regions of the attended mask, each with its approach-weighted centre and size
+    (the ``robust`` preset): the input of the tracker of :mod:`asnn.tracking`, which adds the
+    optional fields ``id``, ``expansion``, ``ttc``, ``offset`` and ``approaching``.
 """
 
 from __future__ import annotations
@@ -12,11 +20,13 @@ from dataclasses import dataclass
 
 import math
 
+import cv2
 import numpy as np
 
 from ._jit import kernel
 
-__all__ = ["Target", "dbscan_points", "dbscan_grid", "extract_targets"]
+__all__ = ["Target", "ObjectRegions", "dbscan_points", "dbscan_grid", "extract_targets",
+           "extract_objects"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -33,6 +43,18 @@ class Target:
         ``sqrt(V_X^2 + V_Y^2)``, the mean motion vector's length.
     pixels : int
         Number of pixels in the cluster.
+    id : int or None
+        Stable identifier of the object across the stream's frames (tracked presets).
+    expansion : float or None
+        Relative growth rate of the object's image, per second: (1/size) d(size)/dt; negative
+        while it shrinks (tracked presets).
+    ttc : float or None
+        Time to contact ``1 / expansion``, seconds; None while the object does not grow.
+    offset : float or None
+        Lateral drift over expansion, in object sizes: near 0 on a collision course, large for
+        an object that will pass (:mod:`asnn.tracking`); None while it does not grow.
+    approaching : bool or None
+        Whether the object passes the approach test that drives the warning.
     """
 
     x: float
@@ -40,10 +62,20 @@ class Target:
     direction: float
     energy: float
     pixels: int
+    id: int | None = None
+    expansion: float | None = None
+    ttc: float | None = None
+    offset: float | None = None
+    approaching: bool | None = None
 
     def to_dict(self) -> dict:
-        return {"x": self.x, "y": self.y, "direction": self.direction, "energy": self.energy,
-                "pixels": self.pixels}
+        """JSON-ready fields; the optional ones only where the model sets them."""
+        d = {"x": self.x, "y": self.y, "direction": self.direction, "energy": self.energy,
+             "pixels": self.pixels}
+        if self.id is not None:
+            d.update(id=self.id, expansion=self.expansion, ttc=self.ttc, offset=self.offset,
+                     approaching=bool(self.approaching))
+        return d
 
 
 @kernel()
@@ -265,3 +297,125 @@ def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | No
                               direction=float(np.arctan2(vy, vx)),
                               energy=float(np.hypot(vx, vy)), pixels=int(count[k])))
     return targets
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectRegions:
+    """Connected regions of an attended mask and their statistics (see :func:`extract_objects`).
+
+    Attributes
+    ----------
+    labels : ndarray of int32 (H, W)
+        Region number of each pixel, 0 outside every kept region.
+    x, y, size, mass : ndarray (n,)
+        Per region: centre and RMS radius of the approach activity ``G`` over the region, and
+        ``sum max(G, 0)``.
+    magnitude : ndarray (n,)
+        ``sum |G|`` over the region: its share of ``sum |G'|``.
+    boxes : ndarray of int (n, 4)
+        ``(x0, y0, x1, y1)`` bounding box (exclusive ends).
+    pixels : ndarray of int (n,)
+    direction, energy : ndarray (n,)
+        Population-coded motion of each region (paper eqs. 30-32): the mean of
+        ``(V cos(phi), V sin(phi))`` over its pixels, as an angle and a length.
+    """
+
+    labels: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    size: np.ndarray
+    mass: np.ndarray
+    magnitude: np.ndarray
+    boxes: np.ndarray
+    pixels: np.ndarray
+    direction: np.ndarray
+    energy: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+
+def extract_objects(mask: np.ndarray, g: np.ndarray,
+                    vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+                    min_pixels: int, reach: float = 0.0, density: float = 0.05, *,
+                    points: tuple[np.ndarray, np.ndarray] | None = None) -> ObjectRegions:
+    """Objects of the attended mask ``M_a M_d``: its pixels grouped by where they are dense.
+
+    On a looming object the attention marks segments of the rim, the sides that move against
+    the background's dominant direction; they are tens of pixels apart on a near object. The
+    attended pixels are grouped by the connected regions of their density at the object scale
+    (the fraction of attended pixels under a Gaussian of ``reach`` pixels, above ``density``),
+    computed on a grid of half the resolution, so that one object gives one target, and two
+    objects further apart than about ``2 reach`` give two. Groups of fewer than ``min_pixels``
+    attended pixels are dropped. The centre and size of a group are weighted by the approach
+    map ``G``: the thresholded mask's outline moves with the signal's strength, the weighted
+    moments move with the object.
+
+    Parameters
+    ----------
+    mask : ndarray of bool (H, W)
+    g : ndarray (H, W)
+        The approach map G (weights; negative values count as 0).
+    vectors : callable
+        ``vectors(rows, cols) -> (dx, dy)``: the motion vector ``V cos(phi)``, ``V sin(phi)``
+        at the given pixels.
+    min_pixels : int
+    reach, density : float
+        With ``reach`` > 0, attended pixels are grouped by their density (above); with 0, by
+        the 8-connected regions of the mask.
+    points : (rows, cols), optional
+        The set pixels of ``mask`` in row-major order, when the caller has them.
+
+    Returns
+    -------
+    ObjectRegions
+    """
+    h, w = mask.shape
+    rows, cols = np.nonzero(mask) if points is None else points
+    if reach > 0:
+        half = cv2.resize(mask.view(np.uint8).astype(np.float32), ((w + 1) // 2, (h + 1) // 2),
+                          interpolation=cv2.INTER_AREA)
+        spread = cv2.GaussianBlur(half, (0, 0), reach / 2, borderType=cv2.BORDER_CONSTANT)
+        count, coarse = cv2.connectedComponents((spread > density).view(np.uint8),
+                                                connectivity=8, ltype=cv2.CV_32S)
+        lab = coarse[rows // 2, cols // 2] - 1
+    else:
+        count, fine = cv2.connectedComponents(mask.view(np.uint8), connectivity=8,
+                                              ltype=cv2.CV_32S)
+        lab = fine[rows, cols] - 1
+    inside = lab >= 0
+    rows, cols, lab = rows[inside], cols[inside], lab[inside]
+    pixels = np.bincount(lab, minlength=count - 1)
+    keep = np.flatnonzero(pixels >= min_pixels)
+    lut = np.full(max(count - 1, 1), -1, np.int64)
+    lut[keep] = np.arange(len(keep))
+    lab = lut[lab]
+    inside = lab >= 0
+    rows, cols, lab = rows[inside], cols[inside], lab[inside]
+    n = len(keep)
+    labels = np.zeros((h, w), np.int32)
+    labels[rows, cols] = lab + 1
+    pixels = np.bincount(lab, minlength=n)
+    values = g[rows, cols].astype(np.float64)
+    magnitude = np.bincount(lab, np.abs(values), n)
+    wt = np.maximum(values, 0.0)
+    mass = np.bincount(lab, wt, n)
+    wt[mass[lab] <= 0] = 1.0  # groups without positive G: equal weights
+    total = np.bincount(lab, wt, n)
+    x = np.bincount(lab, wt * cols, n) / total
+    y = np.bincount(lab, wt * rows, n) / total
+    var = np.bincount(lab, wt * ((cols - x[lab]) ** 2 + (rows - y[lab]) ** 2), n) / total
+    dx, dy = vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))
+    vx = np.bincount(lab, dx, n) / np.maximum(pixels, 1)
+    vy = np.bincount(lab, dy, n) / np.maximum(pixels, 1)
+    boxes = np.zeros((n, 4), np.int64)
+    if n:
+        big = np.iinfo(np.int64).max
+        x0 = np.full(n, big); y0 = np.full(n, big)
+        x1 = np.zeros(n, np.int64); y1 = np.zeros(n, np.int64)
+        np.minimum.at(x0, lab, cols); np.minimum.at(y0, lab, rows)
+        np.maximum.at(x1, lab, cols + 1); np.maximum.at(y1, lab, rows + 1)
+        boxes = np.stack([x0, y0, x1, y1], axis=1)
+    return ObjectRegions(labels=labels, x=x, y=y, size=np.sqrt(var + 1.0), mass=mass,
+                         magnitude=magnitude, boxes=boxes, pixels=pixels, direction=np.arctan2(vy, vx),
+                         energy=np.hypot(vx, vy))

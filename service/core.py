@@ -439,7 +439,7 @@ class WorkerCore:
             log.info("robot %s: state reset (%s) at seq %d", job.robot, reason, frame.seq)
         started = self.clock()
         try:
-            result = state.detector.step(image)
+            result = state.detector.step(image, frame.stamp)
         except FrameError as exc:
             self._give_back(state, job.dropped)
             if state.processed == 0:

@@ -126,9 +126,11 @@ def test_service_bench_options_are_checked(bad):
     assert (args.phases, args.seed, args.worker_threads) == ("random", 7, None)
 
 
-@pytest.mark.parametrize("presets, timed", [(["default"], {"reference32"}),
-                                            (["reference"], {"reference", "reference32"}),
-                                            (["paper", "paper"], {"paper", "reference32"})])
+@pytest.mark.parametrize("presets, timed", [
+    (["default"], {"robust", "reference32"}),
+    (["reference"], {"reference", "robust", "reference32"}),
+    (["paper", "paper"], {"paper", "robust", "reference32"}),
+    (["reference32"], {"reference32", "robust"})])
 def test_bench_times_the_default_preset_for_the_ratio(presets, timed):
     from asnn.evaluation.bench import run
 
@@ -137,6 +139,9 @@ def test_bench_times_the_default_preset_for_the_ratio(presets, timed):
     assert {r["preset"] for r in rows if r["form"] == "optimised"} == timed
     assert len([r for r in rows if r["form"] == "optimised"]) == len(timed)
     assert [r["speedup"] > 0 for r in rows if r["form"] == "straightforward"] == [True]
+    # the default's cost against the published variant, timed in the same run
+    assert [r["vs_published"] > 0 for r in rows if "vs_published" in r] == [True]
+    assert next(r for r in rows if "vs_published" in r)["preset"] == "robust"
 
 
 def test_bench_rejects_an_unknown_preset(capsys, monkeypatch):
@@ -163,7 +168,7 @@ def test_kernels_are_loaded_before_anything_is_timed(monkeypatch):
         return timed(*args, **kwargs)
 
     monkeypatch.setattr(asnn.evaluation.bench, "time_detector", time_detector)
-    asnn.evaluation.bench.run(sizes=[(32, 32)], frames=2, presets=["default"], models=("asnn",),
+    asnn.evaluation.bench.run(sizes=[(32, 32)], frames=2, presets=["paper"], models=("asnn",),
                               straightforward=False)
     assert calls == ["compile", "time"]
     calls.clear()

@@ -12,6 +12,9 @@ from cli.main import main
 FIELDS = {"frame": int, "t": float, "u": float, "out": float, "spikes": int,
           "spike_rate": float, "collision": bool, "targets": list}
 TARGET_FIELDS = {"x": float, "y": float, "direction": float, "energy": float, "pixels": int}
+# the default (tracked) preset's optional fields, docs/contract.md
+TRACKED_FIELDS = {"id": int, "expansion": float, "ttc": float, "offset": float,
+                  "approaching": bool}
 
 
 @pytest.fixture(scope="module")
@@ -34,8 +37,13 @@ def test_jsonl_has_one_object_per_frame_with_the_contract_fields(looming_video, 
             assert isinstance(rec[key], kind) or (kind is float and isinstance(rec[key], int)), key
         assert rec["frame"] == i and rec["t"] == pytest.approx(i / 20.0)
         for target in rec["targets"]:
-            assert set(target) == set(TARGET_FIELDS)
+            assert set(target) == set(TARGET_FIELDS) | set(TRACKED_FIELDS)
+            for key, kind in {**TARGET_FIELDS, **TRACKED_FIELDS}.items():
+                assert isinstance(target[key], kind) or (kind is float and isinstance(
+                    target[key], int)), key
             assert 0 <= target["x"] < 96 and 0 <= target["y"] < 96
+            # the default reports the approaching objects: growing, with a time to contact
+            assert target["approaching"] and target["expansion"] > 0 and target["ttc"] > 0
     warned = [r for r in records if r["collision"]]
     assert warned and any(r["targets"] for r in warned)
     assert all(r["frame"] >= scene.onset_frame for r in warned)

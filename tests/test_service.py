@@ -102,11 +102,12 @@ def test_two_processing_threads_keep_each_robot_exact(zenoh_net):
     from asnn import ASNN
 
     scenes = {"a": make_scene("looming", size=(96, 96), stop=30),
-              "b": make_scene("looming_over_stripes", size=(96, 96), stop=30, polarity="light")}
+              "b": make_scene("looming", size=(96, 96), stop=30, polarity="light",
+                              center=(40.0, 52.0))}
     expected = {}
     for robot, scene in scenes.items():
         model = ASNN()
-        expected[robot] = [model.step(f).u for f in scene.frames]
+        expected[robot] = [model.step(f, seq * 0.05).u for seq, f in enumerate(scene.frames)]
     core = WorkerCore()
     with Worker(zenoh_net.hub, core, stats_every=0, threads=2):
         processing = [t for t in threading.enumerate() if t.name.startswith("asnn-worker-")]

@@ -99,6 +99,9 @@ def _state_bytes(model) -> int:
     return total
 
 
+PUBLISHED = "reference32"  # the published variant in float32: the default before `robust`
+
+
 def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
         models=("asnn", "lgmd1", "lgmd2"), straightforward: bool = True,
         progress=None) -> dict:
@@ -106,6 +109,9 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
 
     ``presets`` are names of :func:`asnn.params.preset` (``None``: all). With ``straightforward``,
     the default preset is timed too, since the straightforward form's ratio is against it.
+    Whenever the default preset is timed, the published variant in float32 (``reference32``,
+    the default before the robust preset) is timed with it, and the default's row carries
+    their ratio (``vs_published``): what the robust additions cost, measured side by side.
 
     Raises
     ------
@@ -120,6 +126,8 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     presets = list(PRESETS) if presets is None else list(dict.fromkeys(map(preset_key, presets)))
     if straightforward and "asnn" in models and DEFAULT_PRESET not in presets:
         presets.append(DEFAULT_PRESET)  # the straightforward form's ratio is against it
+    if DEFAULT_PRESET in presets and PUBLISHED not in presets:
+        presets.append(PUBLISHED)  # the default's cost is reported against it
     warmup = 2  # the first frame only primes the state
     if "asnn" in models:
         compile_kernels()
@@ -146,8 +154,11 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
             if model != "asnn":
                 add(model, "", "optimised", lambda m=model: make_detector(m, None))
                 continue
-            for name in presets:
-                add("asnn", name, "optimised", lambda n=name: ASNN(n))
+            timed = {name: add("asnn", name, "optimised", lambda n=name: ASNN(n))
+                     for name in presets}
+            if DEFAULT_PRESET in timed and DEFAULT_PRESET != PUBLISHED:
+                timed[DEFAULT_PRESET]["vs_published"] = (timed[DEFAULT_PRESET]["median_ms"]
+                                                         / timed[PUBLISHED]["median_ms"])
         if straightforward and "asnn" in models:
             slow = add("asnn", DEFAULT_PRESET, "straightforward",
                        lambda: ASNN(DEFAULT_PRESET, optimised=False))
@@ -164,6 +175,8 @@ def format_table(report: dict) -> str:
              "| --- | --- | --- | --- | ---: | ---: | ---: | --- |"]
     for r in report["results"]:
         note = f"{r['speedup']:.1f}x slower than optimised" if "speedup" in r else ""
+        if "vs_published" in r:
+            note = f"{r['vs_published']:.2f}x the time of {PUBLISHED}"
         state = f"{r['state_mb']:.2f}" if "state_mb" in r else ""
         lines.append(f"| {r['size']} | {r['model']} | {r['preset'] or '-'} | {r['form']} | "
                      f"{r['median_ms']:.2f} | {r['p90_ms']:.2f} | {state} | {note} |")

@@ -1,0 +1,232 @@
+"""Tracking of looming targets across frames: ids, smoothed expansion, time to contact.
+
+One :class:`TargetTracker` per stream. Each frame it takes the frame's object observations
+(centre, size, box) and links them to the tracks of the previous frames by distance, greedily,
+strongest track first. A track keeps its ``id`` while it is seen, and survives ``max_missed``
+frames unseen. The caller then measures each seen track's expansion over the track's box (the
+direct estimate of :mod:`asnn.looming`) and hands it to :meth:`Track.measure`.
+
+Per track, the expansion rate and the drift are exponentially smoothed. From them:
+
+``ttc``
+    Time to contact ``1 / expansion`` in seconds (Lee's tau: size over growth rate), None
+    while the target does not grow.
+``offset``
+    How far off the camera the target's path points, in target sizes:
+    ``|drift| / (expansion * size)``. For an object moving at constant velocity relative to the
+    camera with lateral offset X and size S, the image drifts at ``x / tau`` and grows at
+    ``s / tau``, so this ratio is ``X / S`` whatever the distance: near zero on a collision
+    course (constant bearing), large for an object that will pass (a truck in the next lane, a
+    pole at the roadside while driving). See :func:`approaching`.
+
+References
+----------
+.. [1] D. N. Lee, "A theory of visual control of braking based on information about
+   time-to-collision", Perception 5, 1976, pp. 437-459.
+.. [2] D. Regan, A. Kaushal, "Monocular discrimination of the direction of motion in depth",
+   Vision Research 34, 1994, pp. 163-177 (the ratio of lateral drift to expansion as the cue to
+   where an approaching object will pass).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+__all__ = ["Observation", "Track", "TargetTracker", "approaching"]
+
+
+@dataclass(frozen=True, slots=True)
+class Observation:
+    """One object seen in one frame.
+
+    Attributes
+    ----------
+    x, y : float
+        Centre, pixels of the model's grid.
+    size : float
+        RMS radius of the object's approach activity about its centre, pixels.
+    mass : float
+        Its summed approach activity (orders the tracks when two compete).
+    box : (x0, y0, x1, y1)
+        The region its expansion is measured over, pixels (exclusive ends).
+    """
+
+    x: float
+    y: float
+    size: float
+    mass: float
+    box: tuple[float, float, float, float]
+
+
+@dataclass(slots=True)
+class Track:
+    """A target followed across frames.
+
+    Attributes
+    ----------
+    id : int
+        Stable identifier within the stream.
+    x, y, size, mass : float
+        From the latest observation.
+    box : (x0, y0, x1, y1)
+        The region the expansion is measured over: each observation's box, blended with the
+        previous box carried along by the track's own drift and expansion, so that a target
+        whose attended outline changes from frame to frame keeps a steady region.
+    expansion : float or None
+        Smoothed expansion rate, per second.
+    drift_x, drift_y : float
+        Smoothed drift, pixels per second.
+    measured : int
+        Observations with an expansion estimate so far.
+    missed : int
+        Frames since the track was last seen (0: seen in the latest frame).
+    streak : int
+        Consecutive frames, up to the latest, in which the track passed the approach test
+        (:meth:`judge`).
+    """
+
+    id: int
+    x: float
+    y: float
+    size: float
+    mass: float
+    box: tuple[float, float, float, float]
+    expansion: float | None = None
+    drift_x: float = 0.0
+    drift_y: float = 0.0
+    measured: int = 0
+    missed: int = 0
+    streak: int = 0
+    _smoothing: float = field(default=0.5, repr=False)
+
+    def observe(self, obs: Observation, elapsed: float, box_weight: float) -> None:
+        """Take a new observation of this target, ``elapsed`` seconds after the previous frame.
+
+        The box becomes ``box_weight`` of the observation's box plus the rest of the previous
+        box moved by the track's drift and scaled about its centre by its expansion.
+        """
+        self.x, self.y, self.size, self.mass = obs.x, obs.y, obs.size, obs.mass
+        self.missed = 0
+        x0, y0, x1, y1 = self.box
+        grow = 1.0 + (self.expansion or 0.0) * elapsed
+        cx, cy = 0.5 * (x0 + x1) + self.drift_x * elapsed, 0.5 * (y0 + y1) + self.drift_y * elapsed
+        hw, hh = 0.5 * (x1 - x0) * grow, 0.5 * (y1 - y0) * grow
+        carried = (cx - hw, cy - hh, cx + hw, cy + hh)
+        self.box = tuple(box_weight * o + (1.0 - box_weight) * c
+                         for o, c in zip(obs.box, carried))
+
+    def measure(self, expansion: float, drift_x: float, drift_y: float) -> None:
+        """Take this frame's expansion rate (per second) and drift (pixels per second)."""
+        if self.expansion is None:
+            self.expansion, self.drift_x, self.drift_y = expansion, drift_x, drift_y
+        else:
+            a = self._smoothing
+            self.expansion += a * (expansion - self.expansion)
+            self.drift_x += a * (drift_x - self.drift_x)
+            self.drift_y += a * (drift_y - self.drift_y)
+        self.measured += 1
+
+    @property
+    def ttc(self) -> float | None:
+        """Time to contact ``1 / expansion``, seconds; None unless the target grows."""
+        if self.expansion is None or self.expansion <= 0:
+            return None
+        return 1.0 / self.expansion
+
+    @property
+    def offset(self) -> float | None:
+        """``|drift| / (expansion * size)``: the path's offset from the camera in target sizes;
+        None unless the target grows."""
+        if self.expansion is None or self.expansion <= 0:
+            return None
+        return math.hypot(self.drift_x, self.drift_y) / (self.expansion * max(self.size, 1.0))
+
+    def judge(self, tau_max: float, offset_max: float, frames: int) -> bool:
+        """Update :attr:`streak` with this frame's approach test (:func:`approaching`) and
+        return whether the track has passed it in the last ``frames`` frames in a row: a
+        warning needs a few consecutive frames of approach, not one lucky estimate."""
+        self.streak = self.streak + 1 if approaching(self, tau_max, offset_max) else 0
+        return self.streak >= frames
+
+
+def approaching(track: Track, tau_max: float, offset_max: float) -> bool:
+    """Whether a track looks, in the latest frame, like an object coming at the camera.
+
+    It must be seen now, reach the camera within ``tau_max`` seconds at its current rate, and
+    point at it: ``offset <= offset_max``.
+    """
+    ttc, offset = track.ttc, track.offset
+    return (track.missed == 0 and ttc is not None and ttc <= tau_max and offset is not None
+            and offset <= offset_max)
+
+
+class TargetTracker:
+    """Links each frame's observations to tracks (one tracker per stream).
+
+    Parameters
+    ----------
+    link : float
+        An observation continues a track when their centres are closer than
+        ``link * (track size + observation size) + 8`` pixels.
+    max_missed : int
+        Frames a track survives unseen.
+    smoothing : float
+        Weight of a new expansion and drift estimate in the track's running average, (0, 1].
+    box_weight : float
+        Weight of a new observation's box in the track's box, (0, 1] (see :class:`Track`).
+
+    Attributes
+    ----------
+    tracks : list of Track
+        Live tracks, seen or recently missed.
+    """
+
+    def __init__(self, link: float = 1.0, max_missed: int = 3, smoothing: float = 0.5,
+                 box_weight: float = 1.0):
+        for name, value in (("smoothing", smoothing), ("box_weight", box_weight)):
+            if not 0.0 < value <= 1.0:
+                raise ValueError(f"{name} must lie in (0, 1], got {value}")
+        self.link = link
+        self.max_missed = max_missed
+        self.smoothing = smoothing
+        self.box_weight = box_weight
+        self.tracks: list[Track] = []
+        self._next_id = 0
+
+    def reset(self) -> None:
+        """Forget every track (ids start again from 0)."""
+        self.tracks = []
+        self._next_id = 0
+
+    def update(self, observations: list[Observation], elapsed: float) -> list[Track]:
+        """Link this frame's observations to tracks, ``elapsed`` seconds after the previous frame.
+
+        Returns
+        -------
+        list of Track
+            The track of each observation, in the observations' order.
+        """
+        assigned: list[Track | None] = [None] * len(observations)
+        for track in sorted(self.tracks, key=lambda tr: -tr.mass):
+            best, best_d = -1, math.inf
+            for i, obs in enumerate(observations):
+                if assigned[i] is not None:
+                    continue
+                d = math.hypot(obs.x - track.x, obs.y - track.y)
+                if d < self.link * (track.size + obs.size) + 8.0 and d < best_d:
+                    best, best_d = i, d
+            if best < 0:
+                track.missed += 1
+            else:
+                track.observe(observations[best], elapsed, self.box_weight)
+                assigned[best] = track
+        self.tracks = [tr for tr in self.tracks if tr.missed <= self.max_missed]
+        for i, obs in enumerate(observations):
+            if assigned[i] is None:
+                track = Track(self._next_id, obs.x, obs.y, obs.size, obs.mass, obs.box,
+                              _smoothing=self.smoothing)
+                self._next_id += 1
+                self.tracks.append(track)
+                assigned[i] = track
+        return assigned
