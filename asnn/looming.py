@@ -143,7 +143,7 @@ def region_expansion(previous: np.ndarray, current: np.ndarray, box: tuple[int, 
         fit = _without_background(ex, ey, radial, et, wt, inner, fit)
     if fit is None:
         return None
-    return Expansion(fit.drift_x * step, fit.drift_y * step, fit.rate, fit.brightness)
+    return Expansion(fit.drift_x * step, fit.drift_y * step, fit.rate, -fit.brightness)
 
 
 def _without_background(ex, ey, radial, et, wt, inner, plain):

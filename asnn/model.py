@@ -64,6 +64,11 @@ class ASNN:
         Spikes of the last N_t frames.
     tracker : TargetTracker
         The tracked objects (``params.targets == 'objects'``).
+    objects : list of (Track, float)
+        The objects seen in the latest processed frame with their share of ``sum |G'|`` (or
+        ``sum G'``), in the frame's order; what the approach gate decided on.
+    repeated : bool
+        Whether the latest frame was a repeat (its response repeats the one before).
 
     Notes
     -----
@@ -121,6 +126,8 @@ class ASNN:
         self._last: Response | None = None
         self._repeats = 0
         self._difference = 0.0
+        self.objects: list = []
+        self.repeated = False
 
     # ------------------------------------------------------------------ step
 
@@ -170,7 +177,8 @@ class ASNN:
             self._stamp = stamp
             self._last = Response.silent(index)
             return self._last
-        if p.skip_repeats and self._is_repeat(lum):
+        self.repeated = p.skip_repeats and self._is_repeat(lum)
+        if self.repeated:
             self._last = dataclasses.replace(self._last, index=index)
             return self._last
         elapsed = stamp - self._stamp
@@ -331,6 +339,7 @@ class ASNN:
         p = self.params
         if attended is None:
             self.tracker.update([], elapsed)
+            self.objects = []
             return (0.0 if p.approach_gate else total), []
         regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.object_reach,
                                   points=points)
@@ -354,8 +363,9 @@ class ASNN:
             if est is not None:
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed)
         coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames) for tr in tracks]
+        per_region = regions.magnitude if p.u_abs else regions.mass
+        self.objects = [(tr, float(per_region[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
-            per_region = regions.magnitude if p.u_abs else regions.mass
             total = float(sum(per_region[k] for k in range(len(regions)) if coming[k]))
         sx, sy = self.shape[1] / w, self.shape[0] / h  # the frame's pixels per model pixel
         targets = [Target(x=float(regions.x[k] * sx), y=float(regions.y[k] * sy),

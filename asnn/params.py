@@ -59,7 +59,7 @@ class ASNNParams(BaseModel):
         1.0 / 255, gt=0, description="... and by less than this mean absolute difference "
         "([0, 1] intensity)")
     repeat_run: int = Field(
-        2, ge=1, description="at most this many repeats in a row: after that the scene has "
+        1, ge=1, description="at most this many repeats in a row: after that the scene has "
         "stopped moving, and the model sees it")
 
     # --- input scale (robust addition) ---

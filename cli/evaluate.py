@@ -43,11 +43,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="score the labelled suite of generated scenes instead")
     mode.add_argument("--paper", action="store_true",
                       help="regenerate the paper's synthetic figures (Figs. 2, 4-7) instead")
+    mode.add_argument("--held-out", action="store_true",
+                      help="with CLIPS_DIR: the in-sample and leave-one-clip-out figures of the "
+                           "default preset's approach-gate thresholds (held_out.md)")
     p.add_argument("--labels", metavar="FILE", help="labels file (default: CLIPS_DIR/labels.json)")
     p.add_argument("--detectors", "--models", dest="detectors", type=_detectors,
                    default=list(DEFAULT_DETECTORS), metavar="LIST",
                    help="comma-separated detector specs: asnn, asnn:PRESET, lgmd1, lgmd2 "
                         "(default: %(default)s)")
+    p.add_argument("--ablation", action="store_true",
+                   help="run the robust preset with each of its additions switched off in turn "
+                        "instead of --detectors (asnn.evaluation.runs.ABLATIONS)")
     p.add_argument("--preset", choices=preset_names(), default="default",
                    help="the ASNN preset a bare 'asnn' stands for (default: %(default)s)")
     p.add_argument("--cases", metavar="PATTERN",
@@ -72,16 +78,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from asnn.evaluation import clips, paper, suite  # import matplotlib: only when it runs
+    from asnn.evaluation import clips, heldout, paper, suite  # matplotlib: only when it runs
+    from asnn.evaluation.runs import ABLATIONS
 
     progress = ProgressPrinter(sys.stderr)
     preset_name = None if args.preset == "default" else args.preset
+    if args.ablation:
+        args.detectors = list(ABLATIONS.values())
     if (args.synthetic or args.paper) and args.clips_dir:
         print("asnn eval: give either CLIPS_DIR, --synthetic or --paper", file=sys.stderr)
         return 2
     misplaced = [flag for flag, given, mode in (
         ("--cases", args.cases, args.synthetic), ("--case-plots", args.case_plots, args.synthetic),
         ("--size", args.size, args.paper),
+        ("--ablation", args.ablation, not (args.paper or args.held_out)),
         ("--labels", args.labels, not (args.synthetic or args.paper)),
         ("--early-tolerance", args.early_tolerance is not None,
          not (args.synthetic or args.paper))) if given and not mode]
@@ -107,6 +117,12 @@ def run(args: argparse.Namespace) -> int:
         elif not args.clips_dir:
             print("asnn eval: CLIPS_DIR is required (or --synthetic, or --paper)", file=sys.stderr)
             return 2
+        elif args.held_out:
+            heldout.evaluate_held_out(args.clips_dir, args.out, labels_path=args.labels,
+                                      preset_name=args.preset, jobs=args.jobs,
+                                      progress=progress)
+            print(f"{args.out}/held_out.md")
+            return 0
         else:
             results = clips.evaluate_clips(
                 args.clips_dir, args.out, labels_path=args.labels, detectors=args.detectors,

@@ -1,8 +1,11 @@
 """Running detectors named by a spec over frames, and writing what the runs produce.
 
 A detector spec names one detector to compare: ``asnn`` (the default preset), ``asnn:PRESET``
-(for example ``asnn:reference``, the published variant), ``lgmd1`` or ``lgmd2``. Results of a spec
-go to a directory named by :attr:`DetectorSpec.slug` (``asnn-reference``: no colon in paths).
+(for example ``asnn:reference``, the published variant), ``lgmd1`` or ``lgmd2``. An ASNN spec may
+override parameters after slashes, ``asnn:robust/contrast_gain=none/approach_frames=1`` (values
+``none``, ``true``, ``false``, numbers or words): :data:`ABLATIONS` switches off each addition of
+the robust preset that way. Results of a spec go to a directory named by
+:attr:`DetectorSpec.slug` (``asnn-reference``: no colons or slashes in paths).
 """
 
 from __future__ import annotations
@@ -14,35 +17,78 @@ from pathlib import Path
 
 import numpy as np
 
-from ..detectors import MODELS, Detector, make_detector
-from ..params import preset_key
+from pydantic import ValidationError
 
-__all__ = ["DEFAULT_DETECTORS", "DetectorSpec", "parse_detector", "parse_detectors",
+from ..detectors import MODELS, Detector, make_detector
+from ..params import preset
+
+__all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
            "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
 
 DEFAULT_DETECTORS = ("asnn", "asnn:reference", "lgmd1", "lgmd2")
 
+# each addition of the robust preset switched off in turn (README, "Ablation")
+ABLATIONS = {
+    "robust (all additions)": "asnn:robust",
+    "no repeated-frame hold": "asnn:robust/skip_repeats=false",
+    "no contrast gain control": "asnn:robust/contrast_gain=none",
+    "OFF-led map only (no ON-led mirror)": "asnn:robust/w1_on=0/w2_off=0",
+    "no approach gate (u sums every object)": "asnn:robust/approach_gate=false",
+    "no offset test (near misses)": "asnn:robust/offset_max=1000",
+    "no persistence (one frame of approach)": "asnn:robust/approach_frames=1",
+    "no input scale (frames at their own size)": "asnn:robust/max_width=none",
+    "attention blur at full resolution": "asnn:robust/attention_step=1",
+}
+
 
 @dataclass(frozen=True)
 class DetectorSpec:
-    """One detector to run: a model and, for ASNN, a preset (None: the default)."""
+    """One detector to run: a model and, for ASNN, a preset (None: the default) and parameter
+    overrides (``(name, value)`` pairs)."""
 
     model: str
     preset: str | None = None
+    overrides: tuple[tuple[str, object], ...] = ()
 
     @property
     def name(self) -> str:
-        """``asnn``, ``asnn:PRESET``, ``lgmd1`` or ``lgmd2``."""
-        return f"{self.model}:{self.preset}" if self.preset else self.model
+        """``asnn``, ``asnn:PRESET[/name=value...]``, ``lgmd1`` or ``lgmd2``."""
+        if self.model != "asnn" or not (self.preset or self.overrides):
+            return self.model
+        extra = "".join(f"/{k}={_spell(v)}" for k, v in self.overrides)
+        return f"asnn:{self.preset or 'default'}{extra}"
 
     @property
     def slug(self) -> str:
-        """The name as a directory name (``:`` becomes ``-``)."""
-        return self.name.replace(":", "-")
+        """The name as a directory name (``:``, ``/`` and ``=`` become ``-``)."""
+        return self.name.replace(":", "-").replace("/", "-").replace("=", "-")
 
     def make(self) -> Detector:
         """A fresh detector."""
+        if self.overrides:
+            from ..model import ASNN
+
+            return ASNN(preset(self.preset or "default", **dict(self.overrides)))
         return make_detector(self.model, self.preset)
+
+
+def _spell(value) -> str:
+    return "none" if value is None else str(value).lower() if isinstance(value, bool) else \
+        str(value)
+
+
+def _value(text: str):
+    """A spec's override value: none, true, false, a number, or the word itself."""
+    word = text.strip()
+    lowered = word.lower()
+    if lowered in ("none", "true", "false"):
+        return {"none": None, "true": True, "false": False}[lowered]
+    for kind in (int, float):
+        try:
+            return kind(word)
+        except ValueError:
+            pass
+    return word
 
 
 def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec:
@@ -60,17 +106,29 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
     ValueError
         For an unknown model or preset, or a preset given to an LGMD model.
     """
-    model, _, preset_name = spec.strip().partition(":")
+    model, _, rest = spec.strip().partition(":")
     if model not in MODELS:
         raise ValueError(f"unknown detector {spec!r}; use asnn, asnn:PRESET, lgmd1 or lgmd2")
     if model != "asnn":
-        if preset_name:
+        if rest:
             raise ValueError(f"{model} has no presets: {spec!r}")
         return DetectorSpec(model)
+    preset_name, *items = rest.split("/")
     if not preset_name:
         preset_name = default_preset or "default"
-    preset_key(preset_name)  # raises for an unknown preset
-    return DetectorSpec("asnn", None if preset_name == "default" else preset_name)
+    overrides = []
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"{spec!r}: an override is name=value, got {item!r}")
+        overrides.append((key.strip(), _value(value)))
+    try:
+        preset(preset_name, **dict(overrides))  # raises for an unknown preset or a bad value
+    except ValidationError as exc:
+        raise ValueError(f"{spec!r}: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}") \
+            from None
+    return DetectorSpec("asnn", None if preset_name == "default" else preset_name,
+                        tuple(overrides))
 
 
 def parse_detectors(specs: str | Iterable[str],

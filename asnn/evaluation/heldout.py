@@ -1,0 +1,322 @@
+"""Held-out figures for the parameters chosen by looking at real clips (``asnn eval --held-out``).
+
+The approach gate's thresholds (``tau_max``, ``offset_max``, ``approach_frames``) were set by
+looking at labelled real clips. A score of those thresholds on the clips that chose them is not
+evidence, so this module reports, beside it, leave-one-clip-out figures: for each clip, the
+thresholds are chosen again from :data:`GATE_GRID` on the *other* clips only (by
+:func:`selection_key`, among the grid points that keep the generated suite within its aims:
+:func:`suite_admissible`), and that clip is scored with the thresholds it did not help choose.
+The preset's own thresholds are the ones this procedure picks on every clip of the design set.
+
+Running the model once per grid point would cost the grid's size in model runs. The gate acts
+after everything else, so each clip is run once (:func:`trace_clip`) with the objects of every
+frame recorded (their time to contact, offset and share of ``u``), and the gate, the spikes and
+the warning are replayed for each grid point (:func:`replay`); the replay with the preset's own
+thresholds reproduces the model's warnings frame for frame (``tests/test_heldout.py``).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections import deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import retina
+from ..model import ASNN
+from ..params import ASNNParams
+from . import scoring
+from .runs import fmt, write_json
+
+__all__ = ["GATE_GRID", "SUITE_AIMS", "FrameTrace", "ClipTrace", "trace_clip", "replay",
+           "grid", "suite_admissible", "selection_key", "leave_one_out", "held_out_report",
+           "evaluate_held_out"]
+
+# the thresholds chosen by looking at real clips, and the values tried for each
+GATE_GRID: dict[str, tuple] = {
+    "tau_max": (1.0, 1.5, 2.0, 2.5),
+    "offset_max": (0.75, 1.0, 1.5, 2.0),
+    "approach_frames": (2, 3, 4),
+}
+# a grid point is admissible when the generated suite keeps at least this hit rate and at most
+# this false-alarm rate with it: near misses and passing traffic, the generated cases a fleet
+# would see every day, must stay quiet (one case in a hundred)
+SUITE_AIMS = {"hit_rate": 0.90, "false_alarm_rate": 0.01}
+
+
+@dataclass(frozen=True)
+class FrameTrace:
+    """What the approach gate saw in one frame.
+
+    Attributes
+    ----------
+    repeat : bool
+        The frame repeated the one before (its response is the previous one).
+    objects : tuple of (id, ttc, offset, share, x, y)
+        Each object seen: its track's id, time to contact and offset (None while it does not
+        grow), its share of ``u`` before ``u_scale``, and its centre in the frame's pixels.
+    """
+
+    repeat: bool
+    objects: tuple = ()
+
+
+@dataclass
+class ClipTrace:
+    """One clip run through the model with its gate's inputs recorded."""
+
+    clip: str
+    cells: int
+    frames: list[FrameTrace] = field(default_factory=list)
+
+
+def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
+    """Run the model over ``(t, frame)`` pairs and record what its approach gate saw.
+
+    Raises
+    ------
+    ValueError
+        If the parameters have no approach gate (nothing to replay).
+    """
+    if not params.approach_gate:
+        raise ValueError("only a preset with the approach gate can be traced")
+    model = ASNN(params)
+    trace = ClipTrace(clip=clip, cells=0)
+    for index, (t, frame) in enumerate(timed_frames):
+        model.step(frame, t)
+        if index == 0:
+            trace.frames.append(FrameTrace(repeat=False))
+            continue
+        if model.repeated:
+            trace.frames.append(FrameTrace(repeat=True))
+            continue
+        h, w = model.previous.shape
+        trace.cells = h * w
+        sx, sy = model.shape[1] / w, model.shape[0] / h
+        trace.frames.append(FrameTrace(repeat=False, objects=tuple(
+            (tr.id, tr.ttc, tr.offset, share, tr.x * sx, tr.y * sy)
+            for tr, share in model.objects)))
+    return trace
+
+
+def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
+    """The per-frame records (``frame``, ``collision``, ``targets``) the model would give with
+    ``params``' gate thresholds, from a trace made with the same parameters otherwise."""
+    p = params
+    streak: dict[int, int] = {}
+    window: deque[int] = deque(maxlen=p.n_t)
+    records = []
+    previous = {"collision": False, "targets": []}
+    for index, frame in enumerate(trace.frames):
+        if index == 0:
+            record = {"frame": 0, "collision": False, "targets": []}
+        elif frame.repeat:
+            record = {**previous, "frame": index}
+        else:
+            total, targets = 0.0, []
+            for ident, ttc, offset, share, x, y in frame.objects:
+                passes = (ttc is not None and ttc <= p.tau_max and offset is not None
+                          and offset <= p.offset_max)
+                streak[ident] = streak.get(ident, 0) + 1 if passes else 0
+                if streak[ident] >= p.approach_frames:
+                    total += share
+                    targets.append({"x": x, "y": y})
+            out = retina.sigmoid_output(p.u_scale * total, trace.cells)
+            window.append(retina.spike_count(out, p.k_sp, p.t_sp))
+            rate = sum(window) / (p.n_t * p.window_dt)
+            record = {"frame": index, "collision": rate >= p.t_c, "targets": targets}
+        records.append(record)
+        previous = record
+    return records
+
+
+def grid(base: ASNNParams) -> list[ASNNParams]:
+    """``base`` with each combination of :data:`GATE_GRID`'s values, in grid order."""
+    names = list(GATE_GRID)
+    return [base.model_copy(update=dict(zip(names, values)))
+            for values in itertools.product(*(GATE_GRID[n] for n in names))]
+
+
+def suite_admissible(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
+                     base: ASNNParams, warmup: int = scoring.WARMUP_FRAMES) -> list[bool]:
+    """For each grid point, whether the generated suite (its traces and labels) stays within
+    :data:`SUITE_AIMS` (scored as generated clips: no early tolerance)."""
+    verdicts = []
+    for g in grid(base):
+        s = scoring.summarize(scoring.score_clip(replay(tr, g), lab, warmup=warmup,
+                                                 early_tolerance_s=0.0)
+                              for tr, lab in zip(traces, labels))
+        verdicts.append((s["hit_rate"] or 0.0) >= SUITE_AIMS["hit_rate"]
+                        and (s["false_alarm_rate"] or 0.0) <= SUITE_AIMS["false_alarm_rate"])
+    return verdicts
+
+
+def selection_key(summary: Mapping) -> tuple:
+    """How a grid point is ranked on the clips that choose it (larger is better): hits minus
+    false alarms (early warnings and warned non-collision clips count alike), then fewer false
+    alarms, then more warning frames inside the hit windows than outside them."""
+    inside = summary["window_warning_frames"]
+    return (summary["hit"] - summary["false_alarms"], -summary["false_alarms"],
+            inside - (summary["warning_frames"] - inside))
+
+
+def _gate(params: ASNNParams) -> dict:
+    return {n: getattr(params, n) for n in GATE_GRID}
+
+
+def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: ASNNParams,
+                  admissible: Sequence[bool] | None = None,
+                  warmup: int = scoring.WARMUP_FRAMES,
+                  early_tolerance_s: float = scoring.EARLY_TOLERANCE_S) -> dict:
+    """In-sample and leave-one-clip-out scores of the gate thresholds.
+
+    Parameters
+    ----------
+    traces, labels : sequences of the same length, in the same order
+    base : ASNNParams
+        The preset the traces were made with; its own thresholds give the in-sample scores.
+    admissible : sequence of bool, optional
+        Per grid point (:func:`grid`), whether it may be chosen (:func:`suite_admissible`);
+        all by default.
+
+    Returns
+    -------
+    dict
+        ``grid`` (the tried values), ``base`` (the preset's thresholds), ``chosen_all`` (the
+        thresholds :func:`selection_key` picks on every clip), ``in_sample`` and ``held_out``
+        (per clip a score dict; ``held_out`` adds the ``chosen`` thresholds), with their
+        ``summary``.
+    """
+    points = grid(base)
+    allowed = [k for k in range(len(points)) if admissible is None or admissible[k]]
+    if not allowed:
+        raise ValueError("no grid point keeps the generated suite within its aims")
+    scores = [[scoring.score_clip(replay(tr, g), lab, warmup=warmup,
+                                  early_tolerance_s=early_tolerance_s)
+               for tr, lab in zip(traces, labels)] for g in points]
+
+    def best(exclude: int | None) -> int:
+        keys = {k: selection_key(scoring.summarize(s for i, s in enumerate(scores[k])
+                                                   if i != exclude)) for k in allowed}
+        # ties: the first in grid order (smaller thresholds first)
+        return max(allowed, key=lambda k: (keys[k], -k))
+
+    base_scores = [scoring.score_clip(replay(tr, base), lab, warmup=warmup,
+                                      early_tolerance_s=early_tolerance_s)
+                   for tr, lab in zip(traces, labels)]
+    held = []
+    for i in range(len(traces)):
+        k = best(i)
+        held.append({**scores[k][i].to_dict(), "chosen": _gate(points[k])})
+    return {
+        "grid": {n: list(v) for n, v in GATE_GRID.items()},
+        "base": _gate(base),
+        "admissible": None if admissible is None else [_gate(points[k]) for k in allowed],
+        "chosen_all": _gate(points[best(None)]),
+        "in_sample": {"clips": [s.to_dict() for s in base_scores],
+                      "summary": scoring.summarize(base_scores)},
+        "held_out": {"clips": held, "summary": scoring.summarize(
+            scoring.ClipScore(**{k: v for k, v in c.items() if k != "chosen"}) for c in held)},
+    }
+
+
+def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
+    """Write ``held_out.json`` and ``held_out.md``; returns the Markdown's path."""
+    out_dir = Path(out_dir)
+    write_json(out_dir / "held_out.json", results)
+    ins, held = results["in_sample"], results["held_out"]
+
+    def row(name: str, s: Mapping) -> str:
+        return (f"| {name} | {s['hit']}/{s['collision_clips']} | {s['early']} | {s['late']} | "
+                f"{s['miss']} | {s['false']}/{s['noncollision_clips']} | {s['false_alarms']} | "
+                f"{s['window_warning_frames']} / {s['warning_frames'] - s['window_warning_frames']}"
+                " |")
+
+    gate = ", ".join(f"{k} = {v}" for k, v in results["base"].items())
+    lines = [
+        "# Held-out figures of the approach gate's thresholds",
+        "",
+        f"Preset thresholds: {gate} (on every clip: "
+        + ", ".join(f"{k} = {v}" for k, v in results["chosen_all"].items()) + "). "
+        "Leave-one-clip-out: each clip scored with the thresholds chosen on the other clips "
+        "from the grid " + "; ".join(f"{k} in {v}" for k, v in results["grid"].items()) + ".",
+        "",
+        "| figures | hits | early | late | misses | false (nc) | false alarms | "
+        "warning frames in / out of windows |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+        row("in-sample (preset thresholds)", ins["summary"]),
+        row("held out (leave one clip out)", held["summary"]),
+        "",
+        "| clip | in-sample | held out | thresholds chosen without it |",
+        "| --- | --- | --- | --- |",
+    ]
+    for a, b in zip(ins["clips"], held["clips"]):
+        chosen = ", ".join(f"{v}" for v in b["chosen"].values())
+        lines.append(f"| {a['clip']} | {a['outcome']} {fmt(a['first_warning'])} | "
+                     f"{b['outcome']} {fmt(b['first_warning'])} | {chosen} |")
+    path = out_dir / "held_out.md"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace:
+    from ..io.sources import open_source
+
+    return trace_clip(open_source(spec, topic=topic).timed_frames(), params, Path(spec).name)
+
+
+def _trace_case(name: str, params: ASNNParams) -> ClipTrace:
+    from ..stimuli.suite import make_case
+    from .runs import at_rate
+
+    scene = make_case(name)
+    return trace_clip(at_rate(scene.frames, scene.fps), params, name)
+
+
+def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
+                      labels_path: str | Path | None = None, preset_name: str = "default",
+                      jobs: int = 1, progress=None) -> dict:
+    """Trace a preset on labelled clips and on the generated suite, and write the in-sample and
+    leave-one-clip-out figures of its gate thresholds (:func:`leave_one_out`) to ``out_dir``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown preset, one without the approach gate, or an unreadable labels file.
+    OSError
+        For a clip that cannot be read.
+    """
+    from concurrent.futures import ProcessPoolExecutor
+
+    from ..params import preset
+    from ..stimuli.suite import make_case, suite_cases
+    from .progress import Silent
+
+    clips_dir, out_dir = Path(clips_dir), Path(out_dir)
+    labels = scoring.load_labels(Path(labels_path) if labels_path else clips_dir / "labels.json")
+    base = preset(preset_name)
+    if not base.approach_gate:
+        raise ValueError(f"preset {preset_name!r} has no approach gate to hold out")
+    cases = suite_cases()
+    progress = progress or Silent()
+    progress.start(len(labels) + len(cases), "eval --held-out")
+    with ProcessPoolExecutor(max_workers=max(jobs, 1)) as pool:
+        clip_jobs = [pool.submit(_trace_source, str(clips_dir / lab["file"]), lab.get("topic"),
+                                 base) for lab in labels]
+        case_jobs = [pool.submit(_trace_case, name, base) for name in cases]
+        traces = []
+        for job, lab in zip(clip_jobs, labels):
+            traces.append(job.result())
+            progress.advance(1, lab["file"])
+        suite_traces = []
+        for job, name in zip(case_jobs, cases):
+            suite_traces.append(job.result())
+            progress.advance(1, name)
+    progress.finish()
+    suite_labels = [make_case(name).label(name) for name in cases]
+    admissible = suite_admissible(suite_traces, suite_labels, base)
+    results = {"clips_dir": str(clips_dir), "preset": preset_name,
+               **leave_one_out(traces, labels, base, admissible)}
+    held_out_report(results, out_dir)
+    return results

@@ -1,0 +1,130 @@
+"""The direct looming estimate (asnn/looming.py) and the target tracker (asnn/tracking.py)."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from asnn.looming import region_expansion
+from asnn.tracking import Observation, TargetTracker, Track, approaching
+
+
+def _texture(size=400, seed=0):
+    rng = np.random.default_rng(seed)
+    return cv2.GaussianBlur(rng.random((size, size)).astype(np.float32), (0, 0), 3)
+
+
+def _warp(image, scale=1.0, dx=0.0, dy=0.0, gain=1.0, offset=0.0):
+    """The image scaled about its centre and shifted, as a camera would see it move."""
+    c = image.shape[0] / 2
+    m = np.float32([[scale, 0, c * (1 - scale) + dx], [0, scale, c * (1 - scale) + dy]])
+    return cv2.warpAffine(image, m, image.shape[::-1], flags=cv2.INTER_LINEAR) * gain + offset
+
+
+@pytest.mark.parametrize("box", [(170, 170, 230, 230), (150, 150, 250, 250),
+                                 (100, 100, 300, 300)])
+def test_expansion_about_the_box_centre_is_measured_at_every_box_size(box):
+    # a large box is fitted on a coarser grid, where fine texture reads a little faster
+    tex = _texture()
+    est = region_expansion(tex, _warp(tex, 1.02), box)
+    assert est.rate == pytest.approx(0.02, rel=0.4)
+    assert abs(est.drift_x) < 0.1 and abs(est.drift_y) < 0.1
+    shrink = region_expansion(tex, _warp(tex, 1 / 1.02), box)
+    assert shrink.rate == pytest.approx(-0.02, rel=0.4)  # receding: contraction
+
+
+def test_translation_is_drift_not_expansion():
+    tex = _texture()
+    est = region_expansion(tex, _warp(tex, dx=0.6, dy=-0.4), (150, 150, 250, 250))
+    assert abs(est.rate) < 0.002
+    assert est.drift_x == pytest.approx(0.6, abs=0.1) and est.drift_y == pytest.approx(-0.4,
+                                                                                        abs=0.1)
+
+
+def test_an_off_centre_box_of_an_expanding_surface_drifts_outwards():
+    # the expansion centre (focus of expansion) at the image centre, the box to its right: the
+    # box's centre moves right at rate * distance, which is what makes a passing object's
+    # offset large
+    tex = _texture()
+    est = region_expansion(tex, _warp(tex, 1.02), (250, 170, 310, 230))
+    assert est.rate == pytest.approx(0.02, rel=0.3)
+    assert est.drift_x == pytest.approx(0.02 * 80, rel=0.35)
+
+
+def test_a_brightness_change_is_not_read_as_motion():
+    tex = _texture()
+    est = region_expansion(tex, _warp(tex, gain=1.0, offset=0.05), (150, 150, 250, 250))
+    assert abs(est.rate) < 1e-3 and abs(est.drift_x) < 0.05 and abs(est.drift_y) < 0.05
+    assert est.brightness == pytest.approx(0.05, rel=0.05)
+
+
+def test_a_flat_or_tiny_box_has_no_estimate():
+    flat = np.full((100, 100), 0.5, np.float32)
+    assert region_expansion(flat, flat, (10, 10, 60, 60)) is None
+    tex = _texture(100)
+    assert region_expansion(tex, tex, (10, 10, 13, 40)) is None
+
+
+def test_the_background_ring_keeps_a_moving_background_out_of_the_estimate():
+    # a textured disk expanding in front of a texture sweeping right: the ring around the box
+    # sees the sweep, and the box's pixels that move with it are left out
+    back, front = _texture(seed=1), _texture(seed=2)
+    yy, xx = np.mgrid[0:400, 0:400]
+    disk = lambda r: (np.hypot(xx - 200, yy - 200) <= r).astype(np.float32)
+    a = back * (1 - disk(60)) + front * disk(60)
+    b = _warp(back, dx=2.0) * (1 - disk(61.2)) + _warp(front, 1.02) * disk(61.2)
+    box = (130, 130, 270, 270)
+    plain = region_expansion(a, b, box)
+    ring = region_expansion(a, b, box, surround=0.5)
+    assert abs(ring.rate - 0.02) < abs(plain.rate - 0.02)
+    assert abs(ring.drift_x) < abs(plain.drift_x)
+
+
+def _obs(x, y, size=10.0, mass=1.0):
+    return Observation(x, y, size, mass, (x - size, y - size, x + size, y + size))
+
+
+def test_tracks_keep_their_ids_and_new_objects_get_new_ones():
+    tracker = TargetTracker()
+    first = tracker.update([_obs(50, 50), _obs(150, 60)], 0.05)
+    ids = [tr.id for tr in first]
+    assert ids == [0, 1]
+    second = tracker.update([_obs(153, 61), _obs(52, 49), _obs(300, 300)], 0.05)
+    assert [tr.id for tr in second] == [1, 0, 2]
+    for _ in range(4):  # unseen for longer than max_missed (3): forgotten
+        tracker.update([], 0.05)
+    assert tracker.tracks == []
+    assert tracker.update([_obs(50, 50)], 0.05)[0].id == 3
+
+
+def test_time_to_contact_and_offset_follow_from_expansion_and_drift():
+    track = Track(0, 100.0, 100.0, 20.0, 1.0, (80, 80, 120, 120))
+    track.measure(2.0, 30.0, 40.0)  # grows by 200 % per second, drifts 50 px/s
+    assert track.ttc == pytest.approx(0.5)
+    assert track.offset == pytest.approx(50.0 / (2.0 * 20.0))
+    track.measure(-1.0, 0.0, 0.0)  # smoothed: (2 + -1) / 2
+    assert track.expansion == pytest.approx(0.5)
+    shrinking = Track(1, 0.0, 0.0, 5.0, 1.0, (0, 0, 10, 10))
+    shrinking.measure(-0.5, 0.0, 0.0)
+    assert shrinking.ttc is None and shrinking.offset is None
+
+
+def test_the_approach_test_needs_growth_a_collision_course_and_consecutive_frames():
+    coming = Track(0, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
+    coming.measure(1.0, 5.0, 0.0)  # ttc 1 s, offset 0.25
+    assert approaching(coming, tau_max=1.5, offset_max=1.0)
+    assert not approaching(coming, tau_max=0.8, offset_max=1.0)
+    assert not approaching(coming, tau_max=1.5, offset_max=0.2)
+    assert [coming.judge(1.5, 1.0, 3) for _ in range(4)] == [False, False, True, True]
+    passing = Track(1, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
+    passing.measure(1.0, 60.0, 0.0)  # drifts 3 sizes per unit of growth: it will pass
+    assert not any(passing.judge(1.5, 1.0, 1) for _ in range(3))
+
+
+def test_tracker_rejects_a_smoothing_outside_its_range():
+    with pytest.raises(ValueError):
+        TargetTracker(smoothing=0.0)
+    with pytest.raises(ValueError):
+        TargetTracker(box_weight=1.5)
+    assert math.isfinite(TargetTracker(smoothing=1.0).smoothing)
