@@ -368,7 +368,9 @@ class ASNN:
         if p.approach_gate:
             total = float(sum(per_region[k] for k in range(len(regions)) if coming[k]))
         sx, sy = self.shape[1] / w, self.shape[0] / h  # the frame's pixels per model pixel
-        targets = [Target(x=float(regions.x[k] * sx), y=float(regions.y[k] * sy),
+        # pixel centres: model pixel i covers the frame's pixels [i sx, (i + 1) sx)
+        targets = [Target(x=float((regions.x[k] + 0.5) * sx - 0.5),
+                          y=float((regions.y[k] + 0.5) * sy - 0.5),
                           direction=float(regions.direction[k]),
                           energy=float(regions.energy[k]),
                           pixels=int(round(regions.pixels[k] * sx * sy)),

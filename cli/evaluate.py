@@ -57,8 +57,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", choices=preset_names(), default="default",
                    help="the ASNN preset a bare 'asnn' stands for (default: %(default)s)")
     p.add_argument("--cases", metavar="PATTERN",
-                   help="with --synthetic: comma-separated patterns of case names or groups, "
-                        "e.g. 'loom-*,nearmiss-*' or 'driving-*' (default: every case)")
+                   help="with --synthetic (or --held-out: the cases that decide which "
+                        "thresholds are admissible): comma-separated patterns of case names or "
+                        "groups, e.g. 'loom-*,nearmiss-*' or 'driving-*' (default: every case)")
     p.add_argument("--out", metavar="DIR", default="eval-out",
                    help="output directory (default: %(default)s)")
     p.add_argument("--early-tolerance", type=float, metavar="SECONDS",
@@ -89,7 +90,8 @@ def run(args: argparse.Namespace) -> int:
         print("asnn eval: give either CLIPS_DIR, --synthetic or --paper", file=sys.stderr)
         return 2
     misplaced = [flag for flag, given, mode in (
-        ("--cases", args.cases, args.synthetic), ("--case-plots", args.case_plots, args.synthetic),
+        ("--cases", args.cases, args.synthetic or args.held_out),
+        ("--case-plots", args.case_plots, args.synthetic),
         ("--size", args.size, args.paper),
         ("--ablation", args.ablation, not (args.paper or args.held_out)),
         ("--labels", args.labels, not (args.synthetic or args.paper)),
@@ -119,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             return 2
         elif args.held_out:
             heldout.evaluate_held_out(args.clips_dir, args.out, labels_path=args.labels,
-                                      preset_name=args.preset, jobs=args.jobs,
+                                      preset_name=args.preset, cases=args.cases, jobs=args.jobs,
                                       progress=progress)
             print(f"{args.out}/held_out.md")
             return 0

@@ -1,0 +1,220 @@
+"""The default (robust) preset on generated clips: one test group per point of issue 12, each
+showing what the corresponding stage does by switching it off (the ablation specs of
+asnn.evaluation.runs)."""
+
+import numpy as np
+import pytest
+
+from asnn import ASNN, preset
+from asnn.stimuli.suite import make_case
+
+OFF_LED_ONLY = dict(w1_on=0.0, w2_off=0.0)  # the published variant's OFF-led map alone
+NO_GATE = dict(approach_gate=False)
+NO_OFFSET_TEST = dict(offset_max=1000.0)
+NO_CONTRAST_GAIN = dict(contrast_gain=None)
+
+
+def _run(case, **overrides):
+    scene = make_case(case)
+    model = ASNN(preset("robust", **overrides))
+    responses = [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
+    return scene, responses
+
+
+def _first(responses, warmup=5):
+    return next((r.index for r in responses if r.collision and r.index >= warmup), None)
+
+
+def _hit(scene, responses):
+    first = _first(responses)
+    return first is not None and scene.onset_frame <= first <= scene.contact_frame + 2
+
+
+def _quiet(responses):
+    return _first(responses) is None
+
+
+def test_the_default_preset_is_robust():
+    assert ASNN().params == preset("robust")
+
+
+# 1. both polarities: one preset for dark and light objects, silent while either recedes
+
+@pytest.mark.parametrize("case", ["loom-light-c0.3-d12-center", "loom-light-c0.6-d12-bottomleft",
+                                  "loom-dark-c0.3-d12-center"])
+def test_dark_and_light_approaches_warn_with_one_preset(case):
+    assert _hit(*_run(case))
+
+
+def test_light_approaches_need_the_on_led_map():
+    assert not _hit(*_run("loom-light-c0.3-d12-center", **OFF_LED_ONLY))
+
+
+@pytest.mark.parametrize("case", ["recede-dark-c0.6-d48", "recede-light-c0.6-d48"])
+def test_receding_objects_of_either_polarity_stay_silent(case):
+    assert _quiet(_run(case)[1])
+
+
+def test_recession_is_silenced_by_the_approach_gate():
+    # without the gate the approach map's activity of a receding object reaches the spikes
+    assert not _quiet(_run("recede-dark-c0.6-d48", **NO_GATE)[1])
+
+
+# 2. contrast: Weber 0.2 and up detected, the response growing with contrast
+
+@pytest.mark.parametrize("polarity", ["dark", "light"])
+def test_low_contrast_approaches_warn_as_early_as_high_contrast_ones(polarity):
+    low = _first(_run(f"loom-{polarity}-c0.2-d12-center")[1])
+    high = _first(_run(f"loom-{polarity}-c1.0-d12-center")[1])
+    assert low is not None and high is not None and low - high <= 2
+
+
+def test_the_contrast_gain_control_is_what_makes_low_contrast_warn_early():
+    low = _first(_run("loom-dark-c0.2-d12-center", **NO_CONTRAST_GAIN)[1])
+    high = _first(_run("loom-dark-c1.0-d12-center", **NO_CONTRAST_GAIN)[1])
+    assert low is not None and high is not None and low - high >= 8
+
+
+def test_the_response_grows_with_contrast_instead_of_being_cut_off():
+    peaks = [max(r.u for r in _run(f"loom-dark-c{c}-d12-center")[1])
+             for c in ("0.2", "0.5", "1.0")]
+    assert peaks[0] > 0 and peaks[0] < peaks[1] < peaks[2]
+
+
+# 3. backgrounds and the camera: silent for translation, patterns, camera motion, lighting and
+#    noise; approaches over them still detected; the warning ends with the approach
+
+@pytest.mark.parametrize("case", ["translate-disk-dark-c0.6-h2px", "translate-square-dark-c0.6-diag3px",
+                                  "translate-car-light-c0.6-h4px-left", "bar-dark-c1.0-h3px",
+                                  "stripes-diagonal-c1.0-3px", "checker-c1.0-diag2px",
+                                  "texture-c0.5-diag3px", "shake-texture-4px-rot1deg",
+                                  "pan-scene-h3px", "flicker-sine-8hz-30pct",
+                                  "exposure-step-up-2.0", "headlights-sweep-night", "noise-gauss-10",
+                                  "jpeg-q8", "drive-day-straight", "drive-day-turn-left"])
+def test_translation_patterns_camera_lighting_and_noise_stay_silent(case):
+    assert _quiet(_run(case)[1])
+
+
+@pytest.mark.parametrize("case", ["translate-disk-dark-c0.6-h2px", "drive-day-straight"])
+def test_translation_and_driving_are_silenced_by_the_approach_gate(case):
+    assert not _quiet(_run(case, **NO_GATE)[1])
+
+
+@pytest.mark.parametrize("case", ["loom-dark-c0.3-over-texture-h1px",
+                                  "loom-dark-c0.5-over-texture-diag2px", "loom-dark-c0.6-pan-h1px",
+                                  "loom-dark-c0.6-flicker-4hz", "loom-dark-c0.6-headlights",
+                                  "loom-dark-c0.3-noise-6", "loom-light-c0.5-jpeg-q20"])
+def test_approaches_over_moving_backgrounds_lighting_and_noise_are_detected(case):
+    assert _hit(*_run(case))
+
+
+@pytest.mark.parametrize("case", ["halt-dark-c0.6", "approach-recede-light-c0.6"])
+def test_the_warning_ends_when_the_approach_ends(case):
+    scene, responses = _run(case)
+    assert _hit(scene, responses)
+    # the spike-rate window (N_t = 4 frames) is all that outlasts the approach
+    after = [r.index for r in responses if r.collision and r.index > scene.contact_frame + 2]
+    assert len(after) <= 4 and (not after or after[-1] <= scene.contact_frame + 6)
+
+
+def test_without_the_gate_the_warning_outlasts_the_approach():
+    # the object turns back at the contact frame: its recession keeps the approach map active
+    scene, responses = _run("approach-recede-dark-c0.6", **NO_GATE)
+    after = [r.index for r in responses if r.collision and r.index > scene.contact_frame + 2]
+    assert len(after) > 4
+
+
+# 4. near misses: a pass is not a collision
+
+@pytest.mark.parametrize("case", ["nearmiss-disk-dark-right", "nearmiss-car-dark-left-nextlane",
+                                  "nearmiss-truck-dark-right-close", "drive-day-oncoming-nextlane"])
+def test_near_misses_stay_quiet_while_their_collision_twin_warns(case):
+    scene, responses = _run(case)
+    assert _quiet(responses)
+    if scene.twin:
+        assert _hit(*_run(scene.twin))
+
+
+@pytest.mark.parametrize("case", ["nearmiss-disk-dark-right", "nearmiss-car-dark-left-nextlane"])
+def test_near_misses_are_told_apart_by_the_offset_test(case):
+    assert not _quiet(_run(case, **NO_OFFSET_TEST)[1])
+
+
+# 5. targets: one per approaching object, a stable id, expansion and time to contact
+
+def test_one_target_per_object_with_a_stable_id_and_a_time_to_contact():
+    scene, responses = _run("loom-dark-c0.6-d6-center")
+    warned = [r for r in responses if r.collision and r.targets]
+    assert len(warned) >= 10
+    assert all(len(r.targets) == 1 for r in warned)
+    assert len({r.targets[0].id for r in warned}) == 1
+    cx, cy = scene.center
+    height = scene.frames.shape[1]
+    checked = 0
+    for r in warned:
+        t = r.targets[0]
+        assert t.approaching and t.expansion > 0 and t.offset < 1.0
+        # on the object: within half its radius of its centre
+        assert np.hypot(t.x - cx, t.y - cy) < max(3.0, 0.25 * scene.target_size[r.index])
+        if scene.target_size[r.index] < 0.5 * height:  # while the whole object is in view
+            assert t.ttc == pytest.approx(scene.ttc[r.index], rel=0.25)
+            checked += 1
+    assert checked >= 10
+
+
+def test_the_published_variant_reports_rim_segments_without_ids():
+    scene = make_case("loom-dark-c0.6-d6-center")
+    model = ASNN("reference32")
+    counts = [len(model.step(f).targets) for f in scene.frames]
+    assert max(counts) > 1  # several clusters on one object
+    model = ASNN("reference32")
+    assert all(t.id is None for f in scene.frames for t in model.step(f).targets)
+
+
+# the stages that matter on real video: repeated frames, input scale, persistence
+
+def _with_repeats(frames, every=3):
+    """Frames as a frame-rate conversion delivers them: every ``every``-th frame shown twice."""
+    out = []
+    for i, frame in enumerate(frames):
+        out.append(frame)
+        if i % every == every - 1:
+            out.append(frame)
+    return out
+
+
+def test_repeated_frames_are_held_rather_than_read_as_a_stop():
+    scene = make_case("loom-dark-c0.3-d12-center")
+    frames = _with_repeats(scene.frames)
+    held = ASNN("robust")
+    plain = ASNN(preset("robust", skip_repeats=False))
+    fps = scene.fps * 4 / 3
+    held_warn = [held.step(f, i / fps).collision for i, f in enumerate(frames)]
+    plain_warn = [plain.step(f, i / fps).collision for i, f in enumerate(frames)]
+    assert any(held_warn)
+    assert held_warn.index(True) < (plain_warn.index(True) if any(plain_warn) else len(frames))
+
+
+def test_a_still_scene_is_not_a_run_of_repeats():
+    model = ASNN("robust")
+    scene = make_case("halt-dark-c0.6")
+    for i, frame in enumerate(scene.frames):
+        model.step(frame, i / scene.fps)
+    # the scene stopped 18 frames before the end: one frame held, then seen as it is
+    assert not model.repeated and not model.objects
+
+
+def test_large_frames_are_seen_at_the_scale_of_the_kernels_and_targets_stay_in_their_pixels():
+    import cv2
+
+    scene = make_case("loom-dark-c0.6-d6-center")
+    big = [cv2.resize(f, None, fx=4, fy=4, interpolation=cv2.INTER_NEAREST) for f in scene.frames]
+    small, large = ASNN(preset("robust", max_width=None)), ASNN(preset("robust", max_width=160))
+    pairs = [(small.step(f, i / 20), large.step(g, i / 20))
+             for i, (f, g) in enumerate(zip(scene.frames, big))]
+    assert [a.collision for a, _ in pairs] == [b.collision for _, b in pairs]
+    assert any(a.targets for a, _ in pairs)
+    for a, b in pairs:
+        assert len(a.targets) == len(b.targets)
+        for ta, tb in zip(a.targets, b.targets):
+            assert (tb.x, tb.y) == pytest.approx((4 * ta.x + 1.5, 4 * ta.y + 1.5), abs=0.5)
