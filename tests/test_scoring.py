@@ -113,8 +113,12 @@ def test_summary_counts_rates_and_lead():
     assert s["mean_lead_frames"] == pytest.approx(10.0)
     assert s["mean_lead_s"] == pytest.approx(0.5)
     assert s["median_localisation_px"] is None
+    # non-collision video: 2 clips of 55 scored frames at 20 fps, one warning frame in all
+    assert s["noncollision_minutes"] == pytest.approx(2 * 55 / 20 / 60)
+    assert s["warning_frames_per_minute"] == pytest.approx(1 / (2 * 55 / 20 / 60))
     empty = scoring.summarize([])
     assert empty["hit_rate"] is None and empty["false_alarm_rate"] is None
+    assert empty["warning_frames_per_minute"] is None
 
 
 def test_score_directory_with_hand_made_files_and_a_missing_clip(tmp_path):

@@ -49,8 +49,8 @@ def _clips_report(results: Mapping) -> str:
         "",
         "| detector | hits | early | late | misses | false alarms (nc) | quiet (nc) | hit rate |"
         " false-alarm rate | mean / median lead (hits) | median loc. error | warning frames in /"
-        " out of windows |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        " out of windows | warning frames per minute of non-collision video |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for m in names:
         s = results["detectors"][m]["summary"]
@@ -60,7 +60,8 @@ def _clips_report(results: Mapping) -> str:
             f" | {rate(s['hit_rate'])} | {rate(s['false_alarm_rate'])}"
             f" | {fmt(s['mean_lead_s'], 2, ' s')} / {fmt(s['median_lead_s'], 2, ' s')}"
             f" | {fmt(s['median_localisation_px'], 0, ' px')}"
-            f" | {s['window_warning_frames']} / {s['warning_frames'] - s['window_warning_frames']} |")
+            f" | {s['window_warning_frames']} / {s['warning_frames'] - s['window_warning_frames']}"
+            f" | {fmt(s['warning_frames_per_minute'], 1)} |")
         if s["missing"]:
             lines[-1] += f" ({s['missing']} clips without results)"
     lines += ["", "Per clip: outcome, first warning frame (lead time, s), warning frames.", "",

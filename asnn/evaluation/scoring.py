@@ -91,6 +91,8 @@ class ClipScore:
         track's centre at that frame).
     window : (int, int) or None
         The frames a first warning must lie in to be a hit.
+    duration_s : float or None
+        The clip's length after the warm-up, seconds (frames scored / the label's fps).
     """
 
     clip: str
@@ -105,6 +107,7 @@ class ClipScore:
     lead_s: float | None = None
     localisation_px: float | None = None
     window: tuple[int, int] | None = None
+    duration_s: float | None = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -185,18 +188,22 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     clip = str(label.get("file", "?"))
     collision = bool(label.get("collision"))
     first, count = first_warning(records, warmup)
+    fps = float(label.get("fps") or 0.0)
+    scored = sum(1 for r in records if int(r["frame"]) >= warmup)
+    duration = scored / fps if fps > 0 else None
     if not collision:
         return ClipScore(clip=clip, collision=False, outcome="false" if count else "quiet",
-                         first_warning=first, warning_frames=count, false_alarm=bool(count))
+                         first_warning=first, warning_frames=count, false_alarm=bool(count),
+                         duration_s=duration)
 
     onset, contact = label.get("onset_frame"), label.get("contact_frame")
     if onset is None or contact is None:
         raise ValueError(f"{clip}: a collision label needs onset_frame and contact_frame")
-    fps = float(label.get("fps") or 0.0)
     tolerance = int(round(early_tolerance_s * fps)) if fps > 0 else 0
     window = (int(onset) - tolerance, int(contact) + contact_slack)
     if first is None:
-        return ClipScore(clip=clip, collision=True, outcome="miss", window=window)
+        return ClipScore(clip=clip, collision=True, outcome="miss", window=window,
+                         duration_s=duration)
     if first < window[0]:
         outcome = "early"
     elif first <= window[1]:
@@ -213,6 +220,7 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
                      lead_frames=lead, lead_s=lead / fps if fps > 0 else None,
                      localisation_px=_nearest_target_distance(records, first,
                                                               _labelled_center(label, first)),
+                     duration_s=duration,
                      window=window)
 
 
@@ -248,10 +256,15 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         ``window_warning_frames`` and ``after_warning_frames`` summed over the scored clips, and
         ``after_warning_clips``, the collision clips with warnings after the approach;
         ``mean_lead_s``, ``mean_lead_frames``, ``median_lead_s`` and ``median_lead_frames`` over
-        hits; ``median_localisation_px`` over hits with targets.
+        hits; ``median_localisation_px`` over hits with targets; ``noncollision_minutes`` (of
+        scored non-collision video, where the labels give the fps) and
+        ``warning_frames_per_minute`` of it (SPEC.md section 5: a detector that fires once per
+        clip and one that fires all the time are not equally useful).
     """
     scores = list(scores)
     scored = [s for s in scores if s.outcome != "missing"]
+    quiet_minutes = sum(s.duration_s for s in scored
+                        if not s.collision and s.duration_s is not None) / 60.0
     counts = {o: sum(s.outcome == o for s in scores) for o in OUTCOMES}
     n_col = sum(s.collision for s in scored)
     n_non = len(scored) - n_col
@@ -271,6 +284,9 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         "warning_frames": sum(s.warning_frames for s in scored),
         "window_warning_frames": sum(s.window_warning_frames for s in scored),
         "after_warning_frames": sum(s.after_warning_frames for s in scored),
+        "noncollision_minutes": quiet_minutes,
+        "warning_frames_per_minute": (sum(s.warning_frames for s in scored if not s.collision)
+                                      / quiet_minutes if quiet_minutes else None),
         "after_warning_clips": sum(s.after_warning_frames > 0 for s in scored),
         "mean_lead_frames": _mean([s.lead_frames for s in hits]),
         "mean_lead_s": _mean([s.lead_s for s in hits if s.lead_s is not None]),
