@@ -19,9 +19,14 @@ Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The pre
 ``reference32``
     ``reference``'s parameters computed in float32 (the default).
 ``light``
-    The default preset for light objects on a dark background (ON and OFF swapped).
+    ``reference32`` for light objects on a dark background (ON and OFF swapped).
+``robust``
+    ``reference32`` plus the robust additions (README, "The robust preset"): repeated frames
+    held, input scale, contrast gain control, both polarities, objects with a direct looming
+    estimate, a tracker and the approach gate. Each addition has the field that switches it off.
 ``default``
-    The preset :command:`asnn detect` uses when none is named; chosen by measurement (README).
+    The preset :command:`asnn detect` uses when none is named: ``robust`` (README, "Why
+    robust is the default").
 
 Every preset but ``reference`` runs its optimised step in float32 (``precision``); see
 :mod:`asnn._fast`.
