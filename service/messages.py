@@ -140,13 +140,19 @@ class Frame(_Message):
 
 
 class TargetMsg(_Message):
-    """A looming region (as in ``asnn detect``)."""
+    """A looming region (as in ``asnn detect``); the tracked presets' optional fields
+    (docs/contract.md) are left out of the payload where the model does not set them."""
 
     x: float
     y: float
     direction: float
     energy: float
     pixels: int = Field(ge=0)
+    id: int | None = Field(None, ge=0)
+    expansion: float | None = None
+    ttc: float | None = Field(None, gt=0)
+    offset: float | None = Field(None, ge=0)
+    approaching: bool | None = None
 
 
 class Response(_Message):
@@ -199,8 +205,8 @@ def encode_image(image: np.ndarray, format: str) -> bytes:
 
 
 def encode(message: BaseModel) -> bytes:
-    """msgpack bytes of a message."""
-    return msgpack.packb(message.model_dump(), use_bin_type=True)
+    """msgpack bytes of a message; optional fields that are not set (None) are left out."""
+    return msgpack.packb(message.model_dump(exclude_none=True), use_bin_type=True)
 
 
 class _TooManyItems(ValueError):

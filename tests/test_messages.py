@@ -201,3 +201,30 @@ def test_config_options_override_the_file(tmp_path):
 def test_bad_config_is_a_clear_error(options):
     with pytest.raises(ConfigError):
         make_config(options)
+
+
+def test_tracked_target_fields_cross_the_wire_and_are_left_out_where_unset():
+    import msgpack
+
+    from asnn.stimuli.suite import make_case
+
+    scene = make_case("loom-dark-c0.6-d12-topleft")
+    frame = Frame.from_image(scene.frames[0], seq=0, stamp=0.0)
+    for name, tracked in (("robust", True), ("reference32", False)):
+        model = ASNN(name)
+        results = [model.step(image, i / scene.fps) for i, image in enumerate(scene.frames)]
+        result = next(r for r in reversed(results) if r.targets)
+        wire = encode(response_from(result, robot="r1", frame=frame, model="asnn", preset=name,
+                                    worker="w", latency_ms=1.0, dropped=0))
+        raw = msgpack.unpackb(wire)["targets"]
+        back = decode_response(wire).targets
+        if tracked:
+            assert {"id", "expansion", "ttc", "offset", "approaching"} <= set(raw[0])
+            assert back[0].id == result.targets[0].id and back[0].ttc == result.targets[0].ttc
+        else:
+            assert set(raw[0]) == {"x", "y", "direction", "energy", "pixels"}
+            assert back[0].id is None and back[0].ttc is None
+    bad = msgpack.unpackb(wire)
+    bad["targets"][0]["ttc"] = -1.0  # a time to contact is positive
+    with pytest.raises(MessageError):
+        decode_response(msgpack.packb(bad))
