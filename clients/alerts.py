@@ -44,17 +44,25 @@ def format_warning(r: Response) -> str:
     """One readable line: time of capture, robot, seq, output and the looming targets."""
     clock = format_stamp(r.stamp)
     if r.targets:
-        targets = "; ".join(
-            f"({t.x:.0f}, {t.y:.0f}) heading {math.degrees(t.direction):+.0f} deg"
-            f" energy {t.energy:.3g} {t.pixels} px" for t in r.targets)
+        targets = "; ".join(_target(t) for t in r.targets)
     else:
         targets = "none located"
     return (f"{clock} WARNING robot {r.robot} seq {r.seq}: out {r.out:.3f}, "
             f"{r.spike_rate:.0f} spikes/s, targets: {targets}")
 
 
+def _target(t) -> str:
+    """A target as text; a tracked one leads with its id and time to contact."""
+    where = (f"({t.x:.0f}, {t.y:.0f}) heading {math.degrees(t.direction):+.0f} deg"
+             f" energy {t.energy:.3g} {t.pixels} px")
+    if t.id is None:
+        return where
+    ttc = "no contact" if t.ttc is None else f"contact in {t.ttc:.2f} s"
+    return f"#{t.id} {ttc} at {where}"
+
+
 def format_json(r: Response) -> str:
-    return json.dumps(r.model_dump(), separators=(", ", ": "))
+    return json.dumps(r.model_dump(exclude_none=True), separators=(", ", ": "))
 
 
 class WarningListener:

@@ -228,3 +228,18 @@ def test_tracked_target_fields_cross_the_wire_and_are_left_out_where_unset():
     bad["targets"][0]["ttc"] = -1.0  # a time to contact is positive
     with pytest.raises(MessageError):
         decode_response(msgpack.packb(bad))
+
+
+def test_alert_lines_lead_tracked_targets_with_their_id_and_time_to_contact():
+    from clients.alerts import format_warning
+    from service.messages import TargetMsg
+
+    common = dict(robot="r1", seq=7, stamp=12.0, model="asnn", preset="p", u=1.0, out=0.9,
+                  spikes=3, spike_rate=60.0, collision=True, worker="w", latency_ms=1.0,
+                  dropped=0)
+    place = dict(x=10.0, y=20.0, direction=0.0, energy=0.1, pixels=40)
+    tracked = format_warning(Response(**common, targets=[
+        TargetMsg(**place, id=3, expansion=2.0, ttc=0.5, offset=0.1, approaching=True)]))
+    assert "#3 contact in 0.50 s at (10, 20)" in tracked
+    plain = format_warning(Response(**common, targets=[TargetMsg(**place)]))
+    assert "#" not in plain and "(10, 20)" in plain
