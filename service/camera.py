@@ -68,6 +68,10 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH) -> int:
     """Publish the source's frames paced at ``fps`` (default: the source's own times).
 
+    ``stamp``: the capture time of a live source's frame (wall clock when it was read); a
+    replayed source's (file, bag, generated scene) recorded time shifted to start now, so that
+    frames published late or bunched keep the spacing the scene was recorded with.
+
     ``wait``: seconds to wait, at most, for a subscriber (a worker) before the first frame.
     ``preview_hz``: thumbnails (``preview_width`` pixels wide) per second on the preview key,
     at most one per frame; 0 publishes none.
@@ -98,6 +102,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
         seq = 0
         next_time = time.monotonic()
+        # a replayed source's frames are stamped with their recorded times, shifted to now:
+        # the publishing jitter of this process is not the scene's motion
+        start, replayed = time.time(), 0.0
         while not stop.is_set():
             previous_t = None
             for t, image in source.timed_frames():
@@ -109,8 +116,12 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                         continue
                     next_time = max(next_time + period, now) if fps else now
                 else:
+                    step = period
                     if previous_t is not None and not fps:  # the recorded pace
-                        next_time += min(max(t - previous_t, 0.0), MAX_REPLAY_GAP) - period
+                        step = min(max(t - previous_t, 0.0), MAX_REPLAY_GAP)
+                        next_time += step - period
+                    if seq:
+                        replayed += step
                     previous_t = t
                     if next_time > now:
                         if stop.wait(next_time - now):
@@ -118,8 +129,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                     elif now - next_time > period:  # fell behind: do not burst to catch up
                         next_time = now
                     next_time += period
-                frame = Frame.from_image(np.ascontiguousarray(image), seq=seq,
-                                         stamp=time.time(), format=format)
+                stamp = time.time() if source.live else start + replayed
+                frame = Frame.from_image(np.ascontiguousarray(image), seq=seq, stamp=stamp,
+                                         format=format)
                 publisher.put(encode(frame))
                 if previews is not None and time.monotonic() >= next_preview:
                     next_preview = max(next_preview + 1.0 / preview_hz, time.monotonic())

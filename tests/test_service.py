@@ -96,6 +96,11 @@ def test_two_cameras_at_once_looming_warns_with_targets_translating_does_not(ser
     assert {(w.robot, w.seq) for w in warnings} == {("loom", r.seq) for r in sent}
     assert all(r.worker == service.core.worker_id and r.model == "asnn" for r in loom_responses)
     assert service.core.stats()["invalid"] == {}
+    # a replayed source is stamped at its recorded spacing, however the publishing went
+    stamps = {r.seq: r.stamp for r in loom_responses}
+    first = min(stamps)
+    assert all(stamps[s] - stamps[first] == pytest.approx((s - first) / 40, abs=1e-6)
+               for s in stamps)
 
 
 def test_two_processing_threads_keep_each_robot_exact(zenoh_net):
@@ -263,7 +268,7 @@ def test_demo_prints_warnings_and_exits_0(capsys):
     assert main(["demo", "--fps", "100"]) == 0
     out = capsys.readouterr().out
     lines = [line for line in out.splitlines() if "WARNING robot demo" in line]
-    assert lines and "targets: (" in lines[0]
+    assert lines and "targets: #0 contact in" in lines[0]  # the default tracks its targets
     assert "60 frames published" in out
 
 
