@@ -64,9 +64,9 @@ def test_responses_say_how_much_of_their_latency_the_model_took(looming):
     clock.now += 0.004  # waits 4 ms in the queue
     job = core.take()
 
-    def slow_step(frame):  # the model takes 6 ms by the fake clock
+    def slow_step(frame, t=None):  # the model takes 6 ms by the fake clock
         clock.now += 0.006
-        return core_step(frame)
+        return core_step(frame, t)
 
     response = core.process(job)  # creates the model
     assert response.model_ms == 0.0 and response.latency_ms == pytest.approx(4.0)
