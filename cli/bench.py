@@ -39,6 +39,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "spread, or at random (default: %(default)s)")
     p.add_argument("--seed", type=seed, default=0,
                    help="seed of --phases random (default: %(default)s)")
+    p.add_argument("--handover", action="store_true",
+                   help="instead, how many frames a worker taking a robot over needs before it "
+                   "warns as the previous owner would (the worker's --warmup-frames), over the "
+                   "labelled suite (first --preset)")
+    p.add_argument("--every", type=count, default=3, metavar="N",
+                   help="--handover: try a hand-over every N frames (default: %(default)s)")
+    p.add_argument("--cases", metavar="PATTERN", default=None,
+                   help="--handover: suite cases or groups, shell patterns (default: all)")
     p.add_argument("--worker-threads", type=count, default=None, metavar="N",
                    help="processing threads of the --service worker (asnn worker --threads; "
                         "default: the worker's default, the cores available)")
@@ -53,7 +61,13 @@ def run(args: argparse.Namespace) -> int:
 
     name = "asnn bench --service" if args.service else "asnn bench"
     try:
-        if args.service:
+        if args.handover:
+            from asnn.evaluation import handover
+
+            preset = args.preset[0] if args.preset else None
+            report = handover.run(f"asnn:{preset}" if preset else "asnn", cases=args.cases,
+                                  every=args.every, progress=_progress(args))
+        elif args.service:
             from service import bench as service_bench
 
             report = service_bench.run(size=args.size[0] if args.size else (320, 240),
@@ -75,6 +89,10 @@ def run(args: argparse.Namespace) -> int:
     report["machine"] = bench.machine()
     if args.json:
         print(json.dumps(report, indent=1))
+    elif args.handover:
+        from service.core import WARMUP_FRAMES
+
+        print(handover.format_report(report, WARMUP_FRAMES))
     elif args.service:
         print(f"# threads: {pinning}")
         print(service_bench.format_report(report))

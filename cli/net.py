@@ -248,7 +248,7 @@ def register(subparsers) -> None:
     p.add_argument("--warmup-frames", type=whole, default=WARMUP_FRAMES, metavar="N",
                    help="frames a worker taking a robot over steps silently before it answers, "
                         "while the previous owner still answers (default: %(default)s, "
-                        "measured for the default preset: asnn bench --warmup)")
+                        "measured for the default preset: asnn bench --handover)")
     p.add_argument("--handover-timeout", type=non_negative, default=HANDOVER_TIMEOUT,
                    metavar="SECONDS", help="when stopping, answer the robots until their new "
                    "owners are warm, at most SECONDS (default: %(default)s)")

@@ -107,10 +107,11 @@ __all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "RobotView", "WARMUP_FRAMES
 log = logging.getLogger("asnn.worker")
 
 RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-publisher")
-# Frames a worker taking a robot over steps before it answers: after that many, a fresh model of
-# the default preset gives the warnings of one that saw the whole stream at 99 % of the
-# hand-overs tried over the labelled suite (`asnn bench --warmup`, README "Service"). Measured
-# for the default preset: re-measure when it changes.
+# Frames a worker taking a robot over steps before it answers. After 12, a fresh model of the
+# default preset (reference32) warns as one that saw the whole stream at 99.8 % of 5,295
+# hand-overs tried over the labelled suite (every second frame of its 144 cases; 99 % need 10,
+# the worst 17): `asnn bench --handover --every 2`, README "Service". Re-measure when the
+# default preset changes.
 WARMUP_FRAMES = 12
 
 

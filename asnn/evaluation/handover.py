@@ -3,7 +3,7 @@
 When a robot's stream moves to another worker (a worker joins, stops or dies), the new owner's
 model starts from an empty state. This module measures, over generated scenes, how many frames
 that fresh model must see before its warnings equal those of a model that saw the whole stream:
-the *warm-up* a hand-over needs (``asnn bench --warmup``; the service's ``--warmup-frames``,
+the *warm-up* a hand-over needs (``asnn bench --handover``; the service's ``--warmup-frames``,
 docs/operations.md).
 
 For a scene of n frames and a hand-over at frame k, a fresh detector steps frames k, k+1, ...
@@ -20,7 +20,8 @@ import numpy as np
 
 from .runs import DetectorSpec, parse_detector
 
-__all__ = ["handover_warmups", "summarise_warmups", "warmup_after"]
+__all__ = ["covered", "format_report", "handover_warmups", "run", "summarise_warmups",
+           "warmup_after"]
 
 
 def warmup_after(reference: Sequence[bool], cold: Sequence[bool]) -> int:
@@ -109,3 +110,50 @@ def summarise_warmups(rows: Sequence[dict], quantile: float = 0.99) -> dict:
     worst = sorted(rows, key=lambda r: -r["warmup"])[:5]
     return {"quantile_level": quantile, "all": part(rows),
             "approach": part([r for r in rows if r["approach"]]), "worst": worst}
+
+
+def run(detector: str = "asnn", cases: str | None = None, every: int = 3,
+        progress: Callable[[str], None] | None = None) -> dict:
+    """Warm-ups over the labelled suite (``asnn bench --handover``); the report as a dict.
+
+    ``cases`` selects suite cases (patterns of :func:`asnn.stimuli.suite.suite_cases`; None:
+    all of them).
+    """
+    from ..params import DEFAULT_PRESET
+    from ..stimuli.suite import make_case, suite_cases
+
+    names = suite_cases(cases)
+    spec = parse_detector(detector)
+    rows = handover_warmups(((name, make_case(name)) for name in names), spec, every=every,
+                            on_scene=progress)
+    return {"detector": spec.name,
+            "preset": (spec.preset or DEFAULT_PRESET) if spec.model == "asnn" else None,
+            "cases": len(names), "every": every, **summarise_warmups(rows)}
+
+
+def covered(counts: dict, frames: int) -> float:
+    """The fraction of hand-overs whose warm-up is at most ``frames``."""
+    total = sum(counts.values())
+    return sum(n for k, n in counts.items() if int(k) <= frames) / total if total else 1.0
+
+
+def format_report(report: dict, current: int | None = None) -> str:
+    """The report as text; ``current``: the warm-up in use, with the hand-overs it covers."""
+    preset = f" (preset {report['preset']})" if report.get("preset") else ""
+    lines = [f"# {report['detector']}{preset}: {report['cases']} cases of the labelled suite, a hand-over "
+             f"every {report['every']} frames; warm-up = frames a fresh model steps before its "
+             "warnings equal an uninterrupted one's for good"]
+    for part, title in (("all", "all hand-overs"), ("approach", "during an approach")):
+        s = report[part]
+        if not s["handovers"]:
+            continue
+        dist = ", ".join(f"{k}: {n}" for k, n in sorted(s["counts"].items(), key=lambda kv: int(kv[0])))
+        lines.append(f"{title}: {s['handovers']}; {int(report['quantile_level'] * 100)} % need "
+                     f"at most {s['quantile']} frames, the worst {s['max']} (frames: hand-overs "
+                     f"{dist})")
+        if current is not None:
+            lines.append(f"  with {current} frames (the worker's --warmup-frames): "
+                         f"{100 * covered(s['counts'], current):.2f} % of them")
+    lines.append("worst: " + "; ".join(f"{w['scene']} at frame {w['frame']}: {w['warmup']}"
+                                        for w in report["worst"]))
+    return "\n".join(lines)
