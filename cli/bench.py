@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "ratio. --service instead measures cameras through Zenoh on loopback.")
     p.add_argument("--size", type=frame_size, action="append", metavar="WxH",
                    help="frame size (repeatable; default 128x128, 320x240 and 640x480)")
-    p.add_argument("--frames", type=count, default=40, help="timed frames per run (default 40)")
+    p.add_argument("--frames", type=count, default=None,
+                   help="timed frames per run (default 40; --detect: frames of the clip, 200)")
     p.add_argument("--preset", action="append", metavar="NAME",
                    help="ASNN preset to time (repeatable; default: all)")
     p.add_argument("--model", action="append", choices=("asnn", "lgmd1", "lgmd2"),
@@ -39,6 +40,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "spread, or at random (default: %(default)s)")
     p.add_argument("--seed", type=seed, default=0,
                    help="seed of --phases random (default: %(default)s)")
+    p.add_argument("--detect", action="store_true",
+                   help="instead, the whole asnn detect process per frame (start-up excluded) "
+                   "and its stages, against the straightforward float64 form (--size, default "
+                   "320x240 and 640x480; first --preset)")
+    p.add_argument("--repeat", type=count, default=3, metavar="N",
+                   help="--detect: runs of asnn detect per clip (default: %(default)s)")
     p.add_argument("--handover", action="store_true",
                    help="instead, how many frames a worker taking a robot over needs before it "
                    "warns as the previous owner would (the worker's --warmup-frames), over the "
@@ -56,12 +63,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from asnn.evaluation.bench import pin_threads
 
-    pinning = pin_threads()  # before numba and the models are imported
+    # asnn detect uses the cores: its bench leaves the threads alone
+    pinning = "as asnn detect: not pinned" if args.detect else pin_threads()
     from asnn.evaluation import bench
 
     name = "asnn bench --service" if args.service else "asnn bench"
     try:
-        if args.handover:
+        if args.detect:
+            from asnn.evaluation import bench_detect
+
+            report = bench_detect.run(sizes=args.size or list(bench_detect.DEFAULT_SIZES),
+                                      frames=args.frames or 200, repeat=args.repeat,
+                                      preset=args.preset[0] if args.preset else None,
+                                      progress=_progress(args))
+        elif args.handover:
             from asnn.evaluation import handover
 
             preset = args.preset[0] if args.preset else None
@@ -77,7 +92,8 @@ def run(args: argparse.Namespace) -> int:
                                        worker_threads=args.worker_threads,
                                        phases=args.phases, seed=args.seed)
         else:
-            report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES), frames=args.frames,
+            report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES),
+                               frames=args.frames or 40,
                                presets=args.preset,
                                models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
                                straightforward=not args.no_straightforward,
@@ -89,6 +105,13 @@ def run(args: argparse.Namespace) -> int:
     report["machine"] = bench.machine()
     if args.json:
         print(json.dumps(report, indent=1))
+    elif args.detect:
+        m = report["machine"]
+        print(f"# asnn bench --detect: {m['cpu']}, {m['cores']} logical cores; scene "
+              f"{report['scene']}, preset {report['preset']}; ms per frame; asnn detect as its "
+              "own process, start-up excluded; stages of one loop in this process; baseline "
+              f"{report['baseline']}")
+        print(bench_detect.format_table(report))
     elif args.handover:
         from service.core import WARMUP_FRAMES
 

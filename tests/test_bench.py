@@ -198,3 +198,20 @@ def test_handover_bench_reports_the_warmup_distribution(capsys, monkeypatch):
     from service.core import WARMUP_FRAMES
 
     assert rows["max"] > 0 and report["approach"]["max"] <= WARMUP_FRAMES
+
+
+def test_detect_bench_reports_the_whole_process_and_its_stages(capsys, monkeypatch):
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert main(["bench", "--detect", "--size", "64x48", "--frames", "12", "--repeat", "1",
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["threads"] == "as asnn detect: not pinned"
+    (row,) = report["results"]
+    assert row["size"] == "64x48" and row["identical"] is True
+    assert set(row["stages_ms"]) == {"decode", "model", "targets", "output"}
+    assert all(v >= 0 for v in row["stages_ms"].values()) and row["straightforward_ms"] > 0
+    assert row["ratio"] == pytest.approx(row["straightforward_ms"] / row["detect_ms"])
+    from asnn.evaluation.bench_detect import format_table
+
+    assert "| 64x48 |" in format_table(report) and "| yes |" in format_table(report)
