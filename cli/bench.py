@@ -55,8 +55,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cases", metavar="PATTERN", default=None,
                    help="--handover: suite cases or groups, shell patterns (default: all)")
     p.add_argument("--worker-threads", type=count, default=None, metavar="N",
-                   help="processing threads of the --service worker (asnn worker --threads; "
-                        "default: the worker's default, the cores available)")
+                   help="processing threads of each --service worker (asnn worker --threads; "
+                        "default: the cores available, divided among the workers)")
+    p.add_argument("--workers", type=count, default=1, metavar="N",
+                   help="--service: worker processes sharing the cameras (default: %(default)s)")
+    p.add_argument("--router", action="store_true",
+                   help="--service: connect through an asnn router process even with one "
+                        "worker (with several there always is one)")
     p.set_defaults(func=run)
 
 
@@ -90,7 +95,8 @@ def run(args: argparse.Namespace) -> int:
                                        preset=args.preset[0] if args.preset else None,
                                        progress=_progress(args),
                                        worker_threads=args.worker_threads,
-                                       phases=args.phases, seed=args.seed)
+                                       phases=args.phases, seed=args.seed,
+                                       workers=args.workers, router=args.router or None)
         else:
             report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES),
                                frames=args.frames or 40,
