@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=frame_size, action="append", metavar="WxH",
                    help="frame size (repeatable; default 128x128, 320x240 and 640x480)")
     p.add_argument("--frames", type=count, default=None,
-                   help="timed frames per run (default 40; --detect: frames of the clip, 200)")
+                   help="timed frames per run (default 40; --detect: frames of the clip, 300)")
     p.add_argument("--preset", action="append", metavar="NAME",
                    help="ASNN preset to time (repeatable; default: all)")
     p.add_argument("--model", action="append", choices=("asnn", "lgmd1", "lgmd2"),
@@ -44,7 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="instead, the whole asnn detect process per frame (start-up excluded) "
                    "and its stages, against the straightforward float64 form (--size, default "
                    "320x240 and 640x480; first --preset)")
-    p.add_argument("--repeat", type=count, default=3, metavar="N",
+    p.add_argument("--repeat", type=count, default=4, metavar="N",
                    help="--detect: runs of asnn detect per clip (default: %(default)s)")
     p.add_argument("--handover", action="store_true",
                    help="instead, how many frames a worker taking a robot over needs before it "
@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
             from asnn.evaluation import bench_detect
 
             report = bench_detect.run(sizes=args.size or list(bench_detect.DEFAULT_SIZES),
-                                      frames=args.frames or 200, repeat=args.repeat,
+                                      frames=args.frames or 300, repeat=args.repeat,
                                       preset=args.preset[0] if args.preset else None,
                                       progress=_progress(args))
         elif args.handover:
