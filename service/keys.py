@@ -117,10 +117,15 @@ def parse_key(key: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str]:
 WORKER_CHUNK = "@worker"
 
 
+def _verbatim_key(chunk: str, ident: str, prefix: str) -> str:
+    """``<prefix>/<chunk>/<id>`` for a robot-id-like ``ident`` (or ``*``)."""
+    ident = ident if ident == "*" else check_robot(ident)
+    return f"{check_prefix(prefix)}/{chunk}/{ident}"
+
+
 def worker_token_key(worker: str, prefix: str = DEFAULT_PREFIX) -> str:
     """``<prefix>/@worker/<id>``: the liveliness token of worker ``id`` (a robot-id-like chunk)."""
-    worker = worker if worker == "*" else check_robot(worker)
-    return f"{check_prefix(prefix)}/{WORKER_CHUNK}/{worker}"
+    return _verbatim_key(WORKER_CHUNK, worker, prefix)
 
 
 def worker_tokens(prefix: str = DEFAULT_PREFIX) -> str:
@@ -196,8 +201,7 @@ CAMERA_CHUNK = "@camera"
 
 def camera_token_key(robot: str, prefix: str = DEFAULT_PREFIX) -> str:
     """``<prefix>/@camera/<robot>``: the liveliness token of the camera publishing ``robot``."""
-    robot = robot if robot == "*" else check_robot(robot)
-    return f"{check_prefix(prefix)}/{CAMERA_CHUNK}/{robot}"
+    return _verbatim_key(CAMERA_CHUNK, robot, prefix)
 
 
 def camera_tokens(prefix: str = DEFAULT_PREFIX) -> str:
