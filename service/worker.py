@@ -391,7 +391,7 @@ class Worker:
             payload = sample.payload.to_bytes()
             self._count(len(payload), scanned=True)
             if self.core.offer(key, payload) is not None and self.routes.adopt(robot):
-                log.info("robot %s: found by the scan", robot)
+                log.info("robot %s: found by its frames (its camera does not announce it)", robot)
                 self._changed.set()
         except Exception:
             log.exception("unexpected error on a frame from %s", sample.key_expr)
