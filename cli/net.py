@@ -41,10 +41,11 @@ def cmd_camera(args: argparse.Namespace) -> int:
 
 def cmd_worker(args: argparse.Namespace) -> int:
     from service.core import WorkerCore
-    from service.worker import Worker, WorkerIdTaken, tune_process
+    from service.worker import Worker, WorkerIdTaken, check_scan, tune_process
 
     setup_logging(args)
     try:
+        check_scan(args.scan_interval)
         core = WorkerCore(args.model, args.preset, worker_id=args.id, prefix=args.prefix,
                           idle_timeout=args.idle_timeout, max_gap=args.max_gap,
                           max_robots=args.max_robots, takeover_after=args.takeover_after,

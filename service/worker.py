@@ -42,7 +42,8 @@ from .routing import Routes
 
 __all__ = ["COMPUTE_NICENESS", "HANDOVER_TIMEOUT", "RESPONSE_QOS", "SCAN_INTERVAL",
            "SCAN_WINDOW", "SWITCH_INTERVAL", "WARNING_QOS", "Worker", "WorkerIdTaken",
-           "fleet_claims", "live_workers", "announced_cameras", "query_status", "tune_process"]
+           "announced_cameras", "check_scan", "fleet_claims", "live_workers", "query_status",
+           "tune_process"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -93,6 +94,15 @@ def tune_process() -> None:
 
     cv2.setNumThreads(1)
     sys.setswitchinterval(SWITCH_INTERVAL)
+
+
+def check_scan(interval: float, window: float = SCAN_WINDOW) -> None:
+    """Raise ValueError unless ``interval`` is 0 (no scan) or longer than ``window`` > 0."""
+    if not (interval >= 0 and window > 0):
+        raise ValueError(f"need a scan interval >= 0 and a window > 0, got {interval}, {window}")
+    if interval and window >= interval:
+        raise ValueError(f"the scan interval ({interval:g} s) must be longer than its window "
+                         f"({window:g} s), or 0 for no scan")
 
 
 def _lower_priority(increment: int) -> None:
@@ -216,12 +226,9 @@ class Worker:
                  handover_timeout: float = HANDOVER_TIMEOUT):
         if threads < 1:
             raise ValueError(f"a worker needs at least one processing thread, got {threads}")
-        if not (scan_interval >= 0 and scan_window > 0 and handover_timeout >= 0):
-            raise ValueError("need scan_interval >= 0, scan_window > 0 and handover_timeout "
-                             f">= 0, got {scan_interval}, {scan_window}, {handover_timeout}")
-        if scan_interval and scan_window >= scan_interval:
-            raise ValueError(f"the scan window ({scan_window} s) must be shorter than its "
-                             f"interval ({scan_interval} s)")
+        check_scan(scan_interval, scan_window)
+        if not handover_timeout >= 0:
+            raise ValueError(f"need handover_timeout >= 0, got {handover_timeout}")
         self.session = session
         self.core = core
         self.on_response = on_response
