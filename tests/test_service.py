@@ -357,7 +357,7 @@ def test_the_camera_announces_itself_while_it_publishes(zenoh_net):
     seen = []
     sub = zenoh_net.hub.liveliness().declare_subscriber(  # noqa: F841 (kept declared)
         keys.camera_tokens(), lambda s: seen.append((str(s.key_expr), s.kind)), history=True)
-    scene, source = scene_source("looming", stop=8, frames=10)
+    scene, source = scene_source("looming", start=2, stop=8, frames=10)
     assert publish_frames(zenoh_net.spoke(), "r7", source, fps=100, preview_hz=0) == 10
     wait_for(lambda: len(seen) >= 2, what="the announcement and its end")
     assert seen == [("asnn/@camera/r7", zenoh.SampleKind.PUT),
