@@ -84,6 +84,11 @@ def count(value: str) -> int:
     return _whole(value, 1)
 
 
+def whole(value: str) -> int:
+    """A whole number of 0 or more."""
+    return _whole(value, 0)
+
+
 def seed(value: str) -> int:
     """A random seed: a whole number of 0 or more."""
-    return _whole(value, 0)
+    return whole(value)

@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "ratio. --service instead measures cameras through Zenoh on loopback.")
     p.add_argument("--size", type=frame_size, action="append", metavar="WxH",
                    help="frame size (repeatable; default 128x128, 320x240 and 640x480)")
-    p.add_argument("--frames", type=count, default=40, help="timed frames per run (default 40)")
+    p.add_argument("--frames", type=count, default=None,
+                   help="timed frames per run (default 40; --detect: frames of the clip, 300)")
     p.add_argument("--preset", action="append", metavar="NAME",
                    help="ASNN preset to time (repeatable; default: all)")
     p.add_argument("--model", action="append", choices=("asnn", "lgmd1", "lgmd2"),
@@ -39,21 +40,54 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "spread, or at random (default: %(default)s)")
     p.add_argument("--seed", type=seed, default=0,
                    help="seed of --phases random (default: %(default)s)")
+    p.add_argument("--detect", action="store_true",
+                   help="instead, the whole asnn detect process per frame (start-up excluded) "
+                   "and its stages, against the straightforward float64 form (--size, default "
+                   "320x240 and 640x480; first --preset)")
+    p.add_argument("--repeat", type=count, default=4, metavar="N",
+                   help="--detect: runs of asnn detect per clip (default: %(default)s)")
+    p.add_argument("--handover", action="store_true",
+                   help="instead, how many frames a worker taking a robot over needs before it "
+                   "warns as the previous owner would (the worker's --warmup-frames), over the "
+                   "labelled suite (first --preset)")
+    p.add_argument("--every", type=count, default=3, metavar="N",
+                   help="--handover: try a hand-over every N frames (default: %(default)s)")
+    p.add_argument("--cases", metavar="PATTERN", default=None,
+                   help="--handover: suite cases or groups, shell patterns (default: all)")
     p.add_argument("--worker-threads", type=count, default=None, metavar="N",
-                   help="processing threads of the --service worker (asnn worker --threads; "
-                        "default: the worker's default, the cores available)")
+                   help="processing threads of each --service worker (asnn worker --threads; "
+                        "default: the cores available, divided among the workers)")
+    p.add_argument("--workers", type=count, default=1, metavar="N",
+                   help="--service: worker processes sharing the cameras (default: %(default)s)")
+    p.add_argument("--router", action="store_true",
+                   help="--service: connect through an asnn router process even with one "
+                        "worker (with several there always is one)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from asnn.evaluation.bench import pin_threads
 
-    pinning = pin_threads()  # before numba and the models are imported
+    # asnn detect uses the cores: its bench leaves the threads alone
+    pinning = "as asnn detect: not pinned" if args.detect else pin_threads()
     from asnn.evaluation import bench
 
     name = "asnn bench --service" if args.service else "asnn bench"
     try:
-        if args.service:
+        if args.detect:
+            from asnn.evaluation import bench_detect
+
+            report = bench_detect.run(sizes=args.size or list(bench_detect.DEFAULT_SIZES),
+                                      frames=args.frames or 300, repeat=args.repeat,
+                                      preset=args.preset[0] if args.preset else None,
+                                      progress=_progress(args))
+        elif args.handover:
+            from asnn.evaluation import handover
+
+            preset = args.preset[0] if args.preset else None
+            report = handover.run(f"asnn:{preset}" if preset else "asnn", cases=args.cases,
+                                  every=args.every, progress=_progress(args))
+        elif args.service:
             from service import bench as service_bench
 
             report = service_bench.run(size=args.size[0] if args.size else (320, 240),
@@ -61,9 +95,11 @@ def run(args: argparse.Namespace) -> int:
                                        preset=args.preset[0] if args.preset else None,
                                        progress=_progress(args),
                                        worker_threads=args.worker_threads,
-                                       phases=args.phases, seed=args.seed)
+                                       phases=args.phases, seed=args.seed,
+                                       workers=args.workers, router=args.router or None)
         else:
-            report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES), frames=args.frames,
+            report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES),
+                               frames=args.frames or 40,
                                presets=args.preset,
                                models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
                                straightforward=not args.no_straightforward,
@@ -75,6 +111,17 @@ def run(args: argparse.Namespace) -> int:
     report["machine"] = bench.machine()
     if args.json:
         print(json.dumps(report, indent=1))
+    elif args.detect:
+        m = report["machine"]
+        print(f"# asnn bench --detect: {m['cpu']}, {m['cores']} logical cores; scene "
+              f"{report['scene']}, preset {report['preset']}; ms per frame; asnn detect as its "
+              "own process, start-up excluded; stages of one loop in this process; baseline "
+              f"{report['baseline']}")
+        print(bench_detect.format_table(report))
+    elif args.handover:
+        from service.core import WARMUP_FRAMES
+
+        print(handover.format_report(report, WARMUP_FRAMES))
     elif args.service:
         print(f"# threads: {pinning}")
         print(service_bench.format_report(report))

@@ -14,6 +14,7 @@ from asnn import FrameError
 from asnn.detectors import MODELS, make_detector
 from asnn.params import preset_names
 from asnn.evaluation.progress import ProgressPrinter
+from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import SourceError, open_source
 from asnn.io.visualize import annotate_frame, plot_responses
 
@@ -49,7 +50,17 @@ def _fail(message: str) -> int:
     return 2
 
 
+class _OutputError(Exception):
+    """An output that cannot be written (the message names it)."""
+
+
+READ_AHEAD = 8  # decoded frames waiting for the model
+WRITE_BEHIND = 4  # responses waiting to be written (with --annotate each holds its maps)
+
+
 def run(args: argparse.Namespace) -> int:
+    """Decode ahead and write behind on threads of their own while the model steps on this one
+    (:mod:`asnn.io.pipeline`): the output is that of one loop, in frame order."""
     try:
         source = open_source(args.video, topic=args.topic)
     except SourceError as exc:
@@ -72,25 +83,13 @@ def run(args: argparse.Namespace) -> int:
                                                               frame_id=source.frame_id))
             except (ImportError, OSError) as exc:
                 return _fail(str(exc))
-        writer = None
         progress = ProgressPrinter()
         progress.start(source.frame_count, "detect")
         stack.callback(progress.finish)
-        frames = source.timed_frames()
-        index = 0
-        while True:
-            try:
-                t, frame = next(frames)
-            except StopIteration:
-                break
-            except SourceError as exc:  # a cut or corrupt bag: what was read is written
-                progress.finish()
-                return _fail(f"{exc} (results written for the {index} frames before)")
-            try:
-                response = detector.step(frame, t)
-            except FrameError as exc:  # e.g. a bag whose camera changed its resolution
-                progress.finish()
-                return _fail(f"{args.video}: frame {index}: {exc}")
+        video = []  # the annotated video's writer, opened with the first frame
+
+        def write(item) -> None:
+            index, t, frame, response = item
             record = _record(index, t, response)
             records.append(record)
             if jsonl is not None:
@@ -98,15 +97,40 @@ def run(args: argparse.Namespace) -> int:
             if mcap is not None:
                 mcap.write(frame, record, (source.start_ns or 0) + round(t * 1e9))
             if args.annotate:
-                if writer is None:
+                if not video:
                     writer = cv2.VideoWriter(args.annotate, cv2.VideoWriter_fourcc(*"mp4v"),
                                              source.fps, frame.shape[1::-1])
                     if not writer.isOpened():
-                        return _fail(f"cannot write {args.annotate}")
+                        raise _OutputError(f"cannot write {args.annotate}")
                     stack.callback(writer.release)
-                writer.write(annotate_frame(frame, response))
+                    video.append(writer)
+                video[0].write(annotate_frame(frame, response))
             progress.advance()
-            index += 1
+
+        output = WriteBehind(write, depth=WRITE_BEHIND)
+        failure = None
+        index = 0
+        try:
+            for t, frame in read_ahead(source.timed_frames(), depth=READ_AHEAD):
+                try:
+                    response = detector.step(frame, t)
+                except FrameError as exc:  # e.g. a bag whose camera changed its resolution
+                    failure = f"{args.video}: frame {index}: {exc}"
+                    break
+                output.put((index, t, frame, response))
+                index += 1
+        except SourceError as exc:  # a cut or corrupt bag: what was read is written
+            failure = f"{exc} (results written for the {index} frames before)"
+        except _OutputError as exc:
+            output.close(raise_error=False)
+            return _fail(str(exc))
+        try:
+            output.close()
+        except _OutputError as exc:
+            return _fail(str(exc))
+        if failure is not None:
+            progress.finish()
+            return _fail(failure)
     if not records:
         return _fail(f"{args.video}: no frames decoded")
     if args.plot:

@@ -8,7 +8,7 @@ import sys
 
 from service.config import ConfigError
 
-from .arguments import count, non_negative, positive, robot_id
+from .arguments import count, non_negative, positive, robot_id, whole
 from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
     zenoh_options
 
@@ -41,20 +41,23 @@ def cmd_camera(args: argparse.Namespace) -> int:
 
 def cmd_worker(args: argparse.Namespace) -> int:
     from service.core import WorkerCore
-    from service.worker import Worker, WorkerIdTaken, tune_process
+    from service.worker import Worker, WorkerIdTaken, check_scan, tune_process
 
     setup_logging(args)
     try:
+        check_scan(args.scan_interval)
         core = WorkerCore(args.model, args.preset, worker_id=args.id, prefix=args.prefix,
                           idle_timeout=args.idle_timeout, max_gap=args.max_gap,
-                          max_robots=args.max_robots, takeover_after=args.takeover_after)
+                          max_robots=args.max_robots, takeover_after=args.takeover_after,
+                          warmup_frames=args.warmup_frames)
         session = session_for(args)
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(str(exc))
     stop = stop_on_signals()
     tune_process()
     with session:
-        worker = Worker(session, core, threads=args.threads)
+        worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
+                        handover_timeout=args.handover_timeout)
         try:
             worker.start()
         except WorkerIdTaken as exc:
@@ -65,7 +68,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
             while not stop.wait(0.2):
                 pass
         finally:
-            worker.close()  # hands the robots over at once
+            worker.close()  # hands the robots over, warm
     log.info("worker stopped: %s", core.stats())
     return 0
 
@@ -98,10 +101,15 @@ def format_status(status: dict) -> str:
     """One line of ``asnn status``: a worker's identity, robots, counters and what it refused.
 
     Robots on whose key a second publisher was seen are listed under ``contested`` with the
-    number of intrusions (docs/operations.md); fields an older worker does not report are
-    left out.
+    number of intrusions (docs/operations.md); the frames and bytes Zenoh delivered to the
+    worker follow ``frames in`` (those of the discovery scan in brackets); fields an older
+    worker does not report are left out.
     """
     stats = status["stats"]
+    traffic = status.get("traffic")
+    received = "" if traffic is None else (
+        f"frames in {traffic['frames']} ({traffic['bytes'] / 1e6:.1f} MB; scanned "
+        f"{traffic['scanned_frames']}, {traffic['scanned_bytes'] / 1e6:.1f} MB); ")
     robots = status.get("robots", {})
     invalid = ", ".join(f"{k} {v}" for k, v in sorted(stats["invalid"].items())) or "none"
     tracked = [r for r, s in robots.items() if not s.get("candidate")]
@@ -111,7 +119,7 @@ def format_status(status: dict) -> str:
             f"{status['uptime_s']:.0f} s, robots {', '.join(tracked) or 'none'}"
             f" (+{stats.get('candidates', 0)} waiting for a valid frame); "
             f"processed {stats['processed']}, dropped {stats['dropped']}, warnings "
-            f"{stats['warnings']}, foreign {stats['foreign']}; invalid: {invalid}; "
+            f"{stats['warnings']}, foreign {stats['foreign']}; {received}invalid: {invalid}; "
             f"second publishers: {stats.get('intrusions', 0)}, contested: {contested}; "
             f"live workers {', '.join(status.get('workers', []))}")
 
@@ -186,8 +194,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def register(subparsers) -> None:
     from asnn.detectors import MODELS
     from asnn.stimuli import SCENE_NAMES
-    from service.core import default_threads
+    from service.core import WARMUP_FRAMES, default_threads
     from service.messages import FORMATS
+    from service.worker import HANDOVER_TIMEOUT, SCAN_INTERVAL, SCAN_WINDOW
 
     p = subparsers.add_parser("camera", help="publish a camera's frames",
                               description="Publish frames of a video file, a capture device, "
@@ -214,8 +223,10 @@ def register(subparsers) -> None:
     p.set_defaults(func=cmd_camera)
 
     p = subparsers.add_parser("worker", help="run the detector on every robot's frames",
-                              description="Subscribe to <prefix>/*/frame and publish a response "
-                              "per processed frame and a warning per collision.")
+                              description="Subscribe to the frames of the robots this worker "
+                              "serves (<prefix>/<robot>/frame; with several workers on a prefix, "
+                              "each serves its share) and publish a response per processed frame "
+                              "and a warning per collision.")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
     p.add_argument("--preset", default=None, help="ASNN preset (default: the default preset)")
     p.add_argument("--id", type=robot_id, default=None,
@@ -235,6 +246,18 @@ def register(subparsers) -> None:
     p.add_argument("--threads", type=count, default=default_threads(), metavar="N",
                    help="processing threads (default: the cores available, here %(default)s; "
                         "one robot is never processed by two at once)")
+    p.add_argument("--warmup-frames", type=whole, default=WARMUP_FRAMES, metavar="N",
+                   help="frames a worker taking a robot over steps silently before it answers, "
+                        "while the previous owner still answers (default: %(default)s, "
+                        "measured for the default preset: asnn bench --handover)")
+    p.add_argument("--handover-timeout", type=non_negative, default=HANDOVER_TIMEOUT,
+                   metavar="SECONDS", help="when stopping, answer the robots until their new "
+                   "owners are warm, at most SECONDS (default: %(default)s)")
+    p.add_argument("--scan-interval", type=non_negative, default=SCAN_INTERVAL,
+                   metavar="SECONDS", help="with several workers, one of them looks for cameras "
+                   "that do not announce themselves every SECONDS, receiving every frame for "
+                   f"{SCAN_WINDOW:g} s (default: %(default)s; 0: serve only announced robots, "
+                   "as asnn camera's are, so that each frame reaches one worker)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_worker)
 

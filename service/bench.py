@@ -81,20 +81,16 @@ def model_time(size: tuple[int, int], preset: str | None, frames: np.ndarray) ->
     return {"median_ms": float(np.median(ms)), "p99_ms": float(np.percentile(ms, 99))}
 
 
-class _WorkerProcess:
-    """``asnn worker`` in its own process, listening on ``endpoint``."""
+class _Process:
+    """An ``asnn`` command in its own process; ``ready`` is the stderr text that says it runs."""
 
-    def __init__(self, endpoint: str, config: Path, preset: str | None, threads: int | None):
+    def __init__(self, args: list[str], ready: str):
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         env.pop("RUST_LOG", None)
-        args = [sys.executable, "-m", "cli.main", "worker", "--listen", endpoint, "--mode", "peer",
-                "--config", str(config), "--log-level", "warning", "--id", "bench"]
-        if threads:
-            args += ["--threads", str(threads)]
-        if preset:
-            args += ["--preset", preset]
-        self.popen = subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.DEVNULL,
+        self.popen = subprocess.Popen([sys.executable, "-m", "cli.main", *args], cwd=ROOT,
+                                      env=env, stdout=subprocess.DEVNULL,
                                       stderr=subprocess.PIPE, text=True)
+        self.what, self.ready_text = args[0], ready
         self.lines: list[str] = []
         self._ready = threading.Event()
         threading.Thread(target=self._drain, daemon=True).start()
@@ -102,14 +98,15 @@ class _WorkerProcess:
     def _drain(self):
         for line in self.popen.stderr:
             self.lines.append(line.rstrip())
-            if "ready" in line:
+            if self.ready_text in line:
                 self._ready.set()
 
     def wait_ready(self, timeout: float = 60.0) -> None:
         deadline = time.monotonic() + timeout
         while not self._ready.wait(0.1):
             if self.popen.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError("the worker did not start: " + " | ".join(self.lines[-5:]))
+                raise RuntimeError(f"the {self.what} did not start: "
+                                   + " | ".join(self.lines[-5:]))
 
     def stop(self) -> None:
         if self.popen.poll() is None:
@@ -121,8 +118,19 @@ class _WorkerProcess:
                 self.popen.wait()
 
 
+def _worker_args(worker_id: str, config: Path, preset: str | None,
+                 threads: int | None) -> list[str]:
+    args = ["worker", "--config", str(config), "--log-level", "warning", "--id", worker_id]
+    if threads:
+        args += ["--threads", str(threads)]
+    if preset:
+        args += ["--preset", preset]
+    return args
+
+
 class _Collector:
-    """Every response on ``<prefix>/*/response``: (robot, seq, received wall time, stamp)."""
+    """Every response on ``<prefix>/*/response``: (robot, seq, received wall time, stamp,
+    model_ms, worker)."""
 
     def __init__(self, session, prefix: str):
         from . import keys
@@ -130,7 +138,7 @@ class _Collector:
 
         self._decode = decode_response
         self._lock = threading.Lock()
-        self.records: list[tuple[str, int, float, float, float | None]] = []
+        self.records: list[tuple[str, int, float, float, float | None, str]] = []
         self._sub = session.declare_subscriber(keys.responses(prefix), self._on)
 
     def _on(self, sample) -> None:
@@ -140,9 +148,9 @@ class _Collector:
         except Exception:
             return
         with self._lock:
-            self.records.append((r.robot, r.seq, now, r.stamp, r.model_ms))
+            self.records.append((r.robot, r.seq, now, r.stamp, r.model_ms, r.worker))
 
-    def take(self) -> list[tuple[str, int, float, float, float | None]]:
+    def take(self) -> list[tuple[str, int, float, float, float | None, str]]:
         with self._lock:
             records, self.records = self.records, []
         return records
@@ -156,8 +164,9 @@ def summarise(records, sent: int, fps: float, model_ms: float) -> dict:
 
     Parameters
     ----------
-    records : list of (robot, seq, received, stamp, model_ms or None)
-        ``received`` and ``stamp`` in seconds (wall clock).
+    records : list of (robot, seq, received, stamp, model_ms or None[, worker])
+        ``received`` and ``stamp`` in seconds (wall clock); ``worker`` the worker that answered
+        (counted per worker in ``robots_per_worker``).
     sent : int
         Frames published.
     fps : float
@@ -169,9 +178,14 @@ def summarise(records, sent: int, fps: float, model_ms: float) -> dict:
            "answered": len(records) / sent if sent else 0.0}
     if not records:
         return {**out, "keeps_up": False}
-    latency = np.array([(now - stamp) * 1e3 for _, _, now, stamp, _ in records])
-    added = latency - np.array([model_ms if ms is None else ms for *_, ms in records])
-    stamps = np.array([stamp for _, _, _, stamp, _ in records])
+    latency = np.array([(r[2] - r[3]) * 1e3 for r in records])
+    added = latency - np.array([model_ms if r[4] is None else r[4] for r in records])
+    stamps = np.array([r[3] for r in records])
+    if all(len(r) > 5 for r in records):
+        robots: dict[str, set] = {}
+        for r in records:
+            robots.setdefault(r[5], set()).add(r[0])
+        out["robots_per_worker"] = {w: len(rs) for w, rs in sorted(robots.items())}
     span = stamps.max() - stamps.min()
     first = latency[stamps <= stamps.min() + span / 4]
     last = latency[stamps >= stamps.max() - span / 4]
@@ -198,9 +212,10 @@ def publish_cameras(session, robots: list[str], frames: np.ndarray, fps: float,
                     wait: float = 2.0) -> dict[str, int]:
     """Play ``len(robots)`` cameras from this thread for ``seconds``; frames published per robot.
 
-    Camera i publishes ``frames`` in a loop from frame ``i * len(frames) // n``, at ``fps``, its
-    first frame ``phases[i]`` frame periods (0 <= phase < 1) after the start. A camera that
-    falls more than a period behind (this thread was held up) skips ahead instead of bursting.
+    Camera i announces itself (``<prefix>/@camera/<robot>``, as ``asnn camera`` does) and
+    publishes ``frames`` in a loop from frame ``i * len(frames) // n``, at ``fps``, its first
+    frame ``phases[i]`` frame periods (0 <= phase < 1) after the start. A camera that falls more
+    than a period behind (this thread was held up) skips ahead instead of bursting.
     """
     import heapq
 
@@ -211,6 +226,8 @@ def publish_cameras(session, robots: list[str], frames: np.ndarray, fps: float,
     n, period = len(robots), 1.0 / fps
     publishers = [session.declare_publisher(keys.frame_key(r, prefix), **FRAME_QOS)
                   for r in robots]
+    tokens = [session.liveliness().declare_token(keys.camera_token_key(r, prefix))
+              for r in robots]
     try:
         deadline = time.monotonic() + wait
         while not all(p.matching_status for p in publishers) and time.monotonic() < deadline:
@@ -233,8 +250,8 @@ def publish_cameras(session, robots: list[str], frames: np.ndarray, fps: float,
             heapq.heappush(due, (at + period, i))
         return dict(zip(robots, sent))
     finally:
-        for p in publishers:
-            p.undeclare()
+        for entity in [*publishers, *tokens]:
+            entity.undeclare()
 
 
 def camera_phases(n: int, phases: str, seed: int = 0) -> np.ndarray:
@@ -270,10 +287,48 @@ def _switch_interval(seconds: float):
         sys.setswitchinterval(before)
 
 
+def _fleet(tmp: Path, workers: int, router: bool, preset: str | None,
+           threads: int | None, stack: contextlib.ExitStack):
+    """Start the workers (and the router); the options of this process's session."""
+    from .config import ZenohOptions
+    from .demo import free_port, loopback_options
+
+    config = tmp / "zenoh.json5"
+    config.write_text("{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    processes = []
+    if router:
+        processes.append(_Process(["router", "--listen", endpoint, "--config", str(config)],
+                                  "listening on"))
+        processes[0].wait_ready()
+        where = ["--mode", "client", "--connect", endpoint]
+        session = ZenohOptions(mode="client", connect=(endpoint,), multicast_scouting=False,
+                               gossip=False)
+    else:  # one worker, listening: the cameras and the collector connect to it
+        where = ["--mode", "peer", "--listen", endpoint]
+        session = loopback_options(int(endpoint.rsplit(":", 1)[1]))[1]
+    for i in range(workers):
+        worker_id = "bench" if workers == 1 else f"bench-w{i + 1}"
+        processes.append(_Process(_worker_args(worker_id, config, preset, threads) + where,
+                                  "ready"))
+    for process in processes:
+        stack.callback(process.stop)
+    for process in processes:
+        process.wait_ready()
+    return session
+
+
 def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
         preset: str | None = None, progress=None, worker_threads: int | None = None,
-        phases: str = "spread", seed: int = 0) -> dict:
-    """Ramp the number of cameras; returns the report as a dict (see the module notes)."""
+        phases: str = "spread", seed: int = 0, workers: int = 1,
+        router: bool | None = None) -> dict:
+    """Ramp the number of cameras; returns the report as a dict (see the module notes).
+
+    ``workers`` worker processes share the cameras, each with ``worker_threads`` processing
+    threads (default: the cores divided among the workers). ``router``: put an ``asnn router``
+    process between them and this process (default: only for several workers; one worker
+    listens itself, peer to peer).
+    """
     import zenoh
 
     from asnn.params import DEFAULT_PRESET
@@ -281,59 +336,61 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
 
     from .config import make_config
     from .core import default_threads
-    from .demo import free_port, loopback_options
     from .keys import DEFAULT_PREFIX
-    from .worker import SWITCH_INTERVAL
+    from .worker import SWITCH_INTERVAL, live_workers
 
     counts = sorted(set(counts or DEFAULT_COUNTS))
     camera_phases(1, phases, seed)  # fail now on a bad value
+    if workers < 1:
+        raise ValueError(f"need at least one worker, got {workers}")
+    router = workers > 1 if router is None else router
+    threads = worker_threads or max(1, default_threads() // workers)
     w, h = size
     scene = make_scene(SCENE, size=(w, h), frames=50, start=2, stop=48).frames
     frames = np.concatenate([scene, scene[-2:0:-1]])  # forwards then backwards: no jump
     model = model_time(size, preset, frames)
-    port = free_port()
-    hub, spoke = loopback_options(port)
     steps = []
-    with _switch_interval(SWITCH_INTERVAL), tempfile.TemporaryDirectory() as tmp:
-        config = Path(tmp) / "zenoh.json5"
-        config.write_text("{ scouting: { multicast: { enabled: false }, "
-                          "gossip: { enabled: false } } }")
-        worker = _WorkerProcess(f"tcp/127.0.0.1:{port}", config, preset, worker_threads)
-        try:
-            worker.wait_ready()
-            with zenoh.open(make_config(spoke)) as session:
-                collector = _Collector(session, DEFAULT_PREFIX)
-                try:
-                    # warm-up, not reported: the worker loads its compiled kernels, the
-                    # sessions match
-                    _step(session, collector, 1, -1, frames, fps, 1.5, model["median_ms"],
-                          DEFAULT_PREFIX, phases, seed)
-                    for step, n in enumerate(counts):
-                        if progress:
-                            progress(f"{n} cameras")
-                        result = _step(session, collector, n, step, frames, fps, seconds,
-                                       model["median_ms"], DEFAULT_PREFIX, phases, seed)
-                        steps.append(result)
-                        if not result["keeps_up"]:
-                            break
-                finally:
-                    collector.close()
-        finally:
-            worker.stop()
+    with _switch_interval(SWITCH_INTERVAL), tempfile.TemporaryDirectory() as tmp, \
+            contextlib.ExitStack() as stack:
+        options = _fleet(Path(tmp), workers, router, preset, threads, stack)
+        with zenoh.open(make_config(options)) as session:
+            deadline = time.monotonic() + 30
+            while len(live_workers(session)) < workers and time.monotonic() < deadline:
+                time.sleep(0.1)
+            collector = _Collector(session, DEFAULT_PREFIX)
+            try:
+                # warm-up, not reported: the workers load their compiled kernels, the sessions
+                # match
+                _step(session, collector, 2 * workers, -1, frames, fps, 1.5, model["median_ms"],
+                      DEFAULT_PREFIX, phases, seed)
+                for step, n in enumerate(counts):
+                    if progress:
+                        progress(f"{n} cameras")
+                    result = _step(session, collector, n, step, frames, fps, seconds,
+                                   model["median_ms"], DEFAULT_PREFIX, phases, seed)
+                    steps.append(result)
+                    if not result["keeps_up"]:
+                        break
+            finally:
+                collector.close()
     if progress:
         progress("done\n")
     kept = [s["cameras"] for s in steps if s["keeps_up"]]
     best = max(kept) if kept else None
     best_step = next((s for s in steps if s["cameras"] == best), None)
+    cores = os.cpu_count() or 1
     return {"size": f"{w}x{h}", "fps": fps, "seconds": seconds, "scene": SCENE,
             "preset": preset or DEFAULT_PRESET, "model_ms": model,
-            "worker": f"separate process, {worker_threads or default_threads()} processing "
-                      "thread(s)",
+            "workers": workers, "worker_threads": threads, "cores": cores,
+            "worker": f"{workers} separate process(es), {threads} processing thread(s) each",
             "steady_state_after_s": START_S,
             "cameras": f"one thread, phases {phases}" + (f" (seed {seed})"
                                                           if phases == "random" else ""),
-            "transport": "tcp/127.0.0.1, peer sessions, no scouting, no gossip",
+            "transport": ("tcp/127.0.0.1 through an asnn router process" if router else
+                          "tcp/127.0.0.1, peer sessions") + ", no scouting, no gossip",
             "steps": steps, "max_cameras": best,
+            "cameras_per_worker": best / workers if best else None,
+            "cameras_per_core": best / cores if best else None,
             "added_p99_ms_at_max": best_step.get("added_p99_ms") if best_step else None}
 
 
@@ -352,19 +409,25 @@ def format_report(report: dict) -> str:
               f"{report.get('steady_state_after_s', START_S):g} s (the start column: that "
               f"first second, all streams new)",
               "| cameras | frames | answered | latency p50 ms | latency p99 ms | added p99 ms "
-              "| start: added p99 ms | keeps up |",
-              "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+              "| start: added p99 ms | keeps up | robots per worker |",
+              "| ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |"]
     for s in report["steps"]:
         lat = (f"{s['latency_p50_ms']:.1f} | {s['latency_p99_ms']:.1f} | {s['added_p99_ms']:.1f}"
                if "latency_p50_ms" in s else "- | - | -")
         start = s.get("start_added_p99_ms")
         start = "-" if start is None else f"{start:.1f}"
+        split = "/".join(str(n) for n in s.get("robots_per_worker", {}).values()) or "-"
         lines.append(f"| {s['cameras']} | {s['frames']} | {100 * s['answered']:.1f} % | {lat} | "
-                     f"{start} | {'yes' if s['keeps_up'] else 'no'} |")
+                     f"{start} | {'yes' if s['keeps_up'] else 'no'} | {split} |")
     best = report["max_cameras"]
     if best is None:
         lines.append("largest number of cameras that keeps up: none")
     else:
+        per = ""
+        if report.get("cameras_per_core") is not None:
+            per = (f"; {report['cameras_per_worker']:g} per worker, "
+                   f"{report['cameras_per_core']:g} per core of {report['cores']}")
         lines.append(f"largest number of cameras that keeps up: {best} "
-                     f"(steady-state p99 added latency {report['added_p99_ms_at_max']:.1f} ms)")
+                     f"(steady-state p99 added latency {report['added_p99_ms_at_max']:.1f} ms"
+                     f"{per})")
     return "\n".join(lines)

@@ -11,6 +11,10 @@ of their header stamps; a pause longer than :data:`MAX_REPLAY_GAP` is shortened 
 ``fps`` sets a rate. A bag message that cannot be used, or a cut in the file, is a counted and
 logged rejection (:class:`SourceRejections`), never the end of the camera.
 
+The camera announces itself with the liveliness token ``<prefix>/@camera/<robot>`` while it
+publishes (an optional extension, docs/contract.md): the robot's worker then subscribes to its
+frames before the first one, without scanning for them.
+
 Optionally (``preview_hz`` > 0), a small jpeg thumbnail of the current frame goes to
 ``<prefix>/<robot>/preview`` a few times a second for dashboards (docs/contract.md), with the
 same best-effort delivery as frames.
@@ -65,7 +69,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    prefix: str = keys.DEFAULT_PREFIX, fps: float | None = None,
                    loop: bool = False, format: str = "gray8", wait: float = 0.0,
                    stop: threading.Event | None = None, max_frames: int | None = None,
-                   preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH) -> int:
+                   preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH,
+                   announce: bool = True) -> int:
     """Publish the source's frames paced at ``fps`` (default: the source's own times).
 
     ``stamp``: the capture time of a live source's frame (wall clock when it was read); a
@@ -73,6 +78,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     frames published late or bunched keep the spacing the scene was recorded with.
 
     ``wait``: seconds to wait, at most, for a subscriber (a worker) before the first frame.
+    ``announce``: declare the camera's liveliness token while publishing.
     ``preview_hz``: thumbnails (``preview_width`` pixels wide) per second on the preview key,
     at most one per frame; 0 publishes none.
     Returns the number of frames published. Ends at the end of the source unless ``loop``
@@ -90,6 +96,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     stop = stop or threading.Event()
     key = keys.frame_key(robot, prefix)
     publisher = session.declare_publisher(key, **FRAME_QOS)
+    token = (session.liveliness().declare_token(keys.camera_token_key(robot, prefix))
+             if announce else None)
     previews = (session.declare_publisher(keys.preview_key(robot, prefix), **FRAME_QOS)
                 if preview_hz > 0 else None)
     next_preview = time.monotonic()
@@ -146,5 +154,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         return seq
     finally:
         publisher.undeclare()
+        if token is not None:
+            token.undeclare()
         if previews is not None:
             previews.undeclare()

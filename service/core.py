@@ -60,11 +60,21 @@ the labels of :data:`service.messages.REASONS` plus ``bad-key``, ``frame-rejecte
 rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
 with the count of those not shown.
 
-Ownership: with ``owns`` (a predicate on robot ids, see :mod:`service.ownership`), frames of
-robots the worker does not own are skipped before they are decoded and counted in ``foreign``;
-:meth:`WorkerCore.release_unowned` forgets the robots it no longer owns.
+Ownership: with ``owns`` (a predicate on robot ids, see :mod:`service.ownership` and
+:mod:`service.routing`), frames of robots the worker does not take are skipped before they are
+decoded and counted in ``foreign``; :meth:`WorkerCore.release_unowned` forgets the robots it no
+longer takes. With ``answers`` (another predicate), the frames of a robot the worker does not
+answer yet are stepped without a response (counted in ``warmup``): a worker taking a robot over
+warms its model up on them while the previous owner still answers (docs/operations.md). A robot
+is *warm* (:meth:`WorkerCore.warm`) once its model has stepped ``warmup_frames`` frames of the
+stream it is on, without a reset pending.
 
-Memory: at most two frames per robot are held (the pending one and the one being processed), for
+A frame whose ``seq``, ``stamp`` and data equal those of the robot's previous arrival is the same
+frame delivered twice (two subscriptions of the worker matched it for a moment): it is ignored and
+counted in ``duplicates``, never taken for a camera restart.
+
+Memory: at most two frames per robot are held (the pending one and the one being processed; the
+latest one taken in is kept for the duplicate check, and is one of them or the last processed), for
 at most ``max_robots`` robots, plus one pending frame per candidate, each frame at most
 ``messages.MAX_PAYLOAD`` bytes; plus one model state per robot (docs/operations.md gives the
 numbers). Overload never grows it: a frame that arrives while one waits replaces it.
@@ -91,12 +101,18 @@ from .logutil import RateLimitedLog
 from .messages import (MAX_PAYLOAD, MAX_SIDE, Frame, MessageError, Response, decode_frame,
                        response_from)
 
-__all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "WorkerCore", "default_threads",
-           "default_worker_id"]
+__all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "RobotView", "WARMUP_FRAMES", "WorkerCore",
+           "default_threads", "default_worker_id"]
 
 log = logging.getLogger("asnn.worker")
 
 RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-publisher")
+# Frames a worker taking a robot over steps before it answers. After 12, a fresh model of the
+# default preset (reference32) warns as one that saw the whole stream at 99.8 % of 5,295
+# hand-overs tried over the labelled suite (every second frame of its 144 cases; 99 % need 10,
+# the worst 17): `asnn bench --handover --every 2`, README "Service". Re-measure when the
+# default preset changes.
+WARMUP_FRAMES = 12
 
 
 def default_worker_id() -> str:
@@ -155,6 +171,7 @@ class _Robot:
     previous: _Stream | None = None  # the stream the latest break replaced
     streams: int = 0  # streams started
     processed_stream: int | None = None  # number of the stream the model state belongs to
+    stepped: int = 0  # frames the model state has stepped since it was (re)started
     contested: bool = False  # a second publisher was seen on its key
     intrusions: int = 0
     pending: tuple[Frame, float, _Stream] | None = None  # (frame, received, its stream)
@@ -163,6 +180,20 @@ class _Robot:
     busy: bool = False
     processed: int = 0
     resets: int = 0
+    arrived: int = 0  # frames taken in
+    arrived_bytes: int = 0
+    # seq, stamp and data of the latest frame taken in (the data is the pending frame's or the
+    # one being processed, or the last one processed: never a third frame held)
+    last_arrival: tuple[int, float, bytes] | None = None
+
+
+@dataclass(frozen=True)
+class RobotView:
+    """What routing needs to know of a robot the core tracks."""
+
+    proven: bool  # one of its frames was valid: it holds a slot
+    warm: bool  # its model has stepped enough frames of its current stream to answer
+    last_seen: float  # clock() of its latest arriving frame
 
 
 @dataclass(frozen=True)
@@ -187,6 +218,8 @@ class _Stats:
     foreign: int = 0  # frames of robots another worker owns
     released: int = 0  # robots handed over to another worker
     intrusions: int = 0  # second publishers detected on a robot's key
+    duplicates: int = 0  # the same frame delivered twice
+    warmup: int = 0  # frames stepped without a response, warming up to take a robot over
     invalid: Counter = field(default_factory=Counter)
     resets: Counter = field(default_factory=Counter)
 
@@ -217,7 +250,13 @@ class WorkerCore:
     clock : callable
         Monotonic seconds (tests may pass a fake one).
     owns : callable, optional
-        ``owns(robot) -> bool``: whether this worker serves the robot (default: every robot).
+        ``owns(robot) -> bool``: whether this worker takes the robot's frames (default: every
+        robot's).
+    answers : callable, optional
+        ``answers(robot) -> bool``: whether its frames are answered (default: every robot's);
+        the others are stepped silently (warming up to take the robot over).
+    warmup_frames : int
+        Frames a robot's model must step on its current stream before it is :meth:`warm`.
     log_interval : float
         Seconds between two WARNING lines about rejected frames of the same reason.
 
@@ -231,7 +270,9 @@ class WorkerCore:
                  worker_id: str | None = None, prefix: str = keys.DEFAULT_PREFIX,
                  idle_timeout: float = 60.0, max_gap: int = 20, max_robots: int = 256,
                  takeover_after: float = 3.0, clock: Callable[[], float] = time.monotonic,
-                 owns: Callable[[str], bool] | None = None, log_interval: float = 10.0):
+                 owns: Callable[[str], bool] | None = None,
+                 answers: Callable[[str], bool] | None = None,
+                 warmup_frames: int = WARMUP_FRAMES, log_interval: float = 10.0):
         make_detector(model, preset)  # fail now, not on the first frame
         self.model = model
         self.preset = (DEFAULT_PRESET if preset in (None, "default") else preset) \
@@ -244,6 +285,10 @@ class WorkerCore:
         self.takeover_after = float(takeover_after)
         self.clock = clock
         self.owns = owns
+        self.answers = answers
+        if warmup_frames < 0:
+            raise ValueError(f"warmup_frames must be 0 or more, got {warmup_frames}")
+        self.warmup_frames = int(warmup_frames)
         self.started = clock()
         self._rejections = RateLimitedLog(log, log_interval, clock)
         self._robots: dict[str, _Robot] = {}
@@ -285,6 +330,9 @@ class WorkerCore:
                     self._reject_locked("too-many-robots", full, key)
                     return None
                 state = self._robots[robot] = _Robot()
+            if state.last_arrival == (frame.seq, frame.stamp, frame.data):
+                self._stats.duplicates += 1  # delivered twice: already taken
+                return None
             stream = self._stream_locked(robot, state, frame, received)
             if stream is None:
                 self._reject_locked("second-publisher", f"frame {frame.seq} does not continue "
@@ -292,6 +340,9 @@ class WorkerCore:
                                     key)
                 return None
             self._stats.received += 1
+            state.arrived += 1
+            state.arrived_bytes += len(payload)
+            state.last_arrival = (frame.seq, frame.stamp, frame.data)
             if state.pending is not None:
                 state.dropped += 1
                 self._stats.dropped += 1
@@ -450,10 +501,15 @@ class WorkerCore:
         if state.processed == 0:
             log.info("robot %s: first frame (%dx%d %s)", job.robot, frame.width, frame.height,
                      frame.format)
+        state.stepped = 1 if state.processed_stream != job.stream else state.stepped + 1
         state.shape = (frame.width, frame.height)
         state.last_seq, state.last_stamp = frame.seq, frame.stamp
         state.processed_stream = job.stream
         state.processed += 1
+        if self.answers is not None and not self.answers(job.robot):
+            with self._lock:
+                self._stats.warmup += 1
+            return None
         response = response_from(result, robot=job.robot, frame=frame, model=self.model,
                                  preset=self.preset, worker=self.worker_id,
                                  latency_ms=(self.clock() - job.received) * 1e3,
@@ -507,6 +563,23 @@ class WorkerCore:
         with self._lock:
             return sorted(self._robots)
 
+    def warm(self, robot: str) -> bool:
+        """Whether the robot's model has stepped ``warmup_frames`` frames of the stream its
+        frames arrive in (so its responses are those of a model that saw the whole stream)."""
+        with self._lock:
+            state = self._robots.get(robot)
+            return state is not None and self._warm_locked(state)
+
+    def _warm_locked(self, state: _Robot) -> bool:
+        return (state.detector is not None and state.stepped >= self.warmup_frames
+                and (state.stream is None or state.stream.number == state.processed_stream))
+
+    def views(self) -> dict[str, RobotView]:
+        """Every tracked robot's :class:`RobotView` (for routing)."""
+        with self._lock:
+            return {r: RobotView(s.proven, self._warm_locked(s), s.last_seen)
+                    for r, s in self._robots.items()}
+
     def backlog(self) -> int:
         """Frames waiting or being processed (at most two per robot)."""
         with self._lock:
@@ -515,7 +588,8 @@ class WorkerCore:
     def stats(self) -> dict:
         """Counters: received, processed, dropped, warnings, evicted, foreign, released, robots
         (with a slot), candidates (waiting for a first valid frame), intrusions (second
-        publishers detected), invalid{reason}, resets{reason}."""
+        publishers detected), duplicates (frames delivered twice), warmup (frames stepped
+        without a response), invalid{reason}, resets{reason}."""
         with self._lock:
             s = self._stats
             proven = sum(r.proven for r in self._robots.values())
@@ -523,6 +597,7 @@ class WorkerCore:
                     "warnings": s.warnings, "evicted": s.evicted, "foreign": s.foreign,
                     "released": s.released, "robots": proven,
                     "candidates": len(self._robots) - proven, "intrusions": s.intrusions,
+                    "duplicates": s.duplicates, "warmup": s.warmup,
                     "invalid": dict(s.invalid), "resets": dict(s.resets)}
 
     def status(self) -> dict:
@@ -534,7 +609,8 @@ class WorkerCore:
                           "last_seq": s.last_seq,
                           "size": list(s.shape) if s.shape else None,
                           "candidate": not s.proven, "contested": s.contested,
-                          "intrusions": s.intrusions}
+                          "intrusions": s.intrusions, "frames": s.arrived,
+                          "bytes": s.arrived_bytes, "warm": self._warm_locked(s)}
                       for r, s in sorted(self._robots.items())}
             backlog = sum((s.pending is not None) + s.busy for s in self._robots.values())
         return {"v": 1, "worker": self.worker_id, "model": self.model, "preset": self.preset,
@@ -542,6 +618,7 @@ class WorkerCore:
                 "limits": {"max_side": MAX_SIDE, "max_payload": MAX_PAYLOAD,
                            "max_robots": self.max_robots, "max_gap": self.max_gap,
                            "idle_timeout": self.idle_timeout,
-                           "takeover_after": self.takeover_after},
+                           "takeover_after": self.takeover_after,
+                           "warmup_frames": self.warmup_frames},
                 "backlog": backlog, "stats": self.stats(), "robots": robots}
 

@@ -12,6 +12,13 @@ with ``@``), so ``<prefix>/*/...`` and ``<prefix>/**`` never match these keys, a
 
 ``<prefix>/@worker/<id>``         liveliness token of a running worker (ownership of robots)
 ``<prefix>/@worker/<id>/status``  queryable: the worker's counters and robots (msgpack map)
+``<prefix>/@worker/<id>/robot/<robot>``  liveliness token: worker ``id`` serves ``robot`` (or
+                                 is warm to take it over)
+
+Cameras announce themselves (optional, docs/contract.md), so that workers subscribe to their
+frames at once; ``@camera`` is verbatim too:
+
+``<prefix>/@camera/<robot>``      liveliness token of a camera publishing ``robot``'s frames
 """
 
 from __future__ import annotations
@@ -21,7 +28,9 @@ import re
 __all__ = ["DEFAULT_PREFIX", "KINDS", "KeySchemeError", "check_prefix", "check_robot", "frame_key",
            "parse_key", "response_key", "warning_key", "frames", "responses", "warnings",
            "preview_key", "previews", "WORKER_CHUNK", "worker_token_key", "worker_tokens",
-           "worker_status_key", "worker_statuses", "parse_worker_token"]
+           "worker_status_key", "worker_statuses", "parse_worker_token", "CLAIM_CHUNK",
+           "claim_key", "claims", "parse_claim", "CAMERA_CHUNK", "camera_token_key",
+           "camera_tokens", "parse_camera_token"]
 
 DEFAULT_PREFIX = "asnn"
 KINDS = ("frame", "response", "warning", "preview")
@@ -108,10 +117,15 @@ def parse_key(key: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str]:
 WORKER_CHUNK = "@worker"
 
 
+def _verbatim_key(chunk: str, ident: str, prefix: str) -> str:
+    """``<prefix>/<chunk>/<id>`` for a robot-id-like ``ident`` (or ``*``)."""
+    ident = ident if ident == "*" else check_robot(ident)
+    return f"{check_prefix(prefix)}/{chunk}/{ident}"
+
+
 def worker_token_key(worker: str, prefix: str = DEFAULT_PREFIX) -> str:
     """``<prefix>/@worker/<id>``: the liveliness token of worker ``id`` (a robot-id-like chunk)."""
-    worker = worker if worker == "*" else check_robot(worker)
-    return f"{check_prefix(prefix)}/{WORKER_CHUNK}/{worker}"
+    return _verbatim_key(WORKER_CHUNK, worker, prefix)
 
 
 def worker_tokens(prefix: str = DEFAULT_PREFIX) -> str:
@@ -137,8 +151,70 @@ def parse_worker_token(key: str, prefix: str = DEFAULT_PREFIX) -> str:
     KeySchemeError
         If the key is not a worker token under ``prefix``.
     """
-    head = f"{check_prefix(prefix)}/{WORKER_CHUNK}/"
+    return _id_under(key, prefix, WORKER_CHUNK)
+
+
+def _id_under(key: str, prefix: str, chunk: str) -> str:
+    """The id of a ``<prefix>/<chunk>/<id>`` key (a robot-id-like chunk)."""
+    head = f"{check_prefix(prefix)}/{chunk}/"
     key = str(key)
     if not key.startswith(head) or "/" in key[len(head):]:
         raise KeySchemeError(f"key {key!r} is not {head}<id>")
     return check_robot(key[len(head):])
+
+
+CLAIM_CHUNK = "robot"
+
+
+def claim_key(worker: str, robot: str, prefix: str = DEFAULT_PREFIX) -> str:
+    """``<prefix>/@worker/<id>/robot/<robot>``: worker ``id``'s claim on ``robot`` (a liveliness
+    token while it serves the robot, or is warm to take it over)."""
+    robot = robot if robot == "*" else check_robot(robot)
+    return f"{worker_token_key(worker, prefix)}/{CLAIM_CHUNK}/{robot}"
+
+
+def claims(prefix: str = DEFAULT_PREFIX) -> str:
+    """Liveliness subscription key for every worker's claims under ``prefix``."""
+    return claim_key("*", "*", prefix)
+
+
+def parse_claim(key: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str]:
+    """``(worker, robot)`` of a claim key.
+
+    Raises
+    ------
+    KeySchemeError
+        If the key is not a claim under ``prefix``.
+    """
+    head = f"{check_prefix(prefix)}/{WORKER_CHUNK}/"
+    key = str(key)
+    parts = key[len(head):].split("/") if key.startswith(head) else []
+    if len(parts) != 3 or parts[1] != CLAIM_CHUNK:
+        raise KeySchemeError(f"key {key!r} is not {head}<id>/{CLAIM_CHUNK}/<robot>")
+    return check_robot(parts[0]), check_robot(parts[2])
+
+
+# ---------------------------------------------------------------- cameras (docs/contract.md)
+
+CAMERA_CHUNK = "@camera"
+
+
+def camera_token_key(robot: str, prefix: str = DEFAULT_PREFIX) -> str:
+    """``<prefix>/@camera/<robot>``: the liveliness token of the camera publishing ``robot``."""
+    return _verbatim_key(CAMERA_CHUNK, robot, prefix)
+
+
+def camera_tokens(prefix: str = DEFAULT_PREFIX) -> str:
+    """Liveliness subscription key for every camera under ``prefix``."""
+    return camera_token_key("*", prefix)
+
+
+def parse_camera_token(key: str, prefix: str = DEFAULT_PREFIX) -> str:
+    """The robot id of a ``<prefix>/@camera/<robot>`` token key.
+
+    Raises
+    ------
+    KeySchemeError
+        If the key is not a camera token under ``prefix``.
+    """
+    return _id_under(key, prefix, CAMERA_CHUNK)

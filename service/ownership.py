@@ -42,12 +42,14 @@ def owner(robot: str, workers: Iterable[str]) -> str | None:
 class Membership:
     """The live worker set as one worker sees it, with a cached owner per robot.
 
-    ``me`` is always a member while the worker runs. Thread-safe.
+    ``me`` is always a member while the worker runs; once it is :meth:`leaving`, the owners are
+    those of the others (it hands its robots over). Thread-safe.
     """
 
     def __init__(self, me: str, others: Iterable[str] = ()):
         self.me = me
         self._live = {me, *others}
+        self._leaving = False
         self._owners: dict[str, str] = {}
         self._lock = threading.Lock()
 
@@ -59,7 +61,7 @@ class Membership:
         with self._lock:
             found = self._owners.get(robot)
             if found is None:
-                found = owner(robot, self._live)
+                found = owner(robot, self._live - {self.me} if self._leaving else self._live)
                 if found is not None:
                     if len(self._owners) > 65536:  # robots come and go: keep the cache bounded
                         self._owners.clear()
@@ -68,6 +70,21 @@ class Membership:
 
     def owns(self, robot: str) -> bool:
         return self.owner(robot) == self.me
+
+    def others(self) -> list[str]:
+        """The live workers other than ``me``."""
+        with self._lock:
+            return sorted(self._live - {self.me})
+
+    def leave(self) -> None:
+        """From now on ``me`` owns nothing: every robot's owner is among the others."""
+        with self._lock:
+            self._leaving = True
+            self._owners.clear()
+
+    @property
+    def leaving(self) -> bool:
+        return self._leaving
 
     def add(self, worker: str) -> bool:
         """A worker appeared; True if the set changed."""

@@ -1,18 +1,25 @@
-"""The ASNN worker on Zenoh: frames of every robot in, responses and warnings out.
+"""The ASNN worker on Zenoh: frames of its robots in, responses and warnings out.
 
-Subscribes to ``<prefix>/*/frame`` (best-effort frames), runs :class:`~service.core.WorkerCore`
-on a processing thread and publishes, for every processed frame, a Response on
-``<prefix>/<robot>/response`` and, when ``collision`` is true, on ``<prefix>/<robot>/warning``.
-Responses and warnings are reliable, with blocking congestion control and a higher priority than
-frames. Warnings go through an advanced publisher that caches the robot's latest warning, so an
-advanced subscriber that joins late (``clients.alerts``) receives it.
+Subscribes to the frames of the robots it serves (best effort), runs
+:class:`~service.core.WorkerCore` on processing threads and publishes, for every answered frame,
+a Response on ``<prefix>/<robot>/response`` and, when ``collision`` is true, on
+``<prefix>/<robot>/warning``. Responses and warnings are reliable, with blocking congestion
+control and a higher priority than frames. Warnings go through an advanced publisher that caches
+the robot's latest warning, so an advanced subscriber that joins late (``clients.alerts``)
+receives it.
 
-Several workers share the robots (:mod:`service.ownership`): each declares the liveliness token
-``<prefix>/@worker/<id>``, watches the others' and serves only the robots that rendezvous hashing
-gives it over the live set. A worker that stops withdraws its token first, so the others take its
-robots at once; one that dies loses its token when the router sees its session close or its
-lease expire. Each worker answers queries on ``<prefix>/@worker/<id>/status`` with a msgpack map
-(:meth:`service.core.WorkerCore.status` plus the live workers).
+Several workers share the robots (:mod:`service.ownership`, :mod:`service.routing`): each
+declares the liveliness token ``<prefix>/@worker/<id>``, watches the others' and serves the
+robots that rendezvous hashing gives it over the live set, subscribing to
+``<prefix>/<robot>/frame`` for each, so every frame reaches one worker. A worker alone on its
+prefix also subscribes to ``<prefix>/*/frame``; with several, one scans it now and then for
+cameras that do not announce themselves. Hand-overs are warm: the new owner steps the robot's
+frames silently until its model is warm, while the previous owner answers, and a worker that
+stops answers its robots until their new owners are warm (at most ``handover_timeout``). One
+that dies loses its tokens when the router sees its session close or its lease expire, and its
+robots start cold at their new owners. Each worker answers queries on
+``<prefix>/@worker/<id>/status`` with a msgpack map (:meth:`service.core.WorkerCore.status` plus
+the live workers, the routes and the frames received).
 """
 
 from __future__ import annotations
@@ -31,10 +38,12 @@ from asnn.model import compile_kernels
 from . import keys
 from .core import WorkerCore
 from .messages import Response, encode
-from .ownership import Membership
+from .routing import Routes
 
-__all__ = ["COMPUTE_NICENESS", "RESPONSE_QOS", "SWITCH_INTERVAL", "WARNING_QOS", "Worker",
-           "WorkerIdTaken", "live_workers", "query_status", "tune_process"]
+__all__ = ["COMPUTE_NICENESS", "HANDOVER_TIMEOUT", "RESPONSE_QOS", "SCAN_INTERVAL",
+           "SCAN_WINDOW", "SWITCH_INTERVAL", "WARNING_QOS", "Worker", "WorkerIdTaken",
+           "announced_cameras", "check_scan", "fleet_claims", "live_workers", "query_status",
+           "tune_process"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -59,6 +68,19 @@ SWITCH_INTERVAL = 0.0005
 # halved the worker's p99 wait between a frame's arrival and its processing; under overload it
 # keeps the liveliness token and status queries answered.
 COMPUTE_NICENESS = 5
+# Discovery of cameras that do not announce themselves, when several workers share a prefix: the
+# scanning worker subscribes to every robot's frames for SCAN_WINDOW seconds every SCAN_INTERVAL
+# seconds, so such a camera gets an owner within about a second (at 10 fps or more), for
+# SCAN_WINDOW / SCAN_INTERVAL of the frame traffic again at that one worker. Cameras that
+# announce themselves (asnn camera) are known at once and need no scan (--scan-interval 0).
+SCAN_INTERVAL = 1.0
+SCAN_WINDOW = 0.1
+# A worker that stops answers its robots until their new owners are warm, for at most this long.
+HANDOVER_TIMEOUT = 5.0
+# ... but not for robots whose frames stopped this long ago (no new owner can warm up on them).
+STALE_AFTER = 2.0
+# Seconds between two passes of the routes when nothing changed (warm-ups, scan windows, expiry).
+ROUTE_TICK = 0.05
 
 
 def tune_process() -> None:
@@ -72,6 +94,15 @@ def tune_process() -> None:
 
     cv2.setNumThreads(1)
     sys.setswitchinterval(SWITCH_INTERVAL)
+
+
+def check_scan(interval: float, window: float = SCAN_WINDOW) -> None:
+    """Raise ValueError unless ``interval`` is 0 (no scan) or longer than ``window`` > 0."""
+    if not (interval >= 0 and window > 0):
+        raise ValueError(f"need a scan interval >= 0 and a window > 0, got {interval}, {window}")
+    if interval and window >= interval:
+        raise ValueError(f"the scan interval ({interval:g} s) must be longer than its window "
+                         f"({window:g} s), or 0 for no scan")
 
 
 def _lower_priority(increment: int) -> None:
@@ -98,16 +129,37 @@ class WorkerIdTaken(RuntimeError):
     """Another live worker already uses this worker id."""
 
 
+def _live_tokens(session: zenoh.Session, key: str, parse, timeout: float) -> list:
+    """``parse(key)`` of every live liveliness token matching ``key`` (tokens that do not parse,
+    and error replies, are skipped)."""
+    found = set()
+    for reply in session.liveliness().get(key, timeout=timeout):
+        try:
+            found.add(parse(str(reply.ok.key_expr)))
+        except Exception:
+            continue
+    return sorted(found)
+
+
 def live_workers(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
                  timeout: float = 2.0) -> list[str]:
     """Ids of the workers whose liveliness tokens are alive under ``prefix``."""
-    found = set()
-    for reply in session.liveliness().get(keys.worker_tokens(prefix), timeout=timeout):
-        try:
-            found.add(keys.parse_worker_token(str(reply.ok.key_expr), prefix))
-        except Exception:  # an error reply, or a token that is not a worker's
-            continue
-    return sorted(found)
+    return _live_tokens(session, keys.worker_tokens(prefix),
+                        lambda key: keys.parse_worker_token(key, prefix), timeout)
+
+
+def fleet_claims(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
+                 timeout: float = 2.0) -> list[tuple[str, str]]:
+    """``(worker, robot)`` of every live claim under ``prefix``."""
+    return _live_tokens(session, keys.claims(prefix), lambda key: keys.parse_claim(key, prefix),
+                        timeout)
+
+
+def announced_cameras(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
+                      timeout: float = 2.0) -> list[str]:
+    """Robots whose cameras announce themselves under ``prefix``."""
+    return _live_tokens(session, keys.camera_tokens(prefix),
+                        lambda key: keys.parse_camera_token(key, prefix), timeout)
 
 
 def query_status(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
@@ -150,32 +202,60 @@ class Worker:
     core : WorkerCore
     on_response : callable, optional
         Called with every published Response (for the demo and tests).
+    stats_every : float
+        Seconds between two log lines of counters (0: none).
+    shared : bool
+        Take part in the fleet (liveliness token, claims, routes); False serves every robot
+        whose frames arrive, alone.
     threads : int
         Processing threads. The model's kernels release the GIL, so each core can run one
         (:func:`service.core.default_threads`, with :func:`tune_process`); a robot is still
         processed by one thread at a time (:class:`WorkerCore`).
+    scan_interval, scan_window : float
+        How often, and for how long, the scanning worker subscribes to every robot's frames
+        when several workers share the prefix (:data:`SCAN_INTERVAL`, :data:`SCAN_WINDOW`;
+        ``scan_interval=0``: never, only announced or claimed robots are served).
+    handover_timeout : float
+        Seconds a stopping worker answers its robots at most, waiting for their new owners to
+        be warm (:data:`HANDOVER_TIMEOUT`).
     """
 
     def __init__(self, session: zenoh.Session, core: WorkerCore, *, on_response=None,
-                 stats_every: float = 30.0, shared: bool = True, threads: int = 1):
+                 stats_every: float = 30.0, shared: bool = True, threads: int = 1,
+                 scan_interval: float = SCAN_INTERVAL, scan_window: float = SCAN_WINDOW,
+                 handover_timeout: float = HANDOVER_TIMEOUT):
         if threads < 1:
             raise ValueError(f"a worker needs at least one processing thread, got {threads}")
+        check_scan(scan_interval, scan_window)
+        if not handover_timeout >= 0:
+            raise ValueError(f"need handover_timeout >= 0, got {handover_timeout}")
         self.session = session
         self.core = core
         self.on_response = on_response
         self.stats_every = stats_every
         self.shared = shared
-        self.membership = Membership(core.worker_id)
+        self.threads = threads
+        self.scan_interval, self.scan_window = float(scan_interval), float(scan_window)
+        self.handover_timeout = float(handover_timeout)
+        self.routes = Routes(core.worker_id, remember=core.idle_timeout,
+                             max_known=4 * core.max_robots)
+        self.membership = self.routes.membership
         self._outlets: dict[str, _Outlets] = {}
         self._outlets_lock = threading.Lock()
+        self._subscriptions: dict[str, zenoh.Subscriber] = {}  # per robot, once declared
+        self._claims: dict[str, zenoh.LivelinessToken] = {}
+        self._catch_all = None
+        self._scan_next = self._scan_until = 0.0
+        self._traffic = dict.fromkeys(("frames", "bytes", "scanned_frames", "scanned_bytes"), 0)
+        self._traffic_lock = threading.Lock()
+        self._routes_lock = threading.Lock()  # one pass over the routes at a time
+        self._changed = threading.Event()
         self._stop = threading.Event()
-        self.threads = threads
+        self._stop_routes = threading.Event()
         self._threads: list[threading.Thread] = []
-        self._subscriber = None
-        self._token = None
-        self._workers_sub = None
-        self._status = None
-        self._membership_changed = threading.Event()
+        self._router: threading.Thread | None = None
+        self._token = self._status = None
+        self._watchers: list = []  # liveliness subscribers: workers, claims, cameras
 
     def __enter__(self) -> Worker:
         self.start()
@@ -185,7 +265,8 @@ class Worker:
         self.close()
 
     def start(self) -> None:
-        """Compile the model's kernels, join the live worker set, then take frames.
+        """Compile the model's kernels, learn the fleet (live workers, claims, announced
+        cameras), join it, subscribe to this worker's robots, then take frames.
 
         Raises
         ------
@@ -198,26 +279,38 @@ class Worker:
             compile_kernels()
         prefix, me = self.core.prefix, self.core.worker_id
         if self.shared:
-            # the live set first, so that no frame is taken while this worker thinks it is alone
+            # the fleet first, so that no frame is taken while this worker thinks it is alone
             others = live_workers(self.session, prefix)
             if me in others:
                 raise WorkerIdTaken(f"worker id {me!r} is already live under {prefix!r}")
             for worker in others:
                 self.membership.add(worker)
-            self.core.owns = self.membership.owns
-            self._workers_sub = self.session.liveliness().declare_subscriber(
-                keys.worker_tokens(prefix), self._on_worker, history=True)
-            self._token = self.session.liveliness().declare_token(keys.worker_token_key(me,
-                                                                                        prefix))
+            for worker, robot in fleet_claims(self.session, prefix):
+                self.routes.claim(worker, robot, True)
+            for robot in announced_cameras(self.session, prefix):
+                self.routes.camera(robot, True)
+            self.core.owns, self.core.answers = self.routes.takes, self.routes.answers
+            liveliness = self.session.liveliness()
+            self._watchers = [
+                liveliness.declare_subscriber(keys.worker_tokens(prefix), self._on_worker,
+                                              history=True),
+                liveliness.declare_subscriber(keys.claims(prefix), self._on_claim, history=True),
+                liveliness.declare_subscriber(keys.camera_tokens(prefix), self._on_camera,
+                                              history=True)]
+            self._token = liveliness.declare_token(keys.worker_token_key(me, prefix))
         self._status = self.session.declare_queryable(keys.worker_status_key(me, prefix),
                                                       self._on_status_query)
-        self._threads = [threading.Thread(target=self._run, args=(i == 0,), daemon=True,
+        self._threads = [threading.Thread(target=self._run, daemon=True,
                                           name=f"asnn-worker-{i}") for i in range(self.threads)]
         for thread in self._threads:
             thread.start()
-        self._subscriber = self.session.declare_subscriber(keys.frames(prefix), self._on_frame)
+        self._route()  # this worker's subscriptions before start() returns
+        self._router = threading.Thread(target=self._run_routes, daemon=True, name="asnn-routes")
+        self._router.start()
         log.info("worker %s: %s/%s on %s; workers %s", me, self.core.model,
-                 self.core.preset or "-", keys.frames(prefix), self.membership.live())
+                 self.core.preset or "-", prefix, self.membership.live())
+
+    # ------------------------------------------------------------------ the fleet
 
     def _on_worker(self, sample: zenoh.Sample) -> None:
         try:
@@ -230,8 +323,24 @@ class Worker:
             changed = self.membership.add(worker)
         if changed:
             log.info("workers now %s", self.membership.live())
-            self._membership_changed.set()
+            self._changed.set()
             self.core.notify()
+
+    def _on_claim(self, sample: zenoh.Sample) -> None:
+        try:
+            worker, robot = keys.parse_claim(str(sample.key_expr), self.core.prefix)
+        except keys.KeySchemeError:
+            return
+        if self.routes.claim(worker, robot, sample.kind != zenoh.SampleKind.DELETE):
+            self._changed.set()
+
+    def _on_camera(self, sample: zenoh.Sample) -> None:
+        try:
+            robot = keys.parse_camera_token(str(sample.key_expr), self.core.prefix)
+        except keys.KeySchemeError:
+            return
+        if self.routes.camera(robot, sample.kind != zenoh.SampleKind.DELETE):
+            self._changed.set()
 
     def _on_status_query(self, query: zenoh.Query) -> None:
         import msgpack
@@ -239,45 +348,139 @@ class Worker:
         try:
             status = self.core.status()
             status["workers"] = self.membership.live()
+            status["traffic"] = self.traffic()
+            status["routes"] = self.routes.counts()
+            status["scan"] = {"interval": self.scan_interval, "window": self.scan_window,
+                              "subscribed": self._catch_all is not None}
+            for robot, info in status["robots"].items():
+                info["route"] = self.routes.role(robot)
             query.reply(keys.worker_status_key(self.core.worker_id, self.core.prefix),
                         msgpack.packb(status, use_bin_type=True))
         except Exception:
             log.exception("status query failed")
 
+    # ------------------------------------------------------------------ frames in
+
+    def _count(self, size: int, scanned: bool) -> None:
+        with self._traffic_lock:
+            self._traffic["frames"] += 1
+            self._traffic["bytes"] += size
+            if scanned:
+                self._traffic["scanned_frames"] += 1
+                self._traffic["scanned_bytes"] += size
+
+    def traffic(self) -> dict[str, int]:
+        """Frame messages Zenoh delivered to this worker, and their bytes: all of them, and those
+        that came through the scan (``<prefix>/*/frame``) rather than a robot's own
+        subscription."""
+        with self._traffic_lock:
+            return dict(self._traffic)
+
     def _on_frame(self, sample: zenoh.Sample) -> None:
+        """A frame on a robot's own subscription."""
         try:
-            self.core.offer(str(sample.key_expr), sample.payload.to_bytes())
+            payload = sample.payload.to_bytes()
+            self._count(len(payload), scanned=False)
+            self.core.offer(str(sample.key_expr), payload)
         except Exception:  # never let a bug in one message kill the subscriber
             log.exception("unexpected error on a frame from %s", sample.key_expr)
 
-    def _run(self, housekeeping: bool) -> None:
-        """Process frames; the first thread also follows membership, evicts and logs stats."""
-        _lower_priority(COMPUTE_NICENESS)
+    def _on_scanned_frame(self, sample: zenoh.Sample) -> None:
+        """A frame on ``<prefix>/*/frame``: a robot nobody knows yet is adopted."""
+        try:
+            key = str(sample.key_expr)
+            try:
+                robot = keys.parse_key(key, self.core.prefix)[0]
+            except keys.KeySchemeError:
+                robot = None  # the core counts it (bad-key)
+            if robot in self._subscriptions:
+                return  # its own subscription delivers it too
+            payload = sample.payload.to_bytes()
+            self._count(len(payload), scanned=True)
+            if self.core.offer(key, payload) is not None and self.routes.adopt(robot):
+                log.info("robot %s: found by its frames (its camera does not announce it)", robot)
+                self._changed.set()
+        except Exception:
+            log.exception("unexpected error on a frame from %s", sample.key_expr)
+
+    # ------------------------------------------------------------------ routes
+
+    def _route(self) -> None:
+        """One pass: subscriptions, claims and model states after the routes' plan, then the
+        scan subscription."""
+        prefix = self.core.prefix
+        with self._routes_lock:
+            plan = self.routes.plan(self.core.views())
+            for robot in plan.keys() - self._subscriptions.keys():
+                self._subscriptions[robot] = self.session.declare_subscriber(
+                    keys.frame_key(robot, prefix), self._on_frame)
+            for robot in self._subscriptions.keys() - plan.keys():
+                _undeclare(self._subscriptions.pop(robot))
+            if self.shared:
+                claims = {robot for robot, route in plan.items() if route.claim}
+                for robot in claims - self._claims.keys():
+                    self._claims[robot] = self.session.liveliness().declare_token(
+                        keys.claim_key(self.core.worker_id, robot, prefix))
+                for robot in self._claims.keys() - claims:
+                    _undeclare(self._claims.pop(robot))
+            for robot in self.core.release_unowned():
+                log.info("robot %s: handed over to %s", robot, self.routes.membership.owner(robot))
+            self._drop_outlets()
+            self._update_scan(time.monotonic())
+
+    def _update_scan(self, now: float) -> None:
+        """Subscribe to every robot's frames while alone, or during the scan windows of the
+        scanning worker; not while leaving."""
+        if not self.shared or self.routes.alone():
+            wanted = True
+        elif self.scan_interval and self.routes.scanner():
+            if now >= self._scan_next:
+                self._scan_until, self._scan_next = now + self.scan_window, now + self.scan_interval
+            wanted = now < self._scan_until
+        else:
+            wanted = False
+        if wanted and self._catch_all is None:
+            self._catch_all = self.session.declare_subscriber(keys.frames(self.core.prefix),
+                                                              self._on_scanned_frame)
+        elif not wanted and self._catch_all is not None:
+            self._release("_catch_all")
+
+    def _run_routes(self) -> None:
+        """Follow the fleet: route passes, idle robots, the counters in the log."""
         last_stats = last_evict = time.monotonic()
-        while not self._stop.is_set():
-            job = self.core.take(timeout=0.2)
-            if job is not None:
-                try:
-                    response = self.core.process(job)
-                    if response is not None:
-                        self.publish(response)
-                except Exception:
-                    log.exception("robot %s: frame %d failed", job.robot, job.frame.seq)
-            if not housekeeping:
-                continue
-            if self._membership_changed.is_set():
-                self._membership_changed.clear()
-                self.core.release_unowned()
-                self._drop_outlets()
+        while not self._stop_routes.is_set():
+            self._changed.wait(ROUTE_TICK)
+            self._changed.clear()
             now = time.monotonic()
             if now - last_evict >= 1.0:
                 last_evict = now
                 self.core.evict_idle()
-                self.core.release_unowned()
-                self._drop_outlets()
+            try:
+                self._route()
+            except Exception:  # e.g. the session closing under us
+                if not self._stop_routes.is_set():
+                    log.exception("routing pass failed")
             if self.stats_every and now - last_stats >= self.stats_every:
                 last_stats = now
-                log.info("stats %s", self.core.stats())
+                log.info("stats %s; frames in %s", self.core.stats(), self.traffic())
+
+    # ------------------------------------------------------------------ processing
+
+    def _run(self) -> None:
+        """Process frames (at a lower priority than the threads that move messages)."""
+        _lower_priority(COMPUTE_NICENESS)
+        while not self._stop.is_set():
+            job = self.core.take(timeout=0.2)
+            if job is None:
+                continue
+            try:
+                response = self.core.process(job)
+                if response is not None:
+                    self.publish(response)
+                elif self.routes.role(job.robot) == "warming":
+                    self._changed.set()  # it may be warm now: claim it
+            except Exception:
+                log.exception("robot %s: frame %d failed", job.robot, job.frame.seq)
 
     def _drop_outlets(self) -> None:
         """Undeclare the publishers of robots the core no longer tracks (evicted, handed over)."""
@@ -306,6 +509,8 @@ class Worker:
         """True when no frame is waiting or being processed."""
         return self.core.backlog() == 0
 
+    # ------------------------------------------------------------------ stopping
+
     def _release(self, *names: str) -> None:
         """Undeclare the named entities of this worker, once each."""
         for name in names:
@@ -314,16 +519,53 @@ class Worker:
             if entity is not None:
                 _undeclare(entity)
 
+    def _hand_over(self) -> None:
+        """Answer the robots this worker serves until their new owners claim them (warm), at
+        most ``handover_timeout`` seconds. Robots without a frame for :data:`STALE_AFTER`
+        seconds are not waited for: no new owner can warm up on them."""
+        deadline = time.monotonic() + self.handover_timeout
+        while True:
+            views = self.core.views()
+            now = self.core.clock()
+            waiting = [r for r in list(self._subscriptions)
+                       if self.routes.role(r) == "releasing" and r in views
+                       and now - views[r].last_seen < STALE_AFTER]
+            if not waiting or not self.membership.others():
+                return
+            if time.monotonic() >= deadline:
+                log.warning("stopping before %d robots were taken over: %s", len(waiting),
+                            ", ".join(sorted(waiting)[:20]))
+                return
+            time.sleep(ROUTE_TICK)
+
     def close(self) -> None:
-        """Stop taking frames, hand the robots over (the token goes first, so the other workers
-        take them at once), finish the current frame, undeclare everything."""
-        self._release("_subscriber", "_token")
+        """Leave the fleet and stop. The worker token goes first, so the other workers compute
+        the robots' new owners, which warm up on their frames; meanwhile this worker answers
+        them, until each is claimed (at most ``handover_timeout``); then everything is
+        undeclared."""
+        if self._token is not None:
+            self._release("_token")
+            self.membership.leave()
+            self._changed.set()
+            self._hand_over()
+        self._stop_routes.set()
+        if self._router is not None:
+            self._router.join(timeout=30)
+            self._router = None
+        self._release("_catch_all")
+        for robot in list(self._subscriptions):
+            _undeclare(self._subscriptions.pop(robot))
         self._stop.set()
         self.core.notify()
         for thread in self._threads:
             thread.join(timeout=30)
         self._threads = []
-        self._release("_status", "_workers_sub")
+        for robot in list(self._claims):
+            _undeclare(self._claims.pop(robot))
+        self._release("_status")
+        for watcher in self._watchers:
+            _undeclare(watcher)
+        self._watchers = []
         with self._outlets_lock:
             outlets, self._outlets = list(self._outlets.values()), {}
         for outlet in outlets:

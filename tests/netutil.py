@@ -195,3 +195,60 @@ class FramePump:
                 self.stop_event.wait(delay)
             else:
                 next_time = time.monotonic()
+
+
+class AnnouncedCameras:
+    """Cameras that announce themselves (``<prefix>/@camera/<robot>``, as ``asnn camera`` does)
+    and publish bursts of frames with blocking congestion control, so that none is lost on the
+    way and every count can be exact."""
+
+    def __init__(self, session, robots, size=(64, 64), prefix="asnn"):
+        import zenoh
+
+        self.robots, self.prefix = list(robots), prefix
+        rng = np.random.default_rng(2)
+        self.images = [rng.integers(0, 256, size=size[::-1], dtype=np.uint8) for _ in range(8)]
+        self.tokens = [session.liveliness().declare_token(keys.camera_token_key(r, prefix))
+                       for r in self.robots]
+        self.publishers = {r: session.declare_publisher(
+            keys.frame_key(r, prefix), congestion_control=zenoh.CongestionControl.BLOCK)
+            for r in self.robots}
+        self.seq = 0
+        self.sent_bytes = 0
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        for entity in [*self.publishers.values(), *self.tokens]:
+            try:
+                entity.undeclare()
+            except Exception:
+                pass
+
+    def matched(self) -> bool:
+        """Every camera's frames have a subscriber (its worker)."""
+        return all(p.matching_status.matching for p in self.publishers.values())
+
+    def burst(self, frames: int, fps: float = 25.0, stamp=None) -> None:
+        """``frames`` frames per camera at ``fps``; seq continues from the previous burst."""
+        next_time = time.monotonic()
+        for _ in range(frames):
+            for robot in self.robots:
+                frame = Frame.from_image(self.images[self.seq % len(self.images)], seq=self.seq,
+                                         stamp=time.time() if stamp is None else stamp(self.seq))
+                payload = encode(frame)
+                self.publishers[robot].put(payload)
+                self.sent_bytes += len(payload)
+            self.seq += 1
+            next_time += 1.0 / fps
+            delay = next_time - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+
+    def answered(self, responses) -> bool:
+        """Every camera's latest frame has been answered."""
+        latest = {}
+        for _, r in list(responses.items):
+            latest[r.robot] = max(latest.get(r.robot, -1), r.seq)
+        return all(latest.get(robot, -1) == self.seq - 1 for robot in self.robots)

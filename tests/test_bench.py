@@ -175,3 +175,48 @@ def test_kernels_are_loaded_before_anything_is_timed(monkeypatch):
     frames = np.zeros((4, 32, 32), np.uint8)
     assert model_time((32, 32), None, frames)["median_ms"] > 0
     assert calls == ["compile", "time"]
+
+
+def test_warmup_after_a_handover():
+    from asnn.evaluation.handover import covered, warmup_after
+
+    assert warmup_after([True, True, False], [True, True, False]) == 0
+    assert warmup_after([True, True, True, False], [False, False, True, False]) == 2
+    assert warmup_after([False, True, False, True], [True, True, False, True]) == 1
+    with pytest.raises(ValueError):
+        warmup_after([True], [True, False])
+    assert covered({0: 8, 3: 1, 12: 1}, 3) == 0.9 and covered({}, 0) == 1.0
+
+
+def test_handover_bench_reports_the_warmup_distribution(capsys, monkeypatch):
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert main(["bench", "--handover", "--cases", "loom-dark-c1.0-d12-center", "--every", "9",
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["cases"] == 1 and report["preset"] == "reference32"
+    rows = report["all"]
+    assert rows["handovers"] == sum(rows["counts"].values()) > 0
+    assert 0 <= rows["quantile"] <= rows["max"]
+    # a fresh model on a looming disk is silent for its first frames: some hand-overs need a
+    # few frames, and none during the steady growth needs more than the worker's default
+    from service.core import WARMUP_FRAMES
+
+    assert rows["max"] > 0 and report["approach"]["max"] <= WARMUP_FRAMES
+
+
+def test_detect_bench_reports_the_whole_process_and_its_stages(capsys, monkeypatch):
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert main(["bench", "--detect", "--size", "64x48", "--frames", "12", "--repeat", "1",
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["threads"] == "as asnn detect: not pinned"
+    (row,) = report["results"]
+    assert row["size"] == "64x48" and row["identical"] is True
+    assert set(row["stages_ms"]) == {"decode", "model", "targets", "output"}
+    assert all(v >= 0 for v in row["stages_ms"].values()) and row["straightforward_ms"] > 0
+    assert row["ratio"] == pytest.approx(row["straightforward_ms"] / row["detect_ms"])
+    from asnn.evaluation.bench_detect import format_table
+
+    assert "| 64x48 |" in format_table(report) and "| yes |" in format_table(report)

@@ -81,3 +81,82 @@ def test_missing_or_undecodable_file_exits_2_with_one_line(tmp_path, content):
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert len(proc.stderr.strip().splitlines()) == 1 and str(path) in proc.stderr
+
+
+def test_output_equals_one_loop_over_the_frames(looming_video, tmp_path):
+    """Decoding ahead and writing behind on their own threads changes nothing: the records are
+    those of a plain loop over the same frames, in order."""
+    from asnn.evaluation.runs import run_detector
+    from asnn.io.sources import open_source
+
+    path, _ = looming_video
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", str(path), "--jsonl", str(out)]) == 0
+    got = [json.loads(line) for line in out.read_text().splitlines()]
+    expected = json.loads(json.dumps(run_detector(open_source(str(path)).timed_frames())))
+    assert got == expected
+
+
+def test_read_ahead_keeps_order_and_raises_where_the_source_failed():
+    import threading
+
+    from asnn.io.pipeline import read_ahead
+
+    def items():
+        yield from range(5)
+        raise OSError("cut")
+
+    got = []
+    with pytest.raises(OSError, match="cut"):
+        for item in read_ahead(items(), depth=2):
+            got.append(item)
+    assert got == [0, 1, 2, 3, 4]
+    # a consumer that stops early stops the reading thread
+    before = threading.active_count()
+    for item in read_ahead(iter(range(10**9)), depth=2):
+        if item == 3:
+            break
+    assert threading.active_count() == before
+    with pytest.raises(ValueError):
+        next(read_ahead([], depth=0))
+
+
+def test_write_behind_writes_in_order_and_reports_a_failed_write():
+    import time
+
+    from asnn.io.pipeline import WriteBehind
+
+    written = []
+
+    def slow(item):
+        time.sleep(0.001)
+        written.append(item)
+
+    with WriteBehind(slow, depth=2) as out:
+        for i in range(50):
+            out.put(i)
+    assert written == list(range(50))
+
+    def fails_at_3(item):
+        if item == 3:
+            raise OSError("disk full")
+        written.append(item)
+
+    written.clear()
+    out = WriteBehind(fails_at_3, depth=1)
+    with pytest.raises(OSError, match="disk full"):
+        for i in range(1000):  # put() raises once the writer has failed
+            out.put(i)
+        out.close()
+    assert written == [0, 1, 2]
+    with pytest.raises(OSError, match="disk full"):
+        out.close()
+
+
+def test_an_annotated_video_that_cannot_be_written_is_one_error_line(looming_video, tmp_path,
+                                                                     capsys):
+    path, _ = looming_video
+    target = tmp_path / "missing-dir" / "ann.mp4"
+    assert main(["detect", str(path), "--annotate", str(target)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"asnn detect: cannot write {target}"]

@@ -40,8 +40,8 @@ def net(tmp_path, procs):
     Net.common, Net.router = common, router
     Net.options = ZenohOptions(mode="client", connect=(endpoint,), config_file=config)
 
-    def worker(worker_id):
-        proc = procs("worker", "--id", worker_id, "--idle-timeout", "600", *common)
+    def worker(worker_id, *options):
+        proc = procs("worker", "--id", worker_id, "--idle-timeout", "600", *options, *common)
         proc.wait_line("ready", timeout=60)
         return proc
 
@@ -103,7 +103,11 @@ def test_workers_share_robots_and_fail_over(net, capsys):
         assert set(status) == {"w1", "w2"}
         assert sorted(status["w1"]["robots"]) == mine["w1"]
         assert status["w2"]["workers"] == ["w1", "w2"]
-        assert status["w1"]["stats"]["foreign"] > 0
+        # each worker receives its own robots' frames (and the scanner a few more)
+        for w in ("w1", "w2"):
+            assert all(status[w]["robots"][r]["frames"] > 0 for r in mine[w])
+            assert status[w]["traffic"]["frames"] >= sum(status[w]["robots"][r]["frames"]
+                                                         for r in mine[w])
 
         # SIGKILL: no goodbye; the router drops the session and its liveliness token
         t_kill = time.monotonic()
@@ -176,3 +180,49 @@ def test_a_second_worker_with_the_same_id_is_refused_and_status_lists_the_first(
         nobody.stop()
     finally:
         more.cleanup()
+
+
+def test_each_frame_reaches_exactly_the_worker_of_its_robot(net, capsys):
+    """Three workers and nine cameras that announce themselves (no scan: --scan-interval 0): in
+    steady state every frame is delivered to one worker, its robot's owner, and answered once;
+    the workers' status counts the frames and bytes they received."""
+    from cli.net import format_status
+    from netutil import AnnouncedCameras
+
+    workers = ["w1", "w2", "w3"]
+    for worker in workers:
+        net.worker(worker, "--scan-interval", "0")
+    cameras = [f"cam{i}" for i in range(9)]
+    owners = {camera: owner(camera, workers) for camera in cameras}
+    assert len(set(owners.values())) == 3
+    with zenoh.open(make_config(net.options)) as session:
+        wait_for(lambda: live_workers(session) == workers, what="three live workers")
+        responses = Responses(session)
+        with AnnouncedCameras(session, cameras) as pump:
+            wait_for(pump.matched, what="every camera's worker to subscribe")
+            pump.burst(20)
+            wait_for(lambda: pump.answered(responses), what="the first frames' responses")
+            before, sent_before = query_status(session), pump.sent_bytes
+            t0 = time.monotonic()
+            pump.burst(50)
+            wait_for(lambda: pump.answered(responses), what="the burst's responses")
+            after = query_status(session)
+    delta = {w: {k: after[w]["traffic"][k] - before[w]["traffic"][k] for k in after[w]["traffic"]}
+             for w in workers}
+    with capsys.disabled():
+        print(f"\nframes received per worker for 9 x 50 published: "
+              f"{ {w: d['frames'] for w, d in delta.items()} }")
+    assert sum(d["frames"] for d in delta.values()) == len(cameras) * 50
+    assert sum(d["bytes"] for d in delta.values()) == pump.sent_bytes - sent_before
+    assert all(d["scanned_frames"] == 0 for d in delta.values())
+    for camera in cameras:
+        for w in workers:
+            got = (after[w]["robots"].get(camera, {}).get("frames", 0)
+                   - before[w]["robots"].get(camera, {}).get("frames", 0))
+            assert got == (50 if w == owners[camera] else 0), (camera, w, got)
+        assert after[owners[camera]]["robots"][camera]["route"] == "serving"
+    burst = [(r.robot, r.seq, r.worker) for r in responses.since(t0)]
+    assert len({(robot, seq) for robot, seq, _ in burst}) == len(burst)  # answered once
+    assert all(worker == owners[robot] for robot, _, worker in burst)
+    line = format_status(after["w1"])
+    assert f"frames in {after['w1']['traffic']['frames']}" in line

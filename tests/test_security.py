@@ -295,3 +295,47 @@ def test_the_generator_refuses_bad_robot_ids(tmp_path):
     out = subprocess.run(["bash", str(SCRIPT), "--robots", "r1,bad/id", str(tmp_path / "s")],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "invalid robot id" in out.stderr
+
+
+def test_the_fleet_keys_pass_the_access_control_for_their_owners_only(fleet):
+    """Issue 14's keys: a camera announces its own robot only; workers claim the robots they
+    serve and see each other's claims and the cameras' announcements; nobody else may claim.
+    Two workers then share the announced robots, each receiving its own robots' frames."""
+    from service.camera import Source, publish_frames
+    from service.ownership import owner
+    from service.worker import announced_cameras, fleet_claims
+
+    session, _ = fleet
+    watcher = session("worker")
+    camera, dashboard = session("camera-r1"), session("dashboard")
+    tokens = [camera.liveliness().declare_token(keys.camera_token_key("r1")),
+              camera.liveliness().declare_token(keys.camera_token_key("r2")),  # not its robot
+              camera.liveliness().declare_token(keys.claim_key("w9", "r1")),
+              dashboard.liveliness().declare_token(keys.claim_key("w9", "r2"))]
+    time.sleep(QUIET)
+    assert announced_cameras(watcher) == ["r1"] and fleet_claims(watcher) == []
+    for token in tokens:
+        token.undeclare()
+
+    scene = make_scene("looming", stop=30, frames=40)
+    cores = [WorkerCore(worker_id=w, idle_timeout=600) for w in ("secure-w1", "secure-w2")]
+    with Worker(session("worker"), cores[0], stats_every=0), \
+            Worker(session("worker"), cores[1], stats_every=0, scan_interval=0):
+        responses = Responses(dashboard)
+        wait_for(lambda: live_workers(dashboard) == ["secure-w1", "secure-w2"],
+                 what="both workers")
+        cameras = [threading.Thread(target=publish_frames, kwargs=dict(
+            session=session(f"camera-{r}"), robot=r, wait=30.0, fps=40.0, preview_hz=0,
+            source=Source("looming", 20.0, False, lambda: iter(scene.frames))))
+            for r in ("r1", "r2")]
+        for thread in cameras:
+            thread.start()
+        for thread in cameras:
+            thread.join(timeout=60)
+        wait_for(lambda: {r.robot for r in responses.since(0) if r.seq >= 35} == {"r1", "r2"},
+                 what="both robots answered to the end")
+        owners = {r: owner(r, ["secure-w1", "secure-w2"]) for r in ("r1", "r2")}
+        assert all(r.worker == owners[r.robot] for r in responses.since(0))
+        assert sorted(fleet_claims(watcher)) == sorted((w, r) for r, w in owners.items())
+        for core in cores:
+            assert set(core.robots()) == {r for r, w in owners.items() if w == core.worker_id}

@@ -343,3 +343,28 @@ def test_demo_on_a_fresh_install_warns(tmp_path):
     summary = proc.stdout.strip().splitlines()[-1]  # "60 frames published, ..., N warnings received"
     assert summary.endswith("warnings received"), summary
     assert int(summary.split(",")[-1].split()[0]) > 10, summary
+
+
+def test_worker_scan_and_handover_options_are_checked(capsys):
+    from cli.main import build_parser
+
+    args = build_parser().parse_args(["worker"])
+    assert (args.warmup_frames, args.scan_interval, args.handover_timeout) == (12, 1.0, 5.0)
+    for bad in (["--warmup-frames", "-1"], ["--scan-interval", "-1"],
+                ["--handover-timeout", "x"]):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(["worker", *bad])
+    # a scan shorter than its window: one line, exit 2, before any session is opened
+    assert main(["worker", "--scan-interval", "0.05"]) == 2
+    assert "must be longer than its window" in capsys.readouterr().err
+
+
+def test_the_camera_announces_itself_while_it_publishes(zenoh_net):
+    seen = []
+    sub = zenoh_net.hub.liveliness().declare_subscriber(  # noqa: F841 (kept declared)
+        keys.camera_tokens(), lambda s: seen.append((str(s.key_expr), s.kind)), history=True)
+    scene, source = scene_source("looming", start=2, stop=8, frames=10)
+    assert publish_frames(zenoh_net.spoke(), "r7", source, fps=100, preview_hz=0) == 10
+    wait_for(lambda: len(seen) >= 2, what="the announcement and its end")
+    assert seen == [("asnn/@camera/r7", zenoh.SampleKind.PUT),
+                    ("asnn/@camera/r7", zenoh.SampleKind.DELETE)]

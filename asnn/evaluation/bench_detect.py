@@ -1,0 +1,204 @@
+"""Per-frame cost of the whole ``asnn detect`` process, and of its stages (``asnn bench --detect``).
+
+For each size, a generated clip of ``frames`` frames (mp4v: ``looming_over_stripes``, the disk
+growing over 50 frames, played forwards then backwards, again and again, as ``asnn bench
+--service`` plays it) and a clip of its first two frames are written to a temporary directory,
+and ``asnn detect CLIP --jsonl OUT`` runs as its own process ``repeat`` times on each. The per-frame cost is (median time on the long
+clip - median time on the short one) / (frames - 2): the start-up (interpreter, imports, the
+kernels loaded from numba's cache, opening the file) cancels out. The process uses the machine's
+cores as ``asnn detect`` does: frames are decoded ahead and results written behind on threads of
+their own (:mod:`asnn.io.pipeline`) while the model steps.
+
+The same run, in this process, times each stage of one loop over the same frames: **decode**
+(the source's frames), **model** (the detector's step without the targets), **targets** (the
+clustering inside the step, timed by wrapping :func:`asnn.targets.extract_targets` where the
+model calls it) and **output** (formatting and writing the JSON lines); their sum is what the
+loop costs on one thread. The baseline is the straightforward float64 form of the same preset
+(``ASNN(preset, optimised=False)``) stepping over one period of the same loop on one thread, as
+``asnn bench`` times it: its mean step (the per-frame costs of both forms depend on the frames'
+content, so they are compared over the same frames). ``identical`` says whether the process's JSON lines equal
+those of one loop over the same frames here.
+
+The clip's content matters: on frames where a large region has been still for a few seconds
+(the disk of a long clip near its end, a camera that stops), the default preset's float32
+cascades decay into subnormal numbers, which the processor handles slowly, and its step costs
+several times as much (README, Performance). The looping clip stays clear of that.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .bench import SCENE, THREAD_VARIABLES
+
+__all__ = ["DEFAULT_SIZES", "run", "format_table", "time_stages"]
+
+DEFAULT_SIZES = ((320, 240), (640, 480))
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _detect_seconds(clip: Path, out: Path, preset: str | None) -> float:
+    """Wall-clock seconds of one ``asnn detect CLIP --jsonl OUT`` process."""
+    env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
+    args = [sys.executable, "-m", "cli.main", "detect", str(clip), "--jsonl", str(out)]
+    if preset:
+        args += ["--preset", preset]
+    start = time.perf_counter()
+    proc = subprocess.run(args, cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800)
+    elapsed = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise RuntimeError(f"asnn detect failed: {proc.stderr.strip()[-500:]}")
+    return elapsed
+
+
+@contextlib.contextmanager
+def _timed_targets(totals: list[float]):
+    """Add the seconds spent in the model's calls of ``extract_targets`` to ``totals[0]``."""
+    from .. import model
+
+    original = getattr(model, "extract_targets", None)
+    if original is None:  # the model no longer calls it from there: counted in the model
+        yield
+        return
+
+    def timed(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            totals[0] += time.perf_counter() - start
+
+    model.extract_targets = timed
+    try:
+        yield
+    finally:
+        model.extract_targets = original
+
+
+def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[dict]]:
+    """Milliseconds per frame of each stage of one loop over ``clip``, and its records."""
+    from ..detectors import make_detector
+    from ..io.sources import open_source
+
+    start = time.perf_counter()
+    frames = list(open_source(str(clip)).timed_frames())
+    decode = time.perf_counter() - start
+    detector = make_detector("asnn", preset)
+    targets = [0.0]
+    responses = []
+    with _timed_targets(targets):
+        start = time.perf_counter()
+        for t, frame in frames:
+            responses.append(detector.step(frame, t))
+        step = time.perf_counter() - start
+    start = time.perf_counter()
+    records = []
+    with open(out, "w", encoding="utf-8") as fh:
+        for index, ((t, _), response) in enumerate(zip(frames, responses)):
+            record = {"frame": index, "t": round(t, 6), **response.to_dict()}
+            records.append(record)
+            fh.write(json.dumps(record) + "\n")
+    output = time.perf_counter() - start
+    n = len(frames)
+    ms = {"decode": decode, "model": step - targets[0], "targets": targets[0], "output": output}
+    return {k: 1e3 * v / n for k, v in ms.items()}, records
+
+
+def _straightforward_ms(frames: np.ndarray, preset: str | None) -> float:
+    """Mean milliseconds of the straightforward float64 step over ``frames`` (after the first,
+    which only primes the state), on one OpenCV thread."""
+    import cv2
+
+    from ..model import ASNN
+    from ..params import preset as make_preset
+    from .bench import time_detector
+
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        params = make_preset(preset or "default")
+        seconds = time_detector(lambda: ASNN(params, optimised=False), frames, warmup=1)
+    finally:
+        cv2.setNumThreads(threads)
+    return float(np.mean(seconds) * 1e3)
+
+
+def _clip(size: tuple[int, int], frames: int) -> tuple[np.ndarray, int]:
+    """The bench's frames, and the period of their loop."""
+    from ..stimuli import make_scene
+
+    scene = make_scene(SCENE, size=size, frames=50, start=2, stop=48).frames
+    loop = np.concatenate([scene, scene[-2:0:-1]])  # forwards then backwards: no jump
+    return np.resize(loop, (frames, *loop.shape[1:])), len(loop)
+
+
+def run(sizes=DEFAULT_SIZES, frames: int = 300, repeat: int = 4, preset: str | None = None,
+        progress=None) -> dict:
+    """Time ``asnn detect`` at every size; the report as a dict (see the module notes).
+
+    Raises
+    ------
+    ValueError
+        For fewer than 10 frames or an unknown preset.
+    RuntimeError
+        If ``asnn detect`` fails.
+    """
+    from ..model import compile_kernels
+    from ..params import DEFAULT_PRESET, preset_key
+    from ..stimuli import write_video
+
+    if frames < 10:
+        raise ValueError(f"--detect needs at least 10 frames, got {frames}")
+    name = preset_key(preset) if preset else DEFAULT_PRESET
+    compile_kernels()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for w, h in sizes:
+            if progress:
+                progress(f"{w}x{h}")
+            clip, period = _clip((w, h), frames)
+            long_clip, short_clip = tmp / f"{w}x{h}.mp4", tmp / f"{w}x{h}-2.mp4"
+            write_video(clip, long_clip, fps=25.0)
+            write_video(clip[:2], short_clip, fps=25.0)
+            out = tmp / "detect.jsonl"
+            long_runs, short_runs = [], []
+            for _ in range(repeat):
+                long_runs.append(_detect_seconds(long_clip, out, preset))
+                short_runs.append(_detect_seconds(short_clip, tmp / "short.jsonl", preset))
+            produced = [json.loads(line) for line in out.read_text().splitlines()]
+            stages, records = time_stages(long_clip, preset, tmp / "loop.jsonl")
+            per_frame = (np.median(long_runs) - np.median(short_runs)) / (frames - 2) * 1e3
+            baseline = _straightforward_ms(clip[:period + 1], preset)
+            rows.append({
+                "size": f"{w}x{h}", "frames": frames, "repeat": repeat,
+                "detect_ms": float(per_frame), "startup_s": float(np.median(short_runs)),
+                "stages_ms": stages, "loop_ms": float(sum(stages.values())),
+                "straightforward_ms": baseline, "ratio": baseline / per_frame,
+                "identical": produced == json.loads(json.dumps(records))})
+    return {"scene": SCENE, "preset": name, "results": rows,
+            "baseline": f"ASNN({name!r}, optimised=False) on the same frames, one thread, "
+                        "mean step"}
+
+
+def format_table(report: dict) -> str:
+    """The report as a Markdown table."""
+    lines = ["| size | asnn detect ms/frame | decode | model | targets | output | one loop | "
+             "straightforward ms | straightforward / detect | identical |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+    for r in report["results"]:
+        s = r["stages_ms"]
+        lines.append(f"| {r['size']} | {r['detect_ms']:.2f} | {s['decode']:.2f} | "
+                     f"{s['model']:.2f} | {s['targets']:.2f} | {s['output']:.3f} | "
+                     f"{r['loop_ms']:.2f} | {r['straightforward_ms']:.1f} | "
+                     f"1/{r['ratio']:.1f} | {'yes' if r['identical'] else 'NO'} |")
+    return "\n".join(lines)

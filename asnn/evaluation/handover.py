@@ -1,0 +1,159 @@
+"""How many frames a detector started cold needs before it warns as one that ran all along.
+
+When a robot's stream moves to another worker (a worker joins, stops or dies), the new owner's
+model starts from an empty state. This module measures, over generated scenes, how many frames
+that fresh model must see before its warnings equal those of a model that saw the whole stream:
+the *warm-up* a hand-over needs (``asnn bench --handover``; the service's ``--warmup-frames``,
+docs/operations.md).
+
+For a scene of n frames and a hand-over at frame k, a fresh detector steps frames k, k+1, ...
+(each with its time); its warm-up is the smallest j such that its ``collision`` equals the
+uninterrupted detector's on every frame from k + j to the end. Hand-overs are tried every
+``every`` frames.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+
+import numpy as np
+
+from .runs import DetectorSpec, parse_detector
+
+__all__ = ["covered", "format_report", "handover_warmups", "run", "summarise_warmups",
+           "warmup_after"]
+
+
+def warmup_after(reference: Sequence[bool], cold: Sequence[bool]) -> int:
+    """Frames before ``cold`` agrees with ``reference`` (the same frames) for good.
+
+    Parameters
+    ----------
+    reference : sequence of bool
+        The uninterrupted detector's warnings on the frames from the hand-over on.
+    cold : sequence of bool
+        The fresh detector's warnings on the same frames.
+
+    Returns
+    -------
+    int
+        The smallest j with ``cold[i] == reference[i]`` for every i >= j (0: agrees at once).
+    """
+    if len(reference) != len(cold):
+        raise ValueError(f"{len(reference)} reference and {len(cold)} cold warnings")
+    disagree = [i for i, (r, c) in enumerate(zip(reference, cold)) if bool(r) != bool(c)]
+    return disagree[-1] + 1 if disagree else 0
+
+
+def _warnings(spec: DetectorSpec, frames: np.ndarray, times: np.ndarray) -> list[bool]:
+    detector = spec.make()
+    return [detector.step(frame, float(t)).collision for frame, t in zip(frames, times)]
+
+
+def handover_warmups(scenes: Iterable[tuple[str, object]], detector: DetectorSpec | str = "asnn",
+                     every: int = 3, on_scene: Callable[[str], None] | None = None) -> list[dict]:
+    """Warm-up of a hand-over every ``every`` frames of each scene.
+
+    Parameters
+    ----------
+    scenes : iterable of (name, Scene)
+        :class:`asnn.stimuli.scene.Scene` objects (frames, fps, and for collisions the onset
+        and contact frames).
+    detector : DetectorSpec or str
+        The detector (``asnn`` is the default preset).
+    every : int
+        Frames between two tried hand-overs (the first at frame 1).
+    on_scene : callable, optional
+        Called with each scene's name when it is done (progress).
+
+    Returns
+    -------
+    list of dict
+        One per hand-over: ``scene``, ``frame`` (k), ``warmup`` (frames), ``approach`` (whether
+        k lies within the scene's approach, onset to contact).
+    """
+    spec = parse_detector(detector) if isinstance(detector, str) else detector
+    if every < 1:
+        raise ValueError(f"every must be at least 1, got {every}")
+    rows = []
+    for name, scene in scenes:
+        frames = np.asarray(scene.frames)
+        times = np.arange(len(frames)) / scene.fps
+        reference = _warnings(spec, frames, times)
+        onset, contact = getattr(scene, "onset_frame", None), getattr(scene, "contact_frame", None)
+        for k in range(1, len(frames) - 1, every):
+            cold = _warnings(spec, frames[k:], times[k:])
+            rows.append({"scene": name, "frame": k, "warmup": warmup_after(reference[k:], cold),
+                         "approach": onset is not None and contact is not None
+                         and onset <= k <= contact})
+        if on_scene is not None:
+            on_scene(name)
+    return rows
+
+
+def summarise_warmups(rows: Sequence[dict], quantile: float = 0.99) -> dict:
+    """Distribution of the warm-ups: all hand-overs, and those within an approach.
+
+    Returns ``handovers``, ``max``, ``quantile`` (the ``quantile`` of the warm-ups), ``counts``
+    (warm-up -> hand-overs) and the same for ``approach`` (hand-overs during an approach), plus
+    ``worst`` (the hand-overs with the largest warm-up).
+    """
+    def part(selected):
+        values = np.array([r["warmup"] for r in selected], int)
+        if not len(values):
+            return {"handovers": 0, "max": None, "quantile": None, "counts": {}}
+        counts = dict(zip(*np.unique(values, return_counts=True)))
+        return {"handovers": int(len(values)), "max": int(values.max()),
+                "quantile": int(np.ceil(np.quantile(values, quantile))),
+                "counts": {int(k): int(v) for k, v in counts.items()}}
+
+    worst = sorted(rows, key=lambda r: -r["warmup"])[:5]
+    return {"quantile_level": quantile, "all": part(rows),
+            "approach": part([r for r in rows if r["approach"]]), "worst": worst}
+
+
+def run(detector: str = "asnn", cases: str | None = None, every: int = 3,
+        progress: Callable[[str], None] | None = None) -> dict:
+    """Warm-ups over the labelled suite (``asnn bench --handover``); the report as a dict.
+
+    ``cases`` selects suite cases (patterns of :func:`asnn.stimuli.suite.suite_cases`; None:
+    all of them).
+    """
+    from ..params import DEFAULT_PRESET
+    from ..stimuli.suite import make_case, suite_cases
+
+    names = suite_cases(cases)
+    spec = parse_detector(detector)
+    rows = handover_warmups(((name, make_case(name)) for name in names), spec, every=every,
+                            on_scene=progress)
+    return {"detector": spec.name,
+            "preset": (spec.preset or DEFAULT_PRESET) if spec.model == "asnn" else None,
+            "cases": len(names), "every": every, **summarise_warmups(rows)}
+
+
+def covered(counts: dict, frames: int) -> float:
+    """The fraction of hand-overs whose warm-up is at most ``frames``."""
+    total = sum(counts.values())
+    return sum(n for k, n in counts.items() if int(k) <= frames) / total if total else 1.0
+
+
+def format_report(report: dict, current: int | None = None) -> str:
+    """The report as text; ``current``: the warm-up in use, with the hand-overs it covers."""
+    preset = f" (preset {report['preset']})" if report.get("preset") else ""
+    lines = [f"# {report['detector']}{preset}: {report['cases']} cases of the labelled suite, a hand-over "
+             f"every {report['every']} frames; warm-up = frames a fresh model steps before its "
+             "warnings equal an uninterrupted one's for good"]
+    for part, title in (("all", "all hand-overs"), ("approach", "during an approach")):
+        s = report[part]
+        if not s["handovers"]:
+            continue
+        dist = ", ".join(f"{k}: {n}" for k, n in sorted(s["counts"].items(), key=lambda kv: int(kv[0])))
+        lines.append(f"{title}: {s['handovers']}; {int(report['quantile_level'] * 100)} % need "
+                     f"at most {s['quantile']} frames, the worst {s['max']} (frames: hand-overs "
+                     f"{dist})")
+        if current is not None:
+            lines.append(f"  with {current} frames (the worker's --warmup-frames): "
+                         f"{100 * covered(s['counts'], current):.2f} % of them")
+    lines.append("worst: " + "; ".join(f"{w['scene']} at frame {w['frame']}: {w['warmup']}"
+                                        for w in report["worst"]))
+    return "\n".join(lines)

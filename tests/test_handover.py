@@ -1,0 +1,125 @@
+"""Hand-over without going blind, with OS processes: a robot whose worker stops (SIGTERM), or that
+moves to a newly started worker, in the middle of an approach, is answered on every frame and
+warned as if nothing had happened: the new owner warms its model up on the robot's frames while
+the old one still answers, and takes over warm."""
+
+import signal
+import time
+from collections import defaultdict
+
+import zenoh
+
+from asnn import ASNN
+from asnn.stimuli import make_scene
+from service import keys
+from service.config import make_config
+from service.messages import Frame, encode
+from service.ownership import owner
+from service.worker import live_workers
+
+from netutil import Responses, wait_for
+from test_failover import net  # noqa: F401  (the router fixture)
+from test_routing import robot_of
+
+FPS = 25.0
+
+
+def scene():
+    """The generated looming scene at 25 fps, with an approach long enough (3.6 s) that a
+    hand-over in its middle completes well before contact."""
+    return make_scene("looming", start=10, stop=100, frames=110, fps=FPS)
+
+
+def reference_warnings(frames):
+    model = ASNN()
+    return [model.step(frame, seq / FPS).collision for seq, frame in enumerate(frames)]
+
+
+class SceneCamera:
+    """A camera that announces itself and plays frames at FPS (stamps seq / FPS, no frame lost
+    on the way); ``play`` runs an action after publishing the frames it names."""
+
+    def __init__(self, session, robot, frames):
+        self.frames = frames
+        self.token = session.liveliness().declare_token(keys.camera_token_key(robot))
+        self.publisher = session.declare_publisher(
+            keys.frame_key(robot), congestion_control=zenoh.CongestionControl.BLOCK)
+
+    def play(self, actions):
+        next_time = time.monotonic()
+        for seq, image in enumerate(self.frames):
+            self.publisher.put(encode(Frame.from_image(image, seq=seq, stamp=seq / FPS)))
+            if seq in actions:
+                actions[seq]()
+                next_time = max(next_time, time.monotonic())
+            next_time += 1.0 / FPS
+            time.sleep(max(0.0, next_time - time.monotonic()))
+
+    def close(self):
+        self.publisher.undeclare()
+        self.token.undeclare()
+
+
+def check_handover(responses, robot, frames, handover, old, new, capsys):
+    """Every frame from the hand-over on answered, every answer the warning an uninterrupted
+    model gives, the new owner warm from its first answer and warning inside the window."""
+    answers = defaultdict(list)
+    for r in responses.since(0, robot):
+        answers[r.seq].append(r)
+    reference = reference_warnings(frames)
+    missing = sorted(set(range(handover, len(frames))) - set(answers))
+    assert not missing, f"frames answered by nobody: {missing}"
+    wrong = [(seq, r.worker, r.collision) for seq, rs in answers.items() for r in rs
+             if r.collision != reference[seq]]
+    assert not wrong, f"answers that differ from an uninterrupted model's: {wrong}"
+    taken = min(seq for seq, rs in answers.items() if any(r.worker == new for r in rs))
+    first = next(r for r in answers[taken] if r.worker == new)
+    assert handover < taken and first.collision and first.u > 0  # warm: not a fresh stream
+    assert max(seq for seq, rs in answers.items() if any(r.worker == old for r in rs)) >= taken - 1
+    contact = 100
+    assert any(reference[seq] for seq in range(taken, contact + 3))  # warned in the window
+    both = sorted(seq for seq, rs in answers.items() if len({r.worker for r in rs}) > 1)
+    with capsys.disabled():
+        print(f"\nhand-over at frame {handover}: {new} answers from frame {taken} "
+              f"({taken - handover} frames later); answered by both: {both}")
+
+
+def test_a_worker_stopped_mid_approach_hands_its_robot_over_warm(net, capsys):  # noqa: F811
+    robot = robot_of("w1", ["w1", "w2"])
+    w1, _ = net.worker("w1"), net.worker("w2")
+    frames = scene().frames
+    handover = 55  # mid-approach (onset 10, contact 100)
+    with zenoh.open(make_config(net.options)) as session:
+        wait_for(lambda: live_workers(session) == ["w1", "w2"], what="both workers")
+        responses = Responses(session)
+        camera = SceneCamera(session, robot, frames)
+        wait_for(lambda: camera.publisher.matching_status.matching, what="w1's subscription")
+        camera.play({handover: lambda: w1.popen.send_signal(signal.SIGTERM)})
+        wait_for(lambda: any(r.seq == len(frames) - 1 for r in responses.since(0, robot)),
+                 what="the last frame's answer")
+        camera.close()
+    assert w1.stop() == 0
+    assert "were taken over" not in "\n".join(w1.err)
+    check_handover(responses, robot, frames, handover, "w1", "w2", capsys)
+
+
+def test_a_new_worker_takes_its_robot_over_warm_mid_approach(net, capsys):  # noqa: F811
+    robot = robot_of("w2", ["w1", "w2"])
+    assert owner(robot, ["w1"]) == "w1"
+    net.worker("w1")
+    frames = scene().frames
+    handover = 55
+
+    def start_w2():  # the camera pauses while w2 starts (stamps stay seq / FPS)
+        net.worker("w2")
+
+    with zenoh.open(make_config(net.options)) as session:
+        wait_for(lambda: live_workers(session) == ["w1"], what="w1")
+        responses = Responses(session)
+        camera = SceneCamera(session, robot, frames)
+        wait_for(lambda: camera.publisher.matching_status.matching, what="w1's subscription")
+        camera.play({handover: start_w2})
+        wait_for(lambda: any(r.seq == len(frames) - 1 for r in responses.since(0, robot)),
+                 what="the last frame's answer")
+        camera.close()
+    check_handover(responses, robot, frames, handover + 1, "w1", "w2", capsys)
