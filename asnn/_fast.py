@@ -77,6 +77,7 @@ DEPTH = 2 * RADIUS + 1  # rows kept by the ring buffers of the 5x5 filters
 _TERMS = np.array([[1, 2], [2, 1], [3, 0], [0, 3]], np.int64)
 
 _jit = dict(boundscheck=False)
+_TINY = 1e-18  # float32 cascade values below this are flushed to 0: their products stay normal
 
 
 def supported(params) -> bool:
@@ -231,13 +232,16 @@ def _dog_row(p, y, env, sc, zero, col, on, off):
 
 
 @kernel(inline="always", **_jit)
-def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, slow):
+def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, slow, tiny):
     """One frame of the cascade at row y, in difference form (see :func:`to_differences`).
 
     With ``a = 1 - r A``, ``b = r C`` and z'_{j-1} = B^0 (z_{j-1} = the input), every stage
     is ``z'_i = a z_i + b z'_{i-1}``, so the differences ``d_i = z_i - z_{i+1}`` follow the
     same recursion, ``d'_i = a d_i + b d'_{i-1}``, started by
     ``d'_{j-1} = B^0 - z'_j = a (B^0 - z_j) + (r A - r C) B^0``. The read-outs are ``K d_n``.
+    Stored values below ``tiny`` in magnitude become 0: where the picture stands still the
+    stages decay geometrically, and in float32 they would pass through the subnormal numbers,
+    which some CPUs compute many times slower.
     """
     w = stages.shape[2]
     s = stages[j, y]
@@ -248,12 +252,14 @@ def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, 
         for x in range(w):
             line[x] = a * (x0[x] - s[x]) + e_x * x0[x]
     for x in range(w):
-        s[x] = a * s[x] + b * x0[x]
+        v = a * s[x] + b * x0[x]
+        s[x] = v if abs(v) >= tiny else v - v
     prev = line
     for i in range(j, stages.shape[0] - 1):
         d = stages[i + 1, y]
         for x in range(w):
-            d[x] = a * d[x] + b * prev[x]
+            v = a * d[x] + b * prev[x]
+            d[x] = v if abs(v) >= tiny else v - v
         prev = d
     df, ds = stages[n_fast + 1, y], stages[n_slow + 1, y]
     for x in range(w):
@@ -405,8 +411,8 @@ def _group_row(a, b, c, ninth, line, out):
 
 @kernel(**_jit)
 def _front(p, env, sc, stages_on, stages_off, a, b, e_x, j, gain, n_fast, n_slow, swap,
-           gk, vw, kc, aw, terms, grouping, zero, ninth, col, x0, ro, gabor, acc, csl, gring, gline,
-           colsum,
+           gk, vw, kc, aw, terms, grouping, zero, tiny, ninth, col, x0, ro, gabor, acc, csl, gring,
+           gline, colsum,
            r, v, g):
     h, w = p.shape
     for k in range(4):
@@ -420,9 +426,9 @@ def _front(p, env, sc, stages_on, stages_off, a, b, e_x, j, gain, n_fast, n_slow
             else:
                 _dog_row(p, t, env, sc, zero, col, x0[0], x0[1])
             _cascade_row(stages_on, t, x0[0], a, b, e_x, j, gain, n_fast, n_slow, csl[0],
-                         ro[0, slot], ro[1, slot])
+                         ro[0, slot], ro[1, slot], tiny)
             _cascade_row(stages_off, t, x0[1], a, b, e_x, j, gain, n_fast, n_slow, csl[0],
-                         ro[2, slot], ro[3, slot])
+                         ro[2, slot], ro[3, slot], tiny)
         y = t - RADIUS
         if 0 <= y < h:  # stage 2: row t - 2 through the 5x5 filters
             s0 = y % DEPTH
@@ -468,7 +474,8 @@ def front(p, ws, env, scales, stages_on, stages_off, rate, c, decay, leaky, gain
     t = ws.dtype.type
     _front(p, env, scales, stages_on, stages_off, t(1 - rate * decay), t(rate * c),
            t(rate * decay - rate * c), 0 if leaky else 1, t(gain), int(n_fast), int(n_slow),
-           bool(swap), gk, v_weights, kc, a_weights, _TERMS, bool(grouping), t(0), t(1 / 9),
+           bool(swap), gk, v_weights, kc, a_weights, _TERMS, bool(grouping), t(0),
+           t(_TINY if ws.dtype == np.float32 else 0.0), t(1 / 9),
            ws.col, ws.x0, ws.ro, ws.gabor, ws.acc, ws.csl, ws.gring, ws.gline, ws.colsum, ws.r,
            ws.v, ws.g)
     return ws.r, ws.v, ws.g, ws.colsum.sum(axis=1)

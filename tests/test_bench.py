@@ -194,7 +194,7 @@ def test_handover_bench_reports_the_warmup_distribution(capsys, monkeypatch):
     assert main(["bench", "--handover", "--cases", "loom-dark-c1.0-d12-center", "--every", "9",
                  "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["cases"] == 1 and report["preset"] == "reference32"
+    assert report["cases"] == 1 and report["preset"] == "robust"
     rows = report["all"]
     assert rows["handovers"] == sum(rows["counts"].values()) > 0
     assert 0 <= rows["quantile"] <= rows["max"]

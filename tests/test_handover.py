@@ -10,7 +10,7 @@ from collections import defaultdict
 import zenoh
 
 from asnn import ASNN
-from asnn.stimuli import make_scene
+from asnn.stimuli.planar import planar_scene
 from service import keys
 from service.config import make_config
 from service.messages import Frame, encode
@@ -24,10 +24,14 @@ from test_routing import robot_of
 FPS = 25.0
 
 
+HANDOVER = 70  # the default warns over frames 73-105 of this scene (contact at 103)
+
+
 def scene():
-    """The generated looming scene at 25 fps, with an approach long enough (3.6 s) that a
-    hand-over in its middle completes well before contact."""
-    return make_scene("looming", start=10, stop=100, frames=110, fps=FPS)
+    """A disk on a collision course at 25 fps: time to contact 4 s at onset (frame 10), so that
+    a hand-over in the warning's first half completes well before contact."""
+    return planar_scene("loom", fps=FPS, size=(128, 128), tau=4.0, height=10.0,
+                        position=(58.0, 66.0), onset=10)
 
 
 def reference_warnings(frames):
@@ -76,7 +80,7 @@ def check_handover(responses, robot, frames, handover, old, new, capsys):
     first = next(r for r in answers[taken] if r.worker == new)
     assert handover < taken and first.collision and first.u > 0  # warm: not a fresh stream
     assert max(seq for seq, rs in answers.items() if any(r.worker == old for r in rs)) >= taken - 1
-    contact = 100
+    contact = scene().contact_frame
     assert any(reference[seq] for seq in range(taken, contact + 3))  # warned in the window
     both = sorted(seq for seq, rs in answers.items() if len({r.worker for r in rs}) > 1)
     with capsys.disabled():
@@ -88,7 +92,7 @@ def test_a_worker_stopped_mid_approach_hands_its_robot_over_warm(net, capsys):  
     robot = robot_of("w1", ["w1", "w2"])
     w1, _ = net.worker("w1"), net.worker("w2")
     frames = scene().frames
-    handover = 55  # mid-approach (onset 10, contact 100)
+    handover = HANDOVER
     with zenoh.open(make_config(net.options)) as session:
         wait_for(lambda: live_workers(session) == ["w1", "w2"], what="both workers")
         responses = Responses(session)
@@ -108,7 +112,7 @@ def test_a_new_worker_takes_its_robot_over_warm_mid_approach(net, capsys):  # no
     assert owner(robot, ["w1"]) == "w1"
     net.worker("w1")
     frames = scene().frames
-    handover = 55
+    handover = HANDOVER
 
     def start_w2():  # the camera pauses while w2 starts (stamps stay seq / FPS)
         net.worker("w2")
