@@ -107,12 +107,12 @@ __all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "RobotView", "WARMUP_FRAMES
 log = logging.getLogger("asnn.worker")
 
 RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-publisher")
-# Frames a worker taking a robot over steps before it answers. After 12, a fresh model of the
-# default preset (reference32) warns as one that saw the whole stream at 99.8 % of 5,295
-# hand-overs tried over the labelled suite (every second frame of its 144 cases; 99 % need 10,
-# the worst 17): `asnn bench --handover --every 2`, README "Service". Re-measure when the
-# default preset changes.
-WARMUP_FRAMES = 12
+# Frames a new owner steps a robot's stream silently before it answers: a fresh model of the
+# default (robust) preset that has stepped 18 frames warns as one that saw the whole stream at
+# 99.7 % of 3,547 hand-overs tried over the labelled suite, 99.0 % of the 1,226 during an
+# approach (the tracker needs a few frames of approach in a row; the worst needs 26):
+# `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
+WARMUP_FRAMES = 18
 
 
 def default_worker_id() -> str:
