@@ -341,11 +341,8 @@ class ASNN:
             self.tracker.update([], elapsed)
             self.objects = []
             return (0.0 if p.approach_gate else total), []
-        regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.object_reach,
-                                  points=points)
+        regions = extract_objects(attended, g, vectors, p.min_object_pixels, points=points)
         h, w = attended.shape
-        weights = None if p.looming_weights == "uniform" else \
-            cv2.blur(np.maximum(g, 0), (5, 5), borderType=cv2.BORDER_REFLECT_101)
         observations = []
         for k in range(len(regions)):
             x0, y0, x1, y1 = (int(c) for c in regions.boxes[k])
@@ -358,8 +355,7 @@ class ASNN:
             x0, y0, x1, y1 = tr.box
             est = region_expansion(previous, lum, (max(int(x0), 0), max(int(y0), 0),
                                                    min(int(math.ceil(x1)), w),
-                                                   min(int(math.ceil(y1)), h)),
-                                   weights, p.looming_surround)
+                                                   min(int(math.ceil(y1)), h)))
             if est is not None:
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed)
         coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames) for tr in tracks]

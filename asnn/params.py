@@ -177,15 +177,6 @@ class ASNNParams(BaseModel):
         "connected regions of the attended mask, tracked across frames (robust)",
     )
     min_object_pixels: int = Field(30, ge=1, description="smallest region kept as an object")
-    object_reach: float = Field(
-        0.0, ge=0, description="attended pixels closer than about twice this many pixels form "
-        "one object (their density at this scale); 0: 8-connected regions of the mask")
-    looming_surround: float = Field(
-        0.0, ge=0, description="width of the ring around an object on which the background's "
-        "motion is fitted and discounted, in object box sides; 0: no ring (looming.py)")
-    looming_weights: Literal["uniform", "approach"] = Field(
-        "uniform", description="weights of the expansion fit's pixels: uniform over the box, or "
-        "the approach map G (a background moving otherwise inside the box counts less)")
     cluster_eps: float = Field(5.0, gt=0, description="DBSCAN eps, pixels of the model's grid")
     cluster_min_samples: int = Field(2, ge=1, description="DBSCAN min_samples (a point counts itself)")
     origin_seed: bool = Field(

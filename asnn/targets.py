@@ -337,19 +337,15 @@ class ObjectRegions:
 
 def extract_objects(mask: np.ndarray, g: np.ndarray,
                     vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
-                    min_pixels: int, reach: float = 0.0, density: float = 0.05, *,
+                    min_pixels: int, *,
                     points: tuple[np.ndarray, np.ndarray] | None = None) -> ObjectRegions:
-    """Objects of the attended mask ``M_a M_d``: its pixels grouped by where they are dense.
+    """Objects of the attended mask ``M_a M_d``: its 8-connected regions of at least
+    ``min_pixels`` pixels.
 
-    On a looming object the attention marks segments of the rim, the sides that move against
-    the background's dominant direction; they are tens of pixels apart on a near object. The
-    attended pixels are grouped by the connected regions of their density at the object scale
-    (the fraction of attended pixels under a Gaussian of ``reach`` pixels, above ``density``),
-    computed on a grid of half the resolution, so that one object gives one target, and two
-    objects further apart than about ``2 reach`` give two. Groups of fewer than ``min_pixels``
-    attended pixels are dropped. The centre and size of a group are weighted by the approach
-    map ``G``: the thresholded mask's outline moves with the signal's strength, the weighted
-    moments move with the object.
+    The attention blur (31x31) already joins nearby edges of one object into one region, so a
+    region stands for an object rather than for one segment of its rim. The centre and size are
+    weighted by the approach map ``G``: the thresholded mask's outline moves with the signal's
+    strength, the weighted moments move with the object.
 
     Parameters
     ----------
@@ -360,9 +356,6 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
         ``vectors(rows, cols) -> (dx, dy)``: the motion vector ``V cos(phi)``, ``V sin(phi)``
         at the given pixels.
     min_pixels : int
-    reach, density : float
-        With ``reach`` > 0, attended pixels are grouped by their density (above); with 0, by
-        the 8-connected regions of the mask.
     points : (rows, cols), optional
         The set pixels of ``mask`` in row-major order, when the caller has them.
 
@@ -372,17 +365,9 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
     """
     h, w = mask.shape
     rows, cols = np.nonzero(mask) if points is None else points
-    if reach > 0:
-        half = cv2.resize(mask.view(np.uint8).astype(np.float32), ((w + 1) // 2, (h + 1) // 2),
-                          interpolation=cv2.INTER_AREA)
-        spread = cv2.GaussianBlur(half, (0, 0), reach / 2, borderType=cv2.BORDER_CONSTANT)
-        count, coarse = cv2.connectedComponents((spread > density).view(np.uint8),
-                                                connectivity=8, ltype=cv2.CV_32S)
-        lab = coarse[rows // 2, cols // 2] - 1
-    else:
-        count, fine = cv2.connectedComponents(mask.view(np.uint8), connectivity=8,
-                                              ltype=cv2.CV_32S)
-        lab = fine[rows, cols] - 1
+    count, fine = cv2.connectedComponents(mask.view(np.uint8), connectivity=8,
+                                          ltype=cv2.CV_32S)
+    lab = fine[rows, cols] - 1
     inside = lab >= 0
     rows, cols, lab = rows[inside], cols[inside], lab[inside]
     pixels = np.bincount(lab, minlength=count - 1)

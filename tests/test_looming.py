@@ -66,21 +66,6 @@ def test_a_flat_or_tiny_box_has_no_estimate():
     assert region_expansion(tex, tex, (10, 10, 13, 40)) is None
 
 
-def test_the_background_ring_keeps_a_moving_background_out_of_the_estimate():
-    # a textured disk expanding in front of a texture sweeping right: the ring around the box
-    # sees the sweep, and the box's pixels that move with it are left out
-    back, front = _texture(seed=1), _texture(seed=2)
-    yy, xx = np.mgrid[0:400, 0:400]
-    disk = lambda r: (np.hypot(xx - 200, yy - 200) <= r).astype(np.float32)
-    a = back * (1 - disk(60)) + front * disk(60)
-    b = _warp(back, dx=2.0) * (1 - disk(61.2)) + _warp(front, 1.02) * disk(61.2)
-    box = (130, 130, 270, 270)
-    plain = region_expansion(a, b, box)
-    ring = region_expansion(a, b, box, surround=0.5)
-    assert abs(ring.rate - 0.02) < abs(plain.rate - 0.02)
-    assert abs(ring.drift_x) < abs(plain.drift_x)
-
-
 def _obs(x, y, size=10.0, mass=1.0):
     return Observation(x, y, size, mass, (x - size, y - size, x + size, y + size))
 
