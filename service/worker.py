@@ -289,7 +289,7 @@ class Worker:
                 self.routes.claim(worker, robot, True)
             for robot in announced_cameras(self.session, prefix):
                 self.routes.camera(robot, True)
-            self.core.owns, self.core.answers = self.routes.takes, self.routes.answers
+            self.core.owns, self.core.answers = self.routes.takes, self._answers
             liveliness = self.session.liveliness()
             self._watchers = [
                 liveliness.declare_subscriber(keys.worker_tokens(prefix), self._on_worker,
@@ -402,6 +402,15 @@ class Worker:
                 self._changed.set()
         except Exception:
             log.exception("unexpected error on a frame from %s", sample.key_expr)
+
+    def _answers(self, robot: str) -> bool:
+        """Whether a robot's frame is answered: it is served (or being released), or this
+        worker is warming up to take it over and this frame made it warm. The previous owner
+        may see the claim that follows before it answers that frame itself, so the new owner
+        answers it (a frame may then be answered by both, never by neither)."""
+        if self.routes.answers(robot):
+            return True
+        return self.routes.role(robot) == "warming" and self.core.warm(robot)
 
     # ------------------------------------------------------------------ routes
 
