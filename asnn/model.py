@@ -325,7 +325,6 @@ class ASNN:
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps)
 
-
     def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, previous: np.ndarray,
                  lum: np.ndarray, elapsed: float, total: float,
                  points: tuple[np.ndarray, np.ndarray] | None = None
@@ -341,7 +340,8 @@ class ASNN:
             self.tracker.update([], elapsed)
             self.objects = []
             return (0.0 if p.approach_gate else total), []
-        regions = extract_objects(attended, g, vectors, p.min_object_pixels, points=points)
+        regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
+                                  points=points)
         h, w = attended.shape
         observations = []
         for k in range(len(regions)):
@@ -359,10 +359,9 @@ class ASNN:
             if est is not None:
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed)
         coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames) for tr in tracks]
-        per_region = regions.magnitude if p.u_abs else regions.mass
-        self.objects = [(tr, float(per_region[k])) for k, tr in enumerate(tracks)]
+        self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
-            total = float(sum(per_region[k] for k in range(len(regions)) if coming[k]))
+            total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0
         sx, sy = self.shape[1] / w, self.shape[0] / h  # the frame's pixels per model pixel
         # pixel centres: model pixel i covers the frame's pixels [i sx, (i + 1) sx)
         targets = [Target(x=float((regions.x[k] + 0.5) * sx - 0.5),

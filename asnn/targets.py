@@ -305,13 +305,11 @@ class ObjectRegions:
 
     Attributes
     ----------
-    labels : ndarray of int32 (H, W)
-        Region number of each pixel, 0 outside every kept region.
     x, y, size, mass : ndarray (n,)
         Per region: centre and RMS radius of the approach activity ``G`` over the region, and
         ``sum max(G, 0)``.
-    magnitude : ndarray (n,)
-        ``sum |G|`` over the region: its share of ``sum |G'|``.
+    share : ndarray (n,)
+        The region's share of the membrane potential: ``sum G`` over it, or ``sum |G|``.
     boxes : ndarray of int (n, 4)
         ``(x0, y0, x1, y1)`` bounding box (exclusive ends).
     pixels : ndarray of int (n,)
@@ -320,12 +318,11 @@ class ObjectRegions:
         ``(V cos(phi), V sin(phi))`` over its pixels, as an angle and a length.
     """
 
-    labels: np.ndarray
     x: np.ndarray
     y: np.ndarray
     size: np.ndarray
     mass: np.ndarray
-    magnitude: np.ndarray
+    share: np.ndarray
     boxes: np.ndarray
     pixels: np.ndarray
     direction: np.ndarray
@@ -337,7 +334,7 @@ class ObjectRegions:
 
 def extract_objects(mask: np.ndarray, g: np.ndarray,
                     vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
-                    min_pixels: int, *,
+                    min_pixels: int, absolute: bool, *,
                     points: tuple[np.ndarray, np.ndarray] | None = None) -> ObjectRegions:
     """Objects of the attended mask ``M_a M_d``: its 8-connected regions of at least
     ``min_pixels`` pixels.
@@ -356,6 +353,8 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
         ``vectors(rows, cols) -> (dx, dy)``: the motion vector ``V cos(phi)``, ``V sin(phi)``
         at the given pixels.
     min_pixels : int
+    absolute : bool
+        Whether the membrane potential sums ``|G'|`` (the regions' ``share``).
     points : (rows, cols), optional
         The set pixels of ``mask`` in row-major order, when the caller has them.
 
@@ -363,29 +362,27 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
     -------
     ObjectRegions
     """
-    h, w = mask.shape
     rows, cols = np.nonzero(mask) if points is None else points
-    count, fine = cv2.connectedComponents(mask.view(np.uint8), connectivity=8,
-                                          ltype=cv2.CV_32S)
-    lab = fine[rows, cols] - 1
-    inside = lab >= 0
-    rows, cols, lab = rows[inside], cols[inside], lab[inside]
-    pixels = np.bincount(lab, minlength=count - 1)
-    keep = np.flatnonzero(pixels >= min_pixels)
-    lut = np.full(max(count - 1, 1), -1, np.int64)
-    lut[keep] = np.arange(len(keep))
-    lab = lut[lab]
-    inside = lab >= 0
-    rows, cols, lab = rows[inside], cols[inside], lab[inside]
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8),
+                                                               connectivity=8,
+                                                               ltype=cv2.CV_32S)
+    keep = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_pixels)
     n = len(keep)
-    labels = np.zeros((h, w), np.int32)
-    labels[rows, cols] = lab + 1
-    pixels = np.bincount(lab, minlength=n)
+    lut = np.full(count, -1, np.int64)  # component label -> kept region, or -1
+    lut[keep + 1] = np.arange(n)
+    lab = lut[labels[rows, cols]]
+    inside = lab >= 0
+    rows, cols, lab = rows[inside], cols[inside], lab[inside]
+    kept = stats[keep + 1]
+    x0, y0 = kept[:, cv2.CC_STAT_LEFT], kept[:, cv2.CC_STAT_TOP]
+    boxes = np.stack([x0, y0, x0 + kept[:, cv2.CC_STAT_WIDTH],
+                      y0 + kept[:, cv2.CC_STAT_HEIGHT]], axis=1)
+    pixels = kept[:, cv2.CC_STAT_AREA]
     values = g[rows, cols].astype(np.float64)
-    magnitude = np.bincount(lab, np.abs(values), n)
+    share = np.bincount(lab, np.abs(values) if absolute else values, n)
     wt = np.maximum(values, 0.0)
     mass = np.bincount(lab, wt, n)
-    wt[mass[lab] <= 0] = 1.0  # groups without positive G: equal weights
+    wt[mass[lab] <= 0] = 1.0  # regions without positive G: equal weights
     total = np.bincount(lab, wt, n)
     x = np.bincount(lab, wt * cols, n) / total
     y = np.bincount(lab, wt * rows, n) / total
@@ -393,14 +390,5 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
     dx, dy = vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))
     vx = np.bincount(lab, dx, n) / np.maximum(pixels, 1)
     vy = np.bincount(lab, dy, n) / np.maximum(pixels, 1)
-    boxes = np.zeros((n, 4), np.int64)
-    if n:
-        big = np.iinfo(np.int64).max
-        x0 = np.full(n, big); y0 = np.full(n, big)
-        x1 = np.zeros(n, np.int64); y1 = np.zeros(n, np.int64)
-        np.minimum.at(x0, lab, cols); np.minimum.at(y0, lab, rows)
-        np.maximum.at(x1, lab, cols + 1); np.maximum.at(y1, lab, rows + 1)
-        boxes = np.stack([x0, y0, x1, y1], axis=1)
-    return ObjectRegions(labels=labels, x=x, y=y, size=np.sqrt(var + 1.0), mass=mass,
-                         magnitude=magnitude, boxes=boxes, pixels=pixels, direction=np.arctan2(vy, vx),
-                         energy=np.hypot(vx, vy))
+    return ObjectRegions(x=x, y=y, size=np.sqrt(var + 1.0), mass=mass, share=share, boxes=boxes,
+                         pixels=pixels, direction=np.arctan2(vy, vx), energy=np.hypot(vx, vy))

@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["Observation", "Track", "TargetTracker", "approaching"]
+__all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,8 +77,6 @@ class Track:
         Smoothed expansion rate, per second.
     drift_x, drift_y : float
         Smoothed drift, pixels per second.
-    measured : int
-        Observations with an expansion estimate so far.
     missed : int
         Frames since the track was last seen (0: seen in the latest frame).
     streak : int
@@ -95,7 +93,6 @@ class Track:
     expansion: float | None = None
     drift_x: float = 0.0
     drift_y: float = 0.0
-    measured: int = 0
     missed: int = 0
     streak: int = 0
     _smoothing: float = field(default=0.5, repr=False)
@@ -125,7 +122,6 @@ class Track:
             self.expansion += a * (expansion - self.expansion)
             self.drift_x += a * (drift_x - self.drift_x)
             self.drift_y += a * (drift_y - self.drift_y)
-        self.measured += 1
 
     @property
     def ttc(self) -> float | None:
@@ -151,14 +147,16 @@ class Track:
 
 
 def approaching(track: Track, tau_max: float, offset_max: float) -> bool:
-    """Whether a track looks, in the latest frame, like an object coming at the camera.
+    """Whether a track looks, in the latest frame, like an object coming at the camera: it is
+    seen now and passes :func:`approach_test`."""
+    return track.missed == 0 and approach_test(track.ttc, track.offset, tau_max, offset_max)
 
-    It must be seen now, reach the camera within ``tau_max`` seconds at its current rate, and
-    point at it: ``offset <= offset_max``.
-    """
-    ttc, offset = track.ttc, track.offset
-    return (track.missed == 0 and ttc is not None and ttc <= tau_max and offset is not None
-            and offset <= offset_max)
+
+def approach_test(ttc: float | None, offset: float | None, tau_max: float,
+                  offset_max: float) -> bool:
+    """The approach test on a target's estimates: it reaches the camera within ``tau_max``
+    seconds at its current rate, and points at it: ``offset <= offset_max``."""
+    return ttc is not None and ttc <= tau_max and offset is not None and offset <= offset_max
 
 
 class TargetTracker:
@@ -192,11 +190,6 @@ class TargetTracker:
         self.smoothing = smoothing
         self.box_weight = box_weight
         self.tracks: list[Track] = []
-        self._next_id = 0
-
-    def reset(self) -> None:
-        """Forget every track (ids start again from 0)."""
-        self.tracks = []
         self._next_id = 0
 
     def update(self, observations: list[Observation], elapsed: float) -> list[Track]:

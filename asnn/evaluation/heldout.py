@@ -26,6 +26,7 @@ from pathlib import Path
 from .. import retina
 from ..model import ASNN
 from ..params import ASNNParams
+from ..tracking import approach_test
 from . import scoring
 from .runs import fmt, write_json
 
@@ -116,8 +117,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
         else:
             total, targets = 0.0, []
             for ident, ttc, offset, share, x, y in frame.objects:
-                passes = (ttc is not None and ttc <= p.tau_max and offset is not None
-                          and offset <= p.offset_max)
+                passes = approach_test(ttc, offset, p.tau_max, p.offset_max)
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
                 if streak[ident] >= p.approach_frames:
                     total += share
