@@ -155,8 +155,14 @@ def stale_robot(robots: dict, now: float, stale_after: float) -> str | None:
 
 
 def _target(t) -> dict:
-    return {"x": t.x, "y": t.y, "direction": t.direction, "energy": t.energy,
-            "pixels": t.pixels}
+    """A target as the page draws it: the contract's fields, and the tracker's id and time to
+    contact where the model gives them (robust default)."""
+    out = {"x": t.x, "y": t.y, "direction": t.direction, "energy": t.energy, "pixels": t.pixels}
+    if t.id is not None:
+        out["id"] = t.id
+    if t.ttc is not None:
+        out["ttc"] = t.ttc
+    return out
 
 
 @dataclass

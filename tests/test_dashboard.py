@@ -156,6 +156,18 @@ def test_previews_are_sent_once_and_targets_match_the_previewed_frame():
     assert "src" not in tile["preview"] and tile["preview"]["seq"] == 3  # not sent again
 
 
+def test_targets_carry_the_trackers_id_and_time_to_contact_when_the_model_gives_them():
+    store = FleetStore(clock=Clock())
+    tracked = TargetMsg(x=5.0, y=6.0, direction=0.0, energy=1.0, pixels=50, id=7, ttc=0.8,
+                        expansion=1.25, offset=0.2, approaching=True)
+    plain = TargetMsg(x=50.0, y=40.0, direction=0.0, energy=1.0, pixels=50)
+    r = response(seq=3, collision=True).model_copy(update={"targets": [tracked, plain]})
+    offer_response(store, r, "warning")
+    shown = store.delta(0)["robots"]["r1"]["targets"]
+    assert shown[0]["id"] == 7 and shown[0]["ttc"] == 0.8
+    assert "id" not in shown[1] and "ttc" not in shown[1]
+
+
 def test_consecutive_warnings_make_one_log_entry_per_episode():
     store = FleetStore(clock=Clock())
     for seq in range(10, 20):

@@ -178,6 +178,7 @@ def browser(chromium_exe):
 TILES = """JSON.stringify([...document.querySelectorAll('#fleet .tile')].map(t => ({
   robot: t.dataset.robot, collision: t.dataset.collision, stale: t.dataset.stale,
   preview: t.dataset.preview || null, responses: Number(t.dataset.responses || 0),
+  contact: t.dataset.contact || null, stats: t.querySelector('.stats').textContent,
   badge: getComputedStyle(t.querySelector('.collision-badge')).display})))"""
 
 
@@ -226,6 +227,7 @@ def test_browser_shows_both_robots_and_only_the_looming_one_colliding(zenoh_net,
                 " const bar = t.find(e => e.dataset.robot === 'bar');"
                 " return loom && bar && loom.dataset.collision === 'true'"
                 " && loom.dataset.preview === 'true' && bar.dataset.preview === 'true'"
+                " && !!loom.dataset.contact"
                 " && Number(bar.dataset.responses) >= 60"
                 " && document.querySelectorAll('#warnings tbody tr').length > 0; })()",
                 "both robots with previews, the looming one colliding, a bar cycle answered")
@@ -244,6 +246,9 @@ def test_browser_shows_both_robots_and_only_the_looming_one_colliding(zenoh_net,
     assert shown["loom"]["collision"] == "true" and shown["loom"]["badge"] != "none"
     assert shown["bar"]["collision"] == "false" and shown["bar"]["badge"] == "none"
     assert shown["loom"]["stale"] == shown["bar"]["stale"] == "false"
+    # the robust default's targets carry a time to contact, shown on the tile
+    assert 0 < float(shown["loom"]["contact"]) < 5 and "contact in" in shown["loom"]["stats"]
+    assert shown["bar"]["contact"] is None and "contact in" not in shown["bar"]["stats"]
     assert log_robots == {"loom"}
     assert store.invalid == {}
     assert (ARTIFACTS / "dashboard.png").stat().st_size > 10_000

@@ -26,6 +26,15 @@
       pad(d.getMilliseconds(), 3);
   }
 
+  // the shortest time to contact among the targets (seconds), or null
+  function soonest(targets) {
+    let best = null;
+    for (const t of targets) {
+      if (typeof t.ttc === "number" && (best === null || t.ttc < best)) best = t.ttc;
+    }
+    return best;
+  }
+
   function fmt(x, digits = 2) {
     return x === null || x === undefined ? "-" : Number(x).toFixed(digits);
   }
@@ -106,6 +115,8 @@
     v.el.dataset.responses = String(tile.responses);
     v.el.dataset.warnings = String(tile.warnings);
     v.el.dataset.targets = String(tile.targets.length);
+    const contact = soonest(tile.targets);
+    v.el.dataset.contact = contact === null ? "" : contact.toFixed(2);
     dirty.add(v.name);
   }
 
@@ -154,6 +165,14 @@
       ctx.moveTo(x, y);
       ctx.lineTo(x + Math.cos(t.direction) * (r + 8), y + Math.sin(t.direction) * (r + 8));
       ctx.stroke();
+      const label = (t.id !== undefined ? `#${t.id}` : "") +
+        (typeof t.ttc === "number" ? ` ${t.ttc.toFixed(1)} s` : "");
+      if (label) {
+        ctx.fillStyle = "#ff3b30";
+        ctx.font = "bold 11px sans-serif";
+        ctx.textAlign = "left";
+        ctx.fillText(label.trim(), Math.min(x + r + 2, w - 60), Math.max(y - r, 12));
+      }
     }
   }
 
@@ -197,7 +216,10 @@
         : "no response yet";
       return;
     }
-    v.stats.textContent = `seq ${r.seq} · out ${fmt(r.out)} · ${Math.round(r.spike_rate)} ` +
+    const contact = soonest(v.tile.targets);
+    // the time to contact first: the line is cut to the tile's width
+    v.stats.textContent = (contact === null ? "" : `contact in ${contact.toFixed(1)} s · `) +
+      `seq ${r.seq} · out ${fmt(r.out)} · ${Math.round(r.spike_rate)} ` +
       `spikes/s · ${fmt(r.latency_ms, 0)} ms` + (r.dropped ? ` · ${r.dropped} dropped` : "") +
       ` · ${r.model}${r.preset ? "/" + r.preset : ""}`;
     v.stats.title = `worker ${r.worker}, frame at ${clock(r.stamp)}`;
