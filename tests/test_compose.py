@@ -46,7 +46,7 @@ def test_every_asnn_service_command_parses_with_the_cli_parser():
         args = parser.parse_args(command)
         assert callable(args.func)
         commands[args.command] = args
-    assert set(commands) == {"camera", "worker", "alerts", "dashboard"}
+    assert set(commands) == {"camera", "worker", "alerts", "dashboard", "foxglove"}
     assert commands["camera"].loop and commands["camera"].source.startswith("/")
     for args in commands.values():
         assert args.connect == ["tcp/router:7447"] and args.mode == "client"
@@ -62,6 +62,7 @@ def test_topology_has_the_official_router_and_the_service_image():
     dockerfile = (ROOT / "deploy" / "Dockerfile").read_text()
     assert 'ENTRYPOINT ["asnn"]' in dockerfile
     assert "write_video" in dockerfile  # the camera's clip is generated, not committed
+    assert "pip install '.[ros]'" in dockerfile  # asnn foxglove and bags need the ros extra
 
 
 @pytest.mark.parametrize("name", ["router.json5", "client.json5"])

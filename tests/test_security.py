@@ -181,6 +181,25 @@ def test_each_role_does_its_job_and_nothing_else(fleet):
         assert (late[0].robot, late[0].seq) == ("r1", sent[-1].seq)
 
 
+def test_the_foxglove_identity_only_views(fleet):
+    """The Foxglove live server's identity (deploy/compose.secure.yml) reads what dashboards
+    read, and cannot feed the fleet."""
+    session, _ = fleet
+    worker, foxglove, camera = session("worker"), session("foxglove"), session("camera-r1")
+    seen = collector(foxglove, keys.responses())
+    frames = collector(session("worker"), keys.frames())
+    time.sleep(0.3)  # the subscriptions reach the router
+    worker.put(keys.response_key("r1"), fake_response())
+    wait_for(lambda: seen, what="a response at the foxglove identity")
+    image = make_scene("looming").frames[0]
+    foxglove.put(keys.frame_key("r1"), encode(Frame.from_image(image, seq=1, stamp=0.0)))
+    foxglove.put(keys.warning_key("r1"), fake_response())
+    camera.put(keys.frame_key("r1"), encode(Frame.from_image(image, seq=2, stamp=0.0)))
+    wait_for(lambda: frames, what="the camera's frame (the control)")
+    time.sleep(QUIET)
+    assert [decode_frame(f).seq for f in frames] == [2] and len(seen) == 1
+
+
 def test_wrong_or_unknown_credentials_cannot_connect(fleet, certs):
     _, port = fleet
     assert fails_to_open(client_config(certs, "camera-r1", port, password="not-the-password"))

@@ -16,7 +16,7 @@
 #   <name>.json5                    a client config per identity: user, password, CA, certificate
 #   router.json5                    the router's config: deploy/zenoh/secure/router.json5 with
 #                                   one subject, rule and policy per camera
-# with the identities worker, dashboard, alerts and camera-<robot> for each robot id: user name
+# with the identities worker, dashboard, alerts, foxglove and camera-<robot> for each robot id: user name
 # and certificate CN are the same, and the router's access control requires both, so a camera
 # may publish only <prefix>/<its robot>/frame and .../preview. Existing files are replaced. The
 # configs name the files by their path in OUT_DIR, or under ASNN_SECRETS_PATH when set (where the
@@ -38,7 +38,7 @@ out=${1:-deploy/secrets}
 shift || true
 hosts=("$@")
 template=$(cd "$(dirname "$0")/../zenoh/secure" && pwd)/router.json5
-names=(worker dashboard alerts)
+names=(worker dashboard alerts foxglove)
 for robot in "${robots[@]}"; do names+=("camera-$robot"); done
 days=${ASNN_CERT_DAYS:-30}
 
