@@ -172,7 +172,9 @@ def test_each_role_does_its_job_and_nothing_else(fleet):
         assert core.robots() == ["r1"]  # r9 and r8 never reached the worker
         assert core.stats()["received"] == len(scene.frames) + 1
         assert live_workers(dashboard) == ["secure-w1"]
-        assert worker_session.info.zid() and len(live_workers(worker_session)) == 1
+        # another worker sees this one (a session's liveliness query does not reliably return
+        # the session's own tokens: seen once in ~30 runs, so ask from a second session)
+        assert live_workers(session("worker")) == ["secure-w1"]
         listener.close()
         # a late alerts client still gets the cached last warning through the access control
         late = []
