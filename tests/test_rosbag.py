@@ -310,6 +310,43 @@ def test_an_unknown_encoding_is_an_error_for_detect(tmp_path):
     assert "32FC1" in line and "/depth" in line
 
 
+def test_only_the_chunks_holding_the_image_topic_are_decompressed(tmp_path, looming,
+                                                                    monkeypatch):
+    """A camera beside a bulkier sensor: the other topic's chunks are skipped through the
+    summary's chunk index, and the frames are those of the topic alone."""
+    path = tmp_path / "sensors.mcap"
+    definitions = {rosbag.IMAGE: rosbag.IMAGE_MSGDEF, "std_msgs/msg/String": "string data"}
+    frames = looming.frames[:12]
+    with open(path, "wb") as fh, Ros2Writer(fh, chunk_size=20_000) as writer:
+        schemas = {name: writer.register_msgdef(name, text) for name, text in definitions.items()}
+        for index, frame in enumerate(frames):  # in time order, as a recorder writes them
+            ns = START_NS + index * 50_000_000
+            writer.write_message("/camera", schemas[rosbag.IMAGE],
+                                 raw_message(frame, "mono8", index), log_time=ns, publish_time=ns)
+            for k in range(4):  # a "scan" of 30 kB, four per frame
+                writer.write_message("/scan", schemas["std_msgs/msg/String"],
+                                     {"data": "x" * 30_000}, log_time=ns + k, publish_time=ns + k)
+    opened = []
+    original = rosbag._chunk_records
+    monkeypatch.setattr(rosbag, "_chunk_records",
+                        lambda chunk: opened.append(chunk) or original(chunk))
+    clip = rosbag.BagClip(path, "/camera")
+    opened.clear()
+    read = [image for _, image in clip.frames()]
+    assert len(read) == len(frames)
+    assert all(np.array_equal(a, b) for a, b in zip(read, frames))
+    with open(path, "rb") as fh:
+        total = sum(1 for _ in _all_chunks(fh))
+    assert 0 < len(opened) <= len(frames) < total  # at most one chunk per frame of 60 in all
+
+
+def _all_chunks(fh):
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    return (r for r in StreamReader(fh, emit_chunks=True).records if isinstance(r, Chunk))
+
+
 @pytest.mark.parametrize("cut", [0.4, 0.97])  # in the messages; in the summary after them
 def test_a_cut_bag_is_a_one_line_error_after_the_frames_before_the_cut(tmp_path, looming, cut):
     whole = write_messages(tmp_path / "whole.mcap", {"/c": (rosbag.IMAGE, [

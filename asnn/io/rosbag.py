@@ -236,14 +236,55 @@ def _chunk_records(chunk: Chunk) -> list:
         raise McapError(f"a chunk does not decompress ({type(exc).__name__}: {exc})") from None
 
 
-def _records(fh) -> Iterator:
-    """Schema, Channel and Message records of an MCAP file in file order (bounded)."""
-    reader = StreamReader(_BoundedFile(fh), emit_chunks=True, record_size_limit=MAX_RECORD_BYTES)
-    for record in reader.records:
-        if isinstance(record, Chunk):
-            yield from _chunk_records(record)
-        elif isinstance(record, (Schema, Channel, Message)):
-            yield record
+def _records(fh, topic: str | None = None) -> Iterator:
+    """Schema, Channel and Message records of an MCAP file in file order (bounded).
+
+    With ``topic``, a bag whose summary indexes its chunks has only the chunks that hold
+    ``topic``'s messages read and decompressed (a camera's images beside lidar scans are a
+    small part of a bag); other records of those chunks come too. Otherwise, and for a bag
+    without a chunk index (a recording that was cut), the file is read through.
+    """
+    chunks = _topic_chunks(fh, topic) if topic is not None else None
+    if chunks is None:
+        fh.seek(0)
+        reader = StreamReader(_BoundedFile(fh), emit_chunks=True,
+                              record_size_limit=MAX_RECORD_BYTES)
+        for record in reader.records:
+            if isinstance(record, Chunk):
+                yield from _chunk_records(record)
+            elif isinstance(record, (Schema, Channel, Message)):
+                yield record
+        return
+    summary, offsets = chunks
+    yield from summary.schemas.values()
+    yield from summary.channels.values()
+    for offset in offsets:
+        fh.seek(offset)
+        reader = StreamReader(_BoundedFile(fh), skip_magic=True, emit_chunks=True,
+                              record_size_limit=MAX_RECORD_BYTES)
+        record = next(iter(reader.records), None)
+        if not isinstance(record, Chunk):
+            raise McapError(f"the chunk index points at offset {offset}, where no chunk is")
+        for inner in _chunk_records(record):
+            if isinstance(inner, (Schema, Channel, Message)):
+                yield inner
+
+
+def _topic_chunks(fh, topic: str) -> tuple | None:
+    """The bag's summary and the start offsets, in file order, of the chunks holding
+    ``topic``'s messages; None when the summary does not say (no summary, no chunk index, a
+    chunk index without message indexes)."""
+    try:
+        summary = SeekingReader(_BoundedFile(fh), record_size_limit=MAX_RECORD_BYTES).get_summary()
+    except Exception:  # no footer or summary: read the file through
+        return None
+    if summary is None or not summary.chunk_indexes:
+        return None
+    ids = {c.id for c in summary.channels.values() if c.topic == topic}
+    if not ids or any(not index.message_index_offsets for index in summary.chunk_indexes):
+        return None
+    return summary, sorted(index.chunk_start_offset for index in summary.chunk_indexes
+                           if ids & index.message_index_offsets.keys())
 
 
 # reading errors a corrupt or truncated file raises from the MCAP library and the decompressors
@@ -409,7 +450,7 @@ class BagClip:
         schemas: dict[int, Schema] = {}
         index = 0
         with open(self.path, "rb") as fh:
-            records = _records(fh)
+            records = _records(fh, self.topic)
             while True:
                 try:
                     record = next(records)
