@@ -261,6 +261,26 @@ def test_a_rosbag2_directory_and_asnn_scene_bags_open(tmp_path, looming):
     assert len(frames) == len(make_scene("receding").frames) and frames[0].shape == (48, 64)
 
 
+def test_a_split_rosbag2_directory_is_read_part_after_part_in_numeric_order(tmp_path, looming):
+    """A bag split by size (ros2 bag record --max-bag-size): run_0.mcap ... run_10.mcap, read
+    as one clip, the same as the unsplit bag (run_10 after run_9, not after run_1)."""
+    directory = tmp_path / "run"
+    directory.mkdir()
+    (directory / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    frames = looming.frames[:22]
+    start = 1_700_000_000_000_000_000
+    for part in range(11):  # two frames a file, each file's stamps continuing the last
+        rosbag.write_bag(frames[2 * part:2 * part + 2], directory / f"run_{part}.mcap",
+                         start_ns=start + part * 2 * 50_000_000)
+    whole = rosbag.write_bag(frames, tmp_path / "whole.mcap", start_ns=start)
+    assert open_source(str(directory)).name == f"{directory}#/camera/image_raw"
+    read = [image for _, image in rosbag.open_bag(directory).frames()]
+    assert len(read) == len(frames)
+    assert all(np.array_equal(a, b) for a, b in zip(read, frames))
+    assert rosbag.open_bag(directory).frame_count == len(frames)
+    assert detect_records(directory) == detect_records(whole)
+
+
 # --------------------------------------------------------------------------- bad bags
 
 def detect_fails(*args) -> str:

@@ -14,8 +14,9 @@ when the first stamp is zero: drivers that leave it unset).
 from __future__ import annotations
 
 import io
+import re
 import struct
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -391,11 +392,14 @@ class BagClip:
     Attributes
     ----------
     path : Path
+        The bag file, or the directory of a bag split into several files.
+    parts : list of Path
+        The bag's files, read one after the other.
     topic : str
     schema : str
         ``sensor_msgs/msg/Image`` or ``sensor_msgs/msg/CompressedImage``.
     frame_count : int
-        Messages on the topic, from the bag's summary (0 when it has none).
+        Messages on the topic, from the bag's summaries (0 when they have none).
     start_ns : int
         Time of the first frame, nanoseconds since the epoch.
     clock : {'header', 'log'}
@@ -409,11 +413,15 @@ class BagClip:
         ``header.frame_id`` of the first frame.
     """
 
-    def __init__(self, path: str | Path, topic: str | None = None):
+    def __init__(self, path: str | Path, topic: str | None = None, *,
+                 parts: Sequence[str | Path] | None = None):
         self.path = Path(path)
-        info = choose_topic(self.path, bag_topics(self.path), topic)
+        self.parts = [Path(p) for p in parts] if parts else [self.path]
+        info = choose_topic(self.parts[0], bag_topics(self.parts[0]), topic)
         self.topic, self.schema = info.name, info.schema
-        self.frame_count = info.count or 0
+        self.frame_count = (info.count or 0) + sum(
+            (bag_topics(part).get(self.topic) or TopicInfo(self.topic, "", 0)).count or 0
+            for part in self.parts[1:])
         self.clock = "header"
         self.start_ns = 0
         first, stamps, errors = None, [], []
@@ -443,13 +451,26 @@ class BagClip:
         return _stamp_ns(message) if self.clock == "header" else int(log_time)
 
     def _messages(self, on_error: Callable[[str, str], None] | None) -> Iterator:
-        """(decoded message, log time) of the topic; a corrupt message or a cut is reported
-        to ``on_error`` (the iteration ends at a cut) or raised when there is none."""
+        """(decoded message, log time) of the topic, part after part; a corrupt message or a
+        cut is reported to ``on_error`` (the iteration ends at a cut) or raised when there is
+        none."""
+        index = 0
+        for part in self.parts:
+            for item in self._part_messages(part, index, on_error):
+                if item is None:  # a cut: the parts after it are not read
+                    return
+                index += 1
+                if item is not True:
+                    yield item
+
+    def _part_messages(self, path: Path, index: int,
+                       on_error: Callable[[str, str], None] | None) -> Iterator:
+        """:meth:`_messages` of one file: each message (decoded, log time), True for one that
+        does not decode (reported), and None after a cut (reported)."""
         decoders = DecoderFactory()
         channels: dict[int, tuple[Schema | None, Callable | None]] = {}
         schemas: dict[int, Schema] = {}
-        index = 0
-        with open(self.path, "rb") as fh:
+        with open(path, "rb") as fh:
             records = _records(fh, self.topic)
             while True:
                 try:
@@ -457,10 +478,11 @@ class BagClip:
                 except StopIteration:
                     return
                 except _CORRUPT as exc:
-                    error = _corrupt(self.path, exc, f"after {index} messages of {self.topic}")
+                    error = _corrupt(path, exc, f"after {index} messages of {self.topic}")
                     if on_error is None:
                         raise error from None
                     on_error(error.reason, str(error))
+                    yield None
                     return
                 if isinstance(record, Schema):
                     schemas[record.id] = record
@@ -471,6 +493,7 @@ class BagClip:
                         if on_error is None:
                             raise
                         on_error(error.reason, str(error))
+                        yield None
                         return
                 elif isinstance(record, Message) and record.channel_id in channels:
                     decode = channels[record.channel_id]
@@ -478,12 +501,13 @@ class BagClip:
                         message = decode(record.data)
                         _stamp_ns(message)  # a message without a header is not an image
                     except Exception as exc:  # the decoder is generated from the bag's text
-                        error = SourceError(f"{self.path}: {self.topic} message {index} does "
+                        error = SourceError(f"{path}: {self.topic} message {index} does "
                                             f"not decode ({type(exc).__name__}: "
                                             f"{str(exc)[:120]})", "bad-message")
                         if on_error is None:
                             raise error from None
                         on_error(error.reason, str(error))
+                        yield True
                     else:
                         yield message, record.log_time
                     index += 1
@@ -547,7 +571,8 @@ def _stamp_ns(message) -> int:
 
 def open_bag(path: str | Path, topic: str | None = None) -> BagClip:
     """Open an image topic of a ROS 2 bag (an ``.mcap`` file, or a rosbag2 directory holding
-    one), checking that its first frame decodes.
+    one or, for a bag split by size or duration, several, read in the order of their numbers),
+    checking that its first frame decodes.
 
     Raises
     ------
@@ -557,12 +582,18 @@ def open_bag(path: str | Path, topic: str | None = None) -> BagClip:
     """
     path = Path(path)
     if path.is_dir():
-        files = sorted(p for p in path.iterdir() if p.suffix == ".mcap")
-        if len(files) != 1:
-            raise SourceError(f"{path}: a bag directory with {len(files)} .mcap files; give "
-                              "one file", "missing")
-        path = files[0]
+        files = sorted((p for p in path.iterdir() if p.suffix == ".mcap"), key=_part_order)
+        if not files:
+            raise SourceError(f"{path}: a bag directory without .mcap files", "missing")
+        if len(files) == 1:
+            return BagClip(files[0], topic)
+        return BagClip(path, topic, parts=files)
     return BagClip(path, topic)
+
+
+def _part_order(path: Path) -> tuple:
+    """rosbag2 numbers the files of a split bag ``<name>_<n>.mcap``: n in numeric order."""
+    return tuple(int(t) if t.isdigit() else t for t in re.split(r"(\d+)", path.stem))
 
 
 def write_bag(frames, path: str | Path, *, topic: str = "/camera/image_raw", fps: float = 20.0,
