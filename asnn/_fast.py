@@ -160,9 +160,16 @@ class Scratch:
         self.csl = np.empty((2, pw), dtype)  # vertical pairs of the centre-surround filter
         self.gring = np.empty((3, w + 2), dtype)  # G before grouping
         self.gline = np.empty(w + 2, dtype)
+        self.done = np.zeros(1, np.int64)  # front()'s flag when no one waits for it
 
     def buffers(self) -> tuple:
         return self.col, self.x0, self.ro, self.gabor, self.acc, self.csl, self.gring, self.gline
+
+    def in_place(self, height: int) -> np.ndarray:
+        """Zeros for every row: the versions of :func:`front` in place."""
+        if getattr(self, "_in_place", None) is None or len(self._in_place) != height:
+            self._in_place = np.zeros(height, np.int8)
+        return self._in_place
 
     def spare(self, depth: int) -> tuple[np.ndarray, np.ndarray]:
         """One row of each cascade (``depth`` stages), for rows advanced and dropped."""
@@ -504,12 +511,15 @@ def _group_row(a, b, c, ninth, line, out):
 
 
 @kernel(**_jit)
-def _front(p, env, sc, old_on, old_off, new_on, new_off, a, b, e_x, j, gain, n_fast, n_slow, swap,
-           gk, vw, kc, aw, terms, grouping, zero, tiny, ninth, col, x0, ro, gabor, acc, csl, gring,
-           gline, spare_on, spare_off, r, v, g, colsum, y0, y1, sums):
-    """Rows [y0, y1) of R, V and G. The cascades' rows [y0, y1) advance from ``old`` into
-    ``new`` (the same arrays in place); the rows beyond the band that the filters read are
-    advanced from ``old`` into the spare rows and dropped."""
+def _front(p, env, sc, stages_on, stages_off, other_on, other_off, read, write, a, b, e_x, j,
+           gain, n_fast, n_slow, swap, gk, vw, kc, aw, terms, grouping, zero, tiny, ninth, col, x0,
+           ro, gabor, acc, csl, gring, gline, spare_on, spare_off, r, v, g, colsum, y0, y1, sums,
+           done):
+    """Rows [y0, y1) of R, V and G. Cascade row y is read from the ``stages`` or the
+    ``other`` arrays (``read[y]`` 0 or 1) and, for the rows [y0, y1), advanced into those
+    ``write[y]`` says (in place where they are the same); the rows beyond the band that the
+    filters read are advanced into the spare rows and dropped. ``done[0]`` is set to 1 at the
+    end (another thread can see that without the GIL)."""
     h, w = p.shape
     if sums:
         for k in range(4):
@@ -521,7 +531,10 @@ def _front(p, env, sc, old_on, old_off, new_on, new_off, a, b, e_x, j, gain, n_f
     for t in range(t0, y1 + RADIUS + 1):
         if t < t1:  # stage 1: row t through g_I and the cascade, into the ring
             slot = t % DEPTH
+            old_on, old_off = (stages_on, stages_off) if read[t] == 0 else (other_on, other_off)
             if y0 <= t < y1:
+                new_on, new_off = (stages_on, stages_off) if write[t] == 0 else \
+                    (other_on, other_off)
                 _advance_row(p, t, env, sc, zero, swap, old_on, old_off, t, new_on, new_off, t,
                              a, b, e_x, j, tiny, col, x0, csl[0])
                 _readout_row(new_on, t, gain, n_fast, n_slow, ro[0, slot], ro[1, slot])
@@ -560,6 +573,7 @@ def _front(p, env, sc, old_on, old_off, new_on, new_off, a, b, e_x, j, gain, n_f
         if grouping and y0 <= y < y1:  # stage 3: row t - 3 through the grouping
             _group_row(gring[_reflect(y - 1, h) % 3], gring[y % 3], gring[_reflect(y + 1, h) % 3],
                        ninth, gline, g[y])
+    done[0] = 1
 
 
 @kernel(**_jit)
@@ -615,7 +629,8 @@ class FrontCoefficients(NamedTuple):
         return RADIUS + 1 if self.grouping else RADIUS
 
 
-def front(p, stages, coefficients, maps, scratch, rows=None, new=None, sums=True):
+def front(p, stages, coefficients, maps, scratch, rows=None, other=None, versions=None,
+          sums=True, done=None):
     """Everything from the photoreceptor output P to R^theta, V and G, in one pass.
 
     Reproduces :func:`~asnn.retina.bipolar`, :func:`~asnn.retina.temporal_filter_step` (on the
@@ -629,28 +644,40 @@ def front(p, stages, coefficients, maps, scratch, rows=None, new=None, sums=True
     Parameters
     ----------
     stages : (ndarray, ndarray)
-        The ON and OFF cascades, advanced by one frame in place unless ``new`` is given.
+        The ON and OFF cascades, advanced by one frame in place.
     rows : (y0, y1), optional
         Compute these rows only (default: all). Every pixel of a row is computed the same way
         whatever the band, so bands computed separately, on threads of their own, give the
         maps of one pass. A band's filters read ``coefficients.halo`` rows of read-outs beyond
-        it, whose cascade rows it advances as well and drops: that needs the cascades as they
-        were, so bands write the rows they advance into ``new`` (arrays like ``stages``).
+        it, whose cascade rows it advances again and drops: those rows must still hold their
+        state before this frame, so the rows of a band that a neighbouring band reads go to a
+        second pair of arrays instead (see ``versions``).
+    other : (ndarray, ndarray), optional
+        The second pair of arrays, like ``stages``.
+    versions : (ndarray, ndarray) of int8 (H,), optional
+        Where each cascade row is read from and advanced into: 0 the ``stages``, 1 ``other``
+        (default: all in place in the ``stages``).
     sums : bool
         Set ``maps.colsum`` to the band's column sums of R^theta. With bands, the first band
         (from row 0) sets them and :func:`add_column_sums` adds the others' rows in order: the
         sums are then those of one pass.
+    done : ndarray of int64 (1,), optional
+        Set to 1 once the band is computed, from within the kernel: a thread that waits for
+        the band can see it before this call returns (which needs the GIL).
     """
     h = p.shape[0]
     y0, y1 = rows or (0, h)
-    old_on, old_off = stages
-    new_on, new_off = new or stages
-    if (y0, y1) != (0, h) and new_on is old_on:
-        raise ValueError("a band of rows needs new arrays for the advanced cascades")
-    spare_on, spare_off = scratch.spare(old_on.shape[0])
-    _front(p, coefficients.env, coefficients.scales, old_on, old_off, new_on, new_off,
+    if versions is None:
+        if (y0, y1) != (0, h):
+            raise ValueError("a band of rows needs versions of the cascade rows")
+        read = write = scratch.in_place(h)
+        other = stages
+    else:
+        read, write = versions
+    spare_on, spare_off = scratch.spare(stages[0].shape[0])
+    _front(p, coefficients.env, coefficients.scales, *stages, *other, read, write,
            *coefficients[2:], *scratch.buffers(), spare_on, spare_off, maps.r, maps.v, maps.g,
-           maps.colsum, y0, y1, bool(sums))
+           maps.colsum, y0, y1, bool(sums), scratch.done if done is None else done)
 
 
 def add_column_sums(maps, y0, y1) -> None:

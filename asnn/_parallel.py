@@ -24,26 +24,29 @@ __all__ = ["Task", "Worker", "BandedFront"]
 
 class Task:
     """A call submitted to a :class:`Worker`; :meth:`wait` returns its result or raises its
-    exception. ``started`` and ``finished`` are its ``time.perf_counter()`` times."""
+    exception. ``started`` is its ``time.perf_counter()`` time, ``cpu`` the processor time
+    the call took (None until it is done)."""
 
-    __slots__ = ("_call", "_done", "_result", "_error", "started", "finished")
+    __slots__ = ("_call", "_done", "_result", "_error", "started", "cpu")
 
     def __init__(self, call):
         self._call = call
         self._done = threading.Lock()
         self._done.acquire()  # released when the call has returned or raised
         self._result = self._error = None
-        self.started = self.finished = 0.0
+        self.started = 0.0
+        self.cpu: float | None = None
 
     def run(self) -> None:
         self.started = time.perf_counter()
+        cpu = time.thread_time()
         try:
             self._result = self._call()
         except BaseException as exc:  # handed to the waiting thread
             self._error = exc
         finally:
             self._call = None  # no reference to the model once done
-            self.finished = time.perf_counter()
+            self.cpu = time.thread_time() - cpu
             self._done.release()
 
     def wait(self):
@@ -96,13 +99,14 @@ class Worker:
 class _Pass:
     """One frame's fused pass in flight (see :class:`BandedFront`)."""
 
-    __slots__ = ("p", "stages", "new", "maps", "borders", "tasks", "submitted", "overlapped",
-                 "own")
+    __slots__ = ("p", "stages", "other", "versions", "maps", "borders", "tasks", "done",
+                 "submitted", "overlapped", "own")
 
-    def __init__(self, p, stages, new, maps, borders, tasks, submitted, overlapped):
-        self.p, self.stages, self.new, self.maps = p, stages, new, maps
-        self.borders, self.tasks, self.submitted = borders, tasks, submitted
-        self.overlapped = overlapped
+    def __init__(self, p, stages, other, versions, maps, borders, tasks, done, submitted,
+                 overlapped):
+        self.p, self.stages, self.other, self.versions = p, stages, other, versions
+        self.maps, self.borders, self.tasks, self.done = maps, borders, tasks, done
+        self.submitted, self.overlapped = submitted, overlapped
         self.own: tuple[float, float] | None = None  # the calling thread's (other work, band)
 
 
@@ -110,15 +114,18 @@ class BandedFront:
     """:func:`asnn._fast.front` over one band of rows per thread: one per worker from the top,
     and the calling thread's at the bottom.
 
-    Each band advances its own rows of the cascades from one pair of arrays into another (and,
-    again, the few rows beyond it that its filters read), so the bands of a frame need nothing
-    from each other; the next frame's bands need the whole of this one's. :meth:`start` hands
-    the workers their bands, :meth:`run_own` computes the calling thread's, and :meth:`join`
-    waits for the workers' and completes the column sums of R^theta: the first band sets them,
-    the others' rows are added in row order, so they are those of one pass. A frame's pass may
-    be started before the previous one is joined: a worker's band waits for the previous pass's
-    bands on the other workers. Bands are at least ``2 halo + 2`` rows high; a frame too small
-    for that has fewer bands.
+    Each band advances its own rows of the cascades (and, again, the few rows beyond it that
+    its filters read, which it drops), so the bands of a frame need nothing from each other;
+    the next frame's bands need the whole of this one's. A band advances its rows in place,
+    except the rows that a neighbouring band reads, which it writes into a second pair of
+    arrays: the neighbour still reads them as they were. Where each row's state is, in the
+    cascades or the second pair, is kept per row (:meth:`settle` brings it all back into the
+    cascades). :meth:`start` hands the workers their bands, :meth:`run_own` computes the calling
+    thread's, and :meth:`join` waits for the workers' and completes the column sums of
+    R^theta: the first band sets them, the others' rows are added in row order, so they are
+    those of one pass. A frame's pass may be started before the previous one is joined: a
+    worker's band waits for the previous pass's bands on the other workers. Bands are at least
+    ``2 halo + 2`` rows high; a frame too small for that has fewer bands.
 
     The borders follow the threads' speeds and the calling thread's other work (finishing
     frames, taking the next one): the bands are sized so that the workers would have been done
@@ -138,6 +145,7 @@ class BandedFront:
         self._cost = [0.0] * (len(workers) + 1)
         self._borders: list[int] | None = None
         self._flight: deque[_Pass] = deque()  # started, not joined yet
+        self._versions = np.zeros(0, np.int8)  # where each row's state is after the passes
         self._own_end: float | None = None  # when the calling thread's latest band ended
         self._waited = 0.0  # seconds it waited in join() since
 
@@ -152,32 +160,50 @@ class BandedFront:
             return self._borders
         return [round(i * height / n) for i in range(n + 1)]
 
-    def start(self, p: np.ndarray, stages: tuple, new: tuple, maps: _fast.FrontMaps,
+    def start(self, p: np.ndarray, stages: tuple, other: tuple, maps: _fast.FrontMaps,
               overlapped: bool = False) -> _Pass:
         """Start a frame's pass: hand the workers their bands.
 
-        ``stages`` are the cascades the pass reads, ``new`` those it writes; ``overlapped``
-        says that the calling thread finishes another frame while the workers compute (for the
+        ``stages`` are the cascades, ``other`` the second pair of arrays; ``overlapped`` says
+        that the calling thread finishes another frame while the workers compute (for the
         borders).
         """
         h, w = p.shape
         borders = self.borders(h)
         c = self.coefficients
+        if len(self._versions) != h:
+            self._versions = np.zeros(h, np.int8)
+        read, write = self._versions, self._versions.copy()
+        for m in borders[1:-1]:  # the rows two bands read go where the other band does not
+            write[m - c.halo:m + c.halo] ^= 1
+        self._versions = write
         # the bands read rows that the previous pass's bands, on other workers, may still write
         # (the calling thread's band of it is done: it ran before this call)
         before = self._flight[-1].tasks if self._flight else []
+        done = np.zeros(len(borders) - 2, np.int64)  # the workers' bands set theirs
 
         def band(i):
             for task in before:
                 task.join()
             _fast.front(p, stages, c, maps, _fast.scratch(w, p.dtype),
-                        (borders[i], borders[i + 1]), new, sums=i == 0)
+                        (borders[i], borders[i + 1]), other, (read, write), sums=i == 0,
+                        done=done[i:i + 1])
 
         tasks = [worker.submit(lambda i=i: band(i))
                  for i, worker in enumerate(self.workers[:len(borders) - 2])]
-        flight = _Pass(p, stages, new, maps, borders, tasks, time.perf_counter(), overlapped)
+        flight = _Pass(p, stages, other, (read, write), maps, borders, tasks, done,
+                       time.perf_counter(), overlapped)
         self._flight.append(flight)
         return flight
+
+    def settle(self, stages: tuple, other: tuple) -> None:
+        """Bring every row's state back into the cascades (no pass in flight)."""
+        if self._flight:
+            raise RuntimeError("join() the passes in flight first")
+        there = np.flatnonzero(self._versions)
+        for s, o in zip(stages, other):
+            s[:, there] = o[:, there]
+        self._versions[there] = 0
 
     def run_own(self, flight: _Pass) -> None:
         """Compute the calling thread's band of a started pass (the pass before it joined)."""
@@ -186,12 +212,14 @@ class BandedFront:
         if flight.overlapped and self._own_end is not None:
             other = begun - self._own_end - self._waited
         borders = flight.borders
+        cpu = time.thread_time()
         _fast.front(flight.p, flight.stages, self.coefficients, flight.maps,
                     _fast.scratch(flight.p.shape[1], flight.p.dtype),
-                    (borders[-2], borders[-1]), flight.new, sums=len(borders) == 2)
+                    (borders[-2], borders[-1]), flight.other, flight.versions,
+                    sums=len(borders) == 2)
+        flight.own = (other, time.thread_time() - cpu)
         self._own_end = time.perf_counter()
         self._waited = 0.0
-        flight.own = (other, self._own_end - begun)
 
     def join(self, flight: _Pass) -> None:
         """Wait for the workers' bands of a pass (raising a band's exception) and complete its
@@ -199,20 +227,23 @@ class BandedFront:
         if not self._flight or self._flight[0] is not flight:
             raise RuntimeError("passes are joined in the order they were started")
         self._flight.popleft()
-        waiting = time.perf_counter()
-        for task in flight.tasks:
-            task.join()  # all of them, before anything is raised
-        self._waited += time.perf_counter() - waiting
-        for task in flight.tasks:
-            task.wait()
+        # A band's kernel sets its flag when done; only then does its thread need the GIL, to
+        # return: a pass whose flags are all set is complete, whatever its threads do next.
+        if not flight.done.all():
+            waiting = time.perf_counter()
+            for task in flight.tasks:
+                task.join()  # all of them, before anything is raised
+            self._waited += time.perf_counter() - waiting
+            for task in flight.tasks:
+                task.wait()
         borders = flight.borders
         for i in range(1, len(borders) - 1):
             _fast.add_column_sums(flight.maps, borders[i], borders[i + 1])
         if flight.tasks and flight.own is not None:
             n = len(flight.tasks)
             self._measure(borders, list(range(n)) + [len(self.workers)], [
-                (0.0 if flight.overlapped else t.started - flight.submitted,
-                 t.finished - t.started) for t in flight.tasks] + [flight.own])
+                (0.0 if flight.overlapped else t.started - flight.submitted, t.cpu)
+                for t in flight.tasks] + [flight.own])
 
     def abandon(self) -> None:
         """Wait for the workers' bands in flight, whatever their outcome, and forget them
@@ -222,16 +253,20 @@ class BandedFront:
                 task.join()
 
     def _measure(self, borders: list[int], threads: list[int],
-                 times: list[tuple[float, float]]) -> None:
+                 times: list[tuple[float, float | None]]) -> None:
         """Update the estimates of the threads of the bands from their (other work, band)
-        seconds of one frame, then the borders: rows_i = (finish - other_i) / cost_i, summing
+        seconds of one frame (band: processor time), then the borders: rows_i = (finish - other_i) / cost_i, summing
         to the height, with the workers' other work counted ``_MARGIN`` longer."""
         a = self._SMOOTHING
         cost, other = self._cost, self._other
         for i, (k, (busy, band)) in enumerate(zip(threads, times)):
+            if band is None:  # a worker's band that was done before it could say how long
+                continue
             c = band / (borders[i + 1] - borders[i])
             cost[k] = c if cost[k] == 0 else (1 - a) * cost[k] + a * c
             other[k] = (1 - a) * other[k] + a * max(busy, 0.0)
+        if not all(cost[k] > 0 for k in threads):
+            return
         n, height = len(threads), borders[-1]
         ahead = [other[k] + (self._MARGIN if k < len(self.workers) else 0.0) for k in threads]
         speed = [1.0 / cost[k] for k in threads]

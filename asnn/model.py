@@ -74,8 +74,8 @@ class ASNN:
     stages_on, stages_off : ndarray (n_s + 2, H, W)
         Leaky-integrator cascades of the ON and OFF bipolar channels (z_0..z_{n_s+1}), in
         :attr:`dtype`; the optimised step keeps them in difference form
-        (:func:`asnn._fast.to_differences`). With ``threads`` > 1 each frame writes them into
-        a second pair of arrays, which then become these.
+        (:func:`asnn._fast.to_differences`). With ``threads`` > 1 the rows where two threads'
+        bands meet live in a second pair of arrays during a stream.
     dtype : numpy dtype
         Floating-point type of the state and the computation.
     spike_window : deque of int
@@ -140,7 +140,7 @@ class ASNN:
         self._workers = [_parallel.Worker(f"asnn-model-{k}") for k in range(1, self.threads)]
         self._banded = _parallel.BandedFront(self._coefficients, self._workers)
         self._maps = []  # the front's outputs, three frames' worth (see stream)
-        self._spare = None  # the cascades' other arrays: a pass writes them, reading these
+        self._other = None  # a second pair of arrays for the cascades' rows (see _parallel)
         self._finalizer = weakref.finalize(self, _close_workers, self._workers)
 
     def close(self) -> None:
@@ -265,6 +265,8 @@ class ASNN:
                 yield self._finish(self._joined(pending.popleft()))
         finally:
             self._banded.abandon()  # an abandoned stream: no worker goes on behind the caller
+            if self._other is not None:
+                self._banded.settle((self.stages_on, self.stages_off), self._other)
 
     def _take(self, frame: np.ndarray, t: float | None) -> "_Frame":
         """The first part of a step: the frame's luminance, whether it is new, and P."""
@@ -304,6 +306,7 @@ class ASNN:
             self._banded.run_own(frame.flight)
         finally:
             self._joined(frame)
+            self._banded.settle((self.stages_on, self.stages_off), self._other)
 
     def _start(self, frame: "_Frame", overlapped: bool = False) -> None:
         """Start a frame's banded pass (``threads`` > 1): it advances the cascades from one pair
@@ -313,12 +316,11 @@ class ASNN:
         shape = frame.lum.shape
         if not self._maps or self._maps[0].shape != shape:
             self._maps = [_fast.FrontMaps(shape, self.dtype) for _ in range(3)]
-        if self._spare is None or self._spare[0].shape != self.stages_on.shape:
-            self._spare = (np.zeros_like(self.stages_on), np.zeros_like(self.stages_off))
+        if self._other is None or self._other[0].shape != self.stages_on.shape:
+            self._other = (np.zeros_like(self.stages_on), np.zeros_like(self.stages_off))
         frame.maps = self._maps[frame.index % 3]  # the others: two frames not finished yet
-        stages, new = (self.stages_on, self.stages_off), self._spare
-        frame.flight = self._banded.start(frame.photo, stages, new, frame.maps, overlapped)
-        (self.stages_on, self.stages_off), self._spare = new, stages
+        frame.flight = self._banded.start(frame.photo, (self.stages_on, self.stages_off),
+                                          self._other, frame.maps, overlapped)
 
     def _joined(self, frame: "_Frame") -> "_Frame":
         """The frame, once the workers' bands of its pass are done (``threads`` > 1)."""

@@ -193,8 +193,9 @@ def test_dbscan_matches_brute_force(eps, min_samples):
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 @pytest.mark.parametrize("grouping,swap", [(True, False), (False, True)])
 def test_bands_of_rows_compute_the_pass_of_one(dtype, grouping, swap):
-    """Bands computed one by one, from one pair of cascades into another, give exactly the
-    maps, column sums and cascades of the pass over the whole frame, wherever they start."""
+    """Bands computed one by one give exactly the maps, column sums and cascades of the pass
+    over the whole frame, wherever they start, when the rows that two bands read are
+    advanced into a second pair of arrays."""
     rng = np.random.default_rng(7)
     h, w = 41, 37
     env, scales = _fast.dog_factors(5.0, 1.0, 3.0, 5, "2d")
@@ -205,24 +206,30 @@ def test_bands_of_rows_compute_the_pass_of_one(dtype, grouping, swap):
         _fast.cs_classes(cs).astype(dtype), np.array([1.0, -0.4, 0.5, 0.3], dtype), grouping)
     scratch = _fast.Scratch(w, dtype)
     whole = (np.zeros((6, h, w), dtype), np.zeros((6, h, w), dtype))
+    halo = coefficients.halo
     for borders in ([0, 8, 41], [0, 33, 41], [0, 13, 14 + 8, 41], [0, 20, 21, 41]):
         state = tuple(s.copy() for s in whole)
-        new = tuple(np.full_like(s, np.nan) for s in state)
+        other = tuple(np.full_like(s, np.nan) for s in state)  # unread where not written
+        read = np.zeros(h, np.int8)
+        write = read.copy()
+        for m in borders[1:-1]:
+            write[m - halo:m + halo] = 1
         p = (rng.standard_normal((h, w)) * (rng.random((h, w)) < 0.1)).astype(dtype)
         want, got = _fast.FrontMaps((h, w), dtype), _fast.FrontMaps((h, w), dtype)
         _fast.front(p, whole, coefficients, want, scratch)
-        for i in range(len(borders) - 1):
+        for i in reversed(range(len(borders) - 1)):  # any order: the bands are independent
             _fast.front(p, state, coefficients, got, scratch, (borders[i], borders[i + 1]),
-                        new, sums=i == 0)
+                        other, (read, write), sums=i == 0)
         for i in range(1, len(borders) - 1):
             _fast.add_column_sums(got, borders[i], borders[i + 1])
         for name in ("r", "v", "g", "colsum"):
             np.testing.assert_array_equal(getattr(got, name), getattr(want, name),
                                           err_msg=f"{name} {borders}")
-        for a, b in zip(new, whole):
-            np.testing.assert_array_equal(a, b, err_msg=f"cascades {borders}")
+        for a, b, c in zip(state, other, whole):
+            np.testing.assert_array_equal(np.where(write[:, None] == 1, b, a), c,
+                                          err_msg=f"cascades {borders}")
         assert np.count_nonzero(want.g) > 20
-    with pytest.raises(ValueError, match="new arrays"):
+    with pytest.raises(ValueError, match="versions"):
         _fast.front(p, state, coefficients, got, scratch, (0, 20))
 
 
