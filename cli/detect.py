@@ -7,7 +7,7 @@ import gc
 import json
 import sys
 from collections import deque
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import cv2
@@ -75,6 +75,26 @@ class _WriteNow:
         pass
 
 
+@contextmanager
+def _settings(busy: bool):
+    """The process's settings for the loop, restored after it (``run`` may be called in-process).
+
+    The loop makes objects by the thousand, and the garbage collector's full passes would go over
+    the hundred thousand that the imports made (numba, OpenCV) every time: they are kept out.
+    With a model thread for every core (``busy``), OpenCV's own threads would only take turns
+    with them (its results do not depend on how it splits its work).
+    """
+    threads = cv2.getNumThreads()
+    if busy:
+        cv2.setNumThreads(1)
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+        cv2.setNumThreads(threads)
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode ahead and write behind on threads of their own while the model steps on this one
     (:mod:`asnn.io.pipeline`), or, when the model has threads of its own for every core,
@@ -88,10 +108,7 @@ def run(args: argparse.Namespace) -> int:
             options["record_maps"] = True
     # With a model thread for every core, more threads would only take turns with them, and
     # the machine's switching between threads costs more than decoding or writing on this one.
-    # (OpenCV's results do not depend on how it splits its work.)
     busy = model_threads >= available_cores() > 1
-    if busy:
-        cv2.setNumThreads(1)
     try:
         source = open_source(args.video, topic=args.topic, decoder_threads=1 if busy else None)
     except SourceError as exc:
@@ -99,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
     detector = make_detector(args.model, args.preset, **options)
     records = []
     with ExitStack() as stack:
+        stack.enter_context(_settings(busy))
         jsonl = None
         if args.jsonl == "-":
             jsonl = sys.stdout
@@ -149,9 +167,6 @@ def run(args: argparse.Namespace) -> int:
                 yield t, frame
 
         answers = responses(detector, frames())
-        # The loop makes objects by the thousand; the collector's full passes would go over the
-        # hundred thousand that the imports made (numba, OpenCV) every time: keep them out.
-        gc.freeze()
         try:
             for response in answers:
                 t, frame = taken.popleft()
