@@ -3,9 +3,10 @@
 :class:`Worker` runs calls in order on a thread of its own and hands their results, or their
 exceptions, back to the thread that waits for them. :class:`BandedFront` computes
 :func:`asnn._fast.front` in bands of rows, one per thread, and moves the bands' borders from
-frame to frame so that the threads finish together: every pixel is computed the same way
-whatever the bands, so where the borders lie changes nothing in the results, only in the time.
-The numba kernels release the GIL, so the bands do run at once.
+frame to frame so that the workers are done about when the calling thread needs their bands:
+every pixel is computed the same way whatever the bands, so where the borders lie changes
+nothing in the results, only in the time. The numba kernels release the GIL, so the bands do
+run at once.
 """
 
 from __future__ import annotations
