@@ -43,31 +43,45 @@ whose results it reproduces. What changes is only the order of the arithmetic:
   difference form: stages kept in float32 lose up to 1e-5 on their own).
 * Less work where nothing is attended. The direction attention M_d is only needed where M_a is
   set: :func:`attention` blurs V' only in M_a's bounding box (plus the blur's radius), and not
-  at all when M_a is empty.
+  at all when M_a is empty. With the attention blur on a grid twice coarser (the robust
+  preset), V' goes straight onto that grid: :func:`_v_prime_halved` takes the 2x2 averages in
+  the order OpenCV's INTER_AREA does, so the blur is the same.
+* Bands. :func:`front` can compute any band of rows on its own: it advances the band's rows of
+  the cascades from one pair of arrays into another, and the few rows beyond the band that its
+  filters read into scratch rows that it drops. Every pixel is computed the same way whatever
+  the bands, so bands computed on threads of their own (:mod:`asnn._parallel`) give the maps
+  of one pass, bit for bit; the column sums of R^theta are completed band after band in row
+  order (:func:`add_column_sums`) for the same reason.
 
 The fused kernels are written for the 5x5 kernels of Table I (every preset); other sizes fall
 back to the straightforward functions (:func:`supported`). Numba compiles them on first use and
 caches the machine code next to this file (or in ``NUMBA_CACHE_DIR``; without a writable place,
 it compiles at first use, see :mod:`asnn._jit`); no ``fastmath``, so
 IEEE semantics are kept and float64 results differ from the straightforward form only by
-rounding (about 1e-15 relative). Everything runs on the calling thread.
+rounding (about 1e-15 relative). The kernels release the GIL (``nogil``) and use no threads
+of their own: a model with ``threads`` > 1 runs them on its worker threads
+(:mod:`asnn._parallel`), any other model on the thread that steps it.
 
-Scratch arrays live in a per-thread :class:`Workspace` shared by all models of that thread, so
-a camera's own state is only its cascades and its previous frame.
+Scratch arrays live in per-thread :class:`Workspace` and :class:`Scratch` objects shared by all
+models of that thread, so a camera's own state is only its cascades and its previous frame (a
+model with threads of its own keeps its maps and a second pair of cascades as well).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
+from typing import NamedTuple
 
 import numpy as np
 
 from . import retina
 from ._jit import kernel
 
-__all__ = ["supported", "dog_factors", "gabor_factors", "cs_classes", "Workspace", "workspace",
-           "front", "to_differences", "attention", "AttentionBlur"]
+__all__ = ["supported", "dog_factors", "gabor_factors", "cs_classes", "Scratch", "FrontMaps",
+           "Workspace", "workspace", "scratch", "FrontCoefficients", "front", "add_column_sums", "to_differences", "contrast_gain_control", "attention",
+           "AttentionBlur"]
 
 RADIUS = 2  # the fused kernels are written for 5x5 kernels (Table I)
 DEPTH = 2 * RADIUS + 1  # rows kept by the ring buffers of the 5x5 filters
@@ -133,13 +147,11 @@ def cs_classes(kernel: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- workspace
 
 
-class Workspace:
-    """Scratch arrays and outputs for one frame size and dtype, reused from frame to frame."""
+class Scratch:
+    """The ring buffers of one pass of :func:`front` over a band of rows (a few rows each)."""
 
-    def __init__(self, shape: tuple[int, int], dtype: np.dtype):
-        h, w = shape
-        pw = w + 2 * RADIUS
-        self.shape, self.dtype = shape, dtype
+    def __init__(self, width: int, dtype: np.dtype):
+        w, pw = width, width + 2 * RADIUS
         self.col = np.empty((4, pw), dtype)  # vertical g_I passes of B+ and B- (two Gaussians)
         self.x0 = np.empty((2, w), dtype)  # B+^0, B-^0 of one row
         self.ro = np.empty((4, DEPTH, pw), dtype)  # read-outs: fast_on, slow_on, fast_off, slow_off
@@ -148,31 +160,85 @@ class Workspace:
         self.csl = np.empty((2, pw), dtype)  # vertical pairs of the centre-surround filter
         self.gring = np.empty((3, w + 2), dtype)  # G before grouping
         self.gline = np.empty(w + 2, dtype)
-        self.colsum = np.empty((4, w), np.float64)  # column sums of R^theta
+        self.done = np.zeros(1, np.int64)  # front()'s flag when no one waits for it
+
+    def buffers(self) -> tuple:
+        return self.col, self.x0, self.ro, self.gabor, self.acc, self.csl, self.gring, self.gline
+
+    def in_place(self, height: int) -> np.ndarray:
+        """Zeros for every row: the versions of :func:`front` in place."""
+        if getattr(self, "_in_place", None) is None or len(self._in_place) != height:
+            self._in_place = np.zeros(height, np.int8)
+        return self._in_place
+
+    def spare(self, depth: int) -> tuple[np.ndarray, np.ndarray]:
+        """One row of each cascade (``depth`` stages), for rows advanced and dropped."""
+        if getattr(self, "_spare", None) is None or self._spare[0].shape[0] != depth:
+            self._spare = (np.zeros((depth, 1, self.x0.shape[1]), self.x0.dtype),
+                           np.zeros((depth, 1, self.x0.shape[1]), self.x0.dtype))
+        return self._spare
+
+
+class FrontMaps:
+    """What :func:`front` computes for one frame."""
+
+    def __init__(self, shape: tuple[int, int], dtype: np.dtype):
+        h, w = self.shape = shape
         self.r = np.empty((4, h, w), dtype)  # R^theta, theta = k pi / 4, k = 0..3
         self.v = np.empty((h, w), dtype)
         self.g = np.empty((h, w), dtype)
+        self.colsum = np.empty((4, w), np.float64)  # column sums of R^theta
+
+    def sums(self) -> np.ndarray:
+        """The sums of R^theta (float64)."""
+        return self.colsum.sum(axis=1)
+
+
+class Workspace:
+    """Outputs and scratch arrays for one frame size and dtype, reused from frame to frame."""
+
+    def __init__(self, shape: tuple[int, int], dtype: np.dtype):
+        h, w = shape
+        self.shape, self.dtype = shape, dtype
+        self.attended_sums = np.empty(w, np.float64)  # column sums of G M_a M_d
         self.v_prime = np.empty((h, w), dtype)
         self.mask = np.zeros((h, w), np.bool_)
         self.rows = np.empty(h * w, np.int64)  # the attended pixels
         self.cols = np.empty(h * w, np.int64)
 
+    @functools.cached_property
+    def maps(self) -> FrontMaps:
+        """Outputs of :func:`front` (models that keep their own do not need these)."""
+        return FrontMaps(self.shape, self.dtype)
+
 
 _local = threading.local()
 
 
-def workspace(shape: tuple[int, int], dtype) -> Workspace:
-    """This thread's workspace for a frame size and dtype (the last few are kept)."""
-    cache = getattr(_local, "cache", None)
+def _cached(name: str, key, make):
+    """This thread's object ``make()`` for a key, of the last few kept under ``name``."""
+    cache = getattr(_local, name, None)
     if cache is None:
-        cache = _local.cache = {}
-    key = (shape, np.dtype(dtype).str)
-    ws = cache.get(key)
-    if ws is None:
+        cache = {}
+        setattr(_local, name, cache)
+    value = cache.get(key)
+    if value is None:
         if len(cache) >= 4:
             cache.pop(next(iter(cache)))
-        ws = cache[key] = Workspace(shape, np.dtype(dtype))
-    return ws
+        value = cache[key] = make()
+    return value
+
+
+def workspace(shape: tuple[int, int], dtype) -> Workspace:
+    """This thread's workspace for a frame size and dtype (the last few are kept)."""
+    dtype = np.dtype(dtype)
+    return _cached("workspaces", (shape, dtype.str), lambda: Workspace(shape, dtype))
+
+
+def scratch(width: int, dtype) -> Scratch:
+    """This thread's ring buffers of :func:`front` for a frame width and dtype."""
+    dtype = np.dtype(dtype)
+    return _cached("scratch", (width, dtype.str), lambda: Scratch(width, dtype))
 
 
 # --------------------------------------------------------------------------- helpers
@@ -232,35 +298,58 @@ def _dog_row(p, y, env, sc, zero, col, on, off):
 
 
 @kernel(inline="always", **_jit)
-def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, slow, tiny):
-    """One frame of the cascade at row y, in difference form (see :func:`to_differences`).
+def _cascade_row(old, y_old, new, y_new, x0, a, b, e_x, j, line, tiny):
+    """One frame of the cascade at a row, in difference form (see :func:`to_differences`):
+    row ``y_old`` of the stages ``old`` advanced into row ``y_new`` of ``new`` (the same
+    array and row to advance in place).
 
     With ``a = 1 - r A``, ``b = r C`` and z'_{j-1} = B^0 (z_{j-1} = the input), every stage
     is ``z'_i = a z_i + b z'_{i-1}``, so the differences ``d_i = z_i - z_{i+1}`` follow the
     same recursion, ``d'_i = a d_i + b d'_{i-1}``, started by
-    ``d'_{j-1} = B^0 - z'_j = a (B^0 - z_j) + (r A - r C) B^0``. The read-outs are ``K d_n``.
+    ``d'_{j-1} = B^0 - z'_j = a (B^0 - z_j) + (r A - r C) B^0``. The read-outs are ``K d_n``
+    (:func:`_readout_row`).
     Stored values below ``tiny`` in magnitude become 0: where the picture stands still the
     stages decay geometrically, and in float32 they would pass through the subnormal numbers,
     which some CPUs compute many times slower.
     """
-    w = stages.shape[2]
-    s = stages[j, y]
+    w = old.shape[2]
+    s, s_new = old[j, y_old], new[j, y_new]
     if e_x == 0:
         for x in range(w):
             line[x] = a * (x0[x] - s[x])
     else:
         for x in range(w):
             line[x] = a * (x0[x] - s[x]) + e_x * x0[x]
-    for x in range(w):
-        v = a * s[x] + b * x0[x]
-        s[x] = v if abs(v) >= tiny else v - v
-    prev = line
-    for i in range(j, stages.shape[0] - 1):
-        d = stages[i + 1, y]
+    # in place, the loops write what they read: written as such, they vectorise (rows that may
+    # overlap would make the vectoriser check, and fall back to one value at a time)
+    in_place = s_new.ctypes.data == s.ctypes.data
+    if in_place:
         for x in range(w):
-            v = a * d[x] + b * prev[x]
-            d[x] = v if abs(v) >= tiny else v - v
-        prev = d
+            v = a * s[x] + b * x0[x]
+            s[x] = v if abs(v) >= tiny else v - v
+    else:
+        for x in range(w):
+            v = a * s[x] + b * x0[x]
+            s_new[x] = v if abs(v) >= tiny else v - v
+    prev = line
+    for i in range(j, old.shape[0] - 1):
+        d, d_new = old[i + 1, y_old], new[i + 1, y_new]
+        if in_place:
+            for x in range(w):
+                v = a * d[x] + b * prev[x]
+                d[x] = v if abs(v) >= tiny else v - v
+            prev = d
+        else:
+            for x in range(w):
+                v = a * d[x] + b * prev[x]
+                d_new[x] = v if abs(v) >= tiny else v - v
+            prev = d_new
+
+
+@kernel(inline="always", **_jit)
+def _readout_row(stages, y, gain, n_fast, n_slow, fast, slow):
+    """The fast and slow read-outs ``K d_n`` of row y of an advanced cascade, padded."""
+    w = stages.shape[2]
     df, ds = stages[n_fast + 1, y], stages[n_slow + 1, y]
     for x in range(w):
         fast[x + 2] = gain * df[x]
@@ -268,6 +357,18 @@ def _cascade_row(stages, y, x0, a, b, e_x, j, gain, n_fast, n_slow, line, fast, 
         slow[x + 2] = gain * ds[x]
     _pad(fast, w, 2)
     _pad(slow, w, 2)
+
+
+@kernel(inline="always", **_jit)
+def _advance_row(p, y, env, sc, zero, swap, old_on, old_off, y_old, new_on, new_off, y_new, a,
+                 b, e_x, j, tiny, col, x0, line):
+    """Row y of both cascades advanced by one frame of P (see :func:`_cascade_row`)."""
+    if swap:
+        _dog_row(p, y, env, sc, zero, col, x0[1], x0[0])
+    else:
+        _dog_row(p, y, env, sc, zero, col, x0[0], x0[1])
+    _cascade_row(old_on, y_old, new_on, y_new, x0[0], a, b, e_x, j, line, tiny)
+    _cascade_row(old_off, y_old, new_off, y_new, x0[1], a, b, e_x, j, line, tiny)
 
 
 # --------------------------------------------------------------------------- stage 2: row y - 2
@@ -410,42 +511,58 @@ def _group_row(a, b, c, ninth, line, out):
 
 
 @kernel(**_jit)
-def _front(p, env, sc, stages_on, stages_off, a, b, e_x, j, gain, n_fast, n_slow, swap,
-           gk, vw, kc, aw, terms, grouping, zero, tiny, ninth, col, x0, ro, gabor, acc, csl, gring,
-           gline, colsum,
-           r, v, g):
+def _front(p, env, sc, stages_on, stages_off, other_on, other_off, read, write, a, b, e_x, j,
+           gain, n_fast, n_slow, swap, gk, vw, kc, aw, terms, grouping, zero, tiny, ninth, col, x0,
+           ro, gabor, acc, csl, gring, gline, spare_on, spare_off, r, v, g, colsum, y0, y1, sums,
+           done):
+    """Rows [y0, y1) of R, V and G. Cascade row y is read from the ``stages`` or the
+    ``other`` arrays (``read[y]`` 0 or 1) and, for the rows [y0, y1), advanced into those
+    ``write[y]`` says (in place where they are the same); the rows beyond the band that the
+    filters read are advanced into the spare rows and dropped. ``done[0]`` is set to 1 at the
+    end (another thread can see that without the GIL)."""
     h, w = p.shape
-    for k in range(4):
-        for x in range(w):
-            colsum[k, x] = 0.0
-    for t in range(h + 3):
-        if t < h:  # stage 1: row t through g_I and the cascade
+    if sums:
+        for k in range(4):
+            for x in range(w):
+                colsum[k, x] = 0.0
+    # G is needed one row beyond the band for the grouping; the 5x5 filters read two more
+    g0, g1 = (max(y0 - 1, 0), min(y1 + 1, h)) if grouping else (y0, y1)
+    t0, t1 = max(g0 - RADIUS, 0), min(g1 + RADIUS, h)
+    for t in range(t0, y1 + RADIUS + 1):
+        if t < t1:  # stage 1: row t through g_I and the cascade, into the ring
             slot = t % DEPTH
-            if swap:
-                _dog_row(p, t, env, sc, zero, col, x0[1], x0[0])
+            old_on, old_off = (stages_on, stages_off) if read[t] == 0 else (other_on, other_off)
+            if y0 <= t < y1:
+                new_on, new_off = (stages_on, stages_off) if write[t] == 0 else \
+                    (other_on, other_off)
+                _advance_row(p, t, env, sc, zero, swap, old_on, old_off, t, new_on, new_off, t,
+                             a, b, e_x, j, tiny, col, x0, csl[0])
+                _readout_row(new_on, t, gain, n_fast, n_slow, ro[0, slot], ro[1, slot])
+                _readout_row(new_off, t, gain, n_fast, n_slow, ro[2, slot], ro[3, slot])
             else:
-                _dog_row(p, t, env, sc, zero, col, x0[0], x0[1])
-            _cascade_row(stages_on, t, x0[0], a, b, e_x, j, gain, n_fast, n_slow, csl[0],
-                         ro[0, slot], ro[1, slot], tiny)
-            _cascade_row(stages_off, t, x0[1], a, b, e_x, j, gain, n_fast, n_slow, csl[0],
-                         ro[2, slot], ro[3, slot], tiny)
+                _advance_row(p, t, env, sc, zero, swap, old_on, old_off, t, spare_on, spare_off,
+                             0, a, b, e_x, j, tiny, col, x0, csl[0])
+                _readout_row(spare_on, 0, gain, n_fast, n_slow, ro[0, slot], ro[1, slot])
+                _readout_row(spare_off, 0, gain, n_fast, n_slow, ro[2, slot], ro[3, slot])
         y = t - RADIUS
-        if 0 <= y < h:  # stage 2: row t - 2 through the 5x5 filters
+        if g0 <= y < g1:  # stage 2: row t - 2 through the 5x5 filters
             s0 = y % DEPTH
             sm1, sp1 = _reflect(y - 1, h) % DEPTH, _reflect(y + 1, h) % DEPTH
             sm2, sp2 = _reflect(y - 2, h) % DEPTH, _reflect(y + 2, h) % DEPTH
-            r0, r1, r2, r3 = r[0, y], r[1, y], r[2, y], r[3, y]
-            _gabor_channel(ro, 1, 0, s0, sm1, sp1, sm2, sp2, gk, vw[0], True, gabor, acc,
-                           r0, r1, r2, r3)
-            _gabor_channel(ro, 3, 2, s0, sm1, sp1, sm2, sp2, gk, vw[1], False, gabor, acc,
-                           r0, r1, r2, r3)
-            vv = v[y]
-            for x in range(w):
-                vv[x] = max(max(abs(r0[x]), abs(r1[x])), max(abs(r2[x]), abs(r3[x])))
-            for k in range(4):
-                rk, ck = r[k, y], colsum[k]
+            if y0 <= y < y1:
+                r0, r1, r2, r3 = r[0, y], r[1, y], r[2, y], r[3, y]
+                _gabor_channel(ro, 1, 0, s0, sm1, sp1, sm2, sp2, gk, vw[0], True, gabor, acc,
+                               r0, r1, r2, r3)
+                _gabor_channel(ro, 3, 2, s0, sm1, sp1, sm2, sp2, gk, vw[1], False, gabor, acc,
+                               r0, r1, r2, r3)
+                vv = v[y]
                 for x in range(w):
-                    ck[x] += rk[x]
+                    vv[x] = max(max(abs(r0[x]), abs(r1[x])), max(abs(r2[x]), abs(r3[x])))
+                if sums:
+                    for k in range(4):
+                        rk, ck = r[k, y], colsum[k]
+                        for x in range(w):
+                            ck[x] += rk[x]
             gl = gring[y % 3]
             _approach_row(ro, s0, sm1, sp1, sm2, sp2, kc, aw, terms, zero, csl, gl)
             if not grouping:
@@ -453,32 +570,119 @@ def _front(p, env, sc, stages_on, stages_off, a, b, e_x, j, gain, n_fast, n_slow
                 for x in range(w):
                     gy[x] = gl[x + 1]
         y = t - RADIUS - 1
-        if grouping and 0 <= y < h:  # stage 3: row t - 3 through the grouping
+        if grouping and y0 <= y < y1:  # stage 3: row t - 3 through the grouping
             _group_row(gring[_reflect(y - 1, h) % 3], gring[y % 3], gring[_reflect(y + 1, h) % 3],
                        ninth, gline, g[y])
+    done[0] = 1
 
 
-def front(p, ws, env, scales, stages_on, stages_off, rate, c, decay, leaky, gain, n_fast, n_slow,
-          swap, gk, v_weights, kc, a_weights, grouping):
+@kernel(**_jit)
+def _add_column_sums(r, y0, y1, colsum):
+    for k in range(r.shape[0]):
+        ck = colsum[k]
+        for y in range(y0, y1):
+            rk = r[k, y]
+            for x in range(r.shape[2]):
+                ck[x] += rk[x]
+
+
+class FrontCoefficients(NamedTuple):
+    """The coefficients of :func:`front`, in the order of its kernel's arguments."""
+
+    env: np.ndarray
+    scales: np.ndarray
+    a: float  # 1 - r A
+    b: float  # r C
+    e_x: float  # r A - r C, the extra input of a leaky input stage
+    j: int  # first integrating stage
+    gain: float
+    n_fast: int
+    n_slow: int
+    swap: bool
+    gk: np.ndarray
+    v_weights: np.ndarray
+    kc: np.ndarray
+    a_weights: np.ndarray
+    terms: np.ndarray
+    grouping: bool
+    zero: float
+    tiny: float
+    ninth: float
+
+    @classmethod
+    def make(cls, env, scales, rate, c, decay, leaky, gain, n_fast, n_slow, swap, gk, v_weights,
+             kc, a_weights, grouping) -> "FrontCoefficients":
+        """From the model's parameters, in the dtype of ``env`` (every array must have it).
+
+        ``swap`` exchanges the ON and OFF inputs (``target_polarity='light'``); ``a_weights``
+        are the signed weights ``(w1+, -w2-, w1-, -w2+)``.
+        """
+        t = env.dtype.type
+        return cls(env, scales, t(1 - rate * decay), t(rate * c), t(rate * decay - rate * c),
+                   0 if leaky else 1, t(gain), int(n_fast), int(n_slow), bool(swap), gk,
+                   v_weights, kc, a_weights, _TERMS, bool(grouping), t(0),
+                   t(_TINY if t is np.float32 else 0.0), t(1 / 9))
+
+    @property
+    def halo(self) -> int:
+        """Rows beyond a band whose read-outs :func:`front` reads (5x5 filters, grouping)."""
+        return RADIUS + 1 if self.grouping else RADIUS
+
+
+def front(p, stages, coefficients, maps, scratch, rows=None, other=None, versions=None,
+          sums=True, done=None):
     """Everything from the photoreceptor output P to R^theta, V and G, in one pass.
 
     Reproduces :func:`~asnn.retina.bipolar`, :func:`~asnn.retina.temporal_filter_step` (on the
     cascades in difference form, :func:`to_differences`), :func:`~asnn.retina.temporal_readout`,
     :func:`~asnn.retina.motion_energy` (the four computed orientations;
     R^{theta+pi} = -R^theta), ``V = max_theta R^theta = max_k |R^k|``,
-    :func:`~asnn.retina.approach_map` and (``grouping``) :func:`~asnn.retina.group`. ``swap``
-    exchanges the ON and OFF inputs (``target_polarity='light'``); ``a_weights`` are the signed
-    weights ``(w1+, -w2-, w1-, -w2+)``. Arrays and coefficients must have the workspace's
-    dtype. Returns ``(R, V, G, sums of R^theta)`` (workspace arrays; the sums in float64).
+    :func:`~asnn.retina.approach_map` and (``grouping``) :func:`~asnn.retina.group`, with the
+    coefficients of :class:`FrontCoefficients`, into ``maps`` (a :class:`FrontMaps`), using the
+    ring buffers of ``scratch`` (a :class:`Scratch`).
+
+    Parameters
+    ----------
+    stages : (ndarray, ndarray)
+        The ON and OFF cascades, advanced by one frame in place.
+    rows : (y0, y1), optional
+        Compute these rows only (default: all). Every pixel of a row is computed the same way
+        whatever the band, so bands computed separately, on threads of their own, give the
+        maps of one pass. A band's filters read ``coefficients.halo`` rows of read-outs beyond
+        it, whose cascade rows it advances again and drops: those rows must still hold their
+        state before this frame, so the rows of a band that a neighbouring band reads go to a
+        second pair of arrays instead (see ``versions``).
+    other : (ndarray, ndarray), optional
+        The second pair of arrays, like ``stages``.
+    versions : (ndarray, ndarray) of int8 (H,), optional
+        Where each cascade row is read from and advanced into: 0 the ``stages``, 1 ``other``
+        (default: all in place in the ``stages``).
+    sums : bool
+        Set ``maps.colsum`` to the band's column sums of R^theta. With bands, the first band
+        (from row 0) sets them and :func:`add_column_sums` adds the others' rows in order: the
+        sums are then those of one pass.
+    done : ndarray of int64 (1,), optional
+        Set to 1 once the band is computed, from within the kernel: a thread that waits for
+        the band can see it before this call returns (which needs the GIL).
     """
-    t = ws.dtype.type
-    _front(p, env, scales, stages_on, stages_off, t(1 - rate * decay), t(rate * c),
-           t(rate * decay - rate * c), 0 if leaky else 1, t(gain), int(n_fast), int(n_slow),
-           bool(swap), gk, v_weights, kc, a_weights, _TERMS, bool(grouping), t(0),
-           t(_TINY if ws.dtype == np.float32 else 0.0), t(1 / 9),
-           ws.col, ws.x0, ws.ro, ws.gabor, ws.acc, ws.csl, ws.gring, ws.gline, ws.colsum, ws.r,
-           ws.v, ws.g)
-    return ws.r, ws.v, ws.g, ws.colsum.sum(axis=1)
+    h = p.shape[0]
+    y0, y1 = rows or (0, h)
+    if versions is None:
+        if (y0, y1) != (0, h):
+            raise ValueError("a band of rows needs versions of the cascade rows")
+        read = write = scratch.in_place(h)
+        other = stages
+    else:
+        read, write = versions
+    spare_on, spare_off = scratch.spare(stages[0].shape[0])
+    _front(p, coefficients.env, coefficients.scales, *stages, *other, read, write,
+           *coefficients[2:], *scratch.buffers(), spare_on, spare_off, maps.r, maps.v, maps.g,
+           maps.colsum, y0, y1, bool(sums), scratch.done if done is None else done)
+
+
+def add_column_sums(maps, y0, y1) -> None:
+    """Add rows [y0, y1) of R^theta to ``maps.colsum``, in row order (see :func:`front`)."""
+    _add_column_sums(maps.r, y0, y1, maps.colsum)
 
 
 def to_differences(stages: np.ndarray, leaky: bool) -> np.ndarray:
@@ -497,6 +701,26 @@ def to_differences(stages: np.ndarray, leaky: bool) -> np.ndarray:
     return out
 
 
+# --------------------------------------------------------------------------- gain control
+
+
+@kernel(error_model="numpy", **_jit)  # IEEE division, as NumPy's: no check, so it vectorises
+def _divide_by_pool(p, pool, semi, scale, out):
+    h, w = p.shape
+    for y in range(h):
+        py, qy, oy = p[y], pool[y], out[y]
+        for x in range(w):
+            oy[x] = py[x] * (scale / (semi + qy[x]))
+
+
+def contrast_gain_control(p, semi_saturation, sigma, scale):
+    """:func:`~asnn.retina.contrast_gain_control`, its division in one pass over the image."""
+    t = p.dtype.type
+    out = np.empty_like(p)
+    _divide_by_pool(p, retina.contrast_pool(p, sigma), t(semi_saturation), t(scale), out)
+    return out
+
+
 # --------------------------------------------------------------------------- attention, u(t)
 
 
@@ -507,19 +731,22 @@ def _box(blur, gamma):
     y0, y1, x0, x1 = h, 0, w, 0
     for y in range(h):
         row = blur[y]
-        first = -1
-        last = -1
-        for x in range(w):
-            if row[x] > gamma:
-                if first < 0:
-                    first = x
-                last = x
-        if first >= 0:
-            if y0 == h:
-                y0 = y
-            y1 = y + 1
-            x0 = min(x0, first)
-            x1 = max(x1, last + 1)
+        n = 0
+        for x in range(w):  # a count vectorises; the ends are then searched in the few rows set
+            n += row[x] > gamma
+        if n == 0:
+            continue
+        first = 0
+        while not row[first] > gamma:
+            first += 1
+        last = w - 1
+        while not row[last] > gamma:
+            last -= 1
+        if y0 == h:
+            y0 = y
+        y1 = y + 1
+        x0 = min(x0, first)
+        x1 = max(x1, last + 1)
     return y0, y1, x0, x1
 
 
@@ -541,6 +768,19 @@ def _v_prime(v, r, ks, signs, y0, y1, x0, x1, out):
 
 
 @kernel(**_jit)
+def _v_prime_halved(v, r, k, sign, out):
+    """The 2x2 area averages of ``V - sign R^k``, as OpenCV's INTER_AREA halves an image of
+    even size: ``((a + b) + (c + d)) / 4`` of each block."""
+    quarter = v.dtype.type(0.25)
+    for y in range(out.shape[0]):
+        v0, v1, r0, r1, o = v[2 * y], v[2 * y + 1], r[k, 2 * y], r[k, 2 * y + 1], out[y]
+        for x in range(out.shape[1]):
+            a, b = v0[2 * x] - sign * r0[2 * x], v0[2 * x + 1] - sign * r0[2 * x + 1]
+            c, d = v1[2 * x] - sign * r1[2 * x], v1[2 * x + 1] - sign * r1[2 * x + 1]
+            o[x] = ((a + b) + (c + d)) * quarter
+
+
+@kernel(**_jit)
 def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, y0, y1, x0, x1, mask, colsum, rows,
             cols):
     """M_a M_d in the window (``blur_v`` indexed from the window's origin) into ``mask``, the
@@ -548,10 +788,17 @@ def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, y0, y1, x0, x1, mask,
     for x in range(x0, x1):
         colsum[x] = 0.0
     count = 0
+    bits = mask.view(np.uint8)  # as bytes, and on slices from x0, the loop vectorises
     for y in range(y0, y1):
         bg, bv, gy, my = blur_g[y], blur_v[y - y0], g[y], mask[y]
-        for x in range(x0, x1):
-            my[x] = (bg[x] > gamma_a) & (bv[x - x0] > gamma_d)
+        a, b, m = bg[x0:x1], bv[:x1 - x0], bits[y, x0:x1]
+        n = 0
+        for x in range(x1 - x0):
+            set_ = np.uint8(a[x] > gamma_a) & np.uint8(b[x] > gamma_d)
+            m[x] = set_
+            n += set_
+        if n == 0:  # the column sums never hold -0.0: adding +0.0 would change nothing
+            continue
         if absolute:
             for x in range(x0, x1):
                 colsum[x] += abs(gy[x]) if my[x] else 0.0
@@ -579,7 +826,7 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
     blur's radius, or over the whole frame for a blur on a coarser grid). Returns
     ``(sum, number of attended pixels, blurred G, blurred V' or None, window)``; ``ws.mask``
     holds M_a M_d (zero outside the window), ``ws.rows[:count]``, ``ws.cols[:count]`` the
-    attended pixels in row-major order and ``ws.v_prime`` V' (inside the window).
+    attended pixels in row-major order.
     """
     h, w = g.shape
     blur_g = blur(g)
@@ -603,15 +850,21 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
         min(x1 + margin, w)
     if blur.step > 1:  # a blur on a coarser grid is only exact over the whole frame
         wy0, wy1, wx0, wx1 = 0, h, 0, w
-    if top_k:
-        _v_prime(v, r, ks, signs, wy0, wy1, wx0, wx1, ws.v_prime)
-        window = ws.v_prime[wy0:wy1, wx0:wx1]
+    if top_k == 1 and blur.step == 2 and h % 2 == 0 and w % 2 == 0:
+        # V' straight onto the coarse grid (the window is the whole frame)
+        coarse = np.empty((h // 2, w // 2), g.dtype)
+        _v_prime_halved(v, r, ks[0], signs[0], coarse)
+        blur_v = blur.from_coarse(coarse, (h, w))
     else:
-        window = v[wy0:wy1, wx0:wx1]
-    blur_v = blur(np.ascontiguousarray(window))
+        if top_k:
+            _v_prime(v, r, ks, signs, wy0, wy1, wx0, wx1, ws.v_prime)
+            window = ws.v_prime[wy0:wy1, wx0:wx1]
+        else:
+            window = v[wy0:wy1, wx0:wx1]
+        blur_v = blur(np.ascontiguousarray(window))
     inner = blur_v[y0 - wy0:, x0 - wx0:]
     total, count = _attend(blur_g, float(gamma_a), inner, float(gamma_d), g,
-                           bool(absolute), y0, y1, x0, x1, ws.mask, ws.colsum[0], ws.rows,
+                           bool(absolute), y0, y1, x0, x1, ws.mask, ws.attended_sums, ws.rows,
                            ws.cols)
     return total, count, blur_g, blur_v, (wy0, wy1, wx0, wx1)
 
@@ -621,13 +874,13 @@ class AttentionBlur:
     :func:`attention`)."""
 
     def __init__(self, sigma: float, size: int, normalised: bool, step: int = 1):
-        from . import retina
-
         self.radius = size // 2
         self.step = step
-        self._args = (sigma, size, normalised, step)
-        self._blur = retina.attention_blur
+        self._args = (sigma, size, normalised)
 
     def __call__(self, image: np.ndarray) -> np.ndarray:
-        return self._blur(image, *self._args)
+        return retina.attention_blur(image, *self._args, self.step)
 
+    def from_coarse(self, coarse: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """The blur of an image of this shape from its area average on the coarse grid."""
+        return retina.coarse_attention_blur(coarse, shape, *self._args, self.step)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterable, Iterator
 from typing import Protocol
 
 import numpy as np
@@ -10,7 +12,7 @@ from .model import ASNN
 from .params import preset
 from .response import Response
 
-__all__ = ["Detector", "MODELS", "make_detector"]
+__all__ = ["Detector", "MODELS", "available_cores", "make_detector", "responses"]
 
 MODELS = ("asnn", "lgmd1", "lgmd2")
 
@@ -46,3 +48,24 @@ def make_detector(model: str = "asnn", preset_name: str | None = None, **options
 
         return (baselines.LGMD1 if model == "lgmd1" else baselines.LGMD2)(**options)
     raise ValueError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
+
+
+def responses(detector: Detector, timed_frames: Iterable[tuple[float | None, np.ndarray]]
+              ) -> Iterator[Response]:
+    """The detector's responses to ``(t, frame)`` pairs, in order: its ``stream`` where it has
+    one (:meth:`asnn.model.ASNN.stream`, which uses the model's threads), else ``step`` for
+    each frame."""
+    stream = getattr(detector, "stream", None)
+    if stream is not None:
+        yield from stream(timed_frames)
+        return
+    for t, frame in timed_frames:
+        yield detector.step(frame, t)
+
+
+def available_cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)

@@ -8,6 +8,7 @@ import numpy as np
 __all__ = ["FrameError", "to_luminance"]
 
 _LUMA = np.array([0.114, 0.587, 0.299])  # B, G, R weights of OpenCV's BGR -> gray
+_LEVELS = np.arange(256) / 255.0  # uint8 value -> luminance: one table look-up per pixel
 
 
 class FrameError(ValueError):
@@ -15,8 +16,8 @@ class FrameError(ValueError):
 
 
 def to_luminance(frame: np.ndarray, min_side: int,
-                 stream_shape: tuple[int, int] | None = None) -> np.ndarray:
-    """Validate a frame and return its luminance as float64 on the [0, 1] scale.
+                 stream_shape: tuple[int, int] | None = None, dtype=np.float64) -> np.ndarray:
+    """Validate a frame and return its luminance on the [0, 1] scale.
 
     Parameters
     ----------
@@ -28,6 +29,8 @@ def to_luminance(frame: np.ndarray, min_side: int,
         Smallest accepted height and width (the largest kernel of the model).
     stream_shape : (H, W), optional
         The stream's frame size, which the frame must have.
+    dtype : float dtype
+        Of the result: the float64 luminance rounded to it.
 
     Raises
     ------
@@ -49,7 +52,7 @@ def to_luminance(frame: np.ndarray, min_side: int,
         raise FrameError(f"frame {w}x{h} is smaller than the model's {min_side}x{min_side} kernels")
     if frame.dtype == np.uint8:
         gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
-        return gray.astype(np.float64) / 255.0
+        return cv2.LUT(gray, _LEVELS.astype(dtype, copy=False))
     if frame.dtype.kind != "f":
         raise FrameError(f"frame dtype must be uint8 or float, got {frame.dtype}")
     if not np.isfinite(frame).all():
@@ -58,4 +61,5 @@ def to_luminance(frame: np.ndarray, min_side: int,
     if lo < 0.0 or hi > 1.0:
         raise FrameError(f"float frames must lie in [0, 1], got values in [{lo:g}, {hi:g}]")
     gray = frame.astype(np.float64)
-    return gray @ _LUMA if gray.ndim == 3 else gray
+    gray = gray @ _LUMA if gray.ndim == 3 else gray
+    return gray.astype(dtype, copy=False)

@@ -6,18 +6,26 @@ functions of :mod:`asnn.retina` stage by stage on float64 arrays: it is the defi
 expensive stages with the fused kernels of :mod:`asnn._fast`, in the preset's ``precision``;
 the cheap stages (photoreceptors, attention blurs, output, targets) call the same retina
 functions. ``tests/test_equivalence.py`` keeps the two together.
+
+A step has three parts: taking the frame (luminance, repeats, photoreceptors), the fused pass
+(everything that advances the retina's state) and finishing (attention, objects, tracking,
+output). ``ASNN(params, threads=N)`` computes the fused pass in bands on N threads, and
+``ASNN.stream`` finishes each frame while the next one's pass runs (:mod:`asnn._parallel`); the
+responses are those of ``step``, bit for bit.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import weakref
 from collections import deque
+from collections.abc import Iterable, Iterator
 
 import cv2
 import numpy as np
 
-from . import _fast, retina
+from . import _fast, _parallel, retina
 from .frames import FrameError, to_luminance
 from .looming import region_expansion
 from .params import ASNNParams, preset
@@ -44,6 +52,15 @@ class ASNN:
         Use the fused kernels of :mod:`asnn._fast` in ``params.precision`` (default), or the
         straightforward float64 form of :mod:`asnn.retina` (``False``; for comparisons). Kernel
         sizes other than 5x5 always use the straightforward form.
+    threads : int
+        Threads the optimised form uses for one stream (default 1: only the calling one). With
+        more, each frame's fused pass is computed in bands of rows, one per thread, and
+        :meth:`stream` finishes each frame (attention, objects, tracking, output) on the calling
+        thread while the worker threads compute the next frame's pass. The results are the same
+        whatever the number: only the time changes. The worker threads belong to the model
+        (:meth:`close`, or a ``with`` block); the model is still used from one thread at a
+        time. A process that steps many models at once on threads of its own (the service's
+        worker) leaves this at 1.
 
     Attributes
     ----------
@@ -57,7 +74,8 @@ class ASNN:
     stages_on, stages_off : ndarray (n_s + 2, H, W)
         Leaky-integrator cascades of the ON and OFF bipolar channels (z_0..z_{n_s+1}), in
         :attr:`dtype`; the optimised step keeps them in difference form
-        (:func:`asnn._fast.to_differences`).
+        (:func:`asnn._fast.to_differences`). With ``threads`` > 1 the rows where two threads'
+        bands meet live in a second pair of arrays during a stream.
     dtype : numpy dtype
         Floating-point type of the state and the computation.
     spike_window : deque of int
@@ -80,7 +98,7 @@ class ASNN:
     """
 
     def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,
-                 optimised: bool = True):
+                 optimised: bool = True, threads: int = 1):
         self.params = preset(params) if isinstance(params, str) else params
         self.record_maps = record_maps
         p = self.params
@@ -95,19 +113,47 @@ class ASNN:
                                          p.kernel_size, p.kernel_extent) for k in range(half)]
         self._cs = retina.center_surround_kernel(p.cs_sigma, p.cs_wavelength, p.cs_phase,
                                                  p.kernel_size, p.kernel_extent)
+        if threads < 1:
+            raise ValueError(f"threads must be at least 1, got {threads}")
+        self.threads = int(threads) if self.optimised else 1
+        self._workers: list[_parallel.Worker] = []
         if self.optimised:
             t = self.dtype
             env, scales = _fast.dog_factors(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
                                             p.dog_normalisation)
-            self._env, self._scales = env.astype(t), scales.astype(t)
-            self._factors = _fast.gabor_factors(p.ds_sigma, p.ds_wavelength, p.kernel_size,
-                                                p.kernel_extent).astype(t)
-            self._cs_classes = _fast.cs_classes(self._cs).astype(t)
-            self._v_weights = np.array([p.v_on, p.v_off], t)
-            self._a_weights = np.array([p.w1_on, -p.w2_off, p.w1_off, -p.w2_on], t)
+            self._coefficients = _fast.FrontCoefficients.make(
+                env.astype(t), scales.astype(t), p.dt / p.tau, p.c, p.decay, p.leaky_input,
+                p.gain, p.n_fast, p.n_slow, p.target_polarity == "light",
+                _fast.gabor_factors(p.ds_sigma, p.ds_wavelength, p.kernel_size,
+                                    p.kernel_extent).astype(t),
+                np.array([p.v_on, p.v_off], t), _fast.cs_classes(self._cs).astype(t),
+                np.array([p.w1_on, -p.w2_off, p.w1_off, -p.w2_on], t), p.grouping)
             self._blur = _fast.AttentionBlur(p.attention_sigma, p.attention_size,
                                              p.attention_normalised, p.attention_step)
         self.reset()
+
+    # ------------------------------------------------------------------ threads
+
+    def _start_workers(self) -> None:
+        """The worker threads of ``threads`` > 1, started with the first frame that needs them
+        and stopped when the model is closed or collected."""
+        self._workers = [_parallel.Worker(f"asnn-model-{k}") for k in range(1, self.threads)]
+        self._banded = _parallel.BandedFront(self._coefficients, self._workers)
+        self._maps = []  # the front's outputs, three frames' worth (see stream)
+        self._other = None  # a second pair of arrays for the cascades' rows (see _parallel)
+        self._finalizer = weakref.finalize(self, _close_workers, self._workers)
+
+    def close(self) -> None:
+        """Stop the model's worker threads (``threads`` > 1); a later frame starts new ones."""
+        if self._workers:
+            self._finalizer()
+            self._workers = []
+
+    def __enter__(self) -> "ASNN":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
     # ------------------------------------------------------------------ state
 
@@ -132,11 +178,15 @@ class ASNN:
     # ------------------------------------------------------------------ step
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
-        lum = to_luminance(frame, self._min_side, self.shape)
+        width = self.params.max_width
+        shrink = (width is not None and isinstance(frame, np.ndarray) and frame.ndim >= 2
+                  and frame.shape[1] > width)
+        # a frame to shrink is converted in float64 (the scale its area averages are taken at)
+        lum = to_luminance(frame, self._min_side, self.shape,
+                           np.float64 if shrink else self.dtype)
         if self.shape is None:
             self.shape = lum.shape
-        width = self.params.max_width
-        if width is not None and lum.shape[1] > width:
+        if shrink:
             # the retina's kernels have a fixed size in pixels: a large frame is seen at the
             # scale they were made for (targets are reported in the frame's own pixels)
             h, w = lum.shape
@@ -165,6 +215,61 @@ class ASNN:
         FrameError
             If the frame is not an image the model accepts, or its size differs from the stream's.
         """
+        taken = self._take(frame, t)
+        if taken.photo is not None:
+            self._front(taken)
+        return self._finish(taken)
+
+    def stream(self, frames: Iterable[tuple[float | None, np.ndarray]]) -> Iterator[Response]:
+        """The responses to ``(t, frame)`` pairs, in order: ``step(frame, t)`` for each.
+
+        With ``threads`` > 1, frame n is finished (attention, objects, tracking, output) on the
+        calling thread while the worker threads compute their bands of frame n + 1's fused
+        pass, and response n is yielded while they still do: it comes once frame n + 1 has been
+        taken. An exception raised by ``frames``, or by a frame (:class:`FrameError`), is
+        raised after the responses to the frames before it. While the stream runs, the model's
+        attributes may already describe the next frame.
+        """
+        if self.threads == 1:
+            for t, frame in frames:
+                yield self.step(frame, t)
+            return
+        if not self._workers:
+            self._start_workers()
+        iterator = iter(frames)
+        # Taken frames not finished yet, oldest first: a frame is finished while the workers
+        # compute the next frame's pass and the one after it is taken (two passes in flight:
+        # a worker never waits for this thread to join one).
+        pending: deque[_Frame] = deque()
+        try:
+            while True:
+                try:
+                    t, frame = next(iterator)
+                    taken = self._take(frame, t)
+                except StopIteration:
+                    break
+                except Exception:  # the responses before it first
+                    while pending:
+                        yield self._finish(self._joined(pending.popleft()))
+                    raise
+                if taken.photo is not None:  # the workers' bands queue behind the previous ones
+                    self._start(taken, overlapped=True)
+                if len(pending) == 2:
+                    yield self._finish(pending.popleft())  # joined before
+                if pending:
+                    self._joined(pending[0])  # its maps are complete, and the cascades it wrote
+                if taken.photo is not None:
+                    self._banded.run_own(taken.flight)
+                pending.append(taken)
+            while pending:
+                yield self._finish(self._joined(pending.popleft()))
+        finally:
+            self._banded.abandon()  # an abandoned stream: no worker goes on behind the caller
+            if self._other is not None:
+                self._banded.settle((self.stages_on, self.stages_off), self._other)
+
+    def _take(self, frame: np.ndarray, t: float | None) -> "_Frame":
+        """The first part of a step: the frame's luminance, whether it is new, and P."""
         lum = self._luminance(frame)
         p = self.params
         index = self.index
@@ -175,20 +280,64 @@ class ASNN:
             self.stages_on = np.zeros((p.n_slow + 2, *lum.shape), self.dtype)
             self.stages_off = np.zeros_like(self.stages_on)
             self._stamp = stamp
-            self._last = Response.silent(index)
-            return self._last
+            return _Frame(index)
         self.repeated = p.skip_repeats and self._is_repeat(lum)
         if self.repeated:
-            self._last = dataclasses.replace(self._last, index=index)
-            return self._last
+            return _Frame(index, repeat=True)
         elapsed = stamp - self._stamp
         if not 0.0 < elapsed <= _MAX_ELAPSED:  # no usable timestamps: the nominal frame period
             elapsed = p.dt
         self._stamp = stamp
-        if self.optimised:
-            self._last = self._respond_optimised(index, lum, elapsed)
+        if not self.optimised:
+            return _Frame(index, lum=lum, elapsed=elapsed)
+        photo = self._photoreceptors(lum)
+        previous, self.previous = self.previous, lum
+        return _Frame(index, lum=lum, elapsed=elapsed, previous=previous, photo=photo)
+
+    def _front(self, frame: "_Frame") -> None:
+        """The fused pass of a frame :meth:`_take` took (optimised form): its maps."""
+        if self.threads == 1:
+            frame.maps = _fast.workspace(frame.lum.shape, self.dtype).maps
+            _fast.front(frame.photo, (self.stages_on, self.stages_off), self._coefficients,
+                        frame.maps, _fast.scratch(frame.lum.shape[1], self.dtype))
+            return
+        self._start(frame)
+        try:
+            self._banded.run_own(frame.flight)
+        finally:
+            self._joined(frame)
+            self._banded.settle((self.stages_on, self.stages_off), self._other)
+
+    def _start(self, frame: "_Frame", overlapped: bool = False) -> None:
+        """Start a frame's banded pass (``threads`` > 1): it advances the cascades from one pair
+        of arrays into the other, which become the model's."""
+        if not self._workers:
+            self._start_workers()
+        shape = frame.lum.shape
+        if not self._maps or self._maps[0].shape != shape:
+            self._maps = [_fast.FrontMaps(shape, self.dtype) for _ in range(3)]
+        if self._other is None or self._other[0].shape != self.stages_on.shape:
+            self._other = (np.zeros_like(self.stages_on), np.zeros_like(self.stages_off))
+        frame.maps = self._maps[frame.index % 3]  # the others: two frames not finished yet
+        frame.flight = self._banded.start(frame.photo, (self.stages_on, self.stages_off),
+                                          self._other, frame.maps, overlapped)
+
+    def _joined(self, frame: "_Frame") -> "_Frame":
+        """The frame, once the workers' bands of its pass are done (``threads`` > 1)."""
+        if frame.flight is not None:
+            self._banded.join(frame.flight)
+            frame.flight = None
+        return frame
+
+    def _finish(self, frame: "_Frame") -> Response:
+        """The last part of a step: the response to a frame whose maps are complete."""
+        if frame.lum is None:
+            self._last = (dataclasses.replace(self._last, index=frame.index) if frame.repeat
+                          else Response.silent(frame.index))
+        elif self.optimised:
+            self._last = self._respond_optimised(frame)
         else:
-            self._last = self._respond(index, lum, elapsed)
+            self._last = self._respond(frame.index, frame.lum, frame.elapsed)
         return self._last
 
     def _is_repeat(self, lum: np.ndarray) -> bool:
@@ -225,24 +374,21 @@ class ASNN:
         if p.n_p:
             self.history.appendleft(photo)
         if p.contrast_gain is not None:
-            photo = retina.contrast_gain_control(photo, p.contrast_gain, p.contrast_pool,
-                                                 p.contrast_scale)
+            gain_control = (_fast if self.optimised else retina).contrast_gain_control
+            photo = gain_control(photo, p.contrast_gain, p.contrast_pool, p.contrast_scale)
         return photo
 
-    def _respond_optimised(self, index: int, lum: np.ndarray, elapsed: float) -> Response:
-        """:meth:`_respond` with the fused kernels of :mod:`asnn._fast`."""
+    def _respond_optimised(self, frame: "_Frame") -> Response:
+        """:meth:`_respond` with the fused kernels of :mod:`asnn._fast`, from the fused pass's
+        maps (:meth:`_front`) on."""
         p = self.params
+        index, lum, elapsed, previous, photo = (frame.index, frame.lum, frame.elapsed,
+                                                frame.previous, frame.photo)
         ws = _fast.workspace(lum.shape, self.dtype)
-        photo = self._photoreceptors(lum)
-        previous, self.previous = self.previous, lum
-
-        r, v, g, sums = _fast.front(
-            photo, ws, self._env, self._scales, self.stages_on, self.stages_off, p.dt / p.tau, p.c,
-            p.decay, p.leaky_input, p.gain, p.n_fast, p.n_slow, p.target_polarity == "light",
-            self._factors, self._v_weights, self._cs_classes, self._a_weights, p.grouping)
         # r: R^theta for k = 0..3 (R^{theta + pi} = -R^theta); v = V; g = G after grouping
+        r, v, g = frame.maps.r, frame.maps.v, frame.maps.g
         total, count, blur_g, blur_v, _ = _fast.attention(
-            g, r, v, sums, ws, self._blur, p.gamma_a, p.gamma_d, p.top_k, p.u_abs,
+            g, r, v, frame.maps.sums(), ws, self._blur, p.gamma_a, p.gamma_d, p.top_k, p.u_abs,
             full=self.record_maps)
         attended = ws.mask
 
@@ -373,6 +519,25 @@ class ASNN:
                           approaching=coming[k])
                    for k, tr in enumerate(tracks) if coming[k] or not p.approach_gate]
         return total, targets
+
+
+@dataclasses.dataclass(slots=True)
+class _Frame:
+    """A frame between the parts of :meth:`ASNN.step`: what the later ones need."""
+
+    index: int
+    repeat: bool = False  # a repeat of the previous frame (no lum: no new response either)
+    lum: np.ndarray | None = None
+    elapsed: float = 0.0
+    previous: np.ndarray | None = None
+    photo: np.ndarray | None = None
+    maps: _fast.FrontMaps | None = None
+    flight: "_parallel._Pass | None" = None  # its banded pass, until joined
+
+
+def _close_workers(workers: list) -> None:
+    for worker in workers:
+        worker.close()
 
 
 def compile_kernels() -> None:

@@ -24,6 +24,7 @@ __all__ = [
     "photoreceptor_weights",
     "photoreceptor",
     "contrast_gain_control",
+    "contrast_pool",
     "dog_kernel",
     "dog_norms",
     "bipolar",
@@ -36,6 +37,7 @@ __all__ = [
     "approach_map",
     "group",
     "attention_blur",
+    "coarse_attention_blur",
     "approach_attention",
     "direction_attention",
     "membrane_potential",
@@ -124,12 +126,17 @@ def contrast_gain_control(p: np.ndarray, semi_saturation: float, sigma: float,
     .. [3] M. Carandini, D. J. Heeger, "Normalization as a canonical neural computation",
        Nat. Rev. Neurosci. 13, 2012, pp. 51-62.
     """
+    return p * (scale / (semi_saturation + contrast_pool(p, sigma)))
+
+
+def contrast_pool(p: np.ndarray, sigma: float) -> np.ndarray:
+    """The pooled magnitude ``g_sigma * |P|`` of :func:`contrast_gain_control`, on its coarse
+    grid and bilinearly interpolated back."""
     h, w = p.shape
     coarse = cv2.resize(np.abs(p), (max(w // _POOL_STEP, 1), max(h // _POOL_STEP, 1)),
                         interpolation=cv2.INTER_AREA)
     coarse = cv2.GaussianBlur(coarse, (0, 0), sigma / _POOL_STEP, borderType=_BORDER)
-    pool = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_LINEAR)
-    return p * (scale / (semi_saturation + pool))
+    return cv2.resize(coarse, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
 # --------------------------------------------------------------------------- bipolar cells
@@ -349,8 +356,7 @@ def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
     if step > 1:
         h, w = image.shape
         coarse = cv2.resize(image, (-(-w // step), -(-h // step)), interpolation=cv2.INTER_AREA)
-        blurred = attention_blur(coarse, sigma / step, (size // step) | 1, normalised)
-        return cv2.resize(blurred, (w, h), interpolation=cv2.INTER_LINEAR)
+        return coarse_attention_blur(coarse, (h, w), sigma, size, normalised, step)
     if normalised:
         return cv2.GaussianBlur(image, (size, size), sigma, borderType=_BORDER)
     r = size // 2
@@ -358,6 +364,14 @@ def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
     k = np.exp(-axis**2 / (2 * sigma**2)) / (math.sqrt(2 * math.pi) * sigma)
     depth = cv2.CV_32F if image.dtype == np.float32 else cv2.CV_64F
     return cv2.sepFilter2D(image, depth, k, k, borderType=_BORDER)
+
+
+def coarse_attention_blur(coarse: np.ndarray, shape: tuple[int, int], sigma: float, size: int,
+                          normalised: bool, step: int) -> np.ndarray:
+    """:func:`attention_blur` with ``step`` > 1 of an image of this shape, given its area
+    average on the coarse grid."""
+    blurred = attention_blur(coarse, sigma / step, (size // step) | 1, normalised)
+    return cv2.resize(blurred, shape[::-1], interpolation=cv2.INTER_LINEAR)
 
 
 def approach_attention(g: np.ndarray, sigma: float, size: int, normalised: bool,

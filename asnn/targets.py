@@ -363,18 +363,22 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
     ObjectRegions
     """
     rows, cols = np.nonzero(mask) if points is None else points
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.view(np.uint8),
+    # the components of the set pixels' bounding box, from even coordinates: OpenCV labels
+    # 2x2 blocks in raster order, so on that grid the labels come in the whole mask's order
+    oy, ox = (int(rows[0]) & ~1, int(cols.min()) & ~1) if len(rows) else (0, 0)
+    window = mask[oy:int(rows[-1]) + 1, ox:int(cols.max()) + 1] if len(rows) else mask
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(window.view(np.uint8),
                                                                connectivity=8,
                                                                ltype=cv2.CV_32S)
     keep = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_pixels)
     n = len(keep)
     lut = np.full(count, -1, np.int64)  # component label -> kept region, or -1
     lut[keep + 1] = np.arange(n)
-    lab = lut[labels[rows, cols]]
+    lab = lut[labels[rows - oy, cols - ox]]
     inside = lab >= 0
     rows, cols, lab = rows[inside], cols[inside], lab[inside]
     kept = stats[keep + 1]
-    x0, y0 = kept[:, cv2.CC_STAT_LEFT], kept[:, cv2.CC_STAT_TOP]
+    x0, y0 = kept[:, cv2.CC_STAT_LEFT] + ox, kept[:, cv2.CC_STAT_TOP] + oy
     boxes = np.stack([x0, y0, x0 + kept[:, cv2.CC_STAT_WIDTH],
                       y0 + kept[:, cv2.CC_STAT_HEIGHT]], axis=1)
     pixels = kept[:, cv2.CC_STAT_AREA]

@@ -115,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
         m = report["machine"]
         print(f"# asnn bench --detect: {m['cpu']}, {m['cores']} logical cores; scene "
               f"{report['scene']}, preset {report['preset']}; ms per frame; asnn detect as its "
-              "own process, start-up excluded; stages of one loop in this process; baseline "
+              "own process, start-up excluded; stages of one loop in this process; model "
+              "stream: the model alone with a thread per core; baseline "
               f"{report['baseline']}")
         print(bench_detect.format_table(report))
     elif args.handover:

@@ -3,20 +3,23 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import sys
-from contextlib import ExitStack
+from collections import deque
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import cv2
 
 from asnn import FrameError
-from asnn.detectors import MODELS, make_detector
+from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.params import preset_names
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import SourceError, open_source
 from asnn.io.visualize import annotate_frame, plot_responses
+from cli.arguments import count
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,6 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jsonl", metavar="PATH|-", help="write one JSON object per frame ('-': stdout)")
     p.add_argument("--annotate", metavar="OUT.mp4", help="write the input with overlays")
     p.add_argument("--plot", metavar="OUT.png", help="plot u(t) and the spike rate")
+    p.add_argument("--threads", type=count, default=None, metavar="N",
+                   help="threads the ASNN model uses for the stream, besides decoding and "
+                        "output (default: the cores available; the results are the same "
+                        "whatever the number)")
     p.add_argument("--mcap", metavar="OUT.mcap",
                    help="write the frames, targets, warnings and response numbers as an MCAP "
                         "for Foxglove (docs/foxglove.md; the 'ros' extra)")
@@ -58,17 +65,58 @@ READ_AHEAD = 8  # decoded frames waiting for the model
 WRITE_BEHIND = 4  # responses waiting to be written (with --annotate each holds its maps)
 
 
+class _WriteNow:
+    """:class:`~asnn.io.pipeline.WriteBehind` on the calling thread."""
+
+    def __init__(self, write):
+        self.put = write
+
+    def close(self, raise_error: bool = True) -> None:
+        pass
+
+
+@contextmanager
+def _settings(busy: bool):
+    """The process's settings for the loop, restored after it (``run`` may be called in-process).
+
+    The loop makes objects by the thousand, and the garbage collector's full passes would go over
+    the hundred thousand that the imports made (numba, OpenCV) every time: they are kept out.
+    With a model thread for every core (``busy``), OpenCV's own threads would only take turns
+    with them (its results do not depend on how it splits its work).
+    """
+    threads = cv2.getNumThreads()
+    if busy:
+        cv2.setNumThreads(1)
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+        cv2.setNumThreads(threads)
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode ahead and write behind on threads of their own while the model steps on this one
-    (:mod:`asnn.io.pipeline`): the output is that of one loop, in frame order."""
+    (:mod:`asnn.io.pipeline`), or, when the model has threads of its own for every core,
+    decode and write between its steps (:meth:`asnn.model.ASNN.stream`): the output is that of
+    one loop, in frame order."""
+    options = {}
+    model_threads = 1
+    if args.model == "asnn":
+        model_threads = options["threads"] = args.threads or available_cores()
+        if args.annotate:
+            options["record_maps"] = True
+    # With a model thread for every core, more threads would only take turns with them, and
+    # the machine's switching between threads costs more than decoding or writing on this one.
+    busy = model_threads >= available_cores() > 1
     try:
-        source = open_source(args.video, topic=args.topic)
+        source = open_source(args.video, topic=args.topic, decoder_threads=1 if busy else None)
     except SourceError as exc:
         return _fail(str(exc))
-    detector = make_detector(args.model, args.preset,
-                             **({"record_maps": True} if args.annotate and args.model == "asnn" else {}))
+    detector = make_detector(args.model, args.preset, **options)
     records = []
     with ExitStack() as stack:
+        stack.enter_context(_settings(busy))
         jsonl = None
         if args.jsonl == "-":
             jsonl = sys.stdout
@@ -107,23 +155,34 @@ def run(args: argparse.Namespace) -> int:
                 video[0].write(annotate_frame(frame, response))
             progress.advance()
 
-        output = WriteBehind(write, depth=WRITE_BEHIND)
+        output = _WriteNow(write) if busy else WriteBehind(write, depth=WRITE_BEHIND)
         failure = None
         index = 0
+        taken = deque()  # the frames the detector has taken and not answered yet
+
+        def frames():
+            decoded = source.timed_frames()
+            for t, frame in decoded if busy else read_ahead(decoded, depth=READ_AHEAD):
+                taken.append((t, frame))
+                yield t, frame
+
+        answers = responses(detector, frames())
         try:
-            for t, frame in read_ahead(source.timed_frames(), depth=READ_AHEAD):
-                try:
-                    response = detector.step(frame, t)
-                except FrameError as exc:  # e.g. a bag whose camera changed its resolution
-                    failure = f"{args.video}: frame {index}: {exc}"
-                    break
+            for response in answers:
+                t, frame = taken.popleft()
                 output.put((index, t, frame, response))
                 index += 1
+        except FrameError as exc:  # e.g. a bag whose camera changed its resolution
+            failure = f"{args.video}: frame {index}: {exc}"
         except SourceError as exc:  # a cut or corrupt bag: what was read is written
             failure = f"{exc} (results written for the {index} frames before)"
         except _OutputError as exc:
+            answers.close()
             output.close(raise_error=False)
             return _fail(str(exc))
+        finally:
+            answers.close()
+            getattr(detector, "close", lambda: None)()
         try:
             output.close()
         except _OutputError as exc:

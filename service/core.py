@@ -93,7 +93,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from asnn import FrameError
-from asnn.detectors import make_detector
+from asnn.detectors import available_cores, make_detector
 from asnn.params import DEFAULT_PRESET
 
 from . import keys
@@ -123,10 +123,7 @@ def default_worker_id() -> str:
 
 def default_threads() -> int:
     """A worker's processing threads by default: the cores this process may run on."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
+    return available_cores()
 
 
 @dataclass

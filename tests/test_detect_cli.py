@@ -83,15 +83,22 @@ def test_missing_or_undecodable_file_exits_2_with_one_line(tmp_path, content):
     assert len(proc.stderr.strip().splitlines()) == 1 and str(path) in proc.stderr
 
 
-def test_output_equals_one_loop_over_the_frames(looming_video, tmp_path):
-    """Decoding ahead and writing behind on their own threads changes nothing: the records are
-    those of a plain loop over the same frames, in order."""
+@pytest.mark.parametrize("threads", [None, "1", "2", "3"])
+def test_output_equals_one_loop_over_the_frames(looming_video, tmp_path, threads):
+    """The model's threads, and decoding ahead and writing behind on threads of their own (with
+    fewer model threads than cores), change nothing: the records are those of a plain loop over
+    the same frames, in order."""
+    import cv2
+
     from asnn.evaluation.runs import run_detector
     from asnn.io.sources import open_source
 
     path, _ = looming_video
     out = tmp_path / "out.jsonl"
-    assert main(["detect", str(path), "--jsonl", str(out)]) == 0
+    cv_threads = cv2.getNumThreads()
+    assert main(["detect", str(path), "--jsonl", str(out)]
+                + (["--threads", threads] if threads else [])) == 0
+    assert cv2.getNumThreads() == cv_threads  # the process's settings are restored
     got = [json.loads(line) for line in out.read_text().splitlines()]
     expected = json.loads(json.dumps(run_detector(open_source(str(path)).timed_frames())))
     assert got == expected
@@ -153,10 +160,11 @@ def test_write_behind_writes_in_order_and_reports_a_failed_write():
         out.close()
 
 
+@pytest.mark.parametrize("threads", ["1", "2"])
 def test_an_annotated_video_that_cannot_be_written_is_one_error_line(looming_video, tmp_path,
-                                                                     capsys):
+                                                                     capsys, threads):
     path, _ = looming_video
     target = tmp_path / "missing-dir" / "ann.mp4"
-    assert main(["detect", str(path), "--annotate", str(target)]) == 2
+    assert main(["detect", str(path), "--annotate", str(target), "--threads", threads]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"asnn detect: cannot write {target}"]

@@ -111,13 +111,15 @@ def test_front_matches_the_retina_stages(dtype, grouping, swap):
     a_weights = np.array([weights[0], -weights[1], weights[2], -weights[3]], dtype)
     fast_state = np.zeros((2, 6, h, w), dtype)
     slow_state = np.zeros((2, 6, h, w))
-    ws = _fast.workspace((h, w), dtype)
+    coefficients = _fast.FrontCoefficients.make(
+        env.astype(dtype), scales.astype(dtype), 0.01, 60.0, 60.0, True, 5.0, 2, 4, swap, gk,
+        np.array([1.0, 0.5], dtype), _fast.cs_classes(cs).astype(dtype), a_weights, grouping)
+    maps = _fast.FrontMaps((h, w), dtype)
     for _ in range(2):
         p = rng.standard_normal((h, w)) * (rng.random((h, w)) < 0.05)  # sparse: G > 0
-        r, v, g, sums = _fast.front(p.astype(dtype), ws, env.astype(dtype), scales.astype(dtype),
-                                    fast_state[0], fast_state[1], 0.01, 60.0, 60.0, True, 5.0, 2, 4,
-                                    swap, gk, np.array([1.0, 0.5], dtype),
-                                    _fast.cs_classes(cs).astype(dtype), a_weights, grouping)
+        _fast.front(p.astype(dtype), (fast_state[0], fast_state[1]), coefficients, maps,
+                    _fast.Scratch(w, dtype))
+        r, v, g, sums = maps.r, maps.v, maps.g, maps.sums()
         on, off = retina.bipolar(p, dog)
         if swap:
             on, off = off, on
@@ -186,3 +188,63 @@ def test_dbscan_matches_brute_force(eps, min_samples):
             np.testing.assert_array_equal(labels, want[:len(rows)], err_msg=f"{density} {seed}")
             if seed is not None:
                 assert seed_core == (want[-1] >= 0) and seed_label == want[-1]
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("grouping,swap", [(True, False), (False, True)])
+def test_bands_of_rows_compute_the_pass_of_one(dtype, grouping, swap):
+    """Bands computed one by one give exactly the maps, column sums and cascades of the pass
+    over the whole frame, wherever they start, when the rows that two bands read are
+    advanced into a second pair of arrays."""
+    rng = np.random.default_rng(7)
+    h, w = 41, 37
+    env, scales = _fast.dog_factors(5.0, 1.0, 3.0, 5, "2d")
+    cs = retina.center_surround_kernel(0.3, 4.0, 0.0, 5)
+    coefficients = _fast.FrontCoefficients.make(
+        env.astype(dtype), scales.astype(dtype), 0.01, 60.0, 60.0, True, 5.0, 2, 4, swap,
+        _fast.gabor_factors(0.3, 4.0, 5).astype(dtype), np.array([1.0, 0.5], dtype),
+        _fast.cs_classes(cs).astype(dtype), np.array([1.0, -0.4, 0.5, 0.3], dtype), grouping)
+    scratch = _fast.Scratch(w, dtype)
+    whole = (np.zeros((6, h, w), dtype), np.zeros((6, h, w), dtype))
+    halo = coefficients.halo
+    for borders in ([0, 8, 41], [0, 33, 41], [0, 13, 14 + 8, 41], [0, 20, 21, 41]):
+        state = tuple(s.copy() for s in whole)
+        other = tuple(np.full_like(s, np.nan) for s in state)  # unread where not written
+        read = np.zeros(h, np.int8)
+        write = read.copy()
+        for m in borders[1:-1]:
+            write[m - halo:m + halo] = 1
+        p = (rng.standard_normal((h, w)) * (rng.random((h, w)) < 0.1)).astype(dtype)
+        want, got = _fast.FrontMaps((h, w), dtype), _fast.FrontMaps((h, w), dtype)
+        _fast.front(p, whole, coefficients, want, scratch)
+        for i in reversed(range(len(borders) - 1)):  # any order: the bands are independent
+            _fast.front(p, state, coefficients, got, scratch, (borders[i], borders[i + 1]),
+                        other, (read, write), sums=i == 0)
+        for i in range(1, len(borders) - 1):
+            _fast.add_column_sums(got, borders[i], borders[i + 1])
+        for name in ("r", "v", "g", "colsum"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(want, name),
+                                          err_msg=f"{name} {borders}")
+        for a, b, c in zip(state, other, whole):
+            np.testing.assert_array_equal(np.where(write[:, None] == 1, b, a), c,
+                                          err_msg=f"cascades {borders}")
+        assert np.count_nonzero(want.g) > 20
+    with pytest.raises(ValueError, match="versions"):
+        _fast.front(p, state, coefficients, got, scratch, (0, 20))
+
+
+def test_fused_gain_control_and_halved_v_prime_are_the_straightforward_ones():
+    import cv2
+
+    rng = np.random.default_rng(2)
+    for dtype in (np.float32, np.float64):
+        p = (rng.standard_normal((60, 80)) * 0.02).astype(dtype)
+        np.testing.assert_array_equal(_fast.contrast_gain_control(p, 0.005, 8.0, 0.05),
+                                      retina.contrast_gain_control(p, 0.005, 8.0, 0.05))
+    r = rng.standard_normal((4, 60, 80)).astype(np.float32)
+    v = np.abs(r).max(axis=0)
+    for k, sign in ((0, 1.0), (3, -1.0)):
+        coarse = np.empty((30, 40), np.float32)
+        _fast._v_prime_halved(v, r, k, np.float32(sign), coarse)
+        want = cv2.resize(v - np.float32(sign) * r[k], (40, 30), interpolation=cv2.INTER_AREA)
+        np.testing.assert_array_equal(coarse, want)

@@ -113,3 +113,35 @@ def test_tracker_rejects_a_smoothing_outside_its_range():
     with pytest.raises(ValueError):
         TargetTracker(box_weight=1.5)
     assert math.isfinite(TargetTracker(smoothing=1.0).smoothing)
+
+
+def test_objects_are_those_of_the_components_of_the_whole_mask():
+    """extract_objects labels only the attended pixels' bounding box (from even coordinates):
+    the regions, and their order, are those of the whole mask's components."""
+    import cv2
+
+    from asnn.targets import extract_objects
+
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        h, w = rng.integers(31, 120, 2)
+        mask = np.zeros((h, w), bool)
+        y0, x0 = rng.integers(0, h - 4), rng.integers(0, w - 4)
+        y1, x1 = rng.integers(y0 + 1, h + 1), rng.integers(x0 + 1, w + 1)
+        mask[y0:y1, x0:x1] = rng.random((y1 - y0, x1 - x0)) < rng.random()
+        if not mask.any():
+            continue
+        g = rng.random((h, w)).astype(np.float32)
+        regions = extract_objects(mask, g, lambda r, c: (r * 0.0, c * 0.0), 3, True)
+        count, labels, stats, _ = cv2.connectedComponentsWithStats(
+            mask.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+        kept = stats[1:][stats[1:, cv2.CC_STAT_AREA] >= 3]
+        np.testing.assert_array_equal(regions.pixels, kept[:, cv2.CC_STAT_AREA])
+        np.testing.assert_array_equal(regions.boxes[:, 0], kept[:, cv2.CC_STAT_LEFT])
+        np.testing.assert_array_equal(regions.boxes[:, 1], kept[:, cv2.CC_STAT_TOP])
+        rows, cols = np.nonzero(mask)
+        lab = labels[rows, cols]
+        for k, label in enumerate(np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= 3) + 1):
+            inside = lab == label
+            want = np.abs(g[rows[inside], cols[inside]].astype(float)).sum()
+            assert regions.share[k] == pytest.approx(want, rel=1e-12)

@@ -146,3 +146,113 @@ def test_a_still_scene_leaves_no_subnormal_numbers_in_the_float32_state():
                 magnitude = np.abs(stages)
                 assert not np.any((magnitude > 0) & (magnitude < np.finfo(np.float32).tiny)), i
         assert model.stages_on.dtype == np.float32
+
+
+def _responses(model, frames, stream):
+    if stream:
+        return [r.to_dict() for r in model.stream((None, f) for f in frames)]
+    return [model.step(f).to_dict() for f in frames]
+
+
+@pytest.mark.parametrize("preset", ["default", "reference", "paper"])
+def test_threads_change_nothing_in_the_responses(preset):
+    # off centre (no tie of the orientation sums), with repeated frames (the default preset
+    # skips them) and a new stream of another size after a reset
+    frames = make_scene("looming_over_stripes", size=(96, 72), frames=40, start=4, stop=36,
+                        center=(40.3, 30.6)).frames
+    frames = [f for i, f in enumerate(frames) for _ in range(1 + (i % 7 == 3))]
+    other = make_scene("looming", size=(64, 80), frames=12, start=2, stop=10).frames
+    want = ASNN(preset)
+    expected = [_responses(want, frames, False)]
+    want.reset()
+    expected.append(_responses(want, other, False))
+    for threads, stream in ((2, False), (2, True), (3, True)):
+        with ASNN(preset, threads=threads) as model:
+            assert model.threads == threads
+            got = [_responses(model, frames, stream)]
+            model.reset()
+            got.append(_responses(model, other, stream))
+        assert got == expected, (threads, stream)
+
+
+def test_threads_record_the_same_maps():
+    frames = make_scene("looming", size=(64, 64), frames=10, start=2, stop=9,
+                        center=(30.2, 33.7)).frames
+    one, two = ASNN("default", record_maps=True), ASNN("default", record_maps=True, threads=2)
+    for a, b in zip((one.step(f) for f in frames), two.stream((None, f) for f in frames)):
+        assert (a.maps is None) == (b.maps is None)
+        if a.maps is None:  # the first frame
+            continue
+        for name in ("P", "R", "V", "G", "M_a", "M_d", "G_prime"):
+            np.testing.assert_array_equal(getattr(a.maps, name), getattr(b.maps, name))
+    two.close()
+
+
+def test_a_stream_raises_a_bad_frame_after_the_responses_before_it():
+    frames = make_scene("looming", size=(64, 64), frames=8).frames
+    bad = list(frames[:5]) + [np.zeros((64, 80), np.uint8)] + list(frames[5:])
+    with ASNN("default", threads=2) as model:
+        got = []
+        with pytest.raises(FrameError, match="differs"):
+            for response in model.stream((None, f) for f in bad):
+                got.append(response.index)
+    assert got == [0, 1, 2, 3, 4]
+
+
+@pytest.mark.parametrize("stream", [False, True])
+def test_a_failure_on_a_worker_thread_is_raised_not_waited_for(monkeypatch, stream):
+    import threading
+
+    from asnn import _fast
+
+    front = _fast.front
+
+    def failing(*args, **kwargs):
+        if threading.current_thread().name.startswith("asnn-model"):
+            raise MemoryError("no room on the worker")
+        return front(*args, **kwargs)
+
+    monkeypatch.setattr(_fast, "front", failing)
+    frames = make_scene("looming", size=(64, 64), frames=6).frames
+    outcome = []
+
+    def run():
+        try:
+            with ASNN("default", threads=2) as model:
+                _responses(model, frames, stream)
+        except MemoryError as exc:
+            outcome.append(exc)
+
+    runner = threading.Thread(target=run, daemon=True)
+    runner.start()
+    runner.join(timeout=60)
+    assert not runner.is_alive(), "the model hung"
+    assert outcome and "no room on the worker" in str(outcome[0])
+
+
+def test_threads_are_the_model_s_own_and_stop_with_it():
+    import gc
+    import threading
+
+    def workers():
+        return sum(t.name.startswith("asnn-model") for t in threading.enumerate())
+
+    before = workers()
+    frames = make_scene("looming", size=(64, 64), frames=4).frames
+    model = ASNN("default", threads=3)
+    assert workers() == before  # started with the first frame that needs them
+    for f in frames:
+        model.step(f)
+    assert workers() == before + 2
+    model.close()
+    model.step(frames[0].copy())  # a closed model starts its threads again
+    del model
+    gc.collect()
+    for _ in range(100):  # the workers finish once told to stop
+        if workers() == before:
+            break
+        threading.Event().wait(0.01)
+    assert workers() == before
+    with pytest.raises(ValueError, match="threads"):
+        ASNN("default", threads=0)
+    assert ASNN("default", optimised=False, threads=2).threads == 1

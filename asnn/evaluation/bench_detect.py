@@ -6,18 +6,20 @@ growing over 50 frames, played forwards then backwards, again and again, as ``as
 and ``asnn detect CLIP --jsonl OUT`` runs as its own process ``repeat`` times on each. The per-frame cost is (median time on the long
 clip - median time on the short one) / (frames - 2): the start-up (interpreter, imports, the
 kernels loaded from numba's cache, opening the file) cancels out. The process uses the machine's
-cores as ``asnn detect`` does: frames are decoded ahead and results written behind on threads of
-their own (:mod:`asnn.io.pipeline`) while the model steps.
+cores as ``asnn detect`` does: the model computes each frame's fused pass in bands on a thread
+per core and finishes each frame while the next one's pass runs
+(:meth:`asnn.model.ASNN.stream`), decoding and writing in between.
 
 The same run, in this process, times each stage of one loop over the same frames: **decode**
 (the source's frames), **model** (the detector's step without the targets), **targets** (the
 clustering inside the step, timed by wrapping :func:`asnn.targets.extract_targets` where the
 model calls it) and **output** (formatting and writing the JSON lines); their sum is what the
-loop costs on one thread. The baseline is the straightforward float64 form of the same preset
-(``ASNN(preset, optimised=False)``) stepping over one period of the same loop on one thread, as
-``asnn bench`` times it: its mean step (the per-frame costs of both forms depend on the frames'
-content, so they are compared over the same frames). ``identical`` says whether the process's JSON lines equal
-those of one loop over the same frames here.
+loop costs on one thread. **stream** is the model alone over the decoded frames with the
+threads ``asnn detect`` gives it. The baseline is the straightforward float64 form of the same
+preset (``ASNN(preset, optimised=False)``) stepping over one period of the same loop on one
+thread, as ``asnn bench`` times it: its mean step (the per-frame costs of both forms depend on
+the frames' content, so they are compared over the same frames). ``identical`` says whether the
+process's JSON lines equal those of one loop over the same frames here.
 
 The clip's content matters: on frames where a large region has been still for a few seconds
 (the disk of a long clip near its end, a camera that stops), the default preset's float32
@@ -85,8 +87,9 @@ def _timed_targets(totals: list[float]):
 
 
 def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[dict]]:
-    """Milliseconds per frame of each stage of one loop over ``clip``, and its records."""
-    from ..detectors import make_detector
+    """Milliseconds per frame of each stage of one loop over ``clip``, and of the model's
+    stream with a thread per core (``stream``), and the loop's records."""
+    from ..detectors import available_cores, make_detector
     from ..io.sources import open_source
 
     start = time.perf_counter()
@@ -108,8 +111,14 @@ def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[d
             records.append(record)
             fh.write(json.dumps(record) + "\n")
     output = time.perf_counter() - start
+    with make_detector("asnn", preset, threads=available_cores()) as model:
+        start = time.perf_counter()
+        for _ in model.stream(frames):
+            pass
+        stream = time.perf_counter() - start
     n = len(frames)
-    ms = {"decode": decode, "model": step - targets[0], "targets": targets[0], "output": output}
+    ms = {"decode": decode, "model": step - targets[0], "targets": targets[0], "output": output,
+          "stream": stream}
     return {k: 1e3 * v / n for k, v in ms.items()}, records
 
 
@@ -182,7 +191,8 @@ def run(sizes=DEFAULT_SIZES, frames: int = 300, repeat: int = 4, preset: str | N
             rows.append({
                 "size": f"{w}x{h}", "frames": frames, "repeat": repeat,
                 "detect_ms": float(per_frame), "startup_s": float(np.median(short_runs)),
-                "stages_ms": stages, "loop_ms": float(sum(stages.values())),
+                "stages_ms": stages,
+                "loop_ms": float(sum(v for k, v in stages.items() if k != "stream")),
                 "straightforward_ms": baseline, "ratio": baseline / per_frame,
                 "identical": produced == json.loads(json.dumps(records))})
     return {"scene": SCENE, "preset": name, "results": rows,
@@ -193,12 +203,12 @@ def run(sizes=DEFAULT_SIZES, frames: int = 300, repeat: int = 4, preset: str | N
 def format_table(report: dict) -> str:
     """The report as a Markdown table."""
     lines = ["| size | asnn detect ms/frame | decode | model | targets | output | one loop | "
-             "straightforward ms | straightforward / detect | identical |",
-             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+             "model stream | straightforward ms | straightforward / detect | identical |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
     for r in report["results"]:
         s = r["stages_ms"]
         lines.append(f"| {r['size']} | {r['detect_ms']:.2f} | {s['decode']:.2f} | "
                      f"{s['model']:.2f} | {s['targets']:.2f} | {s['output']:.3f} | "
-                     f"{r['loop_ms']:.2f} | {r['straightforward_ms']:.1f} | "
+                     f"{r['loop_ms']:.2f} | {s['stream']:.2f} | {r['straightforward_ms']:.1f} | "
                      f"1/{r['ratio']:.1f} | {'yes' if r['identical'] else 'NO'} |")
     return "\n".join(lines)

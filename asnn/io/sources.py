@@ -110,7 +110,8 @@ def is_bag(path: str) -> bool:
 
 
 def open_source(spec: str, *, topic: str | None = None,
-                on_error: ErrorHandler | None = None) -> Source:
+                on_error: ErrorHandler | None = None,
+                decoder_threads: int | None = None) -> Source:
     """Open a source (see the module's list), checking that it yields a first frame.
 
     Parameters
@@ -123,6 +124,8 @@ def open_source(spec: str, *, topic: str | None = None,
         For bags: called for a message that cannot be used (skipped) or a cut or corrupt file
         (the frames end there), so that a long-running reader counts and goes on. Without it,
         reading raises :class:`SourceError` there.
+    decoder_threads : int, optional
+        For video files: the threads the decoder may use (default: OpenCV's choice).
 
     Raises
     ------
@@ -141,7 +144,7 @@ def open_source(spec: str, *, topic: str | None = None,
         return _open_scene(spec)
     if spec.isdigit() or "://" in spec:
         return _open_capture(spec)
-    return _open_file(spec)
+    return _open_file(spec, decoder_threads)
 
 
 def _open_scene(spec: str) -> Source:
@@ -171,11 +174,11 @@ def _open_capture(spec: str) -> Source:
     return Source(spec, fps, True, lambda: read_frames(cap))
 
 
-def _open_file(spec: str) -> Source:
+def _open_file(spec: str, decoder_threads: int | None) -> Source:
     from .video import VideoError, open_video
 
     try:
-        clip = open_video(spec)
+        clip = open_video(spec, decoder_threads)
     except VideoError as exc:
         raise SourceError(str(exc), "missing" if "no such file" in str(exc) else
                           "undecodable") from None

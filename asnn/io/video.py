@@ -30,13 +30,16 @@ class VideoClip:
     frame_count : int
         Frame count stated by the file (may be approximate; 0 when unknown).
     width, height : int
+    decoder_threads : int or None
+        Threads the decoder may use (None: OpenCV's choice, as many as there are cores).
     """
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, decoder_threads: int | None = None):
         self.path = Path(path)
+        self.decoder_threads = decoder_threads
         if not self.path.is_file():
             raise VideoError(f"{self.path}: no such file")
-        cap = cv2.VideoCapture(str(self.path))
+        cap = self._capture()
         ok, first = cap.read() if cap.isOpened() else (False, None)
         if not ok or first is None:
             cap.release()
@@ -47,8 +50,17 @@ class VideoClip:
         self.height, self.width = first.shape[:2]
         cap.release()
 
+    def _capture(self) -> cv2.VideoCapture:
+        if self.decoder_threads is not None:
+            cap = cv2.VideoCapture(str(self.path), cv2.CAP_ANY,
+                                   [cv2.CAP_PROP_N_THREADS, self.decoder_threads])
+            if cap.isOpened():
+                return cap
+            cap.release()  # a backend without the property: its own number of threads
+        return cv2.VideoCapture(str(self.path))
+
     def __iter__(self) -> Iterator[np.ndarray]:
-        return read_frames(cv2.VideoCapture(str(self.path)))
+        return read_frames(self._capture())
 
 
 def read_frames(capture: cv2.VideoCapture) -> Iterator[np.ndarray]:
@@ -63,12 +75,15 @@ def read_frames(capture: cv2.VideoCapture) -> Iterator[np.ndarray]:
         capture.release()
 
 
-def open_video(path: str | Path) -> VideoClip:
+def open_video(path: str | Path, decoder_threads: int | None = None) -> VideoClip:
     """Open a video file, checking that its first frame decodes.
+
+    ``decoder_threads`` limits the threads its decoder uses (a process that keeps the cores
+    busy with threads of its own gains nothing from more); the frames are the same.
 
     Raises
     ------
     VideoError
         If the file is missing or not a decodable video.
     """
-    return VideoClip(path)
+    return VideoClip(path, decoder_threads)
