@@ -33,7 +33,7 @@ from .response import Maps, Response
 from .targets import Target, extract_objects, extract_targets
 from .tracking import Observation, TargetTracker
 
-__all__ = ["ASNN", "FrameError", "compile_kernels"]
+__all__ = ["ASNN", "FrameError", "compile_kernels", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
 _MAX_ELAPSED = 1.0  # seconds between frames beyond which their times are not believed
@@ -361,11 +361,7 @@ class ASNN:
         return False
 
     def _spikes(self, u: float, n_cells: int) -> tuple[float, int, float]:
-        p = self.params
-        out = retina.sigmoid_output(u, n_cells)
-        spikes = retina.spike_count(out, p.k_sp, p.t_sp)
-        self.spike_window.append(spikes)
-        return out, spikes, sum(self.spike_window) / (p.n_t * p.window_dt)
+        return spike_step(u, n_cells, self.spike_window, self.params)
 
     def _photoreceptors(self, lum: np.ndarray) -> np.ndarray:
         """P (eq. 1), after the contrast gain control where the preset has it."""
@@ -538,6 +534,17 @@ class _Frame:
 def _close_workers(workers: list) -> None:
     for worker in workers:
         worker.close()
+
+
+def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams
+               ) -> tuple[float, int, float]:
+    """The output stage for one frame: ``out`` (eq. 27), the spikes (eq. 28), appended to
+    ``window`` (the spikes of the last ``n_t`` frames), and the spike rate over it (eq. 29).
+    A warning is a rate of at least ``params.t_c``."""
+    out = retina.sigmoid_output(u, n_cells)
+    spikes = retina.spike_count(out, params.k_sp, params.t_sp)
+    window.append(spikes)
+    return out, spikes, sum(window) / (params.n_t * params.window_dt)
 
 
 def compile_kernels() -> None:

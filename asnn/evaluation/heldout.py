@@ -23,8 +23,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .. import retina
-from ..model import ASNN
+from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from ..tracking import approach_test
 from . import scoring
@@ -122,9 +121,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                 if streak[ident] >= p.approach_frames:
                     total += share
                     targets.append({"x": x, "y": y})
-            out = retina.sigmoid_output(p.u_scale * total, trace.cells)
-            window.append(retina.spike_count(out, p.k_sp, p.t_sp))
-            rate = sum(window) / (p.n_t * p.window_dt)
+            _, _, rate = spike_step(p.u_scale * total, trace.cells, window, p)
             record = {"frame": index, "collision": rate >= p.t_c, "targets": targets}
         records.append(record)
         previous = record
