@@ -357,7 +357,7 @@ def test_only_the_chunks_holding_the_image_topic_are_decompressed(tmp_path, loom
     assert all(np.array_equal(a, b) for a, b in zip(read, frames))
     with open(path, "rb") as fh:
         total = sum(1 for _ in _all_chunks(fh))
-    assert 0 < len(opened) <= len(frames) < total  # at most one chunk per frame of 60 in all
+    assert 0 < len(opened) <= len(frames) < total  # at most one chunk per frame (of 48 in all)
 
 
 def _all_chunks(fh):
