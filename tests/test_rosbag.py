@@ -360,6 +360,32 @@ def test_only_the_chunks_holding_the_image_topic_are_decompressed(tmp_path, loom
     assert 0 < len(opened) <= len(frames) < total  # at most one chunk per frame (of 48 in all)
 
 
+def test_a_chunk_index_pointing_at_no_chunk_is_a_corrupt_bag_error(tmp_path, looming):
+    import struct
+
+    from mcap.reader import SeekingReader
+
+    bag = write_messages(tmp_path / "ok.mcap", {"/c": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:12])])},
+        chunk_size=20_000)
+    data = bytearray(bag.read_bytes())
+    with open(bag, "rb") as fh:
+        summary = SeekingReader(fh).get_summary()
+        footer_start = len(data) - 8 - 20  # footer record: opcode, length, 20 bytes; magic
+    last = summary.chunk_indexes[-1].chunk_start_offset
+    field = struct.pack("<Q", last)
+    at = data.rindex(field, 0, footer_start)  # the last chunk index's chunk_start_offset
+    data[at:at + 8] = struct.pack("<Q", last + 100)  # inside the chunk, not at its start
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(bytes(data))
+    with open(broken, "rb") as fh:  # the index now points 100 bytes into the chunk
+        assert SeekingReader(fh).get_summary().chunk_indexes[-1].chunk_start_offset == last + 100
+    with pytest.raises(SourceError, match="truncated or corrupt"):
+        list(rosbag.open_bag(broken).frames())
+    line = detect_fails(broken)
+    assert "truncated or corrupt" in line
+
+
 def _all_chunks(fh):
     from mcap.records import Chunk
     from mcap.stream_reader import StreamReader
