@@ -274,7 +274,7 @@ def _records(fh, topic: str | None = None) -> Iterator:
 def _topic_chunks(fh, topic: str) -> tuple | None:
     """The bag's summary and the start offsets, in file order, of the chunks holding
     ``topic``'s messages; None when the summary does not say (no summary, no chunk index, a
-    chunk index without message indexes)."""
+    chunk index without message indexes). An offset indexed twice is read once."""
     try:
         summary = SeekingReader(_BoundedFile(fh), record_size_limit=MAX_RECORD_BYTES).get_summary()
     except Exception:  # no footer or summary: read the file through
@@ -284,8 +284,8 @@ def _topic_chunks(fh, topic: str) -> tuple | None:
     ids = {c.id for c in summary.channels.values() if c.topic == topic}
     if not ids or any(not index.message_index_offsets for index in summary.chunk_indexes):
         return None
-    return summary, sorted(index.chunk_start_offset for index in summary.chunk_indexes
-                           if ids & index.message_index_offsets.keys())
+    return summary, sorted({index.chunk_start_offset for index in summary.chunk_indexes
+                            if ids & index.message_index_offsets.keys()})
 
 
 # reading errors a corrupt or truncated file raises from the MCAP library and the decompressors
