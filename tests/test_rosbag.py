@@ -386,6 +386,24 @@ def test_a_chunk_index_pointing_at_no_chunk_is_a_corrupt_bag_error(tmp_path, loo
     assert "truncated or corrupt" in line
 
 
+def test_a_summary_over_the_bound_is_not_loaded_and_the_bag_is_read_through(tmp_path, looming,
+                                                                            monkeypatch):
+    bag = write_messages(tmp_path / "ok.mcap", {"/c": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:12])])},
+        chunk_size=20_000)
+    loaded = []
+    original = rosbag.SeekingReader
+    monkeypatch.setattr(rosbag, "SeekingReader",
+                        lambda *a, **k: loaded.append(1) or original(*a, **k))
+    monkeypatch.setattr(rosbag, "MAX_SUMMARY_BYTES", 64)  # smaller than this bag's summary
+    read = [image for _, image in rosbag.open_bag(bag).frames()]
+    assert not loaded and len(read) == 12
+    assert all(np.array_equal(a, b) for a, b in zip(read, looming.frames[:12]))
+    monkeypatch.setattr(rosbag, "MAX_SUMMARY_BYTES", 2**20)  # the control
+    rosbag.open_bag(bag)
+    assert loaded
+
+
 def _all_chunks(fh):
     from mcap.records import Chunk
     from mcap.stream_reader import StreamReader

@@ -46,6 +46,8 @@ IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 IMAGE_SCHEMAS = (IMAGE, COMPRESSED_IMAGE)
 MAX_RECORD_BYTES = 512 * 2**20  # largest MCAP record or decompressed chunk read
+MAX_SUMMARY_BYTES = 64 * 2**20  # largest summary section used (a larger one: read through)
+_FOOTER_BYTES = 1 + 8 + 20  # the footer record: opcode, length, summary_start, offsets, crc
 FPS_PROBE = 30                  # frames whose stamps estimate a bag's nominal frame rate
 
 # The message definitions rosbag2 embeds as schemas (ros2msg: the type, then its dependencies).
@@ -271,14 +273,29 @@ def _records(fh, topic: str | None = None) -> Iterator:
                 yield inner
 
 
+def _summary(fh):
+    """The bag's summary section, or None when it has none, it does not parse, or it is larger
+    than :data:`MAX_SUMMARY_BYTES` (its records become Python objects: a crafted summary of
+    millions of tiny records must not fill the memory)."""
+    try:
+        end = fh.seek(0, io.SEEK_END)
+        if end < len(_MAGIC) * 2 + _FOOTER_BYTES:
+            return None
+        fh.seek(end - len(_MAGIC) - _FOOTER_BYTES + 9)  # the footer's summary_start
+        (start,) = struct.unpack("<Q", fh.read(8))
+        if start == 0 or not 0 < end - start <= MAX_SUMMARY_BYTES:
+            return None
+        fh.seek(0)  # the reader checks the magic where it starts
+        return SeekingReader(_BoundedFile(fh), record_size_limit=MAX_RECORD_BYTES).get_summary()
+    except Exception:  # no footer or summary (a recording that was cut)
+        return None
+
+
 def _topic_chunks(fh, topic: str) -> tuple | None:
     """The bag's summary and the start offsets, in file order, of the chunks holding
     ``topic``'s messages; None when the summary does not say (no summary, no chunk index, a
     chunk index without message indexes). An offset indexed twice is read once."""
-    try:
-        summary = SeekingReader(_BoundedFile(fh), record_size_limit=MAX_RECORD_BYTES).get_summary()
-    except Exception:  # no footer or summary: read the file through
-        return None
+    summary = _summary(fh)
     if summary is None or not summary.chunk_indexes:
         return None
     ids = {c.id for c in summary.channels.values() if c.topic == topic}
@@ -315,11 +332,7 @@ def bag_topics(path: str | Path) -> dict[str, TopicInfo]:
     with open(path, "rb") as raw:
         if raw.read(len(_MAGIC)) != _MAGIC:
             raise SourceError(f"{path}: not an MCAP file", "not-a-bag")
-        try:
-            summary = SeekingReader(_BoundedFile(raw),
-                                    record_size_limit=MAX_RECORD_BYTES).get_summary()
-        except Exception:  # no footer (a recording that was cut): read it through below
-            summary = None
+        summary = _summary(raw)  # None for a recording that was cut: read it through below
         if summary is not None and summary.channels:
             stats = summary.statistics
             return {c.topic: TopicInfo(c.topic, _schema_name(summary.schemas.get(c.schema_id)),
