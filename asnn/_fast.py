@@ -80,8 +80,8 @@ from . import retina
 from ._jit import kernel
 
 __all__ = ["supported", "dog_factors", "gabor_factors", "cs_classes", "Scratch", "FrontMaps",
-           "Workspace", "workspace", "scratch", "FrontCoefficients", "front", "add_column_sums", "to_differences", "contrast_gain_control", "attention",
-           "AttentionBlur"]
+           "Workspace", "workspace", "scratch", "FrontCoefficients", "front", "add_column_sums",
+           "to_differences", "contrast_gain_control", "attention", "AttentionBlur"]
 
 RADIUS = 2  # the fused kernels are written for 5x5 kernels (Table I)
 DEPTH = 2 * RADIUS + 1  # rows kept by the ring buffers of the 5x5 filters
@@ -161,19 +161,21 @@ class Scratch:
         self.gring = np.empty((3, w + 2), dtype)  # G before grouping
         self.gline = np.empty(w + 2, dtype)
         self.done = np.zeros(1, np.int64)  # front()'s flag when no one waits for it
+        self._in_place: np.ndarray | None = None  # made for the first frame height asked
+        self._spare: tuple[np.ndarray, np.ndarray] | None = None
 
     def buffers(self) -> tuple:
         return self.col, self.x0, self.ro, self.gabor, self.acc, self.csl, self.gring, self.gline
 
     def in_place(self, height: int) -> np.ndarray:
         """Zeros for every row: the versions of :func:`front` in place."""
-        if getattr(self, "_in_place", None) is None or len(self._in_place) != height:
+        if self._in_place is None or len(self._in_place) != height:
             self._in_place = np.zeros(height, np.int8)
         return self._in_place
 
     def spare(self, depth: int) -> tuple[np.ndarray, np.ndarray]:
         """One row of each cascade (``depth`` stages), for rows advanced and dropped."""
-        if getattr(self, "_spare", None) is None or self._spare[0].shape[0] != depth:
+        if self._spare is None or self._spare[0].shape[0] != depth:
             self._spare = (np.zeros((depth, 1, self.x0.shape[1]), self.x0.dtype),
                            np.zeros((depth, 1, self.x0.shape[1]), self.x0.dtype))
         return self._spare

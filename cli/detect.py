@@ -177,7 +177,6 @@ def run(args: argparse.Namespace) -> int:
         except SourceError as exc:  # a cut or corrupt bag: what was read is written
             failure = f"{exc} (results written for the {index} frames before)"
         except _OutputError as exc:
-            answers.close()
             output.close(raise_error=False)
             return _fail(str(exc))
         finally:

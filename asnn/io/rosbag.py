@@ -433,8 +433,7 @@ class BagClip:
         info = choose_topic(self.parts[0], bag_topics(self.parts[0]), topic)
         self.topic, self.schema = info.name, info.schema
         self.frame_count = (info.count or 0) + sum(
-            (bag_topics(part).get(self.topic) or TopicInfo(self.topic, "", 0)).count or 0
-            for part in self.parts[1:])
+            getattr(bag_topics(part).get(self.topic), "count", 0) or 0 for part in self.parts[1:])
         self.clock = "header"
         self.start_ns = 0
         first, stamps, errors = None, [], []
@@ -469,17 +468,14 @@ class BagClip:
         none."""
         index = 0
         for part in self.parts:
-            for item in self._part_messages(part, index, on_error):
-                if item is None:  # a cut: the parts after it are not read
-                    return
-                index += 1
-                if item is not True:
-                    yield item
+            index, cut = yield from self._part_messages(part, index, on_error)
+            if cut:  # the parts after it are not read
+                return
 
     def _part_messages(self, path: Path, index: int,
                        on_error: Callable[[str, str], None] | None) -> Iterator:
-        """:meth:`_messages` of one file: each message (decoded, log time), True for one that
-        does not decode (reported), and None after a cut (reported)."""
+        """:meth:`_messages` of one file, whose first message is the topic's ``index``-th;
+        returns the index after its last message and whether it ended in a cut."""
         decoders = DecoderFactory()
         channels: dict[int, tuple[Schema | None, Callable | None]] = {}
         schemas: dict[int, Schema] = {}
@@ -489,14 +485,13 @@ class BagClip:
                 try:
                     record = next(records)
                 except StopIteration:
-                    return
+                    return index, False
                 except _CORRUPT as exc:
                     error = _corrupt(path, exc, f"after {index} messages of {self.topic}")
                     if on_error is None:
                         raise error from None
                     on_error(error.reason, str(error))
-                    yield None
-                    return
+                    return index, True
                 if isinstance(record, Schema):
                     schemas[record.id] = record
                 elif isinstance(record, Channel) and record.topic == self.topic:
@@ -506,8 +501,7 @@ class BagClip:
                         if on_error is None:
                             raise
                         on_error(error.reason, str(error))
-                        yield None
-                        return
+                        return index, True
                 elif isinstance(record, Message) and record.channel_id in channels:
                     decode = channels[record.channel_id]
                     try:
@@ -520,7 +514,6 @@ class BagClip:
                         if on_error is None:
                             raise error from None
                         on_error(error.reason, str(error))
-                        yield True
                     else:
                         yield message, record.log_time
                     index += 1

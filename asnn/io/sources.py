@@ -12,8 +12,9 @@ Source specifications:
 ``URL``                ``scheme://...``: a stream OpenCV reads, e.g. rtsp (live)
 ``synthetic:SCENE``    one of ``asnn.stimuli.SCENE_NAMES`` (128x128 at 20 fps), or a case of the
                        labelled suite (``asnn scene --list``)
-``BAG.mcap[#TOPIC]``   a ROS 2 bag in MCAP (or a rosbag2 directory: one file or a split bag), the image topic
-                       after ``#`` or given as ``topic``; time = the messages' header stamps
+``BAG.mcap[#TOPIC]``   a ROS 2 bag in MCAP (or a rosbag2 directory: one file or a split bag),
+                       the image topic after ``#`` or given as ``topic``; time = the messages'
+                       header stamps
                        (needs the ``ros`` extra, :mod:`asnn.io.rosbag`)
 """
 
