@@ -404,6 +404,24 @@ def test_a_summary_over_the_bound_is_not_loaded_and_the_bag_is_read_through(tmp_
     assert loaded
 
 
+def test_a_chunk_the_index_lists_twice_is_read_once(tmp_path, looming, monkeypatch):
+    bag = write_messages(tmp_path / "ok.mcap", {"/c": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:12])])},
+        chunk_size=20_000)
+    original = rosbag._summary
+
+    def doubled(fh):
+        summary = original(fh)
+        if summary is not None:
+            summary.chunk_indexes = summary.chunk_indexes + summary.chunk_indexes[:1]
+        return summary
+
+    monkeypatch.setattr(rosbag, "_summary", doubled)
+    read = [image for _, image in rosbag.open_bag(bag).frames()]
+    assert len(read) == 12
+    assert all(np.array_equal(a, b) for a, b in zip(read, looming.frames[:12]))
+
+
 def _all_chunks(fh):
     from mcap.records import Chunk
     from mcap.stream_reader import StreamReader
