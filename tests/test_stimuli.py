@@ -213,6 +213,34 @@ def test_driving_pass_in_the_next_lane_drifts_out_and_is_no_collision():
     assert np.ptp(follow.target_size) < 1e-6
 
 
+def test_crossing_vehicle_hits_our_path_or_clears_it_before_we_arrive():
+    crossing = dict(speed=0.0, lateral_speed=6.0, width=4.5, height=1.45)
+    # 36 m ahead, from 18 m left at 6 m/s while we close at 12 m/s: constant bearing, and at
+    # contact its centre is 1 m left of ours, well inside the overlap
+    tbone = driving_scene(vehicles=(Vehicle(-18.0, 36.0, **crossing),), target=0, speed=12.0,
+                          frames=90, roadside=0.0)
+    c = tbone.contact_frame
+    assert tbone.collision and c == math.ceil((36.0 - 2.0) / 12.0 * 20)
+    x = tbone.track[:c + 1, 0]
+    assert np.ptp(x) < 2.0 and x[0] < (192 - 1) / 2 - 40    # constant bearing, to our left
+    assert np.all(np.diff(tbone.target_size[:c + 1]) > 0)
+    assert tbone.ttc[0] == pytest.approx(36.0 / 12.0, rel=0.02)
+    # its near face is its side: 4.5 m wide in the image (the empty road subtracted)
+    k = c - 25  # (later, its left end is out of the view)
+    road = driving_scene(speed=12.0, frames=k + 1, roadside=0.0).frames[k].astype(float)
+    x, y = tbone.track[k]
+    rows = np.abs(tbone.frames[k].astype(float) - road)[int(y) - 4:int(y) + 5]
+    focal = (192 / 2) / math.tan(math.radians(35.0))
+    assert np.count_nonzero((rows > 10).any(axis=0)) == pytest.approx(focal * 4.5 / (36.0 - 12.0 * k / 20),
+                                                       rel=0.15)
+    # 7 m further right at the same moment: it has left our lane when we get there
+    clears = driving_scene(vehicles=(Vehicle(-11.0, 36.0, **crossing),), target=0, speed=12.0,
+                           frames=90, roadside=0.0)
+    assert not clears.collision and clears.contact_frame is None
+    seen = np.isfinite(clears.track[:, 0])
+    assert not seen[-1] and np.all(np.diff(clears.track[seen, 0]) > 0)  # out to the right
+
+
 def test_night_scenes_are_dark_with_bright_lamps():
     day = driving_scene(frames=3, vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0)
     night = driving_scene(frames=3, night=True, vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0)
@@ -275,9 +303,11 @@ def test_near_misses_pair_with_their_collision_course_twins(suite):
         assert not a.collision and b.collision and "twin" in b.category
         options = {k: v for k, v in SUITE_CASES[near].options.items() if k != "motion"}
         twin_options = dict(SUITE_CASES[twin].options)
-        if "vehicles" in options:  # the same vehicle, speed and distance, in our lane
-            assert [replace(v, lane=0.0) for v in options.pop("vehicles")] == \
-                list(twin_options.pop("vehicles"))
+        if "vehicles" in options:  # the same vehicles, speeds and distances, other lanes
+            near_v, twin_v = options.pop("vehicles"), list(twin_options.pop("vehicles"))
+            assert [replace(v, lane=t.lane) for v, t in zip(near_v, twin_v)] == twin_v
+            # the twin in our lane, or crossing on a course that meets our bumper
+            assert all(t.lane == 0.0 for t in twin_v if t.lateral_speed == 0.0)
         assert options == twin_options
         n = min(len(a.frames), len(b.frames), 20)
         assert np.allclose(a.target_size[:n], b.target_size[:n], rtol=0.02, equal_nan=True)

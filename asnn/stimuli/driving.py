@@ -6,8 +6,9 @@ an oncoming lane on the left (``d = -3.5`` m) and a lane in our direction on the
 textured verge. The road is straight or bends with a constant curvature; the camera follows our
 lane's centre at ``speed``, ``camera_height`` above the road, pitched down a little, with
 optional bumps (a pitch oscillation). Poles, trees, reflector posts and boxes stand beside the
-road and flow outward as we pass them. Other vehicles drive in the lanes; one of them may be the
-labelled target.
+road and flow outward as we pass them. Other vehicles drive in the lanes, or cross the road (cross
+traffic at a junction: the T-bone collisions and crossings ahead of dashcam footage); one of them
+may be the labelled target.
 
 Drawing: every ground pixel is the ray's hit on the plane; the texture is sampled from a mipmap at
 the pixel's footprint and the lines are box-filtered by it, so distant road neither shimmers nor
@@ -19,7 +20,7 @@ Labels for the target vehicle: its image centre (the centre of its near face) an
 frame; ``ttc = Z / v`` with ``Z`` its distance along the camera axis and ``v = -dZ/dt``, where
 ``v > 0``; a collision when its near face reaches our front bumper (``front`` metres ahead of the
 camera) while it overlaps our lane, the contact frame being the first frame at or under that
-distance.
+distance. A crossing vehicle that has left our lane by then is passed behind: no collision.
 """
 
 from __future__ import annotations
@@ -49,7 +50,8 @@ _EGO_WIDTH = 1.8
 
 @dataclass(frozen=True)
 class Vehicle:
-    """Another road user, an upright box seen from behind (or, oncoming, from the front).
+    """Another road user, an upright box seen from behind (oncoming: from the front; crossing:
+    from the side).
 
     Attributes
     ----------
@@ -59,6 +61,9 @@ class Vehicle:
         Metres along the road from our camera to its near face at frame 0.
     speed : float
         Metres per second along the road; negative for oncoming traffic.
+    lateral_speed : float
+        Metres per second across the road, to the right: a vehicle crossing at a junction. Its
+        near face is then its side, so its ``width`` is a car's length.
     brake : float
         Deceleration from ``brake_frame`` until it stands, m/s^2.
     brake_frame : int
@@ -73,6 +78,7 @@ class Vehicle:
     lane: float
     distance: float
     speed: float
+    lateral_speed: float = 0.0
     brake: float = 0.0
     brake_frame: int = 0
     width: float = 1.8
@@ -91,6 +97,10 @@ class Vehicle:
         sign = math.copysign(1.0, self.speed)
         return self.speed * np.minimum(seconds, t0) + sign * (abs(self.speed) * dt
                                                               - 0.5 * self.brake * dt ** 2)
+
+    def lateral(self, t: np.ndarray, fps: float) -> np.ndarray:
+        """Lateral position of its centre (metres right of our lane's centre) at frames ``t``."""
+        return self.lane + self.lateral_speed * np.asarray(t, dtype=np.float64) / fps
 
 
 def path_pose(s: np.ndarray, curvature: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -329,13 +339,16 @@ def _draw_boxes(image: np.ndarray, camera: _Camera, k: int, look: _Look, boxes) 
         _glow(image, x, y, sigma, 255.0 if oncoming else 170.0)
 
 
-def _target_label(camera: _Camera, vehicle: Vehicle, s_v: np.ndarray, fps: float):
-    """Image centre (of the near face), image height and time to contact of a vehicle."""
+def _target_label(camera: _Camera, vehicle: Vehicle, s_v: np.ndarray, d_v: np.ndarray,
+                  fps: float):
+    """Image centre (of the near face), image height and time to contact of a vehicle at road
+    positions (``s_v``, ``d_v``) frame by frame."""
     cx, cy = camera.center
     f = camera.f
-    x, yb, z = np.array([camera.point(s, vehicle.lane, 0.0, k) for k, s in enumerate(s_v)]).T
-    _, yt, zt = np.array([camera.point(s, vehicle.lane, vehicle.height, k)
-                          for k, s in enumerate(s_v)]).T
+    x, yb, z = np.array([camera.point(s, d, 0.0, k)
+                         for k, (s, d) in enumerate(zip(s_v, d_v))]).T
+    _, yt, zt = np.array([camera.point(s, d, vehicle.height, k)
+                          for k, (s, d) in enumerate(zip(s_v, d_v))]).T
     seen = np.minimum(z, zt) >= _NEAR  # NaN once it is beside or behind us
     with np.errstate(divide="ignore", invalid="ignore"):
         track = np.where(seen[:, None],
@@ -413,10 +426,11 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
     contact = None
     if target is not None:
         vehicle = vehicles[target]
-        if abs(vehicle.lane) < (vehicle.width + _EGO_WIDTH) / 2:
-            gap = vehicle.distance + vehicle.travelled(t, fps) - speed * t / fps
-            hits = np.flatnonzero(gap <= front)
-            contact = int(hits[0]) if hits.size else None
+        gap = vehicle.distance + vehicle.travelled(t, fps) - speed * t / fps
+        reached = np.flatnonzero(gap <= front)  # our bumper at its near face
+        if reached.size and abs(vehicle.lateral(reached[0], fps)) < (vehicle.width
+                                                                     + _EGO_WIDTH) / 2:
+            contact = int(reached[0])
         if contact is not None:
             frames = min(frames, contact + tail + 1)
             t = np.minimum(t[:frames], contact)
@@ -426,6 +440,7 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
     camera = _Camera(size, f, camera_height, curvature, ego_s, *path_pose(ego_s, curvature),
                      pitch)
     vehicle_s = [v.distance + v.travelled(t, fps) for v in vehicles]
+    vehicle_d = [v.lateral(t, fps) for v in vehicles]
     pyramid = _pyramid(seed)
     scenery = [(item["s"], item["d"], *box, None)
                for item in (_roadside(seed + 1, ego_s[-1] + 200.0, roadside) if roadside else [])
@@ -434,15 +449,16 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
     clip = np.empty((frames, h, w))
     for k in range(frames):
         image = _ground(camera, k, look, pyramid)
-        traffic = [(s_v[k], v.lane, v.shape, v.width, 0.0, v.height, v.albedo, v)
-                   for v, s_v in zip(vehicles, vehicle_s)]
+        traffic = [(s_v[k], d_v[k], v.shape, v.width, 0.0, v.height, v.albedo, v)
+                   for v, s_v, d_v in zip(vehicles, vehicle_s, vehicle_d)]
         _draw_boxes(image, camera, k, look, scenery + traffic)
         clip[k] = image
     video = np.clip(np.rint(clip), 0, 255).astype(np.uint8)
 
     track = target_size = ttc = None
     if target is not None:
-        track, target_size, ttc = _target_label(camera, vehicles[target], vehicle_s[target], fps)
+        track, target_size, ttc = _target_label(camera, vehicles[target], vehicle_s[target],
+                                                vehicle_d[target], fps)
     collision = contact is not None
     params = dict(size=size, fps=fps, frames=frames, speed=speed, curvature=curvature,
                   bumps_deg=bumps_deg, night=night, vehicles=[asdict(v) for v in vehicles],

@@ -1,4 +1,4 @@
-"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 1).
+"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 2).
 
 Every case has a stable name that says what it is, a generator (:func:`.planar.planar_scene`
 at 160x120 or :func:`.driving.driving_scene` at 192x128, both at 20 fps, the model's
@@ -24,8 +24,10 @@ moving-pattern         stripes, gratings, checkerboards and random textures tran
 camera                 camera shake (jitter and small rotations), pans, tilts and sweeps
 brightness             ramps, flicker, exposure steps, headlights sweeping
 noise                  Gaussian sensor noise and JPEG re-encoding
-driving-threat         driving scenes with a vehicle on a collision course
-driving-pass           driving scenes with a vehicle passing in the next lane (near misses)
+driving-threat         driving scenes with a vehicle on a collision course: ahead in our lane,
+                       oncoming, or crossing the road at a junction into our path (a T-bone)
+driving-pass           driving scenes with a vehicle passing in the next lane, or crossing the
+                       road ahead and clearing it before we arrive (near misses)
 driving-clear          driving with nothing on a collision course: straight, turns, bumps,
                        following at constant distance, being overtaken; day and night
 =====================  =======================================================================
@@ -47,7 +49,7 @@ from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case"]
 
-SUITE_VERSION = "1"
+SUITE_VERSION = "2"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
           "translation", "moving-pattern", "camera", "brightness", "noise", "driving-threat",
           "driving-pass", "driving-clear")
@@ -383,6 +385,10 @@ def _driving_cases() -> list[Case]:
     truck = dict(width=2.5, height=3.2, shape="rect", albedo=0.3)
     brake = dict(brake=7.0, brake_frame=15)
     # a lead car at constant distance, a car in the right lane we slowly gain on, oncoming cars
+    # crossing from the left at 6 m/s, seen from the side (4.5 m long), 36 m ahead: at -17 m it
+    # keeps a constant bearing and meets our bumper (frame 57); at -10 m it clears our lane by
+    # 7 m then, crossing our path 1.2 s ahead of us
+    crossing = dict(speed=0.0, lateral_speed=6.0, width=4.5, height=1.45)
     traffic = (Vehicle(0.0, 16.0, 12.0), Vehicle(LANE_WIDTH, 30.0, 11.0, albedo=0.5),
                Vehicle(-LANE_WIDTH, 60.0, -12.0, albedo=0.35),
                Vehicle(-LANE_WIDTH, 130.0, -14.0, **truck))
@@ -417,6 +423,16 @@ def _driving_cases() -> list[Case]:
                  vehicles=(Vehicle(-LANE_WIDTH, 84.0, -12.0, **lit),), target=0),
         _driving("drive-night-oncoming-headon", "driving-threat", "night", "twin", night=True,
                  vehicles=(Vehicle(0.0, 84.0, -12.0, **lit),), target=0),
+        _driving("drive-day-cross-tbone", "driving-threat", "day", "twin", "crossing",
+                 vehicles=(Vehicle(-17.0, 36.0, **crossing),), target=0),
+        _driving("drive-day-cross-clears", "driving-pass", "day", "crossing",
+                 twin="drive-day-cross-tbone",
+                 vehicles=(Vehicle(-10.0, 36.0, **crossing),), target=0),
+        _driving("drive-night-cross-tbone", "driving-threat", "night", "twin", "crossing",
+                 night=True, vehicles=(Vehicle(-17.0, 36.0, **crossing, **lit),), target=0),
+        _driving("drive-night-cross-clears", "driving-pass", "night", "crossing", night=True,
+                 twin="drive-night-cross-tbone",
+                 vehicles=(Vehicle(-10.0, 36.0, **crossing, **lit),), target=0),
         _driving("drive-day-brake", "driving-threat", "day", "brake",
                  vehicles=(Vehicle(0.0, 14.0, 12.0, **brake),), target=0, onset=15),
         _driving("drive-night-brake", "driving-threat", "night", "brake", night=True,
