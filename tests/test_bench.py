@@ -217,6 +217,7 @@ def test_detect_bench_reports_the_whole_process_and_its_stages(capsys, monkeypat
     assert row["size"] == "64x48" and row["identical"] is True
     assert set(row["stages_ms"]) == {"decode", "model", "targets", "output", "stream"}
     assert all(v >= 0 for v in row["stages_ms"].values()) and row["straightforward_ms"] > 0
+    assert row["stages_ms"]["targets"] > 0  # the default's objects stage, timed on its own
     assert row["ratio"] == pytest.approx(row["straightforward_ms"] / row["detect_ms"])
     from asnn.evaluation.bench_detect import format_table
 

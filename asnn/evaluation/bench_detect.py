@@ -12,8 +12,9 @@ per core and finishes each frame while the next one's pass runs
 
 The same run, in this process, times each stage of one loop over the same frames: **decode**
 (the source's frames), **model** (the detector's step without the targets), **targets** (the
-clustering inside the step, timed by wrapping :func:`asnn.targets.extract_targets` where the
-model calls it) and **output** (formatting and writing the JSON lines); their sum is what the
+targets inside the step: the clustering, :func:`asnn.targets.extract_targets`, or with
+``targets='objects'`` the objects, their looming fits, the tracker and the approach gate,
+``ASNN._objects``; timed by wrapping them where the model calls them) and **output** (formatting and writing the JSON lines); their sum is what the
 loop costs on one thread. **stream** is the model alone over the decoded frames with the
 threads ``asnn detect`` gives it. The baseline is the straightforward float64 form of the same
 preset (``ASNN(preset, optimised=False)``) stepping over one period of the same loop on one
@@ -64,26 +65,31 @@ def _detect_seconds(clip: Path, out: Path, preset: str | None) -> float:
 
 @contextlib.contextmanager
 def _timed_targets(totals: list[float]):
-    """Add the seconds spent in the model's calls of ``extract_targets`` to ``totals[0]``."""
+    """Add the seconds spent in the model's targets (``extract_targets``, or the objects stage
+    ``ASNN._objects`` of ``targets='objects'``) to ``totals[0]``."""
     from .. import model
 
-    original = getattr(model, "extract_targets", None)
-    if original is None:  # the model no longer calls it from there: counted in the model
-        yield
-        return
+    def timed(original):
+        def call(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                totals[0] += time.perf_counter() - start
+        return call
 
-    def timed(*args, **kwargs):
-        start = time.perf_counter()
-        try:
-            return original(*args, **kwargs)
-        finally:
-            totals[0] += time.perf_counter() - start
-
-    model.extract_targets = timed
+    # (owner, name) of each call timed; one the model no longer has is counted in the model
+    places = [(owner, name) for owner, name in ((model, "extract_targets"),
+                                                (model.ASNN, "_objects"))
+              if hasattr(owner, name)]
+    originals = [getattr(owner, name) for owner, name in places]
+    for (owner, name), original in zip(places, originals):
+        setattr(owner, name, timed(original))
     try:
         yield
     finally:
-        model.extract_targets = original
+        for (owner, name), original in zip(places, originals):
+            setattr(owner, name, original)
 
 
 def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[dict]]:
