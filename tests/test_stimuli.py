@@ -231,8 +231,8 @@ def test_crossing_vehicle_hits_our_path_or_clears_it_before_we_arrive():
     x, y = tbone.track[k]
     rows = np.abs(tbone.frames[k].astype(float) - road)[int(y) - 4:int(y) + 5]
     focal = (192 / 2) / math.tan(math.radians(35.0))
-    assert np.count_nonzero((rows > 10).any(axis=0)) == pytest.approx(focal * 4.5 / (36.0 - 12.0 * k / 20),
-                                                       rel=0.15)
+    width = np.count_nonzero((rows > 10).any(axis=0))
+    assert width == pytest.approx(focal * 4.5 / (36.0 - 12.0 * k / 20), rel=0.15)
     # 7 m further right at the same moment: it has left our lane when we get there
     clears = driving_scene(vehicles=(Vehicle(-11.0, 36.0, **crossing),), target=0, speed=12.0,
                            frames=90, roadside=0.0)

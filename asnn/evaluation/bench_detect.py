@@ -14,9 +14,10 @@ The same run, in this process, times each stage of one loop over the same frames
 (the source's frames), **model** (the detector's step without the targets), **targets** (the
 targets inside the step: the clustering, :func:`asnn.targets.extract_targets`, or with
 ``targets='objects'`` the objects, their looming fits, the tracker and the approach gate,
-``ASNN._objects``; timed by wrapping them where the model calls them) and **output** (formatting and writing the JSON lines); their sum is what the
-loop costs on one thread. **stream** is the model alone over the decoded frames with the
-threads ``asnn detect`` gives it. The baseline is the straightforward float64 form of the same
+``ASNN._objects``; timed by wrapping them where the model calls them) and **output**
+(formatting and writing the JSON lines); their sum is what the loop costs on one thread.
+**stream** is the model alone over the decoded frames with the threads ``asnn detect`` gives
+it. The baseline is the straightforward float64 form of the same
 preset (``ASNN(preset, optimised=False)``) stepping over one period of the same loop on one
 thread, as ``asnn bench`` times it: its mean step (the per-frame costs of both forms depend on
 the frames' content, so they are compared over the same frames). ``identical`` says whether the

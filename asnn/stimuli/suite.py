@@ -384,11 +384,11 @@ def _driving_cases() -> list[Case]:
     lit = dict(albedo=0.45)  # a body our headlights light up at night
     truck = dict(width=2.5, height=3.2, shape="rect", albedo=0.3)
     brake = dict(brake=7.0, brake_frame=15)
-    # a lead car at constant distance, a car in the right lane we slowly gain on, oncoming cars
-    # crossing from the left at 6 m/s, seen from the side (4.5 m long), 36 m ahead: at -17 m it
-    # keeps a constant bearing and meets our bumper (frame 57); at -10 m it clears our lane by
-    # 7 m then, crossing our path 1.2 s ahead of us
+    # a car crossing from the left at 6 m/s, seen from the side (4.5 m long), 36 m ahead: from
+    # 17 m left, the middle of its side meets our bumper (frame 57); from 10 m left, it has
+    # cleared our lane by 7 m then, crossing our path 1.2 s ahead of us
     crossing = dict(speed=0.0, lateral_speed=6.0, width=4.5, height=1.45)
+    # a lead car at constant distance, a car in the right lane we slowly gain on, oncoming cars
     traffic = (Vehicle(0.0, 16.0, 12.0), Vehicle(LANE_WIDTH, 30.0, 11.0, albedo=0.5),
                Vehicle(-LANE_WIDTH, 60.0, -12.0, albedo=0.35),
                Vehicle(-LANE_WIDTH, 130.0, -14.0, **truck))
