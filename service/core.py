@@ -109,7 +109,7 @@ log = logging.getLogger("asnn.worker")
 RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-publisher")
 # Frames a new owner steps a robot's stream silently before it answers: a fresh model of the
 # default (robust) preset that has stepped 18 frames warns as one that saw the whole stream at
-# 99.7 % of 3,547 hand-overs tried over the labelled suite, 99.0 % of the 1,226 during an
+# 99.7 % of 3,647 hand-overs tried over the labelled suite, 99.0 % of the 1,264 during an
 # approach (the tracker needs a few frames of approach in a row; the worst needs 26):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
 WARMUP_FRAMES = 18

@@ -48,7 +48,7 @@
     el.dataset.robot = name;
     el.querySelector(".name").textContent = name;
     v = {
-      name, el, tile: null, points: [], image: null, imageSrc: null,
+      name, el, tile: null, contact: null, points: [], image: null, imageSrc: null,
       thumb: el.querySelector(".thumb"), spark: el.querySelector(".spark"),
       stats: el.querySelector(".stats"), age: null, ageAt: 0, stale: true, collision: false,
     };
@@ -115,8 +115,8 @@
     v.el.dataset.responses = String(tile.responses);
     v.el.dataset.warnings = String(tile.warnings);
     v.el.dataset.targets = String(tile.targets.length);
-    const contact = soonest(tile.targets);
-    v.el.dataset.contact = contact === null ? "" : contact.toFixed(2);
+    v.contact = soonest(tile.targets);
+    v.el.dataset.contact = v.contact === null ? "" : v.contact.toFixed(2);
     dirty.add(v.name);
   }
 
@@ -216,9 +216,8 @@
         : "no response yet";
       return;
     }
-    const contact = soonest(v.tile.targets);
     // the time to contact first: the line is cut to the tile's width
-    v.stats.textContent = (contact === null ? "" : `contact in ${contact.toFixed(1)} s · `) +
+    v.stats.textContent = (v.contact === null ? "" : `contact in ${v.contact.toFixed(1)} s · `) +
       `seq ${r.seq} · out ${fmt(r.out)} · ${Math.round(r.spike_rate)} ` +
       `spikes/s · ${fmt(r.latency_ms, 0)} ms` + (r.dropped ? ` · ${r.dropped} dropped` : "") +
       ` · ${r.model}${r.preset ? "/" + r.preset : ""}`;
