@@ -12,7 +12,7 @@ import pytest
 from asnn.stimuli import render
 from asnn.stimuli.driving import LANE_WIDTH, Vehicle, driving_scene, path_pose, road_coordinates
 from asnn.stimuli.effects import Pan, Shake, Step
-from asnn.stimuli.planar import Background, planar_scene
+from asnn.stimuli.planar import Background, Prop, planar_scene
 from asnn.stimuli.suite import GROUPS, SUITE_CASES, make_case, suite_cases
 
 CENTER = (79.5, 59.5)  # of a 160x120 frame
@@ -151,6 +151,25 @@ def test_camera_motion_moves_the_image_and_the_label_together():
     assert np.abs(panned.frames[1][:, :100].astype(float) - panned.frames[0][:, 1:101]).mean() < 1.0
 
 
+def test_props_nearer_than_the_background_move_more_under_the_camera():
+    # a far and a near prop on a uniform wall, the camera panning 1 px per frame: the wall and
+    # the far prop move 1 px, the near one (parallax 2.5) 2.5 px; a rotation moves both alike
+    props = (Prop("square", 40.0, 60.0, 12.0, 20.0), Prop("square", 110.0, 60.0, 12.0, 20.0,
+                                                         parallax=2.5))
+    scene = planar_scene("none", props=props, frames=12, camera=Pan((-1.0, 0.0), start=0))
+
+    def centre(frame, x0, x1):
+        dark = (255.0 - frame[:, x0:x1].astype(float)).clip(0) * (frame[:, x0:x1] < 100)
+        return x0 + (dark.sum(axis=0) * np.arange(x1 - x0)).sum() / dark.sum()
+
+    far = [centre(f, 10, 70) for f in scene.frames]
+    near = [centre(f, 75, 150) for f in scene.frames]
+    assert np.diff(far) == pytest.approx(np.full(11, -1.0), abs=0.02)
+    assert np.diff(near) == pytest.approx(np.full(11, -2.5), abs=0.02)
+    still = planar_scene("none", props=props, frames=3)
+    assert np.array_equal(still.frames[0], still.frames[2])  # no camera: nothing moves
+
+
 def test_lighting_changes_the_mean_brightness_as_stated():
     scene = planar_scene("none", background=Background("texture", 0.3, 1.5, mean=110.0),
                          lighting=(Step(30, 1.4),), frames=40)
@@ -239,6 +258,26 @@ def test_crossing_vehicle_hits_our_path_or_clears_it_before_we_arrive():
     assert not clears.collision and clears.contact_frame is None
     seen = np.isfinite(clears.track[:, 0])
     assert not seen[-1] and np.all(np.diff(clears.track[seen, 0]) > 0)  # out to the right
+
+
+def test_rear_camera_sees_a_car_catch_up_or_overtake():
+    # the camera moves away from the scene at 5 m/s (a cyclist's rear camera); a car 30 m
+    # behind closes at 9 m/s: in our lane its front meets our rear, 1 m behind the camera
+    rear = dict(speed=-5.0, front=1.0, frames=90)
+    catchup = driving_scene(vehicles=(Vehicle(0.0, 30.0, -14.0),), target=0, **rear)
+    c = catchup.contact_frame
+    assert catchup.collision and c == math.ceil((30.0 - 1.0) / 9.0 * 20)
+    assert np.ptp(catchup.track[:c + 1, 0]) < 1.0  # constant bearing
+    assert np.all(np.diff(catchup.target_size[:c + 1]) > 0)
+    assert catchup.ttc[0] == pytest.approx(30.0 / 9.0, rel=0.02)
+    # the scene recedes: a parked car's image shrinks, and it never closes in
+    parked = driving_scene(vehicles=(Vehicle(LANE_WIDTH, 10.0, 0.0),), target=0, **rear)
+    assert np.all(np.diff(parked.target_size) < 0) and np.isnan(parked.ttc).all()
+    # 3 m to the right it overtakes with 1.2 m to spare: it drifts out of the view
+    overtake = driving_scene(vehicles=(Vehicle(3.0, 30.0, -14.0),), target=0, **rear)
+    assert not overtake.collision and overtake.contact_frame is None
+    seen = np.isfinite(overtake.track[:, 0])
+    assert not seen[-1] and np.all(np.diff(overtake.track[seen, 0]) > 0)
 
 
 def test_night_scenes_are_dark_with_bright_lamps():

@@ -128,7 +128,13 @@ class Background:
 
 @dataclass(frozen=True)
 class Prop:
-    """A static object of the scene (not labelled): clutter for the camera and the lights."""
+    """A static object of the scene (not labelled): clutter for the camera and the lights.
+
+    ``parallax`` is how much nearer to the camera than the background it stands: under the
+    camera's displacement its image moves ``parallax`` times as far as the background's (a
+    hand-held camera swaying in front of a desk: the things on it move more than the wall
+    behind). A rotation moves everything alike, near or far.
+    """
 
     shape: str
     x: float
@@ -136,6 +142,7 @@ class Prop:
     height: float
     level: float
     aspect: float = 1.0
+    parallax: float = 1.0
 
 
 def distance_ratio(motion: str, frames: int, onset: int, tau_frames: float,
@@ -261,12 +268,15 @@ def _render(frames: int, size: tuple[int, int], fps: float, background: Backgrou
 
     def scenery(t: int) -> np.ndarray:
         canvas = background.render(t, canvas_shape, origin, mean)
-        for prop in props:
-            paint_object(canvas, prop.shape, prop.x + left, prop.y + top, prop.height,
-                         prop.level, prop.aspect)
+        dx, dy = path[t, :2]
+        for prop in props:  # the camera's warp moves it once more, as the background
+            near = prop.parallax - 1.0
+            paint_object(canvas, prop.shape, prop.x + left + near * dx, prop.y + top + near * dy,
+                         prop.height, prop.level, prop.aspect)
         return canvas
 
-    still = None if background.moving else scenery(0)
+    parallax = camera is not None and any(prop.parallax != 1.0 for prop in props)
+    still = None if background.moving or parallax else scenery(0)
     clip = np.empty((frames, h, w))
     for t in range(frames):
         canvas = still.copy() if still is not None else scenery(t)

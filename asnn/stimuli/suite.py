@@ -1,4 +1,4 @@
-"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 2).
+"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 3).
 
 Every case has a stable name that says what it is, a generator (:func:`.planar.planar_scene`
 at 160x120 or :func:`.driving.driving_scene` at 192x128, both at 20 fps, the model's
@@ -15,19 +15,24 @@ approach               collision course, constant bearing: both polarities, Webe
 approach-stops         approaches that halt, or turn back, short of contact: the warning must
                        end when the approach ends
 approach-in-clutter    approaches over moving stripes, textures and checkerboards, under camera
-                       shake and pans, brightness changes, sensor noise and JPEG artefacts
+                       shake, pans and a hand-held camera's sway, brightness changes, sensor
+                       noise and JPEG artefacts
 nearmiss               the same objects, distances and speeds as their twins, offset so their
                        images drift out of the frame (``twin`` names the collision course)
 recession              objects moving away
 translation            objects and bars crossing the view (horizontal, vertical, diagonal)
 moving-pattern         stripes, gratings, checkerboards and random textures translating
-camera                 camera shake (jitter and small rotations), pans, tilts and sweeps
+camera                 camera shake (jitter and small rotations), pans, tilts and sweeps; a
+                       hand-held camera swaying in front of a desk (parallax: the things on it
+                       move more than the wall behind)
 brightness             ramps, flicker, exposure steps, headlights sweeping
 noise                  Gaussian sensor noise and JPEG re-encoding
 driving-threat         driving scenes with a vehicle on a collision course: ahead in our lane,
-                       oncoming, or crossing the road at a junction into our path (a T-bone)
-driving-pass           driving scenes with a vehicle passing in the next lane, or crossing the
-                       road ahead and clearing it before we arrive (near misses)
+                       oncoming, crossing the road at a junction into our path (a T-bone), or
+                       catching up with us from behind (a rear-facing camera: the scene recedes)
+driving-pass           driving scenes with a vehicle passing in the next lane, crossing the
+                       road ahead and clearing it before we arrive, or overtaking us close by
+                       (near misses)
 driving-clear          driving with nothing on a collision course: straight, turns, bumps,
                        following at constant distance, being overtaken; day and night
 =====================  =======================================================================
@@ -49,7 +54,7 @@ from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case"]
 
-SUITE_VERSION = "2"
+SUITE_VERSION = "3"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
           "translation", "moving-pattern", "camera", "brightness", "noise", "driving-threat",
           "driving-pass", "driving-clear")
@@ -111,6 +116,12 @@ def _c(contrast: float) -> str:
 _PROPS = (Prop("disk", 30.0, 40.0, 20.0, 60.0), Prop("square", 122.0, 32.0, 18.0, 165.0),
           Prop("car", 62.0, 90.0, 14.0, 55.0, 1.4), Prop("rect", 140.0, 82.0, 50.0, 150.0, 0.2))
 _STILL_TEXTURE = Background("texture", 0.3, 1.5, mean=110.0)
+# things on a desk in front of a textured wall, 1.6-3 times nearer: a hand-held camera's sway
+# moves them 1.6-3 times as far as the wall, so they slide over it and over each other
+_DESK = (Prop("rect", 36.0, 92.0, 24.0, 60.0, 1.8, 2.5),
+         Prop("disk", 116.0, 84.0, 22.0, 195.0, 1.0, 3.0),
+         Prop("square", 78.0, 106.0, 16.0, 45.0, 1.0, 3.0),
+         Prop("car", 132.0, 40.0, 14.0, 70.0, 1.4, 1.6))
 _NIGHT_TEXTURE = Background("texture", 0.12, 1.5, mean=40.0)
 
 
@@ -293,6 +304,12 @@ def _camera_cases() -> list[Case]:
         _planar("tilt-texture-v2px", g, "pan", motion="none",
                 background=Background("texture", 0.5, 1.5, mean=127.5), camera=Pan((0.0, 2.0))),
         _planar("sweep-scene-20px", g, "pan", **_scene(camera=Sweep((20.0, 0.0), 2.0))),
+        _planar("handheld-desk-sweep", g, "pan", "parallax", motion="none",
+                background=Background("texture", 0.5, 1.5, mean=127.5), props=_DESK,
+                camera=Sweep((12.0, 3.0), 2.0)),
+        _planar("handheld-desk-sway", g, "shake", "parallax", motion="none",
+                background=Background("texture", 0.5, 1.5, mean=127.5), props=_DESK,
+                camera=Shake(6.0, 1.0, smooth=8)),
     ]
 
 
@@ -356,6 +373,8 @@ def _clutter_cases() -> list[Case]:
                 contrast=0.3, background=still, camera=Shake(2.0)),
         _planar("loom-dark-c0.6-pan-h1px", g, "dark", "pan", background=still,
                 position=(100.0, 60.0), camera=Pan((-1.0, 0.0))),
+        _planar("loom-dark-c0.6-handheld-desk", g, "dark", "shake", "parallax", background=still,
+                props=_DESK, position=(70.0, 50.0), camera=Shake(4.0, 0.5, smooth=8)),
         _planar("loom-dark-c0.6-flicker-4hz", g, "dark", "flicker", background=still,
                 lighting=(Flicker(4.0, 0.15),)),
         _planar("loom-light-c0.6-ramp-down", g, "light", "ramp", polarity="light",
@@ -388,6 +407,10 @@ def _driving_cases() -> list[Case]:
     # 17 m left, the middle of its side meets our bumper (frame 57); from 10 m left, it has
     # cleared our lane by 7 m then, crossing our path 1.2 s ahead of us
     crossing = dict(speed=0.0, lateral_speed=6.0, width=4.5, height=1.45)
+    # a rear-facing camera (a cyclist's, or a car's looking back) moving away from the scene at
+    # 5 m/s while a car catches up at 14 m/s from 30 m behind: in our lane it hits our rear
+    # (1 m behind the camera, frame 65); 3 m to the side it overtakes with 1.2 m to spare
+    rear = dict(speed=-5.0, front=1.0)
     # a lead car at constant distance, a car in the right lane we slowly gain on, oncoming cars
     traffic = (Vehicle(0.0, 16.0, 12.0), Vehicle(LANE_WIDTH, 30.0, 11.0, albedo=0.5),
                Vehicle(-LANE_WIDTH, 60.0, -12.0, albedo=0.35),
@@ -449,6 +472,15 @@ def _driving_cases() -> list[Case]:
                  vehicles=(Vehicle(0.0, 40.0, 0.0),), target=0),
         _driving("drive-day-turn-stopped-car", "driving-threat", "day", "turn",
                  curvature=1 / 80, vehicles=(Vehicle(0.0, 36.0, 0.0),), target=0),
+        _driving("rear-day-catchup", "driving-threat", "day", "twin", "rear", **rear,
+                 vehicles=(Vehicle(0.0, 30.0, -14.0),), target=0),
+        _driving("rear-day-overtake", "driving-pass", "day", "rear", twin="rear-day-catchup",
+                 **rear, vehicles=(Vehicle(3.0, 30.0, -14.0),), target=0),
+        _driving("rear-night-catchup", "driving-threat", "night", "twin", "rear", night=True,
+                 **rear, vehicles=(Vehicle(0.0, 30.0, -14.0, **lit),), target=0),
+        _driving("rear-night-overtake", "driving-pass", "night", "rear", night=True,
+                 twin="rear-night-catchup", **rear,
+                 vehicles=(Vehicle(3.0, 30.0, -14.0, **lit),), target=0),
     ]
 
 
