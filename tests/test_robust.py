@@ -90,12 +90,14 @@ def test_the_response_grows_with_contrast_instead_of_being_cut_off():
                                   "texture-c0.5-diag3px", "shake-texture-4px-rot1deg",
                                   "pan-scene-h3px", "flicker-sine-8hz-30pct",
                                   "exposure-step-up-2.0", "headlights-sweep-night", "noise-gauss-10",
-                                  "jpeg-q8", "drive-day-straight", "drive-day-turn-left"])
+                                  "jpeg-q8", "drive-day-straight", "drive-day-turn-left",
+                                  "handheld-desk-sweep"])
 def test_translation_patterns_camera_lighting_and_noise_stay_silent(case):
     assert _quiet(_run(case)[1])
 
 
-@pytest.mark.parametrize("case", ["translate-disk-dark-c0.6-h2px", "drive-day-straight"])
+@pytest.mark.parametrize("case", ["translate-disk-dark-c0.6-h2px", "drive-day-straight",
+                                  "handheld-desk-sweep"])
 def test_translation_and_driving_are_silenced_by_the_approach_gate(case):
     assert not _quiet(_run(case, **NO_GATE)[1])
 
@@ -127,7 +129,8 @@ def test_without_the_gate_the_warning_outlasts_the_approach():
 # 4. near misses: a pass is not a collision
 
 @pytest.mark.parametrize("case", ["nearmiss-disk-dark-right", "nearmiss-car-dark-left-nextlane",
-                                  "nearmiss-truck-dark-right-close", "drive-day-oncoming-nextlane"])
+                                  "nearmiss-truck-dark-right-close", "drive-day-oncoming-nextlane",
+                                  "rear-day-overtake"])
 def test_near_misses_stay_quiet_while_their_collision_twin_warns(case):
     scene, responses = _run(case)
     assert _quiet(responses)
@@ -135,7 +138,8 @@ def test_near_misses_stay_quiet_while_their_collision_twin_warns(case):
         assert _hit(*_run(scene.twin))
 
 
-@pytest.mark.parametrize("case", ["nearmiss-disk-dark-right", "nearmiss-car-dark-left-nextlane"])
+@pytest.mark.parametrize("case", ["nearmiss-disk-dark-right", "nearmiss-car-dark-left-nextlane",
+                                  "rear-day-overtake"])
 def test_near_misses_are_told_apart_by_the_offset_test(case):
     assert not _quiet(_run(case, **NO_OFFSET_TEST)[1])
 
