@@ -237,11 +237,6 @@ class ASNNParams(BaseModel):
         """Frame period of the spike-rate window."""
         return self.dt if self.spike_dt is None else self.spike_dt
 
-    @property
-    def min_frame_size(self) -> int:
-        """Smallest frame side the kernels accept (OpenCV's reflect-101 border needs more than the radius)."""
-        return max(self.dog_size, self.kernel_size, 3) // 2 + 1
-
 
 _WEIGHTS = {  # [v+, v-, w1+, w2-, w1-, w2+] from the paper's experiments
     "approach": (1.0, 1.0, 1.0, 0.0, 0.5, 0.0),

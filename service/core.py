@@ -162,7 +162,6 @@ class _Robot:
     proven: bool = False  # one of its frames was valid: it holds a slot
     shape: tuple[int, int] | None = None  # (width, height) of the stream being processed
     last_seq: int | None = None
-    last_stamp: float | None = None
     last_seen: float = 0.0
     stream: _Stream | None = None  # the stream its frames arrive in
     previous: _Stream | None = None  # the stream the latest break replaced
@@ -500,7 +499,7 @@ class WorkerCore:
                      frame.format)
         state.stepped = 1 if state.processed_stream != job.stream else state.stepped + 1
         state.shape = (frame.width, frame.height)
-        state.last_seq, state.last_stamp = frame.seq, frame.stamp
+        state.last_seq = frame.seq
         state.processed_stream = job.stream
         state.processed += 1
         if self.answers is not None and not self.answers(job.robot):
