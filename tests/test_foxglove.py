@@ -106,11 +106,11 @@ def test_every_message_is_stamped_with_its_frames_header_time(detected):
     _, messages = read_all(path)
     for topic in ("/asnn/image", "/asnn/annotations", "/asnn/response"):
         assert [t for t, _ in messages[topic]] == stamps, topic
-    for (_, image), (_, annotations), ns in zip(messages["/asnn/image"],
+    for (_, image), (_, marks), ns in zip(messages["/asnn/image"],
                                                 messages["/asnn/annotations"], stamps):
         assert image.timestamp.seconds * 10**9 + image.timestamp.nanos == ns
         assert image.frame_id == "front_camera" and image.format == "jpeg"
-        for circle in annotations.circles:
+        for circle in marks.circles:
             assert circle.timestamp.seconds * 10**9 + circle.timestamp.nanos == ns
     for (_, response), ns, record in zip(messages["/asnn/response"], stamps, records):
         assert response["timestamp"] == {"sec": ns // 10**9, "nsec": ns % 10**9}
@@ -123,15 +123,15 @@ def test_annotations_are_the_targets_and_a_border_while_warning(detected):
     path, records, _, scene = detected
     _, messages = read_all(path)
     drawn = 0
-    for (_, annotations), record in zip(messages["/asnn/annotations"], records):
-        assert len(annotations.circles) == len(record["targets"])
-        for circle, target in zip(annotations.circles, record["targets"]):
+    for (_, marks), record in zip(messages["/asnn/annotations"], records):
+        assert len(marks.circles) == len(record["targets"])
+        for circle, target in zip(marks.circles, record["targets"]):
             assert (circle.position.x, circle.position.y) == pytest.approx(
                 (target["x"], target["y"]))
             meta = {kv.key: kv.value for kv in circle.metadata}
             assert float(meta["energy"]) == pytest.approx(target["energy"])
             drawn += 1
-        borders = [p for p in annotations.points if len(p.points) == 4]
+        borders = [p for p in marks.points if len(p.points) == 4]
         assert len(borders) == int(record["collision"])
     assert drawn > 0
     _, image = messages["/asnn/image"][20]

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from asnn import ASNN, preset
-from asnn.evaluation import heldout, scoring
+from asnn.evaluation import heldout
 from asnn.evaluation.runs import ABLATIONS, at_rate, parse_detector, parse_detectors
 from asnn.stimuli import write_video
 from asnn.stimuli.suite import make_case
