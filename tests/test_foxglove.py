@@ -107,7 +107,7 @@ def test_every_message_is_stamped_with_its_frames_header_time(detected):
     for topic in ("/asnn/image", "/asnn/annotations", "/asnn/response"):
         assert [t for t, _ in messages[topic]] == stamps, topic
     for (_, image), (_, marks), ns in zip(messages["/asnn/image"],
-                                                messages["/asnn/annotations"], stamps):
+                                          messages["/asnn/annotations"], stamps):
         assert image.timestamp.seconds * 10**9 + image.timestamp.nanos == ns
         assert image.frame_id == "front_camera" and image.format == "jpeg"
         for circle in marks.circles:
