@@ -1,6 +1,7 @@
 """``asnn detect``: the JSONL contract of CONTRACT.md, outputs and errors."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -168,3 +169,29 @@ def test_an_annotated_video_that_cannot_be_written_is_one_error_line(looming_vid
     assert main(["detect", str(path), "--annotate", str(target), "--threads", threads]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"asnn detect: cannot write {target}"]
+
+
+def test_wide_vectors_only_where_the_processor_has_them():
+    from cli.main import wide_vector_features
+
+    host = "+64bit,+avx,+avx2,+avx512f,+fma"
+    assert wide_vector_features(host) == host + ",-prefer-256-bit"
+    assert wide_vector_features("+64bit,+avx,+avx2,-avx512f,+fma") is None
+    assert wide_vector_features("+64bit,+avx,+avx2,+avx512fp16") is None
+
+
+def test_the_detect_process_equals_a_loop_in_this_process(looming_video):
+    """``asnn detect`` as its own process has numba use 512-bit vectors where the processor
+    has them (this process: the default width); its records are still those of the loop."""
+    from asnn.evaluation.runs import run_detector
+    from asnn.io.sources import open_source
+
+    path, _ = looming_video
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CPU_FEATURES"}
+    proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", str(path), "--jsonl", "-"],
+                          capture_output=True, text=True, timeout=600, env=env)
+    assert proc.returncode == 0, proc.stderr
+    got = [json.loads(line) for line in proc.stdout.splitlines()]
+    expected = json.loads(json.dumps(run_detector(open_source(str(path)).timed_frames())))
+    assert any(record["targets"] for record in expected)
+    assert got == expected
