@@ -34,6 +34,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from ._jit import kernel
+
 __all__ = ["Expansion", "region_expansion"]
 
 _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
@@ -104,22 +106,91 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
                          for a in (before, after))
     else:
         step = 1.0
-    mean = 0.5 * (before + after)
-    ex = cv2.Sobel(mean, cv2.CV_64F, 1, 0, ksize=3) / 8.0
-    ey = cv2.Sobel(mean, cv2.CV_64F, 0, 1, ksize=3) / 8.0
-    et = (after - before).astype(np.float64)
-    h, w = ex.shape  # coordinates about the box's centre, in pixels of the fitting scale
-    xs = np.arange(w, dtype=np.float64) - 0.5 * (w - 1)
-    ys = np.arange(h, dtype=np.float64) - 0.5 * (h - 1)
-    radial = xs[None, :] * ex + ys[:, None] * ey
-    basis = np.stack([ex.ravel(), ey.ravel(), radial.ravel(), -np.ones(ex.size)])
-    normal = basis @ basis.T
-    rhs = -(basis @ et.ravel())
-    scale = np.trace(normal[:3, :3])
-    if not scale > 0:
+    return _fit(before, after, step)
+
+
+def _fit(before: np.ndarray, after: np.ndarray, step: float) -> Expansion | None:
+    """The least-squares fit of :func:`region_expansion` on the fitting scale."""
+    solved, a, b, c, d = _solve_expansion(before, after, _RIDGE)
+    if not solved:
         return None
+    return Expansion(a * step, b * step, c, d)
+
+
+@kernel(error_model="numpy")
+def _solve_expansion(before, after, ridge):
+    """``(solved, A, B, C, D)`` of :func:`region_expansion` over two equal images.
+
+    One pass over the pixels: the Sobel derivatives of the mean (OpenCV's 3x3 kernels, scaled
+    by 1/8, reflect-101 border) and the temporal difference, in the images' precision as the
+    NumPy expressions would compute them; the normal equations accumulated in float64; then
+    solved by Gaussian elimination with partial pivoting. ``solved`` is False without a
+    gradient to measure.
+    """
+    h, w = before.shape
+    mean = np.empty((h, w), np.float64)  # exact: the float32 mean, widened
+    half = before.dtype.type(0.5)
+    for y in range(h):
+        for x in range(w):
+            mean[y, x] = half * (before[y, x] + after[y, x])
+    normal = np.zeros((4, 5))  # [N | rhs], the upper triangle accumulated
+    for y in range(h):
+        up, down = _reflect(y - 1, h), _reflect(y + 1, h)
+        ry = y - 0.5 * (h - 1)
+        for x in range(w):
+            left, right = _reflect(x - 1, w), _reflect(x + 1, w)
+            # sums of a few float32 values in float64: exact, as OpenCV's float64 Sobel
+            ex = ((mean[up, right] - mean[up, left]) + 2.0 * (mean[y, right] - mean[y, left])
+                  + (mean[down, right] - mean[down, left])) / 8.0
+            ey = ((mean[down, left] - mean[up, left]) + 2.0 * (mean[down, x] - mean[up, x])
+                  + (mean[down, right] - mean[up, right])) / 8.0
+            et = np.float64(after[y, x] - before[y, x])
+            radial = (x - 0.5 * (w - 1)) * ex + ry * ey
+            basis = (ex, ey, radial, -1.0)
+            for i in range(4):
+                bi = basis[i]
+                for j in range(i, 4):
+                    normal[i, j] += bi * basis[j]
+                normal[i, 4] -= bi * et
+    for i in range(4):
+        for j in range(i):
+            normal[i, j] = normal[j, i]
+    scale = normal[0, 0] + normal[1, 1] + normal[2, 2]
+    if not scale > 0:
+        return False, 0.0, 0.0, 0.0, 0.0
     # the gradient terms are regularised relative to their own size (no texture: C -> 0);
     # the brightness term is well posed by the pixel count
-    normal[np.arange(3), np.arange(3)] += _RIDGE * scale
-    a, b, c, d = np.linalg.solve(normal, rhs)
-    return Expansion(float(a) * step, float(b) * step, float(c), float(d))
+    for i in range(3):
+        normal[i, i] += ridge * scale
+    for k in range(4):
+        pivot = k
+        for i in range(k + 1, 4):
+            if abs(normal[i, k]) > abs(normal[pivot, k]):
+                pivot = i
+        if not normal[pivot, k] != 0.0:
+            return False, 0.0, 0.0, 0.0, 0.0
+        for j in range(5):
+            normal[k, j], normal[pivot, j] = normal[pivot, j], normal[k, j]
+        for i in range(k + 1, 4):
+            factor = normal[i, k] / normal[k, k]
+            for j in range(k, 5):
+                normal[i, j] -= factor * normal[k, j]
+    solution = np.zeros(4)
+    for i in range(3, -1, -1):
+        acc = normal[i, 4]
+        for j in range(i + 1, 4):
+            acc -= normal[i, j] * solution[j]
+        solution[i] = acc / normal[i, i]
+    return True, solution[0], solution[1], solution[2], solution[3]
+
+
+@kernel(inline="always")
+def _reflect(i, n):
+    """Reflect-101 index (OpenCV's default border) for an overshoot of one pixel."""
+    if n == 1:
+        return 0
+    if i < 0:
+        return -i
+    if i >= n:
+        return 2 * n - 2 - i
+    return i
