@@ -332,6 +332,44 @@ class ObjectRegions:
         return len(self.x)
 
 
+@kernel()
+def _region_moments(rows, cols, labels, oy, ox, lut, n, g, absolute):
+    """The pixels of the kept regions (their rows, columns and region numbers) and each
+    region's G-weighted centre, variance, mass and share (see :func:`extract_objects`),
+    summed in the pixels' order as ``np.bincount`` sums."""
+    m = 0
+    lab = np.empty(rows.shape[0], np.int64)
+    kept_rows = np.empty_like(lab)
+    kept_cols = np.empty_like(lab)
+    values = np.empty(rows.shape[0], np.float64)
+    share = np.zeros(n)
+    mass = np.zeros(n)
+    for i in range(rows.shape[0]):
+        k = lut[labels[rows[i] - oy, cols[i] - ox]]
+        if k < 0:
+            continue
+        value = np.float64(g[rows[i], cols[i]])
+        lab[m], kept_rows[m], kept_cols[m], values[m] = k, rows[i], cols[i], value
+        m += 1
+        share[k] += abs(value) if absolute else value
+        mass[k] += max(value, 0.0)
+    total, sum_x, sum_y = np.zeros(n), np.zeros(n), np.zeros(n)
+    for i in range(m):
+        k = lab[i]
+        wt = max(values[i], 0.0) if mass[k] > 0 else 1.0  # no positive G: equal weights
+        values[i] = wt
+        total[k] += wt
+        sum_x[k] += wt * kept_cols[i]
+        sum_y[k] += wt * kept_rows[i]
+    x, y = sum_x / total, sum_y / total
+    var = np.zeros(n)
+    for i in range(m):
+        k = lab[i]
+        ddx, ddy = kept_cols[i] - x[k], kept_rows[i] - y[k]
+        var[k] += values[i] * (ddx * ddx + ddy * ddy)
+    return kept_rows[:m], kept_cols[:m], lab[:m], x, y, var / total, mass, share
+
+
 def extract_objects(mask: np.ndarray, g: np.ndarray,
                     vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
                     min_pixels: int, absolute: bool, *,
@@ -374,23 +412,13 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
     n = len(keep)
     lut = np.full(count, -1, np.int64)  # component label -> kept region, or -1
     lut[keep + 1] = np.arange(n)
-    lab = lut[labels[rows - oy, cols - ox]]
-    inside = lab >= 0
-    rows, cols, lab = rows[inside], cols[inside], lab[inside]
     kept = stats[keep + 1]
     x0, y0 = kept[:, cv2.CC_STAT_LEFT] + ox, kept[:, cv2.CC_STAT_TOP] + oy
     boxes = np.stack([x0, y0, x0 + kept[:, cv2.CC_STAT_WIDTH],
                       y0 + kept[:, cv2.CC_STAT_HEIGHT]], axis=1)
     pixels = kept[:, cv2.CC_STAT_AREA]
-    values = g[rows, cols].astype(np.float64)
-    share = np.bincount(lab, np.abs(values) if absolute else values, n)
-    wt = np.maximum(values, 0.0)
-    mass = np.bincount(lab, wt, n)
-    wt[mass[lab] <= 0] = 1.0  # regions without positive G: equal weights
-    total = np.bincount(lab, wt, n)
-    x = np.bincount(lab, wt * cols, n) / total
-    y = np.bincount(lab, wt * rows, n) / total
-    var = np.bincount(lab, wt * ((cols - x[lab]) ** 2 + (rows - y[lab]) ** 2), n) / total
+    rows, cols, lab, x, y, var, mass, share = _region_moments(
+        np.asarray(rows), np.asarray(cols), labels, oy, ox, lut, n, g, bool(absolute))
     dx, dy = vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))
     vx = np.bincount(lab, dx, n) / np.maximum(pixels, 1)
     vy = np.bincount(lab, dy, n) / np.maximum(pixels, 1)
