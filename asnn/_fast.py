@@ -74,6 +74,7 @@ import math
 import threading
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 
 from . import retina
@@ -785,15 +786,16 @@ def _v_prime_halved(v, r, k, sign, out):
 @kernel(**_jit)
 def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, y0, y1, x0, x1, mask, colsum, rows,
             cols):
-    """M_a M_d in the window (``blur_v`` indexed from the window's origin) into ``mask``, the
-    attended pixels into ``rows``, ``cols`` (row-major), and sum G M_a M_d (in float64)."""
+    """M_a M_d in the window (``blur_g``, ``blur_v`` indexed from the window's origin) into
+    ``mask``, the attended pixels into ``rows``, ``cols`` (row-major), and sum G M_a M_d (in
+    float64)."""
     for x in range(x0, x1):
         colsum[x] = 0.0
     count = 0
     bits = mask.view(np.uint8)  # as bytes, and on slices from x0, the loop vectorises
     for y in range(y0, y1):
-        bg, bv, gy, my = blur_g[y], blur_v[y - y0], g[y], mask[y]
-        a, b, m = bg[x0:x1], bv[:x1 - x0], bits[y, x0:x1]
+        bg, bv, gy, my = blur_g[y - y0], blur_v[y - y0], g[y], mask[y]
+        a, b, m = bg[:x1 - x0], bv[:x1 - x0], bits[y, x0:x1]
         n = 0
         for x in range(x1 - x0):
             set_ = np.uint8(a[x] > gamma_a) & np.uint8(b[x] > gamma_d)
@@ -822,53 +824,76 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
     """M_a, M_d and ``sum G M_a M_d`` (or of ``|G|``), in float64.
 
     Reproduces :func:`~asnn.retina.approach_attention`, :func:`~asnn.retina.direction_attention`
-    and :func:`~asnn.retina.membrane_potential` (before its scale). ``blur(image)`` is the
-    attention blur (:func:`~asnn.retina.attention_blur`), ``sums`` the sums of R^theta.
+    and :func:`~asnn.retina.membrane_potential` (before its scale). ``blur`` is the
+    attention blur (:class:`AttentionBlur`), ``sums`` the sums of R^theta.
     Unless ``full``, M_d is computed only in M_a's bounding box (V' is blurred there plus the
-    blur's radius, or over the whole frame for a blur on a coarser grid). Returns
-    ``(sum, number of attended pixels, blurred G, blurred V' or None, window)``; ``ws.mask``
-    holds M_a M_d (zero outside the window), ``ws.rows[:count]``, ``ws.cols[:count]`` the
-    attended pixels in row-major order.
+    blur's radius, or over the whole frame for a blur on a coarser grid), and a blur on a grid
+    twice coarser is interpolated back only in a window around the cells above the threshold
+    (:meth:`AttentionBlur.window`). Returns ``(sum, number of attended pixels, blurred G or
+    None, blurred V' or None, window)``: the blurs cover the window; ``ws.mask`` holds M_a M_d
+    (zero outside the window), ``ws.rows[:count]``, ``ws.cols[:count]`` the attended pixels in
+    row-major order.
     """
     h, w = g.shape
-    blur_g = blur(g)
     ws.mask.fill(False)
-    if full:
-        y0, y1, x0, x1 = 0, h, 0, w
-    else:
+    halved = blur.step == 2 and h % 2 == 0 and w % 2 == 0 and not full
+    if halved:
+        # interpolation is a convex combination of the four nearest cells: a pixel is above
+        # gamma_a only next to a cell that is
+        coarse_g = blur.coarse(retina.coarse_grid(g, 2))
+        y0, y1, x0, x1 = _box(coarse_g, float(gamma_a))
+        if y0 >= y1:
+            return 0.0, 0, None, None, (0, 0, 0, 0)
+        wy0, wy1, wx0, wx1 = max(2 * y0 - 1, 0), min(2 * y1 + 2, h), max(2 * x0 - 1, 0), \
+            min(2 * x1 + 2, w)
+        blur_g = blur.window(coarse_g, wy0, wy1, wx0, wx1)
         y0, y1, x0, x1 = _box(blur_g, float(gamma_a))
         if y0 >= y1:
-            return 0.0, 0, blur_g, None, (0, 0, 0, 0)
+            return 0.0, 0, blur_g, None, (wy0, wy1, wx0, wx1)
+        y0, y1, x0, x1 = y0 + wy0, y1 + wy0, x0 + wx0, x1 + wx0
+        inner_g = blur_g[y0 - wy0:, x0 - wx0:]
+    else:
+        blur_g = blur(g)
+        if full:
+            y0, y1, x0, x1 = 0, h, 0, w
+        else:
+            y0, y1, x0, x1 = _box(blur_g, float(gamma_a))
+            if y0 >= y1:
+                return 0.0, 0, blur_g, None, (0, 0, 0, 0)
+        inner_g = blur_g[y0:, x0:]
     if top_k:
         half = r.shape[0]
         totals = np.concatenate([sums, -sums])
         chosen = np.argsort(-totals, kind="stable")[:top_k]
         ks = np.array([k % half for k in chosen], np.int64)
         signs = np.array([1 if k < half else -1 for k in chosen], dtype=g.dtype)
-    # the blur of V' is exact inside the window when the window extends by its radius
-    # (or reaches the frame's edge, where the border rule applies as in the whole frame)
-    margin = blur.radius
-    wy0, wy1, wx0, wx1 = max(y0 - margin, 0), min(y1 + margin, h), max(x0 - margin, 0), \
-        min(x1 + margin, w)
-    if blur.step > 1:  # a blur on a coarser grid is only exact over the whole frame
-        wy0, wy1, wx0, wx1 = 0, h, 0, w
-    if top_k == 1 and blur.step == 2 and h % 2 == 0 and w % 2 == 0:
-        # V' straight onto the coarse grid (the window is the whole frame)
+    if halved and top_k == 1:
+        # V' straight onto the coarse grid, blurred there, interpolated back in the window
         coarse = np.empty((h // 2, w // 2), g.dtype)
         _v_prime_halved(v, r, ks[0], signs[0], coarse)
-        blur_v = blur.from_coarse(coarse, (h, w))
+        blur_v = blur.window(blur.coarse(coarse), y0, y1, x0, x1)
+        inner = blur_v
+        window = (y0, y1, x0, x1)
     else:
+        # the blur of V' is exact inside the window when the window extends by its radius
+        # (or reaches the frame's edge, where the border rule applies as in the whole frame)
+        margin = blur.radius
+        wy0, wy1, wx0, wx1 = max(y0 - margin, 0), min(y1 + margin, h), max(x0 - margin, 0), \
+            min(x1 + margin, w)
+        if blur.step > 1:  # a blur on a coarser grid is only exact over the whole frame
+            wy0, wy1, wx0, wx1 = 0, h, 0, w
         if top_k:
             _v_prime(v, r, ks, signs, wy0, wy1, wx0, wx1, ws.v_prime)
-            window = ws.v_prime[wy0:wy1, wx0:wx1]
+            source = ws.v_prime[wy0:wy1, wx0:wx1]
         else:
-            window = v[wy0:wy1, wx0:wx1]
-        blur_v = blur(np.ascontiguousarray(window))
-    inner = blur_v[y0 - wy0:, x0 - wx0:]
-    total, count = _attend(blur_g, float(gamma_a), inner, float(gamma_d), g,
+            source = v[wy0:wy1, wx0:wx1]
+        blur_v = blur(np.ascontiguousarray(source))
+        inner = blur_v[y0 - wy0:, x0 - wx0:]
+        window = (wy0, wy1, wx0, wx1)
+    total, count = _attend(inner_g, float(gamma_a), inner, float(gamma_d), g,
                            bool(absolute), y0, y1, x0, x1, ws.mask, ws.attended_sums, ws.rows,
                            ws.cols)
-    return total, count, blur_g, blur_v, (wy0, wy1, wx0, wx1)
+    return total, count, blur_g, blur_v, window
 
 
 class AttentionBlur:
@@ -883,6 +908,20 @@ class AttentionBlur:
     def __call__(self, image: np.ndarray) -> np.ndarray:
         return retina.attention_blur(image, *self._args, self.step)
 
-    def from_coarse(self, coarse: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-        """The blur of an image of this shape from its area average on the coarse grid."""
-        return retina.coarse_attention_blur(coarse, shape, *self._args, self.step)
+    def coarse(self, coarse: np.ndarray) -> np.ndarray:
+        """The blur on the coarse grid (``step`` > 1) of an image's area average there
+        (:func:`~asnn.retina.coarse_grid_blur`)."""
+        return retina.coarse_grid_blur(coarse, *self._args, self.step)
+
+    def window(self, blurred: np.ndarray, y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
+        """Rows ``y0:y1``, columns ``x0:x1`` of the bilinear interpolation back of a blur on
+        the grid twice coarser (``step`` = 2, an image of even size), bit for bit those of
+        :func:`~asnn.retina.coarse_attention_blur`: the cells around the window are
+        interpolated, with a margin of cells that keeps the border rule of their own edges
+        out of it (each pixel reads the two nearest cells in each direction)."""
+        h, w = blurred.shape
+        a, b = max((y0 - 1) // 2 - 1, 0), min((y1 - 1) // 2 + 3, h)
+        c, d = max((x0 - 1) // 2 - 1, 0), min((x1 - 1) // 2 + 3, w)
+        up = cv2.resize(blurred[a:b, c:d], (2 * (d - c), 2 * (b - a)),
+                        interpolation=cv2.INTER_LINEAR)
+        return up[y0 - 2 * a:y1 - 2 * a, x0 - 2 * c:x1 - 2 * c]

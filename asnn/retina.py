@@ -37,7 +37,9 @@ __all__ = [
     "approach_map",
     "group",
     "attention_blur",
+    "coarse_grid",
     "coarse_attention_blur",
+    "coarse_grid_blur",
     "approach_attention",
     "direction_attention",
     "membrane_potential",
@@ -354,9 +356,8 @@ def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
     (bilinear): the blurred map is smooth at that scale, and the blur costs ``step**2`` less.
     """
     if step > 1:
-        h, w = image.shape
-        coarse = cv2.resize(image, (-(-w // step), -(-h // step)), interpolation=cv2.INTER_AREA)
-        return coarse_attention_blur(coarse, (h, w), sigma, size, normalised, step)
+        return coarse_attention_blur(coarse_grid(image, step), image.shape, sigma, size,
+                                     normalised, step)
     if normalised:
         return cv2.GaussianBlur(image, (size, size), sigma, borderType=_BORDER)
     r = size // 2
@@ -366,12 +367,26 @@ def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
     return cv2.sepFilter2D(image, depth, k, k, borderType=_BORDER)
 
 
+def coarse_grid(image: np.ndarray, step: int) -> np.ndarray:
+    """The area average of an image on the grid ``step`` times coarser of
+    :func:`attention_blur` (a partial cell at the end averages the pixels it has)."""
+    h, w = image.shape
+    return cv2.resize(image, (-(-w // step), -(-h // step)), interpolation=cv2.INTER_AREA)
+
+
 def coarse_attention_blur(coarse: np.ndarray, shape: tuple[int, int], sigma: float, size: int,
                           normalised: bool, step: int) -> np.ndarray:
     """:func:`attention_blur` with ``step`` > 1 of an image of this shape, given its area
     average on the coarse grid."""
-    blurred = attention_blur(coarse, sigma / step, (size // step) | 1, normalised)
+    blurred = coarse_grid_blur(coarse, sigma, size, normalised, step)
     return cv2.resize(blurred, shape[::-1], interpolation=cv2.INTER_LINEAR)
+
+
+def coarse_grid_blur(coarse: np.ndarray, sigma: float, size: int, normalised: bool,
+                     step: int) -> np.ndarray:
+    """The blur of :func:`attention_blur` with ``step`` > 1 on its coarse grid, before the
+    bilinear interpolation back."""
+    return attention_blur(coarse, sigma / step, (size // step) | 1, normalised)
 
 
 def approach_attention(g: np.ndarray, sigma: float, size: int, normalised: bool,

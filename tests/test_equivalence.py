@@ -248,3 +248,49 @@ def test_fused_gain_control_and_halved_v_prime_are_the_straightforward_ones():
         _fast._v_prime_halved(v, r, k, np.float32(sign), coarse)
         want = cv2.resize(v - np.float32(sign) * r[k], (40, 30), interpolation=cv2.INTER_AREA)
         np.testing.assert_array_equal(coarse, want)
+
+
+def test_a_window_of_the_coarse_blur_is_that_of_the_whole_frame():
+    """The attention blur on the grid twice coarser, interpolated back only in a window
+    (_fast.AttentionBlur.window), is the whole frame's interpolation there, bit for bit,
+    whatever the window: next to the coarse grid's edges and away from them."""
+    rng = np.random.default_rng(5)
+    blur = _fast.AttentionBlur(8.0, 31, True, step=2)
+    for _ in range(200):
+        h, w = 2 * int(rng.integers(3, 70)), 2 * int(rng.integers(3, 90))
+        image = (rng.random((h, w)) * rng.random() ** 3).astype(np.float32)
+        coarse = blur.coarse(retina.coarse_grid(image, 2))
+        whole = retina.attention_blur(image, 8.0, 31, True, 2)
+        y0, x0 = int(rng.integers(0, h)), int(rng.integers(0, w))
+        y1, x1 = int(rng.integers(y0 + 1, h + 1)), int(rng.integers(x0 + 1, w + 1))
+        np.testing.assert_array_equal(blur.window(coarse, y0, y1, x0, x1),
+                                      whole[y0:y1, x0:x1])
+
+
+def test_attention_in_its_window_equals_attention_over_the_whole_frame(scenes):
+    """attention() with the robust preset's coarse blur interpolates the blurs back only
+    around M_a; M_a M_d, its pixels and sum G M_a M_d are those of the whole-frame blurs."""
+    model = ASNN("robust", record_maps=True)
+    p = model.params
+    attended = 0
+    for frame in scenes[("looming_over_stripes", "dark")]:
+        response = model.step(frame)
+        if response.maps is None:
+            continue
+        m = response.maps
+        r, v, g = m.R[:4].astype(np.float32), m.V.astype(np.float32), m.G.astype(np.float32)
+        sums = r.sum(axis=(1, 2), dtype=np.float64)
+        results = []
+        for full in (False, True):
+            ws = _fast.Workspace(g.shape, np.float32)
+            total, count, *_ = _fast.attention(g, r, v, sums, ws, model._blur, p.gamma_a,
+                                               p.gamma_d, p.top_k, p.u_abs, full=full)
+            results.append((total, count, ws.mask.copy(), ws.rows[:count].copy(),
+                            ws.cols[:count].copy()))
+        (t0, c0, m0, r0, k0), (t1, c1, m1, r1, k1) = results
+        assert t0 == t1 and c0 == c1
+        np.testing.assert_array_equal(m0, m1)
+        np.testing.assert_array_equal(r0, r1)
+        np.testing.assert_array_equal(k0, k1)
+        attended += c0
+    assert attended > 0
