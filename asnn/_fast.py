@@ -249,7 +249,10 @@ def scratch(width: int, dtype) -> Scratch:
 
 @kernel(inline="always", **_jit)
 def _reflect(i, n):
-    """Reflect-101 index (OpenCV's default border) for |overshoot| < n."""
+    """Reflect-101 index (OpenCV's default border) for |overshoot| < n, or 0 for n = 1 (a
+    looming fit's box shrunk to one pixel across)."""
+    if n == 1:
+        return 0
     if i < 0:
         return -i
     if i >= n:

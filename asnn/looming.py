@@ -34,6 +34,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from ._fast import _reflect
 from ._jit import kernel
 
 __all__ = ["Expansion", "region_expansion"]
@@ -106,11 +107,6 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
                          for a in (before, after))
     else:
         step = 1.0
-    return _fit(before, after, step)
-
-
-def _fit(before: np.ndarray, after: np.ndarray, step: float) -> Expansion | None:
-    """The least-squares fit of :func:`region_expansion` on the fitting scale."""
     solved, a, b, c, d = _solve_expansion(before, after, _RIDGE)
     if not solved:
         return None
@@ -182,15 +178,3 @@ def _solve_expansion(before, after, ridge):
             acc -= normal[i, j] * solution[j]
         solution[i] = acc / normal[i, i]
     return True, solution[0], solution[1], solution[2], solution[3]
-
-
-@kernel(inline="always")
-def _reflect(i, n):
-    """Reflect-101 index (OpenCV's default border) for an overshoot of one pixel."""
-    if n == 1:
-        return 0
-    if i < 0:
-        return -i
-    if i >= n:
-        return 2 * n - 2 - i
-    return i
