@@ -65,7 +65,8 @@ class Expansion(NamedTuple):
 
 
 def region_expansion(previous: np.ndarray, current: np.ndarray,
-                     box: tuple[int, int, int, int]) -> Expansion | None:
+                     box: tuple[int, int, int, int],
+                     background: np.ndarray | None = None) -> Expansion | None:
     """Expansion and drift of a box of the image between two frames (Horn et al. [1]_).
 
     Solves ``E_x A + E_y B + g C - D = -E_t`` in the least-squares sense over the box, with
@@ -76,12 +77,19 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     the linear range of the brightness-constancy equation (Horn, Fang and Masaki's hierarchical
     form does the same [2]_).
 
+    With ``background``, the previous frame moved by the background's translation
+    (:mod:`asnn.stabilisation`), a pixel whose change that translation explains better than
+    no motion (``|current - background| < |current - previous|``) is left out of the fit: the
+    box's background sliding past is not the object's own motion.
+
     Parameters
     ----------
     previous, current : ndarray (H, W)
         Luminance of two frames, float.
     box : (x0, y0, x1, y1)
         Pixels ``x0 <= x < x1``, ``y0 <= y < y1``.
+    background : ndarray (H, W), optional
+        ``previous`` moved by the background's translation.
 
     Returns
     -------
@@ -98,24 +106,29 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     x0, y0, x1, y1 = box
     if x1 - x0 < _MIN_SIDE or y1 - y0 < _MIN_SIDE:
         return None
-    before = previous[y0:y1, x0:x1]
-    after = current[y0:y1, x0:x1]
+    images = [previous[y0:y1, x0:x1], current[y0:y1, x0:x1]]
+    if background is not None:
+        images.append(background[y0:y1, x0:x1])
     step = max(x1 - x0, y1 - y0) / _MAX_SIDE
     if step > 1.0:
         size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
-        before, after = (cv2.resize(np.ascontiguousarray(a), size, interpolation=cv2.INTER_AREA)
-                         for a in (before, after))
+        images = [cv2.resize(np.ascontiguousarray(a), size, interpolation=cv2.INTER_AREA)
+                  for a in images]
     else:
         step = 1.0
-    solved, a, b, c, d = _solve_expansion(before, after, _RIDGE)
+    before, after = images[:2]
+    # without a background every pixel counts: |after - before| < itself is never true
+    solved, a, b, c, d = _solve_expansion(before, after, images[-1] if background is not None
+                                          else before, _RIDGE)
     if not solved:
         return None
     return Expansion(a * step, b * step, c, d)
 
 
 @kernel(error_model="numpy")
-def _solve_expansion(before, after, ridge):
-    """``(solved, A, B, C, D)`` of :func:`region_expansion` over two equal images.
+def _solve_expansion(before, after, background, ridge):
+    """``(solved, A, B, C, D)`` of :func:`region_expansion` over two equal images, leaving out
+    the pixels where ``after`` is nearer ``background`` than ``before``.
 
     One pass over the pixels: the Sobel derivatives of the mean (OpenCV's 3x3 kernels, scaled
     by 1/8, reflect-101 border) and the temporal difference, in the images' precision as the
@@ -141,6 +154,8 @@ def _solve_expansion(before, after, ridge):
             ey = ((mean[down, left] - mean[up, left]) + 2.0 * (mean[down, x] - mean[up, x])
                   + (mean[down, right] - mean[up, right])) / 8.0
             et = np.float64(after[y, x] - before[y, x])
+            if abs(after[y, x] - background[y, x]) < abs(et):
+                continue  # the background's translation explains this pixel
             radial = (x - 0.5 * (w - 1)) * ex + ry * ey
             basis = (ex, ey, radial, -1.0)
             for i in range(4):

@@ -30,6 +30,7 @@ from .frames import FrameError, to_luminance
 from .looming import region_expansion
 from .params import ASNNParams, preset
 from .response import Maps, Response
+from .stabilisation import background_shift, shift_image
 from .targets import Target, extract_objects, extract_targets
 from .tracking import Observation, TargetTracker
 
@@ -216,6 +217,8 @@ class ASNN:
             If the frame is not an image the model accepts, or its size differs from the stream's.
         """
         taken = self._take(frame, t)
+        if taken.shift != (0, 0):
+            self._move_state(taken.shift)
         if taken.photo is not None:
             self._front(taken)
         return self._finish(taken)
@@ -252,6 +255,12 @@ class ASNN:
                     while pending:
                         yield self._finish(self._joined(pending.popleft()))
                     raise
+                if taken.shift != (0, 0):  # the state moves once the passes before are done
+                    for earlier in pending:
+                        self._joined(earlier)
+                    if self._other is not None:
+                        self._banded.settle((self.stages_on, self.stages_off), self._other)
+                    self._move_state(taken.shift)
                 if taken.photo is not None:  # the workers' bands queue behind the previous ones
                     self._start(taken, overlapped=True)
                 if len(pending) == 2:
@@ -288,11 +297,24 @@ class ASNN:
         if not 0.0 < elapsed <= _MAX_ELAPSED:  # no usable timestamps: the nominal frame period
             elapsed = p.dt
         self._stamp = stamp
-        if not self.optimised:
-            return _Frame(index, lum=lum, elapsed=elapsed)
-        photo = self._photoreceptors(lum)
+        shift, background = (0, 0), None
+        if p.stabilise:
+            shift = background_shift(self.previous, lum, p.stabilise_radius, p.stabilise_share)
+            if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
+                background = shift_image(self.previous, *shift, border=lum)
         previous, self.previous = self.previous, lum
-        return _Frame(index, lum=lum, elapsed=elapsed, previous=previous, photo=photo)
+        taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, shift=shift,
+                       background=background)
+        if self.optimised:
+            taken.photo = self._photoreceptors(lum, previous if background is None
+                                               else background)
+        return taken
+
+    def _move_state(self, shift: tuple[int, int]) -> None:
+        """Move the retina's state with the background (``params.stabilise``): the temporal
+        filter's cascades and the photoreceptor history; what moves in starts at rest."""
+        for state in (self.stages_on, self.stages_off, *self.history):
+            shift_image(state, *shift, out=state)
 
     def _front(self, frame: "_Frame") -> None:
         """The fused pass of a frame :meth:`_take` took (optimised form): its maps."""
@@ -337,7 +359,7 @@ class ASNN:
         elif self.optimised:
             self._last = self._respond_optimised(frame)
         else:
-            self._last = self._respond(frame.index, frame.lum, frame.elapsed)
+            self._last = self._respond(frame)
         return self._last
 
     def _is_repeat(self, lum: np.ndarray) -> bool:
@@ -363,10 +385,11 @@ class ASNN:
     def _spikes(self, u: float, n_cells: int) -> tuple[float, int, float]:
         return spike_step(u, n_cells, self.spike_window, self.params)
 
-    def _photoreceptors(self, lum: np.ndarray) -> np.ndarray:
-        """P (eq. 1), after the contrast gain control where the preset has it."""
+    def _photoreceptors(self, lum: np.ndarray, previous: np.ndarray) -> np.ndarray:
+        """P (eq. 1) from the frame and the previous one, after the contrast gain control where
+        the preset has it."""
         p = self.params
-        photo = retina.photoreceptor(lum, self.previous, list(self.history), self._p_weights)
+        photo = retina.photoreceptor(lum, previous, list(self.history), self._p_weights)
         if p.n_p:
             self.history.appendleft(photo)
         if p.contrast_gain is not None:
@@ -378,8 +401,7 @@ class ASNN:
         """:meth:`_respond` with the fused kernels of :mod:`asnn._fast`, from the fused pass's
         maps (:meth:`_front`) on."""
         p = self.params
-        index, lum, elapsed, previous, photo = (frame.index, frame.lum, frame.elapsed,
-                                                frame.previous, frame.photo)
+        index, lum, photo = frame.index, frame.lum, frame.photo
         ws = _fast.workspace(lum.shape, self.dtype)
         # r: R^theta for k = 0..3 (R^{theta + pi} = -R^theta); v = V; g = G after grouping
         r, v, g = frame.maps.r, frame.maps.v, frame.maps.g
@@ -395,9 +417,8 @@ class ASNN:
             return vv * np.cos(phi), vv * np.sin(phi)
 
         if p.targets == "objects":
-            total, targets = self._objects(attended if count else None, g, vectors, previous,
-                                           lum, elapsed, total,
-                                           points=(ws.rows[:count], ws.cols[:count]))
+            total, targets = self._objects(attended if count else None, g, vectors, frame,
+                                           total, points=(ws.rows[:count], ws.cols[:count]))
         else:
             targets = []
             if count:
@@ -417,11 +438,11 @@ class ASNN:
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps)
 
-    def _respond(self, index: int, lum: np.ndarray, elapsed: float) -> Response:
+    def _respond(self, frame: "_Frame") -> Response:
         """One step in the straightforward float64 form (:mod:`asnn.retina`, stage by stage)."""
         p = self.params
-        photo = self._photoreceptors(lum)
-        previous, self.previous = self.previous, lum
+        photo = self._photoreceptors(frame.lum, frame.previous if frame.background is None
+                                     else frame.background)
 
         on0, off0 = retina.bipolar(photo, self._dog)
         if p.target_polarity == "light":
@@ -455,7 +476,7 @@ class ASNN:
             total, targets = self._objects(
                 attended if attended.any() else None, g, lambda rows, cols: (dx[rows, cols],
                                                                              dy[rows, cols]),
-                previous, lum, elapsed, retina.membrane_potential(g_prime, 1.0, p.u_abs))
+                frame, retina.membrane_potential(g_prime, 1.0, p.u_abs))
             u = float(p.u_scale * total)
         else:
             u = retina.membrane_potential(g_prime, p.u_scale, p.u_abs)
@@ -464,12 +485,11 @@ class ASNN:
         out, spikes, spike_rate = self._spikes(u, g.size)
         maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d,
                     G_prime=g_prime) if self.record_maps else None
-        return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
+        return Response(index=frame.index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps)
 
-    def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, previous: np.ndarray,
-                 lum: np.ndarray, elapsed: float, total: float,
-                 points: tuple[np.ndarray, np.ndarray] | None = None
+    def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, frame: "_Frame",
+                 total: float, points: tuple[np.ndarray, np.ndarray] | None = None
                  ) -> tuple[float, list[Target]]:
         """Objects of the attended mask, their expansion, the tracker, and the approach gate.
 
@@ -478,6 +498,7 @@ class ASNN:
         objects; without it, every object.
         """
         p = self.params
+        elapsed = frame.elapsed
         if attended is None:
             self.tracker.update([], elapsed)
             self.objects = []
@@ -495,9 +516,9 @@ class ASNN:
         tracks = self.tracker.update(observations, elapsed)
         for tr in tracks:
             x0, y0, x1, y1 = tr.box
-            est = region_expansion(previous, lum, (max(int(x0), 0), max(int(y0), 0),
-                                                   min(int(math.ceil(x1)), w),
-                                                   min(int(math.ceil(y1)), h)))
+            est = region_expansion(frame.previous, frame.lum,
+                                   (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
+                                    min(int(math.ceil(y1)), h)), frame.background)
             if est is not None:
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed)
         coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames) for tr in tracks]
@@ -526,6 +547,8 @@ class _Frame:
     lum: np.ndarray | None = None
     elapsed: float = 0.0
     previous: np.ndarray | None = None
+    shift: tuple[int, int] = (0, 0)  # the background's translation since the previous frame
+    background: np.ndarray | None = None  # the previous frame moved by it (None: no shift)
     photo: np.ndarray | None = None
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined

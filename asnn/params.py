@@ -22,8 +22,8 @@ Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The pre
     ``reference32`` for light objects on a dark background (ON and OFF swapped).
 ``robust``
     ``reference32`` plus the robust additions (README, "The robust preset"): repeated frames
-    held, input scale, contrast gain control, both polarities, objects with a direct looming
-    estimate, a tracker and the approach gate. Each addition has the field that switches it off.
+    held, input scale, background stabilisation, contrast gain control, both polarities,
+    objects with a direct looming estimate, a tracker and the approach gate. Each addition has the field that switches it off.
 ``default``
     The preset :command:`asnn detect` uses when none is named: ``robust`` (README, "Why
     robust is the default").
@@ -73,6 +73,18 @@ class ASNNParams(BaseModel):
         "(aspect kept) before the retina, whose kernels have a fixed size in pixels; targets "
         "stay in the frame's pixels. None: every frame at its own size",
     )
+
+    # --- background stabilisation (robust addition) ---
+    stabilise: bool = Field(
+        False, description="difference each frame against the previous one moved by the "
+        "background's translation, when one translation explains most of the change, and move "
+        "the temporal filter's state with it (asnn.stabilisation)")
+    stabilise_radius: int = Field(
+        3, ge=1, le=16, description="largest translation searched, pixels per frame of the "
+        "model's grid")
+    stabilise_share: float = Field(
+        0.5, gt=0, le=1, description="smallest fraction of the frame's mean absolute difference "
+        "the translation must explain")
 
     # --- input and photoreceptors (paper eq. 1) ---
     target_polarity: Literal["dark", "light"] = Field(
@@ -284,6 +296,7 @@ PRESETS["light"] = PRESETS["reference32"].model_copy(update={"target_polarity": 
 # has the parameter that switches it off
 PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     skip_repeats=True,
+    stabilise=True,
     contrast_gain=0.005,
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale

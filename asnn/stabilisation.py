@@ -1,0 +1,146 @@
+"""Background stabilisation: the frame-to-frame translation of the whole scene, taken out.
+
+When the camera pans or shakes, or a textured background slides past (a train, a fence, moving
+stripes), every edge of the scene moves, and the retina's motion and approach maps fill with it;
+the direction-selective inhibition (paper eqs. 23-25) then removes the background's direction
+everywhere, and with it an approaching object's rims wherever the two overlap. Retinas face the
+same problem with their own eye movements: object-motion-sensitive ganglion cells respond to
+local motion only where it differs from the motion of the surround, which the eye's global
+shifts move as a whole [1]_, and the eye's own movements are compensated so that the world
+holds still [2]_.
+
+This stage does the same before the photoreceptors. :func:`background_shift` finds the whole-pixel
+translation, within a few pixels, that best maps the previous frame onto the current one, and
+accepts it only when it explains most of the frame's change: a pan, a shake or a sliding
+background, not an approaching object or the camera's own forward motion, whose images expand.
+The model then differences the current frame against the previous one moved by that
+translation, and moves its temporal filter's state with it (:func:`shift_image`), so that the
+background stands still for the retina while an object that does not move with it stands out.
+The looming fit, which measures the object's own image motion on the raw frames, leaves out the
+pixels that the background's translation explains (:func:`asnn.looming.region_expansion`).
+
+References
+----------
+.. [1] B. P. Ölveczky, S. A. Baccus, M. Meister, "Segregation of object and background motion
+   in the retina", Nature 423, 2003, pp. 401-408.
+.. [2] R. H. S. Carpenter, *Movements of the Eyes*, 2nd ed., Pion, 1988 (gaze stabilisation).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._jit import kernel
+
+__all__ = ["background_shift", "shift_image"]
+
+_SAMPLES = 4096  # about this many pixels are compared per candidate translation
+_LEVELS = 4096  # the frames are compared in steps of 1/4096 of their [0, 1] scale
+
+
+def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
+                     share: float) -> tuple[int, int]:
+    """The background's translation between two frames, in whole pixels, or ``(0, 0)``.
+
+    For every translation ``(dx, dy)`` with ``|dx|, |dy| <= radius``, the mean absolute
+    difference between ``current[y, x]`` and ``previous[y - dy, x - dx]`` over about 4096
+    pixels (whole rows, evenly spaced, away from the borders). The best
+    translation is accepted when it removes at least ``share`` of the difference without
+    translation: one motion then explains most of what changed.
+
+    Parameters
+    ----------
+    previous, current : ndarray (H, W)
+        Luminance of two consecutive frames, float.
+    radius : int
+        Largest translation searched, pixels per frame.
+    share : float
+        Smallest fraction of the frame's difference the translation must explain, in (0, 1].
+
+    Returns
+    -------
+    (dx, dy) : (int, int)
+        The content moved by ``dx`` pixels right and ``dy`` down; ``(0, 0)`` when no
+        translation is accepted (or the frames are too small to search).
+    """
+    h, w = current.shape
+    if h <= 2 * radius or w <= 2 * radius:
+        return 0, 0
+    stride = max(1, round(h * (w - 2 * radius) / _SAMPLES))
+    costs = _translation_costs(previous, current, radius, stride)
+    best = int(np.argmin(costs))  # the first of equal ones, in row-major order
+    dy, dx = divmod(best, 2 * radius + 1)
+    still = costs[radius, radius]
+    if not costs.flat[best] <= (1.0 - share) * still or costs.flat[best] == still:
+        return 0, 0
+    return dx - radius, dy - radius
+
+
+@kernel()
+def _translation_costs(previous, current, radius, stride):
+    """Sum of ``|current[y, x] - previous[y - dy, x - dx]|`` over every ``stride``-th row (all
+    of its columns away from the borders), per translation, indexed ``[dy + radius,
+    dx + radius]``, in units of 1/4096 of the intensity scale.
+
+    The frames are rounded to those units first: integer sums do not depend on the order
+    they are added in, so the loop is vectorised and the result is the same on every machine.
+    """
+    h, w = current.shape
+    n = 2 * radius + 1
+    m = w - 2 * radius  # the columns compared
+    costs = np.zeros((n, n), np.int64)
+    here = np.empty(w, np.int32)
+    around = np.empty((n, w), np.int32)
+    for y in range(radius, h - radius, stride):
+        _levels(current[y], here)
+        for j in range(n):
+            _levels(previous[y + radius - j], around[j])
+        middle = here[radius:radius + m]
+        for j in range(n):
+            for i in range(n):
+                # sliced so that the loop's indices start at zero: it is then vectorised
+                source = around[j, n - 1 - i:n - 1 - i + m]
+                total = 0
+                for x in range(m):
+                    d = middle[x] - source[x]
+                    total += d if d >= 0 else -d
+                costs[j, i] += total
+    return costs
+
+
+@kernel()
+def _levels(row, out):
+    """A row of intensities in units of 1/4096, rounded to the nearest."""
+    for x in range(row.shape[0]):
+        out[x] = np.int32(np.floor(row[x] * _LEVELS + 0.5))
+
+
+def shift_image(image: np.ndarray, dx: int, dy: int, border: np.ndarray | float = 0.0,
+                out: np.ndarray | None = None) -> np.ndarray:
+    """``image`` moved by ``dx`` pixels right and ``dy`` down over its last two axes.
+
+    Pixels with no source in ``image`` take ``border``: a scalar, or an array of the image's
+    shape whose values there are used. ``out`` may be ``image`` itself (moved in place).
+    """
+    if out is None:
+        out = np.empty_like(image)
+    h, w = image.shape[-2:]
+    dst_y, src_y = _span(dy, h)
+    dst_x, src_x = _span(dx, w)
+    out[..., dst_y, dst_x] = image[..., src_y, src_x]  # NumPy buffers overlapping copies
+    uncovered = []  # the rows, then the columns, that nothing moved into
+    if dy:
+        uncovered.append((slice(0, dy) if dy > 0 else slice(h + dy, h), slice(None)))
+    if dx:
+        uncovered.append((slice(None), slice(0, dx) if dx > 0 else slice(w + dx, w)))
+    for rows, cols in uncovered:
+        out[..., rows, cols] = border[..., rows, cols] if isinstance(border, np.ndarray) \
+            else border
+    return out
+
+
+def _span(shift: int, n: int) -> tuple[slice, slice]:
+    """Destination and source slices of one axis moved by ``shift``."""
+    if shift >= 0:
+        return slice(shift, n), slice(0, n - shift)
+    return slice(0, n + shift), slice(-shift, n)

@@ -1,0 +1,112 @@
+"""Background stabilisation (asnn.stabilisation): the translation found, when it is refused,
+the shifted images, the looming fit that leaves the background out, and the model's threads."""
+
+import cv2
+import numpy as np
+import pytest
+
+from asnn import ASNN, preset
+from asnn.looming import region_expansion
+from asnn.stabilisation import background_shift, shift_image
+from asnn.stimuli.suite import make_case
+
+
+def _texture(shape=(120, 160), seed=0, blur=2.0):
+    rng = np.random.default_rng(seed)
+    noise = rng.random(shape).astype(np.float32)
+    return cv2.GaussianBlur(noise, (0, 0), blur)
+
+
+def _zoom(image, scale):
+    h, w = image.shape
+    m = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), 0.0, scale)
+    return cv2.warpAffine(image, m, (w, h), flags=cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_REFLECT_101)
+
+
+@pytest.mark.parametrize("dx", range(-3, 4))
+@pytest.mark.parametrize("dy", [-3, -1, 0, 2])
+def test_the_translation_of_a_textured_frame_is_found(dx, dy):
+    before = _texture()
+    after = shift_image(before, dx, dy, border=_texture(seed=1))
+    assert background_shift(before, after, 3, 0.5) == (dx, dy)
+
+
+def test_no_translation_beyond_the_radius_or_for_an_expanding_frame():
+    before = _texture()
+    assert background_shift(before, shift_image(before, 5, 0, border=0.5), 3, 0.5) == (0, 0)
+    assert background_shift(before, _zoom(before, 1.04), 3, 0.5) == (0, 0)
+    assert background_shift(before, before, 3, 0.5) == (0, 0)
+    assert background_shift(before[:6, :6], before[:6, :6], 3, 0.5) == (0, 0)
+
+
+def test_an_object_moving_over_a_still_textured_scene_is_not_the_background():
+    scene = _texture()
+    patch = _texture((30, 30), seed=2, blur=1.0)
+    before, after = scene.copy(), scene.copy()
+    before[40:70, 50:80] = patch
+    after[40:70, 52:82] = patch
+    assert background_shift(before, after, 3, 0.5) == (0, 0)
+    # ... while the same scene panned is
+    assert background_shift(before, shift_image(before, 2, 0, border=before), 3, 0.5) == (2, 0)
+
+
+def test_the_share_a_translation_must_explain():
+    # the upper half pans, the lower half changes into another texture: the pan explains a
+    # part of the frame's change (about a third), not most of it
+    before = _texture()
+    after = shift_image(before, 2, 0, border=before)
+    after[60:] = _texture(seed=3)[60:]
+    assert background_shift(before, after, 3, 0.1) == (2, 0)
+    assert background_shift(before, after, 3, 0.5) == (0, 0)
+
+
+def test_shift_image_moves_the_last_two_axes_and_fills_what_nothing_moved_into():
+    image = np.arange(2 * 5 * 6, dtype=np.float64).reshape(2, 5, 6)
+    moved = shift_image(image, 2, -1, border=-1.0)
+    np.testing.assert_array_equal(moved[:, :4, 2:], image[:, 1:, :4])
+    assert (moved[:, 4, :] == -1).all() and (moved[:, :, :2] == -1).all()
+    fill = np.full_like(image, 7.0)
+    assert (shift_image(image, -1, 2, border=fill)[:, :2, :] == 7).all()
+    in_place = image.copy()
+    assert shift_image(in_place, 2, -1, border=-1.0, out=in_place) is in_place
+    np.testing.assert_array_equal(in_place, moved)
+    np.testing.assert_array_equal(shift_image(image, 0, 0), image)
+
+
+def test_the_looming_fit_leaves_out_the_background_that_slides_past():
+    # a textured disk grows by 4 % at the centre of a texture sliding 2 px to the right
+    ground, disk = _texture(seed=4), _texture(seed=5, blur=1.5)
+    y, x = np.mgrid[0:120, 0:160]
+    inside = (x - 80.0) ** 2 + (y - 60.0) ** 2 < 24.0 ** 2
+    grown = _zoom(inside.astype(np.float32), 1.04) > 0.5
+    before = np.where(inside, disk, ground).astype(np.float32)
+    after = np.where(grown, _zoom(disk, 1.04), shift_image(ground, 2, 0, border=ground))
+    after = after.astype(np.float32)
+    box = (46, 26, 114, 94)
+    plain = region_expansion(before, after, box)
+    steady = region_expansion(before, after, box, shift_image(before, 2, 0, border=after))
+    assert abs(steady.drift_x) < 0.2 and abs(steady.drift_y) < 0.2
+    assert abs(plain.drift_x) > 3 * abs(steady.drift_x)
+    assert 0.02 < steady.rate < 0.06
+    # without a background the result is that of the fit over every pixel
+    assert region_expansion(before, after, box, None) == plain
+
+
+def test_threads_change_nothing_while_the_background_is_taken_out():
+    scene = make_case("loom-dark-c0.5-over-stripes-h2px")
+    params = preset("default", approach_gate=False)  # every object's activity in u and targets
+    lum = [ASNN(params)._luminance(f) for f in scene.frames]
+    assert sum(background_shift(a, b, 3, 0.5) != (0, 0) for a, b in zip(lum, lum[1:])) > 60
+    one = ASNN(params)
+    expected = [one.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
+    assert sum(r.u > 0 for r in expected) > 30
+    for threads in (2, 3):
+        with ASNN(params, threads=threads) as model:
+            got = list(model.stream((i / scene.fps, f) for i, f in enumerate(scene.frames)))
+        assert got == expected, threads
+
+
+def test_stabilisation_is_off_in_the_published_variant():
+    assert not preset("reference").stabilise and not preset("reference32").stabilise
+    assert preset("default").stabilise
