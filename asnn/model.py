@@ -218,7 +218,7 @@ class ASNN:
         """
         taken = self._take(frame, t)
         if taken.shift != (0, 0):
-            self._move_state(taken.shift)
+            self._move_cascades(taken.shift)
         if taken.photo is not None:
             self._front(taken)
         return self._finish(taken)
@@ -260,7 +260,7 @@ class ASNN:
                         self._joined(earlier)
                     if self._other is not None:
                         self._banded.settle((self.stages_on, self.stages_off), self._other)
-                    self._move_state(taken.shift)
+                    self._move_cascades(taken.shift)
                 if taken.photo is not None:  # the workers' bands queue behind the previous ones
                     self._start(taken, overlapped=True)
                 if len(pending) == 2:
@@ -302,6 +302,8 @@ class ASNN:
             shift = background_shift(self.previous, lum, p.stabilise_radius, p.stabilise_share)
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
                 background = shift_image(self.previous, *shift, border=lum)
+                for photo in self.history:  # P of earlier frames, as the cascades move
+                    shift_image(photo, *shift, out=photo)
         previous, self.previous = self.previous, lum
         taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, shift=shift,
                        background=background)
@@ -310,11 +312,11 @@ class ASNN:
                                                else background)
         return taken
 
-    def _move_state(self, shift: tuple[int, int]) -> None:
-        """Move the retina's state with the background (``params.stabilise``): the temporal
-        filter's cascades and the photoreceptor history; what moves in starts at rest."""
-        for state in (self.stages_on, self.stages_off, *self.history):
-            shift_image(state, *shift, out=state)
+    def _move_cascades(self, shift: tuple[int, int]) -> None:
+        """Move the temporal filter's state with the background (``params.stabilise``; the
+        photoreceptor history moves in :meth:`_take`): what moves in starts at rest."""
+        for stages in (self.stages_on, self.stages_off):
+            shift_image(stages, *shift, out=stages)
 
     def _front(self, frame: "_Frame") -> None:
         """The fused pass of a frame :meth:`_take` took (optimised form): its maps."""

@@ -110,3 +110,14 @@ def test_threads_change_nothing_while_the_background_is_taken_out():
 def test_stabilisation_is_off_in_the_published_variant():
     assert not preset("reference").stabilise and not preset("reference32").stabilise
     assert preset("default").stabilise
+
+
+def test_the_photoreceptor_history_moves_with_the_background_in_both_forms():
+    # P's history (n_p > 0) moves before the frame's P is computed, in either form
+    scene = make_case("loom-light-c0.5-over-stripes-h2px")
+    params = preset("default", n_p=2, approach_gate=False)
+    fast, slow = ASNN(params), ASNN(params, optimised=False)
+    for i, frame in enumerate(scene.frames):
+        a, b = fast.step(frame, i / scene.fps), slow.step(frame, i / scene.fps)
+        assert abs(a.u - b.u) <= 1e-4 * max(abs(b.u), 1e-6), i
+        assert (a.spikes, a.collision) == (b.spikes, b.collision), i
