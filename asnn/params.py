@@ -23,7 +23,8 @@ Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The pre
 ``robust``
     ``reference32`` plus the robust additions (README, "The robust preset"): repeated frames
     held, input scale, background stabilisation, contrast gain control, both polarities,
-    objects with a direct looming estimate, a tracker and the approach gate. Each addition has the field that switches it off.
+    objects with a direct looming estimate, a tracker and the approach gate. Each addition has
+    the field that switches it off.
 ``default``
     The preset :command:`asnn detect` uses when none is named: ``robust`` (README, "Why
     robust is the default").

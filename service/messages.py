@@ -36,7 +36,7 @@ Bounds on what a message makes a receiver allocate (docs/operations.md, "Hostile
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 import cv2
 import msgpack
@@ -50,7 +50,8 @@ __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageE
            "encode_image", "encoded_size", "unpack_map"]
 
 VERSION = 1
-FORMATS = ("gray8", "bgr8", "jpeg", "png")
+FrameFormat = Literal["gray8", "bgr8", "jpeg", "png"]
+FORMATS = get_args(FrameFormat)
 # the largest valid frame (4096 x 4096 bgr8) plus room for the other fields
 MAX_PAYLOAD = MAX_SIDE * MAX_SIDE * 3 + 64 * 1024
 JPEG_QUALITY = 90
@@ -86,7 +87,7 @@ class Frame(_Message):
     stamp: float = Field(description="capture time, seconds, camera clock")
     width: int = Field(ge=1, le=MAX_SIDE)
     height: int = Field(ge=1, le=MAX_SIDE)
-    format: Literal["gray8", "bgr8", "jpeg", "png"]
+    format: FrameFormat
     data: bytes = Field(description="row-major pixels (gray8, bgr8) or the encoded file")
 
     def image(self) -> np.ndarray:
@@ -328,7 +329,8 @@ def _finite(fields: dict) -> dict:
 
 __all__ += ["MAX_PREVIEW_BYTES", "PREVIEW_FORMATS", "Preview", "check_preview", "decode_preview"]
 
-PREVIEW_FORMATS = ("jpeg", "png")
+PreviewFormat = Literal["jpeg", "png"]
+PREVIEW_FORMATS = get_args(PreviewFormat)
 PREVIEW_QUALITY = 70
 MAX_PREVIEW_BYTES = 64 * 1024  # receivers refuse larger thumbnails (asnn camera's are ~5 KiB)
 
@@ -340,7 +342,7 @@ class Preview(Frame):
     of the worker's targets (default: the thumbnail's own size).
     """
 
-    format: Literal["jpeg", "png"]
+    format: PreviewFormat
     frame_width: int | None = Field(None, ge=1, le=MAX_SIDE)
     frame_height: int | None = Field(None, ge=1, le=MAX_SIDE)
 
