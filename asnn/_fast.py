@@ -196,6 +196,23 @@ class FrontMaps:
         """The sums of R^theta (float64)."""
         return self.colsum.sum(axis=1)
 
+    @classmethod
+    def slots(cls, n: int, shape: tuple[int, int], dtype: np.dtype
+              ) -> tuple[list["FrontMaps"], tuple[np.ndarray, ...]]:
+        """``n`` maps that are the slices of four stacked arrays, and those arrays
+        (``r``, ``v``, ``g``, ``colsum``, each with a first axis of ``n``): a kernel given the
+        stacks reaches every slot."""
+        h, w = shape
+        stacked = (np.empty((n, 4, h, w), dtype), np.empty((n, h, w), dtype),
+                   np.empty((n, h, w), dtype), np.empty((n, 4, w), np.float64))
+        maps = []
+        for k in range(n):
+            m = cls.__new__(cls)
+            m.shape = shape
+            m.r, m.v, m.g, m.colsum = (a[k] for a in stacked)
+            maps.append(m)
+        return maps, stacked
+
 
 class Workspace:
     """Outputs and scratch arrays for one frame size and dtype, reused from frame to frame."""

@@ -116,8 +116,9 @@ class ASNN:
                                                  p.kernel_size, p.kernel_extent)
         if threads < 1:
             raise ValueError(f"threads must be at least 1, got {threads}")
-        self.threads = int(threads) if self.optimised else 1
-        self._workers: list[_parallel.Worker] = []
+        # band servers poll POSIX clocks (asnn._parallel); elsewhere the model uses one thread
+        self.threads = int(threads) if self.optimised and _parallel.supported() else 1
+        self._banded: _parallel.BandedFront | None = None
         if self.optimised:
             t = self.dtype
             env, scales = _fast.dog_factors(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
@@ -135,20 +136,22 @@ class ASNN:
 
     # ------------------------------------------------------------------ threads
 
-    def _start_workers(self) -> None:
-        """The worker threads of ``threads`` > 1, started with the first frame that needs them
-        and stopped when the model is closed or collected."""
-        self._workers = [_parallel.Worker(f"asnn-model-{k}") for k in range(1, self.threads)]
-        self._banded = _parallel.BandedFront(self._coefficients, self._workers)
-        self._maps = []  # the front's outputs, three frames' worth (see stream)
-        self._other = None  # a second pair of arrays for the cascades' rows (see _parallel)
-        self._finalizer = weakref.finalize(self, _close_workers, self._workers)
+    def _banded_front(self) -> "_parallel.BandedFront":
+        """The banded pass and its worker threads (``threads`` > 1), started when a stream or
+        a step first needs them (again after a worker's failure, once it was raised) and
+        stopped when the model is closed or collected."""
+        if self._banded is not None and self._banded.failed:
+            self.close()
+        if self._banded is None:
+            self._banded = _parallel.BandedFront(self._coefficients, self.threads - 1)
+            self._finalizer = weakref.finalize(self, self._banded.close)
+        return self._banded
 
     def close(self) -> None:
         """Stop the model's worker threads (``threads`` > 1); a later frame starts new ones."""
-        if self._workers:
+        if self._banded is not None:
             self._finalizer()
-            self._workers = []
+            self._banded = None
 
     def __enter__(self) -> "ASNN":
         return self
@@ -237,8 +240,7 @@ class ASNN:
             for t, frame in frames:
                 yield self.step(frame, t)
             return
-        if not self._workers:
-            self._start_workers()
+        banded = self._banded_front()
         iterator = iter(frames)
         # Taken frames not finished yet, oldest first: a frame is finished while the workers
         # compute the next frame's pass and the one after it is taken (two passes in flight:
@@ -268,14 +270,14 @@ class ASNN:
                 if pending:
                     self._joined(pending[0])  # its maps are complete, and the cascades it wrote
                 if taken.photo is not None:
-                    self._banded.run_own(taken.flight)
+                    banded.run_own(taken.flight)
                 pending.append(taken)
             while pending:
                 yield self._finish(self._joined(pending.popleft()))
         finally:
-            self._banded.abandon()  # an abandoned stream: no worker goes on behind the caller
-            if self._other is not None:
-                self._banded.settle((self.stages_on, self.stages_off), self._other)
+            banded.abandon()  # an abandoned stream: no worker goes on behind the caller
+            if self.stages_on is not None:
+                banded.settle((self.stages_on, self.stages_off))
 
     def _take(self, frame: np.ndarray, t: float | None) -> "_Frame":
         """The first part of a step: the frame's luminance, whether it is new, and P."""
@@ -325,26 +327,20 @@ class ASNN:
             _fast.front(frame.photo, (self.stages_on, self.stages_off), self._coefficients,
                         frame.maps, _fast.scratch(frame.lum.shape[1], self.dtype))
             return
+        banded = self._banded_front()
         self._start(frame)
         try:
-            self._banded.run_own(frame.flight)
+            banded.run_own(frame.flight)
         finally:
             self._joined(frame)
-            self._banded.settle((self.stages_on, self.stages_off), self._other)
+            banded.settle((self.stages_on, self.stages_off))
 
     def _start(self, frame: "_Frame", overlapped: bool = False) -> None:
         """Start a frame's banded pass (``threads`` > 1): it advances the cascades from one pair
         of arrays into the other, which become the model's."""
-        if not self._workers:
-            self._start_workers()
-        shape = frame.lum.shape
-        if not self._maps or self._maps[0].shape != shape:
-            self._maps = [_fast.FrontMaps(shape, self.dtype) for _ in range(3)]
-        if self._other is None or self._other[0].shape != self.stages_on.shape:
-            self._other = (np.zeros_like(self.stages_on), np.zeros_like(self.stages_off))
-        frame.maps = self._maps[frame.index % 3]  # the others: two frames not finished yet
         frame.flight = self._banded.start(frame.photo, (self.stages_on, self.stages_off),
-                                          self._other, frame.maps, overlapped)
+                                          overlapped)
+        frame.maps = frame.flight.maps  # valid while two more frames are taken (see stream)
 
     def _joined(self, frame: "_Frame") -> "_Frame":
         """The frame, once the workers' bands of its pass are done (``threads`` > 1)."""
@@ -554,11 +550,6 @@ class _Frame:
     photo: np.ndarray | None = None
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined
-
-
-def _close_workers(workers: list) -> None:
-    for worker in workers:
-        worker.close()
 
 
 def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams

@@ -207,16 +207,12 @@ def test_a_stream_raises_a_bad_frame_after_the_responses_before_it():
 def test_a_failure_on_a_worker_thread_is_raised_not_waited_for(monkeypatch, stream):
     import threading
 
-    from asnn import _fast
+    from asnn import _parallel
 
-    front = _fast.front
+    def failing(*args, **kwargs):  # the worker thread's kernel, which computes its bands
+        raise MemoryError("no room on the worker")
 
-    def failing(*args, **kwargs):
-        if threading.current_thread().name.startswith("asnn-model"):
-            raise MemoryError("no room on the worker")
-        return front(*args, **kwargs)
-
-    monkeypatch.setattr(_fast, "front", failing)
+    monkeypatch.setattr(_parallel, "_serve", failing)
     frames = make_scene("looming", size=(64, 64), frames=6).frames
     outcome = []
 
@@ -232,6 +228,64 @@ def test_a_failure_on_a_worker_thread_is_raised_not_waited_for(monkeypatch, stre
     runner.join(timeout=60)
     assert not runner.is_alive(), "the model hung"
     assert outcome and "no room on the worker" in str(outcome[0])
+
+
+def test_a_worker_computes_its_band_while_the_stepping_thread_holds_the_gil():
+    """A worker thread stays in its kernel between passes (asnn._parallel): it computes its
+    band while the thread that steps the model runs Python and keeps the GIL (as finishing a
+    frame does), instead of waiting until that thread lets go of it."""
+    import sys
+    import time
+
+    frames = make_scene("looming", size=(64, 64), frames=4, start=0, stop=4).frames
+    with ASNN("default", threads=2) as model:
+        for _ in model.stream((None, f) for f in frames[:2]):  # the worker is up
+            pass
+        taken = model._take(frames[2], None)
+        assert taken.photo is not None  # a new frame (not a repeat): it has a pass
+        interval = sys.getswitchinterval()
+        sys.setswitchinterval(10.0)  # Python hands the GIL over to no thread for 10 s
+        try:
+            model._start(taken, overlapped=True)
+            number = taken.flight.number
+            deadline = time.perf_counter() + 2.0
+            while model._banded.served(0) < number and time.perf_counter() < deadline:
+                pass
+            served = model._banded.served(0)
+        finally:
+            sys.setswitchinterval(interval)
+        model._banded.run_own(taken.flight)
+        model._joined(taken)
+        model._banded.settle((model.stages_on, model.stages_off))
+    assert served >= number
+
+
+def test_workers_that_left_their_kernel_come_back_with_the_same_responses():
+    import threading
+    import time
+
+    frames = make_scene("looming", size=(64, 64), frames=9, start=2, stop=8,
+                        center=(30.2, 33.7)).frames
+    one = ASNN("default")
+    expected = [one.step(f).to_dict() for f in frames]
+
+    def slowly():  # pauses longer than a worker waits in its kernel for the next pass
+        for i, f in enumerate(frames):
+            if i % 3 == 2:
+                time.sleep(0.08)
+            yield None, f
+
+    got = []
+
+    def run():
+        with ASNN("default", threads=2) as model:
+            got.extend(r.to_dict() for r in model.stream(slowly()))
+
+    runner = threading.Thread(target=run, daemon=True)
+    runner.start()
+    runner.join(timeout=60)
+    assert not runner.is_alive(), "the model hung"
+    assert got == expected
 
 
 def test_threads_are_the_model_s_own_and_stop_with_it():
