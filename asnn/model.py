@@ -563,18 +563,29 @@ def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams
     return out, spikes, sum(window) / (params.n_t * params.window_dt)
 
 
-def compile_kernels() -> None:
-    """Compile the optimised step's numba kernels for both precisions, or load them from numba's
-    on-disk cache (seconds on a fresh install, milliseconds afterwards).
+def compile_kernels(presets: Iterable[str] = ("default", "reference"), threads: int = 1
+                    ) -> None:
+    """Compile the optimised step's numba kernels, or load them from numba's on-disk cache
+    (seconds on a fresh install, milliseconds afterwards).
 
     Long-running processes call it before they take their first frame, so that frame does not
-    wait for the compiler.
+    wait for the compiler; and numba loads a kernel from its cache only when it is first
+    called, so without it the first frames that need a stage (the first object, the first
+    looming fit) wait for its kernels.
+
+    Parameters
+    ----------
+    presets : iterable of str
+        The presets whose kernels to load (default: both precisions, float32 and float64).
+    threads : int
+        As the models that will run (``ASNN(..., threads=N)``): with more than 1, the kernel of
+        the model's worker threads too.
     """
     from .stimuli import make_scene
 
     # a small off-centre looming disk: every stage, including the clustering, has work
     frames = make_scene("looming", size=(64, 64), start=2, stop=12, center=(30.0, 33.0)).frames
-    for name in ("default", "reference"):  # float32 and float64
-        model = ASNN(name)
-        for frame in frames:
-            model.step(frame)
+    for name in presets:
+        with ASNN(name, threads=threads) as model:
+            for _ in model.stream((None, frame) for frame in frames):
+                pass

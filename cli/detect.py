@@ -14,6 +14,7 @@ import cv2
 
 from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
+from asnn.model import compile_kernels
 from asnn.params import preset_names
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.io.pipeline import WriteBehind, read_ahead
@@ -114,6 +115,10 @@ def run(args: argparse.Namespace) -> int:
     except SourceError as exc:
         return _fail(str(exc))
     detector = make_detector(args.model, args.preset, **options)
+    if args.model == "asnn":
+        # numba loads a kernel from its cache when it is first called: all of them now, before
+        # the first frame, rather than on the frames where a stage first has work
+        compile_kernels((args.preset,), threads=model_threads)
     records = []
     with ExitStack() as stack:
         stack.enter_context(_settings(busy))
