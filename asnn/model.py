@@ -260,8 +260,7 @@ class ASNN:
                 if taken.shift != (0, 0):  # the state moves once the passes before are done
                     for earlier in pending:
                         self._joined(earlier)
-                    if self._other is not None:
-                        self._banded.settle((self.stages_on, self.stages_off), self._other)
+                    banded.settle((self.stages_on, self.stages_off))
                     self._move_cascades(taken.shift)
                 if taken.photo is not None:  # the workers' bands queue behind the previous ones
                     self._start(taken, overlapped=True)
