@@ -220,8 +220,6 @@ class ASNN:
             If the frame is not an image the model accepts, or its size differs from the stream's.
         """
         taken = self._take(frame, t)
-        if taken.shift != (0, 0):
-            self._move_cascades(taken.shift)
         if taken.photo is not None:
             self._front(taken)
         return self._finish(taken)
@@ -257,11 +255,6 @@ class ASNN:
                     while pending:
                         yield self._finish(self._joined(pending.popleft()))
                     raise
-                if taken.shift != (0, 0):  # the state moves once the passes before are done
-                    for earlier in pending:
-                        self._joined(earlier)
-                    banded.settle((self.stages_on, self.stages_off))
-                    self._move_cascades(taken.shift)
                 if taken.photo is not None:  # the workers' bands queue behind the previous ones
                     self._start(taken, overlapped=True)
                 if len(pending) == 2:
@@ -298,26 +291,17 @@ class ASNN:
         if not 0.0 < elapsed <= _MAX_ELAPSED:  # no usable timestamps: the nominal frame period
             elapsed = p.dt
         self._stamp = stamp
-        shift, background = (0, 0), None
+        background = None
         if p.stabilise:
             shift = background_shift(self.previous, lum, p.stabilise_radius, p.stabilise_share)
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
                 background = shift_image(self.previous, *shift, border=lum)
-                for photo in self.history:  # P of earlier frames, as the cascades move
-                    shift_image(photo, *shift, out=photo)
         previous, self.previous = self.previous, lum
-        taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, shift=shift,
-                       background=background)
+        taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, background=background)
         if self.optimised:
             taken.photo = self._photoreceptors(lum, previous if background is None
                                                else background)
         return taken
-
-    def _move_cascades(self, shift: tuple[int, int]) -> None:
-        """Move the temporal filter's state with the background (``params.stabilise``; the
-        photoreceptor history moves in :meth:`_take`): what moves in starts at rest."""
-        for stages in (self.stages_on, self.stages_off):
-            shift_image(stages, *shift, out=stages)
 
     def _front(self, frame: "_Frame") -> None:
         """The fused pass of a frame :meth:`_take` took (optimised form): its maps."""
@@ -544,8 +528,8 @@ class _Frame:
     lum: np.ndarray | None = None
     elapsed: float = 0.0
     previous: np.ndarray | None = None
-    shift: tuple[int, int] = (0, 0)  # the background's translation since the previous frame
-    background: np.ndarray | None = None  # the previous frame moved by it (None: no shift)
+    # the previous frame moved by the background's translation since (None: no translation)
+    background: np.ndarray | None = None
     photo: np.ndarray | None = None
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined

@@ -77,9 +77,9 @@ class ASNNParams(BaseModel):
 
     # --- background stabilisation (robust addition) ---
     stabilise: bool = Field(
-        False, description="difference each frame against the previous one moved by the "
-        "background's translation, when one translation explains most of the change, and move "
-        "the temporal filter's state with it (asnn.stabilisation)")
+        False, description="photoreceptors: difference each frame against the previous one "
+        "moved by the background's translation, when one translation explains most of the "
+        "change; the looming fit leaves out what it explains (asnn.stabilisation)")
     stabilise_radius: int = Field(
         3, ge=1, le=16, description="largest translation searched, pixels per frame of the "
         "model's grid")

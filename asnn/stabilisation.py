@@ -9,15 +9,17 @@ local motion only where it differs from the motion of the surround, which the ey
 shifts move as a whole [1]_, and the eye's own movements are compensated so that the world
 holds still [2]_.
 
-This stage does the same before the photoreceptors. :func:`background_shift` finds the whole-pixel
+This stage does the same at the photoreceptors. :func:`background_shift` finds the whole-pixel
 translation, within a few pixels, that best maps the previous frame onto the current one, and
 accepts it only when it explains most of the frame's change: a pan, a shake or a sliding
 background, not an approaching object or the camera's own forward motion, whose images expand.
-The model then differences the current frame against the previous one moved by that
-translation, and moves its temporal filter's state with it (:func:`shift_image`), so that the
-background stands still for the retina while an object that does not move with it stands out.
-The looming fit, which measures the object's own image motion on the raw frames, leaves out the
-pixels that the background's translation explains (:func:`asnn.looming.region_expansion`).
+The photoreceptors then measure each frame's change against the previous frame moved by that
+translation (:func:`shift_image`): the background's motion leaves them nearly silent, while an
+object that does not move with it changes as if it moved against it, which is the motion the
+rest of the retina sees. The temporal filter's state is not moved: it stays where the frame's
+pixels are, with the object, and what the background left in it decays. The looming fit, which
+measures the object's own image motion on the raw frames, leaves out the pixels that the
+background's translation explains (:func:`asnn.looming.region_expansion`).
 
 References
 ----------
@@ -115,19 +117,18 @@ def _levels(row, out):
         out[x] = np.int32(np.floor(row[x] * _LEVELS + 0.5))
 
 
-def shift_image(image: np.ndarray, dx: int, dy: int, border: np.ndarray | float = 0.0,
-                out: np.ndarray | None = None) -> np.ndarray:
-    """``image`` moved by ``dx`` pixels right and ``dy`` down over its last two axes.
+def shift_image(image: np.ndarray, dx: int, dy: int,
+                border: np.ndarray | float = 0.0) -> np.ndarray:
+    """A copy of ``image`` moved by ``dx`` pixels right and ``dy`` down over its last two axes.
 
     Pixels with no source in ``image`` take ``border``: a scalar, or an array of the image's
-    shape whose values there are used. ``out`` may be ``image`` itself (moved in place).
+    shape whose values there are used.
     """
-    if out is None:
-        out = np.empty_like(image)
+    out = np.empty_like(image)
     h, w = image.shape[-2:]
     dst_y, src_y = _span(dy, h)
     dst_x, src_x = _span(dx, w)
-    out[..., dst_y, dst_x] = image[..., src_y, src_x]  # NumPy buffers overlapping copies
+    out[..., dst_y, dst_x] = image[..., src_y, src_x]
     uncovered = []  # the rows, then the columns, that nothing moved into
     if dy:
         uncovered.append((slice(0, dy) if dy > 0 else slice(h + dy, h), slice(None)))
