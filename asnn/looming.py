@@ -147,15 +147,15 @@ def _solve_expansion(before, after, background, ridge):
         up, down = _reflect(y - 1, h), _reflect(y + 1, h)
         ry = y - 0.5 * (h - 1)
         for x in range(w):
+            et = np.float64(after[y, x] - before[y, x])
+            if abs(after[y, x] - background[y, x]) < abs(et):
+                continue  # the background's translation explains this pixel
             left, right = _reflect(x - 1, w), _reflect(x + 1, w)
             # sums of a few float32 values in float64: exact, as OpenCV's float64 Sobel
             ex = ((mean[up, right] - mean[up, left]) + 2.0 * (mean[y, right] - mean[y, left])
                   + (mean[down, right] - mean[down, left])) / 8.0
             ey = ((mean[down, left] - mean[up, left]) + 2.0 * (mean[down, x] - mean[up, x])
                   + (mean[down, right] - mean[up, right])) / 8.0
-            et = np.float64(after[y, x] - before[y, x])
-            if abs(after[y, x] - background[y, x]) < abs(et):
-                continue  # the background's translation explains this pixel
             radial = (x - 0.5 * (w - 1)) * ex + ry * ey
             basis = (ex, ey, radial, -1.0)
             for i in range(4):

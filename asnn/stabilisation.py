@@ -73,7 +73,7 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
     best = int(np.argmin(costs))  # the first of equal ones, in row-major order
     dy, dx = divmod(best, 2 * radius + 1)
     still = costs[radius, radius]
-    if not costs.flat[best] <= (1.0 - share) * still or costs.flat[best] == still:
+    if still == 0 or costs.flat[best] > (1.0 - share) * still:  # nothing changed, or too little
         return 0, 0
     return dx - radius, dy - radius
 
