@@ -1,0 +1,35 @@
+"""The kernels' disk cache: callers of an edited ``_fast.py`` are compiled afresh."""
+
+from asnn._jit import forget_stale_callers
+
+
+def _package(tmp_path, source="x = 1\n"):
+    (tmp_path / "_fast.py").write_text(source)
+    cache = tmp_path / "__pycache__"
+    cache.mkdir(exist_ok=True)
+    for name in ("_fast._front-10.py311.nbi", "looming._solve-20.py311.nbi",
+                 "_parallel._serve-30.py311.nbi", "looming._solve-20.py311.1.nbc"):
+        (cache / name).write_bytes(b"index")
+    return cache
+
+
+def _left(cache):
+    return sorted(p.name for p in cache.iterdir() if p.suffix in (".nbi", ".nbc"))
+
+
+def test_callers_indexes_go_when_the_callee_changes_and_stay_while_it_does_not(tmp_path):
+    cache = _package(tmp_path)
+    # no digest yet (a cache from before): the callers' indexes go, the callee's own stay
+    assert forget_stale_callers(tmp_path)
+    assert _left(cache) == ["_fast._front-10.py311.nbi", "looming._solve-20.py311.1.nbc"]
+    _package(tmp_path)  # numba writes them again
+    assert not forget_stale_callers(tmp_path)
+    assert len(_left(cache)) == 4
+    (tmp_path / "_fast.py").write_text("x = 2\n")
+    assert forget_stale_callers(tmp_path)
+    assert _left(cache) == ["_fast._front-10.py311.nbi", "looming._solve-20.py311.1.nbc"]
+
+
+def test_an_unreadable_package_is_left_alone(tmp_path):
+    assert not forget_stale_callers(tmp_path / "missing")
+    assert not (tmp_path / "missing").exists()
