@@ -6,13 +6,14 @@ import json
 import math
 from dataclasses import replace
 
+import cv2
 import numpy as np
 import pytest
 
 from asnn.stimuli import render
 from asnn.stimuli.driving import LANE_WIDTH, Vehicle, driving_scene, path_pose, road_coordinates
 from asnn.stimuli.effects import Pan, Shake, Step
-from asnn.stimuli.planar import Background, Prop, planar_scene
+from asnn.stimuli.planar import Background, Gait, Prop, planar_scene
 from asnn.stimuli.suite import GROUPS, SUITE_CASES, make_case, suite_cases
 
 CENTER = (79.5, 59.5)  # of a 160x120 frame
@@ -42,6 +43,19 @@ def test_anti_aliased_shapes_cover_their_exact_area_and_move_smoothly():
         centroids.append((image.sum(axis=0) * xs).sum() / image.sum())
     assert np.diff(centroids) == pytest.approx(np.full(4, 0.25), abs=0.015)
     assert centroids[-1] - centroids[0] == pytest.approx(1.0)
+
+
+def test_ellipse_covers_its_area_and_is_a_disk_when_round():
+    image = np.zeros((60, 60))
+    render.paint_ellipse(image, 30.4, 29.8, 14.0, 40.0, 1.0)
+    assert image.sum() == pytest.approx(math.pi * 7.0 * 20.0, rel=5e-3)
+    assert image[29:31, 23].max() < 0.6 < image[29:31, 25].min()     # 7 px to the sides
+    assert image[9, 29:31].max() < 0.6 < image[11, 29:31].min()      # 20 px up
+    disk = np.zeros((60, 60))
+    render.paint_disk(disk, 30.4, 29.8, 10.0, 1.0)
+    round_ = np.zeros((60, 60))
+    render.paint_object(round_, "ellipse", 30.4, 29.8, 20.0, 1.0, aspect=1.0)
+    assert round_ == pytest.approx(disk)
 
 
 def test_car_shape_has_a_darker_window_and_lighter_lamps():
@@ -92,6 +106,55 @@ def test_collision_course_keeps_its_centre_and_grows_until_it_fills_the_frame():
     assert ttc[approach] * size[approach] == pytest.approx(np.full(contact - 9, 36.0))
     assert np.diff(ttc[approach]) == pytest.approx(np.full(contact - 10, -0.05))
     assert len(scene.frames) == contact + 3
+
+
+def test_a_textured_mover_carries_its_texture_as_it_grows():
+    options = dict(shape="ellipse", aspect=0.7, height=20.0, tau=2.0, onset=5, seed=4)
+    plain = planar_scene("loom", **options)
+    textured = planar_scene("loom", texture=0.2, **options)
+    assert textured.params["texture"] == 0.2
+    added = textured.frames.astype(np.float32) - plain.frames
+    background = plain.frames == plain.frames[0, 0, 0]
+    assert np.all(added[background] == 0)                     # on the mover only
+    inside = np.zeros(plain.frames.shape[1:], bool)
+    inside[54:66, 76:84] = True  # within the ellipse from the first frame on
+    for k in (0, 20):
+        assert 1.0 < added[k][inside].std() and np.abs(added[k]).max() <= 26  # +-25.5 levels
+    # the texture grows with the mover: frame 20's, sampled where frame 0's pixels have moved
+    # to (magnified about the centre by the mover's growth), is frame 0's
+    scale = textured.target_size[20] / textured.target_size[0]
+    ys, xs = np.nonzero(inside)
+    moved_x = (79.5 + (xs - 79.5) * scale).astype(np.float32)[None, :]
+    moved_y = (59.5 + (ys - 59.5) * scale).astype(np.float32)[None, :]
+    grown = cv2.remap(added[20], moved_x, moved_y, cv2.INTER_LINEAR)[0]
+    assert np.corrcoef(added[0][ys, xs], grown)[0, 1] > 0.95
+    assert np.corrcoef(added[0][ys, xs], added[20][ys, xs])[0, 1] < 0.9  # not painted on
+    with pytest.raises(ValueError, match="texture"):
+        planar_scene("loom", shape="car", texture=0.1)
+    with pytest.raises(ValueError, match="does not fit"):
+        planar_scene("loom", contrast=1.0, texture=0.1)
+
+
+def test_a_gait_sways_the_mover_about_its_bearing():
+    gait = Gait(sway=0.1, bob=0.05, frequency=2.0)
+    still = planar_scene("loom", height=10.0, tau=3.0, onset=10)
+    walking = planar_scene("loom", height=10.0, tau=3.0, onset=10, gait=gait)
+    assert walking.params["gait"] == {"type": "Gait", "sway": 0.1, "bob": 0.05,
+                                      "frequency": 2.0}
+    assert walking.contact_frame == still.contact_frame
+    offset = walking.track - still.track
+    size = still.target_size
+    assert np.all(offset[:11] == 0.0)                                # still before the onset
+    t = (np.arange(len(size)) - 10) / 20.0
+    assert offset[10:, 0] == pytest.approx(0.1 * size[10:] * np.sin(4 * math.pi * t[10:]))
+    assert offset[10:, 1] == pytest.approx(0.05 * size[10:] * np.abs(np.sin(4 * math.pi * t[10:])))
+    # a stride is 10 frames at 20 fps: the sway is back at zero every 5 frames
+    assert np.abs(offset[10::5, 0]).max() < 1e-9
+    # the image follows the label: its darkest pixels' centroid moves with the sway
+    k = 15
+    dark = walking.frames[k] < walking.frames[k].max() - 20
+    ys, xs = np.nonzero(dark)
+    assert xs.mean() == pytest.approx(walking.track[k, 0], abs=0.3)
 
 
 def test_near_miss_is_its_twin_drifting_out_of_the_frame():
@@ -302,7 +365,7 @@ def test_suite_is_balanced_and_covers_every_group(suite):
     tags = {t for case in SUITE_CASES.values() for t in case.category}
     assert {"dark", "light", "contrast", "size", "speed", "position", "shape", "texture",
             "shake", "pan", "flicker", "ramp", "step", "headlights", "gauss", "jpeg", "night",
-            "turn", "bumps", "halt"} <= tags
+            "turn", "bumps", "halt", "gait"} <= tags
     contrasts = {case.options.get("contrast") for case in SUITE_CASES.values()
                  if case.group == "approach" and "contrast" in case.category}
     assert min(contrasts) == 0.2 and max(contrasts) == 1.0

@@ -2,8 +2,9 @@
 
 :func:`planar_scene` composes a clip from
 
-- a *mover*, the labelled object (disk, square, rectangle or car; dark or light; a Weber
-  contrast), and how it moves (``motion``);
+- a *mover*, the labelled object (disk, ellipse, square, rectangle or car; dark or light; a
+  Weber contrast; optionally a texture of its own, which grows with it), how it moves
+  (``motion``), and optionally a walker's :class:`Gait`;
 - a :class:`Background`, uniform or a pattern (stripes, grating, checkerboard, random texture)
   that may translate;
 - static :class:`Prop` objects;
@@ -55,7 +56,8 @@ from . import effects
 from .render import levels, noise_tile, paint_object, pattern, sample_tile
 from .scene import Scene
 
-__all__ = ["MOTIONS", "COLLISION_MOTIONS", "Background", "Prop", "distance_ratio", "planar_scene"]
+__all__ = ["MOTIONS", "COLLISION_MOTIONS", "Background", "Gait", "Prop", "distance_ratio",
+           "planar_scene"]
 
 MOTIONS = ("loom", "nearmiss", "recede", "halt", "approach-recede", "translate", "none")
 COLLISION_MOTIONS = ("loom", "halt", "approach-recede")
@@ -124,6 +126,35 @@ class Background:
         else:
             values = pattern(shape, self.kind, self.period, self.angle_deg, offset, self.duty)
         return mean + 255.0 * self.contrast * (values - 0.5)
+
+
+@dataclass(frozen=True)
+class Gait:
+    """A walker's sway: an animal or a person walking up to the camera does not keep its image
+    still while it grows; its body swings from side to side once per stride and bobs with every
+    step.
+
+    From the motion's onset the mover's image centre moves by ``sway * size * sin(2 pi f t)``
+    sideways and ``bob * size * |sin(2 pi f t)|`` down, with ``size`` its image height: the path
+    it walks keeps its bearing on average.
+
+    Attributes
+    ----------
+    sway, bob : float
+        Amplitudes, fractions of the mover's image height.
+    frequency : float
+        Strides per second, Hz.
+    """
+
+    sway: float = 0.06
+    bob: float = 0.04
+    frequency: float = 2.0
+
+    def offsets(self, frames: int, onset: int, fps: float, sizes: np.ndarray) -> np.ndarray:
+        """(frames, 2) displacement of the image centre in every frame."""
+        phase = 2.0 * math.pi * self.frequency * np.clip(np.arange(frames) - onset, 0, None) / fps
+        return np.stack([self.sway * sizes * np.sin(phase),
+                         self.bob * sizes * np.abs(np.sin(phase))], axis=1)
 
 
 @dataclass(frozen=True)
@@ -253,11 +284,30 @@ def _mover_path(motion: str, name: str, size: tuple[int, int], horizon: int, ons
     return _Path(z, sizes, centres, contact, min(end, horizon), clearance)
 
 
+# the mover's own texture spans this many tile pixels per image height, so it grows with the mover
+_TEXTURE_SPAN = 30.0
+
+
+def _mover_texture(shape: tuple[int, int], kind: str, cx: float, cy: float, height: float,
+                   aspect: float, contrast: float, tile: np.ndarray) -> np.ndarray:
+    """What a texture of Weber contrast ``contrast`` adds to a mover painted at (cx, cy): the
+    tile scaled with the mover's image height, inside its outline (anti-aliased)."""
+    cover = np.zeros(shape)
+    paint_object(cover, kind, cx, cy, height, 1.0, aspect)
+    k = _TEXTURE_SPAN / height
+    half = tile.shape[0] / 2
+    image_to_tile = np.float32([[k, 0, half - k * cx], [0, k, half - k * cy]])
+    texture = cv2.warpAffine(tile, image_to_tile, shape[::-1],
+                             flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                             borderMode=cv2.BORDER_WRAP)
+    return cover * (127.5 * contrast) * texture
+
+
 def _render(frames: int, size: tuple[int, int], fps: float, background: Background,
             mean: float, props: Sequence[Prop], mover, camera, lighting: Sequence) -> tuple:
     """Float frames (T, H, W) and the camera path: the rest view (background, props and
-    ``mover`` = (shape, level, aspect, centres, sizes) or None) seen by the moving camera under
-    the lighting."""
+    ``mover`` = (shape, level, aspect, centres, sizes, texture) or None, ``texture`` = (Weber
+    contrast, tile) or None) seen by the moving camera under the lighting."""
     w, h = size
     path = effects.camera_path(camera, frames, fps)
     left, top, right, bottom = effects.canvas_margins(path, size) if camera else (0, 0, 0, 0)
@@ -281,9 +331,11 @@ def _render(frames: int, size: tuple[int, int], fps: float, background: Backgrou
     for t in range(frames):
         canvas = still.copy() if still is not None else scenery(t)
         if mover is not None:
-            shape, level, aspect, centres, sizes = mover
-            paint_object(canvas, shape, centres[t, 0] + left, centres[t, 1] + top, sizes[t],
-                         level, aspect)
+            shape, level, aspect, centres, sizes, texture = mover
+            cx, cy = centres[t, 0] + left, centres[t, 1] + top
+            paint_object(canvas, shape, cx, cy, sizes[t], level, aspect)
+            if texture:
+                canvas += _mover_texture(canvas.shape, shape, cx, cy, sizes[t], aspect, *texture)
         if camera is not None:
             canvas = cv2.warpAffine(canvas, effects.camera_matrix(*path[t], size, origin), (w, h),
                                     flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
@@ -299,7 +351,8 @@ def _render(frames: int, size: tuple[int, int], fps: float, background: Backgrou
 def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int, int] = (160, 120),
                  fps: float = 20.0, frames: int | None = None, onset: int = 10,
                  shape: str = "disk", polarity: str = "dark", contrast: float = 0.6,
-                 height: float = 12.0, aspect: float = 1.0,
+                 height: float = 12.0, aspect: float = 1.0, texture: float = 0.0,
+                 gait: Gait | None = None,
                  position: tuple[float, float] | None = None, tau: float = 3.0,
                  velocity: tuple[float, float] = (2.0, 0.0), stop_height: float | None = None,
                  hold: int = 10, tail: int = 2, background: Background = Background(),
@@ -322,14 +375,19 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
         otherwise.
     onset : int
         First frame of the motion.
-    shape : {'disk', 'square', 'rect', 'car'}
+    shape : {'disk', 'ellipse', 'square', 'rect', 'car'}
     polarity : {'dark', 'light'}
     contrast : float
         Weber contrast of the mover against the background's mean.
     height : float
         The mover's image height at onset (a disk's diameter), pixels.
     aspect : float
-        Width over height (``rect``, ``car``).
+        Width over height (``ellipse``, ``rect``, ``car``).
+    texture : float
+        Weber contrast of a random texture on the mover (spanning ``level +- 255 texture / 2``),
+        which grows with it; 0 for a uniform mover. Not for ``car``, which has its own parts.
+    gait : Gait, optional
+        A walker's sway of the mover's image from the onset on.
     position : (x, y), optional
         The mover's image centre at onset; default the frame centre.
     tau : float
@@ -373,23 +431,33 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
     if tau <= 0 or height <= 0:
         raise ValueError("tau and height must be positive")
     has_mover = motion != "none"
+    if texture and (texture < 0 or shape == "car"):
+        raise ValueError(f"a texture must be positive and not on a car, got {texture} on {shape}")
     if has_mover:
         background_level, level = levels(contrast, polarity)
+        if texture and not 127.5 * texture <= min(level, 255.0 - level):
+            raise ValueError(f"a texture of contrast {texture} does not fit around the mover's "
+                             f"level {level:.1f}")
     else:
         background_level, level = 127.5, None
     mean = background.mean if background.mean is not None else background_level
     background.check(mean)
     x0 = np.asarray(position if position is not None else ((w - 1) / 2.0, (h - 1) / 2.0),
                     dtype=np.float64)
-    extent = height * np.array([aspect if shape in ("rect", "car") else 1.0, 1.0])
+    extent = height * np.array([aspect if shape in ("ellipse", "rect", "car") else 1.0, 1.0])
     n_tau = tau * fps
     horizon = frames or onset + int(math.ceil(n_tau)) + 400
     move = _mover_path(motion, name, size, horizon, onset, n_tau, height, extent, x0, velocity,
                        stop_height, hold, tail)
     frames = frames or move.end
     z, sizes, centres = move.z[:frames], move.sizes[:frames], move.centres[:frames]
+    if gait is not None:
+        centres = centres + gait.offsets(frames, onset, fps, sizes)
 
-    mover = (shape, level, aspect, centres, sizes) if has_mover else None
+    mover = None
+    if has_mover:
+        mover = (shape, level, aspect, centres, sizes,
+                 (texture, _tile(seed + 1, 1.5)) if texture else None)
     clip, path = _render(frames, size, fps, background, mean, props, mover, camera, lighting)
     clip = effects.sensor_noise(clip, noise, seed)
     video = np.clip(np.rint(clip), 0, 255).astype(np.uint8)
@@ -408,6 +476,7 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
         ttc = np.where(closing, z * tau, np.nan)
     params = dict(motion=motion, size=size, fps=fps, frames=frames, onset=onset, shape=shape,
                   polarity=polarity, contrast=contrast, height=height, aspect=aspect,
+                  texture=texture, gait=_spec(gait),
                   position=tuple(float(v) for v in x0), tau=tau, velocity=velocity,
                   stop_height=stop_height, hold=hold, background=_spec(background),
                   props=_spec(list(props)), camera=_spec(camera), lighting=_spec(list(lighting)),

@@ -22,6 +22,7 @@ __all__ = [
     "car_lamps",
     "paint_disk",
     "paint_box",
+    "paint_ellipse",
     "paint_object",
     "square_wave",
     "pattern",
@@ -29,7 +30,7 @@ __all__ = [
     "sample_tile",
 ]
 
-SHAPES = ("disk", "square", "rect", "car")
+SHAPES = ("disk", "ellipse", "square", "rect", "car")
 
 # a car seen from behind or the front, as fractions of its image height h and width w: the window
 # band (dark glass) and the two lamps (light)
@@ -144,6 +145,38 @@ def paint_box(image: np.ndarray, cx: float, cy: float, width: float, height: flo
     _blend(image, rows, cols, coverage, level)
 
 
+def paint_ellipse(image: np.ndarray, cx: float, cy: float, width: float, height: float,
+                  level: float) -> None:
+    """Paint an axis-aligned ellipse in place, anti-aliased.
+
+    The coverage is ``clip(0.5 - d, 0, 1)`` with ``d`` the distance to the outline estimated as
+    ``(r - 1) * |grad r|^-1`` (``r`` the normalised radius), exact for a disk.
+
+    Parameters
+    ----------
+    image : ndarray (H, W), float
+    cx, cy : float
+        Centre, pixels.
+    width, height : float
+        Its axes, pixels.
+    level : float
+    """
+    if not (width > 0 and height > 0):
+        return
+    h, w = image.shape
+    a, b = width / 2, height / 2
+    rows = _pixel_range(cy - b - 0.5, cy + b + 0.5, h)
+    cols = _pixel_range(cx - a - 0.5, cx + a + 0.5, w)
+    if rows.start >= rows.stop or cols.start >= cols.stop:
+        return
+    dy = (np.arange(rows.start, rows.stop, dtype=np.float64)[:, None] - cy) / b
+    dx = (np.arange(cols.start, cols.stop, dtype=np.float64)[None, :] - cx) / a
+    r = np.hypot(dx, dy)
+    gradient = np.hypot(dx / a, dy / b) / np.maximum(r, 1e-12)  # |grad r|
+    coverage = np.clip(0.5 - (r - 1.0) / np.maximum(gradient, 1e-12), 0.0, 1.0)
+    _blend(image, rows, cols, coverage, level)
+
+
 def paint_object(image: np.ndarray, shape: str, cx: float, cy: float, height: float,
                  level: float, aspect: float = 1.0) -> None:
     """Paint one object in place: its image height (a disk's diameter) and centre.
@@ -151,15 +184,15 @@ def paint_object(image: np.ndarray, shape: str, cx: float, cy: float, height: fl
     Parameters
     ----------
     image : ndarray (H, W), float
-    shape : {'disk', 'square', 'rect', 'car'}
-        ``rect`` is ``aspect * height`` wide; ``car`` is a box as wide with a darker window band
-        and two lighter lamps (:func:`car_levels`).
+    shape : {'disk', 'ellipse', 'square', 'rect', 'car'}
+        ``ellipse`` and ``rect`` are ``aspect * height`` wide; ``car`` is a box as wide with a
+        darker window band and two lighter lamps (:func:`car_levels`).
     cx, cy, height : float
         Centre and image height, pixels.
     level : float
         Gray level of the object (the car's body).
     aspect : float
-        Width over height, for ``rect`` and ``car``.
+        Width over height, for ``ellipse``, ``rect`` and ``car``.
 
     Raises
     ------
@@ -168,6 +201,8 @@ def paint_object(image: np.ndarray, shape: str, cx: float, cy: float, height: fl
     """
     if shape == "disk":
         paint_disk(image, cx, cy, height / 2, level)
+    elif shape == "ellipse":
+        paint_ellipse(image, cx, cy, aspect * height, height, level)
     elif shape == "square":
         paint_box(image, cx, cy, height, height, level)
     elif shape in ("rect", "car"):

@@ -1,4 +1,4 @@
-"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 3).
+"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 4).
 
 Every case has a stable name that says what it is, a generator (:func:`.planar.planar_scene`
 at 160x120 or :func:`.driving.driving_scene` at 192x128, both at 20 fps, the model's
@@ -16,7 +16,8 @@ approach-stops         approaches that halt, or turn back, short of contact: the
                        end when the approach ends
 approach-in-clutter    approaches over moving stripes, textures and checkerboards, under camera
                        shake, pans and a hand-held camera's sway, brightness changes, sensor
-                       noise and JPEG artefacts
+                       noise and JPEG artefacts; a textured animal walking up to a still camera,
+                       its image swaying with its gait (:class:`~.planar.Gait`)
 nearmiss               the same objects, distances and speeds as their twins, offset so their
                        images drift out of the frame (``twin`` names the collision course)
 recession              objects moving away
@@ -49,12 +50,12 @@ from dataclasses import dataclass, field
 
 from .driving import LANE_WIDTH, Vehicle, driving_scene
 from .effects import Flicker, Headlights, Pan, Ramp, Shake, Step, Sweep
-from .planar import Background, Prop, planar_scene
+from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case"]
 
-SUITE_VERSION = "3"
+SUITE_VERSION = "4"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
           "translation", "moving-pattern", "camera", "brightness", "noise", "driving-threat",
           "driving-pass", "driving-clear")
@@ -123,6 +124,10 @@ _DESK = (Prop("rect", 36.0, 92.0, 24.0, 60.0, 1.8, 2.5),
          Prop("square", 78.0, 106.0, 16.0, 45.0, 1.0, 3.0),
          Prop("car", 132.0, 40.0, 14.0, 70.0, 1.4, 1.6))
 _NIGHT_TEXTURE = Background("texture", 0.12, 1.5, mean=40.0)
+# an animal walking up to a still camera over a textured wall (a bird up to the lens): upright,
+# with markings of its own, from 0.75 s away at onset
+_WALKER = dict(shape="ellipse", aspect=0.7, contrast=0.4, height=15.0, tau=3.6, texture=0.12,
+               background=Background("texture", 0.3, 1.5), noise=2.0, seed=3)
 
 
 def _approach_cases() -> list[Case]:
@@ -153,6 +158,9 @@ def _approach_cases() -> list[Case]:
         cases.append(_planar(f"loom-{polarity}-{_c(contrast)}-d12-texture", "approach",
                              polarity, "texture", polarity=polarity, contrast=contrast,
                              background=Background("texture", 0.2, 1.5)))
+    # the walkers of the clutter group without their gait
+    cases.append(_planar("walk-light-c0.4-still", "approach", "light", "shape", "texture",
+                         **_WALKER, polarity="light"))
     for polarity in ("dark", "light"):
         cases.append(_planar(f"halt-{polarity}-c0.6", "approach-stops", polarity, "halt",
                              motion="halt", polarity=polarity, stop_height=72.0))
@@ -375,6 +383,9 @@ def _clutter_cases() -> list[Case]:
                 position=(100.0, 60.0), camera=Pan((-1.0, 0.0))),
         _planar("loom-dark-c0.6-handheld-desk", g, "dark", "shake", "parallax", background=still,
                 props=_DESK, position=(70.0, 50.0), camera=Shake(4.0, 0.5, smooth=8)),
+        _planar("walk-light-c0.4-gait", g, "light", "gait", **_WALKER, polarity="light",
+                gait=Gait()),
+        _planar("walk-dark-c0.4-gait", g, "dark", "gait", **_WALKER, gait=Gait()),
         _planar("loom-dark-c0.6-flicker-4hz", g, "dark", "flicker", background=still,
                 lighting=(Flicker(4.0, 0.15),)),
         _planar("loom-light-c0.6-ramp-down", g, "light", "ramp", polarity="light",
