@@ -5,8 +5,9 @@
     disks and bars, over translating stripes (Figs. 5-7).
 :mod:`~asnn.stimuli.planar`
     Composable scenes on the image plane: objects approaching on a collision course, passing
-    close, receding, stopping or translating, over moving patterns and textures, with camera
-    shake and pans, brightness changes, sensor noise and JPEG artefacts.
+    close, receding, stopping or translating (an animal walking up with its gait), over moving
+    patterns and textures, with camera shake and pans, brightness changes, sensor noise and JPEG
+    artefacts.
 :mod:`~asnn.stimuli.driving`
     Perspective driving scenes: a camera moving over a textured road with roadside objects and
     other vehicles, turns and bumps, by day and by night.
