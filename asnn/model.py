@@ -392,9 +392,11 @@ class ASNN:
         attended = ws.mask
 
         def vectors(rows, cols):
-            rr = r[:, rows, cols].astype(np.float64)
-            vv = v[rows, cols].astype(np.float64)
-            phi = np.arctan2(rr[2], rr[0])
+            # R^0, R^{pi/2} and V at the pixels, one flat gather each (half the time of
+            # indexing r[:, rows, cols], which gathers all four orientations)
+            at = rows * v.shape[1] + cols
+            x, y, vv = (m.ravel().take(at).astype(np.float64) for m in (r[0], r[2], v))
+            phi = np.arctan2(y, x)
             return vv * np.cos(phi), vv * np.sin(phi)
 
         if p.targets == "objects":
