@@ -381,7 +381,11 @@ class BandedFront:
 
     The borders follow the threads' speeds and the calling thread's other work (finishing
     frames, taking the next one): the bands are sized so that the servers would have been done
-    with the latest frame a little before the calling thread needs them.
+    with the latest frame a little before the calling thread needs them. When that other work
+    alone takes longer than the servers need for the whole frame, the calling thread's band is
+    empty (``borders[-2] == borders[-1]``): a band of the minimum height would only lengthen
+    the calling thread's frame, which is then the slower one (its rows cost it more than they
+    cost a server: they come after its other work, out of its caches).
 
     Parameters
     ----------
@@ -499,7 +503,8 @@ class BandedFront:
         read[:] = self._state
         write[:] = self._state
         for m in borders[1:-1]:  # the rows two bands read go where the other band does not
-            write[m - c.halo:m + c.halo] ^= 1
+            if m < h:  # (no band below an empty last one)
+                write[m - c.halo:m + c.halo] ^= 1
         self._state = write
         np.copyto(self._photos[slot], p)
         for i in range(len(self._servers)):
@@ -538,10 +543,11 @@ class BandedFront:
             other = begun - self._own_end - self._waited
         borders = flight.borders
         cpu = time.thread_time()
-        _fast.front(flight.p, flight.stages, self.coefficients, flight.maps,
-                    _fast.scratch(flight.p.shape[1], flight.p.dtype),
-                    (borders[-2], borders[-1]), self.other, flight.versions,
-                    sums=len(borders) == 2)
+        if borders[-2] < borders[-1]:
+            _fast.front(flight.p, flight.stages, self.coefficients, flight.maps,
+                        _fast.scratch(flight.p.shape[1], flight.p.dtype),
+                        (borders[-2], borders[-1]), self.other, flight.versions,
+                        sums=len(borders) == 2)
         flight.own = (other, time.thread_time() - cpu)
         self._own_end = time.perf_counter()
         self._waited = 0.0
@@ -592,25 +598,34 @@ class BandedFront:
     def _measure(self, borders: list[int], threads: list[int],
                  times: list[tuple[float, float]]) -> None:
         """Update the estimates of the threads of the bands from their (other work, band)
-        seconds of one frame (band: processor time), then the borders:
-        rows_i = (finish - other_i) / cost_i, summing to the height, with the servers' other
-        work counted ``_MARGIN`` longer."""
+        seconds of one frame (band: processor time; an empty band leaves its thread's cost as
+        it was), then the borders: rows_i = (finish - other_i) / cost_i, summing to the height,
+        with the servers' other work counted ``_MARGIN`` longer. The calling thread (the last)
+        gets no band when its other work ends after the servers alone would finish the frame."""
         a = self._SMOOTHING
         cost, other = self._cost, self._other
         for i, (k, (busy, band)) in enumerate(zip(threads, times)):
-            c = band / (borders[i + 1] - borders[i])
-            cost[k] = c if cost[k] == 0 else (1 - a) * cost[k] + a * c
+            if borders[i + 1] > borders[i]:
+                c = band / (borders[i + 1] - borders[i])
+                cost[k] = c if cost[k] == 0 else (1 - a) * cost[k] + a * c
             other[k] = (1 - a) * other[k] + a * max(busy, 0.0)
         if not all(cost[k] > 0 for k in threads):
             return
-        n, height = len(threads), borders[-1]
+        height = borders[-1]
         ahead = [other[k] + (self._MARGIN if k < len(self._servers) else 0.0) for k in threads]
         speed = [1.0 / cost[k] for k in threads]
-        finish = (height + sum(o * v for o, v in zip(ahead, speed))) / sum(speed)
-        rows = [max((finish - o) * v, self._min_rows) for o, v in zip(ahead, speed)]
+
+        def finish(n: int) -> float:  # when the first n threads would be done together
+            return (height + sum(o * v for o, v in zip(ahead[:n], speed[:n]))) / sum(speed[:n])
+
+        servers = len(threads) - 1
+        banded = servers if finish(servers) <= ahead[-1] else servers + 1
+        done = finish(banded)
+        rows = [max((done - o) * v, self._min_rows) for o, v in zip(ahead[:banded],
+                                                                   speed[:banded])]
         scale, end, new = height / sum(rows), 0.0, [0]
-        for i in range(n - 1):  # every band at least min_rows high
+        for i in range(banded - 1):  # every band at least min_rows high
             end += rows[i] * scale
             new.append(int(min(max(round(end), new[-1] + self._min_rows),
-                               height - (n - 1 - i) * self._min_rows)))
-        self._borders = new + [height]
+                               height - (banded - 1 - i) * self._min_rows)))
+        self._borders = new + [height] * (len(threads) + 1 - len(new))

@@ -179,6 +179,56 @@ def test_threads_change_nothing_in_the_responses(preset):
         assert got == expected, (threads, stream)
 
 
+@pytest.mark.parametrize("threads", [2, 3])
+def test_an_empty_band_of_the_stepping_thread_changes_nothing(monkeypatch, threads):
+    """The stepping thread's band may be empty (its other work outlasts the workers' whole
+    pass): frames with and without it, in any alternation, give the responses of one thread."""
+    from asnn import _parallel
+
+    frames = make_scene("looming_over_stripes", size=(96, 72), frames=16, start=2, stop=14,
+                        center=(40.3, 30.6)).frames
+    calls = []
+
+    def alternating(self, height):
+        calls.append(height)
+        inner = [round(i * height / threads) for i in range(1, threads - 1)]
+        last = height if len(calls) % 3 else height - 20  # two empty bands, then one
+        return [0, *inner, last, height]
+
+    monkeypatch.setattr(_parallel.BandedFront, "borders", alternating)
+    expected = _responses(ASNN("default"), frames, False)
+    for stream in (False, True):
+        with ASNN("default", threads=threads) as model:
+            assert _responses(model, frames, stream) == expected, stream
+    assert len(calls) >= 2 * (len(frames) - 1)
+
+
+def test_the_stepping_thread_gets_no_band_when_its_other_work_outlasts_the_pass():
+    """The borders (BandedFront._measure): with 1 ms of other work per frame and a worker that
+    computes the whole frame in 0.8 ms, the stepping thread computes no rows; with 0.2 ms, it
+    computes its share."""
+    from asnn import _parallel
+
+    coefficients = ASNN("default")._coefficients
+    front = _parallel.BandedFront(coefficients, 1)
+    try:
+        h = 240
+        for other, empty in ((1e-3, True), (0.2e-3, False)):
+            front._cost, front._other, front._borders = [0.0, 0.0], [0.0, 0.0], None
+            for _ in range(40):  # the running estimates settle
+                borders = front.borders(h)
+                rows = [borders[1], h - borders[1]]
+                front._measure(borders, [0, 1], [(0.0, 0.8e-3 * rows[0] / h),
+                                                 (other, 0.8e-3 * rows[1] / h)])
+            borders = front.borders(h)
+            assert (borders == [0, h, h]) == empty, (other, borders)
+            if not empty:  # both done at about the same time
+                assert 0.2e-3 + 0.8e-3 * (h - borders[1]) / h == pytest.approx(
+                    0.05e-3 + 0.8e-3 * borders[1] / h, abs=0.02e-3)
+    finally:
+        front.close()
+
+
 def test_threads_record_the_same_maps():
     frames = make_scene("looming", size=(64, 64), frames=10, start=2, stop=9,
                         center=(30.2, 33.7)).frames
