@@ -16,7 +16,8 @@ clockwise on screen). Two groupings:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import math
 
@@ -299,7 +300,7 @@ def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | No
     return targets
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True)
 class ObjectRegions:
     """Connected regions of an attended mask and their statistics (see :func:`extract_objects`).
 
@@ -313,9 +314,16 @@ class ObjectRegions:
     boxes : ndarray of int (n, 4)
         ``(x0, y0, x1, y1)`` bounding box (exclusive ends).
     pixels : ndarray of int (n,)
+    members : (rows, cols, region) of ndarray of int
+        The regions' pixels, in the mask's row-major order, and the region of each.
+    vectors : callable
+        ``vectors(rows, cols) -> (dx, dy)``, as given to :func:`extract_objects`.
     direction, energy : ndarray (n,)
         Population-coded motion of each region (paper eqs. 30-32): the mean of
-        ``(V cos(phi), V sin(phi))`` over its pixels, as an angle and a length.
+        ``(V cos(phi), V sin(phi))`` over its pixels, as an angle and a length. Computed when
+        first read, from ``vectors`` at every pixel of the regions: a frame whose objects are
+        not reported as targets (none approaches) needs none of them. ``vectors`` must still
+        give the frame's values then (the model reads them while it finishes the frame).
     """
 
     x: np.ndarray
@@ -325,11 +333,31 @@ class ObjectRegions:
     share: np.ndarray
     boxes: np.ndarray
     pixels: np.ndarray
-    direction: np.ndarray
-    energy: np.ndarray
+    members: tuple[np.ndarray, np.ndarray, np.ndarray] = field(repr=False, compare=False)
+    vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] = field(
+        repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.x)
+
+    @cached_property
+    def _mean_vectors(self) -> tuple[np.ndarray, np.ndarray]:
+        """The mean motion vector ``(V_X, V_Y)`` of each region (eq. 31)."""
+        rows, cols, lab = self.members
+        n = len(self)
+        dx, dy = self.vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))
+        return (np.bincount(lab, dx, n) / np.maximum(self.pixels, 1),
+                np.bincount(lab, dy, n) / np.maximum(self.pixels, 1))
+
+    @cached_property
+    def direction(self) -> np.ndarray:
+        vx, vy = self._mean_vectors
+        return np.arctan2(vy, vx)
+
+    @cached_property
+    def energy(self) -> np.ndarray:
+        vx, vy = self._mean_vectors
+        return np.hypot(vx, vy)
 
 
 @kernel()
@@ -389,7 +417,7 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
         The approach map G (weights; negative values count as 0).
     vectors : callable
         ``vectors(rows, cols) -> (dx, dy)``: the motion vector ``V cos(phi)``, ``V sin(phi)``
-        at the given pixels.
+        at the given pixels; called when the regions' direction or energy is first read.
     min_pixels : int
     absolute : bool
         Whether the membrane potential sums ``|G'|`` (the regions' ``share``).
@@ -419,8 +447,5 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
     pixels = kept[:, cv2.CC_STAT_AREA]
     rows, cols, lab, x, y, var, mass, share = _region_moments(
         np.asarray(rows), np.asarray(cols), labels, oy, ox, lut, n, g, bool(absolute))
-    dx, dy = vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))
-    vx = np.bincount(lab, dx, n) / np.maximum(pixels, 1)
-    vy = np.bincount(lab, dy, n) / np.maximum(pixels, 1)
     return ObjectRegions(x=x, y=y, size=np.sqrt(var + 1.0), mass=mass, share=share, boxes=boxes,
-                         pixels=pixels, direction=np.arctan2(vy, vx), energy=np.hypot(vx, vy))
+                         pixels=pixels, members=(rows, cols, lab), vectors=vectors)

@@ -145,3 +145,33 @@ def test_objects_are_those_of_the_components_of_the_whole_mask():
             inside = lab == label
             want = np.abs(g[rows[inside], cols[inside]].astype(float)).sum()
             assert regions.share[k] == pytest.approx(want, rel=1e-12)
+
+
+def test_the_objects_motion_is_computed_when_first_read_and_only_then():
+    """extract_objects leaves the regions' mean motion (direction, energy) until it is read:
+    the model reads it only for the objects it reports, and a frame without an approaching
+    object reports none. Read, it is the mean of the vectors over each region's pixels."""
+    from asnn.targets import extract_objects
+
+    rng = np.random.default_rng(8)
+    mask = np.zeros((60, 80), bool)
+    mask[5:20, 10:30] = True
+    mask[30:55, 40:75] = rng.random((25, 35)) < 0.9
+    g = rng.random(mask.shape).astype(np.float32)
+    dx_map, dy_map = rng.standard_normal((2, *mask.shape))
+    calls = []
+
+    def vectors(rows, cols):
+        calls.append(len(rows))
+        return dx_map[rows, cols], dy_map[rows, cols]
+
+    regions = extract_objects(mask, g, vectors, 30, False)
+    assert len(regions) == 2 and calls == []
+    direction, energy = regions.direction, regions.energy
+    assert calls == [int(regions.pixels.sum())]  # once, for both
+    assert regions.direction is direction and regions.energy is energy
+    for k, (y0, y1, x0, x1) in enumerate([(5, 20, 10, 30), (30, 55, 40, 75)]):
+        inside = mask[y0:y1, x0:x1]
+        vx, vy = dx_map[y0:y1, x0:x1][inside].mean(), dy_map[y0:y1, x0:x1][inside].mean()
+        assert direction[k] == pytest.approx(math.atan2(vy, vx), rel=1e-12)
+        assert energy[k] == pytest.approx(math.hypot(vx, vy), rel=1e-12)
