@@ -125,7 +125,7 @@ _DESK = (Prop("rect", 36.0, 92.0, 24.0, 60.0, 1.8, 2.5),
          Prop("car", 132.0, 40.0, 14.0, 70.0, 1.4, 1.6))
 _NIGHT_TEXTURE = Background("texture", 0.12, 1.5, mean=40.0)
 # an animal walking up to a still camera over a textured wall (a bird up to the lens): upright,
-# with markings of its own, from 0.75 s away at onset
+# with markings of its own, 3.6 s from contact at onset
 _WALKER = dict(shape="ellipse", aspect=0.7, contrast=0.4, height=15.0, tau=3.6, texture=0.12,
                background=Background("texture", 0.3, 1.5), noise=2.0, seed=3)
 
