@@ -2,24 +2,16 @@
 
 import math
 
-import cv2
 import numpy as np
 import pytest
 
 from asnn.looming import region_expansion
 from asnn.tracking import Observation, TargetTracker, Track, approaching
+from imageutil import texture, warp
 
 
-def _texture(size=400, seed=0):
-    rng = np.random.default_rng(seed)
-    return cv2.GaussianBlur(rng.random((size, size)).astype(np.float32), (0, 0), 3)
-
-
-def _warp(image, scale=1.0, dx=0.0, dy=0.0, gain=1.0, offset=0.0):
-    """The image scaled about its centre and shifted, as a camera would see it move."""
-    c = image.shape[0] / 2
-    m = np.float32([[scale, 0, c * (1 - scale) + dx], [0, scale, c * (1 - scale) + dy]])
-    return cv2.warpAffine(image, m, image.shape[::-1], flags=cv2.INTER_LINEAR) * gain + offset
+def _texture(size=400):
+    return texture((size, size), blur=3.0)
 
 
 @pytest.mark.parametrize("box", [(170, 170, 230, 230), (150, 150, 250, 250),
@@ -27,16 +19,16 @@ def _warp(image, scale=1.0, dx=0.0, dy=0.0, gain=1.0, offset=0.0):
 def test_expansion_about_the_box_centre_is_measured_at_every_box_size(box):
     # a large box is fitted on a coarser grid, where fine texture reads a little faster
     tex = _texture()
-    est = region_expansion(tex, _warp(tex, 1.02), box)
+    est = region_expansion(tex, warp(tex, 1.02), box)
     assert est.rate == pytest.approx(0.02, rel=0.4)
     assert abs(est.drift_x) < 0.1 and abs(est.drift_y) < 0.1
-    shrink = region_expansion(tex, _warp(tex, 1 / 1.02), box)
+    shrink = region_expansion(tex, warp(tex, 1 / 1.02), box)
     assert shrink.rate == pytest.approx(-0.02, rel=0.4)  # receding: contraction
 
 
 def test_translation_is_drift_not_expansion():
     tex = _texture()
-    est = region_expansion(tex, _warp(tex, dx=0.6, dy=-0.4), (150, 150, 250, 250))
+    est = region_expansion(tex, warp(tex, dx=0.6, dy=-0.4), (150, 150, 250, 250))
     assert abs(est.rate) < 0.002
     assert est.drift_x == pytest.approx(0.6, abs=0.1) and est.drift_y == pytest.approx(-0.4,
                                                                                         abs=0.1)
@@ -47,14 +39,14 @@ def test_an_off_centre_box_of_an_expanding_surface_drifts_outwards():
     # box's centre moves right at rate * distance, which is what makes a passing object's
     # offset large
     tex = _texture()
-    est = region_expansion(tex, _warp(tex, 1.02), (250, 170, 310, 230))
+    est = region_expansion(tex, warp(tex, 1.02), (250, 170, 310, 230))
     assert est.rate == pytest.approx(0.02, rel=0.3)
     assert est.drift_x == pytest.approx(0.02 * 80, rel=0.35)
 
 
 def test_a_brightness_change_is_not_read_as_motion():
     tex = _texture()
-    est = region_expansion(tex, _warp(tex, gain=1.0, offset=0.05), (150, 150, 250, 250))
+    est = region_expansion(tex, tex + 0.05, (150, 150, 250, 250))
     assert abs(est.rate) < 1e-3 and abs(est.drift_x) < 0.05 and abs(est.drift_y) < 0.05
     assert est.brightness == pytest.approx(0.05, rel=0.05)
 

@@ -1,7 +1,6 @@
 """Background stabilisation (asnn.stabilisation): the translation found, when it is refused,
 the shifted images, the looming fit that leaves the background out, and the model's threads."""
 
-import cv2
 import numpy as np
 import pytest
 
@@ -9,40 +8,28 @@ from asnn import ASNN, preset
 from asnn.looming import region_expansion
 from asnn.stabilisation import background_shift, shift_image
 from asnn.stimuli.suite import make_case
-
-
-def _texture(shape=(120, 160), seed=0, blur=2.0):
-    rng = np.random.default_rng(seed)
-    noise = rng.random(shape).astype(np.float32)
-    return cv2.GaussianBlur(noise, (0, 0), blur)
-
-
-def _zoom(image, scale):
-    h, w = image.shape
-    m = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), 0.0, scale)
-    return cv2.warpAffine(image, m, (w, h), flags=cv2.INTER_LINEAR,
-                          borderMode=cv2.BORDER_REFLECT_101)
+from imageutil import texture, warp
 
 
 @pytest.mark.parametrize("dx", range(-3, 4))
 @pytest.mark.parametrize("dy", [-3, -1, 0, 2])
 def test_the_translation_of_a_textured_frame_is_found(dx, dy):
-    before = _texture()
-    after = shift_image(before, dx, dy, border=_texture(seed=1))
+    before = texture()
+    after = shift_image(before, dx, dy, border=texture(seed=1))
     assert background_shift(before, after, 3, 0.5) == (dx, dy)
 
 
 def test_no_translation_beyond_the_radius_or_for_an_expanding_frame():
-    before = _texture()
+    before = texture()
     assert background_shift(before, shift_image(before, 5, 0, border=0.5), 3, 0.5) == (0, 0)
-    assert background_shift(before, _zoom(before, 1.04), 3, 0.5) == (0, 0)
+    assert background_shift(before, warp(before, 1.04), 3, 0.5) == (0, 0)
     assert background_shift(before, before, 3, 0.5) == (0, 0)
     assert background_shift(before[:6, :6], before[:6, :6], 3, 0.5) == (0, 0)
 
 
 def test_an_object_moving_over_a_still_textured_scene_is_not_the_background():
-    scene = _texture()
-    patch = _texture((30, 30), seed=2, blur=1.0)
+    scene = texture()
+    patch = texture((30, 30), seed=2, blur=1.0)
     before, after = scene.copy(), scene.copy()
     before[40:70, 50:80] = patch
     after[40:70, 52:82] = patch
@@ -54,9 +41,9 @@ def test_an_object_moving_over_a_still_textured_scene_is_not_the_background():
 def test_the_share_a_translation_must_explain():
     # the upper half pans, the lower half changes into another texture: the pan explains a
     # part of the frame's change (about a third), not most of it
-    before = _texture()
+    before = texture()
     after = shift_image(before, 2, 0, border=before)
-    after[60:] = _texture(seed=3)[60:]
+    after[60:] = texture(seed=3)[60:]
     assert background_shift(before, after, 3, 0.1) == (2, 0)
     assert background_shift(before, after, 3, 0.5) == (0, 0)
 
@@ -73,12 +60,12 @@ def test_shift_image_moves_the_last_two_axes_and_fills_what_nothing_moved_into()
 
 def test_the_looming_fit_leaves_out_the_background_that_slides_past():
     # a textured disk grows by 4 % at the centre of a texture sliding 2 px to the right
-    ground, disk = _texture(seed=4), _texture(seed=5, blur=1.5)
+    ground, disk = texture(seed=4), texture(seed=5, blur=1.5)
     y, x = np.mgrid[0:120, 0:160]
     inside = (x - 80.0) ** 2 + (y - 60.0) ** 2 < 24.0 ** 2
-    grown = _zoom(inside.astype(np.float32), 1.04) > 0.5
+    grown = warp(inside.astype(np.float32), 1.04) > 0.5
     before = np.where(inside, disk, ground).astype(np.float32)
-    after = np.where(grown, _zoom(disk, 1.04), shift_image(ground, 2, 0, border=ground))
+    after = np.where(grown, warp(disk, 1.04), shift_image(ground, 2, 0, border=ground))
     after = after.astype(np.float32)
     box = (46, 26, 114, 94)
     plain = region_expansion(before, after, box)
