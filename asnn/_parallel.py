@@ -431,9 +431,14 @@ class BandedFront:
 
     def close(self) -> None:
         """Stop the servers (they leave their kernels at once)."""
+        self._tell_servers(_EXIT, 1)
         for s in self._servers:
-            _tell(self.control, self.bells, s.index, _EXIT, 1)
             s.wake(None)
+
+    def _tell_servers(self, field: int, value: int) -> None:
+        """Set a flag (EXIT) of every server, and wake them to look at it."""
+        for s in self._servers:
+            _tell(self.control, self.bells, s.index, field, value)
 
     def borders(self, height: int) -> list[int]:
         """Where the bands of a frame of this height start (the last band the calling
@@ -454,8 +459,7 @@ class BandedFront:
         key = (id(on), id(off), on.shape, on.dtype)
         if key == self._bound:
             return
-        for s in self._servers:
-            _tell(self.control, self.bells, s.index, _EXIT, 1)
+        self._tell_servers(_EXIT, 1)
         for s in self._servers:
             s.lock.acquire()
         try:
@@ -479,8 +483,8 @@ class BandedFront:
                     *scratch.spare(on.shape[0]), *stacked, scratch.done))
             self._bound = key
         finally:
+            self._tell_servers(_EXIT, 0)
             for s in self._servers:
-                _tell(self.control, self.bells, s.index, _EXIT, 0)
                 s.lock.release()
 
     def start(self, p: np.ndarray, stages: tuple, overlapped: bool = False) -> _Pass:
@@ -560,8 +564,7 @@ class BandedFront:
 
     def _stop_serving(self) -> None:
         """After a server's failure: every server out of its kernel (none writes on)."""
-        for s in self._servers:
-            _tell(self.control, self.bells, s.index, _EXIT, 1)
+        self._tell_servers(_EXIT, 1)
         for s in self._servers:
             with s.lock:
                 pass
