@@ -343,6 +343,20 @@ def test_rear_camera_sees_a_car_catch_up_or_overtake():
     assert not seen[-1] and np.all(np.diff(overtake.track[seen, 0]) > 0)
 
 
+def test_car_cutting_in_ahead_recedes_and_is_no_collision():
+    # a faster car from the right lane, 2 m ahead, moves into our lane while it pulls away
+    car = Vehicle(LANE_WIDTH, 2.0, 16.0, lateral_speed=-0.8)
+    scene = driving_scene(vehicles=(car,), target=0, speed=12.0, frames=90)
+    assert not scene.collision and scene.contact_frame is None and np.isnan(scene.ttc).all()
+    seen = np.isfinite(scene.track[:, 0])
+    assert seen[-1]                                          # still ahead at the end
+    x, size = scene.track[seen, 0], scene.target_size[seen]
+    assert np.all(np.diff(size) < 0)                         # it recedes all along
+    assert np.all(np.diff(x) < 0) and abs(x[-1] - (192 - 1) / 2) < 0.1 * 192  # into our lane
+    lanes = car.lateral(np.arange(90), 20.0)                 # next lane -> our lane's centre
+    assert lanes[0] == LANE_WIDTH and abs(lanes[-1]) < 0.1
+
+
 def test_night_scenes_are_dark_with_bright_lamps():
     day = driving_scene(frames=3, vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0)
     night = driving_scene(frames=3, night=True, vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0)

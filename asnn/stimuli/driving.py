@@ -62,8 +62,9 @@ class Vehicle:
     speed : float
         Metres per second along the road; negative for oncoming traffic.
     lateral_speed : float
-        Metres per second across the road, to the right: a vehicle crossing at a junction. Its
-        near face is then its side, so its ``width`` is a car's length.
+        Metres per second across the road, to the right: a vehicle crossing at a junction (its
+        near face is then its side, so give a car's length as its ``width``), or one changing
+        lanes (seen from behind).
     brake : float
         Deceleration from ``brake_frame`` until it stands, m/s^2.
     brake_frame : int

@@ -1,4 +1,4 @@
-"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 4).
+"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 5).
 
 Every case has a stable name that says what it is, a generator (:func:`.planar.planar_scene`
 at 160x120 or :func:`.driving.driving_scene` at 192x128, both at 20 fps, the model's
@@ -35,7 +35,8 @@ driving-pass           driving scenes with a vehicle passing in the next lane, c
                        road ahead and clearing it before we arrive, or overtaking us close by
                        (near misses)
 driving-clear          driving with nothing on a collision course: straight, turns, bumps,
-                       following at constant distance, being overtaken; day and night
+                       following at constant distance, being overtaken, a car overtaking that
+                       cuts into our lane ahead and pulls away; day and night
 =====================  =======================================================================
 
 The suite changes only with :data:`SUITE_VERSION`: results of one version compare.
@@ -55,7 +56,7 @@ from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case"]
 
-SUITE_VERSION = "4"
+SUITE_VERSION = "5"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
           "translation", "moving-pattern", "camera", "brightness", "noise", "driving-threat",
           "driving-pass", "driving-clear")
@@ -426,6 +427,9 @@ def _driving_cases() -> list[Case]:
     traffic = (Vehicle(0.0, 16.0, 12.0), Vehicle(LANE_WIDTH, 30.0, 11.0, albedo=0.5),
                Vehicle(-LANE_WIDTH, 60.0, -12.0, albedo=0.35),
                Vehicle(-LANE_WIDTH, 130.0, -14.0, **truck))
+    # a faster car overtaking from the next lane on the right that moves into our lane ahead
+    # (0.8 m/s to the left: our lane's centre at the clip's end) while it pulls away at 3-6 m/s
+    cut_in = dict(lane=LANE_WIDTH, lateral_speed=-0.8)
     return [
         _driving("drive-day-straight", "driving-clear", "day"),
         _driving("drive-night-straight", "driving-clear", "night", night=True),
@@ -438,6 +442,16 @@ def _driving_cases() -> list[Case]:
                  target=0),
         _driving("drive-night-follow", "driving-clear", "night", "follow", night=True,
                  vehicles=(Vehicle(0.0, 15.0, 12.0, **lit),), target=0),
+        _driving("drive-day-cut-in", "driving-clear", "day", "cut-in",
+                 vehicles=(Vehicle(distance=2.0, speed=16.0, **cut_in),), target=0),
+        _driving("drive-day-cut-in-dark", "driving-clear", "day", "cut-in",
+                 vehicles=(Vehicle(distance=0.0, speed=18.0, albedo=0.15, **cut_in),),
+                 target=0),
+        _driving("drive-day-turn-cut-in", "driving-clear", "day", "turn", "cut-in",
+                 curvature=-1 / 150,
+                 vehicles=(Vehicle(distance=1.0, speed=15.0, **cut_in),), target=0),
+        _driving("drive-night-cut-in", "driving-clear", "night", "cut-in", night=True,
+                 vehicles=(Vehicle(distance=2.0, speed=16.0, **cut_in, **lit),), target=0),
         _driving("drive-day-passed-by-right", "driving-clear", "day",
                  vehicles=(Vehicle(LANE_WIDTH, -4.0, 18.0),), target=0),
         _driving("drive-day-turn-oncoming-nextlane", "driving-pass", "day", "turn",
