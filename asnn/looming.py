@@ -37,7 +37,7 @@ import numpy as np
 from ._fast import _reflect
 from ._jit import kernel
 
-__all__ = ["Expansion", "region_expansion"]
+__all__ = ["Expansion", "region_expansion", "scene_expansion", "moved_by_expansion"]
 
 _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
 _MAX_SIDE = 64  # pixels: a larger box is area-averaged down to this before the fit
@@ -123,6 +123,70 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     if not solved:
         return None
     return Expansion(a * step, b * step, c, d)
+
+
+def scene_expansion(previous: np.ndarray, current: np.ndarray,
+                    boxes: list[tuple[int, int, int, int]],
+                    background: np.ndarray | None = None) -> Expansion | None:
+    """Expansion and drift of the scene around the objects: the fit of :func:`region_expansion`
+    over the whole frame, leaving out ``boxes``.
+
+    Under the camera's own forward motion the static scene expands about the heading; one
+    expansion about the frame's centre is the simplest account of it (depth varies, so it is an
+    average). The boxes of the tracked objects are left out, so that an object does not count
+    as scene, and, with ``background``, so are the pixels the background's translation explains
+    (as in :func:`region_expansion`). A pixel is left out by giving it the current frame as its
+    background: the fit leaves out a pixel its background explains better than no motion.
+
+    Parameters
+    ----------
+    previous, current : ndarray (H, W)
+        Luminance of two frames, float.
+    boxes : list of (x0, y0, x1, y1)
+        Integer pixel boxes to leave out, within the frame.
+    background : ndarray (H, W), optional
+        ``previous`` moved by the background's translation.
+
+    Returns
+    -------
+    Expansion or None
+        About the frame's centre; None as :func:`region_expansion`.
+    """
+    h, w = current.shape
+    reference = (previous if background is None else background).copy()
+    for x0, y0, x1, y1 in boxes:
+        reference[y0:y1, x0:x1] = current[y0:y1, x0:x1]
+    return region_expansion(previous, current, (0, 0, w, h), reference)
+
+
+def moved_by_expansion(previous: np.ndarray, scene: Expansion,
+                       box: tuple[int, int, int, int]) -> np.ndarray:
+    """The box of the previous frame as the scene's expansion moves it into the current one.
+
+    The scene's image motion ``p -> c + A + (1 + C)(p - c)`` about the frame's centre ``c``
+    (:func:`scene_expansion`), inverted and sampled bilinearly (edges replicated) at the box's
+    pixels: what each pixel of the box would show now if it were scenery.
+
+    Parameters
+    ----------
+    previous : ndarray (H, W)
+    scene : Expansion
+        Per frame, about the frame's centre.
+    box : (x0, y0, x1, y1)
+
+    Returns
+    -------
+    ndarray (y1 - y0, x1 - x0), the dtype of ``previous``
+    """
+    h, w = previous.shape
+    x0, y0, x1, y1 = box
+    s = 1.0 + scene.rate
+    cx, cy = 0.5 * (w - 1), 0.5 * (h - 1)
+    inverse = np.array([[1.0 / s, 0.0, cx + (x0 - cx - scene.drift_x) / s],
+                        [0.0, 1.0 / s, cy + (y0 - cy - scene.drift_y) / s]])
+    return cv2.warpAffine(previous, inverse, (x1 - x0, y1 - y0),
+                          flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                          borderMode=cv2.BORDER_REPLICATE)
 
 
 @kernel(error_model="numpy")

@@ -27,12 +27,12 @@ import numpy as np
 
 from . import _fast, _parallel, retina
 from .frames import FrameError, to_luminance
-from .looming import region_expansion
+from .looming import moved_by_expansion, region_expansion, scene_expansion
 from .params import ASNNParams, preset
 from .response import Maps, Response
 from .stabilisation import background_shift, shift_image
 from .targets import Target, extract_objects, extract_targets
-from .tracking import Observation, TargetTracker
+from .tracking import Observation, TargetTracker, approach_test
 
 __all__ = ["ASNN", "FrameError", "compile_kernels", "spike_step"]
 
@@ -177,6 +177,11 @@ class ASNN:
         self._repeats = 0
         self._difference = 0.0
         self.objects: list = []
+        # track id -> its expansion rate against the scene in the latest frame, per second
+        # (None: not measured); with measure_all_against_scene, of every growing track
+        self.against_scene: dict[int, float | None] = {}
+        self.measure_all_against_scene = False
+        self._scene_reference: np.ndarray | None = None
         self.repeated = False
 
     # ------------------------------------------------------------------ step
@@ -497,13 +502,19 @@ class ASNN:
                 float(regions.x[k]), float(regions.y[k]), float(regions.size[k]),
                 float(regions.mass[k]), (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
         tracks = self.tracker.update(observations, elapsed)
+        boxes, rates = [], []
         for tr in tracks:
             x0, y0, x1, y1 = tr.box
-            est = region_expansion(frame.previous, frame.lum,
-                                   (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
-                                    min(int(math.ceil(y1)), h)), frame.background)
+            box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
+                   min(int(math.ceil(y1)), h))
+            est = region_expansion(frame.previous, frame.lum, box, frame.background)
             if est is not None:
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed)
+            boxes.append(box)
+            rates.append(None if est is None else est.rate / elapsed)
+        self.against_scene = {}
+        if p.scene_relative:
+            self._measure_against_scene(tracks, boxes, rates, frame)
         coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames) for tr in tracks]
         self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
@@ -519,6 +530,50 @@ class ASNN:
                           approaching=coming[k])
                    for k, tr in enumerate(tracks) if coming[k] or not p.approach_gate]
         return total, targets
+
+
+    def _measure_against_scene(self, tracks: list, boxes: list, rates: list,
+                               frame: "_Frame") -> None:
+        """Each track that otherwise passes the approach test gets its expansion against the
+        scene (:meth:`~asnn.tracking.Track.measure_own`); the others None.
+
+        The scene's own expansion is fitted over the frame outside the tracks' boxes
+        (:func:`~asnn.looming.scene_expansion`); where it expands, a track's box is fitted again
+        leaving out the pixels it explains better than no motion (or than the background's
+        translation): what is left is the object's motion against the scene. Where the scene
+        does not expand nothing is left out, and the box's own rate stands. The rates go to
+        :attr:`against_scene` too; with :attr:`measure_all_against_scene` (the held-out
+        replay's trace) every growing track's is measured there, and the tracks' state is
+        still only that of the candidates.
+        """
+        p = self.params
+        chosen = {k for k, tr in enumerate(tracks)
+                  if tr.missed == 0 and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max)}
+        measured = sorted(chosen | ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
+                                    if self.measure_all_against_scene else set()))
+        scene = (scene_expansion(frame.previous, frame.lum, boxes, frame.background)
+                 if measured else None)
+        for k in measured:
+            rate = rates[k]
+            if scene is not None and scene.rate > 0:
+                x0, y0, x1, y1 = box = boxes[k]
+                if self._scene_reference is None or self._scene_reference.shape != frame.lum.shape:
+                    self._scene_reference = np.empty_like(frame.lum)
+                before = (frame.previous if frame.background is None
+                          else frame.background)[y0:y1, x0:x1]
+                moved = moved_by_expansion(frame.previous, scene, box)
+                now = frame.lum[y0:y1, x0:x1]
+                # per pixel whichever motion explains it better, the scene's or the background's
+                # translation (none: the previous frame); region_expansion leaves it out if that
+                # beats no motion
+                self._scene_reference[y0:y1, x0:x1] = np.where(
+                    np.abs(now - moved) < np.abs(now - before), moved, before)
+                own = region_expansion(frame.previous, frame.lum, box, self._scene_reference)
+                rate = None if own is None else own.rate / frame.elapsed
+            self.against_scene[tracks[k].id] = rate
+        ids = {tracks[k].id for k in chosen}
+        for tr in self.tracker.tracks:
+            tr.measure_own(self.against_scene.get(tr.id) if tr.id in ids else None)
 
 
 @dataclasses.dataclass(slots=True)

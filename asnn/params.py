@@ -213,6 +213,10 @@ class ASNNParams(BaseModel):
         "time to contact <= tau_max, offset <= offset_max, in approach_frames frames in a "
         "row); needs targets='objects'",
     )
+    scene_relative: bool = Field(
+        False, description="an approaching track must not contract against the scene: its box "
+        "fitted again without the pixels the scene's own expansion (the frame outside the "
+        "tracks' boxes) explains (asnn.tracking.against_scene); needs targets='objects'")
     tau_max: float = Field(1.5, gt=0, description="longest time to contact that warns, s")
     offset_max: float = Field(
         1.0, gt=0, description="largest drift/expansion offset of an approaching object, in "
@@ -236,8 +240,9 @@ class ASNNParams(BaseModel):
                 raise ValueError(f"{name} must be odd, got {getattr(self, name)}")
         if self.n_fast >= self.n_slow:
             raise ValueError("n_fast must be smaller than n_slow")
-        if self.approach_gate and self.targets != "objects":
-            raise ValueError("approach_gate needs targets='objects'")
+        for name in ("approach_gate", "scene_relative"):
+            if getattr(self, name) and self.targets != "objects":
+                raise ValueError(f"{name} needs targets='objects'")
         return self
 
     @property
@@ -302,7 +307,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
-    max_width=480, track_box=0.3, approach_frames=3, attention_step=2,
+    max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
 ))
 DEFAULT_PRESET = "robust"
 

@@ -33,7 +33,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching"]
+__all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching",
+           "against_scene"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,6 +83,12 @@ class Track:
     streak : int
         Consecutive frames, up to the latest, in which the track passed the approach test
         (:meth:`judge`).
+    own_expansion : float or None
+        Its expansion rate against the scene, per second: measured over the pixels of its box
+        that the scene's own expansion does not explain (:meth:`measure_own`), smoothed over
+        the consecutive frames in which it is measured; None where it is not (the model
+        measures it only while the track otherwise passes the approach test, and only with
+        ``scene_relative``).
     """
 
     id: int
@@ -95,6 +102,7 @@ class Track:
     drift_y: float = 0.0
     missed: int = 0
     streak: int = 0
+    own_expansion: float | None = None
     _smoothing: float = field(default=0.5, repr=False)
 
     def observe(self, obs: Observation, elapsed: float, box_weight: float) -> None:
@@ -123,6 +131,14 @@ class Track:
             self.drift_x += a * (drift_x - self.drift_x)
             self.drift_y += a * (drift_y - self.drift_y)
 
+    def measure_own(self, expansion: float | None) -> None:
+        """Take this frame's expansion rate against the scene (per second), or None where it is
+        not measured (which ends the run it is smoothed over)."""
+        if expansion is None or self.own_expansion is None:
+            self.own_expansion = expansion
+        else:
+            self.own_expansion += self._smoothing * (expansion - self.own_expansion)
+
     @property
     def ttc(self) -> float | None:
         """Time to contact ``1 / expansion``, seconds; None unless the target grows."""
@@ -148,8 +164,18 @@ class Track:
 
 def approaching(track: Track, tau_max: float, offset_max: float) -> bool:
     """Whether a track looks, in the latest frame, like an object coming at the camera: it is
-    seen now and passes :func:`approach_test`."""
-    return track.missed == 0 and approach_test(track.ttc, track.offset, tau_max, offset_max)
+    seen now, passes :func:`approach_test`, and, where its expansion against the scene is
+    measured, does not contract against the scene (:func:`against_scene`)."""
+    return (track.missed == 0 and approach_test(track.ttc, track.offset, tau_max, offset_max)
+            and against_scene(track.own_expansion))
+
+
+def against_scene(own_expansion: float | None) -> bool:
+    """The scene-relative test: an object coming at the camera still expands once the pixels
+    the scene's own expansion explains are left out of its fit (``own_expansion >= 0``; None,
+    not measured, passes). A car that cuts in ahead and pulls away, seen in one box with the
+    roadside behind it, fails it: its box expands with the roadside, the car itself contracts."""
+    return own_expansion is None or own_expansion >= 0.0
 
 
 def approach_test(ttc: float | None, offset: float | None, tau_max: float,

@@ -14,7 +14,7 @@ from asnn.stimuli.suite import make_case
 from cli.main import main
 
 CASES = ("loom-dark-c0.6-d6-center", "nearmiss-disk-dark-right", "course-disk-dark-right",
-         "translate-disk-dark-c0.6-h2px")
+         "translate-disk-dark-c0.6-h2px", "drive-day-cut-in-dark")
 
 
 @pytest.fixture(scope="module")
@@ -40,6 +40,11 @@ def test_the_replay_follows_other_thresholds(traced):
     assert not any(r["collision"] for r in heldout.replay(miss, base))
     loose = base.model_copy(update={"offset_max": 1000.0})
     assert any(r["collision"] for r in heldout.replay(miss, loose))
+    # a car cutting in ahead, quiet with the scene-relative test, warns without it
+    cut_in = traces[CASES.index("drive-day-cut-in-dark")]
+    assert not any(r["collision"] for r in heldout.replay(cut_in, base))
+    plain = base.model_copy(update={"scene_relative": False})
+    assert any(r["collision"] for r in heldout.replay(cut_in, plain))
     # a later time to contact threshold warns later
     loom = traces[0]
     first = lambda params: next(r["frame"] for r in heldout.replay(loom, params) if r["collision"])

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from asnn.looming import region_expansion
+from asnn.looming import moved_by_expansion, region_expansion, scene_expansion
 from asnn.tracking import Observation, TargetTracker, Track, approaching
 from imageutil import texture, warp
 
@@ -49,6 +49,25 @@ def test_a_brightness_change_is_not_read_as_motion():
     est = region_expansion(tex, tex + 0.05, (150, 150, 250, 250))
     assert abs(est.rate) < 1e-3 and abs(est.drift_x) < 0.05 and abs(est.drift_y) < 0.05
     assert est.brightness == pytest.approx(0.05, rel=0.05)
+
+
+def test_the_scene_is_fitted_without_the_objects_boxes():
+    # the scene expands about the frame's centre; inside a box right of it an object recedes
+    tex = texture((400, 400), blur=8.0)
+    current = warp(tex, 1.02)
+    box = (230, 160, 330, 240)
+    x0, y0, x1, y1 = box
+    current[y0:y1, x0:x1] = warp(tex, 1 / 1.03)[y0:y1, x0:x1]
+    scene = scene_expansion(tex, current, [box])
+    assert scene.rate == pytest.approx(0.02, rel=0.3)
+    assert abs(scene.drift_x) < 0.05 and abs(scene.drift_y) < 0.05
+    # with the object counted as scene, its inward motion drags the scene's drift
+    assert scene_expansion(tex, current, []).drift_x < -0.2
+    # what the scene's motion predicts for pixels outside the box: the scenery's motion
+    moved = moved_by_expansion(tex, scene, (100, 60, 180, 120))
+    assert (np.abs(moved - current[60:120, 100:180]).mean()
+            < 0.3 * np.abs(tex[60:120, 100:180] - current[60:120, 100:180]).mean())
+    assert moved_by_expansion(tex, scene, box).shape == (y1 - y0, x1 - x0)
 
 
 def test_a_flat_or_tiny_box_has_no_estimate():

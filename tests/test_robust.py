@@ -13,6 +13,7 @@ NO_GATE = dict(approach_gate=False)
 NO_OFFSET_TEST = dict(offset_max=1000.0)
 NO_CONTRAST_GAIN = dict(contrast_gain=None)
 NO_STABILISATION = dict(stabilise=False)
+NO_SCENE_RELATIVE = dict(scene_relative=False)
 
 
 def _run(case, **overrides):
@@ -157,6 +158,18 @@ def test_near_misses_stay_quiet_while_their_collision_twin_warns(case):
                                   "rear-day-overtake"])
 def test_near_misses_are_told_apart_by_the_offset_test(case):
     assert not _quiet(_run(case, **NO_OFFSET_TEST)[1])
+
+
+@pytest.mark.parametrize("case", ["drive-day-cut-in-dark", "drive-day-turn-cut-in"])
+def test_a_car_cutting_in_ahead_is_told_apart_by_its_motion_against_the_scene(case):
+    # its box holds the roadside behind it, which expands with our motion; the car recedes
+    assert _quiet(_run(case)[1])
+    assert not _quiet(_run(case, **NO_SCENE_RELATIVE)[1])
+
+
+def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test():
+    for case in ("drive-day-stopped-car", "drive-day-brake", "drive-day-oncoming-headon"):
+        assert _hit(*_run(case))
 
 
 # 5. targets: one per approaching object, a stable id, expansion and time to contact

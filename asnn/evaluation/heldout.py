@@ -25,7 +25,7 @@ from pathlib import Path
 
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
-from ..tracking import approach_test
+from ..tracking import against_scene, approach_test
 from . import scoring
 from .runs import fmt, write_json
 
@@ -55,9 +55,12 @@ class FrameTrace:
     ----------
     repeat : bool
         The frame repeated the one before (its response is the previous one).
-    objects : tuple of (id, ttc, offset, share, x, y)
+    objects : tuple of (id, ttc, offset, share, x, y, own)
         Each object seen: its track's id, time to contact and offset (None while it does not
-        grow), its share of ``u`` before ``u_scale``, and its centre in the frame's pixels.
+        grow), its share of ``u`` before ``u_scale``, its centre in the frame's pixels, and its
+        expansion rate against the scene in this frame (per second; None where not measured:
+        with ``scene_relative`` it is measured for every growing track, so that the replay can
+        smooth it over the frames in which a track passes any grid point's test).
     """
 
     repeat: bool
@@ -84,6 +87,7 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
     if not params.approach_gate:
         raise ValueError("only a preset with the approach gate can be traced")
     model = ASNN(params)
+    model.measure_all_against_scene = True
     trace = ClipTrace(clip=clip, cells=0)
     for index, (t, frame) in enumerate(timed_frames):
         model.step(frame, t)
@@ -97,8 +101,8 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
         trace.cells = h * w
         sx, sy = model.shape[1] / w, model.shape[0] / h
         trace.frames.append(FrameTrace(repeat=False, objects=tuple(
-            (tr.id, tr.ttc, tr.offset, share, (tr.x + 0.5) * sx - 0.5, (tr.y + 0.5) * sy - 0.5)
-            for tr, share in model.objects)))
+            (tr.id, tr.ttc, tr.offset, share, (tr.x + 0.5) * sx - 0.5, (tr.y + 0.5) * sy - 0.5,
+             model.against_scene.get(tr.id)) for tr, share in model.objects)))
     return trace
 
 
@@ -107,6 +111,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
     ``params``' gate thresholds, from a trace made with the same parameters otherwise."""
     p = params
     streak: dict[int, int] = {}
+    own: dict[int, float | None] = {}  # smoothed expansion against the scene, as Track keeps it
     window: deque[int] = deque(maxlen=p.n_t)
     records = []
     previous = {"collision": False, "targets": []}
@@ -117,12 +122,19 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
             record = {**previous, "frame": index}
         else:
             total, targets = 0.0, []
-            for ident, ttc, offset, share, x, y in frame.objects:
+            measured = {}
+            for ident, ttc, offset, share, x, y, against in frame.objects:
                 passes = approach_test(ttc, offset, p.tau_max, p.offset_max)
+                if p.scene_relative and passes:
+                    before = own.get(ident)
+                    measured[ident] = against if against is None or before is None else \
+                        before + p.track_smoothing * (against - before)
+                    passes = against_scene(measured[ident])
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
                 if streak[ident] >= p.approach_frames:
                     total += share
                     targets.append({"x": x, "y": y})
+            own = measured  # a track not measured in this frame starts afresh (Track.measure_own)
             _, _, rate = spike_step(p.u_scale * total, trace.cells, window, p)
             record = {"frame": index, "collision": rate >= p.t_c, "targets": targets}
         records.append(record)

@@ -36,6 +36,7 @@ ABLATIONS = {
     "OFF-led map only (no ON-led mirror)": "asnn:robust/w1_on=0/w2_off=0",
     "no approach gate (u sums every object)": "asnn:robust/approach_gate=false",
     "no offset test (near misses)": "asnn:robust/offset_max=1000",
+    "no scene-relative test (cut-ins)": "asnn:robust/scene_relative=false",
     "no persistence (one frame of approach)": "asnn:robust/approach_frames=1",
     "no input scale (frames at their own size)": "asnn:robust/max_width=none",
     "attention blur at full resolution": "asnn:robust/attention_step=1",
