@@ -151,6 +151,13 @@ def scene_expansion(previous: np.ndarray, current: np.ndarray,
     -------
     Expansion or None
         About the frame's centre; None as :func:`region_expansion`.
+
+    References
+    ----------
+    .. [1] B. P. Ölveczky, S. A. Baccus, M. Meister, "Segregation of object and background
+       motion in the retina", Nature 423, 2003, pp. 401-408 (object-motion-sensitive cells:
+       an object's motion against the global motion, which :class:`asnn.model.ASNN`'s
+       scene-relative test uses).
     """
     h, w = current.shape
     reference = (previous if background is None else background).copy()

@@ -487,8 +487,11 @@ class ASNN:
         """
         p = self.params
         elapsed = frame.elapsed
+        self.against_scene = {}
         if attended is None:
             self.tracker.update([], elapsed)
+            if p.scene_relative:
+                self._measure_against_scene([], [], [], frame)
             self.objects = []
             return (0.0 if p.approach_gate else total), []
         regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
@@ -512,7 +515,6 @@ class ASNN:
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed)
             boxes.append(box)
             rates.append(None if est is None else est.rate / elapsed)
-        self.against_scene = {}
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frame)
         coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames) for tr in tracks]
@@ -530,7 +532,6 @@ class ASNN:
                           approaching=coming[k])
                    for k, tr in enumerate(tracks) if coming[k] or not p.approach_gate]
         return total, targets
-
 
     def _measure_against_scene(self, tracks: list, boxes: list, rates: list,
                                frame: "_Frame") -> None:
