@@ -554,12 +554,13 @@ class ASNN:
                                     if self.measure_all_against_scene else set()))
         scene = (scene_expansion(frame.previous, frame.lum, boxes, frame.background)
                  if measured else None)
+        if scene is not None and scene.rate > 0 and (
+                self._scene_reference is None or self._scene_reference.shape != frame.lum.shape):
+            self._scene_reference = np.empty_like(frame.lum)
         for k in measured:
             rate = rates[k]
             if scene is not None and scene.rate > 0:
                 x0, y0, x1, y1 = box = boxes[k]
-                if self._scene_reference is None or self._scene_reference.shape != frame.lum.shape:
-                    self._scene_reference = np.empty_like(frame.lum)
                 before = (frame.previous if frame.background is None
                           else frame.background)[y0:y1, x0:x1]
                 moved = moved_by_expansion(frame.previous, scene, box)

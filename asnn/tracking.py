@@ -34,7 +34,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching",
-           "against_scene"]
+           "against_scene", "smoothed_run"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,10 +134,7 @@ class Track:
     def measure_own(self, expansion: float | None) -> None:
         """Take this frame's expansion rate against the scene (per second), or None where it is
         not measured (which ends the run it is smoothed over)."""
-        if expansion is None or self.own_expansion is None:
-            self.own_expansion = expansion
-        else:
-            self.own_expansion += self._smoothing * (expansion - self.own_expansion)
+        self.own_expansion = smoothed_run(self.own_expansion, expansion, self._smoothing)
 
     @property
     def ttc(self) -> float | None:
@@ -168,6 +165,14 @@ def approaching(track: Track, tau_max: float, offset_max: float) -> bool:
     measured, does not contract against the scene (:func:`against_scene`)."""
     return (track.missed == 0 and approach_test(track.ttc, track.offset, tau_max, offset_max)
             and against_scene(track.own_expansion))
+
+
+def smoothed_run(average: float | None, value: float | None, weight: float) -> float | None:
+    """A running average over consecutive measurements: ``value`` starts it (``average`` None),
+    None ends it, and otherwise it moves by ``weight`` of the difference."""
+    if value is None or average is None:
+        return value
+    return average + weight * (value - average)
 
 
 def against_scene(own_expansion: float | None) -> bool:

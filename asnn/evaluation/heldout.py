@@ -25,7 +25,7 @@ from pathlib import Path
 
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
-from ..tracking import against_scene, approach_test
+from ..tracking import against_scene, approach_test, smoothed_run
 from . import scoring
 from .runs import fmt, write_json
 
@@ -124,9 +124,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
             for ident, ttc, offset, share, x, y, against in frame.objects:
                 passes = approach_test(ttc, offset, p.tau_max, p.offset_max)
                 if p.scene_relative and passes:
-                    before = own.get(ident)
-                    measured[ident] = against if against is None or before is None else \
-                        before + p.track_smoothing * (against - before)
+                    measured[ident] = smoothed_run(own.get(ident), against, p.track_smoothing)
                     passes = against_scene(measured[ident])
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
                 if streak[ident] >= p.approach_frames:
