@@ -196,6 +196,7 @@ def register(subparsers) -> None:
     from asnn.stimuli import SCENE_NAMES
     from service.core import WARMUP_FRAMES, default_threads
     from service.messages import FORMATS
+    from service.demo import DEMO_SCENE
     from service.worker import HANDOVER_TIMEOUT, SCAN_INTERVAL, SCAN_WINDOW
 
     p = subparsers.add_parser("camera", help="publish a camera's frames",
@@ -289,8 +290,11 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("demo", help="camera, worker and alerts in one process",
                               description="Play a generated scene through the whole pipeline "
                               "over in-process Zenoh sessions and print the warnings.")
-    p.add_argument("--scene", choices=SCENE_NAMES, default="looming",
-                   help="generated scene (default: %(default)s)")
+    p.add_argument("--scene", default=DEMO_SCENE,
+                   help="generated scene: one of the paper's (" + ", ".join(SCENE_NAMES) + ") "
+                   "or a case of the labelled suite (asnn scene --list); default "
+                   "%(default)s, a dark disk coming at the camera at constant speed, so the "
+                   "warnings' time to contact counts down as it nears")
     p.add_argument("--fps", type=positive, default=None,
                    help="playback rate (default: the scene's, 20)")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")

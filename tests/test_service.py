@@ -6,6 +6,7 @@ stopped at the end of its test. Waits are generous timeouts on messages, never t
 
 import json
 import os
+import re
 import signal
 import sys
 import threading
@@ -268,8 +269,20 @@ def test_demo_prints_warnings_and_exits_0(capsys):
     assert main(["demo", "--fps", "100"]) == 0
     out = capsys.readouterr().out
     lines = [line for line in out.splitlines() if "WARNING robot demo" in line]
-    assert lines and "targets: #0 contact in" in lines[0]  # the default tracks its targets
-    assert "60 frames published" in out
+    assert "77 frames published" in out
+    # the default scene is an approach at constant speed: the default tracks its target and
+    # the time to contact it reports shrinks as the disk nears
+    ttc = [float(re.search(r"contact in ([0-9.]+) s", line).group(1)) for line in lines
+           if "contact in" in line]
+    assert len(ttc) >= 10 and ttc[-1] < 0.6 * ttc[0]
+
+
+def test_demo_plays_the_papers_scenes_and_rejects_unknown_ones(capsys):
+    assert main(["demo", "--fps", "100", "--scene", "translating_bar"]) == 0
+    out = capsys.readouterr().out
+    assert "70 frames published" in out and "WARNING robot demo" not in out
+    assert main(["demo", "--scene", "nothing"]) == 2
+    assert "unknown scene 'nothing'" in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------- separate processes
