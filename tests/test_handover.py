@@ -17,7 +17,7 @@ from service.messages import Frame, encode
 from service.ownership import owner
 from service.worker import live_workers
 
-from netutil import Responses, wait_for
+from netutil import TIMEOUT, Responses, wait_for
 from test_failover import net  # noqa: F401  (the router fixture)
 from test_routing import robot_of
 
@@ -102,7 +102,10 @@ def test_a_worker_stopped_mid_approach_hands_its_robot_over_warm(net, capsys):  
         wait_for(lambda: any(r.seq == len(frames) - 1 for r in responses.since(0, robot)),
                  what="the last frame's answer")
         camera.close()
-    assert w1.stop() == 0
+    # SIGTERM has asked it to stop: wait for it, as a second signal that lands while the
+    # interpreter finalises (default handlers again) would kill it
+    assert w1.popen.wait(timeout=TIMEOUT) == 0
+    w1.stop()  # joins the threads reading its output
     assert "were taken over" not in "\n".join(w1.err)
     check_handover(responses, robot, frames, handover, "w1", "w2", capsys)
 
