@@ -357,6 +357,23 @@ def test_car_cutting_in_ahead_recedes_and_is_no_collision():
     assert lanes[0] == LANE_WIDTH and abs(lanes[-1]) < 0.1
 
 
+@pytest.mark.parametrize("lane", [1.2, -1.2])
+def test_a_car_offset_within_our_width_is_a_partial_overlap_collision(lane):
+    # a stopped car whose centre is 1.2 m to the side of ours: it overlaps our car's width
+    # (both 1.8 m), so it is hit at a corner; 3.5 m to the side (the next lane) it is passed
+    hit = driving_scene(vehicles=(Vehicle(lane, 40.0, 0.0),), target=0, frames=90)
+    passed = driving_scene(vehicles=(Vehicle(3.5 * np.sign(lane), 40.0, 0.0),), target=0,
+                           frames=90)
+    assert hit.collision and hit.contact_frame is not None and not passed.collision
+    x = hit.track[:hit.contact_frame + 1, 0]
+    centre = (192 - 1) / 2
+    # its image drifts away from our heading as it nears (to the side it is on), yet less than
+    # the passed car's: drift over expansion reads the 1.2 m against 3.5 m
+    assert np.all(np.sign(x[1:] - centre) == np.sign(lane))
+    assert np.all(np.diff(np.abs(x - centre)) > 0)
+    assert abs(x[-1] - centre) < abs(passed.track[hit.contact_frame, 0] - centre)
+
+
 def test_night_scenes_are_dark_with_bright_lamps():
     day = driving_scene(frames=3, vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0)
     night = driving_scene(frames=3, night=True, vehicles=(Vehicle(0.0, 15.0, 12.0),), target=0)

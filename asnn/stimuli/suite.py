@@ -1,4 +1,4 @@
-"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 5).
+"""The labelled suite of generated scenes that ``asnn eval --synthetic`` scores (version 6).
 
 Every case has a stable name that says what it is, a generator (:func:`.planar.planar_scene`
 at 160x120 or :func:`.driving.driving_scene` at 192x128, both at 20 fps, the model's
@@ -30,7 +30,10 @@ brightness             ramps, flicker, exposure steps, headlights sweeping
 noise                  Gaussian sensor noise and JPEG re-encoding
 driving-threat         driving scenes with a vehicle on a collision course: ahead in our lane,
                        oncoming, crossing the road at a junction into our path (a T-bone), or
-                       catching up with us from behind (a rear-facing camera: the scene recedes)
+                       catching up with us from behind (a rear-facing camera: the scene recedes);
+                       and partial-overlap collisions (tag ``offset``): a stopped, braking,
+                       oncoming or catching-up car whose centre is 1-1.2 m to the side of ours,
+                       so that it strikes a corner of our car (the commonest way cars collide)
 driving-pass           driving scenes with a vehicle passing in the next lane, crossing the
                        road ahead and clearing it before we arrive, or overtaking us close by
                        (near misses)
@@ -56,7 +59,7 @@ from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case"]
 
-SUITE_VERSION = "5"
+SUITE_VERSION = "6"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
           "translation", "moving-pattern", "camera", "brightness", "noise", "driving-threat",
           "driving-pass", "driving-clear")
@@ -427,6 +430,9 @@ def _driving_cases() -> list[Case]:
     traffic = (Vehicle(0.0, 16.0, 12.0), Vehicle(LANE_WIDTH, 30.0, 11.0, albedo=0.5),
                Vehicle(-LANE_WIDTH, 60.0, -12.0, albedo=0.35),
                Vehicle(-LANE_WIDTH, 130.0, -14.0, **truck))
+    # partial overlap: the other car's centre 1-1.2 m to the side of ours (both 1.8 m wide),
+    # so it strikes our front (or, catching up, our rear) at a corner
+    offset = 1.2
     # a faster car overtaking from the next lane on the right that moves into our lane ahead
     # (0.8 m/s to the left: our lane's centre at the clip's end) while it pulls away at 3-6 m/s
     cut_in = dict(lane=LANE_WIDTH, lateral_speed=-0.8)
@@ -497,6 +503,19 @@ def _driving_cases() -> list[Case]:
                  vehicles=(Vehicle(0.0, 40.0, 0.0),), target=0),
         _driving("drive-day-turn-stopped-car", "driving-threat", "day", "turn",
                  curvature=1 / 80, vehicles=(Vehicle(0.0, 36.0, 0.0),), target=0),
+        _driving("drive-day-stopped-car-offset", "driving-threat", "day", "offset",
+                 vehicles=(Vehicle(offset, 40.0, 0.0),), target=0),
+        _driving("drive-day-brake-offset", "driving-threat", "day", "brake", "offset",
+                 vehicles=(Vehicle(offset, 14.0, 12.0, **brake),), target=0, onset=15),
+        _driving("drive-night-brake-offset", "driving-threat", "night", "brake", "offset",
+                 night=True, vehicles=(Vehicle(-offset, 14.0, 12.0, **brake, **lit),),
+                 target=0, onset=15),
+        _driving("drive-day-oncoming-offset", "driving-threat", "day", "offset",
+                 vehicles=(Vehicle(-offset, 84.0, -12.0),), target=0),
+        _driving("rear-day-catchup-offset", "driving-threat", "day", "rear", "offset", **rear,
+                 vehicles=(Vehicle(1.0, 30.0, -14.0),), target=0),
+        _driving("rear-night-catchup-offset", "driving-threat", "night", "rear", "offset",
+                 night=True, **rear, vehicles=(Vehicle(offset, 30.0, -14.0, **lit),), target=0),
         _driving("rear-day-catchup", "driving-threat", "day", "twin", "rear", **rear,
                  vehicles=(Vehicle(0.0, 30.0, -14.0),), target=0),
         _driving("rear-day-overtake", "driving-pass", "day", "rear", twin="rear-day-catchup",
