@@ -220,7 +220,10 @@ class ASNNParams(BaseModel):
     tau_max: float = Field(1.5, gt=0, description="longest time to contact that warns, s")
     offset_max: float = Field(
         1.0, gt=0, description="largest drift/expansion offset of an approaching object, in "
-        "object sizes (0: dead ahead; a truck passing in the next lane: 2 or more)")
+        "object sizes (its RMS radius, about 0.4 of a whole object's width): 0 dead ahead; 1 a "
+        "path that crosses the camera's own line of sight; a car whose path overlaps that of a "
+        "car as wide (a partial-overlap collision) up to about 2.4; a car in the next lane 4 "
+        "or more")
     approach_frames: int = Field(3, ge=1, description="consecutive frames a track must pass "
                                  "the approach test (ttc, offset) before it counts")
 
