@@ -21,7 +21,6 @@ from functools import cached_property
 
 import math
 
-import cv2
 import numpy as np
 
 from ._jit import kernel
@@ -361,10 +360,101 @@ class ObjectRegions:
 
 
 @kernel()
-def _region_moments(rows, cols, labels, oy, ox, lut, n, g, absolute):
-    """The pixels of the kept regions (their rows, columns and region numbers) and each
-    region's G-weighted centre, variance, mass and share (see :func:`extract_objects`),
-    summed in the pixels' order as ``np.bincount`` sums."""
+def _components(rows, cols):
+    """8-connected components of pixels given in row-major order, numbered as OpenCV's
+    ``connectedComponentsWithStats`` numbers them (from 0 here, without the background).
+
+    The pixels are taken as runs (consecutive pixels of a row); a run joins every run of the
+    row above that it touches, diagonals included (union-find). OpenCV labels 2x2 blocks of
+    the image in raster order, so its components come in the order of their first block: the
+    least ``(y // 2, x // 2)`` over their pixels, a run's being ``(y // 2, x0 // 2)``. Returns
+    each pixel's component and per component ``(left, top, width, height, area)``.
+    """
+    n = rows.shape[0]
+    run_row = np.empty(n, np.int64)
+    run_x0 = np.empty(n, np.int64)
+    run_x1 = np.empty(n, np.int64)  # inclusive
+    m = 0
+    for i in range(n):
+        if m and rows[i] == run_row[m - 1] and cols[i] == run_x1[m - 1] + 1:
+            run_x1[m - 1] = cols[i]
+        else:
+            run_row[m], run_x0[m], run_x1[m] = rows[i], cols[i], cols[i]
+            m += 1
+    parent = np.arange(m)
+    above0 = above1 = row_start = q = 0  # the runs of the row above: [above0, above1)
+    for k in range(m):
+        if k == 0 or run_row[k] != run_row[k - 1]:
+            if k and run_row[k - 1] == run_row[k] - 1:
+                above0, above1 = row_start, k
+            else:
+                above0 = above1 = k
+            row_start, q = k, above0
+        # runs above that end left of this one's reach cannot touch the ones right of it
+        while q < above1 and run_x1[q] < run_x0[k] - 1:
+            q += 1
+        j = q
+        while j < above1 and run_x0[j] <= run_x1[k] + 1:
+            _union(parent, k, j)
+            j += 1
+    width = 1
+    for k in range(m):
+        width = max(width, (run_x1[k] >> 1) + 2)
+    first = np.full(m, -1, np.int64)  # per root: its first block, y // 2 * width + x // 2
+    for k in range(m):
+        root = _find(parent, k)
+        key = (run_row[k] >> 1) * width + (run_x0[k] >> 1)
+        if first[root] < 0 or key < first[root]:
+            first[root] = key
+    roots = np.flatnonzero(first >= 0)
+    order = roots[np.argsort(first[roots])]
+    number = np.empty(m, np.int64)
+    number[order] = np.arange(order.shape[0])
+    stats = np.zeros((order.shape[0], 5), np.int64)
+    right = np.zeros(order.shape[0], np.int64)
+    bottom = np.zeros(order.shape[0], np.int64)
+    labels = np.empty(n, np.int64)
+    i = 0
+    for k in range(m):
+        c = number[_find(parent, k)]
+        s = stats[c]
+        length = run_x1[k] - run_x0[k] + 1
+        if s[4] == 0:
+            s[0], s[1] = run_x0[k], run_row[k]
+        else:
+            s[0] = min(s[0], run_x0[k])
+        right[c] = max(right[c], run_x1[k])
+        bottom[c] = run_row[k]  # the runs come in row order
+        s[4] += length
+        for _ in range(length):
+            labels[i] = c
+            i += 1
+    for c in range(order.shape[0]):
+        stats[c, 2] = right[c] - stats[c, 0] + 1
+        stats[c, 3] = bottom[c] - stats[c, 1] + 1
+    return labels, stats
+
+
+@kernel()
+def _region_moments(rows, cols, g, min_pixels, absolute):
+    """The kept regions' boxes and pixel counts, their pixels (rows, columns and region
+    numbers) and each region's G-weighted centre, variance, mass and share (see
+    :func:`extract_objects`), summed in the pixels' order as ``np.bincount`` sums."""
+    labels, stats = _components(rows, cols)
+    lut = np.full(stats.shape[0], -1, np.int64)  # component -> kept region, or -1
+    n = 0
+    for c in range(stats.shape[0]):
+        if stats[c, 4] >= min_pixels:
+            lut[c] = n
+            n += 1
+    boxes = np.empty((n, 4), np.int64)
+    pixels = np.empty(n, np.int64)
+    for c in range(stats.shape[0]):
+        k = lut[c]
+        if k >= 0:
+            boxes[k, 0], boxes[k, 1] = stats[c, 0], stats[c, 1]
+            boxes[k, 2], boxes[k, 3] = stats[c, 0] + stats[c, 2], stats[c, 1] + stats[c, 3]
+            pixels[k] = stats[c, 4]
     m = 0
     lab = np.empty(rows.shape[0], np.int64)
     kept_rows = np.empty_like(lab)
@@ -373,7 +463,7 @@ def _region_moments(rows, cols, labels, oy, ox, lut, n, g, absolute):
     share = np.zeros(n)
     mass = np.zeros(n)
     for i in range(rows.shape[0]):
-        k = lut[labels[rows[i] - oy, cols[i] - ox]]
+        k = lut[labels[i]]
         if k < 0:
             continue
         value = np.float64(g[rows[i], cols[i]])
@@ -395,7 +485,8 @@ def _region_moments(rows, cols, labels, oy, ox, lut, n, g, absolute):
         k = lab[i]
         ddx, ddy = kept_cols[i] - x[k], kept_rows[i] - y[k]
         var[k] += values[i] * (ddx * ddx + ddy * ddy)
-    return kept_rows[:m], kept_cols[:m], lab[:m], x, y, var / total, mass, share
+    return (boxes, pixels, kept_rows[:m], kept_cols[:m], lab[:m], x, y, var / total, mass,
+            share)
 
 
 def extract_objects(mask: np.ndarray, g: np.ndarray,
@@ -429,23 +520,9 @@ def extract_objects(mask: np.ndarray, g: np.ndarray,
     ObjectRegions
     """
     rows, cols = np.nonzero(mask) if points is None else points
-    # the components of the set pixels' bounding box, from even coordinates: OpenCV labels
-    # 2x2 blocks in raster order, so on that grid the labels come in the whole mask's order
-    oy, ox = (int(rows[0]) & ~1, int(cols.min()) & ~1) if len(rows) else (0, 0)
-    window = mask[oy:int(rows[-1]) + 1, ox:int(cols.max()) + 1] if len(rows) else mask
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(window.view(np.uint8),
-                                                               connectivity=8,
-                                                               ltype=cv2.CV_32S)
-    keep = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_pixels)
-    n = len(keep)
-    lut = np.full(count, -1, np.int64)  # component label -> kept region, or -1
-    lut[keep + 1] = np.arange(n)
-    kept = stats[keep + 1]
-    x0, y0 = kept[:, cv2.CC_STAT_LEFT] + ox, kept[:, cv2.CC_STAT_TOP] + oy
-    boxes = np.stack([x0, y0, x0 + kept[:, cv2.CC_STAT_WIDTH],
-                      y0 + kept[:, cv2.CC_STAT_HEIGHT]], axis=1)
-    pixels = kept[:, cv2.CC_STAT_AREA]
-    rows, cols, lab, x, y, var, mass, share = _region_moments(
-        np.asarray(rows), np.asarray(cols), labels, oy, ox, lut, n, g, bool(absolute))
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    cols = np.ascontiguousarray(cols, dtype=np.int64)
+    boxes, pixels, rows, cols, lab, x, y, var, mass, share = _region_moments(
+        rows, cols, g, min_pixels, bool(absolute))
     return ObjectRegions(x=x, y=y, size=np.sqrt(var + 1.0), mass=mass, share=share, boxes=boxes,
                          pixels=pixels, members=(rows, cols, lab), vectors=vectors)

@@ -127,8 +127,8 @@ def test_tracker_rejects_a_smoothing_outside_its_range():
 
 
 def test_objects_are_those_of_the_components_of_the_whole_mask():
-    """extract_objects labels only the attended pixels' bounding box (from even coordinates):
-    the regions, and their order, are those of the whole mask's components."""
+    """extract_objects labels the attended pixels by runs: the regions, and their order, are
+    those of OpenCV's components of the whole mask."""
     import cv2
 
     from asnn.targets import extract_objects
@@ -156,6 +156,106 @@ def test_objects_are_those_of_the_components_of_the_whole_mask():
             inside = lab == label
             want = np.abs(g[rows[inside], cols[inside]].astype(float)).sum()
             assert regions.share[k] == pytest.approx(want, rel=1e-12)
+
+
+def _random_masks(rng, count):
+    """Masks of every kind the objects' labelling meets: empty, full, single pixels, noise,
+    blobs touching the border, diagonal chains; odd and even sizes down to one pixel."""
+    yield np.zeros((7, 9), bool)
+    yield np.ones((1, 1), bool)
+    yield np.ones((5, 8), bool)
+    chain = np.zeros((9, 9), bool)
+    chain[np.arange(9), np.arange(9)] = True  # one component through diagonals only
+    chain[0, 8] = chain[8, 0] = True  # single pixels in the corners
+    yield chain
+    for i in range(count):
+        h, w = rng.integers(1, 140, 2)
+        mask = np.zeros((h, w), bool)
+        kind = i % 4
+        if kind == 0:
+            mask[:] = rng.random((h, w)) < rng.random()
+        elif kind == 1:
+            y0, x0 = rng.integers(0, h), rng.integers(0, w)
+            y1, x1 = rng.integers(y0 + 1, h + 1), rng.integers(x0 + 1, w + 1)
+            mask[y0:y1, x0:x1] = rng.random((y1 - y0, x1 - x0)) < rng.random()
+        elif kind == 2:
+            yy, xx = np.ogrid[:h, :w]
+            for _ in range(rng.integers(0, 8)):
+                cy, cx, r = rng.integers(-5, h + 5), rng.integers(-5, w + 5), rng.integers(0, 20)
+                mask |= (yy - cy) ** 2 + (xx - cx) ** 2 <= r * r
+            mask &= rng.random((h, w)) < 0.97
+        else:
+            mask.flat[rng.integers(0, h * w, rng.integers(0, 30))] = True
+        yield mask
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_the_objects_components_are_opencvs(threads):
+    """The labelling by runs (targets._components) gives OpenCV's 8-connected components of
+    the mask, in OpenCV's order, with its statistics (with one OpenCV thread or more: the
+    parallel labelling numbers them the same way)."""
+    import cv2
+
+    from asnn.targets import _components
+
+    saved = cv2.getNumThreads()
+    cv2.setNumThreads(threads)
+    try:
+        for mask in _random_masks(np.random.default_rng(14), 1500):
+            rows, cols = np.nonzero(mask)
+            labels, stats = _components(rows, cols)
+            count, want, want_stats, _ = cv2.connectedComponentsWithStats(
+                mask.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+            np.testing.assert_array_equal(labels, want[rows, cols] - 1)
+            np.testing.assert_array_equal(stats, want_stats[1:, [
+                cv2.CC_STAT_LEFT, cv2.CC_STAT_TOP, cv2.CC_STAT_WIDTH, cv2.CC_STAT_HEIGHT,
+                cv2.CC_STAT_AREA]].reshape(count - 1, 5))
+    finally:
+        cv2.setNumThreads(saved)
+
+
+def test_the_objects_moments_are_those_of_numpy_sums_over_opencvs_components():
+    """extract_objects' regions, bit for bit: OpenCV's components of at least min_pixels
+    pixels, their boxes and pixel counts, and the G-weighted moments as ``np.bincount`` sums
+    them, in the pixels' row-major order (how the labelling was done before the runs)."""
+    import cv2
+
+    from asnn.targets import extract_objects
+
+    rng = np.random.default_rng(15)
+    for i, mask in enumerate(_random_masks(rng, 600)):
+        g = rng.standard_normal(mask.shape).astype(np.float32)
+        if i % 5 == 0:
+            g = -np.abs(g)  # regions without positive G: equal weights
+        min_pixels, absolute = int(rng.integers(1, 6)), bool(i % 2)
+        regions = extract_objects(mask, g, None, min_pixels, absolute)
+        count, labels, stats, _ = cv2.connectedComponentsWithStats(
+            mask.view(np.uint8), connectivity=8, ltype=cv2.CV_32S)
+        keep = np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= min_pixels)
+        n = len(keep)
+        lut = np.full(count, -1)
+        lut[keep + 1] = np.arange(n)
+        kept = stats[keep + 1]
+        rows, cols = np.nonzero(mask)
+        lab = lut[labels[rows, cols]]
+        rows, cols, lab = rows[lab >= 0], cols[lab >= 0], lab[lab >= 0]
+        values = g[rows, cols].astype(np.float64)
+        share = np.bincount(lab, np.abs(values) if absolute else values, n)
+        mass = np.bincount(lab, np.maximum(values, 0.0), n)
+        weight = np.where(mass[lab] > 0, np.maximum(values, 0.0), 1.0)
+        total = np.bincount(lab, weight, n)
+        x = np.bincount(lab, weight * cols, n) / total
+        y = np.bincount(lab, weight * rows, n) / total
+        var = np.bincount(lab, weight * ((cols - x[lab]) ** 2 + (rows - y[lab]) ** 2), n) / total
+        left, top = kept[:, cv2.CC_STAT_LEFT], kept[:, cv2.CC_STAT_TOP]
+        for got, want in [
+                (regions.boxes, np.stack([left, top, left + kept[:, cv2.CC_STAT_WIDTH],
+                                          top + kept[:, cv2.CC_STAT_HEIGHT]], 1).reshape(n, 4)),
+                (regions.pixels, kept[:, cv2.CC_STAT_AREA]), (regions.share, share),
+                (regions.mass, mass), (regions.x, x), (regions.y, y),
+                (regions.size, np.sqrt(var + 1.0)),
+                *zip(regions.members, (rows, cols, lab))]:
+            np.testing.assert_array_equal(got, want)
 
 
 def test_the_objects_motion_is_computed_when_first_read_and_only_then():
