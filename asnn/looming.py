@@ -29,6 +29,7 @@ References
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import cv2
@@ -75,7 +76,8 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     temporal one their difference. A box larger than 64 pixels is area-averaged down to that
     first: fewer pixels to fit, and an edge that moves several pixels per frame stays within
     the linear range of the brightness-constancy equation (Horn, Fang and Masaki's hierarchical
-    form does the same [2]_).
+    form does the same [2]_). The area averages are ``cv2.resize``'s (INTER_AREA), computed with
+    the fit in one numba kernel, bit for bit (OpenCV's own where it shrinks by whole factors).
 
     With ``background``, the previous frame moved by the background's translation
     (:mod:`asnn.stabilisation`), a pixel whose change that translation explains better than
@@ -106,20 +108,24 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     x0, y0, x1, y1 = box
     if x1 - x0 < _MIN_SIDE or y1 - y0 < _MIN_SIDE:
         return None
-    images = [previous[y0:y1, x0:x1], current[y0:y1, x0:x1]]
-    if background is not None:
-        images.append(background[y0:y1, x0:x1])
-    step = max(x1 - x0, y1 - y0) / _MAX_SIDE
-    if step > 1.0:
-        size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
-        images = [cv2.resize(np.ascontiguousarray(a), size, interpolation=cv2.INTER_AREA)
-                  for a in images]
-    else:
-        step = 1.0
-    before, after = images[:2]
     # without a background every pixel counts: |after - before| < itself is never true
-    solved, a, b, c, d = _solve_expansion(before, after, images[-1] if background is not None
-                                          else before, _RIDGE)
+    reference = previous if background is None else background
+    step = max(x1 - x0, y1 - y0) / _MAX_SIDE
+    if step <= 1.0:
+        step = 1.0
+        solved, a, b, c, d = _solve_expansion(
+            previous[y0:y1, x0:x1], current[y0:y1, x0:x1], reference[y0:y1, x0:x1], _RIDGE)
+    else:
+        size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
+        if _area_fast((x1 - x0, y1 - y0), size):
+            before, after, reference = (
+                cv2.resize(np.ascontiguousarray(image[y0:y1, x0:x1]), size,
+                           interpolation=cv2.INTER_AREA)
+                for image in (previous, current, reference))
+            solved, a, b, c, d = _solve_expansion(before, after, reference, _RIDGE)
+        else:
+            solved, a, b, c, d = _solve_area_averaged(previous, current, reference, x0, y0,
+                                                      x1, y1, *size, _RIDGE)
     if not solved:
         return None
     return Expansion(a * step, b * step, c, d)
@@ -264,3 +270,97 @@ def _solve_expansion(before, after, background, ridge):
             acc -= normal[i, j] * solution[j]
         solution[i] = acc / normal[i, i]
     return True, solution[0], solution[1], solution[2], solution[3]
+
+
+def _area_fast(size: tuple[int, int], shrunk: tuple[int, int]) -> bool:
+    """Whether ``cv2.resize`` with INTER_AREA shrinks an image of ``size`` to ``shrunk`` by
+    whole factors (its blockwise averages, whose order of additions depends on OpenCV's
+    vector width), rather than with its weighted tables (:func:`_area_table`)."""
+    scales = [1.0 / (d / s) for s, d in zip(size, shrunk)]
+    return all(abs(f - round(f)) < np.finfo(np.float64).eps for f in scales)
+
+
+@kernel(inline="always")
+def _area_table(size, shrunk):
+    """OpenCV's table of INTER_AREA weights (``computeResizeAreaTab``) from ``size`` samples to
+    ``shrunk``, in its order: the source sample and the weight (float32, as OpenCV keeps it) of
+    each entry, and where each destination sample's entries start (``shrunk + 1`` offsets)."""
+    scale = 1.0 / (shrunk / size)
+    source = np.empty(2 * size, np.int64)
+    weight = np.empty(2 * size, np.float32)
+    start = np.empty(shrunk + 1, np.int64)
+    k = 0
+    for dx in range(shrunk):
+        start[dx] = k
+        fsx1 = dx * scale
+        fsx2 = fsx1 + scale
+        cell = min(scale, size - fsx1)
+        sx2 = min(int(math.floor(fsx2)), size - 1)
+        sx1 = min(int(math.ceil(fsx1)), sx2)
+        if sx1 - fsx1 > 1e-3:
+            source[k], weight[k] = sx1 - 1, np.float32((sx1 - fsx1) / cell)
+            k += 1
+        for sx in range(sx1, sx2):
+            source[k], weight[k] = sx, np.float32(1.0 / cell)
+            k += 1
+        if fsx2 - sx2 > 1e-3:
+            source[k] = sx2
+            weight[k] = np.float32(min(min(fsx2 - sx2, 1.0), cell) / cell)
+            k += 1
+    start[shrunk] = k
+    return source, weight, start
+
+
+@kernel(inline="always")
+def _area_averages(images, y0, x0, xtab, ytab, rows, out):
+    """``cv2.resize(image[y0:, x0:], ..., interpolation=cv2.INTER_AREA)`` of three images into
+    ``out`` with the tables of :func:`_area_table`, summed in OpenCV's order and the images'
+    precision (its ``ResizeArea_Invoker`` on one thread), so bit for bit the same.
+
+    ``rows`` holds the horizontal sums of every source row. Each of them is one chain of
+    additions from 0, as OpenCV's into its row buffer, but the three images' chains are
+    computed side by side (the processor overlaps them).
+    """
+    xs, xw, xstart = xtab
+    ys, yw, ystart = ytab
+    a, b, c = images
+    h, w = out.shape[1:]
+    zero = rows.dtype.type(0)
+    for sy in range(rows.shape[1]):
+        ra, rb, rc = a[y0 + sy], b[y0 + sy], c[y0 + sy]
+        la, lb, lc = rows[0, sy], rows[1, sy], rows[2, sy]
+        for dx in range(w):
+            sa = sb = sc = zero
+            for k in range(xstart[dx], xstart[dx + 1]):
+                x, wt = x0 + xs[k], xw[k]
+                sa += ra[x] * wt
+                sb += rb[x] * wt
+                sc += rc[x] * wt
+            la[dx], lb[dx], lc[dx] = sa, sb, sc
+    for i in range(3):
+        for dy in range(h):
+            o = out[i, dy]
+            j = ystart[dy]
+            line, beta = rows[i, ys[j]], yw[j]
+            if dy == 0:  # OpenCV's first sum starts from 0, the others from their first term
+                for dx in range(w):
+                    o[dx] = zero + beta * line[dx]
+            else:
+                for dx in range(w):
+                    o[dx] = beta * line[dx]
+            for j in range(ystart[dy] + 1, ystart[dy + 1]):
+                line, beta = rows[i, ys[j]], yw[j]
+                for dx in range(w):
+                    o[dx] += beta * line[dx]
+
+
+@kernel(error_model="numpy")
+def _solve_area_averaged(previous, current, background, x0, y0, x1, y1, w, h, ridge):
+    """:func:`_solve_expansion` over the box ``(x0, y0, x1, y1)`` of the three images
+    area-averaged down to ``w`` x ``h`` as ``cv2.resize`` does (:func:`_area_averages`),
+    in one call, the tables made once."""
+    rows = np.empty((3, y1 - y0, w), previous.dtype)
+    out = np.empty((3, h, w), previous.dtype)
+    _area_averages((previous, current, background), y0, x0, _area_table(x1 - x0, w),
+                   _area_table(y1 - y0, h), rows, out)
+    return _solve_expansion(out[0], out[1], out[2], ridge)

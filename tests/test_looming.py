@@ -77,6 +77,87 @@ def test_a_flat_or_tiny_box_has_no_estimate():
     assert region_expansion(tex, tex, (10, 10, 13, 40)) is None
 
 
+def _random_boxes(rng, count):
+    """Frames and boxes of every kind the looming fit meets: float32 and float64, boxes from
+    5 pixels across to the whole frame, touching its borders, thin ones (one side not shrunk
+    or shrunk to one sample), and whole shrink factors."""
+    for i in range(count):
+        dtype = np.float64 if i % 3 == 0 else np.float32
+        h, w = rng.integers(5, 420, 2)
+        if i % 11 == 0:
+            h, w = 2 * rng.integers(33, 100), 128  # by a factor of 2 (or more) both ways
+        x0, y0 = int(rng.integers(0, w - 4)), int(rng.integers(0, h - 4))
+        x1, y1 = int(rng.integers(x0 + 5, w + 1)), int(rng.integers(y0 + 5, h + 1))
+        if i % 5 == 0:
+            x0, y0, x1, y1 = 0, 0, int(w), int(h)
+        elif i % 7 == 0:
+            y1 = y0 + 5  # one side far shorter
+        previous = rng.random((h, w)).astype(dtype)
+        current = (previous + 0.1 * rng.standard_normal((h, w))).astype(dtype)
+        background = (previous + 0.05 * rng.standard_normal((h, w))).astype(dtype)
+        yield previous, current, background, (x0, y0, x1, y1)
+
+
+def test_the_fits_area_averages_are_opencvs():
+    """The looming fit's area averages (looming._area_averages, in numba with the fit) are
+    cv2.resize's INTER_AREA, bit for bit, wherever it does not shrink by whole factors."""
+    import cv2
+
+    from asnn.looming import _area_averages, _area_fast, _area_table
+
+    rng = np.random.default_rng(16)
+    checked = 0
+    for previous, current, background, (x0, y0, x1, y1) in _random_boxes(rng, 600):
+        w = int(rng.integers(1, x1 - x0 + 1))
+        h = int(rng.integers(1, y1 - y0 + 1))
+        if _area_fast((x1 - x0, y1 - y0), (w, h)):
+            continue
+        images = (previous, current, background)
+        rows = np.empty((3, y1 - y0, w), previous.dtype)
+        out = np.empty((3, h, w), previous.dtype)
+        _area_averages(images, y0, x0, _area_table(x1 - x0, w), _area_table(y1 - y0, h), rows,
+                       out)
+        for image, got in zip(images, out):
+            want = cv2.resize(np.ascontiguousarray(image[y0:y1, x0:x1]), (w, h),
+                              interpolation=cv2.INTER_AREA)
+            np.testing.assert_array_equal(got, want)
+        checked += 1
+    assert checked > 500
+
+
+def test_the_fit_of_a_large_box_is_that_of_opencvs_area_averages():
+    """region_expansion, which area-averages a large box in numba with the fit, gives the
+    estimate of the fit over cv2.resize's area averages (how it was computed before), bit for
+    bit, with and without a background."""
+    import cv2
+
+    from asnn.looming import _RIDGE, _solve_expansion
+
+    def with_opencv(previous, current, box, background):
+        x0, y0, x1, y1 = box
+        images = [a[y0:y1, x0:x1] for a in (previous, current, background)]
+        step = max(x1 - x0, y1 - y0) / 64
+        if step > 1.0:
+            size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
+            images = [cv2.resize(np.ascontiguousarray(a), size, interpolation=cv2.INTER_AREA)
+                      for a in images]
+        else:
+            step = 1.0
+        solved, a, b, c, d = _solve_expansion(*images, _RIDGE)
+        return (a * step, b * step, c, d) if solved else None
+
+    rng = np.random.default_rng(17)
+    for i, (previous, current, background, box) in enumerate(_random_boxes(rng, 400)):
+        if i % 4 == 0:
+            current = previous.copy()  # no change: no gradient of time to fit
+        got = region_expansion(previous, current, box, background)
+        assert (None if got is None else tuple(got)) == with_opencv(previous, current, box,
+                                                                    background)
+        got = region_expansion(previous, current, box)
+        assert (None if got is None else tuple(got)) == with_opencv(previous, current, box,
+                                                                    previous)
+
+
 def _obs(x, y, size=10.0, mass=1.0):
     return Observation(x, y, size, mass, (x - size, y - size, x + size, y + size))
 
