@@ -294,18 +294,20 @@ def _dog_row(p, y, env, sc, zero, col, on, off):
     h, w = p.shape
     a0, a1, b1 = p[y], p[_reflect(y - 1, h)], p[_reflect(y + 1, h)]
     a2, b2 = p[_reflect(y - 2, h)], p[_reflect(y + 2, h)]
-    for m in range(2):  # vertical passes of relu(P) with e1, e2
-        e = env[m]
-        c = col[m]
-        for x in range(w):
-            c[x + 2] = e[2] * max(a0[x], zero) + e[3] * (max(a1[x], zero) + max(b1[x], zero)) \
-                + e[4] * (max(a2[x], zero) + max(b2[x], zero))
-    for m in range(2):  # ... and of relu(-P)
-        e = env[m]
-        c = col[2 + m]
-        for x in range(w):
-            c[x + 2] = e[2] * max(-a0[x], zero) + e[3] * (max(-a1[x], zero) + max(-b1[x], zero)) \
-                + e[4] * (max(-a2[x], zero) + max(-b2[x], zero))
+    # the vertical passes of relu(P) and relu(-P) with e1 and e2, in one loop that loads the
+    # five rows once
+    p1, p2, n1, n2 = col[0], col[1], col[2], col[3]
+    e10, e11, e12 = env[0, 2], env[0, 3], env[0, 4]
+    e20, e21, e22 = env[1, 2], env[1, 3], env[1, 4]
+    for x in range(w):
+        u0, u1, v1, u2, v2 = a0[x], a1[x], b1[x], a2[x], b2[x]
+        m0, m1, m2 = max(u0, zero), max(u1, zero) + max(v1, zero), max(u2, zero) + max(v2, zero)
+        p1[x + 2] = e10 * m0 + e11 * m1 + e12 * m2
+        p2[x + 2] = e20 * m0 + e21 * m1 + e22 * m2
+        m0, m1 = max(-u0, zero), max(-u1, zero) + max(-v1, zero)
+        m2 = max(-u2, zero) + max(-v2, zero)
+        n1[x + 2] = e10 * m0 + e11 * m1 + e12 * m2
+        n2[x + 2] = e20 * m0 + e21 * m1 + e22 * m2
     for m in range(4):
         _pad(col[m], w, 2)
     e1, e2 = env[0], env[1]
@@ -398,19 +400,27 @@ def _advance_row(p, y, env, sc, zero, swap, old_on, old_off, y_old, new_on, new_
 
 
 @kernel(inline="always", **_jit)
-def _col_sym(src, s0, sm1, sp1, sm2, sp2, k, out):
+def _gabor_columns(src, s0, sm1, sp1, sm2, sp2, k, out):
+    """The five Gabor column passes of one read-out row (``e``, ``Ca``, ``Sa``, ``Cb``,
+    ``Sb``: symmetric, symmetric, antisymmetric, symmetric, antisymmetric) in one loop, which
+    loads the five rows once. Each output is ``c0 a0 + c1 (b1 + a1) + c2 (b2 + a2)``, or
+    ``c1 (b1 - a1) + c2 (b2 - a2)``, as one pass per kernel computes it."""
     a0, a1, b1, a2, b2 = src[s0], src[sm1], src[sp1], src[sm2], src[sp2]
-    c0, c1, c2 = k[2], k[3], k[4]
-    for x in range(out.shape[0]):
-        out[x] = c0 * a0[x] + c1 * (b1[x] + a1[x]) + c2 * (b2[x] + a2[x])
-
-
-@kernel(inline="always", **_jit)
-def _col_anti(src, sm1, sp1, sm2, sp2, k, out):
-    a1, b1, a2, b2 = src[sm1], src[sp1], src[sm2], src[sp2]
-    c1, c2 = k[3], k[4]
-    for x in range(out.shape[0]):
-        out[x] = c1 * (b1[x] - a1[x]) + c2 * (b2[x] - a2[x])
+    e, ca, sa, cb, sb = out[0], out[1], out[2], out[3], out[4]
+    e0, e1, e2 = k[0, 2], k[0, 3], k[0, 4]
+    ca0, ca1, ca2 = k[1, 2], k[1, 3], k[1, 4]
+    sa1, sa2 = k[2, 3], k[2, 4]
+    cb0, cb1, cb2 = k[3, 2], k[3, 3], k[3, 4]
+    sb1, sb2 = k[4, 3], k[4, 4]
+    for x in range(e.shape[0]):
+        m = a0[x]
+        s1, s2 = b1[x] + a1[x], b2[x] + a2[x]
+        d1, d2 = b1[x] - a1[x], b2[x] - a2[x]
+        e[x] = e0 * m + e1 * s1 + e2 * s2
+        ca[x] = ca0 * m + ca1 * s1 + ca2 * s2
+        sa[x] = sa1 * d1 + sa2 * d2
+        cb[x] = cb0 * m + cb1 * s1 + cb2 * s2
+        sb[x] = sb1 * d1 + sb2 * d2
 
 
 @kernel(inline="always", **_jit)
@@ -445,11 +455,7 @@ def _gabor_channel(ro, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, gab
     for im in range(2):
         src = ro[slow] if im == 0 else ro[fast]
         c, a = gabor[im], acc[im]
-        _col_sym(src, s0, sm1, sp1, sm2, sp2, k[0], c[0])   # e
-        _col_sym(src, s0, sm1, sp1, sm2, sp2, k[1], c[1])   # Ca
-        _col_anti(src, sm1, sp1, sm2, sp2, k[2], c[2])      # Sa
-        _col_sym(src, s0, sm1, sp1, sm2, sp2, k[3], c[3])   # Cb
-        _col_anti(src, sm1, sp1, sm2, sp2, k[4], c[4])      # Sb
+        _gabor_columns(src, s0, sm1, sp1, sm2, sp2, k, c)  # e, Ca, Sa, Cb, Sb
         _row_pair(c[0], k[1], k[2], a[0], a[1])   # Re, Im Z^0 = e (x) (ca, sa)
         _row_sym(c[1], k[0], a[2])                # Re Z^{pi/2} = Ca (x) e
         _row_sym(c[2], k[0], a[3])                # Im Z^{pi/2} = Sa (x) e

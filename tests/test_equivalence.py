@@ -233,6 +233,47 @@ def test_bands_of_rows_compute_the_pass_of_one(dtype, grouping, swap):
         _fast.front(p, state, coefficients, got, scratch, (0, 20))
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_fused_column_passes_are_one_pass_per_kernel(dtype):
+    """The column passes that share their input rows, computed in one loop (the five Gabor
+    passes of a read-out row, _fast._gabor_columns; g_I's passes of relu(P) and relu(-P) with
+    both Gaussians, in _fast._dog_row), bit for bit as one loop per kernel computed them:
+    ``c0 a0 + c1 (b1 + a1) + c2 (b2 + a2)`` or ``c1 (b1 - a1) + c2 (b2 - a2)``, here in NumPy
+    (no fused multiply-adds either)."""
+    rng = np.random.default_rng(21)
+    k = _fast.gabor_factors(0.3, 4.0, 5).astype(dtype)
+    for w in (1, 7, 64, 333):
+        src = rng.standard_normal((5, w + 4)).astype(dtype)
+        out = np.empty((5, w + 4), dtype)
+        _fast._gabor_columns(src, 2, 1, 3, 0, 4, k, out)
+        a0, a1, b1, a2, b2 = src[2], src[1], src[3], src[0], src[4]
+        for j in range(5):
+            c0, c1, c2 = k[j, 2], k[j, 3], k[j, 4]
+            want = (c1 * (b1 - a1) + c2 * (b2 - a2) if j in (2, 4)
+                    else c0 * a0 + c1 * (b1 + a1) + c2 * (b2 + a2))
+            np.testing.assert_array_equal(out[j], want)
+    env, scales = (a.astype(dtype) for a in _fast.dog_factors(5.0, 1.0, 3.0, 5, "2d"))
+    for h, w in ((5, 5), (3, 8), (9, 40)):
+        p = (rng.standard_normal((h, w)) * (rng.random((h, w)) < 0.5)).astype(dtype)
+        col = np.empty((4, w + 4), dtype)
+        on, off = np.empty((2, w), dtype)
+        for y in range(h):
+            _fast._dog_row(p, y, env, scales, dtype(0), col, on, off)
+            rows = [p[_fast._reflect(y + d, h)] for d in (0, -1, 1, -2, 2)]
+            for m, sign in ((0, 1), (1, 1), (2, -1), (3, -1)):
+                e = env[m % 2]
+                a0, a1, b1, a2, b2 = (np.maximum(sign * r, dtype(0)) for r in rows)
+                want = e[2] * a0 + e[3] * (a1 + b1) + e[4] * (a2 + b2)
+                np.testing.assert_array_equal(col[m, 2:w + 2], want)
+            for out, (c1, c2) in ((on, col[:2]), (off, col[2:])):
+                e1, e2 = env
+                want = scales[0] * (e1[2] * c1[2:w + 2] + e1[3] * (c1[1:w + 1] + c1[3:w + 3])
+                                    + e1[4] * (c1[:w] + c1[4:w + 4])) \
+                    - scales[1] * (e2[2] * c2[2:w + 2] + e2[3] * (c2[1:w + 1] + c2[3:w + 3])
+                                   + e2[4] * (c2[:w] + c2[4:w + 4]))
+                np.testing.assert_array_equal(out, want)
+
+
 def test_fused_gain_control_and_halved_v_prime_are_the_straightforward_ones():
     import cv2
 
