@@ -82,7 +82,8 @@ from ._jit import kernel
 
 __all__ = ["supported", "dog_factors", "gabor_factors", "cs_classes", "Scratch", "FrontMaps",
            "Workspace", "workspace", "scratch", "FrontCoefficients", "front", "add_column_sums",
-           "to_differences", "contrast_gain_control", "attention", "AttentionBlur"]
+           "to_differences", "contrast_gain_control", "gain_controlled_change", "attention",
+           "AttentionBlur"]
 
 RADIUS = 2  # the fused kernels are written for 5x5 kernels (Table I)
 DEPTH = 2 * RADIUS + 1  # rows kept by the ring buffers of the 5x5 filters
@@ -742,11 +743,54 @@ def _divide_by_pool(p, pool, semi, scale, out):
             oy[x] = py[x] * (scale / (semi + qy[x]))
 
 
-def contrast_gain_control(p, semi_saturation, sigma, scale):
-    """:func:`~asnn.retina.contrast_gain_control`, its division in one pass over the image."""
+def contrast_gain_control(p, semi_saturation, sigma, scale, out=None):
+    """:func:`~asnn.retina.contrast_gain_control`, its division in one pass over the image,
+    into ``out`` (default: a new array)."""
     t = p.dtype.type
-    out = np.empty_like(p)
+    out = np.empty_like(p) if out is None else out
     _divide_by_pool(p, retina.contrast_pool(p, sigma), t(semi_saturation), t(scale), out)
+    return out
+
+
+@kernel(**_jit)
+def _change_and_averages(current, previous, photo, coarse):
+    """``P = current - previous`` into ``photo``, and the averages of ``|P|`` over 4x4 blocks
+    into ``coarse``, as ``cv2.resize`` (INTER_AREA) takes them when it shrinks by 4 both ways:
+    per block the sum of its rows' sums ``((a + b) + c) + d``, times 1/16."""
+    sixteenth = coarse.dtype.type(1 / 16)
+    for cy in range(coarse.shape[0]):
+        for y in range(4 * cy, 4 * cy + 4):
+            a, b, o = current[y], previous[y], photo[y]
+            for x in range(o.shape[0]):
+                o[x] = a[x] - b[x]
+        r0, r1, r2, r3 = photo[4 * cy], photo[4 * cy + 1], photo[4 * cy + 2], photo[4 * cy + 3]
+        c = coarse[cy]
+        for cx in range(c.shape[0]):
+            x = 4 * cx
+            total = c.dtype.type(0)
+            for r in (r0, r1, r2, r3):
+                total += ((abs(r[x]) + abs(r[x + 1])) + abs(r[x + 2])) + abs(r[x + 3])
+            c[cx] = total * sixteenth
+
+
+def gain_controlled_change(current, previous, semi_saturation, sigma, scale, out=None):
+    """:func:`~asnn.retina.contrast_gain_control` of ``P = current - previous`` (eq. 1 without
+    photoreceptor history) into ``out`` (default: a new array).
+
+    Where the pool's grid divides the frame (4 x 4 pixels per cell), P and the pool's area
+    averages are computed in one pass (:func:`_change_and_averages`); elsewhere as
+    :func:`contrast_gain_control` does.
+    """
+    h, w = current.shape
+    if h % 4 or w % 4 or retina._POOL_STEP != 4:
+        return contrast_gain_control(current - previous, semi_saturation, sigma, scale, out)
+    t = current.dtype.type
+    photo = np.empty_like(current)
+    coarse = np.empty((h // 4, w // 4), current.dtype)
+    _change_and_averages(current, previous, photo, coarse)
+    out = np.empty_like(current) if out is None else out
+    _divide_by_pool(photo, retina.contrast_pool_spread(coarse, sigma, (h, w)),
+                    t(semi_saturation), t(scale), out)
     return out
 
 

@@ -510,7 +510,8 @@ class BandedFront:
             if m < h:  # (no band below an empty last one)
                 write[m - c.halo:m + c.halo] ^= 1
         self._state = write
-        np.copyto(self._photos[slot], p)
+        if p is not self._photos[slot]:
+            np.copyto(self._photos[slot], p)
         for i in range(len(self._servers)):
             band = (borders[i], borders[i + 1]) if i < len(borders) - 2 else (0, 0)
             self._params[i, slot] = (*band, i == 0)
@@ -527,6 +528,13 @@ class BandedFront:
             _await_servers(self.control, len(self._servers), _NAP)
         self._flight.append(flight)
         return flight
+
+    def next_photo(self, stages: tuple) -> np.ndarray:
+        """Where the next pass started for the cascades ``stages`` reads its photoreceptor
+        output: P written there is not copied again (:meth:`start`). Valid until that pass
+        is started."""
+        self._bind(stages)
+        return self._photos[(self._passes + 1) % SLOTS]
 
     def settle(self, stages: tuple) -> None:
         """Bring every row's state back into the cascades (no pass in flight)."""

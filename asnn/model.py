@@ -304,8 +304,13 @@ class ASNN:
         previous, self.previous = self.previous, lum
         taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, background=background)
         if self.optimised:
+            # with threads of its own, P goes where the fused pass will read it (a front that
+            # failed is left as it is: the pass in flight raises its error)
+            banded = self._banded
+            out = (banded.next_photo((self.stages_on, self.stages_off))
+                   if banded is not None and not banded.failed else None)
             taken.photo = self._photoreceptors(lum, previous if background is None
-                                               else background)
+                                               else background, out)
         return taken
 
     def _front(self, frame: "_Frame") -> None:
@@ -371,10 +376,16 @@ class ASNN:
     def _spikes(self, u: float, n_cells: int) -> tuple[float, int, float]:
         return spike_step(u, n_cells, self.spike_window, self.params)
 
-    def _photoreceptors(self, lum: np.ndarray, previous: np.ndarray) -> np.ndarray:
+    def _photoreceptors(self, lum: np.ndarray, previous: np.ndarray,
+                        out: np.ndarray | None = None) -> np.ndarray:
         """P (eq. 1) from the frame and the previous one, after the contrast gain control where
-        the preset has it."""
+        the preset has it. The optimised form without photoreceptor history computes the
+        difference and the gain control's pool together
+        (:func:`asnn._fast.gain_controlled_change`), into ``out`` where given."""
         p = self.params
+        if self.optimised and not p.n_p and p.contrast_gain is not None:
+            return _fast.gain_controlled_change(lum, previous, p.contrast_gain, p.contrast_pool,
+                                                p.contrast_scale, out)
         photo = retina.photoreceptor(lum, previous, list(self.history), self._p_weights)
         if p.n_p:
             self.history.appendleft(photo)

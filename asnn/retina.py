@@ -25,6 +25,7 @@ __all__ = [
     "photoreceptor",
     "contrast_gain_control",
     "contrast_pool",
+    "contrast_pool_spread",
     "dog_kernel",
     "dog_norms",
     "bipolar",
@@ -137,8 +138,14 @@ def contrast_pool(p: np.ndarray, sigma: float) -> np.ndarray:
     h, w = p.shape
     coarse = cv2.resize(np.abs(p), (max(w // _POOL_STEP, 1), max(h // _POOL_STEP, 1)),
                         interpolation=cv2.INTER_AREA)
+    return contrast_pool_spread(coarse, sigma, (h, w))
+
+
+def contrast_pool_spread(coarse: np.ndarray, sigma: float, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`contrast_pool` from the area averages of ``|P|`` on its coarse grid: blurred
+    there and bilinearly interpolated back to ``shape`` (H, W)."""
     coarse = cv2.GaussianBlur(coarse, (0, 0), sigma / _POOL_STEP, borderType=_BORDER)
-    return cv2.resize(coarse, (w, h), interpolation=cv2.INTER_LINEAR)
+    return cv2.resize(coarse, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
 
 
 # --------------------------------------------------------------------------- bipolar cells

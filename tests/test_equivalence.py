@@ -291,6 +291,28 @@ def test_fused_gain_control_and_halved_v_prime_are_the_straightforward_ones():
         np.testing.assert_array_equal(coarse, want)
 
 
+def test_the_change_and_its_pool_in_one_pass_are_the_straightforward_ones():
+    """P and the area averages of |P| in one pass (_fast.gain_controlled_change) give
+    retina.contrast_gain_control of retina.photoreceptor, bit for bit: frames whose sides the
+    pool's 4x4 cells divide (the fused pass), frames they do not (cv2.resize's weighted
+    averages), still pixels (P = 0) and both precisions."""
+    rng = np.random.default_rng(22)
+    for h, w in ((8, 8), (240, 320), (60, 84), (61, 80), (9, 13), (360, 480)):
+        for dtype in (np.float32, np.float64):
+            previous = rng.random((h, w)).astype(dtype)
+            current = previous.copy()
+            moved = rng.random((h, w)) < 0.3
+            current[moved] = rng.random(np.count_nonzero(moved)).astype(dtype)
+            want = retina.contrast_gain_control(
+                retina.photoreceptor(current, previous, [], np.zeros(0)), 0.005, 8.0, 0.05)
+            np.testing.assert_array_equal(
+                _fast.gain_controlled_change(current, previous, 0.005, 8.0, 0.05), want)
+            out = np.empty_like(current)
+            assert _fast.gain_controlled_change(current, previous, 0.005, 8.0, 0.05,
+                                                out) is out
+            np.testing.assert_array_equal(out, want)
+
+
 def test_a_window_of_the_coarse_blur_is_that_of_the_whole_frame():
     """The attention blur on the grid twice coarser, interpolated back only in a window
     (_fast.AttentionBlur.window), is the whole frame's interpolation there, bit for bit,
