@@ -425,23 +425,33 @@ def _gabor_columns(src, s0, sm1, sp1, sm2, sp2, k, out):
 
 
 @kernel(inline="always", **_jit)
-def _row_sym(line, k, out):
-    c0, c1, c2 = k[2], k[3], k[4]
-    for x in range(out.shape[0]):
-        out[x] = c0 * line[x + 2] + c1 * (line[x + 3] + line[x + 1]) + c2 * (line[x + 4] + line[x])
-
-
-@kernel(inline="always", **_jit)
-def _row_pair(line, ks, ka, out_sym, out_anti):
-    """A symmetric and an antisymmetric row pass of the same line in one loop: the five taps
-    are loaded once. (Loops with more outputs, or more input rows, stop vectorising: LLVM
-    gives up on the runtime checks that the rows do not overlap.)"""
-    s0, s1, s2 = ks[2], ks[3], ks[4]
-    a1, a2 = ka[3], ka[4]
-    for x in range(out_sym.shape[0]):
-        l0, l1, l2, l3, l4 = line[x], line[x + 1], line[x + 2], line[x + 3], line[x + 4]
-        out_sym[x] = s0 * l2 + s1 * (l3 + l1) + s2 * (l4 + l0)
-        out_anti[x] = a1 * (l3 - l1) + a2 * (l4 - l0)
+def _gabor_rows(c, k, a):
+    """The eight Gabor row passes of the five column passes ``c`` into ``a``, in two loops:
+    Re, Im Z^0 = e (x) (ca, sa) and Re, Im Z^{pi/2} = (Ca, Sa) (x) e; then Cb (x) (cb, sb) and
+    Sb (x) (cb, sb) into (a[4], a[7]) and (a[5], a[6]). Each is
+    ``c0 l2 + c1 (l3 + l1) + c2 (l4 + l0)`` or ``c1 (l3 - l1) + c2 (l4 - l0)``, as one pass per
+    output computes it. (One loop for all eight stops vectorising: LLVM gives up on the
+    runtime checks that its rows do not overlap; one per pass loads each line again.)"""
+    e0, e1, e2 = k[0, 2], k[0, 3], k[0, 4]
+    ca0, ca1, ca2 = k[1, 2], k[1, 3], k[1, 4]
+    sa1, sa2 = k[2, 3], k[2, 4]
+    cb0, cb1, cb2 = k[3, 2], k[3, 3], k[3, 4]
+    sb1, sb2 = k[4, 3], k[4, 4]
+    le, lca, lsa, lcb, lsb = c[0], c[1], c[2], c[3], c[4]
+    a0, a1, a2, a3, a4, a5, a6, a7 = a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7]
+    for x in range(a0.shape[0]):
+        l0, l1, l2, l3, l4 = le[x], le[x + 1], le[x + 2], le[x + 3], le[x + 4]
+        a0[x] = ca0 * l2 + ca1 * (l3 + l1) + ca2 * (l4 + l0)
+        a1[x] = sa1 * (l3 - l1) + sa2 * (l4 - l0)
+        a2[x] = e0 * lca[x + 2] + e1 * (lca[x + 3] + lca[x + 1]) + e2 * (lca[x + 4] + lca[x])
+        a3[x] = e0 * lsa[x + 2] + e1 * (lsa[x + 3] + lsa[x + 1]) + e2 * (lsa[x + 4] + lsa[x])
+    for x in range(a0.shape[0]):
+        l0, l1, l2, l3, l4 = lcb[x], lcb[x + 1], lcb[x + 2], lcb[x + 3], lcb[x + 4]
+        a4[x] = cb0 * l2 + cb1 * (l3 + l1) + cb2 * (l4 + l0)
+        a7[x] = sb1 * (l3 - l1) + sb2 * (l4 - l0)
+        l0, l1, l2, l3, l4 = lsb[x], lsb[x + 1], lsb[x + 2], lsb[x + 3], lsb[x + 4]
+        a5[x] = cb0 * l2 + cb1 * (l3 + l1) + cb2 * (l4 + l0)
+        a6[x] = sb1 * (l3 - l1) + sb2 * (l4 - l0)
 
 
 @kernel(inline="always", **_jit)
@@ -457,39 +467,32 @@ def _gabor_channel(ro, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, gab
         src = ro[slow] if im == 0 else ro[fast]
         c, a = gabor[im], acc[im]
         _gabor_columns(src, s0, sm1, sp1, sm2, sp2, k, c)  # e, Ca, Sa, Cb, Sb
-        _row_pair(c[0], k[1], k[2], a[0], a[1])   # Re, Im Z^0 = e (x) (ca, sa)
-        _row_sym(c[1], k[0], a[2])                # Re Z^{pi/2} = Ca (x) e
-        _row_sym(c[2], k[0], a[3])                # Im Z^{pi/2} = Sa (x) e
-        _row_pair(c[3], k[3], k[4], a[4], a[7])   # Cb (x) (cb, sb)
-        _row_pair(c[4], k[3], k[4], a[5], a[6])   # Sb (x) (cb, sb)
+        _gabor_rows(c, k, a)
     w = r0.shape[0]
     s, f = acc[0], acc[1]
     # E = Re Z_slow Im Z_fast - Re Z_fast Im Z_slow, with (a[4], a[5], a[6], a[7]) =
     # (Cb cb, Sb cb, Sb sb, Cb sb): Z^{pi/4} = (cb Cb - sb Sb) + i (cb Sb + sb Cb) and
     # Z^{3 pi/4} = (cb Cb + sb Sb) + i (cb Sb - sb Cb)
-    for q in range(2):
-        s0_, s1_, f0_, f1_ = s[2 * q], s[2 * q + 1], f[2 * q], f[2 * q + 1]
-        out = r0 if q == 0 else r2
-        if first:
-            for x in range(w):
-                out[x] = weight * (s0_[x] * f1_[x] - f0_[x] * s1_[x])
-        else:
-            for x in range(w):
-                out[x] += weight * (s0_[x] * f1_[x] - f0_[x] * s1_[x])
+    s0_, s1_, s2_, s3_ = s[0], s[1], s[2], s[3]
+    f0_, f1_, f2_, f3_ = f[0], f[1], f[2], f[3]
     scc, scs, sss, ssc = s[4], s[5], s[6], s[7]
     fcc, fcs, fss, fsc = f[4], f[5], f[6], f[7]
     if first:
         for x in range(w):
+            r0[x] = weight * (s0_[x] * f1_[x] - f0_[x] * s1_[x])
+            r2[x] = weight * (s2_[x] * f3_[x] - f2_[x] * s3_[x])
+        for x in range(w):
             r1[x] = weight * ((scc[x] - sss[x]) * (fcs[x] + fsc[x])
                               - (fcc[x] - fss[x]) * (scs[x] + ssc[x]))
-        for x in range(w):
             r3[x] = weight * ((scc[x] + sss[x]) * (fcs[x] - fsc[x])
                               - (fcc[x] + fss[x]) * (scs[x] - ssc[x]))
     else:
         for x in range(w):
+            r0[x] += weight * (s0_[x] * f1_[x] - f0_[x] * s1_[x])
+            r2[x] += weight * (s2_[x] * f3_[x] - f2_[x] * s3_[x])
+        for x in range(w):
             r1[x] += weight * ((scc[x] - sss[x]) * (fcs[x] + fsc[x])
                                - (fcc[x] - fss[x]) * (scs[x] + ssc[x]))
-        for x in range(w):
             r3[x] += weight * ((scc[x] + sss[x]) * (fcs[x] - fsc[x])
                                - (fcc[x] + fss[x]) * (scs[x] - ssc[x]))
 

@@ -291,6 +291,52 @@ def test_fused_gain_control_and_halved_v_prime_are_the_straightforward_ones():
         np.testing.assert_array_equal(coarse, want)
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_a_rows_motion_energy_is_that_of_one_pass_per_kernel(dtype):
+    """A row of R^theta from two channels' read-outs (_fast._gabor_channel: the five column
+    passes, the eight row passes in two loops, the four orientations' energies in two), bit
+    for bit as one loop per pass computed it, here in NumPy."""
+    rng = np.random.default_rng(23)
+    k = _fast.gabor_factors(0.3, 4.0, 5).astype(dtype)
+    w = 37
+    ro = rng.standard_normal((4, 5, w + 4)).astype(dtype)  # fast/slow ON, fast/slow OFF rows
+    gabor, acc = np.empty((2, 5, w + 4), dtype), np.empty((2, 8, w), dtype)
+    got = np.empty((4, w), dtype)
+    weights = (dtype(1.0), dtype(0.7))
+    for channel, (slow, fast) in enumerate(((1, 0), (3, 2))):
+        _fast._gabor_channel(ro, slow, fast, 2, 1, 3, 0, 4, k, weights[channel], channel == 0,
+                             gabor, acc, *got)
+
+    def sym(c, line, n):  # c0 l2 + c1 (l3 + l1) + c2 (l4 + l0) over n outputs
+        return c[2] * line[2:n + 2] + c[3] * (line[3:n + 3] + line[1:n + 1]) \
+            + c[4] * (line[4:n + 4] + line[:n])
+
+    def anti(c, line, n):
+        return c[3] * (line[3:n + 3] - line[1:n + 1]) + c[4] * (line[4:n + 4] - line[:n])
+
+    want = np.zeros((4, w), dtype)
+    for channel, (slow, fast) in enumerate(((1, 0), (3, 2))):
+        z = []
+        for image in (slow, fast):
+            src = ro[image]
+            rows = {d: src[2 + d] for d in (-2, -1, 0, 1, 2)}
+            col = [k[j, 3] * (rows[1] - rows[-1]) + k[j, 4] * (rows[2] - rows[-2]) if j in (2, 4)
+                   else k[j, 2] * rows[0] + k[j, 3] * (rows[1] + rows[-1])
+                   + k[j, 4] * (rows[2] + rows[-2]) for j in range(5)]
+            e, ca, sa, cb, sb = col
+            z.append([sym(k[1], e, w), anti(k[2], e, w), sym(k[0], ca, w), sym(k[0], sa, w),
+                      sym(k[3], cb, w), sym(k[3], sb, w), anti(k[4], sb, w), anti(k[4], cb, w)])
+        s, f = z
+        weight = weights[channel]
+        energies = [weight * (s[0] * f[1] - f[0] * s[1]),
+                    weight * ((s[4] - s[6]) * (f[5] + f[7]) - (f[4] - f[6]) * (s[5] + s[7])),
+                    weight * (s[2] * f[3] - f[2] * s[3]),
+                    weight * ((s[4] + s[6]) * (f[5] - f[7]) - (f[4] + f[6]) * (s[5] - s[7]))]
+        for q in range(4):
+            want[q] = energies[q] if channel == 0 else want[q] + energies[q]
+    np.testing.assert_array_equal(got, want)
+
+
 def test_the_change_and_its_pool_in_one_pass_are_the_straightforward_ones():
     """P and the area averages of |P| in one pass (_fast.gain_controlled_change) give
     retina.contrast_gain_control of retina.photoreceptor, bit for bit: frames whose sides the
