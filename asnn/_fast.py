@@ -512,7 +512,6 @@ def _approach_row(ro, s0, sm1, sp1, sm2, sp2, kc, weights, terms, zero, csl, gl)
         c1, c2 = csl[0], csl[1]
         for x in range(w + 4):
             c1[x] = u1[x] + d1[x]
-        for x in range(w + 4):
             c2[x] = u2[x] + d2[x]
         k00, k01, k02 = kc[0, 0], kc[0, 1], kc[0, 2]
         k10, k11, k12 = kc[1, 0], kc[1, 1], kc[1, 2]
