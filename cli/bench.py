@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=frame_size, action="append", metavar="WxH",
                    help="frame size (repeatable; default 128x128, 320x240 and 640x480)")
     p.add_argument("--frames", type=count, default=None,
-                   help="timed frames per run (default 40; --detect: frames of the clip, 300)")
+                   help="timed frames per run (default 40; --detect: frames of the clip, 1200)")
     p.add_argument("--preset", action="append", metavar="NAME",
                    help="ASNN preset to time (repeatable; default: all)")
     p.add_argument("--model", action="append", choices=("asnn", "lgmd1", "lgmd2"),
@@ -78,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
             from asnn.evaluation import bench_detect
 
             report = bench_detect.run(sizes=args.size or list(bench_detect.DEFAULT_SIZES),
-                                      frames=args.frames or 300, repeat=args.repeat,
+                                      frames=args.frames or bench_detect.DEFAULT_FRAMES,
+                                      repeat=args.repeat,
                                       preset=args.preset[0] if args.preset else None,
                                       progress=_progress(args))
         elif args.handover:
