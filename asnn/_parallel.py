@@ -468,6 +468,7 @@ class BandedFront:
             self.other = (np.zeros_like(on), np.zeros_like(off))
             self.maps, stacked = _fast.FrontMaps.slots(SLOTS, (h, w), t)
             self._photos = np.empty((SLOTS, h, w), t)
+            self._photo_slots = list(self._photos)  # the slots handed out (next_photo)
             self._versions = np.zeros((SLOTS, 2, h), np.int8)  # per pass: read, write
             self._state = np.zeros(h, np.int8)  # where each row's state is after the passes
             self._params = np.zeros((len(self._servers), SLOTS, 3), np.int64)
@@ -510,7 +511,7 @@ class BandedFront:
             if m < h:  # (no band below an empty last one)
                 write[m - c.halo:m + c.halo] ^= 1
         self._state = write
-        if p is not self._photos[slot]:
+        if p is not self._photo_slots[slot]:
             np.copyto(self._photos[slot], p)
         for i in range(len(self._servers)):
             band = (borders[i], borders[i + 1]) if i < len(borders) - 2 else (0, 0)
@@ -534,7 +535,7 @@ class BandedFront:
         output: P written there is not copied again (:meth:`start`). Valid until that pass
         is started."""
         self._bind(stages)
-        return self._photos[(self._passes + 1) % SLOTS]
+        return self._photo_slots[(self._passes + 1) % SLOTS]
 
     def settle(self, stages: tuple) -> None:
         """Bring every row's state back into the cascades (no pass in flight)."""
