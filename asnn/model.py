@@ -642,3 +642,8 @@ def compile_kernels(presets: Iterable[str] = ("default", "reference"), threads: 
         with ASNN(name, threads=threads) as model:
             for _ in model.stream((None, frame) for frame in frames):
                 pass
+            # the looming fit of boxes larger than its grid, which the clip's objects are not:
+            # area-averaged in the fit's kernel, and by whole factors (cv2.resize)
+            flat = np.zeros((128, 128), model.dtype)
+            for box in ((0, 0, 90, 80), (0, 0, 128, 64)):
+                region_expansion(flat, flat, box, flat)
