@@ -195,8 +195,8 @@ def register(subparsers) -> None:
     from asnn.detectors import MODELS
     from asnn.stimuli import SCENE_NAMES
     from service.core import WARMUP_FRAMES, default_threads
-    from service.messages import FORMATS
     from service.demo import DEMO_SCENE
+    from service.messages import FORMATS
     from service.worker import HANDOVER_TIMEOUT, SCAN_INTERVAL, SCAN_WINDOW
 
     p = subparsers.add_parser("camera", help="publish a camera's frames",

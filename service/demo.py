@@ -19,9 +19,9 @@ from .worker import Worker
 __all__ = ["DEMO_SCENE", "free_port", "loopback_options", "run_pipeline"]
 
 #: The demo's default scene: a case of the labelled suite (:mod:`asnn.stimuli.suite`), a dark
-#: disk coming at the camera at constant speed from frame 20 (it fills the view at frame 74 of 77). Unlike the paper's
-#: ``looming`` (a radius growing by a pixel a frame, which no approach at constant speed
-#: produces), its time to contact shrinks as a real approach's does.
+#: disk coming at the camera at constant speed from frame 20 (it fills the view at frame 74 of
+#: 77). Unlike the paper's ``looming`` (a radius growing by a pixel a frame, which no approach
+#: at constant speed produces), its time to contact shrinks as a real approach's does.
 DEMO_SCENE = "loom-dark-c1.0-d12-center"
 
 
