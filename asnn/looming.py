@@ -57,12 +57,18 @@ class Expansion(NamedTuple):
         < 0 contracting (receding). Time to contact is ``1 / rate`` frames.
     brightness : float
         Uniform brightness change ``D`` of the region, intensity units per frame.
+    fit : float
+        The share of the fitted pixels' temporal change, about its mean, that the motion
+        explains (the fit's coefficient of determination, at most 1): near 1 where the box
+        moves as one surface, low where it holds surfaces moving apart (a car and the verge
+        sliding past each other, which least squares can read as expansion).
     """
 
     drift_x: float
     drift_y: float
     rate: float
     brightness: float
+    fit: float
 
 
 def region_expansion(previous: np.ndarray, current: np.ndarray,
@@ -113,7 +119,7 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     step = max(x1 - x0, y1 - y0) / _MAX_SIDE
     if step <= 1.0:
         step = 1.0
-        solved, a, b, c, d = _solve_expansion(
+        solved, a, b, c, d, fit = _solve_expansion(
             previous[y0:y1, x0:x1], current[y0:y1, x0:x1], reference[y0:y1, x0:x1], _RIDGE)
     else:
         size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
@@ -122,13 +128,13 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
                 cv2.resize(np.ascontiguousarray(image[y0:y1, x0:x1]), size,
                            interpolation=cv2.INTER_AREA)
                 for image in (previous, current, reference))
-            solved, a, b, c, d = _solve_expansion(before, after, reference, _RIDGE)
+            solved, a, b, c, d, fit = _solve_expansion(before, after, reference, _RIDGE)
         else:
-            solved, a, b, c, d = _solve_area_averaged(previous, current, reference, x0, y0,
+            solved, a, b, c, d, fit = _solve_area_averaged(previous, current, reference, x0, y0,
                                                       x1, y1, *size, _RIDGE)
     if not solved:
         return None
-    return Expansion(a * step, b * step, c, d)
+    return Expansion(a * step, b * step, c, d, fit)
 
 
 def scene_expansion(previous: np.ndarray, current: np.ndarray,
@@ -204,14 +210,16 @@ def moved_by_expansion(previous: np.ndarray, scene: Expansion,
 
 @kernel(error_model="numpy")
 def _solve_expansion(before, after, background, ridge):
-    """``(solved, A, B, C, D)`` of :func:`region_expansion` over two equal images, leaving out
-    the pixels where ``after`` is nearer ``background`` than ``before``.
+    """``(solved, A, B, C, D, fit)`` of :func:`region_expansion` over two equal images,
+    leaving out the pixels where ``after`` is nearer ``background`` than ``before``.
 
     One pass over the pixels: the Sobel derivatives of the mean (OpenCV's 3x3 kernels, scaled
     by 1/8, reflect-101 border) and the temporal difference, in the images' precision as the
     NumPy expressions would compute them; the normal equations accumulated in float64; then
     solved by Gaussian elimination with partial pivoting. ``solved`` is False without a
-    gradient to measure.
+    gradient to measure. ``fit`` is ``1 - RSS / TSS``: the residual sum of squares of the
+    solution over the fitted pixels (from the unregularised normal equations), against the
+    sum of squares of ``-E_t`` about its mean (0 where that is 0).
     """
     h, w = before.shape
     mean = np.empty((h, w), np.float64)  # exact: the float32 mean, widened
@@ -220,6 +228,7 @@ def _solve_expansion(before, after, background, ridge):
         for x in range(w):
             mean[y, x] = half * (before[y, x] + after[y, x])
     normal = np.zeros((4, 5))  # [N | rhs], the upper triangle accumulated
+    count, total, squares = 0, 0.0, 0.0  # of the fitted pixels' E_t
     for y in range(h):
         up, down = _reflect(y - 1, h), _reflect(y + 1, h)
         ry = y - 0.5 * (h - 1)
@@ -235,6 +244,9 @@ def _solve_expansion(before, after, background, ridge):
                   + (mean[down, right] - mean[up, right])) / 8.0
             radial = (x - 0.5 * (w - 1)) * ex + ry * ey
             basis = (ex, ey, radial, -1.0)
+            count += 1
+            total += et
+            squares += et * et
             for i in range(4):
                 bi = basis[i]
                 for j in range(i, 4):
@@ -245,7 +257,8 @@ def _solve_expansion(before, after, background, ridge):
             normal[i, j] = normal[j, i]
     scale = normal[0, 0] + normal[1, 1] + normal[2, 2]
     if not scale > 0:
-        return False, 0.0, 0.0, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0
+    gram = normal.copy()  # unregularised, for the residual
     # the gradient terms are regularised relative to their own size (no texture: C -> 0);
     # the brightness term is well posed by the pixel count
     for i in range(3):
@@ -256,7 +269,7 @@ def _solve_expansion(before, after, background, ridge):
             if abs(normal[i, k]) > abs(normal[pivot, k]):
                 pivot = i
         if not normal[pivot, k] != 0.0:
-            return False, 0.0, 0.0, 0.0, 0.0
+            return False, 0.0, 0.0, 0.0, 0.0, 0.0
         for j in range(5):
             normal[k, j], normal[pivot, j] = normal[pivot, j], normal[k, j]
         for i in range(k + 1, 4):
@@ -269,7 +282,15 @@ def _solve_expansion(before, after, background, ridge):
         for j in range(i + 1, 4):
             acc -= normal[i, j] * solution[j]
         solution[i] = acc / normal[i, i]
-    return True, solution[0], solution[1], solution[2], solution[3]
+    # RSS = y'y - 2 s'X'y + s'X'X s, with y = -E_t; TSS about y's mean
+    rss = squares
+    for i in range(4):
+        rss -= 2.0 * solution[i] * gram[i, 4]
+        for j in range(4):
+            rss += solution[i] * gram[i, j] * solution[j]
+    tss = squares - total * total / count
+    fit = 1.0 - max(rss, 0.0) / tss if tss > 0 else 0.0
+    return True, solution[0], solution[1], solution[2], solution[3], fit
 
 
 def _area_fast(size: tuple[int, int], shrunk: tuple[int, int]) -> bool:

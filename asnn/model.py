@@ -523,12 +523,14 @@ class ASNN:
                    min(int(math.ceil(y1)), h))
             est = region_expansion(frame.previous, frame.lum, box, frame.background)
             if est is not None:
-                tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed)
+                tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed,
+                           est.fit)
             boxes.append(box)
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frame)
-        coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames) for tr in tracks]
+        coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames, p.overlap)
+                  for tr in tracks]
         self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
             total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0
@@ -560,7 +562,8 @@ class ASNN:
         """
         p = self.params
         chosen = {k for k, tr in enumerate(tracks)
-                  if tr.missed == 0 and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max)}
+                  if tr.missed == 0 and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max,
+                                                      tr.fit, p.overlap)}
         measured = sorted(chosen | ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
                                     if self.measure_all_against_scene else set()))
         scene = (scene_expansion(frame.previous, frame.lum, boxes, frame.background)

@@ -226,6 +226,19 @@ class ASNNParams(BaseModel):
         "or more")
     approach_frames: int = Field(3, ge=1, description="consecutive frames a track must pass "
                                  "the approach test (ttc, offset) before it counts")
+    partial_overlap: bool = Field(
+        False, description="the approach test also passes a partial overlap: ttc <= "
+        "overlap_tau_max, offset <= overlap_offset_max, from a box the expansion fit explains "
+        "(fit >= overlap_fit_min): a car whose path overlaps ours only in part "
+        "(asnn.tracking.approach_test); needs approach_gate")
+    overlap_tau_max: float = Field(1.0, gt=0, description="longest time to contact that warns "
+                                   "on a partial overlap, s")
+    overlap_offset_max: float = Field(
+        2.0, gt=0, description="largest offset of a partial overlap, object sizes (see "
+        "offset_max: a car-width overlap with a car as wide reads up to about 2.4)")
+    overlap_fit_min: float = Field(
+        0.4, le=1, description="least share of the box's change the expansion fit must explain "
+        "on a partial overlap (asnn.looming.Expansion.fit)")
 
     # --- computation ---
     precision: Literal["float32", "float64"] = Field(
@@ -246,12 +259,22 @@ class ASNNParams(BaseModel):
         for name in ("approach_gate", "scene_relative"):
             if getattr(self, name) and self.targets != "objects":
                 raise ValueError(f"{name} needs targets='objects'")
+        if self.partial_overlap and not self.approach_gate:
+            raise ValueError("partial_overlap needs approach_gate")
         return self
 
     @property
     def c(self) -> float:
         """C, the transmission coefficient (C = A unless set)."""
         return self.decay if self.transmission is None else self.transmission
+
+    @property
+    def overlap(self) -> tuple[float, float, float] | None:
+        """The partial-overlap regime of the approach test, ``(overlap_tau_max,
+        overlap_offset_max, overlap_fit_min)``, or None without ``partial_overlap``."""
+        if not self.partial_overlap:
+            return None
+        return self.overlap_tau_max, self.overlap_offset_max, self.overlap_fit_min
 
     @property
     def window_dt(self) -> float:

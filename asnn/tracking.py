@@ -18,6 +18,10 @@ Per track, the expansion rate and the drift are exponentially smoothed. From the
     ``s / tau``, so this ratio is ``X / S`` whatever the distance: near zero on a collision
     course (constant bearing), large for an object that will pass (a truck in the next lane, a
     pole at the roadside while driving). See :func:`approaching`.
+``fit``
+    How well one expanding, drifting surface explains the box's change (the smoothed share of
+    it the expansion fit explains, :class:`asnn.looming.Expansion`): the partial-overlap
+    regime of :func:`approach_test` accepts a wider offset only from a box that moves as one.
 
 References
 ----------
@@ -83,6 +87,8 @@ class Track:
     streak : int
         Consecutive frames, up to the latest, in which the track passed the approach test
         (:meth:`judge`).
+    fit : float or None
+        Smoothed share of the box's change that the expansion fit explains (at most 1).
     own_expansion : float or None
         Its expansion rate against the scene, per second: measured over the pixels of its box
         that the scene's own expansion does not explain (:meth:`measure_own`), smoothed over
@@ -102,6 +108,7 @@ class Track:
     drift_y: float = 0.0
     missed: int = 0
     streak: int = 0
+    fit: float | None = None
     own_expansion: float | None = None
     _smoothing: float = field(default=0.5, repr=False)
 
@@ -121,8 +128,10 @@ class Track:
         self.box = tuple(box_weight * o + (1.0 - box_weight) * c
                          for o, c in zip(obs.box, carried))
 
-    def measure(self, expansion: float, drift_x: float, drift_y: float) -> None:
-        """Take this frame's expansion rate (per second) and drift (pixels per second)."""
+    def measure(self, expansion: float, drift_x: float, drift_y: float,
+                fit: float | None = None) -> None:
+        """Take this frame's expansion rate (per second), drift (pixels per second) and, where
+        known, the share of the box's change the fit explains."""
         if self.expansion is None:
             self.expansion, self.drift_x, self.drift_y = expansion, drift_x, drift_y
         else:
@@ -130,6 +139,8 @@ class Track:
             self.expansion += a * (expansion - self.expansion)
             self.drift_x += a * (drift_x - self.drift_x)
             self.drift_y += a * (drift_y - self.drift_y)
+        if fit is not None:
+            self.fit = fit if self.fit is None else self.fit + self._smoothing * (fit - self.fit)
 
     def measure_own(self, expansion: float | None) -> None:
         """Take this frame's expansion rate against the scene (per second), or None where it is
@@ -151,19 +162,23 @@ class Track:
             return None
         return math.hypot(self.drift_x, self.drift_y) / (self.expansion * max(self.size, 1.0))
 
-    def judge(self, tau_max: float, offset_max: float, frames: int) -> bool:
+    def judge(self, tau_max: float, offset_max: float, frames: int,
+              overlap: tuple[float, float, float] | None = None) -> bool:
         """Update :attr:`streak` with this frame's approach test (:func:`approaching`) and
         return whether the track has passed it in the last ``frames`` frames in a row: a
         warning needs a few consecutive frames of approach, not one lucky estimate."""
-        self.streak = self.streak + 1 if approaching(self, tau_max, offset_max) else 0
+        passed = approaching(self, tau_max, offset_max, overlap)
+        self.streak = self.streak + 1 if passed else 0
         return self.streak >= frames
 
 
-def approaching(track: Track, tau_max: float, offset_max: float) -> bool:
+def approaching(track: Track, tau_max: float, offset_max: float,
+                overlap: tuple[float, float, float] | None = None) -> bool:
     """Whether a track looks, in the latest frame, like an object coming at the camera: it is
     seen now, passes :func:`approach_test`, and, where its expansion against the scene is
     measured, does not contract against the scene (:func:`against_scene`)."""
-    return (track.missed == 0 and approach_test(track.ttc, track.offset, tau_max, offset_max)
+    return (track.missed == 0
+            and approach_test(track.ttc, track.offset, tau_max, offset_max, track.fit, overlap)
             and against_scene(track.own_expansion))
 
 
@@ -184,10 +199,28 @@ def against_scene(own_expansion: float | None) -> bool:
 
 
 def approach_test(ttc: float | None, offset: float | None, tau_max: float,
-                  offset_max: float) -> bool:
-    """The approach test on a target's estimates: it reaches the camera within ``tau_max``
-    seconds at its current rate, and points at it: ``offset <= offset_max``."""
-    return ttc is not None and ttc <= tau_max and offset is not None and offset <= offset_max
+                  offset_max: float, fit: float | None = None,
+                  overlap: tuple[float, float, float] | None = None) -> bool:
+    """The approach test on a target's estimates.
+
+    On a collision course: it reaches the camera within ``tau_max`` seconds at its current
+    rate, and points at it (``offset <= offset_max``). With ``overlap = (tau, offset, fit_min)``
+    also on a partial overlap: within ``tau`` seconds, ``offset`` at most the wider
+    ``overlap[1]``, and a box that moves as one surface (``fit >= fit_min``; None fails).
+
+    ``offset_max`` 1 is a path through the camera's own line of sight, right for a point-like
+    camera; a car is as wide as the car that may hit it, and a partial-overlap collision (the
+    commonest between cars) reads up to about 2.4. A wider offset is also what a misread
+    expansion gives (a box holding an object and the scenery moving apart, which least squares
+    reads as growth: offsets are drift over expansion), so it is accepted only later and only
+    from a box the fit explains well.
+    """
+    if ttc is None or offset is None:
+        return False
+    if ttc <= tau_max and offset <= offset_max:
+        return True
+    return (overlap is not None and ttc <= overlap[0] and offset <= overlap[1]
+            and fit is not None and fit >= overlap[2])
 
 
 class TargetTracker:

@@ -51,6 +51,19 @@ def test_a_brightness_change_is_not_read_as_motion():
     assert est.brightness == pytest.approx(0.05, rel=0.05)
 
 
+def test_the_fit_tells_one_expanding_surface_from_two_sliding_apart():
+    # two halves of a box moving apart, as a car and the verge do behind it, read as expansion
+    # by least squares; the fit says the motion does not explain them as one surface
+    tex = _texture()
+    box = (150, 150, 250, 250)
+    apart = np.hstack([warp(tex, dx=-1.0)[:, :200], warp(tex, dx=1.0)[:, 200:]])
+    split = region_expansion(tex, apart, box)
+    assert split.rate > 0.01 and split.fit < 0.4
+    for moved in (warp(tex, 1.02), warp(tex, 1 / 1.02), warp(tex, dx=0.6, dy=-0.4)):
+        assert region_expansion(tex, moved, box).fit > 0.8
+    assert region_expansion(tex, warp(tex, 1.02), (100, 100, 300, 300)).fit > 0.6  # averaged
+
+
 def test_the_scene_is_fitted_without_the_objects_boxes():
     # the scene expands about the frame's centre; inside a box right of it an object recedes
     tex = texture((400, 400), blur=8.0)
@@ -143,8 +156,8 @@ def test_the_fit_of_a_large_box_is_that_of_opencvs_area_averages():
                       for a in images]
         else:
             step = 1.0
-        solved, a, b, c, d = _solve_expansion(*images, _RIDGE)
-        return (a * step, b * step, c, d) if solved else None
+        solved, a, b, c, d, fit = _solve_expansion(*images, _RIDGE)
+        return (a * step, b * step, c, d, fit) if solved else None
 
     rng = np.random.default_rng(17)
     for i, (previous, current, background, box) in enumerate(_random_boxes(rng, 400)):
@@ -197,6 +210,26 @@ def test_the_approach_test_needs_growth_a_collision_course_and_consecutive_frame
     passing = Track(1, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
     passing.measure(1.0, 60.0, 0.0)  # drifts 3 sizes per unit of growth: it will pass
     assert not any(passing.judge(1.5, 1.0, 1) for _ in range(3))
+
+
+def test_a_partial_overlap_passes_later_and_only_from_a_box_that_moves_as_one():
+    overlap = (1.0, 2.0, 0.4)  # ttc <= 1 s, offset <= 2, fit >= 0.4
+    corner = Track(0, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
+    corner.measure(1.25, 40.0, 0.0, fit=0.6)  # ttc 0.8 s, offset 1.6: a corner strike
+    assert not approaching(corner, tau_max=1.5, offset_max=1.0)
+    assert approaching(corner, tau_max=1.5, offset_max=1.0, overlap=overlap)
+    early = Track(1, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
+    early.measure(0.8, 25.6, 0.0, fit=0.6)  # the same offset, 1.25 s away: not yet
+    assert not approaching(early, tau_max=1.5, offset_max=1.0, overlap=overlap)
+    mixed = Track(2, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
+    mixed.measure(1.25, 40.0, 0.0, fit=0.2)  # two motions in one box
+    assert not approaching(mixed, tau_max=1.5, offset_max=1.0, overlap=overlap)
+    mixed.measure(1.25, 40.0, 0.0, fit=0.8)  # the fit is smoothed: (0.2 + 0.8) / 2
+    assert mixed.fit == pytest.approx(0.5)
+    assert approaching(mixed, tau_max=1.5, offset_max=1.0, overlap=overlap)
+    wide = Track(3, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
+    wide.measure(1.25, 75.0, 0.0, fit=0.9)  # offset 3: the next lane
+    assert not approaching(wide, tau_max=1.5, offset_max=1.0, overlap=overlap)
 
 
 def test_tracker_rejects_a_smoothing_outside_its_range():

@@ -250,3 +250,15 @@ def test_large_frames_are_seen_at_the_scale_of_the_kernels_and_targets_stay_in_t
         assert len(a.targets) == len(b.targets)
         for ta, tb in zip(a.targets, b.targets):
             assert (tb.x, tb.y) == pytest.approx((4 * ta.x + 1.5, 4 * ta.y + 1.5), abs=0.5)
+
+
+def test_the_gates_stages_need_what_they_build_on():
+    from asnn.params import ASNNParams
+
+    with pytest.raises(ValueError, match="partial_overlap needs approach_gate"):
+        ASNNParams(partial_overlap=True)
+    with pytest.raises(ValueError, match="approach_gate needs targets='objects'"):
+        ASNNParams(approach_gate=True)
+    on = ASNNParams(targets="objects", approach_gate=True, partial_overlap=True)
+    assert on.overlap == (on.overlap_tau_max, on.overlap_offset_max, on.overlap_fit_min)
+    assert preset("default").overlap is None  # off in the default (README, partial overlaps)

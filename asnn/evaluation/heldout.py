@@ -1,7 +1,7 @@
 """Held-out figures for the parameters chosen by looking at real clips (``asnn eval --held-out``).
 
-The approach gate's thresholds (``tau_max``, ``offset_max``, ``approach_frames``) were set by
-looking at labelled real clips. A score of those thresholds on the clips that chose them is not
+The approach gate's thresholds (``tau_max``, ``offset_max``, ``approach_frames``, and the
+partial-overlap regime with its ``overlap_fit_min``) were set by looking at labelled real clips. A score of those thresholds on the clips that chose them is not
 evidence, so this module reports, beside it, leave-one-clip-out figures: for each clip, the
 thresholds are chosen again from :data:`GATE_GRID` on the *other* clips only (by
 :func:`selection_key`, among the grid points that keep the generated suite within its aims:
@@ -38,6 +38,8 @@ GATE_GRID: dict[str, tuple] = {
     "tau_max": (1.0, 1.5, 2.0, 2.5),
     "offset_max": (0.75, 1.0, 1.5, 2.0),
     "approach_frames": (2, 3, 4),
+    "partial_overlap": (False, True),
+    "overlap_fit_min": (0.2, 0.4, 0.6),  # with partial_overlap only
 }
 # a grid point is admissible when the generated suite keeps at least this hit rate and at most
 # this false-alarm rate with it: near misses and passing traffic, the generated cases a fleet
@@ -53,12 +55,13 @@ class FrameTrace:
     ----------
     repeat : bool
         The frame repeated the one before (its response is the previous one).
-    objects : tuple of (id, ttc, offset, share, x, y, own)
+    objects : tuple of (id, ttc, offset, share, x, y, own, fit)
         Each object seen: its track's id, time to contact and offset (None while it does not
-        grow), its share of ``u`` before ``u_scale``, its centre in the frame's pixels, and its
+        grow), its share of ``u`` before ``u_scale``, its centre in the frame's pixels, its
         expansion rate against the scene in this frame (per second; None where not measured:
         with ``scene_relative`` it is measured for every growing track, so that the replay can
-        smooth it over the frames in which a track passes any grid point's test).
+        smooth it over the frames in which a track passes any grid point's test), and its
+        track's fit (:attr:`asnn.tracking.Track.fit`).
     """
 
     repeat: bool
@@ -100,7 +103,7 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
         sx, sy = model.shape[1] / w, model.shape[0] / h
         trace.frames.append(FrameTrace(repeat=False, objects=tuple(
             (tr.id, tr.ttc, tr.offset, share, (tr.x + 0.5) * sx - 0.5, (tr.y + 0.5) * sy - 0.5,
-             model.against_scene.get(tr.id)) for tr, share in model.objects)))
+             model.against_scene.get(tr.id), tr.fit) for tr, share in model.objects)))
     return trace
 
 
@@ -121,8 +124,8 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
         else:
             total, targets = 0.0, []
             measured = {}
-            for ident, ttc, offset, share, x, y, against in frame.objects:
-                passes = approach_test(ttc, offset, p.tau_max, p.offset_max)
+            for ident, ttc, offset, share, x, y, against, fit in frame.objects:
+                passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, p.overlap)
                 if p.scene_relative and passes:
                     measured[ident] = smoothed_run(own.get(ident), against, p.track_smoothing)
                     passes = against_scene(measured[ident])
