@@ -517,14 +517,18 @@ class ASNN:
                 float(regions.mass[k]), (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
         tracks = self.tracker.update(observations, elapsed)
         boxes, rates = [], []
-        for tr in tracks:
+        for k, tr in enumerate(tracks):
             x0, y0, x1, y1 = tr.box
             box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
                    min(int(math.ceil(y1)), h))
             est = region_expansion(frame.previous, frame.lum, box, frame.background)
             if est is not None:
+                # an object the frame's edge cuts is measured on its visible part: its drift
+                # and size, so its offset, are not the object's, whatever the fit
+                ox0, oy0, ox1, oy1 = regions.boxes[k]
+                whole = ox0 > 0 and oy0 > 0 and ox1 < w and oy1 < h
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed,
-                           est.fit)
+                           est.fit if whole else 0.0)
             boxes.append(box)
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:

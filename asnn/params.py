@@ -230,7 +230,7 @@ class ASNNParams(BaseModel):
         False, description="the approach test also passes a partial overlap: ttc <= "
         "overlap_tau_max, offset <= overlap_offset_max, from a box the expansion fit explains "
         "(fit >= overlap_fit_min): a car whose path overlaps ours only in part "
-        "(asnn.tracking.approach_test); needs approach_gate")
+        "(asnn.tracking.approach_test); a part of the approach gate, inert without it")
     overlap_tau_max: float = Field(1.0, gt=0, description="longest time to contact that warns "
                                    "on a partial overlap, s")
     overlap_offset_max: float = Field(
@@ -238,7 +238,8 @@ class ASNNParams(BaseModel):
         "offset_max: a car-width overlap with a car as wide reads up to about 2.4)")
     overlap_fit_min: float = Field(
         0.4, le=1, description="least share of the box's change the expansion fit must explain "
-        "on a partial overlap (asnn.looming.Expansion.fit)")
+        "on a partial overlap (asnn.looming.Expansion.fit; an object the frame's edge cuts "
+        "counts 0); -1 switches the test off")
 
     # --- computation ---
     precision: Literal["float32", "float64"] = Field(
@@ -259,8 +260,6 @@ class ASNNParams(BaseModel):
         for name in ("approach_gate", "scene_relative"):
             if getattr(self, name) and self.targets != "objects":
                 raise ValueError(f"{name} needs targets='objects'")
-        if self.partial_overlap and not self.approach_gate:
-            raise ValueError("partial_overlap needs approach_gate")
         return self
 
     @property
@@ -271,8 +270,9 @@ class ASNNParams(BaseModel):
     @property
     def overlap(self) -> tuple[float, float, float] | None:
         """The partial-overlap regime of the approach test, ``(overlap_tau_max,
-        overlap_offset_max, overlap_fit_min)``, or None without ``partial_overlap``."""
-        if not self.partial_overlap:
+        overlap_offset_max, overlap_fit_min)``, or None without ``partial_overlap`` (or without
+        the gate it is a part of)."""
+        if not (self.partial_overlap and self.approach_gate):
             return None
         return self.overlap_tau_max, self.overlap_offset_max, self.overlap_fit_min
 
@@ -334,6 +334,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
+    partial_overlap=True,
 ))
 DEFAULT_PRESET = "robust"
 

@@ -20,8 +20,9 @@ Per track, the expansion rate and the drift are exponentially smoothed. From the
     pole at the roadside while driving). See :func:`approaching`.
 ``fit``
     How well one expanding, drifting surface explains the box's change (the smoothed share of
-    it the expansion fit explains, :class:`asnn.looming.Expansion`): the partial-overlap
-    regime of :func:`approach_test` accepts a wider offset only from a box that moves as one.
+    it the expansion fit explains, :class:`asnn.looming.Expansion`, and 0 while the frame's
+    edge cuts the object): the partial-overlap regime of :func:`approach_test` accepts a wider
+    offset only from a whole object whose box moves as one.
 
 References
 ----------
@@ -88,7 +89,9 @@ class Track:
         Consecutive frames, up to the latest, in which the track passed the approach test
         (:meth:`judge`).
     fit : float or None
-        Smoothed share of the box's change that the expansion fit explains (at most 1).
+        Smoothed share of the box's change that the expansion fit explains (at most 1); the
+        model measures 0 while the frame's edge cuts the object (its drift and size are then
+        those of its visible part).
     own_expansion : float or None
         Its expansion rate against the scene, per second: measured over the pixels of its box
         that the scene's own expansion does not explain (:meth:`measure_own`), smoothed over

@@ -55,7 +55,7 @@ def test_the_replay_reproduces_the_partial_overlap_regime():
     # a car 1.2 m to the side of ours, stopped ahead: a partial overlap, caught only with the
     # regime; a car cutting in at night, whose box holds the roadside too: quiet with the fit
     # test, warned about without it
-    base = preset("robust").model_copy(update={"partial_overlap": True})
+    base = preset("robust")
     for name, warned, without in (("drive-day-stopped-car-offset", True,
                                    {"partial_overlap": False}),
                                   ("drive-night-cut-in", False, {"overlap_fit_min": -1.0})):

@@ -38,8 +38,10 @@ GATE_GRID: dict[str, tuple] = {
     "tau_max": (1.0, 1.5, 2.0, 2.5),
     "offset_max": (0.75, 1.0, 1.5, 2.0),
     "approach_frames": (2, 3, 4),
-    "partial_overlap": (False, True),
-    "overlap_fit_min": (0.2, 0.4, 0.6),  # with partial_overlap only
+    "partial_overlap": (False, True),  # the next two count only with it
+    "overlap_tau_max": (0.8, 1.0, 1.2),
+    "overlap_offset_max": (1.5, 2.0, 2.5),
+    "overlap_fit_min": (0.2, 0.4, 0.6),
 }
 # a grid point is admissible when the generated suite keeps at least this hit rate and at most
 # this false-alarm rate with it: near misses and passing traffic, the generated cases a fleet
