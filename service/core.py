@@ -109,7 +109,7 @@ log = logging.getLogger("asnn.worker")
 RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-publisher")
 # Frames a new owner steps a robot's stream silently before it answers: a fresh model of the
 # default (robust) preset that has stepped 18 frames warns as one that saw the whole stream at
-# 99.2 % of 4,152 hand-overs tried over the labelled suite, 98.1 % of the 1,504 during an
+# 98.9 % of 4,152 hand-overs tried over the labelled suite, 97.5 % of the 1,504 during an
 # approach (the tracker needs a few frames of approach in a row; the worst, approaches over
 # sliding stripes, need 35-44):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
