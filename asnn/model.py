@@ -533,8 +533,8 @@ class ASNN:
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frame)
-        coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames, p.overlap)
-                  for tr in tracks]
+        coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames, p.overlap,
+                           p.scene_tolerance) for tr in tracks]
         self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
             total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0

@@ -217,6 +217,10 @@ class ASNNParams(BaseModel):
         False, description="an approaching track must not contract against the scene: its box "
         "fitted again without the pixels the scene's own expansion (the frame outside the "
         "tracks' boxes) explains (asnn.tracking.against_scene); needs targets='objects'")
+    scene_tolerance: float = Field(
+        0.0, ge=0, description="the scene-relative test passes a rate against the scene down "
+        "to -scene_tolerance times the track's own expansion rate (zero within the second "
+        "fit's noise)")
     tau_max: float = Field(1.5, gt=0, description="longest time to contact that warns, s")
     offset_max: float = Field(
         1.0, gt=0, description="largest drift/expansion offset of an approaching object, in "
@@ -334,7 +338,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
-    partial_overlap=True,
+    partial_overlap=True, scene_tolerance=0.1,
 ))
 DEFAULT_PRESET = "robust"
 

@@ -166,23 +166,25 @@ class Track:
         return math.hypot(self.drift_x, self.drift_y) / (self.expansion * max(self.size, 1.0))
 
     def judge(self, tau_max: float, offset_max: float, frames: int,
-              overlap: tuple[float, float, float] | None = None) -> bool:
+              overlap: tuple[float, float, float] | None = None,
+              tolerance: float = 0.0) -> bool:
         """Update :attr:`streak` with this frame's approach test (:func:`approaching`) and
         return whether the track has passed it in the last ``frames`` frames in a row: a
         warning needs a few consecutive frames of approach, not one lucky estimate."""
-        passed = approaching(self, tau_max, offset_max, overlap)
+        passed = approaching(self, tau_max, offset_max, overlap, tolerance)
         self.streak = self.streak + 1 if passed else 0
         return self.streak >= frames
 
 
 def approaching(track: Track, tau_max: float, offset_max: float,
-                overlap: tuple[float, float, float] | None = None) -> bool:
+                overlap: tuple[float, float, float] | None = None,
+                tolerance: float = 0.0) -> bool:
     """Whether a track looks, in the latest frame, like an object coming at the camera: it is
     seen now, passes :func:`approach_test`, and, where its expansion against the scene is
     measured, does not contract against the scene (:func:`against_scene`)."""
     return (track.missed == 0
             and approach_test(track.ttc, track.offset, tau_max, offset_max, track.fit, overlap)
-            and against_scene(track.own_expansion))
+            and against_scene(track.own_expansion, track.expansion, tolerance))
 
 
 def smoothed_run(average: float | None, value: float | None, weight: float) -> float | None:
@@ -193,12 +195,18 @@ def smoothed_run(average: float | None, value: float | None, weight: float) -> f
     return average + weight * (value - average)
 
 
-def against_scene(own_expansion: float | None) -> bool:
+def against_scene(own_expansion: float | None, expansion: float | None = None,
+                  tolerance: float = 0.0) -> bool:
     """The scene-relative test: an object coming at the camera still expands once the pixels
-    the scene's own expansion explains are left out of its fit (``own_expansion >= 0``; None,
-    not measured, passes). A car that cuts in ahead and pulls away, seen in one box with the
-    roadside behind it, fails it: its box expands with the roadside, the car itself contracts."""
-    return own_expansion is None or own_expansion >= 0.0
+    the scene's own expansion explains are left out of its fit: ``own_expansion >= -tolerance *
+    expansion`` (None, not measured, passes). A car that cuts in ahead and pulls away, seen in
+    one box with the roadside behind it, fails it: its box expands with the roadside, the car
+    itself contracts. ``tolerance`` (a fraction of the track's own expansion rate) keeps a
+    rate that is zero within the fit's noise from failing it: the second fit is over fewer
+    pixels than the first."""
+    if own_expansion is None:
+        return True
+    return own_expansion >= -tolerance * max(expansion or 0.0, 0.0)
 
 
 def approach_test(ttc: float | None, offset: float | None, tau_max: float,

@@ -232,6 +232,15 @@ def test_a_partial_overlap_passes_later_and_only_from_a_box_that_moves_as_one():
     assert not approaching(wide, tau_max=1.5, offset_max=1.0, overlap=overlap)
 
 
+def test_the_scene_relative_test_tolerates_a_fraction_of_the_tracks_expansion():
+    from asnn.tracking import against_scene
+
+    assert against_scene(None) and against_scene(0.0) and not against_scene(-0.01)
+    assert against_scene(-0.2, expansion=2.5, tolerance=0.1)
+    assert not against_scene(-0.3, expansion=2.5, tolerance=0.1)
+    assert not against_scene(-0.01, expansion=-1.0, tolerance=0.1)  # a shrinking track: none
+
+
 def test_tracker_rejects_a_smoothing_outside_its_range():
     with pytest.raises(ValueError):
         TargetTracker(smoothing=0.0)

@@ -185,6 +185,13 @@ def test_the_partial_overlap_regime_needs_a_whole_object_the_fit_explains(case):
     assert not _quiet(_run(case, **NO_FIT_TEST)[1])
 
 
+def test_a_rate_against_the_scene_that_is_zero_within_noise_does_not_break_an_approach():
+    # the night catch-up with a rear camera: one frame reads the car contracting against the
+    # scene at -0.04 per second while it expands at 2.5, which broke its run of frames
+    assert _hit(*_run("rear-night-catchup-offset"))
+    assert _quiet(_run("rear-night-catchup-offset", scene_tolerance=0.0)[1])
+
+
 def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test():
     for case in ("drive-day-stopped-car", "drive-day-brake", "drive-day-oncoming-headon"):
         assert _hit(*_run(case))

@@ -44,6 +44,7 @@ GATE_GRID: dict[str, tuple] = {
     "overlap_tau_max": (0.8, 1.0, 1.2),
     "overlap_offset_max": (1.5, 2.0, 2.5),
     "overlap_fit_min": (0.2, 0.4, 0.6),
+    "scene_tolerance": (0.0, 0.1),
 }
 # a grid point is admissible when the generated suite keeps at least this hit rate and at most
 # this false-alarm rate with it: near misses and passing traffic, the generated cases a fleet
@@ -132,7 +133,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                 passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, p.overlap)
                 if p.scene_relative and passes:
                     measured[ident] = smoothed_run(own.get(ident), against, p.track_smoothing)
-                    passes = against_scene(measured[ident])
+                    passes = against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance)
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
                 if streak[ident] >= p.approach_frames:
                     total += share
@@ -146,10 +147,18 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
 
 
 def grid(base: ASNNParams) -> list[ASNNParams]:
-    """``base`` with each combination of :data:`GATE_GRID`'s values, in grid order."""
+    """``base`` with each combination of :data:`GATE_GRID`'s values, in grid order; without
+    ``partial_overlap`` only the first value of each ``overlap_*`` (they would not count)."""
     names = list(GATE_GRID)
-    return [base.model_copy(update=dict(zip(names, values)))
-            for values in itertools.product(*(GATE_GRID[n] for n in names))]
+    inert = [n.startswith("overlap_") for n in names]
+    points = []
+    for values in itertools.product(*(GATE_GRID[n] for n in names)):
+        point = dict(zip(names, values))
+        if not point["partial_overlap"] and any(
+                dead and value != GATE_GRID[n][0] for n, value, dead in zip(names, values, inert)):
+            continue
+        points.append(base.model_copy(update=point))
+    return points
 
 
 def suite_admissible(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
