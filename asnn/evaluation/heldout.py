@@ -1,14 +1,16 @@
 """Held-out figures for the parameters chosen by looking at real clips (``asnn eval --held-out``).
 
-The approach gate's thresholds (``tau_max``, ``offset_max``, ``approach_frames``, and the
+The approach gate's thresholds (``tau_max``, ``offset_max``, ``approach_frames``, the
 partial-overlap regime with its ``overlap_tau_max``, ``overlap_offset_max`` and
-``overlap_fit_min``) were set by looking at labelled real clips. A score of those thresholds on
+``overlap_fit_min``, and the scene-relative test's ``scene_tolerance``) were set by looking at
+labelled real clips. A score of those thresholds on
 the clips that chose them is not evidence, so this module reports, beside it,
 leave-one-clip-out figures: for each clip, the thresholds are chosen again from
 :data:`GATE_GRID` on the *other* clips only (by :func:`selection_key`, among the grid points
 that keep the generated suite within its aims: :func:`suite_admissible`), and that clip is
 scored with the thresholds it did not help choose.
-The preset's own thresholds are the ones this procedure picks on every clip of the design set.
+The preset's own thresholds are the ones this procedure picks on every clip of the design set,
+wherever those clips tell the values apart (in a tie it takes the first in grid order).
 
 Running the model once per grid point would cost the grid's size in model runs. The gate acts
 after everything else, so each clip is run once (:func:`trace_clip`) with the objects of every
