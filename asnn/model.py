@@ -107,6 +107,7 @@ class ASNN:
         self.dtype = np.dtype(p.precision if self.optimised else np.float64)
         self._min_side = max(p.dog_size, p.kernel_size, p.attention_size)
         self._p_weights = retina.photoreceptor_weights(p.n_p, p.p_u)
+        self._overlap = p.overlap  # the approach test's partial-overlap regime, or None
         self._dog = retina.dog_kernel(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
                                       p.dog_normalisation)
         half = N_ORIENTATIONS // 2
@@ -533,7 +534,7 @@ class ASNN:
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frame)
-        coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames, p.overlap,
+        coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames, self._overlap,
                            p.scene_tolerance) for tr in tracks]
         self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
@@ -567,7 +568,7 @@ class ASNN:
         p = self.params
         chosen = {k for k, tr in enumerate(tracks)
                   if tr.missed == 0 and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max,
-                                                      tr.fit, p.overlap)}
+                                                      tr.fit, self._overlap)}
         measured = sorted(chosen | ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
                                     if self.measure_all_against_scene else set()))
         scene = (scene_expansion(frame.previous, frame.lum, boxes, frame.background)

@@ -143,7 +143,7 @@ class Track:
             self.drift_x += a * (drift_x - self.drift_x)
             self.drift_y += a * (drift_y - self.drift_y)
         if fit is not None:
-            self.fit = fit if self.fit is None else self.fit + self._smoothing * (fit - self.fit)
+            self.fit = smoothed_run(self.fit, fit, self._smoothing)
 
     def measure_own(self, expansion: float | None) -> None:
         """Take this frame's expansion rate against the scene (per second), or None where it is

@@ -42,7 +42,7 @@ GATE_GRID: dict[str, tuple] = {
     "tau_max": (1.0, 1.5, 2.0, 2.5),
     "offset_max": (0.75, 1.0, 1.5, 2.0),
     "approach_frames": (2, 3, 4),
-    "partial_overlap": (False, True),  # the next two count only with it
+    "partial_overlap": (False, True),  # the overlap_* values count only with it
     "overlap_tau_max": (0.8, 1.0, 1.2),
     "overlap_offset_max": (1.5, 2.0, 2.5),
     "overlap_fit_min": (0.2, 0.4, 0.6),
@@ -118,6 +118,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
     """The per-frame records (``frame``, ``collision``, ``targets``) the model would give with
     ``params``' gate thresholds, from a trace made with the same parameters otherwise."""
     p = params
+    overlap = p.overlap
     streak: dict[int, int] = {}
     own: dict[int, float | None] = {}  # smoothed expansion against the scene, as Track keeps it
     window: deque[int] = deque(maxlen=p.n_t)
@@ -132,7 +133,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
             total, targets = 0.0, []
             measured = {}
             for ident, ttc, offset, share, x, y, against, fit in frame.objects:
-                passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, p.overlap)
+                passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, overlap)
                 if p.scene_relative and passes:
                     measured[ident] = smoothed_run(own.get(ident), against, p.track_smoothing)
                     passes = against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance)
