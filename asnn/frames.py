@@ -5,10 +5,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-__all__ = ["FrameError", "to_luminance"]
+__all__ = ["FrameError", "LEVELS", "check_frame", "luma", "to_luminance"]
 
 _LUMA = np.array([0.114, 0.587, 0.299])  # B, G, R weights of OpenCV's BGR -> gray
-_LEVELS = np.arange(256) / 255.0  # uint8 value -> luminance: one table look-up per pixel
+LEVELS = np.arange(256) / 255.0  # uint8 value -> luminance: one table look-up per pixel
 
 
 class FrameError(ValueError):
@@ -37,6 +37,23 @@ def to_luminance(frame: np.ndarray, min_side: int,
     FrameError
         For anything but the above.
     """
+    frame = check_frame(frame, min_side, stream_shape)
+    if frame.dtype == np.uint8:
+        return cv2.LUT(luma(frame), LEVELS.astype(dtype, copy=False))
+    gray = frame.astype(np.float64)
+    gray = gray @ _LUMA if gray.ndim == 3 else gray
+    return gray.astype(dtype, copy=False)
+
+
+def check_frame(frame: np.ndarray, min_side: int,
+                stream_shape: tuple[int, int] | None = None) -> np.ndarray:
+    """The frame, (H, W, 1) taken as (H, W), once it passes :func:`to_luminance`'s checks.
+
+    Raises
+    ------
+    FrameError
+        For a frame :func:`to_luminance` does not take.
+    """
     if not isinstance(frame, np.ndarray):
         raise FrameError(f"a frame must be a numpy array, got {type(frame).__name__}")
     if frame.ndim == 3 and frame.shape[2] == 1:
@@ -51,8 +68,7 @@ def to_luminance(frame: np.ndarray, min_side: int,
     if h < min_side or w < min_side:
         raise FrameError(f"frame {w}x{h} is smaller than the model's {min_side}x{min_side} kernels")
     if frame.dtype == np.uint8:
-        gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
-        return cv2.LUT(gray, _LEVELS.astype(dtype, copy=False))
+        return frame
     if frame.dtype.kind != "f":
         raise FrameError(f"frame dtype must be uint8 or float, got {frame.dtype}")
     if not np.isfinite(frame).all():
@@ -60,6 +76,9 @@ def to_luminance(frame: np.ndarray, min_side: int,
     lo, hi = float(frame.min()), float(frame.max())
     if lo < 0.0 or hi > 1.0:
         raise FrameError(f"float frames must lie in [0, 1], got values in [{lo:g}, {hi:g}]")
-    gray = frame.astype(np.float64)
-    gray = gray @ _LUMA if gray.ndim == 3 else gray
-    return gray.astype(dtype, copy=False)
+    return frame
+
+
+def luma(frame: np.ndarray) -> np.ndarray:
+    """The uint8 gray image of a checked uint8 frame: itself, or OpenCV's rounded luma of BGR."""
+    return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame

@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from . import _fast, _parallel, retina
-from .frames import FrameError, to_luminance
+from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
 from .looming import moved_by_expansion, region_expansion, scene_expansion
 from .params import ASNNParams, preset
 from .response import Maps, Response
@@ -191,22 +191,32 @@ class ASNN:
         width = self.params.max_width
         shrink = (width is not None and isinstance(frame, np.ndarray) and frame.ndim >= 2
                   and frame.shape[1] > width)
-        # a frame to shrink is converted in float64 (the scale its area averages are taken at)
-        lum = to_luminance(frame, self._min_side, self.shape,
-                           np.float64 if shrink else self.dtype)
-        if self.shape is None:
-            self.shape = lum.shape
-        if shrink:
-            # the retina's kernels have a fixed size in pixels: a large frame is seen at the
-            # scale they were made for (targets are reported in the frame's own pixels)
-            h, w = lum.shape
-            lum = cv2.resize(lum, (width, max(round(h * width / w), self._min_side)),
-                             interpolation=cv2.INTER_AREA)
+        if shrink and self.optimised and frame.dtype == np.uint8:
+            # the same luminance as below, bit for bit, without the float64 frame
+            frame = check_frame(frame, self._min_side, self.shape)
+            h, w = self.shape = frame.shape[:2]
+            gray = np.ascontiguousarray(luma(frame))  # one compiled form of the kernel
+            lum = _fast.shrunk_luminance(gray, self._shrunk_size(h, w), LEVELS, self.dtype)
+        else:
+            # a frame to shrink is converted in float64 (the scale its area averages are taken at)
+            lum = to_luminance(frame, self._min_side, self.shape,
+                               np.float64 if shrink else self.dtype)
+            if self.shape is None:
+                self.shape = lum.shape
+            if shrink:
+                lum = cv2.resize(lum, self._shrunk_size(*lum.shape), interpolation=cv2.INTER_AREA)
         if lum.dtype != self.dtype:
             lum = lum.astype(self.dtype)
         if self.params.input_blur:
             lum = cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
         return lum
+
+    def _shrunk_size(self, h: int, w: int) -> tuple[int, int]:
+        """(W, H) of a frame wider than ``max_width`` on the retina: the retina's kernels have a
+        fixed size in pixels, so a large frame is seen at the scale they were made for (targets
+        are reported in the frame's own pixels)."""
+        width = self.params.max_width
+        return width, max(round(h * width / w), self._min_side)
 
     def step(self, frame: np.ndarray, t: float | None = None) -> Response:
         """Process one frame and return the model's response to it.
@@ -655,3 +665,5 @@ def compile_kernels(presets: Iterable[str] = ("default", "reference"), threads: 
             flat = np.zeros((128, 128), model.dtype)
             for box in ((0, 0, 90, 80), (0, 0, 128, 64)):
                 region_expansion(flat, flat, box, flat)
+            # frames wider than max_width, shrunk as they are taken
+            _fast.shrunk_luminance(np.zeros((16, 20), np.uint8), (15, 12), LEVELS, model.dtype)

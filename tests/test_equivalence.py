@@ -9,10 +9,12 @@ M_d, is decided by rounding in either form. Kernel-level checks pin the separabl
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
 from asnn import ASNN, _fast, retina
+from asnn.frames import LEVELS, to_luminance
 from asnn.params import PRESETS
 from asnn.stimuli import make_scene
 
@@ -357,6 +359,35 @@ def test_the_change_and_its_pool_in_one_pass_are_the_straightforward_ones():
             assert _fast.gain_controlled_change(current, previous, 0.005, 8.0, 0.05,
                                                 out) is out
             np.testing.assert_array_equal(out, want)
+
+
+def test_a_wide_frames_shrunk_luminance_is_opencvs_area_average():
+    """_fast.shrunk_luminance gives cv2.resize(INTER_AREA) of the float64 luminance, rounded
+    to the model's precision, bit for bit: common camera sizes (scales 4/3, 8/3, 2, 3, 4),
+    barely wider than the retina, sizes drawn at random; and the model's luminance of a wide
+    frame is that area average, blurred."""
+    rng = np.random.default_rng(31)
+    sizes = [(640, 480), (1280, 720), (960, 540), (1440, 1080), (1920, 1080), (960, 541),
+             (481, 300), (2000, 30)]
+    sizes += [(int(rng.integers(481, 2200)), int(rng.integers(12, 1300))) for _ in range(40)]
+    for w, h in sizes:
+        size = (480, max(round(h * 480 / w), 11))
+        gray = rng.integers(0, 256, (h, w), dtype=np.uint8)
+        if rng.random() < 0.5:
+            gray = cv2.GaussianBlur(gray, (9, 9), 3.0)  # smooth images as well as noise
+        lum = cv2.LUT(gray, LEVELS)
+        for dtype in (np.float32, np.float64):
+            want = cv2.resize(lum, size, interpolation=cv2.INTER_AREA).astype(dtype)
+            np.testing.assert_array_equal(
+                _fast.shrunk_luminance(gray, size, LEVELS, dtype), want, err_msg=f"{w}x{h}")
+    model = ASNN("robust")
+    assert model.params.input_blur
+    for frame in (rng.integers(0, 256, (480, 640, 3), dtype=np.uint8),
+                  rng.integers(0, 256, (480, 640), dtype=np.uint8)):
+        lum = cv2.resize(to_luminance(frame, 5), (480, 360), interpolation=cv2.INTER_AREA)
+        want = cv2.GaussianBlur(lum.astype(model.dtype), (3, 3), 1.0,
+                                borderType=cv2.BORDER_REFLECT_101)
+        np.testing.assert_array_equal(model._luminance(frame), want)
 
 
 def test_a_window_of_the_coarse_blur_is_that_of_the_whole_frame():
