@@ -93,7 +93,6 @@ DEPTH = 2 * RADIUS + 1  # rows kept by the ring buffers of the 5x5 filters
 _TERMS = np.array([[1, 2], [2, 1], [3, 0], [0, 3]], np.int64)
 
 _jit = dict(boundscheck=False)
-_EPSILON = float(np.finfo(np.float64).eps)
 _TINY = 1e-18  # float32 cascade values below this are flushed to 0: their products stay normal
 
 
@@ -737,40 +736,58 @@ def to_differences(stages: np.ndarray, leaky: bool) -> np.ndarray:
 # --------------------------------------------------------------------------- luminance
 
 
-def _area_taps(source: int, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """The taps of ``cv2.resize``'s INTER_AREA shrink along one axis, ``source`` -> ``size``
-    pixels: ``index[t, i]`` and ``weight[t, i]`` of output pixel ``i``'s ``t``-th source pixel,
-    in OpenCV's order, padded with weight 0 (adding ``0 * v`` changes no sum).
+def _area_fast(size: tuple[int, int], shrunk: tuple[int, int]) -> bool:
+    """Whether ``cv2.resize`` with INTER_AREA shrinks an image of ``size`` to ``shrunk`` by
+    whole factors (its blockwise averages, whose order of additions depends on OpenCV's
+    vector width), rather than with its weighted tables (:func:`_area_table`)."""
+    scales = [1.0 / (d / s) for s, d in zip(size, shrunk)]
+    return all(abs(f - round(f)) < np.finfo(np.float64).eps for f in scales)
 
-    Output pixel ``i`` covers the source interval ``[i s, (i + 1) s)``, ``s = source / size``;
-    each source pixel it overlaps by more than 1/1000 of a pixel weighs the overlap over the
-    cell's width, rounded to float32 as OpenCV's tables hold it.
-    """
-    scale = 1.0 / (size / source)  # as OpenCV computes it: 1 / inv_scale
-    taps: list[list[tuple[int, float]]] = []
-    for i in range(size):
-        start = i * scale
-        end = start + scale
-        cell = min(scale, source - start)
-        first, last = math.ceil(start), math.floor(end)
-        last = min(last, source - 1)
-        first = min(first, last)
-        own = []
-        if first - start > 1e-3:
-            own.append((first - 1, (first - start) / cell))
-        own.extend((k, 1.0 / cell) for k in range(first, last))
-        if end - last > 1e-3:
-            own.append((last, min(end - last, 1.0, cell) / cell))
-        taps.append(own)
-    depth = max(len(own) for own in taps)
-    index = np.zeros((depth, size), np.int64)
-    weight = np.zeros((depth, size))
-    for i, own in enumerate(taps):
-        index[:, i] = own[0][0]
-        for t, (k, w) in enumerate(own):
-            index[t, i] = k
-            weight[t, i] = np.float32(w)
-    return index, weight
+
+@kernel(inline="always")
+def _area_table(size, shrunk):
+    """OpenCV's table of INTER_AREA weights (``computeResizeAreaTab``) from ``size`` samples to
+    ``shrunk``, in its order: the source sample and the weight (float32, as OpenCV keeps it) of
+    each entry, and where each destination sample's entries start (``shrunk + 1`` offsets)."""
+    scale = 1.0 / (shrunk / size)
+    source = np.empty(2 * size, np.int64)
+    weight = np.empty(2 * size, np.float32)
+    start = np.empty(shrunk + 1, np.int64)
+    k = 0
+    for dx in range(shrunk):
+        start[dx] = k
+        fsx1 = dx * scale
+        fsx2 = fsx1 + scale
+        cell = min(scale, size - fsx1)
+        sx2 = min(int(math.floor(fsx2)), size - 1)
+        sx1 = min(int(math.ceil(fsx1)), sx2)
+        if sx1 - fsx1 > 1e-3:
+            source[k], weight[k] = sx1 - 1, np.float32((sx1 - fsx1) / cell)
+            k += 1
+        for sx in range(sx1, sx2):
+            source[k], weight[k] = sx, np.float32(1.0 / cell)
+            k += 1
+        if fsx2 - sx2 > 1e-3:
+            source[k] = sx2
+            weight[k] = np.float32(min(min(fsx2 - sx2, 1.0), cell) / cell)
+            k += 1
+    start[shrunk] = k
+    return source, weight, start
+
+
+def _area_taps(size: int, shrunk: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_area_table` as taps: ``index[t, i]`` and ``weight[t, i]`` of destination
+    sample ``i``'s ``t``-th entry, padded with weight 0 (adding ``0 * v`` changes no sum), so
+    that a row's sums are a few passes along it."""
+    source, weight, start = _area_table(size, shrunk)
+    counts = np.diff(start)
+    index = np.repeat(source[start[:-1]][None], counts.max(), axis=0)
+    padded = np.zeros(index.shape)
+    for t in range(index.shape[0]):
+        has = counts > t
+        index[t, has] = source[start[:-1][has] + t]
+        padded[t, has] = weight[start[:-1][has] + t]
+    return index, padded
 
 
 @kernel(**_jit)
@@ -822,7 +839,7 @@ def shrunk_luminance(gray: np.ndarray, size: tuple[int, int], levels: np.ndarray
     OpenCV sums the blocks in another order, and its own fast path is used."""
     h, w = gray.shape
     width, height = size
-    if all(abs(s - round(s)) < _EPSILON for s in (1.0 / (width / w), 1.0 / (height / h))):
+    if _area_fast((w, h), size):
         return cv2.resize(cv2.LUT(gray, levels), size,
                           interpolation=cv2.INTER_AREA).astype(dtype, copy=False)
     x_index, x_weight = _cached("area_taps", (w, width), lambda: _area_taps(w, width))

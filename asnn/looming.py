@@ -35,7 +35,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from ._fast import _reflect
+from ._fast import _area_fast, _area_table, _reflect
 from ._jit import kernel
 
 __all__ = ["Expansion", "region_expansion", "scene_expansion", "moved_by_expansion"]
@@ -291,45 +291,6 @@ def _solve_expansion(before, after, background, ridge):
     tss = squares - total * total / count
     fit = 1.0 - max(rss, 0.0) / tss if tss > 0 else 0.0
     return True, solution[0], solution[1], solution[2], solution[3], fit
-
-
-def _area_fast(size: tuple[int, int], shrunk: tuple[int, int]) -> bool:
-    """Whether ``cv2.resize`` with INTER_AREA shrinks an image of ``size`` to ``shrunk`` by
-    whole factors (its blockwise averages, whose order of additions depends on OpenCV's
-    vector width), rather than with its weighted tables (:func:`_area_table`)."""
-    scales = [1.0 / (d / s) for s, d in zip(size, shrunk)]
-    return all(abs(f - round(f)) < np.finfo(np.float64).eps for f in scales)
-
-
-@kernel(inline="always")
-def _area_table(size, shrunk):
-    """OpenCV's table of INTER_AREA weights (``computeResizeAreaTab``) from ``size`` samples to
-    ``shrunk``, in its order: the source sample and the weight (float32, as OpenCV keeps it) of
-    each entry, and where each destination sample's entries start (``shrunk + 1`` offsets)."""
-    scale = 1.0 / (shrunk / size)
-    source = np.empty(2 * size, np.int64)
-    weight = np.empty(2 * size, np.float32)
-    start = np.empty(shrunk + 1, np.int64)
-    k = 0
-    for dx in range(shrunk):
-        start[dx] = k
-        fsx1 = dx * scale
-        fsx2 = fsx1 + scale
-        cell = min(scale, size - fsx1)
-        sx2 = min(int(math.floor(fsx2)), size - 1)
-        sx1 = min(int(math.ceil(fsx1)), sx2)
-        if sx1 - fsx1 > 1e-3:
-            source[k], weight[k] = sx1 - 1, np.float32((sx1 - fsx1) / cell)
-            k += 1
-        for sx in range(sx1, sx2):
-            source[k], weight[k] = sx, np.float32(1.0 / cell)
-            k += 1
-        if fsx2 - sx2 > 1e-3:
-            source[k] = sx2
-            weight[k] = np.float32(min(min(fsx2 - sx2, 1.0), cell) / cell)
-            k += 1
-    start[shrunk] = k
-    return source, weight, start
 
 
 @kernel(inline="always")

@@ -116,7 +116,8 @@ def test_the_fits_area_averages_are_opencvs():
     cv2.resize's INTER_AREA, bit for bit, wherever it does not shrink by whole factors."""
     import cv2
 
-    from asnn.looming import _area_averages, _area_fast, _area_table
+    from asnn._fast import _area_fast, _area_table
+    from asnn.looming import _area_averages
 
     rng = np.random.default_rng(16)
     checked = 0
