@@ -181,6 +181,9 @@ class ASNN:
         # track id -> its expansion rate against the scene in the latest frame, per second
         # (None: not measured); with measure_all_against_scene, of every growing track
         self.against_scene: dict[int, float | None] = {}
+        # track id -> that fit's share of the box's change, where the scene contracts
+        # (receding_scene; None elsewhere)
+        self.fit_against_scene: dict[int, float | None] = {}
         self.measure_all_against_scene = False
         self._scene_reference: np.ndarray | None = None
         self.repeated = False
@@ -510,6 +513,7 @@ class ASNN:
         p = self.params
         elapsed = frame.elapsed
         self.against_scene = {}
+        self.fit_against_scene = {}
         if attended is None:
             self.tracker.update([], elapsed)
             if p.scene_relative:
@@ -574,21 +578,40 @@ class ASNN:
         :attr:`against_scene` too; with :attr:`measure_all_against_scene` (the held-out
         replay's trace) every growing track's is measured there, and the tracks' state is
         still only that of the candidates.
+
+        With ``receding_scene``, where the scene contracts (the camera moves away from it),
+        the boxes are fitted against it in the same way, and so are those of the tracks that
+        pass the partial-overlap regime but for its fit test; the share of each box's change
+        that this fit explains goes to :attr:`fit_against_scene` and to the track
+        (``own_fit``), whose regime test takes the better of the two fits
+        (:func:`~asnn.tracking.approaching`). An object expanding in a contracting scene moves
+        against it, so the pixels the scene explains are the scenery's; where the scene
+        expands, object and scenery expand alike, and the box's own fit stands.
         """
         p = self.params
+        overlap = self._overlap
         chosen = {k for k, tr in enumerate(tracks)
                   if tr.missed == 0 and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max,
-                                                      tr.fit, self._overlap)}
-        measured = sorted(chosen | ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
-                                    if self.measure_all_against_scene else set()))
+                                                      tr.fit, overlap)}
+        unfit = set()  # passing the regime but for its fit test
+        if p.receding_scene and overlap is not None:
+            unfit = {k for k, tr in enumerate(tracks)
+                     if k not in chosen and tr.missed == 0
+                     and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max, 1.0, overlap)}
+        growing = ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
+                   if self.measure_all_against_scene else set())
         scene = (scene_expansion(frame.previous, frame.lum, boxes, frame.background)
-                 if measured else None)
-        if scene is not None and scene.rate > 0 and (
-                self._scene_reference is None or self._scene_reference.shape != frame.lum.shape):
+                 if chosen or unfit or growing else None)
+        contracts = p.receding_scene and scene is not None and scene.rate < 0
+        if contracts:
+            chosen |= unfit
+        against = scene is not None and (scene.rate > 0 or contracts)
+        if against and (self._scene_reference is None
+                        or self._scene_reference.shape != frame.lum.shape):
             self._scene_reference = np.empty_like(frame.lum)
-        for k in measured:
-            rate = rates[k]
-            if scene is not None and scene.rate > 0:
+        for k in sorted(chosen | growing):
+            rate, fit = rates[k], None
+            if against:
                 x0, y0, x1, y1 = box = boxes[k]
                 before = (frame.previous if frame.background is None
                           else frame.background)[y0:y1, x0:x1]
@@ -601,10 +624,16 @@ class ASNN:
                     np.abs(now - moved) < np.abs(now - before), moved, before)
                 own = region_expansion(frame.previous, frame.lum, box, self._scene_reference)
                 rate = None if own is None else own.rate / frame.elapsed
+                if contracts and own is not None:
+                    fit = own.fit
             self.against_scene[tracks[k].id] = rate
+            self.fit_against_scene[tracks[k].id] = fit
         ids = {tracks[k].id for k in chosen}
         for tr in self.tracker.tracks:
-            tr.measure_own(self.against_scene.get(tr.id) if tr.id in ids else None)
+            if tr.id in ids:
+                tr.measure_own(self.against_scene.get(tr.id), self.fit_against_scene.get(tr.id))
+            else:
+                tr.measure_own(None)
 
 
 @dataclasses.dataclass(slots=True)

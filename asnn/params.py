@@ -221,6 +221,13 @@ class ASNNParams(BaseModel):
         0.0, ge=0, description="the scene-relative test passes a rate against the scene down "
         "to -scene_tolerance times the track's own expansion rate (zero within the second "
         "fit's noise)")
+    receding_scene: bool = Field(
+        False, description="where the scene contracts (the camera moves away from it: a rear "
+        "camera, reversing), a track that passes the partial-overlap regime but for its fit is "
+        "fitted against the scene too, and the regime's fit test takes the better of its box's "
+        "fit and that one (asnn.tracking.Track.own_fit): the scenery receding behind an object "
+        "coming at a rear camera lowers its box's fit; inert without scene_relative and "
+        "partial_overlap")
     tau_max: float = Field(1.5, gt=0, description="longest time to contact that warns, s")
     offset_max: float = Field(
         1.0, gt=0, description="largest drift/expansion offset of an approaching object, in "
@@ -338,7 +345,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
-    partial_overlap=True, scene_tolerance=0.1,
+    partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
 ))
 DEFAULT_PRESET = "robust"
 

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching",
+__all__ = ["better_fit", "Observation", "Track", "TargetTracker", "approach_test", "approaching",
            "against_scene", "smoothed_run"]
 
 
@@ -98,6 +98,10 @@ class Track:
         the consecutive frames in which it is measured; None where it is not (the model
         measures it only while the track otherwise passes the approach test, and only with
         ``scene_relative``).
+    own_fit : float or None
+        The share of the box's change that the fit against the scene explains, smoothed over
+        the same run; the model measures it only where the scene contracts
+        (``receding_scene``), and None elsewhere.
     """
 
     id: int
@@ -113,6 +117,7 @@ class Track:
     streak: int = 0
     fit: float | None = None
     own_expansion: float | None = None
+    own_fit: float | None = None
     _smoothing: float = field(default=0.5, repr=False)
 
     def observe(self, obs: Observation, elapsed: float, box_weight: float) -> None:
@@ -145,10 +150,12 @@ class Track:
         if fit is not None:
             self.fit = smoothed_run(self.fit, fit, self._smoothing)
 
-    def measure_own(self, expansion: float | None) -> None:
-        """Take this frame's expansion rate against the scene (per second), or None where it is
-        not measured (which ends the run it is smoothed over)."""
+    def measure_own(self, expansion: float | None, fit: float | None = None) -> None:
+        """Take this frame's expansion rate against the scene (per second) and that fit's
+        share, or None where they are not measured (which ends the run each is smoothed
+        over)."""
         self.own_expansion = smoothed_run(self.own_expansion, expansion, self._smoothing)
+        self.own_fit = smoothed_run(self.own_fit, fit, self._smoothing)
 
     @property
     def ttc(self) -> float | None:
@@ -180,11 +187,20 @@ def approaching(track: Track, tau_max: float, offset_max: float,
                 overlap: tuple[float, float, float] | None = None,
                 tolerance: float = 0.0) -> bool:
     """Whether a track looks, in the latest frame, like an object coming at the camera: it is
-    seen now, passes :func:`approach_test`, and, where its expansion against the scene is
+    seen now, passes :func:`approach_test` (with the better of its box's fit and its fit
+    against the scene, where that is measured), and, where its expansion against the scene is
     measured, does not contract against the scene (:func:`against_scene`)."""
     return (track.missed == 0
-            and approach_test(track.ttc, track.offset, tau_max, offset_max, track.fit, overlap)
+            and approach_test(track.ttc, track.offset, tau_max, offset_max,
+                              better_fit(track.fit, track.own_fit), overlap)
             and against_scene(track.own_expansion, track.expansion, tolerance))
+
+
+def better_fit(fit: float | None, own_fit: float | None) -> float | None:
+    """The larger of a box's fit and its fit against the scene (None: not measured)."""
+    if own_fit is None or (fit is not None and fit >= own_fit):
+        return fit
+    return own_fit
 
 
 def smoothed_run(average: float | None, value: float | None, weight: float) -> float | None:

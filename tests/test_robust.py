@@ -192,6 +192,13 @@ def test_a_rate_against_the_scene_that_is_zero_within_noise_does_not_break_an_ap
     assert _quiet(_run("rear-night-catchup-offset", scene_tolerance=0.0)[1])
 
 
+def test_a_car_catching_up_off_axis_with_a_rear_camera_is_fitted_against_the_receding_scene():
+    # its box holds the road receding behind it: the box's fit stays at 0.2-0.4, below the
+    # partial-overlap regime's 0.4, while the fit against the contracting scene passes
+    assert _hit(*_run("rear-day-catchup-offset"))
+    assert _quiet(_run("rear-day-catchup-offset", receding_scene=False)[1])
+
+
 def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test():
     for case in ("drive-day-stopped-car", "drive-day-brake", "drive-day-oncoming-headon"):
         assert _hit(*_run(case))

@@ -40,6 +40,7 @@ ABLATIONS = {
     "scene-relative test without its tolerance": "asnn:robust/scene_tolerance=0",
     "no partial-overlap regime": "asnn:robust/partial_overlap=false",
     "partial overlaps without the fit test": "asnn:robust/overlap_fit_min=-1",
+    "no fit against a receding scene": "asnn:robust/receding_scene=false",
     "no persistence (one frame of approach)": "asnn:robust/approach_frames=1",
     "no input scale (frames at their own size)": "asnn:robust/max_width=none",
     "attention blur at full resolution": "asnn:robust/attention_step=1",
