@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["better_fit", "Observation", "Track", "TargetTracker", "approach_test", "approaching",
+__all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
            "against_scene", "smoothed_run"]
 
 

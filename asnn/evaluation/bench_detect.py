@@ -13,7 +13,8 @@ computes each frame's fused pass in bands on a thread per core and finishes each
 the next one's pass runs (:meth:`asnn.model.ASNN.stream`), decoding and writing in between.
 
 The same run, in this process, times each stage of one loop over the same frames: **decode**
-(the source's frames, in a pass of their own that keeps none of them), **model** (the detector's step without the targets), **targets** (the
+(the source's frames, in a pass of their own that keeps none of them), **model** (the
+detector's step without the targets), **targets** (the
 targets inside the step: the clustering, :func:`asnn.targets.extract_targets`, or with
 ``targets='objects'`` the objects, their looming fits, the tracker and the approach gate,
 ``ASNN._objects``; timed by wrapping them where the model calls them) and **output**
