@@ -843,7 +843,7 @@ def shrunk_luminance(gray: np.ndarray, size: tuple[int, int], levels: np.ndarray
         return cv2.resize(cv2.LUT(gray, levels), size,
                           interpolation=cv2.INTER_AREA).astype(dtype, copy=False)
     x_index, x_weight = _cached("area_taps", (w, width), lambda: _area_taps(w, width))
-    y_index, y_weight = _cached("area_taps_y", (h, height), lambda: _area_taps(h, height))
+    y_index, y_weight = _cached("area_taps", (h, height), lambda: _area_taps(h, height))
     out = np.empty((height, width), dtype)
     _shrink_levels(gray, levels, x_index, x_weight, y_index, y_weight, out)
     return out
@@ -903,8 +903,9 @@ def gain_controlled_change(current, previous, semi_saturation, sigma, scale, out
     if h % 4 or w % 4 or retina._POOL_STEP != 4:
         return contrast_gain_control(current - previous, semi_saturation, sigma, scale, out)
     t = current.dtype.type
-    photo = np.empty_like(current)
-    coarse = np.empty((h // 4, w // 4), current.dtype)
+    # P and the averages are consumed here: this thread's buffers serve every frame of a size
+    photo, coarse = _cached("change", (h, w, current.dtype.str), lambda: (
+        np.empty_like(current), np.empty((h // 4, w // 4), current.dtype)))
     _change_and_averages(current, previous, photo, coarse)
     out = np.empty_like(current) if out is None else out
     _divide_by_pool(photo, retina.contrast_pool_spread(coarse, sigma, (h, w)),
