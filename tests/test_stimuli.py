@@ -481,3 +481,28 @@ def test_brightness_and_noise_cases_of_the_suite_do_what_their_names_say(suite):
     # the still scene of the noise cases is the same scene as the lighting cases'
     clean = suite["jpeg-q20"].frames.astype(float) - suite["jpeg-q8"].frames
     assert 0 < np.abs(clean).mean() < 10
+
+
+def test_write_video_takes_frames_one_by_one_as_it_takes_an_array(tmp_path):
+    """A clip written from a generator of frames (not held at once) decodes to the frames of
+    the same clip written from an array; a generator without frames is refused."""
+    from asnn.stimuli import make_scene, write_video
+
+    frames = make_scene("looming", size=(64, 48), frames=12, start=2, stop=10).frames
+    whole = write_video(frames, tmp_path / "whole.avi", fps=20.0)
+    lazy = write_video((f for f in frames), tmp_path / "lazy.avi", fps=20.0)
+
+    def decoded(path):
+        cap = cv2.VideoCapture(str(path))
+        out = []
+        while True:
+            ok, image = cap.read()
+            if not ok:
+                return out
+            out.append(image)
+
+    a, b = decoded(whole), decoded(lazy)
+    assert len(a) == len(b) == 12
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    with pytest.raises(ValueError, match="no frames"):
+        write_video(iter(()), tmp_path / "empty.avi")

@@ -12,15 +12,16 @@ compiles its kernels. The process uses the machine's cores as ``asnn detect`` do
 computes each frame's fused pass in bands on a thread per core and finishes each frame while
 the next one's pass runs (:meth:`asnn.model.ASNN.stream`), decoding and writing in between.
 
-The same run, in this process, times each stage of one loop over the same frames: **decode**
-(the source's frames, in a pass of their own that keeps none of them), **model** (the
+The same run, in this process, times each stage of one loop over the same frames, decoding
+them again for each pass and keeping none (:func:`time_stages`): **decode** (the source's
+frames, in a pass of their own), **model** (the
 detector's step without the targets), **targets** (the
 targets inside the step: the clustering, :func:`asnn.targets.extract_targets`, or with
 ``targets='objects'`` the objects, their looming fits, the tracker and the approach gate,
 ``ASNN._objects``; timed by wrapping them where the model calls them) and **output**
 (formatting and writing the JSON lines); their sum is what the loop costs on one thread.
-**stream** is the model alone over the decoded frames with the threads ``asnn detect`` gives
-it. The baseline is the straightforward float64 form of the same
+**stream** is the model alone over the clip's first decoded frames (up to
+:data:`STREAM_BYTES`) with the threads ``asnn detect`` gives it. The baseline is the straightforward float64 form of the same
 preset (``ASNN(preset, optimised=False)``) stepping over one period of the same loop on one
 thread, as ``asnn bench`` times it: its mean step (the per-frame costs of both forms depend on
 the frames' content, so they are compared over the same frames), timed once between each pair
@@ -48,12 +49,14 @@ import numpy as np
 
 from .bench import SCENE, THREAD_VARIABLES
 
-__all__ = ["DEFAULT_SIZES", "DEFAULT_FRAMES", "run", "format_table", "time_stages"]
+__all__ = ["DEFAULT_SIZES", "DEFAULT_FRAMES", "STREAM_BYTES", "run", "format_table",
+           "time_stages"]
 
 DEFAULT_SIZES = ((320, 240), (640, 480))
 # frames of the long clip: a spread of 0.1 s in the processes' start-up (as on a shared virtual
 # machine) moves the per-frame figure by 0.08 ms over 1198 frames, by 0.34 ms over 298
 DEFAULT_FRAMES = 1200
+STREAM_BYTES = 256 * 2**20  # decoded frames the stream stage holds at most
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -102,42 +105,49 @@ def _timed_targets(totals: list[float]):
 
 def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[dict]]:
     """Milliseconds per frame of each stage of one loop over ``clip``, and of the model's
-    stream with a thread per core (``stream``), and the loop's records."""
+    stream with a thread per core (``stream``), and the loop's records.
+
+    Each pass decodes the clip again and drops each frame once it is done with it, as
+    ``asnn detect`` does: the 1200 frames held at once would take 1.1 GB at 640x480, and
+    timing them would time the memory's first touch. The stream is timed over the clip's first
+    frames, up to :data:`STREAM_BYTES` of them.
+    """
     from ..detectors import available_cores, make_detector
     from ..io.sources import open_source
 
-    # decoding timed on its own, each frame dropped as asnn detect drops it: the 1200 frames
-    # the loop holds (1.1 GB at 640x480) would time the memory's first touch instead
     start = time.perf_counter()
     for _ in open_source(str(clip)).timed_frames():
         pass
     decode = time.perf_counter() - start
-    frames = list(open_source(str(clip)).timed_frames())
     detector = make_detector("asnn", preset)
     targets = [0.0]
-    responses = []
-    with _timed_targets(targets):
-        start = time.perf_counter()
-        for t, frame in frames:
-            responses.append(detector.step(frame, t))
-        step = time.perf_counter() - start
-    start = time.perf_counter()
+    step = output = 0.0
     records = []
-    with open(out, "w", encoding="utf-8") as fh:
-        for index, ((t, _), response) in enumerate(zip(frames, responses)):
+    with _timed_targets(targets), open(out, "w", encoding="utf-8") as fh:
+        for index, (t, frame) in enumerate(open_source(str(clip)).timed_frames()):
+            start = time.perf_counter()
+            response = detector.step(frame, t)
+            stepped = time.perf_counter()
             record = {"frame": index, "t": round(t, 6), **response.to_dict()}
-            records.append(record)
             fh.write(json.dumps(record) + "\n")
-    output = time.perf_counter() - start
+            output += time.perf_counter() - stepped
+            step += stepped - start
+            records.append(record)
+    held, size = [], 0
+    for t, frame in open_source(str(clip)).timed_frames():
+        size += frame.nbytes
+        if held and size > STREAM_BYTES:
+            break
+        held.append((t, frame))
     with make_detector("asnn", preset, threads=available_cores()) as model:
         start = time.perf_counter()
-        for _ in model.stream(frames):
+        for _ in model.stream(held):
             pass
-        stream = time.perf_counter() - start
-    n = len(frames)
-    ms = {"decode": decode, "model": step - targets[0], "targets": targets[0], "output": output,
-          "stream": stream}
-    return {k: 1e3 * v / n for k, v in ms.items()}, records
+        stream = (time.perf_counter() - start) / len(held)
+    n = len(records)
+    ms = {"decode": decode / n, "model": (step - targets[0]) / n, "targets": targets[0] / n,
+          "output": output / n, "stream": stream}
+    return {k: 1e3 * v for k, v in ms.items()}, records
 
 
 def _straightforward_ms(frames: np.ndarray, preset: str | None) -> float:
@@ -159,13 +169,17 @@ def _straightforward_ms(frames: np.ndarray, preset: str | None) -> float:
     return float(np.mean(seconds) * 1e3)
 
 
-def _clip(size: tuple[int, int], frames: int) -> tuple[np.ndarray, int]:
-    """The bench's frames, and the period of their loop."""
+def _loop(size: tuple[int, int]) -> np.ndarray:
+    """One period of the bench clip's frames: the scene forwards, then backwards (no jump)."""
     from ..stimuli import make_scene
 
     scene = make_scene(SCENE, size=size, frames=50, start=2, stop=48).frames
-    loop = np.concatenate([scene, scene[-2:0:-1]])  # forwards then backwards: no jump
-    return np.resize(loop, (frames, *loop.shape[1:])), len(loop)
+    return np.concatenate([scene, scene[-2:0:-1]])
+
+
+def _clip(loop: np.ndarray, frames: int):
+    """The bench clip's ``frames`` frames, one by one: the loop again and again."""
+    return (loop[i % len(loop)] for i in range(frames))
 
 
 def run(sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES, repeat: int = 4,
@@ -193,10 +207,12 @@ def run(sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES, repeat: int = 4,
         for w, h in sizes:
             if progress:
                 progress(f"{w}x{h}")
-            clip, period = _clip((w, h), frames)
+            loop = _loop((w, h))
+            # the baseline's frames: one period of the clip's loop (and the frame that primes)
+            period = np.stack(list(_clip(loop, min(frames, len(loop) + 1))))
             long_clip, short_clip = tmp / f"{w}x{h}.mp4", tmp / f"{w}x{h}-2.mp4"
-            write_video(clip, long_clip, fps=25.0)
-            write_video(clip[:2], short_clip, fps=25.0)
+            write_video(_clip(loop, frames), long_clip, fps=25.0)
+            write_video(_clip(loop, 2), short_clip, fps=25.0)
             out = tmp / "detect.jsonl"
             # untimed: numba's cache may hold no kernels yet for the process's CPU features
             _detect_seconds(short_clip, tmp / "short.jsonl", preset)
@@ -205,7 +221,7 @@ def run(sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES, repeat: int = 4,
                 # the baseline between the processes, so that a spell in which the machine is
                 # slower (another virtual machine on the host) weighs on both sides alike
                 long_runs.append(_detect_seconds(long_clip, out, preset))
-                baselines.append(_straightforward_ms(clip[:period + 1], preset))
+                baselines.append(_straightforward_ms(period, preset))
                 short_runs.append(_detect_seconds(short_clip, tmp / "short.jsonl", preset))
             produced = [json.loads(line) for line in out.read_text().splitlines()]
             stages, records = time_stages(long_clip, preset, tmp / "loop.jsonl")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -87,16 +89,28 @@ class Scene:
         return label
 
 
-def write_video(frames: np.ndarray, path: str | Path, fps: float = 20.0) -> Path:
-    """Write gray uint8 frames (T, H, W) to a video file (mp4v for .mp4, MJPG for .avi).
+def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
+                fps: float = 20.0) -> Path:
+    """Write gray uint8 frames (T, H, W), or (H, W) frames one by one from an iterable (a long
+    clip need not be held at once), to a video file (mp4v for .mp4, MJPG for .avi).
 
     Raises
     ------
     OSError
         If OpenCV cannot open a writer for the path.
+    ValueError
+        For an iterable without frames (an empty array writes an empty video).
     """
     path = Path(path)
-    t, h, w = frames.shape
+    if isinstance(frames, np.ndarray):
+        h, w = frames.shape[1:3]
+    else:
+        frames = iter(frames)
+        first = next(frames, None)
+        if first is None:
+            raise ValueError(f"no frames to write to {path}")
+        h, w = first.shape[:2]
+        frames = itertools.chain([first], frames)
     fourcc = cv2.VideoWriter_fourcc(*("MJPG" if path.suffix.lower() == ".avi" else "mp4v"))
     writer = cv2.VideoWriter(str(path), fourcc, fps, (w, h), isColor=True)
     if not writer.isOpened():
