@@ -20,7 +20,7 @@ from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
 
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import MessageError, Response, decode_response
+from service.messages import MessageError, Response, decode_response, track_label
 
 __all__ = ["WarningListener", "format_stamp", "format_warning"]
 
@@ -58,7 +58,7 @@ def _target(t) -> str:
     if t.id is None:
         return where
     ttc = "no contact" if t.ttc is None else f"contact in {t.ttc:.2f} s"
-    return f"#{t.id} {ttc} at {where}"
+    return f"#{track_label(t.id)} {ttc} at {where}"
 
 
 def format_json(r: Response) -> str:

@@ -99,7 +99,7 @@ from asnn.params import DEFAULT_PRESET
 from . import keys
 from .logutil import RateLimitedLog
 from .messages import (MAX_PAYLOAD, MAX_SIDE, Frame, MessageError, Response, decode_frame,
-                       response_from)
+                       response_from, track_id_base)
 
 __all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "RobotView", "WARMUP_FRAMES", "WorkerCore",
            "default_threads", "default_worker_id"]
@@ -177,6 +177,7 @@ class _Robot:
     busy: bool = False
     processed: int = 0
     resets: int = 0
+    id_base: int = 0  # its model's first target id on the wire (messages.track_id_base)
     arrived: int = 0  # frames taken in
     arrived_bytes: int = 0
     # seq, stamp and data of the latest frame taken in (the data is the pending frame's or the
@@ -478,9 +479,11 @@ class WorkerCore:
                 return None
         if state.detector is None:
             state.detector = make_detector(self.model, self.preset or None)
+            state.id_base = track_id_base(frame.seq)
         elif state.processed_stream not in (None, job.stream):
             reason = job.reset_reason or "seq-backwards"
             state.detector.reset()
+            state.id_base = track_id_base(frame.seq)
             state.resets += 1
             with self._lock:
                 self._stats.resets[reason] += 1
@@ -510,7 +513,8 @@ class WorkerCore:
         response = response_from(result, robot=job.robot, frame=frame, model=self.model,
                                  preset=self.preset, worker=self.worker_id,
                                  latency_ms=(self.clock() - job.received) * 1e3,
-                                 dropped=job.dropped, model_ms=(self.clock() - started) * 1e3)
+                                 dropped=job.dropped, model_ms=(self.clock() - started) * 1e3,
+                                 id_base=state.id_base)
         with self._lock:
             self._stats.processed += 1
             self._stats.warnings += response.collision

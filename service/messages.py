@@ -47,7 +47,8 @@ from asnn.io.images import MAX_SIDE, ImageError, check_encoded, decode_encoded, 
 
 __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
            "Response", "TargetMsg", "VERSION", "decode_frame", "decode_response", "encode",
-           "encode_image", "encoded_size", "unpack_map"]
+           "encode_image", "encoded_size", "track_id_base", "track_label",
+           "unpack_map"]
 
 VERSION = 1
 FrameFormat = Literal["gray8", "bgr8", "jpeg", "png"]
@@ -296,11 +297,34 @@ def decode_response(payload: bytes) -> Response:
     return _validate(Response, _unpack(payload, "response"), "response")
 
 
+TRACK_ID_SPAN = 1 << 16  # target ids a model may number before they could meet a later one's
+
+
+def track_id_base(seq: int) -> int:
+    """The first target id of a robot's model that starts at frame ``seq`` (a new robot, a
+    reset, a hand-over to another worker): ``(seq mod 2^37) * 2^16``. Each model numbers its
+    tracks from 0, so without a base an id seen before a hand-over would name another object
+    after it; with it, two models of one stream number apart unless one of them numbers 2^16
+    tracks per frame between their starts, and ids stay below 2^53 (exact as a JavaScript
+    number)."""
+    return (seq % (1 << 37)) * TRACK_ID_SPAN
+
+
+def track_label(target_id: int) -> str:
+    """A wire target id as people read it: ``"25:3"`` for track 3 of the model that started at
+    frame 25 (:func:`track_id_base`), ``"3"`` for a model that started at frame 0."""
+    start, track = divmod(target_id, TRACK_ID_SPAN)
+    return f"{start}:{track}" if start else str(track)
+
+
 def response_from(result, *, robot: str, frame: Frame, model: str, preset: str, worker: str,
-                  latency_ms: float, dropped: int, model_ms: float | None = None) -> Response:
-    """Wrap an ``asnn.Response`` (the model's output) for the wire."""
+                  latency_ms: float, dropped: int, model_ms: float | None = None,
+                  id_base: int = 0) -> Response:
+    """Wrap an ``asnn.Response`` (the model's output) for the wire; ``id_base``
+    (:func:`track_id_base`) is added to its targets' ids."""
     fields = result.to_dict()
-    targets = [TargetMsg(**_finite(t)) for t in fields.pop("targets")]
+    targets = [TargetMsg(**_finite(t if t.get("id") is None else {**t, "id": t["id"] + id_base}))
+               for t in fields.pop("targets")]
     return Response(robot=robot, seq=frame.seq, stamp=frame.stamp, model=model, preset=preset,
                     targets=targets, worker=worker, latency_ms=max(latency_ms, 0.0),
                     dropped=dropped,

@@ -13,7 +13,7 @@ from service import keys
 from service.config import ConfigError, ZenohOptions, make_config
 from service.messages import (FORMATS, MAX_PAYLOAD, REASONS, Frame, MessageError, Response,
                               decode_frame, decode_response, encode, encode_image, encoded_size,
-                              response_from)
+                              response_from, track_id_base)
 
 RNG = np.random.default_rng(4)
 IMAGE = RNG.integers(0, 256, size=(40, 56, 3), dtype=np.uint8)
@@ -153,6 +153,32 @@ def test_response_from_a_model_step_round_trips_with_targets():
     json.dumps(back.model_dump())  # JSON-ready for `asnn alerts --json`
 
 
+def test_target_ids_on_the_wire_start_at_the_models_first_seq():
+    """A model's target ids go out offset by track_id_base of the seq it started at, so that the
+    models of one stream (before and after a hand-over or a reset) number apart; the base stays
+    below 2^53 whatever the seq, and ids without a tracker stay absent."""
+    scene = make_scene("looming")
+    model = ASNN("default")
+    for image in scene.frames[:30]:
+        result = model.step(image)
+    ids = [t.id for t in result.targets]
+    assert ids and all(i is not None for i in ids)
+    frame = Frame.from_image(scene.frames[29], seq=1029, stamp=0.0)
+    base = track_id_base(1000)
+    response = response_from(result, robot="r1", frame=frame, model="asnn", preset="default",
+                             worker="w", latency_ms=1.0, dropped=0, id_base=base)
+    assert [t.id for t in decode_response(encode(response)).targets] == [i + base for i in ids]
+    assert track_id_base(0) == 0 and track_id_base(1000) == 1000 * 2**16
+    assert all(track_id_base(seq) + 2**16 <= 2**53 for seq in (2**37 - 1, 2**63, 2**64 - 1))
+    untracked = ASNN("reference")
+    for image in scene.frames[:30]:
+        plain = untracked.step(image)
+    assert plain.targets
+    wire = response_from(plain, robot="r1", frame=frame, model="asnn", preset="reference",
+                         worker="w", latency_ms=1.0, dropped=0, id_base=base)
+    assert all(t.id is None for t in wire.targets)
+
+
 def test_invalid_responses_are_rejected():
     good = msgpack.unpackb(encode(Response(
         robot="r", seq=1, stamp=1.0, model="asnn", preset="p", u=1.0, out=0.5, spikes=0,
@@ -241,5 +267,8 @@ def test_alert_lines_lead_tracked_targets_with_their_id_and_time_to_contact():
     tracked = format_warning(Response(**common, targets=[
         TargetMsg(**place, id=3, expansion=2.0, ttc=0.5, offset=0.1, approaching=True)]))
     assert "#3 contact in 0.50 s at (10, 20)" in tracked
+    handed = format_warning(Response(**common, targets=[
+        TargetMsg(**place, id=25 * 2**16 + 3, expansion=2.0, ttc=0.5, approaching=True)]))
+    assert "#25:3 contact in 0.50 s" in handed  # track 3 of the model that started at seq 25
     plain = format_warning(Response(**common, targets=[TargetMsg(**place)]))
     assert "#" not in plain and "(10, 20)" in plain

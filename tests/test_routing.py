@@ -7,6 +7,7 @@ from asnn import ASNN
 from asnn.stimuli import make_scene
 from service import keys
 from service.core import RobotView, WorkerCore
+from service.messages import track_id_base
 from service.ownership import owner
 from service.routing import SCAN_KEY, Routes
 
@@ -135,6 +136,10 @@ def test_a_new_owner_answers_as_a_model_that_saw_the_whole_stream():
     assert answered[0].seq == start + 5
     assert [r.collision for r in answered] == [e.collision for e in expected[start + 5:]]
     assert answered[0].collision and answered[0].u > 0
+    # its tracks are numbered from the seq its model started at: no id the previous owner
+    # gave (numbered from the stream's start) names another object now
+    ids = {t.id for r in answered for t in r.targets}
+    assert ids and all(track_id_base(start) <= i < track_id_base(start + 1) for i in ids)
     # a cold start (what a crash gives) answers u = 0 at once
     cold = WorkerCore()
     cold.offer("asnn/r1/frame", payload(scene.frames[start], start))
