@@ -14,19 +14,19 @@ the next one's pass runs (:meth:`asnn.model.ASNN.stream`), decoding and writing 
 
 The same run, in this process, times each stage of one loop over the same frames, decoding
 them again for each pass and keeping none (:func:`time_stages`): **decode** (the source's
-frames, in a pass of their own), **model** (the
-detector's step without the targets), **targets** (the
-targets inside the step: the clustering, :func:`asnn.targets.extract_targets`, or with
-``targets='objects'`` the objects, their looming fits, the tracker and the approach gate,
-``ASNN._objects``; timed by wrapping them where the model calls them) and **output**
+frames, in a pass of their own), **model** (the detector's step without the targets),
+**targets** (the targets inside the step: the clustering, :func:`asnn.targets.extract_targets`,
+or with ``targets='objects'`` the objects, their looming fits, the tracker and the approach
+gate, ``ASNN._objects``; timed by wrapping them where the model calls them) and **output**
 (formatting and writing the JSON lines); their sum is what the loop costs on one thread.
 **stream** is the model alone over the clip's first decoded frames (up to
-:data:`STREAM_BYTES`) with the threads ``asnn detect`` gives it. The baseline is the straightforward float64 form of the same
-preset (``ASNN(preset, optimised=False)``) stepping over one period of the same loop on one
-thread, as ``asnn bench`` times it: its mean step (the per-frame costs of both forms depend on
-the frames' content, so they are compared over the same frames), timed once between each pair
-of processes and taken as the median, like the processes' times. ``identical`` says whether the
-process's JSON lines equal those of one loop over the same frames here.
+:data:`STREAM_BYTES`) with the threads ``asnn detect`` gives it. The baseline is the
+straightforward float64 form of the same preset (``ASNN(preset, optimised=False)``) stepping
+over one period of the same loop on one thread, as ``asnn bench`` times it: its mean step (the
+per-frame costs of both forms depend on the frames' content, so they are compared over the
+same frames), timed once between each pair of processes and taken as the median, like the
+processes' times. ``identical`` says whether the process's JSON lines equal those of one loop
+over the same frames here.
 
 The clip's content matters: on frames where a large region has been still for a few seconds
 (the disk of a long clip near its end, a camera that stops), the default preset's float32
@@ -209,7 +209,7 @@ def run(sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES, repeat: int = 4,
                 progress(f"{w}x{h}")
             loop = _loop((w, h))
             # the baseline's frames: one period of the clip's loop (and the frame that primes)
-            period = np.stack(list(_clip(loop, min(frames, len(loop) + 1))))
+            baseline_frames = np.stack(list(_clip(loop, min(frames, len(loop) + 1))))
             long_clip, short_clip = tmp / f"{w}x{h}.mp4", tmp / f"{w}x{h}-2.mp4"
             write_video(_clip(loop, frames), long_clip, fps=25.0)
             write_video(_clip(loop, 2), short_clip, fps=25.0)
@@ -221,7 +221,7 @@ def run(sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES, repeat: int = 4,
                 # the baseline between the processes, so that a spell in which the machine is
                 # slower (another virtual machine on the host) weighs on both sides alike
                 long_runs.append(_detect_seconds(long_clip, out, preset))
-                baselines.append(_straightforward_ms(period, preset))
+                baselines.append(_straightforward_ms(baseline_frames, preset))
                 short_runs.append(_detect_seconds(short_clip, tmp / "short.jsonl", preset))
             produced = [json.loads(line) for line in out.read_text().splitlines()]
             stages, records = time_stages(long_clip, preset, tmp / "loop.jsonl")
