@@ -849,8 +849,9 @@ def shrunk_luminance(gray: np.ndarray, size: tuple[int, int], levels: np.ndarray
     """``cv2.resize(cv2.LUT(gray, levels), size, interpolation=cv2.INTER_AREA)`` rounded to
     ``dtype``, bit for bit, for a uint8 ``gray`` image larger than ``size`` (W, H) along the
     width and not smaller along the height; in a third of its time on one thread (the look-up
-    is done where a source pixel is read, and no float64 image is made). Shrinking by whole factors both ways,
-    OpenCV sums the blocks in another order, and its own fast path is used."""
+    is done where a source pixel is read, and no float64 image is made). Shrinking by whole
+    factors both ways, OpenCV sums the blocks in another order, and its own fast path is
+    used."""
     h, w = gray.shape
     width, height = size
     if _area_fast((w, h), size):
@@ -987,18 +988,21 @@ def _v_prime_halved(v, r, k, sign, out):
 
 
 @kernel(**_jit)
-def _attend(blur_g, gamma_a, blur_v, gamma_d, g, absolute, y0, y1, x0, x1, mask, colsum, rows,
-            cols):
-    """M_a M_d in the window (``blur_g``, ``blur_v`` indexed from the window's origin) into
-    ``mask``, the attended pixels into ``rows``, ``cols`` (row-major), and sum G M_a M_d (in
-    float64)."""
+def _attend(blur_g, gy0, gx0, gamma_a, blur_v, vy0, vx0, gamma_d, g, absolute, y0, y1, x0, x1,
+            mask, colsum, rows, cols):
+    """M_a M_d in the window ``y0:y1, x0:x1`` into ``mask``, the attended pixels into ``rows``,
+    ``cols`` (row-major), and sum G M_a M_d (in float64). ``blur_g`` and ``blur_v`` are
+    C-contiguous blurs whose first pixels lie at ``(gy0, gx0)`` and ``(vy0, vx0)`` of the
+    frame: whole arrays rather than slices from the window's origin, whose layout (contiguous
+    or not) would depend on where the window lies, and numba would compile the kernel again
+    for each (seconds, the first time a stream's window touches the frame's corner)."""
     for x in range(x0, x1):
         colsum[x] = 0.0
     count = 0
     bits = mask.view(np.uint8)  # as bytes, and on slices from x0, the loop vectorises
     for y in range(y0, y1):
-        bg, bv, gy, my = blur_g[y - y0], blur_v[y - y0], g[y], mask[y]
-        a, b, m = bg[:x1 - x0], bv[:x1 - x0], bits[y, x0:x1]
+        bg, bv, gy, my = blur_g[y - gy0], blur_v[y - vy0], g[y], mask[y]
+        a, b, m = bg[x0 - gx0:x1 - gx0], bv[x0 - vx0:x1 - vx0], bits[y, x0:x1]
         n = 0
         for x in range(x1 - x0):
             set_ = np.uint8(a[x] > gamma_a) & np.uint8(b[x] > gamma_d)
@@ -1054,7 +1058,7 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
         if y0 >= y1:
             return 0.0, 0, blur_g, None, (wy0, wy1, wx0, wx1)
         y0, y1, x0, x1 = y0 + wy0, y1 + wy0, x0 + wx0, x1 + wx0
-        inner_g = blur_g[y0 - wy0:, x0 - wx0:]
+        g_origin = (wy0, wx0)
     else:
         blur_g = blur(g)
         if full:
@@ -1063,7 +1067,7 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
             y0, y1, x0, x1 = _box(blur_g, float(gamma_a))
             if y0 >= y1:
                 return 0.0, 0, blur_g, None, (0, 0, 0, 0)
-        inner_g = blur_g[y0:, x0:]
+        g_origin = (0, 0)
     if top_k:
         half = r.shape[0]
         totals = np.concatenate([sums, -sums])
@@ -1075,7 +1079,6 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
         coarse = np.empty((h // 2, w // 2), g.dtype)
         _v_prime_halved(v, r, ks[0], signs[0], coarse)
         blur_v = blur.window(blur.coarse(coarse), y0, y1, x0, x1)
-        inner = blur_v
         window = (y0, y1, x0, x1)
     else:
         # the blur of V' is exact inside the window when the window extends by its radius
@@ -1091,11 +1094,10 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
         else:
             source = v[wy0:wy1, wx0:wx1]
         blur_v = blur(np.ascontiguousarray(source))
-        inner = blur_v[y0 - wy0:, x0 - wx0:]
         window = (wy0, wy1, wx0, wx1)
-    total, count = _attend(inner_g, float(gamma_a), inner, float(gamma_d), g,
-                           bool(absolute), y0, y1, x0, x1, ws.mask, ws.attended_sums, ws.rows,
-                           ws.cols)
+    total, count = _attend(blur_g, *g_origin, float(gamma_a), blur_v, window[0], window[2],
+                           float(gamma_d), g, bool(absolute), y0, y1, x0, x1, ws.mask,
+                           ws.attended_sums, ws.rows, ws.cols)
     return total, count, blur_g, blur_v, window
 
 
@@ -1127,4 +1129,5 @@ class AttentionBlur:
         c, d = max((x0 - 1) // 2 - 1, 0), min((x1 - 1) // 2 + 3, w)
         up = cv2.resize(blurred[a:b, c:d], (2 * (d - c), 2 * (b - a)),
                         interpolation=cv2.INTER_LINEAR)
-        return up[y0 - 2 * a:y1 - 2 * a, x0 - 2 * c:x1 - 2 * c]
+        # contiguous, whatever the window: the kernels it goes to keep one compiled form
+        return np.ascontiguousarray(up[y0 - 2 * a:y1 - 2 * a, x0 - 2 * c:x1 - 2 * c])

@@ -368,3 +368,26 @@ def test_threads_are_the_model_s_own_and_stop_with_it():
     with pytest.raises(ValueError, match="threads"):
         ASNN("default", threads=0)
     assert ASNN("default", optimised=False, threads=2).threads == 1
+
+
+def test_where_the_attended_window_lies_compiles_no_second_form_of_a_kernel():
+    """The attention kernels get arrays of one layout wherever the attended window lies (inside
+    the frame, or from its corner once the object fills the view): numba compiles each once per
+    precision, and compile_kernels has done so before a stream's first frame. A second compiled
+    form, first needed at contact, stalled a service worker for seconds on a cold cache and
+    the frames that came meanwhile went unanswered."""
+    from asnn import _fast
+    from asnn.model import compile_kernels
+    from asnn.stimuli.planar import planar_scene
+
+    compile_kernels()
+    kernels = (_fast._attend, _fast._box)
+    before = [set(k.signatures) for k in kernels]
+    # a disk that grows from the middle until it fills the view (contact at frame 103)
+    scene = planar_scene("loom", fps=25.0, size=(128, 128), tau=4.0, height=10.0,
+                         position=(58.0, 66.0), onset=10)
+    model = ASNN()
+    for i, frame in enumerate(scene.frames):
+        model.step(frame, i / 25.0)
+    assert [set(k.signatures) for k in kernels] == before
+    assert all(len({s[0].dtype for s in k.signatures}) == len(k.signatures) for k in kernels)
