@@ -110,7 +110,7 @@ def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[d
     Each pass decodes the clip again and drops each frame once it is done with it, as
     ``asnn detect`` does: the 1200 frames held at once would take 1.1 GB at 640x480, and
     timing them would time the memory's first touch. The stream is timed over the clip's first
-    frames, up to :data:`STREAM_BYTES` of them.
+    frames, up to :data:`STREAM_BYTES` of them, kept from the loop's pass.
     """
     from ..detectors import available_cores, make_detector
     from ..io.sources import open_source
@@ -122,9 +122,12 @@ def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[d
     detector = make_detector("asnn", preset)
     targets = [0.0]
     step = output = 0.0
-    records = []
+    records, held, size = [], [], 0
     with _timed_targets(targets), open(out, "w", encoding="utf-8") as fh:
         for index, (t, frame) in enumerate(open_source(str(clip)).timed_frames()):
+            size += frame.nbytes
+            if not held or size <= STREAM_BYTES:
+                held.append((t, frame))
             start = time.perf_counter()
             response = detector.step(frame, t)
             stepped = time.perf_counter()
@@ -133,12 +136,6 @@ def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[d
             output += time.perf_counter() - stepped
             step += stepped - start
             records.append(record)
-    held, size = [], 0
-    for t, frame in open_source(str(clip)).timed_frames():
-        size += frame.nbytes
-        if held and size > STREAM_BYTES:
-            break
-        held.append((t, frame))
     with make_detector("asnn", preset, threads=available_cores()) as model:
         start = time.perf_counter()
         for _ in model.stream(held):
