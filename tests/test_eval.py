@@ -94,6 +94,13 @@ def test_eval_end_to_end_writes_results_report_and_plots(clips, evaluated):
     for model in DETECTORS:
         assert f"| {model} |" in report
     assert "| loom.mp4 |" in report and "| bar.mp4 |" in report
+    # a row says where the first warning's target was, for the models that give targets
+    loom_row = next(line for line in report.splitlines() if line.startswith("| loom.mp4 |"))
+    cells = dict(zip(DETECTORS, loom_row.strip("| ").split(" | ")[3:]))
+    asnn_loom = {c["clip"]: c for c in results["detectors"]["asnn"]["clips"]}["loom.mp4"]
+    assert asnn_loom["localisation_px"] is not None
+    assert cells["asnn"].endswith(f", target {asnn_loom['localisation_px']:.0f} px off")
+    assert "px off" not in cells["lgmd1"]
     for name in ("loom.png", "bar.png", "summary.png"):
         assert _png(out / "plots" / name)
 

@@ -64,7 +64,8 @@ def _clips_report(results: Mapping) -> str:
             f" | {fmt(s['warning_frames_per_minute'], 1)} |")
         if s["missing"]:
             lines[-1] += f" ({s['missing']} clips without results)"
-    lines += ["", "Per clip: outcome, first warning frame (lead time, s), warning frames.", "",
+    lines += ["", "Per clip: outcome, first warning frame (lead time, s), warning frames, and the "
+              "distance from the nearest target to the labelled centre at the first warning.", "",
               "| clip | onset | contact | " + " | ".join(names) + " |",
               "| --- | --- | --- | " + " | ".join("---" for _ in names) + " |"]
     labels = {lab["file"]: lab for lab in results["labels"]}

@@ -222,7 +222,9 @@ def rate(value) -> str:
 
 def outcome_cell(score: Mapping) -> str:
     """One clip's score for a report table: outcome, first warning frame (lead), warning frames
-    (and those after the approach)."""
+    (and those after the approach), and the nearest target's distance from the labelled centre
+    at the first warning, where it is measured (the scoring counts a warning anywhere in the
+    frame: the distance shows whether it was on the labelled object)."""
     cell = score["outcome"]
     if score["first_warning"] is not None:
         cell += f" @{score['first_warning']}"
@@ -231,4 +233,6 @@ def outcome_cell(score: Mapping) -> str:
         cell += f", {score['warning_frames']} fr"
         if score.get("after_warning_frames"):
             cell += f" ({score['after_warning_frames']} after)"
+        if score.get("localisation_px") is not None:
+            cell += f", target {score['localisation_px']:.0f} px off"
     return cell

@@ -309,8 +309,8 @@ def suite_report(results: Mapping) -> str:
     lines += _table(["category", "cases (collision/not)", *names], rows)
 
     lines += ["", "## Every case", "",
-              "Outcome, first warning frame (lead), warning frames (and those after the approach)."
-              "", ""]
+              "Outcome, first warning frame (lead), warning frames (and those after the approach), "
+              "and the nearest target's distance from the labelled track at the first warning.", ""]
     rows = []
     for index, c in enumerate(cases):
         cells = [outcome_cell(results["detectors"][n]["clips"][index]) for n in names]
