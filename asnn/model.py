@@ -549,7 +549,7 @@ class ASNN:
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frame)
         coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames, self._overlap,
-                           p.scene_tolerance, p.urgent_tau) for tr in tracks]
+                           p.scene_tolerance) for tr in tracks]
         self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
             total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0

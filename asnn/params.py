@@ -237,11 +237,6 @@ class ASNNParams(BaseModel):
         "or more")
     approach_frames: int = Field(3, ge=1, description="consecutive frames a track must pass "
                                  "the approach test (ttc, offset) before it counts")
-    urgent_tau: float | None = Field(
-        None, gt=0, description="a track that passes the approach test on a collision course "
-        "(offset <= offset_max) with at most this time to contact, s, counts in its first "
-        "frame of approach instead of after approach_frames in a row "
-        "(asnn.tracking.urgent); None: never")
     partial_overlap: bool = Field(
         False, description="the approach test also passes a partial overlap: ttc <= "
         "overlap_tau_max, offset <= overlap_offset_max, from a box the expansion fit explains "
@@ -350,7 +345,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
-    partial_overlap=True, scene_tolerance=0.1, receding_scene=True, urgent_tau=0.8,
+    partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
 ))
 DEFAULT_PRESET = "robust"
 

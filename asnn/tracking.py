@@ -38,8 +38,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "urgent",
-           "better_fit", "against_scene", "smoothed_run"]
+__all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
+           "against_scene", "smoothed_run"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -174,15 +174,13 @@ class Track:
 
     def judge(self, tau_max: float, offset_max: float, frames: int,
               overlap: tuple[float, float, float] | None = None,
-              tolerance: float = 0.0, urgent_tau: float | None = None) -> bool:
+              tolerance: float = 0.0) -> bool:
         """Update :attr:`streak` with this frame's approach test (:func:`approaching`) and
         return whether the track has passed it in the last ``frames`` frames in a row: a
-        warning needs a few consecutive frames of approach, not one lucky estimate. A track
-        that passes it :func:`urgent`-ly counts at once."""
+        warning needs a few consecutive frames of approach, not one lucky estimate."""
         passed = approaching(self, tau_max, offset_max, overlap, tolerance)
         self.streak = self.streak + 1 if passed else 0
-        return self.streak >= frames or (passed and urgent(self.ttc, self.offset, urgent_tau,
-                                                            offset_max))
+        return self.streak >= frames
 
 
 def approaching(track: Track, tau_max: float, offset_max: float,
@@ -196,22 +194,6 @@ def approaching(track: Track, tau_max: float, offset_max: float,
             and approach_test(track.ttc, track.offset, tau_max, offset_max,
                               better_fit(track.fit, track.own_fit), overlap)
             and against_scene(track.own_expansion, track.expansion, tolerance))
-
-
-def urgent(ttc: float | None, offset: float | None, urgent_tau: float | None,
-           offset_max: float) -> bool:
-    """Whether a track that passes the approach test in this frame warns at once, without the
-    frames in a row :meth:`Track.judge` otherwise asks for: on a collision course
-    (``offset <= offset_max``, not the wider partial-overlap regime) with at most
-    ``urgent_tau`` seconds to contact (None: never).
-
-    Persistence keeps one misread frame from warning, at the cost of two more frames: with
-    under a second to contact that is a tenth of the time left, and an object whose image is
-    seen in fragments from frame to frame (an animal walking up, swaying with its gait) may
-    not pass in consecutive frames at all.
-    """
-    return (urgent_tau is not None and ttc is not None and offset is not None
-            and ttc <= urgent_tau and offset <= offset_max)
 
 
 def better_fit(fit: float | None, own_fit: float | None) -> float | None:

@@ -213,28 +213,6 @@ def test_the_approach_test_needs_growth_a_collision_course_and_consecutive_frame
     assert not any(passing.judge(1.5, 1.0, 1) for _ in range(3))
 
 
-def test_an_urgent_collision_course_counts_in_its_first_frame_of_approach():
-    from asnn.tracking import urgent
-
-    close = Track(0, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
-    close.measure(2.0, 10.0, 0.0)  # ttc 0.5 s, offset 0.25
-    assert close.judge(1.5, 1.0, 3, urgent_tau=0.8)  # at once, not after 3 frames
-    assert close.streak == 1
-    later = Track(1, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
-    later.measure(1.0, 5.0, 0.0)  # ttc 1 s: persistence as before
-    assert [later.judge(1.5, 1.0, 3, urgent_tau=0.8) for _ in range(3)] == [False, False, True]
-    assert not Track(2, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40)).judge(1.5, 1.0, 3,
-                                                                    urgent_tau=None)
-    # a partial overlap (offset above offset_max) keeps its frames in a row, however close
-    assert not urgent(0.5, 1.6, 0.8, offset_max=1.0)
-    assert urgent(0.5, 0.9, 0.8, offset_max=1.0) and not urgent(0.9, 0.5, 0.8, offset_max=1.0)
-    assert not urgent(None, None, 0.8, offset_max=1.0) and not urgent(0.5, 0.5, None, 1.0)
-    # a track that does not pass the approach test is not urgent, whatever its estimates
-    passing = Track(3, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
-    passing.measure(2.0, 200.0, 0.0)  # ttc 0.5 s, offset 5
-    assert not passing.judge(1.5, 1.0, 3, urgent_tau=0.8)
-
-
 def test_a_partial_overlap_passes_later_and_only_from_a_box_that_moves_as_one():
     overlap = (1.0, 2.0, 0.4)  # ttc <= 1 s, offset <= 2, fit >= 0.4
     corner = Track(0, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))

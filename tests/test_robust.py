@@ -199,14 +199,6 @@ def test_a_car_catching_up_off_axis_with_a_rear_camera_is_fitted_against_the_rec
     assert _quiet(_run("rear-day-catchup-offset", receding_scene=False)[1])
 
 
-def test_an_animal_swaying_with_its_gait_warns_by_the_urgent_warning():
-    # the walker's image sways, so its tracks are fragments that pass the approach test in
-    # single frames, never three in a row: with under 0.8 s to contact one frame warns
-    scene, responses = _run("walk-light-c0.4-gait")
-    assert _hit(scene, responses)
-    assert _quiet(_run("walk-light-c0.4-gait", urgent_tau=None)[1])
-
-
 def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test():
     for case in ("drive-day-stopped-car", "drive-day-brake", "drive-day-oncoming-headon"):
         assert _hit(*_run(case))

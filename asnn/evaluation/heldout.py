@@ -2,8 +2,8 @@
 
 The approach gate's thresholds (``tau_max``, ``offset_max``, ``approach_frames``, the
 partial-overlap regime with its ``overlap_tau_max``, ``overlap_offset_max`` and
-``overlap_fit_min``, the scene-relative test's ``scene_tolerance`` and the urgent warning's
-``urgent_tau``) were set by looking at labelled real clips. A score of those thresholds on
+``overlap_fit_min``, and the scene-relative test's ``scene_tolerance``) were set by looking at
+labelled real clips. A score of those thresholds on
 the clips that chose them is not evidence, so this module reports, beside it,
 leave-one-clip-out figures: for each clip, the thresholds are chosen again from
 :data:`GATE_GRID` on the *other* clips only (by :func:`selection_key`, among the grid points
@@ -29,7 +29,7 @@ from pathlib import Path
 
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
-from ..tracking import against_scene, approach_test, better_fit, smoothed_run, urgent
+from ..tracking import against_scene, approach_test, better_fit, smoothed_run
 from . import scoring
 from .runs import fmt, write_json
 
@@ -47,7 +47,6 @@ GATE_GRID: dict[str, tuple] = {
     "overlap_offset_max": (1.5, 2.0, 2.5),
     "overlap_fit_min": (0.2, 0.4, 0.6),
     "scene_tolerance": (0.0, 0.1),
-    "urgent_tau": (None, 0.8),
 }
 # a grid point is admissible when the generated suite keeps at least this hit rate and at most
 # this false-alarm rate with it: near misses and passing traffic, the generated cases a fleet
@@ -152,8 +151,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                                             better_fit(fit, measured_fits[ident]), overlap)
                               and against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance))
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
-                if streak[ident] >= p.approach_frames or (
-                        passes and urgent(ttc, offset, p.urgent_tau, p.offset_max)):
+                if streak[ident] >= p.approach_frames:
                     total += share
                     targets.append({"x": x, "y": y})
             # a track not measured in this frame starts afresh (Track.measure_own)
