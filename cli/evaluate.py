@@ -1,9 +1,10 @@
 """``asnn eval``: the detectors compared on labelled clips, the generated suite and the paper.
 
 ``asnn eval CLIPS_DIR [--labels FILE] [--detectors LIST] [--preset P] [--out DIR]`` scores every
-detector on labelled clips (SPEC.md section 5); ``asnn eval --synthetic [--cases PATTERN]``
-generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper``
-regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
+detector on labelled clips (SPEC.md section 5), with ``--perturb NAME`` on their frames
+perturbed; ``asnn eval --synthetic [--cases PATTERN]`` generates the labelled suite of
+:mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper`` regenerates the paper's synthetic
+figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
 default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``, ``lgmd2``. Exit status 2 for unusable
 input.
 """
@@ -14,6 +15,7 @@ import argparse
 import sys
 
 from asnn.evaluation import scoring
+from asnn.evaluation.perturb import PERTURBATIONS
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detectors
 from asnn.params import preset_names
@@ -72,6 +74,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="clips or cases evaluated in parallel processes (default: %(default)s)")
     p.add_argument("--size", type=frame_size, metavar="WxH",
                    help="with --paper: frame size of the scenes (default: 128x128, the paper's)")
+    p.add_argument("--perturb", choices=list(PERTURBATIONS), metavar="NAME",
+                   help="with CLIPS_DIR: score the detectors on the clips' frames perturbed, "
+                        "to see whether their scores hold on another camera: "
+                        + "; ".join(f"{name}: {what}" for name, what in PERTURBATIONS.items()))
     p.add_argument("--no-plots", action="store_true", help="skip the PNGs")
     p.add_argument("--case-plots", action="store_true",
                    help="with --synthetic: also plot every case's responses (slower)")
@@ -96,7 +102,9 @@ def run(args: argparse.Namespace) -> int:
         ("--ablation", args.ablation, not (args.paper or args.held_out)),
         ("--labels", args.labels, not (args.synthetic or args.paper)),
         ("--early-tolerance", args.early_tolerance is not None,
-         not (args.synthetic or args.paper))) if given and not mode]
+         not (args.synthetic or args.paper)),
+        ("--perturb", args.perturb, not (args.synthetic or args.paper or args.held_out)),
+    ) if given and not mode]
     if misplaced:
         print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
               file=sys.stderr)
@@ -129,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
             results = clips.evaluate_clips(
                 args.clips_dir, args.out, labels_path=args.labels, detectors=args.detectors,
                 preset_name=preset_name, early_tolerance_s=tolerance,
-                warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots, progress=progress)
+                warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots,
+                perturbation=args.perturb, progress=progress)
             if results["errors"] and len(results["errors"]) == sum(
                     len(d["clips"]) for d in results["detectors"].values()):
                 print(f"{args.out}/report.md")

@@ -122,6 +122,55 @@ def test_eval_subset_of_models_and_a_clip_without_video(clips, tmp_path):
     assert not (out / "plots").exists()
 
 
+def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_deterministic():
+    from asnn.evaluation.perturb import PERTURBATIONS, perturb_frame
+
+    rng = np.random.default_rng(3)
+    for frame in (rng.integers(0, 256, (24, 32), dtype=np.uint8),
+                  rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)):
+        for name in PERTURBATIONS:
+            out = perturb_frame(frame, name, index=7)
+            assert out.shape == frame.shape and out.dtype == np.uint8
+            assert np.array_equal(out, perturb_frame(frame, name, index=7))
+            assert not np.array_equal(out, frame)
+        assert np.array_equal(perturb_frame(frame, "mirror", 0), frame[:, ::-1])
+        dim = perturb_frame(frame, "dim", 0).astype(float)
+        assert dim.mean() == pytest.approx(0.6 * frame.mean(), abs=0.5)
+        noisy = perturb_frame(np.full_like(frame, 128), "noise", 0).astype(float)
+        assert noisy.std() == pytest.approx(4.0, rel=0.2) and abs(noisy.mean() - 128) < 0.5
+        assert not np.array_equal(perturb_frame(frame, "noise", 0), perturb_frame(frame, "noise", 1))
+    with pytest.raises(ValueError, match="unknown perturbation"):
+        perturb_frame(frame, "blur", 0)
+    with pytest.raises(ValueError, match="uint8"):
+        perturb_frame(frame.astype(np.float32), "noise", 0)
+
+
+def test_a_mirrored_clip_is_scored_against_its_mirrored_label(tmp_path):
+    from asnn.evaluation.perturb import perturb_label
+
+    # a disk looming left of centre: mirrored, it looms right of centre
+    scene = make_scene("looming", size=(64, 64), start=8, stop=30, center=(18.0, 30.0))
+    write_video(scene.frames, tmp_path / "left.mp4", scene.fps)
+    label = scene.label("left.mp4")
+    (tmp_path / "labels.json").write_text(json.dumps([label]))
+    assert perturb_label(label, "mirror")["center"] == [45.0, 30.0]
+    assert perturb_label(label, "noise") == label
+    tracked = {**label, "track": [[18.0, 30.0], [19.0, 31.0]]}
+    assert perturb_label(tracked, "mirror")["track"] == [[45.0, 30.0], [44.0, 31.0]]
+    with pytest.raises(ValueError, match="width"):
+        perturb_label({k: v for k, v in label.items() if k != "width"}, "mirror")
+
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "asnn", "--perturb", "mirror",
+                 "--out", str(out), "--no-plots"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["settings"]["perturbation"] == "mirror"
+    assert "Frames perturbed: mirror" in (out / "report.md").read_text()
+    score = results["detectors"]["asnn"]["clips"][0]
+    # caught, and on the mirrored centre (the label's own centre is 27 px away)
+    assert score["outcome"] == "hit" and score["localisation_px"] < 5
+
+
 def test_eval_detector_specs_name_presets_and_their_result_directories(clips, tmp_path):
     root, labels = clips
     out = tmp_path / "out"
@@ -147,8 +196,11 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
         main(["eval", "--paper", "--synthetic"])
     assert main(["eval", str(tmp_path), "--synthetic", "--out", str(tmp_path / "o")]) == 2
     assert main(["eval", str(tmp_path), "--cases", "loom-*", "--out", str(tmp_path / "o")]) == 2
+    with pytest.raises(SystemExit):
+        main(["eval", str(tmp_path), "--perturb", "blur"])  # not one of the perturbations
     for misplaced in (["--synthetic", "--size", "64x64"], ["--paper", "--cases", "loom-*"],
-                      ["--synthetic", "--early-tolerance", "0.5"], ["--paper", "--labels", "x"]):
+                      ["--synthetic", "--early-tolerance", "0.5"], ["--paper", "--labels", "x"],
+                      ["--synthetic", "--perturb", "noise"]):
         assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
         assert "does not go with" in capsys.readouterr().err
 

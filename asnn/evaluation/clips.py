@@ -14,6 +14,7 @@ from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
+from .perturb import PERTURBATIONS, perturb_label, perturbed
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_detectors, rate,
                    run_detector, write_json, write_jsonl)
@@ -21,13 +22,13 @@ from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_det
 __all__ = ["evaluate_clips"]
 
 
-def _run_clip(video: str, detector: DetectorSpec, out_path: str,
-              topic: str | None = None) -> tuple[int, str | None]:
-    """Worker: one detector on one clip (a bag's ``topic``), results to ``out_path``.
-    Returns (frames, error)."""
+def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | None = None,
+              perturbation: str | None = None) -> tuple[int, str | None]:
+    """Worker: one detector on one clip (a bag's ``topic``), its frames perturbed where
+    ``perturbation`` names one, results to ``out_path``. Returns (frames, error)."""
     try:
         clip = open_source(video, topic=topic)
-        records = run_detector(clip.timed_frames(), detector)
+        records = run_detector(perturbed(clip.timed_frames(), perturbation), detector)
     except (SourceError, ValueError) as exc:
         return 0, str(exc)
     write_jsonl(Path(out_path), records)
@@ -45,7 +46,10 @@ def _clips_report(results: Mapping) -> str:
         f"{settings['warmup']} frames; hit when the first warning lies in "
         f"[onset - {settings['early_tolerance_s']:g} s, contact + {scoring.CONTACT_SLACK_FRAMES}"
         " frames]; an earlier first warning is an early warning (a false alarm); any warning on a"
-        " non-collision clip is a false alarm.",
+        " non-collision clip is a false alarm." + (
+            f" Frames perturbed: {settings['perturbation']}"
+            f" ({PERTURBATIONS[settings['perturbation']]})."
+            if settings.get("perturbation") else ""),
         "",
         "| detector | hits | early | late | misses | false alarms (nc) | quiet (nc) | hit rate |"
         " false-alarm rate | mean / median lead (hits) | median loc. error | warning frames in /"
@@ -86,7 +90,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
                    detectors: Sequence[str] = DEFAULT_DETECTORS, preset_name: str | None = None,
                    early_tolerance_s: float = scoring.EARLY_TOLERANCE_S,
                    warmup: int = scoring.WARMUP_FRAMES, jobs: int = 1, plots: bool = True,
-                   progress=None) -> dict:
+                   perturbation: str | None = None, progress=None) -> dict:
     """Run, score and report every detector on every labelled clip.
 
     Parameters
@@ -108,6 +112,9 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         Processes running (detector, clip) pairs in parallel.
     plots : bool
         Draw the PNGs.
+    perturbation : str, optional
+        Run on the clips' frames perturbed by one of
+        :data:`~asnn.evaluation.perturb.PERTURBATIONS` (the labels follow a mirrored frame).
     progress : ProgressPrinter-like, optional
 
     Returns
@@ -119,17 +126,20 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     Raises
     ------
     ValueError
-        For an unknown detector or preset, or an unreadable labels file.
+        For an unknown detector, preset or perturbation, or an unreadable labels file.
     """
     clips_dir, out_dir = Path(clips_dir), Path(out_dir)
     labels_path = Path(labels_path) if labels_path else clips_dir / "labels.json"
-    labels = scoring.load_labels(labels_path)
+    if perturbation is not None and perturbation not in PERTURBATIONS:
+        raise ValueError(f"unknown perturbation {perturbation!r}; choose one of "
+                         f"{', '.join(PERTURBATIONS)}")
+    labels = [perturb_label(lab, perturbation) for lab in scoring.load_labels(labels_path)]
     specs = parse_detectors(detectors, preset_name)
     progress = progress or Silent()
 
     tasks = [(str(clips_dir / lab["file"]), spec,
               str(out_dir / "results" / spec.slug / f"{Path(lab['file']).stem}.jsonl"),
-              lab.get("topic"))
+              lab.get("topic"), perturbation)
              for spec in specs for lab in labels]
     for task in tasks:  # stale results of an earlier run must not be scored
         Path(task[2]).unlink(missing_ok=True)
@@ -159,6 +169,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         "settings": {"clips_dir": str(clips_dir), "labels": str(labels_path),
                      "detectors": [spec.name for spec in specs],
                      "early_tolerance_s": early_tolerance_s, "warmup": warmup,
+                     "perturbation": perturbation,
                      "contact_slack_frames": scoring.CONTACT_SLACK_FRAMES},
         "labels": labels,
         "detectors": {},

@@ -260,7 +260,8 @@ def sensor_noise(clip: np.ndarray, sigma: float, seed: int) -> np.ndarray:
 
 
 def jpeg(clip: np.ndarray, quality: int) -> np.ndarray:
-    """Re-encode every uint8 frame as JPEG at ``quality`` (1-100) and decode it again.
+    """Re-encode every uint8 frame (gray or colour) as JPEG at ``quality`` (1-100) and decode it
+    again.
 
     Raises
     ------
@@ -274,5 +275,5 @@ def jpeg(clip: np.ndarray, quality: int) -> np.ndarray:
         ok, data = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
         if not ok:
             raise ValueError("JPEG encoding failed")
-        out[i] = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+        out[i] = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     return out

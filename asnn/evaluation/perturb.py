@@ -1,0 +1,87 @@
+"""Perturbed clips: is a score robust to the camera, or luck? (``asnn eval CLIPS_DIR --perturb``)
+
+A detector's outcomes on a dozen real clips can hang on details of their pixels that another
+camera would not reproduce. Each perturbation here changes the frames the way a different
+camera or a different day would, and ``asnn eval CLIPS_DIR --perturb NAME`` scores the
+detectors on the perturbed frames with the same labels (mirrored with the frames for
+``mirror``): outcomes that survive every perturbation are the ones a fleet can count on.
+
+Every perturbation is deterministic (the noise is seeded by the frame's index), and keeps the
+frame's size, channels and uint8 type.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping
+
+import numpy as np
+
+from ..stimuli.effects import jpeg, sensor_noise
+
+__all__ = ["PERTURBATIONS", "perturb_frame", "perturbed", "perturb_label"]
+
+# name -> what it does (asnn eval -h lists them)
+PERTURBATIONS = {
+    "noise": "Gaussian sensor noise of 4 gray levels on every pixel",
+    "jpeg": "every frame re-encoded as JPEG at quality 30",
+    "dim": "0.6 times the brightness (an under-exposed camera)",
+    "mirror": "every frame flipped left to right (the labels' centres with it)",
+}
+NOISE_SIGMA = 4.0
+JPEG_QUALITY = 30
+DIM_GAIN = 0.6
+
+
+def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
+    """The frame ``index`` of a clip (uint8, gray or colour) under the perturbation ``name``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown perturbation or a frame that is not uint8.
+    """
+    if name not in PERTURBATIONS:
+        raise ValueError(f"unknown perturbation {name!r}; choose one of "
+                         f"{', '.join(PERTURBATIONS)}")
+    if frame.dtype != np.uint8:
+        raise ValueError(f"perturbations take uint8 frames, got {frame.dtype}")
+    if name == "mirror":
+        return np.ascontiguousarray(frame[:, ::-1])
+    if name == "jpeg":
+        return jpeg(frame[None], JPEG_QUALITY)[0]
+    if name == "noise":
+        changed = sensor_noise(frame.astype(np.float64), NOISE_SIGMA, seed=index)
+    else:
+        changed = frame * DIM_GAIN
+    return np.clip(np.rint(changed), 0, 255).astype(np.uint8)
+
+
+def perturbed(timed_frames: Iterable[tuple[float, np.ndarray]], name: str | None
+              ) -> Iterator[tuple[float, np.ndarray]]:
+    """``(t, frame)`` pairs with every frame perturbed (``name`` None: as they are)."""
+    for index, (t, frame) in enumerate(timed_frames):
+        yield t, frame if name is None else perturb_frame(frame, name, index)
+
+
+def perturb_label(label: Mapping, name: str | None) -> dict:
+    """A clip's label for its perturbed frames: for ``mirror`` the centre and the per-frame
+    ``track`` mirrored (x -> width - 1 - x; the label needs its ``width``), otherwise as it is.
+
+    Raises
+    ------
+    ValueError
+        For ``mirror`` on a label with a centre or track but no width.
+    """
+    label = dict(label)
+    if name != "mirror" or (label.get("center") is None and not label.get("track")):
+        return label
+    if not label.get("width"):
+        raise ValueError(f"{label.get('file', 'a label')}: mirroring its centre needs its width")
+    right = float(label["width"]) - 1.0
+    if label.get("center") is not None:
+        x, y = label["center"]
+        label["center"] = [right - x, y]
+    if label.get("track"):
+        label["track"] = [None if point is None else [right - point[0], point[1]]
+                          for point in label["track"]]
+    return label
