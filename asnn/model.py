@@ -70,6 +70,9 @@ class ASNN:
         The stream's frame size, fixed by its first frame.
     previous : ndarray (H, W)
         Luminance of the last frame, after the optional input blur.
+    previous_blocks : ndarray or None
+        Its means over ``repeat_block`` x ``repeat_block`` blocks, what the next frame's
+        repeat test compares (``skip_repeats``; None without it).
     history : deque of ndarray (H, W)
         The last N_p photoreceptor activations, most recent first.
     stages_on, stages_off : ndarray (n_s + 2, H, W)
@@ -166,6 +169,7 @@ class ASNN:
         """Forget the stream: the next frame starts a new one (of any size)."""
         self.shape: tuple[int, int] | None = None
         self.previous: np.ndarray | None = None
+        self.previous_blocks: np.ndarray | None = None
         self.history: deque[np.ndarray] = deque(maxlen=self.params.n_p)
         self.stages_on: np.ndarray | None = None
         self.stages_off: np.ndarray | None = None
@@ -297,13 +301,14 @@ class ASNN:
         index = self.index
         self.index += 1
         stamp = index * p.dt if t is None else float(t)
+        blocks = self._blocks(lum) if p.skip_repeats else None
         if self.previous is None:
-            self.previous = lum
+            self.previous, self.previous_blocks = lum, blocks
             self.stages_on = np.zeros((p.n_slow + 2, *lum.shape), self.dtype)
             self.stages_off = np.zeros_like(self.stages_on)
             self._stamp = stamp
             return _Frame(index)
-        self.repeated = p.skip_repeats and self._is_repeat(lum)
+        self.repeated = blocks is not None and self._is_repeat(blocks)
         if self.repeated:
             return _Frame(index, repeat=True)
         elapsed = stamp - self._stamp
@@ -315,7 +320,7 @@ class ASNN:
             shift = background_shift(self.previous, lum, p.stabilise_radius, p.stabilise_share)
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
                 background = shift_image(self.previous, *shift, border=lum)
-        previous, self.previous = self.previous, lum
+        previous, self.previous, self.previous_blocks = self.previous, lum, blocks
         taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, background=background)
         if self.optimised:
             # with threads of its own, P goes where the fused pass will read it (a front that
@@ -367,8 +372,18 @@ class ASNN:
             self._last = self._respond(frame)
         return self._last
 
-    def _is_repeat(self, lum: np.ndarray) -> bool:
-        """Whether a frame repeats the previous one (``params.skip_repeats``).
+    def _blocks(self, lum: np.ndarray) -> np.ndarray:
+        """The frame's means over ``repeat_block`` x ``repeat_block`` blocks (the frame itself
+        for 1), what :meth:`_is_repeat` compares."""
+        k = self.params.repeat_block
+        if k == 1:
+            return lum
+        h, w = lum.shape
+        return cv2.resize(lum, (max(w // k, 1), max(h // k, 1)), interpolation=cv2.INTER_AREA)
+
+    def _is_repeat(self, blocks: np.ndarray) -> bool:
+        """Whether a frame, given by its :meth:`_blocks`, repeats the previous one
+        (``params.skip_repeats``).
 
         Video converted to a higher frame rate repeats frames, and a repeat would read as a
         moment in which nothing moved: the model would see the world stop and start again.
@@ -376,9 +391,13 @@ class ASNN:
         below ``repeat_level`` and below ``repeat_fraction`` of the difference the last frame
         that was not a repeat had, so that a still scene with sensor noise is not a repeat; and
         at most ``repeat_run`` frames in a row are repeats: a scene that stops moving is news.
+        The difference is that of the block means: the sensor noise a camera adds to each copy
+        of a repeated frame averages out over a block (a 4-gray-level noise to half a level
+        over 8 x 8 pixels), where per pixel it would hide the repeat, while a frame in which
+        something moved still differs in its blocks.
         """
         p = self.params
-        diff = float(cv2.norm(lum, self.previous, cv2.NORM_L1)) / lum.size
+        diff = float(cv2.norm(blocks, self.previous_blocks, cv2.NORM_L1)) / blocks.size
         if (diff < p.repeat_level and diff < p.repeat_fraction * self._difference
                 and self._repeats < p.repeat_run):
             self._repeats += 1

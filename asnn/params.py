@@ -64,6 +64,10 @@ class ASNNParams(BaseModel):
     repeat_level: float = Field(
         1.0 / 255, gt=0, description="... and by less than this mean absolute difference "
         "([0, 1] intensity)")
+    repeat_block: int = Field(
+        8, ge=1, description="the repeat test compares the frames' means over blocks of this "
+        "many pixels square: a camera's sensor noise, which differs between two copies of a "
+        "repeated frame, averages out over a block; 1: every pixel")
     repeat_run: int = Field(
         1, ge=1, description="at most this many repeats in a row: after that the scene has "
         "stopped moving, and the model sees it")

@@ -259,6 +259,34 @@ def test_repeated_frames_are_held_rather_than_read_as_a_stop():
     assert held_warn.index(True) < (plain_warn.index(True) if any(plain_warn) else len(frames))
 
 
+def test_a_repeated_frame_is_held_under_sensor_noise():
+    # a scene moving across the view (a checkerboard sliding 2 px per frame), converted to a
+    # higher frame rate (every third frame shown twice), every copy with noise of its own (4
+    # gray levels, as a camera adds): per pixel the two copies of a frame differ by more than
+    # the repeat test's level, their block means do not
+    scene = make_case("loom-dark-c0.5-over-checker-diag2px")
+    frames, copies = [], []
+    for i, frame in enumerate(scene.frames):
+        frames.append(frame)
+        if i % 3 == 2:
+            copies.append(len(frames))
+            frames.append(frame)
+    rng = np.random.default_rng(0)
+    noisy = [np.clip(np.rint(f + rng.normal(0.0, 4.0, f.shape)), 0, 255).astype(np.uint8)
+             for f in frames]
+    fps = scene.fps * 4 / 3
+    held = {}
+    for block in (8, 1):
+        model = ASNN(preset("robust", repeat_block=block))
+        held[block] = []
+        for i, frame in enumerate(noisy):
+            model.step(frame, i / fps)
+            if model.repeated:
+                held[block].append(i)
+    assert held[8] == copies
+    assert not held[1]
+
+
 def test_a_still_scene_is_not_a_run_of_repeats():
     model = ASNN("robust")
     scene = make_case("halt-dark-c0.6")
