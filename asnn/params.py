@@ -63,7 +63,7 @@ class ASNNParams(BaseModel):
         "fraction of the mean absolute difference of the last frame that was not a repeat ...")
     repeat_level: float = Field(
         1.0 / 255, gt=0, description="... and by less than this mean absolute difference "
-        "([0, 1] intensity)")
+        "([0, 1] intensity; of the block means, repeat_block)")
     repeat_block: int = Field(
         8, ge=1, description="the repeat test compares the frames' means over blocks of this "
         "many pixels square: a camera's sensor noise, which differs between two copies of a "
