@@ -159,6 +159,10 @@ def test_a_mirrored_clip_is_scored_against_its_mirrored_label(tmp_path):
     assert perturb_label(tracked, "mirror")["track"] == [[45.0, 30.0], [44.0, 31.0]]
     with pytest.raises(ValueError, match="width"):
         perturb_label({k: v for k, v in label.items() if k != "width"}, "mirror")
+    from asnn.evaluation.clips import evaluate_clips
+
+    with pytest.raises(ValueError, match="unknown perturbation"):
+        evaluate_clips(tmp_path, tmp_path / "never", perturbation="blur")
 
     out = tmp_path / "out"
     assert main(["eval", str(tmp_path), "--detectors", "asnn", "--perturb", "mirror",
