@@ -47,8 +47,7 @@ from asnn.io.images import MAX_SIDE, ImageError, check_encoded, decode_encoded, 
 
 __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
            "Response", "TargetMsg", "VERSION", "decode_frame", "decode_response", "encode",
-           "encode_image", "encoded_size", "track_id_base", "track_label",
-           "unpack_map"]
+           "encode_image", "encoded_size", "track_id_base", "track_label", "unpack_map"]
 
 VERSION = 1
 FrameFormat = Literal["gray8", "bgr8", "jpeg", "png"]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
-from .perturb import PERTURBATIONS, perturb_label, perturbed
+from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_detectors, rate,
                    run_detector, write_json, write_jsonl)
@@ -130,9 +130,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     """
     clips_dir, out_dir = Path(clips_dir), Path(out_dir)
     labels_path = Path(labels_path) if labels_path else clips_dir / "labels.json"
-    if perturbation is not None and perturbation not in PERTURBATIONS:
-        raise ValueError(f"unknown perturbation {perturbation!r}; choose one of "
-                         f"{', '.join(PERTURBATIONS)}")
+    check_perturbation(perturbation)
     labels = [perturb_label(lab, perturbation) for lab in scoring.load_labels(labels_path)]
     specs = parse_detectors(detectors, preset_name)
     progress = progress or Silent()

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..stimuli.effects import jpeg, sensor_noise
 
-__all__ = ["PERTURBATIONS", "perturb_frame", "perturbed", "perturb_label"]
+__all__ = ["PERTURBATIONS", "check_perturbation", "perturb_frame", "perturbed", "perturb_label"]
 
 # name -> what it does (asnn eval -h lists them)
 PERTURBATIONS = {
@@ -32,6 +32,13 @@ JPEG_QUALITY = 30
 DIM_GAIN = 0.6
 
 
+def check_perturbation(name: str | None) -> None:
+    """Raise ValueError unless ``name`` is None or one of :data:`PERTURBATIONS`."""
+    if name is not None and name not in PERTURBATIONS:
+        raise ValueError(f"unknown perturbation {name!r}; choose one of "
+                         f"{', '.join(PERTURBATIONS)}")
+
+
 def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
     """The frame ``index`` of a clip (uint8, gray or colour) under the perturbation ``name``.
 
@@ -40,9 +47,7 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
     ValueError
         For an unknown perturbation or a frame that is not uint8.
     """
-    if name not in PERTURBATIONS:
-        raise ValueError(f"unknown perturbation {name!r}; choose one of "
-                         f"{', '.join(PERTURBATIONS)}")
+    check_perturbation(name)
     if frame.dtype != np.uint8:
         raise ValueError(f"perturbations take uint8 frames, got {frame.dtype}")
     if name == "mirror":
