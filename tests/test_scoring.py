@@ -17,10 +17,12 @@ QUIET = {"file": "nc.mp4", "fps": 20.0, "frames": 60, "collision": False, "onset
 
 
 def records(warnings=(), frames=60, targets=None):
-    """Per-frame records with warnings at the given frames; ``targets``: {frame: [(x, y)]}."""
+    """Per-frame records with warnings at the given frames; ``targets``: {frame: [(x, y)]} or
+    {frame: [(x, y, fields)]}, fields a dict of further target fields (``ttc``, ``id``)."""
     targets = targets or {}
     return [{"frame": i, "collision": i in warnings,
-             "targets": [{"x": x, "y": y} for x, y in targets.get(i, [])]} for i in range(frames)]
+             "targets": [{"x": t[0], "y": t[1], **(t[2] if len(t) > 2 else {})}
+                         for t in targets.get(i, [])]} for i in range(frames)]
 
 
 @pytest.mark.parametrize("warnings, outcome", [
@@ -174,3 +176,49 @@ def test_summary_gives_the_median_lead_of_the_hits():
     s = scoring.summarize(scores)
     assert s["median_lead_frames"] == 10 and s["median_lead_s"] == pytest.approx(0.5)
     assert s["mean_lead_frames"] == pytest.approx(31 / 3)
+
+
+def test_time_to_contact_and_ids_of_the_warned_targets():
+    # the label's time to contact falls 0.1 s per frame to 0 at contact (frame 40)
+    label = {**COLLISION, "ttc": [(40 - i) / 10 if i < 40 else None for i in range(60)]}
+    targets = {
+        # frame 30 (true 1.0 s): the nearer target counts, the far one (another object) not
+        30: [(30.0, 40.0, {"ttc": 1.2, "id": 7}), (200.0, 40.0, {"ttc": 9.0, "id": 8})],
+        32: [(31.0, 41.0, {"ttc": 0.8, "id": 7})],      # true 0.8 s: exact
+        34: [(31.0, 41.0, {"ttc": 0.3, "id": 9})],      # true 0.6 s: half, another id
+        36: [(31.0, 41.0, {"id": 9})],                  # no ttc: counts for the ids only
+        41: [(31.0, 41.0, {"ttc": 5.0, "id": 10})],     # after contact: not counted
+    }
+    score = scoring.score_clip(records((5, 30, 32, 34, 36, 41), targets=targets), label)
+    assert score.outcome == "early"  # frame 5; the frames before the hit window do not count
+    # errors 0.2, 0, 0.5 -> median 0.2; ratios 1.2, 1, 0.5 -> median 1
+    assert score.ttc_error == pytest.approx(0.2)
+    assert score.ttc_ratio == pytest.approx(1.0)
+    assert score.target_ids == 2
+    # a label without per-frame ttc: the time left to contact (1 s at frame 20 at 20 fps)
+    plain = scoring.score_clip(records((20,), targets={20: [(30.0, 40.0, {"ttc": 1.5})]}),
+                               COLLISION)
+    assert (plain.ttc_error, plain.ttc_ratio, plain.target_ids) == \
+        (pytest.approx(0.5), pytest.approx(1.5), None)
+    # where the label says the object is not closing (ttc null), nothing is measured
+    receding = {**COLLISION, "ttc": [None] * 60}
+    assert scoring.score_clip(records((20,), targets={20: [(30.0, 40.0, {"ttc": 1.5})]}),
+                              receding).ttc_error is None
+    # targets without the fields (the published variant's) give None
+    bare = scoring.score_clip(records((20, 21), targets={20: [(30.0, 40.0)]}), label)
+    assert (bare.ttc_error, bare.ttc_ratio, bare.target_ids) == (None, None, None)
+
+
+def test_summary_of_the_warned_targets_is_over_hits():
+    label = {**COLLISION, "ttc": [(40 - i) / 10 if i < 40 else None for i in range(60)]}
+    one = {30: [(30.0, 40.0, {"ttc": 1.1, "id": 1})], 31: [(30.0, 40.0, {"ttc": 0.9, "id": 1})]}
+    two = {30: [(30.0, 40.0, {"ttc": 2.0, "id": 1})], 31: [(30.0, 40.0, {"ttc": 1.8, "id": 2})]}
+    scores = [scoring.score_clip(records((30, 31), targets=one), {**label, "file": "a"}),
+              scoring.score_clip(records((30, 31), targets=two), {**label, "file": "b"}),
+              scoring.score_clip(records((5, 30), targets=two), {**label, "file": "c"})]  # early
+    s = scoring.summarize(scores)
+    assert (s["one_id_hits"], s["id_hits"]) == (1, 2)
+    # hit a: ratios 1.1, 1 (errors 0.1, 0); hit b: ratios 2, 2 (errors 1, 1); the early
+    # warning c is left out
+    assert s["median_ttc_error"] == pytest.approx((0.05 + 1.0) / 2)
+    assert s["median_ttc_ratio"] == pytest.approx((1.05 + 2.0) / 2)

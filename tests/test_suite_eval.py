@@ -103,7 +103,12 @@ def test_synthetic_eval_end_to_end(evaluated):
     asnn = {c["clip"]: c for c in results["detectors"]["asnn"]["clips"]}
     assert asnn["loom-dark-c1.0-d12-center.mp4"]["outcome"] == "hit"
     assert asnn["loom-dark-c1.0-d12-center.mp4"]["localisation_px"] < 10
+    # its targets' time to contact is within 15 % of the label's, from one track
+    assert asnn["loom-dark-c1.0-d12-center.mp4"]["ttc_error"] < 0.15
+    assert asnn["loom-dark-c1.0-d12-center.mp4"]["target_ids"] == 1
+    assert results["detectors"]["asnn"]["summary"]["one_id_hits"] == 3
     lgmd1 = {c["clip"]: c for c in results["detectors"]["lgmd1"]["clips"]}
+    assert lgmd1["loom-dark-c1.0-d12-center.mp4"]["ttc_error"] is None  # no targets
     assert lgmd1["translate-car-dark-c0.6-h4px.mp4"]["outcome"] == "false"  # as in the paper
 
     report = (out / "report.md").read_text()

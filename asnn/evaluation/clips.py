@@ -16,8 +16,9 @@ from ..io.sources import SourceError, open_source
 from . import figures, scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
-from .runs import (DEFAULT_DETECTORS, DetectorSpec, fmt, outcome_cell, parse_detectors, rate,
-                   run_detector, write_json, write_jsonl)
+from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, DetectorSpec, fmt, outcome_cell,
+                   parse_detectors, rate, run_detector, target_quality_cells, write_json,
+                   write_jsonl)
 
 __all__ = ["evaluate_clips"]
 
@@ -46,15 +47,20 @@ def _clips_report(results: Mapping) -> str:
         f"{settings['warmup']} frames; hit when the first warning lies in "
         f"[onset - {settings['early_tolerance_s']:g} s, contact + {scoring.CONTACT_SLACK_FRAMES}"
         " frames]; an earlier first warning is an early warning (a false alarm); any warning on a"
-        " non-collision clip is a false alarm." + (
+        " non-collision clip is a false alarm. Ttc error: over the warning frames of the hit"
+        " window before contact, the nearest target's |ttc - true| / true, against the label's"
+        " per-frame ttc where it has one, else the time left to the contact frame (median per"
+        " hit, then over hits; the ratio ttc / true likewise); one id: hits whose warning frames"
+        " followed one target id." + (
             f" Frames perturbed: {settings['perturbation']}"
             f" ({PERTURBATIONS[settings['perturbation']]})."
             if settings.get("perturbation") else ""),
         "",
         "| detector | hits | early | late | misses | false alarms (nc) | quiet (nc) | hit rate |"
-        " false-alarm rate | mean / median lead (hits) | median loc. error | warning frames in /"
+        " false-alarm rate | mean / median lead (hits) | median loc. error | "
+        + " | ".join(TARGET_QUALITY_HEADER) + " | warning frames in /"
         " out of windows | warning frames per minute of non-collision video |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for m in names:
         s = results["detectors"][m]["summary"]
@@ -64,6 +70,7 @@ def _clips_report(results: Mapping) -> str:
             f" | {rate(s['hit_rate'])} | {rate(s['false_alarm_rate'])}"
             f" | {fmt(s['mean_lead_s'], 2, ' s')} / {fmt(s['median_lead_s'], 2, ' s')}"
             f" | {fmt(s['median_localisation_px'], 0, ' px')}"
+            f" | {' | '.join(target_quality_cells(s))}"
             f" | {s['window_warning_frames']} / {s['warning_frames'] - s['window_warning_frames']}"
             f" | {fmt(s['warning_frames_per_minute'], 1)} |")
         if s["missing"]:

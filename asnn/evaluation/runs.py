@@ -220,6 +220,20 @@ def rate(value) -> str:
     return "–" if value is None else f"{100 * value:.0f}%"
 
 
+def target_quality_cells(summary: Mapping) -> list[str]:
+    """A detector's summary cells for the targets of its warnings: the median time-to-contact
+    error (and ratio), and the hits whose warning followed one target id."""
+    ttc = "–"
+    if summary.get("median_ttc_error") is not None:
+        ttc = (f"{100 * summary['median_ttc_error']:.0f}% "
+               f"(x{summary['median_ttc_ratio']:.2f})")
+    ids = f"{summary['one_id_hits']}/{summary['id_hits']}" if summary.get("id_hits") else "–"
+    return [ttc, ids]
+
+
+TARGET_QUALITY_HEADER = ["median ttc error (ratio)", "one id (hits)"]
+
+
 def outcome_cell(score: Mapping) -> str:
     """One clip's score for a report table: outcome, first warning frame (lead), warning frames
     (and those after the approach), and the nearest target's distance from the labelled centre

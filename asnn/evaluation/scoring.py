@@ -28,6 +28,14 @@ nearest target of the first warning's frame to the labelled centre (the track's 
 frame where the label has a track), where that frame has targets. Warning frames after
 ``contact + 2`` on a collision clip are counted apart: the warning should end when the approach
 does (for an approach that stops short, ``contact_frame`` is the frame it stops).
+
+What a warning's targets are worth to someone who acts on them is measured over the warning
+frames of the hit window before contact, on the target nearest the labelled centre in each:
+the time-to-contact error ``|ttc - true| / true`` and ratio ``ttc / true`` (medians over those
+frames; the true time to contact is the label's per-frame ``ttc`` where it has one, else the
+time left to ``contact_frame``), and how many distinct ``id`` those targets carry (1: one track
+followed the object through the warning). Detectors whose targets lack ``ttc`` or ``id`` get
+None.
 """
 
 from __future__ import annotations
@@ -91,6 +99,11 @@ class ClipScore:
         track's centre at that frame).
     window : (int, int) or None
         The frames a first warning must lie in to be a hit.
+    ttc_error, ttc_ratio : float or None
+        Median over the warning frames of the hit window before contact of the nearest target's
+        ``|ttc - true| / true`` and ``ttc / true``.
+    target_ids : int or None
+        Distinct ``id`` of the nearest targets over those frames.
     duration_s : float or None
         The clip's length after the warm-up, seconds (frames scored / the label's fps).
     """
@@ -107,6 +120,9 @@ class ClipScore:
     lead_s: float | None = None
     localisation_px: float | None = None
     window: tuple[int, int] | None = None
+    ttc_error: float | None = None
+    ttc_ratio: float | None = None
+    target_ids: int | None = None
     duration_s: float | None = None
 
     def to_dict(self) -> dict:
@@ -143,18 +159,56 @@ def _labelled_center(label: Mapping, frame: int) -> Sequence[float] | None:
     return label.get("center")
 
 
+def _nearest_target(record: Mapping, center: Sequence[float] | None) -> tuple[Mapping, float] | None:
+    """The record's target nearest ``center``, and its distance."""
+    targets = record.get("targets") or []
+    if center is None or not targets:
+        return None
+    cx, cy = float(center[0]), float(center[1])
+    return min(((t, math.hypot(float(t["x"]) - cx, float(t["y"]) - cy)) for t in targets),
+               key=lambda pair: pair[1])
+
+
 def _nearest_target_distance(records: Sequence[Mapping], frame: int,
                              center: Sequence[float] | None) -> float | None:
-    if center is None:
-        return None
     for r in records:
         if int(r["frame"]) == frame:
-            targets = r.get("targets") or []
-            if not targets:
-                return None
-            cx, cy = float(center[0]), float(center[1])
-            return min(math.hypot(float(t["x"]) - cx, float(t["y"]) - cy) for t in targets)
+            nearest = _nearest_target(r, center)
+            return None if nearest is None else nearest[1]
     return None
+
+
+def _true_ttc(label: Mapping, frame: int, fps: float) -> float | None:
+    """The labelled time to contact at ``frame``, seconds: the label's ``ttc`` where it has one
+    (None where it says the object is not closing), else the time left to contact."""
+    ttc = label.get("ttc")
+    if ttc is not None:
+        value = ttc[frame] if 0 <= frame < len(ttc) else None
+        return float(value) if value is not None and value > 0 else None
+    left = int(label["contact_frame"]) - frame
+    return left / fps if fps > 0 and left > 0 else None
+
+
+def _warned_targets(records: Sequence[Mapping], label: Mapping, frames: range,
+                    fps: float) -> tuple[float | None, float | None, int | None]:
+    """Time-to-contact error, ratio and distinct ids of the nearest targets over the warning
+    frames in ``frames`` (the module's docstring)."""
+    errors, ratios, ids = [], [], set()
+    for r in records:
+        frame = int(r["frame"])
+        if not r.get("collision") or frame not in frames:
+            continue
+        nearest = _nearest_target(r, _labelled_center(label, frame))
+        if nearest is None:
+            continue
+        target = nearest[0]
+        if target.get("id") is not None:
+            ids.add(target["id"])
+        true = _true_ttc(label, frame, fps)
+        if target.get("ttc") is not None and true is not None:
+            ratios.append(float(target["ttc"]) / true)
+            errors.append(abs(ratios[-1] - 1.0))
+    return _median(errors), _median(ratios), (len(ids) if ids else None)
 
 
 def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARMUP_FRAMES,
@@ -213,6 +267,8 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     lead = float(int(contact) - first)
     warned = [int(r["frame"]) for r in records if r.get("collision") and int(r["frame"]) >= warmup]
     in_window = sum(1 for f in warned if window[0] <= f <= window[1])
+    ttc_error, ttc_ratio, target_ids = _warned_targets(
+        records, label, range(max(window[0], warmup), int(contact)), fps)
     return ClipScore(clip=clip, collision=True, outcome=outcome, first_warning=first,
                      warning_frames=count, window_warning_frames=in_window,
                      after_warning_frames=sum(1 for f in warned if f > window[1]),
@@ -220,6 +276,7 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
                      lead_frames=lead, lead_s=lead / fps if fps > 0 else None,
                      localisation_px=_nearest_target_distance(records, first,
                                                               _labelled_center(label, first)),
+                     ttc_error=ttc_error, ttc_ratio=ttc_ratio, target_ids=target_ids,
                      duration_s=duration,
                      window=window)
 
@@ -256,7 +313,10 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         ``window_warning_frames`` and ``after_warning_frames`` summed over the scored clips, and
         ``after_warning_clips``, the collision clips with warnings after the approach;
         ``mean_lead_s``, ``mean_lead_frames``, ``median_lead_s`` and ``median_lead_frames`` over
-        hits; ``median_localisation_px`` over hits with targets; ``noncollision_minutes`` (of
+        hits; ``median_localisation_px`` over hits with targets; ``median_ttc_error`` and
+        ``median_ttc_ratio`` over the hits' own medians; ``one_id_hits`` (hits whose warning
+        followed one target id) of ``id_hits`` (hits whose targets carry ids);
+        ``noncollision_minutes`` (of
         scored non-collision video, where the labels give the fps) and
         ``warning_frames_per_minute`` of it (SPEC.md section 5: a detector that fires once per
         clip and one that fires all the time are not equally useful).
@@ -294,6 +354,10 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         "median_lead_s": _median([s.lead_s for s in hits if s.lead_s is not None]),
         "median_localisation_px": _median([s.localisation_px for s in hits
                                            if s.localisation_px is not None]),
+        "median_ttc_error": _median([s.ttc_error for s in hits if s.ttc_error is not None]),
+        "median_ttc_ratio": _median([s.ttc_ratio for s in hits if s.ttc_ratio is not None]),
+        "one_id_hits": sum(s.target_ids == 1 for s in hits),
+        "id_hits": sum(s.target_ids is not None for s in hits),
     }
 
 

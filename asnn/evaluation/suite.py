@@ -25,8 +25,9 @@ from pathlib import Path
 from ..stimuli.suite import GROUPS, SUITE_CASES, SUITE_VERSION, make_case, suite_cases
 from . import scoring
 from .progress import Silent
-from .runs import (DEFAULT_DETECTORS, DetectorSpec, at_rate, fmt, outcome_cell, parse_detectors,
-                   rate, run_detector, write_json, write_jsonl)
+from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, DetectorSpec, at_rate, fmt,
+                   outcome_cell, parse_detectors, rate, run_detector, target_quality_cells,
+                   write_json, write_jsonl)
 
 __all__ = ["EARLY_TOLERANCE_S", "evaluate_suite", "near_miss_pairs", "category_summaries",
            "suite_report"]
@@ -261,7 +262,11 @@ def suite_report(results: Mapping) -> str:
         f"{settings['contact_slack_frames']} frames], early (a false alarm) before, late after; "
         "any warning on a non-collision case is a false alarm. FA = early + warned non-collision"
         " cases; FA rate over all cases. Lead = contact - first warning (hits). Localisation: "
-        "the nearest target at the first warning to the labelled track. *After*: warning "
+        "the nearest target at the first warning to the labelled track. Ttc error: over the "
+        "warning frames before contact, the nearest target's |ttc - true| / true against the "
+        "label's time to contact (median per hit, then over hits; the ratio ttc / true likewise:"
+        " below 1 warns that contact is nearer than it is); one id: hits whose warning frames "
+        "followed one target id. *After*: warning "
         "frames after contact + 2 (or after an approach stopped) on collision cases.",
         "",
     ]
@@ -272,10 +277,11 @@ def suite_report(results: Mapping) -> str:
                      str(s["late"]), str(s["miss"]), f"{s['false']}/{s['noncollision_clips']}",
                      str(s["false_alarms"]), rate(s["hit_rate"]), rate(s["false_alarm_rate"]),
                      fmt(s["median_lead_s"], 2, " s"), fmt(s["median_localisation_px"], 1, " px"),
+                     *target_quality_cells(s),
                      f"{s['after_warning_frames']} ({s['after_warning_clips']} cases)"])
     lines += _table(["detector", "hits", "early", "late", "misses", "warned non-collision",
                      "FA", "hit rate", "FA rate", "median lead", "median loc. error",
-                     "frames after"], rows)
+                     *TARGET_QUALITY_HEADER, "frames after"], rows)
 
     pairs = results["pairs"]
     if pairs:
