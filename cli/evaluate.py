@@ -20,7 +20,7 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detectors
 from asnn.params import preset_names
 
-from .arguments import count, frame_size
+from .arguments import count, frame_size, whole
 
 
 def _detectors(text: str) -> list[str]:
@@ -62,6 +62,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --synthetic (or --held-out: the cases that decide which "
                         "thresholds are admissible): comma-separated patterns of case names or "
                         "groups, e.g. 'loom-*,nearmiss-*' or 'driving-*' (default: every case)")
+    p.add_argument("--variant", type=whole, default=0, metavar="K",
+                   help="with --synthetic: K >= 1 scores the same cases with fresh scene seeds "
+                        "(other textures, sensor noise and roadside objects; the same geometry, "
+                        "motion and labels), scenes the default's design did not see (default: "
+                        "0, the suite as it is)")
     p.add_argument("--out", metavar="DIR", default="eval-out",
                    help="output directory (default: %(default)s)")
     p.add_argument("--early-tolerance", type=float, metavar="SECONDS",
@@ -98,6 +103,7 @@ def run(args: argparse.Namespace) -> int:
     misplaced = [flag for flag, given, mode in (
         ("--cases", args.cases, args.synthetic or args.held_out),
         ("--case-plots", args.case_plots, args.synthetic),
+        ("--variant", args.variant, args.synthetic),
         ("--size", args.size, args.paper),
         ("--ablation", args.ablation, not (args.paper or args.held_out)),
         ("--labels", args.labels, not (args.synthetic or args.paper)),
@@ -123,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
             suite.evaluate_suite(args.out, detectors=args.detectors, preset_name=preset_name,
                                  cases=args.cases, jobs=args.jobs, warmup=args.warmup,
                                  plots=not args.no_plots, case_plots=args.case_plots,
-                                 progress=progress)
+                                 variant=args.variant, progress=progress)
         elif not args.clips_dir:
             print("asnn eval: CLIPS_DIR is required (or --synthetic, or --paper)", file=sys.stderr)
             return 2

@@ -14,7 +14,7 @@ import sys
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 from asnn.stimuli.suite import SUITE_CASES, make_case, suite_cases
 
-from .arguments import frame_size
+from .arguments import frame_size, whole
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,6 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "video (.mp4 or .avi) or a ROS 2 bag (.mcap: sensor_msgs/msg/Image mono8 "
                         "on /camera/image_raw; the 'ros' extra); with --case only OUT")
     p.add_argument("--case", metavar="CASE", help="a case of the labelled suite instead")
+    p.add_argument("--variant", type=whole, default=0, metavar="K",
+                   help="with --case: the case with a fresh scene seed K >= 1 (asnn eval "
+                        "--synthetic --variant K; default: 0, the case as the suite has it)")
     p.add_argument("--list", nargs="?", const="all", metavar="PATTERN",
                    help="list the suite's cases (matching PATTERN) and exit")
     p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH",
@@ -51,8 +54,11 @@ def run(args: argparse.Namespace) -> int:
                 print("asnn scene: --case takes one OUT file", file=sys.stderr)
                 return 2
             out = args.args[0]
-            scene = make_case(args.case)
+            scene = make_case(args.case, args.variant)
         else:
+            if args.variant:
+                print("asnn scene: --variant goes with --case", file=sys.stderr)
+                return 2
             if len(args.args) != 2:
                 print("asnn scene: give NAME OUT, or --case CASE OUT", file=sys.stderr)
                 return 2

@@ -463,6 +463,37 @@ def test_suite_cases_are_deterministic_and_selectable(suite):
         make_case("no-such-case")
 
 
+def _without_seeds(value):
+    if isinstance(value, dict):
+        return {k: _without_seeds(v) for k, v in value.items() if k != "seed"}
+    if isinstance(value, (list, tuple)):
+        return [_without_seeds(v) for v in value]
+    return value
+
+
+def test_a_variant_is_the_same_case_with_a_fresh_scene_seed(suite):
+    for name in ("drive-day-oncoming-headon", "loom-dark-c0.3-d12-texture", "noise-gauss-10",
+                 "shake-texture-4px-rot1deg", "flicker-random-10pct"):
+        base, fresh = suite[name], make_case(name, 2)
+        assert not np.array_equal(fresh.frames, base.frames)  # other textures, noise, roadside
+        same = ("description",)  # which names the seed
+        assert {k: v for k, v in fresh.label("x").items() if k not in same} == \
+            {k: v for k, v in base.label("x").items() if k not in same}  # the same label
+        assert _without_seeds(fresh.params) == _without_seeds(base.params)
+        assert fresh.params != base.params
+        assert np.array_equal(make_case(name, 2).frames, fresh.frames)  # deterministic
+    assert np.array_equal(make_case("drive-day-follow", 0).frames,
+                          suite["drive-day-follow"].frames)
+    assert make_case("drive-day-follow", 1).params["seed"] != \
+        make_case("drive-day-follow", 2).params["seed"]
+    # a near miss and its collision-course twin keep sharing their textures and noise
+    near = SUITE_CASES["nearmiss-disk-dark-right"]
+    assert make_case(near.name, 3).params["seed"] == make_case(near.twin, 3).params["seed"]
+    for bad in (-1, 1.5, True, "1"):
+        with pytest.raises(ValueError):
+            make_case("drive-day-follow", bad)
+
+
 def test_brightness_and_noise_cases_of_the_suite_do_what_their_names_say(suite):
     def means(name):
         return suite[name].frames.reshape(len(suite[name].frames), -1).mean(axis=1)

@@ -9,7 +9,7 @@ import json
 import pytest
 
 from asnn.evaluation import scoring, suite
-from asnn.evaluation.runs import parse_detector, parse_detectors
+from asnn.evaluation.runs import at_rate, parse_detector, parse_detectors, run_detector
 from asnn.stimuli.suite import make_case
 from cli.main import main
 from service.camera import open_source
@@ -124,6 +124,30 @@ def test_synthetic_eval_end_to_end(evaluated):
 def test_synthetic_eval_rejects_an_unknown_case(tmp_path, capsys):
     assert main(["eval", "--synthetic", "--cases", "no-such-*", "--out", str(tmp_path)]) == 2
     assert "no suite case matches" in capsys.readouterr().err
+
+
+def test_synthetic_eval_of_a_variant(tmp_path, capsys):
+    out = tmp_path / "v2"
+    assert main(["eval", "--synthetic", "--variant", "2", "--cases", "drive-day-follow",
+                 "--detectors", "asnn", "--no-plots", "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["settings"]["variant"] == 2
+    assert (out / "report.md").read_text().startswith(
+        "# Labelled suite of generated scenes (version 6, variant 2)")
+    # the per-frame results are the detector's on the variant's frames, not the suite's
+    records = scoring.load_records(out / "results" / "asnn" / "drive-day-follow.jsonl")
+    variant, base = make_case("drive-day-follow", 2), make_case("drive-day-follow")
+    spec = parse_detector("asnn")
+    on_variant = run_detector(at_rate(variant.frames, variant.fps), spec)
+    on_base = run_detector(at_rate(base.frames, base.fps), spec)
+    assert [r["u"] for r in records] == [r["u"] for r in on_variant] != [r["u"] for r in on_base]
+    capsys.readouterr()
+    for argv in (["eval", str(tmp_path), "--variant", "1", "--out", str(out)],
+                 ["scene", "looming", str(tmp_path / "x.avi"), "--variant", "1"]):
+        assert main(argv) == 2
+        assert "--variant" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["eval", "--synthetic", "--variant", "-1", "--out", str(out)])
 
 
 def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):

@@ -36,10 +36,10 @@ EARLY_TOLERANCE_S = 0.0  # generated clips: the onset is exact
 
 
 def _run_case(name: str, specs: Sequence[DetectorSpec], out_dir: str, warmup: int,
-              plots: bool) -> dict:
+              plots: bool, variant: int = 0) -> dict:
     # plots import matplotlib, and take longer than the runs: only where asked for
     """Worker: generate one case, run and score every detector on it, write its results."""
-    scene = make_case(name)
+    scene = make_case(name, variant)
     label = scene.label(f"{name}.mp4")
     entry = {"label": label, "scores": {}}
     series = {}
@@ -132,7 +132,7 @@ def near_miss_pairs(cases: Sequence[Mapping], detectors: Mapping[str, Sequence[M
 def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DETECTORS,
                    preset_name: str | None = None, cases: str | None = None, jobs: int = 1,
                    warmup: int = scoring.WARMUP_FRAMES, plots: bool = True,
-                   case_plots: bool = False, progress=None) -> dict:
+                   case_plots: bool = False, variant: int = 0, progress=None) -> dict:
     """Generate, run, score and report the labelled suite.
 
     Parameters
@@ -152,6 +152,9 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
         Draw ``plots/summary.png``.
     case_plots : bool
         Draw ``plots/<case>.png`` too (about half a second a case).
+    variant : int
+        0: the suite's cases as designed; K >= 1: the same cases with fresh scene seeds
+        (:func:`asnn.stimuli.suite.make_case`), figures the design did not see.
     progress : ProgressPrinter-like, optional
 
     Returns
@@ -166,6 +169,8 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     """
     out_dir = Path(out_dir)
     names = suite_cases(cases)
+    if isinstance(variant, bool) or not isinstance(variant, int) or variant < 0:
+        raise ValueError(f"variant must be an integer >= 0, got {variant!r}")
     specs = parse_detectors(detectors, preset_name)
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs}")
@@ -185,13 +190,14 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
 
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_run_case, name, specs, str(out_dir), warmup, case_plots): name
+            futures = {pool.submit(_run_case, name, specs, str(out_dir), warmup, case_plots,
+                                   variant): name
                        for name in names}
             for future in as_completed(futures):
                 finished(futures[future], future.result())
     else:
         for name in names:
-            finished(name, _run_case(name, specs, str(out_dir), warmup, case_plots))
+            finished(name, _run_case(name, specs, str(out_dir), warmup, case_plots, variant))
     progress.finish()
     elapsed = time.perf_counter() - started
 
@@ -207,7 +213,7 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
                           "peak_out": entries[name]["scores"][spec.name][1]} for name in names]
              for spec in specs}
     results = {
-        "settings": {"suite_version": SUITE_VERSION, "cases": cases or "all",
+        "settings": {"suite_version": SUITE_VERSION, "variant": variant, "cases": cases or "all",
                      "detectors": [spec.name for spec in specs], "warmup": warmup,
                      "early_tolerance_s": EARLY_TOLERANCE_S,
                      "contact_slack_frames": scoring.CONTACT_SLACK_FRAMES, "jobs": jobs},
@@ -252,8 +258,13 @@ def suite_report(results: Mapping) -> str:
     cases = results["cases"]
     n_col = sum(c["collision"] for c in cases)
     lines = [
-        f"# Labelled suite of generated scenes (version {settings['suite_version']})",
+        f"# Labelled suite of generated scenes (version {settings['suite_version']}"
+        + (f", variant {settings['variant']}" if settings.get("variant") else "") + ")",
         "",
+        *([f"Variant {settings['variant']}: the suite's cases with fresh scene seeds (other "
+           "textures, sensor noise and roadside objects; the same geometry, motion and labels)."
+           " The default preset was designed on the suite as it is (variant 0), not on these.",
+           ""] if settings.get("variant") else []),
         f"{len(cases)} cases ({n_col} collisions, {len(cases) - n_col} not; "
         f"{results['frames']} frames at 20 fps), selection `{settings['cases']}`; detectors "
         f"{', '.join(f'`{n}`' for n in names)}; {results['elapsed_s']:.0f} s wall time with "
