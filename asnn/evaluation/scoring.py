@@ -316,8 +316,7 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         hits; ``median_localisation_px`` over hits with targets; ``median_ttc_error`` and
         ``median_ttc_ratio`` over the hits' own medians; ``one_id_hits`` (hits whose warning
         followed one target id) of ``id_hits`` (hits whose targets carry ids);
-        ``noncollision_minutes`` (of
-        scored non-collision video, where the labels give the fps) and
+        ``noncollision_minutes`` (of scored non-collision video, where the labels give the fps) and
         ``warning_frames_per_minute`` of it (SPEC.md section 5: a detector that fires once per
         clip and one that fires all the time are not equally useful).
     """

@@ -22,7 +22,8 @@ from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from ..stimuli.suite import GROUPS, SUITE_CASES, SUITE_VERSION, make_case, suite_cases
+from ..stimuli.suite import (GROUPS, SUITE_CASES, SUITE_VERSION, check_variant, make_case,
+                             suite_cases)
 from . import scoring
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, DetectorSpec, at_rate, fmt,
@@ -169,8 +170,7 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     """
     out_dir = Path(out_dir)
     names = suite_cases(cases)
-    if isinstance(variant, bool) or not isinstance(variant, int) or variant < 0:
-        raise ValueError(f"variant must be an integer >= 0, got {variant!r}")
+    check_variant(variant)
     specs = parse_detectors(detectors, preset_name)
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs}")

@@ -65,7 +65,8 @@ from .effects import Flicker, Headlights, Pan, Ramp, Shake, Step, Sweep
 from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 
-__all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case"]
+__all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case",
+           "check_variant"]
 
 SUITE_VERSION = "6"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
@@ -119,8 +120,8 @@ def _variant_seed(seed: int, variant: int) -> int:
 
 
 def _reseeded(value, variant: int):
-    """An option with fresh seeds for ``variant``: the scene's own (``seed``), and those of the
-    effects that carry one (dataclasses with a ``seed`` field, alone or in a tuple)."""
+    """An option with fresh seeds for ``variant`` where it is an effect that carries one (a
+    dataclass with a ``seed`` field, alone or in a tuple); any other option as it is."""
     if isinstance(value, tuple):
         return tuple(_reseeded(v, variant) for v in value)
     if is_dataclass(value) and not isinstance(value, type) \
@@ -611,6 +612,11 @@ def make_case(name: str, variant: int = 0) -> Scene:
         case = SUITE_CASES[name]
     except KeyError:
         raise ValueError(f"unknown suite case {name!r} (see asnn.stimuli.suite.SUITE_CASES)") from None
+    return case.make(check_variant(variant))
+
+
+def check_variant(variant) -> int:
+    """``variant`` if it names a variant of the suite (an integer >= 0), else ValueError."""
     if isinstance(variant, bool) or not isinstance(variant, int) or variant < 0:
         raise ValueError(f"variant must be an integer >= 0, got {variant!r}")
-    return case.make(variant)
+    return variant
