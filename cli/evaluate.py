@@ -2,8 +2,8 @@
 
 ``asnn eval CLIPS_DIR [--labels FILE] [--detectors LIST] [--preset P] [--out DIR]`` scores every
 detector on labelled clips (SPEC.md section 5), with ``--perturb NAME`` on their frames
-perturbed; ``asnn eval --synthetic [--cases PATTERN]`` generates the labelled suite of
-:mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper`` regenerates the paper's synthetic
+perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME]``
+generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper`` regenerates the paper's synthetic
 figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
 default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``, ``lgmd2``. Exit status 2 for unusable
 input.
@@ -80,7 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=frame_size, metavar="WxH",
                    help="with --paper: frame size of the scenes (default: 128x128, the paper's)")
     p.add_argument("--perturb", choices=list(PERTURBATIONS), metavar="NAME",
-                   help="with CLIPS_DIR: score the detectors on the clips' frames perturbed, "
+                   help="with CLIPS_DIR or --synthetic: score the detectors on the frames perturbed, "
                         "to see whether their scores hold on another camera: "
                         + "; ".join(f"{name}: {what}" for name, what in PERTURBATIONS.items()))
     p.add_argument("--no-plots", action="store_true", help="skip the PNGs")
@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
         ("--labels", args.labels, not (args.synthetic or args.paper)),
         ("--early-tolerance", args.early_tolerance is not None,
          not (args.synthetic or args.paper)),
-        ("--perturb", args.perturb, not (args.synthetic or args.paper or args.held_out)),
+        ("--perturb", args.perturb, not (args.paper or args.held_out)),
     ) if given and not mode]
     if misplaced:
         print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
@@ -129,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
             suite.evaluate_suite(args.out, detectors=args.detectors, preset_name=preset_name,
                                  cases=args.cases, jobs=args.jobs, warmup=args.warmup,
                                  plots=not args.no_plots, case_plots=args.case_plots,
-                                 variant=args.variant, progress=progress)
+                                 variant=args.variant, perturbation=args.perturb,
+                                 progress=progress)
         elif not args.clips_dir:
             print("asnn eval: CLIPS_DIR is required (or --synthetic, or --paper)", file=sys.stderr)
             return 2

@@ -150,6 +150,26 @@ def test_synthetic_eval_of_a_variant(tmp_path, capsys):
         main(["eval", "--synthetic", "--variant", "-1", "--out", str(out)])
 
 
+def test_synthetic_eval_of_perturbed_frames(tmp_path):
+    # an approach off the centre, mirrored: the labels are mirrored with the frames, so the
+    # warning's target is still on the labelled object
+    out = tmp_path / "mirror"
+    assert main(["eval", "--synthetic", "--perturb", "mirror", "--cases",
+                 "course-disk-dark-right", "--detectors", "asnn", "--no-plots", "--out",
+                 str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["settings"]["perturbation"] == "mirror"
+    assert "Frames perturbed: mirror" in (out / "report.md").read_text()
+    label = json.loads((out / "labels.json").read_text())[0]
+    original = make_case("course-disk-dark-right").label("course-disk-dark-right.mp4")
+    onset = original["onset_frame"]
+    assert label["track"][onset][0] == pytest.approx(
+        original["width"] - 1 - original["track"][onset][0])
+    assert original["track"][onset][0] > original["width"] / 2 > label["track"][onset][0]
+    score = results["detectors"]["asnn"]["clips"][0]
+    assert score["outcome"] == "hit" and score["localisation_px"] < 10
+
+
 def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):
     out, labels = tmp_path / "case.avi", tmp_path / "labels.json"
     assert main(["scene", "--case", "nearmiss-disk-dark-right", str(out), "--labels",

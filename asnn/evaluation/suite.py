@@ -25,6 +25,7 @@ from pathlib import Path
 from ..stimuli.suite import (GROUPS, SUITE_CASES, SUITE_VERSION, check_variant, make_case,
                              suite_cases)
 from . import scoring
+from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, DetectorSpec, at_rate, fmt,
                    outcome_cell, parse_detectors, rate, run_detector, target_quality_cells,
@@ -37,15 +38,16 @@ EARLY_TOLERANCE_S = 0.0  # generated clips: the onset is exact
 
 
 def _run_case(name: str, specs: Sequence[DetectorSpec], out_dir: str, warmup: int,
-              plots: bool, variant: int = 0) -> dict:
+              plots: bool, variant: int = 0, perturbation: str | None = None) -> dict:
     # plots import matplotlib, and take longer than the runs: only where asked for
-    """Worker: generate one case, run and score every detector on it, write its results."""
+    """Worker: generate one case (its frames perturbed where ``perturbation`` names one), run
+    and score every detector on it, write its results."""
     scene = make_case(name, variant)
-    label = scene.label(f"{name}.mp4")
+    label = perturb_label(scene.label(f"{name}.mp4"), perturbation)
     entry = {"label": label, "scores": {}}
     series = {}
     for spec in specs:
-        records = run_detector(at_rate(scene.frames, scene.fps), spec)
+        records = run_detector(perturbed(at_rate(scene.frames, scene.fps), perturbation), spec)
         write_jsonl(Path(out_dir) / "results" / spec.slug / f"{name}.jsonl", records)
         score = scoring.score_clip(records, label, warmup=warmup,
                                    early_tolerance_s=EARLY_TOLERANCE_S)
@@ -133,7 +135,8 @@ def near_miss_pairs(cases: Sequence[Mapping], detectors: Mapping[str, Sequence[M
 def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DETECTORS,
                    preset_name: str | None = None, cases: str | None = None, jobs: int = 1,
                    warmup: int = scoring.WARMUP_FRAMES, plots: bool = True,
-                   case_plots: bool = False, variant: int = 0, progress=None) -> dict:
+                   case_plots: bool = False, variant: int = 0, perturbation: str | None = None,
+                   progress=None) -> dict:
     """Generate, run, score and report the labelled suite.
 
     Parameters
@@ -156,6 +159,9 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     variant : int
         0: the suite's cases as designed; K >= 1: the same cases with fresh scene seeds
         (:func:`asnn.stimuli.suite.make_case`), figures the design did not see.
+    perturbation : str, optional
+        Run on the cases' frames perturbed by one of
+        :data:`~asnn.evaluation.perturb.PERTURBATIONS` (the labels follow a mirrored frame).
     progress : ProgressPrinter-like, optional
 
     Returns
@@ -166,11 +172,13 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     Raises
     ------
     ValueError
-        For an unknown detector or preset, or a pattern that matches no case.
+        For an unknown detector, preset, variant or perturbation, or a pattern that matches no
+        case.
     """
     out_dir = Path(out_dir)
     names = suite_cases(cases)
     check_variant(variant)
+    check_perturbation(perturbation)
     specs = parse_detectors(detectors, preset_name)
     if jobs < 1:
         raise ValueError(f"jobs must be at least 1, got {jobs}")
@@ -191,13 +199,14 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             futures = {pool.submit(_run_case, name, specs, str(out_dir), warmup, case_plots,
-                                   variant): name
+                                   variant, perturbation): name
                        for name in names}
             for future in as_completed(futures):
                 finished(futures[future], future.result())
     else:
         for name in names:
-            finished(name, _run_case(name, specs, str(out_dir), warmup, case_plots, variant))
+            finished(name, _run_case(name, specs, str(out_dir), warmup, case_plots, variant,
+                                     perturbation))
     progress.finish()
     elapsed = time.perf_counter() - started
 
@@ -213,7 +222,8 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
                           "peak_out": entries[name]["scores"][spec.name][1]} for name in names]
              for spec in specs}
     results = {
-        "settings": {"suite_version": SUITE_VERSION, "variant": variant, "cases": cases or "all",
+        "settings": {"suite_version": SUITE_VERSION, "variant": variant,
+                     "perturbation": perturbation, "cases": cases or "all",
                      "detectors": [spec.name for spec in specs], "warmup": warmup,
                      "early_tolerance_s": EARLY_TOLERANCE_S,
                      "contact_slack_frames": scoring.CONTACT_SLACK_FRAMES, "jobs": jobs},
@@ -265,6 +275,9 @@ def suite_report(results: Mapping) -> str:
            "textures, sensor noise and roadside objects; the same geometry, motion and labels)."
            " The default preset was designed on the suite as it is (variant 0), not on these.",
            ""] if settings.get("variant") else []),
+        *([f"Frames perturbed: {settings['perturbation']} "
+           f"({PERTURBATIONS[settings['perturbation']]}).", ""]
+          if settings.get("perturbation") else []),
         f"{len(cases)} cases ({n_col} collisions, {len(cases) - n_col} not; "
         f"{results['frames']} frames at 20 fps), selection `{settings['cases']}`; detectors "
         f"{', '.join(f'`{n}`' for n in names)}; {results['elapsed_s']:.0f} s wall time with "
