@@ -175,8 +175,10 @@ class ASNN:
         self.stages_off: np.ndarray | None = None
         self.spike_window: deque[int] = deque(maxlen=self.params.n_t)
         self.index = 0
-        self.tracker = TargetTracker(self.params.track_link, self.params.track_missed,
-                                     self.params.track_smoothing, self.params.track_box)
+        self.tracker = TargetTracker(
+            self.params.track_link, self.params.track_missed, self.params.track_smoothing,
+            self.params.track_box,
+            self.params.approach_frames if self.params.region_persistence else 0)
         self._stamp: float | None = None
         self._last: Response | None = None
         self._repeats = 0
@@ -567,8 +569,8 @@ class ASNN:
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frame)
-        coming = [tr.judge(p.tau_max, p.offset_max, p.approach_frames, self._overlap,
-                           p.scene_tolerance) for tr in tracks]
+        coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, p.approach_frames,
+                                    self._overlap, p.scene_tolerance)
         self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
             total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0

@@ -241,6 +241,12 @@ class ASNNParams(BaseModel):
         "or more")
     approach_frames: int = Field(3, ge=1, description="consecutive frames a track must pass "
                                  "the approach test (ttc, offset) before it counts")
+    region_persistence: bool = Field(
+        False, description="a track that passes the approach test now also counts where "
+        "passing tracks overlapped its box in approach_frames - 1 of the previous "
+        "approach_frames frames: an object seen in fragments that change tracks from frame to "
+        "frame (a walker whose sway splits its outline) persists where it is seen "
+        "(asnn.tracking.persists_in_region); a part of the approach gate")
     partial_overlap: bool = Field(
         False, description="the approach test also passes a partial overlap: ttc <= "
         "overlap_tau_max, offset <= overlap_offset_max, from a box the expansion fit explains "
@@ -349,7 +355,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
-    partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
+    partial_overlap=True, scene_tolerance=0.1, receding_scene=True, region_persistence=True,
 ))
 DEFAULT_PRESET = "robust"
 

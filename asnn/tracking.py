@@ -24,6 +24,13 @@ Per track, the expansion rate and the drift are exponentially smoothed. From the
     edge cuts the object): the partial-overlap regime of :func:`approach_test` accepts a wider
     offset only from a whole object whose box moves as one.
 
+Persistence: a warning needs a few frames of approach in a row (:meth:`Track.judge`). An
+object seen in fragments that change from frame to frame (a walker whose sway splits its
+outline, so its head, its feet and its sides are tracked as different objects in turn) never
+gives one track that many; with ``region_frames`` the tracker also counts a track that passes
+now where approaching tracks overlapped its box in enough of the frames before
+(:func:`persists_in_region`): persistence of the approach where it is seen, not of a track id.
+
 References
 ----------
 .. [1] D. N. Lee, "A theory of visual control of braking based on information about
@@ -36,10 +43,12 @@ References
 from __future__ import annotations
 
 import math
+from collections import deque
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
-           "against_scene", "smoothed_run"]
+           "against_scene", "smoothed_run", "persists_in_region"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -250,6 +259,20 @@ def approach_test(ttc: float | None, offset: float | None, tau_max: float,
             and fit is not None and fit >= overlap[2])
 
 
+def persists_in_region(box: Sequence[float], history: Iterable[Sequence[Sequence[float]]],
+                       frames: int) -> bool:
+    """Whether an approach seen in ``box`` now persisted in its region: in at least
+    ``frames - 1`` of the earlier frames of ``history`` (each a list of the boxes of the tracks
+    that passed the approach test then) a box overlapped it.
+
+    Boxes are ``(x0, y0, x1, y1)``, exclusive ends; touching is not overlapping.
+    """
+    x0, y0, x1, y1 = box
+    seen = sum(any(b[0] < x1 and x0 < b[2] and b[1] < y1 and y0 < b[3] for b in boxes)
+               for boxes in history)
+    return seen >= frames - 1
+
+
 class TargetTracker:
     """Links each frame's observations to tracks (one tracker per stream).
 
@@ -264,6 +287,10 @@ class TargetTracker:
         Weight of a new expansion and drift estimate in the track's running average, (0, 1].
     box_weight : float
         Weight of a new observation's box in the track's box, (0, 1] (see :class:`Track`).
+    region_frames : int
+        With N > 0, :meth:`judge` also counts a track that passes the approach test now where
+        passing tracks overlapped its box in ``frames - 1`` of the previous N frames
+        (:func:`persists_in_region`); 0 counts each track's own frames only.
 
     Attributes
     ----------
@@ -272,16 +299,21 @@ class TargetTracker:
     """
 
     def __init__(self, link: float = 1.0, max_missed: int = 3, smoothing: float = 0.5,
-                 box_weight: float = 1.0):
+                 box_weight: float = 1.0, region_frames: int = 0):
         for name, value in (("smoothing", smoothing), ("box_weight", box_weight)):
             if not 0.0 < value <= 1.0:
                 raise ValueError(f"{name} must lie in (0, 1], got {value}")
+        if region_frames < 0:
+            raise ValueError(f"region_frames must be >= 0, got {region_frames}")
         self.link = link
         self.max_missed = max_missed
         self.smoothing = smoothing
         self.box_weight = box_weight
         self.tracks: list[Track] = []
         self._next_id = 0
+        # the boxes of the tracks that passed the approach test, per frame, this frame's last
+        self._passed: deque[list] | None = (deque(maxlen=region_frames + 1) if region_frames
+                                            else None)
 
     def update(self, observations: list[Observation], elapsed: float) -> list[Track]:
         """Link this frame's observations to tracks, ``elapsed`` seconds after the previous frame.
@@ -291,6 +323,8 @@ class TargetTracker:
         list of Track
             The track of each observation, in the observations' order.
         """
+        if self._passed is not None:
+            self._passed.append([])
         assigned: list[Track | None] = [None] * len(observations)
         for track in sorted(self.tracks, key=lambda tr: -tr.mass):
             best, best_d = -1, math.inf
@@ -314,3 +348,21 @@ class TargetTracker:
                 self.tracks.append(track)
                 assigned[i] = track
         return assigned
+
+    def judge(self, tracks: Sequence[Track], tau_max: float, offset_max: float, frames: int,
+              overlap: tuple[float, float, float] | None = None,
+              tolerance: float = 0.0) -> list[bool]:
+        """Whether each of this frame's tracks (what :meth:`update` returned) counts as coming
+        at the camera: it passed the approach test in its last ``frames`` frames in a row
+        (:meth:`Track.judge`), or, with ``region_frames``, it passes now and the approach
+        persisted in its region (:func:`persists_in_region`)."""
+        coming = [track.judge(tau_max, offset_max, frames, overlap, tolerance)
+                  for track in tracks]
+        if self._passed is None:
+            return coming
+        earlier = list(self._passed)[:-1]
+        passing = [track.streak > 0 for track in tracks]
+        coming = [ok or (passed and persists_in_region(track.box, earlier, frames))
+                  for track, ok, passed in zip(tracks, coming, passing)]
+        self._passed[-1] = [track.box for track, passed in zip(tracks, passing) if passed]
+        return coming

@@ -55,12 +55,14 @@ def test_the_replay_reproduces_the_partial_overlap_regime():
     # a car 1.2 m to the side of ours, stopped ahead: a partial overlap, caught only with the
     # regime; a car cutting in at night, whose box holds the roadside too: quiet with the fit
     # test, warned about without it; a car catching up with a rear camera off its axis, whose
-    # box holds the receding road: caught with its fit against the receding scene
+    # box holds the receding road: caught with its fit against the receding scene; a walker
+    # whose sway splits its outline into fragments: caught with region persistence
     base = preset("robust")
     for name, warned, without in (("drive-day-stopped-car-offset", True,
                                    {"partial_overlap": False}),
                                   ("drive-night-cut-in", False, {"overlap_fit_min": -1.0}),
-                                  ("rear-day-catchup-offset", True, {"receding_scene": False})):
+                                  ("rear-day-catchup-offset", True, {"receding_scene": False}),
+                                  ("walk-light-c0.4-gait", True, {"region_persistence": False})):
         scene = make_case(name)
         trace = heldout.trace_clip(at_rate(scene.frames, scene.fps), base, name)
         model = ASNN(base)

@@ -233,6 +233,47 @@ def test_a_partial_overlap_passes_later_and_only_from_a_box_that_moves_as_one():
     assert not approaching(wide, tau_max=1.5, offset_max=1.0, overlap=overlap)
 
 
+def test_an_approach_persists_in_its_region_across_tracks():
+    from asnn.tracking import Observation, persists_in_region
+
+    box = (10.0, 10.0, 30.0, 30.0)
+    inside, beside, apart = (20.0, 0.0, 40.0, 15.0), (30.0, 10.0, 50.0, 30.0), (60, 60, 80, 80)
+    assert persists_in_region(box, [[inside], [apart, inside]], 3)
+    assert not persists_in_region(box, [[inside], [apart]], 3)
+    assert not persists_in_region(box, [[beside], [beside]], 3)  # touching is not overlapping
+    assert persists_in_region(box, [], 1)
+
+    def frame(tracker, observations, passes):
+        """One frame: observations, each track's measurement (passing or drifting past)."""
+        tracks = tracker.update(observations, 0.05)
+        for track, ok in zip(tracks, passes):
+            track.measure(1.0, 5.0 if ok else 60.0, 0.0)  # ttc 1 s; offset 0.25 or 3
+        return tracker.judge(tracks, 1.5, 1.0, 3)
+
+    # a walker's fragments: its head, its feet, its head again, each a new track (far apart
+    # in the frame, so they do not link), boxes overlapping the walker's region
+    head, feet = Observation(50, 20, 5, 1, (30, 0, 70, 60)), Observation(50, 95, 5, 1, (30, 50, 70, 110))
+    region = TargetTracker(max_missed=0, region_frames=3)
+    per_track = TargetTracker(max_missed=0)
+    for tracker, expected in ((region, [False, False, True]), (per_track, [False, False, False])):
+        seen = [frame(tracker, [head], [True]), frame(tracker, [feet], [True]),
+                frame(tracker, [head], [True])]
+        assert [any(s) for s in seen] == expected
+    # a track that does not pass now never counts, whatever passed around it
+    quiet = TargetTracker(max_missed=0, region_frames=3)
+    frame(quiet, [head], [True])
+    frame(quiet, [feet], [True])
+    assert frame(quiet, [head], [False]) == [False]
+    # a frame with nothing in it is a frame of the window too
+    gap = TargetTracker(max_missed=0, region_frames=3)
+    frame(gap, [head], [True])
+    frame(gap, [], [])
+    frame(gap, [], [])
+    assert frame(gap, [feet], [True]) == [False]
+    with pytest.raises(ValueError):
+        TargetTracker(region_frames=-1)
+
+
 def test_the_scene_relative_test_tolerates_a_fraction_of_the_tracks_expansion():
     from asnn.tracking import against_scene
 

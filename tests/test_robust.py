@@ -199,6 +199,16 @@ def test_a_car_catching_up_off_axis_with_a_rear_camera_is_fitted_against_the_rec
     assert _quiet(_run("rear-day-catchup-offset", receding_scene=False)[1])
 
 
+@pytest.mark.parametrize("case", ["walk-light-c0.4-gait", "walk-dark-c0.4-gait"])
+def test_a_walker_seen_in_fragments_warns_by_region_persistence(case):
+    # its gait's sway splits its outline: its parts pass the approach test as different tracks
+    # in turn, none of them three frames in a row
+    scene, responses = _run(case)
+    assert _hit(scene, responses) and _first(responses) < scene.contact_frame
+    scene, without = _run(case, region_persistence=False)
+    assert not _hit(scene, without) or _first(without) >= scene.contact_frame
+
+
 def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test():
     for case in ("drive-day-stopped-car", "drive-day-brake", "drive-day-oncoming-headon"):
         assert _hit(*_run(case))

@@ -29,7 +29,7 @@ from pathlib import Path
 
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
-from ..tracking import against_scene, approach_test, better_fit, smoothed_run
+from ..tracking import against_scene, approach_test, better_fit, persists_in_region, smoothed_run
 from . import scoring
 from .runs import fmt, write_json
 
@@ -62,7 +62,7 @@ class FrameTrace:
     ----------
     repeat : bool
         The frame repeated the one before (its response is the previous one).
-    objects : tuple of (id, ttc, offset, share, x, y, own, fit, own_fit)
+    objects : tuple of (id, ttc, offset, share, x, y, own, fit, own_fit, box)
         Each object seen: its track's id, time to contact and offset (None while it does not
         grow), its share of ``u`` before ``u_scale``, its centre in the frame's pixels, its
         expansion rate against the scene in this frame (per second; None where not measured:
@@ -70,7 +70,7 @@ class FrameTrace:
         smooth it over the frames in which a track passes any grid point's test), its
         track's fit (:attr:`asnn.tracking.Track.fit`), and the share of its box's change the
         fit against the scene explains in this frame (None unless the scene contracts, with
-        ``receding_scene``).
+        ``receding_scene``), and its track's box (for ``region_persistence``).
     """
 
     repeat: bool
@@ -112,7 +112,8 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
         sx, sy = model.shape[1] / w, model.shape[0] / h
         trace.frames.append(FrameTrace(repeat=False, objects=tuple(
             (tr.id, tr.ttc, tr.offset, share, (tr.x + 0.5) * sx - 0.5, (tr.y + 0.5) * sy - 0.5,
-             model.against_scene.get(tr.id), tr.fit, model.fit_against_scene.get(tr.id))
+             model.against_scene.get(tr.id), tr.fit, model.fit_against_scene.get(tr.id),
+             tuple(tr.box))
             for tr, share in model.objects)))
     return trace
 
@@ -126,6 +127,8 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
     own: dict[int, float | None] = {}  # smoothed expansion against the scene, as Track keeps it
     own_fits: dict[int, float | None] = {}  # and that fit's share (Track.own_fit)
     window: deque[int] = deque(maxlen=p.n_t)
+    # the boxes of the tracks that passed, per processed frame (TargetTracker.judge)
+    passed: deque[list] = deque(maxlen=p.approach_frames)
     records = []
     previous = {"collision": False, "targets": []}
     for index, frame in enumerate(trace.frames):
@@ -134,9 +137,9 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
         elif frame.repeat:
             record = {**previous, "frame": index}
         else:
-            total, targets = 0.0, []
+            total, targets, passing = 0.0, [], []
             measured, measured_fits = {}, {}
-            for ident, ttc, offset, share, x, y, against, fit, own_fit in frame.objects:
+            for ident, ttc, offset, share, x, y, against, fit, own_fit, box in frame.objects:
                 passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, overlap)
                 # where the scene contracts, the regime's candidates but for the fit test are
                 # measured too (their fit against the scene is known only there); one whose
@@ -151,11 +154,16 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                                             better_fit(fit, measured_fits[ident]), overlap)
                               and against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance))
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
-                if streak[ident] >= p.approach_frames:
+                if passes:
+                    passing.append(box)
+                if streak[ident] >= p.approach_frames or (
+                        passes and p.region_persistence
+                        and persists_in_region(box, passed, p.approach_frames)):
                     total += share
                     targets.append({"x": x, "y": y})
             # a track not measured in this frame starts afresh (Track.measure_own)
             own, own_fits = measured, measured_fits
+            passed.append(passing)
             _, _, rate = spike_step(p.u_scale * total, trace.cells, window, p)
             record = {"frame": index, "collision": rate >= p.t_c, "targets": targets}
         records.append(record)

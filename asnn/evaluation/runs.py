@@ -42,6 +42,7 @@ ABLATIONS = {
     "partial overlaps without the fit test": "asnn:robust/overlap_fit_min=-1",
     "no fit against a receding scene": "asnn:robust/receding_scene=false",
     "no persistence (one frame of approach)": "asnn:robust/approach_frames=1",
+    "persistence per track only (no region persistence)": "asnn:robust/region_persistence=false",
     "no input scale (frames at their own size)": "asnn:robust/max_width=none",
     "attention blur at full resolution": "asnn:robust/attention_step=1",
 }
