@@ -10,7 +10,8 @@ leave-one-clip-out figures: for each clip, the thresholds are chosen again from
 that keep the generated suite within its aims: :func:`suite_admissible`), and that clip is
 scored with the thresholds it did not help choose.
 The preset's own thresholds are the ones this procedure picks on every clip of the design set,
-wherever those clips tell the values apart (in a tie it takes the first in grid order).
+wherever those clips tell the values apart by hits and false alarms (in a tie it takes the first
+in grid order; the README says where the last tie-break, warning frames, picks otherwise).
 
 Running the model once per grid point would cost the grid's size in model runs. The gate acts
 after everything else, so each clip is run once (:func:`trace_clip`) with the objects of every
