@@ -204,7 +204,7 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
         main(["eval", str(tmp_path), "--perturb", "blur"])  # not one of the perturbations
     for misplaced in (["--synthetic", "--size", "64x64"], ["--paper", "--cases", "loom-*"],
                       ["--synthetic", "--early-tolerance", "0.5"], ["--paper", "--labels", "x"],
-                      ["--synthetic", "--perturb", "noise"]):
+                      ["--paper", "--perturb", "noise"], ["--paper", "--variant", "1"]):
         assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
         assert "does not go with" in capsys.readouterr().err
 
