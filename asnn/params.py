@@ -245,8 +245,9 @@ class ASNNParams(BaseModel):
         False, description="a track that passes the approach test now also counts where "
         "passing tracks overlapped its box in approach_frames - 1 of the previous "
         "approach_frames frames: an object seen in fragments that change tracks from frame to "
-        "frame (a walker whose sway splits its outline) persists where it is seen "
-        "(asnn.tracking.persists_in_region); a part of the approach gate")
+        "frame (a walker whose sway splits its outline) persists where it is seen; not where "
+        "a track that counts by its own frames overlaps it (a fragment of that object) "
+        "(asnn.tracking.TargetTracker.judge); a part of the approach gate")
     partial_overlap: bool = Field(
         False, description="the approach test also passes a partial overlap: ttc <= "
         "overlap_tau_max, offset <= overlap_offset_max, from a box the expansion fit explains "

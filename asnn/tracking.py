@@ -48,7 +48,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
-           "against_scene", "smoothed_run", "persists_in_region"]
+           "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -259,17 +259,18 @@ def approach_test(ttc: float | None, offset: float | None, tau_max: float,
             and fit is not None and fit >= overlap[2])
 
 
+def boxes_overlap(a: Sequence[float], b: Sequence[float]) -> bool:
+    """Whether two boxes ``(x0, y0, x1, y1)`` (exclusive ends) overlap; touching is not
+    overlapping."""
+    return b[0] < a[2] and a[0] < b[2] and b[1] < a[3] and a[1] < b[3]
+
+
 def persists_in_region(box: Sequence[float], history: Iterable[Sequence[Sequence[float]]],
                        frames: int) -> bool:
     """Whether an approach seen in ``box`` now persisted in its region: in at least
     ``frames - 1`` of the earlier frames of ``history`` (each a list of the boxes of the tracks
-    that passed the approach test then) a box overlapped it.
-
-    Boxes are ``(x0, y0, x1, y1)``, exclusive ends; touching is not overlapping.
-    """
-    x0, y0, x1, y1 = box
-    seen = sum(any(b[0] < x1 and x0 < b[2] and b[1] < y1 and y0 < b[3] for b in boxes)
-               for boxes in history)
+    that passed the approach test then) a box overlapped it (:func:`boxes_overlap`)."""
+    seen = sum(any(boxes_overlap(box, b) for b in boxes) for boxes in history)
     return seen >= frames - 1
 
 
@@ -354,15 +355,21 @@ class TargetTracker:
               tolerance: float = 0.0) -> list[bool]:
         """Whether each of this frame's tracks (what :meth:`update` returned) counts as coming
         at the camera: it passed the approach test in its last ``frames`` frames in a row
-        (:meth:`Track.judge`), or, with ``region_frames``, it passes now and the approach
-        persisted in its region (:func:`persists_in_region`)."""
+        (:meth:`Track.judge`), or, with ``region_frames``, it passes now, the approach
+        persisted in its region (:func:`persists_in_region`), and no track that counts by its
+        own frames overlaps it (it would be a fragment of that track's object: one target per
+        object)."""
         coming = [track.judge(tau_max, offset_max, frames, overlap, tolerance)
                   for track in tracks]
         if self._passed is None:
             return coming
         earlier = list(self._passed)[:-1]
         passing = [track.streak > 0 for track in tracks]
-        coming = [ok or (passed and persists_in_region(track.box, earlier, frames))
+        # a track that counts by its own frames speaks for the object; one that would count by
+        # its region only where no such track overlaps it (else it is a fragment of that object)
+        counted = [track.box for track, ok in zip(tracks, coming) if ok]
+        coming = [ok or (passed and not any(boxes_overlap(track.box, box) for box in counted)
+                         and persists_in_region(track.box, earlier, frames))
                   for track, ok, passed in zip(tracks, coming, passing)]
         self._passed[-1] = [track.box for track, passed in zip(tracks, passing) if passed]
         return coming

@@ -234,7 +234,7 @@ def test_a_partial_overlap_passes_later_and_only_from_a_box_that_moves_as_one():
 
 
 def test_an_approach_persists_in_its_region_across_tracks():
-    from asnn.tracking import Observation, persists_in_region
+    from asnn.tracking import Observation, boxes_overlap, persists_in_region
 
     box = (10.0, 10.0, 30.0, 30.0)
     inside, beside, apart = (20.0, 0.0, 40.0, 15.0), (30.0, 10.0, 50.0, 30.0), (60, 60, 80, 80)
@@ -242,6 +242,7 @@ def test_an_approach_persists_in_its_region_across_tracks():
     assert not persists_in_region(box, [[inside], [apart]], 3)
     assert not persists_in_region(box, [[beside], [beside]], 3)  # touching is not overlapping
     assert persists_in_region(box, [], 1)
+    assert boxes_overlap(box, inside) and not boxes_overlap(box, beside)
 
     def frame(tracker, observations, passes):
         """One frame: observations, each track's measurement (passing or drifting past)."""
@@ -264,6 +265,12 @@ def test_an_approach_persists_in_its_region_across_tracks():
     frame(quiet, [head], [True])
     frame(quiet, [feet], [True])
     assert frame(quiet, [head], [False]) == [False]
+    # a fragment overlapping a track that counts by its own frames is that object's: not a
+    # second target
+    both = TargetTracker(max_missed=0, region_frames=3)
+    assert frame(both, [head], [True]) == [False]
+    assert frame(both, [head, feet], [True, True]) == [False, False]
+    assert frame(both, [head, feet], [True, True]) == [True, False]
     # a frame with nothing in it is a frame of the window too
     gap = TargetTracker(max_missed=0, region_frames=3)
     frame(gap, [head], [True])

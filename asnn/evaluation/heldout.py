@@ -30,7 +30,8 @@ from pathlib import Path
 
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
-from ..tracking import against_scene, approach_test, better_fit, persists_in_region, smoothed_run
+from ..tracking import (against_scene, approach_test, better_fit, boxes_overlap,
+                        persists_in_region, smoothed_run)
 from . import scoring
 from .runs import fmt, write_json
 
@@ -138,7 +139,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
         elif frame.repeat:
             record = {**previous, "frame": index}
         else:
-            total, targets, passing = 0.0, [], []
+            judged = []  # (object, passes now, counts by its own frames)
             measured, measured_fits = {}, {}
             for ident, ttc, offset, share, x, y, against, fit, own_fit, box in frame.objects:
                 passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, overlap)
@@ -155,16 +156,19 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                                             better_fit(fit, measured_fits[ident]), overlap)
                               and against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance))
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
-                if passes:
-                    passing.append(box)
-                if streak[ident] >= p.approach_frames or (
-                        passes and p.region_persistence
-                        and persists_in_region(box, passed, p.approach_frames)):
+                judged.append(((share, x, y, box), passes, streak[ident] >= p.approach_frames))
+            # region persistence as TargetTracker.judge applies it
+            counted = [obj[3] for obj, _, ok in judged if ok]
+            total, targets = 0.0, []
+            for (share, x, y, box), passes, ok in judged:
+                if ok or (passes and p.region_persistence
+                          and not any(boxes_overlap(box, other) for other in counted)
+                          and persists_in_region(box, passed, p.approach_frames)):
                     total += share
                     targets.append({"x": x, "y": y})
             # a track not measured in this frame starts afresh (Track.measure_own)
             own, own_fits = measured, measured_fits
-            passed.append(passing)
+            passed.append([obj[3] for obj, passes, _ in judged if passes])
             _, _, rate = spike_step(p.u_scale * total, trace.cells, window, p)
             record = {"frame": index, "collision": rate >= p.t_c, "targets": targets}
         records.append(record)
