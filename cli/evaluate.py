@@ -3,8 +3,8 @@
 ``asnn eval CLIPS_DIR [--labels FILE] [--detectors LIST] [--preset P] [--out DIR]`` scores every
 detector on labelled clips (SPEC.md section 5), with ``--perturb NAME`` on their frames
 perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME]``
-generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper`` regenerates the paper's synthetic
-figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
+generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper``
+regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
 default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``, ``lgmd2``. Exit status 2 for unusable
 input.
 """
@@ -65,8 +65,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--variant", type=whole, default=0, metavar="K",
                    help="with --synthetic: K >= 1 scores the same cases with fresh scene seeds "
                         "(other textures, sensor noise and roadside objects; the same geometry, "
-                        "motion and labels), scenes the default's design did not see (default: "
-                        "0, the suite as it is)")
+                        "motion and labels; README, 'fresh scenery') (default: 0, the suite as "
+                        "it is)")
     p.add_argument("--out", metavar="DIR", default="eval-out",
                    help="output directory (default: %(default)s)")
     p.add_argument("--early-tolerance", type=float, metavar="SECONDS",
@@ -80,7 +80,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=frame_size, metavar="WxH",
                    help="with --paper: frame size of the scenes (default: 128x128, the paper's)")
     p.add_argument("--perturb", choices=list(PERTURBATIONS), metavar="NAME",
-                   help="with CLIPS_DIR or --synthetic: score the detectors on the frames perturbed, "
+                   help="with CLIPS_DIR or --synthetic: score the detectors on the frames "
+                        "perturbed, "
                         "to see whether their scores hold on another camera: "
                         + "; ".join(f"{name}: {what}" for name, what in PERTURBATIONS.items()))
     p.add_argument("--no-plots", action="store_true", help="skip the PNGs")

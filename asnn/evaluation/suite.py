@@ -158,7 +158,7 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
         Draw ``plots/<case>.png`` too (about half a second a case).
     variant : int
         0: the suite's cases as designed; K >= 1: the same cases with fresh scene seeds
-        (:func:`asnn.stimuli.suite.make_case`), figures the design did not see.
+        (:func:`asnn.stimuli.suite.make_case`).
     perturbation : str, optional
         Run on the cases' frames perturbed by one of
         :data:`~asnn.evaluation.perturb.PERTURBATIONS` (the labels follow a mirrored frame).
@@ -273,7 +273,8 @@ def suite_report(results: Mapping) -> str:
         "",
         *([f"Variant {settings['variant']}: the suite's cases with fresh scene seeds (other "
            "textures, sensor noise and roadside objects; the same geometry, motion and labels)."
-           " The default preset was designed on the suite as it is (variant 0), not on these.",
+           " The default preset was designed on the suite as it is (variant 0), its region"
+           " persistence on variants 1-5 (README, 'fresh scenery').",
            ""] if settings.get("variant") else []),
         *([f"Frames perturbed: {settings['perturbation']} "
            f"({PERTURBATIONS[settings['perturbation']]}).", ""]
