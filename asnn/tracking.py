@@ -48,7 +48,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
-           "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region"]
+           "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region",
+           "count_in_regions"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -274,6 +275,23 @@ def persists_in_region(box: Sequence[float], history: Iterable[Sequence[Sequence
     return seen >= frames - 1
 
 
+def count_in_regions(boxes: Sequence[Sequence[float]], passing: Sequence[bool],
+                     steady: Sequence[bool], history: Iterable[Sequence[Sequence[float]]],
+                     frames: int) -> list[bool]:
+    """Which of a frame's tracks count as coming at the camera with region persistence.
+
+    A track counts when it passed the approach test in its own last ``frames`` frames
+    (``steady``), or when it passes now (``passing``), the approach persisted in its region
+    (:func:`persists_in_region` over ``history``) and no steady track's box overlaps it: that
+    track speaks for the object, and this one would be a fragment of it (one target per
+    object).
+    """
+    counted = [box for box, ok in zip(boxes, steady) if ok]
+    return [ok or (passed and not any(boxes_overlap(box, other) for other in counted)
+                   and persists_in_region(box, history, frames))
+            for box, passed, ok in zip(boxes, passing, steady)]
+
+
 class TargetTracker:
     """Links each frame's observations to tracks (one tracker per stream).
 
@@ -355,21 +373,13 @@ class TargetTracker:
               tolerance: float = 0.0) -> list[bool]:
         """Whether each of this frame's tracks (what :meth:`update` returned) counts as coming
         at the camera: it passed the approach test in its last ``frames`` frames in a row
-        (:meth:`Track.judge`), or, with ``region_frames``, it passes now, the approach
-        persisted in its region (:func:`persists_in_region`), and no track that counts by its
-        own frames overlaps it (it would be a fragment of that track's object: one target per
-        object)."""
-        coming = [track.judge(tau_max, offset_max, frames, overlap, tolerance)
+        (:meth:`Track.judge`), or, with ``region_frames``, by :func:`count_in_regions`."""
+        steady = [track.judge(tau_max, offset_max, frames, overlap, tolerance)
                   for track in tracks]
         if self._passed is None:
-            return coming
-        earlier = list(self._passed)[:-1]
+            return steady
+        boxes = [track.box for track in tracks]
         passing = [track.streak > 0 for track in tracks]
-        # a track that counts by its own frames speaks for the object; one that would count by
-        # its region only where no such track overlaps it (else it is a fragment of that object)
-        counted = [track.box for track, ok in zip(tracks, coming) if ok]
-        coming = [ok or (passed and not any(boxes_overlap(track.box, box) for box in counted)
-                         and persists_in_region(track.box, earlier, frames))
-                  for track, ok, passed in zip(tracks, coming, passing)]
-        self._passed[-1] = [track.box for track, passed in zip(tracks, passing) if passed]
+        coming = count_in_regions(boxes, passing, steady, list(self._passed)[:-1], frames)
+        self._passed[-1] = [box for box, passed in zip(boxes, passing) if passed]
         return coming

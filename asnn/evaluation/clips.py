@@ -16,9 +16,9 @@ from ..io.sources import SourceError, open_source
 from . import figures, scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
-from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, DetectorSpec, fmt, outcome_cell,
-                   parse_detectors, rate, run_detector, target_quality_cells, write_json,
-                   write_jsonl)
+from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
+                   fmt, outcome_cell, parse_detectors, rate, run_detector, target_quality_cells,
+                   write_json, write_jsonl)
 
 __all__ = ["evaluate_clips"]
 
@@ -47,11 +47,7 @@ def _clips_report(results: Mapping) -> str:
         f"{settings['warmup']} frames; hit when the first warning lies in "
         f"[onset - {settings['early_tolerance_s']:g} s, contact + {scoring.CONTACT_SLACK_FRAMES}"
         " frames]; an earlier first warning is an early warning (a false alarm); any warning on a"
-        " non-collision clip is a false alarm. Ttc error: over the warning frames of the hit"
-        " window before contact, the nearest target's |ttc - true| / true, against the label's"
-        " per-frame ttc where it has one, else the time left to the contact frame (median per"
-        " hit, then over hits; the ratio ttc / true likewise); one id: hits whose warning frames"
-        " followed one target id." + (
+        " non-collision clip is a false alarm. " + TARGET_QUALITY_NOTE + (
             f" Frames perturbed: {settings['perturbation']}"
             f" ({PERTURBATIONS[settings['perturbation']]})."
             if settings.get("perturbation") else ""),

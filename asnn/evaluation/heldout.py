@@ -30,8 +30,8 @@ from pathlib import Path
 
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
-from ..tracking import (against_scene, approach_test, better_fit, boxes_overlap,
-                        persists_in_region, smoothed_run)
+from ..tracking import (against_scene, approach_test, better_fit, count_in_regions,
+                        smoothed_run)
 from . import scoring
 from .runs import fmt, write_json
 
@@ -157,18 +157,19 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                               and against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance))
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
                 judged.append(((share, x, y, box), passes, streak[ident] >= p.approach_frames))
-            # region persistence as TargetTracker.judge applies it
-            counted = [obj[3] for obj, _, ok in judged if ok]
+            boxes = [obj[3] for obj, _, _ in judged]
+            passing = [passes for _, passes, _ in judged]
+            coming = [ok for _, _, ok in judged]
+            if p.region_persistence:  # as TargetTracker.judge
+                coming = count_in_regions(boxes, passing, coming, passed, p.approach_frames)
             total, targets = 0.0, []
-            for (share, x, y, box), passes, ok in judged:
-                if ok or (passes and p.region_persistence
-                          and not any(boxes_overlap(box, other) for other in counted)
-                          and persists_in_region(box, passed, p.approach_frames)):
+            for ((share, x, y, _), _, _), counts in zip(judged, coming):
+                if counts:
                     total += share
                     targets.append({"x": x, "y": y})
             # a track not measured in this frame starts afresh (Track.measure_own)
             own, own_fits = measured, measured_fits
-            passed.append([obj[3] for obj, passes, _ in judged if passes])
+            passed.append([box for box, passes in zip(boxes, passing) if passes])
             _, _, rate = spike_step(p.u_scale * total, trace.cells, window, p)
             record = {"frame": index, "collision": rate >= p.t_c, "targets": targets}
         records.append(record)

@@ -1,10 +1,11 @@
-"""Perturbed clips: is a score robust to the camera, or luck? (``asnn eval CLIPS_DIR --perturb``)
+"""Perturbed clips: is a score robust to the camera, or luck? (``asnn eval --perturb``)
 
 A detector's outcomes on a dozen real clips can hang on details of their pixels that another
 camera would not reproduce. Each perturbation here changes the frames the way a different
-camera or a different day would, and ``asnn eval CLIPS_DIR --perturb NAME`` scores the
-detectors on the perturbed frames with the same labels (mirrored with the frames for
-``mirror``): outcomes that survive every perturbation are the ones a fleet can count on.
+camera or a different day would, and ``asnn eval CLIPS_DIR --perturb NAME`` (or ``asnn eval
+--synthetic --perturb NAME``) scores the detectors on the perturbed frames with the same labels
+(mirrored with the frames for ``mirror``): outcomes that survive every perturbation are the
+ones a fleet can count on.
 
 Every perturbation is deterministic (the noise is seeded by the frame's index), and keeps the
 frame's size, channels and uint8 type.

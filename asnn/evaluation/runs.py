@@ -221,6 +221,15 @@ def rate(value) -> str:
     return "–" if value is None else f"{100 * value:.0f}%"
 
 
+TARGET_QUALITY_HEADER = ["median ttc error (ratio)", "one id (hits)"]
+TARGET_QUALITY_NOTE = (
+    "Ttc error: over the warning frames of the hit window before contact, the nearest target's "
+    "|ttc - true| / true against the label's per-frame time to contact, else the time left to "
+    "the contact frame (median per hit, then over hits; the ratio ttc / true likewise: below 1 "
+    "the target says contact is nearer than it is); one id: hits whose warning frames followed "
+    "one target id.")
+
+
 def target_quality_cells(summary: Mapping) -> list[str]:
     """A detector's summary cells for the targets of its warnings: the median time-to-contact
     error (and ratio), and the hits whose warning followed one target id."""
@@ -230,9 +239,6 @@ def target_quality_cells(summary: Mapping) -> list[str]:
                f"(x{summary['median_ttc_ratio']:.2f})")
     ids = f"{summary['one_id_hits']}/{summary['id_hits']}" if summary.get("id_hits") else "–"
     return [ttc, ids]
-
-
-TARGET_QUALITY_HEADER = ["median ttc error (ratio)", "one id (hits)"]
 
 
 def outcome_cell(score: Mapping) -> str:

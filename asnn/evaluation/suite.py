@@ -27,9 +27,9 @@ from ..stimuli.suite import (GROUPS, SUITE_CASES, SUITE_VERSION, check_variant, 
 from . import scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
-from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, DetectorSpec, at_rate, fmt,
-                   outcome_cell, parse_detectors, rate, run_detector, target_quality_cells,
-                   write_json, write_jsonl)
+from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
+                   at_rate, fmt, outcome_cell, parse_detectors, rate, run_detector,
+                   target_quality_cells, write_json, write_jsonl)
 
 __all__ = ["EARLY_TOLERANCE_S", "evaluate_suite", "near_miss_pairs", "category_summaries",
            "suite_report"]
@@ -287,11 +287,8 @@ def suite_report(results: Mapping) -> str:
         f"{settings['contact_slack_frames']} frames], early (a false alarm) before, late after; "
         "any warning on a non-collision case is a false alarm. FA = early + warned non-collision"
         " cases; FA rate over all cases. Lead = contact - first warning (hits). Localisation: "
-        "the nearest target at the first warning to the labelled track. Ttc error: over the "
-        "warning frames before contact, the nearest target's |ttc - true| / true against the "
-        "label's time to contact (median per hit, then over hits; the ratio ttc / true likewise:"
-        " below 1 warns that contact is nearer than it is); one id: hits whose warning frames "
-        "followed one target id. *After*: warning "
+        "the nearest target at the first warning to the labelled track. " + TARGET_QUALITY_NOTE
+        + " *After*: warning "
         "frames after contact + 2 (or after an approach stopped) on collision cases.",
         "",
     ]
