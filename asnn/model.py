@@ -178,7 +178,8 @@ class ASNN:
         self.tracker = TargetTracker(
             self.params.track_link, self.params.track_missed, self.params.track_smoothing,
             self.params.track_box,
-            self.params.approach_frames if self.params.region_persistence else 0)
+            self.params.approach_frames if self.params.region_persistence else 0,
+            self.params.object_ids)
         self._stamp: float | None = None
         self._last: Response | None = None
         self._repeats = 0
@@ -576,15 +577,21 @@ class ASNN:
             total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0
         sx, sy = self.shape[1] / w, self.shape[0] / h  # the frame's pixels per model pixel
         # pixel centres: model pixel i covers the frame's pixels [i sx, (i + 1) sx)
-        targets = [Target(x=float((regions.x[k] + 0.5) * sx - 0.5),
-                          y=float((regions.y[k] + 0.5) * sy - 0.5),
-                          direction=float(regions.direction[k]),
-                          energy=float(regions.energy[k]),
-                          pixels=int(round(regions.pixels[k] * sx * sy)),
-                          id=tr.id, expansion=tr.expansion, ttc=tr.ttc, offset=tr.offset,
-                          approaching=coming[k])
-                   for k, tr in enumerate(tracks) if coming[k] or not p.approach_gate]
-        return total, targets
+        targets: dict[int, Target] = {}  # by object id
+        for k, tr in enumerate(tracks):
+            if not (coming[k] or not p.approach_gate):
+                continue
+            target = Target(x=float((regions.x[k] + 0.5) * sx - 0.5),
+                            y=float((regions.y[k] + 0.5) * sy - 0.5),
+                            direction=float(regions.direction[k]),
+                            energy=float(regions.energy[k]),
+                            pixels=int(round(regions.pixels[k] * sx * sy)),
+                            id=self.tracker.object_id(tr), expansion=tr.expansion, ttc=tr.ttc,
+                            offset=tr.offset, approaching=coming[k])
+            # an object seen as several fragments is one target: its largest
+            if target.id not in targets or target.pixels > targets[target.id].pixels:
+                targets[target.id] = target
+        return total, list(targets.values())
 
     def _measure_against_scene(self, tracks: list, boxes: list, rates: list,
                                frame: "_Frame") -> None:

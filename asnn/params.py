@@ -248,6 +248,12 @@ class ASNNParams(BaseModel):
         "frame (a walker whose sway splits its outline) persists where it is seen; not where "
         "a track that counts by its own frames overlaps it (a fragment of that object) "
         "(asnn.tracking.TargetTracker.judge); a part of the approach gate")
+    object_ids: bool = Field(
+        False, description="targets are named after their object: a track that appears over "
+        "an object already counted (its box overlapping a counting track's, this frame or the "
+        "one before) is a fragment of that object and reports that track's id, and an object "
+        "seen as several fragments is one target (asnn.tracking.TargetTracker.object_id); "
+        "changes ids and targets, never the warning; needs targets='objects'")
     partial_overlap: bool = Field(
         False, description="the approach test also passes a partial overlap: ttc <= "
         "overlap_tau_max, offset <= overlap_offset_max, from a box the expansion fit explains "
@@ -279,7 +285,7 @@ class ASNNParams(BaseModel):
                 raise ValueError(f"{name} must be odd, got {getattr(self, name)}")
         if self.n_fast >= self.n_slow:
             raise ValueError("n_fast must be smaller than n_slow")
-        for name in ("approach_gate", "scene_relative"):
+        for name in ("approach_gate", "scene_relative", "object_ids"):
             if getattr(self, name) and self.targets != "objects":
                 raise ValueError(f"{name} needs targets='objects'")
         return self
@@ -357,6 +363,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
     partial_overlap=True, scene_tolerance=0.1, receding_scene=True, region_persistence=True,
+    object_ids=True,
 ))
 DEFAULT_PRESET = "robust"
 

@@ -31,6 +31,12 @@ gives one track that many; with ``region_frames`` the tracker also counts a trac
 now where approaching tracks overlapped its box in enough of the frames before
 (:func:`persists_in_region`): persistence of the approach where it is seen, not of a track id.
 
+Object ids: the fragments of one object are different tracks, so the target a warning reports
+could change its id as one fragment takes over from another. With ``object_ids`` a track that
+overlaps a counting track older than itself, before it has counted under its own id, is named
+after that track's object (:func:`fragment_of`), and keeps that name: an object is reported
+under the id it was first warned under.
+
 References
 ----------
 .. [1] D. N. Lee, "A theory of visual control of braking based on information about
@@ -49,7 +55,7 @@ from dataclasses import dataclass, field
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
            "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region",
-           "count_in_regions"]
+           "count_in_regions", "fragment_of"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -292,6 +298,16 @@ def count_in_regions(boxes: Sequence[Sequence[float]], passing: Sequence[bool],
             for box, passed, ok in zip(boxes, passing, steady)]
 
 
+def fragment_of(box: Sequence[float], track_id: int,
+                counting: Iterable[tuple[int, Sequence[float]]]) -> int | None:
+    """The id of the oldest of the ``counting`` tracks, ``(id, box)``, older than ``track_id``
+    (a smaller id) whose box overlaps ``box`` (:func:`boxes_overlap`); None if there is none.
+    A track that appears over an object already counted is a fragment of that object."""
+    older = [other for other, other_box in counting
+             if other < track_id and boxes_overlap(box, other_box)]
+    return min(older) if older else None
+
+
 class TargetTracker:
     """Links each frame's observations to tracks (one tracker per stream).
 
@@ -310,6 +326,10 @@ class TargetTracker:
         With N > 0, :meth:`judge` also counts a track that passes the approach test now where
         passing tracks overlapped its box in ``frames - 1`` of the previous N frames
         (:func:`persists_in_region`); 0 counts each track's own frames only.
+    object_ids : bool
+        Name a fragment after the object it is part of (:meth:`object_id`): a track that,
+        before it counted under its own id, overlapped a track counting in that frame or the
+        one before, takes the older track's object id for good (:func:`fragment_of`).
 
     Attributes
     ----------
@@ -318,7 +338,7 @@ class TargetTracker:
     """
 
     def __init__(self, link: float = 1.0, max_missed: int = 3, smoothing: float = 0.5,
-                 box_weight: float = 1.0, region_frames: int = 0):
+                 box_weight: float = 1.0, region_frames: int = 0, object_ids: bool = False):
         for name, value in (("smoothing", smoothing), ("box_weight", box_weight)):
             if not 0.0 < value <= 1.0:
                 raise ValueError(f"{name} must lie in (0, 1], got {value}")
@@ -333,6 +353,11 @@ class TargetTracker:
         # the boxes of the tracks that passed the approach test, per frame, this frame's last
         self._passed: deque[list] | None = (deque(maxlen=region_frames + 1) if region_frames
                                             else None)
+        # with object_ids: the object each fragment was named after, the ids that counted under
+        # their own name, and the (id, box) of the tracks that counted in the previous frame
+        self._object_of: dict[int, int] | None = {} if object_ids else None
+        self._named: set[int] = set()
+        self._counted: list[tuple[int, tuple]] = []
 
     def update(self, observations: list[Observation], elapsed: float) -> list[Track]:
         """Link this frame's observations to tracks, ``elapsed`` seconds after the previous frame.
@@ -374,12 +399,36 @@ class TargetTracker:
         """Whether each of this frame's tracks (what :meth:`update` returned) counts as coming
         at the camera: it passed the approach test in its last ``frames`` frames in a row
         (:meth:`Track.judge`), or, with ``region_frames``, by :func:`count_in_regions`."""
-        steady = [track.judge(tau_max, offset_max, frames, overlap, tolerance)
+        coming = [track.judge(tau_max, offset_max, frames, overlap, tolerance)
                   for track in tracks]
-        if self._passed is None:
-            return steady
-        boxes = [track.box for track in tracks]
-        passing = [track.streak > 0 for track in tracks]
-        coming = count_in_regions(boxes, passing, steady, list(self._passed)[:-1], frames)
-        self._passed[-1] = [box for box, passed in zip(boxes, passing) if passed]
+        if self._passed is not None:
+            boxes = [track.box for track in tracks]
+            passing = [track.streak > 0 for track in tracks]
+            coming = count_in_regions(boxes, passing, coming, list(self._passed)[:-1], frames)
+            self._passed[-1] = [box for box, passed in zip(boxes, passing) if passed]
+        if self._object_of is not None:
+            self._name_objects(tracks, coming)
         return coming
+
+    def object_id(self, track: Track) -> int:
+        """The id to report ``track`` under: its object's (with ``object_ids``, the track a
+        fragment was named after), else its own."""
+        if self._object_of is None:
+            return track.id
+        return self._object_of.get(track.id, track.id)
+
+    def _name_objects(self, tracks: Sequence[Track], coming: Sequence[bool]) -> None:
+        """Name this frame's new fragments after the objects they overlap (``object_ids``)."""
+        counting = [(track.id, track.box) for track, ok in zip(tracks, coming) if ok]
+        for track in tracks:
+            if track.id in self._object_of or track.id in self._named:
+                continue
+            older = fragment_of(track.box, track.id, counting + self._counted)
+            if older is not None:
+                self._object_of[track.id] = self._object_of.get(older, older)
+        self._named.update(i for i, _ in counting if i not in self._object_of)
+        self._counted = counting
+        # only live tracks need a name: the stream's state stays as small as its tracks
+        live = {track.id for track in self.tracks}
+        self._object_of = {i: name for i, name in self._object_of.items() if i in live}
+        self._named &= live

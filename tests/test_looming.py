@@ -281,6 +281,50 @@ def test_an_approach_persists_in_its_region_across_tracks():
         TargetTracker(region_frames=-1)
 
 
+def test_a_fragment_is_named_after_the_object_it_appears_over():
+    from asnn.tracking import Observation, fragment_of
+
+    assert fragment_of((0, 0, 10, 10), 5, [(3, (5, 5, 20, 20)), (1, (8, 0, 30, 9))]) == 1
+    assert fragment_of((0, 0, 10, 10), 5, [(7, (5, 5, 20, 20))]) is None  # younger
+    assert fragment_of((0, 0, 10, 10), 5, [(3, (10, 0, 20, 10))]) is None  # touching
+
+    def frame(tracker, observations, passes):
+        tracks = tracker.update(observations, 0.05)
+        for track, ok in zip(tracks, passes):
+            track.measure(1.0, 5.0 if ok else 60.0, 0.0)  # ttc 1 s; offset 0.25 or 3
+        coming = tracker.judge(tracks, 1.5, 1.0, 3)
+        return [(tracker.object_id(track), ok) for track, ok in zip(tracks, coming)]
+
+    # an object's track counts; a fragment appears over it (far enough from its centre not to
+    # link), and the object's own track is lost while the fragment goes on counting
+    body = Observation(50, 20, 5, 1, (30, 0, 70, 60))
+    rim = Observation(50, 55, 5, 1, (30, 40, 70, 70))
+    named = TargetTracker(max_missed=0, region_frames=3, object_ids=True)
+    plain = TargetTracker(max_missed=0, region_frames=3)
+    for tracker in (named, plain):
+        for _ in range(3):
+            frame(tracker, [body], [True])
+    assert frame(named, [body, rim], [True, True]) == [(0, True), (0, False)]
+    assert frame(plain, [body, rim], [True, True]) == [(0, True), (1, False)]
+    assert frame(named, [rim], [True]) == [(0, True)]  # by region persistence, as the object
+    assert frame(plain, [rim], [True]) == [(1, True)]
+    # a fragment of a fragment takes the object's name; the object's own track has died
+    far = Observation(50, 90, 5, 1, (30, 65, 70, 110))
+    assert frame(named, [far], [True]) == [(0, True)]
+    # a track that counted under its own id keeps it, whatever it overlaps later
+    own = TargetTracker(max_missed=0, object_ids=True)
+    ahead = Observation(150, 20, 5, 1, (130, 0, 170, 40))
+    for _ in range(3):
+        frame(own, [body, ahead], [True, True])
+    assert frame(own, [body, ahead], [True, True]) == [(0, True), (1, True)]
+    moved = Observation(150, 20, 5, 1, (60, 0, 170, 40))  # its box now reaches the other's
+    assert frame(own, [body, moved], [True, True]) == [(0, True), (1, True)]
+    # the names live as long as the tracks: a long stream does not accumulate them
+    for _ in range(3):
+        frame(named, [], [])
+    assert named.tracks == [] and named._object_of == {} and not named._named
+
+
 def test_the_scene_relative_test_tolerates_a_fraction_of_the_tracks_expansion():
     from asnn.tracking import against_scene
 

@@ -219,6 +219,20 @@ def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test(
 
 # 5. targets: one per approaching object, a stable id, expansion and time to contact
 
+def test_an_object_seen_in_fragments_keeps_the_id_it_was_first_warned_under():
+    # panning right, the direction inhibition keeps the disk's top and bottom rims: two
+    # fragments, and the bottom one takes over from the top one 0.45 s before contact
+    scene, responses = _run("loom-dark-c0.6-pan-h1px")
+    _, plain = _run("loom-dark-c0.6-pan-h1px", object_ids=False)
+    assert [r.collision for r in responses] == [r.collision for r in plain]
+    warned = [r for r in responses if r.collision and r.index <= scene.contact_frame]
+    assert len(warned) >= 8 and all(len(r.targets) == 1 for r in warned)
+    assert len({r.targets[0].id for r in warned}) == 1
+    ids = {t.id for r in plain if r.collision and r.index <= scene.contact_frame
+           for t in r.targets}
+    assert len(ids) == 2
+
+
 def test_one_target_per_object_with_a_stable_id_and_a_time_to_contact():
     scene, responses = _run("loom-dark-c0.6-d6-center")
     warned = [r for r in responses if r.collision and r.targets]
