@@ -579,7 +579,7 @@ class ASNN:
         # pixel centres: model pixel i covers the frame's pixels [i sx, (i + 1) sx)
         targets: dict[int, Target] = {}  # by object id
         for k, tr in enumerate(tracks):
-            if not (coming[k] or not p.approach_gate):
+            if p.approach_gate and not coming[k]:
                 continue
             target = Target(x=float((regions.x[k] + 0.5) * sx - 0.5),
                             y=float((regions.y[k] + 0.5) * sy - 0.5),

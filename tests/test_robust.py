@@ -220,8 +220,8 @@ def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test(
 # 5. targets: one per approaching object, a stable id, expansion and time to contact
 
 def test_an_object_seen_in_fragments_keeps_the_id_it_was_first_warned_under():
-    # panning right, the direction inhibition keeps the disk's top and bottom rims: two
-    # fragments, and the bottom one takes over from the top one 0.45 s before contact
+    # under a horizontal pan the direction inhibition keeps the disk's top and bottom rims: two
+    # fragments, and the bottom one takes over from the top one 0.4 s before contact
     scene, responses = _run("loom-dark-c0.6-pan-h1px")
     _, plain = _run("loom-dark-c0.6-pan-h1px", object_ids=False)
     assert [r.collision for r in responses] == [r.collision for r in plain]
