@@ -28,6 +28,7 @@ import numpy as np
 from . import _fast, _parallel, retina
 from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
 from .looming import moved_by_expansion, region_expansion, scene_expansion
+from .motion_layers import motion_layers
 from .params import ASNNParams, preset
 from .response import Maps, Response
 from .stabilisation import background_shift, shift_image
@@ -38,6 +39,9 @@ __all__ = ["ASNN", "FrameError", "compile_kernels", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
 _MAX_ELAPSED = 1.0  # seconds between frames beyond which their times are not believed
+# the scene "expands" (our own forward motion) from this rate per second: driving scenes expand
+# at about 0.7, a still camera's noise reads below 0.1
+_SCENE_EXPANDS = 0.2
 
 
 class ASNN:
@@ -191,6 +195,9 @@ class ASNN:
         # track id -> that fit's share of the box's change, where the scene contracts
         # (receding_scene; None elsewhere)
         self.fit_against_scene: dict[int, float | None] = {}
+        # track id -> its box's motion layers (share, rate /s, drift px/s), where measured
+        # (motion_layers, while the scene expands)
+        self.layers: dict[int, list] = {}
         self.measure_all_against_scene = False
         self._scene_reference: np.ndarray | None = None
         self.repeated = False
@@ -536,6 +543,7 @@ class ASNN:
         elapsed = frame.elapsed
         self.against_scene = {}
         self.fit_against_scene = {}
+        self.layers = {}
         if attended is None:
             self.tracker.update([], elapsed)
             if p.scene_relative:
@@ -656,12 +664,22 @@ class ASNN:
                     fit = own.fit
             self.against_scene[tracks[k].id] = rate
             self.fit_against_scene[tracks[k].id] = fit
+        layered = (p.motion_layers and scene is not None
+                   and scene.rate / frame.elapsed >= _SCENE_EXPANDS)
+        self.layers = {}
+        for k in sorted(chosen | growing) if layered else ():
+            self.layers[tracks[k].id] = [
+                (layer.share, layer.rate / frame.elapsed, layer.drift_x / frame.elapsed,
+                 layer.drift_y / frame.elapsed)
+                for layer in motion_layers(frame.previous, frame.lum, boxes[k])]
         ids = {tracks[k].id for k in chosen}
         for tr in self.tracker.tracks:
             if tr.id in ids:
                 tr.measure_own(self.against_scene.get(tr.id), self.fit_against_scene.get(tr.id))
+                tr.measure_layers(self.layers.get(tr.id))
             else:
                 tr.measure_own(None)
+                tr.measure_layers(None)
 
 
 @dataclasses.dataclass(slots=True)

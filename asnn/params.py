@@ -248,6 +248,13 @@ class ASNNParams(BaseModel):
         "frame (a walker whose sway splits its outline) persists where it is seen; not where "
         "a track that counts by its own frames overlaps it (a fragment of that object) "
         "(asnn.tracking.TargetTracker.judge); a part of the approach gate")
+    motion_layers: bool = Field(
+        False, description="where the scene expands (our own forward motion), a track that "
+        "passes the approach test must also have, among the motions its box holds (dense "
+        "optical flow split by random sample consensus, asnn.motion_layers), one that is "
+        "itself an approach (asnn.tracking.layers_approach): a car pulling away seen in one box "
+        "with the roadside expanding behind it is two motions, neither coming at us; inert "
+        "without scene_relative (whose scene fit tells where the scene expands)")
     object_ids: bool = Field(
         False, description="targets are named after their object: a track that appears over "
         "an object already counted (its box overlapping a counting track's, this frame or the "
@@ -363,7 +370,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
     partial_overlap=True, scene_tolerance=0.1, receding_scene=True, region_persistence=True,
-    object_ids=True,
+    object_ids=True, motion_layers=True,
 ))
 DEFAULT_PRESET = "robust"
 

@@ -55,7 +55,8 @@ from dataclasses import dataclass, field
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
            "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region",
-           "count_in_regions", "fragment_of"]
+           "count_in_regions", "fragment_of", "layer_estimates", "layers_pass",
+           "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR", "LAYER_OFFSET_FACTOR"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,6 +119,12 @@ class Track:
         The share of the box's change that the fit against the scene explains, smoothed over
         the same run; the model measures it only where the scene contracts
         (``receding_scene``), and None elsewhere.
+    layers : tuple of (share, ttc, offset), or None
+        The motions its box held in the latest frame (:mod:`asnn.motion_layers`): each one's
+        share of the box's textured pixels, time to contact in seconds and offset (None unless
+        it expands), the offset in this track's size (:meth:`measure_layers`); None where they
+        were not measured (the model measures them, with ``motion_layers``, only while the
+        track otherwise passes the approach test and the scene expands).
     """
 
     id: int
@@ -134,6 +141,7 @@ class Track:
     fit: float | None = None
     own_expansion: float | None = None
     own_fit: float | None = None
+    layers: tuple | None = None
     _smoothing: float = field(default=0.5, repr=False)
 
     def observe(self, obs: Observation, elapsed: float, box_weight: float) -> None:
@@ -173,6 +181,12 @@ class Track:
         self.own_expansion = smoothed_run(self.own_expansion, expansion, self._smoothing)
         self.own_fit = smoothed_run(self.own_fit, fit, self._smoothing)
 
+    def measure_layers(self, layers: Sequence | None) -> None:
+        """Take this frame's motion layers ``(share, rate, drift_x, drift_y)`` (rate per
+        second, drift in pixels per second at the box centre), or None where they are not
+        measured (:func:`layer_estimates`)."""
+        self.layers = layer_estimates(layers, self.size)
+
     @property
     def ttc(self) -> float | None:
         """Time to contact ``1 / expansion``, seconds; None unless the target grows."""
@@ -204,12 +218,66 @@ def approaching(track: Track, tau_max: float, offset_max: float,
                 tolerance: float = 0.0) -> bool:
     """Whether a track looks, in the latest frame, like an object coming at the camera: it is
     seen now, passes :func:`approach_test` (with the better of its box's fit and its fit
-    against the scene, where that is measured), and, where its expansion against the scene is
-    measured, does not contract against the scene (:func:`against_scene`)."""
+    against the scene, where that is measured), where its expansion against the scene is
+    measured, does not contract against the scene (:func:`against_scene`), and where its
+    box's motion layers are measured, one of them is itself an approach
+    (:func:`layers_pass`)."""
     return (track.missed == 0
             and approach_test(track.ttc, track.offset, tau_max, offset_max,
                               better_fit(track.fit, track.own_fit), overlap)
-            and against_scene(track.own_expansion, track.expansion, tolerance))
+            and against_scene(track.own_expansion, track.expansion, tolerance)
+            and layers_pass(track.layers, track.ttc, track.offset, tau_max, offset_max, overlap))
+
+
+def layer_estimates(layers: Sequence | None, size: float) -> tuple | None:
+    """``(share, ttc, offset)`` of each motion layer ``(share, rate, drift_x, drift_y)`` of an
+    object's box (rate per second, drift in pixels per second at the box centre), its offset
+    in the object's ``size`` as :attr:`Track.offset`; ttc and offset None unless the layer
+    expands. None for None or no layers (the box held no motion to split: not measured)."""
+    if not layers:
+        return None
+    return tuple((share, 1.0 / rate, math.hypot(dx, dy) / (rate * max(size, 1.0)))
+                 if rate > 0 else (share, None, None)
+                 for share, rate, dx, dy in layers)
+
+
+def layers_pass(layers: tuple | None, ttc: float | None, offset: float | None, tau_max: float,
+                offset_max: float, overlap: tuple[float, float, float] | None = None) -> bool:
+    """The motion-layer part of the approach test for an object that passes the rest of it:
+    where its layers are measured, one of them must be an approach (:func:`layers_approach`)
+    within the limits of the test the object passes (the collision-course test's, else the
+    partial-overlap regime's)."""
+    if layers is None:
+        return True
+    if approach_test(ttc, offset, tau_max, offset_max):
+        return layers_approach(layers, tau_max, offset_max)
+    return overlap is not None and layers_approach(layers, overlap[0], overlap[1])
+
+
+# a motion of a box counts as an approach with these margins over the test's own limits: a
+# layer's estimate is one frame's, from the flow of part of the box (set on the suite's
+# fresh-scenery variants 1-5, README "Motion layers")
+LAYER_SHARE = 0.15
+LAYER_TAU_FACTOR = 3.0
+LAYER_OFFSET_FACTOR = 2.5
+
+
+def layers_approach(layers: Iterable[tuple[float, float | None, float | None]], tau: float,
+                    offset_limit: float) -> bool:
+    """Whether one of a box's motions (``(share, ttc, offset)``, :attr:`Track.layers`) is
+    itself an approach: it holds at least :data:`LAYER_SHARE` of the box's textured pixels,
+    expands, reaches the camera within :data:`LAYER_TAU_FACTOR` times ``tau`` and points at it
+    within :data:`LAYER_OFFSET_FACTOR` times ``offset_limit``.
+
+    A box whose looming fit blends motions that none of its parts has (a car pulling away in
+    front of the roadside expanding behind it, under our own forward motion) fails: its car
+    contracts, its roadside drifts outward from our heading (a large offset). The margins are
+    wide because a layer's estimate is one frame's, from part of the box: the test refuses
+    only boxes where no motion looks like an approach at all.
+    """
+    return any(share >= LAYER_SHARE and ttc is not None and ttc <= LAYER_TAU_FACTOR * tau
+               and offset is not None and offset <= LAYER_OFFSET_FACTOR * offset_limit
+               for share, ttc, offset in layers)
 
 
 def better_fit(fit: float | None, own_fit: float | None) -> float | None:

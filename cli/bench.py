@@ -40,6 +40,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "spread, or at random (default: %(default)s)")
     p.add_argument("--seed", type=seed, default=0,
                    help="seed of --phases random (default: %(default)s)")
+    p.add_argument("--case", metavar="NAME", default=None,
+                   help="time on this case of the labelled suite (asnn scene --list), at its own "
+                   "size and length, instead of the generated scene: e.g. a drive, where the "
+                   "stages that act only under the camera's own forward motion have work")
     p.add_argument("--detect", action="store_true",
                    help="instead, the whole asnn detect process per frame (start-up excluded) "
                    "and its stages, against the straightforward float64 form (--size, default "
@@ -74,6 +78,9 @@ def run(args: argparse.Namespace) -> int:
 
     name = "asnn bench --service" if args.service else "asnn bench"
     try:
+        if args.case is not None and (args.detect or args.handover or args.service):
+            raise ValueError("--case times the models per frame only: not with --detect, "
+                             "--handover or --service")
         if args.detect:
             from asnn.evaluation import bench_detect
 
@@ -99,12 +106,15 @@ def run(args: argparse.Namespace) -> int:
                                        phases=args.phases, seed=args.seed,
                                        workers=args.workers, router=args.router or None)
         else:
+            if args.case is not None and (args.size or args.frames):
+                raise ValueError("--case times the case at its own size and length: "
+                                 "leave out --size and --frames")
             report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES),
                                frames=args.frames or 40,
                                presets=args.preset,
                                models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
                                straightforward=not args.no_straightforward,
-                               progress=_progress(args))
+                               progress=_progress(args), case=args.case)
     except (RuntimeError, ValueError) as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return 2

@@ -56,14 +56,17 @@ def test_the_replay_reproduces_the_partial_overlap_regime():
     # regime; a car cutting in at night, whose box holds the roadside too: quiet with the fit
     # test, warned about without it; a car catching up with a rear camera off its axis, whose
     # box holds the receding road: caught with its fit against the receding scene; a walker
-    # whose sway splits its outline into fragments: caught with region persistence
+    # whose sway splits its outline into fragments: caught with region persistence; a car
+    # cutting in, in fresh scenery, whose box holds no motion coming at us: quiet with the
+    # motion layers
     base = preset("robust")
-    for name, warned, without in (("drive-day-stopped-car-offset", True,
-                                   {"partial_overlap": False}),
-                                  ("drive-night-cut-in", False, {"overlap_fit_min": -1.0}),
-                                  ("rear-day-catchup-offset", True, {"receding_scene": False}),
-                                  ("walk-light-c0.4-gait", True, {"region_persistence": False})):
-        scene = make_case(name)
+    for name, variant, warned, without in (
+            ("drive-day-stopped-car-offset", 0, True, {"partial_overlap": False}),
+            ("drive-night-cut-in", 0, False, {"overlap_fit_min": -1.0}),
+            ("rear-day-catchup-offset", 0, True, {"receding_scene": False}),
+            ("walk-light-c0.4-gait", 0, True, {"region_persistence": False}),
+            ("drive-day-cut-in-dark", 2, False, {"motion_layers": False})):
+        scene = make_case(name, variant)
         trace = heldout.trace_clip(at_rate(scene.frames, scene.fps), base, name)
         model = ASNN(base)
         own = [model.step(f, t).collision for t, f in at_rate(scene.frames, scene.fps)]
@@ -130,6 +133,9 @@ def test_detector_specs_override_parameters():
     for bad in ("asnn:robust/nope=1", "asnn:robust/tau_max=-1", "asnn:robust/x", "lgmd1:robust"):
         with pytest.raises(ValueError):
             parse_detector(bad)
+    # a check of the parameters as a whole (no one parameter to name) reads as clearly
+    with pytest.raises(ValueError, match="n_fast must be smaller than n_slow"):
+        parse_detector("asnn:robust/n_fast=9/n_slow=3")
 
 
 @pytest.mark.parametrize("case", ["loom-dark-c0.6-d12-topleft", "drive-day-brake",

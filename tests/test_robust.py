@@ -16,10 +16,11 @@ NO_STABILISATION = dict(stabilise=False)
 NO_SCENE_RELATIVE = dict(scene_relative=False)
 NO_PARTIAL_OVERLAP = dict(partial_overlap=False)
 NO_FIT_TEST = dict(overlap_fit_min=-1.0)
+NO_MOTION_LAYERS = dict(motion_layers=False)
 
 
-def _run(case, **overrides):
-    scene = make_case(case)
+def _run(case, variant=0, **overrides):
+    scene = make_case(case, variant)
     model = ASNN(preset("robust", **overrides))
     responses = [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
     return scene, responses
@@ -167,6 +168,24 @@ def test_a_car_cutting_in_ahead_is_told_apart_by_its_motion_against_the_scene(ca
     # its box holds the roadside behind it, which expands with our motion; the car recedes
     assert _quiet(_run(case)[1])
     assert not _quiet(_run(case, **NO_SCENE_RELATIVE)[1])
+
+
+@pytest.mark.parametrize("case", ["drive-day-cut-in-dark", "drive-day-passed-by-right"])
+def test_a_box_holding_motions_none_of_which_comes_at_us_does_not_warn(case):
+    # in fresh scenery (variant 2) both pass the scene-relative test: the dark car cutting in,
+    # and a car passing us on the right, seen in one box with the roadside; split into its
+    # motions, the box holds none that is itself an approach
+    assert _quiet(_run(case, 2)[1])
+    assert not _quiet(_run(case, 2, **NO_MOTION_LAYERS)[1])
+
+
+def test_collision_courses_under_our_own_motion_keep_an_approaching_motion():
+    # the box of a car we close on holds the road too: one of its motions is the car's
+    for case in ("drive-day-stopped-car", "drive-day-brake", "drive-day-truck-ahead",
+                 "drive-day-oncoming-headon", "drive-day-cross-tbone"):
+        scene, responses = _run(case)
+        assert _hit(scene, responses)
+        assert _first(responses) - _first(_run(case, **NO_MOTION_LAYERS)[1]) <= 3
 
 
 @pytest.mark.parametrize("case", ["drive-day-stopped-car-offset", "drive-night-brake-offset"])

@@ -31,7 +31,7 @@ from pathlib import Path
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from ..tracking import (against_scene, approach_test, better_fit, count_in_regions,
-                        smoothed_run)
+                        layer_estimates, layers_pass, smoothed_run)
 from . import scoring
 from .runs import fmt, write_json
 
@@ -64,7 +64,7 @@ class FrameTrace:
     ----------
     repeat : bool
         The frame repeated the one before (its response is the previous one).
-    objects : tuple of (id, ttc, offset, share, x, y, own, fit, own_fit, box)
+    objects : tuple of (id, ttc, offset, share, x, y, own, fit, own_fit, box, layers)
         Each object seen: its track's id, time to contact and offset (None while it does not
         grow), its share of ``u`` before ``u_scale``, its centre in the frame's pixels, its
         expansion rate against the scene in this frame (per second; None where not measured:
@@ -72,7 +72,10 @@ class FrameTrace:
         smooth it over the frames in which a track passes any grid point's test), its
         track's fit (:attr:`asnn.tracking.Track.fit`), and the share of its box's change the
         fit against the scene explains in this frame (None unless the scene contracts, with
-        ``receding_scene``), and its track's box (for ``region_persistence``).
+        ``receding_scene``), its track's box (for ``region_persistence``), and its box's
+        motion layers as ``(share, ttc, offset)`` (:func:`asnn.tracking.layer_estimates`; None
+        where not measured: with ``motion_layers`` they are measured for every growing track
+        while the scene expands).
     """
 
     repeat: bool
@@ -115,7 +118,7 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
         trace.frames.append(FrameTrace(repeat=False, objects=tuple(
             (tr.id, tr.ttc, tr.offset, share, (tr.x + 0.5) * sx - 0.5, (tr.y + 0.5) * sy - 0.5,
              model.against_scene.get(tr.id), tr.fit, model.fit_against_scene.get(tr.id),
-             tuple(tr.box))
+             tuple(tr.box), layer_estimates(model.layers.get(tr.id), tr.size))
             for tr, share in model.objects)))
     return trace
 
@@ -141,7 +144,8 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
         else:
             judged = []  # (object, passes now, counts by its own frames)
             measured, measured_fits = {}, {}
-            for ident, ttc, offset, share, x, y, against, fit, own_fit, box in frame.objects:
+            for ident, ttc, offset, share, x, y, against, fit, own_fit, box, layers in (
+                    frame.objects):
                 passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, overlap)
                 # where the scene contracts, the regime's candidates but for the fit test are
                 # measured too (their fit against the scene is known only there); one whose
@@ -154,7 +158,9 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                                                         p.track_smoothing)
                     passes = (approach_test(ttc, offset, p.tau_max, p.offset_max,
                                             better_fit(fit, measured_fits[ident]), overlap)
-                              and against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance))
+                              and against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance)
+                              and layers_pass(layers if p.motion_layers else None, ttc,
+                                              offset, p.tau_max, p.offset_max, overlap))
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
                 judged.append(((share, x, y, box), passes, streak[ident] >= p.approach_frames))
             boxes = [obj[3] for obj, _, _ in judged]

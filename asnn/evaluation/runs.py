@@ -133,8 +133,9 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
     try:
         preset(preset_name, **dict(overrides))  # raises for an unknown preset or a bad value
     except ValidationError as exc:
-        raise ValueError(f"{spec!r}: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}") \
-            from None
+        error = exc.errors()[0]
+        where = f"{error['loc'][0]}: " if error["loc"] else ""  # a check of the whole set
+        raise ValueError(f"{spec!r}: {where}{error['msg']}") from None
     return DetectorSpec("asnn", None if preset_name == "default" else preset_name,
                         tuple(overrides))
 
