@@ -623,6 +623,14 @@ class ASNN:
         (:func:`~asnn.tracking.approaching`). An object expanding in a contracting scene moves
         against it, so the pixels the scene explains are the scenery's; where the scene
         expands, object and scenery expand alike, and the box's own fit stands.
+
+        With ``motion_layers``, where the scene expands at least 0.2 per second (our own
+        forward motion), each candidate's box is split into its motions
+        (:func:`~asnn.motion_layers.motion_layers`, on the frames as the camera gave them), per
+        second in :attr:`layers` and to the track (:meth:`~asnn.tracking.Track.measure_layers`),
+        whose approach test then needs one of them to be an approach
+        (:func:`~asnn.tracking.layers_pass`); with :attr:`measure_all_against_scene`, every
+        growing track's box too.
         """
         p = self.params
         overlap = self._overlap
@@ -740,5 +748,8 @@ def compile_kernels(presets: Iterable[str] = ("default", "reference"), threads: 
             flat = np.zeros((128, 128), model.dtype)
             for box in ((0, 0, 90, 80), (0, 0, 128, 64)):
                 region_expansion(flat, flat, box, flat)
+            # the motion layers' kernel, which the clip (a still camera) never reaches
+            texture = np.random.default_rng(0).random((64, 64)).astype(model.dtype)
+            motion_layers(texture, texture, (0, 0, 64, 64))
             # frames wider than max_width, shrunk as they are taken
             _fast.shrunk_luminance(np.zeros((16, 20), np.uint8), (15, 12), LEVELS, model.dtype)

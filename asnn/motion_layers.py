@@ -9,8 +9,8 @@ motion instead, in the way of a layered representation of image sequences [1]_: 
 optical flow of the box [2]_, then the looming model ``u = A + C (x - c_x)``,
 ``v = B + C (y - c_y)`` (the model of :mod:`asnn.looming`) fitted by random sample consensus
 [3]_ to the largest set of pixels it explains, then again to the rest. Each motion found is a
-:class:`Layer`; an object coming at the camera is one of them (:func:`asnn.tracking.
-layers_approach` tests that).
+:class:`Layer`; an object coming at the camera is one of them
+(:func:`asnn.tracking.layers_approach` tests that).
 
 Deterministic: the samples come from a generator seeded the same way on every call, so the
 same frames give the same layers.
@@ -140,6 +140,7 @@ def motion_layers(previous: np.ndarray, current: np.ndarray,
         members = np.flatnonzero(rest)
         if members.size < max(_MIN_PIXELS, _MIN_SHARE * n):
             break
+        # two distinct pixels per hypothesis, from the generator seeded anew for every box
         pairs = np.array([rng.choice(members, 2, replace=False) for _ in range(_SAMPLES)])
         a, b, c = _best_hypothesis(x, y, u, v, tolerance * tolerance, members, pairs)
         fits = members[np.hypot(u[members] - (a + c * x[members]),

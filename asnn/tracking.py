@@ -31,6 +31,11 @@ gives one track that many; with ``region_frames`` the tracker also counts a trac
 now where approaching tracks overlapped its box in enough of the frames before
 (:func:`persists_in_region`): persistence of the approach where it is seen, not of a track id.
 
+Motion layers: where one box holds two motions (a car pulling away in front of the roadside
+that expands behind it under our own forward motion), the fit over the box blends them into an
+approach that neither has; with the layers of the box measured (:mod:`asnn.motion_layers`),
+a track passes only if one of them is itself an approach (:func:`layers_pass`).
+
 Object ids: the fragments of one object are different tracks, so the target a warning reports
 could change its id as one fragment takes over from another. With ``object_ids`` a track that
 overlaps a counting track older than itself, before it has counted under its own id, is named
@@ -256,7 +261,7 @@ def layers_pass(layers: tuple | None, ttc: float | None, offset: float | None, t
 
 # a motion of a box counts as an approach with these margins over the test's own limits: a
 # layer's estimate is one frame's, from the flow of part of the box (set on the suite's
-# fresh-scenery variants 1-5, README "Motion layers")
+# fresh-scenery variants 1-5: README, the stage table; docs/design-notes.md, "Motion layers")
 LAYER_SHARE = 0.15
 LAYER_TAU_FACTOR = 3.0
 LAYER_OFFSET_FACTOR = 2.5

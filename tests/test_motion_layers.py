@@ -80,3 +80,22 @@ def test_layer_estimates_are_in_the_tracks_terms():
     assert approaching(track, 1.5, 1.0)
     track.measure_layers(None)
     assert track.layers is None and approaching(track, 1.5, 1.0)
+
+
+def test_compile_kernels_loads_the_motion_layers_kernel_before_a_drive_needs_it():
+    # a worker's first frame with a candidate in an expanding scene must not wait for numba
+    from asnn import ASNN
+    from asnn.model import compile_kernels
+    from asnn.motion_layers import _best_hypothesis
+    from asnn.stimuli.suite import make_case
+
+    compile_kernels()
+    before = set(_best_hypothesis.signatures)
+    assert before
+    scene = make_case("drive-day-cut-in-dark", 2)  # its cut-in is split into layers
+    model = ASNN()
+    layered = False
+    for i, frame in enumerate(scene.frames):
+        model.step(frame, i / scene.fps)
+        layered = layered or bool(model.layers)
+    assert layered and set(_best_hypothesis.signatures) == before

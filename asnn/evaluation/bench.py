@@ -10,7 +10,9 @@ numba's cache, before anything is timed (:func:`asnn.model.compile_kernels`): so
 called only on a later frame (the clustering on the first frame with attended pixels), and that
 call would otherwise be timed as a step of 10 ms or more. The same run
 times the straightforward float64 form (``ASNN(params, optimised=False)``) of the default preset
-and reports the speed-up as a ratio of medians.
+and reports the speed-up as a ratio of medians. With a case of the labelled suite instead
+(``asnn bench --case NAME``), the models run on its frames: a drive, where the stages that act
+only under the camera's own forward motion (the motion layers) have work.
 """
 
 from __future__ import annotations
