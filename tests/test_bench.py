@@ -26,6 +26,26 @@ def test_bench_json_report_shape(capsys, monkeypatch):
     assert all(r["state_mb"] > 0 for r in rows if r["model"] == "asnn")
 
 
+def test_bench_times_a_case_of_the_suite_at_its_own_size(capsys, monkeypatch):
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert main(["bench", "--case", "drive-day-brake", "--model", "asnn", "--preset", "default",
+                 "--no-straightforward", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["scene"] == "drive-day-brake"
+    from asnn.stimuli.suite import make_case
+
+    frames = make_case("drive-day-brake").frames
+    size = f"{frames.shape[2]}x{frames.shape[1]}"
+    rows = report["results"]
+    assert {r["preset"] for r in rows} == {"robust", "reference32"}
+    assert all(r["size"] == size and r["frames"] == len(frames) - report["warmup"] for r in rows)
+    for bad in (["--case", "drive-day-brake", "--size", "64x64"],
+                ["--case", "drive-day-brake", "--detect"], ["--case", "no-such-case"]):
+        assert main(["bench", *bad]) == 2
+        assert "asnn bench:" in capsys.readouterr().err
+
+
 def test_service_report_format():
     from service.bench import format_report
 
