@@ -674,7 +674,6 @@ class ASNN:
             self.fit_against_scene[tracks[k].id] = fit
         layered = (p.motion_layers and scene is not None
                    and scene.rate / frame.elapsed >= _SCENE_EXPANDS)
-        self.layers = {}
         for k in sorted(chosen | growing) if layered else ():
             self.layers[tracks[k].id] = [
                 (layer.share, layer.rate / frame.elapsed, layer.drift_x / frame.elapsed,

@@ -205,7 +205,7 @@ class Track:
         None unless the target grows."""
         if self.expansion is None or self.expansion <= 0:
             return None
-        return math.hypot(self.drift_x, self.drift_y) / (self.expansion * max(self.size, 1.0))
+        return _offset(self.drift_x, self.drift_y, self.expansion, self.size)
 
     def judge(self, tau_max: float, offset_max: float, frames: int,
               overlap: tuple[float, float, float] | None = None,
@@ -241,9 +241,14 @@ def layer_estimates(layers: Sequence | None, size: float) -> tuple | None:
     expands. None for None or no layers (the box held no motion to split: not measured)."""
     if not layers:
         return None
-    return tuple((share, 1.0 / rate, math.hypot(dx, dy) / (rate * max(size, 1.0)))
+    return tuple((share, 1.0 / rate, _offset(dx, dy, rate, size))
                  if rate > 0 else (share, None, None)
                  for share, rate, dx, dy in layers)
+
+
+def _offset(drift_x: float, drift_y: float, rate: float, size: float) -> float:
+    """``|drift| / (rate * size)`` (:attr:`Track.offset`), the size at least 1 pixel."""
+    return math.hypot(drift_x, drift_y) / (rate * max(size, 1.0))
 
 
 def layers_pass(layers: tuple | None, ttc: float | None, offset: float | None, tau_max: float,

@@ -274,7 +274,7 @@ def suite_report(results: Mapping) -> str:
         *([f"Variant {settings['variant']}: the suite's cases with fresh scene seeds (other "
            "textures, sensor noise and roadside objects; the same geometry, motion and labels)."
            " The default preset was designed on the suite as it is (variant 0), its region"
-           " persistence on variants 1-5 (README, 'fresh scenery').",
+           " persistence and motion layers on variants 1-5 (README, 'fresh scenery').",
            ""] if settings.get("variant") else []),
         *([f"Frames perturbed: {settings['perturbation']} "
            f"({PERTURBATIONS[settings['perturbation']]}).", ""]
