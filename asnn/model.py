@@ -30,7 +30,7 @@ from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
 from .looming import moved_by_expansion, region_expansion, scene_expansion
 from .motion_layers import motion_layers
 from .params import ASNNParams, preset
-from .response import Maps, Response
+from .response import Maps, Response, TrackReport
 from .stabilisation import background_shift, shift_image
 from .targets import Target, extract_objects, extract_targets
 from .tracking import Observation, TargetTracker, approach_test
@@ -53,6 +53,10 @@ class ASNN:
         A parameter set or a preset name (see :mod:`asnn.params`).
     record_maps : bool
         Attach the intermediate maps (:class:`~asnn.response.Maps`) to every response.
+    record_tracks : bool
+        Attach every tracked object with its approach test
+        (:class:`~asnn.response.TrackReport`) to every response: why the model warned, or did
+        not. Presets that track objects only (``targets='objects'``).
     optimised : bool
         Use the fused kernels of :mod:`asnn._fast` in ``params.precision`` (default), or the
         straightforward float64 form of :mod:`asnn.retina` (``False``; for comparisons). Kernel
@@ -106,10 +110,14 @@ class ASNN:
     """
 
     def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,
-                 optimised: bool = True, threads: int = 1):
+                 record_tracks: bool = False, optimised: bool = True, threads: int = 1):
         self.params = preset(params) if isinstance(params, str) else params
         self.record_maps = record_maps
         p = self.params
+        if record_tracks and p.targets != "objects":
+            raise ValueError("record_tracks needs a preset that tracks objects "
+                             f"(targets='objects'), not targets={p.targets!r}")
+        self.record_tracks = record_tracks
         self.optimised = bool(optimised) and _fast.supported(p)
         self.dtype = np.dtype(p.precision if self.optimised else np.float64)
         self._min_side = max(p.dog_size, p.kernel_size, p.attention_size)
@@ -375,7 +383,8 @@ class ASNN:
         """The last part of a step: the response to a frame whose maps are complete."""
         if frame.lum is None:
             self._last = (dataclasses.replace(self._last, index=frame.index) if frame.repeat
-                          else Response.silent(frame.index))
+                          else dataclasses.replace(Response.silent(frame.index),
+                                                   tracks=[] if self.record_tracks else None))
         elif self.optimised:
             self._last = self._respond_optimised(frame)
         else:
@@ -478,7 +487,8 @@ class ASNN:
                         phi=np.arctan2(r[2], r[0]), G=g.copy(), M_a=m_a, M_d=m_d,
                         G_prime=g * mask)
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
-                        collision=spike_rate >= p.t_c, targets=targets, maps=maps)
+                        collision=spike_rate >= p.t_c, targets=targets, maps=maps,
+                        tracks=frame.tracks)
 
     def _respond(self, frame: "_Frame") -> Response:
         """One step in the straightforward float64 form (:mod:`asnn.retina`, stage by stage)."""
@@ -528,7 +538,8 @@ class ASNN:
         maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d,
                     G_prime=g_prime) if self.record_maps else None
         return Response(index=frame.index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
-                        collision=spike_rate >= p.t_c, targets=targets, maps=maps)
+                        collision=spike_rate >= p.t_c, targets=targets, maps=maps,
+                        tracks=frame.tracks)
 
     def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, frame: "_Frame",
                  total: float, points: tuple[np.ndarray, np.ndarray] | None = None
@@ -549,6 +560,8 @@ class ASNN:
             if p.scene_relative:
                 self._measure_against_scene([], [], [], frame)
             self.objects = []
+            if self.record_tracks:
+                frame.tracks = []
             return (0.0 if p.approach_gate else total), []
         regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
                                   points=points)
@@ -585,6 +598,9 @@ class ASNN:
             total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0
         sx, sy = self.shape[1] / w, self.shape[0] / h  # the frame's pixels per model pixel
         # pixel centres: model pixel i covers the frame's pixels [i sx, (i + 1) sx)
+        if self.record_tracks:
+            frame.tracks = [self._track_report(tr, coming[k], float(regions.share[k]), sx, sy)
+                            for k, tr in enumerate(tracks)]
         targets: dict[int, Target] = {}  # by object id
         for k, tr in enumerate(tracks):
             if p.approach_gate and not coming[k]:
@@ -600,6 +616,19 @@ class ASNN:
             if target.id not in targets or target.pixels > targets[target.id].pixels:
                 targets[target.id] = target
         return total, list(targets.values())
+
+    def _track_report(self, track, counts: bool, share: float, sx: float, sy: float
+                      ) -> TrackReport:
+        """A track as the approach test saw it in this frame, in the input frame's pixels."""
+        x0, y0, x1, y1 = track.box
+        return TrackReport(
+            id=track.id, object_id=self.tracker.object_id(track),
+            x=float((track.x + 0.5) * sx - 0.5), y=float((track.y + 0.5) * sy - 0.5),
+            size=float(track.size * math.sqrt(sx * sy)),
+            box=(float(x0 * sx), float(y0 * sy), float(x1 * sx), float(y1 * sy)),
+            expansion=track.expansion, ttc=track.ttc, offset=track.offset, fit=track.fit,
+            own_expansion=track.own_expansion, layers=track.layers, streak=track.streak,
+            test=track.verdict, counts=bool(counts), share=share if counts else 0.0)
 
     def _measure_against_scene(self, tracks: list, boxes: list, rates: list,
                                frame: "_Frame") -> None:
@@ -703,6 +732,7 @@ class _Frame:
     photo: np.ndarray | None = None
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined
+    tracks: list | None = None  # its objects' approach tests (record_tracks)
 
 
 def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams

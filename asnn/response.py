@@ -7,8 +7,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .targets import Target
+from .tracking import ApproachVerdict
 
-__all__ = ["Maps", "Response"]
+__all__ = ["Maps", "Response", "TrackReport"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,6 +38,66 @@ class Maps:
 
 
 @dataclass(frozen=True, slots=True)
+class TrackReport:
+    """One tracked object as the approach test saw it in one frame, for tracing why the model
+    warned or stayed silent (:class:`asnn.model.ASNN` with ``record_tracks``).
+
+    Attributes
+    ----------
+    id : int
+        The track's own id.
+    object_id : int
+        The id its target is reported under (the object a fragment is part of; else ``id``).
+    x, y : float
+        Centre, input-frame pixels.
+    size : float
+        RMS radius of its approach activity, input-frame pixels.
+    box : (x0, y0, x1, y1)
+        The region its expansion is measured over, input-frame pixels.
+    expansion, ttc, offset, fit, own_expansion, layers
+        As :class:`asnn.tracking.Track` keeps them (per second, seconds, object sizes, share;
+        ``layers`` as ``(share, ttc, offset)`` per motion of the box, None where not measured).
+    streak : int
+        Consecutive frames, up to this one, in which it passed the approach test.
+    test : ApproachVerdict
+        The approach test's parts in this frame (:func:`asnn.tracking.approach_verdict`).
+    counts : bool
+        Whether it counts as coming at the camera in this frame (its streak, or the region's
+        persistence: :meth:`asnn.tracking.TargetTracker.judge`): only these drive u(t).
+    share : float
+        Its share of u(t) before ``u_scale``, where it counts.
+    """
+
+    id: int
+    object_id: int
+    x: float
+    y: float
+    size: float
+    box: tuple[float, float, float, float]
+    expansion: float | None
+    ttc: float | None
+    offset: float | None
+    fit: float | None
+    own_expansion: float | None
+    layers: tuple | None
+    streak: int
+    test: ApproachVerdict
+    counts: bool
+    share: float
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields (the test's parts and ``passes`` as a map)."""
+        return {"id": self.id, "object_id": self.object_id, "x": self.x, "y": self.y,
+                "size": self.size, "box": list(self.box), "expansion": self.expansion,
+                "ttc": self.ttc, "offset": self.offset, "fit": self.fit,
+                "own_expansion": self.own_expansion,
+                "layers": None if self.layers is None else [list(m) for m in self.layers],
+                "streak": self.streak,
+                "test": {**self.test._asdict(), "passes": self.test.passes},
+                "counts": self.counts, "share": self.share}
+
+
+@dataclass(frozen=True, slots=True)
 class Response:
     """One frame's output of a detector.
 
@@ -58,6 +119,9 @@ class Response:
         Looming regions (always empty for the LGMD models).
     maps : Maps or None
         Intermediate maps when the model was asked to record them.
+    tracks : list of TrackReport or None
+        Every object tracked in the frame with its approach test, when the model was asked to
+        record them (presets that track objects).
     """
 
     index: int
@@ -68,6 +132,7 @@ class Response:
     collision: bool
     targets: list[Target] = field(default_factory=list)
     maps: Maps | None = None
+    tracks: list[TrackReport] | None = None
 
     @classmethod
     def silent(cls, index: int) -> "Response":
@@ -75,7 +140,7 @@ class Response:
         return cls(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False)
 
     def to_dict(self) -> dict:
-        """JSON-ready fields (maps excluded)."""
+        """JSON-ready fields (maps and tracks excluded)."""
         return {"u": self.u, "out": self.out, "spikes": self.spikes,
                 "spike_rate": self.spike_rate, "collision": self.collision,
                 "targets": [t.to_dict() for t in self.targets]}

@@ -57,11 +57,13 @@ import math
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
            "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region",
            "count_in_regions", "fragment_of", "layer_estimates", "layers_pass",
-           "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR", "LAYER_OFFSET_FACTOR"]
+           "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR", "LAYER_OFFSET_FACTOR",
+           "ApproachVerdict", "approach_verdict"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,6 +132,9 @@ class Track:
         it expands), the offset in this track's size (:meth:`measure_layers`); None where they
         were not measured (the model measures them, with ``motion_layers``, only while the
         track otherwise passes the approach test and the scene expands).
+    verdict : ApproachVerdict or None
+        The approach test's parts in the latest frame it was judged (:meth:`judge`); None
+        before its first.
     """
 
     id: int
@@ -147,6 +152,7 @@ class Track:
     own_expansion: float | None = None
     own_fit: float | None = None
     layers: tuple | None = None
+    verdict: "ApproachVerdict | None" = None
     _smoothing: float = field(default=0.5, repr=False)
 
     def observe(self, obs: Observation, elapsed: float, box_weight: float) -> None:
@@ -210,12 +216,63 @@ class Track:
     def judge(self, tau_max: float, offset_max: float, frames: int,
               overlap: tuple[float, float, float] | None = None,
               tolerance: float = 0.0) -> bool:
-        """Update :attr:`streak` with this frame's approach test (:func:`approaching`) and
-        return whether the track has passed it in the last ``frames`` frames in a row: a
-        warning needs a few consecutive frames of approach, not one lucky estimate."""
-        passed = approaching(self, tau_max, offset_max, overlap, tolerance)
-        self.streak = self.streak + 1 if passed else 0
+        """Update :attr:`verdict` and :attr:`streak` with this frame's approach test
+        (:func:`approach_verdict`) and return whether the track has passed it in the last
+        ``frames`` frames in a row: a warning needs a few consecutive frames of approach, not
+        one lucky estimate."""
+        self.verdict = approach_verdict(self, tau_max, offset_max, overlap, tolerance)
+        self.streak = self.streak + 1 if self.verdict.passes else 0
         return self.streak >= frames
+
+
+class ApproachVerdict(NamedTuple):
+    """The parts of the approach test for one track in one frame (:func:`approach_verdict`):
+    which of them it passed, so that a warning, or its absence, can be traced to them.
+
+    Attributes
+    ----------
+    seen : bool
+        Seen in the frame (a missed track is not judged on old estimates).
+    course : bool
+        On a collision course: ``ttc <= tau_max`` and ``offset <= offset_max``.
+    overlap : bool
+        Not on a collision course but within the partial-overlap regime (its wider limits,
+        and a box its fit explains: the better of the box's fit and its fit against the scene).
+    scene : bool
+        Does not contract against the scene (:func:`against_scene`; True where not measured).
+    layers : bool
+        One of its box's motion layers is an approach (:func:`layers_pass`; True where not
+        measured).
+    """
+
+    seen: bool
+    course: bool
+    overlap: bool
+    scene: bool
+    layers: bool
+
+    @property
+    def passes(self) -> bool:
+        """Whether the track passes the test: seen, on a collision course or a partial
+        overlap, not contracting against the scene, and a motion layer that approaches."""
+        return self.seen and (self.course or self.overlap) and self.scene and self.layers
+
+
+def approach_verdict(track: Track, tau_max: float, offset_max: float,
+                     overlap: tuple[float, float, float] | None = None,
+                     tolerance: float = 0.0) -> ApproachVerdict:
+    """The approach test's parts for a track in the latest frame (:class:`ApproachVerdict`):
+    :func:`approach_test` on a collision course, else in the partial-overlap regime ``overlap``
+    (with the better of its box's fit and its fit against the scene, where that is measured),
+    :func:`against_scene` with ``tolerance``, and :func:`layers_pass`."""
+    course = approach_test(track.ttc, track.offset, tau_max, offset_max)
+    return ApproachVerdict(
+        seen=track.missed == 0,
+        course=course,
+        overlap=not course and approach_test(track.ttc, track.offset, tau_max, offset_max,
+                                             better_fit(track.fit, track.own_fit), overlap),
+        scene=against_scene(track.own_expansion, track.expansion, tolerance),
+        layers=layers_pass(track.layers, track.ttc, track.offset, tau_max, offset_max, overlap))
 
 
 def approaching(track: Track, tau_max: float, offset_max: float,
@@ -226,12 +283,8 @@ def approaching(track: Track, tau_max: float, offset_max: float,
     against the scene, where that is measured), where its expansion against the scene is
     measured, does not contract against the scene (:func:`against_scene`), and where its
     box's motion layers are measured, one of them is itself an approach
-    (:func:`layers_pass`)."""
-    return (track.missed == 0
-            and approach_test(track.ttc, track.offset, tau_max, offset_max,
-                              better_fit(track.fit, track.own_fit), overlap)
-            and against_scene(track.own_expansion, track.expansion, tolerance)
-            and layers_pass(track.layers, track.ttc, track.offset, tau_max, offset_max, overlap))
+    (:func:`layers_pass`): :attr:`ApproachVerdict.passes` of :func:`approach_verdict`."""
+    return approach_verdict(track, tau_max, offset_max, overlap, tolerance).passes
 
 
 def layer_estimates(layers: Sequence | None, size: float) -> tuple | None:

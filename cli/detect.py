@@ -15,7 +15,7 @@ import cv2
 from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.model import compile_kernels
-from asnn.params import preset_names
+from asnn.params import preset, preset_names
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import SourceError, open_source
@@ -43,6 +43,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="threads the ASNN model uses for the stream, besides decoding and "
                         "output (default: the cores available; the results are the same "
                         "whatever the number)")
+    p.add_argument("--tracks", metavar="PATH|-",
+                   help="write every tracked object with its approach test, one JSON object per "
+                        "frame ('-': stdout): why the model warned, or did not (presets that "
+                        "track objects, e.g. default)")
     p.add_argument("--mcap", metavar="OUT.mcap",
                    help="write the frames, targets, warnings and response numbers as an MCAP "
                         "for Foxglove (docs/foxglove.md; the 'ros' extra)")
@@ -51,6 +55,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _record(index: int, t: float, response) -> dict:
     return {"frame": index, "t": round(t, 6), **response.to_dict()}
+
+
+def _tracks_record(index: int, t: float, response) -> dict:
+    return {"frame": index, "t": round(t, 6), "collision": response.collision,
+            "tracks": [track.to_dict() for track in response.tracks or ()]}
 
 
 def _fail(message: str) -> int:
@@ -103,6 +112,13 @@ def run(args: argparse.Namespace) -> int:
     one loop, in frame order."""
     options = {}
     model_threads = 1
+    if args.tracks:
+        if args.model != "asnn" or preset(args.preset).targets != "objects":
+            return _fail("--tracks needs the ASNN model with a preset that tracks objects "
+                         "(targets='objects', e.g. default)")
+        if args.tracks == "-" and args.jsonl == "-":
+            return _fail("--jsonl and --tracks cannot both write to stdout")
+        options["record_tracks"] = True
     if args.model == "asnn":
         model_threads = options["threads"] = args.threads or available_cores()
         if args.annotate:
@@ -127,6 +143,11 @@ def run(args: argparse.Namespace) -> int:
             jsonl = sys.stdout
         elif args.jsonl:
             jsonl = stack.enter_context(open(args.jsonl, "w", encoding="utf-8"))
+        tracks = None
+        if args.tracks == "-":
+            tracks = sys.stdout
+        elif args.tracks:
+            tracks = stack.enter_context(open(args.tracks, "w", encoding="utf-8"))
         mcap = None
         if args.mcap:
             try:
@@ -147,6 +168,8 @@ def run(args: argparse.Namespace) -> int:
             records.append(record)
             if jsonl is not None:
                 jsonl.write(json.dumps(record) + "\n")
+            if tracks is not None:
+                tracks.write(json.dumps(_tracks_record(index, t, response)) + "\n")
             if mcap is not None:
                 mcap.write(frame, record, (source.start_ns or 0) + round(t * 1e9))
             if args.annotate:

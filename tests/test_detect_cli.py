@@ -58,6 +58,46 @@ def test_lgmd_models_are_selectable_and_report_no_targets(looming_video, capsys)
     assert all(r["targets"] == [] for r in records)
 
 
+TRACK_FIELDS = {"id", "object_id", "x", "y", "size", "box", "expansion", "ttc", "offset", "fit",
+                "own_expansion", "layers", "streak", "test", "counts", "share"}
+TEST_FIELDS = {"seen", "course", "overlap", "scene", "layers", "passes"}
+
+
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_tracks_file_gives_every_object_with_its_approach_test(looming_video, tmp_path, threads):
+    path, scene = looming_video
+    jsonl, tracks = tmp_path / "out.jsonl", tmp_path / "tracks.jsonl"
+    assert main(["detect", str(path), "--jsonl", str(jsonl), "--tracks", str(tracks),
+                 "--threads", threads]) == 0
+    records = [json.loads(line) for line in jsonl.read_text().splitlines()]
+    traced = [json.loads(line) for line in tracks.read_text().splitlines()]
+    assert [(t["frame"], t["t"], t["collision"]) for t in traced] == [
+        (r["frame"], r["t"], r["collision"]) for r in records]
+    for record, frame in zip(records, traced):
+        for track in frame["tracks"]:
+            assert set(track) == TRACK_FIELDS and set(track["test"]) == TEST_FIELDS
+        # the warning's targets are the objects that count, and only they
+        counting = [t for t in frame["tracks"] if t["counts"]]
+        assert {t["object_id"] for t in counting} == {t["id"] for t in record["targets"]}
+        assert all(t["test"]["passes"] for t in counting)
+    assert sum(1 for f in traced for t in f["tracks"] if t["counts"]) >= 10
+    # the same with any number of model threads
+    if threads == "2":
+        single = tmp_path / "single.jsonl"
+        assert main(["detect", str(path), "--tracks", str(single), "--threads", "1"]) == 0
+        assert single.read_text() == tracks.read_text()
+
+
+@pytest.mark.parametrize("extra", [["--preset", "reference"], ["--model", "lgmd1"],
+                                   ["--jsonl", "-"]])
+def test_tracks_that_cannot_be_written_are_one_error_line(looming_video, capsys, extra):
+    path, _ = looming_video
+    assert main(["detect", str(path), "--tracks", "-", *extra]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and len(captured.err.strip().splitlines()) == 1
+    assert "--tracks" in captured.err
+
+
 def test_annotate_and_plot_write_files(looming_video, tmp_path):
     path, scene = looming_video
     video, plot = tmp_path / "ann.mp4", tmp_path / "plot.png"

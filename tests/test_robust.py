@@ -272,6 +272,62 @@ def test_one_target_per_object_with_a_stable_id_and_a_time_to_contact():
     assert checked >= 10
 
 
+def _traced(case, variant=0, **overrides):
+    scene = make_case(case, variant)
+    model = ASNN(preset("robust", **overrides), record_tracks=True)
+    return scene, [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
+
+
+def test_every_tracked_object_reports_the_approach_test_that_decided_the_warning():
+    scene, responses = _traced("loom-dark-c0.6-d6-center")
+    tau_max = preset("robust").tau_max
+    warned = [r for r in responses if r.collision and r.index > 0]
+    assert len(warned) >= 10
+    for r in responses[1:]:
+        counting = [t for t in r.tracks if t.counts]
+        # only counting objects drive u(t), and the warning's targets are theirs
+        assert (r.u > 0) == bool(counting)
+        assert {t.object_id for t in counting} == {t.id for t in r.targets}
+        for t in r.tracks:
+            assert (t.streak > 0) == t.test.passes
+            assert t.test.passes == (t.test.seen and (t.test.course or t.test.overlap)
+                                     and t.test.scene and t.test.layers)
+            assert t.share > 0 if t.counts else t.share == 0
+    for r in warned[:-3]:  # before contact: on a collision course, in the frame's pixels
+        (t,) = [t for t in r.tracks if t.counts]
+        assert t.test.course and t.ttc <= tau_max and t.streak >= 3
+        x0, y0, x1, y1 = t.box
+        assert x0 < scene.center[0] < x1 and y0 < scene.center[1] < y1
+
+
+def test_a_near_miss_reports_the_offset_that_keeps_it_quiet():
+    # the disk grows as fast as its collision twin, but its path points past the camera
+    scene, responses = _traced("nearmiss-disk-dark-right")
+    p = preset("robust")
+    assert _quiet(responses)
+    refused = [t for r in responses for t in r.tracks or ()
+               if t.ttc is not None and t.ttc <= p.tau_max and t.offset > p.offset_max]
+    assert len(refused) >= 10
+    assert all(not t.test.course and not t.counts for t in refused)
+
+
+def test_a_refusal_by_the_scene_or_the_motion_layers_is_reported_as_such():
+    # the dark car cutting in ahead (variant 2): a box on a collision course by its own fit,
+    # which the motion against the scene or the box's motion layers refuse
+    _, responses = _traced("drive-day-cut-in-dark", 2)
+    assert _quiet(responses)
+    refused = [t for r in responses for t in r.tracks
+               if t.test.course and not (t.test.scene and t.test.layers)]
+    assert refused and not any(t.counts for t in refused)
+
+
+def test_tracks_are_recorded_only_for_presets_that_track_objects():
+    with pytest.raises(ValueError, match="record_tracks"):
+        ASNN("reference32", record_tracks=True)
+    scene = make_case("loom-dark-c0.6-d6-center")
+    assert all(ASNN("robust").step(f).tracks is None for f in scene.frames[:5])
+
+
 def test_the_published_variant_reports_rim_segments_without_ids():
     scene = make_case("loom-dark-c0.6-d6-center")
     model = ASNN("reference32")
