@@ -139,6 +139,11 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
         noisy = perturb_frame(np.full_like(frame, 128), "noise", 0).astype(float)
         assert noisy.std() == pytest.approx(4.0, rel=0.2) and abs(noisy.mean() - 128) < 0.5
         assert not np.array_equal(perturb_frame(frame, "noise", 0), perturb_frame(frame, "noise", 1))
+        # the camera's own hood and overlay: still, along the bottom, the view above untouched
+        hood = perturb_frame(frame, "hood", 0)
+        assert np.array_equal(hood, perturb_frame(frame, "hood", 9))
+        assert np.array_equal(hood[:12], frame[:12])
+        assert (hood[-1] != frame[-1]).any() and hood[-1, :8].max() <= 60  # left of the text
     with pytest.raises(ValueError, match="unknown perturbation"):
         perturb_frame(frame, "blur", 0)
     with pytest.raises(ValueError, match="uint8"):

@@ -17,7 +17,7 @@ from collections.abc import Iterable, Iterator, Mapping
 
 import numpy as np
 
-from ..stimuli.effects import jpeg, sensor_noise
+from ..stimuli.effects import camera_rig, jpeg, sensor_noise
 
 __all__ = ["PERTURBATIONS", "check_perturbation", "perturb_frame", "perturbed", "perturb_label"]
 
@@ -27,6 +27,7 @@ PERTURBATIONS = {
     "jpeg": "every frame re-encoded as JPEG at quality 30",
     "dim": "0.6 times the brightness (an under-exposed camera)",
     "mirror": "every frame flipped left to right (the labels' centres with it)",
+    "hood": "a dashcam's own hood along the bottom and a timestamp overlay, still in every frame",
 }
 NOISE_SIGMA = 4.0
 JPEG_QUALITY = 30
@@ -55,7 +56,11 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
         return np.ascontiguousarray(frame[:, ::-1])
     if name == "jpeg":
         return jpeg(frame[None], JPEG_QUALITY)[0]
-    if name == "noise":
+    if name == "hood":
+        covered, values = camera_rig(frame.shape[1::-1])
+        changed = frame.astype(np.float64)
+        changed[covered] = values[covered, None] if frame.ndim == 3 else values[covered]
+    elif name == "noise":
         changed = sensor_noise(frame.astype(np.float64), NOISE_SIGMA, seed=index)
     else:
         changed = frame * DIM_GAIN

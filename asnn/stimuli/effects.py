@@ -5,7 +5,8 @@ displacement of the whole image, ``(dx, dy, angle)``: the content seen at rest i
 ``angle`` about the frame centre and shifted by ``(dx, dy)`` (:func:`camera_matrix`).
 Lighting (:class:`Ramp`, :class:`Flicker`, :class:`Step`) scales each frame's brightness by a gain,
 as exposure or the light on the scene changes; :class:`Headlights` adds a bright soft blob that
-sweeps across. :func:`sensor_noise` and :func:`jpeg` model the sensor and the codec.
+sweeps across. :func:`sensor_noise` and :func:`jpeg` model the sensor and the codec, and
+:func:`camera_rig` what a dashcam shows of its own car and its overlay.
 
 Every effect is deterministic: random ones take a ``seed``.
 """
@@ -34,6 +35,7 @@ __all__ = [
     "gains",
     "sensor_noise",
     "jpeg",
+    "camera_rig",
 ]
 
 
@@ -277,3 +279,38 @@ def jpeg(clip: np.ndarray, quality: int) -> np.ndarray:
             raise ValueError("JPEG encoding failed")
         out[i] = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     return out
+
+
+# --------------------------------------------------------------------------- the camera's rig
+
+def camera_rig(size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """What a dashcam shows of its own car and its recorder, the same in every frame: the hood
+    along the bottom, a dark surface under an arc (16 % of the height at the middle, 9 % at
+    the sides) with a bright rim where it meets the road, and a white timestamp in the bottom
+    right corner.
+
+    Parameters
+    ----------
+    size : (width, height)
+
+    Returns
+    -------
+    covered : ndarray (height, width) bool
+        The pixels the rig covers.
+    values : ndarray (height, width) float
+        Their gray levels (0..255; meaningless elsewhere).
+    """
+    w, h = size
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    u = (xs - 0.5 * (w - 1)) / (0.5 * w)
+    edge = h * (1.0 - 0.09 - 0.07 * (1.0 - u * u))
+    rim = np.abs(ys - edge) < 1.0
+    covered = (ys >= edge) | rim
+    values = 38.0 + 14.0 * (ys - edge) / (0.16 * h)  # shaded toward the camera
+    values[rim] = 120.0
+    text = np.zeros((h, w), np.uint8)
+    cv2.putText(text, "2026/11/24 08:00", (int(0.55 * w), int(0.97 * h)),
+                cv2.FONT_HERSHEY_SIMPLEX, max(0.25, h / 600), 255, 1, cv2.LINE_AA)
+    lettered = text > 0
+    values[lettered] = 235.0
+    return covered | lettered, values
