@@ -305,7 +305,7 @@ def test_a_near_miss_reports_the_offset_that_keeps_it_quiet():
     scene, responses = _traced("nearmiss-disk-dark-right")
     p = preset("robust")
     assert _quiet(responses)
-    refused = [t for r in responses for t in r.tracks or ()
+    refused = [t for r in responses for t in r.tracks
                if t.ttc is not None and t.ttc <= p.tau_max and t.offset > p.offset_max]
     assert len(refused) >= 10
     assert all(not t.test.course and not t.counts for t in refused)
