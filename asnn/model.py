@@ -35,7 +35,7 @@ from .stabilisation import background_shift, shift_image
 from .targets import Target, extract_objects, extract_targets
 from .tracking import Observation, TargetTracker, approach_test
 
-__all__ = ["ASNN", "FrameError", "compile_kernels", "spike_step"]
+__all__ = ["ASNN", "FrameError", "compile_kernels", "frame_pixel", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
 _MAX_ELAPSED = 1.0  # seconds between frames beyond which their times are not believed
@@ -383,8 +383,7 @@ class ASNN:
         """The last part of a step: the response to a frame whose maps are complete."""
         if frame.lum is None:
             self._last = (dataclasses.replace(self._last, index=frame.index) if frame.repeat
-                          else dataclasses.replace(Response.silent(frame.index),
-                                                   tracks=[] if self.record_tracks else None))
+                          else Response.silent(frame.index, [] if self.record_tracks else None))
         elif self.optimised:
             self._last = self._respond_optimised(frame)
         else:
@@ -597,7 +596,6 @@ class ASNN:
         if p.approach_gate:
             total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0
         sx, sy = self.shape[1] / w, self.shape[0] / h  # the frame's pixels per model pixel
-        # pixel centres: model pixel i covers the frame's pixels [i sx, (i + 1) sx)
         if self.record_tracks:
             frame.tracks = [self._track_report(tr, coming[k], float(regions.share[k]), sx, sy)
                             for k, tr in enumerate(tracks)]
@@ -605,8 +603,7 @@ class ASNN:
         for k, tr in enumerate(tracks):
             if p.approach_gate and not coming[k]:
                 continue
-            target = Target(x=float((regions.x[k] + 0.5) * sx - 0.5),
-                            y=float((regions.y[k] + 0.5) * sy - 0.5),
+            target = Target(x=frame_pixel(regions.x[k], sx), y=frame_pixel(regions.y[k], sy),
                             direction=float(regions.direction[k]),
                             energy=float(regions.energy[k]),
                             pixels=int(round(regions.pixels[k] * sx * sy)),
@@ -623,7 +620,7 @@ class ASNN:
         x0, y0, x1, y1 = track.box
         return TrackReport(
             id=track.id, object_id=self.tracker.object_id(track),
-            x=float((track.x + 0.5) * sx - 0.5), y=float((track.y + 0.5) * sy - 0.5),
+            x=frame_pixel(track.x, sx), y=frame_pixel(track.y, sy),
             size=float(track.size * math.sqrt(sx * sy)),
             box=(float(x0 * sx), float(y0 * sy), float(x1 * sx), float(y1 * sy)),
             expansion=track.expansion, ttc=track.ttc, offset=track.offset, fit=track.fit,
@@ -733,6 +730,12 @@ class _Frame:
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined
     tracks: list | None = None  # its objects' approach tests (record_tracks)
+
+
+def frame_pixel(coordinate: float, scale: float) -> float:
+    """A model pixel's coordinate in the input frame's pixels, ``scale`` frame pixels per model
+    pixel: pixel centres, model pixel i covering the frame's pixels [i scale, (i + 1) scale)."""
+    return float((coordinate + 0.5) * scale - 0.5)
 
 
 def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams

@@ -135,9 +135,11 @@ class Response:
     tracks: list[TrackReport] | None = None
 
     @classmethod
-    def silent(cls, index: int) -> "Response":
-        """The response to a frame that only primes a stream (its first): u = 0, no spikes."""
-        return cls(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False)
+    def silent(cls, index: int, tracks: list[TrackReport] | None = None) -> "Response":
+        """The response to a frame that only primes a stream (its first): u = 0, no spikes
+        (``tracks``: none yet, ``[]`` where they are recorded)."""
+        return cls(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False,
+                   tracks=tracks)
 
     def to_dict(self) -> dict:
         """JSON-ready fields (maps and tracks excluded)."""

@@ -63,7 +63,7 @@ __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approachin
            "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region",
            "count_in_regions", "fragment_of", "layer_estimates", "layers_pass",
            "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR", "LAYER_OFFSET_FACTOR",
-           "ApproachVerdict", "approach_verdict"]
+           "ApproachVerdict", "approach_verdict", "approach_parts"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,17 +262,30 @@ def approach_verdict(track: Track, tau_max: float, offset_max: float,
                      overlap: tuple[float, float, float] | None = None,
                      tolerance: float = 0.0) -> ApproachVerdict:
     """The approach test's parts for a track in the latest frame (:class:`ApproachVerdict`):
+    :func:`approach_parts` of its estimates, with the better of its box's fit and its fit
+    against the scene (where that is measured)."""
+    return approach_parts(track.ttc, track.offset, better_fit(track.fit, track.own_fit),
+                          track.own_expansion, track.expansion, track.layers, tau_max,
+                          offset_max, overlap, tolerance, seen=track.missed == 0)
+
+
+def approach_parts(ttc: float | None, offset: float | None, fit: float | None,
+                   own_expansion: float | None, expansion: float | None, layers: tuple | None,
+                   tau_max: float, offset_max: float,
+                   overlap: tuple[float, float, float] | None = None, tolerance: float = 0.0,
+                   seen: bool = True) -> ApproachVerdict:
+    """The approach test's parts for an object's estimates (:class:`ApproachVerdict`):
     :func:`approach_test` on a collision course, else in the partial-overlap regime ``overlap``
-    (with the better of its box's fit and its fit against the scene, where that is measured),
-    :func:`against_scene` with ``tolerance``, and :func:`layers_pass`."""
-    course = approach_test(track.ttc, track.offset, tau_max, offset_max)
+    (with ``fit``), :func:`against_scene` with ``tolerance``, and :func:`layers_pass`. The one
+    composition of the test, for a track (:func:`approach_verdict`) and for the held-out
+    replay's traced estimates."""
+    course = approach_test(ttc, offset, tau_max, offset_max)
     return ApproachVerdict(
-        seen=track.missed == 0,
+        seen=seen,
         course=course,
-        overlap=not course and approach_test(track.ttc, track.offset, tau_max, offset_max,
-                                             better_fit(track.fit, track.own_fit), overlap),
-        scene=against_scene(track.own_expansion, track.expansion, tolerance),
-        layers=layers_pass(track.layers, track.ttc, track.offset, tau_max, offset_max, overlap))
+        overlap=not course and approach_test(ttc, offset, tau_max, offset_max, fit, overlap),
+        scene=against_scene(own_expansion, expansion, tolerance),
+        layers=layers_pass(layers, ttc, offset, tau_max, offset_max, overlap))
 
 
 def approaching(track: Track, tau_max: float, offset_max: float,

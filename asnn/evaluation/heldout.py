@@ -28,10 +28,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..model import ASNN, spike_step
+from ..model import ASNN, frame_pixel, spike_step
 from ..params import ASNNParams
-from ..tracking import (against_scene, approach_test, better_fit, count_in_regions,
-                        layer_estimates, layers_pass, smoothed_run)
+from ..tracking import (approach_parts, approach_test, better_fit, count_in_regions,
+                        layer_estimates, smoothed_run)
 from . import scoring
 from .runs import fmt, write_json
 
@@ -116,7 +116,7 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
         trace.cells = h * w
         sx, sy = model.shape[1] / w, model.shape[0] / h
         trace.frames.append(FrameTrace(repeat=False, objects=tuple(
-            (tr.id, tr.ttc, tr.offset, share, (tr.x + 0.5) * sx - 0.5, (tr.y + 0.5) * sy - 0.5,
+            (tr.id, tr.ttc, tr.offset, share, frame_pixel(tr.x, sx), frame_pixel(tr.y, sy),
              model.against_scene.get(tr.id), tr.fit, model.fit_against_scene.get(tr.id),
              tuple(tr.box), layer_estimates(model.layers.get(tr.id), tr.size))
             for tr, share in model.objects)))
@@ -156,11 +156,10 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                     measured[ident] = smoothed_run(own.get(ident), against, p.track_smoothing)
                     measured_fits[ident] = smoothed_run(own_fits.get(ident), own_fit,
                                                         p.track_smoothing)
-                    passes = (approach_test(ttc, offset, p.tau_max, p.offset_max,
-                                            better_fit(fit, measured_fits[ident]), overlap)
-                              and against_scene(measured[ident], 1.0 / ttc, p.scene_tolerance)
-                              and layers_pass(layers if p.motion_layers else None, ttc,
-                                              offset, p.tau_max, p.offset_max, overlap))
+                    passes = approach_parts(
+                        ttc, offset, better_fit(fit, measured_fits[ident]), measured[ident],
+                        1.0 / ttc, layers if p.motion_layers else None, p.tau_max, p.offset_max,
+                        overlap, p.scene_tolerance).passes
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
                 judged.append(((share, x, y, box), passes, streak[ident] >= p.approach_frames))
             boxes = [obj[3] for obj, _, _ in judged]

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -283,6 +284,7 @@ def jpeg(clip: np.ndarray, quality: int) -> np.ndarray:
 
 # --------------------------------------------------------------------------- the camera's rig
 
+@lru_cache(maxsize=8)
 def camera_rig(size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """What a dashcam shows of its own car and its recorder, the same in every frame: the hood
     along the bottom, a dark surface under an arc (16 % of the height at the middle, 9 % at
@@ -299,6 +301,8 @@ def camera_rig(size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
         The pixels the rig covers.
     values : ndarray (height, width) float
         Their gray levels (0..255; meaningless elsewhere).
+
+    Both are made once per size (every frame of a clip shares them) and are read-only.
     """
     w, h = size
     ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
@@ -313,4 +317,7 @@ def camera_rig(size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
                 cv2.FONT_HERSHEY_SIMPLEX, max(0.25, h / 600), 255, 1, cv2.LINE_AA)
     lettered = text > 0
     values[lettered] = 235.0
-    return covered | lettered, values
+    covered = covered | lettered
+    covered.setflags(write=False)
+    values.setflags(write=False)
+    return covered, values
