@@ -19,6 +19,11 @@ method, their case of arbitrary translation relative to a frontal plane [1]_. A 
 flicker, headlights) out of ``C``. No features, no optical flow field and no tracking of edges
 are needed, and the result does not depend on the object's contrast or polarity.
 
+A camera on a vehicle sees parts of its own rig in every frame: the hood or the dashboard, a
+recorder's timestamp. Their edges never move, so a fit over a box that reaches them reads part
+of the box as still and the expansion as slower than the object's. :func:`rig_pixels` finds
+those edges, and the fits leave them out.
+
 References
 ----------
 .. [1] B. K. P. Horn, Y. Fang, I. Masaki, "Time to contact relative to a planar surface",
@@ -37,11 +42,13 @@ import numpy as np
 from ._fast import _area_fast, _area_table, _reflect
 from ._jit import kernel
 
-__all__ = ["Expansion", "region_expansion", "scene_expansion", "moved_by_expansion"]
+__all__ = ["Expansion", "region_expansion", "scene_expansion", "moved_by_expansion",
+           "rig_pixels", "RIG_WEIGHT"]
 
 _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
 _MAX_SIDE = 64  # pixels: a larger box is area-averaged down to this before the fit
 _RIDGE = 1e-6  # relative regularisation of the normal equations (no texture: C -> 0)
+_NO_SKIP = np.zeros((0, 0), np.bool_)  # no pixel left out by a mask
 
 
 class Expansion(NamedTuple):
@@ -72,7 +79,8 @@ class Expansion(NamedTuple):
 
 def region_expansion(previous: np.ndarray, current: np.ndarray,
                      box: tuple[int, int, int, int],
-                     background: np.ndarray | None = None) -> Expansion | None:
+                     background: np.ndarray | None = None,
+                     exclude: np.ndarray | None = None) -> Expansion | None:
     """Expansion and drift of a box of the image between two frames (Horn et al. [1]_).
 
     Solves ``E_x A + E_y B + g C - D = -E_t`` in the least-squares sense over the box, with
@@ -87,7 +95,10 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     With ``background``, the previous frame moved by the background's translation
     (:mod:`asnn.stabilisation`), a pixel whose change that translation explains better than
     no motion (``|current - background| < |current - previous|``) is left out of the fit: the
-    box's background sliding past is not the object's own motion.
+    box's background sliding past is not the object's own motion. With ``exclude``, the pixels
+    it marks are left out too (the camera's own hood, dashboard or overlay: :func:`rig_pixels`);
+    where the box is area-averaged, a pixel of the smaller box is left out when a quarter of
+    its area is.
 
     Parameters
     ----------
@@ -97,6 +108,8 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
         Pixels ``x0 <= x < x1``, ``y0 <= y < y1``.
     background : ndarray (H, W), optional
         ``previous`` moved by the background's translation.
+    exclude : ndarray (H, W) of bool, optional
+        Pixels to leave out.
 
     Returns
     -------
@@ -115,30 +128,93 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
         return None
     # without a background every pixel counts: |after - before| < itself is never true
     reference = previous if background is None else background
+    skip = _NO_SKIP if exclude is None or not exclude[y0:y1, x0:x1].any() else None
     step = max(x1 - x0, y1 - y0) / _MAX_SIDE
     if step <= 1.0:
         step = 1.0
+        if skip is None:
+            skip = np.ascontiguousarray(exclude[y0:y1, x0:x1])
         solved, a, b, c, d, fit = _solve_expansion(
-            previous[y0:y1, x0:x1], current[y0:y1, x0:x1], reference[y0:y1, x0:x1], _RIDGE)
+            previous[y0:y1, x0:x1], current[y0:y1, x0:x1], reference[y0:y1, x0:x1], skip,
+            _RIDGE)
     else:
         size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
+        if skip is None:
+            skip = cv2.resize(exclude[y0:y1, x0:x1].astype(np.float32), size,
+                              interpolation=cv2.INTER_AREA) > 0.25
         if _area_fast((x1 - x0, y1 - y0), size):
             before, after, reference = (
                 cv2.resize(np.ascontiguousarray(image[y0:y1, x0:x1]), size,
                            interpolation=cv2.INTER_AREA)
                 for image in (previous, current, reference))
-            solved, a, b, c, d, fit = _solve_expansion(before, after, reference, _RIDGE)
+            solved, a, b, c, d, fit = _solve_expansion(before, after, reference, skip, _RIDGE)
         else:
             solved, a, b, c, d, fit = _solve_area_averaged(previous, current, reference, x0, y0,
-                                                      x1, y1, *size, _RIDGE)
+                                                      x1, y1, *size, skip, _RIDGE)
     if not solved:
         return None
     return Expansion(a * step, b * step, c, d, fit)
 
 
+# the camera's rig: running means of each frame and of each pixel's frame-to-frame change with
+# this weight per frame (about a second at 20 frames/s)
+RIG_WEIGHT = 0.05
+_RIG_FRAMES = 20  # one time constant of the running means: before it they hold the first frames
+_RIG_SPEED = 0.2  # pixels a frame: the speed below which an edge is still
+_RIG_EDGE = 0.01  # gray level a pixel ([0, 1] scale): a weaker edge tells nothing
+_RIG_BAND = 0.25  # of the height: the rig is looked for in this band at the top and bottom
+
+
+def rig_pixels(change: np.ndarray, mean: np.ndarray, frames: int) -> np.ndarray | None:
+    """The edges of the camera's own rig: its hood or dashboard, a recorder's overlay, the
+    same in every frame, which the looming fits leave out (:func:`region_expansion`'s
+    ``exclude``).
+
+    An edge of the running mean image is still when the running mean of its pixels' change is
+    below what a speed of 0.2 pixels a frame would make (the change of an edge moving ``v``
+    pixels a frame is about ``v`` times its gradient: brightness constancy). The rig's edges
+    move with the camera, so never; the scene's move with every motion of the camera or of
+    the scene, and a uniform surface (no edge) is never marked. Only the top and bottom
+    quarters of the frame are searched: that is where a camera's rig is seen, while the
+    scenery at the horizon ahead or to the sides, nearly still under forward motion (the focus
+    of expansion and the far distance), is not rig. Where the camera stands still, its still
+    background there is marked too: background, not part of an approaching object.
+
+    Parameters
+    ----------
+    change : ndarray (h, w)
+        Running mean of ``|current - previous|`` (weight :data:`RIG_WEIGHT` per frame).
+    mean : ndarray (h, w)
+        Running mean of the frames (the same weight).
+    frames : int
+        Frames averaged; fewer than 20 mark nothing.
+
+    Returns
+    -------
+    ndarray (h, w) of bool, or None where nothing is marked.
+    """
+    if frames < _RIG_FRAMES:
+        return None
+    h = mean.shape[0]
+    band = int(_RIG_BAND * h)
+    if band < 1:
+        return None
+    rig = np.zeros(mean.shape, bool)
+    for rows in (slice(0, band), slice(h - band, h)):
+        # the band's gradient with a row of context either side, so its edge rows are exact
+        lo, hi = max(rows.start - 1, 0), min(rows.stop + 1, h)
+        part = np.ascontiguousarray(mean[lo:hi], np.float32)
+        edge = 0.125 * (np.abs(cv2.Sobel(part, cv2.CV_32F, 1, 0, ksize=3))
+                        + np.abs(cv2.Sobel(part, cv2.CV_32F, 0, 1, ksize=3)))
+        edge = edge[rows.start - lo:rows.stop - lo]
+        rig[rows] = (edge > _RIG_EDGE) & (change[rows] < _RIG_SPEED * edge)
+    return rig if rig.any() else None
+
+
 def scene_expansion(previous: np.ndarray, current: np.ndarray,
                     boxes: list[tuple[int, int, int, int]],
-                    background: np.ndarray | None = None) -> Expansion | None:
+                    background: np.ndarray | None = None,
+                    exclude: np.ndarray | None = None) -> Expansion | None:
     """Expansion and drift of the scene around the objects: the fit of :func:`region_expansion`
     over the whole frame, leaving out ``boxes``.
 
@@ -157,6 +233,8 @@ def scene_expansion(previous: np.ndarray, current: np.ndarray,
         Integer pixel boxes to leave out, within the frame.
     background : ndarray (H, W), optional
         ``previous`` moved by the background's translation.
+    exclude : ndarray (H, W) of bool, optional
+        Pixels to leave out as well (:func:`region_expansion`).
 
     Returns
     -------
@@ -174,7 +252,7 @@ def scene_expansion(previous: np.ndarray, current: np.ndarray,
     reference = (previous if background is None else background).copy()
     for x0, y0, x1, y1 in boxes:
         reference[y0:y1, x0:x1] = current[y0:y1, x0:x1]
-    return region_expansion(previous, current, (0, 0, w, h), reference)
+    return region_expansion(previous, current, (0, 0, w, h), reference, exclude)
 
 
 def moved_by_expansion(previous: np.ndarray, scene: Expansion,
@@ -208,9 +286,10 @@ def moved_by_expansion(previous: np.ndarray, scene: Expansion,
 
 
 @kernel(error_model="numpy")
-def _solve_expansion(before, after, background, ridge):
+def _solve_expansion(before, after, background, skip, ridge):
     """``(solved, A, B, C, D, fit)`` of :func:`region_expansion` over two equal images,
-    leaving out the pixels where ``after`` is nearer ``background`` than ``before``.
+    leaving out the pixels where ``after`` is nearer ``background`` than ``before``, and those
+    ``skip`` marks (an array of the images' shape, or empty: none).
 
     One pass over the pixels: the Sobel derivatives of the mean (OpenCV's 3x3 kernels, scaled
     by 1/8, reflect-101 border) and the temporal difference, in the images' precision as the
@@ -228,10 +307,13 @@ def _solve_expansion(before, after, background, ridge):
             mean[y, x] = half * (before[y, x] + after[y, x])
     normal = np.zeros((4, 5))  # [N | rhs], the upper triangle accumulated
     count, total, squares = 0, 0.0, 0.0  # of the fitted pixels' E_t
+    masked = skip.size > 0
     for y in range(h):
         up, down = _reflect(y - 1, h), _reflect(y + 1, h)
         ry = y - 0.5 * (h - 1)
         for x in range(w):
+            if masked and skip[y, x]:
+                continue  # the camera's own rig
             et = np.float64(after[y, x] - before[y, x])
             if abs(after[y, x] - background[y, x]) < abs(et):
                 continue  # the background's translation explains this pixel
@@ -336,12 +418,12 @@ def _area_averages(images, y0, x0, xtab, ytab, rows, out):
 
 
 @kernel(error_model="numpy")
-def _solve_area_averaged(previous, current, background, x0, y0, x1, y1, w, h, ridge):
+def _solve_area_averaged(previous, current, background, x0, y0, x1, y1, w, h, skip, ridge):
     """:func:`_solve_expansion` over the box ``(x0, y0, x1, y1)`` of the three images
     area-averaged down to ``w`` x ``h`` as ``cv2.resize`` does (:func:`_area_averages`),
-    in one call, the tables made once."""
+    in one call, the tables made once; ``skip`` at the smaller size."""
     rows = np.empty((3, y1 - y0, w), previous.dtype)
     out = np.empty((3, h, w), previous.dtype)
     _area_averages((previous, current, background), y0, x0, _area_table(x1 - x0, w),
                    _area_table(y1 - y0, h), rows, out)
-    return _solve_expansion(out[0], out[1], out[2], ridge)
+    return _solve_expansion(out[0], out[1], out[2], skip, ridge)

@@ -27,7 +27,7 @@ import numpy as np
 
 from . import _fast, _parallel, retina
 from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
-from .looming import moved_by_expansion, region_expansion, scene_expansion
+from .looming import RIG_WEIGHT, moved_by_expansion, region_expansion, rig_pixels, scene_expansion
 from .motion_layers import motion_layers
 from .params import ASNNParams, preset
 from .response import Maps, Response, TrackReport
@@ -206,6 +206,15 @@ class ASNN:
         # track id -> its box's motion layers (share, rate /s, drift px/s), where measured
         # (motion_layers, while the scene expands)
         self.layers: dict[int, list] = {}
+        # ignore_rig: running means of the frames and of each pixel's change (at half the
+        # resolution: the rig is large), the frames they averaged, and the rig's pixels at full
+        # resolution (None: none)
+        self._mean: np.ndarray | None = None
+        self._change: np.ndarray | None = None
+        self._rig_half: np.ndarray | None = None  # the last frame at half resolution
+        self._rig_half_of: np.ndarray | None = None  # and that frame
+        self._rig_frames = 0
+        self._rig: np.ndarray | None = None
         self.measure_all_against_scene = False
         self._scene_reference: np.ndarray | None = None
         self.repeated = False
@@ -551,6 +560,8 @@ class ASNN:
         """
         p = self.params
         elapsed = frame.elapsed
+        if p.ignore_rig:
+            self._update_rig(frame)
         self.against_scene = {}
         self.fit_against_scene = {}
         self.layers = {}
@@ -578,7 +589,8 @@ class ASNN:
             x0, y0, x1, y1 = tr.box
             box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
                    min(int(math.ceil(y1)), h))
-            est = region_expansion(frame.previous, frame.lum, box, frame.background)
+            est = region_expansion(frame.previous, frame.lum, box, frame.background,
+                                   self._rig)
             if est is not None:
                 # an object the frame's edge cuts is measured on its visible part: its drift
                 # and size, so its offset, are not the object's, whatever the fit
@@ -613,6 +625,26 @@ class ASNN:
             if target.id not in targets or target.pixels > targets[target.id].pixels:
                 targets[target.id] = target
         return total, list(targets.values())
+
+    def _update_rig(self, frame: "_Frame") -> None:
+        """The running means that find the camera's own rig (:func:`~asnn.looming.rig_pixels`),
+        and its pixels, which this frame's looming fits leave out (``ignore_rig``)."""
+        h, w = frame.lum.shape
+        half = (max(w // 2, 1), max(h // 2, 1))  # 2x2 area means: the rig is large
+        before = (self._rig_half if self._rig_half_of is frame.previous
+                  else cv2.resize(frame.previous, half, interpolation=cv2.INTER_AREA))
+        now = cv2.resize(frame.lum, half, interpolation=cv2.INTER_AREA)
+        self._rig_half_of, self._rig_half = frame.lum, now
+        change = np.abs(now - before)
+        if self._change is None or self._change.shape != change.shape:
+            self._change, self._mean, self._rig_frames = change, now.copy(), 1
+        else:
+            self._change += RIG_WEIGHT * (change - self._change)
+            self._mean += RIG_WEIGHT * (now - self._mean)
+            self._rig_frames += 1
+        rig = rig_pixels(self._change, self._mean, self._rig_frames)
+        self._rig = None if rig is None else cv2.resize(
+            rig.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).view(bool)
 
     def _track_report(self, track, counts: bool, share: float, sx: float, sy: float
                       ) -> TrackReport:
@@ -670,7 +702,7 @@ class ASNN:
                      and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max, 1.0, overlap)}
         growing = ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
                    if self.measure_all_against_scene else set())
-        scene = (scene_expansion(frame.previous, frame.lum, boxes, frame.background)
+        scene = (scene_expansion(frame.previous, frame.lum, boxes, frame.background, self._rig)
                  if chosen or unfit or growing else None)
         contracts = p.receding_scene and scene is not None and scene.rate < 0
         if contracts:
@@ -692,7 +724,8 @@ class ASNN:
                 # beats no motion
                 self._scene_reference[y0:y1, x0:x1] = np.where(
                     np.abs(now - moved) < np.abs(now - before), moved, before)
-                own = region_expansion(frame.previous, frame.lum, box, self._scene_reference)
+                own = region_expansion(frame.previous, frame.lum, box, self._scene_reference,
+                                       self._rig)
                 rate = None if own is None else own.rate / frame.elapsed
                 if contracts and own is not None:
                     fit = own.fit

@@ -248,6 +248,11 @@ class ASNNParams(BaseModel):
         "frame (a walker whose sway splits its outline) persists where it is seen; not where "
         "a track that counts by its own frames overlaps it (a fragment of that object) "
         "(asnn.tracking.TargetTracker.judge); a part of the approach gate")
+    ignore_rig: bool = Field(
+        False, description="leave out of the looming fits the edges that stay still at the "
+        "frame's top and bottom (asnn.looming.rig_pixels): the camera's own hood or dashboard "
+        "and a recorder's overlay, whose static edges would read as part of a box not "
+        "expanding")
     motion_layers: bool = Field(
         False, description="where the scene expands (our own forward motion), a track that "
         "passes the approach test must also have, among the motions its box holds (dense "
@@ -292,7 +297,7 @@ class ASNNParams(BaseModel):
                 raise ValueError(f"{name} must be odd, got {getattr(self, name)}")
         if self.n_fast >= self.n_slow:
             raise ValueError("n_fast must be smaller than n_slow")
-        for name in ("approach_gate", "scene_relative", "object_ids"):
+        for name in ("approach_gate", "scene_relative", "object_ids", "ignore_rig"):
             if getattr(self, name) and self.targets != "objects":
                 raise ValueError(f"{name} needs targets='objects'")
         return self
@@ -370,7 +375,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
     partial_overlap=True, scene_tolerance=0.1, receding_scene=True, region_persistence=True,
-    object_ids=True, motion_layers=True,
+    object_ids=True, motion_layers=True, ignore_rig=True,
 ))
 DEFAULT_PRESET = "robust"
 

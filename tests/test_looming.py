@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from asnn.looming import moved_by_expansion, region_expansion, scene_expansion
+from asnn.looming import (RIG_WEIGHT, moved_by_expansion, region_expansion, rig_pixels,
+                          scene_expansion)
 from asnn.tracking import Observation, TargetTracker, Track, approaching
 from imageutil import texture, warp
 
@@ -83,6 +84,59 @@ def test_the_scene_is_fitted_without_the_objects_boxes():
     assert moved_by_expansion(tex, scene, box).shape == (y1 - y0, x1 - x0)
 
 
+def test_excluded_pixels_are_left_out_of_the_fit():
+    # an expanding surface behind a still, textured band along the bottom (a camera's hood):
+    # fitted with the band, the box reads a slower expansion; without it, the surface's own
+    base = texture(seed=3)
+    previous, current = base, warp(base, 1.03)
+    band = np.zeros(base.shape, bool)
+    band[90:] = True
+    hood = texture(seed=4)
+    previous, current = (np.where(band, hood, image) for image in (previous, current))
+    box = (10, 10, 150, 115)
+    diluted = region_expansion(previous, current, box).rate
+    kept = region_expansion(previous, current, box, exclude=band).rate
+    assert diluted < 0.8 * kept
+    assert kept == pytest.approx(region_expansion(base, warp(base, 1.03), box).rate, rel=0.1)
+    # a box large enough to be area-averaged leaves them out too
+    assert region_expansion(previous, current, (0, 0, 160, 120), exclude=band).rate == \
+        pytest.approx(kept, rel=0.2)
+    # for a box the mask does not reach, nothing changes
+    assert region_expansion(previous, current, (10, 10, 150, 80), exclude=band) == \
+        region_expansion(previous, current, (10, 10, 150, 80))
+
+
+def _rig_means(frames):
+    change, mean = np.zeros_like(frames[0]), frames[0].copy()
+    for before, now in zip(frames, frames[1:]):
+        change += RIG_WEIGHT * (np.abs(now - before) - change)
+        mean += RIG_WEIGHT * (now - mean)
+    return change, mean
+
+
+def test_the_rig_is_the_still_edges_at_the_top_and_bottom_of_the_frame():
+    # a textured scene sliding a pixel a frame; along the bottom, a hood with a bright rim and
+    # lettering, the same in every frame; the same still lettering in the middle of the frame
+    rng = np.random.default_rng(5)
+    scene = rng.random((80, 200)).astype(np.float32)
+    still = rng.random((6, 30)).astype(np.float32)
+    frames = []
+    for k in range(30):
+        frame = scene[:, k:k + 120].copy()
+        frame[66:] = 0.15  # the hood: uniform, so no edge to mark inside it
+        frame[64:66] = 0.8  # its rim
+        frame[70:76, 10:40] = still  # the recorder's timestamp
+        frame[37:43, 60:90] = still  # the same, where the scene ahead is
+        frames.append(frame)
+    change, mean = _rig_means(frames)
+    rig = rig_pixels(change, mean, len(frames))
+    assert rig[64:67].all()  # the rim and the hood edge beneath it
+    assert rig[71:75, 12:38].mean() > 0.5  # the letters
+    assert not rig[:60].any()  # the moving scene, and the middle of the frame
+    assert not rig[68:, 50:].any()  # the hood's uniform inside
+    assert rig_pixels(change, mean, 15) is None  # too few frames to tell
+
+
 def test_a_flat_or_tiny_box_has_no_estimate():
     flat = np.full((100, 100), 0.5, np.float32)
     assert region_expansion(flat, flat, (10, 10, 60, 60)) is None
@@ -145,7 +199,7 @@ def test_the_fit_of_a_large_box_is_that_of_opencvs_area_averages():
     bit, with and without a background."""
     import cv2
 
-    from asnn.looming import _RIDGE, _solve_expansion
+    from asnn.looming import _NO_SKIP, _RIDGE, _solve_expansion
 
     def with_opencv(previous, current, box, background):
         x0, y0, x1, y1 = box
@@ -157,7 +211,7 @@ def test_the_fit_of_a_large_box_is_that_of_opencvs_area_averages():
                       for a in images]
         else:
             step = 1.0
-        solved, a, b, c, d, fit = _solve_expansion(*images, _RIDGE)
+        solved, a, b, c, d, fit = _solve_expansion(*images, _NO_SKIP, _RIDGE)
         return (a * step, b * step, c, d, fit) if solved else None
 
     rng = np.random.default_rng(17)

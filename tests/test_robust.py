@@ -17,12 +17,17 @@ NO_SCENE_RELATIVE = dict(scene_relative=False)
 NO_PARTIAL_OVERLAP = dict(partial_overlap=False)
 NO_FIT_TEST = dict(overlap_fit_min=-1.0)
 NO_MOTION_LAYERS = dict(motion_layers=False)
+NO_RIG = dict(ignore_rig=False)
 
 
-def _run(case, variant=0, **overrides):
+def _run(case, variant=0, perturbation=None, **overrides):
+    from asnn.evaluation.perturb import perturb_frame
+
     scene = make_case(case, variant)
     model = ASNN(preset("robust", **overrides))
-    responses = [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
+    frames = (scene.frames if perturbation is None
+              else [perturb_frame(f, perturbation, i) for i, f in enumerate(scene.frames)])
+    responses = [model.step(f, i / scene.fps) for i, f in enumerate(frames)]
     return scene, responses
 
 
@@ -188,6 +193,21 @@ def test_collision_courses_under_our_own_motion_keep_an_approaching_motion():
         assert _first(responses) - _first(_run(case, **NO_MOTION_LAYERS)[1]) <= 3
 
 
+@pytest.mark.parametrize("case", ["drive-day-stopped-car", "drive-day-truck-ahead"])
+def test_the_camera_s_own_hood_in_view_is_left_out_of_the_looming_fits(case):
+    # a dashcam's hood and timestamp, still in every frame: a box that reaches their edges
+    # reads as partly still, and the car's expansion too slow, unless they are left out
+    assert _hit(*_run(case, perturbation="hood"))
+    assert _quiet(_run(case, perturbation="hood", **NO_RIG)[1])
+
+
+def test_a_drive_without_a_rig_in_view_is_judged_as_without_the_stage():
+    # the scenery at the top and bottom of the frame moves: nothing there is taken for rig
+    _, responses = _run("drive-day-stopped-car")
+    _, plain = _run("drive-day-stopped-car", **NO_RIG)
+    assert [r.collision for r in responses] == [r.collision for r in plain]
+
+
 @pytest.mark.parametrize("case", ["drive-day-stopped-car-offset", "drive-night-brake-offset"])
 def test_a_car_that_strikes_a_corner_of_ours_warns_by_the_partial_overlap_regime(case):
     # its centre 1.2 m to the side: the offset test's 1 (a path through the camera) refuses it
@@ -224,11 +244,13 @@ def test_a_car_catching_up_off_axis_with_a_rear_camera_is_fitted_against_the_rec
 @pytest.mark.parametrize("case", ["walk-light-c0.4-gait", "walk-dark-c0.4-gait"])
 def test_a_walker_seen_in_fragments_warns_by_region_persistence(case):
     # its gait's sway splits its outline: its parts pass the approach test as different tracks
-    # in turn, none of them three frames in a row
+    # in turn, none of them three frames in a row; without region persistence the light one is
+    # missed (the dark one, since the camera-rig stage, is caught by one track's frames too)
     scene, responses = _run(case)
     assert _hit(scene, responses) and _first(responses) < scene.contact_frame
-    scene, without = _run(case, region_persistence=False)
-    assert not _hit(scene, without) or _first(without) >= scene.contact_frame
+    if case.startswith("walk-light"):
+        scene, without = _run(case, region_persistence=False)
+        assert not _hit(scene, without) or _first(without) >= scene.contact_frame
 
 
 def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test():

@@ -6,7 +6,7 @@ import pytest
 from asnn import ASNN
 from asnn.stimuli import make_scene
 from service import keys
-from service.core import RobotView, WorkerCore
+from service.core import WARMUP_FRAMES, RobotView, WorkerCore
 from service.messages import track_id_base
 from service.ownership import owner
 from service.routing import SCAN_KEY, Routes
@@ -119,22 +119,26 @@ def test_a_new_owner_answers_as_a_model_that_saw_the_whole_stream():
     reference = ASNN()
     expected = [reference.step(f, i / 20) for i, f in enumerate(scene.frames)]
     answering = set()
-    core = WorkerCore(answers=answering.__contains__, warmup_frames=5)
-    start = 25  # the new owner's first frame, mid-approach
+    warmup = WARMUP_FRAMES
+    core = WorkerCore(answers=answering.__contains__)
+    # the new owner's first frame as the disk starts to grow: it answers from frame 40, in the
+    # middle of the warning (frames 13-46)
+    start = 10
     answered = []
     for seq in range(start, len(scene.frames)):
         assert core.offer("asnn/r1/frame", payload(scene.frames[seq], seq, seq / 20)) == "r1"
         response = core.process(core.take())
-        if seq - start + 1 == 5:
+        if seq - start + 1 == warmup:
             assert core.warm("r1")
             answering.add("r1")  # the previous owner let go
-        elif seq - start + 1 < 5:
+        elif seq - start + 1 < warmup:
             assert response is None and not core.warm("r1")
         if response is not None:
             answered.append(response)
-    assert core.stats()["warmup"] == 5 and core.stats()["processed"] == len(scene.frames) - start - 5
-    assert answered[0].seq == start + 5
-    assert [r.collision for r in answered] == [e.collision for e in expected[start + 5:]]
+    assert core.stats()["warmup"] == warmup
+    assert core.stats()["processed"] == len(scene.frames) - start - warmup
+    assert answered[0].seq == start + warmup
+    assert [r.collision for r in answered] == [e.collision for e in expected[start + warmup:]]
     assert answered[0].collision and answered[0].u > 0
     # its tracks are numbered from the seq its model started at: no id the previous owner
     # gave (numbered from the stream's start) names another object now
