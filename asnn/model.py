@@ -493,7 +493,7 @@ class ASNN:
             mask = attended.copy()
             maps = Maps(P=photo.copy(), R=np.concatenate([r, -r]), V=v.copy(),
                         phi=np.arctan2(r[2], r[0]), G=g.copy(), M_a=m_a, M_d=m_d,
-                        G_prime=g * mask)
+                        G_prime=g * mask, rig=self._rig)
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps,
                         tracks=frame.tracks)
@@ -543,8 +543,8 @@ class ASNN:
             targets = extract_targets(attended, v * np.cos(phi), v * np.sin(phi), p.cluster_eps,
                                       p.cluster_min_samples, p.origin_seed)
         out, spikes, spike_rate = self._spikes(u, g.size)
-        maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d,
-                    G_prime=g_prime) if self.record_maps else None
+        maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d, G_prime=g_prime,
+                    rig=self._rig) if self.record_maps else None
         return Response(index=frame.index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps,
                         tracks=frame.tracks)

@@ -25,6 +25,9 @@ class Maps:
     G : approach-sensitive map (after grouping, where the preset groups).
     M_a, M_d : bool attention masks.
     G_prime : G M_a M_d.
+    rig : bool, or None
+        The pixels the looming fits left out as the camera's own rig (``ignore_rig``;
+        :func:`asnn.looming.rig_pixels`); None where none were.
     """
 
     P: np.ndarray
@@ -35,6 +38,7 @@ class Maps:
     M_a: np.ndarray
     M_d: np.ndarray
     G_prime: np.ndarray
+    rig: np.ndarray | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -41,9 +41,11 @@ def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
     """Overlay a response on its input frame.
 
     The approach map G is drawn in red where positive, the attended region M_a M_d is outlined in
-    green, and each target gets a blue dot and an arrow along its direction whose length grows
-    with its energy (as in the paper's Fig. 8), labelled with its id and time to contact where
-    the target has them. A red border marks a collision warning.
+    green, the pixels the looming fits leave out as the camera's own rig (``Maps.rig``) are
+    tinted cyan, and each target gets a blue dot and an arrow along its direction whose length
+    grows with its energy (as in the paper's Fig. 8), labelled with its id and time to contact
+    where the target has them. A red border marks a collision warning. Maps of a model that saw
+    the frame scaled down (the input-scale stage) are scaled up to it.
 
     Parameters
     ----------
@@ -58,14 +60,18 @@ def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
     image = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR) if frame.ndim == 2 else frame.copy()
     maps = response.maps
     if maps is not None:
-        g = np.maximum(maps.G, 0.0)
+        size = image.shape[1::-1]
+        if maps.rig is not None:
+            rig = _to_frame(maps.rig.view(np.uint8), size, cv2.INTER_NEAREST).view(bool)
+            image[rig] = (0.5 * image[rig] + (128, 128, 0)).astype(np.uint8)
+        g = _to_frame(np.maximum(maps.G, 0.0).astype(np.float32), size, cv2.INTER_LINEAR)
         peak = float(g.max())
         if peak > 0:
             alpha = np.clip(g / peak, 0.0, 1.0)[..., None] * 0.8
             red = np.zeros_like(image)
             red[..., 2] = 255
             image = (image * (1 - alpha) + red * alpha).astype(np.uint8)
-        attended = (maps.M_a & maps.M_d).astype(np.uint8)
+        attended = _to_frame((maps.M_a & maps.M_d).astype(np.uint8), size, cv2.INTER_NEAREST)
         contours, _ = cv2.findContours(attended, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         cv2.drawContours(image, contours, -1, (0, 220, 0), 1)
     for t in response.targets:
@@ -84,6 +90,13 @@ def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
     cv2.putText(image, text, (5, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 3, cv2.LINE_AA)
     cv2.putText(image, text, (5, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
     return image
+
+
+def _to_frame(image: np.ndarray, size: tuple[int, int], interpolation: int) -> np.ndarray:
+    """A map at the frame's ``(width, height)``: as it is where it has that size already."""
+    if image.shape[1::-1] == size:
+        return image
+    return cv2.resize(image, size, interpolation=interpolation)
 
 
 def warning_intervals(collision: Sequence[bool]) -> list[tuple[int, int]]:
