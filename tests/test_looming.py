@@ -116,7 +116,8 @@ def _rig_means(frames):
 
 def test_the_rig_is_the_still_edges_at_the_top_and_bottom_of_the_frame():
     # a textured scene sliding a pixel a frame; along the bottom, a hood with a bright rim and
-    # lettering, the same in every frame; the same still lettering in the middle of the frame
+    # lettering, the same in every frame, and lettering at the top; the same still lettering in
+    # the middle of the frame
     rng = np.random.default_rng(5)
     scene = rng.random((80, 200)).astype(np.float32)
     still = rng.random((6, 30)).astype(np.float32)
@@ -126,13 +127,15 @@ def test_the_rig_is_the_still_edges_at_the_top_and_bottom_of_the_frame():
         frame[66:] = 0.15  # the hood: uniform, so no edge to mark inside it
         frame[64:66] = 0.8  # its rim
         frame[70:76, 10:40] = still  # the recorder's timestamp
+        frame[2:8, 80:110] = still  # another, at the top
         frame[37:43, 60:90] = still  # the same, where the scene ahead is
         frames.append(frame)
     change, mean = _rig_means(frames)
     rig = rig_pixels(change, mean, len(frames))
     assert rig[64:67].all()  # the rim and the hood edge beneath it
-    assert rig[71:75, 12:38].mean() > 0.5  # the letters
-    assert not rig[:60].any()  # the moving scene, and the middle of the frame
+    assert rig[71:75, 12:38].mean() > 0.5 and rig[3:7, 82:108].mean() > 0.5  # the letters
+    assert not rig[10:60].any()  # the moving scene, and the middle of the frame
+    assert not rig[:10, :70].any()  # the moving scene at the top
     assert not rig[68:, 50:].any()  # the hood's uniform inside
     assert rig_pixels(change, mean, 15) is None  # too few frames to tell
 
