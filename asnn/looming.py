@@ -313,7 +313,7 @@ def _solve_expansion(before, after, background, skip, ridge):
         ry = y - 0.5 * (h - 1)
         for x in range(w):
             if masked and skip[y, x]:
-                continue  # the camera's own rig
+                continue  # left out by the caller (the camera's own rig)
             et = np.float64(after[y, x] - before[y, x])
             if abs(after[y, x] - background[y, x]) < abs(et):
                 continue  # the background's translation explains this pixel
