@@ -211,8 +211,7 @@ class ASNN:
         # resolution (None: none)
         self._mean: np.ndarray | None = None
         self._change: np.ndarray | None = None
-        self._rig_half: np.ndarray | None = None  # the last frame at half resolution
-        self._rig_half_of: np.ndarray | None = None  # and that frame
+        self._rig_last: tuple | None = None  # the last frame, and it at half resolution
         self._rig_frames = 0
         self._rig: np.ndarray | None = None
         self.measure_all_against_scene = False
@@ -631,10 +630,11 @@ class ASNN:
         and its pixels, which this frame's looming fits leave out (``ignore_rig``)."""
         h, w = frame.lum.shape
         half = (max(w // 2, 1), max(h // 2, 1))  # 2x2 area means: the rig is large
-        before = (self._rig_half if self._rig_half_of is frame.previous
+        last = self._rig_last
+        before = (last[1] if last is not None and last[0] is frame.previous
                   else cv2.resize(frame.previous, half, interpolation=cv2.INTER_AREA))
         now = cv2.resize(frame.lum, half, interpolation=cv2.INTER_AREA)
-        self._rig_half_of, self._rig_half = frame.lum, now
+        self._rig_last = (frame.lum, now)
         change = np.abs(now - before)
         if self._change is None or self._change.shape != change.shape:
             self._change, self._mean, self._rig_frames = change, now.copy(), 1

@@ -59,7 +59,7 @@ def _record(index: int, t: float, response) -> dict:
 
 def _tracks_record(index: int, t: float, response) -> dict:
     return {"frame": index, "t": round(t, 6), "collision": response.collision,
-            "tracks": [track.to_dict() for track in response.tracks or ()]}
+            "tracks": [track.to_dict() for track in response.tracks]}
 
 
 def _fail(message: str) -> int:
