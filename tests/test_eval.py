@@ -128,7 +128,7 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
     rng = np.random.default_rng(3)
     for frame in (rng.integers(0, 256, (24, 32), dtype=np.uint8),
                   rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)):
-        for name in PERTURBATIONS:
+        for name in (name for name in PERTURBATIONS if name != "half-rate"):
             out = perturb_frame(frame, name, index=7)
             assert out.shape == frame.shape and out.dtype == np.uint8
             assert np.array_equal(out, perturb_frame(frame, name, index=7))
@@ -148,6 +148,8 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
         perturb_frame(frame, "blur", 0)
     with pytest.raises(ValueError, match="uint8"):
         perturb_frame(frame.astype(np.float32), "noise", 0)
+    with pytest.raises(ValueError, match="drops frames"):
+        perturb_frame(frame, "half-rate", 0)
 
 
 def test_a_mirrored_clip_is_scored_against_its_mirrored_label(tmp_path):
@@ -178,6 +180,41 @@ def test_a_mirrored_clip_is_scored_against_its_mirrored_label(tmp_path):
     score = results["detectors"]["asnn"]["clips"][0]
     # caught, and on the mirrored centre (the label's own centre is 27 px away)
     assert score["outcome"] == "hit" and score["localisation_px"] < 5
+
+
+def test_half_rate_keeps_every_second_frame_with_its_time_and_maps_the_label_onto_them():
+    from asnn.evaluation.perturb import perturb_label, perturbed
+
+    frames = [(i / 20, np.full((4, 4), i, np.uint8)) for i in range(7)]
+    kept = list(perturbed(frames, "half-rate"))
+    assert [t for t, _ in kept] == [0.0, 0.1, 0.2, 0.3]
+    assert [int(f[0, 0]) for _, f in kept] == [0, 2, 4, 6]
+    label = {"file": "x.mp4", "fps": 20.0, "frames": 7, "collision": True, "onset_frame": 3,
+             "contact_frame": 5, "track": [[float(i), 0.0] for i in range(7)],
+             "ttc": [0.3, 0.25, 0.2, 0.15, 0.1, 0.05, None], "center": [1.0, 2.0]}
+    half = perturb_label(label, "half-rate")
+    # the onset (3) moves to the first frame kept at or after it, the contact (5) to the last
+    # kept at or before it: both to frame 4, kept as the third
+    assert (half["fps"], half["frames"], half["onset_frame"], half["contact_frame"]) == \
+        (10.0, 4, 2, 2)
+    assert half["track"] == [[0.0, 0.0], [2.0, 0.0], [4.0, 0.0], [6.0, 0.0]]
+    assert half["ttc"] == [0.3, 0.2, 0.1, None] and half["center"] == [1.0, 2.0]
+    assert label["fps"] == 20.0 and len(label["track"]) == 7  # the label itself unchanged
+
+
+def test_a_clip_at_half_its_frame_rate_is_scored_on_the_frames_kept(tmp_path):
+    scene = make_scene("looming", size=(64, 64), start=8, stop=40, center=(32.0, 32.0))
+    write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
+    (tmp_path / "labels.json").write_text(json.dumps([scene.label("loom.mp4")]))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "asnn", "--perturb", "half-rate",
+                 "--out", str(out), "--no-plots"]) == 0
+    score = json.loads((out / "results.json").read_text())["detectors"]["asnn"]["clips"][0]
+    records = [json.loads(line) for line in (out / "results" / "asnn" / "loom.jsonl").open()]
+    assert len(records) == (len(scene.frames) + 1) // 2
+    assert score["outcome"] == "hit"
+    # the lead in seconds at the halved rate: frames kept are 0.1 s apart
+    assert score["lead_s"] == pytest.approx(score["lead_frames"] * 2 / scene.fps)
 
 
 def test_eval_detector_specs_name_presets_and_their_result_directories(clips, tmp_path):

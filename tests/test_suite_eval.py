@@ -169,6 +169,15 @@ def test_synthetic_eval_of_perturbed_frames(tmp_path):
     score = results["detectors"]["asnn"]["clips"][0]
     assert score["outcome"] == "hit" and score["localisation_px"] < 10
 
+    # at half the frame rate: the report says the rate the detectors saw
+    out = tmp_path / "half"
+    assert main(["eval", "--synthetic", "--perturb", "half-rate", "--cases",
+                 "course-disk-dark-right", "--detectors", "asnn", "--no-plots", "--out",
+                 str(out)]) == 0
+    label = json.loads((out / "labels.json").read_text())[0]
+    assert label["fps"] == original["fps"] / 2 and len(label["track"]) == label["frames"]
+    assert "frames at 10 fps" in (out / "report.md").read_text()
+
 
 def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):
     out, labels = tmp_path / "case.avi", tmp_path / "labels.json"

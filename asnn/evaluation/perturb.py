@@ -7,8 +7,11 @@ camera or a different day would, and ``asnn eval CLIPS_DIR --perturb NAME`` (or 
 (mirrored with the frames for ``mirror``): outcomes that survive every perturbation are the
 ones a fleet can count on.
 
-Every perturbation is deterministic (the noise is seeded by the frame's index), and keeps the
-frame's size, channels and uint8 type.
+Every perturbation is deterministic (the noise is seeded by the frame's index). All but
+``half-rate`` change each frame and keep its size, channels and uint8 type; ``half-rate`` drops
+every second frame, as a camera running at half the frame rate (10 fps for the generated suite,
+15 fps for the 30 fps dashcam clips) would deliver the same scene, and maps the labels' frames
+onto the frames kept.
 """
 
 from __future__ import annotations
@@ -28,7 +31,11 @@ PERTURBATIONS = {
     "dim": "0.6 times the brightness (an under-exposed camera)",
     "mirror": "every frame flipped left to right (the labels' centres with it)",
     "hood": "a dashcam's own hood along the bottom and a timestamp overlay, still in every frame",
+    "half-rate": "every second frame dropped, as a camera at half the frame rate would deliver "
+                 "them; the labels follow the frames kept",
 }
+# the perturbations that drop frames instead of changing them: frame k kept is frame step * k
+_RATE_STEP = {"half-rate": 2}
 NOISE_SIGMA = 4.0
 JPEG_QUALITY = 30
 DIM_GAIN = 0.6
@@ -47,9 +54,13 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
     Raises
     ------
     ValueError
-        For an unknown perturbation or a frame that is not uint8.
+        For an unknown perturbation, one that drops frames (``half-rate``: see
+        :func:`perturbed`) or a frame that is not uint8.
     """
     check_perturbation(name)
+    if name in _RATE_STEP:
+        raise ValueError(f"{name!r} drops frames instead of changing one: apply it to a clip "
+                         "with perturbed()")
     if frame.dtype != np.uint8:
         raise ValueError(f"perturbations take uint8 frames, got {frame.dtype}")
     if name == "mirror":
@@ -69,14 +80,21 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
 
 def perturbed(timed_frames: Iterable[tuple[float, np.ndarray]], name: str | None
               ) -> Iterator[tuple[float, np.ndarray]]:
-    """``(t, frame)`` pairs with every frame perturbed (``name`` None: as they are)."""
+    """``(t, frame)`` pairs with every frame perturbed (``name`` None: as they are), or, for a
+    perturbation that drops frames, the frames kept with their own times."""
+    step = _RATE_STEP.get(name, 1)
     for index, (t, frame) in enumerate(timed_frames):
-        yield t, frame if name is None else perturb_frame(frame, name, index)
+        if name is None or step > 1:
+            if index % step == 0:
+                yield t, frame
+        else:
+            yield t, perturb_frame(frame, name, index)
 
 
 def perturb_label(label: Mapping, name: str | None) -> dict:
     """A clip's label for its perturbed frames: for ``mirror`` the centre and the per-frame
-    ``track`` mirrored (x -> width - 1 - x; the label needs its ``width``), otherwise as it is.
+    ``track`` mirrored (x -> width - 1 - x; the label needs its ``width``); for a perturbation
+    that drops frames, its frames, fps and per-frame lists on the frames kept; otherwise as it is.
 
     Raises
     ------
@@ -84,6 +102,8 @@ def perturb_label(label: Mapping, name: str | None) -> dict:
         For ``mirror`` on a label with a centre or track but no width.
     """
     label = dict(label)
+    if name in _RATE_STEP:
+        return _label_at_rate(label, _RATE_STEP[name])
     if name != "mirror" or (label.get("center") is None and not label.get("track")):
         return label
     if not label.get("width"):
@@ -96,3 +116,28 @@ def perturb_label(label: Mapping, name: str | None) -> dict:
         label["track"] = [None if point is None else [right - point[0], point[1]]
                           for point in label["track"]]
     return label
+
+
+def _label_at_rate(label: dict, step: int) -> dict:
+    """The label of a clip of which every ``step``-th frame is kept (frame k is frame step * k).
+
+    The onset moves to the first frame kept at or after it and the contact to the last kept at
+    or before it, so the hit window never grows and a lead is never credited with time the
+    clip did not show; per-frame lists keep the frames kept.
+    """
+    if label.get("fps"):
+        label["fps"] = float(label["fps"]) / step
+    if label.get("frames"):
+        label["frames"] = -(-int(label["frames"]) // step)
+    if label.get("onset_frame") is not None:
+        label["onset_frame"] = -(-int(label["onset_frame"]) // step)
+    if label.get("contact_frame") is not None:
+        label["contact_frame"] = int(label["contact_frame"]) // step
+    for key in _PER_FRAME:
+        if isinstance(label.get(key), list):
+            label[key] = label[key][::step]
+    return label
+
+
+# label fields with one entry per frame
+_PER_FRAME = ("track", "target_size", "ttc")

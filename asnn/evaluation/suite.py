@@ -214,7 +214,7 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     case_info = [{"name": name, "group": SUITE_CASES[name].group,
                   "category": list(SUITE_CASES[name].category), "twin": SUITE_CASES[name].twin,
                   **{key: entries[name]["label"][key]
-                     for key in ("collision", "onset_frame", "contact_frame", "frames")}}
+                     for key in ("collision", "onset_frame", "contact_frame", "frames", "fps")}}
                  for name in names]
     scores = {spec.name: [entries[name]["scores"][spec.name][0] for name in names]
               for spec in specs}
@@ -280,7 +280,8 @@ def suite_report(results: Mapping) -> str:
            f"({PERTURBATIONS[settings['perturbation']]}).", ""]
           if settings.get("perturbation") else []),
         f"{len(cases)} cases ({n_col} collisions, {len(cases) - n_col} not; "
-        f"{results['frames']} frames at 20 fps), selection `{settings['cases']}`; detectors "
+        f"{results['frames']} frames at "
+        f"{'/'.join(f'{fps:g}' for fps in sorted({c['fps'] for c in cases}))} fps), selection `{settings['cases']}`; detectors "
         f"{', '.join(f'`{n}`' for n in names)}; {results['elapsed_s']:.0f} s wall time with "
         f"{settings['jobs']} job(s). Scoring (SPEC.md section 5, generated clips): warm-up "
         f"{settings['warmup']} frames; hit when the first warning lies in [onset, contact + "
