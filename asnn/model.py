@@ -33,12 +33,14 @@ from .params import ASNNParams, preset
 from .response import Maps, Response, TrackReport
 from .stabilisation import background_shift, shift_image
 from .targets import Target, extract_objects, extract_targets
-from .tracking import Observation, TargetTracker, approach_test
+from .tracking import Observation, TargetTracker, approach_test, persistence_frames
 
 __all__ = ["ASNN", "FrameError", "compile_kernels", "frame_pixel", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
 _MAX_ELAPSED = 1.0  # seconds between frames beyond which their times are not believed
+_PERIOD_FRAMES = 5  # the stream's frame period: the median of this many, which one lost frame
+# does not move
 # the scene "expands" (our own forward motion) from this rate per second: driving scenes expand
 # at about 0.7, a still camera's noise reads below 0.1
 _SCENE_EXPANDS = 0.2
@@ -99,6 +101,9 @@ class ASNN:
         ``sum G'``), in the frame's order; what the approach gate decided on.
     repeated : bool
         Whether the latest frame was a repeat (its response repeats the one before).
+    periods : deque of float
+        The times between the last processed frames, seconds (at most 5; repeats not counted):
+        :attr:`frame_period` is their median.
 
     Notes
     -----
@@ -193,6 +198,7 @@ class ASNN:
             self.params.approach_frames if self.params.region_persistence else 0,
             self.params.object_ids)
         self._stamp: float | None = None
+        self.periods: deque[float] = deque(maxlen=_PERIOD_FRAMES)
         self._last: Response | None = None
         self._repeats = 0
         self._difference = 0.0
@@ -217,6 +223,12 @@ class ASNN:
         self.measure_all_against_scene = False
         self._scene_reference: np.ndarray | None = None
         self.repeated = False
+
+    @property
+    def frame_period(self) -> float:
+        """The stream's frame period, seconds: the median of :attr:`periods` (``params.dt``
+        before the second frame)."""
+        return float(np.median(self.periods)) if self.periods else self.params.dt
 
     # ------------------------------------------------------------------ step
 
@@ -341,6 +353,7 @@ class ASNN:
         if not 0.0 < elapsed <= _MAX_ELAPSED:  # no usable timestamps: the nominal frame period
             elapsed = p.dt
         self._stamp = stamp
+        self.periods.append(elapsed)
         background = None
         if p.stabilise:
             shift = background_shift(self.previous, lum, p.stabilise_radius, p.stabilise_share)
@@ -601,8 +614,9 @@ class ASNN:
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frame)
-        coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, p.approach_frames,
-                                    self._overlap, p.scene_tolerance)
+        frames = persistence_frames(p.approach_frames, p.approach_seconds, self.frame_period)
+        coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, frames, self._overlap,
+                                    p.scene_tolerance)
         self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
         if p.approach_gate:
             total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0

@@ -241,6 +241,12 @@ class ASNNParams(BaseModel):
         "or more")
     approach_frames: int = Field(3, ge=1, description="consecutive frames a track must pass "
                                  "the approach test (ttc, offset) before it counts")
+    approach_seconds: float | None = Field(
+        None, gt=0, description="fewer than approach_frames frames suffice where they already "
+        "span this long at the stream's frame period (the median of the last 5): at 0.1 s, a "
+        "camera at 10 fps, or a stream that loses every second frame of 20, needs 2 frames in a "
+        "row, while 20-30 fps streams keep approach_frames (asnn.tracking.persistence_frames). "
+        "None: always approach_frames")
     region_persistence: bool = Field(
         False, description="a track that passes the approach test now also counts where "
         "passing tracks overlapped its box in approach_frames - 1 of the previous "
@@ -373,7 +379,8 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
-    max_width=480, track_box=0.3, approach_frames=3, attention_step=2, scene_relative=True,
+    max_width=480, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
+    scene_relative=True,
     partial_overlap=True, scene_tolerance=0.1, receding_scene=True, region_persistence=True,
     object_ids=True, motion_layers=True, ignore_rig=True,
 ))

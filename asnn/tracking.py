@@ -61,7 +61,7 @@ from typing import NamedTuple
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
            "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region",
-           "count_in_regions", "fragment_of", "layer_estimates", "layers_pass",
+           "persistence_frames", "count_in_regions", "fragment_of", "layer_estimates", "layers_pass",
            "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR", "LAYER_OFFSET_FACTOR",
            "ApproachVerdict", "approach_verdict", "approach_parts"]
 
@@ -425,6 +425,22 @@ def persists_in_region(box: Sequence[float], history: Iterable[Sequence[Sequence
     return seen >= frames - 1
 
 
+def persistence_frames(frames: int, seconds: float | None, period: float) -> int:
+    """Consecutive frames of approach a track needs: ``frames``, or fewer where fewer frames
+    already span ``seconds`` at the frame ``period`` (s): ``k`` frames span ``(k - 1) * period``.
+
+    The persistence of the approach test was set at 20 fps, where 3 frames span 0.1 s. A slower
+    stream (a 10 fps camera, or a worker that skips every second frame under load) sees the
+    object's image move twice as far between frames, and its estimates settle in fewer frames
+    than the tracker needs to follow it: at 0.1 s, 2 frames in a row at 10 fps or slower.
+    Faster streams keep ``frames`` (at 30 fps, 3 frames span 0.067 s).
+    """
+    if seconds is None or period <= 0.0:
+        return frames
+    # a millisecond's slack: timestamps 0.1 s apart read 0.0999... in floating point
+    return max(1, min(frames, 1 + math.ceil(seconds / period - 1e-3)))
+
+
 def count_in_regions(boxes: Sequence[Sequence[float]], passing: Sequence[bool],
                      steady: Sequence[bool], history: Iterable[Sequence[Sequence[float]]],
                      frames: int) -> list[bool]:
@@ -548,7 +564,8 @@ class TargetTracker:
         if self._passed is not None:
             boxes = [track.box for track in tracks]
             passing = [track.streak > 0 for track in tracks]
-            coming = count_in_regions(boxes, passing, coming, list(self._passed)[:-1], frames)
+            history = list(self._passed)[-frames - 1:-1]  # the previous `frames` frames
+            coming = count_in_regions(boxes, passing, coming, history, frames)
             self._passed[-1] = [box for box, passed in zip(boxes, passing) if passed]
         if self._object_of is not None:
             self._name_objects(tracks, coming)

@@ -76,6 +76,19 @@ def test_the_replay_reproduces_the_partial_overlap_regime():
             update=without))) != warned
 
 
+def test_the_replay_asks_a_slow_stream_for_as_few_frames_as_the_model():
+    # the dark walker at 10 fps: caught with two frames of approach, missed with three
+    base = preset("robust")
+    scene = make_case("walk-dark-c0.4-gait")
+    frames = list(at_rate(scene.frames, scene.fps))[::2]
+    trace = heldout.trace_clip(frames, base, scene.name)
+    model = ASNN(base)
+    own = [model.step(f, t).collision for t, f in frames]
+    assert [r["collision"] for r in heldout.replay(trace, base)] == own and any(own)
+    fixed = base.model_copy(update={"approach_seconds": None})
+    assert not any(r["collision"] for r in heldout.replay(trace, fixed))
+
+
 def test_leave_one_out_chooses_without_the_clip_it_scores(traced):
     base, scenes, traces = traced
     labels = [s.label(s.name) for s in scenes]

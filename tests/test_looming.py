@@ -290,6 +290,32 @@ def test_a_partial_overlap_passes_later_and_only_from_a_box_that_moves_as_one():
     assert not approaching(wide, tau_max=1.5, offset_max=1.0, overlap=overlap)
 
 
+def test_a_slow_stream_needs_fewer_frames_of_approach():
+    from asnn.tracking import persistence_frames
+
+    # 3 frames span 0.1 s at 20 fps; at 30 fps they span less, and 3 stay the most asked for
+    assert [persistence_frames(3, 0.1, period) for period in (1 / 30, 0.05, 1 / 15, 0.1, 0.2)] \
+        == [3, 3, 3, 2, 2]
+    assert persistence_frames(3, 0.1, 2 / 20) == 2  # timestamps that read 0.0999... apart
+    assert persistence_frames(4, 0.1, 0.04) == 4 and persistence_frames(1, 0.1, 0.01) == 1
+    assert persistence_frames(3, None, 0.2) == 3  # without approach_seconds: always frames
+
+
+def test_the_frame_period_is_the_median_of_the_last_frames():
+    from asnn import ASNN
+
+    model = ASNN("robust")
+    frame = np.zeros((48, 64), np.uint8)
+    assert model.frame_period == pytest.approx(0.05)  # before any period is measured
+    for t in (0.0, 0.1, 0.2, 0.3, 0.5, 0.6):  # 10 fps with one frame lost on the way
+        model.step(frame + int(t * 100), t)
+    assert list(model.periods) == pytest.approx([0.1, 0.1, 0.1, 0.2, 0.1])
+    assert model.frame_period == pytest.approx(0.1)
+    for t in (0.65, 0.7, 0.75):  # the camera speeds up to 20 fps
+        model.step(frame + int(t * 100), t)
+    assert model.frame_period == pytest.approx(0.05)
+
+
 def test_an_approach_persists_in_its_region_across_tracks():
     from asnn.tracking import Observation, boxes_overlap, persists_in_region
 
@@ -328,6 +354,12 @@ def test_an_approach_persists_in_its_region_across_tracks():
     assert frame(both, [head], [True]) == [False]
     assert frame(both, [head, feet], [True, True]) == [False, False]
     assert frame(both, [head, feet], [True, True]) == [True, False]
+    # on a slow stream two frames suffice, and the region looks back as many frames
+    slow = TargetTracker(max_missed=0, region_frames=3)
+    for observation, expected in ((head, [False]), (feet, [True]), (head, [True])):
+        tracks = slow.update([observation], 0.1)
+        tracks[0].measure(1.0, 5.0, 0.0)
+        assert slow.judge(tracks, 1.5, 1.0, 2) == expected
     # a frame with nothing in it is a frame of the window too
     gap = TargetTracker(max_missed=0, region_frames=3)
     frame(gap, [head], [True])

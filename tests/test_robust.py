@@ -253,6 +253,31 @@ def test_a_walker_seen_in_fragments_warns_by_region_persistence(case):
         assert not _hit(scene, without) or _first(without) >= scene.contact_frame
 
 
+def _run_half_rate(case, **overrides):
+    """The case at half its frame rate (10 fps), scored against its label at that rate."""
+    from asnn.evaluation.perturb import perturb_label, perturbed
+    from asnn.evaluation.runs import at_rate
+
+    scene = make_case(case)
+    label = perturb_label(scene.label(f"{case}.mp4"), "half-rate")
+    model = ASNN(preset("robust", **overrides))
+    responses = [model.step(f, t)
+                 for t, f in perturbed(at_rate(scene.frames, scene.fps), "half-rate")]
+    first = _first(responses)
+    return first is not None and label["onset_frame"] <= first <= label["contact_frame"] + 2
+
+
+@pytest.mark.parametrize("case", ["walk-dark-c0.4-gait", "drive-day-brake-bumps"])
+def test_a_slow_stream_needs_fewer_frames_of_approach(case):
+    # at 10 fps the walker's sway and the bumping car's jolts break every run of three frames
+    # of approach; two frames span the 0.1 s that three span at 20 fps
+    assert _run_half_rate(case)
+    assert not _run_half_rate(case, approach_seconds=None)
+    # at the suite's own 20 fps the frames asked for are the same either way
+    assert ([r.collision for r in _run(case)[1]]
+            == [r.collision for r in _run(case, approach_seconds=None)[1]])
+
+
 def test_collision_courses_under_our_own_motion_survive_the_scene_relative_test():
     for case in ("drive-day-stopped-car", "drive-day-brake", "drive-day-oncoming-headon"):
         assert _hit(*_run(case))

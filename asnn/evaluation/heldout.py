@@ -31,7 +31,7 @@ from pathlib import Path
 from ..model import ASNN, frame_pixel, spike_step
 from ..params import ASNNParams
 from ..tracking import (approach_parts, approach_test, better_fit, count_in_regions,
-                        layer_estimates, smoothed_run)
+                        layer_estimates, persistence_frames, smoothed_run)
 from . import scoring
 from .runs import fmt, write_json
 
@@ -76,10 +76,15 @@ class FrameTrace:
         motion layers as ``(share, ttc, offset)`` (:func:`asnn.tracking.layer_estimates`; None
         where not measured: with ``motion_layers`` they are measured for every growing track
         while the scene expands).
+    period : float or None
+        The stream's frame period then (:attr:`asnn.model.ASNN.frame_period`), which sets how
+        many frames of approach a track needs (:func:`asnn.tracking.persistence_frames`); None
+        for the first frame and repeats, which are not judged.
     """
 
     repeat: bool
     objects: tuple = ()
+    period: float | None = None
 
 
 @dataclass
@@ -119,7 +124,7 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
             (tr.id, tr.ttc, tr.offset, share, frame_pixel(tr.x, sx), frame_pixel(tr.y, sy),
              model.against_scene.get(tr.id), tr.fit, model.fit_against_scene.get(tr.id),
              tuple(tr.box), layer_estimates(model.layers.get(tr.id), tr.size))
-            for tr, share in model.objects)))
+            for tr, share in model.objects), period=model.frame_period))
     return trace
 
 
@@ -142,6 +147,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
         elif frame.repeat:
             record = {**previous, "frame": index}
         else:
+            frames = persistence_frames(p.approach_frames, p.approach_seconds, frame.period)
             judged = []  # (object, passes now, counts by its own frames)
             measured, measured_fits = {}, {}
             for ident, ttc, offset, share, x, y, against, fit, own_fit, box, layers in (
@@ -161,12 +167,13 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
                         1.0 / ttc, layers if p.motion_layers else None, p.tau_max, p.offset_max,
                         overlap, p.scene_tolerance).passes
                 streak[ident] = streak.get(ident, 0) + 1 if passes else 0
-                judged.append(((share, x, y, box), passes, streak[ident] >= p.approach_frames))
+                judged.append(((share, x, y, box), passes, streak[ident] >= frames))
             boxes = [obj[3] for obj, _, _ in judged]
             passing = [passes for _, passes, _ in judged]
             coming = [ok for _, _, ok in judged]
             if p.region_persistence:  # as TargetTracker.judge
-                coming = count_in_regions(boxes, passing, coming, passed, p.approach_frames)
+                coming = count_in_regions(boxes, passing, coming, list(passed)[-frames:],
+                                          frames)
             total, targets = 0.0, []
             for ((share, x, y, _), _, _), counts in zip(judged, coming):
                 if counts:
