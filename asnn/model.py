@@ -39,8 +39,7 @@ __all__ = ["ASNN", "FrameError", "compile_kernels", "frame_pixel", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
 _MAX_ELAPSED = 1.0  # seconds between frames beyond which their times are not believed
-_PERIOD_FRAMES = 5  # the stream's frame period: the median of this many, which one lost frame
-# does not move
+_PERIOD_FRAMES = 5  # the frame period is the median of this many: one lost frame does not move it
 # the scene "expands" (our own forward motion) from this rate per second: driving scenes expand
 # at about 0.7, a still camera's noise reads below 0.1
 _SCENE_EXPANDS = 0.2

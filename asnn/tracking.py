@@ -61,9 +61,9 @@ from typing import NamedTuple
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
            "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region",
-           "persistence_frames", "count_in_regions", "fragment_of", "layer_estimates", "layers_pass",
-           "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR", "LAYER_OFFSET_FACTOR",
-           "ApproachVerdict", "approach_verdict", "approach_parts"]
+           "persistence_frames", "count_in_regions", "fragment_of", "layer_estimates",
+           "layers_pass", "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR",
+           "LAYER_OFFSET_FACTOR", "ApproachVerdict", "approach_verdict", "approach_parts"]
 
 
 @dataclass(frozen=True, slots=True)

@@ -273,7 +273,7 @@ def test_a_slow_stream_needs_fewer_frames_of_approach(case):
     # of approach; two frames span the 0.1 s that three span at 20 fps
     assert _run_half_rate(case)
     assert not _run_half_rate(case, approach_seconds=None)
-    # at the suite's own 20 fps the frames asked for are the same either way
+    # at the suite's own 20 fps it warns as with three frames, frame for frame
     assert ([r.collision for r in _run(case)[1]]
             == [r.collision for r in _run(case, approach_seconds=None)[1]])
 

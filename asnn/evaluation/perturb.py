@@ -36,6 +36,7 @@ PERTURBATIONS = {
 }
 # the perturbations that drop frames instead of changing them: frame k kept is frame step * k
 _RATE_STEP = {"half-rate": 2}
+_PER_FRAME = ("track", "target_size", "ttc")  # label fields with one entry per frame
 NOISE_SIGMA = 4.0
 JPEG_QUALITY = 30
 DIM_GAIN = 0.6
@@ -84,11 +85,9 @@ def perturbed(timed_frames: Iterable[tuple[float, np.ndarray]], name: str | None
     perturbation that drops frames, the frames kept with their own times."""
     step = _RATE_STEP.get(name, 1)
     for index, (t, frame) in enumerate(timed_frames):
-        if name is None or step > 1:
-            if index % step == 0:
-                yield t, frame
-        else:
-            yield t, perturb_frame(frame, name, index)
+        if index % step:
+            continue
+        yield t, frame if name is None or step > 1 else perturb_frame(frame, name, index)
 
 
 def perturb_label(label: Mapping, name: str | None) -> dict:
@@ -138,6 +137,3 @@ def _label_at_rate(label: dict, step: int) -> dict:
             label[key] = label[key][::step]
     return label
 
-
-# label fields with one entry per frame
-_PER_FRAME = ("track", "target_size", "ttc")

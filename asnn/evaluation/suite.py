@@ -267,6 +267,7 @@ def suite_report(results: Mapping) -> str:
     names = list(results["detectors"])
     cases = results["cases"]
     n_col = sum(c["collision"] for c in cases)
+    rates = "/".join(f"{fps:g}" for fps in sorted({c["fps"] for c in cases}))
     lines = [
         f"# Labelled suite of generated scenes (version {settings['suite_version']}"
         + (f", variant {settings['variant']}" if settings.get("variant") else "") + ")",
@@ -280,8 +281,7 @@ def suite_report(results: Mapping) -> str:
            f"({PERTURBATIONS[settings['perturbation']]}).", ""]
           if settings.get("perturbation") else []),
         f"{len(cases)} cases ({n_col} collisions, {len(cases) - n_col} not; "
-        f"{results['frames']} frames at "
-        f"{'/'.join(f'{fps:g}' for fps in sorted({c['fps'] for c in cases}))} fps), selection `{settings['cases']}`; detectors "
+        f"{results['frames']} frames at {rates} fps), selection `{settings['cases']}`; detectors "
         f"{', '.join(f'`{n}`' for n in names)}; {results['elapsed_s']:.0f} s wall time with "
         f"{settings['jobs']} job(s). Scoring (SPEC.md section 5, generated clips): warm-up "
         f"{settings['warmup']} frames; hit when the first warning lies in [onset, contact + "
