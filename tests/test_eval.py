@@ -144,6 +144,14 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
         assert np.array_equal(hood, perturb_frame(frame, "hood", 9))
         assert np.array_equal(hood[:12], frame[:12])
         assert (hood[-1] != frame[-1]).any() and hood[-1, :8].max() <= 60  # left of the text
+        # the wiper's blade: parked below the frame, then sweeping across it, dark
+        assert np.array_equal(perturb_frame(frame, "wiper", 0), frame)
+        assert np.array_equal(perturb_frame(frame, "wiper", 25), frame)
+        wiped = [perturb_frame(frame, "wiper", i).astype(float) for i in range(3, 8)]
+        assert all(w.mean() < frame.mean() - 1 for w in wiped)
+        # back the way it came, and the same in every wipe
+        assert np.array_equal(perturb_frame(frame, "wiper", 15), perturb_frame(frame, "wiper", 5))
+        assert np.array_equal(perturb_frame(frame, "wiper", 45), perturb_frame(frame, "wiper", 5))
     with pytest.raises(ValueError, match="unknown perturbation"):
         perturb_frame(frame, "blur", 0)
     with pytest.raises(ValueError, match="uint8"):

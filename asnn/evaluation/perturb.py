@@ -20,7 +20,7 @@ from collections.abc import Iterable, Iterator, Mapping
 
 import numpy as np
 
-from ..stimuli.effects import camera_rig, jpeg, sensor_noise
+from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
 
 __all__ = ["PERTURBATIONS", "check_perturbation", "perturb_frame", "perturbed", "perturb_label"]
 
@@ -31,6 +31,8 @@ PERTURBATIONS = {
     "dim": "0.6 times the brightness (an under-exposed camera)",
     "mirror": "every frame flipped left to right (the labels' centres with it)",
     "hood": "a dashcam's own hood along the bottom and a timestamp overlay, still in every frame",
+    "wiper": "a windscreen wiper's blurred blade sweeping across the view and back every 40 "
+             "frames (rain: 2 s at 20 fps)",
     "half-rate": "every second frame dropped, as a camera at half the frame rate would deliver "
                  "them; the labels follow the frames kept",
 }
@@ -40,6 +42,7 @@ _PER_FRAME = ("track", "target_size", "ttc")  # label fields with one entry per 
 NOISE_SIGMA = 4.0
 JPEG_QUALITY = 30
 DIM_GAIN = 0.6
+WIPER_GRAY = 20.0  # the blade's rubber, dark against the view
 
 
 def check_perturbation(name: str | None) -> None:
@@ -72,6 +75,11 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
         covered, values = camera_rig(frame.shape[1::-1])
         changed = frame.astype(np.float64)
         changed[covered] = values[covered, None] if frame.ndim == 3 else values[covered]
+    elif name == "wiper":
+        blade = wiper(frame.shape[1::-1], index).astype(np.float64)
+        if frame.ndim == 3:
+            blade = blade[..., None]
+        changed = frame * (1.0 - blade) + WIPER_GRAY * blade
     elif name == "noise":
         changed = sensor_noise(frame.astype(np.float64), NOISE_SIGMA, seed=index)
     else:

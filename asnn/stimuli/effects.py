@@ -37,6 +37,8 @@ __all__ = [
     "sensor_noise",
     "jpeg",
     "camera_rig",
+    "wiper",
+    "WIPER_PERIOD",
 ]
 
 
@@ -321,3 +323,46 @@ def camera_rig(size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     covered.setflags(write=False)
     values.setflags(write=False)
     return covered, values
+
+
+# --------------------------------------------------------------------------- a windscreen wiper
+
+WIPER_PERIOD = 40  # frames of one wipe: up in 10, back in 10, parked for 20 (2 s at 20 fps)
+_WIPER_SWEEP = 10  # frames each way
+_WIPER_ARC = math.radians(150.0)  # from parked along the bottom to up and to the left
+
+
+def wiper(size: tuple[int, int], index: int) -> np.ndarray:
+    """A windscreen wiper's blade in front of a dashcam in frame ``index``: its opacity.
+
+    The blade pivots below the frame's bottom edge, a fifth of the width from the left, and is
+    1.3 times the frame's diagonal long. In each :data:`WIPER_PERIOD` frames it sweeps up
+    through 150 degrees in 10 frames and back in 10 (eased at both ends, as a wiper's crank
+    moves it), then rests below the frame for 20. Close to the lens it is out of focus: a dark
+    band 6 % of the width thick, its edges blurred over a fortieth of the width.
+
+    Parameters
+    ----------
+    size : (width, height)
+    index : int
+        The frame's index in its clip.
+
+    Returns
+    -------
+    ndarray (height, width) float32
+        The blade's opacity, 0..0.9 (0 where the blade is parked below the frame).
+    """
+    w, h = size
+    phase = index % WIPER_PERIOD
+    if phase >= 2 * _WIPER_SWEEP:
+        return np.zeros((h, w), np.float32)
+    s = phase / _WIPER_SWEEP if phase < _WIPER_SWEEP else 2.0 - phase / _WIPER_SWEEP
+    angle = _WIPER_ARC * 0.5 * (1.0 - math.cos(math.pi * s))  # 0: along the bottom, to the right
+    pivot = np.array([0.2 * w, 1.15 * h])
+    tip = pivot + 1.3 * math.hypot(w, h) * np.array([math.cos(angle), -math.sin(angle)])
+    blade = np.zeros((h, w), np.float32)
+    thickness = max(1, round(0.06 * w))
+    cv2.line(blade, tuple(int(round(v)) for v in pivot), tuple(int(round(v)) for v in tip),
+             0.9, thickness, cv2.LINE_AA)
+    sigma = max(0.5, w / 40 / 2)
+    return cv2.GaussianBlur(blade, (0, 0), sigma)
