@@ -102,9 +102,12 @@ def format_status(status: dict) -> str:
 
     Robots on whose key a second publisher was seen are listed under ``contested`` with the
     number of intrusions (docs/operations.md); the frames and bytes Zenoh delivered to the
-    worker follow ``frames in`` (those of the discovery scan in brackets); fields an older
+    worker follow ``frames in`` (those of the discovery scan in brackets); robots whose frames
+    are detected at fewer than ``SLOW_FPS`` a second are listed under ``slow``; fields an older
     worker does not report are left out.
     """
+    from service.core import SLOW_FPS
+
     stats = status["stats"]
     traffic = status.get("traffic")
     received = "" if traffic is None else (
@@ -115,13 +118,16 @@ def format_status(status: dict) -> str:
     tracked = [r for r, s in robots.items() if not s.get("candidate")]
     contested = ", ".join(f"{r} ({s.get('intrusions', 0)} intrusions)"
                           for r, s in robots.items() if s.get("contested")) or "none"
+    slow = ", ".join(f"{r} ({s['fps']:g} fps)" for r, s in robots.items()
+                     if s.get("fps") is not None and s["fps"] < SLOW_FPS)
     return (f"worker {status['worker']}: {status['model']}/{status['preset'] or '-'}, up "
             f"{status['uptime_s']:.0f} s, robots {', '.join(tracked) or 'none'}"
             f" (+{stats.get('candidates', 0)} waiting for a valid frame); "
             f"processed {stats['processed']}, dropped {stats['dropped']}, warnings "
             f"{stats['warnings']}, foreign {stats['foreign']}; {received}invalid: {invalid}; "
             f"second publishers: {stats.get('intrusions', 0)}, contested: {contested}; "
-            f"live workers {', '.join(status.get('workers', []))}")
+            + (f"slow: {slow}; " if slow else "")
+            + f"live workers {', '.join(status.get('workers', []))}")
 
 
 def cmd_alerts(args: argparse.Namespace) -> int:

@@ -86,9 +86,10 @@ import logging
 import os
 import re
 import socket
+import statistics
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -114,6 +115,11 @@ RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-
 # running means; the worst need 53 during an approach, 64 before one):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
 WARMUP_FRAMES = 30
+# A robot's rate is the median over this many gaps between the stamps of its frames processed;
+# below SLOW_FPS the worker logs it once per stream (the default preset is made for 20 fps or
+# more, and a 20 fps camera's stamps jitter)
+RATE_FRAMES = 5
+SLOW_FPS = 18.0
 
 
 def default_worker_id() -> str:
@@ -183,6 +189,12 @@ class _Robot:
     # seq, stamp and data of the latest frame taken in (the data is the pending frame's or the
     # one being processed, or the last one processed: never a third frame held)
     last_arrival: tuple[int, float, bytes] | None = None
+    # the rate its model is stepped at: the stamps' gaps between the frames processed in the
+    # current stream (after the worker's own skips), and whether a slow rate was logged
+    stamp: float | None = None
+    periods: deque = field(default_factory=lambda: deque(maxlen=RATE_FRAMES))
+    fps: float | None = None
+    slow_logged: bool = False
 
 
 @dataclass(frozen=True)
@@ -502,6 +514,7 @@ class WorkerCore:
             log.info("robot %s: first frame (%dx%d %s)", job.robot, frame.width, frame.height,
                      frame.format)
         state.stepped = 1 if state.processed_stream != job.stream else state.stepped + 1
+        self._measure_rate(job.robot, state, frame.stamp)
         state.shape = (frame.width, frame.height)
         state.last_seq = frame.seq
         state.processed_stream = job.stream
@@ -519,6 +532,25 @@ class WorkerCore:
             self._stats.processed += 1
             self._stats.warnings += response.collision
         return response
+
+    def _measure_rate(self, robot: str, state: _Robot, stamp: float) -> None:
+        """Note the gap since the robot's previous processed frame; log once per stream when
+        its model is stepped at less than :data:`SLOW_FPS` (a slow camera, or frames skipped
+        under load): the default preset loses hits there (README, "At half the frame rate")."""
+        if state.stepped == 1:
+            state.periods.clear()
+            state.slow_logged = False
+        elif state.stamp is not None and 0.0 < stamp - state.stamp <= 1.0:
+            state.periods.append(stamp - state.stamp)
+        state.stamp = stamp
+        state.fps = (round(1.0 / statistics.median(state.periods), 1) if state.periods
+                     else None)
+        if (len(state.periods) == RATE_FRAMES and state.fps < SLOW_FPS
+                and not state.slow_logged):
+            state.slow_logged = True
+            log.warning("robot %s: its frames are detected at %.1f per second (the camera's "
+                        "rate, or frames skipped under load); the default preset is made for "
+                        "20 or more", robot, state.fps)
 
     def _give_back(self, state: _Robot, dropped: int) -> None:
         """A taken frame produced no response: its skipped count moves to the next one."""
@@ -611,7 +643,8 @@ class WorkerCore:
                           "size": list(s.shape) if s.shape else None,
                           "candidate": not s.proven, "contested": s.contested,
                           "intrusions": s.intrusions, "frames": s.arrived,
-                          "bytes": s.arrived_bytes, "warm": self._warm_locked(s)}
+                          "bytes": s.arrived_bytes, "warm": self._warm_locked(s),
+                          "fps": s.fps}
                       for r, s in sorted(self._robots.items())}
             backlog = sum((s.pending is not None) + s.busy for s in self._robots.values())
         return {"v": 1, "worker": self.worker_id, "model": self.model, "preset": self.preset,

@@ -337,6 +337,30 @@ def test_rendezvous_ownership_is_stable_and_moves_only_what_it_must():
     assert owner("r", []) is None
 
 
+def test_the_rate_a_robot_is_detected_at_is_reported_and_a_slow_one_logged(caplog, looming):
+    core = WorkerCore()
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for seq in range(8):  # 20 fps
+            feed(core, "fast", looming.frames[seq], seq, stamp=seq * 0.05)
+        # a 20 fps camera whose every second frame the worker skips: detected at 10 fps
+        for seq in range(0, 16, 2):
+            core.offer("asnn/slow/frame", payload(looming.frames[seq], seq, seq * 0.05))
+            core.offer("asnn/slow/frame", payload(looming.frames[seq + 1], seq + 1,
+                                                  (seq + 1) * 0.05))
+            core.process(core.take())
+    status = core.status()
+    robots = status["robots"]
+    assert robots["fast"]["fps"] == 20.0 and robots["slow"]["fps"] == 10.0
+    from cli.net import format_status
+
+    assert "slow: slow (10 fps);" in format_status(status)
+    slow = [r.getMessage() for r in caplog.records if "per second" in r.getMessage()]
+    assert len(slow) == 1 and "robot slow" in slow[0] and "10.0" in slow[0]
+    # a new stream (the camera restarted) measures afresh
+    feed(core, "slow", looming.frames[0], 0, stamp=0.0)
+    assert core.status()["robots"]["slow"]["fps"] is None
+
+
 def test_status_reports_counters_limits_and_robots(looming):
     core = WorkerCore(worker_id="w9")
     feed(core, "r1", looming.frames[0], 0)
