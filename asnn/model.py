@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import statistics
 import weakref
 from collections import deque
 from collections.abc import Iterable, Iterator
@@ -227,7 +228,7 @@ class ASNN:
     def frame_period(self) -> float:
         """The stream's frame period, seconds: the median of :attr:`periods` (``params.dt``
         before the second frame)."""
-        return float(np.median(self.periods)) if self.periods else self.params.dt
+        return statistics.median(self.periods) if self.periods else self.params.dt
 
     # ------------------------------------------------------------------ step
 
