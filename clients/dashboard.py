@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 
 from service import keys
+from service.core import SLOW_FPS
 from service.logutil import RateLimitedLog
 from service.messages import (MessageError, Preview, Response, check_preview, decode_preview,
                               decode_response)
@@ -409,7 +410,7 @@ class FleetStore:
                 "version": self._version, "full": full, "robots": robots, "live": live,
                 "warnings": warnings,
                 "config": {"history": self.history, "hold": self.hold,
-                           "stale_after": self.stale_after},
+                           "stale_after": self.stale_after, "slow_fps": SLOW_FPS},
                 "counts": {"robots": len(self._robots),
                            "collision": sum(v[2] for v in live.values()),
                            "stale": sum(v[1] for v in live.values()),

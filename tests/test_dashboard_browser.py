@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -249,6 +250,8 @@ def test_browser_shows_both_robots_and_only_the_looming_one_colliding(zenoh_net,
     # the robust default's targets carry a time to contact, shown on the tile
     assert 0 < float(shown["loom"]["contact"]) < 5 and "contact in" in shown["loom"]["stats"]
     assert shown["bar"]["contact"] is None and "contact in" not in shown["bar"]["stats"]
+    # the rate each robot is answered at (20 fps cameras; fewer where the worker skipped frames)
+    assert all(re.search(r" · \d+ fps", shown[r]["stats"]) for r in ("loom", "bar")), shown
     assert log_robots == {"loom"}
     assert store.invalid == {}
     assert (ARTIFACTS / "dashboard.png").stat().st_size > 10_000
@@ -263,11 +266,13 @@ def fake_response(robot: str, seq: int, stamp: float, collision: bool) -> bytes:
 
 def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
     """Fifty robots fed straight into the store (no Zenoh): fifty tiles, the colliding ones
-    marked; robots that stop reporting turn stale on the page."""
+    marked; robots that stop reporting turn stale on the page; robots answered at 10 fps are
+    marked slow."""
     store = FleetStore(stale_after=1.0)
     names = [f"robot{i:02d}" for i in range(50)]
     stop = threading.Event()
     silent = {"robot07", "robot33"}
+    slow = set(names[5::10])  # their frames 0.1 s apart: detected at 10 fps
 
     def feed():
         seq = 0
@@ -276,7 +281,8 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
                 if name in silent and seq > 5:
                     continue
                 key = f"asnn/{name}/response"
-                store.offer(key, fake_response(name, seq, 1000.0 + seq * 0.05, i % 10 == 0))
+                period = 0.1 if name in slow else 0.05
+                store.offer(key, fake_response(name, seq, 1000.0 + seq * period, i % 10 == 0))
             seq += 1
             stop.wait(0.05)
 
@@ -298,3 +304,5 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
     assert set(shown) == set(names)
     assert {n for n, t in shown.items() if t["collision"] == "true"} == set(names[::10])
     assert {n for n, t in shown.items() if t["stale"] == "true"} == silent
+    assert {n for n, t in shown.items() if "10 fps (slow)" in t["stats"]} == slow
+    assert all("20 fps" in t["stats"] for n, t in shown.items() if n not in slow | silent)

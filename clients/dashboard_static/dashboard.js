@@ -15,7 +15,7 @@
 
   const robots = new Map(); // name -> view
   const dirty = new Set();
-  let config = { history: 10, hold: 3, stale_after: 3 };
+  let config = { history: 10, hold: 3, stale_after: 3, slow_fps: 18 };
   let counts = null;
   let framePending = false;
 
@@ -208,6 +208,19 @@
     ctx.fillText(`${Math.round(pts[pts.length - 1][1])} spikes/s`, w - 4, 11);
   }
 
+  // the rate a robot's frames are answered at: the median of its last 5 response intervals
+  // (the worker's own skips included), as the worker measures it (service.core.SLOW_FPS)
+  function rateOf(points) {
+    const gaps = [];
+    for (let i = Math.max(1, points.length - 5); i < points.length; i++) {
+      const gap = points[i][0] - points[i - 1][0];
+      if (gap > 0 && gap <= 1) gaps.push(gap);
+    }
+    if (!gaps.length) return null;
+    gaps.sort((a, b) => a - b);
+    return 1 / gaps[Math.floor(gaps.length / 2)];
+  }
+
   function drawStats(v) {
     const r = v.tile && v.tile.response;
     if (!r) {
@@ -216,11 +229,16 @@
         : "no response yet";
       return;
     }
-    // the time to contact first: the line is cut to the tile's width
+    const fps = rateOf(v.points);
+    const rate = fps === null ? "" : `${Math.round(fps)} fps`;
+    const slow = fps !== null && fps < config.slow_fps;
+    // the time to contact first, then a slow rate (detection suffers): the line is cut to the
+    // tile's width
     v.stats.textContent = (v.contact === null ? "" : `contact in ${v.contact.toFixed(1)} s · `) +
+      (slow ? `${rate} (slow) · ` : "") +
       `seq ${r.seq} · out ${fmt(r.out)} · ${Math.round(r.spike_rate)} ` +
       `spikes/s · ${fmt(r.latency_ms, 0)} ms` + (r.dropped ? ` · ${r.dropped} dropped` : "") +
-      ` · ${r.model}${r.preset ? "/" + r.preset : ""}`;
+      (rate && !slow ? ` · ${rate}` : "") + ` · ${r.model}${r.preset ? "/" + r.preset : ""}`;
     v.stats.title = `worker ${r.worker}, frame at ${clock(r.stamp)}`;
   }
 
