@@ -130,7 +130,9 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
                   rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)):
         for name in (name for name in PERTURBATIONS if name != "half-rate"):
             out = perturb_frame(frame, name, index=7)
-            assert out.shape == frame.shape and out.dtype == np.uint8
+            factor = {"half-size": 0.5, "double-size": 2}.get(name, 1)
+            assert out.shape == (24 * factor, 32 * factor, *frame.shape[2:])
+            assert out.dtype == np.uint8
             assert np.array_equal(out, perturb_frame(frame, name, index=7))
             assert not np.array_equal(out, frame)
         assert np.array_equal(perturb_frame(frame, "mirror", 0), frame[:, ::-1])
@@ -158,6 +160,10 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
         perturb_frame(frame.astype(np.float32), "noise", 0)
     with pytest.raises(ValueError, match="drops frames"):
         perturb_frame(frame, "half-rate", 0)
+    # half the resolution: 2x2 means; twice: bilinear, the same mean
+    assert perturb_frame(frame, "half-size", 0)[0, 0] == pytest.approx(
+        frame[:2, :2].astype(float).mean(axis=(0, 1)), abs=1)
+    assert perturb_frame(frame, "double-size", 0).mean() == pytest.approx(frame.mean(), abs=2)
 
 
 def test_a_mirrored_clip_is_scored_against_its_mirrored_label(tmp_path):
@@ -188,6 +194,20 @@ def test_a_mirrored_clip_is_scored_against_its_mirrored_label(tmp_path):
     score = results["detectors"]["asnn"]["clips"][0]
     # caught, and on the mirrored centre (the label's own centre is 27 px away)
     assert score["outcome"] == "hit" and score["localisation_px"] < 5
+
+
+def test_a_resized_clip_is_scored_against_its_scaled_label():
+    from asnn.evaluation.perturb import perturb_label
+
+    label = {"file": "x.mp4", "width": 64, "height": 48, "center": [31.5, 23.5],
+             "track": [[9.5, 11.5], None], "target_size": [6.0, 8.0], "fps": 20.0}
+    half = perturb_label(label, "half-size")
+    assert (half["width"], half["height"], half["center"]) == (32, 24, [15.5, 11.5])
+    assert half["track"] == [[4.5, 5.5], None] and half["target_size"] == [3.0, 4.0]
+    double = perturb_label(label, "double-size")
+    assert (double["width"], double["center"], double["track"][0]) == (128, [63.5, 47.5],
+                                                                       [19.5, 23.5])
+    assert label["width"] == 64 and label["center"] == [31.5, 23.5]  # the label unchanged
 
 
 def test_half_rate_keeps_every_second_frame_with_its_time_and_maps_the_label_onto_them():

@@ -178,6 +178,17 @@ def test_synthetic_eval_of_perturbed_frames(tmp_path):
     assert label["fps"] == original["fps"] / 2 and len(label["track"]) == label["frames"]
     assert "frames at 10 fps" in (out / "report.md").read_text()
 
+    # at twice the resolution: the label's track scaled with the frames, so the warning's
+    # target is still on the labelled object
+    out = tmp_path / "double"
+    assert main(["eval", "--synthetic", "--perturb", "double-size", "--cases",
+                 "course-disk-dark-right", "--detectors", "asnn", "--no-plots", "--out",
+                 str(out)]) == 0
+    label = json.loads((out / "labels.json").read_text())[0]
+    assert label["width"] == 2 * original["width"]
+    score = json.loads((out / "results.json").read_text())["detectors"]["asnn"]["clips"][0]
+    assert score["outcome"] == "hit" and score["localisation_px"] < 20
+
 
 def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):
     out, labels = tmp_path / "case.avi", tmp_path / "labels.json"

@@ -7,17 +7,20 @@ camera or a different day would, and ``asnn eval CLIPS_DIR --perturb NAME`` (or 
 (mirrored with the frames for ``mirror``): outcomes that survive every perturbation are the
 ones a fleet can count on.
 
-Every perturbation is deterministic (the noise is seeded by the frame's index). All but
-``half-rate`` change each frame and keep its size, channels and uint8 type; ``half-rate`` drops
-every second frame, as a camera running at half the frame rate (10 fps for the generated suite,
-15 fps for the 30 fps dashcam clips) would deliver the same scene, and maps the labels' frames
-onto the frames kept.
+Every perturbation is deterministic (the noise is seeded by the frame's index) and keeps the
+frames' channels and uint8 type. ``half-size`` and ``double-size`` change their size, as a
+camera of half or twice the resolution would (the labels' centres scaled with them; enlarging
+adds no detail, but the model's parameters in pixels meet objects and motions twice as large);
+``half-rate`` drops every second frame, as a camera running at half the frame rate (10 fps for
+the generated suite, 15 fps for the 30 fps dashcam clips) would deliver the same scene, and maps
+the labels' frames onto the frames kept.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Mapping
 
+import cv2
 import numpy as np
 
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
@@ -33,12 +36,17 @@ PERTURBATIONS = {
     "hood": "a dashcam's own hood along the bottom and a timestamp overlay, still in every frame",
     "wiper": "a windscreen wiper's blurred blade sweeping across the view and back every 40 "
              "frames (rain: 2 s at 20 fps)",
+    "half-size": "every frame averaged down to half its width and height (a camera of half the "
+                 "resolution; the labels' centres with it)",
+    "double-size": "every frame enlarged to twice its width and height, bilinearly (the labels' "
+                   "centres with it)",
     "half-rate": "every second frame dropped, as a camera at half the frame rate would deliver "
                  "them; the labels follow the frames kept",
 }
 # the perturbations that drop frames instead of changing them: frame k kept is frame step * k
 _RATE_STEP = {"half-rate": 2}
 _PER_FRAME = ("track", "target_size", "ttc")  # label fields with one entry per frame
+_SCALE = {"half-size": 0.5, "double-size": 2.0}  # the perturbations that resize the frames
 NOISE_SIGMA = 4.0
 JPEG_QUALITY = 30
 DIM_GAIN = 0.6
@@ -69,6 +77,11 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
         raise ValueError(f"perturbations take uint8 frames, got {frame.dtype}")
     if name == "mirror":
         return np.ascontiguousarray(frame[:, ::-1])
+    if name in _SCALE:
+        h, w = frame.shape[:2]
+        factor = _SCALE[name]
+        return cv2.resize(frame, (max(1, round(w * factor)), max(1, round(h * factor))),
+                          interpolation=cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR)
     if name == "jpeg":
         return jpeg(frame[None], JPEG_QUALITY)[0]
     if name == "hood":
@@ -100,8 +113,9 @@ def perturbed(timed_frames: Iterable[tuple[float, np.ndarray]], name: str | None
 
 def perturb_label(label: Mapping, name: str | None) -> dict:
     """A clip's label for its perturbed frames: for ``mirror`` the centre and the per-frame
-    ``track`` mirrored (x -> width - 1 - x; the label needs its ``width``); for a perturbation
-    that drops frames, its frames, fps and per-frame lists on the frames kept; otherwise as it is.
+    ``track`` mirrored (x -> width - 1 - x; the label needs its ``width``); for one that resizes
+    the frames, its size, centre, track and target sizes scaled; for one that drops frames, its
+    frames, fps and per-frame lists on the frames kept; otherwise as it is.
 
     Raises
     ------
@@ -111,6 +125,8 @@ def perturb_label(label: Mapping, name: str | None) -> dict:
     label = dict(label)
     if name in _RATE_STEP:
         return _label_at_rate(label, _RATE_STEP[name])
+    if name in _SCALE:
+        return _label_at_scale(label, _SCALE[name])
     if name != "mirror" or (label.get("center") is None and not label.get("track")):
         return label
     if not label.get("width"):
@@ -122,6 +138,25 @@ def perturb_label(label: Mapping, name: str | None) -> dict:
     if label.get("track"):
         label["track"] = [None if point is None else [right - point[0], point[1]]
                           for point in label["track"]]
+    return label
+
+
+def _label_at_scale(label: dict, factor: float) -> dict:
+    """The label of a clip whose frames are resized by ``factor``: its size, centre, per-frame
+    track (pixel centres: ``x -> (x + 0.5) factor - 0.5``) and target sizes scaled."""
+    def point(p):
+        return None if p is None else [(float(v) + 0.5) * factor - 0.5 for v in p]
+
+    for key in ("width", "height"):
+        if label.get(key):
+            label[key] = max(1, round(int(label[key]) * factor))
+    if label.get("center") is not None:
+        label["center"] = point(label["center"])
+    if isinstance(label.get("track"), list):
+        label["track"] = [point(p) for p in label["track"]]
+    if isinstance(label.get("target_size"), list):
+        label["target_size"] = [None if v is None else float(v) * factor
+                                for v in label["target_size"]]
     return label
 
 
