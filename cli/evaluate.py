@@ -15,6 +15,7 @@ import argparse
 import sys
 
 from asnn.evaluation import scoring
+from asnn.evaluation.heldout import TIE_BREAKS
 from asnn.evaluation.perturb import PERTURBATIONS
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detectors
@@ -48,6 +49,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     mode.add_argument("--held-out", action="store_true",
                       help="with CLIPS_DIR: the in-sample and leave-one-clip-out figures of the "
                            "default preset's approach-gate thresholds (held_out.md)")
+    p.add_argument("--tie-break", choices=list(TIE_BREAKS), default="warning-frames",
+                   help="with --held-out: how thresholds that tie on hits and false alarms are "
+                        "told apart: " + "; ".join(f"{k}: {v}" for k, v in TIE_BREAKS.items())
+                        + " (default: %(default)s)")
     p.add_argument("--labels", metavar="FILE", help="labels file (default: CLIPS_DIR/labels.json)")
     p.add_argument("--detectors", "--models", dest="detectors", type=_detectors,
                    default=list(DEFAULT_DETECTORS), metavar="LIST",
@@ -111,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
         ("--early-tolerance", args.early_tolerance is not None,
          not (args.synthetic or args.paper)),
         ("--perturb", args.perturb, not (args.paper or args.held_out)),
+        ("--tie-break", args.tie_break != "warning-frames", args.held_out),
     ) if given and not mode]
     if misplaced:
         print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
@@ -138,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         elif args.held_out:
             heldout.evaluate_held_out(args.clips_dir, args.out, labels_path=args.labels,
                                       preset_name=args.preset, cases=args.cases, jobs=args.jobs,
-                                      progress=progress)
+                                      progress=progress, tie_break=args.tie_break)
             print(f"{args.out}/held_out.md")
             return 0
         else:

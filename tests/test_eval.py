@@ -274,7 +274,8 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
         main(["eval", str(tmp_path), "--perturb", "blur"])  # not one of the perturbations
     for misplaced in (["--synthetic", "--size", "64x64"], ["--paper", "--cases", "loom-*"],
                       ["--synthetic", "--early-tolerance", "0.5"], ["--paper", "--labels", "x"],
-                      ["--paper", "--perturb", "noise"], ["--paper", "--variant", "1"]):
+                      ["--paper", "--perturb", "noise"], ["--paper", "--variant", "1"],
+                      ["--synthetic", "--tie-break", "grid"]):
         assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
         assert "does not go with" in capsys.readouterr().err
 

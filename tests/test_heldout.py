@@ -116,6 +116,25 @@ def test_the_selection_prefers_hits_minus_false_alarms_then_fewer_false_alarms()
         summary(5, 1, 10, 12))
     assert heldout.selection_key(summary(4, 0, 10, 12)) > heldout.selection_key(
         summary(4, 0, 10, 30))
+    # by grid order instead, warning frames do not count: the two tie, and the first wins
+    assert heldout.selection_key(summary(4, 0, 10, 12), "grid") == heldout.selection_key(
+        summary(4, 0, 10, 30), "grid")
+    with pytest.raises(ValueError, match="tie-break"):
+        heldout.selection_key(summary(4, 0, 10, 12), "luck")
+
+
+def test_the_tie_break_decides_between_thresholds_that_score_alike(traced):
+    base, scenes, traces = traced
+    labels = [scene.label(f"{scene.name}.mp4") for scene in scenes]
+    frames = heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0)
+    ordered = heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0,
+                                    tie_break="grid")
+    assert (frames["tie_break"], ordered["tie_break"]) == ("warning-frames", "grid")
+    # on these clips many thresholds score alike: by grid order the smallest are taken, by
+    # warning frames those that warn longest inside the windows
+    assert ordered["chosen_all"]["tau_max"] == 1.0 < frames["chosen_all"]["tau_max"]
+    with pytest.raises(ValueError, match="tie-break"):
+        heldout.leave_one_out(traces, labels, base, tie_break="luck")
 
 
 def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):

@@ -36,8 +36,8 @@ from . import scoring
 from .runs import fmt, write_json
 
 __all__ = ["GATE_GRID", "SUITE_AIMS", "FrameTrace", "ClipTrace", "trace_clip", "replay",
-           "grid", "suite_admissible", "selection_key", "leave_one_out", "held_out_report",
-           "evaluate_held_out"]
+           "grid", "suite_admissible", "selection_key", "TIE_BREAKS", "leave_one_out",
+           "held_out_report", "evaluate_held_out"]
 
 # the thresholds chosen by looking at real clips, and the values tried for each
 GATE_GRID: dict[str, tuple] = {
@@ -54,6 +54,13 @@ GATE_GRID: dict[str, tuple] = {
 # this false-alarm rate with it: near misses and passing traffic, the generated cases a fleet
 # would see every day, must stay quiet (one case in a hundred)
 SUITE_AIMS = {"hit_rate": 0.90, "false_alarm_rate": 0.01}
+# how grid points that tie on hits and false alarms are told apart (selection_key); the
+# first rewards thresholds that warn more, so the held-out figures are given with either
+TIE_BREAKS = {
+    "warning-frames": "more warning frames inside the hit windows than outside them, then the "
+                      "first in grid order",
+    "grid": "the first in grid order (smaller thresholds first)",
+}
 
 
 @dataclass(frozen=True)
@@ -219,13 +226,28 @@ def suite_admissible(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
     return verdicts
 
 
-def selection_key(summary: Mapping) -> tuple:
+def selection_key(summary: Mapping, tie_break: str = "warning-frames") -> tuple:
     """How a grid point is ranked on the clips that choose it (larger is better): hits minus
     false alarms (early warnings and warned non-collision clips count alike), then fewer false
-    alarms, then more warning frames inside the hit windows than outside them."""
+    alarms, then, with ``tie_break`` ``warning-frames``, more warning frames inside the hit
+    windows than outside them (:data:`TIE_BREAKS`; what still ties goes by grid order).
+
+    Raises
+    ------
+    ValueError
+        For a tie-break not in :data:`TIE_BREAKS`.
+    """
+    _check_tie_break(tie_break)
+    key = (summary["hit"] - summary["false_alarms"], -summary["false_alarms"])
+    if tie_break == "grid":
+        return key
     inside = summary["window_warning_frames"]
-    return (summary["hit"] - summary["false_alarms"], -summary["false_alarms"],
-            inside - (summary["warning_frames"] - inside))
+    return key + (inside - (summary["warning_frames"] - inside),)
+
+
+def _check_tie_break(name: str) -> None:
+    if name not in TIE_BREAKS:
+        raise ValueError(f"unknown tie-break {name!r}; choose one of {', '.join(TIE_BREAKS)}")
 
 
 def _gate(params: ASNNParams) -> dict:
@@ -235,7 +257,8 @@ def _gate(params: ASNNParams) -> dict:
 def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: ASNNParams,
                   admissible: Sequence[bool] | None = None,
                   warmup: int = scoring.WARMUP_FRAMES,
-                  early_tolerance_s: float = scoring.EARLY_TOLERANCE_S) -> dict:
+                  early_tolerance_s: float = scoring.EARLY_TOLERANCE_S,
+                  tie_break: str = "warning-frames") -> dict:
     """In-sample and leave-one-clip-out scores of the gate thresholds.
 
     Parameters
@@ -246,15 +269,18 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
     admissible : sequence of bool, optional
         Per grid point (:func:`grid`), whether it may be chosen (:func:`suite_admissible`);
         all by default.
+    tie_break : str
+        How grid points that tie on hits and false alarms are told apart (:data:`TIE_BREAKS`).
 
     Returns
     -------
     dict
-        ``grid`` (the tried values), ``base`` (the preset's thresholds), ``chosen_all`` (the
+        ``grid`` (the tried values), ``tie_break``, ``base`` (the preset's thresholds), ``chosen_all`` (the
         thresholds :func:`selection_key` picks on every clip), ``in_sample`` and ``held_out``
         (per clip a score dict; ``held_out`` adds the ``chosen`` thresholds), with their
         ``summary``.
     """
+    _check_tie_break(tie_break)
     points = grid(base)
     allowed = [k for k in range(len(points)) if admissible is None or admissible[k]]
     if not allowed:
@@ -265,7 +291,8 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
 
     def best(exclude: int | None) -> int:
         keys = {k: selection_key(scoring.summarize(s for i, s in enumerate(scores[k])
-                                                   if i != exclude)) for k in allowed}
+                                                   if i != exclude), tie_break)
+                for k in allowed}
         # ties: the first in grid order (smaller thresholds first)
         return max(allowed, key=lambda k: (keys[k], -k))
 
@@ -278,6 +305,7 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
         held.append({**scores[k][i].to_dict(), "chosen": _gate(points[k])})
     return {
         "grid": {n: list(v) for n, v in GATE_GRID.items()},
+        "tie_break": tie_break,
         "base": _gate(base),
         "admissible": None if admissible is None else [_gate(points[k]) for k in allowed],
         "chosen_all": _gate(points[best(None)]),
@@ -307,7 +335,9 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
         f"Preset thresholds: {gate} (on every clip: "
         + ", ".join(f"{k} = {v}" for k, v in results["chosen_all"].items()) + "). "
         "Leave-one-clip-out: each clip scored with the thresholds chosen on the other clips "
-        "from the grid " + "; ".join(f"{k} in {v}" for k, v in results["grid"].items()) + ".",
+        "from the grid " + "; ".join(f"{k} in {v}" for k, v in results["grid"].items())
+        + f"; ties on hits and false alarms go to {TIE_BREAKS[results['tie_break']]} "
+        f"(`--tie-break {results['tie_break']}`).",
         "",
         "| figures | hits | early | late | misses | false (nc) | false alarms | "
         "warning frames in / out of windows |",
@@ -343,17 +373,20 @@ def _trace_case(name: str, params: ASNNParams) -> ClipTrace:
 
 def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
                       labels_path: str | Path | None = None, preset_name: str = "default",
-                      cases: str | None = None, jobs: int = 1, progress=None) -> dict:
+                      cases: str | None = None, jobs: int = 1, progress=None,
+                      tie_break: str = "warning-frames") -> dict:
     """Trace a preset on labelled clips and on the generated suite, and write the in-sample and
     leave-one-clip-out figures of its gate thresholds (:func:`leave_one_out`) to ``out_dir``.
 
     ``cases`` selects the suite cases that decide which grid points are admissible (a pattern
-    of :func:`asnn.stimuli.suite.suite_cases`; every case by default).
+    of :func:`asnn.stimuli.suite.suite_cases`; every case by default); ``tie_break`` is
+    :func:`leave_one_out`'s.
 
     Raises
     ------
     ValueError
-        For an unknown preset, one without the approach gate, or an unreadable labels file.
+        For an unknown preset, one without the approach gate, an unknown tie-break or an
+        unreadable labels file.
     OSError
         For a clip that cannot be read.
     """
@@ -363,6 +396,7 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     from ..stimuli.suite import make_case, suite_cases
     from .progress import Silent
 
+    _check_tie_break(tie_break)
     clips_dir, out_dir = Path(clips_dir), Path(out_dir)
     labels = scoring.load_labels(Path(labels_path) if labels_path else clips_dir / "labels.json")
     base = preset(preset_name)
@@ -387,6 +421,6 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     suite_labels = [make_case(name).label(name) for name in cases]
     admissible = suite_admissible(suite_traces, suite_labels, base)
     results = {"clips_dir": str(clips_dir), "preset": preset_name, "suite_cases": len(cases),
-               **leave_one_out(traces, labels, base, admissible)}
+               **leave_one_out(traces, labels, base, admissible, tie_break=tie_break)}
     held_out_report(results, out_dir)
     return results
