@@ -385,6 +385,9 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     object_ids=True, motion_layers=True, ignore_rig=True,
 ))
 DEFAULT_PRESET = "robust"
+# frames a second below which the default preset loses hits (README, "At half the frame rate"):
+# it is made for 20 or more, and a 20 fps camera's timestamps jitter
+SLOW_FPS = 18.0
 
 
 def preset_names() -> list[str]:

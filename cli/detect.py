@@ -15,7 +15,7 @@ import cv2
 from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.model import compile_kernels
-from asnn.params import preset, preset_names
+from asnn.params import SLOW_FPS, preset, preset_names
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import SourceError, open_source
@@ -130,6 +130,10 @@ def run(args: argparse.Namespace) -> int:
         source = open_source(args.video, topic=args.topic, decoder_threads=1 if busy else None)
     except SourceError as exc:
         return _fail(str(exc))
+    if args.model == "asnn" and source.fps < SLOW_FPS:
+        print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second; ASNN "
+              f"loses hits below {SLOW_FPS:g} (README, 'At half the frame rate')",
+              file=sys.stderr)
     detector = make_detector(args.model, args.preset, **options)
     if args.model == "asnn":
         # numba loads a kernel from its cache when it is first called: all of them now, before

@@ -106,7 +106,7 @@ def format_status(status: dict) -> str:
     are detected at fewer than ``SLOW_FPS`` a second are listed under ``slow``; fields an older
     worker does not report are left out.
     """
-    from service.core import SLOW_FPS
+    from asnn.params import SLOW_FPS
 
     stats = status["stats"]
     traffic = status.get("traffic")

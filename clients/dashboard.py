@@ -54,8 +54,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import resources
 
+from asnn.params import SLOW_FPS
 from service import keys
-from service.core import SLOW_FPS
 from service.logutil import RateLimitedLog
 from service.messages import (MessageError, Preview, Response, check_preview, decode_preview,
                               decode_response)

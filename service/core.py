@@ -95,7 +95,7 @@ from dataclasses import dataclass, field
 
 from asnn import FrameError
 from asnn.detectors import available_cores, make_detector
-from asnn.params import DEFAULT_PRESET
+from asnn.params import DEFAULT_PRESET, SLOW_FPS
 
 from . import keys
 from .logutil import RateLimitedLog
@@ -116,10 +116,8 @@ RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
 WARMUP_FRAMES = 30
 # A robot's rate is the median over this many gaps between the stamps of its frames processed;
-# below SLOW_FPS the worker logs it once per stream (the default preset is made for 20 fps or
-# more, and a 20 fps camera's stamps jitter)
+# below asnn.params.SLOW_FPS the worker logs it once per stream
 RATE_FRAMES = 5
-SLOW_FPS = 18.0
 
 
 def default_worker_id() -> str:
@@ -535,8 +533,9 @@ class WorkerCore:
 
     def _measure_rate(self, robot: str, state: _Robot, stamp: float) -> None:
         """Note the gap since the robot's previous processed frame; log once per stream when
-        its model is stepped at less than :data:`SLOW_FPS` (a slow camera, or frames skipped
-        under load): the default preset loses hits there (README, "At half the frame rate")."""
+        its model is stepped at less than :data:`asnn.params.SLOW_FPS` (a slow camera, or
+        frames skipped under load): the default preset loses hits there (README, "At half the
+        frame rate")."""
         if state.stepped == 1:
             state.periods.clear()
             state.slow_logged = False

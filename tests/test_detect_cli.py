@@ -50,6 +50,19 @@ def test_jsonl_has_one_object_per_frame_with_the_contract_fields(looming_video, 
     assert all(r["frame"] >= scene.onset_frame for r in warned)
 
 
+def test_a_slow_video_gets_a_note_on_stderr_and_a_fast_one_none(looming_video, tmp_path,
+                                                                  capsys):
+    path, scene = looming_video
+    assert main(["detect", str(path), "--jsonl", str(tmp_path / "fast.jsonl")]) == 0
+    assert "frames a second" not in capsys.readouterr().err
+    slow = tmp_path / "slow.avi"
+    write_video(scene.frames, slow, fps=10.0)
+    assert main(["detect", str(slow), "--jsonl", "-"]) == 0
+    captured = capsys.readouterr()
+    assert "runs at 10 frames a second" in captured.err and "below 18" in captured.err
+    assert len(captured.out.splitlines()) == len(scene.frames)  # stdout stays JSON
+
+
 def test_lgmd_models_are_selectable_and_report_no_targets(looming_video, capsys):
     path, scene = looming_video
     assert main(["detect", str(path), "--model", "lgmd2", "--jsonl", "-"]) == 0
