@@ -380,9 +380,8 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
-    scene_relative=True,
-    partial_overlap=True, scene_tolerance=0.1, receding_scene=True, region_persistence=True,
-    object_ids=True, motion_layers=True, ignore_rig=True,
+    scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
+    region_persistence=True, object_ids=True, motion_layers=True, ignore_rig=True,
 ))
 DEFAULT_PRESET = "robust"
 # frames a second below which the default preset loses hits (README, "At half the frame rate"):
