@@ -437,7 +437,7 @@ def persistence_frames(frames: int, seconds: float | None, period: float) -> int
     """
     if seconds is None or period <= 0.0:
         return frames
-    # a millisecond's slack: timestamps 0.1 s apart read 0.0999... in floating point
+    # a thousandth of a frame's slack: timestamps 0.1 s apart read 0.0999... in floating point
     return max(1, min(frames, 1 + math.ceil(seconds / period - 1e-3)))
 
 

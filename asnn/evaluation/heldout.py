@@ -275,10 +275,10 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
     Returns
     -------
     dict
-        ``grid`` (the tried values), ``tie_break``, ``base`` (the preset's thresholds), ``chosen_all`` (the
-        thresholds :func:`selection_key` picks on every clip), ``in_sample`` and ``held_out``
-        (per clip a score dict; ``held_out`` adds the ``chosen`` thresholds), with their
-        ``summary``.
+        ``grid`` (the tried values), ``tie_break``, ``base`` (the preset's thresholds),
+        ``chosen_all`` (the thresholds :func:`selection_key` picks on every clip),
+        ``in_sample`` and ``held_out`` (per clip a score dict; ``held_out`` adds the ``chosen``
+        thresholds), with their ``summary``.
     """
     _check_tie_break(tie_break)
     points = grid(base)

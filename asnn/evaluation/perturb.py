@@ -132,28 +132,26 @@ def perturb_label(label: Mapping, name: str | None) -> dict:
     if not label.get("width"):
         raise ValueError(f"{label.get('file', 'a label')}: mirroring its centre needs its width")
     right = float(label["width"]) - 1.0
+    return _moved_points(label, lambda x, y: [right - x, y])
+
+
+def _moved_points(label: dict, move) -> dict:
+    """``label`` with its centre and per-frame track moved by ``move(x, y) -> [x, y]``."""
     if label.get("center") is not None:
-        x, y = label["center"]
-        label["center"] = [right - x, y]
+        label["center"] = move(*label["center"])
     if label.get("track"):
-        label["track"] = [None if point is None else [right - point[0], point[1]]
-                          for point in label["track"]]
+        label["track"] = [None if point is None else move(*point) for point in label["track"]]
     return label
 
 
 def _label_at_scale(label: dict, factor: float) -> dict:
     """The label of a clip whose frames are resized by ``factor``: its size, centre, per-frame
     track (pixel centres: ``x -> (x + 0.5) factor - 0.5``) and target sizes scaled."""
-    def point(p):
-        return None if p is None else [(float(v) + 0.5) * factor - 0.5 for v in p]
-
     for key in ("width", "height"):
         if label.get(key):
             label[key] = max(1, round(int(label[key]) * factor))
-    if label.get("center") is not None:
-        label["center"] = point(label["center"])
-    if isinstance(label.get("track"), list):
-        label["track"] = [point(p) for p in label["track"]]
+    _moved_points(label, lambda x, y: [(float(x) + 0.5) * factor - 0.5,
+                                       (float(y) + 0.5) * factor - 0.5])
     if isinstance(label.get("target_size"), list):
         label["target_size"] = [None if v is None else float(v) * factor
                                 for v in label["target_size"]]

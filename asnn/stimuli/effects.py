@@ -350,13 +350,24 @@ def wiper(size: tuple[int, int], index: int) -> np.ndarray:
     Returns
     -------
     ndarray (height, width) float32
-        The blade's opacity, 0..0.9 (0 where the blade is parked below the frame).
+        The blade's opacity, 0..0.9 (0 where the blade is parked below the frame); made once
+        per size and position (every wipe repeats them) and read-only.
     """
-    w, h = size
     phase = index % WIPER_PERIOD
-    if phase >= 2 * _WIPER_SWEEP:
-        return np.zeros((h, w), np.float32)
-    s = phase / _WIPER_SWEEP if phase < _WIPER_SWEEP else 2.0 - phase / _WIPER_SWEEP
+    # the way back passes the way up's positions: one blade per step of the sweep
+    return _blade(tuple(size), min(phase, 2 * _WIPER_SWEEP - phase)
+                  if phase < 2 * _WIPER_SWEEP else _WIPER_SWEEP + 1)
+
+
+@lru_cache(maxsize=64)
+def _blade(size: tuple[int, int], step: int) -> np.ndarray:
+    """The blade's opacity ``step`` frames into its sweep (beyond the sweep: parked)."""
+    w, h = size
+    if step > _WIPER_SWEEP:
+        blade = np.zeros((h, w), np.float32)
+        blade.setflags(write=False)
+        return blade
+    s = step / _WIPER_SWEEP
     angle = _WIPER_ARC * 0.5 * (1.0 - math.cos(math.pi * s))  # 0: along the bottom, to the right
     pivot = np.array([0.2 * w, 1.15 * h])
     tip = pivot + 1.3 * math.hypot(w, h) * np.array([math.cos(angle), -math.sin(angle)])
@@ -364,5 +375,6 @@ def wiper(size: tuple[int, int], index: int) -> np.ndarray:
     thickness = max(1, round(0.06 * w))
     cv2.line(blade, tuple(int(round(v)) for v in pivot), tuple(int(round(v)) for v in tip),
              0.9, thickness, cv2.LINE_AA)
-    sigma = max(0.5, w / 40 / 2)
-    return cv2.GaussianBlur(blade, (0, 0), sigma)
+    blade = cv2.GaussianBlur(blade, (0, 0), max(0.5, w / 40 / 2))
+    blade.setflags(write=False)
+    return blade
