@@ -32,7 +32,7 @@ from .looming import RIG_WEIGHT, moved_by_expansion, region_expansion, rig_pixel
 from .motion_layers import motion_layers
 from .params import ASNNParams, preset
 from .response import Maps, Response, TrackReport
-from .stabilisation import background_shift, shift_image
+from .stabilisation import background_shift, search_radius, shift_image
 from .targets import Target, extract_objects, extract_targets
 from .tracking import Observation, TargetTracker, approach_test, persistence_frames
 
@@ -356,7 +356,8 @@ class ASNN:
         self.periods.append(elapsed)
         background = None
         if p.stabilise:
-            shift = background_shift(self.previous, lum, p.stabilise_radius, p.stabilise_share)
+            radius = search_radius(lum.shape[1], p.stabilise_radius, p.stabilise_reach)
+            shift = background_shift(self.previous, lum, radius, p.stabilise_share)
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
                 background = shift_image(self.previous, *shift, border=lum)
         previous, self.previous, self.previous_blocks = self.previous, lum, blocks

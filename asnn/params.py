@@ -86,7 +86,12 @@ class ASNNParams(BaseModel):
         "change; the looming fit leaves out what it explains (asnn.stabilisation)")
     stabilise_radius: int = Field(
         3, ge=1, le=16, description="largest translation searched, pixels per frame of the "
-        "model's grid")
+        "model's grid (at least: see stabilise_reach)")
+    stabilise_reach: float | None = Field(
+        None, gt=0, le=0.1, description="the search radius grows with the grid: at least this "
+        "fraction of its width, rounded up, so that a camera with more pixels searches as far "
+        "across the scene per frame (1/64: 3 px at 192 px, 5 at 320, 8 at 480); None: "
+        "stabilise_radius at any size")
     stabilise_share: float = Field(
         0.5, gt=0, le=1, description="smallest fraction of the frame's mean absolute difference "
         "the translation must explain")
@@ -374,7 +379,7 @@ PRESETS["light"] = PRESETS["reference32"].model_copy(update={"target_polarity": 
 # has the parameter that switches it off
 PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     skip_repeats=True,
-    stabilise=True,
+    stabilise=True, stabilise_reach=1 / 64,
     contrast_gain=0.005,
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale

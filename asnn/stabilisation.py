@@ -30,11 +30,13 @@ References
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ._jit import kernel
 
-__all__ = ["background_shift", "shift_image"]
+__all__ = ["background_shift", "search_radius", "shift_image"]
 
 _SAMPLES = 4096  # about this many pixels are compared per candidate translation
 _LEVELS = 4096  # the frames are compared in steps of 1/4096 of their [0, 1] scale
@@ -76,6 +78,32 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
     if still == 0 or costs.flat[best] > (1.0 - share) * still:  # nothing changed, or too little
         return 0, 0
     return dx - radius, dy - radius
+
+
+def search_radius(width: int, radius: int, reach: float | None = None) -> int:
+    """The translation :func:`background_shift` searches, pixels per frame, for frames
+    ``width`` pixels wide: ``radius``, or more where ``reach`` asks for a fraction of the width.
+
+    The same scene seen with twice the pixels moves twice as many pixels per frame, so a radius
+    fixed in pixels covers half the motion: a shake of 3 px at 192 px wide is a shake of 5 at
+    320. With ``reach`` the search covers the same share of the view at any size.
+
+    Parameters
+    ----------
+    width : int
+        Width of the frames, pixels.
+    radius : int
+        The smallest radius, pixels per frame.
+    reach : float, optional
+        The radius as a fraction of ``width``, rounded up; None: ``radius`` at any width.
+
+    Returns
+    -------
+    int
+    """
+    if reach is None:
+        return radius
+    return max(radius, math.ceil(reach * width - 1e-9))
 
 
 @kernel()

@@ -134,6 +134,18 @@ def test_approaches_over_a_fast_sliding_background_need_stabilisation(case):
     assert not _hit(*_run(case, **NO_STABILISATION))
 
 
+@pytest.mark.parametrize("case", ["loom-dark-c0.5-over-checker-diag2px",
+                                  "loom-dark-c0.6-shake-3px"])
+def test_a_camera_with_more_pixels_searches_as_far_for_the_background_s_motion(case):
+    # at twice the size (320x240) the checkerboard slides 4 px a frame and the shake jolts up
+    # to 6: beyond the 3 px the search covers at 160 px wide, within the 5 it covers at 320
+    assert _hit(*_run(case, perturbation="double-size"))
+    assert not _hit(*_run(case, perturbation="double-size", stabilise_reach=None))
+    # at the suite's own size the search is the same 3 px, warning for warning
+    assert ([r.collision for r in _run(case)[1]]
+            == [r.collision for r in _run(case, stabilise_reach=None)[1]])
+
+
 @pytest.mark.parametrize("case", ["halt-dark-c0.6", "approach-recede-light-c0.6"])
 def test_the_warning_ends_when_the_approach_ends(case):
     scene, responses = _run(case)

@@ -6,7 +6,7 @@ import pytest
 
 from asnn import ASNN, preset
 from asnn.looming import region_expansion
-from asnn.stabilisation import background_shift, shift_image
+from asnn.stabilisation import background_shift, search_radius, shift_image
 from asnn.stimuli.suite import make_case
 from imageutil import texture, warp
 
@@ -36,6 +36,17 @@ def test_an_object_moving_over_a_still_textured_scene_is_not_the_background():
     assert background_shift(before, after, 3, 0.5) == (0, 0)
     # ... while the same scene panned is
     assert background_shift(before, shift_image(before, 2, 0, border=before), 3, 0.5) == (2, 0)
+
+
+def test_the_search_radius_grows_with_the_frame_s_width():
+    assert [search_radius(w, 3, 1 / 64) for w in (80, 160, 192, 216, 320, 432, 480)] == [
+        3, 3, 3, 4, 5, 7, 8]
+    assert search_radius(480, 3, None) == 3
+    # the radius found that way takes out a translation the fixed one cannot
+    before = texture((120, 320))
+    after = shift_image(before, 5, 0, border=0.5)
+    assert background_shift(before, after, search_radius(320, 3, 1 / 64), 0.5) == (5, 0)
+    assert background_shift(before, after, 3, 0.5) == (0, 0)
 
 
 def test_the_share_a_translation_must_explain():

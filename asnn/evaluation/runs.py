@@ -32,6 +32,7 @@ ABLATIONS = {
     "robust (all additions)": "asnn:robust",
     "no repeated-frame hold": "asnn:robust/skip_repeats=false",
     "no background stabilisation": "asnn:robust/stabilise=false",
+    "the stabilisation's search fixed at 3 px at any width": "asnn:robust/stabilise_reach=none",
     "no contrast gain control": "asnn:robust/contrast_gain=none",
     "OFF-led map only (no ON-led mirror)": "asnn:robust/w1_on=0/w2_off=0",
     "no approach gate (u sums every object)": "asnn:robust/approach_gate=false",
