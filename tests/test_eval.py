@@ -90,9 +90,20 @@ def test_eval_end_to_end_writes_results_report_and_plots(clips, evaluated):
     assert lgmd1["loom.mp4"]["first_warning"] is not None
     assert lgmd1["bar.mp4"]["outcome"] == "false"
 
+    # every other detector is paired with the first, clip by clip
+    first = {c["clip"]: c for c in results["detectors"][DETECTORS[0]]["clips"]}
+    assert list(results["paired"]) == list(DETECTORS[1:])
+    for model in DETECTORS[1:]:
+        other = {c["clip"]: c for c in results["detectors"][model]["clips"]}
+        fas = results["paired"][model]["false_alarms"]
+        assert fas["only_second"] == sum(other[k]["false_alarm"] and not first[k]["false_alarm"]
+                                         for k in first)
+        assert 0.0 < fas["p"] <= 1.0
+
     report = (out / "report.md").read_text()
     for model in DETECTORS:
         assert f"| {model} |" in report
+    assert f"## Paired with `{DETECTORS[0]}`" in report
     assert "| loom.mp4 |" in report and "| bar.mp4 |" in report
     # a row says where the first warning's target was, for the models that give targets
     loom_row = next(line for line in report.splitlines() if line.startswith("| loom.mp4 |"))

@@ -222,3 +222,42 @@ def test_summary_of_the_warned_targets_is_over_hits():
     # warning c is left out
     assert s["median_ttc_error"] == pytest.approx((0.05 + 1.0) / 2)
     assert s["median_ttc_ratio"] == pytest.approx((1.05 + 2.0) / 2)
+
+
+def test_the_wilson_interval_of_a_rate():
+    low, high = scoring.wilson_interval(5, 9)
+    assert low == pytest.approx(0.267, abs=1e-3) and high == pytest.approx(0.812, abs=1e-3)
+    # at none or all of the trials the interval still has a width, within [0, 1]
+    assert scoring.wilson_interval(0, 12) == [0.0, pytest.approx(0.243, abs=1e-3)]
+    assert scoring.wilson_interval(12, 12) == [pytest.approx(0.757, abs=1e-3), 1.0]
+    assert scoring.wilson_interval(0, 0) is None
+    # and it narrows as the sample grows
+    assert scoring.wilson_interval(50, 90)[1] - scoring.wilson_interval(50, 90)[0] < high - low
+
+
+def test_mcnemar_s_exact_test():
+    assert scoring.mcnemar_exact(0, 6) == pytest.approx(2 / 64)
+    assert scoring.mcnemar_exact(6, 0) == scoring.mcnemar_exact(0, 6)
+    assert scoring.mcnemar_exact(1, 10) == pytest.approx(2 * 12 / 2048)
+    assert scoring.mcnemar_exact(3, 2) == 1.0 and scoring.mcnemar_exact(0, 0) == 1.0
+
+
+def test_two_detectors_are_compared_clip_by_clip():
+    def clip(name, collision, outcome):
+        return scoring.ClipScore(clip=name, collision=collision, outcome=outcome,
+                                 false_alarm=outcome in ("early", "false"),
+                                 lead_frames=10.0 if outcome == "hit" else None)
+
+    first = [clip("a", True, "hit"), clip("b", True, "hit"), clip("c", True, "miss"),
+             clip("d", False, "quiet"), clip("e", False, "quiet"), clip("f", True, "missing")]
+    second = [clip("a", True, "hit"), clip("b", True, "early"), clip("c", True, "hit"),
+              clip("d", False, "false"), clip("e", False, "false"), clip("f", True, "hit")]
+    paired = scoring.paired_comparison(first, second)
+    # a clip one of them did not score does not count
+    assert paired["hits"] == {"only_first": 1, "only_second": 1, "p": 1.0}
+    assert paired["false_alarms"] == {"only_first": 0, "only_second": 3, "p": 0.25}
+    with pytest.raises(ValueError):
+        scoring.paired_comparison(first, second[::-1])
+    summary = scoring.summarize(first)
+    assert summary["hit_rate_ci"] == scoring.wilson_interval(2, 3)
+    assert summary["false_alarm_rate_ci"] == scoring.wilson_interval(0, 5)

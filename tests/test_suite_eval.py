@@ -113,7 +113,7 @@ def test_synthetic_eval_end_to_end(evaluated):
 
     report = (out / "report.md").read_text()
     for heading in ("## Near misses against their collision-course twins", "## By category",
-                    "## Every case"):
+                    "## Every case", "## Paired with `asnn`"):
         assert heading in report
     assert "| `asnn` | " in report and "| nearmiss-disk-dark-right |" in report
     for name in CASES:

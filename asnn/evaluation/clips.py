@@ -17,8 +17,8 @@ from . import figures, scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
-                   fmt, outcome_cell, parse_detectors, rate, run_detector, target_quality_cells,
-                   write_json, write_jsonl)
+                   fmt, outcome_cell, paired_comparisons, paired_section, parse_detectors,
+                   rate_interval, run_detector, target_quality_cells, write_json, write_jsonl)
 
 __all__ = ["evaluate_clips"]
 
@@ -63,7 +63,8 @@ def _clips_report(results: Mapping) -> str:
         lines.append(
             f"| {m} | {s['hit']}/{s['collision_clips']} | {s['early']} | {s['late']} | {s['miss']}"
             f" | {s['false']}/{s['noncollision_clips']} | {s['quiet']}/{s['noncollision_clips']}"
-            f" | {rate(s['hit_rate'])} | {rate(s['false_alarm_rate'])}"
+            f" | {rate_interval(s['hit_rate'], s.get('hit_rate_ci'))}"
+            f" | {rate_interval(s['false_alarm_rate'], s.get('false_alarm_rate_ci'))}"
             f" | {fmt(s['mean_lead_s'], 2, ' s')} / {fmt(s['median_lead_s'], 2, ' s')}"
             f" | {fmt(s['median_localisation_px'], 0, ' px')}"
             f" | {' | '.join(target_quality_cells(s))}"
@@ -83,6 +84,7 @@ def _clips_report(results: Mapping) -> str:
             cells.append(outcome_cell(results["detectors"][m]["clips"][index]))
         lines.append(f"| {clip['clip']} | {fmt(lab.get('onset_frame'))} | "
                      f"{fmt(lab.get('contact_frame'))} | " + " | ".join(cells) + " |")
+    lines += paired_section(names[0], results.get("paired", {}))
     if results.get("errors"):
         lines += ["", "Errors:", ""] + [f"- {e}" for e in results["errors"]]
     return "\n".join(lines) + "\n"
@@ -176,11 +178,14 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         "detectors": {},
         "errors": errors,
     }
-    for spec in specs:
-        scores = scoring.score_directory(out_dir / "results" / spec.slug, labels, warmup=warmup,
-                                         early_tolerance_s=early_tolerance_s)
-        results["detectors"][spec.name] = {"summary": scoring.summarize(scores),
-                                           "clips": [s.to_dict() for s in scores]}
+    scores = {spec.name: scoring.score_directory(out_dir / "results" / spec.slug, labels,
+                                                 warmup=warmup,
+                                                 early_tolerance_s=early_tolerance_s)
+              for spec in specs}
+    for name, clip_scores in scores.items():
+        results["detectors"][name] = {"summary": scoring.summarize(clip_scores),
+                                      "clips": [s.to_dict() for s in clip_scores]}
+    results["paired"] = paired_comparisons(scores)
     write_json(out_dir / "results.json", results)
     (out_dir / "report.md").write_text(_clips_report(results), encoding="utf-8")
     if plots:

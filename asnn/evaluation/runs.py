@@ -19,6 +19,7 @@ import numpy as np
 
 from pydantic import ValidationError
 
+from . import scoring
 from ..detectors import MODELS, Detector, make_detector
 from ..params import preset
 
@@ -225,6 +226,44 @@ def fmt(value, digits: int = 2, suffix: str = "") -> str:
 def rate(value) -> str:
     """A fraction as a percentage for a report table (``–`` for None)."""
     return "–" if value is None else f"{100 * value:.0f}%"
+
+
+def rate_interval(value, interval) -> str:
+    """A rate with its 95 % interval for a report table: ``56% (27-81%)``."""
+    if value is None:
+        return "–"
+    if not interval:
+        return rate(value)
+    return f"{rate(value)} ({100 * interval[0]:.0f}-{100 * interval[1]:.0f}%)"
+
+
+def paired_comparisons(scores: Mapping[str, Sequence]) -> dict:
+    """Every detector after the first compared with the first, clip by clip
+    (:func:`asnn.evaluation.scoring.paired_comparison`), by name; empty with one detector."""
+    names = list(scores)
+    return {name: scoring.paired_comparison(scores[names[0]], scores[name])
+            for name in names[1:]}
+
+
+def paired_section(first: str, paired: Mapping[str, Mapping], unit: str = "clips") -> list[str]:
+    """The report's lines on :func:`paired_comparisons`: per detector, the hits and false
+    alarms only the first detector has and only it has, with McNemar's exact p-value."""
+    if not paired:
+        return []
+    lines = ["", f"## Paired with `{first}`", "",
+             f"The same {unit}, one by one: where only one of the two hits (over the collision "
+             f"{unit}) or raises a false alarm (over all), and McNemar's exact two-sided p-value "
+             "(how likely a split at least this lopsided is if neither were better; the "
+             f"{unit} where both agree do not count). The rates' 95 % intervals (Wilson) are "
+             "in brackets above.", "",
+             f"| detector | hits only `{first}` / only it | p | false alarms only `{first}` / "
+             "only it | p |", "| --- | --- | --- | --- | --- |"]
+    for name, c in paired.items():
+        hits, fas = c["hits"], c["false_alarms"]
+        lines.append(f"| `{name}` | {hits['only_first']} / {hits['only_second']} | "
+                     f"{hits['p']:.3g} | {fas['only_first']} / {fas['only_second']} | "
+                     f"{fas['p']:.3g} |")
+    return lines
 
 
 TARGET_QUALITY_HEADER = ["median ttc error (ratio)", "one id (hits)"]

@@ -36,6 +36,18 @@ frames; the true time to contact is the label's per-frame ``ttc`` where it has o
 time left to ``contact_frame``), and how many distinct ``id`` those targets carry (1: one track
 followed the object through the warning). Detectors whose targets lack ``ttc`` or ``id`` get
 None.
+
+A rate over a dozen clips is a small sample: each summary gives the hit and false-alarm rates'
+95 % Wilson score intervals [1]_, and :func:`paired_comparison` compares two detectors clip by
+clip on the same clips with McNemar's exact test [2]_: of the clips where exactly one of them
+hits (or raises a false alarm), how unlikely so lopsided a split is if neither were better.
+
+References
+----------
+.. [1] E. B. Wilson, "Probable inference, the law of succession, and statistical inference",
+   Journal of the American Statistical Association 22, 1927, pp. 209-212.
+.. [2] Q. McNemar, "Note on the sampling error of the difference between correlated
+   proportions or percentages", Psychometrika 12, 1947, pp. 153-157.
 """
 
 from __future__ import annotations
@@ -56,6 +68,9 @@ __all__ = [
     "score_clip",
     "missing_clip",
     "summarize",
+    "wilson_interval",
+    "mcnemar_exact",
+    "paired_comparison",
     "load_records",
     "load_labels",
     "results_path",
@@ -318,7 +333,9 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         followed one target id) of ``id_hits`` (hits whose targets carry ids);
         ``noncollision_minutes`` (of scored non-collision video, where the labels give the fps) and
         ``warning_frames_per_minute`` of it (SPEC.md section 5: a detector that fires once per
-        clip and one that fires all the time are not equally useful).
+        clip and one that fires all the time are not equally useful); ``hit_rate_ci`` and
+        ``false_alarm_rate_ci``, the rates' 95 % :func:`wilson_interval` as ``[low, high]``
+        (None without a denominator).
     """
     scores = list(scores)
     scored = [s for s in scores if s.outcome != "missing"]
@@ -338,7 +355,9 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         **{o: counts[o] for o in OUTCOMES if o != "missing"},
         "false_alarms": false_alarms,
         "hit_rate": counts["hit"] / n_col if n_col else None,
+        "hit_rate_ci": wilson_interval(counts["hit"], n_col),
         "false_alarm_rate": false_alarms / len(scored) if scored else None,
+        "false_alarm_rate_ci": wilson_interval(false_alarms, len(scored)),
         "specificity": counts["quiet"] / n_non if n_non else None,
         "warning_frames": sum(s.warning_frames for s in scored),
         "window_warning_frames": sum(s.window_warning_frames for s in scored),
@@ -358,6 +377,91 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         "one_id_hits": sum(s.target_ids == 1 for s in hits),
         "id_hits": sum(s.target_ids is not None for s in hits),
     }
+
+
+def wilson_interval(successes: int, trials: int, z: float = 1.96) -> list[float] | None:
+    """The Wilson score interval of a proportion ``successes / trials`` [1]_.
+
+    Unlike the normal approximation ``p +- z sqrt(p (1 - p) / n)``, it stays within [0, 1] and
+    does not collapse to a point at 0 or ``n`` successes, which a dozen clips often give.
+
+    Parameters
+    ----------
+    successes, trials : int
+    z : float
+        The normal quantile: 1.96 for a 95 % interval.
+
+    Returns
+    -------
+    [low, high] or None
+        None when ``trials`` is 0.
+
+    References
+    ----------
+    .. [1] E. B. Wilson, "Probable inference, the law of succession, and statistical
+       inference", Journal of the American Statistical Association 22, 1927, pp. 209-212.
+    """
+    if trials <= 0:
+        return None
+    p = successes / trials
+    z2 = z * z
+    scale = 1.0 + z2 / trials
+    centre = (p + z2 / (2 * trials)) / scale
+    half = z * math.sqrt(p * (1.0 - p) / trials + z2 / (4 * trials * trials)) / scale
+    return [max(0.0, centre - half), min(1.0, centre + half)]
+
+
+def mcnemar_exact(only_first: int, only_second: int) -> float:
+    """Two-sided p-value of McNemar's exact test [1]_ on paired outcomes.
+
+    ``only_first`` pairs have the outcome with the first detector alone, ``only_second`` with
+    the second alone (the pairs where both agree carry no information on which is better).
+    Without a difference between them each discordant pair goes either way with probability
+    1/2, so the count is binomial: the p-value is twice the smaller tail, at most 1.
+
+    References
+    ----------
+    .. [1] Q. McNemar, "Note on the sampling error of the difference between correlated
+       proportions or percentages", Psychometrika 12, 1947, pp. 153-157.
+    """
+    n = only_first + only_second
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, k) for k in range(min(only_first, only_second) + 1))
+    return min(1.0, 2.0 * tail / 2 ** n)
+
+
+def paired_comparison(first: Sequence[ClipScore], second: Sequence[ClipScore]) -> dict:
+    """Two detectors' scores on the same clips, compared clip by clip.
+
+    Hits are compared over the collision clips both scored, false alarms (an early warning, or
+    any warning on a non-collision clip) over every clip both scored.
+
+    Returns
+    -------
+    dict
+        ``hits`` and ``false_alarms``, each ``{"only_first", "only_second", "p"}``: the clips
+        where only the first or only the second has the outcome, and :func:`mcnemar_exact`'s
+        p-value.
+
+    Raises
+    ------
+    ValueError
+        If the two lists are not scores of the same clips in the same order.
+    """
+    if [s.clip for s in first] != [s.clip for s in second]:
+        raise ValueError("paired_comparison needs the same clips in the same order")
+    both = [(a, b) for a, b in zip(first, second)
+            if a.outcome != "missing" and b.outcome != "missing"]
+
+    def split(pairs, has) -> dict:
+        only_first = sum(has(a) and not has(b) for a, b in pairs)
+        only_second = sum(has(b) and not has(a) for a, b in pairs)
+        return {"only_first": only_first, "only_second": only_second,
+                "p": mcnemar_exact(only_first, only_second)}
+
+    return {"hits": split([(a, b) for a, b in both if a.collision], lambda s: s.outcome == "hit"),
+            "false_alarms": split(both, lambda s: s.false_alarm)}
 
 
 def load_records(path: str | Path) -> list[dict]:

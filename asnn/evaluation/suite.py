@@ -28,8 +28,9 @@ from . import scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
-                   at_rate, fmt, outcome_cell, parse_detectors, rate, run_detector,
-                   target_quality_cells, write_json, write_jsonl)
+                   at_rate, fmt, outcome_cell, paired_comparisons, paired_section,
+                   parse_detectors, rate_interval, run_detector, target_quality_cells,
+                   write_json, write_jsonl)
 
 __all__ = ["EARLY_TOLERANCE_S", "evaluate_suite", "near_miss_pairs", "category_summaries",
            "suite_report"]
@@ -235,6 +236,7 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
                              "clips": clips[name]}
                       for name in scores},
         "pairs": near_miss_pairs(case_info, clips),
+        "paired": paired_comparisons(scores),
     }
     write_json(out_dir / "labels.json", labels)
     write_json(out_dir / "results.json", results)
@@ -298,7 +300,8 @@ def suite_report(results: Mapping) -> str:
         s = results["detectors"][n]["summary"]
         rows.append([f"`{n}`", f"{s['hit']}/{s['collision_clips']}", str(s["early"]),
                      str(s["late"]), str(s["miss"]), f"{s['false']}/{s['noncollision_clips']}",
-                     str(s["false_alarms"]), rate(s["hit_rate"]), rate(s["false_alarm_rate"]),
+                     str(s["false_alarms"]), rate_interval(s["hit_rate"], s.get("hit_rate_ci")),
+                     rate_interval(s["false_alarm_rate"], s.get("false_alarm_rate_ci")),
                      fmt(s["median_lead_s"], 2, " s"), fmt(s["median_localisation_px"], 1, " px"),
                      *target_quality_cells(s),
                      f"{s['after_warning_frames']} ({s['after_warning_clips']} cases)"])
@@ -324,6 +327,8 @@ def suite_report(results: Mapping) -> str:
                              f"{fmt(d['twin_peak'], 2)})")
             rows.append([f"{p['nearmiss']}", *cells])
         lines += _table(["near miss", *names], rows)
+
+    lines += paired_section(names[0], results.get("paired", {}), "cases")
 
     lines += ["", "## By category", "",
               "Hits over the collision cases and false alarms over all cases carrying the tag "
