@@ -90,8 +90,8 @@ class ASNNParams(BaseModel):
     stabilise_reach: float | None = Field(
         None, gt=0, le=0.1, description="the search radius grows with the grid: at least this "
         "fraction of its width, rounded up, so that a camera with more pixels searches as far "
-        "across the scene per frame (1/64: 3 px at 192 px, 5 at 320, 8 at 480); None: "
-        "stabilise_radius at any size")
+        "across the scene per frame (1/64: 3 px at 192 px, 5 at 320, 8 at 480; at most 16); "
+        "None: stabilise_radius at any size")
     stabilise_share: float = Field(
         0.5, gt=0, le=1, description="smallest fraction of the frame's mean absolute difference "
         "the translation must explain")

@@ -40,6 +40,7 @@ __all__ = ["background_shift", "search_radius", "shift_image"]
 
 _SAMPLES = 4096  # about this many pixels are compared per candidate translation
 _LEVELS = 4096  # the frames are compared in steps of 1/4096 of their [0, 1] scale
+_MAX_RADIUS = 16  # pixels per frame: the search costs (2 r + 1)^2 comparisons per sample
 
 
 def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
@@ -95,7 +96,8 @@ def search_radius(width: int, radius: int, reach: float | None = None) -> int:
     radius : int
         The smallest radius, pixels per frame.
     reach : float, optional
-        The radius as a fraction of ``width``, rounded up; None: ``radius`` at any width.
+        The radius as a fraction of ``width``, rounded up, at most 16 px (the search's cost
+        grows with the radius squared); None: ``radius`` at any width.
 
     Returns
     -------
@@ -103,7 +105,7 @@ def search_radius(width: int, radius: int, reach: float | None = None) -> int:
     """
     if reach is None:
         return radius
-    return max(radius, math.ceil(reach * width - 1e-9))
+    return max(radius, min(math.ceil(reach * width - 1e-9), _MAX_RADIUS))
 
 
 @kernel()

@@ -98,7 +98,6 @@ def test_eval_end_to_end_writes_results_report_and_plots(clips, evaluated):
         fas = results["paired"][model]["false_alarms"]
         assert fas["only_second"] == sum(other[k]["false_alarm"] and not first[k]["false_alarm"]
                                          for k in first)
-        assert 0.0 < fas["p"] <= 1.0
 
     report = (out / "report.md").read_text()
     for model in DETECTORS:

@@ -42,6 +42,8 @@ def test_the_search_radius_grows_with_the_frame_s_width():
     assert [search_radius(w, 3, 1 / 64) for w in (80, 160, 192, 216, 320, 432, 480)] == [
         3, 3, 3, 4, 5, 7, 8]
     assert search_radius(480, 3, None) == 3
+    # without the input scale a wide frame would search far: the cost is bounded
+    assert search_radius(3840, 3, 1 / 64) == 16
     # the radius found that way takes out a translation the fixed one cannot
     before = texture((120, 320))
     after = shift_image(before, 5, 0, border=0.5)
