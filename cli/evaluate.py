@@ -2,7 +2,7 @@
 
 ``asnn eval CLIPS_DIR [--labels FILE] [--detectors LIST] [--preset P] [--out DIR]`` scores every
 detector on labelled clips (SPEC.md section 5), with ``--perturb NAME`` on their frames
-perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME]``
+perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME] [--size WxH]``
 generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper``
 regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
 default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``, ``lgmd2``. Exit status 2 for unusable
@@ -83,7 +83,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jobs", type=count, default=1, metavar="N",
                    help="clips or cases evaluated in parallel processes (default: %(default)s)")
     p.add_argument("--size", type=frame_size, metavar="WxH",
-                   help="with --paper: frame size of the scenes (default: 128x128, the paper's)")
+                   help="with --paper: frame size of the scenes (default: 128x128, the paper's); "
+                        "with --synthetic: render the driving scenes at this size, the same "
+                        "drives seen with other pixels (64x48 to 1920x1080; default 192x128; "
+                        "the planar scenes keep theirs)")
     p.add_argument("--perturb", choices=list(PERTURBATIONS), metavar="NAME",
                    help="with CLIPS_DIR or --synthetic: score the detectors on the frames "
                         "perturbed, "
@@ -110,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         ("--cases", args.cases, args.synthetic or args.held_out),
         ("--case-plots", args.case_plots, args.synthetic),
         ("--variant", args.variant, args.synthetic),
-        ("--size", args.size, args.paper),
+        ("--size", args.size, args.paper or args.synthetic),
         ("--ablation", args.ablation, not (args.paper or args.held_out)),
         ("--labels", args.labels, not (args.synthetic or args.paper)),
         ("--early-tolerance", args.early_tolerance is not None,
@@ -137,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
                                  cases=args.cases, jobs=args.jobs, warmup=args.warmup,
                                  plots=not args.no_plots, case_plots=args.case_plots,
                                  variant=args.variant, perturbation=args.perturb,
-                                 progress=progress)
+                                 driving_size=args.size, progress=progress)
         elif not args.clips_dir:
             print("asnn eval: CLIPS_DIR is required (or --synthetic, or --paper)", file=sys.stderr)
             return 2

@@ -282,7 +282,7 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
     assert main(["eval", str(tmp_path), "--cases", "loom-*", "--out", str(tmp_path / "o")]) == 2
     with pytest.raises(SystemExit):
         main(["eval", str(tmp_path), "--perturb", "blur"])  # not one of the perturbations
-    for misplaced in (["--synthetic", "--size", "64x64"], ["--paper", "--cases", "loom-*"],
+    for misplaced in ([str(tmp_path), "--size", "64x64"], ["--paper", "--cases", "loom-*"],
                       ["--synthetic", "--early-tolerance", "0.5"], ["--paper", "--labels", "x"],
                       ["--paper", "--perturb", "noise"], ["--paper", "--variant", "1"],
                       ["--synthetic", "--tie-break", "grid"]):

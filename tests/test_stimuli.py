@@ -494,6 +494,25 @@ def test_a_variant_is_the_same_case_with_a_fresh_scene_seed(suite):
             make_case("drive-day-follow", bad)
 
 
+def test_a_drive_rendered_with_more_pixels_is_the_same_drive(suite):
+    base, large = suite["drive-day-brake"], make_case("drive-day-brake", 0, (432, 288))
+    assert large.frames.shape[1:3] == (288, 432)
+    small, big = base.label("x"), large.label("x")
+    assert (big["onset_frame"], big["contact_frame"], big["ttc"]) == (
+        small["onset_frame"], small["contact_frame"], small["ttc"])
+    # the car is where it was, in the larger frame's pixels (pixel centres: x 2.25 about -0.5)
+    frame = small["onset_frame"] + 10
+    for a, b in zip(small["track"][frame], big["track"][frame]):
+        assert b + 0.5 == pytest.approx(2.25 * (a + 0.5), abs=0.5)
+    assert big["target_size"][frame] == pytest.approx(2.25 * small["target_size"][frame], rel=0.05)
+    # a planar scene, given in pixels, keeps its size
+    planar = make_case("loom-dark-c1.0-d12-center", 0, (432, 288))
+    assert np.array_equal(planar.frames, suite["loom-dark-c1.0-d12-center"].frames)
+    for bad in ((32, 32), (4000, 2000), (432,), "432x288"):
+        with pytest.raises(ValueError):
+            make_case("drive-day-brake", 0, bad)
+
+
 def test_brightness_and_noise_cases_of_the_suite_do_what_their_names_say(suite):
     def means(name):
         return suite[name].frames.reshape(len(suite[name].frames), -1).mean(axis=1)

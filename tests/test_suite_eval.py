@@ -150,6 +150,24 @@ def test_synthetic_eval_of_a_variant(tmp_path, capsys):
         main(["eval", "--synthetic", "--variant", "-1", "--out", str(out)])
 
 
+def test_synthetic_eval_of_drives_rendered_at_another_size(tmp_path):
+    out = tmp_path / "large"
+    assert main(["eval", "--synthetic", "--size", "288x192", "--cases",
+                 "drive-day-follow,loom-dark-c1.0-d12-center", "--detectors", "asnn",
+                 "--no-plots", "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["settings"]["driving_size"] == [288, 192]
+    assert "Driving scenes rendered at 288x192" in (out / "report.md").read_text()
+    # the drive's results are the detector's on the larger frames; the planar case's as ever
+    spec = parse_detector("asnn")
+    for name, size in (("drive-day-follow", (288, 192)), ("loom-dark-c1.0-d12-center", None)):
+        scene = make_case(name, 0, size)
+        records = scoring.load_records(out / "results" / "asnn" / f"{name}.jsonl")
+        assert [r["u"] for r in records] == [
+            r["u"] for r in run_detector(at_rate(scene.frames, scene.fps), spec)]
+    assert main(["eval", "--synthetic", "--size", "2000x100", "--out", str(out)]) == 2
+
+
 def test_synthetic_eval_of_perturbed_frames(tmp_path):
     # an approach off the centre, mirrored: the labels are mirrored with the frames, so the
     # warning's target is still on the labelled object

@@ -22,8 +22,8 @@ from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from ..stimuli.suite import (GROUPS, SUITE_CASES, SUITE_VERSION, check_variant, make_case,
-                             suite_cases)
+from ..stimuli.suite import (DRIVING_SIZE, GROUPS, SUITE_CASES, SUITE_VERSION,
+                             check_driving_size, check_variant, make_case, suite_cases)
 from . import scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
@@ -39,11 +39,12 @@ EARLY_TOLERANCE_S = 0.0  # generated clips: the onset is exact
 
 
 def _run_case(name: str, specs: Sequence[DetectorSpec], out_dir: str, warmup: int,
-              plots: bool, variant: int = 0, perturbation: str | None = None) -> dict:
+              plots: bool, variant: int = 0, perturbation: str | None = None,
+              driving_size: tuple[int, int] | None = None) -> dict:
     # plots import matplotlib, and take longer than the runs: only where asked for
     """Worker: generate one case (its frames perturbed where ``perturbation`` names one), run
     and score every detector on it, write its results."""
-    scene = make_case(name, variant)
+    scene = make_case(name, variant, driving_size)
     label = perturb_label(scene.label(f"{name}.mp4"), perturbation)
     entry = {"label": label, "scores": {}}
     series = {}
@@ -137,7 +138,7 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
                    preset_name: str | None = None, cases: str | None = None, jobs: int = 1,
                    warmup: int = scoring.WARMUP_FRAMES, plots: bool = True,
                    case_plots: bool = False, variant: int = 0, perturbation: str | None = None,
-                   progress=None) -> dict:
+                   driving_size: tuple[int, int] | None = None, progress=None) -> dict:
     """Generate, run, score and report the labelled suite.
 
     Parameters
@@ -163,6 +164,10 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     perturbation : str, optional
         Run on the cases' frames perturbed by one of
         :data:`~asnn.evaluation.perturb.PERTURBATIONS` (the labels follow a mirrored frame).
+    driving_size : (width, height), optional
+        Render the driving scenes at this size instead of 192x128 (the same drives seen with
+        more or fewer pixels; :func:`asnn.stimuli.suite.make_case`); the planar scenes keep
+        theirs.
     progress : ProgressPrinter-like, optional
 
     Returns
@@ -173,12 +178,14 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     Raises
     ------
     ValueError
-        For an unknown detector, preset, variant or perturbation, or a pattern that matches no
-        case.
+        For an unknown detector, preset, variant, perturbation or driving size, or a pattern
+        that matches no case.
     """
     out_dir = Path(out_dir)
     names = suite_cases(cases)
     check_variant(variant)
+    if driving_size is not None:
+        driving_size = check_driving_size(driving_size)
     check_perturbation(perturbation)
     specs = parse_detectors(detectors, preset_name)
     if jobs < 1:
@@ -200,14 +207,14 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             futures = {pool.submit(_run_case, name, specs, str(out_dir), warmup, case_plots,
-                                   variant, perturbation): name
+                                   variant, perturbation, driving_size): name
                        for name in names}
             for future in as_completed(futures):
                 finished(futures[future], future.result())
     else:
         for name in names:
             finished(name, _run_case(name, specs, str(out_dir), warmup, case_plots, variant,
-                                     perturbation))
+                                     perturbation, driving_size))
     progress.finish()
     elapsed = time.perf_counter() - started
 
@@ -224,7 +231,8 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
              for spec in specs}
     results = {
         "settings": {"suite_version": SUITE_VERSION, "variant": variant,
-                     "perturbation": perturbation, "cases": cases or "all",
+                     "perturbation": perturbation,
+                     "driving_size": list(driving_size) if driving_size else None, "cases": cases or "all",
                      "detectors": [spec.name for spec in specs], "warmup": warmup,
                      "early_tolerance_s": EARLY_TOLERANCE_S,
                      "contact_slack_frames": scoring.CONTACT_SLACK_FRAMES, "jobs": jobs},
@@ -282,6 +290,10 @@ def suite_report(results: Mapping) -> str:
         *([f"Frames perturbed: {settings['perturbation']} "
            f"({PERTURBATIONS[settings['perturbation']]}).", ""]
           if settings.get("perturbation") else []),
+        *([f"Driving scenes rendered at {settings['driving_size'][0]}x"
+           f"{settings['driving_size'][1]} (the suite's are {DRIVING_SIZE[0]}x{DRIVING_SIZE[1]}:"
+           " the same drives seen with other pixels); planar scenes at their own size.", ""]
+          if settings.get("driving_size") else []),
         f"{len(cases)} cases ({n_col} collisions, {len(cases) - n_col} not; "
         f"{results['frames']} frames at {rates} fps), selection `{settings['cases']}`; detectors "
         f"{', '.join(f'`{n}`' for n in names)}; {results['elapsed_s']:.0f} s wall time with "

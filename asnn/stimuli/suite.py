@@ -66,7 +66,7 @@ from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case",
-           "check_variant"]
+           "check_variant", "check_driving_size", "DRIVING_SIZE"]
 
 SUITE_VERSION = "6"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
@@ -593,7 +593,8 @@ def suite_cases(pattern: str | None = None) -> list[str]:
     return [name for name in SUITE_CASES if name in chosen]
 
 
-def make_case(name: str, variant: int = 0) -> Scene:
+def make_case(name: str, variant: int = 0,
+              driving_size: tuple[int, int] | None = None) -> Scene:
     """Generate the suite case ``name`` with its label.
 
     Parameters
@@ -602,17 +603,40 @@ def make_case(name: str, variant: int = 0) -> Scene:
     variant : int
         0 for the case as the suite defines it; K >= 1 for the same case with a fresh scene
         seed (the module docstring's *Variants*).
+    driving_size : (width, height), optional
+        A driving scene rendered at this size instead of 192x128: its world is in metres and
+        its camera's field of view in degrees, so it is the same drive seen with more (or
+        fewer) pixels, rendered as such rather than resized. The planar scenes, whose objects
+        and motions are given in pixels, keep their size.
 
     Raises
     ------
     ValueError
-        For an unknown name or a negative variant.
+        For an unknown name, a negative variant or a size outside 64x48 to 1920x1080.
     """
     try:
         case = SUITE_CASES[name]
     except KeyError:
         raise ValueError(f"unknown suite case {name!r} (see asnn.stimuli.suite.SUITE_CASES)") from None
-    return case.make(check_variant(variant))
+    variant = check_variant(variant)
+    if driving_size is not None:
+        size = check_driving_size(driving_size)
+        if case.generator is driving_scene:
+            case = replace(case, options={**case.options, "size": size})
+    return case.make(variant)
+
+
+def check_driving_size(size) -> tuple[int, int]:
+    """``size`` as ``(width, height)`` if a driving scene can be rendered at it (64x48 to
+    1920x1080), else ValueError."""
+    try:
+        width, height = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise ValueError(f"a driving size is (width, height), got {size!r}") from None
+    if not (64 <= width <= 1920 and 48 <= height <= 1080):
+        raise ValueError(f"driving scenes are rendered at 64x48 to 1920x1080, got "
+                         f"{width}x{height}")
+    return width, height
 
 
 def check_variant(variant) -> int:
