@@ -232,7 +232,8 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     results = {
         "settings": {"suite_version": SUITE_VERSION, "variant": variant,
                      "perturbation": perturbation,
-                     "driving_size": list(driving_size) if driving_size else None, "cases": cases or "all",
+                     "driving_size": list(driving_size) if driving_size else None,
+                     "cases": cases or "all",
                      "detectors": [spec.name for spec in specs], "warmup": warmup,
                      "early_tolerance_s": EARLY_TOLERANCE_S,
                      "contact_slack_frames": scoring.CONTACT_SLACK_FRAMES, "jobs": jobs},
