@@ -2,8 +2,8 @@
 
 ``asnn eval CLIPS_DIR [--labels FILE] [--detectors LIST] [--preset P] [--out DIR]`` scores every
 detector on labelled clips (SPEC.md section 5), with ``--perturb NAME`` on their frames
-perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME] [--size WxH]``
-generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper``
+perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME]
+[--size WxH]`` generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper``
 regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
 default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``, ``lgmd2``. Exit status 2 for unusable
 input.

@@ -191,8 +191,12 @@ class _Robot:
     # current stream (after the worker's own skips), and whether a slow rate was logged
     stamp: float | None = None
     periods: deque = field(default_factory=lambda: deque(maxlen=RATE_FRAMES))
-    fps: float | None = None
     slow_logged: bool = False
+
+    @property
+    def fps(self) -> float | None:
+        """Frames a second its model is stepped at: the median of :attr:`periods`."""
+        return round(1.0 / statistics.median(self.periods), 1) if self.periods else None
 
 
 @dataclass(frozen=True)
@@ -542,14 +546,13 @@ class WorkerCore:
         elif state.stamp is not None and 0.0 < stamp - state.stamp <= 1.0:
             state.periods.append(stamp - state.stamp)
         state.stamp = stamp
-        state.fps = (round(1.0 / statistics.median(state.periods), 1) if state.periods
-                     else None)
-        if (len(state.periods) == RATE_FRAMES and state.fps < SLOW_FPS
-                and not state.slow_logged):
-            state.slow_logged = True
-            log.warning("robot %s: its frames are detected at %.1f per second (the camera's "
-                        "rate, or frames skipped under load); the default preset is made for "
-                        "20 or more", robot, state.fps)
+        if len(state.periods) == RATE_FRAMES and not state.slow_logged:
+            fps = state.fps
+            if fps < SLOW_FPS:
+                state.slow_logged = True
+                log.warning("robot %s: its frames are detected at %.1f per second (the "
+                            "camera's rate, or frames skipped under load); the default preset "
+                            "is made for 20 or more", robot, fps)
 
     def _give_back(self, state: _Robot, dropped: int) -> None:
         """A taken frame produced no response: its skipped count moves to the next one."""

@@ -177,4 +177,3 @@ def _label_at_rate(label: dict, step: int) -> dict:
         if isinstance(label.get(key), list):
             label[key] = label[key][::step]
     return label
-

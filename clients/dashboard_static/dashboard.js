@@ -209,7 +209,8 @@
   }
 
   // the rate a robot's frames are answered at: the median of its last 5 response intervals
-  // (the worker's own skips included), as the worker measures it (asnn.params.SLOW_FPS)
+  // (the worker's own skips included), as the worker measures it (asnn.params.SLOW_FPS); with
+  // an even count, the upper of the two middle intervals (the lower rate)
   function rateOf(points) {
     const gaps = [];
     for (let i = Math.max(1, points.length - 5); i < points.length; i++) {
