@@ -3,8 +3,8 @@
 ``asnn eval CLIPS_DIR [--labels FILE] [--detectors LIST] [--preset P] [--out DIR]`` scores every
 detector on labelled clips (SPEC.md section 5), with ``--perturb NAME`` on their frames
 perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME]
-[--size WxH]`` generates the labelled suite of :mod:`asnn.stimuli.suite` and scores it; ``asnn eval --paper``
-regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
+[--size WxH | --scale S]`` generates the labelled suite of :mod:`asnn.stimuli.suite` and scores
+it; ``asnn eval --paper`` regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
 default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``, ``lgmd2``. Exit status 2 for unusable
 input.
 """
@@ -87,6 +87,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "with --synthetic: render the driving scenes at this size, the same "
                         "drives seen with other pixels (64x48 to 1920x1080; default 192x128; "
                         "the planar scenes keep theirs)")
+    p.add_argument("--scale", type=float, metavar="S",
+                   help="with --synthetic: render every case with S times its pixels (0.5-8): "
+                        "the planar scenes at S times 160x120 with their sizes, positions and "
+                        "speeds in pixels scaled alike, the driving scenes at S times 192x128 "
+                        "(default: 1; not with --size)")
     p.add_argument("--perturb", choices=list(PERTURBATIONS), metavar="NAME",
                    help="with CLIPS_DIR or --synthetic: score the detectors on the frames "
                         "perturbed, "
@@ -114,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         ("--case-plots", args.case_plots, args.synthetic),
         ("--variant", args.variant, args.synthetic),
         ("--size", args.size, args.paper or args.synthetic),
+        ("--scale", args.scale is not None, args.synthetic),
         ("--ablation", args.ablation, not (args.paper or args.held_out)),
         ("--labels", args.labels, not (args.synthetic or args.paper)),
         ("--early-tolerance", args.early_tolerance is not None,
@@ -140,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
                                  cases=args.cases, jobs=args.jobs, warmup=args.warmup,
                                  plots=not args.no_plots, case_plots=args.case_plots,
                                  variant=args.variant, perturbation=args.perturb,
-                                 driving_size=args.size, progress=progress)
+                                 driving_size=args.size, scale=args.scale, progress=progress)
         elif not args.clips_dir:
             print("asnn eval: CLIPS_DIR is required (or --synthetic, or --paper)", file=sys.stderr)
             return 2

@@ -29,6 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--variant", type=whole, default=0, metavar="K",
                    help="with --case: the case with a fresh scene seed K >= 1 (asnn eval "
                         "--synthetic --variant K; default: 0, the case as the suite has it)")
+    p.add_argument("--scale", type=float, metavar="S",
+                   help="with --case: the case drawn with S times its pixels (0.5-8; asnn eval "
+                        "--synthetic --scale S; default: 1)")
     p.add_argument("--list", nargs="?", const="all", metavar="PATTERN",
                    help="list the suite's cases (matching PATTERN) and exit")
     p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH",
@@ -54,10 +57,10 @@ def run(args: argparse.Namespace) -> int:
                 print("asnn scene: --case takes one OUT file", file=sys.stderr)
                 return 2
             out = args.args[0]
-            scene = make_case(args.case, args.variant)
+            scene = make_case(args.case, args.variant, scale=args.scale)
         else:
-            if args.variant:
-                print("asnn scene: --variant goes with --case", file=sys.stderr)
+            if args.variant or args.scale is not None:
+                print("asnn scene: --variant and --scale go with --case", file=sys.stderr)
                 return 2
             if len(args.args) != 2:
                 print("asnn scene: give NAME OUT, or --case CASE OUT", file=sys.stderr)

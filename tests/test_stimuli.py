@@ -89,6 +89,13 @@ def test_levels_and_noise_tile():
     # periodic: the texture sampled one tile further on is the same
     assert np.allclose(render.sample_tile(tile, (32, 32), (64.0, 0.0)),
                        render.sample_tile(tile, (32, 32)), atol=1e-6)
+    # zoomed: the same texture with twice the pixels, every second one the original's
+    zoomed = render.noise_tile(3, 1.5, size=64, zoom=2.0)
+    assert zoomed.shape == (128, 128)
+    assert np.allclose(zoomed[::2, ::2], tile, atol=1e-5)
+    assert not np.allclose(zoomed[1::2, 1::2], tile, atol=1e-2)
+    with pytest.raises(ValueError):
+        render.noise_tile(3, 1.5, zoom=0.0)
 
 
 # --------------------------------------------------------------------------- planar scenes
@@ -511,6 +518,52 @@ def test_a_drive_rendered_with_more_pixels_is_the_same_drive(suite):
     for bad in ((32, 32), (4000, 2000), (432,), "432x288"):
         with pytest.raises(ValueError):
             make_case("drive-day-brake", 0, bad)
+
+
+@pytest.mark.parametrize("name", [
+    "loom-light-c0.6-d12-bottomleft",       # a mover off the centre
+    "loom-dark-c0.5-over-checker-diag2px",  # a pattern sliding under it
+    "loom-dark-c0.3-over-texture-h1px",     # a texture sliding under it
+    "loom-dark-c0.6-handheld-desk",         # props nearer than the wall, a swaying camera
+    "walk-dark-c0.4-gait",                  # a textured walker with a gait
+    "headlights-sweep-day",                 # props and a glow sweeping across
+    "translate-car-dark-c0.6-h4px",         # a car crossing at a speed in pixels
+    "sweep-scene-20px",                     # a camera sweep in pixels
+])
+def test_a_planar_case_rendered_with_more_pixels_is_the_same_scene(suite, name):
+    # every size, position and speed in pixels scales with the frame: averaged back down to
+    # the suite's pixels, the frames are the suite's own but for their noise and edges
+    base, large = suite[name], make_case(name, scale=2.0)
+    assert large.frames.shape == (base.frames.shape[0], 240, 320)
+    assert large.params["scale"] == 2.0 and "scale" not in base.params
+    small, big = base.label("x"), large.label("x")
+    for key in ("onset_frame", "contact_frame", "ttc", "frames", "collision"):
+        assert big.get(key) == small.get(key)
+    if small.get("track"):  # labels keep 3 decimals
+        assert np.allclose(np.asarray(big["track"]) + 0.5,
+                           2.0 * (np.asarray(small["track"]) + 0.5), atol=0.01)
+        assert np.allclose(big["target_size"], 2.0 * np.asarray(small["target_size"]), atol=0.01)
+    error = max(np.abs(cv2.resize(frame, (160, 120), interpolation=cv2.INTER_AREA).astype(float)
+                       - original).mean() for frame, original in zip(large.frames, base.frames))
+    noisy = base.params["noise"] > 0  # the sensor's noise is drawn anew at every pixel
+    assert error < (2.5 if noisy else 1.2)
+
+
+def test_the_whole_suite_can_be_rendered_at_another_scale(suite):
+    # a drive at a scale is the drive at the scaled size; scale 1 is the suite itself
+    drive = make_case("drive-day-brake", scale=2.25)
+    assert np.array_equal(drive.frames, make_case("drive-day-brake", 0, (432, 288)).frames)
+    assert np.array_equal(make_case("loom-dark-c1.0-d12-center", scale=1.0).frames,
+                          suite["loom-dark-c1.0-d12-center"].frames)
+    half = make_case("loom-dark-c1.0-d12-center", scale=0.5)
+    assert half.frames.shape[1:] == (60, 80)
+    for bad in (0.4, 9.0, 0, -1.0, True, "2", None or float("nan")):
+        with pytest.raises(ValueError):
+            make_case("loom-dark-c1.0-d12-center", scale=bad)
+    with pytest.raises(ValueError):
+        make_case("drive-day-brake", 0, (432, 288), scale=2.0)
+    with pytest.raises(ValueError):
+        planar_scene(scale=0.0)
 
 
 def test_brightness_and_noise_cases_of_the_suite_do_what_their_names_say(suite):

@@ -10,6 +10,7 @@ import pytest
 
 from asnn.evaluation import scoring, suite
 from asnn.evaluation.runs import at_rate, parse_detector, parse_detectors, run_detector
+from asnn.io.video import open_video
 from asnn.stimuli.suite import make_case
 from cli.main import main
 from service.camera import open_source
@@ -166,6 +167,38 @@ def test_synthetic_eval_of_drives_rendered_at_another_size(tmp_path):
         assert [r["u"] for r in records] == [
             r["u"] for r in run_detector(at_rate(scene.frames, scene.fps), spec)]
     assert main(["eval", "--synthetic", "--size", "2000x100", "--out", str(out)]) == 2
+
+
+def test_synthetic_eval_of_the_suite_rendered_at_another_scale(tmp_path, capsys):
+    out = tmp_path / "scaled"
+    assert main(["eval", "--synthetic", "--scale", "1.5", "--cases",
+                 "drive-day-follow,loom-dark-c1.0-d12-center", "--detectors", "asnn",
+                 "--no-plots", "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["settings"]["scale"] == 1.5 and results["settings"]["driving_size"] is None
+    assert ("Every case rendered with 1.5 times its pixels (planar scenes at 240x180, driving "
+            "scenes at 288x192)") in (out / "report.md").read_text()
+    # both cases' results are the detector's on the larger frames
+    spec = parse_detector("asnn")
+    labels = {label["file"]: label for label in json.loads((out / "labels.json").read_text())}
+    for name, size in (("drive-day-follow", (288, 192)), ("loom-dark-c1.0-d12-center", (240, 180))):
+        scene = make_case(name, scale=1.5)
+        assert scene.frames.shape[1:] == size[::-1]
+        assert (labels[f"{name}.mp4"]["width"], labels[f"{name}.mp4"]["height"]) == size
+        records = scoring.load_records(out / "results" / "asnn" / f"{name}.jsonl")
+        assert [r["u"] for r in records] == [
+            r["u"] for r in run_detector(at_rate(scene.frames, scene.fps), spec)]
+    capsys.readouterr()
+    for argv in (["eval", "--synthetic", "--scale", "9", "--out", str(out)],
+                 ["eval", "--synthetic", "--scale", "2", "--size", "384x256", "--out", str(out)],
+                 ["eval", str(tmp_path), "--scale", "2", "--out", str(out)],
+                 ["scene", "looming", str(tmp_path / "x.avi"), "--scale", "2"]):
+        assert main(argv) == 2
+        assert "scale" in capsys.readouterr().err
+    assert main(["scene", "--case", "loom-dark-c1.0-d12-center", "--scale", "0.5",
+                 str(tmp_path / "small.avi")]) == 0
+    clip = open_video(tmp_path / "small.avi")
+    assert (clip.width, clip.height) == (80, 60)
 
 
 def test_synthetic_eval_of_perturbed_frames(tmp_path):

@@ -22,8 +22,9 @@ from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from ..stimuli.suite import (DRIVING_SIZE, GROUPS, SUITE_CASES, SUITE_VERSION,
-                             check_driving_size, check_variant, make_case, suite_cases)
+from ..stimuli.suite import (DRIVING_SIZE, GROUPS, PLANAR_SIZE, SUITE_CASES, SUITE_VERSION,
+                             check_driving_size, check_scale, check_variant, make_case,
+                             suite_cases)
 from . import scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
@@ -40,11 +41,12 @@ EARLY_TOLERANCE_S = 0.0  # generated clips: the onset is exact
 
 def _run_case(name: str, specs: Sequence[DetectorSpec], out_dir: str, warmup: int,
               plots: bool, variant: int = 0, perturbation: str | None = None,
-              driving_size: tuple[int, int] | None = None) -> dict:
+              driving_size: tuple[int, int] | None = None,
+              scale: float | None = None) -> dict:
     # plots import matplotlib, and take longer than the runs: only where asked for
     """Worker: generate one case (its frames perturbed where ``perturbation`` names one), run
     and score every detector on it, write its results."""
-    scene = make_case(name, variant, driving_size)
+    scene = make_case(name, variant, driving_size, scale)
     label = perturb_label(scene.label(f"{name}.mp4"), perturbation)
     entry = {"label": label, "scores": {}}
     series = {}
@@ -138,7 +140,8 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
                    preset_name: str | None = None, cases: str | None = None, jobs: int = 1,
                    warmup: int = scoring.WARMUP_FRAMES, plots: bool = True,
                    case_plots: bool = False, variant: int = 0, perturbation: str | None = None,
-                   driving_size: tuple[int, int] | None = None, progress=None) -> dict:
+                   driving_size: tuple[int, int] | None = None, scale: float | None = None,
+                   progress=None) -> dict:
     """Generate, run, score and report the labelled suite.
 
     Parameters
@@ -168,6 +171,9 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
         Render the driving scenes at this size instead of 192x128 (the same drives seen with
         more or fewer pixels; :func:`asnn.stimuli.suite.make_case`); the planar scenes keep
         theirs.
+    scale : float, optional
+        Render every case with this many times its pixels (the planar scenes too; 0.5-8;
+        :func:`asnn.stimuli.suite.make_case`). Not with ``driving_size``.
     progress : ProgressPrinter-like, optional
 
     Returns
@@ -178,14 +184,18 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     Raises
     ------
     ValueError
-        For an unknown detector, preset, variant, perturbation or driving size, or a pattern
-        that matches no case.
+        For an unknown detector, preset, variant, perturbation, driving size or scale, both a
+        driving size and a scale, or a pattern that matches no case.
     """
     out_dir = Path(out_dir)
     names = suite_cases(cases)
     check_variant(variant)
     if driving_size is not None:
         driving_size = check_driving_size(driving_size)
+    if scale is not None:
+        if driving_size is not None:
+            raise ValueError("give a driving size or a scale, not both")
+        scale = check_scale(scale)
     check_perturbation(perturbation)
     specs = parse_detectors(detectors, preset_name)
     if jobs < 1:
@@ -207,14 +217,14 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             futures = {pool.submit(_run_case, name, specs, str(out_dir), warmup, case_plots,
-                                   variant, perturbation, driving_size): name
+                                   variant, perturbation, driving_size, scale): name
                        for name in names}
             for future in as_completed(futures):
                 finished(futures[future], future.result())
     else:
         for name in names:
             finished(name, _run_case(name, specs, str(out_dir), warmup, case_plots, variant,
-                                     perturbation, driving_size))
+                                     perturbation, driving_size, scale))
     progress.finish()
     elapsed = time.perf_counter() - started
 
@@ -233,6 +243,7 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
         "settings": {"suite_version": SUITE_VERSION, "variant": variant,
                      "perturbation": perturbation,
                      "driving_size": list(driving_size) if driving_size else None,
+                     "scale": scale,
                      "cases": cases or "all",
                      "detectors": [spec.name for spec in specs], "warmup": warmup,
                      "early_tolerance_s": EARLY_TOLERANCE_S,
@@ -256,6 +267,10 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
         figures.plot_summary(out_dir / "plots" / "summary.png",
                              {d: results["detectors"][d]["summary"] for d in scores})
     return results
+
+
+def _scaled_size(size: Sequence[int], scale: float) -> str:
+    return f"{round(size[0] * scale)}x{round(size[1] * scale)}"
 
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
@@ -295,6 +310,11 @@ def suite_report(results: Mapping) -> str:
            f"{settings['driving_size'][1]} (the suite's are {DRIVING_SIZE[0]}x{DRIVING_SIZE[1]}:"
            " the same drives seen with other pixels); planar scenes at their own size.", ""]
           if settings.get("driving_size") else []),
+        *([f"Every case rendered with {settings['scale']:g} times its pixels (planar scenes at "
+           f"{_scaled_size(PLANAR_SIZE, settings['scale'])}, driving scenes at "
+           f"{_scaled_size(DRIVING_SIZE, settings['scale'])}): the same scenes drawn with more "
+           "or fewer pixels, not resized.", ""]
+          if settings.get("scale") else []),
         f"{len(cases)} cases ({n_col} collisions, {len(cases) - n_col} not; "
         f"{results['frames']} frames at {rates} fps), selection `{settings['cases']}`; detectors "
         f"{', '.join(f'`{n}`' for n in names)}; {results['elapsed_s']:.0f} s wall time with "

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import cv2
@@ -29,6 +29,7 @@ __all__ = [
     "Flicker",
     "Step",
     "Headlights",
+    "scaled_point",
     "camera_path",
     "camera_matrix",
     "canvas_margins",
@@ -67,6 +68,10 @@ class Shake:
     smooth: int = 1
     seed: int = 0
 
+    def scaled(self, scale: float) -> "Shake":
+        """The same shake seen with ``scale`` times the pixels."""
+        return replace(self, amplitude=self.amplitude * scale)
+
     def path(self, frames: int, fps: float) -> np.ndarray:
         rng = np.random.default_rng(self.seed)
         raw = rng.uniform(-1.0, 1.0, size=(frames + self.smooth - 1, 3))
@@ -90,6 +95,10 @@ class Pan:
     velocity: tuple[float, float]
     start: int = 0
 
+    def scaled(self, scale: float) -> "Pan":
+        """The same pan seen with ``scale`` times the pixels."""
+        return replace(self, velocity=(self.velocity[0] * scale, self.velocity[1] * scale))
+
     def path(self, frames: int, fps: float) -> np.ndarray:
         steps = np.clip(np.arange(frames) - self.start, 0, None)[:, None]
         return np.hstack([steps * np.asarray(self.velocity, float), np.zeros((frames, 1))])
@@ -110,9 +119,20 @@ class Sweep:
     amplitude: tuple[float, float]
     period_s: float
 
+    def scaled(self, scale: float) -> "Sweep":
+        """The same sweep seen with ``scale`` times the pixels."""
+        return replace(self, amplitude=(self.amplitude[0] * scale, self.amplitude[1] * scale))
+
     def path(self, frames: int, fps: float) -> np.ndarray:
         phase = np.sin(2.0 * math.pi * np.arange(frames) / (fps * self.period_s))[:, None]
         return np.hstack([phase * np.asarray(self.amplitude, float), np.zeros((frames, 1))])
+
+
+def scaled_point(point: Sequence[float], scale: float) -> tuple[float, float]:
+    """An image position ``(x, y)`` in pixels, seen with ``scale`` times the pixels: pixel
+    centres sit at whole coordinates, so the frame centre ``(w - 1) / 2`` goes to
+    ``(scale w - 1) / 2``."""
+    return tuple((float(v) + 0.5) * scale - 0.5 for v in point)
 
 
 def camera_path(motion, frames: int, fps: float) -> np.ndarray:
@@ -230,6 +250,11 @@ class Headlights:
     stop_xy: tuple[float, float]
     sigma: float = 25.0
     amplitude: float = 120.0
+
+    def scaled(self, scale: float) -> "Headlights":
+        """The same headlights seen with ``scale`` times the pixels."""
+        return replace(self, start_xy=scaled_point(self.start_xy, scale),
+                       stop_xy=scaled_point(self.stop_xy, scale), sigma=self.sigma * scale)
 
     def glow(self, index: int, shape: tuple[int, int]) -> np.ndarray | None:
         if not self.start <= index <= self.stop:

@@ -47,7 +47,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, is_dataclass
+from dataclasses import asdict, dataclass, is_dataclass, replace
 
 import cv2
 import numpy as np
@@ -65,8 +65,8 @@ _PATTERNS = ("stripes", "grating", "checker")
 
 
 @functools.lru_cache(maxsize=16)
-def _tile(seed: int, scale: float) -> np.ndarray:
-    return noise_tile(seed, scale)
+def _tile(seed: int, scale: float, zoom: float = 1.0) -> np.ndarray:
+    return noise_tile(seed, scale, zoom=zoom)
 
 
 @dataclass(frozen=True)
@@ -91,6 +91,9 @@ class Background:
         Mean gray level; None takes the mover's background level (mid-gray without a mover).
     seed : int
         Of the texture.
+    scale : float
+        Drawn with this many times the pixels (:meth:`scaled`): ``period`` and ``velocity``
+        are given in the pixels of scale 1, and the texture is the same one, finer sampled.
     """
 
     kind: str = "uniform"
@@ -101,6 +104,7 @@ class Background:
     duty: float = 0.5
     mean: float | None = None
     seed: int = 0
+    scale: float = 1.0
 
     def check(self, mean: float) -> None:
         """Raise ValueError unless the pattern fits in 0..255 around ``mean``."""
@@ -115,16 +119,25 @@ class Background:
     def moving(self) -> bool:
         return self.kind != "uniform" and any(self.velocity)
 
+    def scaled(self, scale: float) -> "Background":
+        """The same background seen with ``scale`` times the pixels."""
+        return replace(self, scale=self.scale * scale)
+
     def render(self, index: int, shape: tuple[int, int], origin: tuple[float, float],
                mean: float) -> np.ndarray:
         """The background of frame ``index`` on a canvas whose rest view starts at ``origin``."""
-        offset = (origin[0] + self.velocity[0] * index, origin[1] + self.velocity[1] * index)
+        # pixel centres at whole coordinates: scale 1's pixel x is at scale (x + 1/2) - 1/2
+        step, centre = self.scale * index, (self.scale - 1.0) / 2.0
+        offset = (origin[0] + centre + self.velocity[0] * step,
+                  origin[1] + centre + self.velocity[1] * step)
         if self.kind == "uniform" or self.contrast == 0:
             return np.full(shape, float(mean))
         if self.kind == "texture":
-            values = 0.5 + 0.5 * sample_tile(_tile(self.seed, self.period), shape, offset)
+            tile = _tile(self.seed, self.period, self.scale)
+            values = 0.5 + 0.5 * sample_tile(tile, shape, offset)
         else:
-            values = pattern(shape, self.kind, self.period, self.angle_deg, offset, self.duty)
+            values = pattern(shape, self.kind, self.period * self.scale, self.angle_deg, offset,
+                             self.duty)
         return mean + 255.0 * self.contrast * (values - 0.5)
 
 
@@ -174,6 +187,11 @@ class Prop:
     level: float
     aspect: float = 1.0
     parallax: float = 1.0
+
+    def scaled(self, scale: float) -> "Prop":
+        """The same prop seen with ``scale`` times the pixels."""
+        x, y = effects.scaled_point((self.x, self.y), scale)
+        return replace(self, x=x, y=y, height=self.height * scale)
 
 
 def distance_ratio(motion: str, frames: int, onset: int, tau_frames: float,
@@ -358,7 +376,8 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
                  hold: int = 10, tail: int = 2, background: Background = Background(),
                  props: Sequence[Prop] = (), camera=None, lighting: Sequence = (),
                  noise: float = 0.0, jpeg_quality: int | None = None, seed: int = 0,
-                 category: Sequence[str] = (), twin: str | None = None) -> Scene:
+                 category: Sequence[str] = (), twin: str | None = None,
+                 scale: float = 1.0) -> Scene:
     """Compose a labelled clip on the image plane (see the module text for the motions).
 
     Parameters
@@ -412,6 +431,12 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
         Tags for the label.
     twin : str, optional
         The collision-course twin of a near miss.
+    scale : float
+        Render the scene seen with this many times the pixels: the frame size (rounded), and
+        every length, position and speed given in pixels above (the mover's, the background's,
+        the props', the camera's motion and the headlights') are multiplied by it, so that the
+        same scene is drawn with more (or fewer) pixels rather than resized. The label is in
+        the pixels rendered; ``params`` holds the scaled values and ``scale``.
 
     Returns
     -------
@@ -420,11 +445,26 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
     Raises
     ------
     ValueError
-        For an unknown motion, shape or background, levels outside 0..255, or a clip too short
-        for its motion (no contact, or a near miss that never leaves the frame).
+        For an unknown motion, shape or background, levels outside 0..255, a scale that is not
+        positive, or a clip too short for its motion (no contact, or a near miss that never
+        leaves the frame).
     """
     if motion not in MOTIONS:
         raise ValueError(f"unknown motion {motion!r}; choose one of {', '.join(MOTIONS)}")
+    if not scale > 0:
+        raise ValueError(f"scale must be positive, got {scale!r}")
+    if scale != 1.0:
+        size = (round(size[0] * scale), round(size[1] * scale))
+        height *= scale
+        stop_height = None if stop_height is None else stop_height * scale
+        position = None if position is None else effects.scaled_point(position, scale)
+        velocity = (velocity[0] * scale, velocity[1] * scale)
+        background = background.scaled(scale)
+        props = [prop.scaled(scale) for prop in props]
+        camera = None if camera is None else camera.scaled(scale)
+        # brightness ramps, flicker and exposure steps have nothing in pixels
+        lighting = [light.scaled(scale) if hasattr(light, "scaled") else light
+                    for light in lighting]
     w, h = size
     if w < 32 or h < 32:
         raise ValueError(f"scene size must be at least 32x32, got {w}x{h}")
@@ -481,6 +521,8 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
                   stop_height=stop_height, hold=hold, background=_spec(background),
                   props=_spec(list(props)), camera=_spec(camera), lighting=_spec(list(lighting)),
                   noise=noise, jpeg_quality=jpeg_quality, seed=seed)
+    if scale != 1.0:
+        params["scale"] = scale
     if move.clearance is not None:
         params["clearance"] = round(move.clearance, 3)
     return Scene(name=name, frames=video, fps=fps, collision=collision,

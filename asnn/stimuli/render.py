@@ -277,7 +277,7 @@ def pattern(shape: tuple[int, int], kind: str, period: float, angle_deg: float =
     raise ValueError(f"unknown pattern {kind!r}; choose stripes, grating or checker")
 
 
-def noise_tile(seed: int, scale: float, size: int = 256) -> np.ndarray:
+def noise_tile(seed: int, scale: float, size: int = 256, zoom: float = 1.0) -> np.ndarray:
     """A periodic random texture in [-1, 1] (seamless when tiled), from filtered white noise.
 
     The amplitude spectrum falls as 1/f (natural images) above ``1 / (size / 4)`` and is cut off
@@ -291,16 +291,41 @@ def noise_tile(seed: int, scale: float, size: int = 256) -> np.ndarray:
         Smallest structure, pixels (at least 0.5).
     size : int
         Side of the square tile.
+    zoom : float
+        The same texture drawn with ``zoom`` times the pixels: its spectrum is zero-padded to a
+        tile ``round(zoom * size)`` pixels wide, so every structure, and the tile's period, is
+        ``zoom`` times larger (band-limited interpolation; what the cut-off leaves above the
+        original tile's Nyquist frequency is below 1 % at ``scale`` >= 1).
     """
     if scale < 0.5:
         raise ValueError(f"texture scale must be at least 0.5 px, got {scale}")
+    if not zoom > 0:
+        raise ValueError(f"texture zoom must be positive, got {zoom!r}")
     rng = np.random.default_rng(seed)
     spectrum = np.fft.fft2(rng.standard_normal((size, size)))
     f = np.hypot(*np.meshgrid(np.fft.fftfreq(size), np.fft.fftfreq(size), indexing="ij"))
-    gain = np.exp(-0.5 * (2.0 * math.pi * f * scale) ** 2) / np.maximum(f, 4.0 / size)
-    tile = np.real(np.fft.ifft2(spectrum * gain))
+    spectrum *= np.exp(-0.5 * (2.0 * math.pi * f * scale) ** 2) / np.maximum(f, 4.0 / size)
+    tile = np.real(np.fft.ifft2(spectrum))
     tile -= tile.mean()
-    return (tile / np.abs(tile).max()).astype(np.float32)
+    peak = np.abs(tile).max()
+    zoomed = round(zoom * size)
+    if zoomed != size:
+        # the same values at the original pixels (ifft2 divides by the number of pixels); the
+        # interpolation's few overshoots past the original's peak are clipped
+        tile = np.real(np.fft.ifft2(_resized_spectrum(spectrum, zoomed))) * (zoomed / size) ** 2
+        tile = np.clip(tile - tile.mean(), -peak, peak)
+    return (tile / peak).astype(np.float32)
+
+
+def _resized_spectrum(spectrum: np.ndarray, n: int) -> np.ndarray:
+    """A square FFT's frequencies kept at their indices in an ``n`` x ``n`` one: zeros above
+    the smaller side's Nyquist frequency (a larger ``n``), or those frequencies dropped."""
+    m = min(spectrum.shape[0], n)
+    low, high = (m + 1) // 2, m // 2  # indices 0..low-1 and the last ``high``
+    rows = np.r_[0:low, -high:0]
+    out = np.zeros((n, n), dtype=spectrum.dtype)
+    out[np.ix_(rows, rows)] = spectrum[np.ix_(rows, rows)]
+    return out
 
 
 def sample_tile(tile: np.ndarray, shape: tuple[int, int],

@@ -51,6 +51,12 @@ geometry, motion, contrast, effects and label) with a fresh scene seed: other ra
 objects (their places along the road, kinds and shades), and fresh seeds for the effects that
 have their own (a background's texture, a shake's or a sway's path, a random flicker). A near
 miss and its collision-course twin keep sharing theirs.
+
+**Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
+drives at S times their size (their world is in metres and degrees), the planar scenes with
+every size, position, speed and texture in pixels multiplied by S. The same scenes seen by a
+camera with more (or fewer) pixels, drawn as such rather than resized: S = 2 is 320x240 (a
+common robot camera), S = 3 what a 640x480 camera gives the model after its ``max_width``.
 """
 
 from __future__ import annotations
@@ -66,7 +72,8 @@ from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case",
-           "check_variant", "check_driving_size", "DRIVING_SIZE"]
+           "check_variant", "check_driving_size", "check_scale", "DRIVING_SIZE", "PLANAR_SIZE",
+           "SCALES"]
 
 SUITE_VERSION = "6"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
@@ -74,6 +81,7 @@ GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "rece
           "driving-pass", "driving-clear")
 PLANAR_SIZE = (160, 120)
 DRIVING_SIZE = (192, 128)
+SCALES = (0.5, 8.0)  # the smallest and largest scale make_case renders every case at
 _CENTER = ((PLANAR_SIZE[0] - 1) / 2, (PLANAR_SIZE[1] - 1) / 2)
 
 
@@ -594,7 +602,7 @@ def suite_cases(pattern: str | None = None) -> list[str]:
 
 
 def make_case(name: str, variant: int = 0,
-              driving_size: tuple[int, int] | None = None) -> Scene:
+              driving_size: tuple[int, int] | None = None, scale: float | None = None) -> Scene:
     """Generate the suite case ``name`` with its label.
 
     Parameters
@@ -606,24 +614,46 @@ def make_case(name: str, variant: int = 0,
     driving_size : (width, height), optional
         A driving scene rendered at this size instead of 192x128: its world is in metres and
         its camera's field of view in degrees, so it is the same drive seen with more (or
-        fewer) pixels, rendered as such rather than resized. The planar scenes, whose objects
-        and motions are given in pixels, keep their size.
+        fewer) pixels, rendered as such rather than resized. The planar scenes keep their size.
+    scale : float, optional
+        Every case rendered with this many times its pixels (:data:`SCALES`): the driving
+        scenes at ``scale`` times 192x128, the planar ones at ``scale`` times 160x120 with
+        every size, position and speed in pixels scaled alike
+        (:func:`~.planar.planar_scene`'s ``scale``). Not with ``driving_size``.
 
     Raises
     ------
     ValueError
-        For an unknown name, a negative variant or a size outside 64x48 to 1920x1080.
+        For an unknown name, a negative variant, a size outside 64x48 to 1920x1080, a scale
+        outside :data:`SCALES`, or both a size and a scale.
     """
     try:
         case = SUITE_CASES[name]
     except KeyError:
         raise ValueError(f"unknown suite case {name!r} (see asnn.stimuli.suite.SUITE_CASES)") from None
     variant = check_variant(variant)
+    if driving_size is not None and scale is not None:
+        raise ValueError("give a driving size or a scale, not both")
+    if scale is not None:
+        scale = check_scale(scale)
+        if case.generator is driving_scene:
+            driving_size = (round(DRIVING_SIZE[0] * scale), round(DRIVING_SIZE[1] * scale))
+        elif scale != 1.0:
+            case = replace(case, options={**case.options, "scale": scale})
     if driving_size is not None:
         size = check_driving_size(driving_size)
         if case.generator is driving_scene:
             case = replace(case, options={**case.options, "size": size})
     return case.make(variant)
+
+
+def check_scale(scale) -> float:
+    """``scale`` as a float if the suite can be rendered at it (:data:`SCALES`), else
+    ValueError."""
+    lo, hi = SCALES
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not lo <= scale <= hi:
+        raise ValueError(f"the suite is rendered at scales {lo:g} to {hi:g}, got {scale!r}")
+    return float(scale)
 
 
 def check_driving_size(size) -> tuple[int, int]:
