@@ -4,9 +4,9 @@
 detector on labelled clips (SPEC.md section 5), with ``--perturb NAME`` on their frames
 perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME]
 [--size WxH | --scale S]`` generates the labelled suite of :mod:`asnn.stimuli.suite` and scores
-it; ``asnn eval --paper`` regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors are specs: ``asnn`` (the
-default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``, ``lgmd2``. Exit status 2 for unusable
-input.
+it; ``asnn eval --paper`` regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors
+are specs: ``asnn`` (the default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``,
+``lgmd2``. Exit status 2 for unusable input.
 """
 
 from __future__ import annotations
