@@ -22,6 +22,7 @@ from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
+from ..stimuli.effects import scaled_size
 from ..stimuli.suite import (DRIVING_SIZE, GROUPS, PLANAR_SIZE, SUITE_CASES, SUITE_VERSION,
                              check_driving_size, check_scale, check_variant, make_case,
                              suite_cases)
@@ -269,8 +270,8 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     return results
 
 
-def _scaled_size(size: Sequence[int], scale: float) -> str:
-    return f"{round(size[0] * scale)}x{round(size[1] * scale)}"
+def _size(size: Sequence[int], scale: float) -> str:
+    return "{}x{}".format(*scaled_size(size, scale))
 
 
 def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
@@ -311,9 +312,9 @@ def suite_report(results: Mapping) -> str:
            " the same drives seen with other pixels); planar scenes at their own size.", ""]
           if settings.get("driving_size") else []),
         *([f"Every case rendered with {settings['scale']:g} times its pixels (planar scenes at "
-           f"{_scaled_size(PLANAR_SIZE, settings['scale'])}, driving scenes at "
-           f"{_scaled_size(DRIVING_SIZE, settings['scale'])}): the same scenes drawn with more "
-           "or fewer pixels, not resized.", ""]
+           f"{_size(PLANAR_SIZE, settings['scale'])}, driving scenes at "
+           f"{_size(DRIVING_SIZE, settings['scale'])}): the same scenes drawn with more or "
+           "fewer pixels, not resized.", ""]
           if settings.get("scale") else []),
         f"{len(cases)} cases ({n_col} collisions, {len(cases) - n_col} not; "
         f"{results['frames']} frames at {rates} fps), selection `{settings['cases']}`; detectors "

@@ -30,6 +30,7 @@ __all__ = [
     "Step",
     "Headlights",
     "scaled_point",
+    "scaled_size",
     "camera_path",
     "camera_matrix",
     "canvas_margins",
@@ -133,6 +134,11 @@ def scaled_point(point: Sequence[float], scale: float) -> tuple[float, float]:
     centres sit at whole coordinates, so the frame centre ``(w - 1) / 2`` goes to
     ``(scale w - 1) / 2``."""
     return tuple((float(v) + 0.5) * scale - 0.5 for v in point)
+
+
+def scaled_size(size: Sequence[int], scale: float) -> tuple[int, int]:
+    """A frame size ``(width, height)`` seen with ``scale`` times the pixels, rounded."""
+    return round(size[0] * scale), round(size[1] * scale)
 
 
 def camera_path(motion, frames: int, fps: float) -> np.ndarray:

@@ -454,7 +454,7 @@ def planar_scene(motion: str = "loom", *, name: str = "planar", size: tuple[int,
     if not scale > 0:
         raise ValueError(f"scale must be positive, got {scale!r}")
     if scale != 1.0:
-        size = (round(size[0] * scale), round(size[1] * scale))
+        size = effects.scaled_size(size, scale)
         height *= scale
         stop_height = None if stop_height is None else stop_height * scale
         position = None if position is None else effects.scaled_point(position, scale)

@@ -67,7 +67,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 
 from .driving import LANE_WIDTH, Vehicle, driving_scene
-from .effects import Flicker, Headlights, Pan, Ramp, Shake, Step, Sweep
+from .effects import Flicker, Headlights, Pan, Ramp, Shake, Step, Sweep, scaled_size
 from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 
@@ -637,7 +637,7 @@ def make_case(name: str, variant: int = 0,
     if scale is not None:
         scale = check_scale(scale)
         if case.generator is driving_scene:
-            driving_size = (round(DRIVING_SIZE[0] * scale), round(DRIVING_SIZE[1] * scale))
+            driving_size = scaled_size(DRIVING_SIZE, scale)
         elif scale != 1.0:
             case = replace(case, options={**case.options, "scale": scale})
     if driving_size is not None:
