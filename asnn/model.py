@@ -357,7 +357,8 @@ class ASNN:
         background = None
         if p.stabilise:
             radius = search_radius(lum.shape[1], p.stabilise_radius, p.stabilise_reach)
-            shift = background_shift(self.previous, lum, radius, p.stabilise_share)
+            shift = background_shift(self.previous, lum, radius, p.stabilise_share,
+                                     p.stabilise_spread)
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
                 background = shift_image(self.previous, *shift, border=lum)
         previous, self.previous, self.previous_blocks = self.previous, lum, blocks

@@ -95,6 +95,13 @@ class ASNNParams(BaseModel):
     stabilise_share: float = Field(
         0.5, gt=0, le=1, description="smallest fraction of the frame's mean absolute difference "
         "the translation must explain")
+    stabilise_spread: float = Field(
+        0.5, ge=0, le=1, description="smallest fraction of the frame's 4x4 tiles in each of "
+        "which the translation must also explain half of stabilise_share of the change (a tile "
+        "also holds what moves otherwise: a prop nearer the camera): a pan, a shake "
+        "or a sliding background moves across the frame, an object drifting over a plain or "
+        "still background only where it is (asnn.stabilisation.background_shift); 0: the whole "
+        "frame's change only")
 
     # --- input and photoreceptors (paper eq. 1) ---
     target_polarity: Literal["dark", "light"] = Field(

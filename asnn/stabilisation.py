@@ -41,17 +41,25 @@ __all__ = ["background_shift", "search_radius", "shift_image"]
 _SAMPLES = 4096  # about this many pixels are compared per candidate translation
 _LEVELS = 4096  # the frames are compared in steps of 1/4096 of their [0, 1] scale
 _MAX_RADIUS = 16  # pixels per frame: the search costs (2 r + 1)^2 comparisons per sample
+_TILES = 4  # the frame is also judged in 4 x 4 tiles (background_shift's spread)
 
 
 def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
-                     share: float) -> tuple[int, int]:
+                     share: float, spread: float = 0.0) -> tuple[int, int]:
     """The background's translation between two frames, in whole pixels, or ``(0, 0)``.
 
     For every translation ``(dx, dy)`` with ``|dx|, |dy| <= radius``, the mean absolute
     difference between ``current[y, x]`` and ``previous[y - dy, x - dx]`` over about 4096
     pixels (whole rows, evenly spaced, away from the borders). The best
     translation is accepted when it removes at least ``share`` of the difference without
-    translation: one motion then explains most of what changed.
+    translation: one motion then explains most of what changed. With ``spread``, it must also
+    remove half that share of the difference in at least that fraction of the frame's 4 x 4
+    tiles, each on its own: a pan, a shake or a sliding background moves across the frame,
+    while an object drifting over a plain or still background moves only where it is, and there
+    its own motion can explain most of the frame's change (a near miss drifting over a plain
+    wall would otherwise be taken out, drift and all, and look as if it came straight at the
+    camera). Half the share, because a tile also holds what moves otherwise: a prop nearer the
+    camera, which a hand-held camera's sway moves farther than the wall behind it.
 
     Parameters
     ----------
@@ -61,6 +69,10 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
         Largest translation searched, pixels per frame.
     share : float
         Smallest fraction of the frame's difference the translation must explain, in (0, 1].
+    spread : float, optional
+        Smallest fraction of the 16 tiles in which it must explain ``share / 2`` of the tile's
+        difference, in [0, 1]; a tile without change or without a sampled row never counts.
+        0 (the default): the whole frame's difference only.
 
     Returns
     -------
@@ -72,12 +84,18 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
     if h <= 2 * radius or w <= 2 * radius:
         return 0, 0
     stride = max(1, round(h * (w - 2 * radius) / _SAMPLES))
-    costs = _translation_costs(previous, current, radius, stride)
+    tile_costs = _translation_costs(previous, current, radius, stride, _TILES)
+    costs = tile_costs.sum(axis=(0, 1))
     best = int(np.argmin(costs))  # the first of equal ones, in row-major order
     dy, dx = divmod(best, 2 * radius + 1)
     still = costs[radius, radius]
     if still == 0 or costs.flat[best] > (1.0 - share) * still:  # nothing changed, or too little
         return 0, 0
+    if spread > 0.0:
+        before, after = tile_costs[:, :, radius, radius], tile_costs[:, :, dy, dx]
+        explained = np.count_nonzero((before > 0) & (after <= (1.0 - 0.5 * share) * before))
+        if explained < spread * _TILES * _TILES:  # seen in too few places: an object's own
+            return 0, 0
     return dx - radius, dy - radius
 
 
@@ -109,10 +127,11 @@ def search_radius(width: int, radius: int, reach: float | None = None) -> int:
 
 
 @kernel()
-def _translation_costs(previous, current, radius, stride):
+def _translation_costs(previous, current, radius, stride, tiles):
     """Sum of ``|current[y, x] - previous[y - dy, x - dx]|`` over every ``stride``-th row (all
-    of its columns away from the borders), per translation, indexed ``[dy + radius,
-    dx + radius]``, in units of 1/4096 of the intensity scale.
+    of its columns away from the borders), per tile and translation, indexed ``[tile row,
+    tile column, dy + radius, dx + radius]``, in units of 1/4096 of the intensity scale. The
+    compared part of the frame is cut into ``tiles`` x ``tiles`` tiles of about equal size.
 
     The frames are rounded to those units first: integer sums do not depend on the order
     they are added in, so the loop is vectorised and the result is the same on every machine.
@@ -120,23 +139,26 @@ def _translation_costs(previous, current, radius, stride):
     h, w = current.shape
     n = 2 * radius + 1
     m = w - 2 * radius  # the columns compared
-    costs = np.zeros((n, n), np.int64)
+    costs = np.zeros((tiles, tiles, n, n), np.int64)
     here = np.empty(w, np.int32)
     around = np.empty((n, w), np.int32)
     for y in range(radius, h - radius, stride):
+        row = (y - radius) * tiles // (h - 2 * radius)
         _levels(current[y], here)
         for j in range(n):
             _levels(previous[y + radius - j], around[j])
-        middle = here[radius:radius + m]
-        for j in range(n):
-            for i in range(n):
-                # sliced so that the loop's indices start at zero: it is then vectorised
-                source = around[j, n - 1 - i:n - 1 - i + m]
-                total = 0
-                for x in range(m):
-                    d = middle[x] - source[x]
-                    total += d if d >= 0 else -d
-                costs[j, i] += total
+        for column in range(tiles):
+            start, stop = column * m // tiles, (column + 1) * m // tiles
+            middle = here[radius + start:radius + stop]
+            for j in range(n):
+                for i in range(n):
+                    # sliced so that the loop's indices start at zero: it is then vectorised
+                    source = around[j, n - 1 - i + start:n - 1 - i + stop]
+                    total = 0
+                    for x in range(stop - start):
+                        d = middle[x] - source[x]
+                        total += d if d >= 0 else -d
+                    costs[row, column, j, i] += total
     return costs
 
 

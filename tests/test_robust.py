@@ -109,12 +109,10 @@ def test_translation_patterns_camera_lighting_and_noise_stay_silent(case):
 @pytest.mark.parametrize("case", ["translate-disk-dark-c0.6-h2px", "drive-day-straight",
                                   "handheld-desk-sweep"])
 def test_translation_and_driving_are_silenced_by_the_approach_gate(case):
-    # without stabilisation, which takes a lone translating disk out before the gate sees it
-    assert not _quiet(_run(case, **NO_GATE, **NO_STABILISATION)[1])
-
-
-def test_a_lone_translation_is_taken_out_by_stabilisation():
-    assert _quiet(_run("translate-disk-dark-c0.6-h2px", **NO_GATE)[1])
+    # what the stabilisation leaves of them is the gate's: a lone object's drift is its own
+    # motion (tests/test_stabilisation.py), forward motion expands, the desk's props slide over
+    # the wall the stabilisation holds still
+    assert not _quiet(_run(case, **NO_GATE)[1])
 
 
 @pytest.mark.parametrize("case", ["loom-dark-c0.3-over-texture-h1px",

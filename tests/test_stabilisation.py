@@ -38,6 +38,46 @@ def test_an_object_moving_over_a_still_textured_scene_is_not_the_background():
     assert background_shift(before, shift_image(before, 2, 0, border=before), 3, 0.5) == (2, 0)
 
 
+def test_an_object_drifting_over_a_plain_scene_is_not_the_background():
+    # over a plain wall the drifting patch is all that changes, so its own translation explains
+    # the whole frame's change: only the tiles tell that nothing else moved with it
+    before = np.full((120, 160), 0.5)
+    after = before.copy()
+    patch = texture((30, 30), seed=2, blur=1.0)
+    before[40:70, 50:80] = patch
+    after[40:70, 52:82] = patch
+    assert background_shift(before, after, 3, 0.5) == (2, 0)
+    assert background_shift(before, after, 3, 0.5, spread=0.5) == (0, 0)
+    # a pan moves in every tile, and is still found
+    scene = texture()
+    assert background_shift(scene, shift_image(scene, 2, -1, border=scene), 3, 0.5,
+                            spread=0.5) == (2, -1)
+
+
+def _shifts(case, spread, scale=None):
+    """Frames of a suite case in which the default's search accepts a translation."""
+    scene, p = make_case(case, scale=scale), preset("default")
+    frames = [f.astype(np.float64) / 255.0 for f in scene.frames]
+    radius = search_radius(frames[0].shape[1], p.stabilise_radius, p.stabilise_reach)
+    return sum(background_shift(a, b, radius, p.stabilise_share, spread) != (0, 0)
+               for a, b in zip(frames, frames[1:]))
+
+
+def test_near_misses_keep_their_drift_and_shaken_cameras_their_stabilisation():
+    assert preset("default").stabilise_spread == 0.5
+    # a disk growing as it drifts past over a plain background: in a third of the frames its
+    # drift explained most of the frame's change, and was taken out there, so that the disk
+    # grew as if it came straight at us
+    assert _shifts("nearmiss-disk-dark-right", 0.0) > 20
+    assert _shifts("nearmiss-disk-dark-right", 0.5) == 0
+    # drawn at 480x360, a disk growing at the centre: along the few rows the search compares,
+    # its top and bottom edges looked like a vertical translation
+    assert _shifts("loom-dark-c0.5-d12-center", 0.0, scale=3) > 20
+    assert _shifts("loom-dark-c0.5-d12-center", 0.5, scale=3) == 0
+    for case in ("loom-dark-c0.6-shake-3px", "loom-dark-c0.5-over-stripes-h2px"):
+        assert _shifts(case, 0.5) == _shifts(case, 0.0) > 50
+
+
 def test_the_search_radius_grows_with_the_frame_s_width():
     assert [search_radius(w, 3, 1 / 64) for w in (80, 160, 192, 216, 320, 432, 480)] == [
         3, 3, 3, 4, 5, 7, 8]

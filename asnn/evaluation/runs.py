@@ -34,6 +34,8 @@ ABLATIONS = {
     "no repeated-frame hold": "asnn:robust/skip_repeats=false",
     "no background stabilisation": "asnn:robust/stabilise=false",
     "the stabilisation's search fixed at 3 px at any width": "asnn:robust/stabilise_reach=none",
+    "the stabilisation's translation judged on the whole frame only": (
+        "asnn:robust/stabilise_spread=0"),
     "no contrast gain control": "asnn:robust/contrast_gain=none",
     "OFF-led map only (no ON-led mirror)": "asnn:robust/w1_on=0/w2_off=0",
     "no approach gate (u sums every object)": "asnn:robust/approach_gate=false",
