@@ -11,9 +11,10 @@ holds still [2]_.
 
 This stage does the same at the photoreceptors. :func:`background_shift` finds the whole-pixel
 translation, within a few pixels, that best maps the previous frame onto the current one, and
-accepts it only when it explains most of the frame's change: a pan, a shake or a sliding
-background, not an approaching object or the camera's own forward motion, whose images expand.
-The photoreceptors then measure each frame's change against the previous frame moved by that
+accepts it only when it explains most of the frame's change, and part of it in at least half
+of the frame's tiles: a pan, a shake or a sliding background, not an approaching object or the
+camera's own forward motion, whose images expand, nor an object drifting over a plain
+background, which moves only where it is. The photoreceptors then measure each frame's change against the previous frame moved by that
 translation (:func:`shift_image`): the background's motion leaves them nearly silent, while an
 object that does not move with it changes as if it moved against it, which is the motion the
 rest of the retina sees. The temporal filter's state is not moved: it stays where the frame's
