@@ -356,9 +356,13 @@ class ASNN:
         self.periods.append(elapsed)
         background = None
         if p.stabilise:
-            radius = search_radius(lum.shape[1], p.stabilise_radius, p.stabilise_reach)
+            width = lum.shape[1]
+            radius = search_radius(width, p.stabilise_radius, p.stabilise_reach)
+            wider = (0 if p.stabilise_wider is None else
+                     search_radius(width, p.stabilise_radius, p.stabilise_reach,
+                                   p.stabilise_wider))
             shift = background_shift(self.previous, lum, radius, p.stabilise_share,
-                                     p.stabilise_spread)
+                                     p.stabilise_spread, wider)
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
                 background = shift_image(self.previous, *shift, border=lum)
         previous, self.previous, self.previous_blocks = self.previous, lum, blocks

@@ -102,6 +102,12 @@ class ASNNParams(BaseModel):
         "or a sliding background moves across the frame, an object drifting over a plain or "
         "still background only where it is (asnn.stabilisation.background_shift); 0: the whole "
         "frame's change only")
+    stabilise_wider: float | None = Field(
+        None, gt=1, le=16, description="where the best translation lies on the search's edge, "
+        "search again up to this many times the radius (at most 16 px) and take the wider "
+        "search's best where it leaves a tenth less of the change: a shaken camera's image "
+        "jumps by up to twice the shake from frame to frame (asnn.stabilisation."
+        "background_shift); None: one search")
 
     # --- input and photoreceptors (paper eq. 1) ---
     target_polarity: Literal["dark", "light"] = Field(
@@ -386,7 +392,7 @@ PRESETS["light"] = PRESETS["reference32"].model_copy(update={"target_polarity": 
 # has the parameter that switches it off
 PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     skip_repeats=True,
-    stabilise=True, stabilise_reach=1 / 64,
+    stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0,
     contrast_gain=0.005,
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale

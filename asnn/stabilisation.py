@@ -43,10 +43,11 @@ _SAMPLES = 4096  # about this many pixels are compared per candidate translation
 _LEVELS = 4096  # the frames are compared in steps of 1/4096 of their [0, 1] scale
 _MAX_RADIUS = 16  # pixels per frame: the search costs (2 r + 1)^2 comparisons per sample
 _TILES = 4  # the frame is also judged in 4 x 4 tiles (background_shift's spread)
+_WIDER_GAIN = 0.9  # a wider search's best is taken where it leaves a tenth less difference
 
 
 def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
-                     share: float, spread: float = 0.0) -> tuple[int, int]:
+                     share: float, spread: float = 0.0, wider: int = 0) -> tuple[int, int]:
     """The background's translation between two frames, in whole pixels, or ``(0, 0)``.
 
     For every translation ``(dx, dy)`` with ``|dx|, |dy| <= radius``, the mean absolute
@@ -62,6 +63,14 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
     camera). Half the share, because a tile also holds what moves otherwise: a prop nearer the
     camera, which a hand-held camera's sway moves farther than the wall behind it.
 
+    With ``wider``, where the best translation lies on the search's edge, the search is made
+    again up to ``wider`` pixels, and its best is taken where it leaves clearly less of the
+    difference (a tenth less) than the best within ``radius``. A shaken camera's image jumps by
+    up to twice the shake's amplitude from one frame to the next, beyond a radius that serves
+    pans and sliding backgrounds; the margin keeps the first search's choice where costs are
+    about equal along a line (stripes, whose motion along them is free), so that the wider
+    search changes nothing but the jumps beyond the radius.
+
     Parameters
     ----------
     previous, current : ndarray (H, W)
@@ -74,6 +83,9 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
         Smallest fraction of the 16 tiles in which it must explain ``share / 2`` of the tile's
         difference, in [0, 1]; a tile without change or without a sampled row never counts.
         0 (the default): the whole frame's difference only.
+    wider : int, optional
+        Radius of the second search, pixels per frame, made where the first one's best lies on
+        its edge; at most ``radius`` (the default, 0): one search.
 
     Returns
     -------
@@ -84,13 +96,46 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
     h, w = current.shape
     if h <= 2 * radius or w <= 2 * radius:
         return 0, 0
+    tile_costs = _search(previous, current, radius)
+    if wider > radius and h > 2 * wider and w > 2 * wider and _on_edge(tile_costs):
+        wide_costs = _search(previous, current, wider)
+        costs = wide_costs.sum(axis=(0, 1))
+        inner = costs[wider - radius:wider + radius + 1, wider - radius:wider + radius + 1]
+        if costs.min() < _WIDER_GAIN * inner.min():
+            tile_costs = wide_costs
+    return _accepted(tile_costs, share, spread)
+
+
+def _search(previous, current, radius):
+    """The per-tile costs of every translation up to ``radius`` (:func:`_translation_costs`),
+    on every ``stride``-th row so that about 4096 pixels are compared."""
+    h, w = current.shape
     stride = max(1, round(h * (w - 2 * radius) / _SAMPLES))
-    tile_costs = _translation_costs(previous, current, radius, stride, _TILES)
+    return _translation_costs(previous, current, radius, stride, _TILES)
+
+
+def _best(costs):
+    """Index ``(dy + radius, dx + radius)`` of the smallest cost, the first of equal ones in
+    row-major order."""
+    return divmod(int(np.argmin(costs)), costs.shape[1])
+
+
+def _on_edge(tile_costs):
+    """Whether the best translation of a search lies on its edge."""
+    n = tile_costs.shape[-1]
+    dy, dx = _best(tile_costs.sum(axis=(0, 1)))
+    return dy in (0, n - 1) or dx in (0, n - 1)
+
+
+def _accepted(tile_costs, share, spread):
+    """The best translation of a search, ``(dx, dy)``, if it explains ``share`` of the frame's
+    change and ``share / 2`` of the change in ``spread`` of its tiles, else ``(0, 0)``
+    (:func:`background_shift`)."""
+    radius = tile_costs.shape[-1] // 2
     costs = tile_costs.sum(axis=(0, 1))
-    best = int(np.argmin(costs))  # the first of equal ones, in row-major order
-    dy, dx = divmod(best, 2 * radius + 1)
+    dy, dx = _best(costs)
     still = costs[radius, radius]
-    if still == 0 or costs.flat[best] > (1.0 - share) * still:  # nothing changed, or too little
+    if still == 0 or costs[dy, dx] > (1.0 - share) * still:  # nothing changed, or too little
         return 0, 0
     if spread > 0.0:
         before, after = tile_costs[:, :, radius, radius], tile_costs[:, :, dy, dx]
@@ -100,7 +145,8 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
     return dx - radius, dy - radius
 
 
-def search_radius(width: int, radius: int, reach: float | None = None) -> int:
+def search_radius(width: int, radius: int, reach: float | None = None,
+                  factor: float = 1.0) -> int:
     """The translation :func:`background_shift` searches, pixels per frame, for frames
     ``width`` pixels wide: ``radius``, or more where ``reach`` asks for a fraction of the width.
 
@@ -113,18 +159,21 @@ def search_radius(width: int, radius: int, reach: float | None = None) -> int:
     width : int
         Width of the frames, pixels.
     radius : int
-        The smallest radius, pixels per frame.
+        The smallest radius, pixels per frame (at most 16).
     reach : float, optional
         The radius as a fraction of ``width``, rounded up, at most 16 px (the search's cost
         grows with the radius squared); None: ``radius`` at any width.
+    factor : float, optional
+        That radius multiplied by this, rounded up, at most 16 px: the wider search's
+        (``background_shift``'s ``wider``).
 
     Returns
     -------
     int
     """
-    if reach is None:
-        return radius
-    return max(radius, min(math.ceil(reach * width - 1e-9), _MAX_RADIUS))
+    if reach is not None:
+        radius = max(radius, min(math.ceil(reach * width - 1e-9), _MAX_RADIUS))
+    return min(math.ceil(factor * radius - 1e-9), _MAX_RADIUS)
 
 
 @kernel()

@@ -94,6 +94,31 @@ def test_the_search_radius_grows_with_the_frame_s_width():
     assert background_shift(before, after, 3, 0.5) == (0, 0)
 
 
+def test_a_jump_beyond_the_radius_is_found_by_the_wider_search():
+    assert search_radius(320, 3, 1 / 64, 2.0) == 10
+    assert search_radius(480, 3, 1 / 64, 2.0) == 16  # at most 16 px
+    before = texture()
+    after = shift_image(before, 5, -4, border=texture(seed=1))
+    # within 3 px the best lies on the search's edge, and explains too little
+    assert background_shift(before, after, 3, 0.5) == (0, 0)
+    assert background_shift(before, after, 3, 0.5, wider=6) == (5, -4)
+    # within the radius the wider search changes nothing, not even where it is made
+    for dx, dy in ((3, 0), (-2, 3), (1, 1)):
+        after = shift_image(before, dx, dy, border=texture(seed=1))
+        assert background_shift(before, after, 3, 0.5, wider=6) == (dx, dy)
+
+
+def test_the_wider_search_keeps_the_first_choice_where_costs_tie_along_stripes():
+    # vertical stripes sliding sideways: every vertical shift costs the same, and the first
+    # search takes the first of them, on its edge; the wider search finds no clearly better one
+    x = np.arange(160)
+    before = np.tile(0.5 + 0.4 * np.sin(2 * np.pi * x / 16.0), (120, 1)).astype(np.float32)
+    after = shift_image(before, 2, 0, border=before)
+    first = background_shift(before, after, 3, 0.5)
+    assert first[0] == 2 and abs(first[1]) == 3
+    assert background_shift(before, after, 3, 0.5, wider=6) == first
+
+
 def test_the_share_a_translation_must_explain():
     # the upper half pans, the lower half changes into another texture: the pan explains a
     # part of the frame's change (about a third), not most of it

@@ -36,6 +36,8 @@ ABLATIONS = {
     "the stabilisation's search fixed at 3 px at any width": "asnn:robust/stabilise_reach=none",
     "the stabilisation's translation judged on the whole frame only": (
         "asnn:robust/stabilise_spread=0"),
+    "the stabilisation's search made once (no wider search at its edge)": (
+        "asnn:robust/stabilise_wider=none"),
     "no contrast gain control": "asnn:robust/contrast_gain=none",
     "OFF-led map only (no ON-led mirror)": "asnn:robust/w1_on=0/w2_off=0",
     "no approach gate (u sums every object)": "asnn:robust/approach_gate=false",
