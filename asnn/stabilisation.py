@@ -10,7 +10,8 @@ shifts move as a whole [1]_, and the eye's own movements are compensated so that
 holds still [2]_.
 
 This stage does the same at the photoreceptors. :func:`background_shift` finds the whole-pixel
-translation, within a few pixels, that best maps the previous frame onto the current one, and
+translation, within a few pixels (searched again farther where the best lies at the search's
+edge: a shaken camera's jolts), that best maps the previous frame onto the current one, and
 accepts it only when it explains most of the frame's change, and part of it in at least half
 of the frame's tiles: a pan, a shake or a sliding background, not an approaching object or the
 camera's own forward motion, whose images expand, nor an object drifting over a plain
