@@ -187,6 +187,7 @@ class ASNN:
         self.shape: tuple[int, int] | None = None
         self.previous: np.ndarray | None = None
         self.previous_blocks: np.ndarray | None = None
+        self._search_radii = (0, 0)  # the stabilisation's search and wider search, pixels
         self.history: deque[np.ndarray] = deque(maxlen=self.params.n_p)
         self.stages_on: np.ndarray | None = None
         self.stages_off: np.ndarray | None = None
@@ -332,6 +333,15 @@ class ASNN:
             if self.stages_on is not None:
                 banded.settle((self.stages_on, self.stages_off))
 
+    def _stabilisation_radii(self, width: int) -> tuple[int, int]:
+        """The background stabilisation's search radius and its wider search's (0: none),
+        pixels per frame, on a grid ``width`` pixels wide (:mod:`asnn.stabilisation`)."""
+        p = self.params
+        radius = search_radius(width, p.stabilise_radius, p.stabilise_reach)
+        wider = (0 if p.stabilise_wider is None else
+                 search_radius(width, p.stabilise_radius, p.stabilise_reach, p.stabilise_wider))
+        return radius, wider
+
     def _take(self, frame: np.ndarray, t: float | None) -> "_Frame":
         """The first part of a step: the frame's luminance, whether it is new, and P."""
         lum = self._luminance(frame)
@@ -342,6 +352,8 @@ class ASNN:
         blocks = self._blocks(lum) if p.skip_repeats else None
         if self.previous is None:
             self.previous, self.previous_blocks = lum, blocks
+            if p.stabilise:  # the stream's grid keeps this width
+                self._search_radii = self._stabilisation_radii(lum.shape[1])
             self.stages_on = np.zeros((p.n_slow + 2, *lum.shape), self.dtype)
             self.stages_off = np.zeros_like(self.stages_on)
             self._stamp = stamp
@@ -356,11 +368,7 @@ class ASNN:
         self.periods.append(elapsed)
         background = None
         if p.stabilise:
-            width = lum.shape[1]
-            radius = search_radius(width, p.stabilise_radius, p.stabilise_reach)
-            wider = (0 if p.stabilise_wider is None else
-                     search_radius(width, p.stabilise_radius, p.stabilise_reach,
-                                   p.stabilise_wider))
+            radius, wider = self._search_radii
             shift = background_shift(self.previous, lum, radius, p.stabilise_share,
                                      p.stabilise_spread, wider)
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing

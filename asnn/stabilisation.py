@@ -98,13 +98,14 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
     if h <= 2 * radius or w <= 2 * radius:
         return 0, 0
     tile_costs = _search(previous, current, radius)
-    if wider > radius and h > 2 * wider and w > 2 * wider and _on_edge(tile_costs):
-        wide_costs = _search(previous, current, wider)
-        costs = wide_costs.sum(axis=(0, 1))
-        inner = costs[wider - radius:wider + radius + 1, wider - radius:wider + radius + 1]
-        if costs.min() < _WIDER_GAIN * inner.min():
-            tile_costs = wide_costs
-    return _accepted(tile_costs, share, spread)
+    costs = tile_costs.sum(axis=(0, 1))
+    if wider > radius and h > 2 * wider and w > 2 * wider and _on_edge(costs):
+        wide_tile_costs = _search(previous, current, wider)
+        wide_costs = wide_tile_costs.sum(axis=(0, 1))
+        inner = wide_costs[wider - radius:wider + radius + 1, wider - radius:wider + radius + 1]
+        if wide_costs.min() < _WIDER_GAIN * inner.min():
+            tile_costs, costs = wide_tile_costs, wide_costs
+    return _accepted(tile_costs, costs, share, spread)
 
 
 def _search(previous, current, radius):
@@ -121,19 +122,18 @@ def _best(costs):
     return divmod(int(np.argmin(costs)), costs.shape[1])
 
 
-def _on_edge(tile_costs):
-    """Whether the best translation of a search lies on its edge."""
-    n = tile_costs.shape[-1]
-    dy, dx = _best(tile_costs.sum(axis=(0, 1)))
+def _on_edge(costs):
+    """Whether the best translation of a search (its whole-frame costs) lies on its edge."""
+    n = costs.shape[-1]
+    dy, dx = _best(costs)
     return dy in (0, n - 1) or dx in (0, n - 1)
 
 
-def _accepted(tile_costs, share, spread):
+def _accepted(tile_costs, costs, share, spread):
     """The best translation of a search, ``(dx, dy)``, if it explains ``share`` of the frame's
     change and ``share / 2`` of the change in ``spread`` of its tiles, else ``(0, 0)``
-    (:func:`background_shift`)."""
-    radius = tile_costs.shape[-1] // 2
-    costs = tile_costs.sum(axis=(0, 1))
+    (:func:`background_shift`); ``costs`` are the tiles' summed."""
+    radius = costs.shape[-1] // 2
     dy, dx = _best(costs)
     still = costs[radius, radius]
     if still == 0 or costs[dy, dx] > (1.0 - share) * still:  # nothing changed, or too little
