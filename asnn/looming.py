@@ -42,8 +42,8 @@ import numpy as np
 from ._fast import _area_fast, _area_table, _reflect
 from ._jit import kernel
 
-__all__ = ["Expansion", "region_expansion", "scene_expansion", "moved_by_expansion",
-           "rig_pixels", "RIG_WEIGHT"]
+__all__ = ["Expansion", "region_expansion", "region_and_rim_expansion", "rim_scaled",
+           "scene_expansion", "moved_by_expansion", "rig_pixels", "RIG_WEIGHT"]
 
 _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
 _MAX_SIDE = 64  # pixels: a larger box is area-averaged down to this before the fit
@@ -123,9 +123,50 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     .. [2] B. K. P. Horn, Y. Fang, I. Masaki, "Hierarchical framework for direct gradient-based
        time-to-contact estimation", IEEE Intelligent Vehicles Symposium, 2009, pp. 1394-1400.
     """
+    return _fits(previous, current, box, background, exclude, None)[0]
+
+
+def region_and_rim_expansion(previous: np.ndarray, current: np.ndarray,
+                             box: tuple[int, int, int, int], rim: np.ndarray,
+                             background: np.ndarray | None = None,
+                             exclude: np.ndarray | None = None
+                             ) -> tuple[Expansion | None, Expansion | None]:
+    """:func:`region_expansion` of a box, and of the same box over its object's rim alone, in
+    one pass over its pixels.
+
+    The second fit leaves out, besides what the first leaves out, every pixel of the box that
+    ``rim`` does not mark: it is ``region_expansion(previous, current, box, background, ~rim |
+    exclude)`` bit for bit where the box is fitted at full resolution. Where it is
+    area-averaged, a pixel of the smaller box counts for the rim where the pixel at its centre
+    is ``rim`` (the rim is a smooth region, the attention's: its share of each pixel's area
+    would cost the fit half its time again). :func:`rim_scaled` combines the two.
+
+    Parameters
+    ----------
+    previous, current, box, background, exclude
+        As for :func:`region_expansion`.
+    rim : ndarray (H, W) of bool
+        The object's pixels (the model's attended mask ``M_a M_d``).
+
+    Returns
+    -------
+    (Expansion or None, Expansion or None)
+        The box's fit and the rim's; each None as :func:`region_expansion` gives None.
+    """
+    return _fits(previous, current, box, background, exclude, rim)
+
+
+
+def _rim_sampled(rim: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``rim`` (bool) sampled at the centres of a grid of ``size`` (W, H) pixels."""
+    return cv2.resize(rim.view(np.uint8), size, interpolation=cv2.INTER_NEAREST_EXACT).view(
+        np.bool_)
+
+def _fits(previous, current, box, background, exclude, rim):
+    """:func:`region_and_rim_expansion` (``rim`` None: the rim's fit None)."""
     x0, y0, x1, y1 = box
     if x1 - x0 < _MIN_SIDE or y1 - y0 < _MIN_SIDE:
-        return None
+        return None, None
     # without a background every pixel counts: |after - before| < itself is never true
     reference = previous if background is None else background
     skip = _NO_SKIP if exclude is None or not exclude[y0:y1, x0:x1].any() else None
@@ -134,27 +175,63 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
         step = 1.0
         if skip is None:
             skip = np.ascontiguousarray(exclude[y0:y1, x0:x1])
-        solved, a, b, c, d, fit = _solve_expansion(
-            previous[y0:y1, x0:x1], current[y0:y1, x0:x1], reference[y0:y1, x0:x1], skip,
-            _RIDGE)
+        # the rim's pixels: also kept by the box (the kernel asks both)
+        keep = _NO_SKIP if rim is None else np.ascontiguousarray(rim[y0:y1, x0:x1])
+        fits = _solve_expansion(previous[y0:y1, x0:x1], current[y0:y1, x0:x1],
+                                reference[y0:y1, x0:x1], skip, keep, _RIDGE)
     else:
         size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
         if skip is None:
             skip = cv2.resize(exclude[y0:y1, x0:x1].astype(np.float32), size,
                               interpolation=cv2.INTER_AREA) > 0.25
+        keep = _NO_SKIP if rim is None else _rim_sampled(rim[y0:y1, x0:x1], size)
         if _area_fast((x1 - x0, y1 - y0), size):
             before, after, reference = (
                 cv2.resize(np.ascontiguousarray(image[y0:y1, x0:x1]), size,
                            interpolation=cv2.INTER_AREA)
                 for image in (previous, current, reference))
-            solved, a, b, c, d, fit = _solve_expansion(before, after, reference, skip, _RIDGE)
+            fits = _solve_expansion(before, after, reference, skip, keep, _RIDGE)
         else:
-            solved, a, b, c, d, fit = _solve_area_averaged(previous, current, reference, x0, y0,
-                                                      x1, y1, *size, skip, _RIDGE)
-    if not solved:
-        return None
-    return Expansion(a * step, b * step, c, d, fit)
+            fits = _solve_area_averaged(previous, current, reference, x0, y0, x1, y1, *size,
+                                        skip, keep, _RIDGE)
+    return tuple(Expansion(a * step, b * step, c, d, fit) if solved else None
+                 for solved, a, b, c, d, fit in (fits[:6], fits[6:]))
 
+
+
+def rim_scaled(box: Expansion | None, rim: Expansion | None) -> Expansion | None:
+    """A box's expansion scaled up to the rate its object's rim alone reads.
+
+    Where the background slides (a translation the stabilisation takes out), a box fitted by
+    :func:`region_expansion` holds the pattern sliding past its object besides the object. The
+    pattern's pixels that the translation explains are left out, but those it cannot (where
+    the object's outline occludes the pattern) stay in, and they read as a surface that does
+    not expand: the box's rate comes out short, several tenths of the object's over a pattern
+    that moves several pixels a frame. Its drift is diluted alike, so the ratio of drift to
+    expansion, the path's offset, stays. Fitted over the object's attended pixels alone (its
+    rim, where the approach map sees it), the rate is not diluted. Where the rim reads the
+    faster expansion, this takes the rim's rate and scales the box's drift by as much: the
+    time to contact the rim's, the offset the box's. It never lengthens a time to contact, and
+    it never turns a box that does not expand into one that does.
+
+    Parameters
+    ----------
+    box : Expansion or None
+        The box's fit.
+    rim : Expansion or None
+        The fit of the same box over the object's attended pixels only.
+
+    Returns
+    -------
+    Expansion or None
+        ``box`` with ``rate`` and ``drift_x``, ``drift_y`` scaled by ``rim.rate / box.rate``
+        where ``rim.rate > box.rate > 0``; ``box`` itself otherwise (its brightness and fit
+        as they are).
+    """
+    if box is None or rim is None or not rim.rate > box.rate > 0.0:
+        return box
+    k = rim.rate / box.rate
+    return box._replace(drift_x=box.drift_x * k, drift_y=box.drift_y * k, rate=rim.rate)
 
 # the camera's rig: running means of each frame and of each pixel's frame-to-frame change with
 # this weight per frame (about a second at 20 frames/s)
@@ -282,18 +359,18 @@ def moved_by_expansion(previous: np.ndarray, scene: Expansion,
 
 
 @kernel(error_model="numpy")
-def _solve_expansion(before, after, background, skip, ridge):
+def _solve_expansion(before, after, background, skip, keep, ridge):
     """``(solved, A, B, C, D, fit)`` of :func:`region_expansion` over two equal images,
     leaving out the pixels where ``after`` is nearer ``background`` than ``before``, and those
-    ``skip`` marks (an array of the images' shape, or empty: none).
+    ``skip`` marks (an array of the images' shape, or empty: none); followed by the same six
+    of the fit over those of its pixels ``keep`` marks (an array of the images' shape; empty:
+    no second fit, ``solved`` False).
 
     One pass over the pixels: the Sobel derivatives of the mean (OpenCV's 3x3 kernels, scaled
     by 1/8, reflect-101 border) and the temporal difference, in the images' precision as the
-    NumPy expressions would compute them; the normal equations accumulated in float64; then
-    solved by Gaussian elimination with partial pivoting. ``solved`` is False without a
-    gradient to measure. ``fit`` is ``1 - RSS / TSS``: the residual sum of squares of the
-    solution over the fitted pixels (from the unregularised normal equations), against the
-    sum of squares of ``-E_t`` about its mean (0 where that is 0).
+    NumPy expressions would compute them; the normal equations accumulated in float64 (the
+    second fit's over its pixels in the same order, so it is what a fit of those pixels alone
+    gives, bit for bit); then solved by :func:`_solve_normal`.
     """
     h, w = before.shape
     mean = np.empty((h, w), np.float64)  # exact: the float32 mean, widened
@@ -301,9 +378,10 @@ def _solve_expansion(before, after, background, skip, ridge):
     for y in range(h):
         for x in range(w):
             mean[y, x] = half * (before[y, x] + after[y, x])
-    normal = np.zeros((4, 5))  # [N | rhs], the upper triangle accumulated
-    count, total, squares = 0, 0.0, 0.0  # of the fitted pixels' E_t
+    normal = np.zeros((2, 4, 5))  # [N | rhs] of each fit, the upper triangle accumulated
+    sums = np.zeros((2, 3))  # count, sum and sum of squares of each fit's E_t
     masked = skip.size > 0
+    second = keep.size > 0
     for y in range(h):
         up, down = _reflect(y - 1, h), _reflect(y + 1, h)
         ry = y - 0.5 * (h - 1)
@@ -321,14 +399,30 @@ def _solve_expansion(before, after, background, skip, ridge):
                   + (mean[down, right] - mean[up, right])) / 8.0
             radial = (x - 0.5 * (w - 1)) * ex + ry * ey
             basis = (ex, ey, radial, -1.0)
-            count += 1
-            total += et
-            squares += et * et
-            for i in range(4):
-                bi = basis[i]
-                for j in range(i, 4):
-                    normal[i, j] += bi * basis[j]
-                normal[i, 4] -= bi * et
+            for f in range(2 if second and keep[y, x] else 1):
+                sums[f, 0] += 1.0
+                sums[f, 1] += et
+                sums[f, 2] += et * et
+                for i in range(4):
+                    bi = basis[i]
+                    for j in range(i, 4):
+                        normal[f, i, j] += bi * basis[j]
+                    normal[f, i, 4] -= bi * et
+    first = _solve_normal(normal[0], sums[0], ridge)
+    if not second:
+        return first + (False, 0.0, 0.0, 0.0, 0.0, 0.0)
+    return first + _solve_normal(normal[1], sums[1], ridge)
+
+
+@kernel(error_model="numpy", inline="always")
+def _solve_normal(normal, sums, ridge):
+    """``(solved, A, B, C, D, fit)`` from the accumulated normal equations ``normal`` (4x5,
+    upper triangle) and ``sums`` (count, sum and sum of squares of E_t): Gaussian elimination
+    with partial pivoting. ``solved`` is False without a gradient to measure. ``fit`` is
+    ``1 - RSS / TSS``: the residual sum of squares of the solution over the fitted pixels
+    (from the unregularised normal equations), against the sum of squares of ``-E_t`` about
+    its mean (0 where that is 0)."""
+    count, total, squares = sums[0], sums[1], sums[2]
     for i in range(4):
         for j in range(i):
             normal[i, j] = normal[j, i]
@@ -414,12 +508,13 @@ def _area_averages(images, y0, x0, xtab, ytab, rows, out):
 
 
 @kernel(error_model="numpy")
-def _solve_area_averaged(previous, current, background, x0, y0, x1, y1, w, h, skip, ridge):
+def _solve_area_averaged(previous, current, background, x0, y0, x1, y1, w, h, skip, keep,
+                         ridge):
     """:func:`_solve_expansion` over the box ``(x0, y0, x1, y1)`` of the three images
     area-averaged down to ``w`` x ``h`` as ``cv2.resize`` does (:func:`_area_averages`),
-    in one call, the tables made once; ``skip`` at the smaller size."""
+    in one call, the tables made once; ``skip`` and ``keep`` at the smaller size."""
     rows = np.empty((3, y1 - y0, w), previous.dtype)
     out = np.empty((3, h, w), previous.dtype)
     _area_averages((previous, current, background), y0, x0, _area_table(x1 - x0, w),
                    _area_table(y1 - y0, h), rows, out)
-    return _solve_expansion(out[0], out[1], out[2], skip, ridge)
+    return _solve_expansion(out[0], out[1], out[2], skip, keep, ridge)

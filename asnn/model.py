@@ -28,7 +28,8 @@ import numpy as np
 
 from . import _fast, _parallel, retina
 from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
-from .looming import RIG_WEIGHT, moved_by_expansion, region_expansion, rig_pixels, scene_expansion
+from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
+                      region_expansion, rig_pixels, rim_scaled, scene_expansion)
 from .motion_layers import motion_layers
 from .params import ASNNParams, preset
 from .response import Maps, Response, TrackReport
@@ -610,13 +611,19 @@ class ASNN:
                 float(regions.x[k]), float(regions.y[k]), float(regions.size[k]),
                 float(regions.mass[k]), (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
         tracks = self.tracker.update(observations, elapsed)
+        # where the background slides, each box is fitted over its object's rim too
+        rim = p.rim_expansion and frame.background is not None
         boxes, rates = [], []
         for k, tr in enumerate(tracks):
             x0, y0, x1, y1 = tr.box
             box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
                    min(int(math.ceil(y1)), h))
-            est = region_expansion(frame.previous, frame.lum, box, frame.background,
-                                   self._rig)
+            if rim:
+                est = rim_scaled(*region_and_rim_expansion(
+                    frame.previous, frame.lum, box, attended, frame.background, self._rig))
+            else:
+                est = region_expansion(frame.previous, frame.lum, box, frame.background,
+                                       self._rig)
             if est is not None:
                 # an object the frame's edge cuts is measured on its visible part: its drift
                 # and size, so its offset, are not the object's, whatever the fit

@@ -222,6 +222,12 @@ class ASNNParams(BaseModel):
     looming_margin: float = Field(
         0.25, ge=0, description="the expansion of an object is measured over its bounding box "
         "widened by this fraction of its larger side (plus 4 px) on every side")
+    rim_expansion: bool = Field(
+        False, description="where the stabilisation takes a background translation out, a "
+        "track's box is fitted again over its attended pixels alone (its rim, without the "
+        "pattern sliding past it), and where that reads the faster expansion the box's rate "
+        "and drift are scaled up to it (asnn.looming.rim_scaled): the time to contact the "
+        "rim's, the offset the box's; inert without stabilise")
     track_link: float = Field(1.0, gt=0, description="linking distance, in summed object sizes")
     track_missed: int = Field(3, ge=0, description="frames a track survives unseen")
     track_smoothing: float = Field(
@@ -392,7 +398,7 @@ PRESETS["light"] = PRESETS["reference32"].model_copy(update={"target_polarity": 
 # has the parameter that switches it off
 PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     skip_repeats=True,
-    stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0,
+    stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
     contrast_gain=0.005,
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale

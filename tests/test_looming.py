@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from asnn.looming import (RIG_WEIGHT, moved_by_expansion, region_expansion, rig_pixels,
+from asnn.looming import (RIG_WEIGHT, Expansion, moved_by_expansion,
+                          region_and_rim_expansion, region_expansion, rig_pixels, rim_scaled,
                           scene_expansion)
 from asnn.tracking import Observation, TargetTracker, Track, approaching
 from imageutil import texture, warp
@@ -105,6 +106,21 @@ def test_excluded_pixels_are_left_out_of_the_fit():
     assert region_expansion(previous, current, (10, 10, 150, 80), exclude=band) == \
         region_expansion(previous, current, (10, 10, 150, 80))
 
+
+
+def test_the_rim_scales_a_diluted_expansion_up_and_keeps_the_box_s_offset():
+    box = Expansion(drift_x=0.3, drift_y=-0.4, rate=0.02, brightness=0.01, fit=0.5)
+    scaled = rim_scaled(box, Expansion(9.0, 9.0, 0.05, 0.0, 0.9))
+    # the rim's rate, the box's drift scaled alike: drift / rate (the offset) stays
+    assert scaled.rate == 0.05
+    assert (scaled.drift_x, scaled.drift_y) == pytest.approx((0.75, -1.0))
+    assert (scaled.brightness, scaled.fit) == (box.brightness, box.fit)
+    # never a longer time to contact, never an expansion the box does not read
+    assert rim_scaled(box, Expansion(0.0, 0.0, 0.01, 0.0, 0.9)) is box
+    assert rim_scaled(box, None) is box
+    receding = box._replace(rate=-0.02)
+    assert rim_scaled(receding, Expansion(0.0, 0.0, 0.05, 0.0, 0.9)) is receding
+    assert rim_scaled(None, box) is None
 
 def _rig_means(frames):
     change, mean = np.zeros_like(frames[0]), frames[0].copy()
@@ -214,7 +230,7 @@ def test_the_fit_of_a_large_box_is_that_of_opencvs_area_averages():
                       for a in images]
         else:
             step = 1.0
-        solved, a, b, c, d, fit = _solve_expansion(*images, _NO_SKIP, _RIDGE)
+        solved, a, b, c, d, fit = _solve_expansion(*images, _NO_SKIP, _NO_SKIP, _RIDGE)[:6]
         return (a * step, b * step, c, d, fit) if solved else None
 
     rng = np.random.default_rng(17)
@@ -228,6 +244,38 @@ def test_the_fit_of_a_large_box_is_that_of_opencvs_area_averages():
         assert (None if got is None else tuple(got)) == with_opencv(previous, current, box,
                                                                     previous)
 
+
+
+def test_the_box_and_its_rim_in_one_pass_are_the_two_fits_bit_for_bit():
+    """region_and_rim_expansion gives the box's fit and the fit with every pixel off the rim
+    left out too, as two calls of region_expansion would, bit for bit, with and without pixels
+    to exclude and a background; where the box is area-averaged, with the rim sampled at the
+    centres of the smaller box's pixels: a rim over the whole box is the box, a rim off every
+    centre leaves nothing to fit."""
+    from asnn.looming import _MAX_SIDE
+
+    rng = np.random.default_rng(18)
+    averaged = 0
+    for i, (previous, current, background, box) in enumerate(_random_boxes(rng, 300)):
+        h, w = previous.shape
+        rim = rng.random((h, w)) < (0.2, 0.6)[i % 2]
+        exclude = None if i % 3 else rng.random((h, w)) < 0.1
+        reference = background if i % 4 else None
+        x0, y0, x1, y1 = box
+        whole = region_expansion(previous, current, box, reference, exclude)
+        got = region_and_rim_expansion(previous, current, box, rim, reference, exclude)
+        assert got[0] == whole
+        if max(x1 - x0, y1 - y0) <= _MAX_SIDE:
+            off = ~rim if exclude is None else ~rim | exclude
+            assert got[1] == region_expansion(previous, current, box, reference, off)
+            continue
+        averaged += 1
+        everywhere = np.ones_like(rim)
+        assert region_and_rim_expansion(previous, current, box, everywhere, reference,
+                                        exclude) == (whole, whole)
+        assert region_and_rim_expansion(previous, current, box, ~everywhere, reference,
+                                        exclude)[1] is None
+    assert averaged > 50
 
 def _obs(x, y, size=10.0, mass=1.0):
     return Observation(x, y, size, mass, (x - size, y - size, x + size, y + size))

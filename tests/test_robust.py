@@ -18,6 +18,7 @@ NO_PARTIAL_OVERLAP = dict(partial_overlap=False)
 NO_FIT_TEST = dict(overlap_fit_min=-1.0)
 NO_MOTION_LAYERS = dict(motion_layers=False)
 NO_RIG = dict(ignore_rig=False)
+NO_RIM = dict(rim_expansion=False)
 
 
 def _run(case, variant=0, perturbation=None, scale=None, **overrides):
@@ -155,6 +156,26 @@ def test_a_shaken_camera_s_jolts_beyond_the_radius_are_searched_for():
     assert _hit(*_run("loom-dark-c0.6-shake-3px", scale=2))
     assert not _hit(*_run("loom-dark-c0.6-shake-3px", scale=2, stabilise_wider=None))
 
+
+
+def test_an_approach_over_a_sliding_pattern_is_timed_by_its_rim():
+    # drawn at 320x240 the checkerboard slides 4 px a frame: where the disk's outline occludes
+    # it, the pattern's pixels stay in the box's fit and read as a surface that does not
+    # expand, so the box reads 1.5-3 s to contact where 0.4-1.2 s are left, and the disk never
+    # passes the approach test for long; its rim alone reads the faster expansion
+    assert preset("default").rim_expansion
+    assert _hit(*_run("loom-dark-c0.5-over-checker-diag2px", scale=2))
+    assert not _hit(*_run("loom-dark-c0.5-over-checker-diag2px", scale=2, **NO_RIM))
+
+
+def test_the_rim_warns_earlier_over_sliding_stripes_and_is_inert_where_nothing_slides():
+    case = "loom-light-c0.5-over-stripes-h2px"
+    assert _first(_run(case)[1]) < _first(_run(case, **NO_RIM)[1])
+    # no background translation taken out (a still background; a drive): response for
+    # response as without it
+    for case in ("loom-light-c0.6-d12-top", "drive-day-stopped-car"):
+        assert ([r.to_dict() for r in _run(case)[1]]
+                == [r.to_dict() for r in _run(case, **NO_RIM)[1]])
 
 @pytest.mark.parametrize("case", ["halt-dark-c0.6", "approach-recede-light-c0.6"])
 def test_the_warning_ends_when_the_approach_ends(case):
