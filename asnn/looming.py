@@ -345,10 +345,13 @@ def moved_by_expansion(previous: np.ndarray, scene: Expansion,
 
     Returns
     -------
-    ndarray (y1 - y0, x1 - x0), the dtype of ``previous``
+    ndarray (y1 - y0, x1 - x0), the dtype of ``previous`` (empty for an empty box: a track's
+    box clipped to the frame has none when the track has moved out of it)
     """
     h, w = previous.shape
     x0, y0, x1, y1 = box
+    if x1 <= x0 or y1 <= y0:  # OpenCV would read an empty size as the source's
+        return np.empty((max(y1 - y0, 0), max(x1 - x0, 0)), previous.dtype)
     s = 1.0 + scene.rate
     cx, cy = 0.5 * (w - 1), 0.5 * (h - 1)
     inverse = np.array([[1.0 / s, 0.0, cx + (x0 - cx - scene.drift_x) / s],

@@ -85,6 +85,16 @@ def test_the_scene_is_fitted_without_the_objects_boxes():
     assert moved_by_expansion(tex, scene, box).shape == (y1 - y0, x1 - x0)
 
 
+
+def test_an_empty_box_moved_by_the_scene_is_empty():
+    # a track's box clipped to the frame is empty once the track has moved out of it (seen on a
+    # real clip: the scene-relative refit then failed to broadcast the whole frame into it)
+    tex = _texture(100)
+    scene = Expansion(0.5, -0.2, 0.01, 0.0, 0.9)
+    assert moved_by_expansion(tex, scene, (100, 10, 100, 40)).shape == (30, 0)
+    assert moved_by_expansion(tex, scene, (104, 10, 100, 40)).shape == (30, 0)
+    assert moved_by_expansion(tex, scene, (10, 50, 40, 50)).shape == (0, 30)
+
 def test_excluded_pixels_are_left_out_of_the_fit():
     # an expanding surface behind a still, textured band along the bottom (a camera's hood):
     # fitted with the band, the box reads a slower expansion; without it, the surface's own
