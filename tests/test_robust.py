@@ -217,7 +217,12 @@ def test_a_near_miss_keeps_its_drift_through_the_stabilisation():
     # and the disk grew as if it came at us; the tile test leaves that drift in the maps
     case = dict(case="nearmiss-disk-dark-right", perturbation="double-size", scale=3)
     assert _quiet(_run(**case)[1])
-    assert not _quiet(_run(**case, stabilise_spread=0.0)[1])
+    # the rim's expansion off in both arms: in the frames whose drift the stabilisation takes
+    # out it scales the disk's estimates, and without the tile test the smoothed track then
+    # passes the approach test only from frame 65 on (60 without the rim), too late to warn:
+    # that would hide what the tile test does
+    assert _quiet(_run(**case, **NO_RIM)[1])
+    assert not _quiet(_run(**case, stabilise_spread=0.0, **NO_RIM)[1])
 
 
 @pytest.mark.parametrize("case", ["drive-day-cut-in-dark", "drive-day-turn-cut-in"])
