@@ -162,6 +162,7 @@ def _rim_sampled(rim: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return cv2.resize(rim.view(np.uint8), size, interpolation=cv2.INTER_NEAREST_EXACT).view(
         np.bool_)
 
+
 def _fits(previous, current, box, background, exclude, rim):
     """:func:`region_and_rim_expansion` (``rim`` None: the rim's fit None)."""
     x0, y0, x1, y1 = box
@@ -206,8 +207,8 @@ def rim_scaled(box: Expansion | None, rim: Expansion | None) -> Expansion | None
     :func:`region_expansion` holds the pattern sliding past its object besides the object. The
     pattern's pixels that the translation explains are left out, but those it cannot (where
     the object's outline occludes the pattern) stay in, and they read as a surface that does
-    not expand: the box's rate comes out short, several tenths of the object's over a pattern
-    that moves several pixels a frame. Its drift is diluted alike, so the ratio of drift to
+    not expand: the box's rate comes out short (0.4-0.5 of the object's over the suite's
+    patterns drawn at 320x240, sliding 4 px a frame). Its drift is diluted alike, so the ratio of drift to
     expansion, the path's offset, stays. Fitted over the object's attended pixels alone (its
     rim, where the approach map sees it), the rate is not diluted. Where the rim reads the
     faster expansion, this takes the rim's rate and scales the box's drift by as much: the
@@ -232,6 +233,7 @@ def rim_scaled(box: Expansion | None, rim: Expansion | None) -> Expansion | None
         return box
     k = rim.rate / box.rate
     return box._replace(drift_x=box.drift_x * k, drift_y=box.drift_y * k, rate=rim.rate)
+
 
 # the camera's rig: running means of each frame and of each pixel's frame-to-frame change with
 # this weight per frame (about a second at 20 frames/s)
