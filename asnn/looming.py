@@ -123,11 +123,17 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     .. [2] B. K. P. Horn, Y. Fang, I. Masaki, "Hierarchical framework for direct gradient-based
        time-to-contact estimation", IEEE Intelligent Vehicles Symposium, 2009, pp. 1394-1400.
     """
-    return _fits(previous, current, box, background, exclude, None)[0]
+    return region_and_rim_expansion(previous, current, box, None, background, exclude)[0]
+
+
+def _rim_sampled(rim: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``rim`` (bool) sampled at the centres of a grid of ``size`` (W, H) pixels."""
+    return cv2.resize(rim.view(np.uint8), size, interpolation=cv2.INTER_NEAREST_EXACT).view(
+        np.bool_)
 
 
 def region_and_rim_expansion(previous: np.ndarray, current: np.ndarray,
-                             box: tuple[int, int, int, int], rim: np.ndarray,
+                             box: tuple[int, int, int, int], rim: np.ndarray | None,
                              background: np.ndarray | None = None,
                              exclude: np.ndarray | None = None
                              ) -> tuple[Expansion | None, Expansion | None]:
@@ -145,26 +151,15 @@ def region_and_rim_expansion(previous: np.ndarray, current: np.ndarray,
     ----------
     previous, current, box, background, exclude
         As for :func:`region_expansion`.
-    rim : ndarray (H, W) of bool
-        The object's pixels (the model's attended mask ``M_a M_d``).
+    rim : ndarray (H, W) of bool, or None
+        The object's pixels (the model's attended mask ``M_a M_d``); None: the box's fit only.
 
     Returns
     -------
     (Expansion or None, Expansion or None)
-        The box's fit and the rim's; each None as :func:`region_expansion` gives None.
+        The box's fit and the rim's; each None as :func:`region_expansion` gives None (the
+        rim's also without ``rim``).
     """
-    return _fits(previous, current, box, background, exclude, rim)
-
-
-
-def _rim_sampled(rim: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """``rim`` (bool) sampled at the centres of a grid of ``size`` (W, H) pixels."""
-    return cv2.resize(rim.view(np.uint8), size, interpolation=cv2.INTER_NEAREST_EXACT).view(
-        np.bool_)
-
-
-def _fits(previous, current, box, background, exclude, rim):
-    """:func:`region_and_rim_expansion` (``rim`` None: the rim's fit None)."""
     x0, y0, x1, y1 = box
     if x1 - x0 < _MIN_SIDE or y1 - y0 < _MIN_SIDE:
         return None, None

@@ -612,18 +612,14 @@ class ASNN:
                 float(regions.mass[k]), (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
         tracks = self.tracker.update(observations, elapsed)
         # where the background slides, each box is fitted over its object's rim too
-        rim = p.rim_expansion and frame.background is not None
+        rim = attended if p.rim_expansion and frame.background is not None else None
         boxes, rates = [], []
         for k, tr in enumerate(tracks):
             x0, y0, x1, y1 = tr.box
             box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
                    min(int(math.ceil(y1)), h))
-            if rim:
-                est = rim_scaled(*region_and_rim_expansion(
-                    frame.previous, frame.lum, box, attended, frame.background, self._rig))
-            else:
-                est = region_expansion(frame.previous, frame.lum, box, frame.background,
-                                       self._rig)
+            est = rim_scaled(*region_and_rim_expansion(
+                frame.previous, frame.lum, box, rim, frame.background, self._rig))
             if est is not None:
                 # an object the frame's edge cuts is measured on its visible part: its drift
                 # and size, so its offset, are not the object's, whatever the fit
