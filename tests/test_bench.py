@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from asnn.evaluation.bench import THREAD_VARIABLES
@@ -161,7 +162,52 @@ def test_bench_times_the_default_preset_for_the_ratio(presets, timed):
     assert [r["speedup"] > 0 for r in rows if r["form"] == "straightforward"] == [True]
     # the default's cost against the published variant, timed in the same run
     assert [r["vs_published"] > 0 for r in rows if "vs_published" in r] == [True]
-    assert next(r for r in rows if "vs_published" in r)["preset"] == "robust"
+    default = next(r for r in rows if "vs_published" in r)
+    assert default["preset"] == "robust"
+    published = next(r for r in rows if r["preset"] == "reference32")
+    assert default["vs_published_apart"] == default["median_ms"] / published["median_ms"]
+
+
+def test_detectors_stepped_in_turn_take_each_frame_together_first_by_turns():
+    from asnn.evaluation.bench import time_in_turn
+
+    calls = []
+
+    class Recorder:
+        def __init__(self, name):
+            self.name = name
+
+        def step(self, frame):
+            calls.append((self.name, int(frame[0, 0])))
+
+    frames = np.arange(5, dtype=np.uint8)[:, None, None] * np.ones((1, 2, 2), np.uint8)
+    times = time_in_turn([lambda: Recorder("a"), lambda: Recorder("b")], frames, warmup=2)
+    # both take frame i before either takes i + 1, and who goes first alternates
+    assert calls == [("a", 0), ("b", 0), ("b", 1), ("a", 1), ("a", 2), ("b", 2),
+                     ("b", 3), ("a", 3), ("a", 4), ("b", 4)]
+    assert [len(t) for t in times] == [3, 3] and all((t >= 0).all() for t in times)
+
+
+def test_the_default_is_timed_against_the_published_variant_in_turn(monkeypatch):
+    """``vs_published`` comes from the two stepped in turn, not from the rows' medians."""
+    from asnn.evaluation import bench
+
+    rounds = []
+
+    def in_turn(makes, frames, warmup=2):
+        names = [make().params for make in makes]
+        rounds.append(names)
+        return [np.full(len(frames) - warmup, 3.0), np.full(len(frames) - warmup, 2.0)]
+
+    monkeypatch.setattr(bench, "time_in_turn", in_turn)
+    report = bench.run(sizes=[(48, 48)], frames=2, presets=["default"], models=("asnn",),
+                       straightforward=False)
+    from asnn.params import preset
+
+    assert rounds == [[preset("robust"), preset("reference32")]] * bench.TURN_ROUNDS
+    row = next(r for r in report["results"] if "vs_published" in r)
+    assert row["vs_published"] == 1.5
+    assert "1.50x the time of reference32 stepped in turn" in bench.format_table(report)
 
 
 def test_bench_rejects_an_unknown_preset(capsys, monkeypatch):
