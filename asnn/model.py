@@ -619,7 +619,8 @@ class ASNN:
             box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
                    min(int(math.ceil(y1)), h))
             est = rim_scaled(*region_and_rim_expansion(
-                frame.previous, frame.lum, box, rim, frame.background, self._rig))
+                frame.previous, frame.lum, box, rim, frame.background, self._rig),
+                max(box[2] - box[0], box[3] - box[1]), p.rim_motion_max)
             if est is not None:
                 # an object the frame's edge cuts is measured on its visible part: its drift
                 # and size, so its offset, are not the object's, whatever the fit

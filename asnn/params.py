@@ -228,6 +228,11 @@ class ASNNParams(BaseModel):
         "pattern sliding past it), and where that reads the faster expansion the box's rate "
         "and drift are scaled up to it (asnn.looming.rim_scaled): the time to contact the "
         "rim's, the offset the box's; inert without stabilise")
+    rim_motion_max: float | None = Field(
+        None, gt=0, description="with rim_expansion, the rim's rate counts only where the "
+        "motion it implies at the box's edge, in the looming fit's grid (at most 64 px a side), "
+        "is at most this many pixels a frame: the gradient fit's small-motion range "
+        "(asnn.looming.rim_scaled); None: at any motion")
     track_link: float = Field(1.0, gt=0, description="linking distance, in summed object sizes")
     track_missed: int = Field(3, ge=0, description="frames a track survives unseen")
     track_smoothing: float = Field(
@@ -399,6 +404,7 @@ PRESETS["light"] = PRESETS["reference32"].model_copy(update={"target_polarity": 
 PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     skip_repeats=True,
     stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
+    rim_motion_max=8.0,
     contrast_gain=0.005,
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale

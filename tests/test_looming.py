@@ -132,6 +132,18 @@ def test_the_rim_scales_a_diluted_expansion_up_and_keeps_the_box_s_offset():
     assert rim_scaled(receding, Expansion(0.0, 0.0, 0.05, 0.0, 0.9)) is receding
     assert rim_scaled(None, box) is None
 
+
+def test_the_rim_counts_only_within_the_fit_s_small_motion_range():
+    box = Expansion(drift_x=0.3, drift_y=-0.4, rate=0.02, brightness=0.01, fit=0.5)
+    rim = Expansion(0.0, 0.0, 0.2, 0.0, 0.9)
+    # a 40-px box: 0.2 * 40 / 2 = 4 px at its edge, at the limit; past it the box stands
+    assert rim_scaled(box, rim, 40, 4.0).rate == 0.2
+    assert rim_scaled(box, rim, 41, 4.0) is box
+    assert rim_scaled(box, rim, 41, None).rate == 0.2
+    # a box larger than 64 px is fitted on a 64-px grid: its motion there is what counts
+    assert rim_scaled(box, rim, 300, 6.4).rate == 0.2
+    assert rim_scaled(box, rim, 300, 6.3) is box
+
 def _rig_means(frames):
     change, mean = np.zeros_like(frames[0]), frames[0].copy()
     for before, now in zip(frames, frames[1:]):

@@ -2,6 +2,8 @@
 showing what the corresponding stage does by switching it off (the ablation specs of
 asnn.evaluation.runs)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -19,16 +21,20 @@ NO_FIT_TEST = dict(overlap_fit_min=-1.0)
 NO_MOTION_LAYERS = dict(motion_layers=False)
 NO_RIG = dict(ignore_rig=False)
 NO_RIM = dict(rim_expansion=False)
+NO_RIM_LIMIT = dict(rim_motion_max=None)
 
 
-def _run(case, variant=0, perturbation=None, scale=None, **overrides):
+def _run(case, variant=0, perturbation=None, scale=None, every=1, **overrides):
+    """The robust preset's responses to a case, on every ``every``-th frame (at its times)."""
     from asnn.evaluation.perturb import perturb_frame
 
     scene = make_case(case, variant, scale=scale)
     model = ASNN(preset("robust", **overrides))
     frames = (scene.frames if perturbation is None
               else [perturb_frame(f, perturbation, i) for i, f in enumerate(scene.frames)])
-    responses = [model.step(f, i / scene.fps) for i, f in enumerate(frames)]
+    # each response indexed by its frame's number in the case, as the labels count
+    responses = [dataclasses.replace(model.step(f, i / scene.fps), index=i)
+                 for i, f in enumerate(frames) if i % every == 0]
     return scene, responses
 
 
@@ -166,6 +172,19 @@ def test_an_approach_over_a_sliding_pattern_is_timed_by_its_rim():
     assert preset("default").rim_expansion
     assert _hit(*_run("loom-dark-c0.5-over-checker-diag2px", scale=2))
     assert not _hit(*_run("loom-dark-c0.5-over-checker-diag2px", scale=2, **NO_RIM))
+
+
+def test_the_rim_counts_only_within_the_fit_s_small_motion_range():
+    # a hand-held camera swaying over props, nothing approaching, seen 10 times a second: a
+    # prop's rim read an expansion of 0.76 a frame (13 px at its box's edge, far beyond the
+    # first-order fit's range) where its box read 0.26, and warned
+    assert preset("default").rim_motion_max == 8.0
+    assert _quiet(_run("handheld-desk-sway", variant=9, every=2)[1])
+    assert not _quiet(_run("handheld-desk-sway", variant=9, every=2, **NO_RIM_LIMIT)[1])
+    # the approaches the rim wins at 10 frames a second keep it
+    for case in ("loom-dark-c0.5-over-checker-diag2px", "loom-dark-c0.5-over-stripes-h2px"):
+        assert _hit(*_run(case, every=2))
+        assert not _hit(*_run(case, every=2, **NO_RIM))
 
 
 def test_the_rim_warns_earlier_over_sliding_stripes_and_is_inert_where_nothing_slides():

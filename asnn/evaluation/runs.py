@@ -40,6 +40,8 @@ ABLATIONS = {
         "asnn:robust/stabilise_wider=none"),
     "the box's expansion over a sliding background (no rim fit)": (
         "asnn:robust/rim_expansion=false"),
+    "the rim's expansion at any motion (no small-motion limit)": (
+        "asnn:robust/rim_motion_max=none"),
     "no contrast gain control": "asnn:robust/contrast_gain=none",
     "OFF-led map only (no ON-led mirror)": "asnn:robust/w1_on=0/w2_off=0",
     "no approach gate (u sums every object)": "asnn:robust/approach_gate=false",
