@@ -144,6 +144,7 @@ def test_the_rim_counts_only_within_the_fit_s_small_motion_range():
     assert rim_scaled(box, rim, 300, 6.4).rate == 0.2
     assert rim_scaled(box, rim, 300, 6.3) is box
 
+
 def _rig_means(frames):
     change, mean = np.zeros_like(frames[0]), frames[0].copy()
     for before, now in zip(frames, frames[1:]):
