@@ -194,7 +194,6 @@ def region_and_rim_expansion(previous: np.ndarray, current: np.ndarray,
                  for solved, a, b, c, d, fit in (fits[:6], fits[6:]))
 
 
-
 def rim_scaled(box: Expansion | None, rim: Expansion | None, side: int = 0,
                motion_max: float | None = None) -> Expansion | None:
     """A box's expansion scaled up to the rate its object's rim alone reads.
