@@ -320,7 +320,8 @@ def test_an_oncoming_car_turning_across_our_path_warns_and_one_keeping_its_lane_
 
 def test_a_car_moving_into_our_lane_ahead_of_us_warns_and_one_staying_beside_does_not():
     # 20 m ahead in the right lane at half our speed: moving left at 1.2 m/s it is in front of
-    # us when we reach it (its centre 0.1 m from ours); at 0.4 m/s it is still beside our lane
+    # us when we reach it (its centre 0.1 m from ours); at 0.4 m/s it passes beside us, its
+    # centre 2.3 m from ours (0.5 m to spare)
     moves_in = Vehicle(LANE_WIDTH, 20.0, 6.0, lateral_speed=-1.2)
     stays_beside = dataclasses.replace(moves_in, lateral_speed=-0.4)
     assert _hit(*_drive(moves_in))
