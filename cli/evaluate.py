@@ -66,7 +66,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cases", metavar="PATTERN",
                    help="with --synthetic (or --held-out: the cases that decide which "
                         "thresholds are admissible): comma-separated patterns of case names or "
-                        "groups, e.g. 'loom-*,nearmiss-*' or 'driving-*' (default: every case)")
+                        "groups, e.g. 'loom-*,nearmiss-*' or 'driving-*' (default: every case); "
+                        "'extra-*' runs the extra drives outside the suite")
     p.add_argument("--variant", type=whole, default=0, metavar="K",
                    help="with --synthetic: K >= 1 scores the same cases with fresh scene seeds "
                         "(other textures, sensor noise and roadside objects; the same geometry, "

@@ -12,7 +12,7 @@ import json
 import sys
 
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
-from asnn.stimuli.suite import SUITE_CASES, make_case, suite_cases
+from asnn.stimuli.suite import CASES, make_case, suite_cases
 
 from .arguments import frame_size, whole
 
@@ -33,7 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --case: the case drawn with S times its pixels (0.5-8; asnn eval "
                         "--synthetic --scale S; default: 1)")
     p.add_argument("--list", nargs="?", const="all", metavar="PATTERN",
-                   help="list the suite's cases (matching PATTERN) and exit")
+                   help="list the suite's cases (matching PATTERN; 'extra-*' lists the extra "
+                        "drives outside it) and exit")
     p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH",
                    help="paper scenes only (default: 128x128)")
     p.add_argument("--polarity", choices=("dark", "light"), default="dark",
@@ -49,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.list is not None:
             for name in suite_cases(args.list):
-                case = SUITE_CASES[name]
+                case = CASES[name]
                 print(f"{name}\t{' '.join(case.category)}")
             return 0
         if args.case is not None:

@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 
 from asnn import ASNN, preset
-from asnn.stimuli.driving import LANE_WIDTH, Vehicle, driving_scene
-from asnn.stimuli.suite import DRIVING_SIZE, make_case
+from asnn.stimuli.suite import make_case
 
 OFF_LED_ONLY = dict(w1_on=0.0, w2_off=0.0)  # the published variant's OFF-led map alone
 NO_GATE = dict(approach_gate=False)
@@ -27,19 +26,9 @@ NO_RIM_LIMIT = dict(rim_motion_max=None)
 
 def _run(case, variant=0, perturbation=None, scale=None, every=1, **overrides):
     """The robust preset's responses to a case, on every ``every``-th frame (at its times)."""
-    return _respond(make_case(case, variant, scale=scale), perturbation, every, **overrides)
-
-
-def _drive(vehicle, **overrides):
-    """The robust preset's responses to a day drive at the suite's size with one vehicle, the
-    target (for motions the suite has no case of)."""
-    scene = driving_scene(size=DRIVING_SIZE, frames=90, vehicles=(vehicle,), target=0)
-    return _respond(scene, None, 1, **overrides)
-
-
-def _respond(scene, perturbation, every, **overrides):
     from asnn.evaluation.perturb import perturb_frame
 
+    scene = make_case(case, variant, scale=scale)
     model = ASNN(preset("robust", **overrides))
     frames = (scene.frames if perturbation is None
               else [perturb_frame(f, perturbation, i) for i, f in enumerate(scene.frames)])
@@ -303,30 +292,25 @@ def test_a_car_that_strikes_a_corner_of_ours_warns_by_the_partial_overlap_regime
 
 
 # the motions of two real collisions the default misses (c06: an oncoming pickup turning across
-# our path; c25: a car from the next lane swerving in front of us), generated: caught, so those
-# misses come from how the real clips look, not from how their vehicles move
+# our path; c25: a car from the next lane swerving in front of us), generated (extra drives
+# outside the suite): caught, so those misses come from how the real clips look, not from how
+# their vehicles move
 
-def test_an_oncoming_car_turning_across_our_path_warns_and_one_keeping_its_lane_does_not():
-    # 50 m ahead in the oncoming lane, closing at 20 m/s; turning across at 1.5 m/s its centre
-    # is 0.1 m from ours when it reaches our bumper, 2 m ahead of the camera: it does not come
-    # at the camera itself, and its offset is the partial-overlap regime's
-    across = Vehicle(-LANE_WIDTH, 50.0, -8.0, lateral_speed=1.5)
-    keeps_lane = dataclasses.replace(across, lateral_speed=0.0)
-    assert _hit(*_drive(across))
-    assert _quiet(_drive(across, **NO_PARTIAL_OVERLAP)[1])
-    assert _quiet(_drive(keeps_lane)[1])
-    assert not _quiet(_drive(keeps_lane, **NO_OFFSET_TEST)[1])
+@pytest.mark.parametrize("time", ["day", "night"])
+def test_an_oncoming_car_turning_across_our_path_warns_and_one_keeping_its_lane_does_not(time):
+    # its centre 0.1 m from ours when it reaches our bumper; or passing in the next lane
+    assert _hit(*_run(f"extra-{time}-turn-across"))
+    assert _quiet(_run(f"extra-{time}-turn-across-keeps-lane")[1])
+    assert not _quiet(_run(f"extra-{time}-turn-across-keeps-lane", **NO_OFFSET_TEST)[1])
 
 
-def test_a_car_moving_into_our_lane_ahead_of_us_warns_and_one_staying_beside_does_not():
-    # 20 m ahead in the right lane at half our speed: moving left at 1.2 m/s it is in front of
-    # us when we reach it (its centre 0.1 m from ours); at 0.4 m/s it passes beside us, its
-    # centre 2.3 m from ours (0.5 m to spare)
-    moves_in = Vehicle(LANE_WIDTH, 20.0, 6.0, lateral_speed=-1.2)
-    stays_beside = dataclasses.replace(moves_in, lateral_speed=-0.4)
-    assert _hit(*_drive(moves_in))
-    assert _quiet(_drive(stays_beside)[1])
-    assert not _quiet(_drive(stays_beside, **NO_OFFSET_TEST)[1])
+@pytest.mark.parametrize("time", ["day", "night"])
+def test_a_car_moving_into_our_lane_ahead_of_us_warns_and_one_staying_beside_does_not(time):
+    # a slower car in the right lane: in front of us when we reach it, or passing beside us
+    # with its centre 2.3 m from ours
+    assert _hit(*_run(f"extra-{time}-moves-in"))
+    assert _quiet(_run(f"extra-{time}-moves-in-stays-beside")[1])
+    assert not _quiet(_run(f"extra-{time}-moves-in-stays-beside", **NO_OFFSET_TEST)[1])
 
 
 @pytest.mark.parametrize("case", ["drive-night-cut-in", "drive-day-overtake-truck-right",

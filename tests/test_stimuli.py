@@ -14,7 +14,8 @@ from asnn.stimuli import render
 from asnn.stimuli.driving import LANE_WIDTH, Vehicle, driving_scene, path_pose, road_coordinates
 from asnn.stimuli.effects import Pan, Shake, Step
 from asnn.stimuli.planar import Background, Gait, Prop, planar_scene
-from asnn.stimuli.suite import GROUPS, SUITE_CASES, make_case, suite_cases
+from asnn.stimuli.suite import (EXTRA_CASES, EXTRA_GROUPS, GROUPS, SUITE_CASES, make_case,
+                                suite_cases)
 
 CENTER = (79.5, 59.5)  # of a 160x120 frame
 
@@ -468,6 +469,30 @@ def test_suite_cases_are_deterministic_and_selectable(suite):
         suite_cases("no-such-*")
     with pytest.raises(ValueError):
         make_case("no-such-case")
+
+
+def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins():
+    # the suite's selections (every case, its groups and name patterns) never take them in
+    assert not set(EXTRA_CASES) & set(SUITE_CASES)
+    for pattern in (None, "all", "driving-*", "drive-*,rear-*"):
+        assert set(suite_cases(pattern)) <= set(SUITE_CASES)
+    assert suite_cases("extra-*") == list(EXTRA_CASES)
+    assert suite_cases("extra-pass") == [n for n, c in EXTRA_CASES.items()
+                                         if c.group == "extra-pass"]
+    scenes = {name: make_case(name) for name in EXTRA_CASES}
+    assert {case.group for case in EXTRA_CASES.values()} == set(EXTRA_GROUPS)
+    for name, case in EXTRA_CASES.items():
+        scene = scenes[name]
+        assert name.startswith("extra-") and scene.category == case.category, name
+        assert scene.collision == (case.group == "extra-threat"), name
+        if scene.collision:
+            assert scene.target_size[scene.contact_frame] >= 0.75 * scene.frames.shape[1], name
+        if case.twin:  # the same vehicle, distance and speed, on a course that misses us
+            twin = EXTRA_CASES[case.twin]
+            assert twin.group == "extra-threat" and "twin" in twin.category
+            (near,), (hit,) = case.options["vehicles"], twin.options["vehicles"]
+            assert replace(near, lane=hit.lane, lateral_speed=hit.lateral_speed) == hit
+            assert near != hit and not scene.collision
 
 
 def _without_seeds(value):

@@ -151,6 +151,23 @@ def test_synthetic_eval_of_a_variant(tmp_path, capsys):
         main(["eval", "--synthetic", "--variant", "-1", "--out", str(out)])
 
 
+def test_synthetic_eval_of_the_extra_drives_outside_the_suite(tmp_path, capsys):
+    out = tmp_path / "extra"
+    assert main(["eval", "--synthetic", "--cases", "extra-day-moves-in*", "--detectors", "asnn",
+                 "--no-plots", "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert [(c["name"], c["group"]) for c in results["cases"]] == [
+        ("extra-day-moves-in", "extra-threat"), ("extra-day-moves-in-stays-beside", "extra-pass")]
+    report = (out / "report.md").read_text()
+    assert "Extra drives outside the suite" in report
+    assert "extra-day-moves-in-stays-beside" in report.split("## Near misses")[1]  # paired
+    capsys.readouterr()
+    assert main(["scene", "--list", "extra-*"]) == 0
+    listed = capsys.readouterr().out.splitlines()
+    assert len(listed) == 22 and all(line.startswith("extra-") for line in listed)
+    assert open_source("synthetic:extra-day-sharp-left").fps == 20.0
+
+
 def test_synthetic_eval_of_drives_rendered_at_another_size(tmp_path):
     out = tmp_path / "large"
     assert main(["eval", "--synthetic", "--size", "288x192", "--cases",

@@ -23,9 +23,9 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from ..stimuli.effects import scaled_size
-from ..stimuli.suite import (DRIVING_SIZE, GROUPS, PLANAR_SIZE, SUITE_CASES, SUITE_VERSION,
-                             check_driving_size, check_scale, check_variant, make_case,
-                             suite_cases)
+from ..stimuli.suite import (CASES, DRIVING_SIZE, EXTRA_GROUPS, GROUPS, PLANAR_SIZE,
+                             SUITE_VERSION, check_driving_size, check_scale, check_variant,
+                             make_case, suite_cases)
 from . import scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
@@ -230,8 +230,8 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     elapsed = time.perf_counter() - started
 
     labels = [entries[name]["label"] for name in names]
-    case_info = [{"name": name, "group": SUITE_CASES[name].group,
-                  "category": list(SUITE_CASES[name].category), "twin": SUITE_CASES[name].twin,
+    case_info = [{"name": name, "group": CASES[name].group,
+                  "category": list(CASES[name].category), "twin": CASES[name].twin,
                   **{key: entries[name]["label"][key]
                      for key in ("collision", "onset_frame", "contact_frame", "frames", "fps")}}
                  for name in names]
@@ -304,6 +304,9 @@ def suite_report(results: Mapping) -> str:
            " The default preset was designed on the suite as it is (variant 0), its region"
            " persistence and motion layers on variants 1-5 (README, 'fresh scenery').",
            ""] if settings.get("variant") else []),
+        *(["Extra drives outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
+           "version, and not looked at while the default preset was designed.", ""]
+          if any(c["group"] in EXTRA_GROUPS for c in cases) else []),
         *([f"Frames perturbed: {settings['perturbation']} "
            f"({PERTURBATIONS[settings['perturbation']]}).", ""]
           if settings.get("perturbation") else []),

@@ -150,12 +150,12 @@ def open_source(spec: str, *, topic: str | None = None,
 
 def _open_scene(spec: str) -> Source:
     from ..stimuli import SCENE_NAMES, make_scene
-    from ..stimuli.suite import SUITE_CASES, make_case
+    from ..stimuli.suite import CASES, make_case
 
     name = spec[len(SYNTHETIC):]
     if name in SCENE_NAMES:
         scene = make_scene(name)
-    elif name in SUITE_CASES:
+    elif name in CASES:
         scene = make_case(name)
     else:
         raise SourceError(f"unknown scene {name!r}; choose one of {', '.join(SCENE_NAMES)} "

@@ -52,6 +52,14 @@ objects (their places along the road, kinds and shades), and fresh seeds for the
 have their own (a background's texture, a shake's or a sway's path, a random flicker). A near
 miss and its collision-course twin keep sharing theirs.
 
+**Extra cases.** :data:`EXTRA_CASES` are drives the suite does not hold, kept apart so that
+its figures stay those of its version (their groups and names start with ``extra-``; only a
+pattern that names them selects them, :func:`suite_cases`): the motions of real collisions the
+default missed (an oncoming car turning across our path, a slower car moving into our lane
+ahead), each with a twin that keeps its lane; sharp bends (radius 15 m at 7 m/s), where our own
+turning moves the whole image sideways, with a car standing or oncoming in our lane, one
+oncoming in the next lane, or nothing; and a car standing at night 1.2 m to the side of ours.
+
 **Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
 drives at S times their size (their world is in metres and degrees), the planar scenes with
 every size, position, speed and texture in pixels multiplied by S. The same scenes seen by a
@@ -71,14 +79,15 @@ from .effects import Flicker, Headlights, Pan, Ramp, Shake, Step, Sweep, scaled_
 from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 
-__all__ = ["SUITE_VERSION", "GROUPS", "Case", "SUITE_CASES", "suite_cases", "make_case",
-           "check_variant", "check_driving_size", "check_scale", "DRIVING_SIZE", "PLANAR_SIZE",
+__all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "Case", "SUITE_CASES", "EXTRA_CASES",
+           "CASES", "suite_cases", "make_case", "check_variant", "check_driving_size", "check_scale", "DRIVING_SIZE", "PLANAR_SIZE",
            "SCALES"]
 
 SUITE_VERSION = "6"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
           "translation", "moving-pattern", "camera", "brightness", "noise", "driving-threat",
           "driving-pass", "driving-clear")
+EXTRA_GROUPS = ("extra-threat", "extra-pass", "extra-clear")  # EXTRA_CASES (module docstring)
 PLANAR_SIZE = (160, 120)
 DRIVING_SIZE = (192, 128)
 SCALES = (0.5, 8.0)  # the smallest and largest scale make_case renders every case at
@@ -565,12 +574,86 @@ def _driving_cases() -> list[Case]:
     ]
 
 
+def _extra_cases() -> list[Case]:
+    lit = dict(albedo=0.45)  # a body our headlights light up at night
+    # 50 m ahead in the oncoming lane, closing at 20 m/s: turning across at 1.5 m/s its centre
+    # is 0.1 m from ours when it reaches our bumper (frame 48); or keeping its lane
+    turn_across = dict(lane=-LANE_WIDTH, distance=50.0, speed=-8.0)
+    # 20 m ahead in the right lane at half our speed: moving left at 1.2 m/s it is in front of
+    # us when we reach it (frame 60, its centre 0.1 m from ours); at 0.4 m/s it passes beside
+    # us, its centre 2.3 m from ours
+    moves_in = dict(lane=LANE_WIDTH, distance=20.0, speed=6.0)
+    # a sharp bend, radius 15 m at 7 m/s (our yaw 27 degrees a second): a car standing in our
+    # lane 18 m ahead (frame 46), or oncoming in our lane or the next from 40 m at 6 m/s
+    sharp = dict(speed=7.0, frames=80)
+    right, left = dict(curvature=1 / 15), dict(curvature=-1 / 15)
+    stopped, oncoming = Vehicle(0.0, 18.0, 0.0), Vehicle(0.0, 40.0, -6.0)
+    nextlane = Vehicle(-LANE_WIDTH, 40.0, -6.0)
+
+    def lit_up(vehicle: Vehicle) -> Vehicle:
+        return replace(vehicle, **lit)
+
+    return [
+        _driving("extra-day-turn-across", "extra-threat", "day", "twin", "crossing",
+                 vehicles=(Vehicle(**turn_across, lateral_speed=1.5),), target=0),
+        _driving("extra-night-turn-across", "extra-threat", "night", "twin", "crossing",
+                 night=True, vehicles=(Vehicle(**turn_across, lateral_speed=1.5, **lit),),
+                 target=0),
+        _driving("extra-day-moves-in", "extra-threat", "day", "twin", "cut-in",
+                 vehicles=(Vehicle(**moves_in, lateral_speed=-1.2),), target=0),
+        _driving("extra-night-moves-in", "extra-threat", "night", "twin", "cut-in", night=True,
+                 vehicles=(Vehicle(**moves_in, lateral_speed=-1.2, **lit),), target=0),
+        _driving("extra-day-sharp-right-stopped-car", "extra-threat", "day", "turn", **sharp,
+                 **right, vehicles=(stopped,), target=0),
+        _driving("extra-day-sharp-left-stopped-car", "extra-threat", "day", "turn", **sharp,
+                 **left, vehicles=(stopped,), target=0),
+        _driving("extra-day-sharp-right-oncoming", "extra-threat", "day", "turn", "twin",
+                 **sharp, **right, vehicles=(oncoming,), target=0),
+        _driving("extra-day-sharp-left-oncoming", "extra-threat", "day", "turn", "twin",
+                 **sharp, **left, vehicles=(oncoming,), target=0),
+        _driving("extra-night-sharp-right-stopped-car", "extra-threat", "night", "turn",
+                 night=True, **sharp, **right, vehicles=(lit_up(stopped),), target=0),
+        _driving("extra-night-sharp-left-oncoming", "extra-threat", "night", "turn", "twin",
+                 night=True, **sharp, **left, vehicles=(lit_up(oncoming),), target=0),
+        _driving("extra-night-stopped-car-offset", "extra-threat", "night", "offset",
+                 night=True, vehicles=(Vehicle(1.2, 40.0, 0.0, **lit),), target=0),
+        _driving("extra-day-turn-across-keeps-lane", "extra-pass", "day", "crossing",
+                 twin="extra-day-turn-across", vehicles=(Vehicle(**turn_across),), target=0),
+        _driving("extra-night-turn-across-keeps-lane", "extra-pass", "night", "crossing",
+                 night=True, twin="extra-night-turn-across",
+                 vehicles=(Vehicle(**turn_across, **lit),), target=0),
+        _driving("extra-day-moves-in-stays-beside", "extra-pass", "day", "cut-in",
+                 twin="extra-day-moves-in",
+                 vehicles=(Vehicle(**moves_in, lateral_speed=-0.4),), target=0),
+        _driving("extra-night-moves-in-stays-beside", "extra-pass", "night", "cut-in",
+                 night=True, twin="extra-night-moves-in",
+                 vehicles=(Vehicle(**moves_in, lateral_speed=-0.4, **lit),), target=0),
+        _driving("extra-day-sharp-right-oncoming-nextlane", "extra-pass", "day", "turn",
+                 twin="extra-day-sharp-right-oncoming", **sharp, **right, vehicles=(nextlane,),
+                 target=0),
+        _driving("extra-day-sharp-left-oncoming-nextlane", "extra-pass", "day", "turn",
+                 twin="extra-day-sharp-left-oncoming", **sharp, **left, vehicles=(nextlane,),
+                 target=0),
+        _driving("extra-night-sharp-left-oncoming-nextlane", "extra-pass", "night", "turn",
+                 night=True, twin="extra-night-sharp-left-oncoming", **sharp, **left,
+                 vehicles=(lit_up(nextlane),), target=0),
+        _driving("extra-day-sharp-right", "extra-clear", "day", "turn", **sharp, **right),
+        _driving("extra-day-sharp-left", "extra-clear", "day", "turn", **sharp, **left),
+        _driving("extra-night-sharp-right", "extra-clear", "night", "turn", night=True,
+                 **sharp, **right),
+        _driving("extra-night-sharp-left", "extra-clear", "night", "turn", night=True,
+                 **sharp, **left),
+    ]
+
+
 SUITE_CASES: dict[str, Case] = {
     case.name: case
     for case in (_approach_cases() + _pair_cases() + _clutter_cases() + _recession_cases()
                  + _translation_cases() + _pattern_cases() + _camera_cases()
                  + _brightness_cases() + _noise_cases() + _driving_cases())
 }
+EXTRA_CASES: dict[str, Case] = {case.name: case for case in _extra_cases()}
+CASES: dict[str, Case] = {**SUITE_CASES, **EXTRA_CASES}  # every case make_case knows
 
 
 def suite_cases(pattern: str | None = None) -> list[str]:
@@ -580,7 +663,9 @@ def suite_cases(pattern: str | None = None) -> list[str]:
     ----------
     pattern : str, optional
         Comma-separated shell-style patterns on the name or the group (``loom-*``,
-        ``nearmiss-*,course-*``, ``driving-*``); None or ``all`` selects every case.
+        ``nearmiss-*,course-*``, ``driving-*``, ``extra-*``); None or ``all`` selects every
+        case of the suite, not the :data:`EXTRA_CASES`, which only a pattern that matches
+        them selects.
 
     Raises
     ------
@@ -592,18 +677,18 @@ def suite_cases(pattern: str | None = None) -> list[str]:
     patterns = [p.strip() for p in pattern.split(",") if p.strip()]
     selected = []
     for p in patterns:
-        matched = [name for name, case in SUITE_CASES.items()
+        matched = [name for name, case in CASES.items()
                    if fnmatch.fnmatchcase(name, p) or fnmatch.fnmatchcase(case.group, p)]
         if not matched:
             raise ValueError(f"no suite case matches {p!r}")
         selected += matched
     chosen = set(selected)
-    return [name for name in SUITE_CASES if name in chosen]
+    return [name for name in CASES if name in chosen]
 
 
 def make_case(name: str, variant: int = 0,
               driving_size: tuple[int, int] | None = None, scale: float | None = None) -> Scene:
-    """Generate the suite case ``name`` with its label.
+    """Generate the suite case (or extra case) ``name`` with its label.
 
     Parameters
     ----------
@@ -628,9 +713,9 @@ def make_case(name: str, variant: int = 0,
         outside :data:`SCALES`, or both a size and a scale.
     """
     try:
-        case = SUITE_CASES[name]
+        case = CASES[name]
     except KeyError:
-        raise ValueError(f"unknown suite case {name!r} (see asnn.stimuli.suite.SUITE_CASES)") from None
+        raise ValueError(f"unknown suite case {name!r} (see asnn.stimuli.suite.CASES)") from None
     variant = check_variant(variant)
     if driving_size is not None and scale is not None:
         raise ValueError("give a driving size or a scale, not both")
