@@ -80,8 +80,8 @@ from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "Case", "SUITE_CASES", "EXTRA_CASES",
-           "CASES", "suite_cases", "make_case", "check_variant", "check_driving_size", "check_scale", "DRIVING_SIZE", "PLANAR_SIZE",
-           "SCALES"]
+           "CASES", "suite_cases", "make_case", "check_variant", "check_driving_size",
+           "check_scale", "DRIVING_SIZE", "PLANAR_SIZE", "SCALES"]
 
 SUITE_VERSION = "6"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
