@@ -15,7 +15,7 @@ means for these models:
     The summed excitation of the LGMD cell: ``K_f = sum |G~_f|`` (LGMD1-1) or
     ``k(t) = sum G(t)`` (LGMD1-2), before any feed-forward inhibition.
 ``out``
-    The membrane potential in [0.5, 1): ``kappa_f`` (LGMD1-1) or the adapted ``K^(t)``
+    The membrane potential in [0.5, 1]: ``kappa_f`` (LGMD1-1) or the adapted ``K^(t)``
     (LGMD1-2); 0.5 in a frame the feed-forward inhibition suppresses.
 ``spikes``
     Spikes of the frame (LGMD1-1 fires at most one).
@@ -176,7 +176,8 @@ def group_excitation(s: np.ndarray, c_w: float, delta_c: float, c_de: float,
 
 
 def sigmoid_membrane(excitation: float, n_cells: int) -> float:
-    """Sigmoid membrane potential ``1 / (1 + exp(-k / n_cell))`` (kappa_f, K(t)), in [0.5, 1)."""
+    """Sigmoid membrane potential ``1 / (1 + exp(-k / n_cell))`` (kappa_f, K(t)), in [0.5, 1]
+    (1.0 where it saturates in floating point)."""
     return 1.0 / (1.0 + math.exp(-excitation / n_cells))
 
 

@@ -112,7 +112,7 @@ class Response:
     u : float
         Membrane potential u(t) (paper eq. 26; for the LGMD models, their summed excitation).
     out : float
-        Sigmoid output in [0.5, 1).
+        Sigmoid output in [0.5, 1] (1.0 only where it saturates in floating point).
     spikes : int
         Spikes fired in this frame.
     spike_rate : float

@@ -433,7 +433,8 @@ def membrane_potential(g_prime: np.ndarray, scale: float, absolute: bool) -> flo
 
 
 def sigmoid_output(u: float, n_cells: int) -> float:
-    """out(t) = 1 / (1 + exp(-|u| / N)), in [0.5, 1) (SPEC ruling on paper eq. 27)."""
+    """out(t) = 1 / (1 + exp(-|u| / N)), in [0.5, 1) (SPEC ruling on paper eq. 27); in floating
+    point it rounds to exactly 1.0 once |u| / N passes about 37."""
     return 1.0 / (1.0 + math.exp(-abs(u) / n_cells))
 
 

@@ -14,7 +14,7 @@ import os
 
 import cv2
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from asnn import ASNN
@@ -80,6 +80,10 @@ def _finite(x) -> bool:
        gaps=st.lists(st.sampled_from([0.0, 1e-3, 0.05, 0.1, 0.5, 3.0]), min_size=16,
                      max_size=16),
        name=st.sampled_from(["robust", "reference32", "paper"]), as_bytes=st.booleans())
+# found by a long run: stripes of a new phase each frame on a 31x31 frame drive u / N to 37,
+# where out rounds to 1.0
+@example(kind="stripes", h=31, w=31, n=5, seed=986, gaps=[0.0] * 16, name="reference32",
+         as_bytes=False)
 def test_every_valid_stream_gets_a_well_formed_response_to_every_frame(kind, h, w, n, seed, gaps,
                                                                        name, as_bytes):
     model = ASNN(name, record_tracks=name == "robust")
@@ -88,7 +92,8 @@ def test_every_valid_stream_gets_a_well_formed_response_to_every_frame(kind, h, 
         t += gaps[i]
         r = model.step((frame * 255).astype(np.uint8) if as_bytes else frame, t)
         assert r.index == i
-        assert _finite(r.u) and 0.5 <= r.out < 1.0
+        # out is below 1 in exact arithmetic, and rounds to 1.0 once |u| / N passes about 37
+        assert _finite(r.u) and 0.5 <= r.out <= 1.0
         assert r.spikes >= 0 and _finite(r.spike_rate) and r.spike_rate >= 0
         assert isinstance(r.collision, bool)
         for target in r.targets:
