@@ -293,8 +293,7 @@ def test_a_car_that_strikes_a_corner_of_ours_warns_by_the_partial_overlap_regime
 
 # the motions of two real collisions the default misses (c06: an oncoming pickup turning across
 # our path; c25: a car from the next lane swerving in front of us), generated (extra drives
-# outside the suite): caught, so those misses come from how the real clips look, not from how
-# their vehicles move
+# outside the suite): caught here, so those motions alone do not explain the misses
 
 @pytest.mark.parametrize("time", ["day", "night"])
 def test_an_oncoming_car_turning_across_our_path_warns_and_one_keeping_its_lane_does_not(time):

@@ -587,12 +587,9 @@ def _extra_cases() -> list[Case]:
     # lane 18 m ahead (frame 46), or oncoming in our lane or the next from 40 m at 6 m/s
     sharp = dict(speed=7.0, frames=80)
     right, left = dict(curvature=1 / 15), dict(curvature=-1 / 15)
-    stopped, oncoming = Vehicle(0.0, 18.0, 0.0), Vehicle(0.0, 40.0, -6.0)
-    nextlane = Vehicle(-LANE_WIDTH, 40.0, -6.0)
-
-    def lit_up(vehicle: Vehicle) -> Vehicle:
-        return replace(vehicle, **lit)
-
+    stopped = dict(lane=0.0, distance=18.0, speed=0.0)
+    oncoming = dict(lane=0.0, distance=40.0, speed=-6.0)
+    nextlane = dict(oncoming, lane=-LANE_WIDTH)
     return [
         _driving("extra-day-turn-across", "extra-threat", "day", "twin", "crossing",
                  vehicles=(Vehicle(**turn_across, lateral_speed=1.5),), target=0),
@@ -604,17 +601,19 @@ def _extra_cases() -> list[Case]:
         _driving("extra-night-moves-in", "extra-threat", "night", "twin", "cut-in", night=True,
                  vehicles=(Vehicle(**moves_in, lateral_speed=-1.2, **lit),), target=0),
         _driving("extra-day-sharp-right-stopped-car", "extra-threat", "day", "turn", **sharp,
-                 **right, vehicles=(stopped,), target=0),
+                 **right, vehicles=(Vehicle(**stopped),), target=0),
         _driving("extra-day-sharp-left-stopped-car", "extra-threat", "day", "turn", **sharp,
-                 **left, vehicles=(stopped,), target=0),
+                 **left, vehicles=(Vehicle(**stopped),), target=0),
         _driving("extra-day-sharp-right-oncoming", "extra-threat", "day", "turn", "twin",
-                 **sharp, **right, vehicles=(oncoming,), target=0),
+                 **sharp, **right, vehicles=(Vehicle(**oncoming),), target=0),
         _driving("extra-day-sharp-left-oncoming", "extra-threat", "day", "turn", "twin",
-                 **sharp, **left, vehicles=(oncoming,), target=0),
+                 **sharp, **left, vehicles=(Vehicle(**oncoming),), target=0),
         _driving("extra-night-sharp-right-stopped-car", "extra-threat", "night", "turn",
-                 night=True, **sharp, **right, vehicles=(lit_up(stopped),), target=0),
+                 night=True, **sharp, **right, vehicles=(Vehicle(**stopped, **lit),),
+                 target=0),
         _driving("extra-night-sharp-left-oncoming", "extra-threat", "night", "turn", "twin",
-                 night=True, **sharp, **left, vehicles=(lit_up(oncoming),), target=0),
+                 night=True, **sharp, **left, vehicles=(Vehicle(**oncoming, **lit),),
+                 target=0),
         _driving("extra-night-stopped-car-offset", "extra-threat", "night", "offset",
                  night=True, vehicles=(Vehicle(1.2, 40.0, 0.0, **lit),), target=0),
         _driving("extra-day-turn-across-keeps-lane", "extra-pass", "day", "crossing",
@@ -629,14 +628,14 @@ def _extra_cases() -> list[Case]:
                  night=True, twin="extra-night-moves-in",
                  vehicles=(Vehicle(**moves_in, lateral_speed=-0.4, **lit),), target=0),
         _driving("extra-day-sharp-right-oncoming-nextlane", "extra-pass", "day", "turn",
-                 twin="extra-day-sharp-right-oncoming", **sharp, **right, vehicles=(nextlane,),
-                 target=0),
+                 twin="extra-day-sharp-right-oncoming", **sharp, **right,
+                 vehicles=(Vehicle(**nextlane),), target=0),
         _driving("extra-day-sharp-left-oncoming-nextlane", "extra-pass", "day", "turn",
-                 twin="extra-day-sharp-left-oncoming", **sharp, **left, vehicles=(nextlane,),
-                 target=0),
+                 twin="extra-day-sharp-left-oncoming", **sharp, **left,
+                 vehicles=(Vehicle(**nextlane),), target=0),
         _driving("extra-night-sharp-left-oncoming-nextlane", "extra-pass", "night", "turn",
                  night=True, twin="extra-night-sharp-left-oncoming", **sharp, **left,
-                 vehicles=(lit_up(nextlane),), target=0),
+                 vehicles=(Vehicle(**nextlane, **lit),), target=0),
         _driving("extra-day-sharp-right", "extra-clear", "day", "turn", **sharp, **right),
         _driving("extra-day-sharp-left", "extra-clear", "day", "turn", **sharp, **left),
         _driving("extra-night-sharp-right", "extra-clear", "night", "turn", night=True,
