@@ -1,0 +1,95 @@
+"""The project's Markdown documents hold together: links land, tables render.
+
+The README and the pages under ``docs/`` link to each other's sections by GitHub's heading
+anchors; a section moved or renamed leaves links that lead nowhere, which nothing else notices.
+A ``|`` inside a table cell (in ``|G'|``, say) splits the cell unless escaped, and GitHub then
+drops the row's tail.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+_LINK = re.compile(r"\[(?:[^\]]*)\]\(([^)\s]+)\)")
+_FENCE = re.compile(r"^```.*?^```", re.S | re.M)
+
+
+def heading_anchor(heading: str) -> str:
+    """GitHub's anchor for a heading's text: lower case, punctuation dropped, spaces to dashes."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def anchors(text: str) -> set[str]:
+    """The anchors of a document's headings (outside code blocks), repeated ones numbered."""
+    found, seen = set(), {}
+    for line in _FENCE.sub("", text).splitlines():
+        match = re.match(r"#{1,6}\s+(.*)", line)
+        if match:
+            anchor = heading_anchor(match.group(1))
+            count = seen.get(anchor, 0)
+            seen[anchor] = count + 1
+            found.add(anchor if count == 0 else f"{anchor}-{count}")
+    return found
+
+
+def broken_links(document: Path) -> list[str]:
+    """The relative links of a document whose file or section does not exist."""
+    broken = []
+    for target in _LINK.findall(_FENCE.sub("", document.read_text())):
+        if re.match(r"[a-z][a-z0-9+.-]*:", target):  # https:, mailto: ...
+            continue
+        path, _, anchor = target.partition("#")
+        destination = (document.parent / path).resolve() if path else document
+        if not destination.exists():
+            broken.append(f"{target} (no such file)")
+        elif anchor and destination.suffix == ".md" and anchor not in anchors(
+                destination.read_text()):
+            broken.append(f"{target} (no such section)")
+    return broken
+
+
+def ragged_rows(document: Path) -> list[str]:
+    """Table rows with more or fewer unescaped ``|`` than their table's header row."""
+    ragged, header, fenced = [], None, False
+    for number, line in enumerate(document.read_text().splitlines(), 1):
+        if line.startswith("```"):
+            fenced = not fenced
+        if fenced or not line.startswith("|"):
+            header = None
+            continue
+        bars = len(re.findall(r"(?<!\\)\|", line))
+        if header is None:
+            header = bars
+        elif bars != header:
+            ragged.append(f"line {number}: {line[:60]}")
+    return ragged
+
+
+def test_anchors_follow_githubs_rule():
+    assert heading_anchor("Labelled suite of generated scenes (`asnn eval --synthetic`, "
+                          "version 6)") == \
+        "labelled-suite-of-generated-scenes-asnn-eval---synthetic-version-6"
+    assert anchors("# A\n```\n# not a heading\n```\n## A\n") == {"a", "a-1"}
+
+
+def test_the_checks_find_what_they_look_for(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("# Title\n[ok](#title) [gone](#nothing) [file](missing.md)\n\n"
+                    "| a | b |\n| --- | --- |\n| `\\|x\\|` | 1 |\n| `|x|` | 1 |\n")
+    assert broken_links(page) == ["#nothing (no such section)", "missing.md (no such file)"]
+    assert ragged_rows(page) == ["line 7: | `|x|` | 1 |"]
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
+def test_links_land(document):
+    assert broken_links(document) == []
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
+def test_table_rows_have_their_headers_cells(document):
+    assert ragged_rows(document) == []
