@@ -8,6 +8,7 @@ drops the row's tail.
 
 from __future__ import annotations
 
+import functools
 import re
 from pathlib import Path
 
@@ -16,7 +17,6 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 _LINK = re.compile(r"\[(?:[^\]]*)\]\(([^)\s]+)\)")
-_FENCE = re.compile(r"^```.*?^```", re.S | re.M)
 
 
 def heading_anchor(heading: str) -> str:
@@ -24,10 +24,21 @@ def heading_anchor(heading: str) -> str:
     return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
 
 
+def prose_lines(text: str) -> list[str]:
+    """The document's lines with fenced code blocks (fences included) blanked, so that nothing
+    in code is read as a heading, a link or a table, and line numbers stay as they are."""
+    lines, fenced = [], False
+    for line in text.splitlines():
+        fence = line.startswith("```")
+        fenced ^= fence
+        lines.append("" if fence or fenced else line)
+    return lines
+
+
 def anchors(text: str) -> set[str]:
     """The anchors of a document's headings (outside code blocks), repeated ones numbered."""
     found, seen = set(), {}
-    for line in _FENCE.sub("", text).splitlines():
+    for line in prose_lines(text):
         match = re.match(r"#{1,6}\s+(.*)", line)
         if match:
             anchor = heading_anchor(match.group(1))
@@ -37,29 +48,31 @@ def anchors(text: str) -> set[str]:
     return found
 
 
+@functools.cache
+def _anchors_of(path: Path) -> frozenset[str]:
+    return frozenset(anchors(path.read_text()))
+
+
 def broken_links(document: Path) -> list[str]:
     """The relative links of a document whose file or section does not exist."""
     broken = []
-    for target in _LINK.findall(_FENCE.sub("", document.read_text())):
+    for target in _LINK.findall("\n".join(prose_lines(document.read_text()))):
         if re.match(r"[a-z][a-z0-9+.-]*:", target):  # https:, mailto: ...
             continue
         path, _, anchor = target.partition("#")
         destination = (document.parent / path).resolve() if path else document
         if not destination.exists():
             broken.append(f"{target} (no such file)")
-        elif anchor and destination.suffix == ".md" and anchor not in anchors(
-                destination.read_text()):
+        elif anchor and destination.suffix == ".md" and anchor not in _anchors_of(destination):
             broken.append(f"{target} (no such section)")
     return broken
 
 
 def ragged_rows(document: Path) -> list[str]:
     """Table rows with more or fewer unescaped ``|`` than their table's header row."""
-    ragged, header, fenced = [], None, False
-    for number, line in enumerate(document.read_text().splitlines(), 1):
-        if line.startswith("```"):
-            fenced = not fenced
-        if fenced or not line.startswith("|"):
+    ragged, header = [], None
+    for number, line in enumerate(prose_lines(document.read_text()), 1):
+        if not line.startswith("|"):
             header = None
             continue
         bars = len(re.findall(r"(?<!\\)\|", line))
