@@ -27,24 +27,20 @@ import cv2
 import numpy as np
 
 from . import _fast, _parallel, retina
+from .approach import ApproachStage, FramePair
 from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
-from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
-                      region_expansion, rig_pixels, rim_scaled, scene_expansion)
+from .looming import region_expansion
 from .motion_layers import motion_layers
 from .params import ASNNParams, preset
-from .response import Maps, Response, TrackReport
+from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
-from .targets import Target, extract_objects, extract_targets
-from .tracking import Observation, TargetTracker, approach_test, persistence_frames
+from .targets import extract_targets
 
-__all__ = ["ASNN", "FrameError", "compile_kernels", "frame_pixel", "spike_step"]
+__all__ = ["ASNN", "FrameError", "compile_kernels", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
 _MAX_ELAPSED = 1.0  # seconds between frames beyond which their times are not believed
 _PERIOD_FRAMES = 5  # the frame period is the median of this many: one lost frame does not move it
-# the scene "expands" (our own forward motion) from this rate per second: driving scenes expand
-# at about 0.7, a still camera's noise reads below 0.1
-_SCENE_EXPANDS = 0.2
 
 
 class ASNN:
@@ -95,11 +91,10 @@ class ASNN:
         Floating-point type of the state and the computation.
     spike_window : deque of int
         Spikes of the last N_t frames.
-    tracker : TargetTracker
-        The tracked objects (``params.targets == 'objects'``).
-    objects : list of (Track, float)
-        The objects seen in the latest processed frame with their share of ``sum |G'|`` (or
-        ``sum G'``), in the frame's order; what the approach gate decided on.
+    approach : ApproachStage or None
+        The objects of the attended masks, their tracks and which of them approach
+        (:class:`~asnn.approach.ApproachStage`: the tracker, the objects of the latest frame,
+        the camera's rig), for presets with ``targets='objects'``; None for the others.
     repeated : bool
         Whether the latest frame was a repeat (its response repeats the one before).
     periods : deque of float
@@ -128,7 +123,6 @@ class ASNN:
         self.dtype = np.dtype(p.precision if self.optimised else np.float64)
         self._min_side = max(p.dog_size, p.kernel_size, p.attention_size)
         self._p_weights = retina.photoreceptor_weights(p.n_p, p.p_u)
-        self._overlap = p.overlap  # the approach test's partial-overlap regime, or None
         self._dog = retina.dog_kernel(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
                                       p.dog_normalisation)
         half = N_ORIENTATIONS // 2
@@ -194,36 +188,12 @@ class ASNN:
         self.stages_off: np.ndarray | None = None
         self.spike_window: deque[int] = deque(maxlen=self.params.n_t)
         self.index = 0
-        self.tracker = TargetTracker(
-            self.params.track_link, self.params.track_missed, self.params.track_smoothing,
-            self.params.track_box,
-            self.params.approach_frames if self.params.region_persistence else 0,
-            self.params.object_ids)
+        self.approach = ApproachStage(self.params) if self.params.targets == "objects" else None
         self._stamp: float | None = None
         self.periods: deque[float] = deque(maxlen=_PERIOD_FRAMES)
         self._last: Response | None = None
         self._repeats = 0
         self._difference = 0.0
-        self.objects: list = []
-        # track id -> its expansion rate against the scene in the latest frame, per second
-        # (None: not measured); with measure_all_against_scene, of every growing track
-        self.against_scene: dict[int, float | None] = {}
-        # track id -> that fit's share of the box's change, where the scene contracts
-        # (receding_scene; None elsewhere)
-        self.fit_against_scene: dict[int, float | None] = {}
-        # track id -> its box's motion layers (share, rate /s, drift px/s), where measured
-        # (motion_layers, while the scene expands)
-        self.layers: dict[int, list] = {}
-        # ignore_rig: running means of the frames and of each pixel's change (at half the
-        # resolution: the rig is large), the frames they averaged, and the rig's pixels at full
-        # resolution (None: none)
-        self._mean: np.ndarray | None = None
-        self._change: np.ndarray | None = None
-        self._rig_last: tuple | None = None  # the last frame, and it at half resolution
-        self._rig_frames = 0
-        self._rig: np.ndarray | None = None
-        self.measure_all_against_scene = False
-        self._scene_reference: np.ndarray | None = None
         self.repeated = False
 
     @property
@@ -520,7 +490,7 @@ class ASNN:
             mask = attended.copy()
             maps = Maps(P=photo.copy(), R=np.concatenate([r, -r]), V=v.copy(),
                         phi=np.arctan2(r[2], r[0]), G=g.copy(), M_a=m_a, M_d=m_d,
-                        G_prime=g * mask, rig=self._rig)
+                        G_prime=g * mask, rig=self._rig_mask())
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps,
                         tracks=frame.tracks)
@@ -571,213 +541,28 @@ class ASNN:
                                       p.cluster_min_samples, p.origin_seed)
         out, spikes, spike_rate = self._spikes(u, g.size)
         maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d, G_prime=g_prime,
-                    rig=self._rig) if self.record_maps else None
+                    rig=self._rig_mask()) if self.record_maps else None
         return Response(index=frame.index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=spike_rate >= p.t_c, targets=targets, maps=maps,
                         tracks=frame.tracks)
 
     def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, frame: "_Frame",
                  total: float, points: tuple[np.ndarray, np.ndarray] | None = None
-                 ) -> tuple[float, list[Target]]:
-        """Objects of the attended mask, their expansion, the tracker, and the approach gate.
+                 ) -> tuple[float, list]:
+        """The approach stage's step (``targets='objects'``): the (unscaled) membrane
+        potential and the targets (:meth:`asnn.approach.ApproachStage.step`); the tracks'
+        reports go to the frame (``record_tracks``)."""
+        h, w = g.shape
+        total, targets, frame.tracks = self.approach.step(
+            attended, g, vectors,
+            FramePair(frame.previous, frame.lum, frame.background, frame.elapsed), total,
+            self.frame_period, (self.shape[1] / w, self.shape[0] / h), points,
+            self.record_tracks)
+        return total, targets
 
-        Returns the (unscaled) membrane potential, which with ``approach_gate`` sums ``G'``
-        over the approaching objects only, and the targets: with the gate, the approaching
-        objects; without it, every object.
-        """
-        p = self.params
-        elapsed = frame.elapsed
-        if p.ignore_rig:
-            self._update_rig(frame)
-        self.against_scene = {}
-        self.fit_against_scene = {}
-        self.layers = {}
-        if attended is None:
-            self.tracker.update([], elapsed)
-            if p.scene_relative:
-                self._measure_against_scene([], [], [], frame)
-            self.objects = []
-            if self.record_tracks:
-                frame.tracks = []
-            return (0.0 if p.approach_gate else total), []
-        regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
-                                  points=points)
-        h, w = attended.shape
-        observations = []
-        for k in range(len(regions)):
-            x0, y0, x1, y1 = (int(c) for c in regions.boxes[k])
-            pad = p.looming_margin * max(x1 - x0, y1 - y0) + 4
-            observations.append(Observation(
-                float(regions.x[k]), float(regions.y[k]), float(regions.size[k]),
-                float(regions.mass[k]), (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
-        tracks = self.tracker.update(observations, elapsed)
-        # where the background slides, each box is fitted over its object's rim too
-        rim = attended if p.rim_expansion and frame.background is not None else None
-        boxes, rates = [], []
-        for k, tr in enumerate(tracks):
-            x0, y0, x1, y1 = tr.box
-            box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
-                   min(int(math.ceil(y1)), h))
-            est = rim_scaled(*region_and_rim_expansion(
-                frame.previous, frame.lum, box, rim, frame.background, self._rig),
-                max(box[2] - box[0], box[3] - box[1]), p.rim_motion_max)
-            if est is not None:
-                # an object the frame's edge cuts is measured on its visible part: its drift
-                # and size, so its offset, are not the object's, whatever the fit
-                ox0, oy0, ox1, oy1 = regions.boxes[k]
-                whole = ox0 > 0 and oy0 > 0 and ox1 < w and oy1 < h
-                tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed,
-                           est.fit if whole else 0.0)
-            boxes.append(box)
-            rates.append(None if est is None else est.rate / elapsed)
-        if p.scene_relative:
-            self._measure_against_scene(tracks, boxes, rates, frame)
-        frames = persistence_frames(p.approach_frames, p.approach_seconds, self.frame_period)
-        coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, frames, self._overlap,
-                                    p.scene_tolerance)
-        self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
-        if p.approach_gate:
-            total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0
-        sx, sy = self.shape[1] / w, self.shape[0] / h  # the frame's pixels per model pixel
-        if self.record_tracks:
-            frame.tracks = [self._track_report(tr, coming[k], float(regions.share[k]), sx, sy)
-                            for k, tr in enumerate(tracks)]
-        targets: dict[int, Target] = {}  # by object id
-        for k, tr in enumerate(tracks):
-            if p.approach_gate and not coming[k]:
-                continue
-            target = Target(x=frame_pixel(regions.x[k], sx), y=frame_pixel(regions.y[k], sy),
-                            direction=float(regions.direction[k]),
-                            energy=float(regions.energy[k]),
-                            pixels=int(round(regions.pixels[k] * sx * sy)),
-                            id=self.tracker.object_id(tr), expansion=tr.expansion, ttc=tr.ttc,
-                            offset=tr.offset, approaching=coming[k])
-            # an object seen as several fragments is one target: its largest
-            if target.id not in targets or target.pixels > targets[target.id].pixels:
-                targets[target.id] = target
-        return total, list(targets.values())
-
-    def _update_rig(self, frame: "_Frame") -> None:
-        """The running means that find the camera's own rig (:func:`~asnn.looming.rig_pixels`),
-        and its pixels, which this frame's looming fits leave out (``ignore_rig``)."""
-        h, w = frame.lum.shape
-        half = (max(w // 2, 1), max(h // 2, 1))  # 2x2 area means: the rig is large
-        last = self._rig_last
-        before = (last[1] if last is not None and last[0] is frame.previous
-                  else cv2.resize(frame.previous, half, interpolation=cv2.INTER_AREA))
-        now = cv2.resize(frame.lum, half, interpolation=cv2.INTER_AREA)
-        self._rig_last = (frame.lum, now)
-        change = np.abs(now - before)
-        if self._change is None or self._change.shape != change.shape:
-            self._change, self._mean, self._rig_frames = change, now.copy(), 1
-        else:
-            self._change += RIG_WEIGHT * (change - self._change)
-            self._mean += RIG_WEIGHT * (now - self._mean)
-            self._rig_frames += 1
-        rig = rig_pixels(self._change, self._mean, self._rig_frames)
-        self._rig = None if rig is None else cv2.resize(
-            rig.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).view(bool)
-
-    def _track_report(self, track, counts: bool, share: float, sx: float, sy: float
-                      ) -> TrackReport:
-        """A track as the approach test saw it in this frame, in the input frame's pixels."""
-        x0, y0, x1, y1 = track.box
-        return TrackReport(
-            id=track.id, object_id=self.tracker.object_id(track),
-            x=frame_pixel(track.x, sx), y=frame_pixel(track.y, sy),
-            size=float(track.size * math.sqrt(sx * sy)),
-            box=(float(x0 * sx), float(y0 * sy), float(x1 * sx), float(y1 * sy)),
-            expansion=track.expansion, ttc=track.ttc, offset=track.offset, fit=track.fit,
-            own_expansion=track.own_expansion, layers=track.layers, streak=track.streak,
-            test=track.verdict, counts=bool(counts), share=share if counts else 0.0)
-
-    def _measure_against_scene(self, tracks: list, boxes: list, rates: list,
-                               frame: "_Frame") -> None:
-        """Each track that otherwise passes the approach test gets its expansion against the
-        scene (:meth:`~asnn.tracking.Track.measure_own`); the others None.
-
-        The scene's own expansion is fitted over the frame outside the tracks' boxes
-        (:func:`~asnn.looming.scene_expansion`); where it expands, a track's box is fitted again
-        leaving out the pixels it explains better than no motion (or than the background's
-        translation): what is left is the object's motion against the scene. Where the scene
-        does not expand nothing is left out, and the box's own rate stands. The rates go to
-        :attr:`against_scene` too; with :attr:`measure_all_against_scene` (the held-out
-        replay's trace) every growing track's is measured there, and the tracks' state is
-        still only that of the candidates.
-
-        With ``receding_scene``, where the scene contracts (the camera moves away from it),
-        the boxes are fitted against it in the same way, and so are those of the tracks that
-        pass the partial-overlap regime but for its fit test; the share of each box's change
-        that this fit explains goes to :attr:`fit_against_scene` and to the track
-        (``own_fit``), whose regime test takes the better of the two fits
-        (:func:`~asnn.tracking.approaching`). An object expanding in a contracting scene moves
-        against it, so the pixels the scene explains are the scenery's; where the scene
-        expands, object and scenery expand alike, and the box's own fit stands.
-
-        With ``motion_layers``, where the scene expands at least 0.2 per second (our own
-        forward motion), each candidate's box is split into its motions
-        (:func:`~asnn.motion_layers.motion_layers`, on the frames as the camera gave them), per
-        second in :attr:`layers` and to the track (:meth:`~asnn.tracking.Track.measure_layers`),
-        whose approach test then needs one of them to be an approach
-        (:func:`~asnn.tracking.layers_pass`); with :attr:`measure_all_against_scene`, every
-        growing track's box too.
-        """
-        p = self.params
-        overlap = self._overlap
-        chosen = {k for k, tr in enumerate(tracks)
-                  if tr.missed == 0 and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max,
-                                                      tr.fit, overlap)}
-        unfit = set()  # passing the regime but for its fit test
-        if p.receding_scene and overlap is not None:
-            unfit = {k for k, tr in enumerate(tracks)
-                     if k not in chosen and tr.missed == 0
-                     and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max, 1.0, overlap)}
-        growing = ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
-                   if self.measure_all_against_scene else set())
-        scene = (scene_expansion(frame.previous, frame.lum, boxes, frame.background, self._rig)
-                 if chosen or unfit or growing else None)
-        contracts = p.receding_scene and scene is not None and scene.rate < 0
-        if contracts:
-            chosen |= unfit
-        against = scene is not None and (scene.rate > 0 or contracts)
-        if against and (self._scene_reference is None
-                        or self._scene_reference.shape != frame.lum.shape):
-            self._scene_reference = np.empty_like(frame.lum)
-        for k in sorted(chosen | growing):
-            rate, fit = rates[k], None
-            if against:
-                x0, y0, x1, y1 = box = boxes[k]
-                before = (frame.previous if frame.background is None
-                          else frame.background)[y0:y1, x0:x1]
-                moved = moved_by_expansion(frame.previous, scene, box)
-                now = frame.lum[y0:y1, x0:x1]
-                # per pixel whichever motion explains it better, the scene's or the background's
-                # translation (none: the previous frame); region_expansion leaves it out if that
-                # beats no motion
-                self._scene_reference[y0:y1, x0:x1] = np.where(
-                    np.abs(now - moved) < np.abs(now - before), moved, before)
-                own = region_expansion(frame.previous, frame.lum, box, self._scene_reference,
-                                       self._rig)
-                rate = None if own is None else own.rate / frame.elapsed
-                if contracts and own is not None:
-                    fit = own.fit
-            self.against_scene[tracks[k].id] = rate
-            self.fit_against_scene[tracks[k].id] = fit
-        layered = (p.motion_layers and scene is not None
-                   and scene.rate / frame.elapsed >= _SCENE_EXPANDS)
-        for k in sorted(chosen | growing) if layered else ():
-            self.layers[tracks[k].id] = [
-                (layer.share, layer.rate / frame.elapsed, layer.drift_x / frame.elapsed,
-                 layer.drift_y / frame.elapsed)
-                for layer in motion_layers(frame.previous, frame.lum, boxes[k])]
-        ids = {tracks[k].id for k in chosen}
-        for tr in self.tracker.tracks:
-            if tr.id in ids:
-                tr.measure_own(self.against_scene.get(tr.id), self.fit_against_scene.get(tr.id))
-                tr.measure_layers(self.layers.get(tr.id))
-            else:
-                tr.measure_own(None)
-                tr.measure_layers(None)
+    def _rig_mask(self) -> np.ndarray | None:
+        """The pixels the looming fits left out as the camera's rig in the latest frame."""
+        return None if self.approach is None else self.approach.rig.mask
 
 
 @dataclasses.dataclass(slots=True)
@@ -795,12 +580,6 @@ class _Frame:
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined
     tracks: list | None = None  # its objects' approach tests (record_tracks)
-
-
-def frame_pixel(coordinate: float, scale: float) -> float:
-    """A model pixel's coordinate in the input frame's pixels, ``scale`` frame pixels per model
-    pixel: pixel centres, model pixel i covering the frame's pixels [i scale, (i + 1) scale)."""
-    return float((coordinate + 0.5) * scale - 0.5)
 
 
 def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams

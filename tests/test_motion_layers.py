@@ -105,5 +105,5 @@ def test_compile_kernels_loads_the_motion_layers_kernel_before_a_drive_needs_it(
     layered = False
     for i, frame in enumerate(scene.frames):
         model.step(frame, i / scene.fps)
-        layered = layered or bool(model.layers)
+        layered = layered or bool(model.approach.layers)
     assert layered and set(_best_hypothesis.signatures) == before

@@ -539,7 +539,7 @@ def test_a_still_scene_is_not_a_run_of_repeats():
     for i, frame in enumerate(scene.frames):
         model.step(frame, i / scene.fps)
     # the scene stopped 18 frames before the end: one frame held, then seen as it is
-    assert not model.repeated and not model.objects
+    assert not model.repeated and not model.approach.objects
 
 
 def test_large_frames_are_seen_at_the_scale_of_the_kernels_and_targets_stay_in_their_pixels():

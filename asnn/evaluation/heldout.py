@@ -28,7 +28,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..model import ASNN, frame_pixel, spike_step
+from ..approach import frame_pixel
+from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from ..tracking import (approach_parts, approach_test, better_fit, count_in_regions,
                         layer_estimates, persistence_frames, smoothed_run)
@@ -114,7 +115,8 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
     if not params.approach_gate:
         raise ValueError("only a preset with the approach gate can be traced")
     model = ASNN(params)
-    model.measure_all_against_scene = True
+    approach = model.approach
+    approach.measure_all_against_scene = True
     trace = ClipTrace(clip=clip, cells=0)
     for index, (t, frame) in enumerate(timed_frames):
         model.step(frame, t)
@@ -129,9 +131,9 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
         sx, sy = model.shape[1] / w, model.shape[0] / h
         trace.frames.append(FrameTrace(repeat=False, objects=tuple(
             (tr.id, tr.ttc, tr.offset, share, frame_pixel(tr.x, sx), frame_pixel(tr.y, sy),
-             model.against_scene.get(tr.id), tr.fit, model.fit_against_scene.get(tr.id),
-             tuple(tr.box), layer_estimates(model.layers.get(tr.id), tr.size))
-            for tr, share in model.objects), period=model.frame_period))
+             approach.against_scene.get(tr.id), tr.fit, approach.fit_against_scene.get(tr.id),
+             tuple(tr.box), layer_estimates(approach.layers.get(tr.id), tr.size))
+            for tr, share in approach.objects), period=model.frame_period))
     return trace
 
 

@@ -1,0 +1,358 @@
+"""The object stage of the robust preset: which of the attended pixels come at the camera.
+
+The paper's model sums ``G'`` over every attended pixel (eq. 26) and reports its targets by
+clustering them (eqs. 30-32). Presets with ``targets='objects'`` hand each frame's attended
+mask ``M_a M_d`` and approach map ``G`` to one :class:`ApproachStage` per stream instead, which
+
+1. takes the mask's objects (:func:`asnn.targets.extract_objects`) and links them to tracks
+   (:class:`asnn.tracking.TargetTracker`);
+2. fits each track's box's expansion and drift on the frames themselves
+   (:func:`asnn.looming.region_and_rim_expansion`), leaving out the camera's own rig
+   (:class:`CameraRig`, ``ignore_rig``);
+3. measures the tracks that pass the approach test against the scene around them, and splits
+   their boxes into motion layers where the scene expands (``scene_relative``,
+   ``motion_layers``);
+4. judges the approach test with its persistence (:meth:`asnn.tracking.TargetTracker.judge`);
+
+and gives back the membrane potential summed over the approaching objects only (the approach
+gate, ``approach_gate``) with one target per approaching object. Every stage is in
+``docs/robust-preset.md`` with its reason and its switch.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+
+from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
+                      region_expansion, rig_pixels, rim_scaled, scene_expansion)
+from .motion_layers import motion_layers
+from .params import ASNNParams
+from .response import TrackReport
+from .targets import Target, extract_objects
+from .tracking import Observation, TargetTracker, approach_test, persistence_frames
+
+__all__ = ["ApproachStage", "CameraRig", "FramePair", "frame_pixel"]
+
+# the scene "expands" (our own forward motion) from this rate per second: driving scenes expand
+# at about 0.7, a still camera's noise reads below 0.1
+_SCENE_EXPANDS = 0.2
+
+
+class FramePair(NamedTuple):
+    """The two frames a step's looming fits compare, on the model's grid."""
+
+    previous: np.ndarray
+    current: np.ndarray
+    # the previous frame moved by the background's translation since (None: no translation)
+    background: np.ndarray | None
+    elapsed: float  # seconds between them
+
+
+def frame_pixel(coordinate: float, scale: float) -> float:
+    """A model pixel's coordinate in the input frame's pixels, ``scale`` frame pixels per model
+    pixel: pixel centres, model pixel i covering the frame's pixels [i scale, (i + 1) scale)."""
+    return float((coordinate + 0.5) * scale - 0.5)
+
+
+class CameraRig:
+    """The running means that find the camera's own rig (:func:`~asnn.looming.rig_pixels`),
+    and its pixels, which the looming fits leave out (``ignore_rig``).
+
+    Attributes
+    ----------
+    mean, change : ndarray (h, w) or None
+        Running means (weight :data:`~asnn.looming.RIG_WEIGHT` a frame) of the frames and of
+        each pixel's frame-to-frame change, at half the resolution (the rig is large).
+    frames : int
+        Frames they averaged.
+    mask : ndarray (H, W) of bool, or None
+        The rig's pixels at full resolution after the latest frame (None: none).
+    """
+
+    def __init__(self) -> None:
+        self.mean: np.ndarray | None = None
+        self.change: np.ndarray | None = None
+        self.frames = 0
+        self.mask: np.ndarray | None = None
+        self._last: tuple | None = None  # the last frame, and it at half resolution
+
+    def update(self, previous: np.ndarray, current: np.ndarray) -> np.ndarray | None:
+        """Take a frame and the one before it; return :attr:`mask`."""
+        h, w = current.shape
+        half = (max(w // 2, 1), max(h // 2, 1))  # 2x2 area means
+        last = self._last
+        before = (last[1] if last is not None and last[0] is previous
+                  else cv2.resize(previous, half, interpolation=cv2.INTER_AREA))
+        now = cv2.resize(current, half, interpolation=cv2.INTER_AREA)
+        self._last = (current, now)
+        change = np.abs(now - before)
+        if self.change is None or self.change.shape != change.shape:
+            self.change, self.mean, self.frames = change, now.copy(), 1
+        else:
+            self.change += RIG_WEIGHT * (change - self.change)
+            self.mean += RIG_WEIGHT * (now - self.mean)
+            self.frames += 1
+        rig = rig_pixels(self.change, self.mean, self.frames)
+        self.mask = None if rig is None else cv2.resize(
+            rig.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).view(bool)
+        return self.mask
+
+
+class ApproachStage:
+    """The objects of one stream's attended masks, their tracks and which of them approach.
+
+    Parameters
+    ----------
+    params : ASNNParams
+        The model's parameters (``targets='objects'``).
+
+    Attributes
+    ----------
+    tracker : TargetTracker
+        The tracked objects.
+    rig : CameraRig
+        The camera's rig, which the looming fits leave out (``ignore_rig``).
+    objects : list of (Track, float)
+        The objects seen in the latest frame with their share of ``sum |G'|`` (or
+        ``sum G'``), in the frame's order; what the approach gate decided on.
+    against_scene : dict of int to float or None
+        Track id -> its expansion rate against the scene in the latest frame, per second (None:
+        not measured); with :attr:`measure_all_against_scene`, of every growing track.
+    fit_against_scene : dict of int to float or None
+        Track id -> that fit's share of the box's change, where the scene contracts
+        (``receding_scene``; None elsewhere).
+    layers : dict of int to list
+        Track id -> its box's motion layers ``(share, rate /s, drift_x px/s, drift_y px/s)``,
+        where measured (``motion_layers``, while the scene expands).
+    measure_all_against_scene : bool
+        Measure every growing track against the scene, not only the candidates (the held-out
+        replay's trace, :mod:`asnn.evaluation.heldout`); the tracks' state is still only that
+        of the candidates.
+    """
+
+    def __init__(self, params: ASNNParams):
+        p = self.params = params
+        self.tracker = TargetTracker(p.track_link, p.track_missed, p.track_smoothing,
+                                     p.track_box,
+                                     p.approach_frames if p.region_persistence else 0,
+                                     p.object_ids)
+        self.rig = CameraRig()
+        self.objects: list = []
+        self.against_scene: dict[int, float | None] = {}
+        self.fit_against_scene: dict[int, float | None] = {}
+        self.layers: dict[int, list] = {}
+        self.measure_all_against_scene = False
+        self._overlap = p.overlap  # the approach test's partial-overlap regime, or None
+        self._scene_reference: np.ndarray | None = None
+
+    def step(self, attended: np.ndarray | None, g: np.ndarray,
+             vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+             frames: FramePair, total: float, period: float, scale: tuple[float, float],
+             points: tuple[np.ndarray, np.ndarray] | None = None, record: bool = False
+             ) -> tuple[float, list[Target], list[TrackReport] | None]:
+        """One frame: its objects, their expansion, the tracker, and the approach gate.
+
+        Parameters
+        ----------
+        attended : ndarray (H, W) of bool, or None
+            The attended mask ``M_a M_d``; None where it is empty.
+        g : ndarray (H, W)
+            The approach map G.
+        vectors : callable
+            ``vectors(rows, cols) -> (dx, dy)``: the motion vectors at those pixels.
+        frames : FramePair
+            The frame, the one before it and the time between them.
+        total : float
+            ``sum G'`` over the attended pixels (eq. 26, before ``u_scale``).
+        period : float
+            The stream's frame period, seconds (persistence at low frame rates).
+        scale : (float, float)
+            Input-frame pixels per model pixel, across and down.
+        points : (rows, cols), optional
+            The attended pixels, where the caller has them.
+        record : bool
+            Also return every track's report (:class:`~asnn.response.TrackReport`).
+
+        Returns
+        -------
+        total : float
+            With ``approach_gate``, ``sum G'`` over the approaching objects only; else ``total``.
+        targets : list of Target
+            With ``approach_gate``, the approaching objects; else every object (one target
+            per object id).
+        reports : list of TrackReport or None
+            With ``record``.
+        """
+        p = self.params
+        elapsed = frames.elapsed
+        if p.ignore_rig:
+            self.rig.update(frames.previous, frames.current)
+        self.against_scene = {}
+        self.fit_against_scene = {}
+        self.layers = {}
+        if attended is None:
+            self.tracker.update([], elapsed)
+            if p.scene_relative:
+                self._measure_against_scene([], [], [], frames)
+            self.objects = []
+            return (0.0 if p.approach_gate else total), [], [] if record else None
+        regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
+                                  points=points)
+        h, w = attended.shape
+        observations = []
+        for k in range(len(regions)):
+            x0, y0, x1, y1 = (int(c) for c in regions.boxes[k])
+            pad = p.looming_margin * max(x1 - x0, y1 - y0) + 4
+            observations.append(Observation(
+                float(regions.x[k]), float(regions.y[k]), float(regions.size[k]),
+                float(regions.mass[k]), (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
+        tracks = self.tracker.update(observations, elapsed)
+        # where the background slides, each box is fitted over its object's rim too
+        rim = attended if p.rim_expansion and frames.background is not None else None
+        boxes, rates = [], []
+        for k, tr in enumerate(tracks):
+            x0, y0, x1, y1 = tr.box
+            box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
+                   min(int(math.ceil(y1)), h))
+            est = rim_scaled(*region_and_rim_expansion(
+                frames.previous, frames.current, box, rim, frames.background, self.rig.mask),
+                max(box[2] - box[0], box[3] - box[1]), p.rim_motion_max)
+            if est is not None:
+                # an object the frame's edge cuts is measured on its visible part: its drift
+                # and size, so its offset, are not the object's, whatever the fit
+                ox0, oy0, ox1, oy1 = regions.boxes[k]
+                whole = ox0 > 0 and oy0 > 0 and ox1 < w and oy1 < h
+                tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed,
+                           est.fit if whole else 0.0)
+            boxes.append(box)
+            rates.append(None if est is None else est.rate / elapsed)
+        if p.scene_relative:
+            self._measure_against_scene(tracks, boxes, rates, frames)
+        persistence = persistence_frames(p.approach_frames, p.approach_seconds, period)
+        coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, persistence,
+                                    self._overlap, p.scene_tolerance)
+        self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
+        if p.approach_gate:
+            total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0
+        sx, sy = scale
+        reports = ([self._report(tr, coming[k], float(regions.share[k]), sx, sy)
+                    for k, tr in enumerate(tracks)] if record else None)
+        targets: dict[int, Target] = {}  # by object id
+        for k, tr in enumerate(tracks):
+            if p.approach_gate and not coming[k]:
+                continue
+            target = Target(x=frame_pixel(regions.x[k], sx), y=frame_pixel(regions.y[k], sy),
+                            direction=float(regions.direction[k]),
+                            energy=float(regions.energy[k]),
+                            pixels=int(round(regions.pixels[k] * sx * sy)),
+                            id=self.tracker.object_id(tr), expansion=tr.expansion, ttc=tr.ttc,
+                            offset=tr.offset, approaching=coming[k])
+            # an object seen as several fragments is one target: its largest
+            if target.id not in targets or target.pixels > targets[target.id].pixels:
+                targets[target.id] = target
+        return total, list(targets.values()), reports
+
+    def _report(self, track, counts: bool, share: float, sx: float, sy: float) -> TrackReport:
+        """A track as the approach test saw it in this frame, in the input frame's pixels."""
+        x0, y0, x1, y1 = track.box
+        return TrackReport(
+            id=track.id, object_id=self.tracker.object_id(track),
+            x=frame_pixel(track.x, sx), y=frame_pixel(track.y, sy),
+            size=float(track.size * math.sqrt(sx * sy)),
+            box=(float(x0 * sx), float(y0 * sy), float(x1 * sx), float(y1 * sy)),
+            expansion=track.expansion, ttc=track.ttc, offset=track.offset, fit=track.fit,
+            own_expansion=track.own_expansion, layers=track.layers, streak=track.streak,
+            test=track.verdict, counts=bool(counts), share=share if counts else 0.0)
+
+    def _measure_against_scene(self, tracks: list, boxes: list, rates: list,
+                               frames: FramePair) -> None:
+        """Each track that otherwise passes the approach test gets its expansion against the
+        scene (:meth:`~asnn.tracking.Track.measure_own`); the others None.
+
+        The scene's own expansion is fitted over the frame outside the tracks' boxes
+        (:func:`~asnn.looming.scene_expansion`); where it expands, a track's box is fitted again
+        leaving out the pixels it explains better than no motion (or than the background's
+        translation): what is left is the object's motion against the scene. Where the scene
+        does not expand nothing is left out, and the box's own rate stands. The rates go to
+        :attr:`against_scene` too; with :attr:`measure_all_against_scene` (the held-out
+        replay's trace) every growing track's is measured there, and the tracks' state is
+        still only that of the candidates.
+
+        With ``receding_scene``, where the scene contracts (the camera moves away from it),
+        the boxes are fitted against it in the same way, and so are those of the tracks that
+        pass the partial-overlap regime but for its fit test; the share of each box's change
+        that this fit explains goes to :attr:`fit_against_scene` and to the track
+        (``own_fit``), whose regime test takes the better of the two fits
+        (:func:`~asnn.tracking.approaching`). An object expanding in a contracting scene moves
+        against it, so the pixels the scene explains are the scenery's; where the scene
+        expands, object and scenery expand alike, and the box's own fit stands.
+
+        With ``motion_layers``, where the scene expands at least 0.2 per second (our own
+        forward motion), each candidate's box is split into its motions
+        (:func:`~asnn.motion_layers.motion_layers`, on the frames as the camera gave them), per
+        second in :attr:`layers` and to the track (:meth:`~asnn.tracking.Track.measure_layers`),
+        whose approach test then needs one of them to be an approach
+        (:func:`~asnn.tracking.layers_pass`); with :attr:`measure_all_against_scene`, every
+        growing track's box too.
+        """
+        p = self.params
+        overlap = self._overlap
+        previous, current, background, elapsed = frames
+        rig = self.rig.mask
+        chosen = {k for k, tr in enumerate(tracks)
+                  if tr.missed == 0 and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max,
+                                                      tr.fit, overlap)}
+        unfit = set()  # passing the regime but for its fit test
+        if p.receding_scene and overlap is not None:
+            unfit = {k for k, tr in enumerate(tracks)
+                     if k not in chosen and tr.missed == 0
+                     and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max, 1.0, overlap)}
+        growing = ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
+                   if self.measure_all_against_scene else set())
+        scene = (scene_expansion(previous, current, boxes, background, rig)
+                 if chosen or unfit or growing else None)
+        contracts = p.receding_scene and scene is not None and scene.rate < 0
+        if contracts:
+            chosen |= unfit
+        against = scene is not None and (scene.rate > 0 or contracts)
+        if against and (self._scene_reference is None
+                        or self._scene_reference.shape != current.shape):
+            self._scene_reference = np.empty_like(current)
+        for k in sorted(chosen | growing):
+            rate, fit = rates[k], None
+            if against:
+                x0, y0, x1, y1 = box = boxes[k]
+                before = (previous if background is None else background)[y0:y1, x0:x1]
+                moved = moved_by_expansion(previous, scene, box)
+                now = current[y0:y1, x0:x1]
+                # per pixel whichever motion explains it better, the scene's or the background's
+                # translation (none: the previous frame); region_expansion leaves it out if that
+                # beats no motion
+                self._scene_reference[y0:y1, x0:x1] = np.where(
+                    np.abs(now - moved) < np.abs(now - before), moved, before)
+                own = region_expansion(previous, current, box, self._scene_reference, rig)
+                rate = None if own is None else own.rate / elapsed
+                if contracts and own is not None:
+                    fit = own.fit
+            self.against_scene[tracks[k].id] = rate
+            self.fit_against_scene[tracks[k].id] = fit
+        layered = (p.motion_layers and scene is not None
+                   and scene.rate / elapsed >= _SCENE_EXPANDS)
+        for k in sorted(chosen | growing) if layered else ():
+            self.layers[tracks[k].id] = [
+                (layer.share, layer.rate / elapsed, layer.drift_x / elapsed,
+                 layer.drift_y / elapsed)
+                for layer in motion_layers(previous, current, boxes[k])]
+        ids = {tracks[k].id for k in chosen}
+        for tr in self.tracker.tracks:
+            if tr.id in ids:
+                tr.measure_own(self.against_scene.get(tr.id), self.fit_against_scene.get(tr.id))
+                tr.measure_layers(self.layers.get(tr.id))
+            else:
+                tr.measure_own(None)
+                tr.measure_layers(None)
