@@ -9,9 +9,10 @@ functions. ``tests/test_equivalence.py`` keeps the two together.
 
 A step has three parts: taking the frame (luminance, repeats, the background's translation,
 photoreceptors), the fused pass (everything that advances the retina's state) and finishing
-(attention, objects, tracking, output). ``ASNN(params, threads=N)`` computes the fused pass in
-bands on N threads, and ``ASNN.stream`` finishes each frame while the next one's pass runs
-(:mod:`asnn._parallel`); the responses are those of ``step``, bit for bit.
+(attention, output, and, for presets that track objects, the objects, looming fits, tracks and
+approach gate of :class:`asnn.approach.ApproachStage`). ``ASNN(params, threads=N)`` computes
+the fused pass in bands on N threads, and ``ASNN.stream`` finishes each frame while the next
+one's pass runs (:mod:`asnn._parallel`); the responses are those of ``step``, bit for bit.
 """
 
 from __future__ import annotations
