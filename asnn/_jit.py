@@ -30,12 +30,13 @@ def kernel(**options):
 def forget_stale_callers(package: Path, callee: str = "_fast.py") -> bool:
     """Drop the cached kernels of ``package`` that may have compiled in an older ``callee``.
 
-    Numba checks a cached kernel only against its own file: a kernel in ``looming.py`` or
-    ``_parallel.py`` that calls into ``_fast.py`` would keep running the old machine code after
-    ``_fast.py`` is edited. So the digest of ``callee`` is kept beside the cache, and when it
-    differs (or is missing), the cache indexes (``*.nbi``) of every other file are removed:
-    numba then compiles those kernels afresh. A cache that cannot be written (a read-only
-    installation, whose sources do not change either) is left alone.
+    Numba checks a cached kernel only against its own file: a kernel in
+    ``approach/looming.py`` or ``_parallel.py`` that calls into ``_fast.py`` would keep running
+    the old machine code after ``_fast.py`` is edited. So the digest of ``callee`` is kept beside
+    the cache, and when it differs (or is missing), the cache indexes (``*.nbi``) of every other
+    file, in the package and its subpackages, are removed: numba then compiles those kernels
+    afresh. A cache that cannot be written (a read-only installation, whose sources do not
+    change either) is left alone.
 
     Returns whether indexes were removed.
     """
@@ -46,7 +47,8 @@ def forget_stale_callers(package: Path, callee: str = "_fast.py") -> bool:
         stamp = cache / f"{stem}.kernels.sha256"
         if stamp.is_file() and stamp.read_text(encoding="ascii") == digest:
             return False
-        stale = [index for index in cache.glob("*.nbi") if not index.name.startswith(stem + ".")]
+        stale = [index for index in package.glob("**/__pycache__/*.nbi")
+                 if not (index.parent == cache and index.name.startswith(stem + "."))]
         for index in stale:
             index.unlink(missing_ok=True)
         cache.mkdir(exist_ok=True)

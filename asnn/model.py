@@ -29,9 +29,9 @@ import numpy as np
 
 from . import _fast, _parallel, retina
 from .approach import ApproachStage, FramePair
+from .approach.looming import region_expansion
+from .approach.motion_layers import motion_layers
 from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
-from .looming import region_expansion
-from .motion_layers import motion_layers
 from .params import ASNNParams, preset
 from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image

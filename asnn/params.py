@@ -226,13 +226,13 @@ class ASNNParams(BaseModel):
         False, description="where the stabilisation takes a background translation out, a "
         "track's box is fitted again over its attended pixels alone (its rim, without the "
         "pattern sliding past it), and where that reads the faster expansion the box's rate "
-        "and drift are scaled up to it (asnn.looming.rim_scaled): the time to contact the "
+        "and drift are scaled up to it (asnn.approach.looming.rim_scaled): the time to contact the "
         "rim's, the offset the box's; inert without stabilise")
     rim_motion_max: float | None = Field(
         None, gt=0, description="with rim_expansion, the rim's rate counts only where the "
         "motion it implies at the box's edge, in the looming fit's grid (at most 64 px a side), "
         "is at most this many pixels a frame: the gradient fit's small-motion range "
-        "(asnn.looming.rim_scaled); None: at any motion")
+        "(asnn.approach.looming.rim_scaled); None: at any motion")
     track_link: float = Field(1.0, gt=0, description="linking distance, in summed object sizes")
     track_missed: int = Field(3, ge=0, description="frames a track survives unseen")
     track_smoothing: float = Field(
@@ -249,7 +249,7 @@ class ASNNParams(BaseModel):
     scene_relative: bool = Field(
         False, description="an approaching track must not contract against the scene: its box "
         "fitted again without the pixels the scene's own expansion (the frame outside the "
-        "tracks' boxes) explains (asnn.tracking.against_scene); needs targets='objects'")
+        "tracks' boxes) explains (asnn.approach.tracking.against_scene); needs targets='objects'")
     scene_tolerance: float = Field(
         0.0, ge=0, description="the scene-relative test passes a rate against the scene down "
         "to -scene_tolerance times the track's own expansion rate (zero within the second "
@@ -258,8 +258,8 @@ class ASNNParams(BaseModel):
         False, description="where the scene contracts (the camera moves away from it: a rear "
         "camera, reversing), a track that passes the partial-overlap regime but for its fit is "
         "fitted against the scene too, and the regime's fit test takes the better of its box's "
-        "fit and that one (asnn.tracking.Track.own_fit): the scenery receding behind an object "
-        "coming at a rear camera lowers its box's fit; inert without scene_relative and "
+        "fit and that one (asnn.approach.tracking.Track.own_fit): the scenery receding behind "
+        "an object coming at a rear camera lowers its box's fit; inert without scene_relative and "
         "partial_overlap")
     tau_max: float = Field(1.5, gt=0, description="longest time to contact that warns, s")
     offset_max: float = Field(
@@ -274,38 +274,38 @@ class ASNNParams(BaseModel):
         None, gt=0, description="fewer than approach_frames frames suffice where they already "
         "span this long at the stream's frame period (the median of the last 5): at 0.1 s, a "
         "camera at 10 fps, or a stream that loses every second frame of 20, needs 2 frames in a "
-        "row, while 20-30 fps streams keep approach_frames (asnn.tracking.persistence_frames). "
-        "None: always approach_frames")
+        "row, while 20-30 fps streams keep approach_frames "
+        "(asnn.approach.tracking.persistence_frames). None: always approach_frames")
     region_persistence: bool = Field(
         False, description="a track that passes the approach test now also counts where "
         "passing tracks overlapped its box in approach_frames - 1 of the previous "
         "approach_frames frames: an object seen in fragments that change tracks from frame to "
         "frame (a walker whose sway splits its outline) persists where it is seen; not where "
         "a track that counts by its own frames overlaps it (a fragment of that object) "
-        "(asnn.tracking.TargetTracker.judge); a part of the approach gate")
+        "(asnn.approach.tracking.TargetTracker.judge); a part of the approach gate")
     ignore_rig: bool = Field(
         False, description="leave out of the looming fits the edges that stay still at the "
-        "frame's top and bottom (asnn.looming.rig_pixels): the camera's own hood or dashboard "
-        "and a recorder's overlay, whose static edges would read as part of a box not "
+        "frame's top and bottom (asnn.approach.looming.rig_pixels): the camera's own hood or "
+        "dashboard and a recorder's overlay, whose static edges would read as part of a box not "
         "expanding")
     motion_layers: bool = Field(
         False, description="where the scene expands (our own forward motion), a track that "
         "passes the approach test must also have, among the motions its box holds (dense "
-        "optical flow split by random sample consensus, asnn.motion_layers), one that is "
-        "itself an approach (asnn.tracking.layers_approach): a car pulling away seen in one box "
-        "with the roadside expanding behind it is two motions, neither coming at us; inert "
+        "optical flow split by random sample consensus, asnn.approach.motion_layers), one that is "
+        "itself an approach (asnn.approach.tracking.layers_approach): a car pulling away seen in "
+        "one box with the roadside expanding behind it is two motions, neither coming at us; inert "
         "without scene_relative (whose scene fit tells where the scene expands)")
     object_ids: bool = Field(
         False, description="targets are named after their object: a track that appears over "
         "an object already counted (its box overlapping a counting track's, this frame or the "
         "one before) is a fragment of that object and reports that track's id, and an object "
-        "seen as several fragments is one target (asnn.tracking.TargetTracker.object_id); "
+        "seen as several fragments is one target (asnn.approach.tracking.TargetTracker.object_id); "
         "changes ids and targets, never the warning; needs targets='objects'")
     partial_overlap: bool = Field(
         False, description="the approach test also passes a partial overlap: ttc <= "
         "overlap_tau_max, offset <= overlap_offset_max, from a box the expansion fit explains "
         "(fit >= overlap_fit_min): a car whose path overlaps ours only in part "
-        "(asnn.tracking.approach_test); a part of the approach gate, inert without it")
+        "(asnn.approach.tracking.approach_test); a part of the approach gate, inert without it")
     overlap_tau_max: float = Field(1.0, gt=0, description="longest time to contact that warns "
                                    "on a partial overlap, s")
     overlap_offset_max: float = Field(
@@ -313,8 +313,8 @@ class ASNNParams(BaseModel):
         "offset_max: a car-width overlap with a car as wide reads up to about 2.4)")
     overlap_fit_min: float = Field(
         0.4, le=1, description="least share of the box's change the expansion fit must explain "
-        "on a partial overlap (asnn.looming.Expansion.fit; an object the frame's edge cuts "
-        "counts 0); -1 switches the test off")
+        "on a partial overlap (asnn.approach.looming.Expansion.fit; an object the frame's edge "
+        "cuts counts 0); -1 switches the test off")
 
     # --- computation ---
     precision: Literal["float32", "float64"] = Field(

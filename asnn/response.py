@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .targets import Target
-from .tracking import ApproachVerdict
+
+if TYPE_CHECKING:  # the approach stage builds its reports from this module: no import cycle
+    from .approach.tracking import ApproachVerdict
 
 __all__ = ["Maps", "Response", "TrackReport"]
 
@@ -27,7 +30,7 @@ class Maps:
     G_prime : G M_a M_d.
     rig : bool, or None
         The pixels the looming fits left out as the camera's own rig (``ignore_rig``;
-        :func:`asnn.looming.rig_pixels`); None where none were.
+        :func:`asnn.approach.looming.rig_pixels`); None where none were.
     """
 
     P: np.ndarray
@@ -59,15 +62,16 @@ class TrackReport:
     box : (x0, y0, x1, y1)
         The region its expansion is measured over, input-frame pixels.
     expansion, ttc, offset, fit, own_expansion, layers
-        As :class:`asnn.tracking.Track` keeps them (per second, seconds, object sizes, share;
-        ``layers`` as ``(share, ttc, offset)`` per motion of the box, None where not measured).
+        As :class:`asnn.approach.tracking.Track` keeps them (per second, seconds, object sizes,
+        share; ``layers`` as ``(share, ttc, offset)`` per motion of the box, None where not
+        measured).
     streak : int
         Consecutive frames, up to this one, in which it passed the approach test.
     test : ApproachVerdict
-        The approach test's parts in this frame (:func:`asnn.tracking.approach_verdict`).
+        The approach test's parts in this frame (:func:`asnn.approach.tracking.approach_verdict`).
     counts : bool
         Whether it counts as coming at the camera in this frame (its streak, or the region's
-        persistence: :meth:`asnn.tracking.TargetTracker.judge`): only these drive u(t).
+        persistence: :meth:`asnn.approach.tracking.TargetTracker.judge`): only these drive u(t).
     share : float
         Its share of u(t) before ``u_scale``, where it counts.
     """

@@ -21,7 +21,7 @@ object that does not move with it changes as if it moved against it, which is th
 rest of the retina sees. The temporal filter's state is not moved: it stays where the frame's
 pixels are, with the object, and what the background left in it decays. The looming fit, which
 measures the object's own image motion on the raw frames, leaves out the pixels that the
-background's translation explains (:func:`asnn.looming.region_expansion`).
+background's translation explains (:func:`asnn.approach.looming.region_expansion`).
 
 References
 ----------

@@ -9,8 +9,8 @@ clockwise on screen). Two groupings:
     cluster, which on a looming object is often one per segment of its rim.
 :func:`extract_objects`
     Connected regions of the attended mask, each with its approach-weighted centre and size
-    (the ``robust`` preset): the input of the tracker of :mod:`asnn.tracking`, which adds the
-    optional fields ``id``, ``expansion``, ``ttc``, ``offset`` and ``approaching``.
+    (the ``robust`` preset): the input of the tracker of :mod:`asnn.approach.tracking`, which adds
+    the optional fields ``id``, ``expansion``, ``ttc``, ``offset`` and ``approaching``.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ class Target:
         Time to contact ``1 / expansion``, seconds; None while the object does not grow.
     offset : float or None
         Lateral drift over expansion, in object sizes: near 0 on a collision course, large for
-        an object that will pass (:mod:`asnn.tracking`); None while it does not grow.
+        an object that will pass (:mod:`asnn.approach.tracking`); None while it does not grow.
     approaching : bool or None
         Whether the object passes the approach test that drives the warning.
     """

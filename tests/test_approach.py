@@ -1,4 +1,5 @@
-"""The object stage on its own (asnn/approach.py): attended masks in, approaching targets out."""
+"""The object stage on its own (asnn/approach/stage.py): attended masks in, approaching targets
+out."""
 
 import numpy as np
 import pytest

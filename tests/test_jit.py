@@ -7,27 +7,34 @@ def _package(tmp_path, source="x = 1\n"):
     (tmp_path / "_fast.py").write_text(source)
     cache = tmp_path / "__pycache__"
     cache.mkdir(exist_ok=True)
-    for name in ("_fast._front-10.py311.nbi", "looming._solve-20.py311.nbi",
-                 "_parallel._serve-30.py311.nbi", "looming._solve-20.py311.1.nbc"):
+    for name in ("_fast._front-10.py311.nbi", "_parallel._serve-30.py311.nbi"):
         (cache / name).write_bytes(b"index")
+    # a subpackage's kernels call into _fast.py too (asnn/approach/looming.py)
+    sub = tmp_path / "approach" / "__pycache__"
+    sub.mkdir(parents=True, exist_ok=True)
+    for name in ("looming._solve-20.py311.nbi", "looming._solve-20.py311.1.nbc"):
+        (sub / name).write_bytes(b"index")
     return cache
 
 
 def _left(cache):
-    return sorted(p.name for p in cache.iterdir() if p.suffix in (".nbi", ".nbc"))
+    return sorted(p.relative_to(cache.parent).as_posix()
+                  for p in cache.parent.glob("**/__pycache__/*") if p.suffix in (".nbi", ".nbc"))
 
 
 def test_callers_indexes_go_when_the_callee_changes_and_stay_while_it_does_not(tmp_path):
     cache = _package(tmp_path)
+    kept = ["__pycache__/_fast._front-10.py311.nbi",
+            "approach/__pycache__/looming._solve-20.py311.1.nbc"]
     # no digest yet (a cache from before): the callers' indexes go, the callee's own stay
     assert forget_stale_callers(tmp_path)
-    assert _left(cache) == ["_fast._front-10.py311.nbi", "looming._solve-20.py311.1.nbc"]
+    assert _left(cache) == kept
     _package(tmp_path)  # numba writes them again
     assert not forget_stale_callers(tmp_path)
     assert len(_left(cache)) == 4
     (tmp_path / "_fast.py").write_text("x = 2\n")
     assert forget_stale_callers(tmp_path)
-    assert _left(cache) == ["_fast._front-10.py311.nbi", "looming._solve-20.py311.1.nbc"]
+    assert _left(cache) == kept
 
 
 def test_an_unreadable_package_is_left_alone(tmp_path):

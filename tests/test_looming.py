@@ -1,14 +1,15 @@
-"""The direct looming estimate (asnn/looming.py) and the target tracker (asnn/tracking.py)."""
+"""The direct looming estimate (asnn/approach/looming.py) and the target tracker
+(asnn/approach/tracking.py)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from asnn.looming import (RIG_WEIGHT, Expansion, moved_by_expansion,
+from asnn.approach.looming import (RIG_WEIGHT, Expansion, moved_by_expansion,
                           region_and_rim_expansion, region_expansion, rig_pixels, rim_scaled,
                           scene_expansion)
-from asnn.tracking import Observation, TargetTracker, Track, approaching
+from asnn.approach.tracking import Observation, TargetTracker, Track, approaching
 from imageutil import texture, warp
 
 
@@ -213,7 +214,7 @@ def test_the_fits_area_averages_are_opencvs():
     import cv2
 
     from asnn._fast import _area_fast, _area_table
-    from asnn.looming import _area_averages
+    from asnn.approach.looming import _area_averages
 
     rng = np.random.default_rng(16)
     checked = 0
@@ -241,7 +242,7 @@ def test_the_fit_of_a_large_box_is_that_of_opencvs_area_averages():
     bit, with and without a background."""
     import cv2
 
-    from asnn.looming import _NO_SKIP, _RIDGE, _solve_expansion
+    from asnn.approach.looming import _NO_SKIP, _RIDGE, _solve_expansion
 
     def with_opencv(previous, current, box, background):
         x0, y0, x1, y1 = box
@@ -275,7 +276,7 @@ def test_the_box_and_its_rim_in_one_pass_are_the_two_fits_bit_for_bit():
     to exclude and a background; where the box is area-averaged, with the rim sampled at the
     centres of the smaller box's pixels: a rim over the whole box is the box, a rim off every
     centre leaves nothing to fit."""
-    from asnn.looming import _MAX_SIDE
+    from asnn.approach.looming import _MAX_SIDE
 
     rng = np.random.default_rng(18)
     averaged = 0
@@ -362,7 +363,7 @@ def test_a_partial_overlap_passes_later_and_only_from_a_box_that_moves_as_one():
 
 
 def test_a_slow_stream_needs_fewer_frames_of_approach():
-    from asnn.tracking import persistence_frames
+    from asnn.approach.tracking import persistence_frames
 
     # 3 frames span 0.1 s at 20 fps; at 30 fps they span less, and 3 stay the most asked for
     assert [persistence_frames(3, 0.1, period) for period in (1 / 30, 0.05, 1 / 15, 0.1, 0.2)] \
@@ -388,7 +389,7 @@ def test_the_frame_period_is_the_median_of_the_last_frames():
 
 
 def test_an_approach_persists_in_its_region_across_tracks():
-    from asnn.tracking import Observation, boxes_overlap, persists_in_region
+    from asnn.approach.tracking import Observation, boxes_overlap, persists_in_region
 
     box = (10.0, 10.0, 30.0, 30.0)
     inside, beside, apart = (20.0, 0.0, 40.0, 15.0), (30.0, 10.0, 50.0, 30.0), (60, 60, 80, 80)
@@ -442,7 +443,7 @@ def test_an_approach_persists_in_its_region_across_tracks():
 
 
 def test_a_fragment_is_named_after_the_object_it_appears_over():
-    from asnn.tracking import Observation, fragment_of
+    from asnn.approach.tracking import Observation, fragment_of
 
     assert fragment_of((0, 0, 10, 10), 5, [(3, (5, 5, 20, 20)), (1, (8, 0, 30, 9))]) == 1
     assert fragment_of((0, 0, 10, 10), 5, [(7, (5, 5, 20, 20))]) is None  # younger
@@ -486,7 +487,7 @@ def test_a_fragment_is_named_after_the_object_it_appears_over():
 
 
 def test_the_scene_relative_test_tolerates_a_fraction_of_the_tracks_expansion():
-    from asnn.tracking import against_scene
+    from asnn.approach.tracking import against_scene
 
     assert against_scene(None) and against_scene(0.0) and not against_scene(-0.01)
     assert against_scene(-0.2, expansion=2.5, tolerance=0.1)

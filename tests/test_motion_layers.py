@@ -1,5 +1,5 @@
-"""Motion layers of a box (asnn/motion_layers.py) and the approach test's use of them
-(asnn.tracking.layers_approach, layers_pass)."""
+"""Motion layers of a box (asnn/approach/motion_layers.py) and the approach test's use of them
+(asnn.approach.tracking.layers_approach, layers_pass)."""
 
 import subprocess
 import sys
@@ -7,8 +7,8 @@ import sys
 import numpy as np
 import pytest
 
-from asnn.motion_layers import Layer, motion_layers
-from asnn.tracking import (LAYER_OFFSET_FACTOR, LAYER_SHARE, LAYER_TAU_FACTOR, Track,
+from asnn.approach.motion_layers import Layer, motion_layers
+from asnn.approach.tracking import (LAYER_OFFSET_FACTOR, LAYER_SHARE, LAYER_TAU_FACTOR, Track,
                            approaching, layer_estimates, layers_approach, layers_pass)
 from imageutil import texture, warp
 
@@ -89,13 +89,14 @@ def test_compile_kernels_loads_the_motion_layers_kernel_before_a_drive_needs_it(
     # a worker's first frame with a candidate in an expanding scene must not wait for numba
     from asnn import ASNN
     from asnn.model import compile_kernels
-    from asnn.motion_layers import _best_hypothesis
+    from asnn.approach.motion_layers import _best_hypothesis
     from asnn.stimuli.suite import make_case
 
     # in a fresh process (here other tests may have compiled it already)
     loaded = subprocess.run(
         [sys.executable, "-c", "from asnn.model import compile_kernels; compile_kernels(); "
-         "from asnn.motion_layers import _best_hypothesis; print(len(_best_hypothesis.signatures))"],
+         "from asnn.approach.motion_layers import _best_hypothesis; "
+         "print(len(_best_hypothesis.signatures))"],
         capture_output=True, text=True, check=True)
     assert int(loaded.stdout) >= 1
     compile_kernels()

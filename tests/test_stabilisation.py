@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from asnn import ASNN, preset
-from asnn.looming import region_expansion
+from asnn.approach.looming import region_expansion
 from asnn.stabilisation import background_shift, search_radius, shift_image
 from asnn.stimuli.suite import make_case
 from imageutil import texture, warp

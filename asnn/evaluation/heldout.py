@@ -29,10 +29,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..approach import frame_pixel
+from ..approach.tracking import (approach_parts, approach_test, better_fit, count_in_regions,
+                                 layer_estimates, persistence_frames, smoothed_run)
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
-from ..tracking import (approach_parts, approach_test, better_fit, count_in_regions,
-                        layer_estimates, persistence_frames, smoothed_run)
 from . import scoring
 from .runs import fmt, write_json
 
@@ -77,16 +77,16 @@ class FrameTrace:
         grow), its share of ``u`` before ``u_scale``, its centre in the frame's pixels, its
         expansion rate against the scene in this frame (per second; None where not measured:
         with ``scene_relative`` it is measured for every growing track, so that the replay can
-        smooth it over the frames in which a track passes any grid point's test), its
-        track's fit (:attr:`asnn.tracking.Track.fit`), and the share of its box's change the
-        fit against the scene explains in this frame (None unless the scene contracts, with
-        ``receding_scene``), its track's box (for ``region_persistence``), and its box's
-        motion layers as ``(share, ttc, offset)`` (:func:`asnn.tracking.layer_estimates`; None
-        where not measured: with ``motion_layers`` they are measured for every growing track
-        while the scene expands).
+        smooth it over the frames in which a track passes any grid point's test), its track's fit
+        (:attr:`asnn.approach.tracking.Track.fit`), and the share of its box's change the fit
+        against the scene explains in this frame (None unless the scene contracts, with
+        ``receding_scene``), its track's box (for ``region_persistence``), and its box's motion
+        layers as ``(share, ttc, offset)`` (:func:`asnn.approach.tracking.layer_estimates`; None
+        where not measured: with ``motion_layers`` they are measured for every growing track while
+        the scene expands).
     period : float or None
-        The stream's frame period then (:attr:`asnn.model.ASNN.frame_period`), which sets how
-        many frames of approach a track needs (:func:`asnn.tracking.persistence_frames`); None
+        The stream's frame period then (:attr:`asnn.model.ASNN.frame_period`), which sets how many
+        frames of approach a track needs (:func:`asnn.approach.tracking.persistence_frames`); None
         for the first frame and repeats, which are not judged.
     """
 

@@ -1,16 +1,15 @@
 """Motion layers of a region: its image motion split into the few looming motions it holds.
 
-:func:`asnn.looming.region_expansion` fits one expansion and one drift to a whole box. Where the
-box holds two surfaces moving differently, least squares returns a blend that neither surface
-has: a car pulling away ahead of us (contracting, drifting sideways) seen in one box with the
-roadside behind it (expanding outward from our heading under our own forward motion) can read
-as something growing dead ahead, because the two drifts cancel. This module splits the box's
-motion instead, in the way of a layered representation of image sequences [1]_: the dense
-optical flow of the box [2]_, then the looming model ``u = A + C (x - c_x)``,
-``v = B + C (y - c_y)`` (the model of :mod:`asnn.looming`) fitted by random sample consensus
-[3]_ to the largest set of pixels it explains, then again to the rest. Each motion found is a
-:class:`Layer`; an object coming at the camera is one of them
-(:func:`asnn.tracking.layers_approach` tests that).
+:func:`asnn.approach.looming.region_expansion` fits one expansion and one drift to a whole box.
+Where the box holds two surfaces moving differently, least squares returns a blend that neither
+surface has: a car pulling away ahead of us (contracting, drifting sideways) seen in one box with
+the roadside behind it (expanding outward from our heading under our own forward motion) can read as
+something growing dead ahead, because the two drifts cancel. This module splits the box's motion
+instead, in the way of a layered representation of image sequences [1]_: the dense optical flow of
+the box [2]_, then the looming model ``u = A + C (x - c_x)``, ``v = B + C (y - c_y)`` (the model of
+:mod:`asnn.approach.looming`) fitted by random sample consensus [3]_ to the largest set of pixels it
+explains, then again to the rest. Each motion found is a :class:`Layer`; an object coming at the
+camera is one of them (:func:`asnn.approach.tracking.layers_approach` tests that).
 
 Deterministic: the samples come from a generator seeded the same way on every call, so the
 same frames give the same layers.
@@ -33,7 +32,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from ._jit import kernel
+from .._jit import kernel
 
 __all__ = ["Layer", "motion_layers"]
 

@@ -4,7 +4,7 @@ One :class:`TargetTracker` per stream. Each frame it takes the frame's object ob
 (centre, size, box) and links them to the tracks of the previous frames by distance, greedily,
 strongest track first. A track keeps its ``id`` while it is seen, and survives ``max_missed``
 frames unseen. The caller then measures each seen track's expansion over the track's box (the
-direct estimate of :mod:`asnn.looming`) and hands it to :meth:`Track.measure`.
+direct estimate of :mod:`asnn.approach.looming`) and hands it to :meth:`Track.measure`.
 
 Per track, the expansion rate and the drift are exponentially smoothed. From them:
 
@@ -20,7 +20,7 @@ Per track, the expansion rate and the drift are exponentially smoothed. From the
     pole at the roadside while driving). See :func:`approaching`.
 ``fit``
     How well one expanding, drifting surface explains the box's change (the smoothed share of
-    it the expansion fit explains, :class:`asnn.looming.Expansion`, and 0 while the frame's
+    it the expansion fit explains, :class:`asnn.approach.looming.Expansion`, and 0 while the frame's
     edge cuts the object): the partial-overlap regime of :func:`approach_test` accepts a wider
     offset only from a whole object whose box moves as one.
 
@@ -33,7 +33,7 @@ now where approaching tracks overlapped its box in enough of the frames before
 
 Motion layers: where one box holds two motions (a car pulling away in front of the roadside
 that expands behind it under our own forward motion), the fit over the box blends them into an
-approach that neither has; with the layers of the box measured (:mod:`asnn.motion_layers`),
+approach that neither has; with the layers of the box measured (:mod:`asnn.approach.motion_layers`),
 a track passes only if one of them is itself an approach (:func:`layers_pass`).
 
 Object ids: the fragments of one object are different tracks, so the target a warning reports
@@ -127,11 +127,11 @@ class Track:
         the same run; the model measures it only where the scene contracts
         (``receding_scene``), and None elsewhere.
     layers : tuple of (share, ttc, offset), or None
-        The motions its box held in the latest frame (:mod:`asnn.motion_layers`): each one's
-        share of the box's textured pixels, time to contact in seconds and offset (None unless
-        it expands), the offset in this track's size (:meth:`measure_layers`); None where they
-        were not measured (the model measures them, with ``motion_layers``, only while the
-        track otherwise passes the approach test and the scene expands).
+        The motions its box held in the latest frame (:mod:`asnn.approach.motion_layers`): each
+        one's share of the box's textured pixels, time to contact in seconds and offset (None unless
+        it expands), the offset in this track's size (:meth:`measure_layers`); None where they were
+        not measured (the model measures them, with ``motion_layers``, only while the track
+        otherwise passes the approach test and the scene expands).
     verdict : ApproachVerdict or None
         The approach test's parts in the latest frame it was judged (:meth:`judge`); None
         before its first.

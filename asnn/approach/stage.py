@@ -5,14 +5,15 @@ clustering them (eqs. 30-32). Presets with ``targets='objects'`` hand each frame
 mask ``M_a M_d`` and approach map ``G`` to one :class:`ApproachStage` per stream instead, which
 
 1. takes the mask's objects (:func:`asnn.targets.extract_objects`) and links them to tracks
-   (:class:`asnn.tracking.TargetTracker`);
+   (:class:`asnn.approach.tracking.TargetTracker`);
 2. fits each track's box's expansion and drift on the frames themselves
-   (:func:`asnn.looming.region_and_rim_expansion`), leaving out the camera's own rig
+   (:func:`asnn.approach.looming.region_and_rim_expansion`), leaving out the camera's own rig
    (:class:`CameraRig`, ``ignore_rig``);
 3. measures the tracks that pass the approach test against the scene around them, and splits
    their boxes into motion layers where the scene expands (``scene_relative``,
    ``motion_layers``);
-4. judges the approach test with its persistence (:meth:`asnn.tracking.TargetTracker.judge`);
+4. judges the approach test with its persistence
+   (:meth:`asnn.approach.tracking.TargetTracker.judge`);
 
 and gives back the membrane potential summed over the approaching objects only (the approach
 gate, ``approach_gate``) with one target per approaching object. Every stage is in
@@ -28,12 +29,12 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from ..params import ASNNParams
+from ..response import TrackReport
+from ..targets import Target, extract_objects
 from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
                       region_expansion, rig_pixels, rim_scaled, scene_expansion)
 from .motion_layers import motion_layers
-from .params import ASNNParams
-from .response import TrackReport
-from .targets import Target, extract_objects
 from .tracking import Observation, TargetTracker, approach_test, persistence_frames
 
 __all__ = ["ApproachStage", "CameraRig", "FramePair", "frame_pixel"]
@@ -60,14 +61,14 @@ def frame_pixel(coordinate: float, scale: float) -> float:
 
 
 class CameraRig:
-    """The running means that find the camera's own rig (:func:`~asnn.looming.rig_pixels`),
+    """The running means that find the camera's own rig (:func:`~asnn.approach.looming.rig_pixels`),
     and its pixels, which the looming fits leave out (``ignore_rig``).
 
     Attributes
     ----------
     mean, change : ndarray (h, w) or None
-        Running means (weight :data:`~asnn.looming.RIG_WEIGHT` a frame) of the frames and of
-        each pixel's frame-to-frame change, at half the resolution (the rig is large).
+        Running means (weight :data:`~asnn.approach.looming.RIG_WEIGHT` a frame) of the frames and
+        of each pixel's frame-to-frame change, at half the resolution (the rig is large).
     frames : int
         Frames they averaged.
     mask : ndarray (H, W) of bool, or None
@@ -272,11 +273,11 @@ class ApproachStage:
     def _measure_against_scene(self, tracks: list, boxes: list, rates: list,
                                frames: FramePair) -> None:
         """Each track that otherwise passes the approach test gets its expansion against the
-        scene (:meth:`~asnn.tracking.Track.measure_own`); the others None.
+        scene (:meth:`~asnn.approach.tracking.Track.measure_own`); the others None.
 
         The scene's own expansion is fitted over the frame outside the tracks' boxes
-        (:func:`~asnn.looming.scene_expansion`); where it expands, a track's box is fitted again
-        leaving out the pixels it explains better than no motion (or than the background's
+        (:func:`~asnn.approach.looming.scene_expansion`); where it expands, a track's box is fitted
+        again leaving out the pixels it explains better than no motion (or than the background's
         translation): what is left is the object's motion against the scene. Where the scene
         does not expand nothing is left out, and the box's own rate stands. The rates go to
         :attr:`against_scene` too; with :attr:`measure_all_against_scene` (the held-out
@@ -288,17 +289,17 @@ class ApproachStage:
         pass the partial-overlap regime but for its fit test; the share of each box's change
         that this fit explains goes to :attr:`fit_against_scene` and to the track
         (``own_fit``), whose regime test takes the better of the two fits
-        (:func:`~asnn.tracking.approaching`). An object expanding in a contracting scene moves
-        against it, so the pixels the scene explains are the scenery's; where the scene
+        (:func:`~asnn.approach.tracking.approaching`). An object expanding in a contracting scene
+        moves against it, so the pixels the scene explains are the scenery's; where the scene
         expands, object and scenery expand alike, and the box's own fit stands.
 
-        With ``motion_layers``, where the scene expands at least 0.2 per second (our own
-        forward motion), each candidate's box is split into its motions
-        (:func:`~asnn.motion_layers.motion_layers`, on the frames as the camera gave them), per
-        second in :attr:`layers` and to the track (:meth:`~asnn.tracking.Track.measure_layers`),
-        whose approach test then needs one of them to be an approach
-        (:func:`~asnn.tracking.layers_pass`); with :attr:`measure_all_against_scene`, every
-        growing track's box too.
+        With ``motion_layers``, where the scene expands at least 0.2 per second (our own forward
+        motion), each candidate's box is split into its motions
+        (:func:`~asnn.approach.motion_layers.motion_layers`, on the frames as the camera gave them),
+        per second in :attr:`layers` and to the track
+        (:meth:`~asnn.approach.tracking.Track.measure_layers`), whose approach test then needs one
+        of them to be an approach (:func:`~asnn.approach.tracking.layers_pass`); with
+        :attr:`measure_all_against_scene`, every growing track's box too.
         """
         p = self.params
         overlap = self._overlap

@@ -39,8 +39,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from ._fast import _area_fast, _area_table, _reflect
-from ._jit import kernel
+from .._fast import _area_fast, _area_table, _reflect
+from .._jit import kernel
 
 __all__ = ["Expansion", "region_expansion", "region_and_rim_expansion", "rim_scaled",
            "scene_expansion", "moved_by_expansion", "rig_pixels", "RIG_WEIGHT"]
