@@ -201,7 +201,7 @@ class ApproachStage:
             if p.scene_relative:
                 self._measure_against_scene([], [], [], frames)
             self.objects = []
-            return (0.0 if p.approach_gate else total), [], [] if record else None
+            return (0.0 if p.approach_gate else total), [], ([] if record else None)
         regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
                                   points=points)
         h, w = attended.shape
