@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from asnn import ASNN, preset
-from asnn.evaluation import heldout
+from asnn.evaluation import heldout, scoring
 from asnn.evaluation.runs import ABLATIONS, at_rate, parse_detector, parse_detectors
 from asnn.stimuli import write_video
 from asnn.stimuli.suite import make_case
@@ -137,6 +137,45 @@ def test_the_tie_break_decides_between_thresholds_that_score_alike(traced):
         heldout.leave_one_out(traces, labels, base, tie_break="luck")
 
 
+def test_the_figures_over_ties_do_not_depend_on_the_tie_break(traced):
+    base, scenes, traces = traced
+    labels = [scene.label(f"{scene.name}.mp4") for scene in scenes]
+    runs = [heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0, tie_break=t)
+            for t in heldout.TIE_BREAKS]
+    assert runs[0]["over_ties"] == runs[1]["over_ties"]
+    ties = runs[0]["over_ties"]
+    hits, alarms = ties["summary"]["hits"], ties["summary"]["false_alarms"]
+    assert hits["fewest"] <= hits["expected"] <= hits["most"] <= len(
+        [label for label in labels if label["collision"]])
+    for run in runs:
+        # whichever tie-break: its held-out figures lie within the range over the ties
+        summary = run["held_out"]["summary"]
+        assert hits["fewest"] <= summary["hit"] <= hits["most"]
+        assert alarms["fewest"] <= summary["false_alarms"] <= alarms["most"]
+        for chosen, tied in zip(run["held_out"]["clips"], ties["clips"]):
+            assert chosen["clip"] == tied["clip"] and tied["outcomes"].get(chosen["outcome"])
+    # on these clips many thresholds score alike: the tie-breaks differ somewhere
+    assert max(t["tied"] for t in ties["clips"]) > 1
+
+
+def test_the_figures_over_ties_count_shares_and_ranges():
+    def score(clip, collision, outcome):
+        return scoring.ClipScore(clip=clip, collision=collision, outcome=outcome,
+                                 false_alarm=outcome in ("early", "false"))
+
+    ties = [heldout._over_ties([score("a", True, o) for o in ("hit", "hit", "miss", "early")]),
+            heldout._over_ties([score("b", True, "hit")] * 3),
+            heldout._over_ties([score("c", True, "miss")] * 2),
+            heldout._over_ties([score("d", False, o) for o in ("quiet", "quiet", "quiet",
+                                                               "false")])]
+    assert [t["tied"] for t in ties] == [4, 3, 2, 4]
+    assert ties[0]["outcomes"] == {"hit": 2, "miss": 1, "early": 1}
+    summary = heldout._summarize_ties(ties)
+    assert summary["hits"] == {"expected": 1.5, "fewest": 1, "most": 2}
+    assert summary["false_alarms"] == {"expected": 0.5, "fewest": 0, "most": 2}
+    assert (summary["collision_clips"], summary["noncollision_clips"]) == (3, 1)
+
+
 def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     labels = []
     for name in ("loom-dark-c0.6-d6-center", "translate-disk-dark-c0.6-h2px"):
@@ -150,7 +189,9 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     results = json.loads((out / "held_out.json").read_text())
     assert results["in_sample"]["summary"]["hit"] == 1
     assert results["in_sample"]["summary"]["false_alarms"] == 0
-    assert "held out (leave one clip out)" in (out / "held_out.md").read_text()
+    report = (out / "held_out.md").read_text()
+    assert "held out (leave one clip out)" in report and "Whatever breaks the ties" in report
+    assert len(results["over_ties"]["clips"]) == 2
     with pytest.raises(SystemExit):  # one mode at a time
         main(["eval", str(tmp_path), "--synthetic", "--held-out"])
 

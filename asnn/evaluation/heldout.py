@@ -12,6 +12,9 @@ scored with the thresholds it did not help choose.
 The preset's own thresholds are the ones this procedure picks on every clip of the design set,
 wherever those clips tell the values apart by hits and false alarms (in a tie it takes the first
 in grid order; the README says where the last tie-break, warning frames, picks otherwise).
+Since the tie-break decides part of the held-out figures, they are also given whatever breaks
+the ties: expected over every tied point of each fold, and the fewest and the most that any
+choice among them gives.
 
 Running the model once per grid point would cost the grid's size in model runs. The gate acts
 after everything else, so each clip is run once (:func:`trace_clip`) with the objects of every
@@ -280,7 +283,10 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
         ``grid`` (the tried values), ``tie_break``, ``base`` (the preset's thresholds),
         ``chosen_all`` (the thresholds :func:`selection_key` picks on every clip),
         ``in_sample`` and ``held_out`` (per clip a score dict; ``held_out`` adds the ``chosen``
-        thresholds), with their ``summary``.
+        thresholds), with their ``summary``; ``over_ties``: per clip, its held-out outcomes
+        under every point that ties for the choice made without it (on hits and false
+        alarms: what the tie-break decides between), and their ``summary``, the held-out
+        hits and false alarms expected over those ties and their range whatever breaks them.
     """
     _check_tie_break(tie_break)
     points = grid(base)
@@ -291,31 +297,65 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
                                   early_tolerance_s=early_tolerance_s)
                for tr, lab in zip(traces, labels)] for g in points]
 
-    def best(exclude: int | None) -> int:
-        keys = {k: selection_key(scoring.summarize(s for i, s in enumerate(scores[k])
-                                                   if i != exclude), tie_break)
-                for k in allowed}
+    def ranked(exclude: int | None) -> tuple[int, list[int]]:
+        """The point chosen without clip ``exclude``, and every point that ties with it on
+        hits and false alarms (grid order)."""
+        summaries = {k: scoring.summarize(s for i, s in enumerate(scores[k]) if i != exclude)
+                     for k in allowed}
+        keys = {k: selection_key(summaries[k], tie_break) for k in allowed}
         # ties: the first in grid order (smaller thresholds first)
-        return max(allowed, key=lambda k: (keys[k], -k))
+        chosen = max(allowed, key=lambda k: (keys[k], -k))
+        top = selection_key(summaries[chosen], "grid")
+        return chosen, [k for k in allowed if selection_key(summaries[k], "grid") == top]
 
     base_scores = [scoring.score_clip(replay(tr, base), lab, warmup=warmup,
                                       early_tolerance_s=early_tolerance_s)
                    for tr, lab in zip(traces, labels)]
-    held = []
+    held, ties = [], []
     for i in range(len(traces)):
-        k = best(i)
+        k, tied = ranked(i)
         held.append({**scores[k][i].to_dict(), "chosen": _gate(points[k])})
+        ties.append(_over_ties([scores[t][i] for t in tied]))
     return {
         "grid": {n: list(v) for n, v in GATE_GRID.items()},
         "tie_break": tie_break,
         "base": _gate(base),
         "admissible": None if admissible is None else [_gate(points[k]) for k in allowed],
-        "chosen_all": _gate(points[best(None)]),
+        "chosen_all": _gate(points[ranked(None)[0]]),
         "in_sample": {"clips": [s.to_dict() for s in base_scores],
                       "summary": scoring.summarize(base_scores)},
         "held_out": {"clips": held, "summary": scoring.summarize(
             scoring.ClipScore(**{k: v for k, v in c.items() if k != "chosen"}) for c in held)},
+        "over_ties": {"clips": ties, "summary": _summarize_ties(ties)},
     }
+
+
+def _over_ties(scores: Sequence[scoring.ClipScore]) -> dict:
+    """A held-out clip's outcomes under every grid point that ties for the choice made without
+    it: how many tie, and the shares of them that hit it and that warn falsely on it."""
+    n = len(scores)
+    outcomes: dict[str, int] = {}
+    for s in scores:
+        outcomes[s.outcome] = outcomes.get(s.outcome, 0) + 1
+    return {"clip": scores[0].clip, "collision": scores[0].collision, "tied": n,
+            "hit": outcomes.get("hit", 0) / n,
+            "false_alarm": sum(s.false_alarm for s in scores) / n, "outcomes": outcomes}
+
+
+def _summarize_ties(ties: Sequence[Mapping]) -> dict:
+    """The held-out hits and false alarms whatever breaks the ties: their expected count when
+    each fold takes one of its tied points at random (each alike), and the fewest and the most
+    that any choice gives (the folds choose independently, so every combination can happen)."""
+    collisions = [t for t in ties if t["collision"]]
+
+    def spread(key: str, clips: Sequence[Mapping]) -> dict:
+        return {"expected": sum(t[key] for t in clips),
+                "fewest": sum(t[key] == 1.0 for t in clips),
+                "most": sum(t[key] > 0.0 for t in clips)}
+
+    return {"collision_clips": len(collisions), "noncollision_clips": len(ties) - len(collisions),
+            "hits": spread("hit", collisions), "false_alarms": spread("false_alarm", ties),
+            "median_tied": sorted(t["tied"] for t in ties)[len(ties) // 2] if ties else 0}
 
 
 def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
@@ -354,9 +394,44 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
         chosen = ", ".join(f"{v}" for v in b["chosen"].values())
         lines.append(f"| {a['clip']} | {a['outcome']} {fmt(a['first_warning'])} | "
                      f"{b['outcome']} {fmt(b['first_warning'])} | {chosen} |")
+    ties = results.get("over_ties")
+    if ties is not None:
+        lines += _ties_lines(ties)
     path = out_dir / "held_out.md"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
+
+
+def _ties_lines(ties: Mapping) -> list[str]:
+    """The report's section on the held-out figures whatever breaks the ties."""
+    s = ties["summary"]
+    hits, alarms = s["hits"], s["false_alarms"]
+    lines = [
+        "",
+        "## Whatever breaks the ties",
+        "",
+        "Without each clip, many grid points can tie on hits and false alarms; the tie-break "
+        "then decides what the held-out clip is scored with. Over every tied point of each "
+        f"fold (a median of {s['median_tied']} per fold): the expected held-out figures if each "
+        "fold took one of them at random, and the fewest and the most that any choice among "
+        "them gives.",
+        "",
+        "| | expected | fewest | most |",
+        "| --- | --- | --- | --- |",
+        f"| hits (of {s['collision_clips']}) | {hits['expected']:.1f} | {hits['fewest']} | "
+        f"{hits['most']} |",
+        f"| false alarms (of {s['collision_clips'] + s['noncollision_clips']} clips) | "
+        f"{alarms['expected']:.1f} | {alarms['fewest']} | {alarms['most']} |",
+        "",
+        "| clip | tied points | share that hit | share that warn falsely | outcomes |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for t in ties["clips"]:
+        outcomes = ", ".join(f"{k} {v}" for k, v in sorted(t["outcomes"].items()))
+        hit = f"{t['hit']:.0%}" if t["collision"] else "–"
+        lines.append(f"| {t['clip']} | {t['tied']} | {hit} | {t['false_alarm']:.0%} | "
+                     f"{outcomes} |")
+    return lines
 
 
 def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace:
