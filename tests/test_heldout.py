@@ -121,6 +121,14 @@ def test_the_selection_prefers_hits_minus_false_alarms_then_fewer_false_alarms()
         summary(4, 0, 10, 30), "grid")
     with pytest.raises(ValueError, match="tie-break"):
         heldout.selection_key(summary(4, 0, 10, 12), "luck")
+    # by the generated suite: the point with more suite hits minus false alarms, whatever the
+    # clips' warning frames
+    assert heldout.selection_key(summary(4, 0, 10, 30), "suite", summary(80, 1, 0, 0)) > \
+        heldout.selection_key(summary(4, 0, 10, 12), "suite", summary(79, 1, 0, 0))
+    assert heldout.selection_key(summary(4, 0, 10, 12), "suite", summary(79, 0, 0, 0)) > \
+        heldout.selection_key(summary(4, 0, 10, 12), "suite", summary(80, 1, 0, 0))
+    with pytest.raises(ValueError, match="suite summary"):
+        heldout.selection_key(summary(4, 0, 10, 12), "suite")
 
 
 def test_the_tie_break_decides_between_thresholds_that_score_alike(traced):
@@ -137,12 +145,43 @@ def test_the_tie_break_decides_between_thresholds_that_score_alike(traced):
         heldout.leave_one_out(traces, labels, base, tie_break="luck")
 
 
+def test_the_suite_breaks_ties_by_the_generated_scenes(traced):
+    base, scenes, traces = traced
+    labels = [scene.label(f"{scene.name}.mp4") for scene in scenes]
+    # a suite of one case the clips do not hold: a partial overlap, which only the regime
+    # catches; among the points that tie on the clips, the choice takes one that hits it
+    case = make_case("rear-day-catchup-offset")
+    suite = heldout.suite_summaries([heldout.trace_clip(at_rate(case.frames, case.fps), base)],
+                                    [case.label(case.name)], base)
+    by_suite = heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0,
+                                     tie_break="suite", suite=suite)
+    by_grid = heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0,
+                                    tie_break="grid")
+    assert by_grid["chosen_all"]["partial_overlap"] is False  # the first tied point
+    chosen = by_suite["chosen_all"]
+    assert chosen["partial_overlap"] is True
+    k = next(k for k, g in enumerate(heldout.grid(base))
+             if all(getattr(g, n) == v for n, v in chosen.items()))
+    assert suite[k]["hit"] == 1
+    # ... and it still ties with the grid's choice on the clips themselves
+    in_sample = [heldout.scoring.summarize(
+        heldout.scoring.score_clip(heldout.replay(tr, g), lab, early_tolerance_s=0.0)
+        for tr, lab in zip(traces, labels))
+        for g in (base.model_copy(update=chosen), base.model_copy(update=by_grid["chosen_all"]))]
+    assert heldout.selection_key(in_sample[0], "grid") == heldout.selection_key(in_sample[1],
+                                                                                "grid")
+    with pytest.raises(ValueError, match="suite summary"):
+        heldout.leave_one_out(traces, labels, base, tie_break="suite")
+
+
 def test_the_figures_over_ties_do_not_depend_on_the_tie_break(traced):
     base, scenes, traces = traced
     labels = [scene.label(f"{scene.name}.mp4") for scene in scenes]
-    runs = [heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0, tie_break=t)
+    suite = heldout.suite_summaries(traces, labels, base)
+    runs = [heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0, tie_break=t,
+                                  suite=suite)
             for t in heldout.TIE_BREAKS]
-    assert runs[0]["over_ties"] == runs[1]["over_ties"]
+    assert all(run["over_ties"] == runs[0]["over_ties"] for run in runs)
     ties = runs[0]["over_ties"]
     hits, alarms = ties["summary"]["hits"], ties["summary"]["false_alarms"]
     assert hits["fewest"] <= hits["expected"] <= hits["most"] <= len(

@@ -40,8 +40,8 @@ from . import scoring
 from .runs import fmt, write_json
 
 __all__ = ["GATE_GRID", "SUITE_AIMS", "FrameTrace", "ClipTrace", "trace_clip", "replay",
-           "grid", "suite_admissible", "selection_key", "TIE_BREAKS", "leave_one_out",
-           "held_out_report", "evaluate_held_out"]
+           "grid", "suite_summaries", "suite_admissible", "selection_key", "TIE_BREAKS",
+           "leave_one_out", "held_out_report", "evaluate_held_out"]
 
 # the thresholds chosen by looking at real clips, and the values tried for each
 GATE_GRID: dict[str, tuple] = {
@@ -59,11 +59,13 @@ GATE_GRID: dict[str, tuple] = {
 # would see every day, must stay quiet (one case in a hundred)
 SUITE_AIMS = {"hit_rate": 0.90, "false_alarm_rate": 0.01}
 # how grid points that tie on hits and false alarms are told apart (selection_key); the
-# first rewards thresholds that warn more, so the held-out figures are given with either
+# first rewards thresholds that warn more, so the held-out figures are given with each
 TIE_BREAKS = {
     "warning-frames": "more warning frames inside the hit windows than outside them, then the "
                       "first in grid order",
     "grid": "the first in grid order (smaller thresholds first)",
+    "suite": "more hits minus false alarms on the generated suite, then fewer false alarms "
+             "there, then the first in grid order",
 }
 
 
@@ -216,36 +218,50 @@ def grid(base: ASNNParams) -> list[ASNNParams]:
     return points
 
 
-def suite_admissible(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
-                     base: ASNNParams, warmup: int = scoring.WARMUP_FRAMES) -> list[bool]:
-    """For each grid point, whether the generated suite (its traces and labels) stays within
-    :data:`SUITE_AIMS` (scored as generated clips: no early tolerance)."""
-    verdicts = []
-    for g in grid(base):
-        s = scoring.summarize(scoring.score_clip(replay(tr, g), lab, warmup=warmup,
+def suite_summaries(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
+                    base: ASNNParams, warmup: int = scoring.WARMUP_FRAMES) -> list[dict]:
+    """For each grid point, its summary (:func:`~asnn.evaluation.scoring.summarize`) on the
+    generated suite, from the suite's traces and labels (scored as generated clips: no early
+    tolerance)."""
+    return [scoring.summarize(scoring.score_clip(replay(tr, g), lab, warmup=warmup,
                                                  early_tolerance_s=0.0)
                               for tr, lab in zip(traces, labels))
+            for g in grid(base)]
+
+
+def suite_admissible(summaries: Sequence[Mapping]) -> list[bool]:
+    """For each grid point's suite summary (:func:`suite_summaries`), whether the suite stays
+    within :data:`SUITE_AIMS`."""
+    verdicts = []
+    for s in summaries:
         hits, alarms = s["hit_rate"], s["false_alarm_rate"]  # None: no such case selected
         verdicts.append((hits is None or hits >= SUITE_AIMS["hit_rate"])
                         and (alarms is None or alarms <= SUITE_AIMS["false_alarm_rate"]))
     return verdicts
 
 
-def selection_key(summary: Mapping, tie_break: str = "warning-frames") -> tuple:
+def selection_key(summary: Mapping, tie_break: str = "warning-frames",
+                  suite: Mapping | None = None) -> tuple:
     """How a grid point is ranked on the clips that choose it (larger is better): hits minus
     false alarms (early warnings and warned non-collision clips count alike), then fewer false
-    alarms, then, with ``tie_break`` ``warning-frames``, more warning frames inside the hit
-    windows than outside them (:data:`TIE_BREAKS`; what still ties goes by grid order).
+    alarms, then by ``tie_break`` (:data:`TIE_BREAKS`; what still ties goes by grid order):
+    ``warning-frames``, more warning frames inside the hit windows than outside them;
+    ``suite``, the same two keys on the generated suite (``suite``, the point's summary
+    there), which does not hold the clips being chosen on or held out; ``grid``, nothing more.
 
     Raises
     ------
     ValueError
-        For a tie-break not in :data:`TIE_BREAKS`.
+        For a tie-break not in :data:`TIE_BREAKS`, or ``suite`` without its summary.
     """
     _check_tie_break(tie_break)
     key = (summary["hit"] - summary["false_alarms"], -summary["false_alarms"])
     if tie_break == "grid":
         return key
+    if tie_break == "suite":
+        if suite is None:
+            raise ValueError("the suite tie-break needs the grid point's suite summary")
+        return key + (suite["hit"] - suite["false_alarms"], -suite["false_alarms"])
     inside = summary["window_warning_frames"]
     return key + (inside - (summary["warning_frames"] - inside),)
 
@@ -263,7 +279,8 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
                   admissible: Sequence[bool] | None = None,
                   warmup: int = scoring.WARMUP_FRAMES,
                   early_tolerance_s: float = scoring.EARLY_TOLERANCE_S,
-                  tie_break: str = "warning-frames") -> dict:
+                  tie_break: str = "warning-frames",
+                  suite: Sequence[Mapping] | None = None) -> dict:
     """In-sample and leave-one-clip-out scores of the gate thresholds.
 
     Parameters
@@ -276,6 +293,9 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
         all by default.
     tie_break : str
         How grid points that tie on hits and false alarms are told apart (:data:`TIE_BREAKS`).
+    suite : sequence of dict, optional
+        Per grid point, its summary on the generated suite (:func:`suite_summaries`); needed
+        by the ``suite`` tie-break.
 
     Returns
     -------
@@ -290,6 +310,8 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
     """
     _check_tie_break(tie_break)
     points = grid(base)
+    if tie_break == "suite" and (suite is None or len(suite) != len(points)):
+        raise ValueError("the suite tie-break needs each grid point's suite summary")
     allowed = [k for k in range(len(points)) if admissible is None or admissible[k]]
     if not allowed:
         raise ValueError("no grid point keeps the generated suite within its aims")
@@ -302,7 +324,8 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
         hits and false alarms (grid order)."""
         summaries = {k: scoring.summarize(s for i, s in enumerate(scores[k]) if i != exclude)
                      for k in allowed}
-        keys = {k: selection_key(summaries[k], tie_break) for k in allowed}
+        keys = {k: selection_key(summaries[k], tie_break, None if suite is None else suite[k])
+                for k in allowed}
         # ties: the first in grid order (smaller thresholds first)
         chosen = max(allowed, key=lambda k: (keys[k], -k))
         top = selection_key(summaries[chosen], "grid")
@@ -496,8 +519,9 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
             progress.advance(1, name)
     progress.finish()
     suite_labels = [make_case(name).label(name) for name in cases]
-    admissible = suite_admissible(suite_traces, suite_labels, base)
+    suite = suite_summaries(suite_traces, suite_labels, base)
     results = {"clips_dir": str(clips_dir), "preset": preset_name, "suite_cases": len(cases),
-               **leave_one_out(traces, labels, base, admissible, tie_break=tie_break)}
+               **leave_one_out(traces, labels, base, suite_admissible(suite),
+                               tie_break=tie_break, suite=suite)}
     held_out_report(results, out_dir)
     return results
