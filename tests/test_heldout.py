@@ -231,6 +231,10 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     report = (out / "held_out.md").read_text()
     assert "held out (leave one clip out)" in report and "Whatever breaks the ties" in report
     assert len(results["over_ties"]["clips"]) == 2
+    # the suite's figures (here one near miss, which the preset keeps quiet)
+    assert results["suite"]["preset"] == {"hit": 0, "collision_clips": 0, "false_alarms": 0,
+                                          "clips": 1}
+    assert "On the generated suite (the preset's thresholds: 0/0 hits, 0 false alarms" in report
     with pytest.raises(SystemExit):  # one mode at a time
         main(["eval", str(tmp_path), "--synthetic", "--held-out"])
 

@@ -417,6 +417,14 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
         chosen = ", ".join(f"{v}" for v in b["chosen"].values())
         lines.append(f"| {a['clip']} | {a['outcome']} {fmt(a['first_warning'])} | "
                      f"{b['outcome']} {fmt(b['first_warning'])} | {chosen} |")
+    on_suite = results.get("suite") or {}
+    if on_suite:
+        lines += ["", "On the generated suite (" + "; ".join(
+            f"{what}: {on_suite[name]['hit']}/{on_suite[name]['collision_clips']} hits, "
+            f"{on_suite[name]['false_alarms']} false alarms in {on_suite[name]['clips']} cases"
+            for name, what in (("preset", "the preset's thresholds"),
+                               ("chosen_all", "the choice on every clip"))
+            if name in on_suite) + ")."]
     ties = results.get("over_ties")
     if ties is not None:
         lines += _ties_lines(ties)
@@ -523,5 +531,12 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     results = {"clips_dir": str(clips_dir), "preset": preset_name, "suite_cases": len(cases),
                **leave_one_out(traces, labels, base, suite_admissible(suite),
                                tie_break=tie_break, suite=suite)}
+    # what the preset's thresholds and the choice on every clip score on the suite
+    gates = [_gate(g) for g in grid(base)]
+    results["suite"] = {
+        name: {k: suite[gates.index(gate)][k] for k in ("hit", "collision_clips",
+                                                        "false_alarms", "clips")}
+        for name, gate in (("preset", results["base"]), ("chosen_all", results["chosen_all"]))
+        if gate in gates}
     held_out_report(results, out_dir)
     return results
