@@ -421,7 +421,8 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
     if on_suite:
         lines += ["", "On the generated suite (" + "; ".join(
             f"{what}: {on_suite[name]['hit']}/{on_suite[name]['collision_clips']} hits, "
-            f"{on_suite[name]['false_alarms']} false alarms in {on_suite[name]['clips']} cases"
+            f"{_count(on_suite[name]['false_alarms'], 'false alarm')} in "
+            f"{on_suite[name]['clips']} cases"
             for name, what in (("preset", "the preset's thresholds"),
                                ("chosen_all", "the choice on every clip"))
             if name in on_suite) + ")."]
@@ -431,6 +432,10 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
     path = out_dir / "held_out.md"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 def _ties_lines(ties: Mapping) -> list[str]:
