@@ -110,3 +110,20 @@ def test_the_camera_rig_marks_still_edges_at_the_frame_s_bottom_only():
     assert mask is not None
     assert mask[96:104].any()  # the hood's edge
     assert not mask[:90].any()  # the moving scene, and the middle of the frame
+
+
+def test_a_track_box_outside_the_frame_is_measured_as_empty():
+    """A smoothed track box can trail its object past the frame's edge: its pixels are none,
+    not a slice counted from the far side (a hand sweeping across a webcam, seen without the
+    direction inhibition, once crashed the scene-relative measurement this way)."""
+    from asnn.approach.stage import _pixel_box
+    from asnn.model import ASNN
+    from asnn.stimuli.suite import make_case
+
+    assert _pixel_box((-198.3, 17.9, -158.0, 63.1), W, H) == (0, 17, 0, 64)
+    assert _pixel_box((150.5, -4.0, 171.2, 9.5), W, H) == (150, 0, 160, 10)
+    assert _pixel_box((170.0, 130.0, 180.0, 140.0), W, H) == (160, 120, 160, 120)
+    model = ASNN(preset("robust", top_k=0))
+    model.approach.measure_all_against_scene = True  # every growing track, as the trace does
+    warned = [model.step(frame).collision for frame in make_case("handheld-desk-sweep").frames]
+    assert not any(warned)

@@ -60,6 +60,17 @@ def frame_pixel(coordinate: float, scale: float) -> float:
     return float((coordinate + 0.5) * scale - 0.5)
 
 
+def _pixel_box(box: tuple[float, float, float, float], w: int,
+               h: int) -> tuple[int, int, int, int]:
+    """The whole pixels of a track's box inside a ``w`` x ``h`` frame, ``(x0, y0, x1, y1)``
+    with ``0 <= x0 <= x1 <= w`` and ``0 <= y0 <= y1 <= h``: empty where the box lies outside
+    the frame (a smoothed box can trail its object past the edge), since a slice with a
+    negative end would count from the frame's far side."""
+    x0, y0 = min(max(int(box[0]), 0), w), min(max(int(box[1]), 0), h)
+    return (x0, y0, max(min(int(math.ceil(box[2])), w), x0),
+            max(min(int(math.ceil(box[3])), h), y0))
+
+
 class CameraRig:
     """The running means that find the camera's own rig (:func:`~asnn.approach.looming.rig_pixels`),
     and its pixels, which the looming fits leave out (``ignore_rig``).
@@ -217,9 +228,7 @@ class ApproachStage:
         rim = attended if p.rim_expansion and frames.background is not None else None
         boxes, rates = [], []
         for k, tr in enumerate(tracks):
-            x0, y0, x1, y1 = tr.box
-            box = (max(int(x0), 0), max(int(y0), 0), min(int(math.ceil(x1)), w),
-                   min(int(math.ceil(y1)), h))
+            box = _pixel_box(tr.box, w, h)
             est = rim_scaled(*region_and_rim_expansion(
                 frames.previous, frames.current, box, rim, frames.background, self.rig.mask),
                 max(box[2] - box[0], box[3] - box[1]), p.rim_motion_max)
