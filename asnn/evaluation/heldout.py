@@ -489,7 +489,9 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
                       cases: str | None = None, jobs: int = 1, progress=None,
                       tie_break: str = "warning-frames") -> dict:
     """Trace a preset on labelled clips and on the generated suite, and write the in-sample and
-    leave-one-clip-out figures of its gate thresholds (:func:`leave_one_out`) to ``out_dir``.
+    leave-one-clip-out figures of its gate thresholds (:func:`leave_one_out`) to ``out_dir``,
+    with the suite's hits and false alarms under the preset's thresholds and under the choice
+    made on every clip (``suite``).
 
     ``cases`` selects the suite cases that decide which grid points are admissible (a pattern
     of :func:`asnn.stimuli.suite.suite_cases`; every case by default); ``tie_break`` is
