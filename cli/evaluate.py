@@ -18,7 +18,7 @@ from asnn.evaluation import scoring
 from asnn.evaluation.heldout import TIE_BREAKS
 from asnn.evaluation.perturb import PERTURBATIONS
 from asnn.evaluation.progress import ProgressPrinter
-from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detectors
+from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
 from asnn.params import preset_names
 
 from .arguments import count, frame_size, whole
@@ -48,7 +48,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="regenerate the paper's synthetic figures (Figs. 2, 4-7) instead")
     mode.add_argument("--held-out", action="store_true",
                       help="with CLIPS_DIR: the in-sample and leave-one-clip-out figures of the "
-                           "default preset's approach-gate thresholds (held_out.md)")
+                           "default preset's approach-gate thresholds (held_out.md); of another "
+                           "preset's with --preset, or of one ASNN spec's with --detectors "
+                           "(asnn:robust/stabilise=false: an addition switched off, its gate "
+                           "chosen again)")
     p.add_argument("--tie-break", choices=list(TIE_BREAKS), default="warning-frames",
                    help="with --held-out: how thresholds that tie on hits and false alarms are "
                         "told apart: " + "; ".join(f"{k}: {v}" for k, v in TIE_BREAKS.items())
@@ -152,9 +155,19 @@ def run(args: argparse.Namespace) -> int:
             print("asnn eval: CLIPS_DIR is required (or --synthetic, or --paper)", file=sys.stderr)
             return 2
         elif args.held_out:
+            held_preset, overrides = args.preset, {}
+            if args.detectors != list(DEFAULT_DETECTORS):  # one ASNN spec: its preset, changed
+                specs = [parse_detector(name) for name in args.detectors]
+                if len(specs) != 1 or specs[0].model != "asnn":
+                    print("asnn eval: --held-out holds out one ASNN detector's gate "
+                          "(--detectors asnn:PRESET[/name=value...])", file=sys.stderr)
+                    return 2
+                held_preset = specs[0].preset or args.preset
+                overrides = dict(specs[0].overrides)
             heldout.evaluate_held_out(args.clips_dir, args.out, labels_path=args.labels,
-                                      preset_name=args.preset, cases=args.cases, jobs=args.jobs,
-                                      progress=progress, tie_break=args.tie_break)
+                                      preset_name=held_preset, cases=args.cases, jobs=args.jobs,
+                                      progress=progress, tie_break=args.tie_break,
+                                      overrides=overrides)
             print(f"{args.out}/held_out.md")
             return 0
         else:

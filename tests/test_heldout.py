@@ -237,6 +237,19 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     assert "On the generated suite (the preset's thresholds: 0/0 hits, 0 false alarms" in report
     with pytest.raises(SystemExit):  # one mode at a time
         main(["eval", str(tmp_path), "--synthetic", "--held-out"])
+    # an addition switched off: its gate's limits chosen again
+    changed = tmp_path / "changed"
+    assert main(["eval", str(tmp_path), "--held-out", "--cases", "nearmiss-disk-dark-right",
+                 "--detectors", "asnn:robust/region_persistence=false",
+                 "--out", str(changed)]) == 0
+    results = json.loads((changed / "held_out.json").read_text())
+    assert (results["preset"], results["overrides"]) == ("robust", {"region_persistence": False})
+    assert "Preset `robust` with region_persistence = False." in (
+        changed / "held_out.md").read_text()
+    for detectors in ("lgmd1", "asnn,asnn:reference"):  # one ASNN detector only
+        assert main(["eval", str(tmp_path), "--held-out", "--detectors", detectors,
+                     "--out", str(tmp_path / "refused")]) == 2
+    assert not (tmp_path / "refused").exists()
 
 
 def test_detector_specs_override_parameters():

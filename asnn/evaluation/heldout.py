@@ -394,9 +394,12 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
                 " |")
 
     gate = ", ".join(f"{k} = {v}" for k, v in results["base"].items())
+    changed = results.get("overrides") or {}
     lines = [
         "# Held-out figures of the approach gate's thresholds",
         "",
+        *([f"Preset `{results.get('preset', 'default')}` with "
+           + ", ".join(f"{k} = {v}" for k, v in changed.items()) + ".", ""] if changed else []),
         f"Preset thresholds: {gate} (on every clip: "
         + ", ".join(f"{k} = {v}" for k, v in results["chosen_all"].items()) + "). "
         "Leave-one-clip-out: each clip scored with the thresholds chosen on the other clips "
@@ -487,7 +490,8 @@ def _trace_case(name: str, params: ASNNParams) -> ClipTrace:
 def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
                       labels_path: str | Path | None = None, preset_name: str = "default",
                       cases: str | None = None, jobs: int = 1, progress=None,
-                      tie_break: str = "warning-frames") -> dict:
+                      tie_break: str = "warning-frames",
+                      overrides: Mapping[str, object] | None = None) -> dict:
     """Trace a preset on labelled clips and on the generated suite, and write the in-sample and
     leave-one-clip-out figures of its gate thresholds (:func:`leave_one_out`) to ``out_dir``,
     with the suite's hits and false alarms under the preset's thresholds and under the choice
@@ -495,7 +499,8 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
 
     ``cases`` selects the suite cases that decide which grid points are admissible (a pattern
     of :func:`asnn.stimuli.suite.suite_cases`; every case by default); ``tie_break`` is
-    :func:`leave_one_out`'s.
+    :func:`leave_one_out`'s; ``overrides`` change the preset's parameters (an addition switched
+    off, say: its gate's limits are then chosen again, held out).
 
     Raises
     ------
@@ -514,7 +519,7 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     _check_tie_break(tie_break)
     clips_dir, out_dir = Path(clips_dir), Path(out_dir)
     labels = scoring.load_labels(Path(labels_path) if labels_path else clips_dir / "labels.json")
-    base = preset(preset_name)
+    base = preset(preset_name, **dict(overrides or {}))
     if not base.approach_gate:
         raise ValueError(f"preset {preset_name!r} has no approach gate to hold out")
     cases = suite_cases(cases)
@@ -535,7 +540,8 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     progress.finish()
     suite_labels = [make_case(name).label(name) for name in cases]
     suite = suite_summaries(suite_traces, suite_labels, base)
-    results = {"clips_dir": str(clips_dir), "preset": preset_name, "suite_cases": len(cases),
+    results = {"clips_dir": str(clips_dir), "preset": preset_name,
+               "overrides": dict(overrides or {}), "suite_cases": len(cases),
                **leave_one_out(traces, labels, base, suite_admissible(suite),
                                tie_break=tie_break, suite=suite)}
     # what the preset's thresholds and the choice on every clip score on the suite
