@@ -26,7 +26,7 @@ thresholds reproduces the model's warnings frame for frame (``tests/test_heldout
 from __future__ import annotations
 
 import itertools
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -306,7 +306,9 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
         thresholds), with their ``summary``; ``over_ties``: per clip, its held-out outcomes
         under every point that ties for the choice made without it (on hits and false
         alarms: what the tie-break decides between), and their ``summary``, the held-out
-        hits and false alarms expected over those ties and their range whatever breaks them.
+        hits and false alarms expected over those ties and their range whatever breaks them;
+        with ``suite``, ``suite``: the suite's hits and false alarms under the preset's
+        thresholds (``preset``, where the grid holds them) and under ``chosen_all``.
     """
     _check_tie_break(tie_break)
     points = grid(base)
@@ -324,12 +326,13 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
         hits and false alarms (grid order)."""
         summaries = {k: scoring.summarize(s for i, s in enumerate(scores[k]) if i != exclude)
                      for k in allowed}
-        keys = {k: selection_key(summaries[k], tie_break, None if suite is None else suite[k])
-                for k in allowed}
+        primary = {k: selection_key(summaries[k], "grid") for k in allowed}  # hits, alarms
+        keys = primary if tie_break == "grid" else {
+            k: selection_key(summaries[k], tie_break, None if suite is None else suite[k])
+            for k in allowed}
         # ties: the first in grid order (smaller thresholds first)
         chosen = max(allowed, key=lambda k: (keys[k], -k))
-        top = selection_key(summaries[chosen], "grid")
-        return chosen, [k for k in allowed if selection_key(summaries[k], "grid") == top]
+        return chosen, [k for k in allowed if primary[k] == primary[chosen]]
 
     base_scores = [scoring.score_clip(replay(tr, base), lab, warmup=warmup,
                                       early_tolerance_s=early_tolerance_s)
@@ -339,27 +342,35 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
         k, tied = ranked(i)
         held.append({**scores[k][i].to_dict(), "chosen": _gate(points[k])})
         ties.append(_over_ties([scores[t][i] for t in tied]))
-    return {
+    chosen_all = ranked(None)[0]
+    results = {
         "grid": {n: list(v) for n, v in GATE_GRID.items()},
         "tie_break": tie_break,
         "base": _gate(base),
         "admissible": None if admissible is None else [_gate(points[k]) for k in allowed],
-        "chosen_all": _gate(points[ranked(None)[0]]),
+        "chosen_all": _gate(points[chosen_all]),
         "in_sample": {"clips": [s.to_dict() for s in base_scores],
                       "summary": scoring.summarize(base_scores)},
         "held_out": {"clips": held, "summary": scoring.summarize(
             scoring.ClipScore(**{k: v for k, v in c.items() if k != "chosen"}) for c in held)},
         "over_ties": {"clips": ties, "summary": _summarize_ties(ties)},
     }
+    if suite is not None:
+        # what the preset's thresholds (where the grid holds them) and the choice on every clip
+        # score on the suite
+        figures = ("hit", "collision_clips", "false_alarms", "clips")
+        at = {"chosen_all": chosen_all, "preset": next(
+            (k for k, g in enumerate(points) if _gate(g) == results["base"]), None)}
+        results["suite"] = {name: {f: suite[k][f] for f in figures}
+                            for name, k in at.items() if k is not None}
+    return results
 
 
 def _over_ties(scores: Sequence[scoring.ClipScore]) -> dict:
     """A held-out clip's outcomes under every grid point that ties for the choice made without
     it: how many tie, and the shares of them that hit it and that warn falsely on it."""
     n = len(scores)
-    outcomes: dict[str, int] = {}
-    for s in scores:
-        outcomes[s.outcome] = outcomes.get(s.outcome, 0) + 1
+    outcomes = dict(Counter(s.outcome for s in scores))
     return {"clip": scores[0].clip, "collision": scores[0].collision, "tied": n,
             "hit": outcomes.get("hit", 0) / n,
             "false_alarm": sum(s.false_alarm for s in scores) / n, "outcomes": outcomes}
@@ -544,12 +555,5 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
                "overrides": dict(overrides or {}), "suite_cases": len(cases),
                **leave_one_out(traces, labels, base, suite_admissible(suite),
                                tie_break=tie_break, suite=suite)}
-    # what the preset's thresholds and the choice on every clip score on the suite
-    gates = [_gate(g) for g in grid(base)]
-    results["suite"] = {
-        name: {k: suite[gates.index(gate)][k] for k in ("hit", "collision_clips",
-                                                        "false_alarms", "clips")}
-        for name, gate in (("preset", results["base"]), ("chosen_all", results["chosen_all"]))
-        if gate in gates}
     held_out_report(results, out_dir)
     return results
