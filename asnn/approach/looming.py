@@ -43,7 +43,7 @@ from .._fast import _area_fast, _area_table, _reflect
 from .._jit import kernel
 
 __all__ = ["Expansion", "region_expansion", "region_and_rim_expansion", "rim_scaled",
-           "scene_expansion", "moved_by_expansion", "rig_pixels", "RIG_WEIGHT"]
+           "scene_expansion", "moved_by_expansion", "rig_pixels", "rig_rows", "RIG_WEIGHT"]
 
 _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
 _MAX_SIDE = 64  # pixels: a larger box is area-averaged down to this before the fit
@@ -294,11 +294,54 @@ def rig_pixels(change: np.ndarray, mean: np.ndarray, frames: int) -> np.ndarray 
     if band < 1:
         return None
     mean = np.ascontiguousarray(mean, np.float32)
-    edge = 0.125 * (np.abs(cv2.Sobel(mean, cv2.CV_32F, 1, 0, ksize=3))
-                    + np.abs(cv2.Sobel(mean, cv2.CV_32F, 0, 1, ksize=3)))
-    rig = (edge > _RIG_EDGE) & (change < _RIG_SPEED * edge)
-    rig[band:h - band] = False  # the rig is looked for at the top and bottom only
-    return rig if rig.any() else None
+    rig = np.zeros(mean.shape, np.bool_)  # the middle of the frame is never marked
+    marked = _mark_still_edges(change, mean, 0, band, rig)
+    marked |= _mark_still_edges(change, mean, h - band, h, rig)
+    return rig if marked else None
+
+
+def rig_rows(h: int) -> tuple[slice, ...]:
+    """The rows of an ``h``-row grid that :func:`rig_pixels` reads: its top and bottom bands,
+    each with the row beyond it that the edge filter reaches (none where the bands are empty;
+    the two never overlap)."""
+    band = int(_RIG_BAND * h)
+    if band < 1:
+        return ()
+    return slice(0, band + 1), slice(h - band - 1, h)
+
+
+@kernel()
+def _mark_still_edges(change, mean, y0, y1, rig):
+    """:func:`rig_pixels`' test on the rows ``[y0, y1)``, into ``rig``; whether it marked any.
+
+    The edge is OpenCV's 3x3 Sobel pair on ``mean`` (float32) with its reflect-101 border, bit
+    for bit: each separable pass sums its outer taps first, as ``cv2.Sobel`` does; the
+    thresholds are float32 too, as NumPy compares a float32 array with a Python float.
+    """
+    h, w = mean.shape
+    marked = False
+    for y in range(y0, y1):
+        up, here, down = mean[_reflect(y - 1, h)], mean[y], mean[_reflect(y + 1, h)]
+        still, rig_y = change[y], rig[y]
+        # the columns at the border apart: the loop over the others has no branch to vectorise
+        for x in (0, w - 1):
+            marked |= _still_edge(up, here, down, still, rig_y, _reflect(x - 1, w), x,
+                                  _reflect(x + 1, w))
+        for x in range(1, w - 1):
+            marked |= _still_edge(up, here, down, still, rig_y, x - 1, x, x + 1)
+    return marked
+
+
+@kernel(inline="always")
+def _still_edge(up, here, down, still, rig, left, x, right):
+    """One pixel of :func:`_mark_still_edges`."""
+    two, eighth = np.float32(2.0), np.float32(0.125)
+    ex = ((up[right] - up[left]) + (down[right] - down[left])) + two * (here[right] - here[left])
+    ey = ((down[left] + down[right]) + two * down[x]) - ((up[left] + up[right]) + two * up[x])
+    edge = eighth * (abs(ex) + abs(ey))
+    marked = (edge > np.float32(_RIG_EDGE)) & (still[x] < np.float32(_RIG_SPEED) * edge)
+    rig[x] = marked
+    return marked
 
 
 def scene_expansion(previous: np.ndarray, current: np.ndarray,

@@ -29,11 +29,12 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from .._jit import kernel
 from ..params import ASNNParams
 from ..response import TrackReport
 from ..targets import Target, extract_objects
 from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
-                      region_expansion, rig_pixels, rim_scaled, scene_expansion)
+                      region_expansion, rig_pixels, rig_rows, rim_scaled, scene_expansion)
 from .motion_layers import motion_layers
 from .tracking import Observation, TargetTracker, approach_test, persistence_frames
 
@@ -79,7 +80,9 @@ class CameraRig:
     ----------
     mean, change : ndarray (h, w) or None
         Running means (weight :data:`~asnn.approach.looming.RIG_WEIGHT` a frame) of the frames and
-        of each pixel's frame-to-frame change, at half the resolution (the rig is large).
+        of each pixel's frame-to-frame change, at half the resolution (the rig is large); kept
+        in the rows :func:`~asnn.approach.looming.rig_pixels` reads
+        (:func:`~asnn.approach.looming.rig_rows`), the rows between them hold the first frame's.
     frames : int
         Frames they averaged.
     mask : ndarray (H, W) of bool, or None
@@ -102,17 +105,28 @@ class CameraRig:
                   else cv2.resize(previous, half, interpolation=cv2.INTER_AREA))
         now = cv2.resize(current, half, interpolation=cv2.INTER_AREA)
         self._last = (current, now)
-        change = np.abs(now - before)
-        if self.change is None or self.change.shape != change.shape:
-            self.change, self.mean, self.frames = change, now.copy(), 1
+        if self.change is None or self.change.shape != now.shape:
+            self.change, self.mean, self.frames = np.abs(now - before), now.copy(), 1
         else:
-            self.change += RIG_WEIGHT * (change - self.change)
-            self.mean += RIG_WEIGHT * (now - self.mean)
+            weight = now.dtype.type(RIG_WEIGHT)
+            for rows in rig_rows(now.shape[0]):  # the rows rig_pixels reads
+                _running_means(now, before, rows.start, rows.stop, weight, self.change,
+                               self.mean)
             self.frames += 1
         rig = rig_pixels(self.change, self.mean, self.frames)
         self.mask = None if rig is None else cv2.resize(
             rig.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).view(bool)
         return self.mask
+
+
+@kernel()
+def _running_means(now, before, y0, y1, weight, change, mean):
+    """``change += weight (|now - before| - change)`` and ``mean += weight (now - mean)`` on
+    the rows ``[y0, y1)``, in the arrays' precision as NumPy computes them."""
+    for y in range(y0, y1):
+        for x in range(now.shape[1]):
+            change[y, x] += weight * (abs(now[y, x] - before[y, x]) - change[y, x])
+            mean[y, x] += weight * (now[y, x] - mean[y, x])
 
 
 class ApproachStage:
