@@ -928,6 +928,36 @@ def gain_controlled_change(current, previous, semi_saturation, sigma, scale, out
     return out
 
 
+# --------------------------------------------------------------------------- motion vectors
+
+
+def motion_vectors(r, v, rows, cols):
+    """The motion vectors ``(V cos phi, V sin phi)`` (eq. 30) at the pixels ``(rows, cols)``,
+    float64, from the four computed orientations ``r`` (R^0, R^{pi/4}, R^{pi/2}, R^{3pi/4})
+    and ``V``, with ``phi = atan2(R^{pi/2}, R^0)`` (eq. 21).
+
+    ``cos phi`` and ``sin phi`` are ``R^0 / |(R^0, R^{pi/2})|`` and ``R^{pi/2} / |...|``: the
+    same to rounding (about 1e-16 relative), in one pass without the arc tangent, cosine and
+    sine per pixel, which took most of the time of a frame's targets.
+    """
+    dx, dy = np.empty(rows.shape[0]), np.empty(rows.shape[0])
+    _motion_vectors(r, v, rows, cols, dx, dy)
+    return dx, dy
+
+
+@kernel(error_model="numpy", **_jit)
+def _motion_vectors(r, v, rows, cols, dx, dy):
+    for i in range(rows.shape[0]):
+        y, x = rows[i], cols[i]
+        c, s, vv = np.float64(r[0, y, x]), np.float64(r[2, y, x]), np.float64(v[y, x])
+        norm = math.sqrt(c * c + s * s)  # exact squares of float32 maps: no overflow
+        if norm > 0.0:
+            dx[i], dy[i] = vv * (c / norm), vv * (s / norm)
+        else:  # atan2 of zeros: 0 or pi by their signs
+            phi = math.atan2(s, c)
+            dx[i], dy[i] = vv * math.cos(phi), vv * math.sin(phi)
+
+
 # --------------------------------------------------------------------------- attention, u(t)
 
 

@@ -466,12 +466,7 @@ class ASNN:
         attended = ws.mask
 
         def vectors(rows, cols):
-            # R^0, R^{pi/2} and V at the pixels, one flat gather each (half the time of
-            # indexing r[:, rows, cols], which gathers all four orientations)
-            at = rows * v.shape[1] + cols
-            x, y, vv = (m.ravel().take(at).astype(np.float64) for m in (r[0], r[2], v))
-            phi = np.arctan2(y, x)
-            return vv * np.cos(phi), vv * np.sin(phi)
+            return _fast.motion_vectors(r, v, rows, cols)
 
         if p.targets == "objects":
             total, targets = self._objects(attended if count else None, g, vectors, frame,
