@@ -434,3 +434,20 @@ def test_attention_in_its_window_equals_attention_over_the_whole_frame(scenes):
         np.testing.assert_array_equal(k0, k1)
         attended += c0
     assert attended > 0
+
+
+def test_motion_vectors_are_v_times_cos_and_sin_of_phi():
+    """Eq. 30 with phi of eq. 21, as the optimised step computes it for the targets (without
+    an arc tangent per pixel): the same to rounding, including where R^0 = R^{pi/2} = 0, whose
+    angle atan2 takes from their signs."""
+    rng = np.random.default_rng(4)
+    r = rng.normal(size=(4, 30, 40)).astype(np.float32)
+    r[0, :3], r[2, :3] = 0.0, 0.0
+    r[0, 0, :5] = -0.0  # atan2(0, -0) = pi: the vector points left
+    v = np.abs(r).max(axis=0)
+    rows, cols = np.nonzero(rng.random((30, 40)) < 0.5)
+    phi = np.arctan2(r[2].astype(np.float64), r[0].astype(np.float64))
+    dx, dy = _fast.motion_vectors(r, v, rows, cols)
+    np.testing.assert_allclose(dx, v[rows, cols] * np.cos(phi[rows, cols]), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(dy, v[rows, cols] * np.sin(phi[rows, cols]), rtol=0, atol=1e-15)
+    assert (dx[(rows == 0) & (cols < 5)] < 0).all()
