@@ -462,29 +462,53 @@ def _region_moments(rows, cols, g, min_pixels, absolute):
     values = np.empty(rows.shape[0], np.float64)
     share = np.zeros(n)
     mass = np.zeros(n)
+    # Each region's sums are carried in locals along a run of its pixels and stored when the
+    # run ends: the same additions in the same order, without a store and a load between two
+    # additions to one sum (which made these loops wait on memory).
+    k0, a, b = -1, 0.0, 0.0
     for i in range(rows.shape[0]):
         k = lut[labels[i]]
         if k < 0:
             continue
+        if k != k0:
+            if k0 >= 0:
+                share[k0], mass[k0] = a, b
+            k0, a, b = k, share[k], mass[k]
         value = np.float64(g[rows[i], cols[i]])
         lab[m], kept_rows[m], kept_cols[m], values[m] = k, rows[i], cols[i], value
         m += 1
-        share[k] += abs(value) if absolute else value
-        mass[k] += max(value, 0.0)
+        a += abs(value) if absolute else value
+        b += max(value, 0.0)
+    if k0 >= 0:
+        share[k0], mass[k0] = a, b
     total, sum_x, sum_y = np.zeros(n), np.zeros(n), np.zeros(n)
+    k0, a, b, c = -1, 0.0, 0.0, 0.0
     for i in range(m):
         k = lab[i]
+        if k != k0:
+            if k0 >= 0:
+                total[k0], sum_x[k0], sum_y[k0] = a, b, c
+            k0, a, b, c = k, total[k], sum_x[k], sum_y[k]
         wt = max(values[i], 0.0) if mass[k] > 0 else 1.0  # no positive G: equal weights
         values[i] = wt
-        total[k] += wt
-        sum_x[k] += wt * kept_cols[i]
-        sum_y[k] += wt * kept_rows[i]
+        a += wt
+        b += wt * kept_cols[i]
+        c += wt * kept_rows[i]
+    if k0 >= 0:
+        total[k0], sum_x[k0], sum_y[k0] = a, b, c
     x, y = sum_x / total, sum_y / total
     var = np.zeros(n)
+    k0, a = -1, 0.0
     for i in range(m):
         k = lab[i]
+        if k != k0:
+            if k0 >= 0:
+                var[k0] = a
+            k0, a = k, var[k]
         ddx, ddy = kept_cols[i] - x[k], kept_rows[i] - y[k]
-        var[k] += values[i] * (ddx * ddx + ddy * ddy)
+        a += values[i] * (ddx * ddx + ddy * ddy)
+    if k0 >= 0:
+        var[k0] = a
     return (boxes, pixels, kept_rows[:m], kept_cols[:m], lab[:m], x, y, var / total, mass,
             share)
 
