@@ -114,8 +114,7 @@ class CameraRig:
                                self.mean)
             self.frames += 1
         rig = rig_pixels(self.change, self.mean, self.frames)
-        self.mask = None if rig is None else cv2.resize(
-            rig.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).view(bool)
+        self.mask = None if rig is None else _nearest(rig, h, w)
         return self.mask
 
 
@@ -127,6 +126,28 @@ def _running_means(now, before, y0, y1, weight, change, mean):
         for x in range(now.shape[1]):
             change[y, x] += weight * (abs(now[y, x] - before[y, x]) - change[y, x])
             mean[y, x] += weight * (now[y, x] - mean[y, x])
+
+
+def _nearest(mask: np.ndarray, h: int, w: int) -> np.ndarray:
+    """A boolean ``mask`` resized to ``h`` x ``w`` as ``cv2.resize`` with INTER_NEAREST resizes
+    it; where that doubles it both ways, each cell copied to its 2 x 2 pixels by a kernel (a
+    fraction of OpenCV's time on a dashcam's 432 x 240 frames)."""
+    if (h, w) != (2 * mask.shape[0], 2 * mask.shape[1]):
+        return cv2.resize(mask.view(np.uint8), (w, h), interpolation=cv2.INTER_NEAREST).view(bool)
+    out = np.empty((h, w), np.bool_)
+    _doubled(mask.view(np.uint8), out.view(np.uint16))
+    return out
+
+
+@kernel()
+def _doubled(cells, pairs):
+    """Each byte of ``cells`` (H, W) twice across, as one 16-bit word of ``pairs`` (2H, W), in
+    two rows."""
+    for y in range(cells.shape[0]):
+        top, bottom, row = pairs[2 * y], pairs[2 * y + 1], cells[y]
+        for x in range(row.shape[0]):
+            top[x] = np.uint16(row[x]) * np.uint16(257)
+        bottom[:] = top
 
 
 class ApproachStage:
