@@ -48,8 +48,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="instead, the whole asnn detect process per frame (start-up excluded) "
                    "and its stages, against the straightforward float64 form (--size, default "
                    "320x240 and 640x480; first --preset)")
-    p.add_argument("--repeat", type=count, default=4, metavar="N",
-                   help="--detect: runs of asnn detect per clip (default: %(default)s)")
+    p.add_argument("--repeat", type=count, default=None, metavar="N",
+                   help="--detect: runs of asnn detect per clip (default: 4); otherwise: times "
+                   "the default preset is stepped in turn with reference32, the ratio's median "
+                   "and range reported (default: 1)")
     p.add_argument("--handover", action="store_true",
                    help="instead, how many frames a worker taking a robot over needs before it "
                    "warns as the previous owner would (the worker's --warmup-frames), over the "
@@ -81,12 +83,15 @@ def run(args: argparse.Namespace) -> int:
         if args.case is not None and (args.detect or args.handover or args.service):
             raise ValueError("--case times the models per frame only: not with --detect, "
                              "--handover or --service")
+        if args.repeat is not None and (args.handover or args.service):
+            raise ValueError("--repeat repeats the per-frame comparison or --detect's runs: "
+                             "not with --handover or --service")
         if args.detect:
             from asnn.evaluation import bench_detect
 
             report = bench_detect.run(sizes=args.size or list(bench_detect.DEFAULT_SIZES),
                                       frames=args.frames or bench_detect.DEFAULT_FRAMES,
-                                      repeat=args.repeat,
+                                      repeat=args.repeat or 4,
                                       preset=args.preset[0] if args.preset else None,
                                       progress=_progress(args))
         elif args.handover:
@@ -114,7 +119,8 @@ def run(args: argparse.Namespace) -> int:
                                presets=args.preset,
                                models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
                                straightforward=not args.no_straightforward,
-                               progress=_progress(args), case=args.case)
+                               progress=_progress(args), case=args.case,
+                               repeat=args.repeat or 1)
     except (RuntimeError, ValueError) as exc:
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
