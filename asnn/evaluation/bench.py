@@ -161,8 +161,10 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     Raises
     ------
     ValueError
-        If a preset name is unknown.
+        If a preset name is unknown, or ``repeat`` is below 1.
     """
+    if repeat < 1:
+        raise ValueError(f"repeat must be at least 1, not {repeat}")
     from ..detectors import make_detector
     from ..model import ASNN, compile_kernels
     from ..params import DEFAULT_PRESET, PRESETS, preset_key
