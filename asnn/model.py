@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from . import _fast, _parallel, retina
-from .approach import ApproachStage, FramePair
+from .approach import ApproachStage, CameraRig, FramePair
 from .approach.looming import region_expansion
 from .approach.motion_layers import motion_layers
 from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
@@ -625,3 +625,11 @@ def compile_kernels(presets: Iterable[str] = ("default", "reference"), threads: 
             motion_layers(texture, texture, (0, 0, 64, 64))
             # frames wider than max_width, shrunk as they are taken
             _fast.shrunk_luminance(np.zeros((16, 20), np.uint8), (15, 12), LEVELS, model.dtype)
+            # the camera rig's edge test and its mask, which a stream first needs after 20
+            # frames with its own hood in view (a still edge at the frames' bottom)
+            if model.approach is not None:
+                hood = np.zeros((16, 16), model.dtype)
+                hood[12:] = 1.0
+                rig = CameraRig()
+                for _ in range(21):
+                    rig.update(hood, hood)

@@ -127,3 +127,35 @@ def test_a_track_box_outside_the_frame_is_measured_as_empty():
     model.approach.measure_all_against_scene = True  # every growing track, as the trace does
     warned = [model.step(frame).collision for frame in make_case("handheld-desk-sweep").frames]
     assert not any(warned)
+
+
+def test_compile_kernels_loads_the_rig_kernels_before_a_stream_needs_them():
+    """The rig's edge test runs from a stream's twentieth frame and its mask's doubling from
+    the first frame that marks a rig: a worker must not wait for numba there (a cold cache
+    compiles for seconds, and the frames that come meanwhile go unanswered)."""
+    import subprocess
+    import sys
+
+    loaded = subprocess.run(
+        [sys.executable, "-c", "from asnn.model import compile_kernels; compile_kernels(); "
+         "from asnn.approach.looming import _mark_still_edges; "
+         "from asnn.approach.stage import _doubled; "
+         "print(len(_mark_still_edges.signatures), len(_doubled.signatures))"],
+        capture_output=True, text=True, check=True)
+    assert [int(n) for n in loaded.stdout.split()] == [1, 1]
+    # and a stream with a hood in view needs no other form of them
+    from asnn.approach.looming import _mark_still_edges
+    from asnn.approach.stage import _doubled
+    from asnn.model import ASNN, compile_kernels
+
+    compile_kernels()
+    kernels = (_mark_still_edges, _doubled)
+    before = [set(k.signatures) for k in kernels]
+    rng = np.random.default_rng(8)
+    model = ASNN("default")
+    for _ in range(25):
+        frame = rng.random((96, 128), dtype=np.float32) * 0.5
+        frame[80:] = 0.9  # the hood
+        model.step(frame)
+    assert model.approach.rig.mask is not None
+    assert [set(k.signatures) for k in kernels] == before
