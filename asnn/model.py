@@ -18,6 +18,7 @@ one's pass runs (:mod:`asnn._parallel`); the responses are those of ``step``, bi
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import statistics
 import weakref
@@ -465,9 +466,7 @@ class ASNN:
             full=self.record_maps)
         attended = ws.mask
 
-        def vectors(rows, cols):
-            return _fast.motion_vectors(r, v, rows, cols)
-
+        vectors = functools.partial(_fast.motion_vectors, r, v)  # at (rows, cols)
         if p.targets == "objects":
             total, targets = self._objects(attended if count else None, g, vectors, frame,
                                            total, points=(ws.rows[:count], ws.cols[:count]))

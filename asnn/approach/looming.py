@@ -289,30 +289,34 @@ def rig_pixels(change: np.ndarray, mean: np.ndarray, frames: int) -> np.ndarray 
     """
     if frames < _RIG_FRAMES:
         return None
-    h = mean.shape[0]
-    band = int(_RIG_BAND * h)
+    band = _rig_band(mean.shape[0])
     if band < 1:
         return None
     mean = np.ascontiguousarray(mean, np.float32)
     rig = np.zeros(mean.shape, np.bool_)  # the middle of the frame is never marked
-    marked = _mark_still_edges(change, mean, 0, band, rig)
-    marked |= _mark_still_edges(change, mean, h - band, h, rig)
-    return rig if marked else None
+    return rig if _mark_still_edges(change, mean, band, rig) else None
 
 
 def rig_rows(h: int) -> tuple[slice, ...]:
     """The rows of an ``h``-row grid that :func:`rig_pixels` reads: its top and bottom bands,
     each with the row beyond it that the edge filter reaches (none where the bands are empty;
     the two never overlap)."""
-    band = int(_RIG_BAND * h)
+    band = _rig_band(h)
     if band < 1:
         return ()
     return slice(0, band + 1), slice(h - band - 1, h)
 
 
+def _rig_band(h: int) -> int:
+    """Rows of each of the bands at the top and bottom of an ``h``-row grid where the rig is
+    looked for."""
+    return int(_RIG_BAND * h)
+
+
 @kernel()
-def _mark_still_edges(change, mean, y0, y1, rig):
-    """:func:`rig_pixels`' test on the rows ``[y0, y1)``, into ``rig``; whether it marked any.
+def _mark_still_edges(change, mean, band, rig):
+    """:func:`rig_pixels`' test on the ``band`` rows at the top and at the bottom, into
+    ``rig``; whether it marked any.
 
     The edge is OpenCV's 3x3 Sobel pair on ``mean`` (float32) with its reflect-101 border, bit
     for bit: each separable pass sums its outer taps first, as ``cv2.Sobel`` does; the
@@ -320,7 +324,8 @@ def _mark_still_edges(change, mean, y0, y1, rig):
     """
     h, w = mean.shape
     marked = False
-    for y in range(y0, y1):
+    for i in range(2 * band):
+        y = i if i < band else h - 2 * band + i
         up, here, down = mean[_reflect(y - 1, h)], mean[y], mean[_reflect(y + 1, h)]
         still, rig_y = change[y], rig[y]
         # the columns at the border apart: the loop over the others has no branch to vectorise
