@@ -663,3 +663,54 @@ def test_the_objects_motion_is_computed_when_first_read_and_only_then():
         vx, vy = dx_map[y0:y1, x0:x1][inside].mean(), dy_map[y0:y1, x0:x1][inside].mean()
         assert direction[k] == pytest.approx(math.atan2(vy, vx), rel=1e-12)
         assert energy[k] == pytest.approx(math.hypot(vx, vy), rel=1e-12)
+
+
+def test_the_rig_s_edge_test_is_opencv_s_sobel_pair_bit_for_bit():
+    """The kernel of ``rig_pixels`` computes the 3x3 Sobel pair in OpenCV's float32 order (each
+    separable pass summing its outer taps first): where an edge or a change lies right at a
+    threshold, another order would mark another pixel."""
+    import cv2
+
+    from asnn.approach.looming import _RIG_BAND, _RIG_EDGE, _RIG_SPEED
+
+    def edge_of(mean):
+        mean = mean.astype(np.float32)
+        return 0.125 * (np.abs(cv2.Sobel(mean, cv2.CV_32F, 1, 0, ksize=3))
+                        + np.abs(cv2.Sobel(mean, cv2.CV_32F, 0, 1, ksize=3)))
+
+    def with_opencv(change, mean):
+        edge = edge_of(mean)
+        rig = (edge > _RIG_EDGE) & (change < _RIG_SPEED * edge)
+        band = int(_RIG_BAND * mean.shape[0])
+        rig[band:mean.shape[0] - band] = False
+        return rig
+
+    rng = np.random.default_rng(11)
+    marked = 0
+    for h, w in [(4, 1), (5, 2), (9, 3), (48, 64), (61, 97), (120, 160)]:
+        for dtype in (np.float32, np.float64):
+            mean = (rng.random((h, w)) * 0.05).astype(dtype)
+            change = (rng.random((h, w)) * 0.004).astype(dtype)
+            # half the pixels changing exactly at the threshold OpenCV's edge gives: an edge one
+            # rounding away from it flips them
+            at = rng.random((h, w)) < 0.5
+            change[at] = (_RIG_SPEED * edge_of(mean))[at]
+            want = with_opencv(change, mean)
+            got = rig_pixels(change, mean, 20)
+            assert np.array_equal(np.zeros_like(want) if got is None else got, want), (h, w)
+            marked += int(want.sum())
+    assert marked > 100  # the thresholds were reached: the comparison tells something
+
+
+def test_the_rig_mask_is_doubled_as_opencv_s_nearest_resize_doubles_it():
+    import cv2
+
+    from asnn.approach.stage import _nearest
+
+    rng = np.random.default_rng(12)
+    for hh, ww in [(1, 1), (3, 5), (60, 80), (120, 216)]:
+        mask = rng.random((hh, ww)) < 0.3
+        for h, w in [(2 * hh, 2 * ww), (2 * hh + 1, 2 * ww), (2 * hh, 2 * ww + 1)]:
+            want = cv2.resize(mask.view(np.uint8), (w, h),
+                              interpolation=cv2.INTER_NEAREST).view(bool)
+            assert np.array_equal(_nearest(mask, h, w), want), (hh, ww, h, w)
