@@ -19,7 +19,6 @@ from cli.main import main
 DETECTORS = ("asnn", "asnn:reference", "lgmd1", "lgmd2")
 SLUGS = {"asnn": "asnn", "asnn:reference": "asnn-reference", "lgmd1": "lgmd1", "lgmd2": "lgmd2"}
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-REAL = Path("/work/shared/data/real")
 
 
 def _png(path: Path) -> bool:
@@ -347,11 +346,3 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
     assert set(np.unique(maps["M_a"])) <= {0, 1}
     g_prime = np.asarray(maps["G_prime"])
     assert np.all(g_prime[np.asarray(maps["M_a"]) * np.asarray(maps["M_d"]) == 0] == 0)
-
-
-@pytest.mark.skipif(not (REAL / "labels.json").is_file(), reason="real clips not present")
-def test_real_labels_are_scorable():
-    labels = scoring.load_labels(REAL / "labels.json")
-    for label in labels:
-        score = scoring.score_clip([], label)
-        assert score.outcome == ("miss" if label["collision"] else "quiet")

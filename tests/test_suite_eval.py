@@ -9,6 +9,7 @@ import json
 import pytest
 
 from asnn.evaluation import scoring, suite
+from asnn.evaluation.labels import load_labels
 from asnn.evaluation.runs import at_rate, parse_detector, parse_detectors, run_detector
 from asnn.io.video import open_video
 from asnn.stimuli.suite import make_case
@@ -86,7 +87,7 @@ def test_synthetic_eval_end_to_end(evaluated):
     results = json.loads((out / "results.json").read_text())
     assert [c["name"] for c in results["cases"]] == list(CASES)
     assert list(results["detectors"]) == ["asnn", "lgmd1"]
-    labels = json.loads((out / "labels.json").read_text())
+    labels = load_labels(out / "labels.json")  # the labels' own format, checked
     assert [lab["file"] for lab in labels] == [f"{name}.mp4" for name in CASES]
     assert labels[3]["twin"] == "course-disk-dark-right" and labels[3]["collision"] is False
     for name, entry in results["detectors"].items():

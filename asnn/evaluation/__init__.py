@@ -3,6 +3,8 @@
 Nothing here is imported by the model. The submodules are imported explicitly (``figures``
 loads matplotlib):
 
+:mod:`~asnn.evaluation.labels`
+    Clip labels (``labels.json``), checked where they are read.
 :mod:`~asnn.evaluation.scoring`
     Outcomes of per-frame results against clip labels (SPEC.md section 5).
 :mod:`~asnn.evaluation.runs`

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
+from .labels import load_labels
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
@@ -131,12 +132,14 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     Raises
     ------
     ValueError
-        For an unknown detector, preset or perturbation, or an unreadable labels file.
+        For an unknown detector, preset or perturbation, or a labels file that cannot be read
+        or has an entry :func:`~asnn.evaluation.labels.check_labels` refuses (before anything
+        runs).
     """
     clips_dir, out_dir = Path(clips_dir), Path(out_dir)
     labels_path = Path(labels_path) if labels_path else clips_dir / "labels.json"
     check_perturbation(perturbation)
-    labels = [perturb_label(lab, perturbation) for lab in scoring.load_labels(labels_path)]
+    labels = [perturb_label(lab, perturbation) for lab in load_labels(labels_path)]
     specs = parse_detectors(detectors, preset_name)
     progress = progress or Silent()
 

@@ -37,6 +37,7 @@ from ..approach.tracking import (approach_parts, approach_test, better_fit, coun
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from . import scoring
+from .labels import load_labels
 from .runs import fmt, write_json
 
 __all__ = ["GATE_GRID", "SUITE_AIMS", "FrameTrace", "ClipTrace", "trace_clip", "replay",
@@ -516,8 +517,9 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     Raises
     ------
     ValueError
-        For an unknown preset, one without the approach gate, an unknown tie-break or an
-        unreadable labels file.
+        For an unknown preset, one without the approach gate, an unknown tie-break, or a
+        labels file that cannot be read or has an entry
+        :func:`~asnn.evaluation.labels.check_labels` refuses.
     OSError
         For a clip that cannot be read.
     """
@@ -529,7 +531,7 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
 
     _check_tie_break(tie_break)
     clips_dir, out_dir = Path(clips_dir), Path(out_dir)
-    labels = scoring.load_labels(Path(labels_path) if labels_path else clips_dir / "labels.json")
+    labels = load_labels(Path(labels_path) if labels_path else clips_dir / "labels.json")
     base = preset(preset_name, **dict(overrides or {}))
     if not base.approach_gate:
         raise ValueError(f"preset {preset_name!r} has no approach gate to hold out")

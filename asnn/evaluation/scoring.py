@@ -3,9 +3,10 @@
 The per-frame results of one detector on one clip are the records ``asnn detect --jsonl`` writes
 (CONTRACT.md): dicts with at least ``frame`` and ``collision``, and ``targets`` (a list of dicts
 with ``x`` and ``y``) where the detector reports them. A label is an entry of ``labels.json``
-(see ``data/real/README.md``): ``file``, ``fps``, ``collision``, ``onset_frame``,
-``contact_frame``, ``center``, and optionally ``track`` (the target's centre ``[x, y]`` in every
-frame, or null where it has none; generated clips have it).
+(see ``data/real/README.md``; read and checked by :mod:`asnn.evaluation.labels`): ``file``,
+``fps``, ``collision``, ``onset_frame``, ``contact_frame``, ``center``, and optionally ``track``
+(the target's centre ``[x, y]`` in every frame, or null where it has none; generated clips have
+it).
 
 Rules, with W the warm-up, T the early tolerance in frames (``round(tolerance_s * fps)``), and
 ``first`` the first frame at or after W whose record has ``collision`` true:
@@ -58,6 +59,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from .labels import check_labels
+
 __all__ = [
     "OUTCOMES",
     "WARMUP_FRAMES",
@@ -72,7 +75,6 @@ __all__ = [
     "mcnemar_exact",
     "paired_comparison",
     "load_records",
-    "load_labels",
     "results_path",
     "score_directory",
 ]
@@ -484,22 +486,6 @@ def load_records(path: str | Path) -> list[dict]:
     return records
 
 
-def load_labels(path: str | Path) -> list[dict]:
-    """Read ``labels.json``: a list of clip labels (or an object with a ``clips`` list).
-
-    Raises
-    ------
-    ValueError
-        If the file holds neither, or an entry has no ``file``.
-    """
-    data = json.loads(Path(path).read_text(encoding="utf-8"))
-    if isinstance(data, dict):
-        data = data.get("clips")
-    if not isinstance(data, list) or not all(isinstance(d, dict) and "file" in d for d in data):
-        raise ValueError(f"{path}: expected a list of clip labels, each with a 'file'")
-    return data
-
-
 def results_path(results_dir: str | Path, clip: str) -> Path | None:
     """The results file of a clip in a directory: ``<stem>.jsonl`` or ``<stem>.json``, if any."""
     stem = Path(clip).stem
@@ -514,7 +500,14 @@ def score_directory(results_dir: str | Path, labels: Sequence[Mapping], **option
     """Score every labelled clip from its results file in ``results_dir``.
 
     A clip without a results file scores ``missing``. ``options`` go to :func:`score_clip`.
+
+    Raises
+    ------
+    ValueError
+        If a label is refused (:func:`~asnn.evaluation.labels.check_labels`): checked here
+        too, for labels that did not come through :func:`~asnn.evaluation.labels.load_labels`.
     """
+    check_labels(labels)
     scores = []
     for label in labels:
         path = results_path(results_dir, str(label["file"]))

@@ -1,0 +1,158 @@
+"""The labels of evaluation clips (``labels.json``), checked where they are read.
+
+A label is one clip's entry (the format of ``data/real/README.md``, SPEC.md section 5): the
+clip's ``file``, its ``fps``, whether it ends in a ``collision``, and for a collision the
+``onset_frame`` (the object is clearly on a collision course) and the ``contact_frame``;
+optionally its ``frames``, ``width`` and ``height``, the object's ``center`` at contact, and
+per frame its centre (``track``), size (``target_size``) and time to contact (``ttc``), where a
+generated clip knows them. Other fields (``description``, ``category``, ...) are kept as they
+are.
+
+Labels are written by hand, and a mistake in one costs most when it is found late: a collision
+without its onset fails only after every detector has run over every clip, an onset after the
+contact scores every warning as early, a label without ``fps`` silently loses the scoring
+rule's early tolerance (half a second, in frames) and the clip's minutes of video, and two
+clips with the same name but for the extension write their results to one file, so one clip's
+results are scored for both. So :func:`load_labels` checks every entry before anything runs
+and names the entry and the field it refuses.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from pydantic import (BaseModel, ConfigDict, Field, StrictBool, ValidationError,
+                      field_validator, model_validator)
+
+__all__ = ["ClipLabel", "check_labels", "load_labels"]
+
+
+class ClipLabel(BaseModel):
+    """One clip's label: the fields the scoring reads, checked; any others kept as given."""
+
+    model_config = ConfigDict(extra="allow", allow_inf_nan=False, frozen=True)
+
+    file: str = Field(min_length=1, description="the clip, relative to the clips' folder")
+    fps: float = Field(gt=0, description="the clip's frame rate: the early tolerance's frames "
+                       "and the clip's duration come from it")
+    collision: StrictBool = Field(description="whether the clip ends in a collision")
+    onset_frame: int | None = Field(None, ge=0, description="collision: the first frame on a "
+                                    "collision course")
+    contact_frame: int | None = Field(None, ge=0, description="collision: the frame of contact "
+                                      "(or of the closest approach)")
+    frames: int | None = Field(None, ge=1, description="the clip's length, frames")
+    width: int | None = Field(None, ge=1)
+    height: int | None = Field(None, ge=1)
+    center: tuple[float, float] | None = Field(None, description="the object's centre at "
+                                               "contact, pixels")
+    track: list[tuple[float, float] | None] | None = Field(None, description="the object's "
+                                                           "centre in every frame, or null")
+    target_size: list[float | None] | None = None
+    ttc: list[float | None] | None = Field(None, description="the true time to contact in "
+                                           "every frame, seconds, or null")
+    topic: str | None = Field(None, min_length=1, description="a ROS 2 bag's image topic")
+
+    @field_validator("ttc")
+    @classmethod
+    def _positive_ttc(cls, values: list[float | None] | None) -> list[float | None] | None:
+        if values is not None and any(v is not None and v < 0 for v in values):
+            raise ValueError("a time to contact is never negative")
+        return values
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "ClipLabel":
+        onset, contact = self.onset_frame, self.contact_frame
+        if self.collision:
+            if onset is None or contact is None:
+                raise ValueError("a collision label needs onset_frame and contact_frame")
+            if onset > contact:
+                raise ValueError(f"onset_frame {onset} is after contact_frame {contact}")
+            if self.frames is not None and onset >= self.frames:
+                raise ValueError(f"onset_frame {onset} is beyond the clip's {self.frames} frames")
+        elif onset is not None or contact is not None:
+            raise ValueError("a label without a collision has no onset_frame or contact_frame "
+                             "(null)")
+        if self.frames is not None:
+            for name in ("track", "target_size", "ttc"):
+                values = getattr(self, name)
+                if values is not None and len(values) != self.frames:
+                    raise ValueError(f"{name} has {len(values)} entries for the clip's "
+                                     f"{self.frames} frames (one per frame)")
+        return self
+
+
+def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict]:
+    """Check clip labels (:class:`ClipLabel`) and that no two write their results to one file.
+
+    Parameters
+    ----------
+    labels : sequence of mapping
+        The entries of a ``labels.json``.
+    source : str
+        What the entries came from, for the error message.
+
+    Returns
+    -------
+    list of dict
+        The entries, unchanged.
+
+    Raises
+    ------
+    ValueError
+        Naming the first entry refused (its index and ``file``) and why.
+    """
+    names: dict[str, int] = {}
+    for index, label in enumerate(labels):
+        where = f"{source}: entry {index}"
+        if not isinstance(label, Mapping):
+            raise ValueError(f"{where}: expected an object, got {type(label).__name__}")
+        if isinstance(label.get("file"), str):
+            where += f" ({label['file']})"
+        try:
+            ClipLabel.model_validate(label)
+        except ValidationError as exc:
+            raise ValueError(f"{where}: {_reasons(exc)}") from None
+        # each clip's results are <stem>.jsonl in a detector's folder: two stems alike would
+        # share one file, and one clip's results would be scored for both
+        stem = Path(label["file"]).stem
+        if stem in names:
+            raise ValueError(f"{where}: its results would overwrite those of entry {names[stem]} "
+                             f"({labels[names[stem]]['file']}): clip names must differ by more "
+                             "than their folder and extension")
+        names[stem] = index
+    return [dict(label) for label in labels]
+
+
+def load_labels(path: str | Path) -> list[dict]:
+    """Read and check ``labels.json``: a list of clip labels, or an object with a ``clips`` list.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be read.
+    ValueError
+        If it is not JSON, holds neither form, or an entry is refused (:func:`check_labels`).
+    """
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not JSON ({exc})") from None
+    if isinstance(data, dict):
+        data = data.get("clips")
+    if not isinstance(data, list):
+        raise ValueError(f"{path}: expected a list of clip labels (or an object with 'clips')")
+    return check_labels(data, str(path))
+
+
+def _reasons(exc: ValidationError, most: int = 3) -> str:
+    """A validation error's first ``most`` reasons on one line, each with the field it
+    concerns (``track.4.1``: the second coordinate of the fifth frame's entry)."""
+    reasons = []
+    for error in exc.errors():
+        field = ".".join(str(part) for part in error["loc"])
+        message = error["msg"].removeprefix("Value error, ")
+        reasons.append(f"{field}: {message}" if field else message)
+    more = f"; and {len(reasons) - most} more" if len(reasons) > most else ""
+    return "; ".join(reasons[:most]) + more

@@ -1,0 +1,115 @@
+"""Clip labels are checked when they are read, before any detector runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from asnn.evaluation import scoring
+from asnn.evaluation.labels import check_labels, load_labels
+from cli.main import main
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+COLLISION = {"file": "c.mp4", "fps": 30.0, "frames": 60, "collision": True, "onset_frame": 20,
+             "contact_frame": 40, "center": [10, 12], "description": "kept as it is"}
+QUIET = {"file": "nc.mp4", "fps": 30.0, "frames": 60, "collision": False, "onset_frame": None,
+         "contact_frame": None, "center": None}
+
+
+@pytest.mark.parametrize("folder", ["real", "real-extra"])
+def test_the_shared_labels_pass_and_score(folder):
+    path = DATA / folder / "labels.json"
+    if not path.is_file():
+        pytest.skip(f"../shared/data/{folder} is absent")
+    labels = load_labels(path)
+    assert labels == json.loads(path.read_text())  # unchanged
+    for label in labels:
+        score = scoring.score_clip([], label)
+        assert score.outcome == ("miss" if label["collision"] else "quiet")
+
+
+def test_good_labels_come_back_unchanged_in_either_form(tmp_path):
+    generated = {**COLLISION, "file": "g.avi", "track": [None] * 20 + [[1.5, 2.0]] * 40,
+                 "ttc": [None] * 59 + [0.0], "target_size": [3.0] * 60, "category": ["loom"]}
+    labels = [COLLISION, QUIET, generated, {**QUIET, "file": "bag.mcap", "topic": "/cam"}]
+    path = tmp_path / "labels.json"
+    path.write_text(json.dumps(labels))
+    assert load_labels(path) == labels
+    path.write_text(json.dumps({"clips": labels}))
+    assert load_labels(path) == labels
+
+
+@pytest.mark.parametrize("change, reason", [
+    ({"onset_frame": None}, "needs onset_frame and contact_frame"),
+    ({"contact_frame": None}, "needs onset_frame and contact_frame"),
+    ({"onset_frame": 41}, "onset_frame 41 is after contact_frame 40"),
+    ({"onset_frame": 60, "contact_frame": 70}, "beyond the clip's 60 frames"),
+    ({"onset_frame": -1}, "onset_frame"),
+    ({"onset_frame": 20.5}, "onset_frame"),
+    ({"fps": None}, "fps"),
+    ({"fps": 0}, "fps"),
+    ({"fps": float("nan")}, "fps"),
+    ({"collision": "yes"}, "collision"),
+    ({"collision": None}, "collision"),
+    ({"file": ""}, "file"),
+    ({"frames": 0}, "frames"),
+    ({"center": [1, 2, 3]}, "center"),
+    ({"center": "middle"}, "center"),
+    ({"track": [[1.0, 2.0]] * 59}, "track has 59 entries for the clip's 60 frames"),
+    ({"track": [[1.0]] * 60}, "track.0.1: Field required; track.1.1: Field required; "
+                              "track.2.1: Field required; and 57 more"),
+    ({"ttc": [1.0] * 59 + [-0.5]}, "never negative"),
+    ({"topic": ""}, "topic"),
+])
+def test_a_refused_entry_is_named_with_its_field(change, reason):
+    # a None in the change leaves the field out
+    label = {key: value for key, value in {**COLLISION, **change}.items() if value is not None}
+    with pytest.raises(ValueError) as refused:
+        check_labels([QUIET, label], "labels.json")
+    message = str(refused.value)
+    assert message.startswith("labels.json: entry 1")
+    assert reason in message
+
+
+def test_a_missing_field_and_a_quiet_clip_with_an_onset_are_refused():
+    for label, reason in [({k: v for k, v in QUIET.items() if k != "fps"}, "fps: Field required"),
+                          ({k: v for k, v in QUIET.items() if k != "collision"}, "collision"),
+                          ({**QUIET, "onset_frame": 10}, "without a collision"),
+                          ("c.mp4", "expected an object")]:
+        with pytest.raises(ValueError, match=reason):
+            check_labels([label])
+
+
+def test_two_clips_whose_results_would_share_a_file_are_refused():
+    check_labels([COLLISION, {**QUIET, "file": "c2.mp4"}])
+    for other in ("c.avi", "night/c.mp4", "c.mp4"):
+        with pytest.raises(ValueError, match=r"entry 1 .*overwrite those of entry 0 \(c\.mp4\)"):
+            check_labels([COLLISION, {**QUIET, "file": other}])
+
+
+@pytest.mark.parametrize("text", ["not json", '{"clips": 3}', '"c.mp4"', '[{"nofile": 1}]'])
+def test_a_labels_file_that_is_not_a_list_of_labels_is_refused(tmp_path, text):
+    path = tmp_path / "labels.json"
+    path.write_text(text)
+    with pytest.raises(ValueError, match="labels.json"):
+        load_labels(path)
+
+
+@pytest.mark.parametrize("mode", [[], ["--held-out"]])
+def test_eval_refuses_a_bad_label_before_running_anything(tmp_path, capsys, mode):
+    (tmp_path / "c.mp4").write_bytes(b"")  # never opened: the labels are refused first
+    (tmp_path / "labels.json").write_text(json.dumps([{**COLLISION, "onset_frame": 50}]))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), *mode, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "entry 0 (c.mp4)" in err and "onset_frame 50 is after contact_frame 40" in err
+    assert not out.exists()
+
+
+def test_scoring_a_folder_checks_labels_that_were_not_read_from_a_file(tmp_path):
+    assert [s.outcome for s in scoring.score_directory(tmp_path, [COLLISION])] == ["missing"]
+    with pytest.raises(ValueError, match=r"labels: entry 0 \(c\.mp4\): fps"):
+        scoring.score_directory(tmp_path, [{**COLLISION, "fps": 0}])
