@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 from asnn.evaluation import scoring
-from asnn.evaluation.labels import check_labels, load_labels
+from asnn.evaluation.labels import check_labels, load_labels, mismatches
+from asnn.stimuli import make_scene, write_video
 from cli.main import main
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
@@ -113,3 +114,32 @@ def test_scoring_a_folder_checks_labels_that_were_not_read_from_a_file(tmp_path)
     assert [s.outcome for s in scoring.score_directory(tmp_path, [COLLISION])] == ["missing"]
     with pytest.raises(ValueError, match=r"labels: entry 0 \(c\.mp4\): fps"):
         scoring.score_directory(tmp_path, [{**COLLISION, "fps": 0}])
+
+
+def test_a_clip_that_disagrees_with_its_label_is_named():
+    assert mismatches(COLLISION, 60, 30.2) == []  # within 1 %
+    assert mismatches({**COLLISION, "frames": None}, 59, 30.0) == []  # no length to compare
+    assert mismatches(COLLISION, 59, 30.0) == [
+        "c.mp4: 59 frames decoded where its label counts 60: its onset and contact may be off"]
+    assert mismatches(COLLISION, 60, 25.0) == [
+        "c.mp4: the clip runs at 25 fps where its label says 30: the model's timing and the "
+        "scoring's disagree"]
+
+
+def test_eval_reports_clips_that_disagree_with_their_labels(tmp_path):
+    scene = make_scene("looming", size=(64, 64), frames=24, start=4, stop=20)
+    write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
+    write_video(scene.frames, tmp_path / "same.mp4", scene.fps)
+    label = scene.label("loom.mp4")
+    (tmp_path / "labels.json").write_text(json.dumps(
+        [{**label, "frames": 30, "fps": 2 * scene.fps}, {**label, "file": "same.mp4"}]))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "lgmd1,lgmd2", "--out", str(out),
+                 "--no-plots"]) == 0
+    warnings = json.loads((out / "results.json").read_text())["warnings"]
+    assert warnings == [  # once for the clip, not once a detector; none for the clip that fits
+        "loom.mp4: 24 frames decoded where its label counts 30: its onset and contact may be off",
+        f"loom.mp4: the clip runs at {scene.fps:g} fps where its label says {2 * scene.fps:g}: "
+        "the model's timing and the scoring's disagree"]
+    report = (out / "report.md").read_text()
+    assert "Clips that disagree with their labels:\n\n- loom.mp4: 24 frames" in report

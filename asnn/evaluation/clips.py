@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
-from .labels import load_labels
+from .labels import load_labels, mismatches
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
@@ -25,16 +25,26 @@ __all__ = ["evaluate_clips"]
 
 
 def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | None = None,
-              perturbation: str | None = None) -> tuple[int, str | None]:
+              perturbation: str | None = None
+              ) -> tuple[int, str | None, tuple[int, float] | None]:
     """Worker: one detector on one clip (a bag's ``topic``), its frames perturbed where
-    ``perturbation`` names one, results to ``out_path``. Returns (frames, error)."""
+    ``perturbation`` names one, results to ``out_path``. Returns the frames run, the error
+    (or None) and the clip as decoded, before any perturbation: its frames and frame rate."""
+    decoded = 0
+
+    def counted(frames):
+        nonlocal decoded
+        for item in frames:
+            decoded += 1
+            yield item
+
     try:
         clip = open_source(video, topic=topic)
-        records = run_detector(perturbed(clip.timed_frames(), perturbation), detector)
+        records = run_detector(perturbed(counted(clip.timed_frames()), perturbation), detector)
     except (SourceError, ValueError) as exc:
-        return 0, str(exc)
+        return 0, str(exc), None
     write_jsonl(Path(out_path), records)
-    return len(records), None
+    return len(records), None, (decoded, clip.fps)
 
 
 def _clips_report(results: Mapping) -> str:
@@ -88,6 +98,9 @@ def _clips_report(results: Mapping) -> str:
     lines += paired_section(names[0], results.get("paired", {}))
     if results.get("errors"):
         lines += ["", "Errors:", ""] + [f"- {e}" for e in results["errors"]]
+    if results.get("warnings"):
+        lines += ["", "Clips that disagree with their labels:", ""] + [
+            f"- {w}" for w in results["warnings"]]
     return "\n".join(lines) + "\n"
 
 
@@ -127,7 +140,9 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     -------
     dict
         What ``results.json`` holds: ``settings``, ``labels``, ``detectors`` (per detector a
-        ``summary`` and per-clip ``clips`` scores) and ``errors``.
+        ``summary`` and per-clip ``clips`` scores), ``errors`` and ``warnings`` (clips whose
+        decoded frames or frame rate disagree with their labels:
+        :func:`~asnn.evaluation.labels.mismatches`).
 
     Raises
     ------
@@ -139,7 +154,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     clips_dir, out_dir = Path(clips_dir), Path(out_dir)
     labels_path = Path(labels_path) if labels_path else clips_dir / "labels.json"
     check_perturbation(perturbation)
-    labels = [perturb_label(lab, perturbation) for lab in load_labels(labels_path)]
+    given = load_labels(labels_path)
+    labels = [perturb_label(lab, perturbation) for lab in given]
     specs = parse_detectors(detectors, preset_name)
     progress = progress or Silent()
 
@@ -151,15 +167,20 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         Path(task[2]).unlink(missing_ok=True)
     expected = [int(lab.get("frames") or 1) for _ in specs for lab in labels]
     progress.start(sum(expected), "eval")
-    errors = []
+    errors, warnings, checked = [], [], set()
 
-    def finished(index: int, frames: int, error: str | None) -> None:
+    def finished(index: int, frames: int, error: str | None,
+                 decoded: tuple[int, float] | None) -> None:
         video, spec = tasks[index][:2]
         name = f"{spec.name} {Path(video).name}"
         progress.advance(expected[index], name)
         progress.note(name + (f": {error}" if error else f", {frames} frames"))
         if error:
             errors.append(f"{name}: {error}")
+        clip = index % len(labels)  # the tasks run every label for each detector in turn
+        if decoded is not None and clip not in checked:  # once a clip, by its first run
+            checked.add(clip)
+            warnings.extend(mismatches(given[clip], *decoded))
 
     if jobs > 1:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
@@ -180,6 +201,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         "labels": labels,
         "detectors": {},
         "errors": errors,
+        "warnings": warnings,
     }
     scores = {spec.name: scoring.score_directory(out_dir / "results" / spec.slug, labels,
                                                  warmup=warmup,

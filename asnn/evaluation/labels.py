@@ -26,7 +26,7 @@ from pathlib import Path
 from pydantic import (BaseModel, ConfigDict, Field, StrictBool, ValidationError,
                       field_validator, model_validator)
 
-__all__ = ["ClipLabel", "check_labels", "load_labels"]
+__all__ = ["ClipLabel", "check_labels", "load_labels", "mismatches"]
 
 
 class ClipLabel(BaseModel):
@@ -144,6 +144,31 @@ def load_labels(path: str | Path) -> list[dict]:
     if not isinstance(data, list):
         raise ValueError(f"{path}: expected a list of clip labels (or an object with 'clips')")
     return check_labels(data, str(path))
+
+
+def mismatches(label: Mapping, frames: int, fps: float, tolerance: float = 0.01) -> list[str]:
+    """Where a clip as it was decoded disagrees with its label: its number of frames (where the
+    label gives ``frames``) and its frame rate (by more than ``tolerance``, relative).
+
+    A label's frames are counted as one decoder saw them (OpenCV reads 68 of a clip whose
+    header claims 444, another decoder may read more), and the scoring takes its early
+    tolerance and lead times from the label's ``fps``: where either disagrees with the clip
+    the model was run on, its onset and contact may not point at the frames that were meant.
+
+    Returns
+    -------
+    list of str
+        One sentence per disagreement, naming the clip; empty where there is none.
+    """
+    found = []
+    name = label.get("file", "?")
+    if label.get("frames") is not None and int(label["frames"]) != frames:
+        found.append(f"{name}: {frames} frames decoded where its label counts "
+                     f"{int(label['frames'])}: its onset and contact may be off")
+    if abs(fps - float(label["fps"])) > tolerance * float(label["fps"]):
+        found.append(f"{name}: the clip runs at {fps:g} fps where its label says "
+                     f"{float(label['fps']):g}: the model's timing and the scoring's disagree")
+    return found
 
 
 def _reasons(exc: ValidationError, most: int = 3) -> str:
