@@ -166,6 +166,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     for task in tasks:  # stale results of an earlier run must not be scored
         Path(task[2]).unlink(missing_ok=True)
     expected = [int(lab.get("frames") or 1) for _ in specs for lab in labels]
+    clip_of = [k for _ in specs for k in range(len(labels))]  # each task's label
     progress.start(sum(expected), "eval")
     errors, warnings, checked = [], [], set()
 
@@ -177,7 +178,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         progress.note(name + (f": {error}" if error else f", {frames} frames"))
         if error:
             errors.append(f"{name}: {error}")
-        clip = index % len(labels)  # the tasks run every label for each detector in turn
+        clip = clip_of[index]
         if decoded is not None and clip not in checked:  # once a clip, by its first run
             checked.add(clip)
             warnings.extend(mismatches(given[clip], *decoded))
