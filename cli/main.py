@@ -8,7 +8,7 @@ import os
 import sys
 
 # Each module defines ``register(subparsers)``, adding its sub-commands with ``func`` set.
-COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.bench",
+COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.label", "cli.bench",
                    "cli.dashboard", "cli.foxglove"]
 
 

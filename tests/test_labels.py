@@ -1,4 +1,5 @@
-"""Clip labels are checked when they are read, before any detector runs."""
+"""Clip labels are checked when they are read, before any detector runs; ``asnn label``
+starts and checks them."""
 
 from __future__ import annotations
 
@@ -143,3 +144,43 @@ def test_eval_reports_clips_that_disagree_with_their_labels(tmp_path):
         "the model's timing and the scoring's disagree"]
     report = (out / "report.md").read_text()
     assert "Clips that disagree with their labels:\n\n- loom.mp4: 24 frames" in report
+
+
+def test_label_starts_the_labels_of_a_folder_and_lists_what_is_left(tmp_path, capsys):
+    loom = make_scene("looming", size=(64, 48), frames=24, start=4, stop=20)
+    write_video(loom.frames, tmp_path / "loom.mp4", loom.fps)
+    write_video(loom.frames[:10], tmp_path / "still.avi", 25.0)
+    (tmp_path / "notes.txt").write_text("not a clip")
+    path = tmp_path / "labels.json"
+
+    assert main(["label", str(tmp_path)]) == 1  # two entries to finish
+    entries = json.loads(path.read_text())
+    assert [(e["file"], e["frames"], e["fps"], e["width"], e["height"], e["collision"])
+            for e in entries] == [("loom.mp4", 24, loom.fps, 64, 48, None),
+                                  ("still.avi", 10, 25.0, 64, 48, None)]
+    out = capsys.readouterr().out
+    assert "2 entries added (loom.mp4, still.avi)" in out
+    assert "still.avi: collision is not filled in (true or false)" in out
+    assert main(["eval", str(tmp_path), "--out", str(tmp_path / "out")]) == 2  # not scored yet
+
+    entries[0] = loom.label("loom.mp4")
+    entries[1].update(collision=False)
+    path.write_text(json.dumps(entries))
+    assert main(["label", str(tmp_path)]) == 0
+    assert "2 entries, every one ready for asnn eval" in capsys.readouterr().out
+    assert json.loads(path.read_text()) == entries  # nothing added, nothing rewritten
+
+    entries[1]["fps"] = 30.0
+    path.write_text(json.dumps(entries + [{**entries[1], "file": "gone.mp4"}]))
+    assert main(["label", str(tmp_path)]) == 1
+    assert capsys.readouterr().out.splitlines() == [
+        "still.avi: the clip runs at 25 fps where its label says 30: the model's timing and "
+        "the scoring's disagree",
+        f"gone.mp4: no such clip in {tmp_path}"]
+
+
+def test_label_refuses_what_it_cannot_use(tmp_path, capsys):
+    assert main(["label", str(tmp_path / "nowhere")]) == 2
+    (tmp_path / "labels.json").write_text("{not json")
+    assert main(["label", str(tmp_path)]) == 2
+    assert "not JSON" in capsys.readouterr().err

@@ -26,7 +26,8 @@ from pathlib import Path
 from pydantic import (BaseModel, ConfigDict, Field, StrictBool, ValidationError,
                       field_validator, model_validator)
 
-__all__ = ["ClipLabel", "check_labels", "load_labels", "mismatches"]
+__all__ = ["ClipLabel", "check_labels", "label_problem", "load_labels", "mismatches",
+           "read_entries", "unlabelled"]
 
 
 class ClipLabel(BaseModel):
@@ -37,7 +38,8 @@ class ClipLabel(BaseModel):
     file: str = Field(min_length=1, description="the clip, relative to the clips' folder")
     fps: float = Field(gt=0, description="the clip's frame rate: the early tolerance's frames "
                        "and the clip's duration come from it")
-    collision: StrictBool = Field(description="whether the clip ends in a collision")
+    collision: StrictBool | None = Field(None, description="whether the clip ends in a "
+                                         "collision (required: null only in an unfinished entry)")
     onset_frame: int | None = Field(None, ge=0, description="collision: the first frame on a "
                                     "collision course")
     contact_frame: int | None = Field(None, ge=0, description="collision: the frame of contact "
@@ -64,6 +66,8 @@ class ClipLabel(BaseModel):
     @model_validator(mode="after")
     def _consistent(self) -> "ClipLabel":
         onset, contact = self.onset_frame, self.contact_frame
+        if self.collision is None:
+            raise ValueError("collision is not filled in (true or false)")
         if self.collision:
             if onset is None or contact is None:
                 raise ValueError("a collision label needs onset_frame and contact_frame")
@@ -106,14 +110,11 @@ def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict
     names: dict[str, int] = {}
     for index, label in enumerate(labels):
         where = f"{source}: entry {index}"
-        if not isinstance(label, Mapping):
-            raise ValueError(f"{where}: expected an object, got {type(label).__name__}")
-        if isinstance(label.get("file"), str):
+        if isinstance(label, Mapping) and isinstance(label.get("file"), str):
             where += f" ({label['file']})"
-        try:
-            ClipLabel.model_validate(label)
-        except ValidationError as exc:
-            raise ValueError(f"{where}: {_reasons(exc)}") from None
+        problem = label_problem(label)
+        if problem is not None:
+            raise ValueError(f"{where}: {problem}")
         # each clip's results are <stem>.jsonl in a detector's folder: two stems alike would
         # share one file, and one clip's results would be scored for both
         stem = Path(label["file"]).stem
@@ -123,6 +124,27 @@ def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict
                              "than their folder and extension")
         names[stem] = index
     return [dict(label) for label in labels]
+
+
+def label_problem(label: object) -> str | None:
+    """Why one entry is not a clip label (:class:`ClipLabel`), or None where it is one."""
+    if not isinstance(label, Mapping):
+        return f"expected an object, got {type(label).__name__}"
+    try:
+        ClipLabel.model_validate(label)
+    except ValidationError as exc:
+        return _reasons(exc)
+    return None
+
+
+def unlabelled(file: str, frames: int, fps: float, width: int, height: int) -> dict:
+    """An entry for a clip that has none yet, with what its decoding tells (its ``frames``,
+    ``fps`` and size) and the rest to fill in by hand: ``collision``, and for a collision
+    ``onset_frame``, ``contact_frame`` and ``center``. Until then :func:`check_labels`
+    refuses it, so an unfinished entry is never scored."""
+    return {"file": file, "width": width, "height": height, "fps": fps, "frames": frames,
+            "collision": None, "onset_frame": None, "contact_frame": None, "center": None,
+            "description": ""}
 
 
 def load_labels(path: str | Path) -> list[dict]:
@@ -135,6 +157,19 @@ def load_labels(path: str | Path) -> list[dict]:
     ValueError
         If it is not JSON, holds neither form, or an entry is refused (:func:`check_labels`).
     """
+    return check_labels(read_entries(path), str(path))
+
+
+def read_entries(path: str | Path) -> list:
+    """The entries of a ``labels.json`` (a list, or an object's ``clips`` list), unchecked.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be read.
+    ValueError
+        If it is not JSON or holds neither form.
+    """
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
@@ -143,7 +178,7 @@ def load_labels(path: str | Path) -> list[dict]:
         data = data.get("clips")
     if not isinstance(data, list):
         raise ValueError(f"{path}: expected a list of clip labels (or an object with 'clips')")
-    return check_labels(data, str(path))
+    return data
 
 
 def mismatches(label: Mapping, frames: int, fps: float, tolerance: float = 0.01) -> list[str]:

@@ -1,0 +1,94 @@
+"""``asnn label``: start or check the labels of a folder of clips for ``asnn eval``.
+
+``asnn label CLIPS_DIR [--labels FILE]`` decodes every video in the folder as ``asnn eval``
+will, adds an entry for each video without one (its ``frames``, ``fps`` and size filled in, the
+rest to fill in by hand: :func:`asnn.evaluation.labels.unlabelled`), and lists what is left to
+do: entries to finish or mend, clips that decode to other frames or another frame rate than
+their labels say, labels whose clip is not there. Exit status 0 when every entry is ready for
+``asnn eval``, 1 when something is listed, 2 for unusable input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from asnn.evaluation.labels import label_problem, mismatches, read_entries, unlabelled
+from asnn.io.sources import SourceError, open_source
+
+# what OpenCV's FFmpeg backend commonly reads; bags (.mcap) need a topic and are labelled by hand
+VIDEO_SUFFIXES = (".avi", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg", ".mpg", ".webm", ".wmv")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "label", help="start or check the labels.json of a folder of clips",
+        description="Decode every video in CLIPS_DIR as asnn eval will, add a labels.json entry "
+                    "for each video without one (frames, fps and size filled in; collision, "
+                    "onset_frame, contact_frame and center left to fill in by hand), and list "
+                    "what is left to do. Exit status 0 when every entry is ready for asnn eval, "
+                    "1 when something is listed.")
+    p.add_argument("clips_dir", metavar="CLIPS_DIR", help="the folder of the clips")
+    p.add_argument("--labels", metavar="FILE",
+                   help="the labels file to start or check (default: CLIPS_DIR/labels.json)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    folder = Path(args.clips_dir)
+    path = Path(args.labels) if args.labels else folder / "labels.json"
+    if not folder.is_dir():
+        print(f"asnn label: {folder}: not a folder", file=sys.stderr)
+        return 2
+    try:
+        entries = read_entries(path) if path.exists() else []
+    except (OSError, ValueError) as exc:
+        print(f"asnn label: {exc}", file=sys.stderr)
+        return 2
+    labelled = {e.get("file") for e in entries if isinstance(e, dict)}
+    videos = sorted(p for p in folder.iterdir()
+                    if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES)
+    todo, added = [], []
+    for video in videos:
+        try:
+            frames, fps, (height, width) = _decode(video)
+        except SourceError as exc:
+            todo.append(str(exc))
+            continue
+        name = video.name
+        if name not in labelled:
+            entries.append(unlabelled(name, frames, fps, width, height))
+            added.append(name)
+        else:
+            for entry in entries:
+                if isinstance(entry, dict) and entry.get("file") == name \
+                        and label_problem(entry) is None:
+                    todo += mismatches(entry, frames, fps)
+    for index, entry in enumerate(entries):
+        problem = label_problem(entry)
+        name = entry.get("file") if isinstance(entry, dict) else None
+        if problem is not None:
+            todo.append(f"{name or f'entry {index}'}: {problem}")
+        elif name not in {v.name for v in videos} and not (folder / name).is_file():
+            todo.append(f"{name}: no such clip in {folder}")
+    if added:
+        path.write_text(json.dumps(entries, indent=2) + "\n", encoding="utf-8")
+        print(f"{path}: {len(added)} {'entry' if len(added) == 1 else 'entries'} added "
+              f"({', '.join(added)}): fill in collision, and for a collision onset_frame, "
+              "contact_frame and center")
+    for line in todo:
+        print(line)
+    if not todo:
+        print(f"{path}: {len(entries)} entries, every one ready for asnn eval")
+    return 1 if todo else 0
+
+
+def _decode(video: Path) -> tuple[int, float, tuple[int, int]]:
+    """Frames, frame rate and (height, width) of a video, decoded as ``asnn eval`` does."""
+    clip = open_source(str(video))
+    frames, shape = 0, (0, 0)
+    for image in clip.frames():
+        frames, shape = frames + 1, image.shape[:2]
+    return frames, clip.fps, shape
