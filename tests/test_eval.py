@@ -169,6 +169,11 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
         perturb_frame(frame.astype(np.float32), "noise", 0)
     with pytest.raises(ValueError, match="drops frames"):
         perturb_frame(frame, "half-rate", 0)
+    # jpeg90 is what the service's camera sends with --format jpeg, decoded as the worker does
+    from service.messages import Frame
+    for colour in (np.ascontiguousarray(frame[..., 0]), frame):  # gray, BGR
+        sent = Frame.from_image(colour, seq=0, stamp=0.0, format="jpeg").image()
+        assert np.array_equal(perturb_frame(colour, "jpeg90", 0), sent.reshape(colour.shape))
     # half the resolution: 2x2 means; twice: bilinear, the same mean
     assert perturb_frame(frame, "half-size", 0)[0, 0] == pytest.approx(
         frame[:2, :2].astype(float).mean(axis=(0, 1)), abs=1)

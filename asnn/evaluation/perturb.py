@@ -31,6 +31,8 @@ __all__ = ["PERTURBATIONS", "check_perturbation", "perturb_frame", "perturbed", 
 PERTURBATIONS = {
     "noise": "Gaussian sensor noise of 4 gray levels on every pixel",
     "jpeg": "every frame re-encoded as JPEG at quality 30",
+    "jpeg90": "every frame re-encoded as JPEG at quality 90, as asnn camera --format jpeg sends "
+              "frames",
     "dim": "0.6 times the brightness (an under-exposed camera)",
     "mirror": "every frame flipped left to right (the labels' centres with it)",
     "hood": "a dashcam's own hood along the bottom and a timestamp overlay, still in every frame",
@@ -48,7 +50,7 @@ _RATE_STEP = {"half-rate": 2}
 _PER_FRAME = ("track", "target_size", "ttc")  # label fields with one entry per frame
 _SCALE = {"half-size": 0.5, "double-size": 2.0}  # the perturbations that resize the frames
 NOISE_SIGMA = 4.0
-JPEG_QUALITY = 30
+JPEG_QUALITY = {"jpeg": 30, "jpeg90": 90}  # jpeg90: service.messages.JPEG_QUALITY, the wire's
 DIM_GAIN = 0.6
 WIPER_GRAY = 20.0  # the blade's rubber, dark against the view
 
@@ -82,8 +84,8 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
         factor = _SCALE[name]
         return cv2.resize(frame, (max(1, round(w * factor)), max(1, round(h * factor))),
                           interpolation=cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR)
-    if name == "jpeg":
-        return jpeg(frame[None], JPEG_QUALITY)[0]
+    if name in JPEG_QUALITY:
+        return jpeg(frame[None], JPEG_QUALITY[name])[0]
     if name == "hood":
         covered, values = camera_rig(frame.shape[1::-1])
         changed = frame.astype(np.float64)
