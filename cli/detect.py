@@ -130,7 +130,11 @@ def run(args: argparse.Namespace) -> int:
         source = open_source(args.video, topic=args.topic, decoder_threads=1 if busy else None)
     except SourceError as exc:
         return _fail(str(exc))
-    if args.model == "asnn" and source.fps < SLOW_FPS:
+    if not source.fps_stated:
+        print(f"asnn detect: note: {args.video} states no frame rate a camera runs at; its "
+              f"frames are timed at {source.fps:g} a second, so the targets' expansion and ttc "
+              "are only as right as that guess", file=sys.stderr)
+    elif args.model == "asnn" and source.fps < SLOW_FPS:
         print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second; ASNN "
               f"loses hits below {SLOW_FPS:g} (README, 'At half the frame rate')",
               file=sys.stderr)

@@ -108,6 +108,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         if wait and not publisher.matching_status:
             log.warning("no subscriber on %s after %.1f s; publishing anyway", key, wait)
         log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
+        if not (fps or source.live or source.fps_stated):  # a live source stamps its own times
+            log.warning("camera %s: %s states no frame rate a camera runs at; its frames are "
+                        "paced and stamped at %.1f fps (set --fps)", robot, source.name, rate)
         seq = 0
         next_time = time.monotonic()
         # a replayed source's frames are stamped with their recorded times, shifted to now:

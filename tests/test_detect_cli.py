@@ -63,6 +63,24 @@ def test_a_slow_video_gets_a_note_on_stderr_and_a_fast_one_none(looming_video, t
     assert len(captured.out.splitlines()) == len(scene.frames)  # stdout stays JSON
 
 
+def test_a_video_stating_a_rate_no_camera_runs_at_is_timed_at_20_fps_with_a_note(
+        looming_video, tmp_path, capsys):
+    from asnn.io.sources import open_source
+
+    path, scene = looming_video
+    assert open_source(str(path)).fps_stated
+    base = tmp_path / "base.avi"  # a container's time base read as its frame rate
+    write_video(scene.frames, base, fps=1000.0)
+    source = open_source(str(base))
+    assert (source.fps, source.fps_stated) == (20.0, False)
+    assert main(["detect", str(base), "--jsonl", "-"]) == 0
+    captured = capsys.readouterr()
+    assert "states no frame rate a camera runs at" in captured.err
+    assert "timed at 20 a second" in captured.err
+    records = [json.loads(line) for line in captured.out.splitlines()]
+    assert [r["t"] for r in records[:3]] == [0.0, 0.05, 0.1]
+
+
 def test_lgmd_models_are_selectable_and_report_no_targets(looming_video, capsys):
     path, scene = looming_video
     assert main(["detect", str(path), "--model", "lgmd2", "--jsonl", "-"]) == 0

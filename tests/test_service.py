@@ -372,6 +372,21 @@ def test_worker_scan_and_handover_options_are_checked(capsys):
     assert "must be longer than its window" in capsys.readouterr().err
 
 
+def test_a_file_without_a_camera_s_frame_rate_is_replayed_at_20_fps_with_a_warning(
+        zenoh_net, tmp_path, caplog):
+    path = tmp_path / "base.avi"  # a container's time base read as its frame rate
+    write_video(make_scene("looming", size=(64, 48), frames=4).frames, path, fps=1000.0)
+    source = open_source(str(path))
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        assert publish_frames(zenoh_net.spoke(), "r8", source, max_frames=2) == 2
+    assert "states no frame rate a camera runs at" in caplog.text
+    assert "at 20.0 fps (set --fps)" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        assert publish_frames(zenoh_net.spoke(), "r8", source, fps=100, max_frames=2) == 2
+    assert "frame rate" not in caplog.text  # --fps given: nothing guessed
+
+
 def test_the_camera_announces_itself_while_it_publishes(zenoh_net):
     seen = []
     sub = zenoh_net.hub.liveliness().declare_subscriber(  # noqa: F841 (kept declared)

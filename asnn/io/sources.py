@@ -67,6 +67,9 @@ class Source:
         The first frame's time, nanoseconds since the epoch, where the source records one.
     frame_id : str
         The camera's coordinate frame, where the source records one (ROS ``frame_id``).
+    fps_stated : bool
+        Whether ``fps`` is the source's own; otherwise it states none, or one no camera runs
+        at, and ``fps`` is :data:`asnn.io.video.DEFAULT_FPS` (:func:`asnn.io.video.stated_fps`).
     """
 
     name: str
@@ -77,6 +80,7 @@ class Source:
     frame_count: int = 0
     start_ns: int | None = None
     frame_id: str = ""
+    fps_stated: bool = True
 
     def timed_frames(self) -> Iterator[tuple[float, np.ndarray]]:
         """``(t, image)``: seconds since the first frame, and the frame."""
@@ -165,14 +169,14 @@ def _open_scene(spec: str) -> Source:
 
 
 def _open_capture(spec: str) -> Source:
-    from .video import read_frames
+    from .video import DEFAULT_FPS, read_frames, stated_fps
 
     cap = cv2.VideoCapture(int(spec) if spec.isdigit() else spec)
     if not cap.isOpened():
         raise SourceError(f"cannot open capture source {spec!r}", "missing")
-    fps = cap.get(cv2.CAP_PROP_FPS)
-    fps = float(fps) if fps and np.isfinite(fps) and 0 < fps <= 240 else 20.0
-    return Source(spec, fps, True, lambda: read_frames(cap))
+    fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
+    return Source(spec, DEFAULT_FPS if fps is None else fps, True, lambda: read_frames(cap),
+                  fps_stated=fps is not None)
 
 
 def _open_file(spec: str, decoder_threads: int | None) -> Source:
@@ -183,7 +187,8 @@ def _open_file(spec: str, decoder_threads: int | None) -> Source:
     except VideoError as exc:
         raise SourceError(str(exc), "missing" if "no such file" in str(exc) else
                           "undecodable") from None
-    return Source(spec, clip.fps, False, lambda: iter(clip), frame_count=clip.frame_count)
+    return Source(spec, clip.fps, False, lambda: iter(clip), frame_count=clip.frame_count,
+                  fps_stated=clip.fps_stated)
 
 
 def _open_bag(path: str, topic: str | None, on_error: ErrorHandler | None) -> Source:

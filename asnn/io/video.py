@@ -9,7 +9,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["VideoError", "VideoClip", "open_video", "read_frames"]
+__all__ = ["DEFAULT_FPS", "MAX_FPS", "VideoError", "VideoClip", "open_video", "read_frames",
+           "stated_fps"]
+
+DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
+MAX_FPS = 240.0  # above this a stated rate is a container's time base, not a camera's
 
 # FFmpeg prints its own decoder complaints on stderr; our errors say it in one line instead.
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
@@ -26,7 +30,10 @@ class VideoClip:
     ----------
     path : Path
     fps : float
-        Frames per second stated by the file (20 when it states none).
+        Frames per second stated by the file, or :data:`DEFAULT_FPS` where it states none or
+        one above :data:`MAX_FPS` (:func:`stated_fps`).
+    fps_stated : bool
+        Whether ``fps`` is the file's own.
     frame_count : int
         Frame count stated by the file (may be approximate; 0 when unknown).
     width, height : int
@@ -44,8 +51,9 @@ class VideoClip:
         if not ok or first is None:
             cap.release()
             raise VideoError(f"{self.path}: not a video OpenCV can decode")
-        fps = cap.get(cv2.CAP_PROP_FPS)
-        self.fps = float(fps) if fps and np.isfinite(fps) and fps > 0 else 20.0
+        fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
+        self.fps_stated = fps is not None
+        self.fps = DEFAULT_FPS if fps is None else fps
         self.frame_count = max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0), 0)
         self.height, self.width = first.shape[:2]
         cap.release()
@@ -61,6 +69,15 @@ class VideoClip:
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return read_frames(self._capture())
+
+
+def stated_fps(value: float) -> float | None:
+    """A frame rate as OpenCV reports it (``CAP_PROP_FPS``), or None where it is not one a
+    camera runs at: 0, negative or not finite (none stated), or above :data:`MAX_FPS`. Some
+    containers report their time base instead (1000 for a variable-rate WebM): timed at that
+    rate, every per-second figure of the model (expansion, time to contact) would be 30 to 50
+    times off."""
+    return float(value) if value and np.isfinite(value) and 0 < value <= MAX_FPS else None
 
 
 def read_frames(capture: cv2.VideoCapture) -> Iterator[np.ndarray]:
