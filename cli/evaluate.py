@@ -180,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
                     len(d["clips"]) for d in results["detectors"].values()):
                 print(f"{args.out}/report.md")
                 return 2
+    except BrokenPipeError:  # stdout's reader went away: cli.main handles it
+        raise
     except (OSError, ValueError) as exc:
         print(f"asnn eval: {exc}", file=sys.stderr)
         return 2

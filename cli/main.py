@@ -57,6 +57,12 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # the reader of our standard output went away (`asnn detect --jsonl - | head`): stop
+        # quietly, with the status of a command the pipe's signal ends (128 + SIGPIPE)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # so that Python's flush at exit fails no more
+        return 141
 
 
 if __name__ == "__main__":

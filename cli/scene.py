@@ -79,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
             write_bag(scene.frames, out, fps=scene.fps)
         else:
             write_video(scene.frames, out, fps=scene.fps)
+    except BrokenPipeError:  # stdout's reader went away: cli.main handles it
+        raise
     except (ValueError, OSError, ImportError) as exc:
         print(f"asnn scene: {exc}", file=sys.stderr)
         return 2

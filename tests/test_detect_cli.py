@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from asnn.stimuli import make_scene, write_video
@@ -153,6 +154,20 @@ def test_missing_or_undecodable_file_exits_2_with_one_line(tmp_path, content):
     assert proc.returncode == 2
     assert proc.stdout == ""
     assert len(proc.stderr.strip().splitlines()) == 1 and str(path) in proc.stderr
+
+
+@pytest.mark.parametrize("what", ["--jsonl", "--tracks"])
+def test_a_reader_that_stops_early_ends_detect_quietly(tmp_path, what):
+    """``asnn detect VIDEO --jsonl - | head -1``: no traceback, the status of SIGPIPE."""
+    path = tmp_path / "long.avi"  # its records fill the pipe, so detect is still writing
+    write_video(np.tile(make_scene("looming", size=(64, 64)).frames, (25, 1, 1)), path)
+    proc = subprocess.Popen([sys.executable, "-m", "cli.main", "detect", str(path), what, "-"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    first = proc.stdout.readline()
+    proc.stdout.close()  # as head does after its line
+    assert proc.wait(timeout=120) == 141
+    assert json.loads(first)["frame"] == 0
+    assert proc.stderr.read() == b""  # no traceback, no second complaint at exit
 
 
 @pytest.mark.parametrize("threads", [None, "1", "2", "3"])
