@@ -19,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)
+    parser.commands = sub.choices  # each sub-command's own parser, by name
     return parser
 
 
@@ -49,10 +50,23 @@ def _prefer_wide_vectors() -> None:
         os.environ["NUMBA_CPU_FEATURES"] = features
 
 
+def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """The command line's arguments. A sub-command that sets ``intermixed`` (several
+    positionals, as ``asnn scene NAME OUT``) is parsed again with its options allowed between
+    them, which argparse's one pass cannot do (``asnn scene looming --polarity light out.mp4``
+    would leave ``out.mp4`` unrecognised)."""
+    args, extras = parser.parse_known_args(argv)
+    if not extras:
+        return args
+    if getattr(args, "intermixed", False):
+        return parser.commands[args.command].parse_intermixed_args(argv[1:])
+    return parser.parse_args(argv)  # the usual error for what is left
+
+
 def main(argv: list[str] | None = None) -> int:
     if (sys.argv[1:] if argv is None else argv)[:1] == ["detect"]:
         _prefer_wide_vectors()  # before the commands' modules import numba
-    args = build_parser().parse_args(argv)
+    args = _parse(build_parser(), sys.argv[1:] if argv is None else argv)
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

@@ -9,22 +9,28 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+from pathlib import Path
 
+from asnn.evaluation.labels import read_entries
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 from asnn.stimuli.suite import CASES, make_case, suite_cases
 
-from .arguments import frame_size, whole
+from .arguments import frame_size, positive, whole
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("scene", help="write a generated test scene as a video file",
+    p = sub.add_parser("scene", help="write a generated test scene as a video file or a bag",
                        description="Generate one of the paper's synthetic scenes, or a case of "
-                                   "the labelled suite (--case), as a video file.")
+                                   "the labelled suite (--case), as a video file or a ROS 2 "
+                                   "bag. Options may come before, between or after NAME and "
+                                   "OUT.")
     p.add_argument("args", nargs="*", metavar="[NAME] OUT",
                    help=f"a paper scene ({', '.join(SCENE_NAMES)}) and the file to write: a "
                         "video (.mp4 or .avi) or a ROS 2 bag (.mcap: sensor_msgs/msg/Image mono8 "
-                        "on /camera/image_raw; the 'ros' extra); with --case only OUT")
+                        "on /camera/image_raw; the 'ros' extra); with --case only OUT. Its "
+                        "folder is made where it is missing")
     p.add_argument("--case", metavar="CASE", help="a case of the labelled suite instead")
     p.add_argument("--variant", type=whole, default=0, metavar="K",
                    help="with --case: the case with a fresh scene seed K >= 1 (asnn eval "
@@ -35,15 +41,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--list", nargs="?", const="all", metavar="PATTERN",
                    help="list the suite's cases (matching PATTERN; 'extra-*' lists the extra "
                         "drives outside it) and exit")
-    p.add_argument("--size", type=frame_size, default=(128, 128), metavar="WxH",
-                   help="paper scenes only (default: 128x128)")
-    p.add_argument("--polarity", choices=("dark", "light"), default="dark",
-                   help="paper scenes only")
-    p.add_argument("--contrast", type=float, default=1.0, help="paper scenes only")
-    p.add_argument("--speed", type=float, help="paper scenes only: edge speed, px/frame")
-    p.add_argument("--fps", type=float, default=20.0, help="paper scenes only")
-    p.add_argument("--labels", metavar="FILE", help="also write a labels.json for asnn eval")
-    p.set_defaults(func=run)
+    for flag, options, default, what in _PAPER_OPTIONS:
+        p.add_argument(flag, **options, help=f"paper scenes only: {what} (default: {default})")
+    p.add_argument("--labels", metavar="FILE",
+                   help="also enter the clip's label in FILE, a labels.json for asnn eval: added, "
+                        "or replacing the entry of the same file, named relative to FILE's folder")
+    p.set_defaults(func=run, intermixed=True)
+
+
+# options of the paper's scenes, unset (None) unless given: (flag, argparse options, default,
+# what); a suite case has its own
+_PAPER_OPTIONS = (
+    ("--size", {"type": frame_size, "metavar": "WxH"}, "128x128", "frame size"),
+    ("--polarity", {"choices": ("dark", "light")}, "dark",
+     "dark (the object darker than its ground) or light"),
+    ("--contrast", {"type": positive}, 1.0, "Weber contrast"),
+    ("--speed", {"type": positive}, "the scene's own", "edge speed, px/frame"),
+    ("--fps", {"type": positive}, 20.0, "frame rate"))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -56,6 +70,11 @@ def run(args: argparse.Namespace) -> int:
         if args.case is not None:
             if len(args.args) != 1:
                 print("asnn scene: --case takes one OUT file", file=sys.stderr)
+                return 2
+            given = [flag for flag, *_ in _PAPER_OPTIONS if getattr(args, flag[2:]) is not None]
+            if given:
+                print(f"asnn scene: {', '.join(given)} set a paper scene; a suite case has its "
+                      "own (--scale draws it larger)", file=sys.stderr)
                 return 2
             out = args.args[0]
             scene = make_case(args.case, args.variant, scale=args.scale)
@@ -71,21 +90,34 @@ def run(args: argparse.Namespace) -> int:
                 print(f"asnn scene: unknown scene {name!r}; choose one of "
                       f"{', '.join(SCENE_NAMES)} (or --case for the suite)", file=sys.stderr)
                 return 2
-            scene = make_scene(name, size=args.size, polarity=args.polarity,
-                               contrast=args.contrast, speed=args.speed, fps=args.fps)
+            given = {flag[2:]: getattr(args, flag[2:]) for flag, *_ in _PAPER_OPTIONS}
+            scene = make_scene(name, **{k: v for k, v in given.items() if v is not None})
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
         if out.lower().endswith(".mcap"):
             from asnn.io.rosbag import write_bag
 
             write_bag(scene.frames, out, fps=scene.fps)
         else:
             write_video(scene.frames, out, fps=scene.fps)
+        if args.labels:
+            _enter_label(Path(args.labels), Path(out), scene)
     except BrokenPipeError:  # stdout's reader went away: cli.main handles it
         raise
     except (ValueError, OSError, ImportError) as exc:
         print(f"asnn scene: {exc}", file=sys.stderr)
         return 2
-    if args.labels:
-        with open(args.labels, "w", encoding="utf-8") as fh:
-            json.dump([scene.label(out)], fh, indent=1)
     print(f"asnn scene: wrote {len(scene.frames)} frames to {out}", file=sys.stderr)
     return 0
+
+
+def _enter_label(labels: Path, out: Path, scene) -> None:
+    """Enter the clip's label in ``labels`` (a labels.json, made where it is missing): its
+    ``file`` named relative to the labels' folder, as ``asnn eval`` reads it, replacing an
+    entry of the same file and keeping the others, so that one call per clip builds a folder's
+    labels."""
+    file = Path(os.path.relpath(out.resolve(), labels.resolve().parent)).as_posix()
+    entries = read_entries(labels) if labels.exists() else []
+    entries = [e for e in entries if not (isinstance(e, dict) and e.get("file") == file)]
+    labels.parent.mkdir(parents=True, exist_ok=True)
+    labels.write_text(json.dumps(entries + [scene.label(file)], indent=1) + "\n",
+                      encoding="utf-8")

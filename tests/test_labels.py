@@ -184,3 +184,23 @@ def test_label_refuses_what_it_cannot_use(tmp_path, capsys):
     (tmp_path / "labels.json").write_text("{not json")
     assert main(["label", str(tmp_path)]) == 2
     assert "not JSON" in capsys.readouterr().err
+
+
+def test_scene_builds_a_labelled_folder_one_clip_at_a_time(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # OUT as typed, relative to here; the labels name it from theirs
+    folder = tmp_path / "mine"
+    labels = folder / "labels.json"
+    # options between NAME and OUT, OUT in a folder that is not there yet
+    assert main(["scene", "looming", "--polarity", "light", "mine/deep/light.mp4",
+                 "--labels", str(labels)]) == 0
+    assert main(["scene", "--case", "nearmiss-disk-dark-right", str(folder / "nm.avi"),
+                 "--labels", "mine/labels.json"]) == 0
+    assert main(["scene", "looming", "mine/deep/light.mp4", "--contrast", "0.5",
+                 "--labels", str(labels)]) == 0  # the same clip again: its entry replaced
+    entries = json.loads(labels.read_text())
+    assert [(e["file"], e["collision"]) for e in entries] == [("nm.avi", False),
+                                                              ("deep/light.mp4", True)]
+    assert "'contrast': 0.5" in entries[1]["description"]
+    assert main(["label", str(folder)]) == 0  # every entry ready, every clip where it says
+    assert main(["scene", "--case", "nearmiss-disk-dark-right", "x.avi", "--size", "64x64"]) == 2
+    assert "--size set a paper scene" in capsys.readouterr().err
