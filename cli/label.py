@@ -76,8 +76,9 @@ def run(args: argparse.Namespace) -> int:
     if added:
         path.write_text(json.dumps(entries, indent=2) + "\n", encoding="utf-8")
         print(f"{path}: {len(added)} {'entry' if len(added) == 1 else 'entries'} added "
-              f"({', '.join(added)}): fill in collision, and for a collision onset_frame, "
-              "contact_frame and center")
+              f"({', '.join(added)}): fill in collision, and for a collision onset_frame and "
+              "contact_frame (and center, the object's [x, y] at contact, for the scores of "
+              "the targets)")
     for line in todo:
         print(line)
     if not todo:
