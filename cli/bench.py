@@ -30,9 +30,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="cameras at --fps through one worker process over Zenoh on loopback, "
                    "ramping the number of cameras (first --size, default 320x240; first --preset, "
                    "default the default preset)")
-    p.add_argument("--fps", type=positive, default=25.0, help="camera rate for --service")
+    p.add_argument("--fps", type=positive, default=25.0,
+                   help="camera rate for --service (default: %(default)s)")
     p.add_argument("--seconds", type=positive, default=4.0,
-                   help="duration of each --service step")
+                   help="duration of each --service step (default: %(default)s)")
     p.add_argument("--cameras", type=count, action="append", metavar="N",
                    help="camera counts for --service (repeatable; default 1, 2, 4, 8, 12, 16, 20, 24)")
     p.add_argument("--phases", choices=("spread", "random"), default="spread",

@@ -33,7 +33,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--topic", metavar="NAME",
                    help="image topic of a bag (sensor_msgs/msg/Image or CompressedImage); "
                         "needed when it has several")
-    p.add_argument("--model", choices=MODELS, default="asnn")
+    p.add_argument("--model", choices=MODELS, default="asnn",
+                   help="detector: ASNN or an LGMD baseline (default: %(default)s)")
     p.add_argument("--preset", choices=preset_names(), default="default",
                    help="ASNN parameter preset (default: %(default)s)")
     p.add_argument("--jsonl", metavar="PATH|-", help="write one JSON object per frame ('-': stdout)")

@@ -60,7 +60,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detectors", "--models", dest="detectors", type=_detectors,
                    default=list(DEFAULT_DETECTORS), metavar="LIST",
                    help="comma-separated detector specs: asnn, asnn:PRESET, lgmd1, lgmd2 "
-                        "(default: %(default)s)")
+                        f"(default: {','.join(DEFAULT_DETECTORS)})")
     p.add_argument("--ablation", action="store_true",
                    help="run the robust preset with each of its additions switched off in turn "
                         "instead of --detectors (asnn.evaluation.runs.ABLATIONS)")

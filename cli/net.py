@@ -6,6 +6,7 @@ import argparse
 import logging
 import sys
 
+from asnn.params import preset_names
 from service.config import ConfigError
 
 from .arguments import count, non_negative, positive, robot_id, whole
@@ -235,7 +236,8 @@ def register(subparsers) -> None:
                               "each serves its share) and publish a response per processed frame "
                               "and a warning per collision.")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
-    p.add_argument("--preset", default=None, help="ASNN preset (default: the default preset)")
+    p.add_argument("--preset", choices=preset_names(), default=None,
+                   help="ASNN preset (default: the default preset)")
     p.add_argument("--id", type=robot_id, default=None,
                    help="worker id reported in responses (default: <host>-<pid>)")
     p.add_argument("--idle-timeout", type=positive, default=60.0, metavar="SECONDS",
@@ -304,6 +306,7 @@ def register(subparsers) -> None:
     p.add_argument("--fps", type=positive, default=None,
                    help="playback rate (default: the scene's, 20)")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
-    p.add_argument("--preset", default=None, help="ASNN preset (default: the default preset)")
+    p.add_argument("--preset", choices=preset_names(), default=None,
+                   help="ASNN preset (default: the default preset)")
     p.add_argument("--json", action="store_true", help="print the warnings as JSON lines")
     p.set_defaults(func=cmd_demo)
