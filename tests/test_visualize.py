@@ -55,3 +55,16 @@ def test_a_dashcam_s_hood_is_in_the_maps_as_rig():
     reference = ASNN("reference", record_maps=True)
     assert [reference.step(f, i / scene.fps) for i, f in enumerate(scene.frames[:2])][1].maps.rig \
         is None
+
+
+def test_the_header_fits_a_small_frame_and_keeps_its_size_on_a_large_one():
+    import cv2
+
+    from asnn.io.visualize import header_scale
+
+    text = "#30 spikes/s 1110 WARNING"
+    assert header_scale(text, 640) == 0.4
+    scale = header_scale(text, 128)
+    assert scale < 0.4
+    (w, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 3)
+    assert w <= 128 - 10

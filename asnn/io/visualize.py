@@ -11,7 +11,7 @@ import numpy as np
 
 from ..response import Response
 
-__all__ = ["annotate_frame", "target_arrow", "target_label", "warning_intervals",
+__all__ = ["annotate_frame", "header_scale", "target_arrow", "target_label", "warning_intervals",
            "plot_responses"]
 
 _ARROW_GAIN = 400.0  # pixels per unit of motion energy, clamped below
@@ -86,10 +86,20 @@ def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
                         0.35, (255, 80, 0), 1, cv2.LINE_AA)
     if response.collision:
         cv2.rectangle(image, (0, 0), (image.shape[1] - 1, image.shape[0] - 1), (0, 0, 255), 3)
-    text = f"#{response.index} spikes/s {response.spike_rate:.0f}" + (" WARNING" if response.collision else "")
-    cv2.putText(image, text, (5, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 3, cv2.LINE_AA)
-    cv2.putText(image, text, (5, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 255), 1, cv2.LINE_AA)
+    text = (f"#{response.index} spikes/s {response.spike_rate:.0f}"
+            + (" WARNING" if response.collision else ""))
+    scale = header_scale(text, image.shape[1])
+    for colour, thickness in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # white on a dark rim
+        cv2.putText(image, text, (5, 14), cv2.FONT_HERSHEY_SIMPLEX, scale, colour, thickness,
+                    cv2.LINE_AA)
     return image
+
+
+def header_scale(text: str, width: int, largest: float = 0.4) -> float:
+    """The font scale at which the annotated frame's header fits in ``width`` pixels with a
+    5-px margin each side (at most ``largest``): a 128-px frame would cut off the warning."""
+    (w, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, largest, 3)
+    return largest * min(1.0, (width - 10) / w) if w > 0 else largest
 
 
 def _to_frame(image: np.ndarray, size: tuple[int, int], interpolation: int) -> np.ndarray:
