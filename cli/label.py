@@ -15,7 +15,8 @@ import json
 import sys
 from pathlib import Path
 
-from asnn.evaluation.labels import label_problem, mismatches, read_entries, unlabelled
+from asnn.evaluation.labels import (check_labels, label_problem, mismatches, read_entries,
+                                    unlabelled)
 from asnn.io.sources import SourceError, open_source
 
 # what OpenCV's FFmpeg backend commonly reads; bags (.mcap) need a topic and are labelled by hand
@@ -47,32 +48,41 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as exc:
         print(f"asnn label: {exc}", file=sys.stderr)
         return 2
+    todo = []
+    for index, entry in enumerate(entries):  # the entries there are, each on its own
+        problem = label_problem(entry)
+        if problem is not None:
+            name = entry.get("file") if isinstance(entry, dict) else None
+            todo.append(f"{name or f'entry {index}'}: {problem}")
+            continue
+        clip = folder / entry["file"]
+        if not clip.is_file():
+            todo.append(f"{entry['file']}: no such clip in {folder}")
+        elif clip.suffix.lower() in VIDEO_SUFFIXES:
+            try:
+                frames, fps, _ = _decode(clip)
+            except SourceError as exc:
+                todo.append(str(exc))
+                continue
+            todo += mismatches(entry, frames, fps)
+    if not todo:
+        try:  # across the entries: two clips whose results would share a file
+            check_labels(entries, str(path))
+        except ValueError as exc:
+            todo.append(str(exc))
     labelled = {e.get("file") for e in entries if isinstance(e, dict)}
-    videos = sorted(p for p in folder.iterdir()
-                    if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES)
-    todo, added = [], []
-    for video in videos:
+    added = []
+    for video in sorted(p for p in folder.iterdir()
+                        if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES
+                        and p.name not in labelled):
         try:
             frames, fps, (height, width) = _decode(video)
         except SourceError as exc:
             todo.append(str(exc))
             continue
-        name = video.name
-        if name not in labelled:
-            entries.append(unlabelled(name, frames, fps, width, height))
-            added.append(name)
-        else:
-            for entry in entries:
-                if isinstance(entry, dict) and entry.get("file") == name \
-                        and label_problem(entry) is None:
-                    todo += mismatches(entry, frames, fps)
-    for index, entry in enumerate(entries):
-        problem = label_problem(entry)
-        name = entry.get("file") if isinstance(entry, dict) else None
-        if problem is not None:
-            todo.append(f"{name or f'entry {index}'}: {problem}")
-        elif name not in {v.name for v in videos} and not (folder / name).is_file():
-            todo.append(f"{name}: no such clip in {folder}")
+        entries.append(unlabelled(video.name, frames, fps, width, height))
+        added.append(video.name)
+        todo.append(f"{video.name}: {label_problem(entries[-1])}")
     if added:
         path.write_text(json.dumps(entries, indent=2) + "\n", encoding="utf-8")
         print(f"{path}: {len(added)} {'entry' if len(added) == 1 else 'entries'} added "
