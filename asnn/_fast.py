@@ -932,9 +932,9 @@ def gain_controlled_change(current, previous, semi_saturation, sigma, scale, out
 
 
 def motion_vectors(r, v, rows, cols):
-    """The motion vectors ``(V cos phi, V sin phi)`` (eq. 30) at the pixels ``(rows, cols)``,
+    """The motion vectors ``(V cos phi, V sin phi)`` (eq. 29) at the pixels ``(rows, cols)``,
     float64, from the four computed orientations ``r`` (R^0, R^{pi/4}, R^{pi/2}, R^{3pi/4})
-    and ``V``, with ``phi = atan2(R^{pi/2}, R^0)`` (eq. 21).
+    and ``V``, with ``phi = atan2(R^{pi/2}, R^0)`` (eq. 18).
 
     ``cos phi`` and ``sin phi`` are ``R^0 / |(R^0, R^{pi/2})|`` and ``R^{pi/2} / |...|``: the
     same to rounding (about 1e-16 relative), in one pass without the arc tangent, cosine and

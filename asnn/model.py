@@ -579,8 +579,8 @@ class _Frame:
 
 def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams
                ) -> tuple[float, int, float]:
-    """The output stage for one frame: ``out`` (eq. 27), the spikes (eq. 28), appended to
-    ``window`` (the spikes of the last ``n_t`` frames), and the spike rate over it (eq. 29).
+    """The output stage for one frame: ``out`` (eq. 32), the spikes (eq. 33), appended to
+    ``window`` (the spikes of the last ``n_t`` frames), and the spike rate over it (eq. 34).
     A warning is a rate of at least ``params.t_c``."""
     out = retina.sigmoid_output(u, n_cells)
     spikes = retina.spike_count(out, params.k_sp, params.t_sp)

@@ -141,7 +141,7 @@ class ASNNParams(BaseModel):
         "'2d': F/(2 pi sigma^2) as in the published implementation",
     )
 
-    # --- temporal filter L(K, n, z0) (eqs. 5-7) ---
+    # --- temporal filter L(K, n, z0) (eqs. 5-8) ---
     gain: float = Field(5.0, description="K, gain of the temporal filter")
     decay: float = Field(60.0, gt=0, description="A, decay coefficient")
     transmission: float | None = Field(
@@ -155,7 +155,7 @@ class ASNNParams(BaseModel):
     n_slow: int = Field(4, ge=2, description="n_s, stages of the slow filter")
     dt: float = Field(0.05, gt=0, description="integration step, seconds per frame")
 
-    # --- amacrine cells (eqs. 8-13) ---
+    # --- amacrine cells (eqs. 9-14) ---
     ds_sigma: float = Field(0.3, gt=0, description="sigma_DS of the Gabor pair")
     ds_wavelength: float = Field(4.0, gt=0, description="lambda_DS of the Gabor pair")
     cs_sigma: float = Field(0.3, gt=0, description="sigma_CS of the centre-surround kernel")
@@ -166,7 +166,7 @@ class ASNNParams(BaseModel):
         1.0, gt=0, description="g_DS and g_CS are sampled on [-extent, extent] (SPEC ruling)"
     )
 
-    # --- ganglion cells (eqs. 14-19) ---
+    # --- ganglion cells (eqs. 15-20) ---
     v_on: float = Field(1.0, description="v+, weight of ON motion energy")
     v_off: float = Field(1.0, description="v-, weight of OFF motion energy")
     w1_on: float = Field(1.0, description="w^1_+, weight of G^1_+ (slow ON)")
@@ -177,12 +177,12 @@ class ASNNParams(BaseModel):
         False, description="G <- G (G * ones(3,3)/9) before attention (reference)"
     )
 
-    # --- attention (eqs. 20-26) ---
+    # --- attention (eqs. 21-28) ---
     attention_sigma: float = Field(8.0, gt=0, description="sigma_g of g_sigma")
     attention_size: int = Field(31, ge=3, description="size of g_sigma (odd)")
     attention_normalised: bool = Field(
         False,
-        description="False: g_sigma = exp(-r^2/2s^2)/(2 pi s^2) as printed (eq. 20); "
+        description="False: g_sigma = exp(-r^2/2s^2)/(2 pi s^2) as printed (eq. 21); "
         "True: normalised to sum 1 (OpenCV GaussianBlur, reference)",
     )
     attention_step: int = Field(
@@ -192,7 +192,7 @@ class ASNNParams(BaseModel):
     gamma_d: float = Field(0.005, description="gamma_d, threshold of the direction attention M_d")
     top_k: int = Field(1, ge=0, le=7, description="k of the top-k inhibited orientations")
 
-    # --- output and warning (eqs. 27-29) ---
+    # --- output and warning (eqs. 32-34) ---
     u_scale: float = Field(
         1.0, gt=0, description="u = u_scale * sum(G'); 255 undoes the [0,1] input scaling"
     )
@@ -208,7 +208,7 @@ class ASNNParams(BaseModel):
     # --- targets (SPEC section 1 item 10) ---
     targets: Literal["clusters", "objects"] = Field(
         "clusters",
-        description="'clusters': DBSCAN of the attended pixels (paper eqs. 30-32); 'objects': "
+        description="'clusters': DBSCAN of the attended pixels (paper eqs. 29-31); 'objects': "
         "connected regions of the attended mask, tracked across frames (robust)",
     )
     min_object_pixels: int = Field(30, ge=1, description="smallest region kept as an object")

@@ -114,7 +114,7 @@ class Response:
     index : int
         0-based number of the frame in the stream.
     u : float
-        Membrane potential u(t) (paper eq. 26; for the LGMD models, their summed excitation).
+        Membrane potential u(t) (paper eq. 28; for the LGMD models, their summed excitation).
     out : float
         Sigmoid output in [0.5, 1] (1.0 only where it saturates in floating point).
     spikes : int

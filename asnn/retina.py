@@ -231,7 +231,7 @@ def _grid(size: int, extent: float) -> tuple[np.ndarray, np.ndarray]:
 
 def gabor_pair(theta: float, sigma: float, wavelength: float, size: int,
                extent: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Even and odd Gabor kernels g^0_DS, g^{pi/2}_DS at orientation theta (paper eq. 8).
+    """Even and odd Gabor kernels g^0_DS, g^{pi/2}_DS at orientation theta (paper eq. 9).
 
     ``g = exp(-(x'^2 + y'^2) / (2 sigma^2)) cos(2 pi x' / lambda + psi)`` with
     ``x' = x cos(theta) + y sin(theta)``, ``y' = -x sin(theta) + y cos(theta)``, x along columns
@@ -257,7 +257,7 @@ def gabor_pair(theta: float, sigma: float, wavelength: float, size: int,
 
 def center_surround_kernel(sigma: float, wavelength: float, phase: float, size: int,
                            extent: float = 1.0) -> np.ndarray:
-    """Antagonistic centre-surround kernel g_CS (paper eq. 10).
+    """Antagonistic centre-surround kernel g_CS (paper eq. 11).
 
     ``g_CS = 1 - exp(-r^2 / (2 sigma^2)) cos(2 pi r^2 / lambda + psi)``; with psi = 0 the centre
     weight is 0 and the surround approaches 1.
@@ -269,7 +269,7 @@ def center_surround_kernel(sigma: float, wavelength: float, phase: float, size: 
 
 def _orientation_energy(slow: np.ndarray, fast: np.ndarray, even: np.ndarray,
                         odd: np.ndarray) -> np.ndarray:
-    """E^theta = SA^1 SB^2 - SA^2 SB^1 for one channel and one orientation (paper eqs. 9, 14)."""
+    """E^theta = SA^1 SB^2 - SA^2 SB^1 for one channel and one orientation (paper eqs. 10, 15)."""
     sa1, sb1 = correlate(slow, even), correlate(slow, odd)
     sa2, sb2 = correlate(fast, even), correlate(fast, odd)
     return sa1 * sb2 - sa2 * sb1
@@ -278,7 +278,7 @@ def _orientation_energy(slow: np.ndarray, fast: np.ndarray, even: np.ndarray,
 def motion_energy(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
                   fast_off: np.ndarray, pairs: list[tuple[np.ndarray, np.ndarray]],
                   v_on: float, v_off: float) -> np.ndarray:
-    """Ganglion motion energy R^theta = v+ E+^theta + v- E-^theta (paper eqs. 9, 14, 15).
+    """Ganglion motion energy R^theta = v+ E+^theta + v- E-^theta (paper eqs. 10, 15, 16).
 
     Parameters
     ----------
@@ -307,14 +307,14 @@ def motion_energy(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray
 
 
 def center_surround_inhibition(response: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """SAC inhibition S = relu(B (*) g_CS) (paper eqs. 11-13)."""
+    """SAC inhibition S = relu(B (*) g_CS) (paper eqs. 12-14)."""
     return np.maximum(correlate(response, kernel), 0.0)
 
 
 def approach_map(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
                  fast_off: np.ndarray, cs_kernel: np.ndarray,
                  weights: tuple[float, float, float, float]) -> np.ndarray:
-    """Approach-sensitive map G of the ganglion cells (paper eqs. 16, 17).
+    """Approach-sensitive map G of the ganglion cells (paper eqs. 19, 20).
 
     ``G1+ = relu(relu(B+s) - S1-)``, ``G2+ = relu(relu(B+f) - S2-)``,
     ``G1- = relu(relu(B-s) - S1+)``, ``G2- = relu(relu(B-f) - S2+)``, where
@@ -354,7 +354,7 @@ def group(g: np.ndarray) -> np.ndarray:
 
 def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
                    step: int = 1) -> np.ndarray:
-    """Smoothing with the attention Gaussian g_sigma (paper eqs. 20, 21).
+    """Smoothing with the attention Gaussian g_sigma (paper eqs. 21, 22).
 
     ``normalised=False`` uses the printed ``exp(-r^2/2 sigma^2) / (2 pi sigma^2)`` on a
     size x size window; ``True`` uses OpenCV's GaussianBlur (sampled, normalised to sum 1),
@@ -398,13 +398,13 @@ def coarse_grid_blur(coarse: np.ndarray, sigma: float, size: int, normalised: bo
 
 def approach_attention(g: np.ndarray, sigma: float, size: int, normalised: bool,
                        gamma_a: float, step: int = 1) -> np.ndarray:
-    """Approach-sensitive attention mask M_a = B(G (*) g_sigma, gamma_a) (paper eqs. 21, 22)."""
+    """Approach-sensitive attention mask M_a = B(G (*) g_sigma, gamma_a) (paper eqs. 22, 23)."""
     return attention_blur(g, sigma, size, normalised, step) > gamma_a
 
 
 def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, size: int,
                         normalised: bool, gamma_d: float, step: int = 1) -> np.ndarray:
-    """Directionally selective attention M_d (paper eqs. 23-25).
+    """Directionally selective attention M_d (paper eqs. 24-26).
 
     The top-k orientations by ``R_sum(theta) = sum_xy R^theta`` form Theta_I;
     ``V' = V - max_{Theta_I} R`` and ``M_d = B(V' (*) g_sigma, gamma_d)``.
@@ -427,17 +427,17 @@ def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, 
 
 
 def membrane_potential(g_prime: np.ndarray, scale: float, absolute: bool) -> float:
-    """u(t) = sum_xy G'(x, y, t) (paper eq. 26), scaled; ``absolute`` sums |G'| instead."""
+    """u(t) = sum_xy G'(x, y, t) (paper eqs. 27, 28), scaled; ``absolute`` sums |G'| instead."""
     total = np.abs(g_prime).sum() if absolute else g_prime.sum()
     return float(scale * total)
 
 
 def sigmoid_output(u: float, n_cells: int) -> float:
-    """out(t) = 1 / (1 + exp(-|u| / N)), in [0.5, 1) (SPEC ruling on paper eq. 27); in floating
+    """out(t) = 1 / (1 + exp(-|u| / N)), in [0.5, 1) (SPEC ruling on paper eq. 32); in floating
     point it rounds to exactly 1.0 once |u| / N passes about 37."""
     return 1.0 / (1.0 + math.exp(-abs(u) / n_cells))
 
 
 def spike_count(out: float, k_sp: float, t_sp: float) -> int:
-    """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 28)."""
+    """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 33)."""
     return int(math.floor(math.exp(k_sp * (out - t_sp))))

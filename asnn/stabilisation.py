@@ -2,7 +2,7 @@
 
 When the camera pans or shakes, or a textured background slides past (a train, a fence, moving
 stripes), every edge of the scene moves, and the retina's motion and approach maps fill with it;
-the direction-selective inhibition (paper eqs. 23-25) then removes the background's direction
+the direction-selective inhibition (paper eqs. 24-26) then removes the background's direction
 everywhere, and with it an approaching object's rims wherever the two overlap. Retinas face the
 same problem with their own eye movements: object-motion-sensitive ganglion cells respond to
 local motion only where it differs from the motion of the surround, which the eye's global

@@ -1,6 +1,6 @@
 """Looming-target extraction: grouping of the attended pixels and population-coded motion.
 
-Implements SPEC.md section 1 item 10 (paper eqs. 30-32) with the cluster direction ruling
+Implements SPEC.md section 1 item 10 (paper eqs. 29-31) with the cluster direction ruling
 ``direction = atan2(V_Y, V_X)`` in image coordinates (x right, y down, so a positive angle turns
 clockwise on screen). Two groupings:
 
@@ -236,14 +236,14 @@ def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | No
                     vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
                     | None = None, points: tuple[np.ndarray, np.ndarray] | None = None
                     ) -> list[Target]:
-    """Targets of the attended pixels ``M_a M_d = 1`` (paper eqs. 30-32).
+    """Targets of the attended pixels ``M_a M_d = 1`` (paper eqs. 29-31).
 
     Parameters
     ----------
     mask : ndarray of bool (H, W)
         ``M_a M_d``.
     dx, dy : ndarray (H, W) or None
-        Motion vector per pixel, ``V cos(phi)`` and ``V sin(phi)`` (eq. 30).
+        Motion vector per pixel, ``V cos(phi)`` and ``V sin(phi)`` (eq. 29).
     eps, min_samples : DBSCAN parameters.
     vectors : callable, optional
         Instead of ``dx`` and ``dy``: ``vectors(rows, cols) -> (dx, dy)`` at the given pixels,
@@ -318,7 +318,7 @@ class ObjectRegions:
     vectors : callable
         ``vectors(rows, cols) -> (dx, dy)``, as given to :func:`extract_objects`.
     direction, energy : ndarray (n,)
-        Population-coded motion of each region (paper eqs. 30-32): the mean of
+        Population-coded motion of each region (paper eqs. 29-31): the mean of
         ``(V cos(phi), V sin(phi))`` over its pixels, as an angle and a length. Computed when
         first read, from ``vectors`` at every pixel of the regions: a frame whose objects are
         not reported as targets (none approaches) needs none of them. ``vectors`` must still
@@ -341,7 +341,7 @@ class ObjectRegions:
 
     @cached_property
     def _mean_vectors(self) -> tuple[np.ndarray, np.ndarray]:
-        """The mean motion vector ``(V_X, V_Y)`` of each region (eq. 31)."""
+        """The mean motion vector ``(V_X, V_Y)`` of each region (eq. 30)."""
         rows, cols, lab = self.members
         n = len(self)
         dx, dy = self.vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))

@@ -437,7 +437,7 @@ def test_attention_in_its_window_equals_attention_over_the_whole_frame(scenes):
 
 
 def test_motion_vectors_are_v_times_cos_and_sin_of_phi():
-    """Eq. 30 with phi of eq. 21, as the optimised step computes it for the targets (without
+    """Eq. 29 with phi of eq. 18, as the optimised step computes it for the targets (without
     an arc tangent per pixel): the same to rounding, including where R^0 = R^{pi/2} = 0, whose
     angle atan2 takes from their signs."""
     rng = np.random.default_rng(4)

@@ -1,7 +1,7 @@
 """The object stage of the robust preset: which of the attended pixels come at the camera.
 
-The paper's model sums ``G'`` over every attended pixel (eq. 26) and reports its targets by
-clustering them (eqs. 30-32). Presets with ``targets='objects'`` hand each frame's attended
+The paper's model sums ``G'`` over every attended pixel (eq. 28) and reports its targets by
+clustering them (eqs. 29-31). Presets with ``targets='objects'`` hand each frame's attended
 mask ``M_a M_d`` and approach map ``G`` to one :class:`ApproachStage` per stream instead, which
 
 1. takes the mask's objects (:func:`asnn.targets.extract_objects`) and links them to tracks
@@ -215,7 +215,7 @@ class ApproachStage:
         frames : FramePair
             The frame, the one before it and the time between them.
         total : float
-            ``sum G'`` over the attended pixels (eq. 26, before ``u_scale``).
+            ``sum G'`` over the attended pixels (eq. 28, before ``u_scale``).
         period : float
             The stream's frame period, seconds (persistence at low frame rates).
         scale : (float, float)

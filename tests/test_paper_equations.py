@@ -1,0 +1,67 @@
+"""Each retina function names the paper's equation it implements, numbered as in the paper's
+text (``../shared/paper/asnn-paper.tex``): the cited equation holds the function's symbol."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from asnn import retina
+
+PAPER = Path(__file__).resolve().parents[2] / "shared" / "paper" / "asnn-paper.tex"
+
+# function -> a symbol that one of the equations its docstring cites must hold
+SYMBOLS = {
+    retina.photoreceptor: r"P(x,y,t)=I(x,y,t)",
+    retina.dog_kernel: r"g_I(x,y",
+    retina.bipolar: r"B_{+}^0(x,y,t)&=B_{+}(x,y,t)\otimes g_I",
+    retina.temporal_filter_step: r"\tau \frac{\mathrm{d}z_n}{\mathrm{d}t}",
+    retina.temporal_readout: r"\mathcal{L}(K,n,z_0)=K(z_n-z_{n+1})",
+    retina.gabor_pair: r"g_{DS}(x,y)=",
+    retina.center_surround_kernel: r"g_{CS}(x,y)=",
+    retina._orientation_energy: r"E^{\theta}_{+}(x,y,t)&=",
+    retina.motion_energy: r"R^{\theta}(x,y,t)=v_{+}",
+    retina.center_surround_inhibition: r"S^1_{+}(x,y,t)=relu",
+    retina.approach_map: r"G(x,y,t)&=w^1_{+}G^1_{+}",
+    retina.attention_blur: r"g_{\sigma}(x,y)=",
+    retina.approach_attention: r"M_a(x,y,t)=",
+    retina.direction_attention: r"M_d(x,y,t)=",
+    retina.membrane_potential: r"u(t)=\sum_{x,y} G^{\prime}",
+    retina.sigmoid_output: r"out(t) =",
+    retina.spike_count: r"spike(t) =",
+}
+
+
+def paper_equations(text: str) -> list[str]:
+    """The numbered equations of the paper's body, in order (the appendix's derivation of the
+    temporal filter's peak left out): one number per equation environment."""
+    body = text.split("\\section{APPENDIX}")[0]
+    return [" ".join(m.group(2).split()) for m in
+            re.finditer(r"\\begin\{(equation|align)\}(.*?)\\end\{\1\}", body, re.S)]
+
+
+def cited(doc: str) -> list[int]:
+    """The equation numbers a docstring's first sentence cites: ``eq. 5``, ``eqs. 9, 14``,
+    ``eqs. 12-14``."""
+    first = doc.split("\n\n")[0]
+    numbers = []
+    for group in re.findall(r"eqs?\. ([0-9][0-9 ,\-]*)", first):
+        for part in group.replace(" ", "").strip(",").split(","):
+            low, _, high = part.partition("-")
+            numbers += range(int(low), int(high or low) + 1)
+    return numbers
+
+
+@pytest.mark.skipif(not PAPER.is_file(), reason="../shared/paper is absent")
+def test_every_retina_stage_cites_the_equation_that_holds_its_symbol():
+    equations = paper_equations(PAPER.read_text(encoding="utf-8"))
+    assert len(equations) == 34  # the body's: 1-31 the retina and targets, 32-34 the output
+    wrong = {}
+    for function, symbol in SYMBOLS.items():
+        numbers = cited(function.__doc__)
+        assert numbers, f"{function.__name__} cites no equation"
+        if not any(symbol in equations[n - 1] for n in numbers if 0 < n <= len(equations)):
+            wrong[function.__name__] = numbers
+    assert not wrong, f"cited equations without the stage's symbol: {wrong}"
