@@ -230,7 +230,8 @@ def publish_cameras(session, robots: list[str], frames: np.ndarray, fps: float,
               for r in robots]
     try:
         deadline = time.monotonic() + wait
-        while not all(p.matching_status for p in publishers) and time.monotonic() < deadline:
+        while (not all(p.matching_status.matching for p in publishers)
+               and time.monotonic() < deadline):
             time.sleep(0.05)
         sent = [0] * n
         start = time.monotonic() + period

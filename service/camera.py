@@ -103,9 +103,10 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     next_preview = time.monotonic()
     try:
         deadline = time.monotonic() + wait
-        while not publisher.matching_status and time.monotonic() < deadline and not stop.is_set():
+        while (not publisher.matching_status.matching and time.monotonic() < deadline
+               and not stop.is_set()):
             time.sleep(0.05)
-        if wait and not publisher.matching_status:
+        if wait and not publisher.matching_status.matching:
             log.warning("no subscriber on %s after %.1f s; publishing anyway", key, wait)
         log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
         if not (fps or source.live or source.fps_stated):  # a live source stamps its own times

@@ -22,7 +22,7 @@ from cli.main import main
 from service import keys
 from service.camera import Source, SourceError, open_source, publish_frames
 from service.core import WARMUP_FRAMES, WorkerCore
-from service.messages import Frame, decode_response, encode
+from service.messages import Frame, decode_frame, decode_response, encode
 from service.worker import COMPUTE_NICENESS, Worker
 
 from netutil import TIMEOUT, Fleet, wait_for
@@ -385,6 +385,23 @@ def test_a_file_without_a_camera_s_frame_rate_is_replayed_at_20_fps_with_a_warni
     with caplog.at_level("WARNING", logger="asnn.camera"):
         assert publish_frames(zenoh_net.spoke(), "r8", source, fps=100, max_frames=2) == 2
     assert "frame rate" not in caplog.text  # --fps given: nothing guessed
+
+
+def test_the_camera_waits_for_a_subscriber_that_comes_late_and_loses_no_frame(zenoh_net, caplog):
+    got = []
+    camera = zenoh_net.spoke()
+    late = threading.Timer(0.5, lambda: got.append(zenoh_net.hub.declare_subscriber(
+        keys.frame_key("r9"), lambda sample: got.append(sample.payload.to_bytes()))))
+    late.start()
+    scene, source = scene_source("looming", start=2, stop=8, frames=10)
+    assert publish_frames(camera, "r9", source, fps=100, wait=30.0, preview_hz=0) == 10
+    late.join()
+    wait_for(lambda: len(got) == 1 + 10, what="every frame, the first ones included")
+    assert [decode_frame(p).seq for p in got[1:]] == list(range(10))
+    # nobody there: it says so, then publishes anyway
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        assert publish_frames(camera, "r10", source, fps=100, wait=0.3, preview_hz=0) == 10
+    assert "no subscriber on asnn/r10/frame after 0.3 s; publishing anyway" in caplog.text
 
 
 def test_the_camera_announces_itself_while_it_publishes(zenoh_net):
