@@ -275,8 +275,14 @@ class Worker:
             same robots).
         """
         if self.core.model == "asnn":
-            # a cold numba cache takes seconds: frames waiting that long would all be dropped
+            # a cold numba cache takes about a minute: frames waiting that long would all be
+            # dropped, and a worker silent that long looks hung
+            log.info("worker %s: loading the model's kernels (compiling them takes about a "
+                     "minute where numba has no cache yet)", self.core.worker_id)
+            started = time.monotonic()
             compile_kernels()
+            log.info("worker %s: kernels ready in %.1f s", self.core.worker_id,
+                     time.monotonic() - started)
         prefix, me = self.core.prefix, self.core.worker_id
         if self.shared:
             # the fleet first, so that no frame is taken while this worker thinks it is alone

@@ -250,6 +250,15 @@ def test_a_late_subscriber_receives_the_last_warning_of_each_robot(service):
     assert [(w.robot, w.seq) for w in only_b] == [("b", 30)]
 
 
+def test_a_starting_worker_says_it_loads_the_model_s_kernels(zenoh_net, caplog):
+    with caplog.at_level("INFO", logger="asnn.worker"):
+        with Worker(zenoh_net.hub, WorkerCore(), stats_every=0):
+            pass
+    messages = [r.getMessage() for r in caplog.records if r.name == "asnn.worker"]
+    loading = next(i for i, m in enumerate(messages) if "loading the model's kernels" in m)
+    assert re.search(r"kernels ready in [0-9.]+ s", messages[loading + 1])
+
+
 def test_camera_sources_open_files_scenes_and_fail_clearly(tmp_path):
     scene = make_scene("looming", size=(64, 48))
     path = tmp_path / "clip.avi"
