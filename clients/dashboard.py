@@ -34,10 +34,13 @@ from one address) and ``max_streams + spare_connections`` connections in all
 still load the page while another address holds what it may. Invalid messages and dropped
 connections are logged rate-limited, without tracebacks.
 
-Robot state as shown: **collision** when the latest response says so, or the robot's latest
-warning is at most ``hold`` seconds older (camera clock) than its latest response, so a warning
-that lasts a few frames stays visible; **stale** when no response or preview arrived for
-``stale_after`` seconds (or none ever did: a robot known only from a cached warning).
+Robot state as shown: **stale** when no response arrived for ``stale_after`` seconds (or none
+ever did: a robot known only from a cached warning, or from its camera's previews): its camera
+may still send previews, but no worker answers it, so nothing watches it; **collision**, unless
+stale, when the latest response says so, or the robot's latest warning is at most ``hold``
+seconds older (camera clock) than its latest response, so a warning that lasts a few frames
+stays visible. A robot whose worker dies, or whose camera ends, mid-warning turns stale, not
+held in collision.
 """
 
 from __future__ import annotations
@@ -175,7 +178,7 @@ class _Robot:
     response: Response | None = None
     warning: Response | None = None   # the latest warning
     preview: dict | None = None
-    seen: float | None = None         # arrival (store clock) of the latest response or preview
+    answered: float | None = None     # arrival (store clock) of the latest response
     touched: float = 0.0              # arrival of anything, for forgetting
     points: deque = field(default_factory=deque)  # (version, stamp, spike_rate)
     recent_targets: deque = field(default_factory=lambda: deque(maxlen=RECENT_TARGETS))
@@ -295,7 +298,7 @@ class FleetStore:
         if previous is not None and response.stamp < previous.stamp:
             state.points.clear()  # the camera's clock went back (restart): a new history
             state.points_reset = version
-        state.response, state.seen, state.changed = response, now, version
+        state.response, state.answered, state.changed = response, now, version
         state.responses += 1
         state.points.append((version, response.stamp, response.spike_rate))
         state.recent_targets.append((response.seq, response.targets))  # at most MAX_TARGETS
@@ -350,7 +353,7 @@ class FleetStore:
             "src": f"data:image/{preview.format};base64,"
                    + base64.b64encode(preview.data).decode("ascii")}
         self._preview_bytes += len(preview.data)
-        state.seen, state.preview_changed, state.changed = now, version, version
+        state.preview_changed, state.changed = version, version
         state.previews += 1
         if self._preview_bytes > self.max_preview_total:  # forget the oldest previews first
             for other in sorted(self._robots.values(), key=lambda s: s.preview_changed):
@@ -399,9 +402,11 @@ class FleetStore:
             robots, live = {}, {}
             for name in sorted(self._robots):
                 state = self._robots[name]
-                age = None if state.seen is None else max(now - state.seen, 0.0)
+                age = None if state.answered is None else max(now - state.answered, 0.0)
                 stale = age is None or age > self.stale_after
-                collision = state.collision(self.hold)
+                # a robot no worker answers is not watched: whatever it warned of last is
+                # unknown now (its worker died, its camera ended), not a collision held
+                collision = not stale and state.collision(self.hold)
                 live[name] = [None if age is None else round(age, 3), stale, collision]
                 if full or state.changed > since:
                     robots[name] = self._tile_locked(state, since, full, collision, stale)

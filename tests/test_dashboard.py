@@ -112,20 +112,23 @@ def test_collision_is_held_for_a_while_after_the_latest_warning_camera_clock():
     assert store.delta(0)["robots"]["r1"]["last_warning"]["seq"] == 10
 
 
-def test_stale_when_no_response_or_preview_arrives_and_for_a_warning_only_robot():
+def test_stale_when_no_response_arrives_whatever_its_camera_sends_and_then_no_collision():
     clock = Clock()
-    store = FleetStore(stale_after=3.0, clock=clock)
-    offer_response(store, response("live"))
+    store = FleetStore(stale_after=3.0, hold=3.0, clock=clock)
+    offer_response(store, response("live", 0, collision=True))
     offer_response(store, response("old", collision=True), "warning")  # a cached warning
     live = store.delta(0)["live"]
-    assert live["live"] == [0.0, False, False]
-    assert live["old"] == [None, True, True]  # known only from its warning: stale
+    assert live["live"] == [0.0, False, True]
+    assert live["old"] == [None, True, False]  # known only from its warning: stale, not held
     clock.now += 2.0
     store.offer("asnn/live/preview", encode(preview()))
     clock.now += 2.0
-    assert store.delta(0)["live"]["live"] == [2.0, False, False]  # the preview counts
-    clock.now += 1.5
-    assert store.delta(0)["live"]["live"] == [3.5, True, False]
+    # its camera still sends previews, but no worker answers it (it died mid-warning): the
+    # previews do not make it live, and its last warning is not held on
+    assert store.delta(0)["live"]["live"] == [4.0, True, False]
+    assert store.delta(0)["counts"]["collision"] == 0
+    offer_response(store, response("live", 80, collision=False))  # a worker answers again
+    assert store.delta(0)["live"]["live"] == [0.0, False, False]
 
 
 def test_silent_robots_are_forgotten_and_the_number_of_robots_is_bounded():
@@ -162,7 +165,7 @@ def test_targets_carry_the_trackers_id_and_time_to_contact_when_the_model_gives_
                         expansion=1.25, offset=0.2, approaching=True)
     plain = TargetMsg(x=50.0, y=40.0, direction=0.0, energy=1.0, pixels=50)
     r = response(seq=3, collision=True).model_copy(update={"targets": [tracked, plain]})
-    offer_response(store, r, "warning")
+    offer_response(store, r)
     shown = store.delta(0)["robots"]["r1"]["targets"]
     assert shown[0]["id"] == 7 and shown[0]["ttc"] == 0.8
     assert "id" not in shown[1] and "ttc" not in shown[1]
