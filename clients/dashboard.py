@@ -70,7 +70,7 @@ log = logging.getLogger("asnn.dashboard")
 
 HISTORY_S = 10.0      # spike-rate sparkline span, camera clock
 HOLD_S = 3.0          # a warning keeps the robot in the collision state this long
-STALE_S = 3.0         # no response or preview for this long: stale
+STALE_S = 3.0         # no response for this long: stale (no worker watches it)
 FORGET_S = 600.0      # a robot silent this long is dropped from the dashboard
 MAX_ROBOTS = 1000     # bound on the state a misbehaving publisher can make us keep
 MAX_POINTS = 400      # per robot, whatever the stamps say (10 s at 40 responses a second)
@@ -391,7 +391,7 @@ class FleetStore:
 
         ``robots``: the tile of every robot changed since then, with the spike-rate points and
         (if new) the preview added since then; ``live``: for every robot, ``[age, stale,
-        collision]`` (age in seconds since its last response or preview, ``None`` if none);
+        collision]`` (age in seconds since its last response, ``None`` if none);
         ``warnings``: log entries added since then, oldest first; ``full``: whether this
         replaces everything the receiver had.
         """
