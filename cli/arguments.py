@@ -46,6 +46,15 @@ def robot_id(value: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def worker_id(value: str) -> str:
+    """A worker id: a key chunk as a robot id is (``[A-Za-z0-9_-]{1,64}``)."""
+    try:
+        return keys.check_robot(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"invalid worker id {value!r}: use 1 to 64 of A-Z a-z 0-9 _ -") from None
+
+
 def _number(value: str) -> float:
     try:
         return float(value)

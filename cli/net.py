@@ -9,7 +9,7 @@ import sys
 from asnn.params import preset_names
 from service.config import ConfigError
 
-from .arguments import count, non_negative, positive, robot_id, whole
+from .arguments import count, non_negative, positive, robot_id, whole, worker_id
 from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
     zenoh_options
 
@@ -238,7 +238,7 @@ def register(subparsers) -> None:
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
     p.add_argument("--preset", choices=preset_names(), default=None,
                    help="ASNN preset (default: the default preset)")
-    p.add_argument("--id", type=robot_id, default=None,
+    p.add_argument("--id", type=worker_id, default=None,
                    help="worker id reported in responses (default: <host>-<pid>)")
     p.add_argument("--idle-timeout", type=positive, default=60.0, metavar="SECONDS",
                    help="forget a robot after SECONDS without frames (default: %(default)s)")
@@ -274,7 +274,8 @@ def register(subparsers) -> None:
                               description="Query <prefix>/@worker/<id>/status: each worker's "
                               "counters (rejected frames per reason, dropped frames), robots "
                               "and the live workers. Exit status 1 when no worker answers.")
-    p.add_argument("--worker", type=robot_id, default=None, help="only this worker (default: all)")
+    p.add_argument("--worker", type=worker_id, default=None,
+                   help="only this worker (default: all)")
     p.add_argument("--json", action="store_true", help="one JSON object per worker")
     p.add_argument("--timeout", type=positive, default=2.0, metavar="SECONDS",
                    help="how long to wait for answers (default: %(default)s)")

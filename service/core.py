@@ -589,9 +589,7 @@ class WorkerCore:
                     del self._robots[robot]
                     released.append(robot)
             self._stats.released += len(released)
-        for robot in released:
-            log.info("robot %s: handed over to another worker", robot)
-        return released
+        return released  # the worker logs each, with its new owner
 
     def robots(self) -> list[str]:
         """Robots currently tracked."""
