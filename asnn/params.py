@@ -322,7 +322,10 @@ class ASNNParams(BaseModel):
         description="floating-point type of the optimised step (ASNN(optimised=True)); the "
         "straightforward form always computes in float64. 'reference' keeps float64 to match "
         "the published implementation; elsewhere float32 stays within 1e-5 of float64 on u(t) "
-        "(tests/test_equivalence.py)",
+        "(tests/test_equivalence.py), except where the orientations' summed energies R_sum "
+        "(eq. 24) tie, as for a disk looming at the frame's exact centre: rounding then picks "
+        "the orientation the top-k inhibition removes (u(t) up to 2 % apart, the same "
+        "warnings)",
     )
 
     @model_validator(mode="after")

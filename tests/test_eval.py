@@ -329,6 +329,8 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
         assert _png(out / f"{stem}.png")
         assert json.loads((out / f"{stem}.json").read_text())
     assert "report.md" in capsys.readouterr().out
+    assert "detectors `asnn`, `lgmd1`, `lgmd2`; the temporal filter" in \
+        (out / "report.md").read_text()  # the detectors run, not only the sweeps' preset
 
     results = json.loads((out / "results.json").read_text())
     table = {(r["scene"], r["polarity"], r["detector"]): r for r in results["table"]}

@@ -89,8 +89,10 @@ def _paper_report(results: Mapping) -> str:
     lines = [
         "# The paper's synthetic experiments",
         "",
-        f"Scenes {results['size'][0]}x{results['size'][1]}, {results['frames']} steps; ASNN preset "
-        f"`{results['preset']}`. Approach-recession: the disk grows over steps 10-55 and shrinks "
+        f"Scenes {results['size'][0]}x{results['size'][1]}, {results['frames']} steps; detectors "
+        f"{', '.join(f'`{d}`' for d in results['detectors'])}; the temporal filter, the maps and "
+        f"the sweeps (and a bare `asnn`) are ASNN's preset `{results['preset']}`. "
+        "Approach-recession: the disk grows over steps 10-55 and shrinks "
         "over 75-120; translation: the bar moves right over 10-55 and back over 75-120. Scored "
         "with no early tolerance (generated clips); `approach` counts warning frames in "
         "[onset, contact + 2], `other` the warning frames elsewhere after the warm-up.",
