@@ -335,9 +335,11 @@ class ASNNParams(BaseModel):
                 raise ValueError(f"{name} must be odd, got {getattr(self, name)}")
         if self.n_fast >= self.n_slow:
             raise ValueError("n_fast must be smaller than n_slow")
-        for name in ("approach_gate", "scene_relative", "object_ids", "ignore_rig"):
-            if getattr(self, name) and self.targets != "objects":
-                raise ValueError(f"{name} needs targets='objects'")
+        needing = [name for name in ("approach_gate", "scene_relative", "object_ids",
+                                     "ignore_rig") if getattr(self, name)]
+        if needing and self.targets != "objects":  # every stage that works on the objects
+            raise ValueError(f"{', '.join(needing)} need{'s' if len(needing) == 1 else ''} "
+                             f"targets='objects': set {'=False, '.join(needing)}=False too")
         return self
 
     @property
