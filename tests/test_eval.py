@@ -332,6 +332,11 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
     assert "detectors `asnn`, `lgmd1`, `lgmd2`; the temporal filter" in \
         (out / "report.md").read_text()  # the detectors run, not only the sweeps' preset
 
+    fig2 = json.loads((out / "fig2_temporal_filter.json").read_text())
+    # the paper's own simulation: K=5, C=60, tau=8, 100 steps of 0.05 s
+    assert (fig2["K"], fig2["C"], fig2["tau"], fig2["dt"]) == (5.0, 60.0, 8.0, 0.05)
+    assert len(fig2["t"]) == 100 and set(fig2["impulse"]) == {"1", "2", "3", "4", "5"}
+
     results = json.loads((out / "results.json").read_text())
     table = {(r["scene"], r["polarity"], r["detector"]): r for r in results["table"]}
     assert len(table) == 3 * 2 * 3
