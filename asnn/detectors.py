@@ -9,7 +9,7 @@ from typing import Protocol
 import numpy as np
 
 from .model import ASNN
-from .params import preset
+from .params import ASNNParams, preset
 from .response import Response
 
 __all__ = ["Detector", "MODELS", "available_cores", "make_detector", "responses"]
@@ -25,14 +25,16 @@ class Detector(Protocol):
     def reset(self) -> None: ...
 
 
-def make_detector(model: str = "asnn", preset_name: str | None = None, **options) -> Detector:
+def make_detector(model: str = "asnn", preset_name: str | ASNNParams | None = None,
+                  **options) -> Detector:
     """Build a detector by name.
 
     Parameters
     ----------
     model : {'asnn', 'lgmd1', 'lgmd2'}
-    preset_name : str, optional
-        ASNN preset (ignored by the LGMD models); None means ``default``.
+    preset_name : str or ASNNParams, optional
+        ASNN preset, by name or as parameters (ignored by the LGMD models); None means
+        ``default``.
     **options
         Passed to the detector's constructor (for ASNN, e.g. ``record_maps``).
 
@@ -42,7 +44,9 @@ def make_detector(model: str = "asnn", preset_name: str | None = None, **options
         For an unknown model or preset.
     """
     if model == "asnn":
-        return ASNN(preset(preset_name or "default"), **options)
+        params = (preset_name if isinstance(preset_name, ASNNParams)
+                  else preset(preset_name or "default"))
+        return ASNN(params, **options)
     if model in ("lgmd1", "lgmd2"):
         from . import baselines
 

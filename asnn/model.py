@@ -588,8 +588,8 @@ def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams
     return out, spikes, sum(window) / (params.n_t * params.window_dt)
 
 
-def compile_kernels(presets: Iterable[str] = ("default", "reference"), threads: int = 1
-                    ) -> None:
+def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference"),
+                    threads: int = 1) -> None:
     """Compile the optimised step's numba kernels, or load them from numba's on-disk cache
     (seconds on a fresh install, milliseconds afterwards).
 
@@ -600,8 +600,9 @@ def compile_kernels(presets: Iterable[str] = ("default", "reference"), threads: 
 
     Parameters
     ----------
-    presets : iterable of str
-        The presets whose kernels to load (default: both precisions, float32 and float64).
+    presets : iterable of str or ASNNParams
+        The presets (by name or as parameters) whose kernels to load (default: both
+        precisions, float32 and float64).
     threads : int
         As the models that will run (``ASNN(..., threads=N)``): with more than 1, the kernel of
         the model's worker threads too.

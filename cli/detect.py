@@ -15,7 +15,8 @@ import cv2
 from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.model import compile_kernels
-from asnn.params import SLOW_FPS, preset, preset_names
+from asnn.evaluation.runs import parse_detector
+from asnn.params import SLOW_FPS, preset_names
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import SourceError, open_source
@@ -35,8 +36,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "needed when it has several")
     p.add_argument("--model", choices=MODELS, default="asnn",
                    help="detector: ASNN or an LGMD baseline (default: %(default)s)")
-    p.add_argument("--preset", choices=preset_names(), default="default",
-                   help="ASNN parameter preset (default: %(default)s)")
+    p.add_argument("--preset", type=_preset, default="default", metavar="NAME[/FIELD=VALUE...]",
+                   help=f"ASNN parameter preset ({', '.join(preset_names())}; default: "
+                        "%(default)s), with any fields of asnn.params.ASNNParams changed after "
+                        "slashes, as asnn eval's specs take them: robust/top_k=0")
     p.add_argument("--jsonl", metavar="PATH|-", help="write one JSON object per frame ('-': stdout)")
     p.add_argument("--annotate", metavar="OUT.mp4", help="write the input with overlays")
     p.add_argument("--plot", metavar="OUT.png", help="plot u(t) and the spike rate")
@@ -106,6 +109,16 @@ def _settings(busy: bool):
         cv2.setNumThreads(threads)
 
 
+def _preset(text: str) -> str:
+    """A preset name with optional ``/field=value`` changes, checked."""
+    try:
+        parse_detector(f"asnn:{text}")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).replace(repr(f"asnn:{text}"), repr(text))
+                                         ) from None
+    return text
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode ahead and write behind on threads of their own while the model steps on this one
     (:mod:`asnn.io.pipeline`), or, when the model has threads of its own for every core,
@@ -113,8 +126,9 @@ def run(args: argparse.Namespace) -> int:
     one loop, in frame order."""
     options = {}
     model_threads = 1
+    params = parse_detector(f"asnn:{args.preset}").params
     if args.tracks:
-        if args.model != "asnn" or preset(args.preset).targets != "objects":
+        if args.model != "asnn" or params.targets != "objects":
             return _fail("--tracks needs the ASNN model with a preset that tracks objects "
                          "(targets='objects', e.g. default)")
         if args.tracks == "-" and args.jsonl == "-":
@@ -139,11 +153,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second; ASNN "
               f"loses hits below {SLOW_FPS:g} (README, 'At half the frame rate')",
               file=sys.stderr)
-    detector = make_detector(args.model, args.preset, **options)
+    detector = make_detector(args.model, params, **options)
     if args.model == "asnn":
         # numba loads a kernel from its cache when it is first called: all of them now, before
         # the first frame, rather than on the frames where a stage first has work
-        compile_kernels((args.preset,), threads=model_threads)
+        compile_kernels((params,), threads=model_threads)
     records = []
     with ExitStack() as stack:
         stack.enter_context(_settings(busy))

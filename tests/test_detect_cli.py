@@ -82,6 +82,28 @@ def test_a_video_stating_a_rate_no_camera_runs_at_is_timed_at_20_fps_with_a_note
     assert [r["t"] for r in records[:3]] == [0.0, 0.05, 0.1]
 
 
+def test_a_preset_with_a_field_changed_runs_as_the_python_model_does(looming_video, capsys):
+    from asnn import ASNN
+    from asnn.io.sources import open_source
+    from asnn.params import preset
+
+    path, scene = looming_video
+    assert main(["detect", str(path), "--preset", "robust/top_k=0/u_scale=1000",
+                 "--jsonl", "-"]) == 0
+    out = [json.loads(line)["u"] for line in capsys.readouterr().out.splitlines()]
+    model = ASNN(preset("robust", top_k=0, u_scale=1000))
+    assert out == [model.step(f, t).u for t, f in open_source(str(path)).timed_frames()]
+    assert out != [r["u"] for r in map(json.loads, _detect_lines(path, capsys))]
+    with pytest.raises(SystemExit):
+        main(["detect", str(path), "--preset", "robust/nope=1"])
+    assert "argument --preset: 'robust/nope=1': nope: Extra inputs" in capsys.readouterr().err
+
+
+def _detect_lines(path, capsys) -> list[str]:
+    assert main(["detect", str(path), "--jsonl", "-"]) == 0
+    return capsys.readouterr().out.splitlines()
+
+
 def test_lgmd_models_are_selectable_and_report_no_targets(looming_video, capsys):
     path, scene = looming_video
     assert main(["detect", str(path), "--model", "lgmd2", "--jsonl", "-"]) == 0

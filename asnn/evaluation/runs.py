@@ -21,7 +21,7 @@ from pydantic import ValidationError
 
 from . import scoring
 from ..detectors import MODELS, Detector, make_detector
-from ..params import preset
+from ..params import ASNNParams, preset
 
 __all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
            "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
@@ -84,13 +84,14 @@ class DetectorSpec:
         """The name as a directory name (``:``, ``/`` and ``=`` become ``-``)."""
         return self.name.replace(":", "-").replace("/", "-").replace("=", "-")
 
+    @property
+    def params(self) -> ASNNParams:
+        """The ASNN parameters: the preset with the overrides."""
+        return preset(self.preset or "default", **dict(self.overrides))
+
     def make(self) -> Detector:
         """A fresh detector."""
-        if self.overrides:
-            from ..model import ASNN
-
-            return ASNN(preset(self.preset or "default", **dict(self.overrides)))
-        return make_detector(self.model, self.preset)
+        return make_detector(self.model, self.params if self.model == "asnn" else None)
 
 
 def _spell(value) -> str:
