@@ -84,7 +84,11 @@ def run(args: argparse.Namespace) -> int:
         added.append(video.name)
         todo.append(f"{video.name}: {label_problem(entries[-1])}")
     if added:
-        path.write_text(json.dumps(entries, indent=2) + "\n", encoding="utf-8")
+        try:
+            path.write_text(json.dumps(entries, indent=2) + "\n", encoding="utf-8")
+        except OSError as exc:
+            print(f"asnn label: cannot write {path}: {exc.strerror or exc}", file=sys.stderr)
+            return 2
         print(f"{path}: {len(added)} {'entry' if len(added) == 1 else 'entries'} added "
               f"({', '.join(added)}): fill in collision, and for a collision onset_frame and "
               "contact_frame (and center, the object's [x, y] at contact, for the scores of "
