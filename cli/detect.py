@@ -119,11 +119,36 @@ def _preset(text: str) -> str:
     return text
 
 
+# what matplotlib writes (--plot): it takes the format from the file's extension
+PLOT_FORMATS = (".eps", ".jpeg", ".jpg", ".pdf", ".png", ".ps", ".svg", ".tif", ".tiff",
+                ".webp")
+
+
+def _output_problem(path: str | None, flag: str) -> str | None:
+    """Why an output path cannot be written, found before the run, or None."""
+    if not path or path == "-":
+        return None
+    target = Path(path)
+    if target.is_dir():
+        return f"{flag} {path}: is a folder"
+    if not target.parent.is_dir():
+        return f"{flag} {path}: no folder {target.parent}"
+    if flag == "--plot" and target.suffix.lower() not in PLOT_FORMATS:
+        return f"--plot {path}: name the format by its extension ({', '.join(PLOT_FORMATS)})"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode ahead and write behind on threads of their own while the model steps on this one
     (:mod:`asnn.io.pipeline`), or, when the model has threads of its own for every core,
     decode and write between its steps (:meth:`asnn.model.ASNN.stream`): the output is that of
     one loop, in frame order."""
+    for flag, path in (("--jsonl", args.jsonl), ("--tracks", args.tracks),
+                       ("--annotate", args.annotate), ("--plot", args.plot),
+                       ("--mcap", args.mcap)):
+        problem = _output_problem(path, flag)
+        if problem is not None:  # before decoding a frame, not after the whole run
+            return _fail(problem)
     options = {}
     model_threads = 1
     params = parse_detector(f"asnn:{args.preset}").params
@@ -161,16 +186,12 @@ def run(args: argparse.Namespace) -> int:
     records = []
     with ExitStack() as stack:
         stack.enter_context(_settings(busy))
-        jsonl = None
-        if args.jsonl == "-":
-            jsonl = sys.stdout
-        elif args.jsonl:
-            jsonl = stack.enter_context(open(args.jsonl, "w", encoding="utf-8"))
-        tracks = None
-        if args.tracks == "-":
-            tracks = sys.stdout
-        elif args.tracks:
-            tracks = stack.enter_context(open(args.tracks, "w", encoding="utf-8"))
+        try:
+            jsonl, tracks = (sys.stdout if path == "-" else
+                             stack.enter_context(open(path, "w", encoding="utf-8")) if path else None
+                             for path in (args.jsonl, args.tracks))
+        except OSError as exc:
+            return _fail(f"cannot write {exc.filename}: {exc.strerror or exc}")
         mcap = None
         if args.mcap:
             try:
@@ -189,12 +210,17 @@ def run(args: argparse.Namespace) -> int:
             index, t, frame, response = item
             record = _record(index, t, response)
             records.append(record)
-            if jsonl is not None:
-                jsonl.write(json.dumps(record) + "\n")
-            if tracks is not None:
-                tracks.write(json.dumps(_tracks_record(index, t, response)) + "\n")
-            if mcap is not None:
-                mcap.write(frame, record, (source.start_ns or 0) + round(t * 1e9))
+            try:
+                if jsonl is not None:
+                    jsonl.write(json.dumps(record) + "\n")
+                if tracks is not None:
+                    tracks.write(json.dumps(_tracks_record(index, t, response)) + "\n")
+                if mcap is not None:
+                    mcap.write(frame, record, (source.start_ns or 0) + round(t * 1e9))
+            except BrokenPipeError:  # stdout's reader went away: cli.main ends quietly
+                raise
+            except (OSError, RuntimeError) as exc:  # a full disk; the MCAP writer's errors
+                raise _OutputError(f"cannot write the output at frame {index}: {exc}") from None
             if args.annotate:
                 if not video:
                     writer = cv2.VideoWriter(args.annotate, cv2.VideoWriter_fourcc(*"mp4v"),
@@ -243,9 +269,13 @@ def run(args: argparse.Namespace) -> int:
     if not records:
         return _fail(f"{args.video}: no frames decoded")
     if args.plot:
-        plot_responses([r["t"] for r in records], [r["u"] for r in records],
-                       [r["spike_rate"] for r in records], [r["collision"] for r in records],
-                       args.plot, title=f"{Path(args.video).name} ({args.model}, {args.preset})")
+        try:
+            plot_responses([r["t"] for r in records], [r["u"] for r in records],
+                           [r["spike_rate"] for r in records], [r["collision"] for r in records],
+                           args.plot,
+                           title=f"{Path(args.video).name} ({args.model}, {args.preset})")
+        except (OSError, ValueError) as exc:
+            return _fail(f"cannot write {args.plot}: {exc}")
     warned = sum(r["collision"] for r in records)
     print(f"asnn detect: {len(records)} frames, {warned} with a collision warning",
           file=sys.stderr)

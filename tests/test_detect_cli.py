@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -192,6 +193,24 @@ def test_a_reader_that_stops_early_ends_detect_quietly(tmp_path, what):
     assert proc.stderr.read() == b""  # no traceback, no second complaint at exit
 
 
+@pytest.mark.parametrize("flag, path, says", [
+    ("--jsonl", "{tmp}/missing/a.jsonl", "no folder"),
+    ("--tracks", "{tmp}", "is a folder"),
+    ("--plot", "{tmp}/p.notanimage", "name the format by its extension"),
+    ("--plot", "{tmp}", "is a folder"),
+    ("--annotate", "{tmp}/missing/a.mp4", "no folder"),
+    ("--jsonl", "/dev/full", "No space left on device"),  # found while writing
+])
+def test_an_output_that_cannot_be_written_is_a_one_line_error(looming_video, tmp_path, capsys,
+                                                              flag, path, says):
+    if path == "/dev/full" and not Path(path).exists():
+        pytest.skip("no /dev/full here")
+    video, _ = looming_video
+    assert main(["detect", str(video), flag, path.format(tmp=tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
 @pytest.mark.parametrize("threads", [None, "1", "2", "3"])
 def test_output_equals_one_loop_over_the_frames(looming_video, tmp_path, threads):
     """The model's threads, and decoding ahead and writing behind on threads of their own (with
@@ -273,7 +292,7 @@ def test_write_behind_writes_in_order_and_reports_a_failed_write():
 def test_an_annotated_video_that_cannot_be_written_is_one_error_line(looming_video, tmp_path,
                                                                      capsys, threads):
     path, _ = looming_video
-    target = tmp_path / "missing-dir" / "ann.mp4"
+    target = tmp_path / "ann.txt"  # a folder that is there, a container OpenCV cannot write
     assert main(["detect", str(path), "--annotate", str(target), "--threads", threads]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"asnn detect: cannot write {target}"]
