@@ -187,9 +187,10 @@ def run(args: argparse.Namespace) -> int:
     with ExitStack() as stack:
         stack.enter_context(_settings(busy))
         try:
-            jsonl, tracks = (sys.stdout if path == "-" else
-                             stack.enter_context(open(path, "w", encoding="utf-8")) if path else None
-                             for path in (args.jsonl, args.tracks))
+            jsonl, tracks = (
+                sys.stdout if path == "-"
+                else stack.enter_context(open(path, "w", encoding="utf-8")) if path else None
+                for path in (args.jsonl, args.tracks))
         except OSError as exc:
             return _fail(f"cannot write {exc.filename}: {exc.strerror or exc}")
         mcap = None
