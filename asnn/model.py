@@ -123,7 +123,7 @@ class ASNN:
         self.record_tracks = record_tracks
         self.optimised = bool(optimised) and _fast.supported(p)
         self.dtype = np.dtype(p.precision if self.optimised else np.float64)
-        self._min_side = max(p.dog_size, p.kernel_size, p.attention_size)
+        self._min_side = p.min_side
         self._p_weights = retina.photoreceptor_weights(p.n_p, p.p_u)
         self._dog = retina.dog_kernel(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
                                       p.dog_normalisation)

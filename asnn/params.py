@@ -348,6 +348,11 @@ class ASNNParams(BaseModel):
         return self.decay if self.transmission is None else self.transmission
 
     @property
+    def min_side(self) -> int:
+        """The smallest frame side, in pixels, the model takes: its largest kernel's."""
+        return max(self.dog_size, self.kernel_size, self.attention_size)
+
+    @property
     def overlap(self) -> tuple[float, float, float] | None:
         """The partial-overlap regime of the approach test, ``(overlap_tau_max,
         overlap_offset_max, overlap_fit_min)``, or None without ``partial_overlap`` (or without

@@ -14,13 +14,14 @@ import cv2
 
 from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
-from asnn.model import compile_kernels
-from asnn.evaluation.runs import parse_detector
-from asnn.params import SLOW_FPS, preset_names
 from asnn.evaluation.progress import ProgressPrinter
+from asnn.evaluation.runs import parse_detector
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import SourceError, open_source
+from asnn.io.video import cut_short
 from asnn.io.visualize import annotate_frame, plot_responses
+from asnn.model import compile_kernels
+from asnn.params import SLOW_FPS, preset_names
 from cli.arguments import count
 
 
@@ -277,6 +278,9 @@ def run(args: argparse.Namespace) -> int:
                            title=f"{Path(args.video).name} ({args.model}, {args.preset})")
         except (OSError, ValueError) as exc:
             return _fail(f"cannot write {args.plot}: {exc}")
+    short = cut_short(source.frame_count, len(records))
+    if short:
+        print(f"asnn detect: note: {args.video}: {short}", file=sys.stderr)
     warned = sum(r["collision"] for r in records)
     print(f"asnn detect: {len(records)} frames, {warned} with a collision warning",
           file=sys.stderr)

@@ -18,6 +18,8 @@ from pathlib import Path
 from asnn.evaluation.labels import (check_labels, label_problem, mismatches, read_entries,
                                     unlabelled)
 from asnn.io.sources import SourceError, open_source
+from asnn.io.video import cut_short
+from asnn.params import preset
 
 # what OpenCV's FFmpeg backend commonly reads; bags (.mcap) need a topic and are labelled by hand
 VIDEO_SUFFIXES = (".avi", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg", ".mpg", ".webm", ".wmv")
@@ -60,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
             todo.append(f"{entry['file']}: no such clip in {folder}")
         elif clip.suffix.lower() in VIDEO_SUFFIXES:
             try:
-                frames, fps, _ = _decode(clip)
+                frames, fps, _ = _decode(clip, todo)
             except SourceError as exc:
                 todo.append(str(exc))
                 continue
@@ -76,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
                         if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES
                         and p.name not in labelled):
         try:
-            frames, fps, (height, width) = _decode(video)
+            frames, fps, (height, width) = _decode(video, todo)
         except SourceError as exc:
             todo.append(str(exc))
             continue
@@ -100,10 +102,19 @@ def run(args: argparse.Namespace) -> int:
     return 1 if todo else 0
 
 
-def _decode(video: Path) -> tuple[int, float, tuple[int, int]]:
-    """Frames, frame rate and (height, width) of a video, decoded as ``asnn eval`` does."""
+def _decode(video: Path, todo: list[str]) -> tuple[int, float, tuple[int, int]]:
+    """Frames, frame rate and (height, width) of a video, decoded as ``asnn eval`` does; what
+    makes it unfit to score goes to ``todo`` (frames smaller than the model takes, a clip that
+    decodes to fewer frames than it states)."""
     clip = open_source(str(video))
     frames, shape = 0, (0, 0)
     for image in clip.frames():
         frames, shape = frames + 1, image.shape[:2]
+    smallest = preset("default").min_side
+    if min(shape) < smallest:
+        todo.append(f"{video.name}: its {shape[1]}x{shape[0]} frames are smaller than the "
+                    f"model's {smallest}x{smallest} kernels: asnn eval cannot score it")
+    short = cut_short(clip.frame_count, frames)
+    if short:
+        todo.append(f"{video.name}: {short}")
     return frames, clip.fps, shape

@@ -211,6 +211,18 @@ def test_an_output_that_cannot_be_written_is_a_one_line_error(looming_video, tmp
     assert says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+def test_a_clip_cut_partway_is_run_as_far_as_it_decodes_with_a_note(tmp_path, capsys):
+    whole = tmp_path / "whole.avi"
+    write_video(make_scene("looming", size=(64, 64), frames=40).frames, whole)
+    cut = tmp_path / "cut.avi"
+    cut.write_bytes(whole.read_bytes()[:whole.stat().st_size // 2])
+    assert main(["detect", str(whole)]) == 0
+    assert "note" not in capsys.readouterr().err
+    assert main(["detect", str(cut)]) == 0  # what decodes is the clip's result
+    err = capsys.readouterr().err
+    assert "frames decoded where the file states 40: it may be cut or damaged partway" in err
+
+
 @pytest.mark.parametrize("threads", [None, "1", "2", "3"])
 def test_output_equals_one_loop_over_the_frames(looming_video, tmp_path, threads):
     """The model's threads, and decoding ahead and writing behind on threads of their own (with

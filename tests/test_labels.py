@@ -207,3 +207,17 @@ def test_scene_builds_a_labelled_folder_one_clip_at_a_time(tmp_path, monkeypatch
     assert main(["label", str(folder)]) == 0  # every entry ready, every clip where it says
     assert main(["scene", "--case", "nearmiss-disk-dark-right", "x.avi", "--size", "64x64"]) == 2
     assert "--size set a paper scene" in capsys.readouterr().err
+
+
+def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
+    write_video(make_scene("looming", size=(64, 64), frames=3).frames[:, :30, :30],
+                tmp_path / "tiny.avi")
+    whole = tmp_path / "whole.avi"
+    write_video(make_scene("looming", size=(64, 64), frames=40).frames, whole)
+    data = whole.read_bytes()
+    whole.unlink()
+    (tmp_path / "cut.avi").write_bytes(data[:len(data) // 2])
+    assert main(["label", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "tiny.avi: its 30x30 frames are smaller than the model's 31x31 kernels" in out
+    assert "cut.avi:" in out and "where the file states 40: it may be cut" in out

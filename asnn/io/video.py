@@ -9,8 +9,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["DEFAULT_FPS", "MAX_FPS", "VideoError", "VideoClip", "open_video", "read_frames",
-           "stated_fps"]
+__all__ = ["DEFAULT_FPS", "MAX_FPS", "VideoError", "VideoClip", "cut_short", "open_video",
+           "read_frames", "stated_fps"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 MAX_FPS = 240.0  # above this a stated rate is a container's time base, not a camera's
@@ -78,6 +78,16 @@ def stated_fps(value: float) -> float | None:
     rate, every per-second figure of the model (expansion, time to contact) would be 30 to 50
     times off."""
     return float(value) if value and np.isfinite(value) and 0 < value <= MAX_FPS else None
+
+
+def cut_short(stated: int, decoded: int) -> str | None:
+    """What to say of a video that decodes to clearly fewer frames than its container states
+    (a file cut or damaged partway: decoding stops where it breaks, with no error), or None.
+    Some containers overstate by a frame or two, so a shortfall counts from 2 % or 3 frames."""
+    if stated <= 0 or stated - decoded <= max(2, 0.02 * stated):
+        return None
+    return (f"{decoded} frames decoded where the file states {stated}: it may be cut or "
+            "damaged partway")
 
 
 def read_frames(capture: cv2.VideoCapture) -> Iterator[np.ndarray]:
