@@ -167,10 +167,12 @@ def test_annotate_and_plot_write_files(looming_video, tmp_path):
     assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-@pytest.mark.parametrize("content", [None, b"not a video at all\n" * 20])
+@pytest.mark.parametrize("content", [None, b"not a video at all\n" * 20, "folder"])
 def test_missing_or_undecodable_file_exits_2_with_one_line(tmp_path, content):
     path = tmp_path / "clip.mp4"
-    if content is not None:
+    if content == "folder":
+        path.mkdir()
+    elif content is not None:
         path.write_bytes(content)
     proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", str(path), "--jsonl", "-"],
                           capture_output=True, text=True, timeout=120)

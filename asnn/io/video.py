@@ -44,6 +44,8 @@ class VideoClip:
     def __init__(self, path: str | Path, decoder_threads: int | None = None):
         self.path = Path(path)
         self.decoder_threads = decoder_threads
+        if self.path.is_dir():
+            raise VideoError(f"{self.path}: is a folder, not a video file")
         if not self.path.is_file():
             raise VideoError(f"{self.path}: no such file")
         cap = self._capture()
