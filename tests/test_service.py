@@ -269,6 +269,13 @@ def test_camera_sources_open_files_scenes_and_fail_clearly(tmp_path):
     assert len(frames) == len(scene.frames) and frames[0].shape[:2] == (48, 64)
     assert len(list(open_source("synthetic:receding").frames())) == len(make_scene("receding")
                                                                           .frames)
+    os.symlink(path, tmp_path / "0")  # a file named as a device index is the file
+    cwd = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        assert not open_source("0").live
+    finally:
+        os.chdir(cwd)
     for bad in (str(tmp_path / "missing.mp4"), "synthetic:nothing", "rtsp://127.0.0.1:1/none"):
         with pytest.raises(SourceError):
             open_source(bad)

@@ -8,7 +8,7 @@ BGR uint8 frames with their time in seconds since its first frame.
 Source specifications:
 
 ``FILE``               any video OpenCV reads; time = frame index / the file's frame rate
-``DEVICE_INDEX``       an integer: a capture device (live)
+``DEVICE_INDEX``       an integer: a capture device (live), unless a file of that name is here
 ``URL``                ``scheme://...``: a stream OpenCV reads, e.g. rtsp (live)
 ``synthetic:SCENE``    one of ``asnn.stimuli.SCENE_NAMES`` (128x128 at 20 fps), or a case of the
                        labelled suite (``asnn scene --list``)
@@ -147,7 +147,7 @@ def open_source(spec: str, *, topic: str | None = None,
         raise SourceError(f"{spec}: a topic applies to ROS 2 bags (.mcap) only", "no-topic")
     if spec.startswith(SYNTHETIC):
         return _open_scene(spec)
-    if spec.isdigit() or "://" in spec:
+    if (spec.isdigit() and not Path(spec).exists()) or "://" in spec:  # a file named 0 is one
         return _open_capture(spec)
     return _open_file(spec, decoder_threads)
 
