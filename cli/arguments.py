@@ -38,21 +38,23 @@ def key_prefix(value: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def robot_id(value: str) -> str:
-    """A robot id: one key chunk of ``[A-Za-z0-9_-]{1,64}``."""
-    try:
-        return keys.check_robot(value)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def worker_id(value: str) -> str:
-    """A worker id: a key chunk as a robot id is (``[A-Za-z0-9_-]{1,64}``)."""
+def _key_chunk(value: str, what: str) -> str:
+    """An id that is one key chunk, ``[A-Za-z0-9_-]{1,64}`` (a robot's or a worker's)."""
     try:
         return keys.check_robot(value)
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"invalid worker id {value!r}: use 1 to 64 of A-Z a-z 0-9 _ -") from None
+            f"invalid {what} id {value!r}: use 1 to 64 of A-Z a-z 0-9 _ -") from None
+
+
+def robot_id(value: str) -> str:
+    """A robot id: one key chunk of ``[A-Za-z0-9_-]{1,64}``."""
+    return _key_chunk(value, "robot")
+
+
+def worker_id(value: str) -> str:
+    """A worker id: a key chunk as a robot id is."""
+    return _key_chunk(value, "worker")
 
 
 def _number(value: str) -> float:

@@ -43,7 +43,8 @@ import msgpack
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from asnn.io.images import MAX_SIDE, ImageError, check_encoded, decode_encoded, encoded_size
+from asnn.io.images import (JPEG_QUALITY, MAX_SIDE, ImageError, check_encoded, decode_encoded,
+                             encoded_size)
 
 __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
            "Response", "TargetMsg", "VERSION", "decode_frame", "decode_response", "encode",
@@ -54,7 +55,6 @@ FrameFormat = Literal["gray8", "bgr8", "jpeg", "png"]
 FORMATS = get_args(FrameFormat)
 # the largest valid frame (4096 x 4096 bgr8) plus room for the other fields
 MAX_PAYLOAD = MAX_SIDE * MAX_SIDE * 3 + 64 * 1024
-JPEG_QUALITY = 90
 # msgpack bounds: a frame has 7 fields, a response 16 and up to one map per looming target
 MAX_MAP_LEN = 256
 MAX_ARRAY_LEN = 4096

@@ -23,6 +23,7 @@ from collections.abc import Iterable, Iterator, Mapping
 import cv2
 import numpy as np
 
+from ..io.images import JPEG_QUALITY as WIRE_JPEG_QUALITY
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
 
 __all__ = ["PERTURBATIONS", "check_perturbation", "perturb_frame", "perturbed", "perturb_label"]
@@ -50,7 +51,7 @@ _RATE_STEP = {"half-rate": 2}
 _PER_FRAME = ("track", "target_size", "ttc")  # label fields with one entry per frame
 _SCALE = {"half-size": 0.5, "double-size": 2.0}  # the perturbations that resize the frames
 NOISE_SIGMA = 4.0
-JPEG_QUALITY = {"jpeg": 30, "jpeg90": 90}  # jpeg90: service.messages.JPEG_QUALITY, the wire's
+JPEG_QUALITY = {"jpeg": 30, "jpeg90": WIRE_JPEG_QUALITY}  # jpeg90: as the camera sends frames
 DIM_GAIN = 0.6
 WIPER_GRAY = 20.0  # the blade's rubber, dark against the view
 

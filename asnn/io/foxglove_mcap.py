@@ -20,6 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .images import JPEG_QUALITY
 from .visualize import target_arrow, target_label
 
 try:
@@ -37,7 +38,6 @@ __all__ = ["DEFAULT_TOPIC_PREFIX", "IMAGE_FORMATS", "RESPONSE_SCHEMA", "Foxglove
 
 DEFAULT_TOPIC_PREFIX = "/asnn"
 IMAGE_FORMATS = ("jpeg", "png")
-JPEG_QUALITY = 90
 TARGET_COLOR = Color(r=0.0, g=0.31, b=1.0, a=1.0)   # the blue of the annotated videos
 WARNING_COLOR = Color(r=1.0, g=0.0, b=0.0, a=1.0)
 LABEL_BACKGROUND = Color(r=1.0, g=1.0, b=1.0, a=0.7)

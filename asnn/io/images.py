@@ -19,11 +19,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["ENCODED_FORMATS", "MAX_SIDE", "ImageError", "check_encoded", "decode_encoded",
-           "encoded_size", "min_encoded_bytes", "to_uint8"]
+__all__ = ["ENCODED_FORMATS", "JPEG_QUALITY", "MAX_SIDE", "ImageError", "check_encoded",
+           "decode_encoded", "encoded_size", "min_encoded_bytes", "to_uint8"]
 
 MAX_SIDE = 4096  # largest accepted picture width or height, whatever its source
 ENCODED_FORMATS = ("jpeg", "png")
+JPEG_QUALITY = 90  # what the project encodes jpeg at: the camera's frames, the MCAP's images
 
 
 class ImageError(ValueError):
