@@ -6,13 +6,17 @@ perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NA
 [--size WxH | --scale S]`` generates the labelled suite of :mod:`asnn.stimuli.suite` and scores
 it; ``asnn eval --paper`` regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors
 are specs: ``asnn`` (the default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``,
-``lgmd2``. Exit status 2 for unusable input.
+``lgmd2``. Exit status 2 for unusable input (found before anything runs: labels, clips that
+cannot be opened, options), 1 when some runs failed after it started (their clips scored as
+missing, named in the report's errors), 130 when interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from pathlib import Path
 
 from asnn.evaluation import scoring
 from asnn.evaluation.heldout import TIE_BREAKS
@@ -137,9 +141,19 @@ def run(args: argparse.Namespace) -> int:
         return 2
     tolerance = (scoring.EARLY_TOLERANCE_S if args.early_tolerance is None
                  else args.early_tolerance)
-    if tolerance < 0 or args.warmup < 0:
-        print("asnn eval: --early-tolerance and --warmup must be >= 0", file=sys.stderr)
+    if not (math.isfinite(tolerance) and tolerance >= 0) or args.warmup < 0:
+        print("asnn eval: --early-tolerance must be a finite number of seconds >= 0, and "
+              "--warmup >= 0", file=sys.stderr)
         return 2
+    if args.clips_dir and not (args.synthetic or args.paper):
+        labels = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
+        if not Path(args.clips_dir).is_dir():
+            print(f"asnn eval: {args.clips_dir}: not a folder", file=sys.stderr)
+            return 2
+        if not labels.is_file():
+            print(f"asnn eval: {labels}: no labels file (asnn label {args.clips_dir} starts "
+                  "one)", file=sys.stderr)
+            return 2
     try:
         if args.paper:
             paper.paper_figures(args.out, preset_name=preset_name, detectors=args.detectors,
@@ -176,10 +190,11 @@ def run(args: argparse.Namespace) -> int:
                 preset_name=preset_name, early_tolerance_s=tolerance,
                 warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots,
                 perturbation=args.perturb, progress=progress)
-            if results["errors"] and len(results["errors"]) == sum(
-                    len(d["clips"]) for d in results["detectors"].values()):
+            if results["errors"]:
                 print(f"{args.out}/report.md")
-                return 2
+                print(f"asnn eval: {len(results['errors'])} of the runs failed, their clips "
+                      "scored as missing (the report's errors name them)", file=sys.stderr)
+                return 1
     except BrokenPipeError:  # stdout's reader went away: cli.main handles it
         raise
     except (OSError, ValueError) as exc:

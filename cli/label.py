@@ -1,7 +1,8 @@
 """``asnn label``: start or check the labels of a folder of clips for ``asnn eval``.
 
-``asnn label CLIPS_DIR [--labels FILE]`` decodes every video in the folder as ``asnn eval``
-will, adds an entry for each video without one (its ``frames``, ``fps`` and size filled in, the
+``asnn label CLIPS_DIR [--labels FILE]`` decodes every video in the folder (not its subfolders:
+their clips are entered by hand, as ``sub/clip.mp4``, and then checked like the others) as
+``asnn eval`` will, adds an entry for each video without one (its ``frames``, ``fps`` and size filled in, the
 rest to fill in by hand: :func:`asnn.evaluation.labels.unlabelled`), and lists what is left to
 do: entries to finish or mend, clips that decode to other frames or another frame rate than
 their labels say, labels whose clip is not there. Exit status 0 when every entry is ready for
@@ -17,19 +18,22 @@ from pathlib import Path
 
 from asnn.evaluation.labels import (check_labels, label_problem, mismatches, read_entries,
                                     unlabelled)
+from asnn.evaluation.scoring import WARMUP_FRAMES
 from asnn.io.sources import SourceError, open_source
 from asnn.io.video import cut_short
 from asnn.params import preset
 
-# what OpenCV's FFmpeg backend commonly reads; bags (.mcap) need a topic and are labelled by hand
-VIDEO_SUFFIXES = (".avi", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg", ".mpg", ".webm", ".wmv")
+# what OpenCV's FFmpeg backend commonly reads (dashcams write .ts and .mts too); bags (.mcap)
+# need a topic and are labelled by hand
+VIDEO_SUFFIXES = (".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg",
+                  ".mpg", ".mts", ".ogv", ".ts", ".webm", ".wmv")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "label", help="start or check the labels.json of a folder of clips",
-        description="Decode every video in CLIPS_DIR as asnn eval will, add a labels.json entry "
-                    "for each video without one (frames, fps and size filled in; collision, "
+        description="Decode every video in CLIPS_DIR (not its subfolders) as asnn eval will, "
+                    "add a labels.json entry for each video without one (frames, fps and size filled in; collision, "
                     "onset_frame, contact_frame and center left to fill in by hand), and list "
                     "what is left to do. Exit status 0 when every entry is ready for asnn eval, "
                     "1 when something is listed.")
@@ -72,11 +76,17 @@ def run(args: argparse.Namespace) -> int:
             check_labels(entries, str(path))
         except ValueError as exc:
             todo.append(str(exc))
-    labelled = {e.get("file") for e in entries if isinstance(e, dict)}
+    # an entry names its clip relative to the folder, perhaps as ./clip.mp4 or sub/../clip.mp4
+    labelled = {(folder / e["file"]).resolve() for e in entries
+                if isinstance(e, dict) and isinstance(e.get("file"), str)}
+    videos = sorted(p for p in folder.iterdir()
+                    if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES)
+    if not entries and not videos:
+        print(f"asnn label: {folder} holds no video ({', '.join(VIDEO_SUFFIXES)}; subfolders "
+              "are not searched: enter their clips by hand, as sub/clip.mp4)")
+        return 1
     added = []
-    for video in sorted(p for p in folder.iterdir()
-                        if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES
-                        and p.name not in labelled):
+    for video in (p for p in videos if p.resolve() not in labelled):
         try:
             frames, fps, (height, width) = _decode(video, todo)
         except SourceError as exc:
@@ -111,6 +121,9 @@ def _decode(video: Path, todo: list[str]) -> tuple[int, float, tuple[int, int]]:
     for image in clip.frames():
         frames, shape = frames + 1, image.shape[:2]
     smallest = preset("default").min_side
+    if frames <= WARMUP_FRAMES:
+        todo.append(f"{video.name}: {frames} frames: asnn eval ignores the first "
+                    f"{WARMUP_FRAMES}, so nothing of it would be scored")
     if min(shape) < smallest:
         todo.append(f"{video.name}: its {shape[1]}x{shape[0]} frames are smaller than the "
                     f"model's {smallest}x{smallest} kernels: asnn eval cannot score it")

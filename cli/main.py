@@ -69,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     args = _parse(build_parser(), sys.argv[1:] if argv is None else argv)
     try:
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt:  # a progress bar may hold the line: start a new one
+        print("\nasnn: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         # the reader of our standard output went away (`asnn detect --jsonl - | head`): stop

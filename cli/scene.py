@@ -45,7 +45,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         p.add_argument(flag, **options, help=f"paper scenes only: {what} (default: {default})")
     p.add_argument("--labels", metavar="FILE",
                    help="also enter the clip's label in FILE, a labels.json for asnn eval: added, "
-                        "or replacing the entry of the same file, named relative to FILE's folder")
+                        "or replacing the entry of the same file, named relative to FILE's folder "
+                        "(OUT must be in that folder or below it)")
     p.set_defaults(func=run, intermixed=True)
 
 
@@ -92,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
                 return 2
             given = {flag[2:]: getattr(args, flag[2:]) for flag, *_ in _PAPER_OPTIONS}
             scene = make_scene(name, **{k: v for k, v in given.items() if v is not None})
+        entries = _label_entries(Path(args.labels), Path(out)) if args.labels else None
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         if out.lower().endswith(".mcap"):
             from asnn.io.rosbag import write_bag
@@ -100,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             write_video(scene.frames, out, fps=scene.fps)
         if args.labels:
-            _enter_label(Path(args.labels), Path(out), scene)
+            _enter_label(Path(args.labels), Path(out), scene, entries)
     except BrokenPipeError:  # stdout's reader went away: cli.main handles it
         raise
     except (ValueError, OSError, ImportError) as exc:
@@ -110,13 +112,40 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _enter_label(labels: Path, out: Path, scene) -> None:
+def _label_name(labels: Path, out: Path) -> str:
+    """The clip's ``file`` in ``labels``: its path relative to the labels' folder."""
+    return Path(os.path.relpath(out.resolve(), labels.resolve().parent)).as_posix()
+
+
+def _label_entries(labels: Path, out: Path) -> list:
+    """The entries already in ``labels`` (none where it is missing), read before the clip is
+    written so that a labels file that cannot take it stops the command first.
+
+    Raises
+    ------
+    ValueError
+        If the clip is not in the labels' folder or below it (``asnn eval CLIPS_DIR`` and
+        ``asnn label`` read a labels file's names relative to CLIPS_DIR, the labels' folder
+        when it is ``CLIPS_DIR/labels.json``), or the file is not a labels file.
+    OSError
+        If it cannot be read.
+    """
+    if labels.is_dir():
+        raise ValueError(f"--labels {labels}: a folder; give the labels file "
+                         f"({labels / 'labels.json'})")
+    if _label_name(labels, out).startswith("../"):
+        raise ValueError(f"{out} is not in the folder of {labels} or below it: asnn eval and "
+                         "asnn label read the names in a labels file relative to the clips' "
+                         "folder, so keep the labels beside their clips")
+    return read_entries(labels) if labels.exists() else []
+
+
+def _enter_label(labels: Path, out: Path, scene, entries: list) -> None:
     """Enter the clip's label in ``labels`` (a labels.json, made where it is missing): its
     ``file`` named relative to the labels' folder, as ``asnn eval`` reads it, replacing an
-    entry of the same file and keeping the others, so that one call per clip builds a folder's
-    labels."""
-    file = Path(os.path.relpath(out.resolve(), labels.resolve().parent)).as_posix()
-    entries = read_entries(labels) if labels.exists() else []
+    entry of the same file among ``entries`` (:func:`_label_entries`) and keeping the others,
+    so that one call per clip builds a folder's labels."""
+    file = _label_name(labels, out)
     entries = [e for e in entries if not (isinstance(e, dict) and e.get("file") == file)]
     labels.parent.mkdir(parents=True, exist_ok=True)
     labels.write_text(json.dumps(entries + [scene.label(file)], indent=1) + "\n",

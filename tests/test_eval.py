@@ -114,20 +114,41 @@ def test_eval_end_to_end_writes_results_report_and_plots(clips, evaluated):
         assert _png(out / "plots" / name)
 
 
-def test_eval_subset_of_models_and_a_clip_without_video(clips, tmp_path):
+def test_eval_refuses_clips_it_cannot_open_before_anything_runs(clips, tmp_path, capsys):
     root, labels = clips
-    extra = tmp_path / "labels.json"
-    extra.write_text(json.dumps([labels[1], {**labels[0], "file": "gone.mp4"}]))
+    broken = tmp_path / "broken.mp4"
+    broken.write_bytes((root / "loom.mp4").read_bytes()[:200])  # cut inside its header
+    for name in ("gone.mp4", str(broken)):
+        extra = tmp_path / "labels.json"
+        extra.write_text(json.dumps([labels[1], {**labels[0], "file": name}]))
+        out = tmp_path / "out"
+        assert main(["eval", str(root), "--labels", str(extra), "--detectors", "lgmd1",
+                     "--out", str(out), "--no-plots"]) == 2
+        err = capsys.readouterr().err
+        assert "1 of the 2 labelled clips cannot be read" in err and Path(name).name in err
+        assert not out.exists()  # nothing ran, nothing was scored without it
+
+
+def test_eval_exits_1_when_a_run_fails_after_it_started(clips, tmp_path, monkeypatch, capsys):
+    from asnn.evaluation import clips as clip_runs
+
+    root, _ = clips
+    run_clip = clip_runs._run_clip
+
+    def failing(video, *args):  # a clip whose frames change size halfway, say
+        if video.endswith("bar.mp4"):
+            return 0, "frame size changed mid-clip", None
+        return run_clip(video, *args)
+
+    monkeypatch.setattr(clip_runs, "_run_clip", failing)
     out = tmp_path / "out"
-    status = main(["eval", str(root), "--labels", str(extra), "--detectors", "lgmd1",
-                   "--out", str(out), "--no-plots"])
-    assert status == 0
+    assert main(["eval", str(root), "--detectors", "lgmd1", "--out", str(out),
+                 "--no-plots"]) == 1
+    assert "1 of the runs failed" in capsys.readouterr().err
     results = json.loads((out / "results.json").read_text())
-    assert list(results["detectors"]) == ["lgmd1"]
-    assert len(results["errors"]) == 1 and "gone.mp4" in results["errors"][0]
-    outcomes = [c["outcome"] for c in results["detectors"]["lgmd1"]["clips"]]
-    assert outcomes == ["false", "missing"]
-    assert results["detectors"]["lgmd1"]["summary"]["missing"] == 1
+    assert results["errors"] == ["lgmd1 bar.mp4: frame size changed mid-clip"]
+    assert [c["outcome"] for c in results["detectors"]["lgmd1"]["clips"]] == ["hit", "missing"]
+    assert "frame size changed mid-clip" in (out / "report.md").read_text()
     assert not (out / "plots").exists()
 
 
@@ -275,7 +296,12 @@ def test_eval_detector_specs_name_presets_and_their_result_directories(clips, tm
 
 def test_eval_rejects_bad_input(tmp_path, capsys):
     assert main(["eval", str(tmp_path), "--out", str(tmp_path / "o")]) == 2  # no labels.json
-    assert "labels.json" in capsys.readouterr().err
+    assert f"asnn label {tmp_path} starts one" in capsys.readouterr().err
+    assert main(["eval", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) == 2
+    assert "not a folder" in capsys.readouterr().err
+    for tolerance in ("inf", "nan", "-1"):  # before the run, not a traceback after it
+        assert main(["eval", str(tmp_path), "--early-tolerance", tolerance]) == 2
+        assert "--early-tolerance must be a finite" in capsys.readouterr().err
     assert main(["eval", "--out", str(tmp_path / "o")]) == 2                  # nothing to do
     for bad in ("asnn,nope", "asnn:nope", "lgmd1:paper", ""):
         with pytest.raises(SystemExit):
@@ -358,3 +384,30 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
     assert set(np.unique(maps["M_a"])) <= {0, 1}
     g_prime = np.asarray(maps["G_prime"])
     assert np.all(g_prime[np.asarray(maps["M_a"]) * np.asarray(maps["M_d"]) == 0] == 0)
+
+
+def _mark(folder: str, index: int) -> int:
+    """A task of run_tasks' test: a moment's work, then a file that says it finished."""
+    import time
+
+    time.sleep(0.2)
+    Path(folder, f"{index}.done").touch()
+    return index
+
+
+def test_tasks_left_early_are_cancelled_and_their_workers_ended(tmp_path):
+    from asnn.evaluation.pool import run_tasks
+
+    tasks = [(str(tmp_path), k) for k in range(20)]
+    assert sorted(i for i, _ in run_tasks(_mark, tasks[:4], 2)) == [0, 1, 2, 3]
+    assert sorted(r for _, r in run_tasks(_mark, tasks[:3], 1)) == [0, 1, 2]
+    for marker in tmp_path.glob("*.done"):
+        marker.unlink()
+    results = run_tasks(_mark, tasks, 2)
+    next(results)
+    results.close()  # what Ctrl-C or an error in the caller does: leave the loop
+    finished = len(list(tmp_path.glob("*.done")))
+    assert finished < 20  # the queue was not run to its end...
+    import multiprocessing
+    assert not multiprocessing.active_children()  # ...and no worker is left running
+    assert len(list(tmp_path.glob("*.done"))) == finished  # nor finishes anything later

@@ -49,6 +49,10 @@ def test_good_labels_come_back_unchanged_in_either_form(tmp_path):
     ({"contact_frame": None}, "needs onset_frame and contact_frame"),
     ({"onset_frame": 41}, "onset_frame 41 is after contact_frame 40"),
     ({"onset_frame": 60, "contact_frame": 70}, "beyond the clip's 60 frames"),
+    ({"contact_frame": 60}, "contact_frame 60 is beyond the clip's 60 frames (0 to 59)"),
+    ({"centre": [10, 12]}, "unknown field 'centre': did you mean 'center'?"),
+    ({"colision": True}, "did you mean 'collision'?"),
+    ({"onset_frme": 3}, "did you mean 'onset_frame'?"),
     ({"onset_frame": -1}, "onset_frame"),
     ({"onset_frame": 20.5}, "onset_frame"),
     ({"fps": None}, "fps"),
@@ -98,6 +102,9 @@ def test_a_labels_file_that_is_not_a_list_of_labels_is_refused(tmp_path, text):
     path.write_text(text)
     with pytest.raises(ValueError, match="labels.json"):
         load_labels(path)
+    path.write_text(json.dumps([COLLISION]), encoding="utf-16")
+    with pytest.raises(ValueError, match="labels.json: not UTF-8 text"):
+        load_labels(path)
 
 
 @pytest.mark.parametrize("mode", [[], ["--held-out"]])
@@ -125,6 +132,14 @@ def test_a_clip_that_disagrees_with_its_label_is_named():
     assert mismatches(COLLISION, 60, 25.0) == [
         "c.mp4: the clip runs at 25 fps where its label says 30: the model's timing and the "
         "scoring's disagree"]
+    # without the label's frames, the clip's own: a contact after them, per-frame lists too short
+    unsized = {**COLLISION, "frames": None, "track": [[1.0, 2.0]] * 60}
+    assert mismatches(unsized, 60, 30.0) == []
+    assert mismatches(unsized, 40, 30.0) == [
+        "c.mp4: its contact_frame 40 is beyond the 40 frames decoded: the scoring's window "
+        "ends after the clip",
+        "c.mp4: its track has 60 entries for the 40 frames decoded (one per frame): its target "
+        "scores are left out"]
 
 
 def test_eval_reports_clips_that_disagree_with_their_labels(tmp_path):
@@ -209,6 +224,32 @@ def test_scene_builds_a_labelled_folder_one_clip_at_a_time(tmp_path, monkeypatch
     assert "--size set a paper scene" in capsys.readouterr().err
 
 
+def test_label_takes_every_video_suffix_and_names_an_empty_folder(tmp_path, capsys):
+    assert main(["label", str(tmp_path)]) == 1  # nothing to label is something to say
+    assert "holds no video" in capsys.readouterr().out
+    assert not (tmp_path / "labels.json").exists()
+    write_video(make_scene("looming", size=(64, 48), frames=12).frames, tmp_path / "a.avi")
+    (tmp_path / "a.avi").rename(tmp_path / "dash0001.MTS")  # a dashcam's name; FFmpeg sniffs
+    (tmp_path / "labels.json").write_text(json.dumps([{**QUIET, "file": "./other.mp4"}]))
+    write_video(make_scene("looming", size=(64, 48), frames=12).frames, tmp_path / "other.mp4")
+    assert main(["label", str(tmp_path)]) == 1
+    entries = json.loads((tmp_path / "labels.json").read_text())
+    assert [e["file"] for e in entries] == ["./other.mp4", "dash0001.MTS"]  # ./ is the same clip
+
+
+def test_scene_refuses_a_labels_file_it_cannot_enter_the_clip_in_before_writing_it(tmp_path,
+                                                                                 capsys):
+    (tmp_path / "labels").mkdir()
+    (tmp_path / "bad.json").write_text("{not json")
+    for labels, reason in [(tmp_path / "labels", "a folder; give the labels file"),
+                           (tmp_path / "labels" / "labels.json", "is not in the folder of"),
+                           (tmp_path / "bad.json", "not JSON")]:
+        assert main(["scene", "looming", str(tmp_path / "clip.avi"), "--labels",
+                     str(labels)]) == 2
+        assert reason in capsys.readouterr().err
+        assert not (tmp_path / "clip.avi").exists()  # no clip left without its label
+
+
 def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
     write_video(make_scene("looming", size=(64, 64), frames=3).frames[:, :30, :30],
                 tmp_path / "tiny.avi")
@@ -220,4 +261,5 @@ def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
     assert main(["label", str(tmp_path)]) == 1
     out = capsys.readouterr().out
     assert "tiny.avi: its 30x30 frames are smaller than the model's 31x31 kernels" in out
+    assert "tiny.avi: 3 frames: asnn eval ignores the first 5" in out
     assert "cut.avi:" in out and "where the file states 40: it may be cut" in out

@@ -9,19 +9,43 @@ clip of a ``labels.json``, keeps each run's per-frame results as
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
 from .labels import load_labels, mismatches
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
+from .pool import run_tasks
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
                    fmt, outcome_cell, paired_comparisons, paired_section, parse_detectors,
                    rate_interval, run_detector, target_quality_cells, write_json, write_jsonl)
 
-__all__ = ["evaluate_clips"]
+__all__ = ["evaluate_clips", "unreadable_clips"]
+
+
+def unreadable_clips(clips_dir: str | Path, labels: Sequence[Mapping]) -> list[str]:
+    """The labelled clips that cannot be opened, one line each naming the clip: missing, not a
+    video OpenCV decodes, a bag without its image topic (:func:`~asnn.io.sources.open_source`,
+    which decodes each clip's first frame). Checked before anything runs, so that a clip that
+    cannot be scored stops the evaluation instead of leaving the rates without it."""
+    problems = []
+    for lab in labels:
+        try:
+            open_source(str(Path(clips_dir) / lab["file"]), topic=lab.get("topic"))
+        except SourceError as exc:
+            problems.append(str(exc))
+    return problems
+
+
+def check_clips(clips_dir: str | Path, labels: Sequence[Mapping], most: int = 5) -> None:
+    """Raise ValueError naming the clips of ``labels`` that cannot be opened
+    (:func:`unreadable_clips`), the first ``most`` of them."""
+    problems = unreadable_clips(clips_dir, labels)
+    if problems:
+        more = f"; and {len(problems) - most} more" if len(problems) > most else ""
+        raise ValueError(f"{len(problems)} of the {len(labels)} labelled clips cannot be read "
+                         f"(mend or remove their entries): {'; '.join(problems[:most])}{more}")
 
 
 def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | None = None,
@@ -147,9 +171,11 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     Raises
     ------
     ValueError
-        For an unknown detector, preset or perturbation, or a labels file that cannot be read
-        or has an entry :func:`~asnn.evaluation.labels.check_labels` refuses (before anything
-        runs).
+        For an unknown detector, preset or perturbation, a labels file that cannot be read or
+        has an entry :func:`~asnn.evaluation.labels.check_labels` refuses, or a labelled clip
+        that cannot be opened (:func:`check_clips`), all before anything runs. A clip that
+        fails later (a frame size that changes mid-clip, say) is named in ``errors`` and scored
+        as ``missing``.
     """
     clips_dir, out_dir = Path(clips_dir), Path(out_dir)
     labels_path = Path(labels_path) if labels_path else clips_dir / "labels.json"
@@ -157,6 +183,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     given = load_labels(labels_path)
     labels = [perturb_label(lab, perturbation) for lab in given]
     specs = parse_detectors(detectors, preset_name)
+    check_clips(clips_dir, given)
     progress = progress or Silent()
 
     tasks = [(str(clips_dir / lab["file"]), spec,
@@ -183,14 +210,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
             checked.add(clip)
             warnings.extend(mismatches(given[clip], *decoded))
 
-    if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_run_clip, *task): index for index, task in enumerate(tasks)}
-            for future in as_completed(futures):
-                finished(futures[future], *future.result())
-    else:
-        for index, task in enumerate(tasks):
-            finished(index, *_run_clip(*task))
+    for index, result in run_tasks(_run_clip, tasks, jobs):
+        finished(index, *result)
     progress.finish()
 
     results = {

@@ -37,7 +37,9 @@ from ..approach.tracking import (approach_parts, approach_test, better_fit, coun
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from . import scoring
+from .clips import check_clips
 from .labels import load_labels
+from .pool import run_tasks
 from .runs import fmt, write_json
 
 __all__ = ["GATE_GRID", "SUITE_AIMS", "FrameTrace", "ClipTrace", "trace_clip", "replay",
@@ -485,6 +487,14 @@ def _ties_lines(ties: Mapping) -> list[str]:
     return lines
 
 
+def _trace_item(spec: str | None, topic_or_case: str | None, params: ASNNParams) -> ClipTrace:
+    """Worker: a clip's trace (``spec`` its path, with its bag's topic), or a suite case's
+    (``spec`` None, the case's name)."""
+    if spec is None:
+        return _trace_case(topic_or_case, params)
+    return _trace_source(spec, topic_or_case, params)
+
+
 def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace:
     from ..io.sources import open_source
 
@@ -519,12 +529,12 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     ValueError
         For an unknown preset, one without the approach gate, an unknown tie-break, or a
         labels file that cannot be read or has an entry
-        :func:`~asnn.evaluation.labels.check_labels` refuses.
+        :func:`~asnn.evaluation.labels.check_labels` refuses, or a labelled clip that cannot
+        be opened (:func:`~asnn.evaluation.clips.check_clips`), all before anything runs; or
+        a clip whose frame size changes while it is read.
     OSError
-        For a clip that cannot be read.
+        For a clip that fails while it is read.
     """
-    from concurrent.futures import ProcessPoolExecutor
-
     from ..params import preset
     from ..stimuli.suite import make_case, suite_cases
     from .progress import Silent
@@ -535,21 +545,21 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     base = preset(preset_name, **dict(overrides or {}))
     if not base.approach_gate:
         raise ValueError(f"preset {preset_name!r} has no approach gate to hold out")
+    check_clips(clips_dir, labels)
     cases = suite_cases(cases)
     progress = progress or Silent()
     progress.start(len(labels) + len(cases), "eval --held-out")
-    with ProcessPoolExecutor(max_workers=max(jobs, 1)) as pool:
-        clip_jobs = [pool.submit(_trace_source, str(clips_dir / lab["file"]), lab.get("topic"),
-                                 base) for lab in labels]
-        case_jobs = [pool.submit(_trace_case, name, base) for name in cases]
-        traces = []
-        for job, lab in zip(clip_jobs, labels):
-            traces.append(job.result())
-            progress.advance(1, lab["file"])
-        suite_traces = []
-        for job, name in zip(case_jobs, cases):
-            suite_traces.append(job.result())
-            progress.advance(1, name)
+    # the clips and the cases in one queue, each traced where a worker is free
+    tasks = ([(str(clips_dir / lab["file"]), lab.get("topic"), base) for lab in labels]
+             + [(None, name, base) for name in cases])
+    names = [lab["file"] for lab in labels] + list(cases)
+    found: dict[int, ClipTrace] = {}
+    for index, trace in run_tasks(_trace_item, tasks, jobs):
+        found[index] = trace
+        progress.advance(1, names[index])
+        progress.note(names[index])
+    traces = [found[k] for k in range(len(labels))]
+    suite_traces = [found[len(labels) + k] for k in range(len(cases))]
     progress.finish()
     suite_labels = [make_case(name).label(name) for name in cases]
     suite = suite_summaries(suite_traces, suite_labels, base)

@@ -19,6 +19,7 @@ and names the entry and the field it refuses.
 
 from __future__ import annotations
 
+import difflib
 import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -73,11 +74,16 @@ class ClipLabel(BaseModel):
                 raise ValueError("a collision label needs onset_frame and contact_frame")
             if onset > contact:
                 raise ValueError(f"onset_frame {onset} is after contact_frame {contact}")
-            if self.frames is not None and onset >= self.frames:
-                raise ValueError(f"onset_frame {onset} is beyond the clip's {self.frames} frames")
+            if self.frames is not None and contact >= self.frames:
+                raise ValueError(f"contact_frame {contact} is beyond the clip's {self.frames} "
+                                 f"frames (0 to {self.frames - 1})")
         elif onset is not None or contact is not None:
             raise ValueError("a label without a collision has no onset_frame or contact_frame "
                              "(null)")
+        for key in self.model_extra or {}:  # a misspelt field would be kept and never read
+            near = difflib.get_close_matches(key, _FIELDS, n=1, cutoff=0.75)
+            if near:
+                raise ValueError(f"unknown field {key!r}: did you mean {near[0]!r}?")
         if self.frames is not None:
             for name in ("track", "target_size", "ttc"):
                 values = getattr(self, name)
@@ -85,6 +91,9 @@ class ClipLabel(BaseModel):
                     raise ValueError(f"{name} has {len(values)} entries for the clip's "
                                      f"{self.frames} frames (one per frame)")
         return self
+
+
+_FIELDS = tuple(ClipLabel.model_fields)
 
 
 def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict]:
@@ -174,6 +183,8 @@ def read_entries(path: str | Path) -> list:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not JSON ({exc})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not UTF-8 text (save it as UTF-8)") from None
     if isinstance(data, dict):
         data = data.get("clips")
     if not isinstance(data, list):
@@ -183,7 +194,9 @@ def read_entries(path: str | Path) -> list:
 
 def mismatches(label: Mapping, frames: int, fps: float, tolerance: float = 0.01) -> list[str]:
     """Where a clip as it was decoded disagrees with its label: its number of frames (where the
-    label gives ``frames``) and its frame rate (by more than ``tolerance``, relative).
+    label gives ``frames``; else the per-frame ``track``, ``target_size`` and ``ttc``'s
+    lengths), a ``contact_frame`` beyond the frames decoded, and its frame rate (by more than
+    ``tolerance``, relative).
 
     A label's frames are counted as one decoder saw them (OpenCV reads 68 of a clip whose
     header claims 444, another decoder may read more), and the scoring takes its early
@@ -200,6 +213,14 @@ def mismatches(label: Mapping, frames: int, fps: float, tolerance: float = 0.01)
     if label.get("frames") is not None and int(label["frames"]) != frames:
         found.append(f"{name}: {frames} frames decoded where its label counts "
                      f"{int(label['frames'])}: its onset and contact may be off")
+    if label.get("contact_frame") is not None and int(label["contact_frame"]) >= frames:
+        found.append(f"{name}: its contact_frame {int(label['contact_frame'])} is beyond the "
+                     f"{frames} frames decoded: the scoring's window ends after the clip")
+    for field in ("track", "target_size", "ttc"):
+        values = label.get(field)
+        if values is not None and len(values) != frames and label.get("frames") is None:
+            found.append(f"{name}: its {field} has {len(values)} entries for the {frames} "
+                         "frames decoded (one per frame): its target scores are left out")
     if abs(fps - float(label["fps"])) > tolerance * float(label["fps"]):
         found.append(f"{name}: the clip runs at {fps:g} fps where its label says "
                      f"{float(label['fps']):g}: the model's timing and the scoring's disagree")

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from ..stimuli.effects import scaled_size
@@ -28,6 +27,7 @@ from ..stimuli.suite import (CASES, DRIVING_SIZE, EXTRA_GROUPS, GROUPS, PLANAR_S
                              make_case, suite_cases)
 from . import scoring
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
+from .pool import run_tasks
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
                    at_rate, fmt, outcome_cell, paired_comparisons, paired_section,
@@ -215,17 +215,10 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
         progress.advance(1, name)
         progress.note(f"{name}: {outcomes}")
 
-    if jobs > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(_run_case, name, specs, str(out_dir), warmup, case_plots,
-                                   variant, perturbation, driving_size, scale): name
-                       for name in names}
-            for future in as_completed(futures):
-                finished(futures[future], future.result())
-    else:
-        for name in names:
-            finished(name, _run_case(name, specs, str(out_dir), warmup, case_plots, variant,
-                                     perturbation, driving_size, scale))
+    tasks = [(name, specs, str(out_dir), warmup, case_plots, variant, perturbation,
+              driving_size, scale) for name in names]
+    for index, entry in run_tasks(_run_case, tasks, jobs):
+        finished(names[index], entry)
     progress.finish()
     elapsed = time.perf_counter() - started
 

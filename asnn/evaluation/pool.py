@@ -1,0 +1,62 @@
+"""Evaluation work spread over processes, stopped at once by Ctrl-C.
+
+``concurrent.futures.ProcessPoolExecutor`` leaves a ``with`` block only when every task it was
+given has run, so an interrupted evaluation used to finish its whole queue before it exited.
+:func:`run_tasks` cancels what has not started and ends the workers at once instead, and the
+workers ignore SIGINT themselves (a terminal sends it to the whole process group): the parent
+alone decides, and no worker prints a traceback of its own.
+"""
+
+from __future__ import annotations
+
+import signal
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+__all__ = ["run_tasks"]
+
+
+def run_tasks(function: Callable, tasks: Sequence[tuple], jobs: int
+              ) -> Iterator[tuple[int, object]]:
+    """``(index, function(*tasks[index]))`` for every task, as each finishes.
+
+    With ``jobs`` <= 1 the tasks run here, in order; otherwise in ``jobs`` processes (the
+    function and its arguments must pickle). An exception in a task is raised here; when the
+    caller stops early (an exception, Ctrl-C, or a generator left unfinished) the tasks not yet
+    started are cancelled and the workers are ended without waiting for the running ones.
+    """
+    if jobs <= 1:
+        for index, task in enumerate(tasks):
+            yield index, function(*task)
+        return
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_ignore_interrupts)
+    finished = False
+    try:
+        pending = {pool.submit(function, *task): index for index, task in enumerate(tasks)}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in done:
+                yield pending.pop(future), future.result()
+        finished = True
+    finally:
+        if finished:
+            pool.shutdown()
+        else:
+            _stop(pool)
+
+
+def _ignore_interrupts() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop(pool: ProcessPoolExecutor) -> None:
+    """Cancel the queued tasks and end the workers now (the running tasks' results are lost:
+    the caller is leaving). The executor keeps its processes in a private mapping; where a
+    Python version has none, the workers finish their current task and exit."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=5)
