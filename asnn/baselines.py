@@ -45,7 +45,7 @@ from collections import deque
 
 import cv2
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .frames import to_luminance
 from .response import Response
@@ -68,10 +68,24 @@ _MIN_SIDE = 3
 # --------------------------------------------------------------------------- parameters
 
 
-class LGMD1Params(BaseModel):
-    """Parameters of LGMD1-1 (Yue & Rind 2006), with the source of each default."""
+class _LGMDParams(BaseModel):
+    """What both models' parameters share: no NaN, and no infinity but where it switches the
+    feed-forward inhibition off (``t_ffi``): either would silence a model, or crash its spike
+    count, without a word."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+    @model_validator(mode="after")
+    def _finite(self) -> "_LGMDParams":
+        for name, value in self:
+            if isinstance(value, float) and (math.isnan(value) or (math.isinf(value)
+                                                                   and name != "t_ffi")):
+                raise ValueError(f"{name} must be a finite number, got {value}")
+        return self
+
+
+class LGMD1Params(_LGMDParams):
+    """Parameters of LGMD1-1 (Yue & Rind 2006), with the source of each default."""
 
     n_p: int = Field(0, ge=0, le=16, description=(
         "n_p, frames of photoreceptor persistence in P_f = L_f - L_{f-1} + sum p_i P_{f-i}; "
@@ -96,10 +110,8 @@ class LGMD1Params(BaseModel):
     rate_window: int = Field(4, ge=1, description="frames of the reported spike rate (ASNN's N_t)")
 
 
-class LGMD2Params(BaseModel):
+class LGMD2Params(_LGMDParams):
     """Parameters of LGMD1-2 (Fu, Hu, Peng & Yue 2018), with the source of each default."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     persistence: float = Field(0.1, ge=0, lt=1, description=(
         "decay of the ON/OFF channels, ON(t) = [P >= 0] P + 0.1 ON(t-1); 0.1 (SPEC section 4)"))

@@ -56,6 +56,9 @@ def check_frame(frame: np.ndarray, min_side: int,
     """
     if not isinstance(frame, np.ndarray):
         raise FrameError(f"a frame must be a numpy array, got {type(frame).__name__}")
+    if isinstance(frame, np.ma.MaskedArray):  # its checks below would skip the masked values
+        raise FrameError("a frame must be a plain numpy array, not a masked array: fill it "
+                         "(frame.filled(value)) first")
     if frame.ndim == 3 and frame.shape[2] == 1:
         frame = frame[:, :, 0]
     if frame.ndim not in (2, 3) or (frame.ndim == 3 and frame.shape[2] != 3):
@@ -75,7 +78,7 @@ def check_frame(frame: np.ndarray, min_side: int,
         raise FrameError("frame contains NaN or infinite values")
     lo, hi = float(frame.min()), float(frame.max())
     if lo < 0.0 or hi > 1.0:
-        raise FrameError(f"float frames must lie in [0, 1], got values in [{lo:g}, {hi:g}]")
+        raise FrameError(f"float frames must lie in [0, 1], got values in [{lo!r}, {hi!r}]")
     return frame
 
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import numbers
 import statistics
 import weakref
 from collections import deque
@@ -114,7 +115,14 @@ class ASNN:
 
     def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,
                  record_tracks: bool = False, optimised: bool = True, threads: int = 1):
-        self.params = preset(params) if isinstance(params, str) else params
+        if isinstance(params, str):
+            params = preset(params)
+        elif not isinstance(params, ASNNParams):
+            raise TypeError("params must be a preset's name or an ASNNParams (asnn.preset(name, "
+                            f"**changes) makes one), got {type(params).__name__}")
+        if isinstance(threads, bool) or not isinstance(threads, numbers.Integral):
+            raise TypeError(f"threads must be an int, got {threads!r}")
+        self.params = params
         self.record_maps = record_maps
         p = self.params
         if record_tracks and p.targets != "objects":
@@ -252,7 +260,8 @@ class ASNN:
         Raises
         ------
         FrameError
-            If the frame is not an image the model accepts, or its size differs from the stream's.
+            If the frame is not an image the model accepts, its size differs from the stream's,
+            or ``t`` is not a number; the model's state is then as it was.
         """
         taken = self._take(frame, t)
         if taken.photo is not None:
@@ -267,7 +276,10 @@ class ASNN:
         pass, and response n is yielded while they still do: it comes once frame n + 1 has been
         taken. An exception raised by ``frames``, or by a frame (:class:`FrameError`), is
         raised after the responses to the frames before it. While the stream runs, the model's
-        attributes may already describe the next frame.
+        attributes may already describe the next frame. A stream left early (``break``, or the
+        generator closed) finishes the frames it had taken, up to two beyond the last response
+        yielded, without yielding them: ``index`` counts them, and the model goes on from there
+        as a step-by-step run would.
         """
         if self.threads == 1:
             for t, frame in frames:
@@ -301,6 +313,12 @@ class ASNN:
                 pending.append(taken)
             while pending:
                 yield self._finish(self._joined(pending.popleft()))
+        except GeneratorExit:
+            # the caller stopped early: the frames already taken are finished (their responses
+            # dropped), so that the model is as step() would leave it after ``index`` frames
+            while pending:
+                self._finish(self._joined(pending.popleft()))
+            raise
         finally:
             banded.abandon()  # an abandoned stream: no worker goes on behind the caller
             if self.stages_on is not None:
@@ -317,11 +335,11 @@ class ASNN:
 
     def _take(self, frame: np.ndarray, t: float | None) -> "_Frame":
         """The first part of a step: the frame's luminance, whether it is new, and P."""
-        lum = self._luminance(frame)
         p = self.params
         index = self.index
+        stamp = index * p.dt if t is None else _stamp(t)  # checked before any state changes
+        lum = self._luminance(frame)
         self.index += 1
-        stamp = index * p.dt if t is None else float(t)
         blocks = self._blocks(lum) if p.skip_repeats else None
         if self.previous is None:
             self.previous, self.previous_blocks = lum, blocks
@@ -575,6 +593,14 @@ class _Frame:
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined
     tracks: list | None = None  # its objects' approach tests (record_tracks)
+
+
+def _stamp(t: object) -> float:
+    """A frame's time as a float; FrameError (before the step changes any state) for one that
+    is not a real number. NaN or infinite times are taken, and read as no usable time."""
+    if isinstance(t, bool) or not isinstance(t, numbers.Real):
+        raise FrameError(f"a frame's time t must be a number of seconds or None, got {t!r}")
+    return float(t)
 
 
 def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams

@@ -17,7 +17,7 @@ Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The pre
 ``reference``
     The published Python implementation (SPEC section 3), reproduced to float64 precision.
 ``reference32``
-    ``reference``'s parameters computed in float32 (the default).
+    ``reference``'s parameters computed in float32.
 ``light``
     ``reference32`` for light objects on a dark background (ON and OFF swapped).
 ``robust``
@@ -49,7 +49,7 @@ __all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "preset", "preset_key", "p
 class ASNNParams(BaseModel):
     """Every parameter of the ASNN model, with the paper's symbol in each description."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
     # --- repeated frames (robust addition) ---
     skip_repeats: bool = Field(
@@ -145,7 +145,7 @@ class ASNNParams(BaseModel):
     gain: float = Field(5.0, description="K, gain of the temporal filter")
     decay: float = Field(60.0, gt=0, description="A, decay coefficient")
     transmission: float | None = Field(
-        None, description="C, transmission coefficient; None means C = A (SPEC ruling)"
+        None, gt=0, description="C, transmission coefficient; None means C = A (SPEC ruling)"
     )
     tau: float = Field(5.0, gt=0, description="tau, integration time constant")
     leaky_input: bool = Field(
@@ -212,7 +212,8 @@ class ASNNParams(BaseModel):
         "connected regions of the attended mask, tracked across frames (robust)",
     )
     min_object_pixels: int = Field(30, ge=1, description="smallest region kept as an object")
-    cluster_eps: float = Field(5.0, gt=0, description="DBSCAN eps, pixels of the model's grid")
+    cluster_eps: float = Field(5.0, gt=0, le=4096, description="DBSCAN eps, pixels of the "
+                               "model's grid (at most a frame's largest side, 4096)")
     cluster_min_samples: int = Field(2, ge=1, description="DBSCAN min_samples (a point counts itself)")
     origin_seed: bool = Field(
         False, description="add the pixel (0, 0) to the clustered points, as the reference does"
@@ -335,6 +336,12 @@ class ASNNParams(BaseModel):
                 raise ValueError(f"{name} must be odd, got {getattr(self, name)}")
         if self.n_fast >= self.n_slow:
             raise ValueError("n_fast must be smaller than n_slow")
+        # the temporal filter's forward-Euler step (eq. 5) multiplies each stage by
+        # 1 - dt A / tau per frame: at 2 or more it grows without bound instead of decaying
+        step = self.dt * self.decay / self.tau
+        if step >= 2.0:
+            raise ValueError(f"dt * decay / tau is {step:g}: the temporal filter (eq. 5) is "
+                             "unstable at 2 or more; lower dt or decay, or raise tau")
         needing = [name for name in ("approach_gate", "scene_relative", "object_ids",
                                      "ignore_rig") if getattr(self, name)]
         if needing and self.targets != "objects":  # every stage that works on the objects

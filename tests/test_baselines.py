@@ -67,6 +67,11 @@ def test_parameters_are_typed_and_overridable():
         LGMD1Params(not_a_parameter=1)
     with pytest.raises(ValidationError):
         LGMD2Params(persistence=1.5)
+    for params, changes in ((LGMD1Params, {"t_s": math.nan}), (LGMD2Params, {"k_sp": math.nan}),
+                            (LGMD2Params, {"tau_sfa": math.inf}), (LGMD1Params, {"c_de": -math.inf})):
+        with pytest.raises(ValidationError, match="must be a finite number"):
+            params(**changes)  # a model that would never warn, or crash in its spike count
+    assert LGMD1Params(t_ffi=math.inf).t_ffi == math.inf  # infinity switches the FFI off
     for params in (LGMD1Params(), LGMD2Params()):  # every default documents its source
         assert all(f.description for f in type(params).model_fields.values())
 

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from pydantic import ValidationError
 
 from asnn import ASNN, FrameError
 from asnn import preset as asnn_preset
@@ -78,6 +79,8 @@ def test_gray_bgr_and_float_frames_give_the_same_response():
     (np.full((64, 64), np.nan), "NaN"),
     (np.full((64, 64), 2.0), r"\[0, 1\]"),
     (np.zeros((20, 64), np.uint8), "smaller"),
+    (np.ma.masked_invalid(np.full((64, 64), np.nan)), "masked array"),  # its NaN hidden
+    (np.full((64, 64), 1.0000001), r"\[1.0000001, 1.0000001\]"),  # bounds not rounded to 1
 ])
 def test_bad_frames_get_a_clear_error(frame, message):
     with pytest.raises(FrameError, match=message):
@@ -100,8 +103,45 @@ def test_a_rejected_frame_leaves_the_state_untouched():
         if i == 10:
             with pytest.raises(FrameError):
                 disturbed.step(np.zeros((32, 32), np.uint8))
+        if i in (0, 10):  # a bad time on the first frame does not fix the stream's size either
+            for t in ("1.5", [1.0], True):
+                with pytest.raises(FrameError, match="time t must be a number"):
+                    disturbed.step(np.zeros((80, 80), np.uint8), t)
         a, b = clean.step(frame), disturbed.step(frame)
     assert (a.u, a.index) == (b.u, b.index)
+
+
+@pytest.mark.parametrize("params, threads, message", [
+    (None, 1, "params must be a preset's name or an ASNNParams"),
+    ({"top_k": 1}, 1, "got dict"),
+    ("default", "2", "threads must be an int"),
+    ("default", 2.7, "threads must be an int"),
+])
+def test_a_model_of_something_else_than_parameters_is_refused(params, threads, message):
+    with pytest.raises(TypeError, match=message):
+        ASNN(params, threads=threads)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"t_c": float("nan")}, "finite number"),
+    ({"dog_gain": float("inf")}, "finite number"),
+    ({"transmission": -5.0}, "greater than 0"),
+    ({"tau": 1.0}, "dt \\* decay / tau is 3: the temporal filter \\(eq. 5\\) is unstable"),
+    ({"dt": 0.5}, "unstable"),
+    ({"cluster_eps": 1e9}, "less than or equal to 4096"),
+])
+def test_parameters_that_would_silence_or_blow_up_the_model_are_refused(changes, message):
+    with pytest.raises(ValidationError, match=message):
+        asnn_preset("default", **changes)
+
+
+def test_the_temporal_filter_is_stable_up_to_the_refused_step():
+    # dt A / tau just under 2: each stage's own term decays (|1 - 1.9| < 1), the state stays
+    # bounded on a still scene after a step of light
+    model = ASNN(asnn_preset("default", tau=0.05 * 60 / 1.9), optimised=False)
+    for k in range(200):
+        model.step(np.full((64, 64), 0 if k < 5 else 200, np.uint8))
+    assert np.abs(model.stages_on).max() < 1e3
 
 
 def test_maps_are_recorded_on_request_only():
@@ -251,6 +291,19 @@ def test_a_stream_raises_a_bad_frame_after_the_responses_before_it():
             for response in model.stream((None, f) for f in bad):
                 got.append(response.index)
     assert got == [0, 1, 2, 3, 4]
+
+
+def test_a_stream_left_early_goes_on_as_a_step_by_step_run():
+    frames = make_scene("looming_over_stripes", size=(160, 120)).frames
+    one = ASNN()
+    whole = [one.step(f, i / 20) for i, f in enumerate(frames)]
+    with ASNN("default", threads=2) as model:
+        for response in model.stream((i / 20, f) for i, f in enumerate(frames)):
+            if response.index == 14:
+                break  # frames 15 and 16 were taken already: they are finished, not lost
+        assert model.index == 17
+        rest = [model.step(f, i / 20) for i, f in enumerate(frames) if i >= model.index]
+    assert [r.u for r in rest] == [r.u for r in whole[len(frames) - len(rest):]]
 
 
 @pytest.mark.parametrize("stream", [False, True])
