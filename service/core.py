@@ -20,6 +20,15 @@ smaller. Otherwise a new stream starts, for the first rule that failed:
 When the worker processes the first frame of a new stream, the model state is **reset** (that
 frame only primes the model) and the reset is counted under the rule.
 
+A frame that belongs to the stream but arrives after later ones did (the same size, a ``seq``
+above 0 and at most ``max_gap`` behind the latest, a ``stamp`` no later than its: reordered on
+the way) is refused as ``late`` instead: the model does not go back in time, and a restart is
+not what happened. A camera that restarts begins again at ``seq`` 0 (or with a later stamp).
+A robot whose streams keep ending after one frame (a camera whose ``seq`` never grows) has its
+model reset on every frame, so it can never warn: after :data:`RESTARTS_WARNED` such streams in
+a row the worker logs it at WARNING, and every response says how many frames its model has
+stepped in the current stream (``stream_frames``, docs/contract.md).
+
 The model integrates with its fixed time step (0.05 s), whatever the stamps say. A robot that
 sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten).
 
@@ -30,7 +39,8 @@ interleaves its frames with the robot's: every frame of one breaks the other's s
 worker detects it when the stream that a frame has just replaced continues (a frame fits the
 previous stream, which sent a frame less than ``takeover_after`` seconds ago): it counts an
 intrusion, logs it (rate-limited), marks the robot *contested* and returns to the stream that
-was there first (a ``second-publisher`` reset if the other's frame was processed meanwhile).
+was there first (a ``second-publisher`` reset if the other's frame was processed meanwhile);
+the other's later frames, continuing its own stream, are refused as ``second-publisher``.
 From then on, while the robot's stream keeps sending (a frame less than ``takeover_after``
 seconds ago), a frame that does not continue it is refused as ``second-publisher``. So an
 intruder costs the robot at most two resets, however long it keeps publishing. A camera that
@@ -56,7 +66,7 @@ soon as a frame of it fails. So ids that send only undecodable frames cannot loc
 
 Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``,
 the labels of :data:`service.messages.REASONS` plus ``bad-key``, ``frame-rejected``,
-``too-many-robots`` and ``second-publisher``) and logged at WARNING, rate-limited: the first
+``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING, rate-limited: the first
 rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
 with the count of those not shown.
 
@@ -115,6 +125,8 @@ RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-
 # running means; the worst need 53 during an approach, 64 before one):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
 WARMUP_FRAMES = 30
+# streams in a row that last one frame before the worker logs that a robot's model cannot warn
+RESTARTS_WARNED = 10
 # A robot's rate is the median over this many gaps between the stamps of its frames processed;
 # below asnn.params.SLOW_FPS the worker logs it once per stream
 RATE_FRAMES = 5
@@ -141,6 +153,7 @@ class _Stream:
     stamp: float
     size: tuple[int, int]
     arrival: float
+    frames: int = 1  # frames that arrived in it
 
     def continues(self, frame: Frame, max_gap: int) -> str | None:
         """None if ``frame`` continues this stream, else the rule it breaks."""
@@ -154,9 +167,17 @@ class _Stream:
             return "stamp-backwards"
         return None
 
+    def outran(self, frame: Frame, max_gap: int) -> bool:
+        """Whether ``frame`` is one of this stream's own, arriving after later ones did: the
+        same size, a ``seq`` at most ``max_gap`` back but not 0 (a camera starts at 0) and no
+        later ``stamp``: a late or reordered delivery, not a camera that restarted."""
+        return ((frame.width, frame.height) == self.size and frame.seq > 0
+                and self.seq - max_gap <= frame.seq <= self.seq and frame.stamp <= self.stamp)
+
     def advance(self, frame: Frame, arrival: float) -> None:
         self.seq, self.stamp, self.arrival = frame.seq, frame.stamp, arrival
         self.size = (frame.width, frame.height)
+        self.frames += 1
 
 
 @dataclass
@@ -175,6 +196,7 @@ class _Robot:
     stepped: int = 0  # frames the model state has stepped since it was (re)started
     contested: bool = False  # a second publisher was seen on its key
     intrusions: int = 0
+    restarts: int = 0  # streams in a row that ended after one frame (a seq that never grows)
     pending: tuple[Frame, float, _Stream] | None = None  # (frame, received, its stream)
     waiting_since: int = 0  # arrival order of the first frame it has been waiting with
     dropped: int = 0  # frames replaced since the last response
@@ -345,6 +367,11 @@ class WorkerCore:
             if state.last_arrival == (frame.seq, frame.stamp, frame.data):
                 self._stats.duplicates += 1  # delivered twice: already taken
                 return None
+            if state.stream is not None and state.stream.outran(frame, self.max_gap):
+                self._reject_locked("late", f"frame {frame.seq} of {robot} arrived after frame "
+                                    f"{state.stream.seq}: the model does not go back in time",
+                                    key)
+                return None
             stream = self._stream_locked(robot, state, frame, received)
             if stream is None:
                 self._reject_locked("second-publisher", f"frame {frame.seq} does not continue "
@@ -389,6 +416,10 @@ class WorkerCore:
         if (current is not None and previous is not None
                 and received - previous.arrival <= self.takeover_after
                 and previous.continues(frame, self.max_gap) is None):
+            if previous.number > current.number:
+                # the intruder's stream goes on while the one there first keeps sending
+                previous.advance(frame, received)
+                return None
             # the stream this one replaced goes on: two publishers interleave on the key
             state.contested = True
             state.intrusions += 1
@@ -405,6 +436,14 @@ class WorkerCore:
         if (state.contested and current is not None
                 and received - current.arrival <= self.takeover_after):
             return None
+        if current is not None:
+            state.restarts = state.restarts + 1 if current.frames == 1 else 0
+            if state.restarts >= RESTARTS_WARNED:
+                self._rejections.warning(
+                    f"restarts:{robot}", "robot %s: its last %d frames each started a new "
+                    "stream (%s): its model is reset on every frame and cannot warn; a "
+                    "camera's seq must grow by one a frame and its stamp must not go back",
+                    robot, state.restarts, broken)
         state.streams += 1
         state.previous = current
         state.stream = _Stream(state.streams, broken, frame.seq, frame.stamp,
@@ -529,7 +568,7 @@ class WorkerCore:
                                  preset=self.preset, worker=self.worker_id,
                                  latency_ms=(self.clock() - job.received) * 1e3,
                                  dropped=job.dropped, model_ms=(self.clock() - started) * 1e3,
-                                 id_base=state.id_base)
+                                 id_base=state.id_base, stream_frames=state.stepped)
         with self._lock:
             self._stats.processed += 1
             self._stats.warnings += response.collision

@@ -8,12 +8,18 @@ import time
 from collections import Counter
 from collections.abc import Callable
 
-__all__ = ["RateLimitedLog"]
+__all__ = ["MAX_REASONS", "RateLimitedLog"]
+
+MAX_REASONS = 1024
 
 
 class RateLimitedLog:
     """WARNING lines per reason: the first at once, then at most one every ``interval`` seconds,
-    each saying how many were not shown since the previous one."""
+    each saying how many were not shown since the previous one.
+
+    Reasons may name a robot (``intrusion:<robot>``): past :data:`MAX_REASONS` of them, those
+    quiet for ``interval`` are forgotten, so ids that come and go cannot grow it.
+    """
 
     def __init__(self, logger: logging.Logger, interval: float = 10.0,
                  clock: Callable[[], float] = time.monotonic):
@@ -33,6 +39,10 @@ class RateLimitedLog:
                 self._hidden[reason] += 1
                 return False
             hidden = self._hidden.pop(reason, 0)
+            if last is None and len(self._last) >= MAX_REASONS:
+                for old in [r for r, t in self._last.items() if now - t >= self.interval]:
+                    del self._last[old]
+                    self._hidden.pop(old, None)
             self._last[reason] = now
         if hidden:
             message += " (%d more %s since the last line)"

@@ -174,8 +174,10 @@ class Response(_Message):
     worker: str
     latency_ms: float = Field(ge=0)
     dropped: int = Field(ge=0)
-    # optional extension (docs/contract.md): the model step's own share of latency_ms
+    # optional extensions (docs/contract.md): the model step's own share of latency_ms, and
+    # the frames the robot's model has stepped in its current stream (1: this one only primed it)
     model_ms: float | None = Field(default=None, ge=0)
+    stream_frames: int | None = Field(default=None, ge=1)
 
 
 def _message_error(exc: ImageError) -> MessageError:
@@ -318,7 +320,7 @@ def track_label(target_id: int) -> str:
 
 def response_from(result, *, robot: str, frame: Frame, model: str, preset: str, worker: str,
                   latency_ms: float, dropped: int, model_ms: float | None = None,
-                  id_base: int = 0) -> Response:
+                  id_base: int = 0, stream_frames: int | None = None) -> Response:
     """Wrap an ``asnn.Response`` (the model's output) for the wire; ``id_base``
     (:func:`track_id_base`) is added to its targets' ids."""
     fields = result.to_dict()
@@ -328,7 +330,7 @@ def response_from(result, *, robot: str, frame: Frame, model: str, preset: str, 
                     targets=targets, worker=worker, latency_ms=max(latency_ms, 0.0),
                     dropped=dropped,
                     model_ms=None if model_ms is None else max(model_ms, 0.0),
-                    **_finite(fields))
+                    stream_frames=stream_frames, **_finite(fields))
 
 
 def _finite(fields: dict) -> dict:

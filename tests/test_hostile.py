@@ -308,6 +308,29 @@ def test_a_second_publisher_cannot_reset_the_robot_over_and_over(caplog):
     assert any("two publishers" in r.getMessage() for r in caplog.records)
 
 
+def test_an_intruder_with_a_seq_of_its_own_cannot_take_the_robot_over():
+    """A second camera misconfigured with the robot's id, counting its own seq up: its frames
+    continue its own stream, which must not win the robot back after the intrusion."""
+    scene = make_scene("looming")
+    blank = np.zeros_like(scene.frames[0])
+    clock = FakeClock()
+    alone, core = WorkerCore(clock=clock), WorkerCore(clock=clock)
+    warned = {"alone": 0, "attacked": 0}
+    for seq, image in enumerate(scene.frames):
+        clock.now += 0.05
+        for name, target in (("alone", alone), ("attacked", core)):
+            warned[name] += bool(feed(target, "r1", image, 1000 + seq, stamp=seq * 0.05).collision)
+        if seq >= 5:
+            core.offer("asnn/r1/frame", payload(blank, seq - 5, stamp=(seq - 5) * 0.05))
+            job = core.take(timeout=0)
+            if job is not None:
+                core.process(job)
+    stats = core.stats()
+    assert stats["intrusions"] == 1 and sum(stats["resets"].values()) <= 2
+    assert stats["invalid"]["second-publisher"] >= len(scene.frames) - 5 - 2
+    assert warned["attacked"] >= warned["alone"] - 2 > 0
+
+
 def test_after_an_intrusion_a_restarted_camera_is_followed_once_the_old_stream_is_silent():
     scene = make_scene("looming")
     clock = FakeClock()

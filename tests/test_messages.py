@@ -141,15 +141,16 @@ def test_response_from_a_model_step_round_trips_with_targets():
     assert result.collision and result.targets
     frame = Frame.from_image(scene.frames[29], seq=29, stamp=100.0)
     response = response_from(result, robot="r1", frame=frame, model="asnn", preset="reference",
-                             worker="w", latency_ms=3.0, dropped=2, model_ms=1.25)
+                             worker="w", latency_ms=3.0, dropped=2, model_ms=1.25,
+                             stream_frames=30)
     back = decode_response(encode(response))
     assert back == response
     assert back.seq == 29 and back.stamp == 100.0 and back.dropped == 2 and back.collision
     assert back.targets[0].pixels == result.targets[0].pixels
     assert set(back.model_dump()) == {"v", "robot", "seq", "stamp", "model", "preset", "u", "out",
                                       "spikes", "spike_rate", "collision", "targets", "worker",
-                                      "latency_ms", "dropped", "model_ms"}
-    assert back.model_ms == 1.25
+                                      "latency_ms", "dropped", "model_ms", "stream_frames"}
+    assert back.model_ms == 1.25 and back.stream_frames == 30
     json.dumps(back.model_dump())  # JSON-ready for `asnn alerts --json`
 
 
@@ -186,6 +187,8 @@ def test_invalid_responses_are_rejected():
     assert decode_response(msgpack.packb(good)).collision
     assert decode_response(msgpack.packb(good)).model_ms is None  # optional: older workers
     assert reason(msgpack.packb({**good, "model_ms": -1.0}), decode_response) == "invalid-field"
+    assert decode_response(msgpack.packb(good)).stream_frames is None
+    assert reason(msgpack.packb({**good, "stream_frames": 0}), decode_response) == "invalid-field"
     assert reason(msgpack.packb({**good, "collision": "yes"}), decode_response) == "invalid-field"
     assert reason(msgpack.packb({**good, "targets": [{"x": 1}]}), decode_response) == \
         "invalid-field"  # a nested field: the reason is about the field that holds it

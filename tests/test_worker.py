@@ -136,7 +136,7 @@ def test_frame_size_change_resets_the_robot_instead_of_crashing(looming):
 
 @pytest.mark.parametrize("seqs, stamps, rule", [
     ([0, 1, 2, 0], None, "seq-backwards"),      # the camera restarted
-    ([0, 1, 2, 2], None, "seq-backwards"),      # a repeated seq
+    ([0, 1, 2, 1], [0.0, 0.05, 0.1, 0.2], "seq-backwards"),  # back, but with a later stamp
     ([0, 1, 2, 40], None, "seq-gap"),           # more than max_gap=20 frames missing
     ([0, 1, 2, 3], [0.0, 0.05, 0.1, 0.02], "stamp-backwards"),
 ])
@@ -146,6 +146,35 @@ def test_reset_rules(looming, seqs, stamps, rule):
                       None if stamps is None else stamps[i]) for i, seq in enumerate(seqs)]
     assert responses[-1].u == 0.0 and responses[-1].seq == seqs[-1]
     assert core.stats()["resets"] == {rule: 1}
+
+
+def test_frames_reordered_on_the_way_are_refused_as_late_not_a_restart(looming):
+    core = WorkerCore(max_gap=20)
+    answered = []
+    # two swaps, and a seq repeated with other pixels (the same frame twice is a duplicate)
+    for k, seq in enumerate([0, 1, 2, 4, 3, 5, 6, 8, 7, 9, 9]):
+        assert core.offer("asnn/r1/frame", payload(looming.frames[10 + k], seq)) == "r1" \
+            or k in (4, 8, 10)
+        job = core.take(timeout=0)
+        if job is not None:
+            answered.append(core.process(job).seq)
+    assert answered == [0, 1, 2, 4, 5, 6, 8, 9]
+    stats = core.stats()
+    assert stats["resets"] == {} and stats["intrusions"] == 0
+    assert stats["invalid"] == {"late": 3}
+    assert core.status()["robots"]["r1"]["contested"] is False
+
+
+def test_a_camera_whose_seq_never_grows_is_reported_as_unable_to_warn(looming, caplog):
+    core = WorkerCore()
+    with caplog.at_level("WARNING", logger="asnn.worker"):
+        responses = [feed(core, "r1", image, 0, stamp=i * 0.05)
+                     for i, image in enumerate(looming.frames[:40])]
+    assert all(r.stream_frames == 1 and r.u == 0.0 for r in responses)  # each one a new stream
+    assert any("cannot warn" in r.getMessage() for r in caplog.records)
+    good = WorkerCore()
+    steps = [feed(good, "r1", image, i).stream_frames for i, image in enumerate(looming.frames[:5])]
+    assert steps == [1, 2, 3, 4, 5]
 
 
 def test_small_gaps_from_skipped_frames_keep_the_state(looming):
