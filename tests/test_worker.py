@@ -325,6 +325,18 @@ def test_rate_limited_log_counts_what_it_hides():
     assert limited.warning("a", "later")
 
 
+def test_rate_limited_log_forgets_quiet_per_robot_reasons():
+    from service.logutil import MAX_REASONS
+
+    clock = FakeClock()
+    limited = RateLimitedLog(logging.getLogger("test.ratelimit"), interval=5.0, clock=clock)
+    for k in range(3 * MAX_REASONS):  # robot ids that come and go, each logged once
+        limited.warning(f"intrusion:r{k}", "robot %s", k)
+        clock.now += 0.01
+    assert len(limited._last) <= MAX_REASONS + 5 / 0.01  # the quiet ones went
+    assert not limited.warning(f"intrusion:r{3 * MAX_REASONS - 1}", "again")  # the recent stay
+
+
 def test_a_worker_takes_only_the_robots_it_owns(looming):
     membership = Membership("w1", ["w2"])
     core = WorkerCore(worker_id="w1", owns=membership.owns)
