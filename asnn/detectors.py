@@ -50,6 +50,10 @@ def make_detector(model: str = "asnn", preset_name: str | ASNNParams | None = No
     if model in ("lgmd1", "lgmd2"):
         from . import baselines
 
+        asnn_only = sorted(set(options) & {"record_maps", "record_tracks", "optimised",
+                                           "threads"})
+        if asnn_only:
+            raise ValueError(f"{', '.join(asnn_only)} apply to the ASNN model only, not {model}")
         return (baselines.LGMD1 if model == "lgmd1" else baselines.LGMD2)(**options)
     raise ValueError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
 

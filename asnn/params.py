@@ -451,7 +451,10 @@ def preset_key(name: str) -> str:
     """
     key = DEFAULT_PRESET if name == "default" else name
     if key not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(preset_names())}")
+        hint = (f" (the command line's NAME/FIELD=VALUE; in Python: preset({name.split('/')[0]!r}"
+                ", FIELD=VALUE))" if isinstance(name, str) and "/" in name else "")
+        raise ValueError(f"unknown preset {name!r}{hint}; choose one of "
+                         f"{', '.join(preset_names())}")
     return key
 
 

@@ -227,6 +227,8 @@ def test_the_wilson_interval_of_a_rate():
     assert scoring.wilson_interval(0, 12) == [0.0, pytest.approx(0.243, abs=1e-3)]
     assert scoring.wilson_interval(12, 12) == [pytest.approx(0.757, abs=1e-3), 1.0]
     assert scoring.wilson_interval(0, 0) is None
+    with pytest.raises(ValueError, match="0..trials"):
+        scoring.wilson_interval(5, 3)
     # and it narrows as the sample grows
     assert scoring.wilson_interval(50, 90)[1] - scoring.wilson_interval(50, 90)[0] < high - low
 
@@ -236,6 +238,15 @@ def test_mcnemar_s_exact_test():
     assert scoring.mcnemar_exact(6, 0) == scoring.mcnemar_exact(0, 6)
     assert scoring.mcnemar_exact(1, 10) == pytest.approx(2 * 12 / 2048)
     assert scoring.mcnemar_exact(3, 2) == 1.0 and scoring.mcnemar_exact(0, 0) == 1.0
+    with pytest.raises(ValueError, match="cannot be negative"):
+        scoring.mcnemar_exact(-1, 5)  # not a p-value of 0
+
+
+def test_a_label_built_in_code_with_its_onset_after_its_contact_is_refused():
+    label = {"file": "a.mp4", "fps": 20.0, "collision": True, "onset_frame": 20,
+             "contact_frame": 12}
+    with pytest.raises(ValueError, match="onset_frame 20 is after contact_frame 12"):
+        scoring.score_clip([{"frame": 15, "collision": True}], label)
 
 
 def test_two_detectors_are_compared_clip_by_clip():

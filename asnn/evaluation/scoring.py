@@ -254,7 +254,9 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     Raises
     ------
     ValueError
-        If a collision label lacks its onset or contact frame.
+        If a collision label lacks its onset or contact frame, or its onset is after its
+        contact (labels read from a file are checked in full before: :mod:`.labels`; this
+        check is the one a label built in code needs for a meaningful window).
     """
     clip = str(label.get("file", "?"))
     collision = bool(label.get("collision"))
@@ -270,6 +272,8 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     onset, contact = label.get("onset_frame"), label.get("contact_frame")
     if onset is None or contact is None:
         raise ValueError(f"{clip}: a collision label needs onset_frame and contact_frame")
+    if int(onset) > int(contact):
+        raise ValueError(f"{clip}: onset_frame {onset} is after contact_frame {contact}")
     tolerance = int(round(early_tolerance_s * fps)) if fps > 0 else 0
     window = (int(onset) - tolerance, int(contact) + contact_slack)
     if first is None:
@@ -405,6 +409,8 @@ def wilson_interval(successes: int, trials: int, z: float = 1.96) -> list[float]
     """
     if trials <= 0:
         return None
+    if not 0 <= successes <= trials:
+        raise ValueError(f"successes must lie in 0..trials, got {successes} of {trials}")
     p = successes / trials
     z2 = z * z
     scale = 1.0 + z2 / trials
@@ -426,6 +432,8 @@ def mcnemar_exact(only_first: int, only_second: int) -> float:
     .. [1] Q. McNemar, "Note on the sampling error of the difference between correlated
        proportions or percentages", Psychometrika 12, 1947, pp. 153-157.
     """
+    if only_first < 0 or only_second < 0:
+        raise ValueError(f"counts of pairs cannot be negative, got {only_first}, {only_second}")
     n = only_first + only_second
     if n == 0:
         return 1.0
