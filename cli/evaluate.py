@@ -35,6 +35,14 @@ def _detectors(text: str) -> list[str]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _summary_line(name: str, s: dict) -> str:
+    """One detector's scores on labelled clips, as report.md's first table has them."""
+    line = (f"{name}: {s['hit']}/{s['collision_clips']} hits ({s['early']} early, "
+            f"{s['late']} late), false alarms on {s['false']}/{s['noncollision_clips']} clips "
+            "without a collision")
+    return line + (f", {s['missing']} clips without results" if s["missing"] else "")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "eval", help="score the detectors on labelled clips, the generated suite or the paper's "
@@ -190,6 +198,8 @@ def run(args: argparse.Namespace) -> int:
                 preset_name=preset_name, early_tolerance_s=tolerance,
                 warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots,
                 perturbation=args.perturb, progress=progress)
+            for name, entry in results["detectors"].items():
+                print(_summary_line(name, entry["summary"]))
             if results["errors"]:
                 print(f"{args.out}/report.md")
                 print(f"asnn eval: {len(results['errors'])} of the runs failed, their clips "

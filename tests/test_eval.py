@@ -57,6 +57,10 @@ def test_eval_end_to_end_writes_results_report_and_plots(clips, evaluated):
     status, out, stdout, stderr = evaluated
     assert status == 0
     assert "report.md" in stdout
+    results = json.loads((out / "results.json").read_text())
+    for model in DETECTORS:  # a line per detector, the report's first table in brief
+        summary = results["detectors"][model]["summary"]
+        assert f"{model}: {summary['hit']}/{summary['collision_clips']} hits (" in stdout
     for model in DETECTORS:  # the progress printer names every run
         for label in labels:
             assert f"{model} {label['file']}" in stderr

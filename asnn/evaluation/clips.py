@@ -21,31 +21,37 @@ from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE
                    fmt, outcome_cell, paired_comparisons, paired_section, parse_detectors,
                    rate_interval, run_detector, target_quality_cells, write_json, write_jsonl)
 
-__all__ = ["evaluate_clips", "unreadable_clips"]
+__all__ = ["check_clips", "evaluate_clips", "open_clips"]
 
 
-def unreadable_clips(clips_dir: str | Path, labels: Sequence[Mapping]) -> list[str]:
-    """The labelled clips that cannot be opened, one line each naming the clip: missing, not a
-    video OpenCV decodes, a bag without its image topic (:func:`~asnn.io.sources.open_source`,
-    which decodes each clip's first frame). Checked before anything runs, so that a clip that
-    cannot be scored stops the evaluation instead of leaving the rates without it."""
-    problems = []
+def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
+               ) -> tuple[list[int], list[str]]:
+    """Open every labelled clip (:func:`~asnn.io.sources.open_source`, which decodes its first
+    frame): the frames each states (0 where unknown or unreadable), and one line per clip that
+    cannot be opened, naming it (missing, not a video OpenCV decodes, a bag without its image
+    topic). Checked before anything runs, so that a clip that cannot be scored stops the
+    evaluation instead of leaving the rates without it."""
+    counts, problems = [], []
     for lab in labels:
         try:
-            open_source(str(Path(clips_dir) / lab["file"]), topic=lab.get("topic"))
+            source = open_source(str(Path(clips_dir) / lab["file"]), topic=lab.get("topic"))
         except SourceError as exc:
             problems.append(str(exc))
-    return problems
+            counts.append(0)
+        else:
+            counts.append(int(source.frame_count or 0))
+    return counts, problems
 
 
-def check_clips(clips_dir: str | Path, labels: Sequence[Mapping], most: int = 5) -> None:
-    """Raise ValueError naming the clips of ``labels`` that cannot be opened
-    (:func:`unreadable_clips`), the first ``most`` of them."""
-    problems = unreadable_clips(clips_dir, labels)
+def check_clips(clips_dir: str | Path, labels: Sequence[Mapping], most: int = 5) -> list[int]:
+    """The frames each labelled clip states (:func:`open_clips`); ValueError naming the clips
+    that cannot be opened, the first ``most`` of them."""
+    counts, problems = open_clips(clips_dir, labels)
     if problems:
         more = f"; and {len(problems) - most} more" if len(problems) > most else ""
         raise ValueError(f"{len(problems)} of the {len(labels)} labelled clips cannot be read "
                          f"(mend or remove their entries): {'; '.join(problems[:most])}{more}")
+    return counts
 
 
 def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | None = None,
@@ -183,7 +189,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     given = load_labels(labels_path)
     labels = [perturb_label(lab, perturbation) for lab in given]
     specs = parse_detectors(detectors, preset_name)
-    check_clips(clips_dir, given)
+    stated = check_clips(clips_dir, given)
     progress = progress or Silent()
 
     tasks = [(str(clips_dir / lab["file"]), spec,
@@ -192,7 +198,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
              for spec in specs for lab in labels]
     for task in tasks:  # stale results of an earlier run must not be scored
         Path(task[2]).unlink(missing_ok=True)
-    expected = [int(lab.get("frames") or 1) for _ in specs for lab in labels]
+    expected = [int(lab.get("frames") or count or 1) for _ in specs
+                for lab, count in zip(labels, stated)]
     clip_of = [k for _ in specs for k in range(len(labels))]  # each task's label
     progress.start(sum(expected), "eval")
     errors, warnings, checked = [], [], set()
