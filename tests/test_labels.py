@@ -90,7 +90,9 @@ def test_a_missing_field_and_a_quiet_clip_with_an_onset_are_refused():
 
 
 def test_two_clips_whose_results_would_share_a_file_are_refused():
-    check_labels([COLLISION, {**QUIET, "file": "c2.mp4"}])
+    check_labels([COLLISION, {**QUIET, "file": "c2.mp4"}, {**QUIET, "file": "y" * 249 + ".mp4"}])
+    with pytest.raises(ValueError, match="too long for its results file"):  # not mid-run
+        check_labels([COLLISION, {**QUIET, "file": "y" * 250 + ".mp4"}])
     for other in ("c.avi", "night/c.mp4", "c.mp4"):
         with pytest.raises(ValueError, match=r"entry 1 .*overwrite those of entry 0 \(c\.mp4\)"):
             check_labels([COLLISION, {**QUIET, "file": other}])

@@ -112,7 +112,8 @@ def _clips_report(results: Mapping) -> str:
             f" | {s['window_warning_frames']} / {s['warning_frames'] - s['window_warning_frames']}"
             f" | {fmt(s['warning_frames_per_minute'], 1)} |")
         if s["missing"]:
-            lines[-1] += f" ({s['missing']} clips without results)"
+            lines[-1] += (f" ({s['missing']} clip{'' if s['missing'] == 1 else 's'} without "
+                          "results)")
     lines += ["", "Per clip: outcome, first warning frame (lead time, s), warning frames, and the "
               "distance from the nearest target to the labelled centre at the first warning.", "",
               "| clip | onset | contact | " + " | ".join(names) + " |",
@@ -206,13 +207,13 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
 
     def finished(index: int, frames: int, error: str | None,
                  decoded: tuple[int, float] | None) -> None:
-        video, spec = tasks[index][:2]
-        name = f"{spec.name} {Path(video).name}"
+        spec, clip = tasks[index][1], clip_of[index]
+        name = f"{spec.name} {labels[clip]['file']}"  # as labelled: sub/clip.mp4, not clip.mp4
         progress.advance(expected[index], name)
-        progress.note(name + (f": {error}" if error else f", {frames} frames"))
+        progress.note(name + (f": {error}" if error else
+                              f", {frames} frame{'' if frames == 1 else 's'}"))
         if error:
             errors.append(f"{name}: {error}")
-        clip = clip_of[index]
         if decoded is not None and clip not in checked:  # once a clip, by its first run
             checked.add(clip)
             warnings.extend(mismatches(given[clip], *decoded))

@@ -94,6 +94,7 @@ class ClipLabel(BaseModel):
 
 
 _FIELDS = tuple(ClipLabel.model_fields)
+MAX_NAME_BYTES = 255  # a file name's longest on the usual file systems (ext4, APFS, NTFS)
 
 
 def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict]:
@@ -127,6 +128,10 @@ def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict
         # each clip's results are <stem>.jsonl in a detector's folder: two stems alike would
         # share one file, and one clip's results would be scored for both
         stem = Path(label["file"]).stem
+        if len(f"{stem}.jsonl".encode()) > MAX_NAME_BYTES:
+            raise ValueError(f"{where}: its name is too long for its results file "
+                             f"({stem[:20]}....jsonl: at most {MAX_NAME_BYTES} bytes); "
+                             "shorten it")
         if stem in names:
             raise ValueError(f"{where}: its results would overwrite those of entry {names[stem]} "
                              f"({labels[names[stem]]['file']}): clip names must differ by more "
