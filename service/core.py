@@ -30,7 +30,8 @@ a row the worker logs it at WARNING, and every response says how many frames its
 stepped in the current stream (``stream_frames``, docs/contract.md).
 
 The model integrates with its fixed time step (0.05 s), whatever the stamps say. A robot that
-sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten).
+sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten); when every slot
+is taken, one silent for ``takeover_after`` seconds is forgotten to make room for a new robot.
 
 Two publishers on one key
 -------------------------
@@ -395,13 +396,32 @@ class WorkerCore:
 
     def _full_locked(self, candidate: bool = False) -> str | None:
         """Why a new robot cannot take a slot (or, ``candidate``, wait for one) now; None if
-        it can."""
+        it can. A full table makes room first by forgetting the robot silent longest, if it
+        has been silent for ``takeover_after`` seconds: ids that sent a frame or two and went
+        (a flood of them, or cameras renamed) cannot lock a new camera out for
+        ``idle_timeout``."""
         proven = sum(s.proven for s in self._robots.values())
-        if proven >= self.max_robots:
+        if proven >= self.max_robots and not self._make_room_locked():
             return f"already tracking {self.max_robots} robots"
         if candidate and len(self._robots) - proven >= self.max_robots:
             return f"already {self.max_robots} new robots waiting for a first valid frame"
         return None
+
+    def _make_room_locked(self) -> bool:
+        """Forget the proven robot silent longest if it has been silent for
+        ``takeover_after`` seconds (and has no frame waiting or in process); whether one was."""
+        now = self.clock()
+        quiet = [(s.last_seen, r) for r, s in self._robots.items()
+                 if s.proven and not s.busy and s.pending is None
+                 and now - s.last_seen >= self.takeover_after]
+        if not quiet:
+            return False
+        robot = min(quiet)[1]
+        del self._robots[robot]
+        self._stats.evicted += 1
+        log.info("robot %s: forgotten after %.0f s without frames to make room for a new one",
+                 robot, now - min(quiet)[0])
+        return True
 
     def _stream_locked(self, robot: str, state: _Robot, frame: Frame,
                        received: float) -> _Stream | None:

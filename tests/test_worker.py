@@ -273,6 +273,20 @@ def test_robot_limit_rejects_new_robots(looming):
     assert core.stats()["invalid"] == {"too-many-robots": 1}
 
 
+def test_a_full_table_makes_room_by_forgetting_a_robot_silent_for_a_while(looming):
+    clock = FakeClock()
+    core = WorkerCore(max_robots=2, clock=clock, takeover_after=3.0)
+    for robot in ("a", "b"):
+        feed(core, robot, looming.frames[0], 0)
+    clock.now += 1.0
+    assert core.offer("asnn/c/frame", payload(looming.frames[0], 0)) is None  # a, b still live
+    clock.now += 2.5
+    feed(core, "b", looming.frames[1], 1)  # b goes on; a has been silent for 3.5 s
+    assert feed(core, "c", looming.frames[0], 0) is not None
+    assert core.robots() == ["b", "c"] and core.stats()["evicted"] == 1
+    assert core.stats()["invalid"] == {"too-many-robots": 1}
+
+
 def test_unknown_model_or_preset_fails_at_start():
     with pytest.raises(ValueError):
         WorkerCore(model="nope")
