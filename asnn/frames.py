@@ -66,8 +66,8 @@ def check_frame(frame: np.ndarray, min_side: int,
     h, w = frame.shape[:2]
     if stream_shape is not None and (h, w) != tuple(stream_shape):
         sh, sw = stream_shape
-        raise FrameError(f"frame {w}x{h} differs from the stream's {sw}x{sh};"
-                         " reset() the model or start a new one")
+        raise FrameError(f"frame {w}x{h} differs from the stream's {sw}x{sh} (one size a "
+                         "stream: for another, reset() the model or start a new one)")
     if h < min_side or w < min_side:
         raise FrameError(f"frame {w}x{h} is smaller than the model's {min_side}x{min_side} kernels")
     if frame.dtype == np.uint8:

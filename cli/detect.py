@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import os
 import sys
 from collections import deque
 from contextlib import ExitStack, contextmanager
@@ -17,7 +18,7 @@ from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import parse_detector
 from asnn.io.pipeline import WriteBehind, read_ahead
-from asnn.io.sources import SourceError, open_source
+from asnn.io.sources import SourceError, open_source, split_topic
 from asnn.io.video import cut_short
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
@@ -139,17 +140,40 @@ def _output_problem(path: str | None, flag: str) -> str | None:
     return None
 
 
+def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
+    """Why the outputs would overwrite the input or each other, or None: an output that is the
+    input file (or lies in the input's bag folder) would be truncated before a frame is read."""
+    source = Path(split_topic(video)[0]).resolve()
+    seen: dict[Path, str] = {}
+    for flag, path in outputs:
+        if not path or path == "-":
+            continue
+        target = Path(path).resolve()
+        if target.exists() and source.exists() and os.path.samefile(target, source):
+            target = source  # a hard link to it
+        if target == source or (source.is_dir() and source in target.parents):
+            return (f"{flag} {path}: is the input {video}" if target == source else
+                    f"{flag} {path}: inside the input bag's folder {video}")
+        if target in seen:
+            return f"{flag} and {seen[target]} both write {path}"
+        seen[target] = flag
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode ahead and write behind on threads of their own while the model steps on this one
     (:mod:`asnn.io.pipeline`), or, when the model has threads of its own for every core,
     decode and write between its steps (:meth:`asnn.model.ASNN.stream`): the output is that of
     one loop, in frame order."""
-    for flag, path in (("--jsonl", args.jsonl), ("--tracks", args.tracks),
-                       ("--annotate", args.annotate), ("--plot", args.plot),
-                       ("--mcap", args.mcap)):
+    outputs = [("--jsonl", args.jsonl), ("--tracks", args.tracks), ("--annotate", args.annotate),
+               ("--plot", args.plot), ("--mcap", args.mcap)]
+    for flag, path in outputs:
         problem = _output_problem(path, flag)
         if problem is not None:  # before decoding a frame, not after the whole run
             return _fail(problem)
+    problem = _overwrites(outputs, args.video)
+    if problem is not None:
+        return _fail(problem)
     options = {}
     model_threads = 1
     params = parse_detector(f"asnn:{args.preset}").params
@@ -252,7 +276,8 @@ def run(args: argparse.Namespace) -> int:
                 output.put((index, t, frame, response))
                 index += 1
         except FrameError as exc:  # e.g. a bag whose camera changed its resolution
-            failure = f"{args.video}: frame {index}: {exc}"
+            failure = f"{args.video}: frame {index}: {exc}; results written for the {index} " \
+                      "frames before"
         except SourceError as exc:  # a cut or corrupt bag: what was read is written
             failure = f"{exc} (results written for the {index} frames before)"
         except _OutputError as exc:

@@ -213,6 +213,23 @@ def test_an_output_that_cannot_be_written_is_a_one_line_error(looming_video, tmp
     assert says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+def test_an_output_over_the_input_or_another_output_is_refused_before_it_is_opened(
+        looming_video, tmp_path, capsys):
+    video, _ = looming_video
+    copy = tmp_path / "clip.avi"
+    copy.write_bytes(Path(video).read_bytes())
+    before = copy.read_bytes()
+    link = tmp_path / "link.avi"
+    os.link(copy, link)
+    for args, says in [(["--annotate", str(copy)], f"--annotate {copy}: is the input"),
+                       (["--jsonl", str(link)], "is the input"),  # the same file by another name
+                       (["--jsonl", str(tmp_path / "a"), "--tracks", str(tmp_path / "a")],
+                        "--tracks and --jsonl both write")]:
+        assert main(["detect", str(copy), *args]) == 2
+        assert says in capsys.readouterr().err
+    assert copy.read_bytes() == before  # the recording is intact
+
+
 def test_a_clip_cut_partway_is_run_as_far_as_it_decodes_with_a_note(tmp_path, capsys):
     whole = tmp_path / "whole.avi"
     write_video(make_scene("looming", size=(64, 64), frames=40).frames, whole)

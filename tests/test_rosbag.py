@@ -46,12 +46,13 @@ def raw_message(image: np.ndarray, encoding: str, index: int = 0, *, pad: int = 
 
 
 def write_messages(path, topics: dict[str, tuple[str, list[dict]]], fps: float = 20.0,
-                   chunk_size: int = 1024 * 1024):
-    """A bag with the third-party writer: {topic: (schema name, messages)}."""
+                   chunk_size: int = 1024 * 1024, **options):
+    """A bag with the third-party writer: {topic: (schema name, messages)}; ``options`` go to
+    the writer (``compression``)."""
     definitions = {rosbag.IMAGE: rosbag.IMAGE_MSGDEF,
                    rosbag.COMPRESSED_IMAGE: rosbag.COMPRESSED_IMAGE_MSGDEF,
                    "std_msgs/msg/String": "string data"}
-    with open(path, "wb") as fh, Ros2Writer(fh, chunk_size=chunk_size) as writer:
+    with open(path, "wb") as fh, Ros2Writer(fh, chunk_size=chunk_size, **options) as writer:
         schemas = {name: writer.register_msgdef(name, text) for name, text in definitions.items()}
         for topic, (schema, messages) in topics.items():
             for index, message in enumerate(messages):
@@ -281,7 +282,41 @@ def test_a_split_rosbag2_directory_is_read_part_after_part_in_numeric_order(tmp_
     assert detect_records(directory) == detect_records(whole)
 
 
+def test_a_rosbag2_directory_is_the_files_its_metadata_lists(tmp_path, looming):
+    """A copy, a recovered file or results written beside the bag are not part of it; a split
+    bag's camera may start in a later part."""
+    directory = tmp_path / "run"
+    directory.mkdir()
+    (directory / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information:\n  storage_identifier: mcap\n"
+        "  relative_file_paths:\n    - run_0.mcap\n    - run_1.mcap\n")
+    status = [{"data": "up"}]
+    write_messages(directory / "run_0.mcap", {"/status": ("std_msgs/msg/String", status)})
+    rosbag.write_bag(looming.frames[:10], directory / "run_1.mcap")  # the camera started late
+    rosbag.write_bag(looming.frames, directory / "run_0 (copy).mcap")
+    assert len(list(open_source(str(directory)).frames())) == 10
+    assert rosbag.open_bag(directory).frame_count == 10
+    (directory / "run_1.mcap").unlink()
+    assert "metadata.yaml lists run_1.mcap, which is not there" in detect_fails(directory)
+    (directory / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information:\n  storage_identifier: sqlite3\n")
+    assert "only MCAP bags are read" in detect_fails(directory)
+
+
 # --------------------------------------------------------------------------- bad bags
+
+
+def test_a_chunk_overwritten_in_place_is_found_by_its_crc(tmp_path, looming):
+    from mcap.writer import CompressionType
+
+    messages = [raw_message(f, "mono8", i) for i, f in enumerate(looming.frames)]
+    bag = write_messages(tmp_path / "plain.mcap", {"/c": (rosbag.IMAGE, messages)},
+                         compression=CompressionType.NONE)
+    data = bytearray(bag.read_bytes())
+    middle = len(data) // 3
+    data[middle:middle + 200] = bytes(b ^ 0x5A for b in data[middle:middle + 200])  # pixels
+    bag.write_bytes(bytes(data))
+    assert "does not match its CRC" in detect_fails(bag)  # not a run on damaged pixels
 
 def detect_fails(*args) -> str:
     proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", *map(str, args)],
@@ -507,8 +542,9 @@ def test_eval_reads_bags_in_a_labelled_folder_and_a_label_names_the_topic(tmp_pa
     assert len((out / "results" / "asnn" / "two.jsonl").read_text().splitlines()) == len(
         looming.frames)
     (clips / "labels.json").write_text(json.dumps([label]))  # two image topics, none named
-    results = evaluate_clips(clips, tmp_path / "out2", detectors=["asnn"], plots=False)
-    assert len(results["errors"]) == 1 and "/front/image" in results["errors"][0]
+    with pytest.raises(ValueError, match="/front/image.*the entry's topic names it"):
+        evaluate_clips(clips, tmp_path / "out2", detectors=["asnn"], plots=False)
+    assert not (tmp_path / "out2").exists()  # refused before anything ran
 
 
 def test_camera_skips_and_counts_bad_messages_and_a_cut_without_stopping(tmp_path, looming):

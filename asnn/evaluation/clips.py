@@ -36,7 +36,10 @@ def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
         try:
             source = open_source(str(Path(clips_dir) / lab["file"]), topic=lab.get("topic"))
         except SourceError as exc:
-            problems.append(str(exc))
+            # the command line's way to choose a topic is not a label's
+            hint = "; in labels.json, the entry's topic names it" if (
+                exc.reason == "several-topics") else ""
+            problems.append(str(exc) + hint)
             counts.append(0)
         else:
             counts.append(int(source.frame_count or 0))

@@ -27,10 +27,11 @@ from .images import MAX_SIDE, ImageError, decode_encoded, to_uint8
 from .sources import SourceError
 
 try:
+    import yaml
     from mcap.exceptions import McapError
     from mcap.reader import SeekingReader
     from mcap.records import Channel, Chunk, Message, Schema
-    from mcap.stream_reader import StreamReader, breakup_chunk
+    from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
     from mcap_ros2.decoder import DecoderFactory
     from mcap_ros2.writer import Writer as Ros2Writer
 except ImportError as exc:  # the optional extra is missing: say which one, in one line
@@ -216,7 +217,9 @@ class _BoundedFile:
 
 
 def _chunk_records(chunk: Chunk) -> list:
-    """The records of a chunk, its decompressed size checked before it is decompressed."""
+    """The records of a chunk, its decompressed size checked before it is decompressed and its
+    CRC after (where the writer stored one): a chunk overwritten in place may still decompress,
+    or be stored uncompressed, and its frames would be read as if nothing had happened."""
     try:
         declared = [chunk.uncompressed_size]
         if chunk.compression == "zstd":
@@ -232,9 +235,11 @@ def _chunk_records(chunk: Chunk) -> list:
         if max(declared) > MAX_RECORD_BYTES:
             raise McapError(f"a chunk of {max(declared)} bytes uncompressed, more than "
                             f"{MAX_RECORD_BYTES}")
-        return breakup_chunk(chunk)
+        return breakup_chunk(chunk, validate_crc=True)
     except McapError:
         raise
+    except CRCValidationError:
+        raise McapError("a chunk's data does not match its CRC: the file was damaged") from None
     except Exception as exc:  # the decompressors' own error types
         raise McapError(f"a chunk does not decompress ({type(exc).__name__}: {exc})") from None
 
@@ -358,6 +363,22 @@ def bag_topics(path: str | Path) -> dict[str, TopicInfo]:
                 for c in channels.values()}
 
 
+def _merged_topics(parts: Sequence[Path]) -> dict[str, TopicInfo]:
+    """The topics of a bag's parts together: a topic's type from the first part that names
+    one, its count the sum (None where a part does not say)."""
+    merged: dict[str, TopicInfo] = {}
+    for part in parts:
+        for name, info in bag_topics(part).items():
+            seen = merged.get(name)
+            if seen is None:
+                merged[name] = info
+                continue
+            count = (None if seen.count is None or info.count is None
+                     else seen.count + info.count)
+            merged[name] = TopicInfo(name, seen.schema or info.schema, count)
+    return merged
+
+
 def _schema_name(schema: Schema | None) -> str:
     return schema.name if schema is not None else ""
 
@@ -385,7 +406,7 @@ def choose_topic(path: Path, topics: dict[str, TopicInfo], topic: str | None) ->
                               f"topics: {_topic_list(topics)}", "no-topic")
         if len(images) > 1:
             raise SourceError(f"{path}: several image topics, choose one with --topic (or "
-                              f"FILE.mcap#TOPIC): {', '.join(sorted(images))}", "no-topic")
+                              f"FILE.mcap#TOPIC): {', '.join(sorted(images))}", "several-topics")
         topic = next(iter(images))
     info = topics.get(topic)
     if info is None:
@@ -430,10 +451,11 @@ class BagClip:
                  parts: Sequence[str | Path] | None = None):
         self.path = Path(path)
         self.parts = [Path(p) for p in parts] if parts else [self.path]
-        info = choose_topic(self.parts[0], bag_topics(self.parts[0]), topic)
+        # a split bag's topics are those of all its parts: a camera that started late has its
+        # frames in a later part only
+        info = choose_topic(self.path, _merged_topics(self.parts), topic)
         self.topic, self.schema = info.name, info.schema
-        self.frame_count = (info.count or 0) + sum(
-            getattr(bag_topics(part).get(self.topic), "count", 0) or 0 for part in self.parts[1:])
+        self.frame_count = info.count or 0
         self.clock = "header"
         self.start_ns = 0
         first, stamps, errors = None, [], []
@@ -588,13 +610,53 @@ def open_bag(path: str | Path, topic: str | None = None) -> BagClip:
     """
     path = Path(path)
     if path.is_dir():
-        files = sorted((p for p in path.iterdir() if p.suffix == ".mcap"), key=_part_order)
-        if not files:
-            raise SourceError(f"{path}: a bag directory without .mcap files", "missing")
+        files = _bag_files(path)
         if len(files) == 1:
             return BagClip(files[0], topic)
         return BagClip(path, topic, parts=files)
     return BagClip(path, topic)
+
+
+def _bag_files(folder: Path) -> list[Path]:
+    """The files of a rosbag2 directory, as its ``metadata.yaml`` lists them
+    (``relative_file_paths``): other files beside them (a copy, a recovered file, results
+    written there) are not part of the bag. A metadata file that lists none: every ``.mcap``
+    in the folder, in the order of their numbers.
+
+    Raises
+    ------
+    SourceError
+        If the metadata cannot be read, names another storage than MCAP or a file that is
+        not there, or the folder holds no ``.mcap``.
+    """
+    meta = folder / "metadata.yaml"
+    try:
+        info = (yaml.safe_load(meta.read_text(encoding="utf-8")) or {}).get(
+            "rosbag2_bagfile_information") or {}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, AttributeError) as exc:
+        raise SourceError(f"{meta}: not a rosbag2 metadata file ({type(exc).__name__})",
+                          "not-a-bag") from None
+    storage = str(info.get("storage_identifier") or "mcap")
+    if storage != "mcap":
+        raise SourceError(f"{folder}: a bag stored in {storage}; only MCAP bags are read "
+                          "(ros2 bag convert makes one)", "not-a-bag")
+    listed = info.get("relative_file_paths") or []
+    if not isinstance(listed, list) or not all(isinstance(p, str) for p in listed):
+        raise SourceError(f"{meta}: relative_file_paths is not a list of file names",
+                          "not-a-bag")
+    if listed:
+        # some rosbag2 versions wrote the bag's own folder name before each file's
+        files = [folder / name if (folder / name).is_file() else folder / Path(name).name
+                 for name in listed]
+        gone = [str(p.name) for p in files if not p.is_file()]
+        if gone:
+            raise SourceError(f"{folder}: metadata.yaml lists {', '.join(gone)}, which "
+                              f"{'is' if len(gone) == 1 else 'are'} not there", "missing")
+        return files
+    files = sorted((p for p in folder.iterdir() if p.suffix == ".mcap"), key=_part_order)
+    if not files:
+        raise SourceError(f"{folder}: a bag directory without .mcap files", "missing")
+    return files
 
 
 def _part_order(path: Path) -> tuple:
