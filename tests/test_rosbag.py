@@ -539,8 +539,19 @@ def test_eval_reads_bags_in_a_labelled_folder_and_a_label_names_the_topic(tmp_pa
     results = json.loads((out / "results.json").read_text())
     assert not results["errors"]
     assert results["detectors"]["asnn"]["clips"][0]["outcome"] == "hit"
-    assert len((out / "results" / "asnn" / "two.jsonl").read_text().splitlines()) == len(
-        looming.frames)
+    assert len((out / "results" / "asnn" / "two.rear_image.jsonl").read_text().splitlines()) \
+        == len(looming.frames)
+    # two cameras of one bag are two clips: their own results files, rows and outcomes
+    quiet = {**label, "topic": "/front/image", "collision": False, "onset_frame": None,
+             "contact_frame": None}
+    (clips / "labels.json").write_text(json.dumps([{**label, "topic": "/rear/image"}, quiet]))
+    results = evaluate_clips(clips, tmp_path / "both", detectors=["asnn"], plots=False,
+                             early_tolerance_s=0.0)
+    scores = results["detectors"]["asnn"]["clips"]
+    assert [(c["clip"], c["outcome"]) for c in scores] == [("two.mcap#/rear/image", "hit"),
+                                                          ("two.mcap#/front/image", "false")]
+    assert sorted(p.name for p in (tmp_path / "both" / "results" / "asnn").iterdir()) == [
+        "two.front_image.jsonl", "two.rear_image.jsonl"]
     (clips / "labels.json").write_text(json.dumps([label]))  # two image topics, none named
     with pytest.raises(ValueError, match="/front/image.*the entry's topic names it"):
         evaluate_clips(clips, tmp_path / "out2", detectors=["asnn"], plots=False)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
-from .labels import load_labels, mismatches
+from .labels import load_labels, mismatches, result_name
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .pool import run_tasks
 from .progress import Silent
@@ -121,9 +121,8 @@ def _clips_report(results: Mapping) -> str:
               "distance from the nearest target to the labelled centre at the first warning.", "",
               "| clip | onset | contact | " + " | ".join(names) + " |",
               "| --- | --- | --- | " + " | ".join("---" for _ in names) + " |"]
-    labels = {lab["file"]: lab for lab in results["labels"]}
     for index, clip in enumerate(results["detectors"][names[0]]["clips"]):
-        lab = labels.get(clip["clip"], {})
+        lab = results["labels"][index]  # the scores come in the labels' order
         cells = []
         for m in names:
             cells.append(outcome_cell(results["detectors"][m]["clips"][index]))
@@ -197,7 +196,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     progress = progress or Silent()
 
     tasks = [(str(clips_dir / lab["file"]), spec,
-              str(out_dir / "results" / spec.slug / f"{Path(lab['file']).stem}.jsonl"),
+              str(out_dir / "results" / spec.slug / f"{result_name(lab)}.jsonl"),
               lab.get("topic"), perturbation)
              for spec in specs for lab in labels]
     for task in tasks:  # stale results of an earlier run must not be scored
@@ -256,7 +255,7 @@ def _plot_clips(out_dir: Path, labels: Sequence[Mapping], specs: Sequence[Detect
     for index, lab in enumerate(labels):
         series = {}
         for spec in specs:
-            path = scoring.results_path(out_dir / "results" / spec.slug, lab["file"])
+            path = scoring.results_path(out_dir / "results" / spec.slug, lab)
             if path is None:
                 continue
             records = scoring.load_records(path)
@@ -266,7 +265,7 @@ def _plot_clips(out_dir: Path, labels: Sequence[Mapping], specs: Sequence[Detect
             continue
         window = results["detectors"][specs[0].name]["clips"][index].get("window")
         figures.plot_clip_responses(
-            out_dir / "plots" / f"{Path(lab['file']).stem}.png",
+            out_dir / "plots" / f"{result_name(lab)}.png",
             {"name": lab["file"], "onset": lab.get("onset_frame"),
              "contact": lab.get("contact_frame"), "window": window, "warmup": warmup,
              "models": series})

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import difflib
 import json
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -28,7 +29,7 @@ from pydantic import (BaseModel, ConfigDict, Field, StrictBool, ValidationError,
                       field_validator, model_validator)
 
 __all__ = ["ClipLabel", "check_labels", "label_problem", "load_labels", "mismatches",
-           "read_entries", "unlabelled"]
+           "read_entries", "result_name", "unlabelled"]
 
 
 class ClipLabel(BaseModel):
@@ -125,9 +126,9 @@ def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict
         problem = label_problem(label)
         if problem is not None:
             raise ValueError(f"{where}: {problem}")
-        # each clip's results are <stem>.jsonl in a detector's folder: two stems alike would
-        # share one file, and one clip's results would be scored for both
-        stem = Path(label["file"]).stem
+        # each clip's results are <result_name>.jsonl in a detector's folder: two names alike
+        # would share one file, and one clip's results would be scored for both
+        stem = result_name(label)
         if len(f"{stem}.jsonl".encode()) > MAX_NAME_BYTES:
             raise ValueError(f"{where}: its name is too long for its results file "
                              f"({stem[:20]}....jsonl: at most {MAX_NAME_BYTES} bytes); "
@@ -135,9 +136,20 @@ def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict
         if stem in names:
             raise ValueError(f"{where}: its results would overwrite those of entry {names[stem]} "
                              f"({labels[names[stem]]['file']}): clip names must differ by more "
-                             "than their folder and extension")
+                             "than their folder and extension (a bag's cameras by their topic)")
         names[stem] = index
     return [dict(label) for label in labels]
+
+
+def result_name(label: Mapping) -> str:
+    """The name of a clip's results and plot files: its file's stem, and for a bag's camera
+    its topic too (``drive.front_image_raw`` for ``drive.mcap`` and ``/front/image_raw``), so
+    that two cameras of one bag are two clips."""
+    stem = Path(str(label["file"])).stem
+    topic = label.get("topic")
+    if not topic:
+        return stem
+    return f"{stem}.{re.sub(r'[^A-Za-z0-9_-]+', '_', str(topic)).strip('_')}"
 
 
 def label_problem(label: object) -> str | None:

@@ -59,7 +59,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from .labels import check_labels
+from .labels import check_labels, result_name
 
 __all__ = [
     "OUTCOMES",
@@ -76,6 +76,7 @@ __all__ = [
     "paired_comparison",
     "load_records",
     "results_path",
+    "clip_name",
     "score_directory",
 ]
 
@@ -258,7 +259,7 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
         contact (labels read from a file are checked in full before: :mod:`.labels`; this
         check is the one a label built in code needs for a meaningful window).
     """
-    clip = str(label.get("file", "?"))
+    clip = clip_name(label)
     collision = bool(label.get("collision"))
     first, count = first_warning(records, warmup)
     fps = float(label.get("fps") or 0.0)
@@ -304,7 +305,7 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
 
 def missing_clip(label: Mapping) -> ClipScore:
     """The score of a clip the detector has no results for (outcome ``missing``)."""
-    return ClipScore(clip=str(label.get("file", "?")), collision=bool(label.get("collision")),
+    return ClipScore(clip=clip_name(label), collision=bool(label.get("collision")),
                      outcome="missing")
 
 
@@ -494,9 +495,18 @@ def load_records(path: str | Path) -> list[dict]:
     return records
 
 
-def results_path(results_dir: str | Path, clip: str) -> Path | None:
-    """The results file of a clip in a directory: ``<stem>.jsonl`` or ``<stem>.json``, if any."""
-    stem = Path(clip).stem
+def clip_name(label: Mapping) -> str:
+    """How scores and reports name a clip: its label's ``file``, and for a bag's camera
+    ``file#topic`` (as ``asnn detect`` takes it)."""
+    name = str(label.get("file", "?"))
+    return f"{name}#{label['topic']}" if label.get("topic") else name
+
+
+def results_path(results_dir: str | Path, clip: str | Mapping) -> Path | None:
+    """The results file of a clip in a directory, if any: ``<name>.jsonl`` or ``<name>.json``,
+    the name its label's (:func:`~asnn.evaluation.labels.result_name`; for a file name alone,
+    its stem)."""
+    stem = result_name(clip) if isinstance(clip, Mapping) else Path(clip).stem
     for suffix in (".jsonl", ".json"):
         candidate = Path(results_dir) / f"{stem}{suffix}"
         if candidate.is_file():
@@ -518,7 +528,7 @@ def score_directory(results_dir: str | Path, labels: Sequence[Mapping], **option
     check_labels(labels)
     scores = []
     for label in labels:
-        path = results_path(results_dir, str(label["file"]))
+        path = results_path(results_dir, label)
         scores.append(missing_clip(label) if path is None
                       else score_clip(load_records(path), label, **options))
     return scores
