@@ -83,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
                     if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES)
     if not entries and not videos:
         print(f"asnn label: {folder} holds no video ({', '.join(VIDEO_SUFFIXES)}; subfolders "
-              "are not searched: enter their clips by hand, as sub/clip.mp4)")
+              "are not searched: enter their clips by hand, as sub/clip.mp4, and bags with "
+              "their topic)")
         return 1
     added = []
     for video in (p for p in videos if p.resolve() not in labelled):

@@ -301,6 +301,8 @@ def test_a_rosbag2_directory_is_the_files_its_metadata_lists(tmp_path, looming):
     (directory / "metadata.yaml").write_text(
         "rosbag2_bagfile_information:\n  storage_identifier: sqlite3\n")
     assert "only MCAP bags are read" in detect_fails(directory)
+    (directory / "metadata.yaml").unlink()  # a recording killed before it wrote its metadata
+    assert "without the metadata.yaml of a rosbag2 directory" in detect_fails(directory)
 
 
 # --------------------------------------------------------------------------- bad bags

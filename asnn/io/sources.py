@@ -143,6 +143,10 @@ def open_source(spec: str, *, topic: str | None = None,
     path, suffix_topic = split_topic(spec)
     if is_bag(path):
         return _open_bag(path, topic or suffix_topic, on_error)
+    if Path(path).is_dir() and any(Path(path).glob("*.mcap")):
+        raise SourceError(f"{path}: a folder of .mcap files without the metadata.yaml of a "
+                          "rosbag2 directory: give one .mcap file, or rebuild the metadata "
+                          "(ros2 bag reindex)", "not-a-bag")
     if topic is not None:
         raise SourceError(f"{spec}: a topic applies to ROS 2 bags (.mcap) only", "no-topic")
     if spec.startswith(SYNTHETIC):
