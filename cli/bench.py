@@ -20,9 +20,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=count, default=None,
                    help="timed frames per run (default 40; --detect: frames of the clip, 1200)")
     p.add_argument("--preset", action="append", metavar="NAME",
-                   help="ASNN preset to time (repeatable; default: all)")
+                   help="ASNN preset to time (repeatable; default: all); the default preset is "
+                        "added for the straightforward form's ratio (unless "
+                        "--no-straightforward), and with it reference32, its cost's reference")
     p.add_argument("--model", action="append", choices=("asnn", "lgmd1", "lgmd2"),
-                   help="model to time (repeatable; default: all)")
+                   help="model to time (repeatable; default: all, the LGMDs too)")
     p.add_argument("--no-straightforward", action="store_true",
                    help="skip the straightforward float64 form")
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
