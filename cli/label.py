@@ -2,9 +2,9 @@
 
 ``asnn label CLIPS_DIR [--labels FILE]`` decodes every video in the folder (not its subfolders:
 their clips are entered by hand, as ``sub/clip.mp4``, and then checked like the others) as
-``asnn eval`` will, adds an entry for each video without one (its ``frames``, ``fps`` and size filled in, the
-rest to fill in by hand: :func:`asnn.evaluation.labels.unlabelled`), and lists what is left to
-do: entries to finish or mend, clips that decode to other frames or another frame rate than
+``asnn eval`` will, adds an entry for each video without one (its ``frames``, ``fps`` and size
+filled in, the rest to fill in by hand: :func:`asnn.evaluation.labels.unlabelled`), and lists
+what is left to do: entries to finish or mend, clips that decode to other frames or another frame rate than
 their labels say, labels whose clip is not there. Exit status 0 when every entry is ready for
 ``asnn eval``, 1 when something is listed, 2 for unusable input.
 """
@@ -33,8 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "label", help="start or check the labels.json of a folder of clips",
         description="Decode every video in CLIPS_DIR (not its subfolders) as asnn eval will, "
-                    "add a labels.json entry for each video without one (frames, fps and size filled in; collision, "
-                    "onset_frame, contact_frame and center left to fill in by hand), and list "
+                    "add a labels.json entry for each video without one (frames, fps and size "
+                    "filled in; collision, onset_frame, contact_frame and center left to fill "
+                    "in by hand), and list "
                     "what is left to do. Exit status 0 when every entry is ready for asnn eval, "
                     "1 when something is listed.")
     p.add_argument("clips_dir", metavar="CLIPS_DIR", help="the folder of the clips")

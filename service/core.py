@@ -67,8 +67,8 @@ soon as a frame of it fails. So ids that send only undecodable frames cannot loc
 
 Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``,
 the labels of :data:`service.messages.REASONS` plus ``bad-key``, ``frame-rejected``,
-``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING, rate-limited: the first
-rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
+``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING, rate-limited:
+the first rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
 with the count of those not shown.
 
 Ownership: with ``owns`` (a predicate on robot ids, see :mod:`service.ownership` and

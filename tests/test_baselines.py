@@ -68,7 +68,8 @@ def test_parameters_are_typed_and_overridable():
     with pytest.raises(ValidationError):
         LGMD2Params(persistence=1.5)
     for params, changes in ((LGMD1Params, {"t_s": math.nan}), (LGMD2Params, {"k_sp": math.nan}),
-                            (LGMD2Params, {"tau_sfa": math.inf}), (LGMD1Params, {"c_de": -math.inf})):
+                            (LGMD2Params, {"tau_sfa": math.inf}),
+                            (LGMD1Params, {"c_de": -math.inf})):
         with pytest.raises(ValidationError, match="must be a finite number"):
             params(**changes)  # a model that would never warn, or crash in its spike count
     assert LGMD1Params(t_ffi=math.inf).t_ffi == math.inf  # infinity switches the FFI off
