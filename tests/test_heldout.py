@@ -225,6 +225,9 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["eval", str(tmp_path), "--held-out", "--cases", "nearmiss-disk-dark-right",
                  "--out", str(out)]) == 0
+    err = capsys.readouterr().err  # off a terminal: a line per traced clip or case
+    for name in (*(lab["file"] for lab in labels), "nearmiss-disk-dark-right"):
+        assert f"eval --held-out: {name} (" in err
     results = json.loads((out / "held_out.json").read_text())
     assert results["in_sample"]["summary"]["hit"] == 1
     assert results["in_sample"]["summary"]["false_alarms"] == 0
