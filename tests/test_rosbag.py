@@ -249,6 +249,11 @@ def test_t_is_the_header_stamp_relative_to_the_first_frame(tmp_path, looming):
     source = open_source(str(bag))
     assert source.timed and source.start_ns == START_NS and source.frame_id == "cam"
     assert source.frame_count == 6 and source.fps == pytest.approx(10.0)  # median step 0.1 s
+    # a driver that stops stamping partway: those frames take their log time, not 1970
+    for m in messages[3:]:
+        m["header"]["stamp"] = {"sec": 0, "nanosec": 0}
+    bag = write_messages(tmp_path / "unstamped.mcap", {"/c": (rosbag.IMAGE, messages)})
+    assert [r["t"] for r in detect_records(bag)] == [0.0, 0.1, 0.25, 0.15, 0.2, 0.25]
 
 
 def test_a_rosbag2_directory_and_asnn_scene_bags_open(tmp_path, looming):

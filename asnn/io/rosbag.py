@@ -437,8 +437,8 @@ class BagClip:
     start_ns : int
         Time of the first frame, nanoseconds since the epoch.
     clock : {'header', 'log'}
-        Where frame times come from: ``header.stamp``, or the recorder's log time when the
-        first frame's stamp is zero.
+        Where frame times come from: ``header.stamp`` (a frame whose stamp is zero: its log
+        time), or the recorder's log time when the first frame's stamp is zero.
     fps : float
         Nominal frame rate: the median rate of the first frames (20 when there is one).
     width, height : int
@@ -482,7 +482,10 @@ class BagClip:
         self.fps = float(1e9 / np.median(steps)) if steps.size else 20.0
 
     def _time_ns(self, message, log_time: int) -> int:
-        return _stamp_ns(message) if self.clock == "header" else int(log_time)
+        # a stamp left unset (zero) partway through a header-clocked bag is the recorder's log
+        # time instead, not a jump back to 1970
+        stamp = _stamp_ns(message) if self.clock == "header" else 0
+        return stamp or int(log_time)
 
     def _messages(self, on_error: Callable[[str, str], None] | None) -> Iterator:
         """(decoded message, log time) of the topic, part after part; a corrupt message or a
