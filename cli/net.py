@@ -104,8 +104,9 @@ def format_status(status: dict) -> str:
     Robots on whose key a second publisher was seen are listed under ``contested`` with the
     number of intrusions (docs/operations.md); the frames and bytes Zenoh delivered to the
     worker follow ``frames in`` (those of the discovery scan in brackets); robots whose frames
-    are detected at fewer than ``SLOW_FPS`` a second are listed under ``slow``; fields an older
-    worker does not report are left out.
+    are detected at fewer than ``SLOW_FPS`` a second are listed under ``slow``, and those with
+    a frame refused in the last minute under ``refused lately``, with the latest reason; fields
+    an older worker does not report are left out.
     """
     from asnn.params import SLOW_FPS
 
@@ -121,6 +122,10 @@ def format_status(status: dict) -> str:
                           for r, s in robots.items() if s.get("contested")) or "none"
     slow = ", ".join(f"{r} ({s['fps']:g} fps)" for r, s in robots.items()
                      if s.get("fps") is not None and s["fps"] < SLOW_FPS)
+    # robots refused in the last minute, the latest first: why a camera gets no response
+    refused = ", ".join(f"{r} ({e['reason']} x{e['count']}: {e['detail'][:60]})"
+                        for r, e in reversed(status.get("refused", {}).items())
+                        if e.get("seconds_ago", 0) <= 60)
     return (f"worker {status['worker']}: {status['model']}/{status['preset'] or '-'}, up "
             f"{status['uptime_s']:.0f} s, robots {', '.join(tracked) or 'none'}"
             f" (+{stats.get('candidates', 0)} waiting for a valid frame); "
@@ -128,6 +133,7 @@ def format_status(status: dict) -> str:
             f"{stats['warnings']}, foreign {stats['foreign']}; {received}invalid: {invalid}; "
             f"second publishers: {stats.get('intrusions', 0)}, contested: {contested}; "
             + (f"slow: {slow}; " if slow else "")
+            + (f"refused lately: {refused}; " if refused else "")
             + f"live workers {', '.join(status.get('workers', []))}")
 
 

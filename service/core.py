@@ -100,7 +100,7 @@ import socket
 import statistics
 import threading
 import time
-from collections import Counter, deque
+from collections import Counter, OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -128,6 +128,8 @@ RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-
 WARMUP_FRAMES = 30
 # streams in a row that last one frame before the worker logs that a robot's model cannot warn
 RESTARTS_WARNED = 10
+# robot ids whose latest refusal the status keeps (the most recently refused)
+MAX_REFUSED = 256
 # A robot's rate is the median over this many gaps between the stamps of its frames processed;
 # below asnn.params.SLOW_FPS the worker logs it once per stream
 RATE_FRAMES = 5
@@ -326,6 +328,9 @@ class WorkerCore:
         self.warmup_frames = int(warmup_frames)
         self.started = clock()
         self._rejections = RateLimitedLog(log, log_interval, clock)
+        # the latest refusal of each of the last MAX_REFUSED robot ids refused, for the status:
+        # a camera none of whose frames is taken never appears among the robots
+        self._refused: OrderedDict[str, dict] = OrderedDict()
         self._robots: dict[str, _Robot] = {}
         self._stats = _Stats()
         self._arrivals = 0  # frames taken in, for the order of the queue
@@ -477,6 +482,17 @@ class WorkerCore:
     def _reject_locked(self, reason: str, detail: str, key: str) -> None:
         self._stats.invalid[reason] += 1
         n = self._stats.invalid[reason]
+        try:
+            robot = keys.parse_key(key, self.prefix)[0]
+        except keys.KeySchemeError:
+            robot = None  # not a robot's key: counted, and logged, only
+        if robot is not None:
+            last = self._refused.pop(robot, None)
+            self._refused[robot] = {"reason": reason, "detail": detail[:200],
+                                    "count": (last["count"] if last else 0) + 1,
+                                    "at": self.clock()}
+            if len(self._refused) > MAX_REFUSED:
+                self._refused.popitem(last=False)
         self._rejections.warning(reason, "invalid frame on %s (%s, #%d): %s", str(key)[:200],
                                  reason, n, detail[:300])
 
@@ -706,6 +722,10 @@ class WorkerCore:
                           "fps": s.fps}
                       for r, s in sorted(self._robots.items())}
             backlog = sum((s.pending is not None) + s.busy for s in self._robots.values())
+            now = self.clock()
+            refused = {r: {"reason": e["reason"], "detail": e["detail"], "count": e["count"],
+                           "seconds_ago": round(now - e["at"], 1)}
+                       for r, e in self._refused.items()}
         return {"v": 1, "worker": self.worker_id, "model": self.model, "preset": self.preset,
                 "prefix": self.prefix, "uptime_s": round(self.clock() - self.started, 3),
                 "limits": {"max_side": MAX_SIDE, "max_payload": MAX_PAYLOAD,
@@ -713,5 +733,6 @@ class WorkerCore:
                            "idle_timeout": self.idle_timeout,
                            "takeover_after": self.takeover_after,
                            "warmup_frames": self.warmup_frames},
-                "backlog": backlog, "stats": self.stats(), "robots": robots}
+                "backlog": backlog, "stats": self.stats(), "robots": robots,
+                "refused": refused}
 

@@ -412,6 +412,30 @@ def test_status_shows_candidates_and_second_publishers():
     assert "robots r1 (+1 waiting for a valid frame)" in line
     assert "second publishers: 1, contested: r1 (1 intrusions)" in line
     assert "second-publisher 1" in line
+    assert "refused lately: r1 (second-publisher x1: frame 0 does not continue" in line
+
+
+def test_status_says_why_a_camera_none_of_whose_frames_is_taken_gets_no_response():
+    from cli.net import format_status
+
+    clock = FakeClock()
+    core = WorkerCore(worker_id="w1", clock=clock)
+    for seq in range(3):  # raw data one byte short: never a robot, never answered
+        core.offer("asnn/cam7/frame", msgpack.packb({"seq": seq, "stamp": 0.0, "width": 64,
+                                                     "height": 64, "format": "gray8",
+                                                     "data": b"\x00" * 4095}))
+    status = msgpack.unpackb(msgpack.packb(core.status()))
+    assert "cam7" not in status["robots"]
+    assert status["refused"]["cam7"]["reason"] == "bad-pixels"
+    assert status["refused"]["cam7"]["count"] == 3
+    assert "refused lately: cam7 (bad-pixels x3" in format_status(status)
+    clock.now += 120  # a minute later the line no longer lists it; the status still does
+    status = msgpack.unpackb(msgpack.packb(core.status()))
+    assert "refused lately" not in format_status(status)
+    assert status["refused"]["cam7"]["seconds_ago"] == 120.0
+    for k in range(400):  # ids come and go: the status keeps the latest 256
+        core.offer(f"asnn/x{k}/frame", b"\xc1")
+    assert len(core.status()["refused"]) == 256 and "x399" in core.status()["refused"]
 
 
 # ---------------------------------------------------------------- 7. alerts
