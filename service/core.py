@@ -110,8 +110,8 @@ from asnn.params import DEFAULT_PRESET, SLOW_FPS
 
 from . import keys
 from .logutil import RateLimitedLog
-from .messages import (MAX_PAYLOAD, MAX_SIDE, Frame, MessageError, Response, decode_frame,
-                       response_from, track_id_base)
+from .messages import (MAX_PAYLOAD, MAX_SIDE, VERSION, Frame, MessageError, Response,
+                       decode_frame, response_from, track_id_base)
 
 __all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "RobotView", "WARMUP_FRAMES", "WorkerCore",
            "default_threads", "default_worker_id"]
@@ -726,7 +726,7 @@ class WorkerCore:
             refused = {r: {"reason": e["reason"], "detail": e["detail"], "count": e["count"],
                            "seconds_ago": round(now - e["at"], 1)}
                        for r, e in self._refused.items()}
-        return {"v": 1, "worker": self.worker_id, "model": self.model, "preset": self.preset,
+        return {"v": VERSION, "worker": self.worker_id, "model": self.model, "preset": self.preset,
                 "prefix": self.prefix, "uptime_s": round(self.clock() - self.started, 3),
                 "limits": {"max_side": MAX_SIDE, "max_payload": MAX_PAYLOAD,
                            "max_robots": self.max_robots, "max_gap": self.max_gap,

@@ -47,8 +47,9 @@ from asnn.io.images import (JPEG_QUALITY, MAX_SIDE, ImageError, check_encoded, d
                              encoded_size)
 
 __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
-           "Response", "TargetMsg", "VERSION", "decode_frame", "decode_response", "encode",
-           "encode_image", "encoded_size", "track_id_base", "track_label", "unpack_map"]
+           "Response", "TargetMsg", "VERSION", "decode_frame", "decode_response",
+           "decode_status", "encode", "encode_image", "encode_status", "encoded_size",
+           "track_id_base", "track_label", "unpack_map"]
 
 VERSION = 1
 FrameFormat = Literal["gray8", "bgr8", "jpeg", "png"]
@@ -216,8 +217,10 @@ class _TooManyItems(ValueError):
     pass
 
 
-def unpack_map(payload: bytes, what: str = "message") -> dict:
-    """The msgpack map of a payload, unpacked within this module's bounds.
+def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_MAP_LEN,
+               max_items: int = MAX_ITEMS, max_payload: int = MAX_PAYLOAD) -> dict:
+    """The msgpack map of a payload, unpacked within this module's bounds (the map's and the
+    total's larger for a worker's status: :func:`decode_status`).
 
     The per-container limits (MAX_MAP_LEN, MAX_ARRAY_LEN, MAX_STR_LEN, MAX_EXT_LEN) make msgpack
     refuse a container when it reads its header, before building it; the total (MAX_ITEMS) is
@@ -230,29 +233,58 @@ def unpack_map(payload: bytes, what: str = "message") -> dict:
     MessageError
         ``oversized``, ``undecodable`` (including a container over a bound) or ``not-a-map``.
     """
-    if len(payload) > MAX_PAYLOAD:
+    if len(payload) > max_payload:
         raise MessageError("oversized", f"{what} of {len(payload)} bytes, the limit is "
-                           f"{MAX_PAYLOAD}")
+                           f"{max_payload}")
     items = 0
 
     def count(container):
         nonlocal items
         items += len(container) + 1
-        if items > MAX_ITEMS:
-            raise _TooManyItems(f"more than {MAX_ITEMS} entries in all")
+        if items > max_items:
+            raise _TooManyItems(f"more than {max_items} entries in all")
         return container
 
     try:
         obj = msgpack.unpackb(payload, raw=False, strict_map_key=False, object_hook=count,
                               list_hook=count, max_str_len=MAX_STR_LEN,
-                              max_bin_len=MAX_PAYLOAD, max_array_len=MAX_ARRAY_LEN,
-                              max_map_len=MAX_MAP_LEN, max_ext_len=MAX_EXT_LEN)
+                              max_bin_len=max_payload, max_array_len=MAX_ARRAY_LEN,
+                              max_map_len=max_map_len, max_ext_len=MAX_EXT_LEN)
     except Exception as exc:  # msgpack raises several unrelated types on garbage
         why = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         raise MessageError("undecodable", f"{what} is not msgpack ({why})") from None
     if not isinstance(obj, dict):
         raise MessageError("not-a-map", f"{what} is a msgpack {type(obj).__name__}, not a map")
     return obj
+
+
+# A worker's status map (``<prefix>/@worker/<id>/status``, docs/operations.md): a robot's
+# entry per robot tracked and per robot refused lately, so larger maps than a message's, still
+# bounded (any process on the prefix can answer a status query).
+STATUS_MAX_MAP_LEN = 8192
+STATUS_MAX_ITEMS = 1 << 18
+STATUS_MAX_BYTES = 16 * 1024 * 1024
+
+
+def encode_status(status: dict) -> bytes:
+    """A worker's status map as it goes on the wire (:func:`decode_status` reads it)."""
+    return msgpack.packb(status, use_bin_type=True)
+
+
+def decode_status(payload: bytes) -> dict:
+    """A worker's status map (built by :meth:`service.core.WorkerCore.status` and the worker),
+    unpacked within the status bounds.
+
+    Raises
+    ------
+    MessageError
+        As :func:`unpack_map`, or ``invalid-field`` where it names no ``worker``.
+    """
+    status = unpack_map(payload, "status", max_map_len=STATUS_MAX_MAP_LEN,
+                        max_items=STATUS_MAX_ITEMS, max_payload=STATUS_MAX_BYTES)
+    if not isinstance(status.get("worker"), str):
+        raise MessageError("invalid-field", "a status map names its worker")
+    return status
 
 
 def _unpack(payload: bytes, what: str) -> dict[str, Any]:

@@ -37,7 +37,7 @@ from asnn.model import compile_kernels
 
 from . import keys
 from .core import WorkerCore
-from .messages import Response, encode
+from .messages import MessageError, Response, decode_status, encode, encode_status
 from .routing import Routes
 
 __all__ = ["COMPUTE_NICENESS", "HANDOVER_TIMEOUT", "RESPONSE_QOS", "SCAN_INTERVAL",
@@ -165,17 +165,17 @@ def announced_cameras(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
 def query_status(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
                  worker: str | None = None, timeout: float = 2.0) -> dict[str, dict]:
     """The status maps of one worker or (``worker=None``) of all, by worker id."""
-    import msgpack
-
     key = keys.worker_status_key(worker, prefix) if worker else keys.worker_statuses(prefix)
     out = {}
     for reply in session.get(key, target=zenoh.QueryTarget.ALL, timeout=timeout,
                              consolidation=zenoh.ConsolidationMode.NONE):
-        try:
-            status = msgpack.unpackb(reply.ok.payload.to_bytes(), raw=False)
-            out[str(status["worker"])] = status
-        except Exception:  # an error reply or a payload that is not a status map
+        if reply.ok is None:  # an error reply
             continue
+        try:  # bounded: any process on the prefix may answer
+            status = decode_status(reply.ok.payload.to_bytes())
+        except MessageError:
+            continue
+        out[status["worker"]] = status
     return out
 
 
@@ -349,8 +349,6 @@ class Worker:
             self._changed.set()
 
     def _on_status_query(self, query: zenoh.Query) -> None:
-        import msgpack
-
         try:
             status = self.core.status()
             status["workers"] = self.membership.live()
@@ -361,7 +359,7 @@ class Worker:
             for robot, info in status["robots"].items():
                 info["route"] = self.routes.role(robot)
             query.reply(keys.worker_status_key(self.core.worker_id, self.core.prefix),
-                        msgpack.packb(status, use_bin_type=True))
+                        encode_status(status))
         except Exception:
             log.exception("status query failed")
 

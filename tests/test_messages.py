@@ -275,3 +275,17 @@ def test_alert_lines_lead_tracked_targets_with_their_id_and_time_to_contact():
     assert "#25:3 contact in 0.50 s" in handed  # track 3 of the model that started at seq 25
     plain = format_warning(Response(**common, targets=[TargetMsg(**place)]))
     assert "#" not in plain and "(10, 20)" in plain
+
+
+def test_a_status_map_is_read_within_bounds_of_its_own():
+    from service.messages import (STATUS_MAX_MAP_LEN, MessageError, decode_status,
+                                  encode_status)
+
+    robots = {f"r{k}": {"processed": k, "warm": True} for k in range(1000)}  # > a message's 256
+    status = {"v": 1, "worker": "w1", "robots": robots}
+    assert decode_status(encode_status(status)) == status
+    for hostile in (msgpack.packb({"worker": "w", "robots": dict.fromkeys(
+                        map(str, range(STATUS_MAX_MAP_LEN + 1)), 0)}),  # refused at its header
+                    msgpack.packb([1, 2]), msgpack.packb({"robots": {}}), b"\xc1"):
+        with pytest.raises(MessageError):
+            decode_status(hostile)
