@@ -8,7 +8,8 @@ from service import keys
 
 
 def frame_size(text: str) -> tuple[int, int]:
-    """``WxH`` (or ``N`` for NxN) as (width, height); at least 32x32, the model's smallest frame."""
+    """``WxH`` (or ``N`` for NxN) as (width, height); at least 32x32, a round size just above
+    the smallest frame the model takes (31x31, ``ASNNParams.min_side``)."""
     try:
         w, _, h = text.lower().partition("x")
         size = (int(w), int(h or w))

@@ -8,6 +8,7 @@ import sys
 
 from cli.arguments import port, positive
 from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
+from clients.dashboard import HOLD_S, STALE_S
 from service.config import ConfigError
 
 __all__ = ["register"]
@@ -61,10 +62,10 @@ def register(subparsers) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default: %(default)s; 0.0.0.0 for every "
                         "interface, as in a container)")
-    p.add_argument("--stale-after", type=positive, default=3.0, metavar="SECONDS",
-                   help="mark a robot stale after SECONDS without a response or preview "
-                        "(default: %(default)s)")
-    p.add_argument("--hold", type=positive, default=3.0, metavar="SECONDS",
+    p.add_argument("--stale-after", type=positive, default=STALE_S, metavar="SECONDS",
+                   help="mark a robot stale after SECONDS without a response, whatever previews "
+                        "its camera still sends (default: %(default)s)")
+    p.add_argument("--hold", type=positive, default=HOLD_S, metavar="SECONDS",
                    help="keep a robot in the collision state for SECONDS (camera clock) after "
                         "its latest warning (default: %(default)s)")
     add_zenoh_options(p)

@@ -29,7 +29,8 @@ from cli.arguments import count
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("detect", help="offline detection on a video file or a ROS 2 bag",
                        description="Run a detector over a video file or an image topic of a "
-                                   "ROS 2 bag (MCAP); one JSON object per frame.")
+                                   "ROS 2 bag (MCAP): one JSON object per frame with --jsonl, "
+                                   "and a summary line on stderr.")
     p.add_argument("video", metavar="VIDEO",
                    help="any video OpenCV reads, or a ROS 2 bag: BAG.mcap[#TOPIC] (the 'ros' "
                         "extra)")

@@ -7,6 +7,7 @@ import logging
 import sys
 
 from asnn.params import preset_names
+from service import keys
 from service.config import ConfigError
 
 from .arguments import count, non_negative, positive, robot_id, whole, worker_id
@@ -92,8 +93,9 @@ def cmd_status(args: argparse.Namespace) -> int:
         else:
             print(format_status(status), flush=True)
     if not statuses:
-        print(f"no worker answered on {args.prefix}/@worker/"
-              f"{args.worker or '*'}/status", file=sys.stderr)
+        key = (keys.worker_status_key(args.worker, args.prefix) if args.worker
+               else keys.worker_statuses(args.prefix))
+        print(f"no worker answered on {key}", file=sys.stderr)
         return 1
     return 0
 
@@ -248,7 +250,7 @@ def register(subparsers) -> None:
                    help="worker id reported in responses (default: <host>-<pid>)")
     p.add_argument("--idle-timeout", type=positive, default=60.0, metavar="SECONDS",
                    help="forget a robot after SECONDS without frames (default: %(default)s)")
-    p.add_argument("--max-gap", type=int, default=20, metavar="N",
+    p.add_argument("--max-gap", type=whole, default=20, metavar="N",
                    help="reset a robot's state when seq jumps ahead by more than N "
                         "(default: %(default)s)")
     p.add_argument("--max-robots", type=count, default=256, metavar="N",
@@ -298,7 +300,9 @@ def register(subparsers) -> None:
 
     p = subparsers.add_parser("router", help="run a Zenoh router (for machines without zenohd)",
                               description="A Zenoh router from the Python package; robots, "
-                              "workers and subscribers --connect to it.")
+                              "workers and subscribers --connect to it. It routes every key: "
+                              "--prefix, common to the networked commands (CONTRACT.md), "
+                              "changes nothing here.")
     add_zenoh_options(p, modes=())
     p.set_defaults(func=cmd_router)
 

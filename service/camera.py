@@ -4,7 +4,8 @@ published on Zenoh.
 Sources are opened by :func:`asnn.io.sources.open_source` (the one place every command opens its
 input). Frames go to ``<prefix>/<robot>/frame``, best effort (congestion control drop, lowest
 data priority): a late frame is worth less than the next one. ``seq`` counts from 0 and keeps
-increasing across ``--loop`` repetitions; ``stamp`` is the wall-clock time of capture.
+increasing across ``--loop`` repetitions; ``stamp`` is the wall-clock time of capture for a
+live source, and a replayed one's recorded time shifted to start now (:func:`publish_frames`).
 
 Files and scenes are replayed at their frame rate, bags at their recorded pace (the differences
 of their header stamps; a pause longer than :data:`MAX_REPLAY_GAP` is shortened to it), unless

@@ -50,9 +50,6 @@ class ZenohOptions:
     multicast_scouting: bool | None = None
     gossip: bool | None = None
 
-    def config(self) -> zenoh.Config:
-        return make_config(self)
-
 
 def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Config:
     """Build a ``zenoh.Config`` from options (keyword arguments override fields of ``options``).

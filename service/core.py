@@ -121,7 +121,7 @@ log = logging.getLogger("asnn.worker")
 RESET_REASONS = ("size", "seq-backwards", "seq-gap", "stamp-backwards", "second-publisher")
 # Frames a new owner steps a robot's stream silently before it answers: a fresh model of the
 # default (robust) preset that has stepped 30 frames warns as one that saw the whole stream at
-# 99.3 % of 4,152 hand-overs tried over the labelled suite, 99.1 % of the 1,504 during an
+# 99.45 % of 4,152 hand-overs tried over the labelled suite, 99.34 % of the 1,504 during an
 # approach (the tracker needs a few frames of approach in a row, and the camera-rig stage its
 # running means; the worst need 53 during an approach, 64 before one):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
