@@ -154,3 +154,9 @@ class Response:
         return {"u": self.u, "out": self.out, "spikes": self.spikes,
                 "spike_rate": self.spike_rate, "collision": self.collision,
                 "targets": [t.to_dict() for t in self.targets]}
+
+    def record(self, frame: int, t: float) -> dict:
+        """The frame's line of ``asnn detect --jsonl`` (CONTRACT.md): its number in the clip
+        ``frame``, its time ``t`` in seconds (to the microsecond), and :meth:`to_dict`'s
+        fields; what :func:`asnn.evaluation.scoring.score_clip` reads."""
+        return {"frame": frame, "t": round(t, 6), **self.to_dict()}

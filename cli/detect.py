@@ -60,10 +60,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _record(index: int, t: float, response) -> dict:
-    return {"frame": index, "t": round(t, 6), **response.to_dict()}
-
-
 def _tracks_record(index: int, t: float, response) -> dict:
     return {"frame": index, "t": round(t, 6), "collision": response.collision,
             "tracks": [track.to_dict() for track in response.tracks]}
@@ -235,7 +231,7 @@ def run(args: argparse.Namespace) -> int:
 
         def write(item) -> None:
             index, t, frame, response = item
-            record = _record(index, t, response)
+            record = response.record(index, t)
             records.append(record)
             try:
                 if jsonl is not None:

@@ -11,7 +11,7 @@ the robust preset that way. Results of a spec go to a directory named by
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -177,8 +177,7 @@ def at_rate(frames: Iterable[np.ndarray], fps: float) -> Iterator[tuple[float, n
 
 
 def run_detector(timed_frames: Iterable[tuple[float, np.ndarray]],
-                 detector: DetectorSpec | str = "asnn",
-                 on_frame: Callable[[], None] | None = None) -> list[dict]:
+                 detector: DetectorSpec | str = "asnn") -> list[dict]:
     """Run one fresh detector over frames and return its per-frame records.
 
     Parameters
@@ -187,8 +186,6 @@ def run_detector(timed_frames: Iterable[tuple[float, np.ndarray]],
         Each frame with its time in seconds (``Source.timed_frames()``, or :func:`at_rate`).
     detector : DetectorSpec or str
         A spec (see :func:`parse_detector`).
-    on_frame : callable, optional
-        Called after each frame (progress).
 
     Returns
     -------
@@ -200,10 +197,7 @@ def run_detector(timed_frames: Iterable[tuple[float, np.ndarray]],
     model = spec.make()
     records = []
     for index, (t, frame) in enumerate(timed_frames):
-        response = model.step(frame, t)
-        records.append({"frame": index, "t": round(t, 6), **response.to_dict()})
-        if on_frame is not None:
-            on_frame()
+        records.append(model.step(frame, t).record(index, t))
     return records
 
 
