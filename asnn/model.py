@@ -34,7 +34,7 @@ from .approach import ApproachStage, CameraRig, FramePair
 from .approach.looming import region_expansion
 from .approach.motion_layers import motion_layers
 from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
-from .params import ASNNParams, preset
+from .params import MAX_FRAME_GAP_S, PERIOD_FRAMES, ASNNParams, preset
 from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
 from .targets import extract_targets
@@ -42,8 +42,6 @@ from .targets import extract_targets
 __all__ = ["ASNN", "FrameError", "compile_kernels", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
-_MAX_ELAPSED = 1.0  # seconds between frames beyond which their times are not believed
-_PERIOD_FRAMES = 5  # the frame period is the median of this many: one lost frame does not move it
 
 
 class ASNN:
@@ -200,7 +198,7 @@ class ASNN:
         self.index = 0
         self.approach = ApproachStage(self.params) if self.params.targets == "objects" else None
         self._stamp: float | None = None
-        self.periods: deque[float] = deque(maxlen=_PERIOD_FRAMES)
+        self.periods: deque[float] = deque(maxlen=PERIOD_FRAMES)
         self._last: Response | None = None
         self._repeats = 0
         self._difference = 0.0
@@ -353,7 +351,7 @@ class ASNN:
         if self.repeated:
             return _Frame(index, repeat=True)
         elapsed = stamp - self._stamp
-        if not 0.0 < elapsed <= _MAX_ELAPSED:  # no usable timestamps: the nominal frame period
+        if not 0.0 < elapsed <= MAX_FRAME_GAP_S:  # no usable times: the nominal frame period
             elapsed = p.dt
         self._stamp = stamp
         self.periods.append(elapsed)

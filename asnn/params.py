@@ -434,6 +434,11 @@ DEFAULT_PRESET = "robust"
 # frames a second below which the default preset loses hits (README, "At half the frame rate"):
 # it is made for 20 or more, and a 20 fps camera's timestamps jitter
 SLOW_FPS = 18.0
+# a stream's frame period: the median of the last PERIOD_FRAMES gaps between its frames' times
+# (one lost frame does not move it), each believed only above 0 and up to MAX_FRAME_GAP_S
+# seconds (beyond, a clock in other units or a stall: the nominal period instead)
+PERIOD_FRAMES = 5
+MAX_FRAME_GAP_S = 1.0
 
 
 def preset_names() -> list[str]:

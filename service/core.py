@@ -106,7 +106,7 @@ from dataclasses import dataclass, field
 
 from asnn import FrameError
 from asnn.detectors import available_cores, make_detector
-from asnn.params import DEFAULT_PRESET, SLOW_FPS
+from asnn.params import DEFAULT_PRESET, MAX_FRAME_GAP_S, PERIOD_FRAMES, SLOW_FPS
 
 from . import keys
 from .logutil import RateLimitedLog
@@ -130,9 +130,9 @@ WARMUP_FRAMES = 30
 RESTARTS_WARNED = 10
 # robot ids whose latest refusal the status keeps (the most recently refused)
 MAX_REFUSED = 256
-# A robot's rate is the median over this many gaps between the stamps of its frames processed;
-# below asnn.params.SLOW_FPS the worker logs it once per stream
-RATE_FRAMES = 5
+# A robot's rate is the median over asnn.params.PERIOD_FRAMES gaps between the stamps of its
+# frames processed, as its model measures its own; below SLOW_FPS the worker logs it once per
+# stream
 
 
 def default_worker_id() -> str:
@@ -215,7 +215,7 @@ class _Robot:
     # the rate its model is stepped at: the stamps' gaps between the frames processed in the
     # current stream (after the worker's own skips), and whether a slow rate was logged
     stamp: float | None = None
-    periods: deque = field(default_factory=lambda: deque(maxlen=RATE_FRAMES))
+    periods: deque = field(default_factory=lambda: deque(maxlen=PERIOD_FRAMES))
     slow_logged: bool = False
 
     @property
@@ -618,10 +618,10 @@ class WorkerCore:
         if state.stepped == 1:
             state.periods.clear()
             state.slow_logged = False
-        elif state.stamp is not None and 0.0 < stamp - state.stamp <= 1.0:
+        elif state.stamp is not None and 0.0 < stamp - state.stamp <= MAX_FRAME_GAP_S:
             state.periods.append(stamp - state.stamp)
         state.stamp = stamp
-        if len(state.periods) == RATE_FRAMES and not state.slow_logged:
+        if len(state.periods) == PERIOD_FRAMES and not state.slow_logged:
             fps = state.fps
             if fps < SLOW_FPS:
                 state.slow_logged = True
