@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from asnn.detectors import MODELS
 from cli.arguments import count, frame_size, positive, seed
 
 
@@ -23,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="ASNN preset to time (repeatable; default: all); the default preset is "
                         "added for the straightforward form's ratio (unless "
                         "--no-straightforward), and with it reference32, its cost's reference")
-    p.add_argument("--model", action="append", choices=("asnn", "lgmd1", "lgmd2"),
+    p.add_argument("--model", action="append", choices=MODELS,
                    help="model to time (repeatable; default: all, the LGMDs too)")
     p.add_argument("--no-straightforward", action="store_true",
                    help="skip the straightforward float64 form")

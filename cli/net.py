@@ -209,7 +209,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def register(subparsers) -> None:
     from asnn.detectors import MODELS
     from asnn.stimuli import SCENE_NAMES
-    from service.core import WARMUP_FRAMES, default_threads
+    from service.camera import PREVIEW_HZ
+    from service.core import (IDLE_TIMEOUT_S, MAX_GAP, MAX_ROBOTS, TAKEOVER_AFTER_S,
+                              WARMUP_FRAMES, default_threads)
     from service.demo import DEMO_SCENE
     from service.messages import FORMATS
     from service.worker import HANDOVER_TIMEOUT, SCAN_INTERVAL, SCAN_WINDOW
@@ -232,7 +234,7 @@ def register(subparsers) -> None:
     p.add_argument("--wait", type=float, default=2.0, metavar="SECONDS",
                    help="wait up to SECONDS for a subscriber before the first frame "
                         "(default: %(default)s)")
-    p.add_argument("--preview-hz", type=non_negative, default=2.0, metavar="HZ",
+    p.add_argument("--preview-hz", type=non_negative, default=PREVIEW_HZ, metavar="HZ",
                    help="thumbnails per second on <prefix>/<robot>/preview for dashboards "
                         "(docs/contract.md; default: %(default)s; 0: none)")
     add_zenoh_options(p)
@@ -248,15 +250,16 @@ def register(subparsers) -> None:
                    help="ASNN preset (default: the default preset)")
     p.add_argument("--id", type=worker_id, default=None,
                    help="worker id reported in responses (default: <host>-<pid>)")
-    p.add_argument("--idle-timeout", type=positive, default=60.0, metavar="SECONDS",
+    p.add_argument("--idle-timeout", type=positive, default=IDLE_TIMEOUT_S, metavar="SECONDS",
                    help="forget a robot after SECONDS without frames (default: %(default)s)")
-    p.add_argument("--max-gap", type=whole, default=20, metavar="N",
+    p.add_argument("--max-gap", type=whole, default=MAX_GAP, metavar="N",
                    help="reset a robot's state when seq jumps ahead by more than N "
                         "(default: %(default)s)")
-    p.add_argument("--max-robots", type=count, default=256, metavar="N",
+    p.add_argument("--max-robots", type=count, default=MAX_ROBOTS, metavar="N",
                    help="robots tracked at once; frames of more are rejected. A robot takes "
                         "a place once one of its frames is valid (default: %(default)s)")
-    p.add_argument("--takeover-after", type=positive, default=3.0, metavar="SECONDS",
+    p.add_argument("--takeover-after", type=positive, default=TAKEOVER_AFTER_S,
+                   metavar="SECONDS",
                    help="once a second publisher was seen on a robot's key, refuse frames that "
                         "do not continue the robot's stream until it has been silent for "
                         "SECONDS (default: %(default)s)")

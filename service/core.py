@@ -130,6 +130,11 @@ WARMUP_FRAMES = 30
 RESTARTS_WARNED = 10
 # robot ids whose latest refusal the status keeps (the most recently refused)
 MAX_REFUSED = 256
+# the worker's defaults (asnn worker --idle-timeout, --max-gap, --max-robots, --takeover-after)
+IDLE_TIMEOUT_S = 60.0
+MAX_GAP = 20
+MAX_ROBOTS = 256
+TAKEOVER_AFTER_S = 3.0
 # A robot's rate is the median over asnn.params.PERIOD_FRAMES gaps between the stamps of its
 # frames processed, as its model measures its own; below SLOW_FPS the worker logs it once per
 # stream
@@ -305,8 +310,9 @@ class WorkerCore:
 
     def __init__(self, model: str = "asnn", preset: str | None = None, *,
                  worker_id: str | None = None, prefix: str = keys.DEFAULT_PREFIX,
-                 idle_timeout: float = 60.0, max_gap: int = 20, max_robots: int = 256,
-                 takeover_after: float = 3.0, clock: Callable[[], float] = time.monotonic,
+                 idle_timeout: float = IDLE_TIMEOUT_S, max_gap: int = MAX_GAP,
+                 max_robots: int = MAX_ROBOTS, takeover_after: float = TAKEOVER_AFTER_S,
+                 clock: Callable[[], float] = time.monotonic,
                  owns: Callable[[str], bool] | None = None,
                  answers: Callable[[str], bool] | None = None,
                  warmup_frames: int = WARMUP_FRAMES, log_interval: float = 10.0):
