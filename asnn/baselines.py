@@ -48,6 +48,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .frames import to_luminance
+from .retina import photoreceptor_weights, spike_count
 from .response import Response
 
 __all__ = [
@@ -294,8 +295,8 @@ class LGMD1(_LGMDBase):
     def __init__(self, params: LGMD1Params | None = None, **overrides):
         base = params or LGMD1Params()
         self.params = LGMD1Params(**{**base.model_dump(), **overrides}) if overrides else base
-        i = np.arange(1, self.params.n_p + 1, dtype=np.float64)
-        self._p_weights = 1.0 / (1.0 + np.exp(self.params.p_u * i))
+        # the photoreceptors' persistence is the ASNN's (paper eq. 1, p_i = 1/(1+exp(u i)))
+        self._p_weights = photoreceptor_weights(self.params.n_p, self.params.p_u)
         self._w_i = lateral_inhibition_kernel()
         self.reset()
 
@@ -407,6 +408,6 @@ class LGMD2(_LGMDBase):
         if self.ffi >= prm.t_ffi:
             out, spikes = 0.5, 0
         else:
-            out, spikes = adapted, int(math.floor(math.exp(prm.k_sp * (adapted - prm.t_sp))))
+            out, spikes = adapted, spike_count(adapted, prm.k_sp, prm.t_sp)
         self.running = self.running + spikes if spikes else 0
         return k, out, spikes, self.running >= prm.n_ts
