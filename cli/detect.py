@@ -147,10 +147,9 @@ def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
             continue
         target = Path(path).resolve()
         if target.exists() and source.exists() and os.path.samefile(target, source):
-            target = source  # a hard link to it
-        if target == source or (source.is_dir() and source in target.parents):
-            return (f"{flag} {path}: is the input {video}" if target == source else
-                    f"{flag} {path}: inside the input bag's folder {video}")
+            return f"{flag} {path}: is the input {video}"  # by any name or link
+        if source.is_dir() and source in target.parents:
+            return f"{flag} {path}: inside the input bag's folder {video}"
         if target in seen:
             return f"{flag} and {seen[target]} both write {path}"
         seen[target] = flag

@@ -427,11 +427,11 @@ class WorkerCore:
                  and now - s.last_seen >= self.takeover_after]
         if not quiet:
             return False
-        robot = min(quiet)[1]
+        last_seen, robot = min(quiet)
         del self._robots[robot]
         self._stats.evicted += 1
         log.info("robot %s: forgotten after %.0f s without frames to make room for a new one",
-                 robot, now - min(quiet)[0])
+                 robot, now - last_seen)
         return True
 
     def _stream_locked(self, robot: str, state: _Robot, frame: Frame,

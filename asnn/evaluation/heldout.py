@@ -487,12 +487,12 @@ def _ties_lines(ties: Mapping) -> list[str]:
     return lines
 
 
-def _trace_item(spec: str | None, topic_or_case: str | None, params: ASNNParams) -> ClipTrace:
-    """Worker: a clip's trace (``spec`` its path, with its bag's topic), or a suite case's
-    (``spec`` None, the case's name)."""
-    if spec is None:
-        return _trace_case(topic_or_case, params)
-    return _trace_source(spec, topic_or_case, params)
+def _trace_item(kind: str, name: str, topic: str | None, params: ASNNParams) -> ClipTrace:
+    """Worker: the trace of a clip (``kind`` ``"clip"``: ``name`` its path, ``topic`` its bag's
+    image topic) or of a suite case (``"case"``: ``name`` the case's)."""
+    if kind == "case":
+        return _trace_case(name, params)
+    return _trace_source(name, topic, params)
 
 
 def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace:
@@ -550,8 +550,8 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     progress = progress or Silent()
     progress.start(len(labels) + len(cases), "eval --held-out")
     # the clips and the cases in one queue, each traced where a worker is free
-    tasks = ([(str(clips_dir / lab["file"]), lab.get("topic"), base) for lab in labels]
-             + [(None, name, base) for name in cases])
+    tasks = ([("clip", str(clips_dir / lab["file"]), lab.get("topic"), base) for lab in labels]
+             + [("case", name, None, base) for name in cases])
     names = [lab["file"] for lab in labels] + list(cases)
     found: dict[int, ClipTrace] = {}
     for index, trace in run_tasks(_trace_item, tasks, jobs):

@@ -482,10 +482,11 @@ class BagClip:
         self.fps = float(1e9 / np.median(steps)) if steps.size else 20.0
 
     def _time_ns(self, message, log_time: int) -> int:
-        # a stamp left unset (zero) partway through a header-clocked bag is the recorder's log
-        # time instead, not a jump back to 1970
-        stamp = _stamp_ns(message) if self.clock == "header" else 0
-        return stamp or int(log_time)
+        if self.clock == "header":
+            stamp = _stamp_ns(message)
+            if stamp:  # one left unset (zero) partway through: its log time, not 1970
+                return stamp
+        return int(log_time)
 
     def _messages(self, on_error: Callable[[str, str], None] | None) -> Iterator:
         """(decoded message, log time) of the topic, part after part; a corrupt message or a
