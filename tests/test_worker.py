@@ -292,6 +292,16 @@ def test_unknown_model_or_preset_fails_at_start():
         WorkerCore(model="nope")
     with pytest.raises(ValueError):
         WorkerCore(preset="nope")
+    with pytest.raises(ValueError, match=r"in Python: preset\('robust', FIELD=VALUE\)"):
+        WorkerCore(preset="robust/top_k=0")  # the command line's spec, given to the library
+
+
+def test_a_negative_max_gap_is_refused_on_the_command_line(capsys):
+    from cli.main import build_parser
+
+    with pytest.raises(SystemExit):  # every frame would break the seq-gap rule and reset
+        build_parser().parse_args(["worker", "--max-gap", "-5"])
+    assert "--max-gap" in capsys.readouterr().err
 
 
 def test_every_kind_of_bad_input_is_counted_under_its_reason(looming):
