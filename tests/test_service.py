@@ -54,8 +54,11 @@ def scene_source(name, **kwargs):
 
 
 def send_one(session, responses, robot, image, seq):
-    """Put one frame and wait for its response (so that nothing is skipped)."""
-    session.put(keys.frame_key(robot), encode(Frame.from_image(image, seq=seq, stamp=seq * 0.05)))
+    """Put one frame and wait for its response (so that nothing is skipped). Put blocking, as
+    the junk around it is: a frame the session itself dropped under load (the default
+    congestion control) would never be answered, and the wait would blame the worker."""
+    session.put(keys.frame_key(robot), encode(Frame.from_image(image, seq=seq, stamp=seq * 0.05)),
+                congestion_control=zenoh.CongestionControl.BLOCK)
     wait_for(lambda: any(r.seq == seq for r in responses.of(robot)), what=f"{robot} seq {seq}")
     return next(r for r in responses.of(robot) if r.seq == seq)
 
