@@ -255,7 +255,7 @@ class FleetStore:
             now = self.clock()
             state.touched = now
             if kind == "preview":
-                self._add_preview_locked(state, message, version, now)
+                self._add_preview_locked(state, message, version)
             elif kind == "response":
                 self._add_response_locked(state, message, version, now)
             else:
@@ -341,8 +341,7 @@ class FleetStore:
             "worker": w.worker}
         self._log.append((version, entry))
 
-    def _add_preview_locked(self, state: _Robot, preview: Preview, version: int,
-                            now: float) -> None:
+    def _add_preview_locked(self, state: _Robot, preview: Preview, version: int) -> None:
         if state.preview is not None:
             self._preview_bytes -= state.preview["bytes"]
         state.preview = {

@@ -68,7 +68,7 @@ ANSWERED = 0.95
 START_S = 1.0
 
 
-def model_time(size: tuple[int, int], preset: str | None, frames: np.ndarray) -> dict:
+def model_time(preset: str | None, frames: np.ndarray) -> dict:
     """Median and p99 milliseconds of one detector step on ``frames`` (after two warm-up frames;
     the kernels are loaded first, as the worker does before it takes frames)."""
     from asnn.evaluation.bench import time_detector
@@ -349,7 +349,7 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
     w, h = size
     scene = make_scene(SCENE, size=(w, h), frames=50, start=2, stop=48).frames
     frames = np.concatenate([scene, scene[-2:0:-1]])  # forwards then backwards: no jump
-    model = model_time(size, preset, frames)
+    model = model_time(preset, frames)
     steps = []
     with _switch_interval(SWITCH_INTERVAL), tempfile.TemporaryDirectory() as tmp, \
             contextlib.ExitStack() as stack:
