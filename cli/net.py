@@ -22,10 +22,11 @@ log = logging.getLogger("asnn")
 # ---------------------------------------------------------------- commands
 
 def cmd_camera(args: argparse.Namespace) -> int:
-    from service.camera import SourceError, SourceRejections, open_source, publish_frames
+    from service.camera import (RefusalNotices, SourceError, SourceRejections, open_source,
+                                publish_frames)
 
     setup_logging(args)
-    rejections = SourceRejections(args.robot)
+    rejections, refusals = SourceRejections(args.robot), RefusalNotices(args.robot)
     try:
         source = open_source(args.source, on_error=rejections)
         session = session_for(args)
@@ -35,9 +36,10 @@ def cmd_camera(args: argparse.Namespace) -> int:
     with session:
         count = publish_frames(session, args.robot, source, prefix=args.prefix, fps=args.fps,
                                loop=args.loop, format=args.format, wait=args.wait, stop=stop,
-                               preview_hz=args.preview_hz)
+                               preview_hz=args.preview_hz, refusals=refusals)
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(rejections.counts.items())) or "none"
-    log.info("camera %s: %d frames published; rejected: %s", args.robot, count, rejected)
+    log.info("camera %s: %d frames published; rejected: %s; refused by workers: %s", args.robot,
+             count, rejected, refusals.summary())
     return 0
 
 

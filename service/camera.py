@@ -16,6 +16,9 @@ The camera announces itself with the liveliness token ``<prefix>/@camera/<robot>
 publishes (an optional extension, docs/contract.md): the robot's worker then subscribes to its
 frames before the first one, without scanning for them.
 
+A worker that refuses the camera's frames says why on ``<prefix>/<robot>/refused``
+(:class:`RefusalNotices` logs it), so that a camera nothing answers does not stay silent about it.
+
 Optionally (``preview_hz`` > 0), a small jpeg thumbnail of the current frame goes to
 ``<prefix>/<robot>/preview`` a few times a second for dashboards (docs/contract.md), with the
 same best-effort delivery as frames.
@@ -35,10 +38,11 @@ from asnn.io.sources import Source, SourceError, open_source
 
 from . import keys
 from .logutil import RateLimitedLog
-from .messages import FORMATS, Frame, Preview, encode
+from .messages import FORMATS, Frame, MessageError, Preview, decode_refusal, encode
 
-__all__ = ["FRAME_QOS", "MAX_REPLAY_GAP", "PREVIEW_HZ", "PREVIEW_WIDTH", "Source", "SourceError",
-           "SourceRejections", "open_source", "publish_frames"]
+__all__ = ["FRAME_QOS", "MAX_NOTICES", "MAX_REPLAY_GAP", "PREVIEW_HZ", "PREVIEW_WIDTH",
+           "RefusalNotices", "Source", "SourceError", "SourceRejections", "open_source",
+           "publish_frames"]
 
 log = logging.getLogger("asnn.camera")
 
@@ -47,6 +51,7 @@ FRAME_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
 PREVIEW_HZ = 2.0     # thumbnails per second on <prefix>/<robot>/preview (0: none)
 PREVIEW_WIDTH = 160  # thumbnail width in pixels (never scaled up)
 MAX_REPLAY_GAP = 5.0  # seconds: a longer pause between two recorded frames is shortened to this
+MAX_NOTICES = 64  # (worker, reason) pairs a camera counts refusals of
 
 
 class SourceRejections:
@@ -66,12 +71,50 @@ class SourceRejections:
                           message[:300])
 
 
+class RefusalNotices:
+    """What the workers say about this camera's frames (``<prefix>/<robot>/refused``,
+    :class:`~service.messages.Refusal`): the latest count per reason and worker (``counts``),
+    logged at WARNING, at most one line per reason every 10 s. A notice that is not a valid
+    Refusal of this robot is counted under ``invalid`` and otherwise ignored."""
+
+    def __init__(self, robot: str):
+        self.robot = robot
+        self.counts: dict[tuple[str, str], int] = {}
+        self.invalid = 0
+        self._log = RateLimitedLog(log)
+        self._lock = threading.Lock()
+
+    def __call__(self, sample: zenoh.Sample) -> None:
+        try:
+            notice = decode_refusal(sample.payload.to_bytes())
+            if notice.robot != self.robot:
+                raise MessageError("invalid-field", f"a notice for robot {notice.robot!r}")
+        except MessageError:
+            with self._lock:
+                self.invalid += 1
+            return
+        with self._lock:
+            if len(self.counts) < MAX_NOTICES or (notice.worker, notice.reason) in self.counts:
+                self.counts[notice.worker, notice.reason] = notice.count
+        self._log.warning(notice.reason, "camera %s: worker %s refuses its frames (%s, %d so "
+                          "far): %s", self.robot, notice.worker, notice.reason, notice.count,
+                          notice.detail)
+
+    def summary(self) -> str:
+        """``reason count`` per reason, summed over the workers, or ``none``."""
+        with self._lock:
+            totals = Counter()
+            for (_, reason), count in self.counts.items():
+                totals[reason] += count
+        return ", ".join(f"{k} {v}" for k, v in sorted(totals.items())) or "none"
+
+
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    prefix: str = keys.DEFAULT_PREFIX, fps: float | None = None,
                    loop: bool = False, format: str = "gray8", wait: float = 0.0,
                    stop: threading.Event | None = None, max_frames: int | None = None,
                    preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH,
-                   announce: bool = True) -> int:
+                   announce: bool = True, refusals: RefusalNotices | None = None) -> int:
     """Publish the source's frames paced at ``fps`` (default: the source's own times).
 
     ``stamp``: the capture time of a live source's frame (wall clock when it was read); a
@@ -82,6 +125,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     ``announce``: declare the camera's liveliness token while publishing.
     ``preview_hz``: thumbnails (``preview_width`` pixels wide) per second on the preview key,
     at most one per frame; 0 publishes none.
+    ``refusals``: collects and logs the workers' notices that they refuse the frames (a new
+    :class:`RefusalNotices` if not given).
     Returns the number of frames published. Ends at the end of the source unless ``loop``
     (a live source is never replayed), when ``stop`` is set, or after ``max_frames``.
     """
@@ -96,6 +141,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     period = 1.0 / rate
     stop = stop or threading.Event()
     key = keys.frame_key(robot, prefix)
+    notices = session.declare_subscriber(keys.refusal_key(robot, prefix),
+                                         refusals or RefusalNotices(robot))
     publisher = session.declare_publisher(key, **FRAME_QOS)
     token = (session.liveliness().declare_token(keys.camera_token_key(robot, prefix))
              if announce else None)
@@ -158,6 +205,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                 break
         return seq
     finally:
+        notices.undeclare()
         publisher.undeclare()
         if token is not None:
             token.undeclare()

@@ -496,11 +496,21 @@ class WorkerCore:
             last = self._refused.pop(robot, None)
             self._refused[robot] = {"reason": reason, "detail": detail[:200],
                                     "count": (last["count"] if last else 0) + 1,
-                                    "at": self.clock()}
+                                    "at": self.clock(), "told": False}
             if len(self._refused) > MAX_REFUSED:
                 self._refused.popitem(last=False)
         self._rejections.warning(reason, "invalid frame on %s (%s, #%d): %s", str(key)[:200],
                                  reason, n, detail[:300])
+
+    def refusals_to_tell(self) -> list[tuple[str, str, str, int]]:
+        """The refusals made since the last call, for the robots' cameras: ``(robot, reason,
+        detail, count)``, the latest per robot (at most :data:`MAX_REFUSED`)."""
+        with self._lock:
+            told = [(r, e["reason"], e["detail"], e["count"]) for r, e in self._refused.items()
+                    if not e["told"]]
+            for robot, *_ in told:
+                self._refused[robot]["told"] = True
+        return told
 
     # ------------------------------------------------------------------ processing side
 

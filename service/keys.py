@@ -5,6 +5,8 @@
 ``<prefix>/<robot>/warning``   worker -> fleet      Response, only when ``collision`` is true
 ``<prefix>/<robot>/preview``   camera -> dashboards Preview, a low-rate thumbnail (optional
                                                     extension, docs/contract.md)
+``<prefix>/<robot>/refused``   worker -> camera     Refusal: the worker refuses the robot's frames,
+                                                    at most one a second (optional extension)
 
 Worker coordination (docs/operations.md); the ``@worker`` chunk is *verbatim* in Zenoh (it starts
 with ``@``), so ``<prefix>/*/...`` and ``<prefix>/**`` never match these keys, and no robot id
@@ -25,15 +27,15 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["DEFAULT_PREFIX", "KINDS", "KeySchemeError", "check_prefix", "check_robot", "frame_key",
-           "parse_key", "response_key", "warning_key", "frames", "responses", "warnings",
-           "preview_key", "previews", "WORKER_CHUNK", "worker_token_key", "worker_tokens",
-           "worker_status_key", "worker_statuses", "parse_worker_token", "CLAIM_CHUNK",
-           "claim_key", "claims", "parse_claim", "CAMERA_CHUNK", "camera_token_key",
-           "camera_tokens", "parse_camera_token"]
+__all__ = ["DEFAULT_PREFIX", "KINDS", "KeySchemeError", "check_prefix", "check_robot",
+           "frame_key", "parse_key", "response_key", "warning_key", "frames", "responses",
+           "warnings", "preview_key", "previews", "refusal_key", "WORKER_CHUNK",
+           "worker_token_key", "worker_tokens", "worker_status_key", "worker_statuses",
+           "parse_worker_token", "CLAIM_CHUNK", "claim_key", "claims", "parse_claim",
+           "CAMERA_CHUNK", "camera_token_key", "camera_tokens", "parse_camera_token"]
 
 DEFAULT_PREFIX = "asnn"
-KINDS = ("frame", "response", "warning", "preview")
+KINDS = ("frame", "response", "warning", "preview", "refused")
 ROBOT_PATTERN = re.compile(r"[A-Za-z0-9_-]{1,64}")
 _CHUNK = re.compile(r"[^/*$?#\s]+")
 
@@ -92,6 +94,11 @@ def preview_key(robot: str, prefix: str = DEFAULT_PREFIX) -> str:
 
 def previews(prefix: str = DEFAULT_PREFIX, robot: str | None = None) -> str:
     return preview_key(robot or "*", prefix)
+
+
+def refusal_key(robot: str, prefix: str = DEFAULT_PREFIX) -> str:
+    """Where a worker tells a robot's camera that it refuses its frames (docs/contract.md)."""
+    return _key(prefix, robot, "refused")
 
 
 def parse_key(key: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str]:

@@ -47,9 +47,9 @@ from asnn.io.images import (JPEG_QUALITY, MAX_SIDE, ImageError, check_encoded, d
                              encoded_size)
 
 __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
-           "Response", "TargetMsg", "VERSION", "decode_frame", "decode_response",
-           "decode_status", "encode", "encode_image", "encode_status", "encoded_size",
-           "track_id_base", "track_label", "unpack_map"]
+           "Refusal", "Response", "TargetMsg", "VERSION", "decode_frame", "decode_refusal",
+           "decode_response", "decode_status", "encode", "encode_image", "encode_status",
+           "encoded_size", "track_id_base", "track_label", "unpack_map"]
 
 VERSION = 1
 FrameFormat = Literal["gray8", "bgr8", "jpeg", "png"]
@@ -62,6 +62,8 @@ MAX_ARRAY_LEN = 4096
 MAX_ITEMS = 16384  # container entries (map pairs and array items) in one message, in all
 MAX_STR_LEN = 64 * 1024
 MAX_EXT_LEN = 64
+MAX_NOTE_LEN = 200  # characters of a refusal's detail and worker id
+MAX_REFUSAL_BYTES = 4096
 REASONS = ("oversized", "undecodable", "not-a-map", "unsupported-version", "missing-field",
            "invalid-field", "bad-stamp", "bad-size", "bad-format", "bad-pixels", "bad-image")
 
@@ -285,6 +287,28 @@ def decode_status(payload: bytes) -> dict:
     if not isinstance(status.get("worker"), str):
         raise MessageError("invalid-field", "a status map names its worker")
     return status
+
+
+class Refusal(_Message):
+    """A worker's notice on ``<prefix>/<robot>/refused`` that it refuses the robot's frames
+    (an optional extension, docs/contract.md): the latest refusal, at most one notice a second
+    per robot, so that the camera can say why nothing answers it."""
+
+    v: int = Field(VERSION, description="message version (1)")
+    robot: str = Field(pattern=r"^[A-Za-z0-9_-]{1,64}$")
+    worker: str = Field(min_length=1, max_length=MAX_NOTE_LEN)
+    reason: str = Field(min_length=1, max_length=64, description="the label counted, REASONS "
+                        "and the worker's own (docs/operations.md)")
+    detail: str = Field(max_length=MAX_NOTE_LEN)
+    count: int = Field(ge=1, description="frames of the robot this worker has refused")
+
+
+def decode_refusal(payload: bytes) -> Refusal:
+    """Validate a Refusal payload (a small message: at most MAX_REFUSAL_BYTES)."""
+    if len(payload) > MAX_REFUSAL_BYTES:
+        raise MessageError("oversized", f"refusal of {len(payload)} bytes, more than "
+                           f"{MAX_REFUSAL_BYTES}")
+    return _validate(Refusal, _unpack(payload, "refusal"), "refusal")
 
 
 def _unpack(payload: bytes, what: str) -> dict[str, Any]:

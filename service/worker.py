@@ -17,7 +17,9 @@ cameras that do not announce themselves. Hand-overs are warm: the new owner step
 frames silently until its model is warm, while the previous owner answers, and a worker that
 stops answers its robots until their new owners are warm (at most ``handover_timeout``). One
 that dies loses its tokens when the router sees its session close or its lease expire, and its
-robots start cold at their new owners. Each worker answers queries on
+robots start cold at their new owners. A robot whose frames the worker refuses (an invalid
+message, a second publisher, a full table, ...) is told why on ``<prefix>/<robot>/refused``, at
+most once a second (:class:`~service.messages.Refusal`). Each worker answers queries on
 ``<prefix>/@worker/<id>/status`` with a msgpack map (:meth:`service.core.WorkerCore.status` plus
 the live workers, the routes and the frames received).
 """
@@ -37,10 +39,11 @@ from asnn.model import compile_kernels
 
 from . import keys
 from .core import WorkerCore
-from .messages import MessageError, Response, decode_status, encode, encode_status
+from .messages import (MAX_NOTE_LEN, MessageError, Refusal, Response, decode_status, encode,
+                       encode_status)
 from .routing import Routes
 
-__all__ = ["COMPUTE_NICENESS", "HANDOVER_TIMEOUT", "RESPONSE_QOS", "SCAN_INTERVAL",
+__all__ = ["COMPUTE_NICENESS", "HANDOVER_TIMEOUT", "REFUSAL_QOS", "RESPONSE_QOS", "SCAN_INTERVAL",
            "SCAN_WINDOW", "SWITCH_INTERVAL", "WARNING_QOS", "Worker", "WorkerIdTaken",
            "announced_cameras", "check_scan", "fleet_claims", "live_workers", "query_status",
            "tune_process"]
@@ -51,6 +54,9 @@ RESPONSE_QOS = dict(congestion_control=zenoh.CongestionControl.BLOCK,
                     priority=zenoh.Priority.DATA_HIGH, reliability=zenoh.Reliability.RELIABLE)
 WARNING_QOS = dict(congestion_control=zenoh.CongestionControl.BLOCK,
                    priority=zenoh.Priority.INTERACTIVE_HIGH, reliability=zenoh.Reliability.RELIABLE)
+# A refusal notice is worth less than anything else the worker sends, and never waits.
+REFUSAL_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
+                   priority=zenoh.Priority.BACKGROUND)
 # Per-publisher sequence numbers. Without them the advanced subscriber orders samples by
 # timestamp per session, and a late joiner can lose the cached warning of every robot but the
 # most recent one (all warning publishers of a worker share its session). The sporadic heartbeat
@@ -468,6 +474,7 @@ class Worker:
             if now - last_evict >= 1.0:
                 last_evict = now
                 self.core.evict_idle()
+                self._tell_refusals()
             try:
                 self._route()
             except Exception:  # e.g. the session closing under us
@@ -476,6 +483,19 @@ class Worker:
             if self.stats_every and now - last_stats >= self.stats_every:
                 last_stats = now
                 log.info("stats %s; frames in %s", self.core.stats(), self.traffic())
+
+    def _tell_refusals(self) -> None:
+        """Tell each robot refused since the last call why, on ``<prefix>/<robot>/refused``
+        (best effort: a notice, not data)."""
+        for robot, reason, detail, count in self.core.refusals_to_tell():
+            notice = Refusal(robot=robot, worker=self.core.worker_id[:MAX_NOTE_LEN],
+                             reason=reason[:64], detail=detail[:MAX_NOTE_LEN], count=count)
+            try:
+                self.session.put(keys.refusal_key(robot, self.core.prefix), encode(notice),
+                                 **REFUSAL_QOS)
+            except Exception:  # e.g. the session closing under us; the status keeps it
+                if not self._stop_routes.is_set():
+                    log.exception("robot %s: telling it its frames are refused failed", robot)
 
     # ------------------------------------------------------------------ processing
 

@@ -11,9 +11,9 @@ from asnn import ASNN
 from asnn.stimuli import make_scene
 from service import keys
 from service.config import ConfigError, ZenohOptions, make_config
-from service.messages import (FORMATS, MAX_PAYLOAD, REASONS, Frame, MessageError, Response,
-                              decode_frame, decode_response, encode, encode_image, encoded_size,
-                              response_from, track_id_base)
+from service.messages import (FORMATS, MAX_PAYLOAD, REASONS, Frame, MessageError, Refusal,
+                              Response, decode_frame, decode_refusal, decode_response, encode,
+                              encode_image, encoded_size, response_from, track_id_base)
 
 RNG = np.random.default_rng(4)
 IMAGE = RNG.integers(0, 256, size=(40, 56, 3), dtype=np.uint8)
@@ -209,6 +209,26 @@ def test_keys_follow_the_contract():
     for bad in ("", "a b", "a/*", "a//b", "r/1/../**"):
         with pytest.raises(keys.KeySchemeError):
             keys.check_prefix(bad)
+
+
+def test_a_refusal_notice_round_trips_and_bad_ones_are_refused():
+    notice = Refusal(robot="r1", worker="w1", reason="bad-size", detail="width 0", count=3)
+    assert keys.refusal_key("r1") == "asnn/r1/refused"
+    assert keys.parse_key("asnn/r1/refused") == ("r1", "refused")
+    assert decode_refusal(encode(notice)) == notice
+    good = msgpack.unpackb(encode(notice))
+    for change, expected in [({"robot": "r/1"}, "invalid-field"),
+                             ({"count": 0}, "invalid-field"),
+                             ({"detail": "x" * 201}, "invalid-field"),
+                             ({"v": 2}, "unsupported-version"),
+                             ({"reason": None}, "invalid-field")]:
+        with pytest.raises(MessageError) as err:
+            decode_refusal(msgpack.packb({**good, **change}))
+        assert err.value.reason == expected, change
+    with pytest.raises(MessageError, match="missing-field"):
+        decode_refusal(msgpack.packb({k: v for k, v in good.items() if k != "worker"}))
+    with pytest.raises(MessageError, match="oversized"):  # a bounded notice, whatever it holds
+        decode_refusal(msgpack.packb({**good, "padding": "x" * 5000}))
 
 
 def test_config_options_override_the_file(tmp_path):

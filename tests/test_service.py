@@ -20,7 +20,7 @@ from asnn.stimuli import make_scene, write_video
 from clients.alerts import WarningListener
 from cli.main import main
 from service import keys
-from service.camera import Source, SourceError, open_source, publish_frames
+from service.camera import RefusalNotices, Source, SourceError, open_source, publish_frames
 from service.core import WARMUP_FRAMES, WorkerCore
 from service.messages import Frame, decode_frame, decode_response, encode
 from service.worker import COMPUTE_NICENESS, Worker
@@ -432,3 +432,33 @@ def test_the_camera_announces_itself_while_it_publishes(zenoh_net):
     wait_for(lambda: len(seen) >= 2, what="the announcement and its end")
     assert seen == [("asnn/@camera/r7", zenoh.SampleKind.PUT),
                     ("asnn/@camera/r7", zenoh.SampleKind.DELETE)]
+
+
+def test_a_camera_whose_frames_the_worker_refuses_is_told_why(zenoh_net, caplog):
+    core = WorkerCore(max_robots=1)
+    with Worker(zenoh_net.hub, core, stats_every=0):
+        responses = Responses(zenoh_net.spoke())
+        scene, source = scene_source("looming")
+        send_one(zenoh_net.spoke(), responses, "first", scene.frames[0], 0)  # takes the slot
+        refusals, stop = RefusalNotices("second"), threading.Event()
+        camera = threading.Thread(target=publish_frames, args=(zenoh_net.spoke(), "second", source),
+                                  kwargs=dict(fps=40, loop=True, stop=stop, refusals=refusals,
+                                              wait=TIMEOUT))
+        with caplog.at_level("WARNING", logger="asnn.camera"):
+            camera.start()
+            try:
+                wait_for(lambda: refusals.counts, what="the worker's notice")
+                # notices that are not valid refusals of this robot are counted and ignored
+                zenoh_net.hub.put(keys.refusal_key("second"), b"junk")
+                zenoh_net.hub.put(keys.refusal_key("second"), msgpack.packb(
+                    {"v": 1, "robot": "other", "worker": "w", "reason": "r", "detail": "",
+                     "count": 1}))
+                wait_for(lambda: refusals.invalid == 2, what="the junk notices")
+            finally:
+                stop.set()
+                camera.join(timeout=TIMEOUT)
+    (worker, reason), count = next(iter(refusals.counts.items()))
+    assert (worker, reason) == (core.worker_id, "too-many-robots") and count >= 1
+    assert refusals.summary() == f"too-many-robots {count}"
+    assert (f"camera second: worker {core.worker_id} refuses its frames (too-many-robots, "
+            in caplog.text) and "already tracking 1 robots" in caplog.text

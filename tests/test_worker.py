@@ -165,6 +165,22 @@ def test_frames_reordered_on_the_way_are_refused_as_late_not_a_restart(looming):
     assert core.status()["robots"]["r1"]["contested"] is False
 
 
+def test_each_refused_robot_is_to_be_told_once_with_its_latest_refusal(looming):
+    core = WorkerCore(max_robots=1)
+    assert core.refusals_to_tell() == []
+    assert core.offer("asnn/r1/frame", payload(looming.frames[10], 0)) == "r1"
+    core.process(core.take(timeout=0))
+    assert core.offer("asnn/r1/frame", b"junk") is None
+    for seq in range(3):  # the table is full: r2 is refused
+        assert core.offer("asnn/r2/frame", payload(looming.frames[10], seq)) is None
+    told = {robot: (reason, count) for robot, reason, _, count in core.refusals_to_tell()}
+    assert told == {"r1": ("undecodable", 1), "r2": ("too-many-robots", 3)}
+    assert core.refusals_to_tell() == []  # told once
+    assert core.offer("asnn/r2/frame", payload(looming.frames[10], 3)) is None
+    assert core.refusals_to_tell() == [("r2", "too-many-robots", "already tracking 1 robots", 4)]
+    assert core.status()["refused"]["r2"]["count"] == 4  # the status keeps them all the same
+
+
 def test_a_camera_whose_seq_never_grows_is_reported_as_unable_to_warn(looming, caplog):
     core = WorkerCore()
     with caplog.at_level("WARNING", logger="asnn.worker"):
