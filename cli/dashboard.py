@@ -16,9 +16,11 @@ __all__ = ["register"]
 log = logging.getLogger("asnn")
 
 
-def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str) -> int:
-    """Feed ``store`` from the fleet's subscribers while ``server`` (a context manager that
-    serves it) runs, until SIGINT or SIGTERM; ``server`` is closed on every path."""
+def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
+                refusals: bool = False) -> int:
+    """Feed ``store`` from the fleet's subscribers (``refusals``: the workers' refusal notices
+    too) while ``server`` (a context manager that serves it) runs, until SIGINT or SIGTERM;
+    ``server`` is closed on every path."""
     from clients.dashboard import FleetSubscriber
 
     try:
@@ -27,7 +29,7 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str) ->
         server.close()
         return fail(str(exc))
     stop = stop_on_signals()
-    with session, FleetSubscriber(session, store) as subscriber, server:
+    with session, FleetSubscriber(session, store, refusals=refusals) as subscriber, server:
         print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
               flush=True)
         while not stop.wait(0.5):
@@ -47,13 +49,14 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     except OSError as exc:  # the port is taken, or the address is not ours
         return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
     host, port = server.address
-    return serve_fleet(args, store, server, "dashboard", f"http://{host}:{port}/")
+    return serve_fleet(args, store, server, "dashboard", f"http://{host}:{port}/",
+                       refusals=True)
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser("dashboard", help="the fleet in a web browser",
                               description="Serve a live page showing every robot on "
-                              "<prefix>/*/response, warning and preview: thumbnail with the "
+                              "<prefix>/*/response, warning, preview and refused: thumbnail with the "
                               "looming targets, spike-rate sparkline, collision and stale "
                               "markers, and the latest warnings. Every asset comes from the "
                               "package (works offline).")

@@ -9,7 +9,9 @@ Three parts, each usable alone:
   a browser.
 - :class:`FleetSubscriber` feeds a store from a Zenoh session: ``<prefix>/*/response``,
   ``<prefix>/*/preview`` and ``<prefix>/*/warning`` (an advanced subscriber asking the workers'
-  caches for history, so the latest warning of each robot shows at once, as in ``asnn alerts``).
+  caches for history, so the latest warning of each robot shows at once, as in ``asnn alerts``),
+  and for the dashboard ``<prefix>/*/refused`` (a worker refuses a robot's frames: its tile
+  says why until a response comes).
 - :class:`DashboardServer` serves the page (one HTML, one script, one style sheet, all from this
   package: nothing from the network) and Server-Sent Events from the standard library's
   ``ThreadingHTTPServer``. Each browser gets one full snapshot, then coalesced deltas, at most
@@ -60,8 +62,8 @@ from importlib import resources
 from asnn.params import SLOW_FPS
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import (MessageError, Preview, Response, check_preview, decode_preview,
-                              decode_response)
+from service.messages import (MessageError, Preview, Refusal, Response, check_preview,
+                              decode_preview, decode_refusal, decode_response)
 
 __all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES",
            "decode_fleet_sample", "stale_robot", "take_fleet_sample"]
@@ -122,6 +124,10 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
     if kind == "preview":
         message = decode_preview(payload)
         check_preview(message)  # the viewers only ever get images of the announced size
+    elif kind == "refused":
+        message = decode_refusal(payload)
+        if message.robot != robot:
+            raise MessageError("bad-key", f"a refusal of robot {message.robot!r} on {key}")
     elif kind in ("response", "warning"):
         message = decode_response(payload)
         if message.robot != robot:
@@ -131,7 +137,7 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
         if len(message.targets) > MAX_TARGETS:
             message = message.model_copy(update={"targets": message.targets[:MAX_TARGETS]})
     else:
-        raise MessageError("bad-key", f"{key!r} is not a response, warning or preview")
+        raise MessageError("bad-key", f"{key!r} is not a response, warning, preview or refusal")
     return robot, kind, message
 
 
@@ -183,6 +189,8 @@ class _Robot:
     points: deque = field(default_factory=deque)  # (version, stamp, spike_rate)
     recent_targets: deque = field(default_factory=lambda: deque(maxlen=RECENT_TARGETS))
     episode: dict | None = None       # its latest entry in the warning log
+    refused: Refusal | None = None    # a worker's latest notice that it refuses its frames
+    refused_at: float = 0.0           # its arrival (store clock)
     responses: int = 0
     warnings: int = 0
     previews: int = 0
@@ -256,6 +264,8 @@ class FleetStore:
             state.touched = now
             if kind == "preview":
                 self._add_preview_locked(state, message, version)
+            elif kind == "refused":
+                state.refused, state.refused_at, state.changed = message, now, version
             elif kind == "response":
                 self._add_response_locked(state, message, version, now)
             else:
@@ -438,6 +448,7 @@ class FleetStore:
                 "preset": r.preset, "worker": r.worker, "latency_ms": r.latency_ms,
                 "dropped": r.dropped},
             "last_warning": None if w is None else {"seq": w.seq, "stamp": w.stamp},
+            "refused": self._refused_locked(state),
             "targets": self._targets_locked(state, collision),
         }
         if state.preview is not None:
@@ -445,6 +456,15 @@ class FleetStore:
             tile["preview"] = state.preview if fresh else {
                 k: v for k, v in state.preview.items() if k != "src"}
         return tile
+
+    @staticmethod
+    def _refused_locked(state: _Robot) -> dict | None:
+        """A worker's refusal of the robot's frames, unless a response came after it."""
+        notice = state.refused
+        if notice is None or (state.answered is not None and state.answered >= state.refused_at):
+            return None
+        return {"worker": notice.worker, "reason": notice.reason, "detail": notice.detail,
+                "count": notice.count}
 
     @staticmethod
     def _targets_locked(state: _Robot, collision: bool) -> list[dict]:
@@ -469,19 +489,22 @@ class FleetStore:
 
 
 class FleetSubscriber:
-    """Declares the dashboard's three subscribers on ``session``, feeding ``store`` (a
+    """Declares the fleet viewers' subscribers on ``session`` (responses, previews, warnings,
+    and with ``refusals`` the workers' refusal notices), feeding ``store`` (a
     :class:`FleetStore`, or anything with a ``prefix`` and an ``offer(key, payload)`` that never
     raises, such as the Foxglove bridge of :mod:`clients.foxglove`)."""
 
-    def __init__(self, session, store: FleetStore):
+    def __init__(self, session, store: FleetStore, *, refusals: bool = False):
         from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
 
         prefix = store.prefix
         self.store = store
         self.keys = [keys.responses(prefix), keys.warnings(prefix), keys.previews(prefix)]
+        if refusals:
+            self.keys.append(keys.refusals(prefix))
         self._subscribers = [
-            session.declare_subscriber(keys.responses(prefix), self._on_sample),
-            session.declare_subscriber(keys.previews(prefix), self._on_sample),
+            *(session.declare_subscriber(key, self._on_sample)
+              for key in self.keys if key != keys.warnings(prefix)),
             declare_advanced_subscriber(
                 session, keys.warnings(prefix), self._on_sample,
                 history=HistoryConfig(detect_late_publishers=True, max_samples=1),

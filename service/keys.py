@@ -29,7 +29,7 @@ import re
 
 __all__ = ["DEFAULT_PREFIX", "KINDS", "KeySchemeError", "check_prefix", "check_robot",
            "frame_key", "parse_key", "response_key", "warning_key", "frames", "responses",
-           "warnings", "preview_key", "previews", "refusal_key", "WORKER_CHUNK",
+           "warnings", "preview_key", "previews", "refusal_key", "refusals", "WORKER_CHUNK",
            "worker_token_key", "worker_tokens", "worker_status_key", "worker_statuses",
            "parse_worker_token", "CLAIM_CHUNK", "claim_key", "claims", "parse_claim",
            "CAMERA_CHUNK", "camera_token_key", "camera_tokens", "parse_camera_token"]
@@ -99,6 +99,10 @@ def previews(prefix: str = DEFAULT_PREFIX, robot: str | None = None) -> str:
 def refusal_key(robot: str, prefix: str = DEFAULT_PREFIX) -> str:
     """Where a worker tells a robot's camera that it refuses its frames (docs/contract.md)."""
     return _key(prefix, robot, "refused")
+
+
+def refusals(prefix: str = DEFAULT_PREFIX, robot: str | None = None) -> str:
+    return refusal_key(robot or "*", prefix)
 
 
 def parse_key(key: str, prefix: str = DEFAULT_PREFIX) -> tuple[str, str]:

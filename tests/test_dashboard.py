@@ -26,7 +26,7 @@ from clients.dashboard import STATIC_FILES, DashboardServer, FleetStore, FleetSu
 from service import keys
 from service.camera import Source, publish_frames
 from service.demo import free_port
-from service.messages import Preview, Response, TargetMsg, decode_preview, encode
+from service.messages import Preview, Refusal, Response, TargetMsg, decode_preview, encode
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT = 20.0
@@ -129,6 +129,26 @@ def test_stale_when_no_response_arrives_whatever_its_camera_sends_and_then_no_co
     assert store.delta(0)["counts"]["collision"] == 0
     offer_response(store, response("live", 80, collision=False))  # a worker answers again
     assert store.delta(0)["live"]["live"] == [0.0, False, False]
+
+
+def test_a_workers_refusal_shows_on_the_tile_until_a_response_comes():
+    clock = Clock()
+    store = FleetStore(clock=clock)
+    notice = Refusal(robot="r1", worker="w2", reason="bad-size", detail="width 5000", count=7)
+    assert store.offer("asnn/r1/refused", encode(notice)) == "r1"
+    tile = store.delta(0)["robots"]["r1"]
+    assert tile["refused"] == {"worker": "w2", "reason": "bad-size", "detail": "width 5000",
+                               "count": 7}
+    assert tile["stale"] is True and tile["response"] is None  # nothing answers it
+    clock.now += 1.0
+    offer_response(store, response("r1", 1))
+    assert store.delta(0)["robots"]["r1"]["refused"] is None  # answered since
+    clock.now += 1.0
+    store.offer("asnn/r1/refused", encode(notice))
+    assert store.delta(0)["robots"]["r1"]["refused"]["count"] == 7
+    # a notice naming another robot than its key's is refused itself
+    assert store.offer("asnn/r2/refused", encode(notice)) is None
+    assert store.invalid == {"bad-key": 1} and store.robots() == ["r1"]
 
 
 def test_silent_robots_are_forgotten_and_the_number_of_robots_is_bounded():
@@ -373,9 +393,11 @@ def test_closing_the_server_ends_open_event_streams():
 
 def test_subscriber_feeds_the_store_over_zenoh(zenoh_net):
     store = FleetStore()
-    with FleetSubscriber(zenoh_net.hub, store):
+    with FleetSubscriber(zenoh_net.hub, store, refusals=True) as subscriber:
         spoke = zenoh_net.spoke()
         time.sleep(0.3)  # let the subscriptions reach the spoke
+        spoke.put("asnn/r2/refused", encode(Refusal(robot="r2", worker="w", reason="late",
+                                                    detail="", count=1)))
         spoke.put("asnn/r1/response", encode(response(seq=1)))
         spoke.put("asnn/r1/preview", encode(preview(seq=1)))
         spoke.put("asnn/r1/response", b"garbage")
@@ -383,7 +405,9 @@ def test_subscriber_feeds_the_store_over_zenoh(zenoh_net):
         while (store.delta(0)["counts"]["received"].get("preview") is None
                or not store.invalid) and time.monotonic() < deadline:
             time.sleep(0.05)
-    assert store.delta(0)["counts"]["received"] == {"response": 1, "preview": 1}
+    assert subscriber.keys == ["asnn/*/response", "asnn/*/warning", "asnn/*/preview",
+                               "asnn/*/refused"]
+    assert store.delta(0)["counts"]["received"] == {"refused": 1, "response": 1, "preview": 1}
     assert store.invalid == {"undecodable": 1}
 
 

@@ -27,7 +27,7 @@ from asnn.stimuli import make_scene
 from clients.dashboard import DashboardServer, FleetStore, FleetSubscriber
 from service.camera import Source, publish_frames
 from service.core import WorkerCore
-from service.messages import Response, encode
+from service.messages import Refusal, Response, encode
 from service.worker import Worker
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -296,6 +296,10 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
                 key = f"asnn/{name}/response"
                 period = 0.1 if name in slow else 0.05
                 store.offer(key, fake_response(name, seq, 1000.0 + seq * period, i % 10 == 0))
+            if seq == 10:  # a worker refuses one silent robot's frames and says why
+                store.offer("asnn/robot33/refused", encode(Refusal(
+                    robot="robot33", worker="w2", reason="too-many-robots",
+                    detail="already tracking 256 robots", count=4)))
             seq += 1
             stop.wait(0.05)
 
@@ -312,8 +316,9 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
             # not reached yet are then stale for a moment too (most likely what failed in CI:
             # two tiles stale by count, none of them stale a moment later).
             shown = wait_for_tiles(
-                chrome, lambda shown: len(shown) == 50 and stale(shown) == silent,
-                "fifty tiles, exactly the silent robots stale")
+                chrome, lambda shown: len(shown) == 50 and stale(shown) == silent
+                and "refused" in shown["robot33"]["stats"],
+                "fifty tiles, exactly the silent robots stale, one of them refused")
             chrome.screenshot(ARTIFACTS / "dashboard-fifty.png")
             check_page_health(chrome, server.url)
     finally:
@@ -323,3 +328,6 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
     assert {n for n, t in shown.items() if t["collision"] == "true"} == set(names[::10])
     assert {n for n, t in shown.items() if "10 fps (slow)" in t["stats"]} == slow
     assert all("20 fps" in t["stats"] for n, t in shown.items() if n not in slow | silent)
+    assert shown["robot33"]["stats"] == ("refused by w2: too-many-robots (4 frames) · already "
+                                         "tracking 256 robots")
+    assert "refused" not in shown["robot07"]["stats"]

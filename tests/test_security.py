@@ -363,8 +363,9 @@ def test_the_fleet_keys_pass_the_access_control_for_their_owners_only(fleet):
 
 
 def test_a_camera_hears_its_own_robots_refusals_only_and_cannot_send_any(fleet):
-    """The refusal notices (docs/contract.md): the workers tell a robot's camera, and only it,
-    why its frames are refused; a camera cannot forge a notice for another robot."""
+    """The refusal notices (docs/contract.md): the workers tell a robot's camera, and no other
+    camera, why its frames are refused (dashboards hear them all); a camera cannot forge a
+    notice for another robot."""
     from service.messages import Refusal
 
     session, _ = fleet
@@ -372,10 +373,11 @@ def test_a_camera_hears_its_own_robots_refusals_only_and_cannot_send_any(fleet):
     # (the collectors are on other sessions: a session delivers its own puts locally)
     heard_r1 = collector(session("camera-r1"), keys.refusal_key("r1"))
     heard_r2 = collector(session("camera-r2"), "asnn/*/refused")
+    dashboard = collector(session("dashboard"), keys.refusals())
     time.sleep(QUIET)  # the subscriptions reach the router
     notice = encode(Refusal(robot="r1", worker="w", reason="bad-size", detail="", count=1))
     worker.put(keys.refusal_key("r1"), notice)
     forger.put(keys.refusal_key("r1"), notice)
     wait_for(lambda: heard_r1, what="the worker's notice at r1's camera")
     time.sleep(QUIET)
-    assert len(heard_r1) == 1 and heard_r2 == []
+    assert len(heard_r1) == 1 and heard_r2 == [] and len(dashboard) == 1

@@ -223,6 +223,14 @@
   }
 
   function drawStats(v) {
+    const refused = v.tile && v.tile.refused;
+    v.el.dataset.refused = refused ? refused.reason : "";
+    if (refused) {  // newer than any response: the worker says why it does not answer
+      v.stats.textContent = `refused by ${refused.worker}: ${refused.reason} ` +
+        `(${refused.count} frames) · ${refused.detail}`;
+      v.stats.title = refused.detail;
+      return;
+    }
     const r = v.tile && v.tile.response;
     if (!r) {
       v.stats.textContent = v.tile && v.tile.last_warning
