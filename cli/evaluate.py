@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import time
 from pathlib import Path
 
 from asnn.evaluation import scoring
@@ -26,6 +27,10 @@ from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detect
 from asnn.params import preset_names
 
 from .arguments import count, frame_size, whole
+
+
+# the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
+MANIFEST = ".asnn-eval-files"
 
 
 def _detectors(text: str) -> list[str]:
@@ -89,7 +94,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "motion and labels; README, 'fresh scenery') (default: 0, the suite as "
                         "it is)")
     p.add_argument("--out", metavar="DIR", default="eval-out",
-                   help="output directory (default: %(default)s)")
+                   help="output directory (default: %(default)s); it then holds this run's "
+                        "files: those an earlier run wrote there and this one did not are "
+                        f"removed (the run's files are listed in DIR/{MANIFEST})")
     p.add_argument("--early-tolerance", type=float, metavar="SECONDS",
                    help="with CLIPS_DIR: a first warning up to this long before the labelled "
                         f"onset still counts as a hit (default: {scoring.EARLY_TOLERANCE_S}, for "
@@ -119,7 +126,54 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _replace_previous_run(out: Path, since: float) -> None:
+    """Leave ``out`` holding this run's files only: remove those the previous run listed in
+    the manifest and this one did not write again (their times unchanged; never a file
+    outside ``out``, nor one no run listed), and list this run's (written again, or new since
+    ``since``)."""
+    if not out.is_dir():
+        return
+    previous: dict[str, int] = {}
+    try:
+        for line in (out / MANIFEST).read_text(encoding="utf-8").splitlines():
+            mtime, _, name = line.partition("\t")
+            previous[name] = int(mtime)
+    except (OSError, UnicodeDecodeError, ValueError):
+        pass
+    root = out.resolve()
+    written = {}
+    for path in out.rglob("*"):
+        if path.name == MANIFEST or path.is_symlink() or not path.is_file():
+            continue
+        name, mtime = str(path.relative_to(out)), path.stat().st_mtime_ns
+        ours = previous[name] != mtime if name in previous else mtime >= since * 1e9
+        if ours:
+            written[name] = mtime
+    for name, mtime in previous.items():
+        path = out / name
+        if (name in written or path.is_symlink() or not path.is_file()
+                or root not in path.resolve().parents or path.stat().st_mtime_ns != mtime):
+            continue
+        path.unlink()
+        parent = path.parent
+        while parent.resolve() != root and not any(parent.iterdir()):
+            parent.rmdir()
+            parent = parent.parent
+    (out / MANIFEST).write_text("".join(f"{mtime}\t{name}\n" for name, mtime
+                                        in sorted(written.items())), encoding="utf-8")
+
+
 def run(args: argparse.Namespace) -> int:
+    """``asnn eval``; the --out folder then holds this run's files only (its earlier runs'
+    others are removed, :func:`_replace_previous_run`)."""
+    since = time.time()
+    status = _evaluate(args)
+    if status in (0, 1):  # a report was written
+        _replace_previous_run(Path(args.out), since)
+    return status
+
+
+def _evaluate(args: argparse.Namespace) -> int:
     from asnn.evaluation import clips, heldout, paper, suite  # matplotlib: only when it runs
     from asnn.evaluation.runs import ABLATIONS
 

@@ -415,3 +415,25 @@ def test_tasks_left_early_are_cancelled_and_their_workers_ended(tmp_path):
     import multiprocessing
     assert not multiprocessing.active_children()  # ...and no worker is left running
     assert len(list(tmp_path.glob("*.done"))) == finished  # nor finishes anything later
+
+
+def test_an_out_folder_holds_the_latest_run_s_files_only(clips, tmp_path):
+    root, _ = clips
+    out = tmp_path / "out"
+    assert main(["eval", str(root), "--detectors", "asnn,lgmd1", "--out", str(out),
+                 "--no-plots"]) == 0
+    assert (out / "results" / "lgmd1" / "loom.jsonl").is_file()
+    (out / "notes.md").write_text("mine")  # a file of the user's, never listed
+    outside = tmp_path / "outside.txt"
+    outside.write_text("not eval's")
+    with (out / ".asnn-eval-files").open("a") as manifest:  # a tampered list cannot reach out
+        manifest.write(f"{outside.stat().st_mtime_ns}\t../outside.txt\n")
+    assert main(["eval", str(root), "--detectors", "asnn", "--out", str(out), "--no-plots"]) == 0
+    assert not (out / "results" / "lgmd1").exists()  # the earlier run's other detector
+    assert sorted(p.name for p in (out / "results" / "asnn").iterdir()) == \
+        ["bar.jsonl", "loom.jsonl"]
+    assert list(json.loads((out / "results.json").read_text())["detectors"]) == ["asnn"]
+    assert (out / "notes.md").read_text() == "mine" and outside.read_text() == "not eval's"
+    listed = [line.split("\t")[1] for line in (out / ".asnn-eval-files").read_text().splitlines()]
+    assert "results/asnn/loom.jsonl" in listed and "report.md" in listed
+    assert "notes.md" not in listed and not any("lgmd1" in name for name in listed)
