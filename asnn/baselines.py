@@ -294,7 +294,8 @@ class LGMD1(_LGMDBase):
 
     def __init__(self, params: LGMD1Params | None = None, **overrides):
         base = params or LGMD1Params()
-        self.params = LGMD1Params(**{**base.model_dump(), **overrides}) if overrides else base
+        # validated again, overrides or not: pydantic's model_copy(update=...) skips the checks
+        self.params = LGMD1Params(**{**base.model_dump(), **overrides})
         # the photoreceptors' persistence is the ASNN's (paper eq. 1, p_i = 1/(1+exp(u i)))
         self._p_weights = photoreceptor_weights(self.params.n_p, self.params.p_u)
         self._w_i = lateral_inhibition_kernel()
@@ -361,7 +362,8 @@ class LGMD2(_LGMDBase):
 
     def __init__(self, params: LGMD2Params | None = None, **overrides):
         base = params or LGMD2Params()
-        self.params = LGMD2Params(**{**base.model_dump(), **overrides}) if overrides else base
+        # validated again, overrides or not: pydantic's model_copy(update=...) skips the checks
+        self.params = LGMD2Params(**{**base.model_dump(), **overrides})
         prm = self.params
         a_near = prm.dt / (prm.dt + prm.tau_near)
         a_diag = prm.dt / (prm.dt + prm.tau_diagonal)

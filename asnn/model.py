@@ -120,6 +120,9 @@ class ASNN:
                             f"**changes) makes one), got {type(params).__name__}")
         if isinstance(threads, bool) or not isinstance(threads, numbers.Integral):
             raise TypeError(f"threads must be an int, got {threads!r}")
+        # validated again: pydantic's model_copy(update=...) skips the checks, and the kernels
+        # index by the parameters without bounds checks (n_fast >= n_slow read past an array)
+        params = ASNNParams.model_validate(params.model_dump())
         self.params = params
         self.record_maps = record_maps
         p = self.params

@@ -135,6 +135,20 @@ def test_parameters_that_would_silence_or_blow_up_the_model_are_refused(changes,
         asnn_preset("default", **changes)
 
 
+def test_parameters_changed_around_their_checks_are_refused_by_the_models():
+    """pydantic's model_copy(update=...) skips validation; the optimised kernels index by the
+    parameters without bounds checks (n_fast >= n_slow read past an array: finite garbage)."""
+    from asnn.baselines import LGMD1, LGMD2, LGMD1Params, LGMD2Params
+
+    for changes in ({"n_fast": 5}, {"t_c": float("nan")}):
+        with pytest.raises(ValidationError):
+            ASNN(asnn_preset("paper").model_copy(update=changes))
+    with pytest.raises(ValidationError):
+        LGMD1(LGMD1Params().model_copy(update={"t_s": float("nan")}))
+    with pytest.raises(ValidationError):
+        LGMD2(LGMD2Params().model_copy(update={"t_sp": float("nan")}))
+
+
 def test_the_temporal_filter_is_stable_up_to_the_refused_step():
     # dt A / tau just under 2: each stage's own term decays (|1 - 1.9| < 1), the state stays
     # bounded on a still scene after a step of light
