@@ -437,3 +437,22 @@ def test_an_out_folder_holds_the_latest_run_s_files_only(clips, tmp_path):
     listed = [line.split("\t")[1] for line in (out / ".asnn-eval-files").read_text().splitlines()]
     assert "results/asnn/loom.jsonl" in listed and "report.md" in listed
     assert "notes.md" not in listed and not any("lgmd1" in name for name in listed)
+
+
+def test_the_maps_figure_draws_motion_where_it_points_on_the_image():
+    """phi is in image coordinates (y down): a rim moving down the image is drawn pointing down
+    the screen, one moving right pointing right."""
+    from asnn.evaluation.figures import _maps_figure
+
+    size = 48
+    blank = np.zeros((size, size)).tolist()
+    for phi, screen in ((np.pi / 2, (0, -1)), (0.0, (1, 0))):  # display y grows upwards
+        data = {"frame": blank, "V": np.ones((size, size)).tolist(),
+                "phi": np.full((size, size), phi).tolist(), "G": blank, "M_a": blank,
+                "M_d": blank, "G_prime": blank, "step": 0}
+        ax = _maps_figure(data).axes[0]
+        arrows = ax.collections[0]
+        (x, y), u, v = arrows.XY[0], arrows.U[0], arrows.V[0]
+        start, end = ax.transData.transform([(x, y), (x + u, y + v)])
+        drawn = np.sign(np.round(end - start, 6))
+        assert tuple(drawn) == screen, (phi, end - start)

@@ -217,6 +217,10 @@ def plot_maps(path: str | Path, data: Mapping) -> Path:
         ``frame`` (2-D gray), ``V``, ``phi``, ``G``, ``M_a``, ``M_d``, ``G_prime`` (2-D lists),
         ``step`` and ``title``.
     """
+    return _save(_maps_figure(data), path)
+
+
+def _maps_figure(data: Mapping) -> Figure:
     frame = np.asarray(data["frame"], dtype=float)
     v, phi = np.asarray(data["V"], dtype=float), np.asarray(data["phi"], dtype=float)
     fig = _figure(12.0, 7.6)
@@ -227,8 +231,9 @@ def plot_maps(path: str | Path, data: Mapping) -> Path:
     ys, xs = np.mgrid[stride // 2:frame.shape[0]:stride, stride // 2:frame.shape[1]:stride]
     vv = np.clip(v[ys, xs], 0.0, None)
     scale = vv.max() if vv.max() > 0 else 1.0
-    # image coordinates: y points down, so the arrow's screen y is the negated vector y
-    ax.quiver(xs, ys, vv * np.cos(phi[ys, xs]) / scale, -vv * np.sin(phi[ys, xs]) / scale,
+    # phi is in image coordinates (y down), and so are the axes imshow sets up: angles="xy"
+    # draws the vector in them as it is
+    ax.quiver(xs, ys, vv * np.cos(phi[ys, xs]) / scale, vv * np.sin(phi[ys, xs]) / scale,
               color="tab:red", angles="xy", scale_units="xy", scale=1.0 / (1.5 * stride))
     ax.set_title("(a) flow of motion energy")
     panels = [("V", "(b) maximal motion energy V", "magma"),
@@ -244,7 +249,7 @@ def plot_maps(path: str | Path, data: Mapping) -> Path:
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle(data.get("title", f"intermediate maps at step {data.get('step')}"))
-    return _save(fig, path)
+    return fig
 
 
 def plot_temporal_filter(path: str | Path, data: Mapping) -> Path:
