@@ -61,6 +61,11 @@ def test_tolerance_and_warmup_are_parameters():
     assert scoring.score_clip(records((8, 30)), COLLISION, warmup=9).outcome == "hit"
     no_fps = {**COLLISION, "fps": None}
     assert scoring.score_clip(records((15,)), no_fps).outcome == "early"  # no fps: no tolerance
+    # "up to 0.5 s before onset": whole frames within it, at 15 fps 7 (8 would be 0.53 s)
+    for fps, earliest in ((15.0, 13), (29.97, 6), (30.0, 5), (20.0, 10)):
+        label = {**COLLISION, "fps": fps}
+        assert scoring.score_clip(records((earliest,)), label, warmup=0).outcome == "hit", fps
+        assert scoring.score_clip(records((earliest - 1,)), label, warmup=0).outcome == "early"
 
 
 def test_warning_frames_inside_the_hit_window_are_counted():

@@ -8,8 +8,8 @@ with ``x`` and ``y``) where the detector reports them. A label is an entry of ``
 (the target's centre ``[x, y]`` in every frame, or null where it has none; generated clips have
 it).
 
-Rules, with W the warm-up, T the early tolerance in frames (``round(tolerance_s * fps)``), and
-``first`` the first frame at or after W whose record has ``collision`` true:
+Rules, with W the warm-up, T the early tolerance in whole frames (``floor(tolerance_s * fps)``:
+7 at 15 fps, 14 at 29.97), and ``first`` the first frame at or after W whose record has ``collision`` true:
 
 =========  ===================================================================================
 outcome    when
@@ -275,7 +275,8 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
         raise ValueError(f"{clip}: a collision label needs onset_frame and contact_frame")
     if int(onset) > int(contact):
         raise ValueError(f"{clip}: onset_frame {onset} is after contact_frame {contact}")
-    tolerance = int(round(early_tolerance_s * fps)) if fps > 0 else 0
+    # whole frames within the tolerance (SPEC: "up to 0.5 s"): at 15 fps 7 frames, not 8
+    tolerance = math.floor(early_tolerance_s * fps + 1e-9) if fps > 0 else 0
     window = (int(onset) - tolerance, int(contact) + contact_slack)
     if first is None:
         return ClipScore(clip=clip, collision=True, outcome="miss", window=window,
