@@ -18,7 +18,10 @@ PUBLISHED_ORIENTATION = [(4 - k) % 8 for k in range(8)]
 
 
 def close(a: float, b: float) -> bool:
-    return abs(a - b) <= max(1e-9, 1e-6 * abs(b))
+    """Equal to float64 precision (SPEC.md section 3), with room for another machine's order of
+    summation: the reference preset differs from the golden outputs by at most 1e-14
+    (relative), the float32 reference32 by up to 5e-7."""
+    return abs(a - b) <= max(1e-12, 1e-10 * abs(b))
 
 
 def run_reference(frames: np.ndarray) -> list:

@@ -4,7 +4,6 @@ starts and checks them."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 
@@ -12,8 +11,9 @@ from asnn.evaluation import scoring
 from asnn.evaluation.labels import check_labels, load_labels, mismatches
 from asnn.stimuli import make_scene, write_video
 from cli.main import main
+from shared_data import SHARED
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+DATA = SHARED / "data"
 
 COLLISION = {"file": "c.mp4", "fps": 30.0, "frames": 60, "collision": True, "onset_frame": 20,
              "contact_frame": 40, "center": [10, 12], "description": "kept as it is"}

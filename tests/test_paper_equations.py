@@ -4,13 +4,13 @@ text (``../shared/paper/asnn-paper.tex``): the cited equation holds the function
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
 
 from asnn import retina
+from shared_data import SHARED
 
-PAPER = Path(__file__).resolve().parents[2] / "shared" / "paper" / "asnn-paper.tex"
+PAPER = SHARED / "paper" / "asnn-paper.tex"
 
 # function -> a symbol that one of the equations its docstring cites must hold
 SYMBOLS = {
