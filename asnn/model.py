@@ -502,11 +502,12 @@ class ASNN:
             m_a = blur_g > p.gamma_a
             m_d = blur_v > p.gamma_d  # full=True: the window is the whole frame
             mask = attended.copy()
-            maps = Maps(P=photo.copy(), R=np.concatenate([r, -r]), V=v.copy(),
-                        phi=np.arctan2(r[2], r[0]), G=g.copy(), M_a=m_a, M_d=m_d,
+            whole = np.concatenate([r, -r])  # R^{theta + pi} = -R^theta
+            maps = Maps(P=photo.copy(), R=whole, V=v.copy(),
+                        phi=retina.motion_direction(whole), G=g.copy(), M_a=m_a, M_d=m_d,
                         G_prime=g * mask, rig=self._rig_mask())
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
-                        collision=spike_rate >= p.t_c, targets=targets, maps=maps,
+                        collision=retina.collision_warning(spike_rate, p.t_c), targets=targets, maps=maps,
                         tracks=frame.tracks)
 
     def _respond(self, frame: "_Frame") -> Response:
@@ -528,8 +529,8 @@ class ASNN:
 
         r = retina.motion_energy(slow_on, fast_on, slow_off, fast_off, self._gabor,
                                  p.v_on, p.v_off)
-        v = r.max(axis=0)
-        phi = np.arctan2(r[2], r[0])  # R^{pi/2}, R^0
+        v = retina.motion_strength(r)
+        phi = retina.motion_direction(r)
 
         g = retina.approach_map(slow_on, fast_on, slow_off, fast_off, self._cs,
                                 (p.w1_on, p.w2_off, p.w1_off, p.w2_on))
@@ -540,10 +541,10 @@ class ASNN:
         m_d = retina.direction_attention(r, v, p.top_k, p.attention_sigma, p.attention_size,
                                          p.attention_normalised, p.gamma_d, p.attention_step)
         attended = m_a & m_d
-        g_prime = g * attended
+        g_prime = retina.attended_response(g, m_a, m_d)
+        dx, dy = retina.motion_components(v, phi)
 
         if p.targets == "objects":
-            dx, dy = v * np.cos(phi), v * np.sin(phi)
             total, targets = self._objects(
                 attended if attended.any() else None, g, lambda rows, cols: (dx[rows, cols],
                                                                              dy[rows, cols]),
@@ -551,13 +552,13 @@ class ASNN:
             u = float(p.u_scale * total)
         else:
             u = retina.membrane_potential(g_prime, p.u_scale, p.u_abs)
-            targets = extract_targets(attended, v * np.cos(phi), v * np.sin(phi), p.cluster_eps,
-                                      p.cluster_min_samples, p.origin_seed)
+            targets = extract_targets(attended, dx, dy, p.cluster_eps, p.cluster_min_samples,
+                                      p.origin_seed)
         out, spikes, spike_rate = self._spikes(u, g.size)
         maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d, G_prime=g_prime,
                     rig=self._rig_mask()) if self.record_maps else None
         return Response(index=frame.index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
-                        collision=spike_rate >= p.t_c, targets=targets, maps=maps,
+                        collision=retina.collision_warning(spike_rate, p.t_c), targets=targets, maps=maps,
                         tracks=frame.tracks)
 
     def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, frame: "_Frame",
@@ -612,7 +613,7 @@ def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams
     out = retina.sigmoid_output(u, n_cells)
     spikes = retina.spike_count(out, params.k_sp, params.t_sp)
     window.append(spikes)
-    return out, spikes, sum(window) / (params.n_t * params.window_dt)
+    return out, spikes, retina.spike_rate(window, params.n_t, params.window_dt)
 
 
 def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference"),

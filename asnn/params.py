@@ -141,7 +141,7 @@ class ASNNParams(BaseModel):
         "'2d': F/(2 pi sigma^2) as in the published implementation",
     )
 
-    # --- temporal filter L(K, n, z0) (eqs. 5-8) ---
+    # --- temporal filter L(K, n, z0) (eqs. 5-7) ---
     gain: float = Field(5.0, description="K, gain of the temporal filter")
     decay: float = Field(60.0, gt=0, description="A, decay coefficient")
     transmission: float | None = Field(

@@ -15,6 +15,7 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import cv2
 import numpy as np
@@ -34,6 +35,9 @@ __all__ = [
     "gabor_pair",
     "center_surround_kernel",
     "motion_energy",
+    "motion_strength",
+    "motion_direction",
+    "motion_components",
     "center_surround_inhibition",
     "approach_map",
     "group",
@@ -43,9 +47,12 @@ __all__ = [
     "coarse_grid_blur",
     "approach_attention",
     "direction_attention",
+    "attended_response",
     "membrane_potential",
     "sigmoid_output",
     "spike_count",
+    "spike_rate",
+    "collision_warning",
 ]
 
 _BORDER = cv2.BORDER_REFLECT_101
@@ -306,6 +313,25 @@ def motion_energy(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray
     return r
 
 
+def motion_strength(r: np.ndarray) -> np.ndarray:
+    """Motion energy V = max_theta R^theta (paper eq. 17), over the orientations of ``r``
+    (:func:`motion_energy`'s, the whole circle)."""
+    return r.max(axis=0)
+
+
+def motion_direction(r: np.ndarray) -> np.ndarray:
+    """Motion direction phi = atan2(R^{pi/2}, R^0) (paper eq. 18), in image coordinates (x right,
+    y down: +pi/2 points down the image), from :func:`motion_energy`'s ``r`` (any number of
+    orientations divisible by 4, the whole circle)."""
+    return np.arctan2(r[len(r) // 4], r[0])
+
+
+def motion_components(v: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The motion vectors V_x = V cos(phi), V_y = V sin(phi) (paper eq. 29) that the targets'
+    directions and energies average."""
+    return v * np.cos(phi), v * np.sin(phi)
+
+
 def center_surround_inhibition(response: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     """SAC inhibition S = relu(B (*) g_CS) (paper eqs. 12-14)."""
     return np.maximum(correlate(response, kernel), 0.0)
@@ -426,8 +452,13 @@ def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, 
 # --------------------------------------------------------------------------- output
 
 
+def attended_response(g: np.ndarray, m_a: np.ndarray, m_d: np.ndarray) -> np.ndarray:
+    """The attended approach response G' = G M_a M_d (paper eq. 27)."""
+    return g * (m_a & m_d)
+
+
 def membrane_potential(g_prime: np.ndarray, scale: float, absolute: bool) -> float:
-    """u(t) = sum_xy G'(x, y, t) (paper eqs. 27, 28), scaled; ``absolute`` sums |G'| instead."""
+    """u(t) = sum_xy G'(x, y, t) (paper eq. 28), scaled; ``absolute`` sums |G'| instead."""
     total = np.abs(g_prime).sum() if absolute else g_prime.sum()
     return float(scale * total)
 
@@ -441,3 +472,15 @@ def sigmoid_output(u: float, n_cells: int) -> float:
 def spike_count(out: float, k_sp: float, t_sp: float) -> int:
     """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 33)."""
     return int(math.floor(math.exp(k_sp * (out - t_sp))))
+
+
+def spike_rate(spikes: Iterable[int], n_t: int, dt: float) -> float:
+    """The spike rate of the warning, (1 / (N_t dt)) sum of the last N_t frames' spikes (paper
+    eq. 34), spikes per second; ``spikes`` holds at most N_t frames' (fewer at a stream's
+    start, still divided by N_t: SPEC ruling)."""
+    return sum(spikes) / (n_t * dt)
+
+
+def collision_warning(rate: float, t_c: float) -> bool:
+    """Col(t): the collision warning, a spike rate of at least T_c (paper eq. 34)."""
+    return rate >= t_c

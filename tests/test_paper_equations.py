@@ -23,14 +23,20 @@ SYMBOLS = {
     retina.center_surround_kernel: r"g_{CS}(x,y)=",
     retina._orientation_energy: r"E^{\theta}_{+}(x,y,t)&=",
     retina.motion_energy: r"R^{\theta}(x,y,t)=v_{+}",
+    retina.motion_strength: r"V(x,y,t)=\max_{\theta}",
+    retina.motion_direction: r"\hat{\varphi}(x,y,t) = \arctan2(R^{\frac{\pi}{2}}",
+    retina.motion_components: r"V_x(x,y,t) &= V(x,y,t)\cos",
     retina.center_surround_inhibition: r"S^1_{+}(x,y,t)=relu",
     retina.approach_map: r"G(x,y,t)&=w^1_{+}G^1_{+}",
     retina.attention_blur: r"g_{\sigma}(x,y)=",
     retina.approach_attention: r"M_a(x,y,t)=",
     retina.direction_attention: r"M_d(x,y,t)=",
+    retina.attended_response: r"G^{\prime}(x,y,t)=G(x,y,t)\cdot M_a(x,y,t)\cdot M_d",
     retina.membrane_potential: r"u(t)=\sum_{x,y} G^{\prime}",
     retina.sigmoid_output: r"out(t) =",
     retina.spike_count: r"spike(t) =",
+    retina.spike_rate: r"\frac{1}{N_t\Delta t} \sum_{i-N_t}^t spike(t)",
+    retina.collision_warning: r"Col(t)=",
 }
 
 

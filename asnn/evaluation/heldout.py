@@ -36,6 +36,7 @@ from ..approach.tracking import (approach_parts, approach_test, better_fit, coun
                                  layer_estimates, persistence_frames, smoothed_run)
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
+from ..retina import collision_warning
 from . import scoring
 from .clips import check_clips
 from .labels import load_labels
@@ -200,7 +201,8 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
             own, own_fits = measured, measured_fits
             passed.append([box for box, passes in zip(boxes, passing) if passes])
             _, _, rate = spike_step(p.u_scale * total, trace.cells, window, p)
-            record = {"frame": index, "collision": rate >= p.t_c, "targets": targets}
+            record = {"frame": index, "collision": collision_warning(rate, p.t_c),
+                      "targets": targets}
         records.append(record)
         previous = record
     return records
