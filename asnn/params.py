@@ -5,8 +5,9 @@ Defaults are Table I of the paper plus the rulings of SPEC.md section 2. The pre
 ``paper``
     Table I, the rulings of SPEC section 2, the weights of the approach experiment and the
     warning parameters of the vehicle experiment, read literally. On the [0, 1] intensity scale
-    of the rulings, ``out(t) = 1/(1+exp(-|u|/N))`` stays below 0.51 for any real input, so with
-    T_sp = 0.7 this preset never fires a spike: it is kept for studying the maps and u(t).
+    of the rulings, ``out(t) = 1/(1+exp(-|u|/N))`` stays near 0.5 (at most about 0.53 on any
+    input measured, flicker and noise included), so with T_sp = 0.7 this preset never fires a
+    spike: it is kept for studying the maps and u(t).
 ``approach``, ``translation``, ``robot``
     The weight vector of the corresponding experiment; ``robot`` with its warning parameters.
 ``vehicle``

@@ -104,3 +104,16 @@ def whole(value: str) -> int:
 def seed(value: str) -> int:
     """A random seed: a whole number of 0 or more."""
     return whole(value)
+
+
+def preset_spec(text: str) -> str:
+    """An ASNN preset name with optional ``/field=value`` changes (``robust/top_k=0``), checked
+    as a detector spec's."""
+    from asnn.evaluation.runs import parse_detector  # only when a preset is given
+
+    try:
+        parse_detector(f"asnn:{text}")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).replace(repr(f"asnn:{text}"), repr(text))
+                                         ) from None
+    return text

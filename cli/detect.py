@@ -23,7 +23,7 @@ from asnn.io.video import cut_short
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import SLOW_FPS, preset_names
-from cli.arguments import count
+from cli.arguments import count, preset_spec
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "needed when it has several")
     p.add_argument("--model", choices=MODELS, default="asnn",
                    help="detector: ASNN or an LGMD baseline (default: %(default)s)")
-    p.add_argument("--preset", type=_preset, default="default", metavar="NAME[/FIELD=VALUE...]",
+    p.add_argument("--preset", type=preset_spec, default="default", metavar="NAME[/FIELD=VALUE...]",
                    help=f"ASNN parameter preset ({', '.join(preset_names())}; default: "
                         "%(default)s), with any fields of asnn.params.ASNNParams changed after "
                         "slashes, as asnn eval's specs take them: robust/top_k=0")
@@ -106,16 +106,6 @@ def _settings(busy: bool):
     finally:
         gc.unfreeze()
         cv2.setNumThreads(threads)
-
-
-def _preset(text: str) -> str:
-    """A preset name with optional ``/field=value`` changes, checked."""
-    try:
-        parse_detector(f"asnn:{text}")
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc).replace(repr(f"asnn:{text}"), repr(text))
-                                         ) from None
-    return text
 
 
 # what matplotlib writes (--plot): it takes the format from the file's extension

@@ -4,7 +4,7 @@
 detector on labelled clips (SPEC.md section 5), with ``--perturb NAME`` on their frames
 perturbed; ``asnn eval --synthetic [--cases PATTERN] [--variant K] [--perturb NAME]
 [--size WxH | --scale S]`` generates the labelled suite of :mod:`asnn.stimuli.suite` and scores
-it; ``asnn eval --paper`` regenerates the paper's synthetic figures (Figs. 2, 4-7). Detectors
+it; ``asnn eval --paper`` regenerates the paper's synthetic figures (Figs. 3, 6-9). Detectors
 are specs: ``asnn`` (the default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``,
 ``lgmd2``. Exit status 2 for unusable input (found before anything runs: labels, clips that
 cannot be opened, options), 1 when some runs failed after it started (their clips scored as
@@ -26,7 +26,7 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
 from asnn.params import preset_names
 
-from .arguments import count, frame_size, whole
+from .arguments import count, frame_size, preset_spec, whole
 
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
@@ -62,7 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     mode.add_argument("--synthetic", action="store_true",
                       help="score the labelled suite of generated scenes instead")
     mode.add_argument("--paper", action="store_true",
-                      help="regenerate the paper's synthetic figures (Figs. 2, 4-7) instead")
+                      help="regenerate the paper's synthetic figures (Figs. 3, 6-9) instead")
     mode.add_argument("--held-out", action="store_true",
                       help="with CLIPS_DIR: the in-sample and leave-one-clip-out figures of the "
                            "default preset's approach-gate thresholds (held_out.md); of another "
@@ -81,8 +81,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ablation", action="store_true",
                    help="run the robust preset with each of its additions switched off in turn "
                         "instead of --detectors (asnn.evaluation.runs.ABLATIONS)")
-    p.add_argument("--preset", choices=preset_names(), default="default",
-                   help="the ASNN preset a bare 'asnn' stands for (default: %(default)s)")
+    p.add_argument("--preset", type=preset_spec, default="default",
+                   metavar="NAME[/FIELD=VALUE...]",
+                   help=f"the ASNN preset a bare 'asnn' stands for ({', '.join(preset_names())}; "
+                        "default: %(default)s), with fields of asnn.params.ASNNParams changed "
+                        "after slashes as in the detector specs (robust/top_k=0); with --paper "
+                        "also the preset of the maps and the sweeps")
     p.add_argument("--cases", metavar="PATTERN",
                    help="with --synthetic (or --held-out: the cases that decide which "
                         "thresholds are admissible): comma-separated patterns of case names or "
@@ -231,15 +235,15 @@ def _evaluate(args: argparse.Namespace) -> int:
             print("asnn eval: CLIPS_DIR is required (or --synthetic, or --paper)", file=sys.stderr)
             return 2
         elif args.held_out:
-            held_preset, overrides = args.preset, {}
+            held = parse_detector("asnn", args.preset)
             if args.detectors != list(DEFAULT_DETECTORS):  # one ASNN spec: its preset, changed
-                specs = [parse_detector(name) for name in args.detectors]
+                specs = [parse_detector(name, args.preset) for name in args.detectors]
                 if len(specs) != 1 or specs[0].model != "asnn":
                     print("asnn eval: --held-out holds out one ASNN detector's gate "
                           "(--detectors asnn:PRESET[/name=value...])", file=sys.stderr)
                     return 2
-                held_preset = specs[0].preset or args.preset
-                overrides = dict(specs[0].overrides)
+                held = specs[0]
+            held_preset, overrides = held.preset or "default", dict(held.overrides)
             heldout.evaluate_held_out(args.clips_dir, args.out, labels_path=args.labels,
                                       preset_name=held_preset, cases=args.cases, jobs=args.jobs,
                                       progress=progress, tie_break=args.tie_break,

@@ -310,6 +310,10 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
     for bad in ("asnn,nope", "asnn:nope", "lgmd1:paper", ""):
         with pytest.raises(SystemExit):
             main(["eval", str(tmp_path), "--detectors", bad])
+    for bad in ("nope", "robust/nope=1", "robust/top_k=-1", "robust/top_k"):
+        with pytest.raises(SystemExit):
+            main(["eval", str(tmp_path), "--preset", bad])
+        assert repr(bad) in capsys.readouterr().err
     with pytest.raises(SystemExit):  # one mode at a time
         main(["eval", "--paper", "--synthetic"])
     assert main(["eval", str(tmp_path), "--synthetic", "--out", str(tmp_path / "o")]) == 2
@@ -322,6 +326,16 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
                       ["--synthetic", "--tie-break", "grid"]):
         assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
         assert "does not go with" in capsys.readouterr().err
+
+
+def test_a_preset_with_changes_is_what_a_bare_asnn_stands_for():
+    from asnn.evaluation.runs import parse_detector
+
+    bare = parse_detector("asnn", "robust/top_k=0")
+    assert (bare.name, bare.params.top_k) == ("asnn:robust/top_k=0", 0)
+    changed = parse_detector("asnn:/t_c=2", "paper/top_k=0")  # the spec's changes come after
+    assert (changed.preset, changed.params.top_k, changed.params.t_c) == ("paper", 0, 2)
+    assert parse_detector("asnn:vehicle", "paper/top_k=0").overrides == ()
 
 
 def test_progress_printer_draws_a_bar_on_a_terminal():
@@ -354,36 +368,36 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
     out = tmp_path / "syn"
     assert main(["eval", "--paper", "--detectors", "asnn,lgmd1,lgmd2", "--size", "64x64",
                  "--out", str(out)]) == 0
-    for stem in ("fig2_temporal_filter", "fig4_maps", "fig5_dark_responses",
-                 "fig6_light_responses", "fig7_contrast_speed"):
+    for stem in ("fig3_temporal_filter", "fig8_maps", "fig6_dark_responses",
+                 "fig7_light_responses", "fig9_contrast_speed"):
         assert _png(out / f"{stem}.png")
         assert json.loads((out / f"{stem}.json").read_text())
     assert "report.md" in capsys.readouterr().out
     assert "detectors `asnn`, `lgmd1`, `lgmd2`; the temporal filter" in \
         (out / "report.md").read_text()  # the detectors run, not only the sweeps' preset
 
-    fig2 = json.loads((out / "fig2_temporal_filter.json").read_text())
+    fig3 = json.loads((out / "fig3_temporal_filter.json").read_text())
     # the paper's own simulation: K=5, C=60, tau=8, 100 steps of 0.05 s
-    assert (fig2["K"], fig2["C"], fig2["tau"], fig2["dt"]) == (5.0, 60.0, 8.0, 0.05)
-    assert len(fig2["t"]) == 100 and set(fig2["impulse"]) == {"1", "2", "3", "4", "5"}
+    assert (fig3["K"], fig3["C"], fig3["tau"], fig3["dt"]) == (5.0, 60.0, 8.0, 0.05)
+    assert len(fig3["t"]) == 100 and set(fig3["impulse"]) == {"1", "2", "3", "4", "5"}
 
     results = json.loads((out / "results.json").read_text())
     table = {(r["scene"], r["polarity"], r["detector"]): r for r in results["table"]}
     assert len(table) == 3 * 2 * 3
     for polarity in ("dark", "light"):
-        # the paper's Fig. 5b/6b: LGMD1-1 keeps firing on translation, LGMD1-2 adapts
+        # the paper's Fig. 6b/7b: LGMD1-1 keeps firing on translation, LGMD1-2 adapts
         assert table[("translation", polarity, "lgmd1")]["outcome"] == "false"
         assert table[("translation", polarity, "lgmd2")]["outcome"] == "quiet"
 
-    fig5 = json.loads((out / "fig5_dark_responses.json").read_text())
-    assert [s["scene"] for s in fig5["scenes"]] == [s for s, _ in paper.SYNTHETIC_SCENES]
-    for scene in fig5["scenes"]:
+    fig6 = json.loads((out / "fig6_dark_responses.json").read_text())
+    assert [s["scene"] for s in fig6["scenes"]] == [s for s, _ in paper.SYNTHETIC_SCENES]
+    for scene in fig6["scenes"]:
         assert set(scene["models"]) == {"asnn", "lgmd1", "lgmd2"}
         assert all(len(m["out"]) == 130 for m in scene["models"].values())
-    sweeps = json.loads((out / "fig7_contrast_speed.json").read_text())
+    sweeps = json.loads((out / "fig9_contrast_speed.json").read_text())
     assert sweeps["contrast"]["values"] == list(paper.CONTRAST_SWEEP)
     assert sweeps["speed"]["peak"] == [max(u) for u in sweeps["speed"]["u"]]
-    maps = json.loads((out / "fig4_maps.json").read_text())
+    maps = json.loads((out / "fig8_maps.json").read_text())
     assert np.asarray(maps["V"]).shape == (64, 64)
     assert set(np.unique(maps["M_a"])) <= {0, 1}
     g_prime = np.asarray(maps["G_prime"])

@@ -56,7 +56,7 @@ def test_fast_output_peaks_before_slow_output():
     fast = retina.temporal_readout(z.T[:, :, None], p.gain, p.n_fast)[:, 0]
     slow = retina.temporal_readout(z.T[:, :, None], p.gain, p.n_slow)[:, 0]
     assert t[np.argmax(fast)] < t[np.argmax(slow)]
-    assert fast.max() > slow.max()  # the response weakens as n grows (paper Fig. 2)
+    assert fast.max() > slow.max()  # the response weakens as n grows (paper Fig. 3)
 
 
 def test_filter_has_zero_dc_gain():

@@ -1,4 +1,4 @@
-"""Approach selectivity of the published variant on the paper's generated scenes (Figs. 5, 6).
+"""Approach selectivity of the published variant on the paper's generated scenes (Figs. 6, 7).
 
 The published variant answers dark objects; ``light`` swaps ON and OFF for light ones. The
 default (robust) preset answers both polarities itself: tests/test_robust.py.

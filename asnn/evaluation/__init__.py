@@ -14,7 +14,7 @@ loads matplotlib):
 :mod:`~asnn.evaluation.suite`
     Every detector over the labelled suite of generated scenes (``asnn eval --synthetic``).
 :mod:`~asnn.evaluation.paper`
-    The paper's synthetic experiments, Figs. 2 and 4-7 (``asnn eval --paper``).
+    The paper's synthetic experiments, Figs. 3 and 6-9 (``asnn eval --paper``).
 :mod:`~asnn.evaluation.bench`
     Per-frame timing of every model and preset (``asnn bench``).
 :mod:`~asnn.evaluation.figures`, :mod:`~asnn.evaluation.progress`

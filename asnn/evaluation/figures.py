@@ -147,7 +147,7 @@ def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
 
 
 def plot_synthetic_responses(path: str | Path, data: Mapping) -> Path:
-    """Paper Figs. 5 and 6: a stimulus frame and the models' outputs, one column per scene.
+    """Paper Figs. 6 and 7: a stimulus frame and the models' outputs, one column per scene.
 
     Parameters
     ----------
@@ -180,7 +180,7 @@ def plot_synthetic_responses(path: str | Path, data: Mapping) -> Path:
 
 
 def plot_sweeps(path: str | Path, data: Mapping) -> Path:
-    """Paper Fig. 7: ASNN's u(t) and its peak for a contrast sweep and a speed sweep.
+    """Paper Fig. 9: ASNN's u(t) and its peak for a contrast sweep and a speed sweep.
 
     Parameters
     ----------
@@ -209,7 +209,7 @@ def plot_sweeps(path: str | Path, data: Mapping) -> Path:
 
 
 def plot_maps(path: str | Path, data: Mapping) -> Path:
-    """Paper Fig. 4: motion-energy flow, V, G, M_a, M_d and G' at one step.
+    """Paper Fig. 8: motion-energy flow, V, G, M_a, M_d and G' at one step.
 
     Parameters
     ----------
@@ -253,7 +253,7 @@ def _maps_figure(data: Mapping) -> Figure:
 
 
 def plot_temporal_filter(path: str | Path, data: Mapping) -> Path:
-    """Paper Fig. 2: impulse and step responses of L(K, n, z0) for several n.
+    """Paper Fig. 3: impulse and step responses of L(K, n, z0) for several n.
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """The paper's synthetic experiments as figures and numbers (``asnn eval --paper``).
 
-:func:`paper_figures` regenerates the experiments of Figs. 2, 4, 5, 6 and 7 from
+:func:`paper_figures` regenerates the experiments of Figs. 3, 6, 7, 8 and 9 from
 :mod:`asnn.stimuli.paper`: each figure as a PNG with the numbers behind it as JSON, plus
 ``results.json`` and ``report.md``. The labelled suite of generated scenes is
 :mod:`asnn.evaluation.suite` (``asnn eval --synthetic``).
@@ -32,16 +32,16 @@ SYNTHETIC_SCENES = (
 )
 CONTRAST_SWEEP = (0.1, 0.2, 0.4, 0.6, 0.8, 1.0)
 SPEED_SWEEP = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
-MAPS_STEP = 32  # the step of paper Fig. 4
+MAPS_STEP = 32  # the step of paper Fig. 8
 FILTER_ORDERS = (1, 2, 3, 4, 5)
-# Fig. 2's simulation as the paper's text gives it ("K=5, C=60 and tau=8 ... 100 steps, step
+# Fig. 3's simulation as the paper's text gives it ("K=5, C=60 and tau=8 ... 100 steps, step
 # size 0.05 s"): tau is not the model's (5), so the figure is drawn with its own settings
-FIG2_FILTER = {"gain": 5.0, "transmission": 60.0, "tau": 8.0, "dt": 0.05}
-FIG2_STEPS = 100
+FIG3_FILTER = {"gain": 5.0, "transmission": 60.0, "tau": 8.0, "dt": 0.05}
+FIG3_STEPS = 100
 
 def temporal_filter_responses(params, orders: Sequence[int] = FILTER_ORDERS,
                               steps: int = 30) -> dict:
-    """Impulse and step responses of L(K, n, z0) = K (z_n - z_{n+1}) for several n (Fig. 2).
+    """Impulse and step responses of L(K, n, z0) = K (z_n - z_{n+1}) for several n (Fig. 3).
 
     Uses the cascade of :func:`asnn.retina.temporal_filter_step` with the parameters' dt, tau,
     A, C and input convention.
@@ -123,10 +123,10 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
                   warmup: int = scoring.WARMUP_FRAMES, progress=None) -> dict:
     """Regenerate the paper's synthetic experiments and write figures, JSON and a report.
 
-    Writes to ``out_dir``: ``fig2_temporal_filter`` (with the paper's own simulation settings,
-    :data:`FIG2_FILTER`, whatever the preset), ``fig4_maps`` (step 32 of the dark
-    approach-recession over stripes), ``fig5_dark_responses``, ``fig6_light_responses``,
-    ``fig7_contrast_speed`` (each ``.png`` and ``.json``), ``results.json`` and ``report.md``.
+    Writes to ``out_dir``: ``fig3_temporal_filter`` (with the paper's own simulation settings,
+    :data:`FIG3_FILTER`, whatever the preset), ``fig8_maps`` (step 32 of the dark
+    approach-recession over stripes), ``fig6_dark_responses``, ``fig7_light_responses``,
+    ``fig9_contrast_speed`` (each ``.png`` and ``.json``), ``results.json`` and ``report.md``.
 
     Parameters
     ----------
@@ -134,7 +134,7 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
     preset_name : str, optional
         ASNN preset for every scene, the sweeps and the maps; None means ``default``.
     detectors : sequence of str
-        Detector specs of Figs. 5 and 6 (a bare ``asnn`` stands for ``preset_name``); the
+        Detector specs of Figs. 6 and 7 (a bare ``asnn`` stands for ``preset_name``); the
         sweeps and maps are ASNN's with ``preset_name``.
     size : (width, height)
         Frame size; the paper's is 128x128.
@@ -148,26 +148,26 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
     """
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    params = preset(preset_name or "default")
     specs = parse_detectors(detectors, preset_name)
     own = parse_detector("asnn", preset_name)
+    params = own.params
     progress = progress or Silent()
     n_runs = 2 * len(SYNTHETIC_SCENES) * len(specs) + len(CONTRAST_SWEEP) + len(SPEED_SWEEP) + 2
     progress.start(n_runs, "eval --paper")
     written = []
 
-    # Fig. 2: the temporal filter, with the simulation's own settings (the paper's text)
-    filt = temporal_filter_responses(preset("paper", **FIG2_FILTER), steps=FIG2_STEPS)
-    filt["title"] = ("temporal filter L(K, n, z0) as in the paper's Fig. 2: K=5, C=60, tau=8, "
-                     f"dt 0.05 s, {FIG2_STEPS} steps")
-    write_json(out_dir / "fig2_temporal_filter.json", filt)
-    written.append(figures.plot_temporal_filter(out_dir / "fig2_temporal_filter.png", filt).name)
+    # Fig. 3: the temporal filter, with the simulation's own settings (the paper's text)
+    filt = temporal_filter_responses(preset("paper", **FIG3_FILTER), steps=FIG3_STEPS)
+    filt["title"] = ("temporal filter L(K, n, z0) as in the paper's Fig. 3: K=5, C=60, tau=8, "
+                     f"dt 0.05 s, {FIG3_STEPS} steps")
+    write_json(out_dir / "fig3_temporal_filter.json", filt)
+    written.append(figures.plot_temporal_filter(out_dir / "fig3_temporal_filter.png", filt).name)
     progress.advance(1, "fig. 2")
 
-    # Figs. 5 and 6: three scenes, dark and light targets, every model
+    # Figs. 6 and 7: three scenes, dark and light targets, every model
     table = []
     frames = None
-    for polarity, fig_name in (("dark", "fig5_dark_responses"), ("light", "fig6_light_responses")):
+    for polarity, fig_name in (("dark", "fig6_dark_responses"), ("light", "fig7_light_responses")):
         data = {"title": f"{polarity} target: responses of {', '.join(s.name for s in specs)}"
                          f" (ASNN preset {preset_name or 'default'})", "scenes": []}
         for scene_name, title in SYNTHETIC_SCENES:
@@ -193,7 +193,7 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
         write_json(out_dir / f"{fig_name}.json", data)
         written.append(figures.plot_synthetic_responses(out_dir / f"{fig_name}.png", data).name)
 
-    # Fig. 7: contrast and speed sweeps of ASNN on the dark approach-recession
+    # Fig. 9: contrast and speed sweeps of ASNN on the dark approach-recession
     sweeps = {"title": f"ASNN (preset {preset_name or 'default'}): contrast and speed",
               "onset": 10, "contact": 55}
     for key, values in (("contrast", CONTRAST_SWEEP), ("speed", SPEED_SWEEP)):
@@ -206,10 +206,10 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
             sweep["peak"].append(max(u))
             progress.advance(1, f"{key} {value:g}")
         sweeps[key] = sweep
-    write_json(out_dir / "fig7_contrast_speed.json", sweeps)
-    written.append(figures.plot_sweeps(out_dir / "fig7_contrast_speed.png", sweeps).name)
+    write_json(out_dir / "fig9_contrast_speed.json", sweeps)
+    written.append(figures.plot_sweeps(out_dir / "fig9_contrast_speed.png", sweeps).name)
 
-    # Fig. 4: intermediate maps at step 32 of the dark approach-recession over stripes
+    # Fig. 8: intermediate maps at step 32 of the dark approach-recession over stripes
     scene = make_scene("approach_recession_over_stripes", polarity="dark", size=size)
     model = ASNN(params, record_maps=True)
     response = None
@@ -223,8 +223,8 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
             "M_a": _round_map(maps.M_a), "M_d": _round_map(maps.M_d),
             "G_prime": _round_map(maps.G_prime), "u": response.u,
             "targets": [t.to_dict() for t in response.targets]}
-    write_json(out_dir / "fig4_maps.json", data)
-    written.append(figures.plot_maps(out_dir / "fig4_maps.png", data).name)
+    write_json(out_dir / "fig8_maps.json", data)
+    written.append(figures.plot_maps(out_dir / "fig8_maps.png", data).name)
     progress.advance(1, "fig. 4")
     progress.finish()
 

@@ -121,7 +121,9 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
     spec : str
         ``asnn``, ``asnn:PRESET``, ``lgmd1`` or ``lgmd2``.
     default_preset : str, optional
-        The preset a bare ``asnn`` stands for (None or ``default``: the default preset).
+        The preset a bare ``asnn`` stands for (None or ``default``: the default preset), with
+        any overrides after slashes as a spec has them (``robust/top_k=0``); a spec's own
+        overrides come after these.
 
     Raises
     ------
@@ -137,7 +139,8 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
         return DetectorSpec(model)
     preset_name, *items = rest.split("/")
     if not preset_name:
-        preset_name = default_preset or "default"
+        preset_name, *base = (default_preset or "default").split("/")
+        items = base + items
     overrides = []
     for item in items:
         key, sep, value = item.partition("=")

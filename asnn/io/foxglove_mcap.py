@@ -105,7 +105,7 @@ def target_annotations(targets: Sequence[Mapping], stamp_ns: int, size: tuple[in
     """A frame's targets as a ``foxglove.ImageAnnotations``.
 
     Each target is a dot at its position with an arrow along its direction, longer for more
-    motion energy (as in the annotated videos and the paper's Fig. 8), and, where the target has
+    motion energy (as in the annotated videos and the paper's Fig. 12), and, where the target has
     an ``id`` or a ``ttc``, a label (``#3 ttc 1.2 s``); every field of the target is in the
     dot's metadata. A red border
     frames the picture while the warning is on.

@@ -1,4 +1,4 @@
-"""Pictures of a detector's output: annotated frames (paper Fig. 8) and response plots."""
+"""Pictures of a detector's output: annotated frames (paper Fig. 12) and response plots."""
 
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
     The approach map G is drawn in red where positive, the attended region M_a M_d is outlined in
     green, the pixels the looming fits leave out as the camera's own rig (``Maps.rig``) are
     tinted cyan, and each target gets a blue dot and an arrow along its direction whose length
-    grows with its energy (as in the paper's Fig. 8), labelled with its id and time to contact
+    grows with its energy (as in the paper's Fig. 12), labelled with its id and time to contact
     where the target has them. A red border marks a collision warning. Maps of a model that saw
     the frame scaled down (the input-scale stage) are scaled up to it.
 

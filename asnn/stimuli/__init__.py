@@ -2,7 +2,7 @@
 
 :mod:`~asnn.stimuli.paper`
     The paper's scenes (``make_scene``, :data:`SCENE_NAMES`): looming, receding and translating
-    disks and bars, over translating stripes (Figs. 5-7).
+    disks and bars, over translating stripes (Figs. 6, 7 and 9).
 :mod:`~asnn.stimuli.planar`
     Composable scenes on the image plane: objects approaching on a collision course, passing
     close, receding, stopping or translating (an animal walking up with its gait), over moving

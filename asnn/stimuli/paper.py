@@ -1,4 +1,4 @@
-"""The synthetic scenes of the paper's experiments (Figs. 5-7), generated in code.
+"""The synthetic scenes of the paper's experiments (Figs. 6, 7 and 9), generated in code.
 
 Every scene is a :class:`~asnn.stimuli.scene.Scene`: uint8 gray frames plus the ground truth a
 scorer needs. Targets are drawn anti-aliased (pixel coverage of the exact disk or bar), so
@@ -9,18 +9,18 @@ scenes, and the fixtures made from them, stay the same to the byte.
 Scenes (``make_scene(name, ...)``):
 
 ``approach_recession``
-    A disk expands from ``start`` to ``stop`` and shrinks back from ``stop + hold`` (paper Fig. 5a:
+    A disk expands from ``start`` to ``stop`` and shrinks back from ``stop + hold`` (paper Fig. 6a:
     expands over steps 10-55, shrinks over 75-120 of 130).
 ``looming`` / ``receding``
     Only the expansion (ends at contact) / only the shrinking.
 ``translation``
-    A bar moves right from ``start`` to ``stop`` and back left after ``hold`` (Fig. 5b).
+    A bar moves right from ``start`` to ``stop`` and back left after ``hold`` (Fig. 6b).
 ``translating_bar``
     A bar moving right for the whole clip.
 ``stripes``
     Vertical stripes translating right for the whole clip, nothing looming.
 ``looming_over_stripes`` / ``approach_recession_over_stripes``
-    The disk scenes in front of translating stripes (Fig. 5c).
+    The disk scenes in front of translating stripes (Fig. 6c).
 
 Contrast is Weber contrast ``c = |I_target - I_background| / 255``; ``polarity='dark'`` draws a
 dark target on a light background, ``'light'`` the reverse.
