@@ -152,6 +152,15 @@ def test_the_paper_preset_is_the_papers_equations(scenes, optimised, rtol):
 W_I = np.array([[1 / 8, 1 / 4, 1 / 8], [1 / 4, 0, 1 / 4], [1 / 8, 1 / 4, 1 / 8]])
 
 
+def frame_differences(frames: np.ndarray):
+    """None for the first frame, then L_f - L_{f-1} on the raw 0..255 values (SPEC section 4)."""
+    previous = None
+    for frame in frames:
+        lum = frame.astype(float)
+        yield None if previous is None else lum - previous
+        previous = lum
+
+
 def grouped(s: np.ndarray, p) -> np.ndarray:
     """Ce = S ⊗ ones(3,3)/9, ω = δ_C + max|Ce| / C_w, G = S Ce / ω, kept where G C_de >= T_de."""
     ce = correlate(s, np.full((3, 3), 1 / 9))
@@ -162,14 +171,11 @@ def grouped(s: np.ndarray, p) -> np.ndarray:
 def lgmd1_transcribed(frames: np.ndarray, p: LGMD1Params) -> list[tuple]:
     """SPEC section 4, LGMD1-1 (N_p = 0): (u = K_f, out, spikes, collision) per frame."""
     assert p.n_p == 0
-    out, previous, p_previous, successive = [], None, None, 0
-    for frame in frames:
-        lum = frame.astype(float)
-        if previous is None:
-            previous = lum
-            out.append((0.0, 0.5, 0, False))
+    out, p_previous, successive = [], None, 0
+    for e in frame_differences(frames):
+        if e is None:
+            out.append((0.0, 0.5, 0, False))  # the first frame: no output
             continue
-        e, previous = lum - previous, lum
         inhibition = correlate(p_previous, W_I) if p_previous is not None else 0.0 * e
         ffi = np.abs(p_previous).sum() / e.size if p_previous is not None else 0.0
         k = np.abs(grouped(e - p.w_i * inhibition, p)).sum()
@@ -187,16 +193,13 @@ def lgmd2_transcribed(frames: np.ndarray, p: LGMD2Params) -> list[tuple]:
     a_near, a_diag = p.dt / (p.dt + p.tau_near), p.dt / (p.dt + p.tau_diagonal)
     a = np.array([[a_diag, a_near, a_diag], [a_near, 0.0, a_near], [a_diag, a_near, a_diag]])
     a_sfa, a_ffi = p.tau_sfa / (p.tau_sfa + p.dt), p.dt / (p.dt + p.tau_ffi)
-    out, previous, on, off = [], None, None, None
+    out, on, off = [], None, None
     k_previous = k_adapted = 0.5
     ffi, count = 0.0, 0
-    for frame in frames:
-        lum = frame.astype(float)
-        if previous is None:
-            previous = lum
-            out.append((0.0, 0.5, 0, False))
+    for diff in frame_differences(frames):
+        if diff is None:
+            out.append((0.0, 0.5, 0, False))  # the first frame: no output
             continue
-        diff, previous = lum - previous, lum
         on_before = on if on is not None else 0.0 * diff
         off_before = off if off is not None else 0.0 * diff
         on = np.where(diff >= 0, diff, 0.0) + p.persistence * on_before
