@@ -545,10 +545,19 @@ class WorkerCore:
         with self._ready:
             self._ready.notify_all()
 
-    def process(self, job: Job) -> Response | None:
-        """Run the robot's model on the job's frame; the wire Response, or None if rejected."""
+    def process(self, job: Job, publish: Callable[[Response], None] | None = None
+                ) -> Response | None:
+        """Run the robot's model on the job's frame; the wire Response, or None if rejected.
+
+        ``publish`` is called with the response before the robot is released: with several
+        processing threads, another thread could otherwise step the robot's next frame and send
+        its response first (a user trial saw 83 inversions in 11,624 responses at 300 fps).
+        """
         try:
-            return self._process(job)
+            response = self._process(job)
+            if response is not None and publish is not None:
+                publish(response)
+            return response
         finally:
             with self._ready:
                 state = self._robots.get(job.robot)

@@ -507,10 +507,8 @@ class Worker:
             if job is None:
                 continue
             try:
-                response = self.core.process(job)
-                if response is not None:
-                    self.publish(response)
-                elif self.routes.role(job.robot) == "warming":
+                response = self.core.process(job, publish=self.publish)
+                if response is None and self.routes.role(job.robot) == "warming":
                     self._changed.set()  # it may be warm now: claim it
             except Exception:
                 log.exception("robot %s: frame %d failed", job.robot, job.frame.seq)
