@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import base64
 import http.server
+import io
 import json
 import logging
 import socket
@@ -538,6 +539,26 @@ def load_static() -> dict[str, bytes]:
     return {name: (folder / name).read_bytes() for name in STATIC_FILES}
 
 
+class _RequestDeadline(io.RawIOBase):
+    """A connection's bytes for the request reader, each request's to arrive whole by the
+    handler's ``deadline``: a socket timeout alone bounds one wait, and a client sending a byte
+    every few seconds would hold the connection for ever (a user trial held all of them)."""
+
+    def __init__(self, sock: socket.socket, handler):
+        super().__init__()
+        self._sock, self._handler = sock, handler
+
+    def readable(self) -> bool:
+        return True
+
+    def readinto(self, buffer) -> int:
+        remaining = self._handler.deadline - time.monotonic()
+        if remaining <= 0:
+            raise TimeoutError("the request did not arrive whole in time")
+        self._sock.settimeout(remaining)
+        return self._sock.recv_into(buffer)
+
+
 class _HTTPServer(http.server.ThreadingHTTPServer):
     """The standard threading server with a cap on connections and quiet error handling."""
 
@@ -685,7 +706,22 @@ class DashboardServer:
             protocol_version = "HTTP/1.1"
             server_version = "asnn-dashboard"
             sys_version = ""
-            timeout = server.idle_timeout  # the socket's: a request must arrive whole in time
+            timeout = server.idle_timeout  # a request must arrive whole within it
+            deadline = 0.0
+
+            def setup(self):
+                super().setup()
+                self.rfile = io.BufferedReader(_RequestDeadline(self.connection, self))
+
+            def handle_one_request(self):
+                # from the connection's start or the previous answer: idle time counts too
+                self.deadline = time.monotonic() + self.timeout
+                super().handle_one_request()
+
+            def parse_request(self):
+                parsed = super().parse_request()
+                self.connection.settimeout(self.timeout)  # writing the answer: the full time
+                return parsed
 
             def log_message(self, format, *args):  # noqa: A002 (the base class's name)
                 log.debug("%s %s", self.address_string(), format % args)

@@ -101,7 +101,17 @@ def test_idle_and_half_open_connections_are_closed():
         idle.sendall(b"GET /state HTTP/1.1\r\nHost: x\r\n\r\n")  # kept alive, then silent
         assert idle.recv(65536).startswith(b"HTTP/1.1 200")
         silent = raw_client(server)  # connects and never says anything
-        for sock in (half, idle, silent):
+        drip = raw_client(server)  # a byte now and then, each within the timeout (slowloris)
+        cut_off = False
+        for byte in b"GET / HTTP/1.1\r\nHost: x\r\nX-Pad: " + b"a" * 40:  # 6 s of bytes
+            try:
+                drip.sendall(bytes([byte]))
+            except OSError:  # the server closed it: the request did not arrive whole in time
+                cut_off = True
+                break
+            time.sleep(0.1)
+        assert cut_off
+        for sock in (half, idle, silent, drip):
             assert closed_by_server(sock)
             sock.close()
         wait_for(lambda: server.connections == 0, what="the connections to be released")
