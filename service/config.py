@@ -11,6 +11,13 @@ asnn's defaults, applied only where the config file says nothing (docs/operation
   to every 2 s (Zenoh's own: 1 s to 4 s), so cameras, workers and subscribers reconnect by
   themselves and re-declare their subscribers, publishers and liveliness tokens.
 
+* ``transport/shared_memory/enabled``: false, unless the config file names ``shared_memory``.
+  Zenoh 1.10.2 enables its shared-memory transport by default; every client session on the same
+  host that publishes frames through it leaves a 16 MiB pool mapped in the router and in the
+  worker when it closes, never given back (about 19 MB of RSS per camera session: a camera that
+  reconnects often grew them by hundreds of MB; docs/operations.md). Over TCP on one host the
+  frames cost a copy more, which the worker's budget does not notice.
+
 The lease that decides how fast a dead worker's robots move (``transport/link/tx/lease``) is
 left to the config files: deploy/zenoh/*.json5 set 1 s with 4 keep-alives per lease.
 """
@@ -24,12 +31,15 @@ from pathlib import Path
 
 import zenoh
 
-__all__ = ["DEFAULTS", "MODES", "ConfigError", "ZenohOptions", "make_config"]
+__all__ = ["DEFAULTS", "MODES", "SHARED_MEMORY", "ConfigError", "ZenohOptions", "make_config"]
 
 MODES = ("peer", "client", "router")
 DEFAULTS: dict[str, object] = {
     "connect/retry": {"period_init_ms": 250, "period_max_ms": 2000, "period_increase_factor": 2},
 }
+
+
+SHARED_MEMORY = "transport/shared_memory/enabled"
 
 
 class ConfigError(ValueError):
@@ -70,6 +80,10 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
     for key, value in DEFAULTS.items():
         if json.loads(conf.get_json(key)) is None:
             settings.append((key, value))
+    # Zenoh's own default is true, so whether the file chose it is read from the file itself
+    if not (opts.config_file and "shared_memory" in Path(opts.config_file).read_text(
+            encoding="utf-8", errors="replace")):  # (Zenoh has just read the same file)
+        settings.append((SHARED_MEMORY, False))
     if opts.mode is not None:
         if opts.mode not in MODES:
             raise ConfigError(f"unknown Zenoh mode {opts.mode!r}; choose one of {', '.join(MODES)}")

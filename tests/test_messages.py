@@ -2,6 +2,7 @@
 
 import json
 import math
+import pathlib
 
 import msgpack
 import numpy as np
@@ -243,6 +244,30 @@ def test_config_options_override_the_file(tmp_path):
     assert json.loads(conf.get_json("mode")) == "peer"
     assert json.loads(conf.get_json("connect/endpoints")) == ["tcp/127.0.0.1:1234"]
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
+
+
+def test_zenohs_shared_memory_is_off_unless_a_config_file_chooses_it(tmp_path):
+    """Zenoh 1.10.2 turns it on by default, and each closed session's 16 MiB pool then stays
+    mapped in the router and the worker (docs/operations.md)."""
+    import zenoh
+
+    from service.config import SHARED_MEMORY
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+
+    assert json.loads(make_config().get_json(SHARED_MEMORY)) is False
+    plain = tmp_path / "plain.json5"
+    plain.write_text('{ mode: "client" }')
+    assert json.loads(make_config(ZenohOptions(config_file=plain)).get_json(SHARED_MEMORY)) \
+        is False
+    chosen = tmp_path / "shm.json5"
+    chosen.write_text('{ transport: { shared_memory: { enabled: true } } }')
+    assert json.loads(make_config(ZenohOptions(config_file=chosen)).get_json(SHARED_MEMORY)) \
+        is True
+    for name in ("client.json5", "router.json5", "secure/router.json5"):
+        deployed = root / "deploy" / "zenoh" / name
+        assert json.loads(zenoh.Config.from_file(str(deployed)).get_json(SHARED_MEMORY)) \
+            is False, name
 
 
 @pytest.mark.parametrize("options", [ZenohOptions(mode="hub"), ZenohOptions(connect=("nope",)),

@@ -97,6 +97,8 @@ for name in "${names[@]}"; do
       },
       tx: { lease: 1000, keep_alive: 4 },
     },
+    // no shared memory: a closed session's pool stays mapped in its peers (docs/operations.md)
+    shared_memory: { enabled: false },
   },
 }
 JSON
