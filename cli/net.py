@@ -102,6 +102,11 @@ def cmd_status(args: argparse.Namespace) -> int:
     return 0
 
 
+def _clipped(text: str, length: int) -> str:
+    """``text`` cut to ``length`` characters, ending in an ellipsis where it was cut."""
+    return text if len(text) <= length else text[:length - 1] + "…"
+
+
 def format_status(status: dict) -> str:
     """One line of ``asnn status``: a worker's identity, robots, counters and what it refused.
 
@@ -127,7 +132,7 @@ def format_status(status: dict) -> str:
     slow = ", ".join(f"{r} ({s['fps']:g} fps)" for r, s in robots.items()
                      if s.get("fps") is not None and s["fps"] < SLOW_FPS)
     # robots refused in the last minute, the latest first: why a camera gets no response
-    refused = ", ".join(f"{r} ({e['reason']} x{e['count']}: {e['detail'][:60]})"
+    refused = ", ".join(f"{r} ({e['reason']} x{e['count']}: {_clipped(e['detail'], 60)})"
                         for r, e in reversed(status.get("refused", {}).items())
                         if e.get("seconds_ago", 0) <= 60)
     return (f"worker {status['worker']}: {status['model']}/{status['preset'] or '-'}, up "

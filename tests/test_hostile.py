@@ -413,6 +413,12 @@ def test_status_shows_candidates_and_second_publishers():
     assert "second publishers: 1, contested: r1 (1 intrusions)" in line
     assert "second-publisher 1" in line
     assert "refused lately: r1 (second-publisher x1: frame 0 does not continue" in line
+    # a detail cut to fit ends in an ellipsis (its own brackets then do not look closed)
+    status = core.status()
+    status["refused"]["r1"]["detail"] = ("frame 369 does not continue the stream of r3 (last "
+                                         "seq 18953)")
+    assert "x1: frame 369 does not continue the stream of r3 (last seq 1895…); " in \
+        format_status(status)
 
 
 def test_status_says_why_a_camera_none_of_whose_frames_is_taken_gets_no_response():
