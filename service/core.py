@@ -221,7 +221,7 @@ class _Robot:
     # current stream (after the worker's own skips), and whether a slow rate was logged
     stamp: float | None = None
     periods: deque = field(default_factory=lambda: deque(maxlen=PERIOD_FRAMES))
-    slow_logged: bool = False
+    slow_frames: int = 0  # frames in a row whose rate read below SLOW_FPS
 
     @property
     def fps(self) -> float | None:
@@ -636,23 +636,24 @@ class WorkerCore:
         return response
 
     def _measure_rate(self, robot: str, state: _Robot, stamp: float) -> None:
-        """Note the gap since the robot's previous processed frame; log once per stream when
-        its model is stepped at less than :data:`asnn.params.SLOW_FPS` (a slow camera, or
-        frames skipped under load): the default preset loses hits there (README, "At half the
-        frame rate")."""
+        """Note the gap since the robot's previous processed frame; log when its model has
+        been stepped at less than :data:`asnn.params.SLOW_FPS` for PERIOD_FRAMES frames in a row
+        (a slow camera, or frames skipped under load; a moment's skips are not logged, and a
+        slowdown after the rate recovered is logged again, at most once every 10 s): the
+        default preset loses hits there (README, "At half the frame rate")."""
         if state.stepped == 1:
             state.periods.clear()
-            state.slow_logged = False
+            state.slow_frames = 0
         elif state.stamp is not None and 0.0 < stamp - state.stamp <= MAX_FRAME_GAP_S:
             state.periods.append(stamp - state.stamp)
         state.stamp = stamp
-        if len(state.periods) == PERIOD_FRAMES and not state.slow_logged:
-            fps = state.fps
-            if fps < SLOW_FPS:
-                state.slow_logged = True
-                log.warning("robot %s: its frames are detected at %.1f per second (the "
-                            "camera's rate, or frames skipped under load); the default preset "
-                            "is made for 20 or more", robot, fps)
+        slow = len(state.periods) == PERIOD_FRAMES and state.fps < SLOW_FPS
+        state.slow_frames = state.slow_frames + 1 if slow else 0
+        if state.slow_frames == PERIOD_FRAMES:  # slow for a while, not a moment's skips
+            self._rejections.warning(
+                f"slow:{robot}", "robot %s: its frames are detected at %.1f per second (the "
+                "camera's rate, or frames skipped under load); the default preset is made for "
+                "20 or more", robot, state.fps)
 
     def _give_back(self, state: _Robot, dropped: int) -> None:
         """A taken frame produced no response: its skipped count moves to the next one."""

@@ -424,7 +424,7 @@ def test_the_rate_a_robot_is_detected_at_is_reported_and_a_slow_one_logged(caplo
         for seq in range(8):  # 20 fps
             feed(core, "fast", looming.frames[seq], seq, stamp=seq * 0.05)
         # a 20 fps camera whose every second frame the worker skips: detected at 10 fps
-        for seq in range(0, 16, 2):
+        for seq in range(0, 24, 2):
             core.offer("asnn/slow/frame", payload(looming.frames[seq], seq, seq * 0.05))
             core.offer("asnn/slow/frame", payload(looming.frames[seq + 1], seq + 1,
                                                   (seq + 1) * 0.05))
@@ -440,6 +440,29 @@ def test_the_rate_a_robot_is_detected_at_is_reported_and_a_slow_one_logged(caplo
     # a new stream (the camera restarted) measures afresh
     feed(core, "slow", looming.frames[0], 0, stamp=0.0)
     assert core.status()["robots"]["slow"]["fps"] is None
+
+
+def test_a_moments_skipped_frames_are_not_logged_as_slow_but_a_later_slowdown_is(caplog,
+                                                                                  looming):
+    clock = FakeClock()
+    core = WorkerCore(clock=clock)
+
+    def run(stamps):
+        for t in stamps:
+            clock.now += 0.05
+            feed(core, "r1", looming.frames[0], round(t / 0.05), stamp=t)
+
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        run([k * 0.05 for k in range(10)])
+        run([0.6, 0.7, 0.8] + [0.85 + k * 0.05 for k in range(10)])  # three frames skipped
+        assert not [r for r in caplog.records if "per second" in r.getMessage()]
+        clock.now += 20
+        run([1.45 + k * 0.1 for k in range(12)])  # then a lasting slowdown
+        run([2.6 + k * 0.05 for k in range(10)])  # recovered
+        clock.now += 20
+        run([3.2 + k * 0.1 for k in range(12)])  # and slow again
+    slow = [r.getMessage() for r in caplog.records if "per second" in r.getMessage()]
+    assert len(slow) == 2 and all("10.0 per second" in m for m in slow), slow
 
 
 def test_status_reports_counters_limits_and_robots(looming):
