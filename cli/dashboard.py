@@ -10,6 +10,7 @@ from cli.arguments import port, positive
 from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
 from clients.dashboard import HOLD_S, STALE_S
 from service.config import ConfigError
+from service.link import RouterWatch
 
 __all__ = ["register"]
 
@@ -29,7 +30,8 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
         server.close()
         return fail(str(exc))
     stop = stop_on_signals()
-    with session, FleetSubscriber(session, store, refusals=refusals) as subscriber, server:
+    with session, RouterWatch(session, name), \
+            FleetSubscriber(session, store, refusals=refusals) as subscriber, server:
         print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
               flush=True)
         while not stop.wait(0.5):

@@ -9,6 +9,7 @@ import sys
 from asnn.params import preset_names
 from service import keys
 from service.config import ConfigError
+from service.link import RouterWatch
 
 from .arguments import count, non_negative, positive, robot_id, whole, worker_id
 from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
@@ -33,7 +34,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
     except (SourceError, ConfigError) as exc:
         return fail(str(exc))
     stop = stop_on_signals()
-    with session:
+    with session, RouterWatch(session, f"camera {args.robot}"):
         count = publish_frames(session, args.robot, source, prefix=args.prefix, fps=args.fps,
                                loop=args.loop, format=args.format, wait=args.wait, stop=stop,
                                preview_hz=args.preview_hz, refusals=refusals)
@@ -59,7 +60,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
         return fail(str(exc))
     stop = stop_on_signals()
     tune_process()
-    with session:
+    with session, RouterWatch(session, f"worker {core.worker_id}"):
         worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
                         handover_timeout=args.handover_timeout)
         try:
@@ -155,7 +156,7 @@ def cmd_alerts(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         return fail(str(exc))
     stop = stop_on_signals()
-    with session, \
+    with session, RouterWatch(session, "alerts"), \
             WarningListener(session, printer(args.json, sys.stdout), prefix=args.prefix,
                             robot=args.robot) as listener:
         print(f"listening on {listener.key}", file=sys.stderr, flush=True)

@@ -25,6 +25,8 @@ def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
 
         assert router.stop(signal.SIGKILL) != 0
         time.sleep(2.0)  # longer than the lease: every session has seen the router go
+        for proc in (camera, worker, alerts):  # and each says so
+            proc.wait_line("lost its router")
         down = len(responses.since(0))
         warned = len(alerts.out)
         restarted = time.monotonic()
@@ -33,6 +35,8 @@ def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
         wait_for(lambda: len(responses.since(restarted, "r1")) >= 20, timeout=60,
                  what="responses after the restart")
         wait_for(lambda: len(alerts.out) > warned, timeout=60, what="warnings after the restart")
+        for proc in (camera, worker, alerts):
+            proc.wait_line("reached the router again")
         resumed = min(t for t, _ in responses.items if t >= restarted) - restarted
         print(f"\nstream resumed {resumed:.2f} s after the router restarted")
         assert len(responses.since(0)) > down

@@ -1,0 +1,67 @@
+"""Whether a session reaches its router, said in the log.
+
+Zenoh reconnects by itself (:mod:`service.config`'s ``connect/retry``) and says nothing meanwhile:
+a camera publishing into a lost link, or a worker or a dashboard hearing nothing, would look as
+if all were quiet. :class:`RouterWatch` logs a WARNING when a session that had a router has none
+left, and an INFO line when one is back. A session that never had a router (peers on a LAN) is
+not reported.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+__all__ = ["RouterWatch", "WATCH_INTERVAL"]
+
+log = logging.getLogger("asnn.link")
+
+WATCH_INTERVAL = 1.0  # seconds between looks at the session's routers
+
+
+class RouterWatch:
+    """Polls ``session.info.routers_zid()`` every ``interval`` seconds on a daemon thread, until
+    :meth:`close` or the session closes.
+
+    Parameters
+    ----------
+    session : zenoh.Session
+    name : str
+        What the log lines call the process (``camera r1``, ``worker w1``, ``dashboard``).
+    """
+
+    def __init__(self, session, name: str, interval: float = WATCH_INTERVAL):
+        self.session, self.name, self.interval = session, name, interval
+        self.connected: bool | None = None  # None until a router was seen
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="router-watch", daemon=True)
+        self._thread.start()
+
+    def _routers(self) -> list[str]:
+        return [str(zid) for zid in self.session.info.routers_zid()]
+
+    def _run(self) -> None:
+        while not self._stop.is_set() and not self.session.is_closed():
+            try:
+                routers = self._routers()
+            except Exception:  # the session closing under us
+                return
+            if routers and self.connected is not True:
+                if self.connected is False:
+                    log.info("%s: reached the router again (%s)", self.name, ", ".join(routers))
+                self.connected = True
+            elif not routers and self.connected:
+                log.warning("%s: lost its router; Zenoh retries the connection (nothing is "
+                            "sent or received meanwhile)", self.name)
+                self.connected = False
+            self._stop.wait(self.interval)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2 * self.interval + 1.0)
+
+    def __enter__(self) -> RouterWatch:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
