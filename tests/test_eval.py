@@ -414,7 +414,20 @@ def _mark(folder: str, index: int) -> int:
 
 
 def test_tasks_left_early_are_cancelled_and_their_workers_ended(tmp_path):
+    import signal
+
     from asnn.evaluation.pool import run_tasks
+
+    # as after a command that stops on signals ran in this process (cli.session): a forked
+    # worker inherits the handler, and must still die of terminate()
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: None)
+    try:
+        _left_early(tmp_path, run_tasks)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _left_early(tmp_path, run_tasks):
 
     tasks = [(str(tmp_path), k) for k in range(20)]
     assert sorted(i for i, _ in run_tasks(_mark, tasks[:4], 2)) == [0, 1, 2, 3]

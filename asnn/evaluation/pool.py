@@ -46,7 +46,10 @@ def run_tasks(function: Callable, tasks: Sequence[tuple], jobs: int
 
 
 def _ignore_interrupts() -> None:
+    """A worker ignores SIGINT and dies of SIGTERM, whatever handlers its parent had (a forked
+    worker inherits them: one that set an event on SIGTERM made ``terminate`` do nothing)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _stop(pool: ProcessPoolExecutor) -> None:
