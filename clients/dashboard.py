@@ -723,6 +723,12 @@ class DashboardServer:
                 self.connection.settimeout(self.timeout)  # writing the answer: the full time
                 return parsed
 
+            def end_headers(self):
+                # on every answer, the standard library's error pages (400, 431, 501) included
+                for name, value in SECURITY_HEADERS.items():
+                    self.send_header(name, value)
+                super().end_headers()
+
             def log_message(self, format, *args):  # noqa: A002 (the base class's name)
                 log.debug("%s %s", self.address_string(), format % args)
 
@@ -750,8 +756,6 @@ class DashboardServer:
                 self.send_header("Content-Type", ctype)
                 self.send_header("Content-Length", str(len(body)))
                 self.send_header("Cache-Control", "no-cache" if cache else "no-store")
-                for name, value in SECURITY_HEADERS.items():
-                    self.send_header(name, value)
                 self.end_headers()
                 if not head:
                     self.wfile.write(body)
@@ -781,8 +785,6 @@ class DashboardServer:
             handler.send_header("Content-Type", "text/event-stream; charset=utf-8")
             handler.send_header("Cache-Control", "no-store")
             handler.send_header("X-Accel-Buffering", "no")
-            for name, value in SECURITY_HEADERS.items():
-                handler.send_header(name, value)
             handler.end_headers()
             handler.close_connection = True
             out = handler.wfile

@@ -41,10 +41,12 @@ class RouterWatch:
         return [str(zid) for zid in self.session.info.routers_zid()]
 
     def _run(self) -> None:
-        while not self._stop.is_set() and not self.session.is_closed():
+        while not self._stop.is_set():
             try:
+                if self.session.is_closed():
+                    return
                 routers = self._routers()
-            except Exception:  # the session closing under us
+            except Exception:  # the session closing under us, or not a Zenoh session
                 return
             if routers and self.connected is not True:
                 if self.connected is False:

@@ -318,6 +318,17 @@ def test_server_serves_the_packaged_page_and_nothing_else():
         for path in ("/static/../dashboard.py", "/static/", "/nothing", "/../pyproject.toml"):
             assert get(server, path)[0] == 404
         assert get(server, "/", "HEAD")[0] == 200
+        # the standard library's own error pages carry the security headers too
+        status, headers, _ = get(server, "/", "DELETE")
+        assert status == 501 and "default-src 'self'" in headers["Content-Security-Policy"]
+        with socket.create_connection(server.address, timeout=TIMEOUT) as sock:
+            sock.sendall(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")  # the event stream
+            head = b""
+            while b"\r\n\r\n" not in head:
+                head += sock.recv(4096)
+        lines = head.split(b"\r\n\r\n")[0].split(b"\r\n")
+        assert lines[0].startswith(b"HTTP/1.1 200")
+        assert sum(line.startswith(b"Content-Security-Policy:") for line in lines) == 1
 
 
 class EventReader:
