@@ -366,9 +366,9 @@ class SlowCore(WorkerCore):
 
     STEP_S = 0.02
 
-    def process(self, job):
+    def process(self, job, publish=None):
         time.sleep(self.STEP_S)
-        return super().process(job)
+        return super().process(job, publish)
 
 
 def test_overloaded_worker_over_zenoh_serves_every_camera_in_turn(zenoh_net):

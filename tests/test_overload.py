@@ -27,9 +27,9 @@ SECONDS = 4.0
 class SlowCore(WorkerCore):
     """A worker core that takes STEP_S per frame, whatever the model costs."""
 
-    def process(self, job):
+    def process(self, job, publish=None):
         time.sleep(STEP_S)
-        return super().process(job)
+        return super().process(job, publish)
 
 
 @pytest.fixture
