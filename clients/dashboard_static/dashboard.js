@@ -219,7 +219,8 @@
     }
     if (!gaps.length) return null;
     gaps.sort((a, b) => a - b);
-    return 1 / gaps[Math.floor(gaps.length / 2)];
+    const mid = gaps.length >> 1;  // the median as the worker takes it (statistics.median)
+    return 1 / (gaps.length % 2 ? gaps[mid] : (gaps[mid - 1] + gaps[mid]) / 2);
   }
 
   function drawStats(v) {
