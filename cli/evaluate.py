@@ -17,7 +17,7 @@ import argparse
 import math
 import sys
 import time
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 from asnn.evaluation import scoring
 from asnn.evaluation.heldout import TIE_BREAKS
@@ -31,6 +31,8 @@ from .arguments import count, frame_size, preset_spec, whole
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
 MANIFEST = ".asnn-eval-files"
+# what eval writes at the top of --out (besides --paper's fig*.png and fig*.json)
+OUTPUT_FILES = ("report.md", "results.json", "labels.json", "held_out.md", "held_out.json")
 
 
 def _detectors(text: str) -> list[str]:
@@ -99,8 +101,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "it is)")
     p.add_argument("--out", metavar="DIR", default="eval-out",
                    help="output directory (default: %(default)s); it then holds this run's "
-                        "files: those an earlier run wrote there and this one did not are "
-                        f"removed (the run's files are listed in DIR/{MANIFEST})")
+                        "results: the reports, results, plots and figures an earlier run wrote "
+                        "there, unchanged since, and this one did not write again are removed "
+                        f"(each run's are listed in DIR/{MANIFEST}); nothing else is touched")
     p.add_argument("--early-tolerance", type=float, metavar="SECONDS",
                    help="with CLIPS_DIR: a first warning up to this long before the labelled "
                         f"onset still counts as a hit (default: {scoring.EARLY_TOLERANCE_S}, for "
@@ -130,11 +133,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _eval_output(relative: PurePosixPath) -> bool:
+    """Whether a path in an --out folder is of a kind eval writes there (the only files the
+    manifest may list): the reports and results at its top, ``fig*`` of --paper, the plots and
+    the per-clip results."""
+    parts, suffix = relative.parts, relative.suffix
+    if len(parts) == 1:
+        return parts[0] in OUTPUT_FILES or (parts[0].startswith("fig")
+                                            and suffix in (".png", ".json"))
+    return ((len(parts) == 2 and parts[0] == "plots" and suffix == ".png")
+            or (len(parts) == 3 and parts[0] == "results" and suffix == ".jsonl"))
+
+
 def _replace_previous_run(out: Path, since: float) -> None:
     """Leave ``out`` holding this run's files only: remove those the previous run listed in
-    the manifest and this one did not write again (their times unchanged; never a file
-    outside ``out``, nor one no run listed), and list this run's (written again, or new since
-    ``since``)."""
+    the manifest, if unchanged since (their time as listed) and not written again by this run,
+    and list this run's: the files of eval's kinds (:func:`_eval_output`) written since
+    ``since``. A file of another kind, one edited since it was listed, and anything outside
+    ``out`` are never removed."""
     if not out.is_dir():
         return
     previous: dict[str, int] = {}
@@ -147,16 +163,17 @@ def _replace_previous_run(out: Path, since: float) -> None:
     root = out.resolve()
     written = {}
     for path in out.rglob("*"):
-        if path.name == MANIFEST or path.is_symlink() or not path.is_file():
+        relative = PurePosixPath(path.relative_to(out).as_posix())
+        if path.is_symlink() or not path.is_file() or not _eval_output(relative):
             continue
-        name, mtime = str(path.relative_to(out)), path.stat().st_mtime_ns
-        ours = previous[name] != mtime if name in previous else mtime >= since * 1e9
-        if ours:
-            written[name] = mtime
+        mtime = path.stat().st_mtime_ns
+        if mtime >= since * 1e9:
+            written[str(relative)] = mtime
     for name, mtime in previous.items():
         path = out / name
-        if (name in written or path.is_symlink() or not path.is_file()
-                or root not in path.resolve().parents or path.stat().st_mtime_ns != mtime):
+        if (name in written or not _eval_output(PurePosixPath(name)) or path.is_symlink()
+                or not path.is_file() or root not in path.resolve().parents
+                or path.stat().st_mtime_ns != mtime):
             continue
         path.unlink()
         parent = path.parent

@@ -466,6 +466,33 @@ def test_an_out_folder_holds_the_latest_run_s_files_only(clips, tmp_path):
     assert "notes.md" not in listed and not any("lgmd1" in name for name in listed)
 
 
+def test_an_out_folder_keeps_what_eval_did_not_write_and_what_was_edited(tmp_path):
+    import os
+    import time
+
+    from cli.evaluate import MANIFEST, _replace_previous_run
+
+    out = tmp_path / "out"
+    (out / "results" / "asnn").mkdir(parents=True)
+    ours = out / "results" / "asnn" / "a.jsonl"
+    ours.write_text("{}")
+    edited = out / "report.md"
+    edited.write_text("# report")
+    _replace_previous_run(out, since=0.0)
+    assert sorted(line.split("\t")[1] for line in (out / MANIFEST).read_text().splitlines()) \
+        == ["report.md", "results/asnn/a.jsonl"]
+    later = time.time() + 5  # a later run that writes none of them
+    stat = edited.stat()
+    os.utime(edited, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))  # the user edits it
+    mine = out / "plots" / "mine.txt"  # not a kind eval writes, however new
+    mine.parent.mkdir()
+    mine.write_text("mine")
+    _replace_previous_run(out, since=later)
+    assert not ours.exists() and not (out / "results").exists()
+    assert edited.read_text() == "# report" and mine.read_text() == "mine"
+    assert (out / MANIFEST).read_text() == ""
+
+
 def test_the_maps_figure_draws_motion_where_it_points_on_the_image():
     """phi is in image coordinates (y down): a rim moving down the image is drawn pointing down
     the screen, one moving right pointing right."""
