@@ -136,8 +136,8 @@ MAX_GAP = 20
 MAX_ROBOTS = 256
 TAKEOVER_AFTER_S = 3.0
 # A robot's rate is the median over asnn.params.PERIOD_FRAMES gaps between the stamps of its
-# frames processed, as its model measures its own; below SLOW_FPS the worker logs it once per
-# stream
+# frames processed, as its model measures its own; when it reads below SLOW_FPS for
+# PERIOD_FRAMES frames in a row the worker logs it (_measure_rate)
 
 
 def default_worker_id() -> str:
@@ -218,10 +218,11 @@ class _Robot:
     # one being processed, or the last one processed: never a third frame held)
     last_arrival: tuple[int, float, bytes] | None = None
     # the rate its model is stepped at: the stamps' gaps between the frames processed in the
-    # current stream (after the worker's own skips), and whether a slow rate was logged
+    # current stream (after the worker's own skips), and how long it has read slow
     stamp: float | None = None
     periods: deque = field(default_factory=lambda: deque(maxlen=PERIOD_FRAMES))
     slow_frames: int = 0  # frames in a row whose rate read below SLOW_FPS
+    slow_logged: bool = False  # this slow spell was logged
 
     @property
     def fps(self) -> float | None:
@@ -649,8 +650,12 @@ class WorkerCore:
         state.stamp = stamp
         slow = len(state.periods) == PERIOD_FRAMES and state.fps < SLOW_FPS
         state.slow_frames = state.slow_frames + 1 if slow else 0
-        if state.slow_frames == PERIOD_FRAMES:  # slow for a while, not a moment's skips
-            self._rejections.warning(
+        if not slow:
+            state.slow_logged = False
+        elif state.slow_frames >= PERIOD_FRAMES and not state.slow_logged:
+            # slow for a while, not a moment's skips; logged once per slow spell, when the
+            # rate limit lets it through (so a relapse soon after one is logged later)
+            state.slow_logged = self._rejections.warning(
                 f"slow:{robot}", "robot %s: its frames are detected at %.1f per second (the "
                 "camera's rate, or frames skipped under load); the default preset is made for "
                 "20 or more", robot, state.fps)

@@ -461,8 +461,12 @@ def test_a_moments_skipped_frames_are_not_logged_as_slow_but_a_later_slowdown_is
         run([2.6 + k * 0.05 for k in range(10)])  # recovered
         clock.now += 20
         run([3.2 + k * 0.1 for k in range(12)])  # and slow again
+        run([4.45 + k * 0.05 for k in range(10)])  # recovered
+        run([5.0 + k * 0.1 for k in range(12)])  # slow again within 10 s of the last line:
+        clock.now += 11  # logged once the rate limit lets it through, while it lasts
+        run([6.2 + k * 0.1 for k in range(3)])
     slow = [r.getMessage() for r in caplog.records if "per second" in r.getMessage()]
-    assert len(slow) == 2 and all("10.0 per second" in m for m in slow), slow
+    assert len(slow) == 3 and all("10.0 per second" in m for m in slow), slow
 
 
 def test_status_reports_counters_limits_and_robots(looming):
