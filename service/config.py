@@ -11,7 +11,7 @@ asnn's defaults, applied only where the config file says nothing (docs/operation
   to every 2 s (Zenoh's own: 1 s to 4 s), so cameras, workers and subscribers reconnect by
   themselves and re-declare their subscribers, publishers and liveliness tokens.
 
-* ``transport/shared_memory/enabled``: false, unless the config file names ``shared_memory``.
+* ``transport/shared_memory/enabled``: false, unless the config file has a ``shared_memory`` key.
   Zenoh 1.10.2 enables its shared-memory transport by default; every client session on the same
   host that publishes frames through it leaves a 16 MiB pool mapped in the router and in the
   worker when it closes, never given back (about 19 MB of RSS per camera session: a camera that
@@ -25,6 +25,7 @@ left to the config files: deploy/zenoh/*.json5 set 1 s with 4 keep-alives per le
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,6 +62,15 @@ class ZenohOptions:
     gossip: bool | None = None
 
 
+_COMMENTS = re.compile(r"/\*.*?\*/|//[^\n]*", re.S)
+_SHARED_MEMORY_KEY = re.compile(r"""["']?\bshared_memory["']?\s*:""")
+
+
+def _sets_shared_memory(text: str) -> bool:
+    """Whether a JSON5 config's text has a ``shared_memory`` key outside its comments."""
+    return bool(_SHARED_MEMORY_KEY.search(_COMMENTS.sub("", text)))
+
+
 def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Config:
     """Build a ``zenoh.Config`` from options (keyword arguments override fields of ``options``).
 
@@ -81,8 +91,8 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
         if json.loads(conf.get_json(key)) is None:
             settings.append((key, value))
     # Zenoh's own default is true, so whether the file chose it is read from the file itself
-    if not (opts.config_file and "shared_memory" in Path(opts.config_file).read_text(
-            encoding="utf-8", errors="replace")):  # (Zenoh has just read the same file)
+    if not (opts.config_file and _sets_shared_memory(
+            Path(opts.config_file).read_text(encoding="utf-8", errors="replace"))):
         settings.append((SHARED_MEMORY, False))
     if opts.mode is not None:
         if opts.mode not in MODES:

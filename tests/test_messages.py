@@ -257,7 +257,8 @@ def test_zenohs_shared_memory_is_off_unless_a_config_file_chooses_it(tmp_path):
 
     assert json.loads(make_config().get_json(SHARED_MEMORY)) is False
     plain = tmp_path / "plain.json5"
-    plain.write_text('{ mode: "client" }')
+    plain.write_text('{ mode: "client", // we let asnn turn shared_memory off\n'
+                     '  /* shared_memory: { enabled: true } */ }')
     assert json.loads(make_config(ZenohOptions(config_file=plain)).get_json(SHARED_MEMORY)) \
         is False
     chosen = tmp_path / "shm.json5"
