@@ -126,9 +126,7 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
         message = decode_preview(payload)
         check_preview(message)  # the viewers only ever get images of the announced size
     elif kind == "refused":
-        message = decode_refusal(payload)
-        if message.robot != robot:
-            raise MessageError("bad-key", f"a refusal of robot {message.robot!r} on {key}")
+        message = decode_refusal(payload, robot)
     elif kind in ("response", "warning"):
         message = decode_response(payload)
         if message.robot != robot:

@@ -26,6 +26,7 @@ same best-effort delivery as frames.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
@@ -73,40 +74,38 @@ class SourceRejections:
 
 class RefusalNotices:
     """What the workers say about this camera's frames (``<prefix>/<robot>/refused``,
-    :class:`~service.messages.Refusal`): the latest count per reason and worker (``counts``),
-    logged at WARNING, at most one line per reason every 10 s. A notice that is not a valid
-    Refusal of this robot is counted under ``invalid`` and otherwise ignored."""
+    :class:`~service.messages.Refusal`): per worker (at most MAX_NOTICES), its latest notice
+    (``latest``: the reason and the frames it has refused in all), logged at WARNING, at most
+    one line every 10 s whatever the notices say (anyone on an open router can send them). A
+    notice that is not a valid Refusal of this robot is counted under ``invalid`` and otherwise
+    ignored."""
 
     def __init__(self, robot: str):
         self.robot = robot
-        self.counts: dict[tuple[str, str], int] = {}
+        self.latest: dict[str, tuple[str, int]] = {}
         self.invalid = 0
         self._log = RateLimitedLog(log)
         self._lock = threading.Lock()
 
     def __call__(self, sample: zenoh.Sample) -> None:
         try:
-            notice = decode_refusal(sample.payload.to_bytes())
-            if notice.robot != self.robot:
-                raise MessageError("invalid-field", f"a notice for robot {notice.robot!r}")
+            notice = decode_refusal(sample.payload.to_bytes(), robot=self.robot)
         except MessageError:
             with self._lock:
                 self.invalid += 1
             return
         with self._lock:
-            if len(self.counts) < MAX_NOTICES or (notice.worker, notice.reason) in self.counts:
-                self.counts[notice.worker, notice.reason] = notice.count
-        self._log.warning(notice.reason, "camera %s: worker %s refuses its frames (%s, %d so "
-                          "far): %s", self.robot, notice.worker, notice.reason, notice.count,
+            if len(self.latest) < MAX_NOTICES or notice.worker in self.latest:
+                self.latest[notice.worker] = (notice.reason, notice.count)
+        self._log.warning("refused", "camera %s: worker %r refuses its frames (%r, %d so far): "
+                          "%r", self.robot, notice.worker, notice.reason, notice.count,
                           notice.detail)
 
     def summary(self) -> str:
-        """``reason count`` per reason, summed over the workers, or ``none``."""
+        """``count by worker (latest reason)`` per worker, or ``none``."""
         with self._lock:
-            totals = Counter()
-            for (_, reason), count in self.counts.items():
-                totals[reason] += count
-        return ", ".join(f"{k} {v}" for k, v in sorted(totals.items())) or "none"
+            return ", ".join(f"{count} by {worker!r} (latest {reason})" for worker, (reason, count)
+                             in sorted(self.latest.items())) or "none"
 
 
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
@@ -141,15 +140,21 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     period = 1.0 / rate
     stop = stop or threading.Event()
     key = keys.frame_key(robot, prefix)
-    notices = session.declare_subscriber(keys.refusal_key(robot, prefix),
-                                         refusals or RefusalNotices(robot))
-    publisher = session.declare_publisher(key, **FRAME_QOS)
-    token = (session.liveliness().declare_token(keys.camera_token_key(robot, prefix))
-             if announce else None)
-    previews = (session.declare_publisher(keys.preview_key(robot, prefix), **FRAME_QOS)
-                if preview_hz > 0 else None)
-    next_preview = time.monotonic()
-    try:
+    with contextlib.ExitStack() as declared:  # each undeclared on the way out, whatever fails
+
+        def declare(entity):
+            declared.callback(entity.undeclare)
+            return entity
+
+        declare(session.declare_subscriber(keys.refusal_key(robot, prefix),
+                                           refusals or RefusalNotices(robot)))
+        publisher = declare(session.declare_publisher(key, **FRAME_QOS))
+        if announce:
+            declare(session.liveliness().declare_token(keys.camera_token_key(robot, prefix)))
+        previews = (declare(session.declare_publisher(keys.preview_key(robot, prefix),
+                                                      **FRAME_QOS))
+                    if preview_hz > 0 else None)
+        next_preview = time.monotonic()
         deadline = time.monotonic() + wait
         while (not publisher.matching_status.matching and time.monotonic() < deadline
                and not stop.is_set()):
@@ -204,10 +209,3 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
             if not loop or source.live or seq == 0:
                 break
         return seq
-    finally:
-        notices.undeclare()
-        publisher.undeclare()
-        if token is not None:
-            token.undeclare()
-        if previews is not None:
-            previews.undeclare()

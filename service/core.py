@@ -110,8 +110,8 @@ from asnn.params import DEFAULT_PRESET, MAX_FRAME_GAP_S, PERIOD_FRAMES, SLOW_FPS
 
 from . import keys
 from .logutil import RateLimitedLog
-from .messages import (MAX_PAYLOAD, MAX_SIDE, VERSION, Frame, MessageError, Response,
-                       decode_frame, response_from, track_id_base)
+from .messages import (MAX_NOTE_LEN, MAX_PAYLOAD, MAX_REASON_LEN, MAX_SIDE, VERSION, Frame,
+                       MessageError, Response, decode_frame, response_from, track_id_base)
 
 __all__ = ["Job", "RESET_REASONS", "RateLimitedLog", "RobotView", "WARMUP_FRAMES", "WorkerCore",
            "default_threads", "default_worker_id"]
@@ -495,7 +495,8 @@ class WorkerCore:
             robot = None  # not a robot's key: counted, and logged, only
         if robot is not None:
             last = self._refused.pop(robot, None)
-            self._refused[robot] = {"reason": reason, "detail": detail[:200],
+            self._refused[robot] = {"reason": reason[:MAX_REASON_LEN],
+                                    "detail": detail[:MAX_NOTE_LEN],
                                     "count": (last["count"] if last else 0) + 1,
                                     "at": self.clock(), "told": False}
             if len(self._refused) > MAX_REFUSED:

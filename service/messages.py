@@ -63,6 +63,7 @@ MAX_ITEMS = 16384  # container entries (map pairs and array items) in one messag
 MAX_STR_LEN = 64 * 1024
 MAX_EXT_LEN = 64
 MAX_NOTE_LEN = 200  # characters of a refusal's detail and worker id
+MAX_REASON_LEN = 64  # characters of a refusal's reason
 MAX_REFUSAL_BYTES = 4096
 REASONS = ("oversized", "undecodable", "not-a-map", "unsupported-version", "missing-field",
            "invalid-field", "bad-stamp", "bad-size", "bad-format", "bad-pixels", "bad-image")
@@ -297,18 +298,23 @@ class Refusal(_Message):
     v: int = Field(VERSION, description="message version (1)")
     robot: str = Field(pattern=r"^[A-Za-z0-9_-]{1,64}$")
     worker: str = Field(min_length=1, max_length=MAX_NOTE_LEN)
-    reason: str = Field(min_length=1, max_length=64, description="the label counted, REASONS "
+    reason: str = Field(pattern=rf"^[A-Za-z0-9_.:-]{{1,{MAX_REASON_LEN}}}$", description="the label counted, REASONS "
                         "and the worker's own (docs/operations.md)")
     detail: str = Field(max_length=MAX_NOTE_LEN)
     count: int = Field(ge=1, description="frames of the robot this worker has refused")
 
 
-def decode_refusal(payload: bytes) -> Refusal:
-    """Validate a Refusal payload (a small message: at most MAX_REFUSAL_BYTES)."""
+def decode_refusal(payload: bytes, robot: str | None = None) -> Refusal:
+    """Validate a Refusal payload (a small message: at most MAX_REFUSAL_BYTES), of ``robot``
+    where given (the robot of the key it came on)."""
     if len(payload) > MAX_REFUSAL_BYTES:
         raise MessageError("oversized", f"refusal of {len(payload)} bytes, more than "
                            f"{MAX_REFUSAL_BYTES}")
-    return _validate(Refusal, _unpack(payload, "refusal"), "refusal")
+    notice = _validate(Refusal, _unpack(payload, "refusal"), "refusal")
+    if robot is not None and notice.robot != robot:
+        raise MessageError("bad-key", f"a refusal of robot {notice.robot!r} on robot {robot!r}'s "
+                           "key")
+    return notice
 
 
 def _unpack(payload: bytes, what: str) -> dict[str, Any]:

@@ -488,9 +488,9 @@ class Worker:
         """Tell each robot refused since the last call why, on ``<prefix>/<robot>/refused``
         (best effort: a notice, not data)."""
         for robot, reason, detail, count in self.core.refusals_to_tell():
-            notice = Refusal(robot=robot, worker=self.core.worker_id[:MAX_NOTE_LEN],
-                             reason=reason[:64], detail=detail[:MAX_NOTE_LEN], count=count)
-            try:
+            try:  # the core keeps reason and detail within the Refusal's bounds
+                notice = Refusal(robot=robot, worker=self.core.worker_id[:MAX_NOTE_LEN],
+                                 reason=reason, detail=detail, count=count)
                 self.session.put(keys.refusal_key(robot, self.core.prefix), encode(notice),
                                  **REFUSAL_QOS)
             except Exception:  # e.g. the session closing under us; the status keeps it

@@ -447,7 +447,7 @@ def test_a_camera_whose_frames_the_worker_refuses_is_told_why(zenoh_net, caplog)
         with caplog.at_level("WARNING", logger="asnn.camera"):
             camera.start()
             try:
-                wait_for(lambda: refusals.counts, what="the worker's notice")
+                wait_for(lambda: refusals.latest, what="the worker's notice")
                 # notices that are not valid refusals of this robot are counted and ignored
                 zenoh_net.hub.put(keys.refusal_key("second"), b"junk")
                 zenoh_net.hub.put(keys.refusal_key("second"), msgpack.packb(
@@ -457,8 +457,28 @@ def test_a_camera_whose_frames_the_worker_refuses_is_told_why(zenoh_net, caplog)
             finally:
                 stop.set()
                 camera.join(timeout=TIMEOUT)
-    (worker, reason), count = next(iter(refusals.counts.items()))
+    worker, (reason, count) = next(iter(refusals.latest.items()))
     assert (worker, reason) == (core.worker_id, "too-many-robots") and count >= 1
-    assert refusals.summary() == f"too-many-robots {count}"
-    assert (f"camera second: worker {core.worker_id} refuses its frames (too-many-robots, "
-            in caplog.text) and "already tracking 1 robots" in caplog.text
+    assert refusals.summary() == f"{count} by {core.worker_id!r} (latest too-many-robots)"
+    assert (f"camera second: worker '{core.worker_id}' refuses its frames ('too-many-robots', "
+            in caplog.text) and "'already tracking 1 robots'" in caplog.text
+
+
+def test_refusal_notices_keep_each_workers_latest_and_log_one_line_whatever_they_say(caplog):
+    from types import SimpleNamespace
+
+    def sample(**fields):
+        fields = {"robot": "r1", "worker": "w1", "detail": "", **fields}
+        payload = msgpack.packb({"v": 1, **fields})
+        return SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda: payload))
+
+    notices = RefusalNotices("r1")
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        notices(sample(reason="late", count=10, detail="a\nfake log line"))
+        notices(sample(reason="second-publisher", count=11))  # the count is the worker's total
+        for k in range(50):  # a flood of made-up reasons (an open router): one line, not 50
+            notices(sample(reason=f"made-up-{k}", count=12 + k))
+        notices(sample(reason="not\na label", count=99))  # not a Refusal: ignored
+    assert notices.summary() == "61 by 'w1' (latest made-up-49)" and notices.invalid == 1
+    lines = [r.getMessage() for r in caplog.records if "refuses its frames" in r.getMessage()]
+    assert len(lines) == 1 and "\n" not in lines[0]  # its text shown as data, on one line
