@@ -505,10 +505,11 @@ class ASNN:
             whole = np.concatenate([r, -r])  # R^{theta + pi} = -R^theta
             maps = Maps(P=photo.copy(), R=whole, V=v.copy(),
                         phi=retina.motion_direction(whole), G=g.copy(), M_a=m_a, M_d=m_d,
-                        G_prime=g * mask, rig=self._rig_mask())
+                        G_prime=g * mask,  # eq. 27 with the kernels' M_a M_d
+                        rig=self._rig_mask())
         return Response(index=index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
-                        collision=retina.collision_warning(spike_rate, p.t_c), targets=targets, maps=maps,
-                        tracks=frame.tracks)
+                        collision=retina.collision_warning(spike_rate, p.t_c), targets=targets,
+                        maps=maps, tracks=frame.tracks)
 
     def _respond(self, frame: "_Frame") -> Response:
         """One step in the straightforward float64 form (:mod:`asnn.retina`, stage by stage)."""
@@ -558,8 +559,8 @@ class ASNN:
         maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d, G_prime=g_prime,
                     rig=self._rig_mask()) if self.record_maps else None
         return Response(index=frame.index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
-                        collision=retina.collision_warning(spike_rate, p.t_c), targets=targets, maps=maps,
-                        tracks=frame.tracks)
+                        collision=retina.collision_warning(spike_rate, p.t_c), targets=targets,
+                        maps=maps, tracks=frame.tracks)
 
     def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, frame: "_Frame",
                  total: float, points: tuple[np.ndarray, np.ndarray] | None = None

@@ -58,8 +58,8 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
 def register(subparsers) -> None:
     p = subparsers.add_parser("dashboard", help="the fleet in a web browser",
                               description="Serve a live page showing every robot on "
-                              "<prefix>/*/response, warning, preview and refused: thumbnail with the "
-                              "looming targets, spike-rate sparkline, collision and stale "
+                              "<prefix>/*/response, warning, preview and refused: thumbnail "
+                              "with the looming targets, spike-rate sparkline, collision and stale "
                               "markers, and the latest warnings. Every asset comes from the "
                               "package (works offline).")
     p.add_argument("--port", type=port, default=8080,

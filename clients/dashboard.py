@@ -241,7 +241,7 @@ class FleetStore:
     # ------------------------------------------------------------------ input
 
     def offer(self, key: str, payload: bytes) -> str | None:
-        """Take one sample of ``<prefix>/<robot>/(response|warning|preview)``.
+        """Take one sample of ``<prefix>/<robot>/(response|warning|preview|refused)``.
 
         Returns the robot id, or ``None`` when the message was invalid (counted in
         ``invalid`` by reason and logged). Never raises for bad input.

@@ -46,7 +46,8 @@ class RouterWatch:
                 if self.session.is_closed():
                     return
                 routers = self._routers()
-            except Exception:  # the session closing under us, or not a Zenoh session
+            except Exception as exc:  # the session closing under us, or not a Zenoh session
+                log.debug("%s: router watch ended: %r", self.name, exc)
                 return
             if routers and self.connected is not True:
                 if self.connected is False:

@@ -298,8 +298,9 @@ class Refusal(_Message):
     v: int = Field(VERSION, description="message version (1)")
     robot: str = Field(pattern=r"^[A-Za-z0-9_-]{1,64}$")
     worker: str = Field(min_length=1, max_length=MAX_NOTE_LEN)
-    reason: str = Field(pattern=rf"^[A-Za-z0-9_.:-]{{1,{MAX_REASON_LEN}}}$", description="the label counted, REASONS "
-                        "and the worker's own (docs/operations.md)")
+    reason: str = Field(pattern=rf"^[A-Za-z0-9_.:-]{{1,{MAX_REASON_LEN}}}$",
+                        description="the label counted, REASONS and the worker's own "
+                        "(docs/operations.md)")
     detail: str = Field(max_length=MAX_NOTE_LEN)
     count: int = Field(ge=1, description="frames of the robot this worker has refused")
 

@@ -481,7 +481,7 @@ def test_status_reports_counters_limits_and_robots(looming):
     assert msgpack.unpackb(msgpack.packb(status)) == status
 
 
-def _published_in_order(looming, publish_inside: bool) -> list[int]:
+def _published_in_order(looming) -> list[int]:
     """The seqs one robot's responses are published in, with two processing threads and a
     publish slow enough for the other thread to step the next frame meanwhile."""
     import threading
@@ -498,10 +498,7 @@ def _published_in_order(looming, publish_inside: bool) -> list[int]:
             job = core.take(timeout=0.05)
             if job is None:
                 continue
-            if publish_inside:
-                core.process(job, publish=publish)
-            elif (response := core.process(job)) is not None:
-                publish(response)
+            core.process(job, publish=publish)
 
     threads = [threading.Thread(target=run) for _ in range(2)]
     for thread in threads:
@@ -520,6 +517,8 @@ def _published_in_order(looming, publish_inside: bool) -> list[int]:
 
 def test_a_robots_responses_are_published_in_the_order_of_its_frames(looming):
     """With several processing threads, a robot is not released before its response is
-    published (a user trial: 83 of 11,624 responses overtaken by the next one at 300 fps)."""
-    published = _published_in_order(looming, publish_inside=True)
+    published (a user trial: 83 of 11,624 responses overtaken by the next one at 300 fps).
+    The slow publish makes the race likely, not certain: publishing after process() returned
+    gave 1-3 inversions in three runs of 58-73 responses."""
+    published = _published_in_order(looming)
     assert len(published) > 10 and published == sorted(published)

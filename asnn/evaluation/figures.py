@@ -14,6 +14,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from ..retina import motion_components
+
 __all__ = [
     "MODEL_COLOURS",
     "response_series",
@@ -231,9 +233,10 @@ def _maps_figure(data: Mapping) -> Figure:
     ys, xs = np.mgrid[stride // 2:frame.shape[0]:stride, stride // 2:frame.shape[1]:stride]
     vv = np.clip(v[ys, xs], 0.0, None)
     scale = vv.max() if vv.max() > 0 else 1.0
+    vx, vy = motion_components(vv / scale, phi[ys, xs])  # eq. 29
     # phi is in image coordinates (y down), and so are the axes imshow sets up: angles="xy"
     # draws the vector in them as it is
-    ax.quiver(xs, ys, vv * np.cos(phi[ys, xs]) / scale, vv * np.sin(phi[ys, xs]) / scale,
+    ax.quiver(xs, ys, vx, vy,
               color="tab:red", angles="xy", scale_units="xy", scale=1.0 / (1.5 * stride))
     ax.set_title("(a) flow of motion energy")
     panels = [("V", "(b) maximal motion energy V", "magma"),

@@ -162,7 +162,7 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
                      f"dt 0.05 s, {FIG3_STEPS} steps")
     write_json(out_dir / "fig3_temporal_filter.json", filt)
     written.append(figures.plot_temporal_filter(out_dir / "fig3_temporal_filter.png", filt).name)
-    progress.advance(1, "fig. 2")
+    progress.advance(1, "fig. 3")
 
     # Figs. 6 and 7: three scenes, dark and light targets, every model
     table = []
@@ -225,7 +225,7 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
             "targets": [t.to_dict() for t in response.targets]}
     write_json(out_dir / "fig8_maps.json", data)
     written.append(figures.plot_maps(out_dir / "fig8_maps.png", data).name)
-    progress.advance(1, "fig. 4")
+    progress.advance(1, "fig. 8")
     progress.finish()
 
     results = {"preset": preset_name or "default", "size": list(size), "frames": frames,

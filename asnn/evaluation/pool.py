@@ -29,7 +29,7 @@ def run_tasks(function: Callable, tasks: Sequence[tuple], jobs: int
         for index, task in enumerate(tasks):
             yield index, function(*task)
         return
-    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_ignore_interrupts)
+    pool = ProcessPoolExecutor(max_workers=jobs, initializer=_worker_signals)
     finished = False
     try:
         pending = {pool.submit(function, *task): index for index, task in enumerate(tasks)}
@@ -45,7 +45,7 @@ def run_tasks(function: Callable, tasks: Sequence[tuple], jobs: int
             _stop(pool)
 
 
-def _ignore_interrupts() -> None:
+def _worker_signals() -> None:
     """A worker ignores SIGINT and dies of SIGTERM, whatever handlers its parent had (a forked
     worker inherits them: one that set an event on SIGTERM made ``terminate`` do nothing)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -8,8 +8,9 @@ with ``x`` and ``y``) where the detector reports them. A label is an entry of ``
 (the target's centre ``[x, y]`` in every frame, or null where it has none; generated clips have
 it).
 
-Rules, with W the warm-up, T the early tolerance in whole frames (``floor(tolerance_s * fps)``:
-7 at 15 fps, 14 at 29.97), and ``first`` the first frame at or after W whose record has ``collision`` true:
+Rules, with W the warm-up, T the early tolerance in whole frames
+(``floor(tolerance_s * fps)``: 7 at 15 fps, 14 at 29.97), and ``first`` the first frame at or
+after W whose record has ``collision`` true:
 
 =========  ===================================================================================
 outcome    when
