@@ -60,6 +60,8 @@ def _stop(pool: ProcessPoolExecutor) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         if process.is_alive():
-            process.terminate()
+            # SIGKILL: a worker forked a moment ago may not have reset the SIGTERM handler it
+            # inherited yet (_worker_signals), and a kept handler made terminate() do nothing
+            process.kill()
     for process in processes:
         process.join(timeout=5)
