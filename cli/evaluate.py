@@ -162,7 +162,9 @@ def _replace_previous_run(out: Path, since: float) -> None:
         pass
     root = out.resolve()
     written = {}
-    for path in out.rglob("*"):
+    # only where eval writes: a whole tree (--out .) is not walked
+    candidates = [*out.glob("*"), *out.glob("plots/*"), *out.glob("results/*/*")]
+    for path in candidates:
         relative = PurePosixPath(path.relative_to(out).as_posix())
         if path.is_symlink() or not path.is_file() or not _eval_output(relative):
             continue

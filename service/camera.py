@@ -52,7 +52,7 @@ FRAME_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
 PREVIEW_HZ = 2.0     # thumbnails per second on <prefix>/<robot>/preview (0: none)
 PREVIEW_WIDTH = 160  # thumbnail width in pixels (never scaled up)
 MAX_REPLAY_GAP = 5.0  # seconds: a longer pause between two recorded frames is shortened to this
-MAX_NOTICES = 64  # (worker, reason) pairs a camera counts refusals of
+MAX_NOTICES = 64  # workers whose latest refusal notice a camera keeps
 
 
 class SourceRejections:
