@@ -744,7 +744,13 @@ class DashboardServer:
                 elif path == "/state":
                     body = json.dumps(server.store.delta(0)).encode()
                     self._send(200, "application/json", body, head, cache=False)
-                elif path == "/events" and not head:
+                elif path == "/events" and head:
+                    # a health check's HEAD: the stream's headers, no stream held open
+                    self.send_response(200)
+                    self.send_header("Content-Type", "text/event-stream; charset=utf-8")
+                    self.send_header("Cache-Control", "no-store")
+                    self.end_headers()
+                elif path == "/events":
                     server._stream(self)
                 else:
                     self._send(404, "text/plain; charset=utf-8", b"not found\n", head)

@@ -318,6 +318,10 @@ def test_server_serves_the_packaged_page_and_nothing_else():
         for path in ("/static/../dashboard.py", "/static/", "/nothing", "/../pyproject.toml"):
             assert get(server, path)[0] == 404
         assert get(server, "/", "HEAD")[0] == 200
+        # a health check's HEAD on the stream: its headers at once, and no stream held open
+        status, headers, body = get(server, "/events", "HEAD")
+        assert status == 200 and headers["Content-Type"].startswith("text/event-stream")
+        assert body == b"" and server.clients == 0
         # the standard library's own error pages carry the security headers too
         status, headers, _ = get(server, "/", "DELETE")
         assert status == 501 and "default-src 'self'" in headers["Content-Security-Policy"]
