@@ -433,8 +433,11 @@ class Worker:
             for robot in plan.keys() - self._subscriptions.keys():
                 self._subscriptions[robot] = self.session.declare_subscriber(
                     keys.frame_key(robot, prefix), self._on_frame)
+                # which robots a worker serves, in its log as well as in its status
+                log.info("robot %s: subscribed to its frames", robot)
             for robot in self._subscriptions.keys() - plan.keys():
                 _undeclare(self._subscriptions.pop(robot))
+                log.info("robot %s: unsubscribed from its frames", robot)
             if self.shared:
                 claims = {robot for robot, route in plan.items() if route.claim}
                 for robot in claims - self._claims.keys():

@@ -90,7 +90,7 @@ def check_handover(responses, robot, frames, handover, old, new, capsys):
 
 def test_a_worker_stopped_mid_approach_hands_its_robot_over_warm(net, capsys):  # noqa: F811
     robot = robot_of("w1", ["w1", "w2"])
-    w1, _ = net.worker("w1"), net.worker("w2")
+    w1, w2 = net.worker("w1"), net.worker("w2")
     frames = scene().frames
     handover = HANDOVER
     with zenoh.open(make_config(net.options)) as session:
@@ -107,6 +107,10 @@ def test_a_worker_stopped_mid_approach_hands_its_robot_over_warm(net, capsys):  
     assert w1.popen.wait(timeout=TIMEOUT) == 0
     w1.stop()  # joins the threads reading its output
     assert "were taken over" not in "\n".join(w1.err)
+    # each worker's log says which robots it serves
+    assert f"robot {robot}: subscribed to its frames" in "\n".join(w1.err)
+    wait_for(lambda: f"robot {robot}: subscribed to its frames" in "\n".join(w2.err),
+             what="w2's log of its new robot")
     check_handover(responses, robot, frames, handover, "w1", "w2", capsys)
 
 
