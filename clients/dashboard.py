@@ -187,6 +187,7 @@ class _Robot:
     touched: float = 0.0              # arrival of anything, for forgetting
     points: deque = field(default_factory=deque)  # (version, stamp, spike_rate)
     recent_targets: deque = field(default_factory=lambda: deque(maxlen=RECENT_TARGETS))
+    shown: deque = field(default_factory=lambda: deque(maxlen=RECENT_TARGETS))  # (seq, stamp)
     episode: dict | None = None       # its latest entry in the warning log
     refused: Refusal | None = None    # a worker's latest notice that it refuses its frames
     refused_at: float = 0.0           # its arrival (store clock)
@@ -304,6 +305,12 @@ class FleetStore:
     def _add_response_locked(self, state: _Robot, response: Response, version: int,
                              now: float) -> None:
         previous = state.response
+        if (response.seq, response.stamp) in state.shown:
+            # a second answer to a frame already shown: both workers may answer one frame
+            # around a hand-over, the old one last, and it is no restart of the camera
+            state.responses += 1
+            return
+        state.shown.append((response.seq, response.stamp))
         if previous is not None and response.stamp < previous.stamp:
             state.points.clear()  # the camera's clock went back (restart): a new history
             state.points_reset = version

@@ -100,6 +100,21 @@ def test_a_camera_restart_starts_a_new_spike_history():
     assert tile["points_reset"] and tile["points"] == [[900.0, 0.0]]
 
 
+def test_a_second_answer_to_a_frame_shown_is_no_restart():
+    store = FleetStore(clock=Clock())
+    for seq in range(5):
+        offer_response(store, response(seq=seq, rate=float(seq)))
+    version = store.version
+    # around a hand-over the old owner answers frame 3 again, after the new owner's frame 4
+    offer_response(store, response(seq=3, rate=3.0).model_copy(update={"worker": "w2"}))
+    tile = store.delta(0)["robots"]["r1"]
+    assert tile["response"]["seq"] == 4 and len(tile["points"]) == 5
+    assert tile["responses"] == 6 and not store.delta(version)["robots"]
+    offer_response(store, response(seq=5, rate=5.0))
+    tile = store.delta(version)["robots"]["r1"]
+    assert not tile["points_reset"] and tile["points"] == [[1000.25, 5.0]]
+
+
 def test_collision_is_held_for_a_while_after_the_latest_warning_camera_clock():
     store = FleetStore(hold=3.0, clock=Clock())
     offer_response(store, response(seq=10, collision=True))
