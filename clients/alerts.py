@@ -20,7 +20,9 @@ from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
 
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import MessageError, Response, decode_response, track_label
+from service.messages import MessageError, Response, track_label
+
+from .fleet import decode_fleet_sample
 
 __all__ = ["WarningListener", "format_stamp", "format_warning"]
 
@@ -68,14 +70,16 @@ def format_json(r: Response) -> str:
 class WarningListener:
     """Declares the warning subscriber on a session and calls ``on_warning(Response)``.
 
-    Invalid payloads are counted per reason in ``invalid`` and logged (at most one WARNING line per
-    reason every 10 s); they never raise.
+    Invalid samples (:func:`clients.fleet.decode_fleet_sample`: among others, a warning must
+    name the robot of its key and say ``collision``) are counted per reason in ``invalid`` and
+    logged (at most one WARNING line per reason every 10 s); they never raise.
     Use as a context manager (or call ``close``).
     """
 
     def __init__(self, session: zenoh.Session, on_warning: Callable[[Response], None], *,
                  prefix: str = keys.DEFAULT_PREFIX, robot: str | None = None):
         self.on_warning = on_warning
+        self.prefix = prefix
         self.invalid: Counter = Counter()
         self.received = 0
         self._log = RateLimitedLog(log)
@@ -88,7 +92,9 @@ class WarningListener:
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
-            response = decode_response(sample.payload.to_bytes())
+            # as every fleet viewer takes it: the robot of its key, collision true
+            _, _, response = decode_fleet_sample(str(sample.key_expr),
+                                                 sample.payload.to_bytes(), self.prefix)
         except MessageError as exc:
             with self._lock:
                 self.invalid[exc.reason] += 1

@@ -24,9 +24,9 @@ for scripts).
 
 Bounds (docs/operations.md, "Hostile input"): at most ``max_robots`` robots (when the table is
 full, the one silent longest makes room if it is stale); per robot a preview of at most
-``service.messages.MAX_PREVIEW_BYTES`` (:func:`decode_fleet_sample`, shared with the Foxglove
-server), at most MAX_POINTS spike-rate points and MAX_TARGETS targets per response;
-all previews together at most ``max_preview_total`` bytes (the oldest previews are forgotten
+``service.messages.MAX_PREVIEW_BYTES`` and at most ``clients.fleet.MAX_TARGETS`` targets per
+response (:func:`clients.fleet.decode_fleet_sample`, shared with the Foxglove server and
+``asnn alerts``), at most MAX_POINTS spike-rate points; all previews together at most ``max_preview_total`` bytes (the oldest previews are forgotten
 first). The server closes connections idle for ``idle_timeout`` seconds (a request that does not
 arrive whole, a kept-alive connection without a next request), drops an event stream whose
 client has not taken an event within ``send_timeout`` seconds (at most SEND_BUFFER bytes wait in
@@ -63,11 +63,11 @@ from importlib import resources
 from asnn.params import SLOW_FPS
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import (MessageError, Preview, Refusal, Response, check_preview,
-                              decode_preview, decode_refusal, decode_response)
+from service.messages import Preview, Refusal, Response
 
-__all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES",
-           "decode_fleet_sample", "stale_robot", "take_fleet_sample"]
+from .fleet import stale_robot, take_fleet_sample
+
+__all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES"]
 
 log = logging.getLogger("asnn.dashboard")
 
@@ -77,7 +77,6 @@ STALE_S = 3.0         # no response for this long: stale (no worker watches it)
 FORGET_S = 600.0      # a robot silent this long is dropped from the dashboard
 MAX_ROBOTS = 1000     # bound on the state a misbehaving publisher can make us keep
 MAX_POINTS = 400      # per robot, whatever the stamps say (10 s at 40 responses a second)
-MAX_TARGETS = 16      # targets kept per response (the worker finds a few)
 LOG_SIZE = 50         # warning episodes kept in the log
 EPISODE_GAP = 20      # a warning at most this many frames after a robot's previous one extends
                       # the same log entry (one row per episode, not twenty rows a second)
@@ -101,66 +100,6 @@ SECURITY_HEADERS = {
     "X-Content-Type-Options": "nosniff",
     "Referrer-Policy": "no-referrer",
 }
-
-
-def decode_fleet_sample(key: str, payload: bytes, prefix: str
-                        ) -> tuple[str, str, Response | Preview]:
-    """Validate a sample of ``<prefix>/<robot>/(response|warning|preview)``: ``(robot, kind,
-    message)``, as every fleet viewer takes it (this dashboard, :mod:`clients.foxglove`).
-
-    A preview must be at most MAX_PREVIEW_BYTES and its image is decoded
-    (:func:`service.messages.check_preview`); a response or warning must name the robot of its
-    key, and a warning must say ``collision``. Targets beyond MAX_TARGETS are left out (the
-    worker finds a few; a viewer keeps or draws no more).
-
-    Raises
-    ------
-    MessageError
-        With ``reason`` ``bad-key`` for a key outside the scheme, else the message's reason.
-    """
-    try:
-        robot, kind = keys.parse_key(str(key), prefix)
-    except keys.KeySchemeError as exc:
-        raise MessageError("bad-key", str(exc)) from None
-    if kind == "preview":
-        message = decode_preview(payload)
-        check_preview(message)  # the viewers only ever get images of the announced size
-    elif kind == "refused":
-        message = decode_refusal(payload, robot)
-    elif kind in ("response", "warning"):
-        message = decode_response(payload)
-        if message.robot != robot:
-            raise MessageError("bad-key", f"{kind} of robot {message.robot!r} on {key}")
-        if kind == "warning" and not message.collision:
-            raise MessageError("invalid-field", "a warning without collision: true")
-        if len(message.targets) > MAX_TARGETS:
-            message = message.model_copy(update={"targets": message.targets[:MAX_TARGETS]})
-    else:
-        raise MessageError("bad-key", f"{key!r} is not a response, warning, preview or refusal")
-    return robot, kind, message
-
-
-def take_fleet_sample(key: str, payload: bytes, prefix: str,
-                      reject: Callable[[str, str, str], None]
-                      ) -> tuple[str, str, Response | Preview] | None:
-    """:func:`decode_fleet_sample` for receivers that never raise: an invalid sample goes to
-    ``reject(reason, detail, key)`` (which counts it and logs it rate-limited) and gives None."""
-    try:
-        return decode_fleet_sample(key, payload, prefix)
-    except MessageError as exc:
-        reject(exc.reason, exc.detail, key)
-    except Exception as exc:  # a bug here must not take the subscriber down
-        reject("internal", repr(exc), key)
-    return None
-
-
-def stale_robot(robots: dict, now: float, stale_after: float) -> str | None:
-    """The robot of ``robots`` (name -> state with a ``touched`` time) silent longest, if it
-    has been silent for more than ``stale_after`` seconds: when a viewer's table of robots is
-    full, it makes room for a new one, so that a burst of ids cannot hide new robots for long.
-    """
-    name, quiet = min(robots.items(), key=lambda item: item[1].touched)
-    return name if now - quiet.touched > stale_after else None
 
 
 def _target(t) -> dict:

@@ -13,7 +13,7 @@ topics named after the robot, in the schemas ``asnn detect --mcap`` writes
 ``/<prefix>/<robot>/warning``      JSON ``asnn.Response``         every warning
 
 Bounds (docs/operations.md, "Hostile input"), the dashboard's rules: every inbound message is
-validated by the dashboard's own :func:`clients.dashboard.decode_fleet_sample` (previews of at
+validated by :func:`clients.fleet.decode_fleet_sample`, as the dashboard validates it (previews of at
 most ``service.messages.MAX_PREVIEW_BYTES``, decoded; at most ``MAX_TARGETS`` targets per
 response); invalid ones are counted per reason and logged rate-limited (one line per reason
 every ``log_interval`` seconds), never raised. A robot costs four channels and two numbers, for
@@ -45,7 +45,8 @@ from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Response
 
-from .dashboard import STALE_S, stale_robot, take_fleet_sample
+from .dashboard import STALE_S
+from .fleet import stale_robot, take_fleet_sample
 
 __all__ = ["DEFAULT_PORT", "FoxgloveBridge", "robot_topics"]
 

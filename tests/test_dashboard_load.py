@@ -13,7 +13,8 @@ import time
 import cv2
 import numpy as np
 
-from clients.dashboard import (MAX_PREVIEW_TOTAL, MAX_TARGETS, DashboardServer, FleetStore)
+from clients.dashboard import MAX_PREVIEW_TOTAL, DashboardServer, FleetStore
+from clients.fleet import MAX_TARGETS
 from service.messages import Preview, encode
 
 from netutil import wait_for

@@ -312,7 +312,8 @@ def test_bridge_follows_the_dashboards_hostile_input_rules(caplog):
     one, and a flood of invalid messages logs a line or two."""
     import logging
 
-    from clients.dashboard import MAX_TARGETS, FleetStore, decode_fleet_sample
+    from clients.dashboard import FleetStore
+    from clients.fleet import MAX_TARGETS, decode_fleet_sample
     from clients.foxglove import FoxgloveBridge
 
     noise = np.random.default_rng(1).integers(0, 256, (200, 200, 3), np.uint8)

@@ -482,3 +482,19 @@ def test_refusal_notices_keep_each_workers_latest_and_log_one_line_whatever_they
     assert notices.summary() == "61 by 'w1' (latest made-up-49)" and notices.invalid == 1
     lines = [r.getMessage() for r in caplog.records if "refuses its frames" in r.getMessage()]
     assert len(lines) == 1 and "\n" not in lines[0]  # its text shown as data, on one line
+
+
+def test_the_alerts_take_a_warning_only_for_the_robot_of_its_key_and_with_collision(zenoh_net):
+    from test_dashboard import response
+
+    warnings = []
+    with WarningListener(zenoh_net.spoke(), warnings.append) as listener:
+        publisher = zenoh_net.hub.declare_publisher("asnn/r1/warning")
+        wait_for(lambda: publisher.matching_status.matching, what="the listener")
+        publisher.put(encode(response("r2", seq=1, collision=True)))  # another robot's
+        publisher.put(encode(response("r1", seq=2, collision=False)))  # no collision
+        publisher.put(encode(response("r1", seq=3, collision=True)))
+        wait_for(lambda: warnings, what="the valid warning")
+        time.sleep(0.2)  # anything further would arrive now
+    assert [(w.robot, w.seq) for w in warnings] == [("r1", 3)]
+    assert listener.invalid == {"bad-key": 1, "invalid-field": 1}
