@@ -9,6 +9,9 @@ import sys
 from asnn.detectors import MODELS
 from cli.arguments import count, frame_size, positive, seed
 
+# how the benches that time whole processes run asnn: this interpreter, this checkout's CLI
+ASNN_COMMAND = (sys.executable, "-m", "cli.main")
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -93,24 +96,24 @@ def run(args: argparse.Namespace) -> int:
         if args.detect:
             from asnn.evaluation import bench_detect
 
-            report = bench_detect.run(sizes=args.size or list(bench_detect.DEFAULT_SIZES),
+            report = bench_detect.run(ASNN_COMMAND, sizes=args.size or list(bench_detect.DEFAULT_SIZES),
                                       frames=args.frames or bench_detect.DEFAULT_FRAMES,
                                       repeat=args.repeat or 4,
                                       preset=args.preset[0] if args.preset else None,
-                                      progress=_progress(args))
+                                      progress=_progress())
         elif args.handover:
             from asnn.evaluation import handover
 
             preset = args.preset[0] if args.preset else None
             report = handover.run(f"asnn:{preset}" if preset else "asnn", cases=args.cases,
-                                  every=args.every, progress=_progress(args))
+                                  every=args.every, progress=_progress())
         elif args.service:
             from service import bench as service_bench
 
-            report = service_bench.run(size=args.size[0] if args.size else (320, 240),
+            report = service_bench.run(ASNN_COMMAND, size=args.size[0] if args.size else (320, 240),
                                        fps=args.fps, seconds=args.seconds, counts=args.cameras,
                                        preset=args.preset[0] if args.preset else None,
-                                       progress=_progress(args),
+                                       progress=_progress(),
                                        worker_threads=args.worker_threads,
                                        phases=args.phases, seed=args.seed,
                                        workers=args.workers, router=args.router or None)
@@ -123,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
                                presets=args.preset,
                                models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
                                straightforward=not args.no_straightforward,
-                               progress=_progress(args), case=args.case,
+                               progress=_progress(), case=args.case,
                                repeat=args.repeat or 1)
     except (RuntimeError, ValueError) as exc:
         print(f"{name}: {exc}", file=sys.stderr)
@@ -158,7 +161,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _progress(args):
+def _progress():
     if not sys.stderr.isatty():
         return None
     return lambda text: print(f"\r\033[Kbench: {text}", end="", file=sys.stderr, flush=True)

@@ -54,6 +54,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -82,12 +83,13 @@ def model_time(preset: str | None, frames: np.ndarray) -> dict:
 
 
 class _Process:
-    """An ``asnn`` command in its own process; ``ready`` is the stderr text that says it runs."""
+    """An ``asnn`` command in its own process (``command``, the command line that runs
+    ``asnn``, then ``args``); ``ready`` is the stderr text that says it runs."""
 
-    def __init__(self, args: list[str], ready: str):
+    def __init__(self, command: Sequence[str], args: list[str], ready: str):
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         env.pop("RUST_LOG", None)
-        self.popen = subprocess.Popen([sys.executable, "-m", "cli.main", *args], cwd=ROOT,
+        self.popen = subprocess.Popen([*command, *args], cwd=ROOT,
                                       env=env, stdout=subprocess.DEVNULL,
                                       stderr=subprocess.PIPE, text=True)
         self.what, self.ready_text = args[0], ready
@@ -288,7 +290,7 @@ def _switch_interval(seconds: float):
         sys.setswitchinterval(before)
 
 
-def _fleet(tmp: Path, workers: int, router: bool, preset: str | None,
+def _fleet(command: Sequence[str], tmp: Path, workers: int, router: bool, preset: str | None,
            threads: int | None, stack: contextlib.ExitStack):
     """Start the workers (and the router); the options of this process's session."""
     from .config import ZenohOptions
@@ -299,7 +301,7 @@ def _fleet(tmp: Path, workers: int, router: bool, preset: str | None,
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     processes = []
     if router:
-        processes.append(_Process(["router", "--listen", endpoint, "--config", str(config)],
+        processes.append(_Process(command, ["router", "--listen", endpoint, "--config", str(config)],
                                   "listening on"))
         processes[0].wait_ready()
         where = ["--mode", "client", "--connect", endpoint]
@@ -310,7 +312,7 @@ def _fleet(tmp: Path, workers: int, router: bool, preset: str | None,
         session = loopback_options(int(endpoint.rsplit(":", 1)[1]))[1]
     for i in range(workers):
         worker_id = "bench" if workers == 1 else f"bench-w{i + 1}"
-        processes.append(_Process(_worker_args(worker_id, config, preset, threads) + where,
+        processes.append(_Process(command, _worker_args(worker_id, config, preset, threads) + where,
                                   "ready"))
     for process in processes:
         stack.callback(process.stop)
@@ -319,11 +321,15 @@ def _fleet(tmp: Path, workers: int, router: bool, preset: str | None,
     return session
 
 
-def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
+def run(command: Sequence[str], size=(320, 240), fps: float = 25.0, seconds: float = 4.0,
+        counts=None,
         preset: str | None = None, progress=None, worker_threads: int | None = None,
         phases: str = "spread", seed: int = 0, workers: int = 1,
         router: bool | None = None) -> dict:
     """Ramp the number of cameras; returns the report as a dict (see the module notes).
+
+    ``command`` is the command line that runs ``asnn`` (the command-line layer gives it: this
+    module does not know where it is installed), for the workers and the router.
 
     ``workers`` worker processes share the cameras, each with ``worker_threads`` processing
     threads (default: the cores divided among the workers). ``router``: put an ``asnn router``
@@ -353,7 +359,7 @@ def run(size=(320, 240), fps: float = 25.0, seconds: float = 4.0, counts=None,
     steps = []
     with _switch_interval(SWITCH_INTERVAL), tempfile.TemporaryDirectory() as tmp, \
             contextlib.ExitStack() as stack:
-        options = _fleet(Path(tmp), workers, router, preset, threads, stack)
+        options = _fleet(command, Path(tmp), workers, router, preset, threads, stack)
         with zenoh.open(make_config(options)) as session:
             deadline = time.monotonic() + 30
             while len(live_workers(session)) < workers and time.monotonic() < deadline:

@@ -40,9 +40,9 @@ import contextlib
 import json
 import os
 import subprocess
-import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -60,10 +60,10 @@ STREAM_BYTES = 256 * 2**20  # decoded frames the stream stage holds at most
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _detect_seconds(clip: Path, out: Path, preset: str | None) -> float:
+def _detect_seconds(command: Sequence[str], clip: Path, out: Path, preset: str | None) -> float:
     """Wall-clock seconds of one ``asnn detect CLIP --jsonl OUT`` process."""
     env = {k: v for k, v in os.environ.items() if k not in THREAD_VARIABLES}
-    args = [sys.executable, "-m", "cli.main", "detect", str(clip), "--jsonl", str(out)]
+    args = [*command, "detect", str(clip), "--jsonl", str(out)]
     if preset:
         args += ["--preset", preset]
     start = time.perf_counter()
@@ -179,9 +179,10 @@ def _clip(loop: np.ndarray, frames: int):
     return (loop[i % len(loop)] for i in range(frames))
 
 
-def run(sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES, repeat: int = 4,
-        preset: str | None = None, progress=None) -> dict:
+def run(command: Sequence[str], sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES,
+        repeat: int = 4, preset: str | None = None, progress=None) -> dict:
     """Time ``asnn detect`` at every size; the report as a dict (see the module notes).
+    ``command`` is the command line that runs ``asnn`` (the command-line layer gives it).
 
     Raises
     ------
@@ -212,14 +213,14 @@ def run(sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES, repeat: int = 4,
             write_video(_clip(loop, 2), short_clip, fps=25.0)
             out = tmp / "detect.jsonl"
             # untimed: numba's cache may hold no kernels yet for the process's CPU features
-            _detect_seconds(short_clip, tmp / "short.jsonl", preset)
+            _detect_seconds(command, short_clip, tmp / "short.jsonl", preset)
             long_runs, short_runs, baselines = [], [], []
             for _ in range(repeat):
                 # the baseline between the processes, so that a spell in which the machine is
                 # slower (another virtual machine on the host) weighs on both sides alike
-                long_runs.append(_detect_seconds(long_clip, out, preset))
+                long_runs.append(_detect_seconds(command, long_clip, out, preset))
                 baselines.append(_straightforward_ms(baseline_frames, preset))
-                short_runs.append(_detect_seconds(short_clip, tmp / "short.jsonl", preset))
+                short_runs.append(_detect_seconds(command, short_clip, tmp / "short.jsonl", preset))
             produced = [json.loads(line) for line in out.read_text().splitlines()]
             stages, records = time_stages(long_clip, preset, tmp / "loop.jsonl")
             per_frame = (np.median(long_runs) - np.median(short_runs)) / (frames - 2) * 1e3
