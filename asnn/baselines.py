@@ -48,7 +48,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .frames import to_luminance
-from .retina import photoreceptor_weights, spike_count
+from .retina import photoreceptor_weights, spike_count, spike_rate
 from .response import Response
 
 __all__ = [
@@ -176,6 +176,12 @@ def group_excitation(s: np.ndarray, c_w: float, delta_c: float, c_de: float,
     ----------
     s : ndarray (H, W)
         Summing-layer excitation S_f.
+    c_w : float
+        C_w, the divisor of the largest grouped excitation in omega_f.
+    delta_c : float
+        delta_c, omega_f's floor.
+    c_de, t_de : float
+        C_de and T_de: a grouped cell is kept where ``G_f C_de >= T_de``.
 
     Returns
     -------
@@ -266,7 +272,7 @@ class _LGMDBase:
         self.previous = lum
         u, out, spikes, collision = self._respond(p)
         self.spike_window.append(spikes)
-        rate = sum(self.spike_window) / (self.params.rate_window * self.params.dt)
+        rate = spike_rate(self.spike_window, self.params.rate_window, self.params.dt)
         return Response(index=index, u=float(u), out=float(out), spikes=int(spikes),
                         spike_rate=float(rate), collision=bool(collision))
 

@@ -212,6 +212,14 @@ def temporal_filter_step(stages: np.ndarray, x: np.ndarray, rate: float, transmi
         an integrator of the input as well.
     x : ndarray (H, W)
         The bipolar input B^0 of this frame.
+    rate : float
+        ``dt / tau``, the Euler step in units of the stages' time constant.
+    transmission : float
+        C, the gain with which each stage takes its predecessor.
+    decay : float
+        A, each stage's leak.
+    leaky_input : bool
+        Whether z_0 integrates the input (the published implementation) or is the input.
     """
     if leaky_input:
         stages[0] += rate * (transmission * x - decay * stages[0])
@@ -349,8 +357,19 @@ def approach_map(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
 
     Parameters
     ----------
+    slow_on, fast_on : ndarray (H, W)
+        The ON pathway's slow and fast temporal filter outputs, B+s and B+f.
+    slow_off, fast_off : ndarray (H, W)
+        The OFF pathway's, B-s and B-f.
+    cs_kernel : ndarray (k, k)
+        g_CS, the starburst amacrine cells' centre-surround kernel (eq. 13).
     weights : (w1_on, w2_off, w1_off, w2_on)
         Signed as in the fusion equation; a zero weight skips its term's filtering.
+
+    Returns
+    -------
+    g : ndarray (H, W)
+        G, positive where the approach is seen.
     """
     w1_on, w2_off, w1_off, w2_on = weights
     g = np.zeros_like(slow_on)
@@ -402,7 +421,9 @@ def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
 
 def coarse_grid(image: np.ndarray, step: int) -> np.ndarray:
     """The area average of an image on the grid ``step`` times coarser of
-    :func:`attention_blur` (a partial cell at the end averages the pixels it has)."""
+    :func:`attention_blur`: ``ceil(W / step) x ceil(H / step)`` cells, each the average of
+    ``W / ceil(W / step)`` (by ``H / ceil(H / step)``) pixels, so where ``step`` does not divide
+    the size every cell is a little narrower than ``step`` (OpenCV's area resampling)."""
     h, w = image.shape
     return cv2.resize(image, (-(-w // step), -(-h // step)), interpolation=cv2.INTER_AREA)
 
@@ -441,6 +462,16 @@ def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, 
         Motion energy per orientation.
     v : ndarray (H, W)
         Its maximum over orientations.
+    top_k : int
+        k, the orientations inhibited; 0 inhibits none.
+    sigma, size, normalised, step
+        The attention blur's, as in :func:`attention_blur`.
+    gamma_d : float
+        The mask's threshold.
+
+    Returns
+    -------
+    m_d : ndarray of bool (H, W)
     """
     if top_k:
         totals = r.sum(axis=(1, 2))

@@ -25,7 +25,7 @@ import numpy as np
 
 from ._jit import kernel
 
-__all__ = ["Target", "ObjectRegions", "dbscan_points", "dbscan_grid", "extract_targets",
+__all__ = ["Target", "ObjectRegions", "dbscan_points", "extract_targets",
            "extract_objects"]
 
 
@@ -212,23 +212,6 @@ def dbscan_points(rows: np.ndarray, cols: np.ndarray, eps: float, min_samples: i
     labels, seed_core, seed_label = _dbscan_points(rows, cols, float(eps), int(min_samples),
                                                    seed is not None, int(sr), int(sc))
     return labels, bool(seed_core), int(seed_label)
-
-
-def dbscan_grid(mask: np.ndarray, eps: float, min_samples: int,
-                seed: tuple[int, int] | None = None) -> tuple[np.ndarray, bool, int]:
-    """:func:`dbscan_points` of the set pixels of a binary mask.
-
-    Returns
-    -------
-    labels : ndarray of int (H, W)
-        Cluster number of each *core* pixel, -1 elsewhere.
-    seed_core, seed_label : as :func:`dbscan_points`.
-    """
-    rows, cols = np.nonzero(mask)
-    point_labels, seed_core, seed_label = dbscan_points(rows, cols, eps, min_samples, seed)
-    labels = np.full(mask.shape, -1, dtype=np.int64)
-    labels[rows, cols] = point_labels
-    return labels, seed_core, seed_label
 
 
 def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | None, eps: float,

@@ -56,7 +56,7 @@ FrameFormat = Literal["gray8", "bgr8", "jpeg", "png"]
 FORMATS = get_args(FrameFormat)
 # the largest valid frame (4096 x 4096 bgr8) plus room for the other fields
 MAX_PAYLOAD = MAX_SIDE * MAX_SIDE * 3 + 64 * 1024
-# msgpack bounds: a frame has 7 fields, a response 16 and up to one map per looming target
+# msgpack bounds: a frame has 7 fields, a response 17 and up to one map per looming target
 MAX_MAP_LEN = 256
 MAX_ARRAY_LEN = 4096
 MAX_ITEMS = 16384  # container entries (map pairs and array items) in one message, in all
@@ -415,10 +415,9 @@ def _finite(fields: dict) -> dict:
 # ``<prefix>/<robot>/preview``: a low-rate thumbnail of the camera's frames for dashboards
 # (docs/contract.md; not part of CONTRACT.md's required interface, the worker ignores it).
 
-__all__ += ["MAX_PREVIEW_BYTES", "PREVIEW_FORMATS", "Preview", "check_preview", "decode_preview"]
+__all__ += ["MAX_PREVIEW_BYTES", "Preview", "check_preview", "decode_preview"]
 
 PreviewFormat = Literal["jpeg", "png"]
-PREVIEW_FORMATS = get_args(PreviewFormat)
 PREVIEW_QUALITY = 70
 MAX_PREVIEW_BYTES = 64 * 1024  # receivers refuse larger thumbnails (asnn camera's are ~5 KiB)
 

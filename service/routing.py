@@ -56,9 +56,8 @@ from dataclasses import dataclass
 from .core import RobotView
 from .ownership import Membership, owner
 
-__all__ = ["ROLES", "SCAN_KEY", "Route", "Routes"]
+__all__ = ["SCAN_KEY", "Route", "Routes"]
 
-ROLES = ("serving", "warming", "releasing")
 SCAN_KEY = "@scan"  # rendezvous key of the scanning worker (no robot id contains "@")
 
 
