@@ -270,16 +270,23 @@ def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | No
         count[seed_label] += 1
         sum_dx[seed_label] += vx0
         sum_dy[seed_label] += vy0
+    direction, energy = _population_motion(sum_dx, sum_dy, count)
     targets = []
     for k in range(n):
         cx, cy = sum_x[k] / count[k], sum_y[k] / count[k]
         if origin_seed and cx * cx + cy * cy <= 1.0:
             continue
-        vx, vy = sum_dx[k] / count[k], sum_dy[k] / count[k]
-        targets.append(Target(x=float(cx), y=float(cy),
-                              direction=float(np.arctan2(vy, vx)),
-                              energy=float(np.hypot(vx, vy)), pixels=int(count[k])))
+        targets.append(Target(x=float(cx), y=float(cy), direction=float(direction[k]),
+                              energy=float(energy[k]), pixels=int(count[k])))
     return targets
+
+
+def _population_motion(sum_dx: np.ndarray, sum_dy: np.ndarray, count: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Each cluster's population-coded motion from its summed motion vectors: the mean
+    ``(V_X, V_Y)`` (paper eq. 30) as a direction and an energy (eq. 31)."""
+    vx, vy = sum_dx / count, sum_dy / count
+    return np.arctan2(vy, vx), np.hypot(vx, vy)
 
 
 @dataclass(frozen=True)
@@ -323,23 +330,21 @@ class ObjectRegions:
         return len(self.x)
 
     @cached_property
-    def _mean_vectors(self) -> tuple[np.ndarray, np.ndarray]:
-        """The mean motion vector ``(V_X, V_Y)`` of each region (eq. 30)."""
+    def _motion(self) -> tuple[np.ndarray, np.ndarray]:
+        """The direction and energy of each region's mean motion vector (eqs. 30-31)."""
         rows, cols, lab = self.members
         n = len(self)
         dx, dy = self.vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))
-        return (np.bincount(lab, dx, n) / np.maximum(self.pixels, 1),
-                np.bincount(lab, dy, n) / np.maximum(self.pixels, 1))
+        return _population_motion(np.bincount(lab, dx, n), np.bincount(lab, dy, n),
+                                  np.maximum(self.pixels, 1))
 
     @cached_property
     def direction(self) -> np.ndarray:
-        vx, vy = self._mean_vectors
-        return np.arctan2(vy, vx)
+        return self._motion[0]
 
     @cached_property
     def energy(self) -> np.ndarray:
-        vx, vy = self._mean_vectors
-        return np.hypot(vx, vy)
+        return self._motion[1]
 
 
 @kernel()
