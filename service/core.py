@@ -9,19 +9,22 @@ Per-robot state and its reset rule
 A robot's model state is created on its first valid frame. Each frame that arrives is compared
 with the previous frame that arrived for the robot (not with the last one processed, so the
 frames the worker skips itself never count as a gap). It continues the robot's **stream** when
-its size is the same, its ``seq`` is greater by at most ``max_gap`` and its ``stamp`` is not
-smaller. Otherwise a new stream starts, for the first rule that failed:
+its size is the same, its ``seq`` is greater by at most ``max_gap`` steps and its ``stamp`` is
+not smaller. A step is the smallest amount by which the robot's ``seq`` has grown from one
+arriving frame to the next (1 for a camera that counts its frames; a camera whose ``seq`` is a
+clock, or counts by 10, is measured so: CONTRACT.md asks only that ``seq`` increase). Otherwise a new stream starts, for the first rule that failed:
 
 * ``size``: the frame size (width x height) differs;
 * ``seq-backwards``: ``seq`` is not greater (the camera restarted);
-* ``seq-gap``: ``seq`` jumps ahead by more than ``max_gap`` (frames were lost on the way);
+* ``seq-gap``: ``seq`` jumps ahead by more than ``max_gap`` steps (frames were lost on the
+  way; a robot's first step that is larger than any before it counts as a gap once);
 * ``stamp-backwards``: ``stamp`` is smaller.
 
 When the worker processes the first frame of a new stream, the model state is **reset** (that
 frame only primes the model) and the reset is counted under the rule.
 
 A frame that belongs to the stream but arrives after later ones did (the same size, a ``seq``
-above 0 and at most ``max_gap`` behind the latest, a ``stamp`` no later than its: reordered on
+above 0 and at most ``max_gap`` steps behind the latest, a ``stamp`` no later than its: reordered on
 the way) is refused as ``late`` instead: the model does not go back in time, and a restart is
 not what happened. A camera that restarts begins again at ``seq`` 0 (or with a later stamp).
 A robot whose streams keep ending after one frame (a camera whose ``seq`` never grows) has its
@@ -29,7 +32,8 @@ model reset on every frame, so it can never warn: after :data:`RESTARTS_WARNED` 
 a row the worker logs it at WARNING, and every response says how many frames its model has
 stepped in the current stream (``stream_frames``, docs/contract.md).
 
-The model integrates with its fixed time step (0.05 s), whatever the stamps say. A robot that
+The retina integrates with its fixed time step (0.05 s) whatever the stamps say; the targets'
+time to contact, and with it the default's approach gate, read the stamps' gaps. A robot that
 sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten); when every slot
 is taken, one silent for ``takeover_after`` seconds is forgotten to make room for a new robot.
 
@@ -216,6 +220,7 @@ class _Robot:
     # seq, stamp and data of the latest frame taken in (the data is the pending frame's or the
     # one being processed, or the last one processed: never a third frame held)
     last_arrival: tuple[int, float, bytes] | None = None
+    seq_step: int = 0  # the smallest growth of seq between two arriving frames; 0: none yet
     # the rate its model is stepped at: the stamps' gaps between the frames processed in the
     # current stream (after the worker's own skips), and how long it has read slow
     stamp: float | None = None
@@ -281,7 +286,8 @@ class WorkerCore:
     idle_timeout : float
         Seconds without frames after which a robot's state is evicted.
     max_gap : int
-        Largest forward jump of ``seq`` that keeps the state (see the module notes).
+        Largest forward jump of ``seq``, in the robot's steps, that keeps the state (see the
+        module notes).
     max_robots : int
         Robots with a model state at once; frames of further robots are rejected
         (``too-many-robots``). As many candidates (robots none of whose frames was valid yet)
@@ -379,7 +385,7 @@ class WorkerCore:
             if state.last_arrival == (frame.seq, frame.stamp, frame.data):
                 self._stats.duplicates += 1  # delivered twice: already taken
                 return None
-            if state.stream is not None and state.stream.outran(frame, self.max_gap):
+            if state.stream is not None and state.stream.outran(frame, self._gap(state)):
                 self._reject_locked("late", f"frame {frame.seq} of {robot} arrived after frame "
                                     f"{state.stream.seq}: the model does not go back in time",
                                     key)
@@ -393,6 +399,9 @@ class WorkerCore:
             self._stats.received += 1
             state.arrived += 1
             state.arrived_bytes += len(payload)
+            if state.last_arrival is not None and frame.seq > state.last_arrival[0]:
+                step = frame.seq - state.last_arrival[0]  # after the gap rule: it counts once
+                state.seq_step = min(state.seq_step, step) if state.seq_step else step
             state.last_arrival = (frame.seq, frame.stamp, frame.data)
             if state.pending is not None:
                 state.dropped += 1
@@ -404,6 +413,11 @@ class WorkerCore:
             state.last_seen = received
             self._ready.notify()
         return robot
+
+    def _gap(self, state: _Robot) -> int:
+        """The largest forward jump of a robot's ``seq`` that continues its stream:
+        ``max_gap`` of its steps."""
+        return self.max_gap * max(state.seq_step, 1)
 
     def _full_locked(self, candidate: bool = False) -> str | None:
         """Why a new robot cannot take a slot (or, ``candidate``, wait for one) now; None if
@@ -439,14 +453,15 @@ class WorkerCore:
         """Place an arriving frame in the robot's streams (see the module notes); the stream it
         belongs to, or None when it is refused as a second publisher's."""
         current = state.stream
-        broken = None if current is None else current.continues(frame, self.max_gap)
+        max_gap = self._gap(state)
+        broken = None if current is None else current.continues(frame, max_gap)
         if current is not None and broken is None:
             current.advance(frame, received)
             return current
         previous = state.previous
         if (current is not None and previous is not None
                 and received - previous.arrival <= self.takeover_after
-                and previous.continues(frame, self.max_gap) is None):
+                and previous.continues(frame, max_gap) is None):
             if previous.number > current.number:
                 # the intruder's stream goes on while the one there first keeps sending
                 previous.advance(frame, received)
@@ -473,7 +488,7 @@ class WorkerCore:
                 self._rejections.warning(
                     f"restarts:{robot}", "robot %s: its last %d frames each started a new "
                     "stream (%s): its model is reset on every frame and cannot warn; a "
-                    "camera's seq must grow by one a frame and its stamp must not go back",
+                    "camera's seq must grow from frame to frame and its stamp must not go back",
                     robot, state.restarts, broken)
         state.streams += 1
         state.previous = current
@@ -745,7 +760,7 @@ class WorkerCore:
         with self._lock:
             robots = {r: {"processed": s.processed, "resets": s.resets,
                           "pending": s.pending is not None, "busy": s.busy,
-                          "last_seq": s.last_seq,
+                          "last_seq": s.last_seq, "seq_step": s.seq_step or None,
                           "size": list(s.shape) if s.shape else None,
                           "candidate": not s.proven, "contested": s.contested,
                           "intrusions": s.intrusions, "frames": s.arrived,

@@ -522,3 +522,24 @@ def test_a_robots_responses_are_published_in_the_order_of_its_frames(looming):
     gave 1-3 inversions in three runs of 58-73 responses."""
     published = _published_in_order(looming)
     assert len(published) > 10 and published == sorted(published)
+
+
+@pytest.mark.parametrize("step, first", [(10, 0), (50, 1)])
+def test_a_camera_whose_seq_counts_by_more_than_one_is_followed_in_its_own_steps(looming, step,
+                                                                                  first):
+    # CONTRACT.md asks only that seq increase: a counter by 10, or a clock in ms, is measured
+    core = WorkerCore(max_gap=20)
+    responses = [feed(core, "r1", image, i * step, stamp=i * 0.05)
+                 for i, image in enumerate(looming.frames)]
+    # a first step above max_gap is a gap once; then the stream goes on
+    assert sum(core.stats()["resets"].values()) == first
+    assert responses[-1].stream_frames == len(looming.frames) - first
+    assert any(r.collision for r in responses)
+    # frames lost now are gaps in its steps: a jump of 20 keeps the state, of 21 resets it
+    seq = (len(looming.frames) - 1) * step
+    frames = responses[-1].stream_frames
+    assert feed(core, "r1", looming.frames[0], seq + 20 * step, stamp=99.0).stream_frames \
+        == frames + 1
+    assert feed(core, "r1", looming.frames[1], seq + 41 * step, stamp=99.1).stream_frames == 1
+    assert core.stats()["resets"] == {"seq-gap": first + 1}
+    assert core.status()["robots"]["r1"]["seq_step"] == step
