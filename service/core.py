@@ -596,8 +596,7 @@ class WorkerCore:
         try:
             image = frame.image()
         except MessageError as exc:
-            self._give_back(state, job.dropped)
-            self._reject(exc.reason, exc.detail, keys.frame_key(job.robot, self.prefix))
+            self._refuse_taken(state, job, exc.reason, exc.detail)
             return None
         if not state.proven:
             with self._lock:
@@ -605,7 +604,7 @@ class WorkerCore:
                 if full is None:
                     state.proven = True  # counted from now on; undone if the model refuses
             if full:
-                self._reject("too-many-robots", full, keys.frame_key(job.robot, self.prefix))
+                self._refuse_taken(state, job, "too-many-robots", full)
                 return None
         if state.detector is None:
             state.detector = make_detector(self.model, self.preset or None)
@@ -622,11 +621,10 @@ class WorkerCore:
         try:
             result = state.detector.step(image, frame.stamp)
         except FrameError as exc:
-            self._give_back(state, job.dropped)
             if state.processed == 0:
                 with self._lock:
                     state.proven = False
-            self._reject("frame-rejected", str(exc), keys.frame_key(job.robot, self.prefix))
+            self._refuse_taken(state, job, "frame-rejected", str(exc))
             return None
         if state.processed == 0:
             log.info("robot %s: first frame (%dx%d %s)", job.robot, frame.width, frame.height,
@@ -675,10 +673,14 @@ class WorkerCore:
                 "camera's rate, or frames skipped under load); the default preset is made for "
                 "20 or more", robot, state.fps)
 
-    def _give_back(self, state: _Robot, dropped: int) -> None:
-        """A taken frame produced no response: its skipped count moves to the next one."""
+    def _refuse_taken(self, state: _Robot, job: Job, reason: str, detail: str) -> None:
+        """A frame taken in is refused when it is processed (its image, its robot's place, the
+        model): it counts as refused, not as received, and its skipped count moves to the
+        robot's next response."""
         with self._lock:
-            state.dropped += dropped
+            state.dropped += job.dropped
+            self._stats.received -= 1
+        self._reject(reason, detail, keys.frame_key(job.robot, self.prefix))
 
     # ------------------------------------------------------------------ housekeeping
 

@@ -225,6 +225,23 @@ def test_frames_refused_for_too_many_robots_are_not_counted_as_received():
     assert core.stats()["invalid"] == {"too-many-robots": 1}
 
 
+def test_frames_taken_in_and_refused_when_processed_are_not_counted_as_received():
+    scene = make_scene("looming")
+    core = WorkerCore(max_robots=2)
+    feed(core, "a", scene.frames[0], 0)
+    # two new robots at once may both wait for the one place left; the second is refused when
+    # it is processed
+    for robot in ("b", "c"):
+        assert core.offer(f"asnn/{robot}/frame", payload(scene.frames[0], 0)) == robot
+    assert core.process(core.take()) is not None and core.process(core.take()) is None
+    # a jpeg whose header is sound but that does not decode is refused when processed too
+    assert core.offer("asnn/a/frame", undecodable_jpeg(scene.frames[1], 1)) == "a"
+    assert core.process(core.take()) is None
+    stats = core.stats()
+    assert stats["invalid"] == {"too-many-robots": 1, "bad-image": 1}
+    assert stats["received"] == stats["processed"] == 2
+
+
 # ---------------------------------------------------------------- 4. scheduling
 
 def gaps_between_responses(core, robots, ticks, arrivals_per_job):
