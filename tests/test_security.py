@@ -60,7 +60,7 @@ def set_json(conf: zenoh.Config, key: str, value) -> None:
 
 def router_config(certs: Path, port: int) -> zenoh.Config:
     """The generated router config (paths already in ``certs``), on a free loopback port."""
-    conf = zenoh.Config.from_file(str(certs / "router.json5"))
+    conf = zenoh.Config.from_file(str(certs / "router" / "router.json5"))
     set_json(conf, "listen/endpoints", [f"tls/127.0.0.1:{port}"])
     return conf
 
@@ -69,7 +69,7 @@ def client_config(certs: Path, role: str, port: int, *, password: str | None = N
                   ca: Path | None = None, cert_from: Path | None = None) -> zenoh.Config:
     """The generated config of ``role``, pointed at the test router (optionally with another
     password, another trusted CA, or the client certificate of another CA)."""
-    conf = zenoh.Config.from_file(str(certs / f"{role}.json5"))
+    conf = zenoh.Config.from_file(str(certs / role / f"{role}.json5"))
     set_json(conf, "connect/endpoints", [f"tls/127.0.0.1:{port}"])
     set_json(conf, "timestamping/enabled", True)
     if password is not None:
@@ -77,8 +77,10 @@ def client_config(certs: Path, role: str, port: int, *, password: str | None = N
     if ca is not None:
         set_json(conf, "transport/link/tls/root_ca_certificate", str(ca))
     if cert_from is not None:
-        set_json(conf, "transport/link/tls/connect_certificate", str(cert_from / f"{role}.pem"))
-        set_json(conf, "transport/link/tls/connect_private_key", str(cert_from / f"{role}.key"))
+        set_json(conf, "transport/link/tls/connect_certificate",
+                 str(cert_from / role / f"{role}.pem"))
+        set_json(conf, "transport/link/tls/connect_private_key",
+                 str(cert_from / role / f"{role}.key"))
     return conf
 
 
@@ -245,20 +247,69 @@ def test_no_secret_is_committed():
         assert not name.endswith((".key", ".pem", ".crt", "credentials.txt")), name
 
 
+IDENTITIES = ("worker", "dashboard", "alerts", "foxglove", *(f"camera-{r}" for r in ROBOTS))
+
+
+def test_each_identity_s_folder_holds_its_own_secrets_only(certs):
+    """Each folder is mounted alone into its service's container: a viewer's container must not
+    hold the worker's key, the CA's key or the router's password dictionary."""
+    assert (certs / "ca.key").is_file()
+    for name in IDENTITIES:
+        assert sorted(p.name for p in (certs / name).iterdir()) == sorted(
+            ["ca.pem", f"{name}.pem", f"{name}.key", f"{name}.json5"])
+        # readable by whichever user the container runs as; OUT_DIR itself is private
+        assert (certs / name / f"{name}.key").stat().st_mode & 0o044 == 0o044
+    assert sorted(p.name for p in (certs / "router").iterdir()) == sorted(
+        ["ca.pem", "router.pem", "router.key", "credentials.txt", "router.json5"])
+    assert certs.stat().st_mode & 0o077 == 0
+
+
+def test_running_the_script_again_keeps_the_ca_and_the_identities(tmp_path):
+    """Adding a robot must not invalidate the credentials already deployed."""
+    out = tmp_path / "secrets"
+    subprocess.run(["bash", str(SCRIPT), "--robots", "r1", str(out)], check=True,
+                   capture_output=True, timeout=180)
+    before = {name: (out / name / f"{name}.json5").read_text()
+              for name in ("worker", "camera-r1")}
+    ca = (out / "ca.pem").read_text()
+    subprocess.run(["bash", str(SCRIPT), "--robots", "r1,r2", str(out), "routerhost"],
+                   check=True, capture_output=True, timeout=180)
+    assert (out / "ca.pem").read_text() == ca
+    assert {name: (out / name / f"{name}.json5").read_text() for name in before} == before
+    users = [line.split(":")[0] for line in
+             (out / "router" / "credentials.txt").read_text().splitlines()]
+    assert users == ["worker", "dashboard", "alerts", "foxglove", "camera-r1", "camera-r2"]
+    # the new robot's camera may connect to a router that names routerhost
+    port = free_port()
+    with zenoh.open(router_config(out, port)):
+        assert not fails_to_open(client_config(out, "camera-r2", port))
+        assert not fails_to_open(client_config(out, "worker", port))
+
+
 def test_the_secure_compose_override_parses_and_names_existing_files():
     yaml = pytest.importorskip("ruamel.yaml")
     from cli.main import build_parser
 
-    override = yaml.YAML(typ="safe").load((ROOT / "deploy" / "compose.secure.yml").read_text())
+    loader = yaml.YAML(typ="safe")
+    # Compose's merge tag: the override's list replaces the base file's instead of adding to it
+    loader.constructor.add_constructor(
+        "!override", lambda constructor, node: ("override", constructor.construct_sequence(node)))
+    override = loader.load((ROOT / "deploy" / "compose.secure.yml").read_text())
     parser = build_parser()
     for name, service in override["services"].items():
         if name == "router":
             assert service["command"] == ["--config", "/etc/asnn/secrets/router.json5"]
+            assert service["volumes"] == ["./deploy/secrets/router:/etc/asnn/secrets:ro"]
             continue
         args = parser.parse_args(service["command"])
         identity = f"camera-{args.robot}" if name == "camera" else name
         assert args.connect == ["tls/router:7447"]
-        assert args.config.endswith(f"/{identity}.json5")
+        assert args.config == f"/etc/asnn/secrets/{identity}.json5"
+        # its own folder only: never the CA's key, another identity's or the passwords
+        assert service["volumes"] == [f"./deploy/secrets/{identity}:/etc/asnn/secrets:ro"]
+        if name in ("dashboard", "foxglove"):  # no authentication of their own: loopback only
+            kind, ports = service["ports"]
+            assert kind == "override" and all(p.startswith("127.0.0.1:") for p in ports)
     for name in ("router.json5", "client.json5"):
         conf = zenoh.Config.from_file(str(ROOT / "deploy" / "zenoh" / name))
         assert json.loads(conf.get_json("transport/link/tx/lease")) == 1000

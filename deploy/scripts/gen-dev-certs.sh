@@ -7,21 +7,29 @@
 #   deploy/scripts/gen-dev-certs.sh [--robots ID,ID,...] [OUT_DIR] [HOST...]
 #
 # --robots (default robot1): the robot ids whose cameras get an identity of their own.
-# OUT_DIR (default deploy/secrets) receives:
-#   ca.pem, ca.key                  the development CA (keep ca.key away from every machine)
-#   router.pem, router.key          the router's certificate (CN router; SAN localhost,
-#                                   127.0.0.1, router and every HOST given)
-#   <name>.pem, <name>.key          a client certificate per identity, CN = the name
-#   credentials.txt                 user:password per line, the router's usrpwd dictionary
-#   <name>.json5                    a client config per identity: user, password, CA, certificate
-#   router.json5                    the router's config: deploy/zenoh/secure/router.json5 with
-#                                   one subject, rule and policy per camera
-# with the identities worker, dashboard, alerts, foxglove and camera-<robot> for each robot id: user name
-# and certificate CN are the same, and the router's access control requires both, so a camera
-# may publish only <prefix>/<its robot>/frame and .../preview. Existing files are replaced. The
-# configs name the files by their path in OUT_DIR, or under ASNN_SECRETS_PATH when set (where the
-# directory is mounted in containers: ASNN_SECRETS_PATH=/etc/asnn/secrets for
-# deploy/compose.secure.yml).
+# OUT_DIR (default deploy/secrets, made mode 700) receives:
+#   ca.pem, ca.key        the development CA (ca.key stays here: no identity's folder holds it)
+#   router/               what the router needs: ca.pem, router.pem and router.key (CN router;
+#                         SAN localhost, 127.0.0.1, router and every HOST given: the names other
+#                         machines reach the router by), credentials.txt (user:password per
+#                         line, the usrpwd dictionary) and router.json5 (the template
+#                         deploy/zenoh/secure/router.json5 with one subject, rule and policy
+#                         per camera)
+#   <name>/               one folder per client identity, holding only its own: ca.pem,
+#                         <name>.pem, <name>.key (CN = name) and <name>.json5, its client config
+#                         (user, password, CA, certificate)
+# with the identities worker, dashboard, alerts, foxglove and camera-<robot> for each robot id:
+# user name and certificate CN are the same, and the router's access control requires both, so
+# a camera may publish only <prefix>/<its robot>/frame and .../preview. Each folder is mounted
+# alone into its service's container (deploy/compose.secure.yml), readable by the container's
+# user (folders 755, files 644 inside OUT_DIR's 700).
+#
+# Run again (to add a robot, or a HOST), it keeps the CA and every identity whose certificate
+# is valid for 30 more days, with its password, so the configs already deployed stay valid; it
+# issues what is new or expiring, and the router's certificate and config each time. Certificates
+# are valid for ASNN_CERT_DAYS days (365); the CA for ten times that. The configs name the files
+# by their path in OUT_DIR, or under ASNN_SECRETS_PATH when set: where each folder is mounted in
+# containers (ASNN_SECRETS_PATH=/etc/asnn/secrets for deploy/compose.secure.yml).
 set -euo pipefail
 
 robots=(robot1)
@@ -40,47 +48,80 @@ hosts=("$@")
 template=$(cd "$(dirname "$0")/../zenoh/secure" && pwd)/router.json5
 names=(worker dashboard alerts foxglove)
 for robot in "${robots[@]}"; do names+=("camera-$robot"); done
-days=${ASNN_CERT_DAYS:-30}
+days=${ASNN_CERT_DAYS:-365}
 
 command -v openssl >/dev/null || { echo "gen-dev-certs: openssl is required" >&2; exit 2; }
 mkdir -p "$out"
 chmod 700 "$out"
 cd "$out"
-umask 077
-dir=${ASNN_SECRETS_PATH:-$(pwd)}
+top=$(pwd)
+renew=$(( 30 * 86400 ))  # a certificate valid for less than this more is issued again
+
+where() {  # where NAME: the path the configs of NAME's folder name its files by
+  echo "${ASNN_SECRETS_PATH:-$top/$1}"
+}
+
+valid() {  # valid CERT: signed by this CA and valid for $renew seconds more
+  [[ -f $1 ]] && openssl verify -CAfile ca.pem "$1" >/dev/null 2>&1 \
+    && openssl x509 -in "$1" -noout -checkend "$renew" >/dev/null 2>&1
+}
+
+if [[ -f ca.key && -f ca.pem ]] && openssl x509 -in ca.pem -noout -checkend "$renew" \
+    >/dev/null 2>&1; then
+  echo "gen-dev-certs: keeping the CA in $top" >&2
+else
+  (umask 077; openssl req -x509 -newkey rsa:2048 -nodes -sha256 -days "$(( days * 10 ))" \
+    -subj "/CN=asnn development CA" -keyout ca.key -out ca.pem \
+    -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign" \
+    2>/dev/null)
+fi
+chmod 600 ca.key
+chmod 644 ca.pem
+
+issue() {  # issue NAME EXTENSIONS...: NAME/NAME.pem and NAME/NAME.key
+  local name=$1; shift
+  local ext
+  ext=$(mktemp)
+  printf '%s\n' "$@" > "$ext"
+  openssl req -newkey rsa:2048 -nodes -sha256 -subj "/CN=$name" -keyout "$name/$name.key" \
+    -out "$name/$name.csr" 2>/dev/null
+  openssl x509 -req -in "$name/$name.csr" -CA ca.pem -CAkey ca.key -CAcreateserial \
+    -days "$days" -sha256 -extfile "$ext" -out "$name/$name.pem" 2>/dev/null
+  rm -f "$name/$name.csr" "$ext" ca.srl
+}
+
+folder() {  # folder NAME: NAME/ with the CA's certificate
+  mkdir -p "$1"
+  chmod 755 "$1"
+  cp ca.pem "$1/ca.pem"
+}
 
 san="DNS:localhost,IP:127.0.0.1,DNS:router"
 for host in "${hosts[@]}"; do
   if [[ $host =~ ^[0-9.]+$ || $host == *:* ]]; then san+=",IP:$host"; else san+=",DNS:$host"; fi
 done
-
-openssl req -x509 -newkey rsa:2048 -nodes -sha256 -days "$days" -subj "/CN=asnn development CA" \
-  -keyout ca.key -out ca.pem \
-  -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign" \
-  2>/dev/null
-
-issue() {  # issue NAME EXTENSIONS...
-  local name=$1; shift
-  local ext
-  ext=$(mktemp)
-  printf '%s\n' "$@" > "$ext"
-  openssl req -newkey rsa:2048 -nodes -sha256 -subj "/CN=$name" -keyout "$name.key" \
-    -out "$name.csr" 2>/dev/null
-  openssl x509 -req -in "$name.csr" -CA ca.pem -CAkey ca.key -CAcreateserial -days "$days" \
-    -sha256 -extfile "$ext" -out "$name.pem" 2>/dev/null
-  rm -f "$name.csr" "$ext"
-}
-
+folder router
 issue router "basicConstraints=CA:FALSE" "keyUsage=digitalSignature,keyEncipherment" \
   "extendedKeyUsage=serverAuth,clientAuth" "subjectAltName=$san"
 
-: > credentials.txt
+old_credentials=""
+[[ -f router/credentials.txt ]] && old_credentials=$(cat router/credentials.txt)
+credentials=""
+kept=() issued=()
 for name in "${names[@]}"; do
-  issue "$name" "basicConstraints=CA:FALSE" "keyUsage=digitalSignature,keyEncipherment" \
-    "extendedKeyUsage=clientAuth" "subjectAltName=DNS:$name"
-  password=$(openssl rand -hex 16)
-  printf '%s:%s\n' "$name" "$password" >> credentials.txt
-  cat > "$name.json5" <<JSON
+  folder "$name"
+  password=$(printf '%s\n' "$old_credentials" | sed -n "s/^$name:\([0-9a-f]\{32\}\)$/\1/p")
+  if [[ -n $password && -f $name/$name.key ]] && valid "$name/$name.pem"; then
+    kept+=("$name")
+  else
+    issue "$name" "basicConstraints=CA:FALSE" "keyUsage=digitalSignature,keyEncipherment" \
+      "extendedKeyUsage=clientAuth" "subjectAltName=DNS:$name"
+    password=$(openssl rand -hex 16)
+    issued+=("$name")
+  fi
+  credentials+="$name:$password"$'\n'
+  dir=$(where "$name")
+  cat > "$name/$name.json5" <<JSON
 // generated by deploy/scripts/gen-dev-certs.sh: the identity $name of the secured fleet
 {
   mode: "client",
@@ -103,6 +144,7 @@ for name in "${names[@]}"; do
 }
 JSON
 done
+printf '%s' "$credentials" > router/credentials.txt
 
 # the router's config: the template, its secrets' paths, one identity and rule per camera
 rules="" subjects="" policies=""
@@ -121,6 +163,7 @@ for robot in "${robots[@]}"; do
   policies+=" \"camera-$robot-announce\", \"camera-$robot-refusals-in\","
   policies+=" \"camera-$robot-refusals-out\", \"camera-matching\"] },"$'\n'
 done
+dir=$(where router)
 {
   echo "// generated by deploy/scripts/gen-dev-certs.sh from deploy/zenoh/secure/router.json5"
   while IFS= read -r line; do
@@ -131,10 +174,9 @@ done
       *) printf '%s\n' "${line//\/etc\/asnn\/secrets/$dir}" ;;
     esac
   done < "$template"
-} > router.json5
+} > router/router.json5
 
-rm -f ca.srl
-chmod 600 ./*.key credentials.txt ./*.json5
-chmod 644 ./*.pem
-echo "gen-dev-certs: CA, certificates and client configs of ${names[*]}, credentials.txt and" \
-  "router.json5 in $(pwd)" >&2
+# inside OUT_DIR's 700, each folder is readable by whichever user its container runs as
+for name in router "${names[@]}"; do chmod 644 "$name"/*; done
+echo "gen-dev-certs: in $top: router/ and the identities ${names[*]}" \
+  "(issued: ${issued[*]:-none}; kept: ${kept[*]:-none})" >&2
