@@ -50,6 +50,9 @@ def make_detector(model: str = "asnn", preset_name: str | ASNNParams | None = No
     if model in ("lgmd1", "lgmd2"):
         from . import baselines
 
+        if isinstance(preset_name, str):
+            preset(preset_name)  # ignored, but a misspelt name is still an error
+
         asnn_only = sorted(set(options) & {"record_maps", "record_tracks", "optimised",
                                            "threads"})
         if asnn_only:

@@ -52,7 +52,8 @@ class ASNN:
     params : ASNNParams or str
         A parameter set or a preset name (see :mod:`asnn.params`).
     record_maps : bool
-        Attach the intermediate maps (:class:`~asnn.response.Maps`) to every response.
+        Attach the intermediate maps (:class:`~asnn.response.Maps`) to every response but a
+        stream's first (it only primes the model: ``maps`` is None).
     record_tracks : bool
         Attach every tracked object with its approach test
         (:class:`~asnn.response.TrackReport`) to every response: why the model warned, or did
@@ -255,14 +256,15 @@ class ASNN:
             Gray (H, W) or BGR (H, W, 3), uint8 or float in [0, 1].
         t : float, optional
             The frame's time in seconds (any origin, increasing). Used for expansion rates and
-            time to contact; without it, or where it does not advance by more than 0 and at
-            most 1 s (a clock in other units, a stall), frames are ``params.dt`` apart.
+            time to contact; without it, or where it is NaN or infinite or does not advance by
+            more than 0 and at most 1 s (a clock in other units, a stall), frames are
+            ``params.dt`` apart.
 
         Raises
         ------
         FrameError
             If the frame is not an image the model accepts, its size differs from the stream's,
-            or ``t`` is not a number; the model's state is then as it was.
+            or ``t`` is not a number (a str, a bool); the model's state is then as it was.
         """
         taken = self._take(frame, t)
         if taken.photo is not None:

@@ -40,6 +40,7 @@ term, which is ``w2+ = -0.3`` here.
 
 from __future__ import annotations
 
+import textwrap
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -385,6 +386,21 @@ _WEIGHTS = {  # [v+, v-, w1+, w2-, w1-, w2+] from the paper's experiments
 def _weights(name: str) -> dict:
     keys = ("v_on", "v_off", "w1_on", "w2_off", "w1_off", "w2_on")
     return dict(zip(keys, _WEIGHTS[name]))
+
+
+def _fields_section(model: type[BaseModel]) -> str:
+    """A numpydoc Attributes section from a model's field descriptions, so that ``help()``
+    shows what each field means (pydantic keeps them in ``model_fields`` only)."""
+    lines = ["", "", "    Attributes", "    ----------"]
+    for name, info in model.model_fields.items():
+        lines.append(f"    {name} : {getattr(info.annotation, '__name__', info.annotation)}"
+                     f" = {info.default!r}")
+        lines.append(textwrap.fill(info.description or "", 92, initial_indent=" " * 8,
+                                   subsequent_indent=" " * 8))
+    return "\n".join(lines) + "\n"
+
+
+ASNNParams.__doc__ += _fields_section(ASNNParams)
 
 
 _PAPER = ASNNParams()

@@ -19,6 +19,15 @@ __all__ = ["Maps", "Response", "TrackReport"]
 class Maps:
     """Intermediate maps of one ASNN step, for figures and debugging (all (H, W) unless noted).
 
+    The maps are on the model's own grid: the frame's size, or where ``max_width`` shrinks
+    wider frames, that smaller size (targets and tracks stay in the frame's pixels). ``P`` is
+    the photoreceptors' output after the input stages the preset has (input blur, contrast
+    gain control, background stabilisation), not the raw frame difference. The bipolar and
+    temporal-filter outputs are not kept: an ``ASNN(..., optimised=False)`` model keeps its
+    cascades as eq. 5 writes them (``stages_on``, ``stages_off``), from which
+    :func:`asnn.retina.temporal_readout` gives them (the optimised form keeps them in another
+    form).
+
     Attributes
     ----------
     P : photoreceptor activation.
@@ -115,6 +124,9 @@ class Response:
         0-based number of the frame in the stream.
     u : float
         Membrane potential u(t) (paper eq. 28; for the LGMD models, their summed excitation).
+        With the approach gate (``approach_gate``, the default preset) it sums G' over the
+        objects that count as coming at the camera only (``TrackReport.share``), so it can be
+        0 where G' is not.
     out : float
         Sigmoid output in [0.5, 1] (1.0 only where it saturates in floating point).
     spikes : int
@@ -126,7 +138,8 @@ class Response:
     targets : list of Target
         Looming regions (always empty for the LGMD models).
     maps : Maps or None
-        Intermediate maps when the model was asked to record them.
+        Intermediate maps when the model was asked to record them; None on a stream's first
+        frame, which only primes the model (:meth:`silent`).
     tracks : list of TrackReport or None
         Every object tracked in the frame with its approach test, when the model was asked to
         record them (presets that track objects).

@@ -80,6 +80,8 @@ def test_parameters_are_typed_and_overridable():
 def test_factory_builds_the_baselines():
     assert isinstance(make_detector("lgmd1"), LGMD1)
     assert isinstance(make_detector("lgmd2", "paper"), LGMD2)
+    with pytest.raises(ValueError, match="nopreset"):  # ignored by the LGMDs, still checked
+        make_detector("lgmd1", "nopreset")
     with pytest.raises(ValueError, match="record_maps apply to the ASNN model only"):
         make_detector("lgmd1", record_maps=True)
 

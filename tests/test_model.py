@@ -458,3 +458,12 @@ def test_where_the_attended_window_lies_compiles_no_second_form_of_a_kernel():
         model.step(frame, i / 25.0)
     assert [set(k.signatures) for k in kernels] == before
     assert all(len({s[0].dtype for s in k.signatures}) == len(k.signatures) for k in kernels)
+
+
+def test_help_on_the_parameters_shows_what_each_field_means():
+    from asnn.params import ASNNParams
+
+    doc = ASNNParams.__doc__
+    for name, info in ASNNParams.model_fields.items():
+        assert f"    {name} : " in doc, name
+    assert "treat a frame that hardly differs" in doc  # a description, not only the names
