@@ -8,7 +8,7 @@ import sys
 
 from asnn.params import preset_names
 from service import keys
-from service.config import ConfigError
+from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
 from .arguments import count, non_negative, positive, robot_id, whole, worker_id
@@ -178,7 +178,7 @@ def cmd_router(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         return fail(str(exc))
     except Exception as exc:  # zenoh.ZError: e.g. the port is taken
-        return fail(f"cannot start the router: {str(exc).split(' at /')[0]}")
+        return fail(f"cannot start the router: {zenoh_error(exc)}")
     with session:
         listen = ", ".join(listen_endpoints(config))
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)

@@ -9,7 +9,7 @@ import sys
 import threading
 
 from service import keys
-from service.config import ConfigError, ZenohOptions
+from service.config import ConfigError, ZenohOptions, zenoh_error
 
 from .arguments import key_prefix
 
@@ -69,7 +69,7 @@ def open_session(config):
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:
-        raise ConfigError(f"cannot open a Zenoh session: {str(exc).split(' at /')[0]}") from None
+        raise ConfigError(f"cannot open a Zenoh session: {zenoh_error(exc)}") from None
 
 
 def session_for(args: argparse.Namespace):

@@ -32,7 +32,8 @@ from pathlib import Path
 
 import zenoh
 
-__all__ = ["DEFAULTS", "MODES", "SHARED_MEMORY", "ConfigError", "ZenohOptions", "make_config"]
+__all__ = ["DEFAULTS", "MODES", "SHARED_MEMORY", "ConfigError", "ZenohOptions", "make_config",
+           "zenoh_error"]
 
 MODES = ("peer", "client", "router")
 DEFAULTS: dict[str, object] = {
@@ -85,7 +86,8 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
     try:
         conf = zenoh.Config.from_file(str(opts.config_file)) if opts.config_file else zenoh.Config()
     except Exception as exc:  # zenoh.ZError, or an OS error surfaced by zenoh
-        raise ConfigError(f"cannot load Zenoh config {opts.config_file}: {exc}") from None
+        raise ConfigError(f"cannot load Zenoh config {opts.config_file}: {zenoh_error(exc)}") \
+            from None
     settings: list[tuple[str, object]] = [("timestamping/enabled", True)]
     for key, value in DEFAULTS.items():
         if json.loads(conf.get_json(key)) is None:
@@ -112,3 +114,11 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
         except Exception as exc:
             raise ConfigError(f"Zenoh rejects {key} = {json.dumps(value)}: {exc}") from None
     return conf
+
+
+_RUST_LOCATION = re.compile(r"\s+at /\S+\.rs:\d+\.?\s*$")
+
+
+def zenoh_error(exc: BaseException) -> str:
+    """A Zenoh error's text for a user: without the Rust source location it ends with."""
+    return _RUST_LOCATION.sub("", str(exc))

@@ -278,6 +278,14 @@ def test_bad_config_is_a_clear_error(options):
         make_config(options)
 
 
+def test_a_config_zenoh_refuses_is_named_without_the_rust_source_location(tmp_path):
+    bad = tmp_path / "bad.json5"
+    bad.write_text('{ mode: "client", bogus_key: 1 }')
+    with pytest.raises(ConfigError, match="bogus_key") as caught:
+        make_config(ZenohOptions(config_file=bad))
+    assert ".rs:" not in str(caught.value)
+
+
 def test_tracked_target_fields_cross_the_wire_and_are_left_out_where_unset():
     import msgpack
 
