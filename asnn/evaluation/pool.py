@@ -64,4 +64,6 @@ def _stop(pool: ProcessPoolExecutor) -> None:
             # inherited yet (_worker_signals), and a kept handler made terminate() do nothing
             process.kill()
     for process in processes:
-        process.join(timeout=5)
+        # SIGKILL cannot be refused, but a busy machine may take seconds to tear a forked
+        # copy of a large process down (a full test run under load once took longer than 5 s)
+        process.join(timeout=60)
