@@ -19,7 +19,7 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import parse_detector
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import SourceError, open_source, split_topic
-from asnn.io.video import cut_short
+from asnn.io.video import VideoError, check_written, cut_short, quiet_writer
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import SLOW_FPS, preset_names
@@ -102,7 +102,8 @@ def _settings(busy: bool):
         cv2.setNumThreads(1)
     gc.freeze()
     try:
-        yield
+        with quiet_writer():  # a failed --annotate is one line (:func:`_check_annotated`)
+            yield
     finally:
         gc.unfreeze()
         cv2.setNumThreads(threads)
@@ -144,6 +145,25 @@ def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
             return f"{flag} and {seen[target]} both write {path}"
         seen[target] = flag
     return None
+
+
+def _check_annotated(video: list, path: str | None, frames: int) -> None:
+    """Close the annotated video's writer (``video``: it, once the first frame opened it) and
+    check the file holds its ``frames`` frames: OpenCV's writer fails silently on a full disk,
+    leaving a file that does not play.
+
+    Raises
+    ------
+    _OutputError
+        If it does not.
+    """
+    if not video:
+        return
+    video[0].release()
+    try:
+        check_written(path, frames)
+    except VideoError as exc:
+        raise _OutputError(str(exc)) from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -274,6 +294,7 @@ def run(args: argparse.Namespace) -> int:
             getattr(detector, "close", lambda: None)()
         try:
             output.close()
+            _check_annotated(video, args.annotate, len(records))
         except _OutputError as exc:
             return _fail(str(exc))
         if failure is not None:

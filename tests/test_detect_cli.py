@@ -353,3 +353,52 @@ def test_the_detect_process_equals_a_loop_in_this_process(looming_video):
     expected = json.loads(json.dumps(run_detector(open_source(str(path)).timed_frames())))
     assert any(record["targets"] for record in expected)
     assert got == expected
+
+
+class _WriterThatStops:
+    """An OpenCV video writer that stops writing after ``keep`` frames with no error, as
+    OpenCV's own does when the disk fills (its ``write`` returns None whatever happens)."""
+
+    def __init__(self, real, keep: int):
+        self._real, self._keep = real, keep
+
+    def __getattr__(self, name):
+        return getattr(self._real, name)
+
+    def write(self, image) -> None:
+        if self._keep > 0:
+            self._keep -= 1
+            self._real.write(image)
+
+
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_an_annotated_video_that_loses_frames_is_one_error_line(looming_video, tmp_path,
+                                                                capsys, monkeypatch, threads):
+    import cv2
+
+    import cli.detect
+
+    real = cv2.VideoWriter
+    monkeypatch.setattr(cli.detect.cv2, "VideoWriter",
+                        lambda *args: _WriterThatStops(real(*args), keep=3))
+    path, scene = looming_video
+    target = tmp_path / "ann.mp4"
+    assert main(["detect", str(path), "--annotate", str(target), "--threads", threads]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"asnn detect: cannot write {target}: the video written holds 3 of "
+                   f"{len(scene.frames)} frames"]
+
+
+def test_a_written_video_is_checked_by_reading_it_back(looming_video, tmp_path):
+    from asnn.io.video import VideoError, check_written
+
+    path, scene = looming_video
+    check_written(path, len(scene.frames))  # whole
+    n = len(scene.frames)
+    with pytest.raises(VideoError, match=f"holds {n} of {n + 1} frames"):
+        check_written(path, n + 1)
+    cut = tmp_path / "cut.mp4"  # an MP4 whose index, written last, did not fit
+    write_video(scene.frames, cut)
+    cut.write_bytes(cut.read_bytes()[:-200])
+    with pytest.raises(VideoError, match=f"cannot write {cut}: the video written does not open"):
+        check_written(cut, len(scene.frames))

@@ -634,3 +634,27 @@ def test_write_video_takes_frames_one_by_one_as_it_takes_an_array(tmp_path):
     assert all(np.array_equal(x, y) for x, y in zip(a, b))
     with pytest.raises(ValueError, match="no frames"):
         write_video(iter(()), tmp_path / "empty.avi")
+
+
+def test_write_video_raises_where_the_file_lost_frames(tmp_path, monkeypatch):
+    """OpenCV's writer fails silently (a full disk): the file is read back."""
+    from asnn.stimuli import make_scene, scene, write_video
+
+    real = cv2.VideoWriter
+
+    class Stops:  # writes the first frame only, as a writer on a disk that filled up
+        def __init__(self, *args, **kwargs):
+            self._real, self._left = real(*args, **kwargs), 1
+
+        def __getattr__(self, name):
+            return getattr(self._real, name)
+
+        def write(self, image):
+            if self._left:
+                self._left -= 1
+                self._real.write(image)
+
+    monkeypatch.setattr(scene.cv2, "VideoWriter", Stops)
+    frames = make_scene("looming", size=(64, 64), frames=5).frames
+    with pytest.raises(OSError, match="the video written holds 1 of 5 frames"):
+        write_video(frames, tmp_path / "clip.avi")

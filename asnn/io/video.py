@@ -1,16 +1,18 @@
-"""Reading video files into frames (the only file I/O of the asnn package)."""
+"""Reading video files into frames, and checking one written (the only file I/O of the asnn
+package)."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-__all__ = ["DEFAULT_FPS", "MAX_FPS", "VideoError", "VideoClip", "cut_short", "open_video",
-           "read_frames", "stated_fps"]
+__all__ = ["DEFAULT_FPS", "MAX_FPS", "VideoError", "VideoClip", "check_written", "cut_short",
+           "open_video", "quiet_writer", "read_frames", "stated_fps"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 MAX_FPS = 240.0  # above this a stated rate is a container's time base, not a camera's
@@ -116,3 +118,61 @@ def open_video(path: str | Path, decoder_threads: int | None = None) -> VideoCli
         If the file is missing or not a decodable video.
     """
     return VideoClip(path, decoder_threads)
+
+
+def check_written(path: str | Path, frames: int) -> None:
+    """Check that a video OpenCV's ``VideoWriter`` has written and released holds its frames.
+
+    The writer reports nothing when a write fails (``write`` returns None in Python; FFmpeg
+    only logs a warning): on a full disk an MP4 loses its index, written last, and does not
+    open at all. Reading the file back is the one reliable signal: it must open, state
+    ``frames`` frames and decode its last one.
+
+    Raises
+    ------
+    VideoError
+        If it does not; the message says why, a full disk where the file's folder has no room.
+    """
+    path = Path(path)
+    capture = cv2.VideoCapture(str(path))
+    try:
+        stated = int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) if capture.isOpened() else -1
+        last_decodes = stated == frames and _decodes(capture, frames - 1)
+    finally:
+        capture.release()
+    if last_decodes:
+        return
+    if _disk_full(path):
+        raise VideoError(f"cannot write {path}: No space left on device (the video is cut "
+                         "short)")
+    found = "does not open" if stated < 0 else f"holds {stated} of {frames} frames"
+    raise VideoError(f"cannot write {path}: the video written {found}")
+
+
+@contextmanager
+def quiet_writer():
+    """OpenCV's warnings held back while a video is written: a writer that fails logs one for
+    every frame, where the caller reports it in one line (:func:`check_written`)."""
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    try:
+        yield
+    finally:
+        cv2.utils.logging.setLogLevel(level)
+
+
+def _decodes(capture: cv2.VideoCapture, index: int) -> bool:
+    """Whether frame ``index`` of an open capture decodes (the first is the ``0``th)."""
+    if index > 0:
+        capture.set(cv2.CAP_PROP_POS_FRAMES, index)
+    ok, frame = capture.read()
+    return bool(ok) and frame is not None
+
+
+def _disk_full(path: Path) -> bool:
+    """Whether the file system that holds ``path`` has no room left for an ordinary user."""
+    try:
+        stats = os.statvfs(path.parent if str(path.parent) else ".")
+    except (OSError, AttributeError):  # no statvfs on Windows
+        return False
+    return stats.f_bavail * stats.f_frsize < 64 * 1024

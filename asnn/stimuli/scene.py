@@ -11,6 +11,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..io.video import check_written, quiet_writer
+
 __all__ = ["Scene", "write_video", "write_frames"]
 
 
@@ -97,7 +99,8 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
     Raises
     ------
     OSError
-        If OpenCV cannot open a writer for the path.
+        If OpenCV cannot open a writer for the path, or the file written does not hold the
+        frames (a full disk: the writer itself fails silently).
     ValueError
         For an iterable without frames (an empty array writes an empty video).
     """
@@ -115,11 +118,16 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
     writer = cv2.VideoWriter(str(path), fourcc, fps, (w, h), isColor=True)
     if not writer.isOpened():
         raise OSError(f"cannot write video {path}")
+    written = 0
     try:
-        for frame in frames:
-            writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
+        with quiet_writer():  # a failed write is raised once, below
+            for frame in frames:
+                writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
+                written += 1
     finally:
         writer.release()
+    if written:
+        check_written(path, written)
     return path
 
 
