@@ -3,13 +3,26 @@
 from __future__ import annotations
 
 import argparse
+import math
 
+from asnn.stimuli.suite import LARGEST_SIZE
 from service import keys
+
+# --fps of what is written or played: 0.1 to 1000 frames a second. Beyond either end no camera
+# runs, and a video writer given such a rate (or inf) may never return (asnn scene --fps inf).
+FPS_RANGE = (0.1, 1000.0)
+# --frames: 10000 frames, over 8 minutes at 20 a second; a generated clip is held at once
+MAX_FRAMES = 10_000
+# --threads of a model: it splits each frame into bands, one for each thread, and threads
+# beyond the cores only take turns; 256 is more cores than a machine running it has, where
+# thousands of threads stall the machine or cannot be started
+MAX_THREADS = 256
 
 
 def frame_size(text: str) -> tuple[int, int]:
     """``WxH`` (or ``N`` for NxN) as (width, height); at least 32x32, a round size just above
-    the smallest frame the model takes (31x31, ``ASNNParams.min_side``)."""
+    the smallest frame the model takes (31x31, ``ASNNParams.min_side``), and at most 1920x1080,
+    the largest the suite's scenes are rendered at (a generated clip is held at once)."""
     try:
         w, _, h = text.lower().partition("x")
         size = (int(w), int(h or w))
@@ -17,6 +30,10 @@ def frame_size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
     if min(size) < 32:
         raise argparse.ArgumentTypeError(f"frames must be at least 32x32, got {text!r}")
+    largest = LARGEST_SIZE
+    if size[0] > largest[0] or size[1] > largest[1]:
+        raise argparse.ArgumentTypeError(
+            f"frames must be at most {largest[0]}x{largest[1]}, got {text!r}")
     return size
 
 
@@ -59,10 +76,19 @@ def worker_id(value: str) -> str:
 
 
 def _number(value: str) -> float:
+    """A finite number: ``inf`` and ``nan``, which float() takes, are no option's value."""
     try:
-        return float(value)
+        number = float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {value!r}") from None
+    if not math.isfinite(number):
+        raise argparse.ArgumentTypeError(f"not a finite number: {value!r}")
+    return number
+
+
+def finite(value: str) -> float:
+    """Any finite number."""
+    return _number(value)
 
 
 def positive(value: str) -> float:
@@ -81,13 +107,25 @@ def non_negative(value: str) -> float:
     return number
 
 
-def _whole(value: str, at_least: int) -> int:
+def frame_rate(value: str) -> float:
+    """Frames a second, within :data:`FPS_RANGE`."""
+    number = _number(value)
+    low, high = FPS_RANGE
+    if not low <= number <= high:
+        raise argparse.ArgumentTypeError(
+            f"a frame rate is {low:g} to {high:g} frames a second, got {value!r}")
+    return number
+
+
+def _whole(value: str, at_least: int, at_most: int | None = None) -> int:
     try:
         number = int(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a whole number: {value!r}") from None
     if number < at_least:
         raise argparse.ArgumentTypeError(f"must be at least {at_least}: {value!r}")
+    if at_most is not None and number > at_most:
+        raise argparse.ArgumentTypeError(f"must be at most {at_most}: {value!r}")
     return number
 
 
@@ -99,6 +137,16 @@ def count(value: str) -> int:
 def whole(value: str) -> int:
     """A whole number of 0 or more."""
     return _whole(value, 0)
+
+
+def frames(value: str) -> int:
+    """A number of frames: 1 to :data:`MAX_FRAMES`."""
+    return _whole(value, 1, MAX_FRAMES)
+
+
+def threads(value: str) -> int:
+    """A model's number of threads: 1 to :data:`MAX_THREADS`."""
+    return _whole(value, 1, MAX_THREADS)
 
 
 def seed(value: str) -> int:

@@ -7,7 +7,7 @@ import json
 import sys
 
 from asnn.detectors import MODELS
-from cli.arguments import count, frame_size, positive, seed
+from cli.arguments import count, frame_rate, frame_size, frames, positive, seed, threads
 
 # how the benches that time whole processes run asnn: this interpreter, this checkout's CLI
 ASNN_COMMAND = (sys.executable, "-m", "cli.main")
@@ -21,8 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "ratio. --service instead measures cameras through Zenoh on loopback.")
     p.add_argument("--size", type=frame_size, action="append", metavar="WxH",
                    help="frame size (repeatable; default 128x128, 320x240 and 640x480)")
-    p.add_argument("--frames", type=count, default=None,
-                   help="timed frames per run (default 40; --detect: frames of the clip, 1200)")
+    p.add_argument("--frames", type=frames, default=None,
+                   help="timed frames per run (default 40; --detect: frames of the clip, 1200; "
+                        "at most 10000)")
     p.add_argument("--preset", action="append", metavar="NAME",
                    help="ASNN preset to time (repeatable; default: all); the default preset is "
                         "added for the straightforward form's ratio (unless "
@@ -36,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="cameras at --fps through one worker process over Zenoh on loopback, "
                    "ramping the number of cameras (first --size, default 320x240; first --preset, "
                    "default the default preset)")
-    p.add_argument("--fps", type=positive, default=25.0,
+    p.add_argument("--fps", type=frame_rate, default=25.0,
                    help="camera rate for --service (default: %(default)s)")
     p.add_argument("--seconds", type=positive, default=4.0,
                    help="duration of each --service step (default: %(default)s)")
@@ -67,7 +68,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="--handover: try a hand-over every N frames (default: %(default)s)")
     p.add_argument("--cases", metavar="PATTERN", default=None,
                    help="--handover: suite cases or groups, shell patterns (default: all)")
-    p.add_argument("--worker-threads", type=count, default=None, metavar="N",
+    p.add_argument("--worker-threads", type=threads, default=None, metavar="N",
                    help="processing threads of each --service worker (asnn worker --threads; "
                         "default: the cores available, divided among the workers)")
     p.add_argument("--workers", type=count, default=1, metavar="N",

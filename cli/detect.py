@@ -23,7 +23,7 @@ from asnn.io.video import VideoError, check_written, cut_short, quiet_writer
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import SLOW_FPS, preset_names
-from cli.arguments import count, preset_spec
+from cli.arguments import preset_spec, threads
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -46,10 +46,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jsonl", metavar="PATH|-", help="write one JSON object per frame ('-': stdout)")
     p.add_argument("--annotate", metavar="OUT.mp4", help="write the input with overlays")
     p.add_argument("--plot", metavar="OUT.png", help="plot u(t) and the spike rate")
-    p.add_argument("--threads", type=count, default=None, metavar="N",
+    p.add_argument("--threads", type=threads, default=None, metavar="N",
                    help="threads the ASNN model uses for the stream, besides decoding and "
                         "output (default: the cores available; the results are the same "
-                        "whatever the number)")
+                        "whatever the number; at most 256: more than the cores only take "
+                        "turns, and thousands stall the machine)")
     p.add_argument("--tracks", metavar="PATH|-",
                    help="write every tracked object with its approach test, one JSON object per "
                         "frame ('-': stdout): why the model warned, or did not (presets that "

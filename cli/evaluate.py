@@ -26,7 +26,7 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
 from asnn.params import preset_names
 
-from .arguments import count, frame_size, preset_spec, whole
+from .arguments import count, finite, frame_size, preset_spec, whole
 
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
@@ -117,7 +117,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "with --synthetic: render the driving scenes at this size, the same "
                         "drives seen with other pixels (64x48 to 1920x1080; default 192x128; "
                         "the planar scenes keep theirs)")
-    p.add_argument("--scale", type=float, metavar="S",
+    p.add_argument("--scale", type=finite, metavar="S",
                    help="with --synthetic: render every case with S times its pixels (0.5-8): "
                         "the planar scenes at S times 160x120 with their sizes, positions and "
                         "speeds in pixels scaled alike, the driving scenes at S times 192x128 "

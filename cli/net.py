@@ -11,7 +11,8 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import count, non_negative, positive, robot_id, whole, worker_id
+from .arguments import (count, finite, frame_rate, non_negative, positive, robot_id, threads,
+                        whole, worker_id)
 from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
     zenoh_options
 
@@ -234,12 +235,12 @@ def register(subparsers) -> None:
                         f"(SCENE: {', '.join(SCENE_NAMES)}, or a case of the labelled suite: "
                         "asnn scene --list) or a ROS 2 bag BAG.mcap[#TOPIC], replayed at its "
                         "recorded pace")
-    p.add_argument("--fps", type=positive, default=None,
+    p.add_argument("--fps", type=frame_rate, default=None,
                    help="publishing rate (default: the source's frame rate)")
     p.add_argument("--loop", action="store_true", help="replay a file, scene or bag forever")
     p.add_argument("--format", choices=FORMATS, default="gray8",
                    help="frame encoding on the wire (default: %(default)s)")
-    p.add_argument("--wait", type=float, default=2.0, metavar="SECONDS",
+    p.add_argument("--wait", type=finite, default=2.0, metavar="SECONDS",
                    help="wait up to SECONDS for a subscriber before the first frame "
                         "(default: %(default)s)")
     p.add_argument("--preview-hz", type=non_negative, default=PREVIEW_HZ, metavar="HZ",
@@ -272,7 +273,7 @@ def register(subparsers) -> None:
                    help="once a second publisher was seen on a robot's key, refuse frames that "
                         "do not continue the robot's stream until it has been silent for "
                         "SECONDS (default: %(default)s)")
-    p.add_argument("--threads", type=count, default=default_threads(), metavar="N",
+    p.add_argument("--threads", type=threads, default=default_threads(), metavar="N",
                    help="processing threads (default: the cores available, here %(default)s; "
                         "one robot is never processed by two at once)")
     p.add_argument("--warmup-frames", type=whole, default=WARMUP_FRAMES, metavar="N",
@@ -326,7 +327,7 @@ def register(subparsers) -> None:
                    "or a case of the labelled suite (asnn scene --list); default "
                    "%(default)s, a dark disk coming at the camera at constant speed, so the "
                    "warnings' time to contact counts down as it nears")
-    p.add_argument("--fps", type=positive, default=None,
+    p.add_argument("--fps", type=frame_rate, default=None,
                    help="playback rate (default: the scene's, 20)")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
     p.add_argument("--preset", choices=preset_names(), default=None,

@@ -17,7 +17,7 @@ from asnn.evaluation.labels import read_entries
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 from asnn.stimuli.suite import CASES, make_case, suite_cases
 
-from .arguments import frame_size, positive, whole
+from .arguments import finite, frame_rate, frame_size, positive, whole
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--variant", type=whole, default=0, metavar="K",
                    help="with --case: the case with a fresh scene seed K >= 1 (asnn eval "
                         "--synthetic --variant K; default: 0, the case as the suite has it)")
-    p.add_argument("--scale", type=float, metavar="S",
+    p.add_argument("--scale", type=finite, metavar="S",
                    help="with --case: the case drawn with S times its pixels (0.5-8; asnn eval "
                         "--synthetic --scale S; default: 1)")
     p.add_argument("--list", nargs="?", const="all", metavar="PATTERN",
@@ -58,7 +58,7 @@ _PAPER_OPTIONS = (
      "dark (the object darker than its ground) or light"),
     ("--contrast", {"type": positive}, 1.0, "Weber contrast"),
     ("--speed", {"type": positive}, "the scene's own", "edge speed, px/frame"),
-    ("--fps", {"type": positive}, 20.0, "frame rate"))
+    ("--fps", {"type": frame_rate}, 20.0, "frame rate, 0.1 to 1000"))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -323,3 +323,23 @@ def test_bench_refuses_repeat_where_it_means_nothing(capsys, monkeypatch, extra)
         monkeypatch.delenv(name, raising=False)
     assert main(["bench", "--repeat", "3", *extra]) == 2
     assert "--repeat" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("bad, says", [
+    (["--frames", "10001"], "argument --frames: must be at most 10000"),
+    (["--size", "3000x3000"], "argument --size: frames must be at most 1920x1080"),
+    (["--fps", "inf"], "argument --fps: not a finite number"),
+    (["--worker-threads", "257"], "argument --worker-threads: must be at most 256")])
+def test_bench_refuses_sizes_and_counts_without_bound(capsys, bad, says):
+    with pytest.raises(SystemExit):
+        main(["bench", *bad])
+    assert says in capsys.readouterr().err
+
+
+def test_bench_refuses_a_clip_too_large_to_draw_at_once(capsys, monkeypatch):
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert main(["bench", "--size", "1920x1080", "--frames", "1000"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["asnn bench: 1000 frames at 1920x1080 are more than the bench draws at once: "
+                   "at most 58 at that size"]

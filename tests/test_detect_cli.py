@@ -402,3 +402,12 @@ def test_a_written_video_is_checked_by_reading_it_back(looming_video, tmp_path):
     cut.write_bytes(cut.read_bytes()[:-200])
     with pytest.raises(VideoError, match=f"cannot write {cut}: the video written does not open"):
         check_written(cut, len(scene.frames))
+
+
+@pytest.mark.parametrize("value, says", [("99999", "must be at most 256"),
+                                         ("0", "must be at least 1")])
+def test_threads_are_bounded(looming_video, capsys, value, says):
+    path, _ = looming_video  # 99999 could not be started, 3000 stalled the machine
+    with pytest.raises(SystemExit) as exit_:
+        main(["detect", str(path), "--threads", value])
+    assert exit_.value.code == 2 and f"argument --threads: {says}" in capsys.readouterr().err

@@ -658,3 +658,32 @@ def test_write_video_raises_where_the_file_lost_frames(tmp_path, monkeypatch):
     frames = make_scene("looming", size=(64, 64), frames=5).frames
     with pytest.raises(OSError, match="the video written holds 1 of 5 frames"):
         write_video(frames, tmp_path / "clip.avi")
+
+
+@pytest.mark.parametrize("option, value, says", [
+    ("--fps", "inf", "not a finite number: 'inf'"),  # hung in the video writer
+    ("--fps", "nan", "not a finite number: 'nan'"),
+    ("--fps", "5000", "a frame rate is 0.1 to 1000 frames a second, got '5000'"),
+    ("--fps", "0.01", "a frame rate is 0.1 to 1000 frames a second, got '0.01'"),
+    ("--contrast", "inf", "not a finite number: 'inf'"),
+    ("--speed", "inf", "not a finite number: 'inf'"),
+    ("--size", "3000x3000", "frames must be at most 1920x1080, got '3000x3000'"),
+])
+def test_scene_refuses_a_value_no_camera_has_with_one_line(tmp_path, capsys, option, value,
+                                                           says):
+    from cli.main import main
+
+    out = tmp_path / "clip.mp4"
+    with pytest.raises(SystemExit) as exit_:
+        main(["scene", "looming", str(out), option, value])
+    assert exit_.value.code == 2
+    assert f"argument {option}: {says}" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_scene_writes_at_the_bounds_of_its_frame_rate(tmp_path):
+    from cli.main import main
+
+    for fps in ("0.1", "1000"):
+        assert main(["scene", "looming", str(tmp_path / f"{fps}.avi"), "--fps", fps,
+                     "--size", "32x32"]) == 0

@@ -32,6 +32,9 @@ THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"
 DEFAULT_SIZES = ((128, 128), (320, 240), (640, 480))
 SCENE = "looming_over_stripes"
 TURN_ROUNDS = 3  # passes over the clip of the default and the published variant stepped in turn
+# pixels of the generated clip, which is drawn at once (in float64, some 26 bytes a pixel while
+# drawn): at most 60 frames at 1920x1080, as the paper's scenes at the largest size (3 GB)
+MAX_CLIP_PIXELS = 60 * 1920 * 1080
 
 
 def pin_threads() -> str:
@@ -137,6 +140,17 @@ def _state_bytes(model) -> int:
 PUBLISHED = "reference32"  # the published variant in float32: the default before `robust`
 
 
+def _check_clip_pixels(sizes, frames: int, warmup: int) -> None:
+    """ValueError if a clip of ``frames`` timed frames after ``warmup`` at one of ``sizes``
+    would be larger than :data:`MAX_CLIP_PIXELS`: it is drawn at once, before a frame is
+    timed."""
+    for w, h in sizes:
+        if (frames + warmup) * w * h > MAX_CLIP_PIXELS:
+            most = MAX_CLIP_PIXELS // (w * h) - warmup
+            raise ValueError(f"{frames} frames at {w}x{h} are more than the bench draws at "
+                             f"once: at most {most} at that size")
+
+
 def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
         models=("asnn", "lgmd1", "lgmd2"), straightforward: bool = True,
         progress=None, case: str | None = None, repeat: int = 1) -> dict:
@@ -161,7 +175,8 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     Raises
     ------
     ValueError
-        If a preset name is unknown, or ``repeat`` is below 1.
+        If a preset name is unknown, ``repeat`` is below 1, or a generated clip would have more
+        than :data:`MAX_CLIP_PIXELS` pixels.
     """
     if repeat < 1:
         raise ValueError(f"repeat must be at least 1, not {repeat}")
@@ -176,6 +191,8 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     if DEFAULT_PRESET in presets and PUBLISHED not in presets:
         presets.append(PUBLISHED)  # the default's cost is reported against it
     warmup = 2  # the first frame only primes the state
+    if case is None:
+        _check_clip_pixels(sizes, frames, warmup)
     if "asnn" in models:
         compile_kernels()
     rows = []

@@ -81,7 +81,7 @@ from .scene import Scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "Case", "SUITE_CASES", "EXTRA_CASES",
            "CASES", "suite_cases", "make_case", "check_variant", "check_driving_size",
-           "check_scale", "DRIVING_SIZE", "PLANAR_SIZE", "SCALES"]
+           "check_scale", "DRIVING_SIZE", "LARGEST_SIZE", "PLANAR_SIZE", "SCALES"]
 
 SUITE_VERSION = "6"
 GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "recession",
@@ -91,6 +91,8 @@ EXTRA_GROUPS = ("extra-threat", "extra-pass", "extra-clear")  # EXTRA_CASES (mod
 PLANAR_SIZE = (160, 120)
 DRIVING_SIZE = (192, 128)
 SCALES = (0.5, 8.0)  # the smallest and largest scale make_case renders every case at
+# the largest frame a generated scene is drawn at, held at once (the CLI's --size takes no more)
+LARGEST_SIZE = (1920, 1080)
 _CENTER = ((PLANAR_SIZE[0] - 1) / 2, (PLANAR_SIZE[1] - 1) / 2)
 
 
@@ -747,9 +749,9 @@ def check_driving_size(size) -> tuple[int, int]:
         width, height = (int(v) for v in size)
     except (TypeError, ValueError):
         raise ValueError(f"a driving size is (width, height), got {size!r}") from None
-    if not (64 <= width <= 1920 and 48 <= height <= 1080):
-        raise ValueError(f"driving scenes are rendered at 64x48 to 1920x1080, got "
-                         f"{width}x{height}")
+    if not (64 <= width <= LARGEST_SIZE[0] and 48 <= height <= LARGEST_SIZE[1]):
+        raise ValueError(f"driving scenes are rendered at 64x48 to "
+                         f"{LARGEST_SIZE[0]}x{LARGEST_SIZE[1]}, got {width}x{height}")
     return width, height
 
 
