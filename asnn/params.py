@@ -45,7 +45,15 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "preset", "preset_key", "preset_names"]
+__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "MAX_KERNEL", "preset", "preset_key",
+           "preset_names"]
+
+# Upper bounds of the sizes and counts, far above what the presets and the paper use (kernels
+# of 5 and 31 px, 2 and 4 filter stages, windows of a few frames) but below what allocates
+# gigabytes or stalls a frame (a kernel of 10001 px, 20000 filter stages of a frame each):
+MAX_KERNEL = 255  # px of a kernel's side (the frame must be at least as large)
+MAX_STAGES = 32  # stages of the temporal filters, each a frame of state
+MAX_FRAMES = 1000  # frames of a window or a track's memory (50 s at 20 fps)
 
 
 class ASNNParams(BaseModel):
@@ -67,11 +75,13 @@ class ASNNParams(BaseModel):
         1.0 / 255, gt=0, description="... and by less than this mean absolute difference "
         "([0, 1] intensity; of the block means, repeat_block)")
     repeat_block: int = Field(
-        8, ge=1, description="the repeat test compares the frames' means over blocks of this "
+        8, ge=1, le=MAX_KERNEL,
+        description="the repeat test compares the frames' means over blocks of this "
         "many pixels square: a camera's sensor noise, which differs between two copies of a "
         "repeated frame, averages out over a block; 1: every pixel")
     repeat_run: int = Field(
-        1, ge=1, description="at most this many repeats in a row: after that the scene has "
+        1, ge=1, le=MAX_FRAMES,
+        description="at most this many repeats in a row: after that the scene has "
         "stopped moving, and the model sees it")
 
     # --- input scale (robust addition) ---
@@ -129,14 +139,16 @@ class ASNNParams(BaseModel):
         description="semi-saturation of the contrast gain control: P <- s P / (this + "
         "g_pool * |P|); None switches the stage off (retina.contrast_gain_control)",
     )
-    contrast_pool: float = Field(8.0, gt=0, description="sigma of the pooling Gaussian, px")
+    contrast_pool: float = Field(8.0, gt=0, le=MAX_KERNEL / 4,
+                                 description="sigma of the pooling Gaussian, px")
     contrast_scale: float = Field(0.05, gt=0, description="s, the output scale")
 
     # --- bipolar cells (eqs. 2-4) ---
     dog_gain: float = Field(5.0, description="F, gain of the difference of Gaussians g_I")
     dog_sigma1: float = Field(1.0, gt=0, description="sigma_1 of g_I")
     dog_sigma2: float = Field(3.0, gt=0, description="sigma_2 of g_I")
-    dog_size: int = Field(5, ge=3, description="size of the square kernel g_I (odd)")
+    dog_size: int = Field(5, ge=3, le=MAX_KERNEL,
+                          description="size of the square kernel g_I (odd)")
     dog_normalisation: Literal["paper", "2d"] = Field(
         "paper",
         description="'paper': F/(sqrt(2 pi) sigma) as printed in eq. 3; "
@@ -153,8 +165,8 @@ class ASNNParams(BaseModel):
     leaky_input: bool = Field(
         False, description="z_0 integrates the input instead of being it (reference: six integrators)"
     )
-    n_fast: int = Field(2, ge=1, description="n_f, stages of the fast filter")
-    n_slow: int = Field(4, ge=2, description="n_s, stages of the slow filter")
+    n_fast: int = Field(2, ge=1, le=MAX_STAGES - 1, description="n_f, stages of the fast filter")
+    n_slow: int = Field(4, ge=2, le=MAX_STAGES, description="n_s, stages of the slow filter")
     dt: float = Field(0.05, gt=0, description="integration step, seconds per frame")
 
     # --- amacrine cells (eqs. 9-14) ---
@@ -163,7 +175,7 @@ class ASNNParams(BaseModel):
     cs_sigma: float = Field(0.3, gt=0, description="sigma_CS of the centre-surround kernel")
     cs_wavelength: float = Field(4.0, gt=0, description="lambda_CS of the centre-surround kernel")
     cs_phase: float = Field(0.0, description="psi_CS")
-    kernel_size: int = Field(5, ge=3, description="size of g_DS and g_CS (odd)")
+    kernel_size: int = Field(5, ge=3, le=MAX_KERNEL, description="size of g_DS and g_CS (odd)")
     kernel_extent: float = Field(
         1.0, gt=0, description="g_DS and g_CS are sampled on [-extent, extent] (SPEC ruling)"
     )
@@ -181,7 +193,7 @@ class ASNNParams(BaseModel):
 
     # --- attention (eqs. 21-28) ---
     attention_sigma: float = Field(8.0, gt=0, description="sigma_g of g_sigma")
-    attention_size: int = Field(31, ge=3, description="size of g_sigma (odd)")
+    attention_size: int = Field(31, ge=3, le=MAX_KERNEL, description="size of g_sigma (odd)")
     attention_normalised: bool = Field(
         False,
         description="False: g_sigma = exp(-r^2/2s^2)/(2 pi s^2) as printed (eq. 21); "
@@ -199,9 +211,11 @@ class ASNNParams(BaseModel):
         1.0, gt=0, description="u = u_scale * sum(G'); 255 undoes the [0,1] input scaling"
     )
     u_abs: bool = Field(False, description="sum |G'| instead of G' (reference)")
-    k_sp: float = Field(10.0, description="K_sp, spike gain")
-    t_sp: float = Field(0.7, description="T_sp, spike threshold on out(t)")
-    n_t: int = Field(4, ge=1, description="N_t, spike window in frames")
+    # out(t) is a sigmoid, in [0, 1]: a threshold outside it, or a gain past 100 (e^100
+    # spikes a frame), only overflows the spike count (eq. 33)
+    k_sp: float = Field(10.0, ge=0, le=100, description="K_sp, spike gain")
+    t_sp: float = Field(0.7, ge=0, le=1, description="T_sp, spike threshold on out(t)")
+    n_t: int = Field(4, ge=1, le=MAX_FRAMES, description="N_t, spike window in frames")
     t_c: float = Field(1.0, description="T_c, spike-rate threshold of the warning, Hz")
     spike_dt: float | None = Field(
         None, gt=0, description="frame period used in the spike rate; None means dt"
@@ -237,7 +251,8 @@ class ASNNParams(BaseModel):
         "is at most this many pixels a frame: the gradient fit's small-motion range "
         "(asnn.approach.looming.rim_scaled); None: at any motion")
     track_link: float = Field(1.0, gt=0, description="linking distance, in summed object sizes")
-    track_missed: int = Field(3, ge=0, description="frames a track survives unseen")
+    track_missed: int = Field(3, ge=0, le=MAX_FRAMES,
+                              description="frames a track survives unseen")
     track_smoothing: float = Field(
         0.5, gt=0, le=1, description="weight of a new expansion estimate in a track's average")
     track_box: float = Field(
@@ -271,7 +286,8 @@ class ASNNParams(BaseModel):
         "path that crosses the camera's own line of sight; a car whose path overlaps that of a "
         "car as wide (a partial-overlap collision) up to about 2.4; a car in the next lane 4 "
         "or more")
-    approach_frames: int = Field(3, ge=1, description="consecutive frames a track must pass "
+    approach_frames: int = Field(3, ge=1, le=MAX_FRAMES,
+                                 description="consecutive frames a track must pass "
                                  "the approach test (ttc, offset) before it counts")
     approach_seconds: float | None = Field(
         None, gt=0, description="fewer than approach_frames frames suffice where they already "

@@ -500,9 +500,16 @@ def sigmoid_output(u: float, n_cells: int) -> float:
     return 1.0 / (1.0 + math.exp(-abs(u) / n_cells))
 
 
+MAX_SPIKES = 2**31 - 1  # the spike count saturates here (eq. 33 grows without bound)
+
+
 def spike_count(out: float, k_sp: float, t_sp: float) -> int:
-    """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 33)."""
-    return int(math.floor(math.exp(k_sp * (out - t_sp))))
+    """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 33), at most :data:`MAX_SPIKES`:
+    past it, exp overflows a float (from an exponent of 710) and no warning changes."""
+    exponent = k_sp * (out - t_sp)
+    if exponent >= math.log(MAX_SPIKES):
+        return MAX_SPIKES
+    return int(math.floor(math.exp(exponent)))
 
 
 def spike_rate(spikes: Iterable[int], n_t: int, dt: float) -> float:

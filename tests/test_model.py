@@ -129,6 +129,18 @@ def test_a_model_of_something_else_than_parameters_is_refused(params, threads, m
     ({"tau": 1.0}, "dt \\* decay / tau is 3: the temporal filter \\(eq. 5\\) is unstable"),
     ({"dt": 0.5}, "unstable"),
     ({"cluster_eps": 1e9}, "less than or equal to 4096"),
+    # sizes and counts that allocated gigabytes or stalled (hostile-input trial)
+    ({"kernel_size": 10001}, "less than or equal to 255"),
+    ({"dog_size": 1000000001}, "less than or equal to 255"),
+    ({"attention_size": 257}, "less than or equal to 255"),
+    ({"n_slow": 20000}, "less than or equal to 32"),
+    ({"contrast_pool": 1e6}, "less than or equal to 63.75"),
+    ({"n_t": 10**9}, "less than or equal to 1000"),
+    ({"track_missed": 10**9}, "less than or equal to 1000"),
+    ({"approach_frames": 10**9}, "less than or equal to 1000"),
+    ({"repeat_block": 10**9}, "less than or equal to 255"),
+    ({"k_sp": 2000}, "less than or equal to 100"),  # math.exp overflowed in the spike count
+    ({"t_sp": -1000}, "greater than or equal to 0"),
 ])
 def test_parameters_that_would_silence_or_blow_up_the_model_are_refused(changes, message):
     with pytest.raises(ValidationError, match=message):
@@ -458,6 +470,14 @@ def test_where_the_attended_window_lies_compiles_no_second_form_of_a_kernel():
         model.step(frame, i / 25.0)
     assert [set(k.signatures) for k in kernels] == before
     assert all(len({s[0].dtype for s in k.signatures}) == len(k.signatures) for k in kernels)
+
+
+def test_the_spike_count_saturates_instead_of_overflowing():
+    from asnn.retina import MAX_SPIKES, spike_count
+
+    assert spike_count(0.9, 10.0, 0.7) == math.floor(math.exp(2.0))  # eq. 33 as it stands
+    assert spike_count(1.0, 2000.0, -1000.0) == MAX_SPIKES  # exp(2e6) overflows a float
+    assert spike_count(1.0, 21.0, 0.0) == math.floor(math.exp(21.0)) < MAX_SPIKES
 
 
 def test_help_on_the_parameters_shows_what_each_field_means():
