@@ -619,6 +619,17 @@ def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams
     return out, spikes, retina.spike_rate(window, params.n_t, params.window_dt)
 
 
+def _warmup_clip(min_side: int) -> np.ndarray:
+    """The frames :func:`compile_kernels` steps a model over: a small off-centre looming disk,
+    so that every stage, including the clustering, has work; 64x64, or as large as the
+    smallest frame the model takes (``min_side``: a preset with larger kernels)."""
+    from .stimuli import make_scene
+
+    side = max(64, min_side)
+    return make_scene("looming", size=(side, side), start=2, stop=12,
+                      center=(30.0 * side / 64, 33.0 * side / 64)).frames
+
+
 def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference"),
                     threads: int = 1) -> None:
     """Compile the optimised step's numba kernels, or load them from numba's on-disk cache
@@ -638,13 +649,9 @@ def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference
         As the models that will run (``ASNN(..., threads=N)``): with more than 1, the kernel of
         the model's worker threads too.
     """
-    from .stimuli import make_scene
-
-    # a small off-centre looming disk: every stage, including the clustering, has work
-    frames = make_scene("looming", size=(64, 64), start=2, stop=12, center=(30.0, 33.0)).frames
     for name in presets:
         with ASNN(name, threads=threads) as model:
-            for _ in model.stream((None, frame) for frame in frames):
+            for _ in model.stream((None, frame) for frame in _warmup_clip(model.params.min_side)):
                 pass
             # the looming fit of boxes larger than its grid, which the clip's objects are not:
             # area-averaged in the fit's kernel, and by whole factors (cv2.resize)

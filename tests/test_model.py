@@ -487,3 +487,10 @@ def test_help_on_the_parameters_shows_what_each_field_means():
     for name, info in ASNNParams.model_fields.items():
         assert f"    {name} : " in doc, name
     assert "treat a frame that hardly differs" in doc  # a description, not only the names
+
+
+def test_kernels_are_compiled_for_a_preset_whose_kernels_are_larger_than_the_warmup_clip():
+    # asnn detect --preset robust/attention_size=101 stopped here: the warm-up clip was 64x64
+    from asnn.model import compile_kernels
+
+    compile_kernels((asnn_preset("robust", attention_size=101),))
