@@ -296,7 +296,11 @@ def run(args: argparse.Namespace) -> int:
         try:
             output.close()
             _check_annotated(video, args.annotate, len(records))
+            if mcap is not None:
+                mcap.close()  # its index, written last: a full disk may show only here
         except _OutputError as exc:
+            return _fail(str(exc))
+        except OSError as exc:
             return _fail(str(exc))
         if failure is not None:
             progress.finish()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import base64
 import json
 import math
+import os
 import subprocess
 import sys
 import time
@@ -370,3 +371,28 @@ def test_asnn_foxglove_serves_on_127_0_0_1_and_fails_clearly_on_a_taken_port(pro
     server = procs("foxglove", "--port", "0", *zenoh_options)
     server.wait_line("foxglove on ws://127.0.0.1:")
     assert server.stop() == 0
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full here")
+def test_an_mcap_on_a_full_disk_stops_at_the_first_frame_it_could_not_write():
+    from asnn.io.foxglove_mcap import FoxgloveMcapWriter
+
+    frames = make_scene("looming", size=(96, 96)).frames
+    record = {"frame": 0, "t": 0.0, "u": 0.0, "collision": False, "targets": []}
+    writer = FoxgloveMcapWriter("/dev/full")
+    with pytest.raises(OSError, match="cannot write /dev/full: No space left on device"):
+        for i, frame in enumerate(frames):
+            writer.write(frame, record, i * 50_000_000)
+    assert writer.written < len(frames)
+    writer.close()  # said once, by write
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full here")
+def test_detect_mcap_on_a_full_disk_is_one_error_line(tmp_path, capsys):
+    from asnn.stimuli import write_video
+    from cli.main import main
+
+    video = write_video(make_scene("looming", size=(64, 64)).frames, tmp_path / "clip.avi")
+    assert main(["detect", str(video), "--mcap", "/dev/full"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cannot write /dev/full: No space left on device" in err[0]

@@ -13,6 +13,7 @@ optional ``id`` and ``ttc`` drawn where present.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -189,6 +190,57 @@ def _plain(value):
     return value
 
 
+class _FileSink:
+    """The MCAP's file as the SDK writes it, keeping the first error: the SDK's logging reports
+    none to its caller (a full disk would surface only when the file is closed), so
+    :class:`FoxgloveMcapWriter` checks :attr:`error` after each frame and stops at the first
+    that failed."""
+
+    def __init__(self, path: Path):
+        self._file = open(path, "wb")  # noqa: SIM115  (closed by FoxgloveMcapWriter.close)
+        self.error: OSError | None = None
+
+    def _kept(self, call, *args):
+        try:
+            return call(*args)
+        except OSError as exc:
+            self.error = self.error or exc
+            raise
+
+    def write(self, data) -> int:
+        return self._kept(self._file.write, data)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._kept(self._file.seek, offset, whence)
+
+    def tell(self) -> int:
+        return self._file.tell()
+
+    def flush(self) -> None:
+        self._kept(self._file.flush)
+
+    def close(self) -> None:
+        try:
+            self._kept(self._file.close)  # flushes what is buffered
+        except OSError:
+            pass  # kept in error
+
+
+# the SDK's logger of a message it could not write: one line for each after the first failure
+_SDK_LOGGER = "foxglove.log_sink_set"
+
+
+class _QuietAfterFailure(logging.Filter):
+    """Drops the SDK's complaints once a sink has failed: the writer says it in one error."""
+
+    def __init__(self, sink: _FileSink):
+        super().__init__()
+        self._sink = sink
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return self._sink.error is None
+
+
 class FoxgloveMcapWriter:
     """Writes a detector's frames and responses to an MCAP file for Foxglove.
 
@@ -203,7 +255,8 @@ class FoxgloveMcapWriter:
     Raises
     ------
     OSError
-        If the file cannot be created.
+        If the file cannot be created; from :meth:`write`, at the first frame the file could
+        not take (a full disk), and from :meth:`close`, if the file cannot be finished.
     """
 
     def __init__(self, path: str | Path, *, prefix: str = DEFAULT_TOPIC_PREFIX,
@@ -214,11 +267,18 @@ class FoxgloveMcapWriter:
         self.frame_id = frame_id or "camera"
         self.image_format = image_format
         self._context = foxglove.Context()  # only this file's channels reach this writer
+        self._sink = None
         try:
-            self._writer = foxglove.open_mcap(self.path, allow_overwrite=True,
-                                              context=self._context)
+            self._sink = _FileSink(self.path)
+            self._writer = foxglove.open_mcap(self._sink, context=self._context)
+        except OSError as exc:
+            raise OSError(f"cannot write {self.path}: {exc.strerror or exc}") from None
         except Exception as exc:  # the SDK's own error type: say it as an OSError
+            self._sink.close()
             raise OSError(f"cannot write {self.path}: {exc}") from None
+        self._failed = False
+        self._quiet = _QuietAfterFailure(self._sink)
+        logging.getLogger(_SDK_LOGGER).addFilter(self._quiet)
         prefix = prefix.rstrip("/")
         self.topics = {kind: f"{prefix}/{kind}"
                        for kind in ("image", "annotations", "response", "warning")}
@@ -245,13 +305,37 @@ class FoxgloveMcapWriter:
         self._response.log(message, log_time=stamp_ns)
         if record.get("collision"):
             self._warning.log(message, log_time=stamp_ns)
+        if self._sink.error is not None:
+            self._failed = True
+            raise OSError(f"cannot write {self.path}: "
+                          f"{self._sink.error.strerror or self._sink.error}")
         self.written += 1
 
     def close(self) -> None:
-        """Finish the file (its index and summary)."""
-        if self._writer is not None:
-            self._writer.close()
-            self._writer = None
+        """Finish the file (its index and summary); after a failed :meth:`write`, which said
+        why, only let it go.
+
+        Raises
+        ------
+        OSError
+            If the file cannot be finished (a full disk).
+        """
+        if self._writer is None:
+            return
+        writer, self._writer = self._writer, None
+        try:
+            writer.close()
+        except Exception as exc:  # the SDK's error type (RuntimeError)
+            failure = exc
+        else:
+            failure = None
+        finally:
+            self._sink.close()
+            logging.getLogger(_SDK_LOGGER).removeFilter(self._quiet)
+        error = self._sink.error or failure
+        if error is not None and not self._failed:
+            reason = error.strerror if isinstance(error, OSError) else None
+            raise OSError(f"cannot write {self.path}: {reason or error}")
 
     def __enter__(self) -> FoxgloveMcapWriter:
         return self
