@@ -107,6 +107,17 @@ def non_negative(value: str) -> float:
     return number
 
 
+def tolerance_seconds(value: str) -> float:
+    """Seconds of early tolerance: 0 to ``asnn.evaluation.scoring.MAX_EARLY_TOLERANCE_S``."""
+    from asnn.evaluation.scoring import MAX_EARLY_TOLERANCE_S
+
+    number = _number(value)
+    if not 0 <= number <= MAX_EARLY_TOLERANCE_S:
+        raise argparse.ArgumentTypeError(
+            f"must be 0 to {MAX_EARLY_TOLERANCE_S:g} seconds: {value!r}")
+    return number
+
+
 def frame_rate(value: str) -> float:
     """Frames a second, within :data:`FPS_RANGE`."""
     number = _number(value)

@@ -26,7 +26,7 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
 from asnn.params import preset_names
 
-from .arguments import count, finite, frame_size, preset_spec, whole
+from .arguments import count, finite, frame_size, preset_spec, tolerance_seconds, whole
 
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
@@ -104,10 +104,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "results: the reports, results, plots and figures an earlier run wrote "
                         "there, unchanged since, and this one did not write again are removed "
                         f"(each run's are listed in DIR/{MANIFEST}); nothing else is touched")
-    p.add_argument("--early-tolerance", type=float, metavar="SECONDS",
+    p.add_argument("--early-tolerance", type=tolerance_seconds, metavar="SECONDS",
                    help="with CLIPS_DIR: a first warning up to this long before the labelled "
-                        f"onset still counts as a hit (default: {scoring.EARLY_TOLERANCE_S}, for "
-                        "onsets judged by eye; the suite's onsets are exact and use 0)")
+                        f"onset still counts as a hit (0 to 60; default: "
+                        f"{scoring.EARLY_TOLERANCE_S}, for onsets judged by eye; the suite's "
+                        "onsets are exact and use 0)")
     p.add_argument("--warmup", type=int, default=scoring.WARMUP_FRAMES, metavar="FRAMES",
                    help="frames ignored at the start of each clip (default: %(default)s)")
     p.add_argument("--jobs", type=count, default=1, metavar="N",

@@ -510,3 +510,16 @@ def test_the_maps_figure_draws_motion_where_it_points_on_the_image():
         start, end = ax.transData.transform([(x, y), (x + u, y + v)])
         drawn = np.sign(np.round(end - start, 6))
         assert tuple(drawn) == screen, (phi, end - start)
+
+
+@pytest.mark.parametrize("value, says", [("1e308", "must be 0 to 60 seconds"),
+                                         ("-1", "must be 0 to 60 seconds"),
+                                         ("inf", "not a finite number")])
+def test_an_early_tolerance_beyond_reason_is_refused(tmp_path, capsys, value, says):
+    with pytest.raises(SystemExit):  # 1e308 s of frames overflowed an int in score_clip
+        main(["eval", str(tmp_path), "--early-tolerance", value])
+    assert f"argument --early-tolerance: {says}" in capsys.readouterr().err
+    label = {"file": "a.mp4", "collision": True, "onset_frame": 10, "contact_frame": 20,
+             "fps": 20.0}
+    with pytest.raises(ValueError, match="early_tolerance_s must be 0 to 60"):
+        scoring.score_clip([], label, early_tolerance_s=float(value))

@@ -67,6 +67,7 @@ __all__ = [
     "WARMUP_FRAMES",
     "CONTACT_SLACK_FRAMES",
     "EARLY_TOLERANCE_S",
+    "MAX_EARLY_TOLERANCE_S",
     "ClipScore",
     "first_warning",
     "score_clip",
@@ -84,6 +85,7 @@ __all__ = [
 WARMUP_FRAMES = 5
 CONTACT_SLACK_FRAMES = 2
 EARLY_TOLERANCE_S = 0.5
+MAX_EARLY_TOLERANCE_S = 60.0  # an onset judged by eye is off by a second or two, not a minute
 OUTCOMES = ("hit", "early", "late", "miss", "false", "quiet", "missing")
 
 
@@ -258,8 +260,12 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     ValueError
         If a collision label lacks its onset or contact frame, or its onset is after its
         contact (labels read from a file are checked in full before: :mod:`.labels`; this
-        check is the one a label built in code needs for a meaningful window).
+        check is the one a label built in code needs for a meaningful window), or the
+        tolerance is outside 0 to :data:`MAX_EARLY_TOLERANCE_S`.
     """
+    if not 0 <= early_tolerance_s <= MAX_EARLY_TOLERANCE_S:  # 1e308 s overflow an int
+        raise ValueError(f"early_tolerance_s must be 0 to {MAX_EARLY_TOLERANCE_S:g}, got "
+                         f"{early_tolerance_s!r}")
     clip = clip_name(label)
     collision = bool(label.get("collision"))
     first, count = first_warning(records, warmup)
