@@ -4,6 +4,7 @@ starts and checks them."""
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -69,6 +70,18 @@ def test_good_labels_come_back_unchanged_in_either_form(tmp_path):
                               "track.2.1: Field required; and 57 more"),
     ({"ttc": [1.0] * 59 + [-0.5]}, "never negative"),
     ({"topic": ""}, "topic"),
+    # taken quietly before the hostile-input trial: a bool or a string for a number, a frame
+    # rate no camera has, a centre outside the frame the label gives
+    ({"onset_frame": True}, "onset_frame: Input should be a valid integer"),
+    ({"contact_frame": "40"}, "contact_frame: Input should be a valid integer"),
+    ({"frames": 60.0}, "frames: Input should be a valid integer"),
+    ({"fps": "20"}, "fps: Input should be a valid number"),
+    ({"fps": True}, "fps: Input should be a valid number"),
+    ({"fps": 1e308}, "fps: Input should be less than or equal to 1000"),
+    ({"fps": 1e-300}, "fps: Input should be greater than or equal to 1"),
+    ({"width": 64, "height": 48, "center": [70.0, 20.0]},
+     "center (70, 20) is outside the 64x48 frame"),
+    ({"width": 64, "height": 48, "center": [10.0, -1.0]}, "outside the 64x48 frame"),
 ])
 def test_a_refused_entry_is_named_with_its_field(change, reason):
     # a None in the change leaves the field out
@@ -265,3 +278,21 @@ def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
     assert "tiny.avi: its 30x30 frames are smaller than the model's 31x31 kernels" in out
     assert "tiny.avi: 3 frames: asnn eval ignores the first 5" in out
     assert "cut.avi:" in out and "where the file states 40: it may be cut" in out
+
+
+@pytest.mark.parametrize("text, says", [
+    ("[" * 100000 + "]" * 100000, "labels.json: not JSON a labels file holds (nested too deeply)"),
+    ("[]", "labels.json: no clip labels in it"),
+    ('{"clips": []}', "labels.json: no clip labels in it")])
+def test_a_labels_file_nested_too_deeply_or_empty_is_one_error_line(tmp_path, capsys, text,
+                                                                    says):
+    (tmp_path / "labels.json").write_text(text)
+    with pytest.raises(ValueError, match=re.escape(says)):
+        load_labels(tmp_path / "labels.json")
+    assert main(["eval", str(tmp_path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0]
+    if text.startswith("[["):  # asnn label reads it too (an empty list is a folder to start)
+        assert main(["label", str(tmp_path)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and says in err[0]

@@ -25,30 +25,38 @@ import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from pydantic import (BaseModel, ConfigDict, Field, StrictBool, ValidationError,
+from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, ValidationError,
                       field_validator, model_validator)
 
 __all__ = ["ClipLabel", "check_labels", "label_problem", "load_labels", "mismatches",
            "read_entries", "result_name", "unlabelled"]
 
 
+FPS_RANGE = (1.0, 1000.0)  # frame rates a clip's camera runs at; outside, a typing mistake
+
+
 class ClipLabel(BaseModel):
-    """One clip's label: the fields the scoring reads, checked; any others kept as given."""
+    """One clip's label: the fields the scoring reads, checked; any others kept as given.
+
+    Numbers are taken as JSON writes them, not converted: ``true`` or ``"20"`` for a frame is
+    a mistake to name, not the frame 1 or 20.
+    """
 
     model_config = ConfigDict(extra="allow", allow_inf_nan=False, frozen=True)
 
     file: str = Field(min_length=1, description="the clip, relative to the clips' folder")
-    fps: float = Field(gt=0, description="the clip's frame rate: the early tolerance's frames "
-                       "and the clip's duration come from it")
+    fps: float = Field(strict=True, ge=FPS_RANGE[0], le=FPS_RANGE[1],
+                       description="the clip's frame rate: the early tolerance's frames and the "
+                       "clip's duration come from it")
     collision: StrictBool | None = Field(None, description="whether the clip ends in a "
                                          "collision (required: null only in an unfinished entry)")
-    onset_frame: int | None = Field(None, ge=0, description="collision: the first frame on a "
-                                    "collision course")
-    contact_frame: int | None = Field(None, ge=0, description="collision: the frame of contact "
-                                      "(or of the closest approach)")
-    frames: int | None = Field(None, ge=1, description="the clip's length, frames")
-    width: int | None = Field(None, ge=1)
-    height: int | None = Field(None, ge=1)
+    onset_frame: StrictInt | None = Field(None, ge=0, description="collision: the first frame "
+                                          "on a collision course")
+    contact_frame: StrictInt | None = Field(None, ge=0, description="collision: the frame of "
+                                            "contact (or of the closest approach)")
+    frames: StrictInt | None = Field(None, ge=1, description="the clip's length, frames")
+    width: StrictInt | None = Field(None, ge=1)
+    height: StrictInt | None = Field(None, ge=1)
     center: tuple[float, float] | None = Field(None, description="the object's centre at "
                                                "contact, pixels")
     track: list[tuple[float, float] | None] | None = Field(None, description="the object's "
@@ -81,6 +89,11 @@ class ClipLabel(BaseModel):
         elif onset is not None or contact is not None:
             raise ValueError("a label without a collision has no onset_frame or contact_frame "
                              "(null)")
+        if self.center is not None and self.width is not None and self.height is not None:
+            x, y = self.center
+            if not (0 <= x <= self.width and 0 <= y <= self.height):
+                raise ValueError(f"center ({x:g}, {y:g}) is outside the {self.width}x"
+                                 f"{self.height} frame")
         for key in self.model_extra or {}:  # a misspelt field would be kept and never read
             near = difflib.get_close_matches(key, _FIELDS, n=1, cutoff=0.75)
             if near:
@@ -181,9 +194,13 @@ def load_labels(path: str | Path) -> list[dict]:
     OSError
         If the file cannot be read.
     ValueError
-        If it is not JSON, holds neither form, or an entry is refused (:func:`check_labels`).
+        If it is not JSON, holds neither form, holds no entry (nothing to evaluate), or an
+        entry is refused (:func:`check_labels`).
     """
-    return check_labels(read_entries(path), str(path))
+    entries = read_entries(path)
+    if not entries:
+        raise ValueError(f"{path}: no clip labels in it")
+    return check_labels(entries, str(path))
 
 
 def read_entries(path: str | Path) -> list:
@@ -200,6 +217,8 @@ def read_entries(path: str | Path) -> list:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not JSON ({exc})") from None
+    except RecursionError:  # lists in lists, thousands deep: Python's parser gives up
+        raise ValueError(f"{path}: not JSON a labels file holds (nested too deeply)") from None
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not UTF-8 text (save it as UTF-8)") from None
     if isinstance(data, dict):
