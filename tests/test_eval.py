@@ -523,3 +523,23 @@ def test_an_early_tolerance_beyond_reason_is_refused(tmp_path, capsys, value, sa
              "fps": 20.0}
     with pytest.raises(ValueError, match="early_tolerance_s must be 0 to 60"):
         scoring.score_clip([], label, early_tolerance_s=float(value))
+
+
+@pytest.mark.parametrize("spec, says", [
+    ("asnn:robust/top_k=true", "top_k: Input should be a valid integer"),  # ran as 1
+    ("asnn:robust/top_k=1.0", "top_k: Input should be a valid integer"),
+    ("asnn:robust/stabilise=1", "stabilise: Input should be a valid boolean"),  # ran as true
+    ("asnn:robust/skip_repeats=0", "skip_repeats: Input should be a valid boolean")])
+def test_a_spec_value_of_another_type_is_refused_not_converted(spec, says):
+    from asnn.evaluation.runs import parse_detector
+
+    with pytest.raises(ValueError, match=says):
+        parse_detector(spec)
+    assert parse_detector("asnn:robust/gain=5/stabilise=false").params.gain == 5.0  # int: float
+
+
+def test_detect_refuses_a_preset_value_of_another_type(capsys):
+    with pytest.raises(SystemExit):
+        main(["detect", "clip.mp4", "--preset", "robust/top_k=true"])
+    assert ("argument --preset: 'robust/top_k=true': top_k: Input should be a valid integer"
+            in capsys.readouterr().err)

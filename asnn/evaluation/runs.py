@@ -148,7 +148,10 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
             raise ValueError(f"{spec!r}: an override is name=value, got {item!r}")
         overrides.append((key.strip(), _value(value)))
     try:
-        preset(preset_name, **dict(overrides))  # raises for an unknown preset or a bad value
+        # as preset(name, **overrides) checks them, but strictly: a spec's true is no top_k
+        # of 1, nor its 1 a stabilise of true
+        base = preset(preset_name)  # raises for an unknown preset
+        ASNNParams.model_validate({**base.model_dump(), **dict(overrides)}, strict=True)
     except ValidationError as exc:
         error = exc.errors()[0]
         where = f"{error['loc'][0]}: " if error["loc"] else ""  # a check of the whole set
