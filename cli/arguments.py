@@ -19,6 +19,14 @@ MAX_FRAMES = 10_000
 MAX_THREADS = 256
 
 
+def nonempty_path(value: str) -> str:
+    """A file or folder name, not empty: an empty one would be taken as no output at all, or
+    as the current folder."""
+    if not value:
+        raise argparse.ArgumentTypeError("an empty path")
+    return value
+
+
 def frame_size(text: str) -> tuple[int, int]:
     """``WxH`` (or ``N`` for NxN) as (width, height); at least 32x32, a round size just above
     the smallest frame the model takes (31x31, ``ASNNParams.min_side``), and at most 1920x1080,

@@ -23,7 +23,7 @@ from asnn.io.video import VideoError, check_written, cut_short, quiet_writer
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import SLOW_FPS, preset_names
-from cli.arguments import preset_spec, threads
+from cli.arguments import nonempty_path, preset_spec, threads
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Run a detector over a video file or an image topic of a "
                                    "ROS 2 bag (MCAP): one JSON object per frame with --jsonl, "
                                    "and a summary line on stderr.")
-    p.add_argument("video", metavar="VIDEO",
+    p.add_argument("video", type=nonempty_path, metavar="VIDEO",
                    help="any video OpenCV reads, or a ROS 2 bag: BAG.mcap[#TOPIC] (the 'ros' "
                         "extra)")
     p.add_argument("--topic", metavar="NAME",
@@ -43,19 +43,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help=f"ASNN parameter preset ({', '.join(preset_names())}; default: "
                         "%(default)s), with any fields of asnn.params.ASNNParams changed after "
                         "slashes, as asnn eval's specs take them: robust/top_k=0")
-    p.add_argument("--jsonl", metavar="PATH|-", help="write one JSON object per frame ('-': stdout)")
-    p.add_argument("--annotate", metavar="OUT.mp4", help="write the input with overlays")
-    p.add_argument("--plot", metavar="OUT.png", help="plot u(t) and the spike rate")
+    p.add_argument("--jsonl", type=nonempty_path, metavar="PATH|-",
+                   help="write one JSON object per frame ('-': stdout)")
+    p.add_argument("--annotate", type=nonempty_path, metavar="OUT.mp4",
+                   help="write the input with overlays")
+    p.add_argument("--plot", type=nonempty_path, metavar="OUT.png",
+                   help="plot u(t) and the spike rate")
     p.add_argument("--threads", type=threads, default=None, metavar="N",
                    help="threads the ASNN model uses for the stream, besides decoding and "
                         "output (default: the cores available; the results are the same "
                         "whatever the number; at most 256: more than the cores only take "
                         "turns, and thousands stall the machine)")
-    p.add_argument("--tracks", metavar="PATH|-",
+    p.add_argument("--tracks", type=nonempty_path, metavar="PATH|-",
                    help="write every tracked object with its approach test, one JSON object per "
                         "frame ('-': stdout): why the model warned, or did not (presets that "
                         "track objects, e.g. default)")
-    p.add_argument("--mcap", metavar="OUT.mcap",
+    p.add_argument("--mcap", type=nonempty_path, metavar="OUT.mcap",
                    help="write the frames, targets, warnings and response numbers as an MCAP "
                         "for Foxglove (docs/foxglove.md; the 'ros' extra)")
     p.set_defaults(func=run)

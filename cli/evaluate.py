@@ -26,7 +26,8 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
 from asnn.params import preset_names
 
-from .arguments import count, finite, frame_size, preset_spec, tolerance_seconds, whole
+from .arguments import (count, finite, frame_size, nonempty_path, preset_spec, tolerance_seconds,
+                        whole)
 
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
@@ -58,7 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "labelled suite of generated scenes (--synthetic) and score them (hit / "
                     "early / late / miss, false alarms, lead time, localisation), or regenerate "
                     "the paper's synthetic figures (--paper).")
-    p.add_argument("clips_dir", nargs="?", metavar="CLIPS_DIR",
+    p.add_argument("clips_dir", nargs="?", type=nonempty_path, metavar="CLIPS_DIR",
                    help="directory of the clips (not with --synthetic or --paper)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--synthetic", action="store_true",
@@ -75,7 +76,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --held-out: how thresholds that tie on hits and false alarms are "
                         "told apart: " + "; ".join(f"{k}: {v}" for k, v in TIE_BREAKS.items())
                         + " (default: %(default)s)")
-    p.add_argument("--labels", metavar="FILE", help="labels file (default: CLIPS_DIR/labels.json)")
+    p.add_argument("--labels", type=nonempty_path, metavar="FILE",
+                   help="labels file (default: CLIPS_DIR/labels.json)")
     p.add_argument("--detectors", "--models", dest="detectors", type=_detectors,
                    default=list(DEFAULT_DETECTORS), metavar="LIST",
                    help="comma-separated detector specs: asnn, asnn:PRESET, lgmd1, lgmd2 "
@@ -99,7 +101,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(other textures, sensor noise and roadside objects; the same geometry, "
                         "motion and labels; README, 'fresh scenery') (default: 0, the suite as "
                         "it is)")
-    p.add_argument("--out", metavar="DIR", default="eval-out",
+    p.add_argument("--out", type=nonempty_path, metavar="DIR", default="eval-out",
                    help="output directory (default: %(default)s); it then holds this run's "
                         "results: the reports, results, plots and figures an earlier run wrote "
                         "there, unchanged since, and this one did not write again are removed "

@@ -22,6 +22,7 @@ from asnn.evaluation.scoring import WARMUP_FRAMES
 from asnn.io.sources import SourceError, open_source
 from asnn.io.video import cut_short
 from asnn.params import preset
+from cli.arguments import nonempty_path
 
 # what OpenCV's FFmpeg backend commonly reads (dashcams write .ts and .mts too); bags (.mcap)
 # need a topic and are labelled by hand
@@ -38,8 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "in by hand), and list "
                     "what is left to do. Exit status 0 when every entry is ready for asnn eval, "
                     "1 when something is listed.")
-    p.add_argument("clips_dir", metavar="CLIPS_DIR", help="the folder of the clips")
-    p.add_argument("--labels", metavar="FILE",
+    p.add_argument("clips_dir", type=nonempty_path, metavar="CLIPS_DIR",
+                   help="the folder of the clips")
+    p.add_argument("--labels", type=nonempty_path, metavar="FILE",
                    help="the labels file to start or check (default: CLIPS_DIR/labels.json)")
     p.set_defaults(func=run)
 

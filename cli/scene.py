@@ -17,7 +17,7 @@ from asnn.evaluation.labels import read_entries
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 from asnn.stimuli.suite import CASES, make_case, suite_cases
 
-from .arguments import finite, frame_rate, frame_size, positive, whole
+from .arguments import finite, frame_rate, frame_size, nonempty_path, positive, whole
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "the labelled suite (--case), as a video file or a ROS 2 "
                                    "bag. Options may come before, between or after NAME and "
                                    "OUT.")
-    p.add_argument("args", nargs="*", metavar="[NAME] OUT",
+    p.add_argument("args", nargs="*", type=nonempty_path, metavar="[NAME] OUT",
                    help=f"a paper scene ({', '.join(SCENE_NAMES)}) and the file to write: a "
                         "video (.mp4 or .avi) or a ROS 2 bag (.mcap: sensor_msgs/msg/Image mono8 "
                         "on /camera/image_raw; the 'ros' extra); with --case only OUT. Its "
@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "drives outside it) and exit")
     for flag, options, default, what in _PAPER_OPTIONS:
         p.add_argument(flag, **options, help=f"paper scenes only: {what} (default: {default})")
-    p.add_argument("--labels", metavar="FILE",
+    p.add_argument("--labels", type=nonempty_path, metavar="FILE",
                    help="also enter the clip's label in FILE, a labels.json for asnn eval: added, "
                         "or replacing the entry of the same file, named relative to FILE's folder "
                         "(OUT must be in that folder or below it)")

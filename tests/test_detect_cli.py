@@ -411,3 +411,14 @@ def test_threads_are_bounded(looming_video, capsys, value, says):
     with pytest.raises(SystemExit) as exit_:
         main(["detect", str(path), "--threads", value])
     assert exit_.value.code == 2 and f"argument --threads: {says}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args, says", [
+    (["{video}", "--jsonl", ""], "argument --jsonl: an empty path"),  # was ignored
+    (["{video}", "--annotate", ""], "argument --annotate: an empty path"),
+    ([""], "argument VIDEO: an empty path")])  # was '.: is a folder'
+def test_an_empty_path_is_refused(looming_video, capsys, args, says):
+    video, _ = looming_video
+    with pytest.raises(SystemExit) as exit_:
+        main(["detect", *(a.format(video=video) for a in args)])
+    assert exit_.value.code == 2 and says in capsys.readouterr().err

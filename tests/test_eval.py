@@ -543,3 +543,11 @@ def test_detect_refuses_a_preset_value_of_another_type(capsys):
         main(["detect", "clip.mp4", "--preset", "robust/top_k=true"])
     assert ("argument --preset: 'robust/top_k=true': top_k: Input should be a valid integer"
             in capsys.readouterr().err)
+
+
+def test_eval_refuses_an_empty_out(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # where '' wrote its results
+    with pytest.raises(SystemExit):
+        main(["eval", "--paper", "--out", ""])
+    assert "argument --out: an empty path" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
