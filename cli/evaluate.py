@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path, PurePosixPath
@@ -189,6 +190,21 @@ def _replace_previous_run(out: Path, since: float) -> None:
                                         in sorted(written.items())), encoding="utf-8")
 
 
+def _out_problem(out: Path) -> str | None:
+    """Why ``--out`` cannot be the results' folder, found before anything runs, or None: a file
+    there, or a file or a folder without write access where it would be made."""
+    if out.exists():
+        return None if out.is_dir() else f"--out {out}: not a folder"
+    parent = out.parent
+    while not parent.exists():  # the nearest folder there is, where the rest is made
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"--out {out}: {parent} is not a folder"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return f"--out {out}: cannot make it in {parent} (no write access)"
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     """``asnn eval``; the --out folder then holds this run's files only (its earlier runs'
     others are removed, :func:`_replace_previous_run`)."""
@@ -226,6 +242,10 @@ def _evaluate(args: argparse.Namespace) -> int:
     if misplaced:
         print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
               file=sys.stderr)
+        return 2
+    problem = _out_problem(Path(args.out))
+    if problem is not None:  # before the first clip runs, not when its results are written
+        print(f"asnn eval: {problem}", file=sys.stderr)
         return 2
     tolerance = (scoring.EARLY_TOLERANCE_S if args.early_tolerance is None
                  else args.early_tolerance)

@@ -551,3 +551,16 @@ def test_eval_refuses_an_empty_out(tmp_path, capsys, monkeypatch):
         main(["eval", "--paper", "--out", ""])
     assert "argument --out: an empty path" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("out, says", [("afile.txt", "--out {tmp}/afile.txt: not a folder"),
+                                       ("afile.txt/sub",
+                                        "--out {tmp}/afile.txt/sub: {tmp}/afile.txt is not a "
+                                        "folder")])
+def test_eval_refuses_an_out_that_cannot_be_a_folder_before_it_runs(tmp_path, capsys, out,
+                                                                     says):
+    (tmp_path / "afile.txt").write_text("mine\n")
+    assert main(["eval", "--paper", "--out", str(tmp_path / out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"asnn eval: {says.format(tmp=tmp_path)}"]
+    assert (tmp_path / "afile.txt").read_text() == "mine\n"
