@@ -19,7 +19,8 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import parse_detector
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import SourceError, open_source, split_topic
-from asnn.io.video import VideoError, check_written, cut_short, quiet_writer
+from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_short,
+                           quiet_writer)
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import SLOW_FPS, preset_names
@@ -129,6 +130,9 @@ def _output_problem(path: str | None, flag: str) -> str | None:
         return f"{flag} {path}: no folder {target.parent}"
     if flag == "--plot" and target.suffix.lower() not in PLOT_FORMATS:
         return f"--plot {path}: name the format by its extension ({', '.join(PLOT_FORMATS)})"
+    if flag == "--annotate" and target.suffix.lower() not in WRITABLE_SUFFIXES:
+        return (f"--annotate {path}: name the format by its extension "
+                f"({', '.join(WRITABLE_SUFFIXES)})")
     return None
 
 

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from asnn.evaluation.labels import read_entries
+from asnn.io.video import WRITABLE_SUFFIXES
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 from asnn.stimuli.suite import CASES, make_case, suite_cases
 
@@ -93,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
                 return 2
             given = {flag[2:]: getattr(args, flag[2:]) for flag, *_ in _PAPER_OPTIONS}
             scene = make_scene(name, **{k: v for k, v in given.items() if v is not None})
+        if Path(out).suffix.lower() not in (*WRITABLE_SUFFIXES, ".mcap"):  # before drawing
+            raise ValueError(f"{out}: name the format by its extension: a video "
+                             f"({', '.join(WRITABLE_SUFFIXES)}) or a bag (.mcap)")
         entries = _label_entries(Path(args.labels), Path(out)) if args.labels else None
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         if out.lower().endswith(".mcap"):

@@ -326,7 +326,8 @@ def test_an_annotated_video_that_cannot_be_written_is_one_error_line(looming_vid
     target = tmp_path / "ann.txt"  # a folder that is there, a container OpenCV cannot write
     assert main(["detect", str(path), "--annotate", str(target), "--threads", threads]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"asnn detect: cannot write {target}"]
+    assert err == [f"asnn detect: --annotate {target}: name the format by its extension "
+                   "(.avi, .m4v, .mkv, .mov, .mp4)"]
 
 
 def test_wide_vectors_only_where_the_processor_has_them():

@@ -687,3 +687,14 @@ def test_scene_writes_at_the_bounds_of_its_frame_rate(tmp_path):
     for fps in ("0.1", "1000"):
         assert main(["scene", "looming", str(tmp_path / f"{fps}.avi"), "--fps", fps,
                      "--size", "32x32"]) == 0
+
+
+def test_scene_names_the_extensions_it_writes_before_drawing(tmp_path, capsys):
+    from cli.main import main
+
+    out = tmp_path / "x.txt"  # was an OpenCV dump
+    assert main(["scene", "looming", str(out)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"asnn scene: {out}: name the format by its extension: a video (.avi, .m4v, .mkv, .mov, "
+        ".mp4) or a bag (.mcap)"]
+    assert not out.exists()

@@ -11,11 +11,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["DEFAULT_FPS", "MAX_FPS", "VideoError", "VideoClip", "check_written", "cut_short",
-           "open_video", "quiet_writer", "read_frames", "stated_fps"]
+__all__ = ["DEFAULT_FPS", "MAX_FPS", "WRITABLE_SUFFIXES", "VideoError", "VideoClip",
+           "check_written", "cut_short", "open_video", "quiet_writer", "read_frames",
+           "stated_fps"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 MAX_FPS = 240.0  # above this a stated rate is a container's time base, not a camera's
+# the containers our video writers (OpenCV's, mp4v or MJPG) write and read back; OpenCV takes
+# the container from the name, and refuses others (.txt) or writes what it cannot read (.mpg)
+WRITABLE_SUFFIXES = (".avi", ".m4v", ".mkv", ".mov", ".mp4")
 
 # FFmpeg prints its own decoder complaints on stderr; our errors say it in one line instead.
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
