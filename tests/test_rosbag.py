@@ -601,3 +601,19 @@ def test_camera_replays_a_bag_at_its_recorded_pace(zenoh_net, tmp_path, looming)
     # a lower bound only (a busy machine adds delay): 5 frames at the nominal 20 fps would take
     # 0.2 s; the recorded pace, pause included, takes 0.45 s
     assert published == len(stamps) and time.monotonic() - start >= 0.44
+
+
+def test_header_stamps_that_go_back_are_one_error_line(tmp_path, looming, capsys):
+    messages = []
+    for i, s in enumerate([0.0, 0.05, 0.1, 0.02, 0.15]):  # the fourth goes back 0.08 s
+        m = raw_message(looming.frames[i], "mono8")
+        ns = START_NS + round(s * 1e9)
+        m["header"]["stamp"] = {"sec": ns // 10**9, "nanosec": ns % 10**9}
+        messages.append(m)
+    bag = write_messages(tmp_path / "back.mcap", {"/c": (rosbag.IMAGE, messages)})
+    with pytest.raises(SourceError, match="message 3: its header stamp is 0.08 s before"):
+        list(rosbag.open_bag(str(bag)).frames())
+    assert main(["detect", str(bag), "--jsonl", str(tmp_path / "out.jsonl")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a camera's stamps never go back" in err[0]
+    assert len((tmp_path / "out.jsonl").read_text().splitlines()) == 3  # the frames before

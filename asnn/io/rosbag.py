@@ -585,15 +585,31 @@ class BagClip:
             Called for a message that cannot be used (it is skipped) and for a cut or corrupt
             file (the frames end there). Without it, these raise :class:`SourceError`.
         """
+        latest = 0  # the latest header stamp taken
         for index, (message, log_time) in enumerate(self._messages(on_error)):
             try:
                 image = self._decode(message, index)
+                latest = self._check_stamp(message, index, latest)
             except SourceError as exc:
                 if on_error is None:
                     raise
                 on_error(exc.reason, str(exc))
                 continue
             yield (self._time_ns(message, log_time) - self.start_ns) / 1e9, image
+
+    def _check_stamp(self, message, index: int, latest: int) -> int:
+        """The latest header stamp with this message's; SourceError where its stamp goes back
+        from the latest: a camera's clock only advances, and frames timed backwards would give
+        the targets' expansion and time to contact the wrong sign. (A stamp left unset, zero,
+        takes the log time instead: that is not checked.)"""
+        stamp = _stamp_ns(message) if self.clock == "header" else 0
+        if not stamp:
+            return latest
+        if stamp < latest:
+            raise SourceError(f"{self.path}: {self.topic} message {index}: its header stamp is "
+                              f"{(latest - stamp) / 1e9:g} s before an earlier frame's; a "
+                              "camera's stamps never go back", "stamp-backwards")
+        return stamp
 
 
 def _stamp_ns(message) -> int:
