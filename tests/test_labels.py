@@ -281,7 +281,7 @@ def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("text, says", [
-    ("[" * 100000 + "]" * 100000, "labels.json: not JSON a labels file holds (nested too deeply)"),
+    ("[" * 100000 + "]" * 100000, "labels.json: not JSON (nested too deeply)"),
     ("[]", "labels.json: no clip labels in it"),
     ('{"clips": []}', "labels.json: no clip labels in it")])
 def test_a_labels_file_nested_too_deeply_or_empty_is_one_error_line(tmp_path, capsys, text,

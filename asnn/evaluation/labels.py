@@ -218,7 +218,7 @@ def read_entries(path: str | Path) -> list:
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not JSON ({exc})") from None
     except RecursionError:  # lists in lists, thousands deep: Python's parser gives up
-        raise ValueError(f"{path}: not JSON a labels file holds (nested too deeply)") from None
+        raise ValueError(f"{path}: not JSON (nested too deeply)") from None
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not UTF-8 text (save it as UTF-8)") from None
     if isinstance(data, dict):
