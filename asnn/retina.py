@@ -164,6 +164,20 @@ def dog_kernel(gain: float, sigma1: float, sigma2: float, size: int,
 
     ``normalisation='paper'`` uses F/(sqrt(2 pi) sigma) as printed; ``'2d'`` uses the
     two-dimensional F/(2 pi sigma^2) of the published implementation. Neither is renormalised.
+
+    Parameters
+    ----------
+    gain : float
+        F.
+    sigma1, sigma2 : float
+        The centre's and the surround's standard deviations, pixels.
+    size : int
+        The kernel's side (odd).
+    normalisation : {'paper', '2d'}
+
+    Returns
+    -------
+    g_I : ndarray (size, size)
     """
     r = size // 2
     y, x = np.mgrid[-r:r + 1, -r:r + 1].astype(np.float64)
@@ -184,6 +198,13 @@ def dog_norms(sigma1: float, sigma2: float, normalisation: str) -> tuple[float, 
 
 def bipolar(p: np.ndarray, dog: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """ON and OFF bipolar inputs B+^0, B-^0: half-wave rectification then g_I (paper eqs. 2, 4).
+
+    Parameters
+    ----------
+    p : ndarray (H, W)
+        Photoreceptor activation P.
+    dog : ndarray (k, k)
+        g_I (:func:`dog_kernel`).
 
     Returns
     -------
@@ -230,7 +251,21 @@ def temporal_filter_step(stages: np.ndarray, x: np.ndarray, rate: float, transmi
 
 
 def temporal_readout(stages: np.ndarray, gain: float, n: int) -> np.ndarray:
-    """Temporal filter output L(K, n, z_0) = K (z_n - z_{n+1}) (paper eq. 6)."""
+    """Temporal filter output L(K, n, z_0) = K (z_n - z_{n+1}) (paper eq. 6).
+
+    Parameters
+    ----------
+    stages : ndarray (n_s + 2, H, W)
+        The cascade z_0..z_{n_s+1} of :func:`temporal_filter_step`.
+    gain : float
+        K.
+    n : int
+        The stage read: n_f for the fast response B^f, n_s for the slow B^s.
+
+    Returns
+    -------
+    ndarray (H, W)
+    """
     return gain * (stages[n] - stages[n + 1])
 
 
@@ -258,6 +293,17 @@ def gabor_pair(theta: float, sigma: float, wavelength: float, size: int,
     function's orientation (4 - k) mod 8, so all its sums, maxima and masks are the same and
     only the x component of its motion vectors has the opposite sign.
 
+    Parameters
+    ----------
+    theta : float
+        Orientation, radians.
+    sigma, wavelength : float
+        The envelope's standard deviation and lambda, in the sampled coordinates.
+    size : int
+        The kernel's side (odd).
+    extent : float
+        The samples span [-extent, extent] in x and y (SPEC ruling).
+
     Returns
     -------
     even, odd : ndarray (size, size)
@@ -276,6 +322,19 @@ def center_surround_kernel(sigma: float, wavelength: float, phase: float, size: 
 
     ``g_CS = 1 - exp(-r^2 / (2 sigma^2)) cos(2 pi r^2 / lambda + psi)``; with psi = 0 the centre
     weight is 0 and the surround approaches 1.
+
+    Parameters
+    ----------
+    sigma, wavelength, phase : float
+        sigma_CS, lambda_CS and psi_CS, in the sampled coordinates.
+    size : int
+        The kernel's side (odd).
+    extent : float
+        The samples span [-extent, extent] in x and y (SPEC ruling).
+
+    Returns
+    -------
+    g_CS : ndarray (size, size)
     """
     x, y = _grid(size, extent)
     r2 = x * x + y * y
@@ -341,7 +400,19 @@ def motion_components(v: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def center_surround_inhibition(response: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """SAC inhibition S = relu(B (*) g_CS) (paper eqs. 12-14)."""
+    """SAC inhibition S = relu(B (*) g_CS) (paper eqs. 12-14).
+
+    Parameters
+    ----------
+    response : ndarray (H, W)
+        The inhibiting bipolar response B.
+    kernel : ndarray (k, k)
+        g_CS (:func:`center_surround_kernel`).
+
+    Returns
+    -------
+    S : ndarray (H, W)
+    """
     return np.maximum(correlate(response, kernel), 0.0)
 
 
@@ -406,6 +477,20 @@ def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
     as the published implementation does. With ``step`` > 1 the image is area-averaged onto a
     grid ``step`` times coarser, blurred there with ``sigma / step`` and interpolated back
     (bilinear): the blurred map is smooth at that scale, and the blur costs ``step**2`` less.
+
+    Parameters
+    ----------
+    image : ndarray (H, W)
+    sigma : float
+        sigma_g, pixels.
+    size : int
+        The window's side (odd).
+    normalised : bool
+    step : int
+
+    Returns
+    -------
+    ndarray (H, W)
     """
     if step > 1:
         return coarse_attention_blur(coarse_grid(image, step), image.shape, sigma, size,
@@ -445,7 +530,21 @@ def coarse_grid_blur(coarse: np.ndarray, sigma: float, size: int, normalised: bo
 
 def approach_attention(g: np.ndarray, sigma: float, size: int, normalised: bool,
                        gamma_a: float, step: int = 1) -> np.ndarray:
-    """Approach-sensitive attention mask M_a = B(G (*) g_sigma, gamma_a) (paper eqs. 22, 23)."""
+    """Approach-sensitive attention mask M_a = B(G (*) g_sigma, gamma_a) (paper eqs. 22, 23).
+
+    Parameters
+    ----------
+    g : ndarray (H, W)
+        The approach map G.
+    sigma, size, normalised, step
+        The attention blur's, as in :func:`attention_blur`.
+    gamma_a : float
+        The mask's threshold.
+
+    Returns
+    -------
+    m_a : ndarray of bool (H, W)
+    """
     return attention_blur(g, sigma, size, normalised, step) > gamma_a
 
 
