@@ -263,8 +263,8 @@ def register(subparsers) -> None:
                    help="forget a robot after SECONDS without frames (default: %(default)s)")
     p.add_argument("--max-gap", type=whole, default=MAX_GAP, metavar="N",
                    help="reset a robot's state when seq jumps ahead by more than N of the "
-                        "robot's steps, the smallest growth of its seq seen (default: "
-                        "%(default)s)")
+                        "robot's steps (1, or the growth of its seq that three frames in a row "
+                        "agree on; default: %(default)s)")
     p.add_argument("--max-robots", type=count, default=MAX_ROBOTS, metavar="N",
                    help="robots tracked at once; frames of more are rejected. A robot takes "
                         "a place once one of its frames is valid (default: %(default)s)")

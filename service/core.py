@@ -10,14 +10,17 @@ A robot's model state is created on its first valid frame. Each frame that arriv
 with the previous frame that arrived for the robot (not with the last one processed, so the
 frames the worker skips itself never count as a gap). It continues the robot's **stream** when
 its size is the same, its ``seq`` is greater by at most ``max_gap`` steps and its ``stamp`` is
-not smaller. A step is the smallest amount by which the robot's ``seq`` has grown from one
-arriving frame to the next (1 for a camera that counts its frames; a camera whose ``seq`` is a
-clock, or counts by 10, is measured so: CONTRACT.md asks only that ``seq`` increase). Otherwise a new stream starts, for the first rule that failed:
+not smaller. A step is how much the robot's ``seq`` grows from one frame to the next: 1, until
+:data:`STEP_FRAMES` growths in a row between arriving frames agree on another (the largest less
+than twice the smallest, which becomes the step): a camera whose ``seq`` counts by 10, or is a
+clock in milliseconds (CONTRACT.md asks only that ``seq`` increase). One frame, a stranger's or
+one after frames were lost, cannot change it. Otherwise a new stream starts, for the first rule that failed:
 
 * ``size``: the frame size (width x height) differs;
 * ``seq-backwards``: ``seq`` is not greater (the camera restarted);
 * ``seq-gap``: ``seq`` jumps ahead by more than ``max_gap`` steps (frames were lost on the
-  way; a robot's first step that is larger than any before it counts as a gap once);
+  way; a camera whose step is larger than 1 resets on its first frames, until its step is
+  known);
 * ``stamp-backwards``: ``stamp`` is smaller.
 
 When the worker processes the first frame of a new stream, the model state is **reset** (that
@@ -154,6 +157,24 @@ def default_threads() -> int:
     return available_cores()
 
 
+# growths of a robot's seq in a row that must agree (the largest less than twice the smallest)
+# before the smallest becomes its step: one frame, a stranger's or a lost one's, cannot change it
+STEP_FRAMES = 3
+
+
+def _learn_step(state: "_Robot", growth: int) -> None:
+    """Take one growth of a robot's ``seq`` between two arriving frames; a run of
+    :data:`STEP_FRAMES` steady ones sets its step (a seq that went back starts a new run)."""
+    if growth <= 0:
+        state.seq_growths.clear()
+        return
+    state.seq_growths.append(growth)
+    if len(state.seq_growths) == STEP_FRAMES:
+        smallest = min(state.seq_growths)
+        if max(state.seq_growths) < 2 * smallest:
+            state.seq_step = smallest
+
+
 @dataclass
 class _Stream:
     """The frames of one source as they arrive: the latest one's seq, stamp, size and time."""
@@ -220,7 +241,10 @@ class _Robot:
     # seq, stamp and data of the latest frame taken in (the data is the pending frame's or the
     # one being processed, or the last one processed: never a third frame held)
     last_arrival: tuple[int, float, bytes] | None = None
-    seq_step: int = 0  # the smallest growth of seq between two arriving frames; 0: none yet
+    # its seq's step (1 until a steady other one is seen) and the latest growths of its seq
+    # between arriving frames, from which a steady step is read (_learn_step)
+    seq_step: int = 1
+    seq_growths: deque = field(default_factory=lambda: deque(maxlen=STEP_FRAMES))
     # the rate its model is stepped at: the stamps' gaps between the frames processed in the
     # current stream (after the worker's own skips), and how long it has read slow
     stamp: float | None = None
@@ -399,9 +423,8 @@ class WorkerCore:
             self._stats.received += 1
             state.arrived += 1
             state.arrived_bytes += len(payload)
-            if state.last_arrival is not None and frame.seq > state.last_arrival[0]:
-                step = frame.seq - state.last_arrival[0]  # after the gap rule: it counts once
-                state.seq_step = min(state.seq_step, step) if state.seq_step else step
+            if state.last_arrival is not None:  # after the gap rule: a new step counts once
+                _learn_step(state, frame.seq - state.last_arrival[0])
             state.last_arrival = (frame.seq, frame.stamp, frame.data)
             if state.pending is not None:
                 state.dropped += 1
@@ -417,7 +440,7 @@ class WorkerCore:
     def _gap(self, state: _Robot) -> int:
         """The largest forward jump of a robot's ``seq`` that continues its stream:
         ``max_gap`` of its steps."""
-        return self.max_gap * max(state.seq_step, 1)
+        return self.max_gap * state.seq_step
 
     def _full_locked(self, candidate: bool = False) -> str | None:
         """Why a new robot cannot take a slot (or, ``candidate``, wait for one) now; None if
@@ -762,7 +785,7 @@ class WorkerCore:
         with self._lock:
             robots = {r: {"processed": s.processed, "resets": s.resets,
                           "pending": s.pending is not None, "busy": s.busy,
-                          "last_seq": s.last_seq, "seq_step": s.seq_step or None,
+                          "last_seq": s.last_seq, "seq_step": s.seq_step,
                           "size": list(s.shape) if s.shape else None,
                           "candidate": not s.proven, "contested": s.contested,
                           "intrusions": s.intrusions, "frames": s.arrived,

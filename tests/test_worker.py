@@ -524,22 +524,45 @@ def test_a_robots_responses_are_published_in_the_order_of_its_frames(looming):
     assert len(published) > 10 and published == sorted(published)
 
 
-@pytest.mark.parametrize("step, first", [(10, 0), (50, 1)])
+@pytest.mark.parametrize("step, first", [(10, 0), (50, 3)])
 def test_a_camera_whose_seq_counts_by_more_than_one_is_followed_in_its_own_steps(looming, step,
                                                                                   first):
     # CONTRACT.md asks only that seq increase: a counter by 10, or a clock in ms, is measured
     core = WorkerCore(max_gap=20)
     responses = [feed(core, "r1", image, i * step, stamp=i * 0.05)
                  for i, image in enumerate(looming.frames)]
-    # a first step above max_gap is a gap once; then the stream goes on
+    # a step above max_gap resets until three growths in a row agree on it; then it is followed
     assert sum(core.stats()["resets"].values()) == first
     assert responses[-1].stream_frames == len(looming.frames) - first
     assert any(r.collision for r in responses)
-    # frames lost now are gaps in its steps: a jump of 20 keeps the state, of 21 resets it
+    assert core.status()["robots"]["r1"]["seq_step"] == step
+    # frames lost now are gaps in its steps: a jump of 20 keeps the state, of 41 resets it
     seq = (len(looming.frames) - 1) * step
     frames = responses[-1].stream_frames
     assert feed(core, "r1", looming.frames[0], seq + 20 * step, stamp=99.0).stream_frames \
         == frames + 1
     assert feed(core, "r1", looming.frames[1], seq + 41 * step, stamp=99.1).stream_frames == 1
     assert core.stats()["resets"] == {"seq-gap": first + 1}
-    assert core.status()["robots"]["r1"]["seq_step"] == step
+    assert core.status()["robots"]["r1"]["seq_step"] == step  # two odd growths changed nothing
+
+
+def test_one_strangers_frame_cannot_change_a_robot_s_seq_step(looming):
+    """A frame with a huge seq would widen the window of late frames over the robot's own (all
+    refused as late); one at the latest seq + 1 would shrink a millisecond clock's step to 1
+    (every later frame a gap). Neither can: a step needs three growths in a row that agree."""
+    core = WorkerCore(max_gap=20)
+    answered = []
+    for i, image in enumerate(looming.frames):
+        assert core.offer("asnn/r1/frame", payload(image, 40 * i, stamp=i * 0.05)) == "r1"
+        if i == 0:  # a stranger's frame as the robot's second
+            core.offer("asnn/r1/frame", payload(image, 10**12, stamp=1e9))
+        if i == 30:  # a stranger's frame one seq after the camera's
+            core.offer("asnn/r1/frame", payload(image, 40 * i + 1, stamp=i * 0.05 + 0.01))
+        while (job := core.take(timeout=0)) is not None:
+            response = core.process(job)
+            if response is not None and response.seq % 40 == 0:
+                answered.append(response.seq)
+    assert answered[-1] == 40 * (len(looming.frames) - 1)
+    assert len(answered) >= len(looming.frames) - 2
+    assert "late" not in core.stats()["invalid"]
+    assert core.status()["robots"]["r1"]["seq_step"] == 40
