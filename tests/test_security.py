@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import shutil
 import subprocess
 import threading
@@ -267,13 +268,17 @@ def test_each_identity_s_folder_holds_its_own_secrets_only(certs):
 def test_running_the_script_again_keeps_the_ca_and_the_identities(tmp_path):
     """Adding a robot must not invalidate the credentials already deployed."""
     out = tmp_path / "secrets"
-    subprocess.run(["bash", str(SCRIPT), "--robots", "r1", str(out)], check=True,
-                   capture_output=True, timeout=180)
+
+    def run(robots, *hosts):
+        return subprocess.run(["bash", str(SCRIPT), "--robots", robots, str(out), *hosts],
+                              check=True, capture_output=True, text=True, timeout=180,
+                              env={**os.environ, "ASNN_CERT_DAYS": "30"})
+
+    run("r1,r1")  # a repeated id is one identity (else the router's rule ids repeat)
     before = {name: (out / name / f"{name}.json5").read_text()
               for name in ("worker", "camera-r1")}
     ca = (out / "ca.pem").read_text()
-    subprocess.run(["bash", str(SCRIPT), "--robots", "r1,r2", str(out), "routerhost"],
-                   check=True, capture_output=True, timeout=180)
+    run("r1,r2", "routerhost")  # certificates of 30 days are not "expiring" at once
     assert (out / "ca.pem").read_text() == ca
     assert {name: (out / name / f"{name}.json5").read_text() for name in before} == before
     users = [line.split(":")[0] for line in
@@ -284,6 +289,12 @@ def test_running_the_script_again_keeps_the_ca_and_the_identities(tmp_path):
     with zenoh.open(router_config(out, port)):
         assert not fails_to_open(client_config(out, "camera-r2", port))
         assert not fails_to_open(client_config(out, "worker", port))
+    # a robot left out loses its access, and the script says its folder is left over
+    assert "camera-r2/ is no longer an identity" in run("r1").stderr
+    port = free_port()
+    with zenoh.open(router_config(out, port)):
+        assert fails_to_open(client_config(out, "camera-r2", port))
+        assert not fails_to_open(client_config(out, "camera-r1", port))
 
 
 def test_the_secure_compose_override_parses_and_names_existing_files():

@@ -25,8 +25,10 @@
 # user (folders 755, files 644 inside OUT_DIR's 700).
 #
 # Run again (to add a robot, or a HOST), it keeps the CA and every identity whose certificate
-# is valid for 30 more days, with its password, so the configs already deployed stay valid; it
-# issues what is new or expiring, and the router's certificate and config each time. Certificates
+# is valid for 30 more days (a third of its validity where that is shorter), with its password,
+# so the configs already deployed stay valid; it issues what is new or expiring, and the
+# router's certificate and config each time. A robot left out can no longer connect (its folder
+# is named, to delete). Certificates
 # are valid for ASNN_CERT_DAYS days (365); the CA for ten times that. The configs name the files
 # by their path in OUT_DIR, or under ASNN_SECRETS_PATH when set: where each folder is mounted in
 # containers (ASNN_SECRETS_PATH=/etc/asnn/secrets for deploy/compose.secure.yml).
@@ -42,6 +44,8 @@ for robot in "${robots[@]}"; do
     echo "gen-dev-certs: invalid robot id '$robot': use 1 to 64 of A-Z a-z 0-9 _ -" >&2; exit 2; }
 done
 (( ${#robots[@]} )) || { echo "gen-dev-certs: --robots needs at least one robot id" >&2; exit 2; }
+# each id once: a repeated one would repeat its identity and the router's rule ids
+mapfile -t robots < <(printf '%s\n' "${robots[@]}" | awk '!seen[$0]++')
 out=${1:-deploy/secrets}
 shift || true
 hosts=("$@")
@@ -55,7 +59,9 @@ mkdir -p "$out"
 chmod 700 "$out"
 cd "$out"
 top=$(pwd)
-renew=$(( 30 * 86400 ))  # a certificate valid for less than this more is issued again
+# a certificate valid for less than this more is issued again: 30 days, or a third of a
+# shorter validity (else every run would reissue every identity)
+renew=$(( (days < 90 ? days / 3 : 30) * 86400 ))
 
 where() {  # where NAME: the path the configs of NAME's folder name its files by
   echo "${ASNN_SECRETS_PATH:-$top/$1}"
@@ -178,5 +184,11 @@ dir=$(where router)
 
 # inside OUT_DIR's 700, each folder is readable by whichever user its container runs as
 for name in router "${names[@]}"; do chmod 644 "$name"/*; done
+for folder in */; do  # an identity left out of this run can no longer connect: say so
+  folder=${folder%/}
+  [[ $folder == router || " ${names[*]} " == *" $folder "* ]] && continue
+  [[ -f $folder/$folder.json5 ]] && echo "gen-dev-certs: $top/$folder/ is no longer an" \
+    "identity of the router (its credentials are refused): delete it" >&2
+done
 echo "gen-dev-certs: in $top: router/ and the identities ${names[*]}" \
   "(issued: ${issued[*]:-none}; kept: ${kept[*]:-none})" >&2
