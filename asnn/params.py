@@ -409,14 +409,16 @@ def _fields_section(model: type[BaseModel]) -> str:
     shows what each field means (pydantic keeps them in ``model_fields`` only)."""
     lines = ["", "", "    Attributes", "    ----------"]
     for name, info in model.model_fields.items():
-        lines.append(f"    {name} : {getattr(info.annotation, '__name__', info.annotation)}"
-                     f" = {info.default!r}")
+        kind = info.annotation
+        kind = kind.__name__ if isinstance(kind, type) else str(kind).replace("typing.", "")
+        lines.append(f"    {name} : {kind} = {info.default!r}")
         lines.append(textwrap.fill(info.description or "", 92, initial_indent=" " * 8,
                                    subsequent_indent=" " * 8))
     return "\n".join(lines) + "\n"
 
 
-ASNNParams.__doc__ += _fields_section(ASNNParams)
+if ASNNParams.__doc__:  # None under python -OO
+    ASNNParams.__doc__ += _fields_section(ASNNParams)
 
 
 _PAPER = ASNNParams()

@@ -116,9 +116,9 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
     return conf
 
 
-_RUST_LOCATION = re.compile(r"\s+at /\S+\.rs:\d+\.?\s*$")
+_RUST_LOCATION = re.compile(r"\s+at /\S+\.rs:\d+\.?")
 
 
 def zenoh_error(exc: BaseException) -> str:
-    """A Zenoh error's text for a user: without the Rust source location it ends with."""
-    return _RUST_LOCATION.sub("", str(exc))
+    """A Zenoh error's text for a user: without the Rust source locations it carries."""
+    return _RUST_LOCATION.sub("", str(exc)).strip()

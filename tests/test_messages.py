@@ -284,6 +284,10 @@ def test_a_config_zenoh_refuses_is_named_without_the_rust_source_location(tmp_pa
     with pytest.raises(ConfigError, match="bogus_key") as caught:
         make_config(ZenohOptions(config_file=bad))
     assert ".rs:" not in str(caught.value)
+    from service.config import zenoh_error  # an inner error's location too
+
+    assert zenoh_error(Exception("bad at /a/b.rs:3. rule repeated at /c/d.rs:395.")) \
+        == "bad rule repeated"
 
 
 def test_tracked_target_fields_cross_the_wire_and_are_left_out_where_unset():
