@@ -5,12 +5,10 @@ from __future__ import annotations
 import argparse
 import math
 
-from asnn.stimuli.suite import LARGEST_SIZE
+from asnn.io.video import FPS_RANGE  # beyond it no camera runs, and a video writer given
+from asnn.stimuli.suite import LARGEST_SIZE  # such a rate (inf) may never return
 from service import keys
 
-# --fps of what is written or played: 0.1 to 1000 frames a second. Beyond either end no camera
-# runs, and a video writer given such a rate (or inf) may never return (asnn scene --fps inf).
-FPS_RANGE = (0.1, 1000.0)
 # --frames: 10000 frames, over 8 minutes at 20 a second; a generated clip is held at once
 MAX_FRAMES = 10_000
 # --threads of a model: it splits each frame into bands, one for each thread, and threads

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from asnn.evaluation.labels import read_entries
-from asnn.io.video import WRITABLE_SUFFIXES
+from asnn.io.video import FPS_RANGE, WRITABLE_SUFFIXES
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 from asnn.stimuli.suite import CASES, make_case, suite_cases
 
@@ -59,7 +59,7 @@ _PAPER_OPTIONS = (
      "dark (the object darker than its ground) or light"),
     ("--contrast", {"type": positive}, 1.0, "Weber contrast"),
     ("--speed", {"type": positive}, "the scene's own", "edge speed, px/frame"),
-    ("--fps", {"type": frame_rate}, 20.0, "frame rate, 0.1 to 1000"))
+    ("--fps", {"type": frame_rate}, 20.0, f"frame rate, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}"))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -28,11 +28,12 @@ from pathlib import Path
 from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, ValidationError,
                       field_validator, model_validator)
 
+from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside, a mistake
+
 __all__ = ["ClipLabel", "check_labels", "label_problem", "load_labels", "mismatches",
            "read_entries", "result_name", "unlabelled"]
 
 
-FPS_RANGE = (1.0, 1000.0)  # frame rates a clip's camera runs at; outside, a typing mistake
 
 
 class ClipLabel(BaseModel):
