@@ -161,6 +161,11 @@ def frames(value: str) -> int:
     return _whole(value, 1, MAX_FRAMES)
 
 
+def warmup_frames(value: str) -> int:
+    """Frames left out at a clip's start: 0 to :data:`MAX_FRAMES`."""
+    return _whole(value, 0, MAX_FRAMES)
+
+
 def threads(value: str) -> int:
     """A model's number of threads: 1 to :data:`MAX_THREADS`."""
     return _whole(value, 1, MAX_THREADS)

@@ -8,7 +8,8 @@ import sys
 
 from cli.arguments import port, positive
 from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
-from clients.dashboard import HOLD_S, STALE_S
+from clients.dashboard import HOLD_S
+from clients.fleet import STALE_S
 from service.config import ConfigError
 from service.link import RouterWatch
 

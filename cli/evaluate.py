@@ -14,7 +14,6 @@ missing, named in the report's errors), 130 when interrupted.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 import time
@@ -28,7 +27,7 @@ from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detect
 from asnn.params import preset_names
 
 from .arguments import (count, finite, frame_size, nonempty_path, preset_spec, tolerance_seconds,
-                        whole)
+                        warmup_frames, whole)
 
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
@@ -112,7 +111,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"onset still counts as a hit (0 to 60; default: "
                         f"{scoring.EARLY_TOLERANCE_S}, for onsets judged by eye; the suite's "
                         "onsets are exact and use 0)")
-    p.add_argument("--warmup", type=int, default=scoring.WARMUP_FRAMES, metavar="FRAMES",
+    p.add_argument("--warmup", type=warmup_frames, default=scoring.WARMUP_FRAMES, metavar="FRAMES",
                    help="frames ignored at the start of each clip (default: %(default)s)")
     p.add_argument("--jobs", type=count, default=1, metavar="N",
                    help="clips or cases evaluated in parallel processes (default: %(default)s)")
@@ -248,11 +247,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(f"asnn eval: {problem}", file=sys.stderr)
         return 2
     tolerance = (scoring.EARLY_TOLERANCE_S if args.early_tolerance is None
-                 else args.early_tolerance)
-    if not (math.isfinite(tolerance) and tolerance >= 0) or args.warmup < 0:
-        print("asnn eval: --early-tolerance must be a finite number of seconds >= 0, and "
-              "--warmup >= 0", file=sys.stderr)
-        return 2
+                 else args.early_tolerance)  # its type bounds it
     if args.clips_dir and not (args.synthetic or args.paper):
         labels = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
         if not Path(args.clips_dir).is_dir():

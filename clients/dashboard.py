@@ -65,7 +65,7 @@ from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response
 
-from .fleet import stale_robot, take_fleet_sample
+from .fleet import STALE_S, stale_robot, take_fleet_sample
 
 __all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES"]
 
@@ -73,7 +73,6 @@ log = logging.getLogger("asnn.dashboard")
 
 HISTORY_S = 10.0      # spike-rate sparkline span, camera clock
 HOLD_S = 3.0          # a warning keeps the robot in the collision state this long
-STALE_S = 3.0         # no response for this long: stale (no worker watches it)
 FORGET_S = 600.0      # a robot silent this long is dropped from the dashboard
 MAX_ROBOTS = 1000     # bound on the state a misbehaving publisher can make us keep
 MAX_POINTS = 400      # per robot, whatever the stamps say (10 s at 40 responses a second)
@@ -692,10 +691,7 @@ class DashboardServer:
                     self._send(200, "application/json", body, head, cache=False)
                 elif path == "/events" and head:
                     # a health check's HEAD: the stream's headers, no stream held open
-                    self.send_response(200)
-                    self.send_header("Content-Type", "text/event-stream; charset=utf-8")
-                    self.send_header("Cache-Control", "no-store")
-                    self.end_headers()
+                    server._stream_headers(self)
                 elif path == "/events":
                     server._stream(self)
                 else:
@@ -711,6 +707,14 @@ class DashboardServer:
                     self.wfile.write(body)
 
         return Handler
+
+    @staticmethod
+    def _stream_headers(handler) -> None:
+        handler.send_response(200)
+        handler.send_header("Content-Type", "text/event-stream; charset=utf-8")
+        handler.send_header("Cache-Control", "no-store")
+        handler.send_header("X-Accel-Buffering", "no")
+        handler.end_headers()
 
     def _stream(self, handler) -> None:
         """Server-Sent Events: a snapshot, then deltas at most every ``min_interval``."""
@@ -731,11 +735,7 @@ class DashboardServer:
             # what a client that does not read can make us hold: the kernel's buffer, one event
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.send_buffer)
             sock.settimeout(self.send_timeout)
-            handler.send_response(200)
-            handler.send_header("Content-Type", "text/event-stream; charset=utf-8")
-            handler.send_header("Cache-Control", "no-store")
-            handler.send_header("X-Accel-Buffering", "no")
-            handler.end_headers()
+            self._stream_headers(handler)
             handler.close_connection = True
             out = handler.wfile
             out.write(b"retry: 2000\n\n")

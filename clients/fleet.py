@@ -14,9 +14,10 @@ from service import keys
 from service.messages import (MessageError, Preview, Refusal, Response, check_preview,
                               decode_preview, decode_refusal, decode_response)
 
-__all__ = ["MAX_TARGETS", "decode_fleet_sample", "stale_robot", "take_fleet_sample"]
+__all__ = ["MAX_TARGETS", "STALE_S", "decode_fleet_sample", "stale_robot", "take_fleet_sample"]
 
 MAX_TARGETS = 16      # targets kept per response (the worker finds a few)
+STALE_S = 3.0         # no response for this long: stale (no worker watches it)
 
 
 def decode_fleet_sample(key: str, payload: bytes, prefix: str

@@ -45,8 +45,7 @@ from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Response
 
-from .dashboard import STALE_S
-from .fleet import stale_robot, take_fleet_sample
+from .fleet import STALE_S, stale_robot, take_fleet_sample
 
 __all__ = ["DEFAULT_PORT", "FoxgloveBridge", "robot_topics"]
 

@@ -64,7 +64,6 @@ __all__ = ["DEFAULT_COUNTS", "camera_phases", "format_report", "model_time",
 
 DEFAULT_COUNTS = (1, 2, 4, 8, 12, 16, 20, 24)
 SCENE = "looming_over_stripes"
-ROOT = Path(__file__).resolve().parents[1]
 ANSWERED = 0.95
 START_S = 1.0
 
@@ -89,7 +88,7 @@ class _Process:
     def __init__(self, command: Sequence[str], args: list[str], ready: str):
         env = {**os.environ, "PYTHONUNBUFFERED": "1"}
         env.pop("RUST_LOG", None)
-        self.popen = subprocess.Popen([*command, *args], cwd=ROOT,
+        self.popen = subprocess.Popen([*command, *args],
                                       env=env, stdout=subprocess.DEVNULL,
                                       stderr=subprocess.PIPE, text=True)
         self.what, self.ready_text = args[0], ready

@@ -308,6 +308,10 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
             main(["eval", str(tmp_path), "--early-tolerance", tolerance])
         assert exit_.value.code == 2
         assert "argument --early-tolerance: " in capsys.readouterr().err
+    for warmup in ("-1", "1000000000"):  # a warm-up longer than any clip ignored every frame
+        with pytest.raises(SystemExit):
+            main(["eval", str(tmp_path), "--warmup", warmup])
+        assert "argument --warmup: " in capsys.readouterr().err
     assert main(["eval", "--out", str(tmp_path / "o")]) == 2                  # nothing to do
     for bad in ("asnn,nope", "asnn:nope", "lgmd1:paper", ""):
         with pytest.raises(SystemExit):

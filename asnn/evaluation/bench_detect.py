@@ -57,7 +57,6 @@ DEFAULT_SIZES = ((320, 240), (640, 480))
 # machine) moves the per-frame figure by 0.08 ms over 1198 frames, by 0.34 ms over 298
 DEFAULT_FRAMES = 1200
 STREAM_BYTES = 256 * 2**20  # decoded frames the stream stage holds at most
-ROOT = Path(__file__).resolve().parents[2]
 
 
 def _detect_seconds(command: Sequence[str], clip: Path, out: Path, preset: str | None) -> float:
@@ -67,7 +66,7 @@ def _detect_seconds(command: Sequence[str], clip: Path, out: Path, preset: str |
     if preset:
         args += ["--preset", preset]
     start = time.perf_counter()
-    proc = subprocess.run(args, cwd=ROOT, env=env, capture_output=True, text=True, timeout=1800)
+    proc = subprocess.run(args, env=env, capture_output=True, text=True, timeout=1800)
     elapsed = time.perf_counter() - start
     if proc.returncode != 0:
         raise RuntimeError(f"asnn detect failed: {proc.stderr.strip()[-500:]}")
