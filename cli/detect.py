@@ -190,6 +190,8 @@ def run(args: argparse.Namespace) -> int:
         return _fail(problem)
     options = {}
     model_threads = 1
+    if args.model != "asnn" and args.preset != "default":
+        return _fail(f"--preset applies to the ASNN model only, not {args.model}")
     params = parse_detector(f"asnn:{args.preset}").params
     if args.tracks:
         if args.model != "asnn" or params.targets != "objects":

@@ -11,8 +11,8 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import (count, finite, frame_rate, non_negative, positive, robot_id, threads,
-                        whole, worker_id)
+from .arguments import (count, finite, frame_rate, non_negative, nonempty_path, positive,
+                        robot_id, threads, whole, worker_id)
 from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
     zenoh_options
 
@@ -230,7 +230,7 @@ def register(subparsers) -> None:
                               "a stream URL, a generated scene or a ROS 2 bag on "
                               "<prefix>/<robot>/frame.")
     p.add_argument("--robot", required=True, type=robot_id, help="robot id ([A-Za-z0-9_-]{1,64})")
-    p.add_argument("--source", required=True,
+    p.add_argument("--source", required=True, type=nonempty_path,
                    help="FILE, DEVICE_INDEX, URL, synthetic:SCENE "
                         f"(SCENE: {', '.join(SCENE_NAMES)}, or a case of the labelled suite: "
                         "asnn scene --list) or a ROS 2 bag BAG.mcap[#TOPIC], replayed at its "

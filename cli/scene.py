@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "OUT.")
     p.add_argument("args", nargs="*", type=nonempty_path, metavar="[NAME] OUT",
                    help=f"a paper scene ({', '.join(SCENE_NAMES)}) and the file to write: a "
-                        "video (.mp4 or .avi) or a ROS 2 bag (.mcap: sensor_msgs/msg/Image mono8 "
+                        "video (.mp4, .avi, .mkv, .mov or .m4v) or a ROS 2 bag (.mcap: sensor_msgs/msg/Image mono8 "
                         "on /camera/image_raw; the 'ros' extra); with --case only OUT. Its "
                         "folder is made where it is missing")
     p.add_argument("--case", metavar="CASE", help="a case of the labelled suite instead")

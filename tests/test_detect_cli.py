@@ -111,6 +111,15 @@ def test_lgmd_models_are_selectable_and_report_no_targets(looming_video, capsys)
     records = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
     assert len(records) == len(scene.frames)
     assert all(r["targets"] == [] for r in records)
+    # a preset is the ASNN model's: given with an LGMD model it was ignored without a word
+    assert main(["detect", str(path), "--model", "lgmd1", "--preset", "robust"]) == 2
+    assert "--preset applies to the ASNN model only" in capsys.readouterr().err
+
+
+def test_a_camera_given_an_empty_source_is_refused_before_it_starts(capsys):
+    with pytest.raises(SystemExit):  # it read '' as the current folder
+        main(["camera", "--robot", "r1", "--source", ""])
+    assert "argument --source: an empty path" in capsys.readouterr().err
 
 
 TRACK_FIELDS = {"id", "object_id", "x", "y", "size", "box", "expansion", "ttc", "offset", "fit",
