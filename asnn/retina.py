@@ -327,10 +327,8 @@ def center_surround_kernel(sigma: float, wavelength: float, phase: float, size: 
     ----------
     sigma, wavelength, phase : float
         sigma_CS, lambda_CS and psi_CS, in the sampled coordinates.
-    size : int
-        The kernel's side (odd).
-    extent : float
-        The samples span [-extent, extent] in x and y (SPEC ruling).
+    size, extent
+        As in :func:`gabor_pair`.
 
     Returns
     -------
