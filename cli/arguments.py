@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import math
 
-from asnn.io.video import FPS_RANGE  # beyond it no camera runs, and a video writer given
-from asnn.stimuli.suite import LARGEST_SIZE  # such a rate (inf) may never return
+# FPS_RANGE bounds every --fps: beyond it no camera runs, and a video writer given such a rate
+# (inf) may never return
+from asnn.io.video import FPS_RANGE
+from asnn.stimuli.suite import LARGEST_SIZE
 from service import keys
 
 # --frames: 10000 frames, over 8 minutes at 20 a second; a generated clip is held at once
