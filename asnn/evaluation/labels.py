@@ -34,8 +34,6 @@ __all__ = ["ClipLabel", "check_labels", "label_problem", "load_labels", "mismatc
            "read_entries", "result_name", "unlabelled"]
 
 
-
-
 class ClipLabel(BaseModel):
     """One clip's label: the fields the scoring reads, checked; any others kept as given.
 
