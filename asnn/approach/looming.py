@@ -539,25 +539,34 @@ def _area_averages(images, y0, x0, xtab, ytab, rows, out):
     precision (its ``ResizeArea_Invoker`` on one thread), so bit for bit the same.
 
     ``rows`` holds the horizontal sums of every source row. Each of them is one chain of
-    additions from 0, as OpenCV's into its row buffer, but the three images' chains are
-    computed side by side (the processor overlaps them).
+    additions from 0, as OpenCV's into its row buffer, but the chains of two source rows of
+    the three images are computed side by side: six independent chains, which the processor
+    overlaps (with one row's three, each addition waited on the one before it).
     """
     xs, xw, xstart = xtab
     ys, yw, ystart = ytab
     a, b, c = images
     h, w = out.shape[1:]
     zero = rows.dtype.type(0)
-    for sy in range(rows.shape[1]):
+    n = rows.shape[1]
+    for sy in range(0, n, 2):
+        ty = min(sy + 1, n - 1)  # the pair's second row (the last row twice where n is odd)
         ra, rb, rc = a[y0 + sy], b[y0 + sy], c[y0 + sy]
+        qa, qb, qc = a[y0 + ty], b[y0 + ty], c[y0 + ty]
         la, lb, lc = rows[0, sy], rows[1, sy], rows[2, sy]
+        ma, mb, mc = rows[0, ty], rows[1, ty], rows[2, ty]
         for dx in range(w):
-            sa = sb = sc = zero
+            sa = sb = sc = ta = tb = tc = zero
             for k in range(xstart[dx], xstart[dx + 1]):
                 x, wt = x0 + xs[k], xw[k]
                 sa += ra[x] * wt
                 sb += rb[x] * wt
                 sc += rc[x] * wt
+                ta += qa[x] * wt
+                tb += qb[x] * wt
+                tc += qc[x] * wt
             la[dx], lb[dx], lc[dx] = sa, sb, sc
+            ma[dx], mb[dx], mc[dx] = ta, tb, tc
     for i in range(3):
         for dy in range(h):
             o = out[i, dy]
