@@ -49,6 +49,7 @@ _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
 _MAX_SIDE = 64  # pixels: a larger box is area-averaged down to this before the fit
 _RIDGE = 1e-6  # relative regularisation of the normal equations (no texture: C -> 0)
 _NO_SKIP = np.zeros((0, 0), np.bool_)  # no pixel left out by a mask
+_NO_SUMS = (0.0,) * 17  # a fit's sums before its first pixel (_add_pixel)
 
 
 class Expansion(NamedTuple):
@@ -438,7 +439,8 @@ def _solve_expansion(before, after, background, skip, keep, ridge):
     by 1/8, reflect-101 border) and the temporal difference, in the images' precision as the
     NumPy expressions would compute them; the normal equations accumulated in float64 (the
     second fit's over its pixels in the same order, so it is what a fit of those pixels alone
-    gives, bit for bit); then solved by :func:`_solve_normal`.
+    gives, bit for bit), in local sums (:func:`_add_pixel`) rather than in an array, where
+    each addition waited on the store of the one before; then solved by :func:`_solve_normal`.
     """
     h, w = before.shape
     mean = np.empty((h, w), np.float64)  # exact: the float32 mean, widened
@@ -446,8 +448,7 @@ def _solve_expansion(before, after, background, skip, keep, ridge):
     for y in range(h):
         for x in range(w):
             mean[y, x] = half * (before[y, x] + after[y, x])
-    normal = np.zeros((2, 4, 5))  # [N | rhs] of each fit, the upper triangle accumulated
-    sums = np.zeros((2, 3))  # count, sum and sum of squares of each fit's E_t
+    box = rim = _NO_SUMS  # each fit's sums (_add_pixel): the box's, and its rim's
     masked = skip.size > 0
     second = keep.size > 0
     for y in range(h):
@@ -466,20 +467,46 @@ def _solve_expansion(before, after, background, skip, keep, ridge):
             ey = ((mean[down, left] - mean[up, left]) + 2.0 * (mean[down, x] - mean[up, x])
                   + (mean[down, right] - mean[up, right])) / 8.0
             radial = (x - 0.5 * (w - 1)) * ex + ry * ey
-            basis = (ex, ey, radial, -1.0)
-            for f in range(2 if second and keep[y, x] else 1):
-                sums[f, 0] += 1.0
-                sums[f, 1] += et
-                sums[f, 2] += et * et
-                for i in range(4):
-                    bi = basis[i]
-                    for j in range(i, 4):
-                        normal[f, i, j] += bi * basis[j]
-                    normal[f, i, 4] -= bi * et
+            box = _add_pixel(box, ex, ey, radial, et)
+            if second and keep[y, x]:
+                rim = _add_pixel(rim, ex, ey, radial, et)
+    normal = np.zeros((2, 4, 5))  # [N | rhs] of each fit, the upper triangle
+    sums = np.zeros((2, 3))  # count, sum and sum of squares of each fit's E_t
+    _store_sums(box, normal[0], sums[0])
+    _store_sums(rim, normal[1], sums[1])
     first = _solve_normal(normal[0], sums[0], ridge)
     if not second:
         return first + (False, 0.0, 0.0, 0.0, 0.0, 0.0)
     return first + _solve_normal(normal[1], sums[1], ridge)
+
+
+@kernel(inline="always")
+def _add_pixel(sums, ex, ey, radial, et):
+    """A fit's sums with one more pixel: the count, sum and sum of squares of ``E_t``, the
+    upper triangle of ``N = X'X`` row by row and the right-hand side ``-X'E_t``, for the
+    pixel's basis ``(E_x, E_y, g, -1)`` (:func:`_solve_expansion`)."""
+    (count, total, squares, n00, n01, n02, n03, n11, n12, n13, n22, n23, n33,
+     r0, r1, r2, r3) = sums
+    m = -1.0  # the brightness term's basis
+    return (count + 1.0, total + et, squares + et * et,
+            n00 + ex * ex, n01 + ex * ey, n02 + ex * radial, n03 + ex * m,
+            n11 + ey * ey, n12 + ey * radial, n13 + ey * m,
+            n22 + radial * radial, n23 + radial * m,
+            n33 + m * m,
+            r0 - ex * et, r1 - ey * et, r2 - radial * et, r3 - m * et)
+
+
+@kernel(inline="always")
+def _store_sums(sums, normal, moments):
+    """A fit's sums (:func:`_add_pixel`) into ``normal`` (4x5, the upper triangle and the
+    right-hand side) and ``moments`` (count, sum and sum of squares of E_t)."""
+    (count, total, squares, n00, n01, n02, n03, n11, n12, n13, n22, n23, n33,
+     r0, r1, r2, r3) = sums
+    moments[0], moments[1], moments[2] = count, total, squares
+    normal[0, 0], normal[0, 1], normal[0, 2], normal[0, 3], normal[0, 4] = n00, n01, n02, n03, r0
+    normal[1, 1], normal[1, 2], normal[1, 3], normal[1, 4] = n11, n12, n13, r1
+    normal[2, 2], normal[2, 3], normal[2, 4] = n22, n23, r2
+    normal[3, 3], normal[3, 4] = n33, r3
 
 
 @kernel(error_model="numpy", inline="always")
