@@ -42,8 +42,8 @@ from .logutil import RateLimitedLog
 from .messages import FORMATS, Frame, MessageError, Preview, decode_refusal, encode
 
 __all__ = ["FRAME_QOS", "MAX_NOTICES", "MAX_REPLAY_GAP", "PREVIEW_HZ", "PREVIEW_WIDTH",
-           "RefusalNotices", "Source", "SourceError", "SourceRejections", "open_source",
-           "publish_frames"]
+           "RefusalNotices", "Source", "SourceError", "SourceRejections", "SubscriberWatch",
+           "open_source", "publish_frames"]
 
 log = logging.getLogger("asnn.camera")
 
@@ -108,6 +108,31 @@ class RefusalNotices:
                              in sorted(self.latest.items())) or "none"
 
 
+class SubscriberWatch:
+    """Logs when a camera's frames lose their last subscriber (no worker takes them: its
+    robot goes unanswered, and nothing else would say so) and when one subscribes again.
+    A Zenoh matching listener's handler (:meth:`zenoh.Publisher.declare_matching_listener`);
+    ``matching`` is the latest status seen (``None``: not known yet)."""
+
+    def __init__(self, robot: str, key: str, matching: bool | None = None):
+        self.robot, self.key = robot, key
+        self.matching = matching
+        self._lock = threading.Lock()
+
+    def __call__(self, status) -> None:
+        with self._lock:
+            before, self.matching = self.matching, bool(status.matching)
+            if before == self.matching:
+                return
+        if self.matching:
+            log.info("camera %s: a subscriber (a worker) takes its frames on %s", self.robot,
+                     self.key)
+        else:
+            log.warning("camera %s: no subscriber on %s any more (its worker stopped, or the "
+                        "router went): its frames are lost until a worker subscribes again",
+                        self.robot, self.key)
+
+
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    prefix: str = keys.DEFAULT_PREFIX, fps: float | None = None,
                    loop: bool = False, format: str = "gray8", wait: float = 0.0,
@@ -161,6 +186,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
             time.sleep(0.05)
         if wait and not publisher.matching_status.matching:
             log.warning("no subscriber on %s after %.1f s; publishing anyway", key, wait)
+        # a worker that dies or stops later leaves the camera publishing into nothing: say so
+        declare(publisher.declare_matching_listener(
+            SubscriberWatch(robot, key, publisher.matching_status.matching)))
         log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
         if not (fps or source.live or source.fps_stated):  # a live source stamps its own times
             log.warning("camera %s: %s states no frame rate a camera runs at; its frames are "

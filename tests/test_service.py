@@ -423,6 +423,34 @@ def test_the_camera_waits_for_a_subscriber_that_comes_late_and_loses_no_frame(ze
     assert "no subscriber on asnn/r10/frame after 0.3 s; publishing anyway" in caplog.text
 
 
+def test_a_camera_says_when_its_frames_lose_their_last_subscriber_and_get_one_again(
+        zenoh_net, caplog):
+    # a soak trial: with its worker killed, a camera published into nothing without a word
+    camera, got = zenoh_net.spoke(), []
+    take = lambda sample: got.append(sample)  # noqa: E731
+    subscriber = zenoh_net.hub.declare_subscriber(keys.frame_key("r12"), take)
+    _, source = scene_source("looming", start=2, stop=8, frames=10)
+    stop = threading.Event()
+    with caplog.at_level("INFO", logger="asnn.camera"):
+        thread = threading.Thread(target=publish_frames, args=(camera, "r12", source),
+                                  kwargs=dict(fps=50, loop=True, wait=30.0, stop=stop,
+                                              preview_hz=0), daemon=True)
+        thread.start()
+        try:
+            wait_for(lambda: len(got) >= 3, what="frames at the worker")
+            subscriber.undeclare()  # the worker goes
+            gone = "camera r12: no subscriber on asnn/r12/frame any more"
+            wait_for(lambda: gone in caplog.text, what="the camera saying its frames go nowhere")
+            subscriber = zenoh_net.hub.declare_subscriber(keys.frame_key("r12"), take)
+            back = "camera r12: a subscriber (a worker) takes its frames on asnn/r12/frame"
+            wait_for(lambda: back in caplog.text, what="the camera saying a worker is back")
+        finally:
+            stop.set()
+            thread.join(timeout=TIMEOUT)
+    assert caplog.text.count(gone) == 1 and caplog.text.count(back) == 1
+    assert caplog.text.index(gone) < caplog.text.index(back)
+
+
 def test_the_camera_announces_itself_while_it_publishes(zenoh_net):
     seen = []
     sub = zenoh_net.hub.liveliness().declare_subscriber(  # noqa: F841 (kept declared)
