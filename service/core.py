@@ -513,6 +513,16 @@ class WorkerCore:
                     "stream (%s): its model is reset on every frame and cannot warn; a "
                     "camera's seq must grow from frame to frame and its stamp must not go back",
                     robot, state.restarts, broken)
+        if broken == "seq-gap":
+            # frames lost on the way (a link that drops, a camera faster than its link or its
+            # worker can take): each such gap resets the model, which cannot warn until it has
+            # stepped a few frames again; an INFO line per reset hid a soak trial's 28 in 32 s
+            self._rejections.warning(
+                f"seq-gap:{robot}", "robot %s: seq %d after %d: frames lost on the way, more "
+                "than --max-gap (%d steps of %d); its model starts again and cannot warn until "
+                "it has warmed up (frequent: a link that drops frames, or a camera faster than "
+                "its link or worker)", robot, frame.seq, current.seq, self.max_gap,
+                state.seq_step)
         state.streams += 1
         state.previous = current
         state.stream = _Stream(state.streams, broken, frame.seq, frame.stamp,

@@ -148,6 +148,23 @@ def test_reset_rules(looming, seqs, stamps, rule):
     assert core.stats()["resets"] == {rule: 1}
 
 
+def test_frames_lost_on_the_way_are_logged_as_a_warning_at_a_limited_rate(looming, caplog):
+    # a soak trial: a camera faster than its link lost runs of frames, and the model was reset
+    # 28 times in 32 s with an INFO line each
+    clock = FakeClock()
+    core = WorkerCore(max_gap=20, clock=clock)
+    with caplog.at_level(logging.INFO, logger="asnn.worker"):
+        for k, seq in enumerate([0, 1, 2, 40, 41, 42, 90, 91]):
+            clock.now += 0.05
+            feed(core, "r1", looming.frames[10 + k], seq)
+    assert core.stats()["resets"] == {"seq-gap": 2}
+    lost = [r for r in caplog.records if "frames lost on the way" in r.getMessage()]
+    assert len(lost) == 1 and lost[0].levelno == logging.WARNING  # the second within 10 s
+    assert "robot r1: seq 40 after 2" in lost[0].getMessage()
+    resets = [r for r in caplog.records if "state reset (seq-gap)" in r.getMessage()]
+    assert len(resets) == 2  # each reset still has its INFO line
+
+
 def test_frames_reordered_on_the_way_are_refused_as_late_not_a_restart(looming):
     core = WorkerCore(max_gap=20)
     answered = []
