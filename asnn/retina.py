@@ -431,7 +431,7 @@ def approach_map(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
     slow_off, fast_off : ndarray (H, W)
         The OFF pathway's, B-s and B-f.
     cs_kernel : ndarray (k, k)
-        g_CS, the starburst amacrine cells' centre-surround kernel (eq. 13).
+        g_CS, the starburst amacrine cells' centre-surround kernel (eq. 11).
     weights : (w1_on, w2_off, w1_off, w2_on)
         Signed as in the fusion equation; a zero weight skips its term's filtering.
 

@@ -71,3 +71,30 @@ def test_every_retina_stage_cites_the_equation_that_holds_its_symbol():
         if not any(symbol in equations[n - 1] for n in numbers if 0 < n <= len(equations)):
             wrong[function.__name__] = numbers
     assert not wrong, f"cited equations without the stage's symbol: {wrong}"
+
+
+# kernel symbol in a docstring -> the text of the equation that defines it
+KERNELS = {"g_I": r"g_I(x,y", "g_DS": r"g_{DS}(x,y)=", "g_CS": r"g_{CS}(x,y)=",
+           "g_sigma": r"g_{\sigma}(x,y)="}
+
+
+@pytest.mark.skipif(not PAPER.is_file(), reason="../shared/paper is absent")
+def test_a_kernel_cited_with_an_equation_cites_the_one_that_defines_it():
+    """Beyond the first sentences: a docstring line that describes a kernel (a parameter's
+    description that starts with its symbol: ``g_CS, the ... kernel (eq. 11)``) and cites an
+    equation cites the kernel's definition."""
+    import inspect
+
+    equations = paper_equations(PAPER.read_text(encoding="utf-8"))
+    wrong = []
+    for name, function in inspect.getmembers(retina, inspect.isfunction):
+        for line in (function.__doc__ or "").splitlines():
+            for symbol, definition in KERNELS.items():
+                if not re.match(rf"\s*{symbol}\b", line):
+                    continue
+                numbers = cited(line)
+                if numbers and not any(definition in equations[n - 1] for n in numbers
+                                       if 0 < n <= len(equations)):
+                    wrong.append(f"{name}: {line.strip()}")
+    assert not wrong, "kernels cited with an equation that does not define them:\n" + \
+        "\n".join(wrong)
