@@ -147,6 +147,26 @@ def test_the_paper_preset_is_the_papers_equations(scenes, optimised, rtol):
         np.testing.assert_allclose(got, want, rtol=rtol, atol=1e-12 * max(want), err_msg=name)
 
 
+@pytest.mark.parametrize("optimised, rtol", [(False, 1e-9), (True, 1e-4)])
+def test_the_fast_terms_of_eq_19_enter_eq_20_as_printed(scenes, optimised, rtol):
+    """The ``paper`` preset's weights (w2+ = w2- = 0) leave G2+ and G2- (eq. 19) and their
+    minus signs in eq. 20 out of the test above: the robot experiment's weights
+    [1, 1, 1, 0.4, 1, 0.4] have all four terms."""
+    p = preset("robot")
+    assert (p.w1_on, p.w2_off, p.w1_off, p.w2_on) == (1.0, 0.4, 1.0, 0.4)
+    for name in ("approach_recession_over_stripes", "translation"):
+        frames = scenes[name]
+        want = paper_model_u(frames, p)
+        model = ASNN(p, optimised=optimised)
+        got = [model.step(f).u for f in frames]
+        assert max(np.abs(want)) > 0, name
+        np.testing.assert_allclose(got, want, rtol=rtol, atol=1e-12 * max(np.abs(want)),
+                                   err_msg=name)
+        # the fast terms are subtracted: without them u would be larger
+        without = paper_model_u(frames, p.model_copy(update={"w2_off": 0.0, "w2_on": 0.0}))
+        assert sum(without) > sum(want), name
+
+
 # ---------------------------------------------------------------- the baselines
 
 W_I = np.array([[1 / 8, 1 / 4, 1 / 8], [1 / 4, 0, 1 / 4], [1 / 8, 1 / 4, 1 / 8]])
