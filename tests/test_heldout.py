@@ -31,6 +31,22 @@ def test_the_replay_reproduces_the_models_warnings_frame_by_frame(traced):
         model = ASNN(base)
         own = [model.step(f, t).collision for t, f in at_rate(scene.frames, scene.fps)]
         assert [r["collision"] for r in heldout.replay(trace, base)] == own
+        assert trace.warnings == own  # what check_replay holds the replay to
+
+
+def test_a_replay_that_misses_a_stage_of_the_gate_is_refused(traced):
+    # a stage added to the gate but not to the replay: the model quiet where the replay warns;
+    # the held-out figures would leave the stage out without a word
+    import dataclasses
+
+    base, _, traces = traced
+    trace = traces[0]  # the loom: it warns
+    heldout.check_replay(trace, base)
+    assert any(trace.warnings)
+    silenced = dataclasses.replace(trace, warnings=[False] * len(trace.warnings))
+    with pytest.raises(ValueError, match="does not reproduce the model's warnings on "
+                                         "'loom-dark-c0.6-d6-center'"):
+        heldout.check_replay(silenced, base)
 
 
 def test_the_replay_follows_other_thresholds(traced):
