@@ -7,7 +7,8 @@ import json
 import sys
 
 from asnn.detectors import MODELS
-from cli.arguments import count, frame_rate, frame_size, frames, positive, seed, threads
+from cli.arguments import (count, frame_rate, frame_size, frames, positive, preset_spec, seed,
+                           threads)
 
 # how the benches that time whole processes run asnn: this interpreter, this checkout's CLI
 ASNN_COMMAND = (sys.executable, "-m", "cli.main")
@@ -24,8 +25,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=frames, default=None,
                    help="timed frames per run (default 40; --detect: frames of the clip, 1200; "
                         "at most 10000)")
-    p.add_argument("--preset", action="append", metavar="NAME",
-                   help="ASNN preset to time (repeatable; default: all); the default preset is "
+    p.add_argument("--preset", action="append", type=preset_spec, metavar="NAME[/FIELD=VALUE...]",
+                   help="ASNN preset to time (repeatable; default: all), per frame with fields "
+                   "changed after slashes as asnn eval's specs (robust/top_k=0: a stage's cost "
+                   "as the difference of two rows of one run); the default preset is "
                         "added for the straightforward form's ratio (unless "
                         "--no-straightforward), and with it reference32, its cost's reference")
     p.add_argument("--model", action="append", choices=MODELS,
@@ -91,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
         if args.case is not None and (args.detect or args.handover or args.service):
             raise ValueError("--case times the models per frame only: not with --detect, "
                              "--handover or --service")
+        if (args.detect or args.service) and any("/" in name for name in args.preset or ()):
+            raise ValueError("--preset with changed fields is timed per frame (or with "
+                             "--handover): --detect and --service take a preset's name")
         if args.repeat is not None and (args.handover or args.service):
             raise ValueError("--repeat repeats the per-frame comparison or --detect's runs: "
                              "not with --handover or --service")

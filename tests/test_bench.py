@@ -213,7 +213,9 @@ def test_the_default_is_timed_against_the_published_variant_in_turn(monkeypatch)
 def test_bench_rejects_an_unknown_preset(capsys, monkeypatch):
     for name in THREAD_VARIABLES:
         monkeypatch.delenv(name, raising=False)
-    assert main(["bench", "--preset", "nope", "--size", "48x48", "--frames", "2"]) == 2
+    with pytest.raises(SystemExit) as refused:  # refused as the arguments are read
+        main(["bench", "--preset", "nope", "--size", "48x48", "--frames", "2"])
+    assert refused.value.code == 2
     assert "unknown preset 'nope'" in capsys.readouterr().err
 
 
@@ -343,3 +345,41 @@ def test_bench_refuses_a_clip_too_large_to_draw_at_once(capsys, monkeypatch):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["asnn bench: 1000 frames at 1920x1080 are more than the bench draws at once: "
                    "at most 58 at that size"]
+
+
+def test_bench_times_a_preset_with_changed_fields_beside_the_preset(monkeypatch):
+    """``robust/top_k=0`` is timed with its fields changed, in its own row of the same run: a
+    stage's cost without a second run at another time."""
+    from asnn.evaluation import bench
+    from asnn.params import preset
+
+    built = {}
+
+    def timed(make, clip, warmup):
+        model = make()
+        built.setdefault(model.params, 0)
+        built[model.params] += 1
+        return np.full(len(clip) - warmup, 1.0)
+
+    monkeypatch.setattr(bench, "time_detector", timed)
+    report = bench.run(sizes=[(48, 48)], frames=2, presets=["robust", "robust/top_k=0"],
+                       models=("asnn",), straightforward=False, repeat=1)
+    rows = {r["preset"]: r for r in report["results"]}
+    assert set(rows) == {"robust", "robust/top_k=0", "reference32"}
+    assert preset("robust", top_k=0) in built and preset("robust") in built
+    assert "vs_published" in rows["robust"] and "vs_published" not in rows["robust/top_k=0"]
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--preset", "robust/nope=1"], "nope"),
+    (["--detect", "--preset", "robust/top_k=0"], "take a preset's name"),
+    (["--service", "--preset", "robust/top_k=0"], "take a preset's name")])
+def test_bench_refuses_changed_fields_it_cannot_time(capsys, monkeypatch, argv, says):
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    try:
+        status = main(["bench", *argv])
+    except SystemExit as exc:  # argparse's own refusal
+        status = exc.code
+    assert status == 2
+    assert says in capsys.readouterr().err

@@ -151,6 +151,26 @@ def _check_clip_pixels(sizes, frames: int, warmup: int) -> None:
                              f"once: at most {most} at that size")
 
 
+def _preset_params(names: list[str] | None) -> dict:
+    """Each preset to time, by the name its row gets: a preset's key (:func:`preset_key`), or a
+    spec with changed fields (``robust/top_k=0``, as the command line writes it) mapped to its
+    parameters. ``None``: every preset."""
+    from ..params import PRESETS, preset_key
+    from .runs import parse_detector
+
+    if names is None:
+        return {name: name for name in PRESETS}
+    timed = {}
+    for name in names:
+        if "/" not in name:
+            key = preset_key(name)
+            timed.setdefault(key, key)
+            continue
+        spec = parse_detector(f"asnn:{name}")
+        timed.setdefault(spec.name.removeprefix("asnn:"), spec.params)
+    return timed
+
+
 def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
         models=("asnn", "lgmd1", "lgmd2"), straightforward: bool = True,
         progress=None, case: str | None = None, repeat: int = 1) -> dict:
@@ -161,7 +181,9 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     are not used): a driving scene, where the stages that act only while the scene expands
     under the camera's own motion have work to do.
 
-    ``presets`` are names of :func:`asnn.params.preset` (``None``: all). With ``straightforward``,
+    ``presets`` are names of :func:`asnn.params.preset` (``None``: all), each optionally with
+    fields changed after slashes as a detector spec has them (``robust/top_k=0``: a stage's
+    cost is the difference of its two rows, timed in one run). With ``straightforward``,
     the default preset is timed too, since the straightforward form's ratio is against it.
     Whenever the default preset is timed, the published variant in float32 (``reference32``,
     the default before the robust preset) is timed with it, and the default's row carries
@@ -175,17 +197,18 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     Raises
     ------
     ValueError
-        If a preset name is unknown, ``repeat`` is below 1, or a generated clip would have more
-        than :data:`MAX_CLIP_PIXELS` pixels.
+        If a preset name or field is unknown, ``repeat`` is below 1, or a generated clip would
+        have more than :data:`MAX_CLIP_PIXELS` pixels.
     """
     if repeat < 1:
         raise ValueError(f"repeat must be at least 1, not {repeat}")
     from ..detectors import make_detector
     from ..model import ASNN, compile_kernels
-    from ..params import DEFAULT_PRESET, PRESETS, preset_key
+    from ..params import DEFAULT_PRESET
     from ..stimuli import make_scene
 
-    presets = list(PRESETS) if presets is None else list(dict.fromkeys(map(preset_key, presets)))
+    timed_params = _preset_params(presets)
+    presets = list(timed_params)
     if straightforward and "asnn" in models and DEFAULT_PRESET not in presets:
         presets.append(DEFAULT_PRESET)  # the straightforward form's ratio is against it
     if DEFAULT_PRESET in presets and PUBLISHED not in presets:
@@ -224,7 +247,8 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
             if model != "asnn":
                 add(model, "", "optimised", lambda m=model: make_detector(m, None))
                 continue
-            timed = {name: add("asnn", name, "optimised", lambda n=name: ASNN(n))
+            timed = {name: add("asnn", name, "optimised",
+                               lambda n=timed_params.get(name, name): ASNN(n))
                      for name in presets}
             if DEFAULT_PRESET in timed and DEFAULT_PRESET != PUBLISHED:
                 row = timed[DEFAULT_PRESET]
