@@ -4,8 +4,9 @@
 their clips are entered by hand, as ``sub/clip.mp4``, and then checked like the others) as
 ``asnn eval`` will, adds an entry for each video without one (its ``frames``, ``fps`` and size
 filled in, the rest to fill in by hand: :func:`asnn.evaluation.labels.unlabelled`), and lists
-what is left to do: entries to finish or mend, clips that decode to other frames or another frame rate than
-their labels say, labels whose clip is not there. Exit status 0 when every entry is ready for
+what is left to do: entries to finish or mend, clips that decode to other frames, another frame
+rate or another size than their labels say, a centre outside the clip's frames, labels whose clip
+is not there. Exit status 0 when every entry is ready for
 ``asnn eval``, 1 when something is listed, 2 for unusable input.
 """
 
@@ -16,8 +17,8 @@ import json
 import sys
 from pathlib import Path
 
-from asnn.evaluation.labels import (check_labels, label_problem, mismatches, read_entries,
-                                    unlabelled)
+from asnn.evaluation.labels import (center_outside, check_labels, label_problem, mismatches,
+                                    read_entries, unlabelled)
 from asnn.evaluation.scoring import WARMUP_FRAMES
 from asnn.io.sources import SourceError, open_source
 from asnn.io.video import cut_short
@@ -69,11 +70,14 @@ def run(args: argparse.Namespace) -> int:
             todo.append(f"{entry['file']}: no such clip in {folder}")
         elif clip.suffix.lower() in VIDEO_SUFFIXES:
             try:
-                frames, fps, _ = _decode(clip, todo)
+                frames, fps, (height, width) = _decode(clip, todo)
             except SourceError as exc:
                 todo.append(str(exc))
                 continue
-            todo += mismatches(entry, frames, fps)
+            todo += mismatches(entry, frames, fps, size=(width, height))
+            outside = center_outside(entry, width, height)
+            if outside is not None:
+                todo.append(outside)
     if not todo:
         try:  # across the entries: two clips whose results would share a file
             check_labels(entries, str(path))

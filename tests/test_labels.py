@@ -296,3 +296,32 @@ def test_a_labels_file_nested_too_deeply_or_empty_is_one_error_line(tmp_path, ca
         assert main(["label", str(tmp_path)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and says in err[0]
+
+
+def test_a_center_outside_the_clips_own_frames_is_refused_before_anything_runs(tmp_path, capsys):
+    # a portrait clip: its label's size swapped (width and height mixed up), or left out, must
+    # not let a centre outside the frames through to the localisation scores
+    scene = make_scene("looming", size=(48, 96), frames=24, start=4, stop=20)
+    write_video(scene.frames, tmp_path / "tall.mp4", scene.fps)
+    label = {**scene.label("tall.mp4"), "center": [70.0, 30.0]}
+    out = tmp_path / "out"
+    for entry in ({**label, "width": 96, "height": 48}, {k: v for k, v in label.items()
+                                                         if k not in ("width", "height")}):
+        (tmp_path / "labels.json").write_text(json.dumps([entry]))
+        assert main(["eval", str(tmp_path), "--detectors", "lgmd2", "--out", str(out)]) == 2
+        assert ("tall.mp4: center (70, 30) is outside its 48x96 frames"
+                in capsys.readouterr().err)
+        assert not out.exists()
+        assert main(["label", str(tmp_path)]) == 1
+        listed = capsys.readouterr().out
+        assert "tall.mp4: center (70, 30) is outside its 48x96 frames" in listed
+        if "width" in entry:
+            assert "tall.mp4: its frames are 48x96 where its label says 96x48" in listed
+
+
+def test_a_clip_whose_size_disagrees_with_its_label_is_named():
+    assert mismatches({**COLLISION, "width": 64, "height": 48}, 60, 30.0, size=(64, 48)) == []
+    assert mismatches(COLLISION, 60, 30.0, size=(64, 48)) == []  # no size to compare
+    assert mismatches({**COLLISION, "width": 48, "height": 64}, 60, 30.0, size=(64, 48)) == [
+        "c.mp4: its frames are 64x48 where its label says 48x64: its center and track may "
+        "not be in the clip's pixels"]

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
-from .labels import load_labels, mismatches, result_name
+from .labels import center_outside, load_labels, mismatches, result_name
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .pool import run_tasks
 from .progress import Silent
@@ -25,13 +25,14 @@ __all__ = ["check_clips", "evaluate_clips", "open_clips"]
 
 
 def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
-               ) -> tuple[list[int], list[str]]:
+               ) -> tuple[list[int], list[str], list[tuple[int, int] | None]]:
     """Open every labelled clip (:func:`~asnn.io.sources.open_source`, which decodes its first
-    frame): the frames each states (0 where unknown or unreadable), and one line per clip that
+    frame): the frames each states (0 where unknown or unreadable), one line per clip that
     cannot be opened, naming it (missing, not a video OpenCV decodes, a bag without its image
-    topic). Checked before anything runs, so that a clip that cannot be scored stops the
+    topic), and each clip's frame size (width, height; None where it cannot be opened).
+    Checked before anything runs, so that a clip that cannot be scored stops the
     evaluation instead of leaving the rates without it."""
-    counts, problems = [], []
+    counts, problems, sizes = [], [], []
     for lab in labels:
         try:
             source = open_source(str(Path(clips_dir) / lab["file"]), topic=lab.get("topic"))
@@ -41,34 +42,47 @@ def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
                 exc.reason == "several-topics") else ""
             problems.append(str(exc) + hint)
             counts.append(0)
+            sizes.append(None)
         else:
             counts.append(int(source.frame_count or 0))
-    return counts, problems
+            first = next(iter(source.frames()), None)
+            sizes.append(None if first is None else (first.shape[1], first.shape[0]))
+    return counts, problems, sizes
 
 
 def check_clips(clips_dir: str | Path, labels: Sequence[Mapping], most: int = 5) -> list[int]:
     """The frames each labelled clip states (:func:`open_clips`); ValueError naming the clips
-    that cannot be opened, the first ``most`` of them."""
-    counts, problems = open_clips(clips_dir, labels)
+    that cannot be opened, the first ``most`` of them, or else the labels whose ``center`` is
+    outside their clip's frames (:func:`~asnn.evaluation.labels.center_outside`)."""
+    counts, problems, sizes = open_clips(clips_dir, labels)
     if problems:
         more = f"; and {len(problems) - most} more" if len(problems) > most else ""
         raise ValueError(f"{len(problems)} of the {len(labels)} labelled clips cannot be read "
                          f"(mend or remove their entries): {'; '.join(problems[:most])}{more}")
+    outside = [problem for lab, size in zip(labels, sizes) if size is not None
+               for problem in [center_outside(lab, *size)] if problem is not None]
+    if outside:
+        more = f"; and {len(outside) - most} more" if len(outside) > most else ""
+        raise ValueError(f"{len(outside)} of the {len(labels)} labels put the object outside "
+                         f"their clip: {'; '.join(outside[:most])}{more}")
     return counts
 
 
 def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | None = None,
               perturbation: str | None = None
-              ) -> tuple[int, str | None, tuple[int, float] | None]:
+              ) -> tuple[int, str | None, tuple[int, float, tuple[int, int] | None] | None]:
     """Worker: one detector on one clip (a bag's ``topic``), its frames perturbed where
     ``perturbation`` names one, results to ``out_path``. Returns the frames run, the error
-    (or None) and the clip as decoded, before any perturbation: its frames and frame rate."""
-    decoded = 0
+    (or None) and the clip as decoded, before any perturbation: its frames, frame rate and
+    frame size (width, height)."""
+    decoded, size = 0, None
 
     def counted(frames):
-        nonlocal decoded
+        nonlocal decoded, size
         for item in frames:
             decoded += 1
+            if size is None:
+                size = (item[1].shape[1], item[1].shape[0])  # (t, image): width, height
             yield item
 
     try:
@@ -77,7 +91,7 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
     except (SourceError, ValueError) as exc:
         return 0, str(exc), None
     write_jsonl(Path(out_path), records)
-    return len(records), None, (decoded, clip.fps)
+    return len(records), None, (decoded, clip.fps, size)
 
 
 def _clips_report(results: Mapping) -> str:
@@ -208,7 +222,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     errors, warnings, checked = [], [], set()
 
     def finished(index: int, frames: int, error: str | None,
-                 decoded: tuple[int, float] | None) -> None:
+                 decoded: tuple[int, float, tuple[int, int] | None] | None) -> None:
         spec, clip = tasks[index][1], clip_of[index]
         name = f"{spec.name} {labels[clip]['file']}"  # as labelled: sub/clip.mp4, not clip.mp4
         progress.advance(expected[index], name)
@@ -218,7 +232,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
             errors.append(f"{name}: {error}")
         if decoded is not None and clip not in checked:  # once a clip, by its first run
             checked.add(clip)
-            warnings.extend(mismatches(given[clip], *decoded))
+            frames, fps, size = decoded
+            warnings.extend(mismatches(given[clip], frames, fps, size=size))
 
     for index, result in run_tasks(_run_clip, tasks, jobs):
         finished(index, *result)

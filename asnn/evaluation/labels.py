@@ -30,8 +30,8 @@ from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, Valid
 
 from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside, a mistake
 
-__all__ = ["ClipLabel", "check_labels", "label_problem", "load_labels", "mismatches",
-           "read_entries", "result_name", "unlabelled"]
+__all__ = ["ClipLabel", "check_labels", "center_outside", "label_problem", "load_labels",
+           "mismatches", "read_entries", "result_name", "unlabelled"]
 
 
 class ClipLabel(BaseModel):
@@ -227,11 +227,30 @@ def read_entries(path: str | Path) -> list:
     return data
 
 
-def mismatches(label: Mapping, frames: int, fps: float, tolerance: float = 0.01) -> list[str]:
+def center_outside(label: Mapping, width: int, height: int) -> str | None:
+    """Why a label's ``center`` cannot be in its clip's own ``width`` x ``height`` frames (a
+    portrait clip labelled with its size swapped, or a label without a size), or None.
+
+    :class:`ClipLabel` checks the centre against the label's own ``width`` and ``height`` only;
+    this checks it against the frames decoded, so that a centre no target can be near is
+    refused instead of scored as a localisation error."""
+    center = label.get("center")
+    if center is None:
+        return None
+    x, y = (float(v) for v in center)
+    if 0 <= x <= width and 0 <= y <= height:
+        return None
+    return (f"{label.get('file', '?')}: center ({x:g}, {y:g}) is outside its {width}x{height} "
+            "frames (center is [x, y] in the clip's pixels)")
+
+
+def mismatches(label: Mapping, frames: int, fps: float, tolerance: float = 0.01,
+               size: tuple[int, int] | None = None) -> list[str]:
     """Where a clip as it was decoded disagrees with its label: its number of frames (where the
     label gives ``frames``; else the per-frame ``track``, ``target_size`` and ``ttc``'s
-    lengths), a ``contact_frame`` beyond the frames decoded, and its frame rate (by more than
-    ``tolerance``, relative).
+    lengths), a ``contact_frame`` beyond the frames decoded, its frame rate (by more than
+    ``tolerance``, relative), and its frames' ``size`` (width, height), where given, against
+    the label's ``width`` and ``height``.
 
     A label's frames are counted as one decoder saw them (OpenCV reads 68 of a clip whose
     header claims 444, another decoder may read more), and the scoring takes its early
@@ -256,6 +275,12 @@ def mismatches(label: Mapping, frames: int, fps: float, tolerance: float = 0.01)
         if values is not None and len(values) != frames and label.get("frames") is None:
             found.append(f"{name}: its {field} has {len(values)} entries for the {frames} "
                          "frames decoded (one per frame): its target scores are left out")
+    if size is not None and label.get("width") is not None and label.get("height") is not None:
+        labelled = (int(label["width"]), int(label["height"]))
+        if tuple(size) != labelled:
+            found.append(f"{name}: its frames are {size[0]}x{size[1]} where its label says "
+                         f"{labelled[0]}x{labelled[1]}: its center and track may not be in the "
+                         "clip's pixels")
     if abs(fps - float(label["fps"])) > tolerance * float(label["fps"]):
         found.append(f"{name}: the clip runs at {fps:g} fps where its label says "
                      f"{float(label['fps']):g}: the model's timing and the scoring's disagree")
