@@ -51,6 +51,24 @@ def _summary_line(name: str, s: dict) -> str:
     return line + (f", {s['missing']} clips without results" if s["missing"] else "")
 
 
+def _say_unlabelled(clips_dir: str, labels: Path) -> None:
+    """Name on stderr, before anything runs, the videos in the clips' folder that no label
+    names: they are not scored (``asnn label`` adds their entries). A labels file that cannot
+    be read is left to the evaluation to refuse."""
+    from asnn.evaluation.labels import read_entries, unlabelled_videos
+
+    try:
+        names = unlabelled_videos(clips_dir, read_entries(labels))
+    except (OSError, ValueError):
+        return
+    if names:
+        one = len(names) == 1
+        print(f"asnn eval: {len(names)} video{'' if one else 's'} in the folder "
+              f"{'has' if one else 'have'} no label and {'is' if one else 'are'} not scored "
+              f"(asnn label {clips_dir} adds {'its entry' if one else 'their entries'}): "
+              + ", ".join(names), file=sys.stderr)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "eval", help="score the detectors on labelled clips, the generated suite or the paper's "
@@ -281,6 +299,7 @@ def _evaluate(args: argparse.Namespace) -> int:
                     return 2
                 held = specs[0]
             held_preset, overrides = held.preset or "default", dict(held.overrides)
+            _say_unlabelled(args.clips_dir, labels)
             heldout.evaluate_held_out(args.clips_dir, args.out, labels_path=args.labels,
                                       preset_name=held_preset, cases=args.cases, jobs=args.jobs,
                                       progress=progress, tie_break=args.tie_break,
@@ -288,6 +307,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             print(f"{args.out}/held_out.md")
             return 0
         else:
+            _say_unlabelled(args.clips_dir, labels)
             results = clips.evaluate_clips(
                 args.clips_dir, args.out, labels_path=args.labels, detectors=args.detectors,
                 preset_name=preset_name, early_tolerance_s=tolerance,
@@ -295,6 +315,8 @@ def _evaluate(args: argparse.Namespace) -> int:
                 perturbation=args.perturb, progress=progress)
             for name, entry in results["detectors"].items():
                 print(_summary_line(name, entry["summary"]))
+            for warning in results["warnings"]:  # also in report.md, but easy to miss there
+                print(f"asnn eval: {warning}", file=sys.stderr)
             if results["errors"]:
                 print(f"{args.out}/report.md")
                 print(f"asnn eval: {len(results['errors'])} of the runs failed, their clips "

@@ -17,18 +17,15 @@ import json
 import sys
 from pathlib import Path
 
-from asnn.evaluation.labels import (center_outside, check_labels, label_problem, mismatches,
-                                    read_entries, unlabelled)
+from asnn.evaluation.labels import (VIDEO_SUFFIXES, center_outside, check_labels,
+                                    label_problem, mismatches, read_entries, unlabelled,
+                                    unlabelled_videos)
 from asnn.evaluation.scoring import WARMUP_FRAMES
 from asnn.io.sources import SourceError, open_source
 from asnn.io.video import cut_short
 from asnn.params import preset
 from cli.arguments import nonempty_path
 
-# what OpenCV's FFmpeg backend commonly reads (dashcams write .ts and .mts too); bags (.mcap)
-# need a topic and are labelled by hand
-VIDEO_SUFFIXES = (".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg",
-                  ".mpg", ".mts", ".ogv", ".ts", ".webm", ".wmv")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -84,17 +81,14 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             todo.append(str(exc))
     # an entry names its clip relative to the folder, perhaps as ./clip.mp4 or sub/../clip.mp4
-    labelled = {(folder / e["file"]).resolve() for e in entries
-                if isinstance(e, dict) and isinstance(e.get("file"), str)}
-    videos = sorted(p for p in folder.iterdir()
-                    if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES)
-    if not entries and not videos:
+    new_videos = [folder / name for name in unlabelled_videos(folder, entries)]
+    if not entries and not new_videos:
         print(f"asnn label: {folder} holds no video ({', '.join(VIDEO_SUFFIXES)}; subfolders "
               "are not searched: enter their clips by hand, as sub/clip.mp4, and bags with "
               "their topic)")
         return 1
     added = []
-    for video in (p for p in videos if p.resolve() not in labelled):
+    for video in new_videos:
         try:
             frames, fps, (height, width) = _decode(video, todo)
         except SourceError as exc:

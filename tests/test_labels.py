@@ -325,3 +325,25 @@ def test_a_clip_whose_size_disagrees_with_its_label_is_named():
     assert mismatches({**COLLISION, "width": 48, "height": 64}, 60, 30.0, size=(64, 48)) == [
         "c.mp4: its frames are 64x48 where its label says 48x64: its center and track may "
         "not be in the clip's pixels"]
+
+
+def test_eval_names_unlabelled_videos_and_label_disagreements_on_the_terminal(tmp_path, capsys):
+    # a video in the folder without an entry is not scored: said before anything runs, not
+    # left for the reader to notice a clip short in the counts; a clip that disagrees with its
+    # label is said on stderr too, not only at the end of report.md
+    scene = make_scene("looming", size=(64, 64), frames=24, start=4, stop=20)
+    write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
+    write_video(scene.frames, tmp_path / "forgotten.mp4", scene.fps)
+    (tmp_path / "labels.json").write_text(json.dumps(
+        [{**scene.label("loom.mp4"), "fps": 2 * scene.fps}]))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "lgmd2", "--out", str(out),
+                 "--no-plots"]) == 0
+    err = capsys.readouterr().err
+    assert ("asnn eval: 1 video in the folder has no label and is not scored (asnn label "
+            f"{tmp_path} adds its entry): forgotten.mp4") in err
+    assert f"loom.mp4: the clip runs at {scene.fps:g} fps where its label says" in err
+    results = json.loads((out / "results.json").read_text())
+    assert results["unlabelled"] == ["forgotten.mp4"]
+    report = (out / "report.md").read_text()
+    assert "Videos in the folder without a label (not scored): forgotten.mp4" in report

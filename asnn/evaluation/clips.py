@@ -13,7 +13,8 @@ from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
-from .labels import center_outside, load_labels, mismatches, result_name
+from .labels import (center_outside, load_labels, mismatches, result_name,
+                     unlabelled_videos)
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .pool import run_tasks
 from .progress import Silent
@@ -145,6 +146,9 @@ def _clips_report(results: Mapping) -> str:
     lines += paired_section(names[0], results.get("paired", {}))
     if results.get("errors"):
         lines += ["", "Errors:", ""] + [f"- {e}" for e in results["errors"]]
+    if results.get("unlabelled"):
+        lines += ["", "Videos in the folder without a label (not scored): "
+                  + ", ".join(results["unlabelled"])]
     if results.get("warnings"):
         lines += ["", "Clips that disagree with their labels:", ""] + [
             f"- {w}" for w in results["warnings"]]
@@ -187,9 +191,11 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     -------
     dict
         What ``results.json`` holds: ``settings``, ``labels``, ``detectors`` (per detector a
-        ``summary`` and per-clip ``clips`` scores), ``errors`` and ``warnings`` (clips whose
-        decoded frames or frame rate disagree with their labels:
-        :func:`~asnn.evaluation.labels.mismatches`).
+        ``summary`` and per-clip ``clips`` scores), ``errors``, ``warnings`` (clips whose
+        decoded frames, frame rate or size disagree with their labels:
+        :func:`~asnn.evaluation.labels.mismatches`) and ``unlabelled`` (the videos in
+        ``clips_dir`` no label names, not scored:
+        :func:`~asnn.evaluation.labels.unlabelled_videos`).
 
     Raises
     ------
@@ -249,6 +255,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         "detectors": {},
         "errors": errors,
         "warnings": warnings,
+        "unlabelled": unlabelled_videos(clips_dir, given),
     }
     scores = {spec.name: scoring.score_directory(out_dir / "results" / spec.slug, labels,
                                                  warmup=warmup,

@@ -30,8 +30,14 @@ from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, Valid
 
 from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside, a mistake
 
-__all__ = ["ClipLabel", "check_labels", "center_outside", "label_problem", "load_labels",
-           "mismatches", "read_entries", "result_name", "unlabelled"]
+# what OpenCV's FFmpeg backend commonly reads (dashcams write .ts and .mts too); bags (.mcap)
+# need a topic and are labelled by hand
+VIDEO_SUFFIXES = (".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg",
+                  ".mpg", ".mts", ".ogv", ".ts", ".webm", ".wmv")
+
+__all__ = ["VIDEO_SUFFIXES", "ClipLabel", "check_labels", "center_outside", "label_problem",
+           "load_labels", "mismatches", "read_entries", "result_name", "unlabelled",
+           "unlabelled_videos"]
 
 
 class ClipLabel(BaseModel):
@@ -183,6 +189,21 @@ def unlabelled(file: str, frames: int, fps: float, width: int, height: int) -> d
     return {"file": file, "width": width, "height": height, "fps": fps, "frames": frames,
             "collision": None, "onset_frame": None, "contact_frame": None, "center": None,
             "description": ""}
+
+
+def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
+    """The videos (:data:`VIDEO_SUFFIXES`) directly in ``clips_dir`` that no entry of
+    ``labels`` names (as ``clip.mp4``, ``./clip.mp4`` or ``sub/../clip.mp4``): clips
+    ``asnn eval`` does not score, and ``asnn label`` would add. Sorted by name."""
+    folder = Path(clips_dir)
+    labelled = {(folder / e["file"]).resolve() for e in labels
+                if isinstance(e, Mapping) and isinstance(e.get("file"), str)}
+    try:
+        found = sorted(p for p in folder.iterdir()
+                       if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES)
+    except OSError:
+        return []
+    return [p.name for p in found if p.resolve() not in labelled]
 
 
 def load_labels(path: str | Path) -> list[dict]:
