@@ -570,3 +570,22 @@ def test_eval_refuses_an_out_that_cannot_be_a_folder_before_it_runs(tmp_path, ca
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"asnn eval: {says.format(tmp=tmp_path)}"]
     assert (tmp_path / "afile.txt").read_text() == "mine\n"
+
+
+def test_a_clips_report_says_which_detector_is_which_and_what_its_columns_count(tmp_path):
+    # a reader of report.md alone must learn that a bare asnn is the robust preset, what the
+    # LGMD names stand for, and what the false-alarm rate and the warning frames count over
+    scene = make_scene("looming", size=(64, 64), frames=24, start=4, stop=20)
+    write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
+    (tmp_path / "labels.json").write_text(json.dumps([scene.label("loom.mp4")]))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "asnn,asnn:light/top_k=0,lgmd1,lgmd2",
+                 "--out", str(out), "--no-plots"]) == 0
+    report = (out / "report.md").read_text()
+    for line in ("- `asnn`: ASNN, the default preset (`robust`)",
+                 "- `asnn:light/top_k=0`: ASNN, preset `light` with top_k=0",
+                 "- `lgmd1`: LGMD1-1 (Yue & Rind 2006)",
+                 "- `lgmd2`: LGMD1-2 (Fu et al. 2018)"):
+        assert line in report
+    assert "false-alarm rate: early warnings and false alarms over all clips scored" in report
+    assert "warning frames in / out of windows:" in report

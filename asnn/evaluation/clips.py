@@ -19,7 +19,8 @@ from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .pool import run_tasks
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
-                   fmt, outcome_cell, paired_comparisons, paired_section, parse_detectors,
+                   fmt, outcome_cell, paired_comparisons, paired_section, parse_detector,
+                   parse_detectors,
                    rate_interval, run_detector, target_quality_cells, write_json, write_jsonl)
 
 __all__ = ["check_clips", "evaluate_clips", "open_clips"]
@@ -132,6 +133,20 @@ def _clips_report(results: Mapping) -> str:
         if s["missing"]:
             lines[-1] += (f" ({s['missing']} clip{'' if s['missing'] == 1 else 's'} without "
                           "results)")
+    lines += ["", "Detectors:", ""] + [
+        f"- `{m}`: {parse_detector(m).description}" for m in names]
+    lines += ["", "Columns: hits, early, late and misses count the collision clips (a *late* "
+              "first warning comes after the hit window, a *miss* has none after the warm-up); (nc): of the clips without a collision, "
+              "those with any warning (false alarms) and those without (quiet); hit rate: hits "
+              "over collision clips; false-alarm rate: early warnings and false alarms over all "
+              "clips scored, with 95 % Wilson intervals in brackets; lead: contact frame - first "
+              "warning, in seconds at the label's fps; loc. error: distance from the nearest "
+              "target at the first warning to the labelled centre (ASNN only); warning frames "
+              "in / out of windows: frames with a warning after the warm-up inside the hit "
+              "windows, and elsewhere (on clips without a collision, before the window, and "
+              "after contact + "
+              f"{scoring.CONTACT_SLACK_FRAMES} frames); warning frames per minute: over the "
+              "clips without a collision, after the warm-up."]
     lines += ["", "Per clip: outcome, first warning frame (lead time, s), warning frames, and the "
               "distance from the nearest target to the labelled centre at the first warning.", "",
               "| clip | onset | contact | " + " | ".join(names) + " |",

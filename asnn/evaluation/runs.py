@@ -21,7 +21,7 @@ from pydantic import ValidationError
 
 from . import scoring
 from ..detectors import MODELS, Detector, make_detector
-from ..params import ASNNParams, preset
+from ..params import DEFAULT_PRESET, ASNNParams, preset
 
 __all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
            "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
@@ -78,6 +78,20 @@ class DetectorSpec:
             return self.model
         extra = "".join(f"/{k}={_spell(v)}" for k, v in self.overrides)
         return f"asnn:{self.preset or 'default'}{extra}"
+
+    @property
+    def description(self) -> str:
+        """What the name stands for, for a report's reader: the model, and for ASNN its preset
+        (the default's own name) and overrides."""
+        if self.model == "lgmd1":
+            return "LGMD1-1 (Yue & Rind 2006), asnn.baselines.LGMD1"
+        if self.model == "lgmd2":
+            return "LGMD1-2 (Fu et al. 2018), asnn.baselines.LGMD2"
+        text = (f"ASNN, the default preset (`{DEFAULT_PRESET}`)" if self.preset is None
+                else f"ASNN, preset `{self.preset}`")
+        if self.overrides:
+            text += " with " + ", ".join(f"{k}={_spell(v)}" for k, v in self.overrides)
+        return text
 
     @property
     def slug(self) -> str:
