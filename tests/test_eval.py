@@ -589,3 +589,25 @@ def test_a_clips_report_says_which_detector_is_which_and_what_its_columns_count(
         assert line in report
     assert "false-alarm rate: early warnings and false alarms over all clips scored" in report
     assert "warning frames in / out of windows:" in report
+
+
+def test_the_summary_plot_keeps_long_detector_names_apart_and_marks_no_hits(monkeypatch,
+                                                                            tmp_path):
+    from asnn.evaluation import figures
+
+    drawn = {}
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda fig, path: drawn.setdefault("fig", fig)
+                        and save(fig, path))
+    base = {"hit": 4, "miss": 2, "quiet": 3, "median_lead_s": 0.8}
+    summaries = {"asnn": base, "asnn:light": base, "asnn:robust/ignore_rig=false": base,
+                 "lgmd2": {**base, "hit": 0, "miss": 6, "median_lead_s": None}}
+    figures.plot_summary(tmp_path / "summary.png", summaries)
+    fig = drawn["fig"]
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:  # each panel's detector names must not overlap one another
+        boxes = [t.get_window_extent(renderer) for t in ax.get_xticklabels()]
+        assert len(boxes) == len(summaries)
+        assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    lead_ax = fig.axes[1]  # a detector without hits has no lead, not a lead of 0 s
+    assert "no hits" in [t.get_text() for t in lead_ax.texts]

@@ -126,7 +126,10 @@ def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
         ``{model: scoring.summarize(...)}``.
     """
     models = list(summaries)
-    fig = _figure(8.0, 3.6)
+    # detector specs can be long (asnn:robust/ignore_rig=false): stand them upright where they
+    # would run into each other, and give them room below
+    tilt = sum(len(m) for m in models) > 24
+    fig = _figure(8.0, 3.6 + (0.07 * max(len(m) for m in models) if tilt else 0.0))
     counts_ax, lead_ax = fig.subplots(1, 2, width_ratios=[2, 1])
     x = np.arange(len(models))
     bottom = np.zeros(len(models))
@@ -143,8 +146,14 @@ def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
     lead_ax.bar(x, [v if v is not None else 0.0 for v in lead],
                 color=[_colour(m) for m in models], width=0.6)
     lead_ax.set_xticks(x, models)
+    for i, value in enumerate(lead):
+        if value is None:  # no hits: no lead, not a lead of 0 s
+            lead_ax.text(i, 0.0, "no hits", ha="center", va="bottom", rotation=90, fontsize=8)
     lead_ax.set_ylabel("seconds")
     lead_ax.set_title("median lead time of hits")
+    if tilt:
+        for ax in (counts_ax, lead_ax):
+            ax.tick_params(axis="x", labelrotation=90)
     return _save(fig, path)
 
 
