@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-from asnn.evaluation.labels import (VIDEO_SUFFIXES, center_outside, check_labels,
+from asnn.evaluation.labels import (VIDEO_SUFFIXES, center_outside, check_labels, clip_hint,
                                     label_problem, mismatches, read_entries, unlabelled,
                                     unlabelled_videos)
 from asnn.evaluation.scoring import WARMUP_FRAMES
@@ -64,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
             continue
         clip = folder / entry["file"]
         if not clip.is_file():
-            todo.append(f"{entry['file']}: no such clip in {folder}")
+            todo.append(f"{entry['file']}: no such clip in {folder}"
+                        + clip_hint(entry["file"], unlabelled_videos(folder, entries)))
         elif clip.suffix.lower() in VIDEO_SUFFIXES:
             try:
                 frames, fps, (height, width) = _decode(clip, todo)

@@ -347,3 +347,17 @@ def test_eval_names_unlabelled_videos_and_label_disagreements_on_the_terminal(tm
     assert results["unlabelled"] == ["forgotten.mp4"]
     report = (out / "report.md").read_text()
     assert "Videos in the folder without a label (not scored): forgotten.mp4" in report
+
+
+def test_a_misspelt_clip_name_is_answered_with_the_unlabelled_video_it_likely_means(tmp_path,
+                                                                                   capsys):
+    scene = make_scene("looming", size=(64, 64), frames=24, start=4, stop=20)
+    write_video(scene.frames, tmp_path / "loom25.mp4", scene.fps)
+    (tmp_path / "labels.json").write_text(json.dumps([scene.label("loom_25.mp4")]))
+    assert main(["eval", str(tmp_path), "--detectors", "lgmd2", "--out",
+                 str(tmp_path / "out")]) == 2
+    assert "loom_25.mp4: no such file (did you mean loom25.mp4?)" in capsys.readouterr().err
+    (tmp_path / "labels.json").write_text(json.dumps([scene.label("loom_25.mp4")]))
+    assert main(["label", str(tmp_path)]) == 1
+    assert (f"loom_25.mp4: no such clip in {tmp_path} (did you mean loom25.mp4?)"
+            in capsys.readouterr().out)

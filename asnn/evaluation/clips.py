@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..io.sources import SourceError, open_source
 from . import figures, scoring
-from .labels import (center_outside, load_labels, mismatches, result_name,
+from .labels import (center_outside, clip_hint, load_labels, mismatches, result_name,
                      unlabelled_videos)
 from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
 from .pool import run_tasks
@@ -42,6 +42,8 @@ def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
             # the command line's way to choose a topic is not a label's
             hint = "; in labels.json, the entry's topic names it" if (
                 exc.reason == "several-topics") else ""
+            if exc.reason == "missing" and not (Path(clips_dir) / lab["file"]).exists():
+                hint = clip_hint(lab["file"], unlabelled_videos(clips_dir, labels))
             problems.append(str(exc) + hint)
             counts.append(0)
             sizes.append(None)

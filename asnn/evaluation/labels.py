@@ -35,7 +35,8 @@ from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside
 VIDEO_SUFFIXES = (".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg",
                   ".mpg", ".mts", ".ogv", ".ts", ".webm", ".wmv")
 
-__all__ = ["VIDEO_SUFFIXES", "ClipLabel", "check_labels", "center_outside", "label_problem",
+__all__ = ["VIDEO_SUFFIXES", "ClipLabel", "center_outside", "check_labels", "clip_hint",
+           "label_problem",
            "load_labels", "mismatches", "read_entries", "result_name", "unlabelled",
            "unlabelled_videos"]
 
@@ -204,6 +205,13 @@ def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
     except OSError:
         return []
     return [p.name for p in found if p.resolve() not in labelled]
+
+
+def clip_hint(file: str, candidates: Sequence[str]) -> str:
+    """For a label whose clip is missing: `` (did you mean NAME?)`` naming the one of
+    ``candidates`` (videos no label names) its ``file`` is most likely a typo of, or ''."""
+    near = difflib.get_close_matches(Path(file).name, list(candidates), n=1, cutoff=0.75)
+    return f" (did you mean {near[0]}?)" if near else ""
 
 
 def load_labels(path: str | Path) -> list[dict]:
