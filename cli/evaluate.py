@@ -89,7 +89,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                            "default preset's approach-gate thresholds (held_out.md); of another "
                            "preset's with --preset, or of one ASNN spec's with --detectors "
                            "(asnn:robust/stabilise=false: an addition switched off, its gate "
-                           "chosen again)")
+                           "chosen again). The thresholds were tuned on ../shared/data/real: on "
+                           "other clips (your own) the preset's row is not in-sample but "
+                           "already held out, and the leave-one-clip-out row shows what "
+                           "choosing them on your clips would give. Runs the generated suite "
+                           "too (minutes; the replay after it prints nothing)")
     p.add_argument("--tie-break", choices=list(TIE_BREAKS), default="warning-frames",
                    help="with --held-out: how thresholds that tie on hits and false alarms are "
                         "told apart: " + "; ".join(f"{k}: {v}" for k, v in TIE_BREAKS.items())
