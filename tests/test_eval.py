@@ -611,3 +611,26 @@ def test_the_summary_plot_keeps_long_detector_names_apart_and_marks_no_hits(monk
         assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
     lead_ax = fig.axes[1]  # a detector without hits has no lead, not a lead of 0 s
     assert "no hits" in [t.get_text() for t in lead_ax.texts]
+
+
+def test_a_clip_slower_than_the_model_was_made_for_is_named_in_the_warnings(tmp_path, capsys):
+    # a 10 fps webcam's clip is scored, but a reader must hear that ASNN loses hits there
+    for name, fps in (("slow.mp4", 10.0), ("fast.mp4", 20.0)):
+        scene = make_scene("looming", size=(64, 64), frames=24, start=4, stop=20)
+        write_video(scene.frames, tmp_path / name, fps)
+    labels = [dict(make_scene("looming", size=(64, 64), frames=24, start=4, stop=20)
+                   .label(name), fps=fps) for name, fps in (("slow.mp4", 10.0), ("fast.mp4", 20.0))]
+    (tmp_path / "labels.json").write_text(json.dumps(labels))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "asnn", "--out", str(out),
+                 "--no-plots"]) == 0
+    warned = json.loads((out / "results.json").read_text())["warnings"]
+    assert [w for w in warned if "frames a second" in w] == [
+        "slow.mp4: 10 frames a second; ASNN loses hits below 18 (README, 'At half the frame "
+        "rate')"]
+    assert "slow.mp4: 10 frames a second" in capsys.readouterr().err
+    # the LGMD baselines were not made for a rate: nothing to say for them alone
+    assert main(["eval", str(tmp_path), "--detectors", "lgmd1", "--out", str(out),
+                 "--no-plots"]) == 0
+    assert not [w for w in json.loads((out / "results.json").read_text())["warnings"]
+                if "frames a second" in w]
