@@ -46,6 +46,27 @@ def test_previews_and_state_are_bounded_in_bytes_per_robot_and_in_total():
     assert "src" in json.loads(state)["robots"]["r999"]["preview"]
 
 
+def test_long_names_in_responses_are_refused_not_held_per_robot():
+    """A hostile review: responses and warnings whose model, preset and worker were 64 KiB
+    strings (within the msgpack bounds), from 1,000 robot ids, held 380 MB in the store and
+    made /state 190 MB."""
+    import msgpack
+
+    from service.messages import MAX_NOTE_LEN
+
+    store = FleetStore(clock=Clock())
+    fields = response("r0").model_dump()
+    for name in ("model", "preset", "worker"):
+        payload = msgpack.packb({**fields, name: "x" * 65535})
+        assert store.offer("asnn/r0/response", payload) is None
+        assert store.offer("asnn/r0/warning", msgpack.packb({**msgpack.unpackb(payload),
+                                                             "collision": True})) is None
+    assert store.invalid == {"invalid-field": 6} and store.robots() == []
+    # the names of this project's workers are far shorter than the bound
+    edge = msgpack.packb({**fields, "worker": "w" * MAX_NOTE_LEN})
+    assert store.offer("asnn/r0/response", edge) == "r0"
+
+
 def test_a_burst_of_ids_does_not_hide_new_robots_once_it_is_stale():
     clock = Clock()
     store = FleetStore(clock=clock, max_robots=10, stale_after=3.0)

@@ -504,3 +504,13 @@ def test_router_prints_the_endpoints_of_its_config_file(procs, tmp_path):
     router.wait_line("listening on")
     line = next(line for line in router.err if "listening on" in line)
     assert line.endswith(f"listening on {endpoint}"), line
+
+
+def test_a_worker_id_too_long_for_a_response_is_refused_at_start():
+    """Responses carry at most MAX_NOTE_LEN characters of worker id (viewers refuse longer
+    ones): a worker must not start with an id it could never answer under."""
+    from service.messages import MAX_NOTE_LEN
+
+    with pytest.raises(ValueError, match="at most"):
+        WorkerCore(worker_id="w" * (MAX_NOTE_LEN + 1))
+    assert WorkerCore(worker_id="w" * MAX_NOTE_LEN).worker_id == "w" * MAX_NOTE_LEN
