@@ -418,11 +418,15 @@ def _finite(fields: dict) -> dict:
 # ``<prefix>/<robot>/preview``: a low-rate thumbnail of the camera's frames for dashboards
 # (docs/contract.md; not part of CONTRACT.md's required interface, the worker ignores it).
 
-__all__ += ["MAX_PREVIEW_BYTES", "Preview", "check_preview", "decode_preview"]
+__all__ += ["MAX_PREVIEW_BYTES", "MAX_PREVIEW_PIXELS", "Preview", "check_preview", "decode_preview"]
 
 PreviewFormat = Literal["jpeg", "png"]
 PREVIEW_QUALITY = 70
 MAX_PREVIEW_BYTES = 64 * 1024  # receivers refuse larger thumbnails (asnn camera's are ~5 KiB)
+# ... and thumbnails of more pixels, before decoding them: 64 KiB of png can declare a whole
+# 4096x4096 RGBA image, which took a viewer 0.36 s of CPU and 110 MB to decode (a legit
+# thumbnail: 0.25 ms); asnn camera's are at most 160 x 4096 (PREVIEW_WIDTH, never scaled up)
+MAX_PREVIEW_PIXELS = 1 << 20
 
 
 class Preview(Frame):
@@ -459,8 +463,8 @@ def decode_preview(payload: bytes) -> Preview:
 
 
 def check_preview(preview: Preview) -> np.ndarray:
-    """What a viewer checks before it shows a thumbnail: at most MAX_PREVIEW_BYTES, and an
-    image of the announced size (decoded, and returned).
+    """What a viewer checks before it shows a thumbnail: at most MAX_PREVIEW_BYTES and
+    MAX_PREVIEW_PIXELS, and an image of the announced size (decoded, and returned).
 
     Raises
     ------
@@ -470,4 +474,8 @@ def check_preview(preview: Preview) -> np.ndarray:
     if len(preview.data) > MAX_PREVIEW_BYTES:
         raise MessageError("oversized", f"preview of {len(preview.data)} bytes, more than "
                            f"{MAX_PREVIEW_BYTES}")
+    preview.check_size()  # the header first: a file that is no such image says so
+    if preview.width * preview.height > MAX_PREVIEW_PIXELS:
+        raise MessageError("oversized", f"preview of {preview.width}x{preview.height} pixels, "
+                           f"more than {MAX_PREVIEW_PIXELS}")
     return preview.image()

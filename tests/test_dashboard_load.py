@@ -92,6 +92,47 @@ def test_the_targets_kept_to_match_previews_cost_little_per_robot():
     assert [(t["x"], t["y"]) for t in drawn] == [(float(x), float(y)) for x, y in targets]
 
 
+def png_of_zeros(width, height, colour_type=6, channels=4) -> bytes:
+    """A png of width x height black pixels, written by hand: deflate packs a 4096x4096 RGBA
+    one into 64 KiB."""
+    import struct
+    import zlib
+
+    def chunk(kind, body):
+        return (struct.pack(">I", len(body)) + kind + body
+                + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF))
+
+    header = struct.pack(">IIBBBBB", width, height, 8, colour_type, 0, 0, 0)
+    rows = (b"\0" * (1 + width * channels)) * height
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
+            + chunk(b"IDAT", zlib.compress(rows, 9)) + chunk(b"IEND", b""))
+
+
+def test_a_preview_declaring_too_many_pixels_is_refused_before_it_is_decoded(monkeypatch):
+    """A hostile review: a 64 KiB png preview of 4096x4096 RGBA took a viewer 0.36 s of CPU
+    and 110 MB to decode (a thumbnail from asnn camera: 0.25 ms), so a few a second kept the
+    dashboard and the Foxglove server busy."""
+    import asnn.io.images as images
+
+    from service.messages import MAX_PREVIEW_BYTES
+
+    bomb = png_of_zeros(4096, 4096)
+    assert len(bomb) <= MAX_PREVIEW_BYTES
+    decoded = []
+    real = images.cv2.imdecode
+    monkeypatch.setattr(images.cv2, "imdecode", lambda *a: decoded.append(a) or real(*a))
+    store = FleetStore(clock=Clock())
+    payload = encode(Preview(seq=0, stamp=1.0, width=4096, height=4096, format="png",
+                             data=bomb))
+    assert store.offer("asnn/r1/preview", payload) is None
+    assert store.invalid == {"oversized": 1} and not decoded
+    # the tallest thumbnail asnn camera makes (a 160 x 4096 frame, never scaled up) is shown
+    tall = png_of_zeros(160, 4096, colour_type=0, channels=1)
+    assert store.offer("asnn/r1/preview", encode(Preview(
+        seq=1, stamp=1.0, width=160, height=4096, format="png", data=tall))) == "r1"
+    assert len(decoded) == 1
+
+
 def test_a_burst_of_ids_does_not_hide_new_robots_once_it_is_stale():
     clock = Clock()
     store = FleetStore(clock=clock, max_robots=10, stale_after=3.0)
