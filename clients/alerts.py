@@ -16,13 +16,12 @@ from collections import Counter
 from collections.abc import Callable
 
 import zenoh
-from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
 
 from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import MessageError, Response, track_label
 
-from .fleet import decode_fleet_sample
+from .fleet import decode_fleet_sample, declare_warning_subscribers
 
 __all__ = ["WarningListener", "format_stamp", "format_warning"]
 
@@ -85,10 +84,8 @@ class WarningListener:
         self._log = RateLimitedLog(log)
         self._lock = threading.Lock()
         self.key = keys.warnings(prefix, robot)
-        self._subscriber = declare_advanced_subscriber(
-            session, self.key, self._on_sample,
-            history=HistoryConfig(detect_late_publishers=True, max_samples=1),
-            recovery=RecoveryConfig(periodic_queries=None, heartbeat=True))
+        # an advanced subscriber (history, recovery) and a plain one, each warning taken once
+        self._subscribers = declare_warning_subscribers(session, self.key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
@@ -115,9 +112,9 @@ class WarningListener:
         self.close()
 
     def close(self) -> None:
-        if self._subscriber is not None:
-            self._subscriber.undeclare()
-            self._subscriber = None
+        subscribers, self._subscribers = self._subscribers, []
+        for subscriber in subscribers:
+            subscriber.undeclare()
 
 
 def printer(json_lines: bool, out) -> Callable[[Response], None]:

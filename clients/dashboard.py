@@ -65,7 +65,7 @@ from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response
 
-from .fleet import STALE_S, stale_robot, take_fleet_sample
+from .fleet import STALE_S, declare_warning_subscribers, stale_robot, take_fleet_sample
 
 __all__ = ["DashboardServer", "FleetStore", "FleetSubscriber", "STATIC_FILES"]
 
@@ -443,8 +443,6 @@ class FleetSubscriber:
     raises, such as the Foxglove bridge of :mod:`clients.foxglove`)."""
 
     def __init__(self, session, store: FleetStore, *, refusals: bool = False):
-        from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
-
         prefix = store.prefix
         self.store = store
         self.keys = [keys.responses(prefix), keys.warnings(prefix), keys.previews(prefix)]
@@ -453,10 +451,8 @@ class FleetSubscriber:
         self._subscribers = [
             *(session.declare_subscriber(key, self._on_sample)
               for key in self.keys if key != keys.warnings(prefix)),
-            declare_advanced_subscriber(
-                session, keys.warnings(prefix), self._on_sample,
-                history=HistoryConfig(detect_late_publishers=True, max_samples=1),
-                recovery=RecoveryConfig(periodic_queries=None, heartbeat=True)),
+            # an advanced subscriber (history, recovery) and a plain one, each warning once
+            *declare_warning_subscribers(session, keys.warnings(prefix), self._on_sample),
         ]
 
     def _on_sample(self, sample) -> None:

@@ -8,16 +8,21 @@ most MAX_TARGETS targets per response (docs/operations.md, "Hostile input").
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
 from collections.abc import Callable
 
 from service import keys
 from service.messages import (MessageError, Preview, Refusal, Response, check_preview,
                               decode_preview, decode_refusal, decode_response)
 
-__all__ = ["MAX_TARGETS", "STALE_S", "decode_fleet_sample", "stale_robot", "take_fleet_sample"]
+__all__ = ["MAX_TARGETS", "RECENT_SAMPLES", "STALE_S", "RecentSamples", "decode_fleet_sample",
+           "declare_warning_subscribers", "stale_robot", "take_fleet_sample"]
 
 MAX_TARGETS = 16      # targets kept per response (the worker finds a few)
 STALE_S = 3.0         # no response for this long: stale (no worker watches it)
+RECENT_SAMPLES = 4096  # warnings remembered to drop the second copy of each (two subscribers)
 
 
 def decode_fleet_sample(key: str, payload: bytes, prefix: str
@@ -78,3 +83,56 @@ def stale_robot(robots: dict, now: float, stale_after: float) -> str | None:
     """
     name, quiet = min(robots.items(), key=lambda item: item[1].touched)
     return name if now - quiet.touched > stale_after else None
+
+
+class RecentSamples:
+    """The latest ``size`` samples seen, by a digest of their key and payload (thread safe)."""
+
+    def __init__(self, size: int = RECENT_SAMPLES):
+        self.size = size
+        self._seen: OrderedDict[bytes, None] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def first(self, key: str, payload: bytes) -> bool:
+        """Whether this key and payload are new (not among the latest ``size`` seen)."""
+        digest = hashlib.blake2b(key.encode() + b"\0" + payload, digest_size=16).digest()
+        with self._lock:
+            if digest in self._seen:
+                self._seen.move_to_end(digest)
+                return False
+            self._seen[digest] = None
+            if len(self._seen) > self.size:
+                self._seen.popitem(last=False)
+            return True
+
+
+def declare_warning_subscribers(session, key: str, callback: Callable) -> list:
+    """The subscribers a fleet viewer takes warnings on ``key`` with: ``callback(sample)`` once
+    per warning.
+
+    An advanced subscriber asks the workers' caches for history (a late joiner gets each
+    robot's latest warning, docs/contract.md) and recovers missed warnings; it orders a
+    publisher's samples by the sequence numbers they carry, which anyone on an open router can
+    forge: one warning copied with the worker's source id and sequence number 2^32 - 1 stopped
+    every later warning of that robot from reaching ``asnn alerts`` and the dashboard. So a
+    plain subscriber takes the same warnings too, and the second copy of each (the same key and
+    payload, :class:`RecentSamples`) is dropped.
+    """
+    from zenoh.ext import HistoryConfig, RecoveryConfig, declare_advanced_subscriber
+
+    recent = RecentSamples()
+
+    def once(sample) -> None:
+        if recent.first(str(sample.key_expr), sample.payload.to_bytes()):
+            callback(sample)
+
+    subscribers = [session.declare_subscriber(key, once)]
+    try:
+        subscribers.append(declare_advanced_subscriber(
+            session, key, once,
+            history=HistoryConfig(detect_late_publishers=True, max_samples=1),
+            recovery=RecoveryConfig(periodic_queries=None, heartbeat=True)))
+    except Exception:
+        subscribers[0].undeclare()
+        raise
+    return subscribers

@@ -514,3 +514,55 @@ def test_a_worker_id_too_long_for_a_response_is_refused_at_start():
     with pytest.raises(ValueError, match="at most"):
         WorkerCore(worker_id="w" * (MAX_NOTE_LEN + 1))
     assert WorkerCore(worker_id="w" * MAX_NOTE_LEN).worker_id == "w" * MAX_NOTE_LEN
+
+
+def test_a_forged_sequence_number_cannot_silence_a_robots_warnings(zenoh_net):
+    """A hostile review: on an open router, one warning sent with the worker's source id and a
+    sequence number far ahead of its own (zenoh.SourceInfo) made the viewers' advanced
+    subscribers drop every later warning of that robot: `asnn alerts` and the dashboard went
+    silent while its responses went on."""
+    import zenoh
+
+    from clients.alerts import WarningListener
+    from clients.dashboard import FleetStore, FleetSubscriber
+    from service.messages import Response, encode
+    from service.worker import _Outlets
+
+    def warning(seq):
+        return Response(robot="r1", seq=seq, stamp=1000.0 + seq, model="asnn", preset="p",
+                        u=1.0, out=0.9, spikes=3, spike_rate=60.0, collision=True, worker="w1",
+                        latency_ms=1.0, dropped=0)
+
+    # peers do not route for each other: the worker's and the attacker's puts leave from the
+    # hub, the viewers and the attacker's ears are on spokes
+    worker = attacker = zenoh_net.hub
+    viewer = zenoh_net.spoke()
+    outlets = _Outlets(worker, "r1", "asnn")
+    printed, sniffed, store = [], [], FleetStore()
+    sniffer = zenoh_net.spoke().declare_subscriber("asnn/r1/warning", sniffed.append)
+    with WarningListener(viewer, printed.append), FleetSubscriber(viewer, store):
+        seq = 0
+        while not (printed and sniffed and store.robots()):  # until everyone hears the worker
+            outlets.warning.put(encode(warning(seq)))
+            seq += 1
+            time.sleep(0.05)
+            assert seq < 600, "no warning arrived"
+        source = sniffed[-1].source_info
+        # an old warning again (another payload), sent as the worker's sample a million ahead;
+        # in the worker's priority, so that it arrives before the worker's next ones
+        forged = warning(0).model_copy(update={"latency_ms": 2.0})
+        attacker.put("asnn/r1/warning", encode(forged), priority=zenoh.Priority.INTERACTIVE_HIGH,
+                     source_info=zenoh.SourceInfo(source.source_id, source.source_sn + 2**20))
+        wait_for(lambda: any(w.latency_ms == 2.0 for w in printed), what="the forged warning")
+        later = list(range(seq, seq + 5))
+        for n in later:
+            outlets.warning.put(encode(warning(n)))
+        wait_for(lambda: {w.seq for w in printed} >= set(later), timeout=15,
+                 what="the worker's warnings after the forged one")
+        wait_for(lambda: store.delta(0)["robots"]["r1"]["last_warning"]["seq"] == later[-1],
+                 timeout=15, what="the dashboard to show them")
+        # each warning once, though two subscribers take it
+        real = [w.seq for w in printed if w.latency_ms == 1.0]
+        assert len(real) == len(set(real))
+    sniffer.undeclare()
+    outlets.undeclare()
