@@ -125,7 +125,7 @@ class Routes:
             holders.discard(worker)
             if not holders:
                 del self._claims[robot]
-                self._remembered[robot] = self.clock()
+                self._remember_locked(robot, self.clock())
             return True
 
     def camera(self, robot: str, present: bool) -> bool:
@@ -139,7 +139,7 @@ class Routes:
             if robot not in self._cameras:
                 return False
             self._cameras.discard(robot)
-            self._remembered[robot] = self.clock()
+            self._remember_locked(robot, self.clock())
             return True
 
     def adopt(self, robot: str) -> bool:
@@ -204,7 +204,7 @@ class Routes:
         with self._lock:
             for robot in self._adopted - tracked.keys():  # its frame failed, or it went idle
                 self._adopted.discard(robot)
-                self._remembered[robot] = now
+                self._remember_locked(robot, now)
             robots = (self._claims.keys() | self._cameras | self._adopted | self._claimed
                       | self._remembered.keys() | tracked.keys())
             routes: dict[str, Route] = {}
@@ -226,11 +226,22 @@ class Routes:
                     self._adopted.discard(robot)
                 routes[robot] = Route(role, claim)
             for robot in self._claimed - claimed:  # let go: known a while longer
-                self._remembered.setdefault(robot, now)
+                if robot not in self._remembered:
+                    self._remember_locked(robot, now)
             self._claimed = claimed
             return routes
 
     # ------------------------------------------------------------------ internals
+
+    def _remember_locked(self, robot: str, now: float) -> None:
+        """Remember a robot whose last evidence went now; at most ``max_known`` are, the
+        oldest forgotten first. Each robot of the plan costs the worker a subscription (and
+        the thread Zenoh runs its Python callback on): a flood of robot ids, each tracked for a
+        moment, left 1,200 threads in a worker for a minute, more with every new id."""
+        self._remembered.pop(robot, None)
+        self._remembered[robot] = now
+        while len(self._remembered) > self.max_known:
+            del self._remembered[next(iter(self._remembered))]
 
     def _known_locked(self, robot: str) -> bool:
         return (robot in self._claims or robot in self._cameras or robot in self._adopted

@@ -188,3 +188,23 @@ def test_claim_and_camera_keys(key, parsed):
             keys.parse_claim(bad)
     with pytest.raises(keys.KeySchemeError):
         keys.parse_camera_token("asnn/@camera/r1/x")
+
+
+def test_a_flood_of_robot_ids_leaves_a_bounded_number_of_robots_planned():
+    """A hostile review: 1,800 robot ids, each tracked for a moment (a frame, a slot made for
+    it), stayed in a lone worker's plan for --idle-timeout: a subscription each, and the thread
+    Zenoh runs its Python callback on (1,200 threads, more with every new id)."""
+    clock = FakeClock()
+    routes = Routes("w1", remember=60.0, max_known=16, clock=clock)
+    for i in range(200):
+        clock.now += 0.01
+        robot = f"flood{i}"
+        routes.adopt(robot)
+        assert roles(routes, {robot: COLD})[robot] == ("serving", True)
+        # the core forgot it: remembered a while, with at most 15 others (and the robot
+        # let go in this pass)
+        assert len(routes.plan({})) <= 16 + 1 and routes.counts()["remembered"] <= 16
+    assert routes.counts()["remembered"] <= 16
+    # the latest ids are the ones remembered, and a robot that comes back is served
+    assert routes.known("flood199") and not routes.known("flood0")
+    assert roles(routes, {"flood0": COLD})["flood0"] == ("serving", True)
