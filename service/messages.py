@@ -174,8 +174,8 @@ class Response(_Message):
     preset: str = Field(max_length=MAX_NOTE_LEN)
     u: float
     out: float
-    spikes: int
-    spike_rate: float
+    spikes: int = Field(ge=0)  # counts and rates: a negative one is no model's output
+    spike_rate: float = Field(ge=0)
     collision: bool
     targets: list[TargetMsg] = Field(default_factory=list)
     worker: str = Field(max_length=MAX_NOTE_LEN)

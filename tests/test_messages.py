@@ -191,6 +191,10 @@ def test_invalid_responses_are_rejected():
     assert decode_response(msgpack.packb(good)).stream_frames is None
     assert reason(msgpack.packb({**good, "stream_frames": 0}), decode_response) == "invalid-field"
     assert reason(msgpack.packb({**good, "collision": "yes"}), decode_response) == "invalid-field"
+    # a hostile review: negative spike counts and rates were shown as they came
+    assert reason(msgpack.packb({**good, "spikes": -2**63}), decode_response) == "invalid-field"
+    assert reason(msgpack.packb({**good, "spike_rate": -1.0}), decode_response) == \
+        "invalid-field"
     assert reason(msgpack.packb({**good, "targets": [{"x": 1}]}), decode_response) == \
         "invalid-field"  # a nested field: the reason is about the field that holds it
     assert reason(msgpack.packb({k: v for k, v in good.items() if k != "robot"}),
