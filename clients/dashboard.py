@@ -143,7 +143,12 @@ class _Robot:
             return True
         if self.warning is None:
             return False
-        return self.warning.stamp >= self.latest_stamp() - hold
+        if self.response is None:
+            return True
+        # within ``hold`` of the latest response, either way (a warning may arrive before its
+        # frame's response); one far ahead of it is from a clock that went back since (a
+        # camera that restarted) or forged, and would otherwise hold the collision for ever
+        return abs(self.response.stamp - self.warning.stamp) <= hold
 
 
 class FleetStore:
@@ -265,8 +270,10 @@ class FleetStore:
             state.points.popleft()
 
     def _add_warning_locked(self, state: _Robot, warning: Response, version: int) -> None:
-        if state.warning is None or warning.stamp >= state.warning.stamp:
-            state.warning = warning
+        held, latest = state.warning, state.response
+        if (held is None or warning.stamp >= held.stamp
+                or (latest is not None and held.stamp - latest.stamp > self.hold)):
+            state.warning = warning  # the latest, unless the one held is of a clock gone back
         state.warnings += 1
         state.changed = version
         self._log_warning_locked(state, warning, version)

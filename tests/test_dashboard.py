@@ -127,6 +127,30 @@ def test_collision_is_held_for_a_while_after_the_latest_warning_camera_clock():
     assert store.delta(0)["robots"]["r1"]["last_warning"]["seq"] == 10
 
 
+def test_a_warning_from_before_the_camera_clock_went_back_is_not_held_for_ever():
+    """A hostile review: a camera that restarted (its clock back to 0) right after a warning,
+    or one warning forged with a stamp of 1e300, kept the robot in the collision state for as
+    long as responses came, all saying no collision; the camera's next warnings were not
+    taken as its latest."""
+    clock = Clock()
+    store = FleetStore(hold=3.0, clock=clock)
+    for seq in range(10):
+        offer_response(store, response(seq=seq, stamp=5000.0 + seq * 0.05))
+    offer_response(store, response(seq=10, stamp=5000.5, collision=True), "warning")
+    assert store.delta(0)["live"]["r1"][2] is True
+    for seq in range(100):  # the camera restarts: its clock counts from 0
+        clock.now += 0.05
+        offer_response(store, response(seq=seq, stamp=seq * 0.05))
+    assert store.delta(0)["live"]["r1"][2] is False
+    offer_response(store, response(seq=100, stamp=5.0, collision=True), "warning")
+    assert store.delta(0)["robots"]["r1"]["last_warning"] == {"seq": 100, "stamp": 5.0}
+    offer_response(store, response(seq=101, stamp=5.05))
+    assert store.delta(0)["live"]["r1"][2] is True  # held, on the camera's new clock
+    offer_response(store, response(seq=102, stamp=1e300, collision=True), "warning")  # forged
+    offer_response(store, response(seq=103, stamp=9.0))
+    assert store.delta(0)["live"]["r1"][2] is False
+
+
 def test_stale_when_no_response_arrives_whatever_its_camera_sends_and_then_no_collision():
     clock = Clock()
     store = FleetStore(stale_after=3.0, hold=3.0, clock=clock)
