@@ -40,8 +40,8 @@ Robot state as shown: **stale** when no response arrived for ``stale_after`` sec
 ever did: a robot known only from a cached warning, or from its camera's previews): its camera
 may still send previews, but no worker answers it, so nothing watches it; **collision**, unless
 stale, when the latest response says so, or the robot's latest warning is at most ``hold``
-seconds older (camera clock) than its latest response, so a warning that lasts a few frames
-stays visible. A robot whose worker dies, or whose camera ends, mid-warning turns stale, not
+seconds older (camera clock) than its latest response (or as much newer), so a warning that
+lasts a few frames stays visible. A robot whose worker dies, or whose camera ends, mid-warning turns stale, not
 held in collision.
 """
 
