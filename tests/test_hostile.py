@@ -68,6 +68,47 @@ def test_the_header_must_allow_a_whole_image_of_its_size():
         check_encoded(bytes(arith), "jpeg", (64, 64))
 
 
+def repeated_scans(copies: int) -> bytes:
+    """A progressive 4096x4096 gray jpeg (66 KB) with its last scan (33 bytes) repeated."""
+    import cv2
+
+    data = cv2.imencode(".jpg", np.zeros((4096, 4096), np.uint8),
+                        [cv2.IMWRITE_JPEG_QUALITY, 50, cv2.IMWRITE_JPEG_PROGRESSIVE, 1])[1]
+    data = data.tobytes()
+    start, end = data.rindex(b"\xff\xda"), data.rindex(b"\xff\xd9")
+    return data[:end] + data[start:end] * copies + data[end:]
+
+
+def test_a_jpeg_of_many_scans_is_refused_before_it_is_decoded(monkeypatch):
+    """A hostile review: each scan of a progressive jpeg costs a pass over every block of the
+    image, whatever its few bytes: 1,000 copies of one 33-byte scan made a 99 KB frame (or
+    preview) that took 10.8 s to decode (0.08 s without them); a 48 MiB frame holds a million,
+    hours of one processing thread."""
+    import cv2
+
+    import asnn.io.images as images
+
+    decoded = []
+    real = images.cv2.imdecode
+    monkeypatch.setattr(images.cv2, "imdecode", lambda *a: decoded.append(a) or real(*a))
+    bomb = repeated_scans(1000)
+    assert len(bomb) < 100_000
+    frame = Frame(seq=0, stamp=0.0, width=4096, height=4096, format="jpeg", data=bomb)
+    for check in (frame.check_size, frame.image):
+        with pytest.raises(MessageError) as err:
+            check()
+        assert err.value.reason == "bad-image" and "scans" in err.value.detail
+    assert not decoded
+    # what encoders write passes: baseline, and progressive colour (10 scans) and gray
+    image = make_scene("looming").frames[5]
+    for params in ([], [cv2.IMWRITE_JPEG_PROGRESSIVE, 1]):
+        for picture in (image, cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)):
+            data = cv2.imencode(".jpg", picture, params)[1].tobytes()
+            h, w = picture.shape[:2]
+            check_encoded(data, "jpeg", (w, h))
+    assert check_encoded(repeated_scans(0), "jpeg", (4096, 4096)) == (4096, 4096)
+
+
 CHILD = r"""
 import json, os, resource, sys
 import numpy as np, msgpack
