@@ -370,6 +370,20 @@ def test_bench_times_a_preset_with_changed_fields_beside_the_preset(monkeypatch)
     assert "vs_published" in rows["robust"] and "vs_published" not in rows["robust/top_k=0"]
 
 
+def test_bench_names_a_changed_default_by_its_preset_once(monkeypatch):
+    """``default/top_k=0`` is ``robust/top_k=0``, as ``default`` is ``robust``: one row, named
+    by the preset, not two rows timing the same parameters under two names."""
+    from asnn.evaluation import bench
+    from asnn.params import DEFAULT_PRESET
+
+    monkeypatch.setattr(bench, "time_detector",
+                        lambda make, clip, warmup: np.full(len(clip) - warmup, 1.0))
+    report = bench.run(sizes=[(48, 48)], frames=2,
+                       presets=["default/top_k=0", f"{DEFAULT_PRESET}/top_k=0", "/top_k=0"],
+                       models=("asnn",), straightforward=False, repeat=1)
+    assert [r["preset"] for r in report["results"]] == [f"{DEFAULT_PRESET}/top_k=0"]
+
+
 @pytest.mark.parametrize("argv, says", [
     (["--preset", "robust/nope=1"], "nope"),
     (["--detect", "--preset", "robust/top_k=0"], "take a preset's name"),

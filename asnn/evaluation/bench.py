@@ -156,7 +156,7 @@ def _preset_params(names: list[str] | None) -> dict:
     spec with changed fields (``robust/top_k=0``, as the command line writes it) mapped to its
     parameters. ``None``: every preset."""
     from ..params import PRESETS, preset_key
-    from .runs import parse_detector
+    from .runs import DetectorSpec, parse_detector
 
     if names is None:
         return {name: name for name in PRESETS}
@@ -167,6 +167,8 @@ def _preset_params(names: list[str] | None) -> dict:
             timed.setdefault(key, key)
             continue
         spec = parse_detector(f"asnn:{name}")
+        # named by the preset's key, as a plain name is: default/top_k=0 is robust/top_k=0
+        spec = DetectorSpec("asnn", preset_key(spec.preset or "default"), spec.overrides)
         timed.setdefault(spec.name.removeprefix("asnn:"), spec.params)
     return timed
 
