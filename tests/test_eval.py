@@ -629,6 +629,10 @@ def test_a_clip_slower_than_the_model_was_made_for_is_named_in_the_warnings(tmp_
         "slow.mp4: 10 frames a second; ASNN loses hits below 18 (README, 'At half the frame "
         "rate')"]
     assert "slow.mp4: 10 frames a second" in capsys.readouterr().err
+    # its label is right: the report must not list it as a clip that disagrees with its label
+    report = (out / "report.md").read_text()
+    assert "- slow.mp4: 10 frames a second" in report
+    assert "Clips that disagree with their labels:" not in report
     # the LGMD baselines were not made for a rate: nothing to say for them alone
     assert main(["eval", str(tmp_path), "--detectors", "lgmd1", "--out", str(out),
                  "--no-plots"]) == 0

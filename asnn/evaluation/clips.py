@@ -168,7 +168,9 @@ def _clips_report(results: Mapping) -> str:
         lines += ["", "Videos in the folder without a label (not scored): "
                   + ", ".join(results["unlabelled"])]
     if results.get("warnings"):
-        lines += ["", "Clips that disagree with their labels:", ""] + [
+        # mismatches with the labels, and clips slower than ASNN was made for (not a mismatch)
+        lines += ["", "Warnings (clips that disagree with their labels, or run slower than "
+                  "ASNN was made for):", ""] + [
             f"- {w}" for w in results["warnings"]]
     return "\n".join(lines) + "\n"
 
@@ -211,7 +213,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         What ``results.json`` holds: ``settings``, ``labels``, ``detectors`` (per detector a
         ``summary`` and per-clip ``clips`` scores), ``errors``, ``warnings`` (clips whose
         decoded frames, frame rate or size disagree with their labels:
-        :func:`~asnn.evaluation.labels.mismatches`) and ``unlabelled`` (the videos in
+        :func:`~asnn.evaluation.labels.mismatches`; and, where ASNN is scored unperturbed,
+        clips slower than :data:`~asnn.params.SLOW_FPS`) and ``unlabelled`` (the videos in
         ``clips_dir`` no label names, not scored:
         :func:`~asnn.evaluation.labels.unlabelled_videos`).
 
