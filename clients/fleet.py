@@ -14,8 +14,8 @@ from collections import OrderedDict
 from collections.abc import Callable
 
 from service import keys
-from service.messages import (MessageError, Preview, Refusal, Response, check_preview,
-                              decode_preview, decode_refusal, decode_response)
+from service.messages import (MAX_NOTE_LEN, MessageError, Preview, Refusal, Response,
+                              check_preview, decode_preview, decode_refusal, decode_response)
 
 __all__ = ["MAX_TARGETS", "RECENT_SAMPLES", "STALE_S", "RecentSamples", "decode_fleet_sample",
            "declare_warning_subscribers", "stale_robot", "take_fleet_sample"]
@@ -33,7 +33,8 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
     A preview must be at most MAX_PREVIEW_BYTES and its image is decoded
     (:func:`service.messages.check_preview`); a response or warning must name the robot of its
     key, and a warning must say ``collision``. Targets beyond MAX_TARGETS are left out (the
-    worker finds a few; a viewer keeps or draws no more).
+    worker finds a few; a viewer keeps or draws no more), and so are the characters of
+    ``model``, ``preset`` and ``worker`` beyond MAX_NOTE_LEN (CONTRACT.md bounds none of them).
 
     Raises
     ------
@@ -57,6 +58,10 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
             raise MessageError("invalid-field", "a warning without collision: true")
         if len(message.targets) > MAX_TARGETS:
             message = message.model_copy(update={"targets": message.targets[:MAX_TARGETS]})
+        long = {name: getattr(message, name)[:MAX_NOTE_LEN] for name in ("model", "preset",
+                "worker") if len(getattr(message, name)) > MAX_NOTE_LEN}
+        if long:  # CONTRACT.md bounds none of them: shortened, never refused
+            message = message.model_copy(update=long)
     else:
         raise MessageError("bad-key", f"{key!r} is not a response, warning, preview or refusal")
     return robot, kind, message

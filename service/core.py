@@ -351,7 +351,7 @@ class WorkerCore:
         self.preset = (DEFAULT_PRESET if preset in (None, "default") else preset) \
             if model == "asnn" else ""
         self.worker_id = worker_id or default_worker_id()
-        if len(self.worker_id) > MAX_NOTE_LEN:  # it goes in every response (messages.Response)
+        if len(self.worker_id) > MAX_NOTE_LEN:  # viewers show no more of it (clients.fleet)
             raise ValueError(f"a worker id has at most {MAX_NOTE_LEN} characters, got "
                              f"{len(self.worker_id)}")
         self.prefix = keys.check_prefix(prefix)

@@ -167,18 +167,18 @@ class Response(_Message):
     robot: str
     seq: int = Field(ge=0)
     stamp: float
-    # the names are short (a model, a preset, a worker id); bounded, so that a viewer keeping
-    # the latest response and warning of each robot holds little per robot (64 KiB strings
-    # from 1,000 robot ids held 380 MB in the dashboard and made its /state 190 MB)
-    model: str = Field(max_length=MAX_NOTE_LEN)
-    preset: str = Field(max_length=MAX_NOTE_LEN)
+    # any length CONTRACT.md allows (a worker of another team may name itself at length): the
+    # fleet viewers keep at most MAX_NOTE_LEN characters of each (clients.fleet), so that 64 KiB
+    # strings from 1,000 robot ids cannot hold 380 MB in the dashboard as they did
+    model: str
+    preset: str
     u: float
     out: float
     spikes: int = Field(ge=0)  # counts and rates: a negative one is no model's output
     spike_rate: float = Field(ge=0)
     collision: bool
     targets: list[TargetMsg] = Field(default_factory=list)
-    worker: str = Field(max_length=MAX_NOTE_LEN)
+    worker: str
     latency_ms: float = Field(ge=0)
     dropped: int = Field(ge=0)
     # optional extensions (docs/contract.md): the model step's own share of latency_ms, and

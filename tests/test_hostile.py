@@ -589,8 +589,8 @@ def test_router_prints_the_endpoints_of_its_config_file(procs, tmp_path):
 
 
 def test_a_worker_id_too_long_for_a_response_is_refused_at_start():
-    """Responses carry at most MAX_NOTE_LEN characters of worker id (viewers refuse longer
-    ones): a worker must not start with an id it could never answer under."""
+    """The viewers keep at most MAX_NOTE_LEN characters of a response's worker id: this
+    project's workers start only with ids they show whole."""
     from service.messages import MAX_NOTE_LEN
 
     with pytest.raises(ValueError, match="at most"):

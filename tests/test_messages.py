@@ -191,6 +191,8 @@ def test_invalid_responses_are_rejected():
     assert decode_response(msgpack.packb(good)).stream_frames is None
     assert reason(msgpack.packb({**good, "stream_frames": 0}), decode_response) == "invalid-field"
     assert reason(msgpack.packb({**good, "collision": "yes"}), decode_response) == "invalid-field"
+    # CONTRACT.md bounds no name's length: a long worker id is valid (viewers shorten it)
+    assert decode_response(msgpack.packb({**good, "worker": "w" * 1000})).worker == "w" * 1000
     # a hostile review: negative spike counts and rates were shown as they came
     assert reason(msgpack.packb({**good, "spikes": -2**63}), decode_response) == "invalid-field"
     assert reason(msgpack.packb({**good, "spike_rate": -1.0}), decode_response) == \
