@@ -112,25 +112,44 @@ class SubscriberWatch:
     """Logs when a camera's frames lose their last subscriber (no worker takes them: its
     robot goes unanswered, and nothing else would say so) and when one subscribes again.
     A Zenoh matching listener's handler (:meth:`zenoh.Publisher.declare_matching_listener`);
-    ``matching`` is the latest status seen (``None``: not known yet)."""
+    ``matching`` is the latest status seen (``None``: not known yet).
 
-    def __init__(self, robot: str, key: str, matching: bool | None = None):
+    Each of the two lines at most once every ``interval`` seconds, the next one saying how many
+    changes it did not show: with several workers, the scanning one subscribes to every
+    robot's frames for a moment every second (:data:`service.worker.SCAN_INTERVAL`), so a
+    camera no worker serves saw a subscriber come and go twice a line a second."""
+
+    def __init__(self, robot: str, key: str, matching: bool | None = None, *,
+                 interval: float = 10.0, clock=time.monotonic):
         self.robot, self.key = robot, key
         self.matching = matching
+        self.interval, self.clock = float(interval), clock
+        self._logged: dict[bool, float] = {}  # status -> when its line was last written
+        self._hidden: Counter = Counter()     # status -> changes to it not shown since
         self._lock = threading.Lock()
 
     def __call__(self, status) -> None:
+        now = self.clock()
         with self._lock:
             before, self.matching = self.matching, bool(status.matching)
-            if before == self.matching:
+            matching = self.matching
+            if before == matching:
                 return
-        if self.matching:
-            log.info("camera %s: a subscriber (a worker) takes its frames on %s", self.robot,
-                     self.key)
+            last = self._logged.get(matching)
+            if last is not None and now - last < self.interval:
+                self._hidden[matching] += 1
+                return
+            self._logged[matching] = now
+            hidden = self._hidden.pop(matching, 0)
+        more = (f" ({hidden} more times since the last such line: a worker scanning the prefix "
+                "subscribes to every robot's frames for a moment)") if hidden else ""
+        if matching:
+            log.info("camera %s: a subscriber (a worker) takes its frames on %s%s", self.robot,
+                     self.key, more)
         else:
             log.warning("camera %s: no subscriber on %s any more (its worker stopped, or the "
-                        "router went): its frames are lost until a worker subscribes again",
-                        self.robot, self.key)
+                        "router went): its frames are lost until a worker subscribes again%s",
+                        self.robot, self.key, more)
 
 
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,

@@ -526,3 +526,29 @@ def test_the_alerts_take_a_warning_only_for_the_robot_of_its_key_and_with_collis
         wait_for(lambda: warnings, what="the valid warning")
     assert [(w.robot, w.seq) for w in warnings] == [("r1", 3)]
     assert listener.invalid == {"bad-key": 1, "invalid-field": 1}
+
+
+def test_a_camera_says_at_most_a_line_of_each_kind_when_its_subscriber_comes_and_goes(caplog):
+    """A review: with several workers, the scanning one subscribes to every robot's frames for
+    0.1 s every second, so a camera that no worker serves logged 'a subscriber takes its
+    frames' and 'no subscriber any more' each second, for as long as it ran."""
+    from types import SimpleNamespace
+
+    from service.camera import SubscriberWatch
+
+    now = [0.0]
+    watch = SubscriberWatch("r1", "asnn/r1/frame", False, interval=10.0, clock=lambda: now[0])
+    gone, back = "no subscriber on asnn/r1/frame any more", "a subscriber (a worker) takes"
+    with caplog.at_level("INFO", logger="asnn.camera"):
+        for _ in range(9):  # nine scans, a second apart
+            watch(SimpleNamespace(matching=True))
+            now[0] += 0.1
+            watch(SimpleNamespace(matching=False))
+            now[0] += 0.9
+        assert caplog.text.count(back) == 1 and caplog.text.count(gone) == 1
+        now[0] += 10.0
+        watch(SimpleNamespace(matching=True))
+        watch(SimpleNamespace(matching=True))  # no change: nothing to say
+    assert caplog.text.count(back) == 2
+    assert "(8 more times since the last such line" in caplog.text
+    assert watch.matching is True
