@@ -123,24 +123,18 @@ class SubscriberWatch:
                  interval: float = 10.0, clock=time.monotonic):
         self.robot, self.key = robot, key
         self.matching = matching
-        self.interval, self.clock = float(interval), clock
-        self._logged: dict[bool, float] = {}  # status -> when its line was last written
-        self._hidden: Counter = Counter()     # status -> changes to it not shown since
+        self._lines = RateLimitedLog(log, interval, clock)  # one reason per status
         self._lock = threading.Lock()
 
     def __call__(self, status) -> None:
-        now = self.clock()
         with self._lock:
             before, self.matching = self.matching, bool(status.matching)
             matching = self.matching
-            if before == matching:
-                return
-            last = self._logged.get(matching)
-            if last is not None and now - last < self.interval:
-                self._hidden[matching] += 1
-                return
-            self._logged[matching] = now
-            hidden = self._hidden.pop(matching, 0)
+        if before == matching:
+            return
+        hidden = self._lines.allow("subscribed" if matching else "unsubscribed")
+        if hidden is None:
+            return
         more = (f" ({hidden} more times since the last such line: a worker scanning the prefix "
                 "subscribes to every robot's frames for a moment)") if hidden else ""
         if matching:

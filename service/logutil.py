@@ -30,20 +30,28 @@ class RateLimitedLog:
         self._hidden: Counter = Counter()
         self._lock = threading.Lock()
 
-    def warning(self, reason: str, message: str, *args) -> bool:
-        """Log (or count) one event of ``reason``; True if a line was written."""
+    def allow(self, reason: str) -> int | None:
+        """Count one event of ``reason``: None if its line is not due yet, else the number of
+        events not shown since its previous line (the caller writes the line)."""
         now = self.clock()
         with self._lock:
             last = self._last.get(reason)
             if last is not None and now - last < self.interval:
                 self._hidden[reason] += 1
-                return False
+                return None
             hidden = self._hidden.pop(reason, 0)
             if last is None and len(self._last) >= MAX_REASONS:
                 for old in [r for r, t in self._last.items() if now - t >= self.interval]:
                     del self._last[old]
                     self._hidden.pop(old, None)
             self._last[reason] = now
+        return hidden
+
+    def warning(self, reason: str, message: str, *args) -> bool:
+        """Log (or count) one event of ``reason``; True if a line was written."""
+        hidden = self.allow(reason)
+        if hidden is None:
+            return False
         if hidden:
             message += " (%d more %s since the last line)"
             args = (*args, hidden, reason)
