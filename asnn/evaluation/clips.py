@@ -139,10 +139,10 @@ def _clips_report(results: Mapping) -> str:
     lines += ["", "Detectors:", ""] + [
         f"- `{m}`: {parse_detector(m).description}" for m in names]
     lines += ["", "Columns: hits, early, late and misses count the collision clips (a *late* "
-              "first warning comes after the hit window, a *miss* has none after the warm-up); (nc): of the clips without a collision, "
-              "those with any warning (false alarms) and those without (quiet); hit rate: hits "
-              "over collision clips; false-alarm rate: early warnings and false alarms over all "
-              "clips scored, with 95 % Wilson intervals in brackets; lead: contact frame - first "
+              "first warning comes after the hit window, a *miss* has none after the warm-up); "
+              "(nc): of the clips without a collision, those with any warning (false alarms) "
+              "and those without (quiet); hit rate: hits over collision clips; false-alarm "
+              "rate: early warnings and false alarms over all clips scored, with 95 % Wilson intervals in brackets; lead: contact frame - first "
               "warning, in seconds at the label's fps; loc. error: distance from the nearest "
               "target at the first warning to the labelled centre (ASNN only); warning frames "
               "in / out of windows: frames with a warning after the warm-up inside the hit "

@@ -36,9 +36,8 @@ VIDEO_SUFFIXES = (".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4
                   ".mpg", ".mts", ".ogv", ".ts", ".webm", ".wmv")
 
 __all__ = ["VIDEO_SUFFIXES", "ClipLabel", "center_outside", "check_labels", "clip_hint",
-           "label_problem",
-           "load_labels", "mismatches", "read_entries", "result_name", "unlabelled",
-           "unlabelled_videos"]
+           "label_problem", "load_labels", "mismatches", "read_entries", "result_name",
+           "unlabelled", "unlabelled_videos"]
 
 
 class ClipLabel(BaseModel):
