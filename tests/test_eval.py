@@ -613,6 +613,48 @@ def test_the_summary_plot_keeps_long_detector_names_apart_and_marks_no_hits(monk
     assert "no hits" in [t.get_text() for t in lead_ax.texts]
 
 
+def test_the_summary_plot_keeps_the_outcome_colours_to_the_outcomes(monkeypatch, tmp_path):
+    # asnn's model colour is the false alarms' red: a lead bar in it read as a false alarm
+    from matplotlib.colors import to_rgba
+
+    from asnn.evaluation import figures
+
+    drawn = {}
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda fig, path: drawn.setdefault("fig", fig)
+                        and save(fig, path))
+    base = {"hit": 4, "miss": 2, "false": 1, "median_lead_s": 0.8}
+    figures.plot_summary(tmp_path / "summary.png", {"asnn": base, "asnn:reference": base,
+                                                    "lgmd2": base})
+    outcomes = {to_rgba(c) for c in figures._OUTCOME_COLOURS.values()}
+    lead_ax = drawn["fig"].axes[1]
+    assert lead_ax.patches
+    assert not {to_rgba(bar.get_facecolor()) for bar in lead_ax.patches} & outcomes
+
+
+def test_a_clips_response_plot_gives_seconds_beside_the_label_frames(monkeypatch, tmp_path):
+    from asnn.evaluation import figures
+
+    drawn = []
+    save = figures._save
+    monkeypatch.setattr(figures, "_save", lambda fig, path: drawn.append(fig) or save(fig, path))
+    series = {"out": [0.1, 0.2, 0.9, 0.3], "spike_rate": [0, 0, 5, 0],
+              "collision": [False, False, True, False], "outcome": "hit"}
+    clip = {"name": "c.mp4", "onset": 1, "contact": 3, "window": (1, 3), "warmup": 0,
+            "models": {"asnn": series}}
+    figures.plot_clip_responses(tmp_path / "frames.png", clip)
+    figures.plot_clip_responses(tmp_path / "both.png", {**clip, "fps": 20.0})
+    labels = [[ax.get_xlabel() for ax in fig.axes] + [child.get_xlabel() for ax in fig.axes
+                                                      for child in ax.child_axes]
+              for fig in drawn]
+    assert "time (s)" not in labels[0]
+    assert "time (s)" in labels[1] and "frame" in labels[1]
+    drawn[1].canvas.draw()  # a secondary axis takes its limits from its parent's when drawn
+    top = drawn[1].axes[0]
+    seconds = next(iter(top.child_axes))
+    assert np.multiply(seconds.get_xlim(), 20.0) == pytest.approx(top.get_xlim())
+
+
 def test_a_clip_slower_than_the_model_was_made_for_is_named_in_the_warnings(tmp_path, capsys):
     # a 10 fps webcam's clip is scored, but a reader must hear that ASNN loses hits there
     for name, fps in (("slow.mp4", 10.0), ("fast.mp4", 20.0)):

@@ -319,6 +319,6 @@ def _plot_clips(out_dir: Path, labels: Sequence[Mapping], specs: Sequence[Detect
             out_dir / "plots" / f"{result_name(lab)}.png",
             {"name": lab["file"], "onset": lab.get("onset_frame"),
              "contact": lab.get("contact_frame"), "window": window, "warmup": warmup,
-             "models": series})
+             "fps": lab.get("fps"), "models": series})
     figures.plot_summary(out_dir / "plots" / "summary.png",
                          {spec.name: results["detectors"][spec.name]["summary"] for spec in specs})

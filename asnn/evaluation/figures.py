@@ -88,7 +88,8 @@ def plot_clip_responses(path: str | Path, clip: Mapping) -> Path:
     clip : dict
         ``name``, ``onset``, ``contact`` (frames or None), ``window`` (the hit window or None),
         ``warmup`` and ``models``: ``{model: {"out": [...], "spike_rate": [...],
-        "collision": [...], "outcome": str}}``.
+        "collision": [...], "outcome": str}}``; optionally ``fps``, which adds a time axis in
+        seconds over the frames (labels count frames, ``asnn detect --plot`` seconds).
     """
     models = clip["models"]
     fig = _figure(8.0, 5.6)
@@ -114,6 +115,10 @@ def plot_clip_responses(path: str | Path, clip: Mapping) -> Path:
     bottom.set_ylim(-0.7, len(models) - 0.3)
     bottom.set_ylabel("warnings")
     bottom.set_xlabel("frame")
+    fps = clip.get("fps")
+    if fps:
+        seconds = top.secondary_xaxis("top", functions=(lambda f: f / fps, lambda s: s * fps))
+        seconds.set_xlabel("time (s)")
     return _save(fig, path)
 
 
@@ -143,8 +148,9 @@ def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
     counts_ax.legend(fontsize=8, ncol=3, loc="upper right")
     counts_ax.set_ylim(0, max(bottom.max(), 1) * 1.35)
     lead = [summaries[m].get("median_lead_s") for m in models]
-    lead_ax.bar(x, [v if v is not None else 0.0 for v in lead],
-                color=[_colour(m) for m in models], width=0.6)
+    # one neutral colour: the detectors' own colours would clash with the outcomes' beside them
+    # (asnn's red is the false alarms' red); the ticks name the bars
+    lead_ax.bar(x, [v if v is not None else 0.0 for v in lead], color="0.45", width=0.6)
     lead_ax.set_xticks(x, models)
     for i, value in enumerate(lead):
         if value is None:  # no hits: no lead, not a lead of 0 s

@@ -69,7 +69,7 @@ def _run_case(name: str, specs: Sequence[DetectorSpec], out_dir: str, warmup: in
             Path(out_dir) / "plots" / f"{name}.png",
             {"name": name, "onset": label["onset_frame"], "contact": label["contact_frame"],
              "window": next(iter(entry["scores"].values()))[0].window, "warmup": warmup,
-             "models": series})
+             "fps": label.get("fps"), "models": series})
     return entry
 
 
