@@ -223,6 +223,10 @@ class _TooManyItems(ValueError):
     pass
 
 
+class _DuplicateKey(ValueError):
+    pass
+
+
 def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_MAP_LEN,
                max_items: int = MAX_ITEMS, max_payload: int = MAX_PAYLOAD) -> dict:
     """The msgpack map of a payload, unpacked within this module's bounds (the map's and the
@@ -251,8 +255,18 @@ def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_
             raise _TooManyItems(f"more than {max_items} entries in all")
         return container
 
+    def unique(pairs):
+        # a key given twice would be read as its last value here and maybe its first by
+        # another reader (a dashboard, a proxy): refuse the ambiguity rather than pick one
+        mapping = count(dict(pairs))
+        if len(mapping) < len(pairs):
+            seen = set()
+            twice = next(key for key, _ in pairs if key in seen or seen.add(key))
+            raise _DuplicateKey(f"a map gives the key {twice!r:.80} twice")
+        return mapping
+
     try:
-        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False, object_hook=count,
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False, object_pairs_hook=unique,
                               list_hook=count, max_str_len=MAX_STR_LEN,
                               max_bin_len=max_payload, max_array_len=MAX_ARRAY_LEN,
                               max_map_len=max_map_len, max_ext_len=MAX_EXT_LEN)

@@ -249,6 +249,26 @@ def test_a_frame_with_every_field_and_some_unknown_ones_still_decodes():
         "undecodable"
 
 
+
+@pytest.mark.parametrize("nested", [False, True])
+def test_a_map_that_gives_a_key_twice_is_refused_not_read_as_its_last_value(nested):
+    # the worker read the last "seq"; a dashboard or proxy reading the first would disagree
+    def twice(key, first, second, **rest) -> bytes:
+        fields = b"".join(msgpack.packb(k) + msgpack.packb(v) for k, v in rest.items())
+        return (bytes([0x80 | (len(rest) + 2)]) + fields + msgpack.packb(key)
+                + msgpack.packb(first) + msgpack.packb(key) + msgpack.packb(second))
+
+    fields = {"v": 1, "seq": 0, "stamp": 0.0, "width": 2, "height": 1, "format": "gray8",
+              "data": b"ab"}
+    if nested:  # inside a field's value, where the frame's own model never looks
+        junk = msgpack.packb({**fields, "extra": 0})[:-1] + twice("a", 1, 2)
+    else:
+        junk = twice("seq", 0, 7, **{k: v for k, v in fields.items() if k != "seq"})
+    with pytest.raises(MessageError) as err:
+        decode_frame(junk)
+    assert err.value.reason == "undecodable" and "twice" in str(err.value)
+    assert decode_frame(msgpack.packb(fields)).seq == 0  # the same fields once each decode
+
 # ---------------------------------------------------------------- 3. robot-slot lockout
 
 def test_ids_sending_only_undecodable_frames_cannot_lock_new_robots_out():
