@@ -231,6 +231,38 @@ def test_the_figures_over_ties_count_shares_and_ranges():
     assert (summary["collision_clips"], summary["noncollision_clips"]) == (3, 1)
 
 
+def test_the_report_names_each_folds_thresholds(traced, tmp_path, monkeypatch):
+    # a grid of four points, quick to score: the preset's thresholds but for tau_max, and
+    # scene_tolerance 0, with which two frames of approach warn falsely on the car cutting in
+    # and four do not: the fold without that car chooses two (they warn longer on the
+    # others), the other folds four
+    base, scenes, traces = traced
+    monkeypatch.setattr(heldout, "GATE_GRID", {
+        **{n: (getattr(base, n),) for n in heldout.GATE_GRID},
+        "tau_max": (1.0, 1.5), "approach_frames": (2, 4), "scene_tolerance": (0.0,)})
+    labels = [scene.label(f"{scene.name}.mp4") for scene in scenes]
+    results = heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0)
+    report = heldout.held_out_report(results, tmp_path).read_text()
+    names = list(heldout.GATE_GRID)
+    assert results["grid"] == {n: list(v) for n, v in heldout.GATE_GRID.items()}
+    assert "| clip left out | in-sample | held out | " + " | ".join(names) + " |" in report
+    rows = [[c.strip() for c in line.strip("|").split("|")] for line in report.splitlines()
+            if line.startswith("| ") and line.count("|") == len(names) + 4]
+    fold_rows = rows[2:]  # after the header and its rule: one row per fold, in the clips' order
+    assert [cells[0] for cells in fold_rows] == [lab["file"] for lab in labels]
+    for cells, a, b in zip(fold_rows, results["in_sample"]["clips"],
+                           results["held_out"]["clips"]):
+        assert cells[0] == a["clip"] == b["clip"]
+        for cell, score in ((cells[1], a), (cells[2], b)):
+            first = score["first_warning"]
+            assert cell == score["outcome"] + ("" if first is None else f" @{first}")
+        assert cells[3:] == [str(b["chosen"][n]) for n in names]
+    # the folds do not all choose alike here: the rows tell them apart by name
+    assert [c["chosen"]["approach_frames"] for c in results["held_out"]["clips"]] == [
+        2 if name == "drive-day-cut-in-dark" else 4 for name in CASES]
+    assert "the thresholds by their `ASNNParams` names" in report
+
+
 def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     labels = []
     for name in ("loom-dark-c0.6-d6-center", "translate-disk-dark-c0.6-h2px"):

@@ -42,7 +42,7 @@ from . import scoring
 from .clips import check_clips
 from .labels import load_labels
 from .pool import run_tasks
-from .runs import fmt, write_json
+from .runs import write_json
 
 __all__ = ["GATE_GRID", "SUITE_AIMS", "FrameTrace", "ClipTrace", "trace_clip", "replay",
            "check_replay", "grid", "suite_summaries", "suite_admissible", "selection_key",
@@ -438,15 +438,14 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
                 f"{s['window_warning_frames']} / {s['warning_frames'] - s['window_warning_frames']}"
                 " |")
 
-    gate = ", ".join(f"{k} = {v}" for k, v in results["base"].items())
     changed = results.get("overrides") or {}
     lines = [
         "# Held-out figures of the approach gate's thresholds",
         "",
         *([f"Preset `{results.get('preset', 'default')}` with "
            + ", ".join(f"{k} = {v}" for k, v in changed.items()) + ".", ""] if changed else []),
-        f"Preset thresholds: {gate} (on every clip: "
-        + ", ".join(f"{k} = {v}" for k, v in results["chosen_all"].items()) + "). "
+        f"Preset thresholds: {_named(results['base'])} (on every clip: "
+        f"{_named(results['chosen_all'])}). "
         "Leave-one-clip-out: each clip scored with the thresholds chosen on the other clips "
         "from the grid " + "; ".join(f"{k} in {v}" for k, v in results["grid"].items())
         + f"; ties on hits and false alarms go to {TIE_BREAKS[results['tie_break']]} "
@@ -458,13 +457,25 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
         row("in-sample (preset thresholds)", ins["summary"]),
         row("held out (leave one clip out)", held["summary"]),
         "",
-        "| clip | in-sample | held out | thresholds chosen without it |",
-        "| --- | --- | --- | --- |",
+        "Per fold: the clip left out, its outcome with the preset's thresholds (in-sample) and "
+        "with those chosen on the other clips (held out), and the thresholds chosen without it.",
+        "",
+        "| clip left out | in-sample | held out | " + " | ".join(results["grid"]) + " |",
+        "| --- | --- | --- | " + " | ".join("---" for _ in results["grid"]) + " |",
     ]
     for a, b in zip(ins["clips"], held["clips"]):
-        chosen = ", ".join(f"{v}" for v in b["chosen"].values())
-        lines.append(f"| {a['clip']} | {a['outcome']} {fmt(a['first_warning'])} | "
-                     f"{b['outcome']} {fmt(b['first_warning'])} | {chosen} |")
+        lines.append(f"| {a['clip']} | {_outcome(a)} | {_outcome(b)} | "
+                     + " | ".join(f"{b['chosen'][n]}" for n in results["grid"]) + " |")
+    lines += ["", "Columns: hits, early, late and misses count the collision clips (a *late* "
+              "first warning comes after the hit window, a *miss* has none after the warm-up); "
+              "false (nc): the clips without a collision with any warning; false alarms: early "
+              "warnings and those clips; warning frames in / out of windows: frames with a "
+              "warning after the warm-up inside the hit windows, and elsewhere. Per fold: the "
+              "outcome (hit, early, late, miss; quiet or false on a clip without a collision) "
+              "and its first warning frame after @; the thresholds by their `ASNNParams` names "
+              "(the `overlap_*` ones count only with `partial_overlap` True). How many grid "
+              "points tied for each fold's choice, and what they give its clip: \"Whatever "
+              "breaks the ties\" below."]
     on_suite = results.get("suite") or {}
     if on_suite:
         lines += ["", "On the generated suite (" + "; ".join(
@@ -480,6 +491,16 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
     path = out_dir / "held_out.md"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
+
+
+def _named(gate: Mapping) -> str:
+    return ", ".join(f"{k} = {v}" for k, v in gate.items())
+
+
+def _outcome(score: Mapping) -> str:
+    """A held-out report's cell: the outcome, and its first warning frame after ``@``."""
+    first = score["first_warning"]
+    return score["outcome"] + ("" if first is None else f" @{first}")
 
 
 def _count(n: int, noun: str) -> str:
