@@ -304,10 +304,12 @@ def _evaluate(args: argparse.Namespace) -> int:
                 held = specs[0]
             held_preset, overrides = held.preset or "default", dict(held.overrides)
             _say_unlabelled(args.clips_dir, labels)
-            heldout.evaluate_held_out(args.clips_dir, args.out, labels_path=args.labels,
-                                      preset_name=held_preset, cases=args.cases, jobs=args.jobs,
-                                      progress=progress, tie_break=args.tie_break,
-                                      overrides=overrides)
+            results = heldout.evaluate_held_out(
+                args.clips_dir, args.out, labels_path=args.labels, preset_name=held_preset,
+                cases=args.cases, jobs=args.jobs, progress=progress, tie_break=args.tie_break,
+                overrides=overrides)
+            for line in heldout.summary_lines(results):
+                print(line)
             print(f"{args.out}/held_out.md")
             return 0
         else:

@@ -261,6 +261,18 @@ def test_the_report_names_each_folds_thresholds(traced, tmp_path, monkeypatch):
     assert [c["chosen"]["approach_frames"] for c in results["held_out"]["clips"]] == [
         2 if name == "drive-day-cut-in-dark" else 4 for name in CASES]
     assert "the thresholds by their `ASNNParams` names" in report
+    # the lines the command prints: the same figures, the thresholds named
+    lines = heldout.summary_lines(results)
+    ins, held = results["in_sample"]["summary"], results["held_out"]["summary"]
+    assert lines[0].startswith(f"in-sample (preset thresholds): {ins['hit']}/"
+                               f"{ins['collision_clips']} hits ({ins['early']} early, ")
+    assert lines[1].startswith("held out (leave one clip out; ties by warning-frames): "
+                               f"{held['hit']}/{held['collision_clips']} hits")
+    ties = results["over_ties"]["summary"]
+    assert lines[2].startswith(f"held out over every tie: {ties['hits']['expected']:.1f}/"
+                               f"{ties['collision_clips']} hits expected")
+    assert lines[-1] == "chosen on every clip: " + ", ".join(
+        f"{n} = {results['chosen_all'][n]}" for n in names)
 
 
 def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
@@ -273,10 +285,16 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["eval", str(tmp_path), "--held-out", "--cases", "nearmiss-disk-dark-right",
                  "--out", str(out)]) == 0
-    err = capsys.readouterr().err  # off a terminal: a line per traced clip or case
+    printed = capsys.readouterr()
+    err = printed.err  # off a terminal: a line per traced clip or case
     for name in (*(lab["file"] for lab in labels), "nearmiss-disk-dark-right"):
         assert f"eval --held-out: {name} (" in err
     results = json.loads((out / "held_out.json").read_text())
+    # stdout: the figures (heldout.summary_lines), the thresholds named, then the report's path
+    assert printed.out.splitlines() == [*heldout.summary_lines(results), f"{out}/held_out.md"]
+    assert printed.out.startswith("in-sample (preset thresholds): 1/1 hits (0 early, 0 late)")
+    assert "chosen on every clip: tau_max = " in printed.out
+    assert set(results["held_out"]["clips"][0]["chosen"]) == set(heldout.GATE_GRID)
     assert results["in_sample"]["summary"]["hit"] == 1
     assert results["in_sample"]["summary"]["false_alarms"] == 0
     report = (out / "held_out.md").read_text()

@@ -46,7 +46,8 @@ from .runs import write_json
 
 __all__ = ["GATE_GRID", "SUITE_AIMS", "FrameTrace", "ClipTrace", "trace_clip", "replay",
            "check_replay", "grid", "suite_summaries", "suite_admissible", "selection_key",
-           "TIE_BREAKS", "leave_one_out", "held_out_report", "evaluate_held_out"]
+           "TIE_BREAKS", "leave_one_out", "held_out_report", "summary_lines",
+           "evaluate_held_out"]
 
 # the thresholds chosen by looking at real clips, and the values tried for each
 GATE_GRID: dict[str, tuple] = {
@@ -491,6 +492,33 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
     path = out_dir / "held_out.md"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
+
+
+def summary_lines(results: Mapping) -> list[str]:
+    """What ``asnn eval --held-out`` prints: the in-sample and held-out hits, early and late
+    warnings and false alarms, as ``held_out.md``'s first table has them; the held-out hits and
+    false alarms expected over the ties, with the fewest and the most (its "Whatever breaks the
+    ties"); and the preset's thresholds and those chosen on every clip, by name."""
+    def scores(name: str, s: Mapping) -> str:
+        return (f"{name}: {s['hit']}/{s['collision_clips']} hits ({s['early']} early, "
+                f"{s['late']} late), false alarms on {s['false']}/{s['noncollision_clips']} "
+                "clips without a collision")
+
+    lines = [scores("in-sample (preset thresholds)", results["in_sample"]["summary"]),
+             scores(f"held out (leave one clip out; ties by {results['tie_break']})",
+                    results["held_out"]["summary"])]
+    ties = results.get("over_ties")
+    if ties is not None:
+        s = ties["summary"]
+        hits, alarms = s["hits"], s["false_alarms"]
+        lines.append(
+            f"held out over every tie: {hits['expected']:.1f}/{s['collision_clips']} hits "
+            f"expected ({hits['fewest']} to {hits['most']}), {alarms['expected']:.1f} false "
+            f"alarms expected in {s['collision_clips'] + s['noncollision_clips']} clips "
+            f"({alarms['fewest']} to {alarms['most']})")
+    lines += [f"preset thresholds: {_named(results['base'])}",
+              f"chosen on every clip: {_named(results['chosen_all'])}"]
+    return lines
 
 
 def _named(gate: Mapping) -> str:
