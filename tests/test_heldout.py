@@ -2,6 +2,7 @@
 parameter overrides, and the robust preset's two forms."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -295,6 +296,11 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     assert printed.out.startswith("in-sample (preset thresholds): 1/1 hits (0 early, 0 late)")
     assert "chosen on every clip: tau_max = " in printed.out
     assert set(results["held_out"]["clips"][0]["chosen"]) == set(heldout.GATE_GRID)
+    # the README says what each key of held_out.json holds
+    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
+    keys = {*results, *results["over_ties"]["clips"][0], *results["over_ties"]["summary"],
+            *results["suite"], "chosen"}
+    assert not [key for key in sorted(keys) if f"`{key}`" not in readme]
     assert results["in_sample"]["summary"]["hit"] == 1
     assert results["in_sample"]["summary"]["false_alarms"] == 0
     report = (out / "held_out.md").read_text()

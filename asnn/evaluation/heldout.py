@@ -336,6 +336,7 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
     -------
     dict
         ``grid`` (the tried values), ``tie_break``, ``base`` (the preset's thresholds),
+        ``admissible`` (the grid points that may be chosen; None when all may),
         ``chosen_all`` (the thresholds :func:`selection_key` picks on every clip),
         ``in_sample`` and ``held_out`` (per clip a score dict; ``held_out`` adds the ``chosen``
         thresholds), with their ``summary``; ``over_ties``: per clip, its held-out outcomes
@@ -603,6 +604,13 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     of :func:`asnn.stimuli.suite.suite_cases`; every case by default); ``tie_break`` is
     :func:`leave_one_out`'s; ``overrides`` change the preset's parameters (an addition switched
     off, say: its gate's limits are then chosen again, held out).
+
+    Returns
+    -------
+    dict
+        :func:`leave_one_out`'s result, with the run's ``clips_dir``, ``preset``, ``overrides``
+        and ``suite_cases`` (how many cases decided admissibility); written to
+        ``held_out.json``, and as ``held_out.md`` (:func:`held_out_report`).
 
     Raises
     ------
