@@ -86,7 +86,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                       help="regenerate the paper's synthetic figures (Figs. 3, 6-9) instead")
     mode.add_argument("--held-out", action="store_true",
                       help="with CLIPS_DIR: the in-sample and leave-one-clip-out figures of the "
-                           "default preset's approach-gate thresholds (held_out.md); of another "
+                           "default preset's approach-gate thresholds (printed, and in full in "
+                           "held_out.md and held_out.json); of another "
                            "preset's with --preset, or of one ASNN spec's with --detectors "
                            "(asnn:robust/stabilise=false: an addition switched off, its gate "
                            "chosen again). The thresholds were tuned on ../shared/data/real: on "
