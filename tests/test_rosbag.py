@@ -603,17 +603,67 @@ def test_camera_replays_a_bag_at_its_recorded_pace(zenoh_net, tmp_path, looming)
     assert published == len(stamps) and time.monotonic() - start >= 0.44
 
 
-def test_header_stamps_that_go_back_are_one_error_line(tmp_path, looming, capsys):
+def stamped_bag(path, frames, seconds) -> str:
+    """A bag of mono8 ``frames`` whose header stamps are ``seconds`` after START_NS."""
     messages = []
-    for i, s in enumerate([0.0, 0.05, 0.1, 0.02, 0.15]):  # the fourth goes back 0.08 s
-        m = raw_message(looming.frames[i], "mono8")
+    for frame, s in zip(frames, seconds):
+        m = raw_message(frame, "mono8")
         ns = START_NS + round(s * 1e9)
         m["header"]["stamp"] = {"sec": ns // 10**9, "nanosec": ns % 10**9}
         messages.append(m)
-    bag = write_messages(tmp_path / "back.mcap", {"/c": (rosbag.IMAGE, messages)})
+    return str(write_messages(path, {"/c": (rosbag.IMAGE, messages)}))
+
+
+def test_a_header_stamp_that_goes_back_skips_its_frame_with_a_warning(tmp_path, looming,
+                                                                      capsys):
+    """A real robot's bag carries the odd frame out of order: detect skips it, says so, and
+    goes on; the reader alone (without a handler) still refuses it."""
+    bag = stamped_bag(tmp_path / "back.mcap", looming.frames,
+                      [0.0, 0.05, 0.1, 0.02, *(0.15 + 0.05 * i for i in range(21))])
     with pytest.raises(SourceError, match="message 3: its header stamp is 0.08 s before"):
-        list(rosbag.open_bag(str(bag)).frames())
-    assert main(["detect", str(bag), "--jsonl", str(tmp_path / "out.jsonl")]) == 2
+        list(rosbag.open_bag(bag).frames())
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", bag, "--jsonl", str(out)]) == 0
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "a camera's stamps never go back" in err[0]
-    assert len((tmp_path / "out.jsonl").read_text().splitlines()) == 3  # the frames before
+    assert len(err) == 2, err
+    assert "warning: skipped" in err[0] and "message 3: its header stamp is 0.08 s" in err[0]
+    assert err[1].startswith("asnn detect: 24 frames, ")
+    assert err[1].endswith(", 1 skipped (header stamp before an earlier frame's)")
+    records = [json.loads(line) for line in out.read_text().splitlines()]
+    # each record keeps its frame's place in the topic: the skipped one leaves a gap
+    assert [r["frame"] for r in records] == [0, 1, 2, *range(4, 25)]
+    assert [r["t"] for r in records[:4]] == [0.0, 0.05, 0.1, 0.15]
+
+
+def test_stamps_that_go_back_now_and_then_are_named_five_times_then_counted(tmp_path, looming,
+                                                                            capsys):
+    frames = [looming.frames[i % len(looming.frames)] for i in range(160)]
+    seconds = [0.05 * i for i in range(160)]
+    late = range(20, 160, 26)  # one frame in 26 stamped 0.2 s early: 6 skipped, 4 in 100
+    for i in late:
+        seconds[i] -= 0.2
+    bag = stamped_bag(tmp_path / "jitter.mcap", frames, seconds)
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", bag, "--model", "lgmd1", "--jsonl", str(out)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert [line for line in err if "warning: skipped" in line] == err[:5]
+    assert "further frames whose stamp goes back are skipped" in err[5]
+    assert len(err) == 7 and err[-1].startswith("asnn detect: 154 frames, ")
+    assert err[-1].endswith(", 6 skipped (header stamp before an earlier frame's)")
+    assert [json.loads(line)["frame"] for line in out.read_text().splitlines()] == [
+        i for i in range(160) if i not in late]
+
+
+def test_a_clock_that_went_back_stops_detect_with_one_error(tmp_path, looming, capsys):
+    """Stamps that keep going back are no odd frame out of order: the camera's clock was
+    reset (or an earlier stamp lies far ahead). Skipping them all would leave nothing: the
+    run stops at the fifth within 100 frames, the frames before written."""
+    seconds = [10 + 0.05 * i for i in range(12)] + [0.05 * i for i in range(13)]
+    bag = stamped_bag(tmp_path / "reset.mcap", looming.frames, seconds)
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", bag, "--jsonl", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 5 and all("warning: skipped" in line for line in err[:4])
+    assert "message 16" in err[4] and "a clock that went back" in err[4]
+    assert "results written for the 12 frames before" in err[4]
+    assert len(out.read_text().splitlines()) == 12

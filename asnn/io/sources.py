@@ -127,8 +127,9 @@ def open_source(spec: str, *, topic: str | None = None,
         The image topic of a bag (instead of a ``#TOPIC`` suffix).
     on_error : callable(reason, message), optional
         For bags: called for a message that cannot be used (skipped) or a cut or corrupt file
-        (the frames end there), so that a long-running reader counts and goes on. Without it,
-        reading raises :class:`SourceError` there.
+        (the frames end there), so that a long-running reader counts and goes on; it may raise
+        to stop there instead (``asnn detect`` skips only frames whose header stamp goes back,
+        ``stamp-backwards``). Without it, reading raises :class:`SourceError` there.
     decoder_threads : int, optional
         For video files: the threads the decoder may use (default: OpenCV's choice).
 
