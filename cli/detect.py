@@ -126,14 +126,21 @@ PLOT_FORMATS = (".eps", ".jpeg", ".jpg", ".pdf", ".png", ".ps", ".svg", ".tif", 
 
 
 def _output_problem(path: str | None, flag: str) -> str | None:
-    """Why an output path cannot be written, found before the run, or None."""
+    """Why an output path cannot be written, found before the run, or None. Its folder need
+    not exist: the folders missing are made once the input opens (as ``asnn scene`` makes
+    them), where the nearest existing one is a folder this process may write."""
     if not path or path == "-":
         return None
     target = Path(path)
     if target.is_dir():
         return f"{flag} {path}: is a folder"
-    if not target.parent.is_dir():
-        return f"{flag} {path}: no folder {target.parent}"
+    parent = target.parent
+    while not parent.exists() and parent != parent.parent:  # the folders to make, as scene does
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"{flag} {path}: {parent} is not a folder"
+    if target.parent != parent and not os.access(parent, os.W_OK | os.X_OK):
+        return f"{flag} {path}: cannot make {target.parent} in {parent} (no write access)"
     if flag == "--plot" and target.suffix.lower() not in PLOT_FORMATS:
         return f"--plot {path}: name the format by its extension ({', '.join(PLOT_FORMATS)})"
     if flag == "--annotate" and target.suffix.lower() not in WRITABLE_SUFFIXES:
@@ -279,6 +286,12 @@ def run(args: argparse.Namespace) -> int:
         # the first frame, rather than on the frames where a stage first has work
         compile_kernels((params,), threads=model_threads)
     records = []
+    for _, path in outputs:  # their folders, made as asnn scene makes them (checked above)
+        if path and path != "-":
+            try:
+                Path(path).parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                return _fail(f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
     with ExitStack() as stack:
         stack.enter_context(_settings(busy))
         try:

@@ -100,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         todo.append(f"{video.name}: {label_problem(entries[-1])}")
     if added:
         try:
+            path.parent.mkdir(parents=True, exist_ok=True)  # as asnn scene --labels makes it
             path.write_text(json.dumps(entries, indent=2) + "\n", encoding="utf-8")
         except OSError as exc:
             print(f"asnn label: cannot write {path}: {exc.strerror or exc}", file=sys.stderr)

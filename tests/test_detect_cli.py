@@ -205,11 +205,11 @@ def test_a_reader_that_stops_early_ends_detect_quietly(tmp_path, what):
 
 
 @pytest.mark.parametrize("flag, path, says", [
-    ("--jsonl", "{tmp}/missing/a.jsonl", "no folder"),
+    ("--jsonl", "{tmp}/a-file/a.jsonl", "a-file is not a folder"),
     ("--tracks", "{tmp}", "is a folder"),
     ("--plot", "{tmp}/p.notanimage", "name the format by its extension"),
     ("--plot", "{tmp}", "is a folder"),
-    ("--annotate", "{tmp}/missing/a.mp4", "no folder"),
+    ("--annotate", "{tmp}/a-file/more/a.mp4", "a-file is not a folder"),
     ("--jsonl", "/dev/full", "No space left on device"),  # found while writing
 ])
 def test_an_output_that_cannot_be_written_is_a_one_line_error(looming_video, tmp_path, capsys,
@@ -217,9 +217,31 @@ def test_an_output_that_cannot_be_written_is_a_one_line_error(looming_video, tmp
     if path == "/dev/full" and not Path(path).exists():
         pytest.skip("no /dev/full here")
     video, _ = looming_video
+    (tmp_path / "a-file").write_text("")  # where a folder would have to be made
     assert main(["detect", str(video), flag, path.format(tmp=tmp_path)]) == 2
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_outputs_in_folders_that_do_not_exist_yet_are_written_there(looming_video, tmp_path,
+                                                                     capsys):
+    """As ``asnn scene OUT`` does, detect makes the folders its outputs go into."""
+    pytest.importorskip("mcap_ros2", reason="--mcap needs the 'ros' extra")
+    video, scene = looming_video
+    outputs = {"--jsonl": "a/b/out.jsonl", "--tracks": "t/tracks.jsonl",
+               "--annotate": "v/w/out.mp4", "--plot": "p/out.png", "--mcap": "m/out.mcap"}
+    args = [arg for flag, name in outputs.items() for arg in (flag, str(tmp_path / name))]
+    assert main(["detect", str(video), *args]) == 0, capsys.readouterr().err
+    for name in outputs.values():
+        assert (tmp_path / name).stat().st_size > 0, name
+    records = (tmp_path / "a/b/out.jsonl").read_text().splitlines()
+    assert len(records) == len(scene.frames)
+
+
+def test_an_output_folder_is_made_only_once_the_input_opens(tmp_path, capsys):
+    assert main(["detect", str(tmp_path / "none.avi"), "--jsonl",
+                 str(tmp_path / "new" / "out.jsonl")]) == 2
+    assert "none.avi" in capsys.readouterr().err and not (tmp_path / "new").exists()
 
 
 def test_an_output_over_the_input_or_another_output_is_refused_before_it_is_opened(

@@ -213,8 +213,13 @@ def test_label_starts_the_labels_of_a_folder_and_lists_what_is_left(tmp_path, ca
 def test_label_refuses_what_it_cannot_use(tmp_path, capsys):
     assert main(["label", str(tmp_path / "nowhere")]) == 2
     write_video(make_scene("looming", size=(64, 48), frames=3).frames, tmp_path / "a.avi")
-    assert main(["label", str(tmp_path), "--labels", str(tmp_path / "no" / "labels.json")]) == 2
+    (tmp_path / "a-file").write_text("")
+    assert main(["label", str(tmp_path), "--labels", str(tmp_path / "a-file" / "labels.json")]) == 2
     assert "cannot write" in capsys.readouterr().err  # one line, no traceback
+    # a folder that is not there yet is made, as asnn scene --labels and asnn detect make theirs
+    assert main(["label", str(tmp_path), "--labels", str(tmp_path / "no" / "labels.json")]) == 1
+    assert [e["file"] for e in json.loads((tmp_path / "no" / "labels.json").read_text())] == [
+        "a.avi"]
     (tmp_path / "labels.json").write_text("{not json")
     assert main(["label", str(tmp_path)]) == 2
     assert "not JSON" in capsys.readouterr().err
