@@ -8,6 +8,7 @@ import contextlib
 import json
 import os
 import shutil
+import stat
 import subprocess
 import threading
 import time
@@ -258,11 +259,28 @@ def test_each_identity_s_folder_holds_its_own_secrets_only(certs):
     for name in IDENTITIES:
         assert sorted(p.name for p in (certs / name).iterdir()) == sorted(
             ["ca.pem", f"{name}.pem", f"{name}.key", f"{name}.json5"])
-        # readable by whichever user the container runs as; OUT_DIR itself is private
-        assert (certs / name / f"{name}.key").stat().st_mode & 0o044 == 0o044
     assert sorted(p.name for p in (certs / "router").iterdir()) == sorted(
         ["ca.pem", "router.pem", "router.key", "credentials.txt", "router.json5"])
     assert certs.stat().st_mode & 0o077 == 0
+
+
+def test_secrets_are_readable_by_their_owner_only(certs):
+    """Keys and passwords are mode 600 (OUT_DIR's 700 alone would not keep them from a user
+    given the folder, e.g. mounted into a container); the certificates are public."""
+    def mode(path: Path) -> int:
+        return stat.S_IMODE(path.stat().st_mode)
+
+    secret = [certs / "ca.key", certs / "router" / "router.key",
+              certs / "router" / "credentials.txt"]
+    public = [certs / "ca.pem", certs / "router" / "router.pem", certs / "router" / "ca.pem",
+              certs / "router" / "router.json5"]
+    for name in IDENTITIES:
+        assert "password" in (certs / name / f"{name}.json5").read_text()  # hence secret
+        secret += [certs / name / f"{name}.key", certs / name / f"{name}.json5"]
+        public += [certs / name / f"{name}.pem", certs / name / "ca.pem"]
+        assert mode(certs / name) == 0o755
+    assert {str(p): mode(p) for p in secret} == {str(p): 0o600 for p in secret}
+    assert {str(p): mode(p) for p in public} == {str(p): 0o644 for p in public}
 
 
 def test_running_the_script_again_keeps_the_ca_and_the_identities(tmp_path):
@@ -314,6 +332,9 @@ def test_the_secure_compose_override_parses_and_names_existing_files():
             continue
         args = parser.parse_args(service["command"])
         identity = f"camera-{args.robot}" if name == "camera" else name
+        # as the owner of the secrets, whose keys only the owner may read (mode 600)
+        assert service["user"] == "${ASNN_UID:?the uid owning deploy/secrets (id -u)}:" \
+                                  "${ASNN_GID:?its gid (id -g)}"
         assert args.connect == ["tls/router:7447"]
         assert args.config == f"/etc/asnn/secrets/{identity}.json5"
         # its own folder only: never the CA's key, another identity's or the passwords

@@ -21,8 +21,12 @@
 # with the identities worker, dashboard, alerts, foxglove and camera-<robot> for each robot id:
 # user name and certificate CN are the same, and the router's access control requires both, so
 # a camera may publish only <prefix>/<its robot>/frame and .../preview. Each folder is mounted
-# alone into its service's container (deploy/compose.secure.yml), readable by the container's
-# user (folders 755, files 644 inside OUT_DIR's 700).
+# alone into its service's container (deploy/compose.secure.yml). Inside OUT_DIR's 700, what is
+# secret is readable by the user who ran the script only (mode 600: the keys, credentials.txt
+# and the client configs, which hold the passwords); the certificates and router.json5 are 644,
+# the folders 755. A process reading them as another user cannot: deploy/compose.secure.yml
+# runs its containers as this user (ASNN_UID, ASNN_GID), and a systemd unit's user must own its
+# folder (docs/operations.md, "Secrets on disk").
 #
 # Run again (to add a robot, or a HOST), it keeps the CA and every identity whose certificate
 # is valid for 30 more days (a third of its validity where that is shorter), with its password,
@@ -62,6 +66,7 @@ command -v openssl >/dev/null || { echo "gen-dev-certs: openssl is required" >&2
 mkdir -p "$out"
 chmod 700 "$out"
 cd "$out"
+umask 077  # every file private as it is written; the certificates are opened to 644 below
 top=$(pwd)
 # a certificate valid for less than this more is issued again: 30 days, or a third of a
 # shorter validity (else every run would reissue every identity)
@@ -190,8 +195,16 @@ dir=$(where router)
   done < "$template"
 } > router/router.json5
 
-# inside OUT_DIR's 700, each folder is readable by whichever user its container runs as
-for name in router "${names[@]}"; do chmod 644 "$name"/*; done
+# inside OUT_DIR's 700: certificates and the router's config readable by any user, secrets
+# (keys, passwords, the client configs that hold them) by the owner only (umask 077 above made
+# every file so as it was written)
+for name in router "${names[@]}"; do
+  chmod 644 "$name"/*.pem
+  chmod 600 "$name"/*.key
+done
+chmod 644 router/router.json5
+chmod 600 router/credentials.txt
+for name in "${names[@]}"; do chmod 600 "$name/$name.json5"; done
 for folder in */; do  # an identity left out of this run can no longer connect: say so
   folder=${folder%/}
   [[ $folder == router || " ${names[*]} " == *" $folder "* ]] && continue
