@@ -91,6 +91,10 @@ def cmd_status(args: argparse.Namespace) -> int:
         return fail(str(exc))
     with session:
         statuses = query_status(session, args.prefix, args.worker, timeout=args.timeout)
+    if args.local:
+        from service.core import started_here
+
+        statuses = {worker: s for worker, s in statuses.items() if started_here(worker)}
     for worker, status in sorted(statuses.items()):
         if args.json:
             print(json.dumps(status, separators=(", ", ": ")), flush=True)
@@ -99,7 +103,13 @@ def cmd_status(args: argparse.Namespace) -> int:
     if not statuses:
         key = (keys.worker_status_key(args.worker, args.prefix) if args.worker
                else keys.worker_statuses(args.prefix))
-        print(f"no worker answered on {key}", file=sys.stderr)
+        if args.local:
+            from service.core import worker_host
+
+            print(f"no worker of this host ({worker_host()}-<pid>) answered on {key}",
+                  file=sys.stderr)
+        else:
+            print(f"no worker answered on {key}", file=sys.stderr)
         return 1
     return 0
 
@@ -295,8 +305,13 @@ def register(subparsers) -> None:
                               description="Query <prefix>/@worker/<id>/status: each worker's "
                               "counters (rejected frames per reason, dropped frames), robots "
                               "and the live workers. Exit status 1 when no worker answers.")
-    p.add_argument("--worker", type=worker_id, default=None,
-                   help="only this worker (default: all)")
+    only = p.add_mutually_exclusive_group()
+    only.add_argument("--worker", type=worker_id, default=None,
+                      help="only this worker (default: all)")
+    only.add_argument("--local", action="store_true",
+                      help="only the workers of this host that have the default id, "
+                           "<host>-<pid>: in a container, whose host name is its own, its "
+                           "worker (a health check)")
     p.add_argument("--json", action="store_true", help="one JSON object per worker")
     p.add_argument("--timeout", type=positive, default=2.0, metavar="SECONDS",
                    help="how long to wait for answers (default: %(default)s)")

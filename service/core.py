@@ -121,7 +121,7 @@ from .messages import (MAX_NOTE_LEN, MAX_PAYLOAD, MAX_REASON_LEN, MAX_SIDE, VERS
                        MessageError, Response, decode_frame, response_from, track_id_base)
 
 __all__ = ["Job", "RateLimitedLog", "RobotView", "WARMUP_FRAMES", "WorkerCore",
-           "default_threads", "default_worker_id"]
+           "default_threads", "default_worker_id", "started_here", "worker_host"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -146,10 +146,21 @@ TAKEOVER_AFTER_S = 3.0
 # PERIOD_FRAMES frames in a row the worker logs it (_measure_rate)
 
 
+def worker_host() -> str:
+    """The host part of :func:`default_worker_id`: the host name in the robot-id alphabet (at
+    most 40 characters)."""
+    return re.sub(r"[^A-Za-z0-9_-]", "-", socket.gethostname())[:40] or "worker"
+
+
 def default_worker_id() -> str:
     """``<host>-<pid>``, restricted to the robot-id alphabet."""
-    host = re.sub(r"[^A-Za-z0-9_-]", "-", socket.gethostname())[:40] or "worker"
-    return f"{host}-{os.getpid()}"
+    return f"{worker_host()}-{os.getpid()}"
+
+
+def started_here(worker_id: str) -> bool:
+    """Whether ``worker_id`` is the default id of a process of this host, ``<host>-<pid>``
+    (in a container, whose host name is its own: the container's worker)."""
+    return re.fullmatch(re.escape(worker_host()) + r"-[0-9]+", worker_id) is not None
 
 
 def default_threads() -> int:

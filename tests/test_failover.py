@@ -182,6 +182,29 @@ def test_a_second_worker_with_the_same_id_is_refused_and_status_lists_the_first(
         more.cleanup()
 
 
+def test_status_local_answers_for_the_workers_of_this_host_with_the_default_id(net, procs):
+    """``asnn status --local``, the worker's health check in a container: a worker whose id is
+    the default, <host>-<pid>, of this host answers it; a worker named otherwise does not."""
+    from service.core import worker_host
+
+    net.worker("named")
+    more = Procs()
+    try:
+        nobody = more("status", "--local", "--timeout", "1", *net.common)
+        assert nobody.popen.wait(timeout=60) == 1
+        nobody.stop()
+        assert f"no worker of this host ({worker_host()}-<pid>)" in "\n".join(nobody.err)
+        here = procs("worker", "--idle-timeout", "600", *net.common)
+        here.wait_line("ready", timeout=60)
+        status = more("status", "--local", "--json", *net.common)
+        assert status.popen.wait(timeout=60) == 0
+        status.stop()
+        assert [json.loads(line)["worker"] for line in status.out] == [
+            f"{worker_host()}-{here.popen.pid}"]
+    finally:
+        more.cleanup()
+
+
 def test_each_frame_reaches_exactly_the_worker_of_its_robot(net, capsys):
     """Three workers and nine cameras that announce themselves (no scan: --scan-interval 0): in
     steady state every frame is delivered to one worker, its robot's owner, and answered once;

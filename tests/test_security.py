@@ -187,6 +187,19 @@ def test_each_role_does_its_job_and_nothing_else(fleet):
         assert (late[0].robot, late[0].seq) == ("r1", sent[-1].seq)
 
 
+def test_the_worker_identity_may_ask_the_workers_status_for_its_health_check(fleet):
+    """A worker's container checks its health with its own credentials (``asnn status --local``
+    in deploy/compose.secure.yml): the worker identity may query the status queryables; a
+    camera still may not."""
+    session, _ = fleet
+    core = WorkerCore(worker_id="secure-w1", idle_timeout=600)
+    with Worker(session("worker"), core, stats_every=0):
+        wait_for(lambda: live_workers(session("dashboard")) == ["secure-w1"],
+                 what="the worker's token")
+        assert list(query_status(session("worker"))) == ["secure-w1"]
+        assert query_status(session("camera-r1"), timeout=1.0) == {}
+
+
 def test_the_foxglove_identity_only_views(fleet):
     """The Foxglove live server's identity (deploy/compose.secure.yml) reads what dashboards
     read, and cannot feed the fleet."""
