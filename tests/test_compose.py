@@ -1,5 +1,6 @@
 """docker-compose.yml and deploy/: checked as files (no Docker engine is needed)."""
 
+import os
 import shutil
 import subprocess
 import sys
@@ -69,3 +70,154 @@ def test_topology_has_the_official_router_and_the_service_image():
 def test_zenoh_configs_load(name):
     config = zenoh.Config.from_file(str(ROOT / "deploy" / "zenoh" / name))
     assert config.get_json("mode") == f'"{name.split(".")[0]}"'
+
+
+# ---------------------------------------------------------------- health checks
+
+def load_secure_override() -> dict:
+    yaml = pytest.importorskip("ruamel.yaml")
+    loader = yaml.YAML(typ="safe")
+    loader.constructor.add_constructor(  # Compose's merge tag: the list replaces the base's
+        "!override", lambda constructor, node: constructor.construct_sequence(node))
+    return loader.load((ROOT / "deploy" / "compose.secure.yml").read_text())
+
+
+def test_health_checks_are_asnn_commands_the_parser_takes_against_the_service_s_own_router():
+    """The worker's check asks its own status queryable (``asnn status --local``) through the
+    router and with the config the worker itself uses, in the plain and the secured fleet."""
+    parser = build_parser()
+    plain, secure = load_compose()["services"], load_secure_override()["services"]
+    for services in (plain, secure):
+        service = services["worker"]
+        test = service["healthcheck"]["test"]
+        assert test[:2] == ["CMD", "asnn"]
+        check, own = parser.parse_args(test[2:]), parser.parse_args(service["command"])
+        assert check.command == "status" and check.local and check.worker is None
+        assert (check.config, check.connect, check.mode) == (own.config, own.connect, own.mode)
+        assert check.timeout < int(plain["worker"]["healthcheck"]["timeout"].rstrip("s"))
+    # the plain fleet's timing, which the secured one keeps
+    assert set(plain["worker"]["healthcheck"]) == {"test", "interval", "timeout", "retries",
+                                                   "start_period"}
+    assert set(secure["worker"]["healthcheck"]) == {"test"}
+
+
+def test_services_without_a_health_check_have_nothing_to_ask():
+    """docs/operations.md, "Deployment health": the camera and alerts have no status of their
+    own, the official router image no client, and every probe of the Foxglove server is
+    logged by its SDK (a TCP connection as an error)."""
+    services = load_compose()["services"]
+    assert {name for name, s in services.items() if "healthcheck" not in s} == {
+        "router", "camera", "alerts", "foxglove"}
+    for service in services.values():
+        if "healthcheck" in service:
+            assert service["healthcheck"]["test"][0] == "CMD"  # no shell: nothing to quote
+
+
+def test_the_dashboard_health_check_passes_against_a_dashboard_and_fails_without_one():
+    from clients.dashboard import DashboardServer, FleetStore
+    from service.demo import free_port
+
+    test = load_compose()["services"]["dashboard"]["healthcheck"]["test"]
+    assert test[:3] == ["CMD", "python", "-c"] and "'http://127.0.0.1:8080/events'" in test[3]
+
+    def check(port: int, **env) -> int:
+        code = test[3].replace(":8080/", f":{port}/")
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=60,
+                              env={**os.environ, **env}).returncode
+
+    port = free_port()
+    with DashboardServer(FleetStore(), port=port):
+        assert check(port) == 0
+        # straight to the dashboard, whatever proxy the container's environment names
+        dead = f"http://127.0.0.1:{free_port()}"
+        assert check(port, http_proxy=dead, HTTP_PROXY=dead) == 0
+    assert check(port) != 0  # nothing listens there any more
+
+
+# ---------------------------------------------------------------- systemd units
+
+SYSTEMD = ROOT / "deploy" / "systemd"
+
+
+def read_unit(path: Path) -> dict[str, list[tuple[str, str]]]:
+    """A unit file's settings, section by section, in order (a key may repeat)."""
+    sections: dict[str, list[tuple[str, str]]] = {}
+    section = None
+    for line in path.read_text().splitlines():
+        line = line.strip()
+        if not line or line.startswith(("#", ";")):
+            continue
+        if line.startswith("["):
+            section = sections.setdefault(line.strip("[]"), [])
+            continue
+        key, _, value = line.partition("=")
+        section.append((key.strip(), value.strip()))
+    return sections
+
+
+def unit_command(service: list[tuple[str, str]], instance: str) -> list[str]:
+    """ExecStart's words as systemd runs them: ``%i``, ``%C`` and ``${VAR}`` of the unit's own
+    Environment= (the defaults, before any EnvironmentFile) replaced."""
+    import re
+    import shlex
+
+    env = {}
+    for key, value in service:
+        if key == "Environment":
+            env.update(word.split("=", 1) for word in shlex.split(value))
+    (exec_start,) = [value for key, value in service if key == "ExecStart"]
+    exec_start = exec_start.replace("%i", instance).replace("%C", "/var/cache")
+    exec_start = re.sub(r"\$\{(\w+)\}", lambda m: env[m.group(1)].replace("%i", instance),
+                        exec_start)
+    return shlex.split(exec_start)
+
+
+def test_systemd_units_run_asnn_commands_the_parser_takes():
+    parser = build_parser()
+    commands = {}
+    for path in sorted(SYSTEMD.glob("*.service")):
+        unit = read_unit(path)
+        service = dict(unit["Service"])  # the last of a repeated key: enough for these
+        words = unit_command(unit["Service"], "robot1")
+        assert words[0] == "/opt/asnn/venv/bin/asnn", path.name
+        args = parser.parse_args(words[1:])
+        assert callable(args.func)
+        commands[args.command] = (path.name, args, service)
+        assert service["User"] == "asnn" and service["Group"] == "asnn"
+        assert service["Restart"] == "always" and service["NoNewPrivileges"] == "yes"
+        assert service["ProtectSystem"] == "strict" and service["CapabilityBoundingSet"] == ""
+        # numba compiles into executable memory: MemoryDenyWriteExecute would stop the model
+        assert "MemoryDenyWriteExecute" not in service
+        # its kernel cache where ProtectSystem=strict still lets the user write
+        env = " ".join(value for key, value in unit["Service"] if key == "Environment")
+        assert "NUMBA_CACHE_DIR=%C/asnn/numba" in env and service["CacheDirectory"] == "asnn"
+        assert unit["Install"] == [("WantedBy", "multi-user.target")]
+    assert set(commands) == {"router", "worker", "camera", "alerts", "dashboard", "foxglove"}
+    name, camera, service = commands["camera"]
+    assert name == "asnn-camera@.service" and camera.robot == "robot1" and camera.source == "0"
+    assert "PrivateDevices" not in service and service["DeviceAllow"] == "char-video4linux rw"
+    assert (ROOT / "deploy" / "zenoh" / Path(commands["router"][1].config).name).is_file()
+    for command, (name, args, service) in commands.items():
+        if command == "router":
+            continue
+        assert args.connect == ["tcp/127.0.0.1:7447"] and args.mode == "client", name
+        assert (ROOT / "deploy" / "zenoh" / Path(args.config).name).is_file()
+        if command != "camera":
+            assert service["PrivateDevices"] == "yes", name
+        if command in ("dashboard", "foxglove"):  # no login of their own
+            assert args.host == "127.0.0.1", name
+
+
+def test_systemd_units_pass_systemd_analyze_verify(tmp_path):
+    """systemd's own check of the units (unknown options, bad values), with the program path
+    pointed at one that exists here."""
+    analyze = shutil.which("systemd-analyze")
+    if analyze is None:
+        pytest.skip("systemd-analyze is not installed")
+    units = []
+    for path in sorted(SYSTEMD.glob("*.service")):
+        units.append(tmp_path / path.name)
+        units[-1].write_text(path.read_text().replace("/opt/asnn/venv/bin/asnn", "/bin/true"))
+    result = subprocess.run([analyze, "verify", "--man=no", *map(str, units)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0 and result.stderr == "", result.stderr
