@@ -201,7 +201,9 @@ class _StampSkips:
                 "back: not the odd stamp out of order but a clock that went back (a camera "
                 "restarted, or an earlier stamp far ahead)", "stamps-backwards")
         if self.count <= self.lines:
-            print(f"asnn detect: warning: skipped {message}", file=sys.stderr, flush=True)
+            # on a terminal, over the progress bar's line (it is drawn again below)
+            lead = "\r\033[K" if sys.stderr.isatty() else ""
+            print(f"{lead}asnn detect: warning: skipped {message}", file=sys.stderr, flush=True)
             if self.count == self.lines:
                 print("asnn detect: warning: further frames whose stamp goes back are skipped "
                       "and counted in the summary", file=sys.stderr, flush=True)

@@ -614,8 +614,9 @@ def stamped_bag(path, frames, seconds) -> str:
     return str(write_messages(path, {"/c": (rosbag.IMAGE, messages)}))
 
 
+@pytest.mark.parametrize("threads", [[], ["--threads", "1"]])  # in turn; reading ahead
 def test_a_header_stamp_that_goes_back_skips_its_frame_with_a_warning(tmp_path, looming,
-                                                                      capsys):
+                                                                      capsys, threads):
     """A real robot's bag carries the odd frame out of order: detect skips it, says so, and
     goes on; the reader alone (without a handler) still refuses it."""
     bag = stamped_bag(tmp_path / "back.mcap", looming.frames,
@@ -623,7 +624,7 @@ def test_a_header_stamp_that_goes_back_skips_its_frame_with_a_warning(tmp_path, 
     with pytest.raises(SourceError, match="message 3: its header stamp is 0.08 s before"):
         list(rosbag.open_bag(bag).frames())
     out = tmp_path / "out.jsonl"
-    assert main(["detect", bag, "--jsonl", str(out)]) == 0
+    assert main(["detect", bag, "--jsonl", str(out), *threads]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2, err
     assert "warning: skipped" in err[0] and "message 3: its header stamp is 0.08 s" in err[0]
@@ -654,14 +655,15 @@ def test_stamps_that_go_back_now_and_then_are_named_five_times_then_counted(tmp_
         i for i in range(160) if i not in late]
 
 
-def test_a_clock_that_went_back_stops_detect_with_one_error(tmp_path, looming, capsys):
+@pytest.mark.parametrize("threads", [[], ["--threads", "1"]])  # in turn; reading ahead
+def test_a_clock_that_went_back_stops_detect_with_one_error(tmp_path, looming, capsys, threads):
     """Stamps that keep going back are no odd frame out of order: the camera's clock was
     reset (or an earlier stamp lies far ahead). Skipping them all would leave nothing: the
     run stops at the fifth within 100 frames, the frames before written."""
     seconds = [10 + 0.05 * i for i in range(12)] + [0.05 * i for i in range(13)]
     bag = stamped_bag(tmp_path / "reset.mcap", looming.frames, seconds)
     out = tmp_path / "out.jsonl"
-    assert main(["detect", bag, "--jsonl", str(out)]) == 2
+    assert main(["detect", bag, "--jsonl", str(out), *threads]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 5 and all("warning: skipped" in line for line in err[:4])
     assert "message 16" in err[4] and "a clock that went back" in err[4]
