@@ -80,12 +80,13 @@ class _OutputError(Exception):
 
 
 READ_AHEAD = 8  # decoded frames waiting for the model
-# A bag's frame whose header stamp goes back is skipped (the odd stamp out of order) until
-# STAMP_LIMIT of them fall within STAMP_WINDOW frames read: then the clock itself went back (a
-# camera restarted, or one stamp far ahead makes every later frame look late) and the run stops.
+# A bag's frame whose header stamp goes back is taken at the latest frame's time (the odd stamp
+# out of order) until STAMP_LIMIT of them fall within STAMP_WINDOW frames read: then the clock
+# itself went back (a camera restarted, or one stamp far ahead makes every later frame look
+# late) and the run stops.
 STAMP_WINDOW = 100
 STAMP_LIMIT = 5
-STAMP_LINES = 5  # skipped frames named on stderr one by one; the rest are counted at the end
+STAMP_LINES = 5  # such frames named on stderr one by one; the rest are counted at the end
 WRITE_BEHIND = 4  # responses waiting to be written (with --annotate each holds its maps)
 
 
@@ -168,29 +169,29 @@ def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
     return None
 
 
-class _StampSkips:
-    """The frames of a bag skipped because their header stamp goes back from an earlier
-    frame's (:meth:`asnn.io.rosbag.BagClip.frames` reports them as ``stamp-backwards``).
+class _BackwardStamps:
+    """The frames of a bag whose header stamp goes back from an earlier frame's
+    (:meth:`asnn.io.rosbag.BagClip.frames` reports them as ``stamp-backwards``).
 
-    Pass :meth:`on_error` to :func:`~asnn.io.sources.open_source` and wrap the source's
-    ``timed_frames()`` in :meth:`frames`, which numbers each frame by its place in the topic
-    (a skipped frame leaves its number out). Every other error the bag reports is raised, as
-    without ``on_error``; so is the skip that makes :data:`STAMP_LIMIT` within
-    :data:`STAMP_WINDOW` frames read.
+    Pass :meth:`on_error` to :func:`~asnn.io.sources.open_source` with ``hold_backwards``, and
+    wrap the source's ``timed_frames()`` in :meth:`frames`, which counts the frames read. Such
+    a frame is taken at the latest frame's time (the model then steps it by the nominal
+    period), so every message still gets its result (CONTRACT.md: one per input frame). Every
+    other error the bag reports is raised, as without ``on_error``; so is the one that makes
+    :data:`STAMP_LIMIT` within :data:`STAMP_WINDOW` frames read.
     """
 
     def __init__(self, window: int = STAMP_WINDOW, limit: int = STAMP_LIMIT,
                  lines: int = STAMP_LINES):
         self.window, self.limit, self.lines = window, limit, lines
-        self.read = 0  # frames read so far, taken or skipped
-        self.count = 0  # frames skipped
-        self._recent: deque[int] = deque()  # the numbers of the skips within the window
+        self.read = 0  # frames read so far
+        self.count = 0  # frames whose stamp went back
+        self._recent: deque[int] = deque()  # their numbers within the window
 
     def on_error(self, reason: str, message: str) -> None:
         if reason != "stamp-backwards":
             raise SourceError(message, reason)
-        number = self.read
-        self.read += 1
+        number = self.read  # the frame the reader yields next
         self.count += 1
         self._recent.append(number)
         while self._recent[0] <= number - self.window:
@@ -203,17 +204,18 @@ class _StampSkips:
         if self.count <= self.lines:
             # on a terminal, over the progress bar's line (it is drawn again below)
             lead = "\r\033[K" if sys.stderr.isatty() else ""
-            print(f"{lead}asnn detect: warning: skipped {message}", file=sys.stderr, flush=True)
+            print(f"{lead}asnn detect: warning: {message}; taken at the latest frame's time",
+                  file=sys.stderr, flush=True)
             if self.count == self.lines:
-                print("asnn detect: warning: further frames whose stamp goes back are skipped "
-                      "and counted in the summary", file=sys.stderr, flush=True)
+                print("asnn detect: warning: further frames whose stamp goes back are taken "
+                      "at the latest frame's time and counted in the summary", file=sys.stderr,
+                      flush=True)
 
     def frames(self, timed):
-        """``(t, image, number)`` for each ``(t, image)`` of ``timed``."""
-        for t, image in timed:
-            number = self.read
+        """``timed``'s ``(t, image)``, counted."""
+        for item in timed:
             self.read += 1
-            yield t, image, number
+            yield item
 
 
 def _check_annotated(video: list, path: str | None, frames: int) -> None:
@@ -268,10 +270,10 @@ def run(args: argparse.Namespace) -> int:
     # With a model thread for every core, more threads would only take turns with them, and
     # the machine's switching between threads costs more than decoding or writing on this one.
     busy = model_threads >= available_cores() > 1
-    skips = _StampSkips()  # a bag's frames whose header stamp goes back
+    backwards = _BackwardStamps()  # a bag's frames whose header stamp goes back
     try:
-        source = open_source(args.video, topic=args.topic, on_error=skips.on_error,
-                             decoder_threads=1 if busy else None)
+        source = open_source(args.video, topic=args.topic, on_error=backwards.on_error,
+                             hold_backwards=True, decoder_threads=1 if busy else None)
     except SourceError as exc:
         return _fail(str(exc))
     if not source.fps_stated:
@@ -349,21 +351,20 @@ def run(args: argparse.Namespace) -> int:
         taken = deque()  # the frames the detector has taken and not answered yet
 
         def frames():
-            decoded = skips.frames(source.timed_frames())
-            for t, frame, number in decoded if busy else read_ahead(decoded, depth=READ_AHEAD):
-                taken.append((t, frame, number))
+            decoded = backwards.frames(source.timed_frames())
+            for t, frame in decoded if busy else read_ahead(decoded, depth=READ_AHEAD):
+                taken.append((t, frame))
                 yield t, frame
 
         answers = responses(detector, frames())
         try:
             for response in answers:
-                t, frame, number = taken.popleft()
-                output.put((number, t, frame, response))
+                t, frame = taken.popleft()
+                output.put((index, t, frame, response))
                 index += 1
         except FrameError as exc:  # e.g. a bag whose camera changed its resolution
-            number = taken[0][2] if taken else index  # the oldest frame not answered
-            failure = f"{args.video}: frame {number}: {exc}; results written for the " \
-                      f"{index} frames before"
+            failure = f"{args.video}: frame {index}: {exc}; results written for the {index} " \
+                      "frames before"
         except SourceError as exc:  # a cut or corrupt bag: what was read is written
             failure = f"{exc} (results written for the {index} frames before)"
         except _OutputError as exc:
@@ -394,12 +395,12 @@ def run(args: argparse.Namespace) -> int:
                            title=f"{Path(args.video).name} ({args.model}, {args.preset})")
         except (OSError, ValueError) as exc:
             return _fail(f"cannot write {args.plot}: {exc}")
-    short = cut_short(source.frame_count, len(records) + skips.count)
+    short = cut_short(source.frame_count, len(records))
     if short:
         print(f"asnn detect: note: {args.video}: {short}", file=sys.stderr)
     warned = sum(r["collision"] for r in records)
-    skipped = (f", {skips.count} skipped (header stamp before an earlier frame's)"
-               if skips.count else "")
-    print(f"asnn detect: {len(records)} frames, {warned} with a collision warning{skipped}",
+    held = (f", {backwards.count} taken at the latest frame's time (header stamp before an "
+            "earlier frame's)" if backwards.count else "")
+    print(f"asnn detect: {len(records)} frames, {warned} with a collision warning{held}",
           file=sys.stderr)
     return 0

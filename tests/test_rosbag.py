@@ -615,10 +615,11 @@ def stamped_bag(path, frames, seconds) -> str:
 
 
 @pytest.mark.parametrize("threads", [[], ["--threads", "1"]])  # in turn; reading ahead
-def test_a_header_stamp_that_goes_back_skips_its_frame_with_a_warning(tmp_path, looming,
-                                                                      capsys, threads):
-    """A real robot's bag carries the odd frame out of order: detect skips it, says so, and
-    goes on; the reader alone (without a handler) still refuses it."""
+def test_a_header_stamp_that_goes_back_is_taken_at_the_latest_time_with_a_warning(
+        tmp_path, looming, capsys, threads):
+    """A real robot's bag carries the odd frame out of order: detect takes it at the latest
+    frame's time, says so, and goes on, with a result for every frame (CONTRACT.md); the
+    reader alone (without a handler) still refuses it."""
     bag = stamped_bag(tmp_path / "back.mcap", looming.frames,
                       [0.0, 0.05, 0.1, 0.02, *(0.15 + 0.05 * i for i in range(21))])
     with pytest.raises(SourceError, match="message 3: its header stamp is 0.08 s before"):
@@ -627,45 +628,50 @@ def test_a_header_stamp_that_goes_back_skips_its_frame_with_a_warning(tmp_path, 
     assert main(["detect", bag, "--jsonl", str(out), *threads]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 2, err
-    assert "warning: skipped" in err[0] and "message 3: its header stamp is 0.08 s" in err[0]
-    assert err[1].startswith("asnn detect: 24 frames, ")
-    assert err[1].endswith(", 1 skipped (header stamp before an earlier frame's)")
+    assert "message 3: its header stamp is 0.08 s" in err[0]
+    assert err[0].endswith("taken at the latest frame's time")
+    assert err[1].startswith("asnn detect: 25 frames, ")
+    assert err[1].endswith(", 1 taken at the latest frame's time (header stamp before an "
+                           "earlier frame's)")
     records = [json.loads(line) for line in out.read_text().splitlines()]
-    # each record keeps its frame's place in the topic: the skipped one leaves a gap
-    assert [r["frame"] for r in records] == [0, 1, 2, *range(4, 25)]
-    assert [r["t"] for r in records[:4]] == [0.0, 0.05, 0.1, 0.15]
+    assert [r["frame"] for r in records] == list(range(25))
+    assert [r["t"] for r in records[:5]] == [0.0, 0.05, 0.1, 0.1, 0.15]  # never back
 
 
 def test_stamps_that_go_back_now_and_then_are_named_five_times_then_counted(tmp_path, looming,
                                                                             capsys):
     frames = [looming.frames[i % len(looming.frames)] for i in range(160)]
     seconds = [0.05 * i for i in range(160)]
-    late = range(20, 160, 26)  # one frame in 26 stamped 0.2 s early: 6 skipped, 4 in 100
+    late = range(20, 160, 26)  # one frame in 26 stamped 0.2 s early: 6 of them, 4 in 100
     for i in late:
         seconds[i] -= 0.2
     bag = stamped_bag(tmp_path / "jitter.mcap", frames, seconds)
     out = tmp_path / "out.jsonl"
     assert main(["detect", bag, "--model", "lgmd1", "--jsonl", str(out)]) == 0
     err = capsys.readouterr().err.strip().splitlines()
-    assert [line for line in err if "warning: skipped" in line] == err[:5]
-    assert "further frames whose stamp goes back are skipped" in err[5]
-    assert len(err) == 7 and err[-1].startswith("asnn detect: 154 frames, ")
-    assert err[-1].endswith(", 6 skipped (header stamp before an earlier frame's)")
-    assert [json.loads(line)["frame"] for line in out.read_text().splitlines()] == [
-        i for i in range(160) if i not in late]
+    assert all("taken at the latest frame's time" in line for line in err[:5])
+    assert "further frames whose stamp goes back are taken" in err[5]
+    assert len(err) == 7 and err[-1].startswith("asnn detect: 160 frames, ")
+    assert err[-1].endswith(", 6 taken at the latest frame's time (header stamp before an "
+                            "earlier frame's)")
+    records = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [r["frame"] for r in records] == list(range(160))
+    assert all(b["t"] >= a["t"] for a, b in zip(records, records[1:]))
+    assert [records[i]["t"] for i in late] == [records[i - 1]["t"] for i in late]
 
 
 @pytest.mark.parametrize("threads", [[], ["--threads", "1"]])  # in turn; reading ahead
 def test_a_clock_that_went_back_stops_detect_with_one_error(tmp_path, looming, capsys, threads):
     """Stamps that keep going back are no odd frame out of order: the camera's clock was
-    reset (or an earlier stamp lies far ahead). Skipping them all would leave nothing: the
-    run stops at the fifth within 100 frames, the frames before written."""
+    reset (or an earlier stamp lies far ahead). Holding them all at the last good time would
+    stop the clock: the run stops at the fifth within 100 frames, the frames before written."""
     seconds = [10 + 0.05 * i for i in range(12)] + [0.05 * i for i in range(13)]
     bag = stamped_bag(tmp_path / "reset.mcap", looming.frames, seconds)
     out = tmp_path / "out.jsonl"
     assert main(["detect", bag, "--jsonl", str(out), *threads]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 5 and all("warning: skipped" in line for line in err[:4])
+    assert len(err) == 5
+    assert all("taken at the latest frame's time" in line for line in err[:4])
     assert "message 16" in err[4] and "a clock that went back" in err[4]
-    assert "results written for the 12 frames before" in err[4]
-    assert len(out.read_text().splitlines()) == 12
+    assert "results written for the 16 frames before" in err[4]
+    assert len(out.read_text().splitlines()) == 16

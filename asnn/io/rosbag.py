@@ -575,8 +575,8 @@ class BagClip:
             raise SourceError(f"{self.path}: {self.topic} message {index} is not a "
                               f"{self.schema} ({exc})", "bad-message") from None
 
-    def frames(self, on_error: Callable[[str, str], None] | None = None
-               ) -> Iterator[tuple[float, np.ndarray]]:
+    def frames(self, on_error: Callable[[str, str], None] | None = None, *,
+               hold_backwards: bool = False) -> Iterator[tuple[float, np.ndarray]]:
         """``(t, image)`` per message: seconds since the first frame, gray or BGR uint8.
 
         Parameters
@@ -584,8 +584,12 @@ class BagClip:
         on_error : callable(reason, message), optional
             Called for a message that cannot be used (it is skipped) and for a cut or corrupt
             file (the frames end there). Without it, these raise :class:`SourceError`.
+        hold_backwards : bool
+            With ``on_error``: a frame whose header stamp goes back from the latest is reported
+            (``stamp-backwards``) and then yielded at the latest frame's time instead of
+            skipped, so that every message gives a frame and the times never go back.
         """
-        latest = 0  # the latest header stamp taken
+        latest, latest_t = 0, 0.0  # the latest header stamp taken, and its frame's t
         for index, (message, log_time) in enumerate(self._messages(on_error)):
             try:
                 image = self._decode(message, index)
@@ -594,8 +598,11 @@ class BagClip:
                 if on_error is None:
                     raise
                 on_error(exc.reason, str(exc))
+                if hold_backwards and exc.reason == "stamp-backwards":
+                    yield latest_t, image
                 continue
-            yield (self._time_ns(message, log_time) - self.start_ns) / 1e9, image
+            latest_t = (self._time_ns(message, log_time) - self.start_ns) / 1e9
+            yield latest_t, image
 
     def _check_stamp(self, message, index: int, latest: int) -> int:
         """The latest header stamp with this message's; SourceError where its stamp goes back

@@ -115,7 +115,7 @@ def is_bag(path: str) -> bool:
 
 
 def open_source(spec: str, *, topic: str | None = None,
-                on_error: ErrorHandler | None = None,
+                on_error: ErrorHandler | None = None, hold_backwards: bool = False,
                 decoder_threads: int | None = None) -> Source:
     """Open a source (see the module's list), checking that it yields a first frame.
 
@@ -128,8 +128,11 @@ def open_source(spec: str, *, topic: str | None = None,
     on_error : callable(reason, message), optional
         For bags: called for a message that cannot be used (skipped) or a cut or corrupt file
         (the frames end there), so that a long-running reader counts and goes on; it may raise
-        to stop there instead (``asnn detect`` skips only frames whose header stamp goes back,
-        ``stamp-backwards``). Without it, reading raises :class:`SourceError` there.
+        to stop there instead. Without it, reading raises :class:`SourceError` there.
+    hold_backwards : bool
+        For bags, with ``on_error``: a frame whose header stamp goes back is reported
+        (``stamp-backwards``) and then taken at the latest frame's time instead of skipped
+        (``asnn detect``: one result per message).
     decoder_threads : int, optional
         For video files: the threads the decoder may use (default: OpenCV's choice).
 
@@ -143,7 +146,7 @@ def open_source(spec: str, *, topic: str | None = None,
     spec = str(spec)
     path, suffix_topic = split_topic(spec)
     if is_bag(path):
-        return _open_bag(path, topic or suffix_topic, on_error)
+        return _open_bag(path, topic or suffix_topic, on_error, hold_backwards)
     if Path(path).is_dir() and any(Path(path).glob("*.mcap")):
         raise SourceError(f"{path}: a folder of .mcap files without the metadata.yaml of a "
                           "rosbag2 directory: give one .mcap file, or rebuild the metadata "
@@ -196,12 +199,13 @@ def _open_file(spec: str, decoder_threads: int | None) -> Source:
                   fps_stated=clip.fps_stated)
 
 
-def _open_bag(path: str, topic: str | None, on_error: ErrorHandler | None) -> Source:
+def _open_bag(path: str, topic: str | None, on_error: ErrorHandler | None,
+              hold_backwards: bool = False) -> Source:
     try:
         from . import rosbag
     except ImportError as exc:  # the message names the extra to install
         raise SourceError(f"{path}: {exc}", "missing-extra") from None
     clip = rosbag.open_bag(path, topic)
     return Source(f"{clip.path}#{clip.topic}", clip.fps, False,
-                  lambda: clip.frames(on_error), timed=True, frame_count=clip.frame_count,
+                  lambda: clip.frames(on_error, hold_backwards=hold_backwards), timed=True, frame_count=clip.frame_count,
                   start_ns=clip.start_ns, frame_id=clip.frame_id)
