@@ -627,6 +627,10 @@ class DashboardServer:
         return f"http://{'127.0.0.1' if host in ('0.0.0.0', '') else host}:{port}/"
 
     def start(self) -> DashboardServer:
+        """Serve on a thread of its own; once (``with DashboardServer(...).start()`` starts it
+        once, not twice)."""
+        if self._thread is not None:
+            return self
         self._thread = threading.Thread(target=self._httpd.serve_forever, kwargs={
             "poll_interval": 0.2}, name="asnn-dashboard-http", daemon=True)
         self._thread.start()

@@ -445,6 +445,21 @@ def test_closing_the_server_ends_open_event_streams():
     reader.close()
 
 
+def test_a_server_started_then_entered_serves_on_one_thread_and_stops():
+    before = {t for t in threading.enumerate() if t.name == "asnn-dashboard-http"}
+    with DashboardServer(FleetStore(), "127.0.0.1", 0).start() as server:
+        serving = {t for t in threading.enumerate() if t.name == "asnn-dashboard-http"}
+        assert len(serving - before) == 1
+        _, port = server.address
+        page = http.client.HTTPConnection("127.0.0.1", port, timeout=TIMEOUT)
+        page.request("GET", "/")
+        assert page.getresponse().status == 200
+        page.close()
+    time.sleep(0.5)
+    assert not {t for t in threading.enumerate()
+                if t.name == "asnn-dashboard-http" and t.is_alive()} - before
+
+
 def test_subscriber_feeds_the_store_over_zenoh(zenoh_net):
     store = FleetStore()
     with FleetSubscriber(zenoh_net.hub, store, refusals=True) as subscriber:
