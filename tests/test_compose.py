@@ -221,3 +221,20 @@ def test_systemd_units_pass_systemd_analyze_verify(tmp_path):
     result = subprocess.run([analyze, "verify", "--man=no", *map(str, units)],
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0 and result.stderr == "", result.stderr
+
+
+def test_the_camera_sources_the_docs_give_the_unit_open_as_capture_devices():
+    """``--source`` takes a capture device by its index (``0``), not by its path: a path under
+    /dev is opened as a video file, and a character device is no file (the unit would exit
+    "no such file" and restart every 5 s)."""
+    import re
+
+    from asnn.io.sources import SourceError, open_source
+
+    with pytest.raises(SourceError, match="no such file"):
+        open_source("/dev/null")  # a character device, as /dev/video0 is
+    given = re.findall(r"ASNN_SOURCE=(\S+?)'?\s", (ROOT / "docs" / "operations.md").read_text())
+    given += [word.split("=", 1)[1] for path in SYSTEMD.glob("*.service")
+              for key, value in read_unit(path)["Service"] if key == "Environment"
+              for word in value.split() if word.startswith("ASNN_SOURCE=")]
+    assert given and all(value.isdigit() for value in given), given
