@@ -197,6 +197,11 @@ def test_systemd_units_run_asnn_commands_the_parser_takes():
     assert name == "asnn-camera@.service" and camera.robot == "robot1" and camera.source == "0"
     assert "PrivateDevices" not in service and service["DeviceAllow"] == "char-video4linux rw"
     assert (ROOT / "deploy" / "zenoh" / Path(commands["router"][1].config).name).is_file()
+    # every unit takes its config from an environment file, the router's too (a secured fleet
+    # names its own: docs/operations.md; ExecStart= itself cannot be overridden by one line)
+    for name, _, service in commands.values():
+        assert service["EnvironmentFile"].startswith("-/etc/asnn/"), name
+        assert "${ASNN_CONFIG}" in service["ExecStart"], name
     for command, (name, args, service) in commands.items():
         if command == "router":
             continue
