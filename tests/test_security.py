@@ -477,3 +477,22 @@ def test_a_camera_hears_its_own_robots_refusals_only_and_cannot_send_any(fleet):
     wait_for(lambda: heard_r1, what="the worker's notice at r1's camera")
     time.sleep(QUIET)
     assert len(heard_r1) == 1 and heard_r2 == [] and len(dashboard) == 1
+
+
+def test_every_documented_secured_compose_command_has_the_owner_s_ids():
+    """The overlay's ``user:`` is ``${ASNN_UID:?...}:${ASNN_GID:?...}``, which compose resolves
+    for every command given the file (``up``, ``ps``, ``logs``, ``down``): each place that shows
+    one sets both first (inline, or exported earlier in the same file)."""
+    root, shown = ROOT, 0
+    for name in ("README.md", "docs/operations.md", "deploy/compose.secure.yml"):
+        exported = False
+        for line in (root / name).read_text().splitlines():
+            if "export ASNN_UID=" in line and "ASNN_GID=" in line:
+                exported = True
+            if "docker compose" in line and "compose.secure.yml" in line:
+                shown += 1
+                assert exported or ("ASNN_UID=" in line and "ASNN_GID=" in line), (name, line)
+    assert shown >= 3
+    # and the overlay's own header says the other commands need them too
+    header = (root / "deploy" / "compose.secure.yml").read_text()
+    assert "every command with this file needs them" in header and "ps  # logs, down" in header
