@@ -228,7 +228,8 @@ class _DuplicateKey(ValueError):
 
 
 def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_MAP_LEN,
-               max_items: int = MAX_ITEMS, max_payload: int = MAX_PAYLOAD) -> dict:
+               max_items: int = MAX_ITEMS, max_payload: int = MAX_PAYLOAD,
+               unique_keys: bool = True) -> dict:
     """The msgpack map of a payload, unpacked within this module's bounds (the map's and the
     total's larger for a worker's status: :func:`decode_status`).
 
@@ -236,7 +237,15 @@ def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_
     refuse a container when it reads its header, before building it; the total (MAX_ITEMS) is
     counted as containers complete, so nested containers cannot multiply the per-container
     limits. What is built is therefore at most about 2 x MAX_ITEMS objects plus the bytes of
-    the strings and binaries, which the payload holds anyway.
+    the strings and binaries, which the payload holds anyway, plus what the containers still
+    being read hold (uncounted until they complete): at most msgpack's nesting depth (1024) of
+    them, each within its own limit.
+
+    With ``unique_keys`` a map that gives a key twice is refused (``undecodable``): its pairs
+    are then kept until the map completes, about 64 bytes each beyond a dict's entry, so that
+    the containers still being read may hold 1024 x ``max_map_len`` of them (16 MiB for a
+    message's bounds, under the 32 MiB of 1024 arrays of MAX_ARRAY_LEN read at once; 512 MiB
+    for a status map's, hence :func:`decode_status` reads without the check).
 
     Raises
     ------
@@ -265,8 +274,9 @@ def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_
             raise _DuplicateKey(f"a map gives the key {twice!r:.80} twice")
         return mapping
 
+    hook = {"object_pairs_hook": unique} if unique_keys else {"object_hook": count}
     try:
-        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False, object_pairs_hook=unique,
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False, **hook,
                               list_hook=count, max_str_len=MAX_STR_LEN,
                               max_bin_len=max_payload, max_array_len=MAX_ARRAY_LEN,
                               max_map_len=max_map_len, max_ext_len=MAX_EXT_LEN)
@@ -293,7 +303,10 @@ def encode_status(status: dict) -> bytes:
 
 def decode_status(payload: bytes) -> dict:
     """A worker's status map (built by :meth:`service.core.WorkerCore.status` and the worker),
-    unpacked within the status bounds.
+    unpacked within the status bounds. A key given twice is read as its last value: refusing it
+    (as messages do) would keep every pair of the maps being read, and the status bounds let
+    1024 nested maps of 8,192 pairs hold half a GiB before any completes
+    (:func:`unpack_map`); a status only informs (``asnn status``, the health check).
 
     Raises
     ------
@@ -301,7 +314,8 @@ def decode_status(payload: bytes) -> dict:
         As :func:`unpack_map`, or ``invalid-field`` where it names no ``worker``.
     """
     status = unpack_map(payload, "status", max_map_len=STATUS_MAX_MAP_LEN,
-                        max_items=STATUS_MAX_ITEMS, max_payload=STATUS_MAX_BYTES)
+                        max_items=STATUS_MAX_ITEMS, max_payload=STATUS_MAX_BYTES,
+                        unique_keys=False)
     if not isinstance(status.get("worker"), str):
         raise MessageError("invalid-field", "a status map names its worker")
     return status

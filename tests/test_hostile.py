@@ -269,6 +269,28 @@ def test_a_map_that_gives_a_key_twice_is_refused_not_read_as_its_last_value(nest
     assert err.value.reason == "undecodable" and "twice" in str(err.value)
     assert decode_frame(msgpack.packb(fields)).seq == 0  # the same fields once each decode
 
+def test_a_status_map_of_nested_repeated_pairs_is_read_without_keeping_them():
+    """A status map is read with the status bounds (8,192 pairs a map): the duplicate-key check
+    keeps every pair of the maps still being read, 64 bytes each, so 64 nested maps of 8,192
+    repeated pairs (1 MiB) held 32 MiB, a full 16 MiB status half a GiB. Read as a dict, each
+    such map is one entry; a message's maps (256 pairs) keep the check, and their worst case
+    stays under that of arrays read at once."""
+    from service.messages import MAX_ARRAY_LEN, MAX_MAP_LEN, STATUS_MAX_MAP_LEN, decode_status
+
+    def nested(n: int, depth: int, item: bytes) -> bytes:
+        opened = (b"\xde" if item else b"\xdc") + n.to_bytes(2, "big")
+        return b"\x81\xa1x" + (opened + item * (n - 1)) * depth + b"\x00"
+
+    status = nested(STATUS_MAX_MAP_LEN, 64, b"\x00\x00")  # key 0, value 0, again and again
+    assert len(status) < 1.1e6
+    assert allocated_peak(lambda: pytest.raises(MessageError, decode_status, status)) < 4e6
+    maps = nested(MAX_MAP_LEN, 1000, msgpack.packb("k") + b"\x00")
+    arrays = b"\x81\xa1x" + (b"\xdc" + MAX_ARRAY_LEN.to_bytes(2, "big")
+                            + b"\x00" * (MAX_ARRAY_LEN - 1)) * 1000 + b"\x00"
+    assert rejected(maps) == rejected(arrays) == "undecodable"
+    assert allocated_peak(rejected, maps) < allocated_peak(rejected, arrays)
+
+
 # ---------------------------------------------------------------- 3. robot-slot lockout
 
 def test_ids_sending_only_undecodable_frames_cannot_lock_new_robots_out():
