@@ -229,20 +229,21 @@ def test_systemd_units_pass_systemd_analyze_verify(tmp_path):
 
 
 def test_the_camera_sources_the_docs_give_the_unit_open_as_capture_devices():
-    """``--source`` takes a capture device by its index (``0``), not by its path: a path under
-    /dev is opened as a video file, and a character device is no file (the unit would exit
-    "no such file" and restart every 5 s)."""
+    """``--source`` takes a capture device by its index (``0``) or its node (``/dev/video0``):
+    a character device is opened as a capture device, not as a video file (which it is not:
+    the unit exited "no such file" and restarted every 5 s before sources took nodes)."""
     import re
 
     from asnn.io.sources import SourceError, open_source
 
-    with pytest.raises(SourceError, match="no such file"):
-        open_source("/dev/null")  # a character device, as /dev/video0 is
+    with pytest.raises(SourceError, match="cannot open capture device '/dev/null'"):
+        open_source("/dev/null")  # a character device, as /dev/video0 is, but no camera
     given = re.findall(r"ASNN_SOURCE=(\S+?)'?\s", (ROOT / "docs" / "operations.md").read_text())
     given += [word.split("=", 1)[1] for path in SYSTEMD.glob("*.service")
               for key, value in read_unit(path)["Service"] if key == "Environment"
               for word in value.split() if word.startswith("ASNN_SOURCE=")]
-    assert given and all(value.isdigit() for value in given), given
+    assert given and all(value.isdigit() or value.startswith("/dev/video")
+                         for value in given), given
 
 
 def test_the_worker_check_waits_out_a_cold_kernel_compile():

@@ -284,6 +284,27 @@ def test_camera_sources_open_files_scenes_and_fail_clearly(tmp_path):
             open_source(bad)
 
 
+def test_a_capture_devices_node_opens_the_device_not_a_file(monkeypatch):
+    # /dev/video0 was opened as a video file, and a device is none: "no such file"
+    from asnn.io import sources
+
+    opened = []
+
+    class Capture:
+        def __init__(self, which):
+            opened.append(which)
+
+        def isOpened(self):
+            return False
+
+    monkeypatch.setattr(sources.cv2, "VideoCapture", Capture)
+    monkeypatch.setattr(sources, "_is_device", lambda path: path.startswith("/dev/"))
+    for spec in ("/dev/video7", "/dev/null", "7"):
+        with pytest.raises(SourceError, match="cannot open capture"):
+            open_source(spec)
+    assert opened == [7, "/dev/null", 7]  # a V4L2 node by its index, as every backend takes it
+
+
 def test_demo_prints_warnings_and_exits_0(capsys):
     assert main(["demo", "--fps", "100"]) == 0
     out = capsys.readouterr().out

@@ -9,6 +9,7 @@ Source specifications:
 
 ``FILE``               any video OpenCV reads; time = frame index / the file's frame rate
 ``DEVICE_INDEX``       an integer: a capture device (live), unless a file of that name is here
+``DEVICE``             a capture device's node, e.g. ``/dev/video0`` (any character device)
 ``URL``                ``scheme://...``: a stream OpenCV reads, e.g. rtsp (live)
 ``synthetic:SCENE``    one of ``asnn.stimuli.SCENE_NAMES`` (128x128 at 20 fps), or a case of the
                        labelled suite (``asnn scene --list``)
@@ -20,6 +21,9 @@ Source specifications:
 
 from __future__ import annotations
 
+import os
+import re
+import stat
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -157,7 +161,16 @@ def open_source(spec: str, *, topic: str | None = None,
         return _open_scene(spec)
     if (spec.isdigit() and not Path(spec).exists()) or "://" in spec:  # a file named 0 is one
         return _open_capture(spec)
+    if _is_device(spec):  # /dev/video0: what people type for their camera
+        return _open_capture(spec)
     return _open_file(spec, decoder_threads)
+
+
+def _is_device(path: str) -> bool:
+    try:
+        return stat.S_ISCHR(os.stat(path).st_mode)
+    except (OSError, ValueError):
+        return False
 
 
 def _open_scene(spec: str) -> Source:
@@ -179,9 +192,13 @@ def _open_scene(spec: str) -> Source:
 def _open_capture(spec: str) -> Source:
     from .video import DEFAULT_FPS, read_frames, stated_fps
 
-    cap = cv2.VideoCapture(int(spec) if spec.isdigit() else spec)
+    # a V4L2 node by its index, as OpenCV's backends all take it
+    device = re.fullmatch(r"/dev/video(\d+)", os.path.realpath(spec))
+    cap = cv2.VideoCapture(int(spec) if spec.isdigit() else
+                           int(device.group(1)) if device else spec)
     if not cap.isOpened():
-        raise SourceError(f"cannot open capture source {spec!r}", "missing")
+        what = "capture device" if _is_device(spec) else "capture source"
+        raise SourceError(f"cannot open {what} {spec!r}", "missing")
     fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
     return Source(spec, DEFAULT_FPS if fps is None else fps, True, lambda: read_frames(cap),
                   fps_stated=fps is not None)
