@@ -97,11 +97,9 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
     h, w = current.shape
     if h <= 2 * radius or w <= 2 * radius:
         return 0, 0
-    tile_costs = _search(previous, current, radius)
-    costs = tile_costs.sum(axis=(0, 1))
+    tile_costs, costs = _search(previous, current, radius)
     if wider > radius and h > 2 * wider and w > 2 * wider and _on_edge(costs):
-        wide_tile_costs = _search(previous, current, wider)
-        wide_costs = wide_tile_costs.sum(axis=(0, 1))
+        wide_tile_costs, wide_costs = _search(previous, current, wider)
         inner = wide_costs[wider - radius:wider + radius + 1, wider - radius:wider + radius + 1]
         if wide_costs.min() < _WIDER_GAIN * inner.min():
             tile_costs, costs = wide_tile_costs, wide_costs
@@ -110,37 +108,50 @@ def background_shift(previous: np.ndarray, current: np.ndarray, radius: int,
 
 def _search(previous, current, radius):
     """The per-tile costs of every translation up to ``radius`` (:func:`_translation_costs`),
-    on every ``stride``-th row so that about 4096 pixels are compared."""
+    on every ``stride``-th row so that about 4096 pixels are compared, and the tiles' sums."""
     h, w = current.shape
     stride = max(1, round(h * (w - 2 * radius) / _SAMPLES))
     return _translation_costs(previous, current, radius, stride, _TILES)
 
 
+@kernel(inline="always")
 def _best(costs):
     """Index ``(dy + radius, dx + radius)`` of the smallest cost, the first of equal ones in
     row-major order."""
-    return divmod(int(np.argmin(costs)), costs.shape[1])
+    dy = dx = 0
+    for j in range(costs.shape[0]):
+        for i in range(costs.shape[1]):
+            if costs[j, i] < costs[dy, dx]:
+                dy, dx = j, i
+    return dy, dx
 
 
+@kernel()
 def _on_edge(costs):
     """Whether the best translation of a search (its whole-frame costs) lies on its edge."""
     n = costs.shape[-1]
     dy, dx = _best(costs)
-    return dy in (0, n - 1) or dx in (0, n - 1)
+    return dy == 0 or dy == n - 1 or dx == 0 or dx == n - 1
 
 
+@kernel()
 def _accepted(tile_costs, costs, share, spread):
     """The best translation of a search, ``(dx, dy)``, if it explains ``share`` of the frame's
     change and ``share / 2`` of the change in ``spread`` of its tiles, else ``(0, 0)``
-    (:func:`background_shift`); ``costs`` are the tiles' summed."""
+    (:func:`background_shift`); ``costs`` are the tiles' summed. In numba: on these few
+    integers NumPy's calls cost more than the search's own kernel."""
     radius = costs.shape[-1] // 2
     dy, dx = _best(costs)
     still = costs[radius, radius]
     if still == 0 or costs[dy, dx] > (1.0 - share) * still:  # nothing changed, or too little
         return 0, 0
     if spread > 0.0:
-        before, after = tile_costs[:, :, radius, radius], tile_costs[:, :, dy, dx]
-        explained = np.count_nonzero((before > 0) & (after <= (1.0 - 0.5 * share) * before))
+        explained = 0
+        for row in range(tile_costs.shape[0]):
+            for column in range(tile_costs.shape[1]):
+                before = tile_costs[row, column, radius, radius]
+                if before > 0 and tile_costs[row, column, dy, dx] <= (1.0 - 0.5 * share) * before:
+                    explained += 1
         if explained < spread * _TILES * _TILES:  # seen in too few places: an object's own
             return 0, 0
     return dx - radius, dy - radius
@@ -181,8 +192,9 @@ def search_radius(width: int, radius: int, reach: float | None = None,
 def _translation_costs(previous, current, radius, stride, tiles):
     """Sum of ``|current[y, x] - previous[y - dy, x - dx]|`` over every ``stride``-th row (all
     of its columns away from the borders), per tile and translation, indexed ``[tile row,
-    tile column, dy + radius, dx + radius]``, in units of 1/4096 of the intensity scale. The
-    compared part of the frame is cut into ``tiles`` x ``tiles`` tiles of about equal size.
+    tile column, dy + radius, dx + radius]``, in units of 1/4096 of the intensity scale, and
+    the tiles' sums, indexed ``[dy + radius, dx + radius]``. The compared part of the frame
+    is cut into ``tiles`` x ``tiles`` tiles of about equal size.
 
     The frames are rounded to those units first: integer sums do not depend on the order
     they are added in, so the loop is vectorised and the result is the same on every machine.
@@ -210,7 +222,11 @@ def _translation_costs(previous, current, radius, stride, tiles):
                         d = middle[x] - source[x]
                         total += d if d >= 0 else -d
                     costs[row, column, j, i] += total
-    return costs
+    summed = np.zeros((n, n), np.int64)
+    for row in range(tiles):
+        for column in range(tiles):
+            summed += costs[row, column]
+    return costs, summed
 
 
 @kernel()

@@ -6,7 +6,7 @@ import pytest
 
 from asnn import ASNN, preset
 from asnn.approach.looming import region_expansion
-from asnn.stabilisation import background_shift, search_radius, shift_image
+from asnn.stabilisation import _accepted, _on_edge, background_shift, search_radius, shift_image
 from asnn.stimuli.suite import make_case
 from imageutil import texture, warp
 
@@ -127,6 +127,48 @@ def test_the_share_a_translation_must_explain():
     after[60:] = texture(seed=3)[60:]
     assert background_shift(before, after, 3, 0.1) == (2, 0)
     assert background_shift(before, after, 3, 0.5) == (0, 0)
+
+
+def _accepted_in_numpy(tile_costs, costs, share, spread):
+    """The acceptance test as NumPy computed it before its kernel (asnn.stabilisation)."""
+    radius = costs.shape[-1] // 2
+    dy, dx = divmod(int(np.argmin(costs)), costs.shape[1])
+    still = costs[radius, radius]
+    if still == 0 or costs[dy, dx] > (1.0 - share) * still:
+        return 0, 0
+    if spread > 0.0:
+        before, after = tile_costs[:, :, radius, radius], tile_costs[:, :, dy, dx]
+        explained = np.count_nonzero((before > 0) & (after <= (1.0 - 0.5 * share) * before))
+        if explained < spread * 16:
+            return 0, 0
+    return dx - radius, dy - radius
+
+
+def test_the_acceptance_kernels_decide_as_numpy_did():
+    # few distinct costs, so that the best ties and the thresholds are met exactly
+    rng = np.random.default_rng(0)
+    decided = set()
+    for trial in range(3000):
+        radius = int(rng.integers(1, 6))
+        n = 2 * radius + 1
+        tile_costs = rng.integers(0, 6, (4, 4, n, n)) * int(rng.choice([1, 1000]))
+        share, spread = float(rng.choice([0.1, 0.5, 0.75])), float(rng.choice([0.0, 0.5, 1.0]))
+        if trial % 2:
+            # a translation that explains all of some tiles' change and, at share 0.5, just
+            # the tile test's half of the others' (or one unit less)
+            share, spread = 0.5, float(rng.choice([0.25, 0.5, 0.75]))
+            tile_costs += 40
+            still = rng.choice([0, 4, 8], (4, 4))
+            tile_costs[:, :, radius, radius] = still
+            tile_costs[:, :, rng.integers(n), rng.integers(n)] = np.where(
+                rng.random((4, 4)) < 0.5, 0, still * 3 // 4 + rng.integers(0, 2, (4, 4)))
+        costs = tile_costs.sum(axis=(0, 1))
+        expected = _accepted_in_numpy(tile_costs, costs, share, spread)
+        assert _accepted(tile_costs, costs, share, spread) == expected, trial
+        dy, dx = divmod(int(np.argmin(costs)), n)
+        assert _on_edge(costs) == (dy in (0, n - 1) or dx in (0, n - 1)), trial
+        decided.add(expected != (0, 0))
+    assert decided == {True, False}
 
 
 def test_shift_image_moves_the_last_two_axes_and_fills_what_nothing_moved_into():
