@@ -217,10 +217,11 @@ def _translation_costs(previous, current, radius, stride, tiles):
                 for i in range(n):
                     # sliced so that the loop's indices start at zero: it is then vectorised
                     source = around[j, n - 1 - i + start:n - 1 - i + stop]
-                    total = 0
+                    # in int32 (twice the lanes of int64): levels of frames on [0, 1] differ by
+                    # at most 4096, so a row's sum fits by far
+                    total = np.int32(0)
                     for x in range(stop - start):
-                        d = middle[x] - source[x]
-                        total += d if d >= 0 else -d
+                        total = np.int32(total + abs(np.int32(middle[x] - source[x])))
                     costs[row, column, j, i] += total
     summed = np.zeros((n, n), np.int64)
     for row in range(tiles):
