@@ -251,13 +251,16 @@ class ApproachStage:
         regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
                                   points=points)
         h, w = attended.shape
+        # the regions' numbers as Python's: a frame's few objects are read one number at a time
+        object_boxes, xs, ys, shares = (regions.boxes.tolist(), regions.x.tolist(),
+                                        regions.y.tolist(), regions.share.tolist())
         observations = []
-        for k in range(len(regions)):
-            x0, y0, x1, y1 = (int(c) for c in regions.boxes[k])
+        for (x0, y0, x1, y1), x, y, size, mass in zip(object_boxes, xs, ys,
+                                                      regions.size.tolist(),
+                                                      regions.mass.tolist()):
             pad = p.looming_margin * max(x1 - x0, y1 - y0) + 4
-            observations.append(Observation(
-                float(regions.x[k]), float(regions.y[k]), float(regions.size[k]),
-                float(regions.mass[k]), (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
+            observations.append(Observation(x, y, size, mass,
+                                            (x0 - pad, y0 - pad, x1 + pad, y1 + pad)))
         tracks = self.tracker.update(observations, elapsed)
         # where the background slides, each box is fitted over its object's rim too
         rim = attended if p.rim_expansion and frames.background is not None else None
@@ -270,7 +273,7 @@ class ApproachStage:
             if est is not None:
                 # an object the frame's edge cuts is measured on its visible part: its drift
                 # and size, so its offset, are not the object's, whatever the fit
-                ox0, oy0, ox1, oy1 = regions.boxes[k]
+                ox0, oy0, ox1, oy1 = object_boxes[k]
                 whole = ox0 > 0 and oy0 > 0 and ox1 < w and oy1 < h
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed,
                            est.fit if whole else 0.0)
@@ -281,20 +284,20 @@ class ApproachStage:
         persistence = persistence_frames(p.approach_frames, p.approach_seconds, period)
         coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, persistence,
                                     self._overlap, p.scene_tolerance)
-        self.objects = [(tr, float(regions.share[k])) for k, tr in enumerate(tracks)]
-        if p.approach_gate:
-            total = float(regions.share[np.asarray(coming, bool)].sum()) if tracks else 0.0
+        self.objects = list(zip(tracks, shares))
+        if p.approach_gate:  # NumPy's sum, in its order (none coming: 0)
+            total = float(regions.share[np.asarray(coming, bool)].sum()) if any(coming) else 0.0
         sx, sy = scale
-        reports = ([self._report(tr, coming[k], float(regions.share[k]), sx, sy)
+        reports = ([self._report(tr, coming[k], shares[k], sx, sy)
                     for k, tr in enumerate(tracks)] if record else None)
         targets: dict[int, Target] = {}  # by object id
         for k, tr in enumerate(tracks):
             if p.approach_gate and not coming[k]:
                 continue
-            target = Target(x=frame_pixel(regions.x[k], sx), y=frame_pixel(regions.y[k], sy),
+            target = Target(x=frame_pixel(xs[k], sx), y=frame_pixel(ys[k], sy),
                             direction=float(regions.direction[k]),
                             energy=float(regions.energy[k]),
-                            pixels=int(round(regions.pixels[k] * sx * sy)),
+                            pixels=round(int(regions.pixels[k]) * sx * sy),
                             id=self.tracker.object_id(tr), expansion=tr.expansion, ttc=tr.ttc,
                             offset=tr.offset, approaching=coming[k])
             # an object seen as several fragments is one target: its largest
