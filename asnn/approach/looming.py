@@ -183,16 +183,17 @@ def region_and_rim_expansion(previous: np.ndarray, current: np.ndarray,
                               interpolation=cv2.INTER_AREA) > 0.25
         keep = _NO_SKIP if rim is None else _rim_sampled(rim[y0:y1, x0:x1], size)
         if _area_fast((x1 - x0, y1 - y0), size):
+            # OpenCV reads the box's rows where they are: no copy of the box
             before, after, reference = (
-                cv2.resize(np.ascontiguousarray(image[y0:y1, x0:x1]), size,
-                           interpolation=cv2.INTER_AREA)
+                cv2.resize(image[y0:y1, x0:x1], size, interpolation=cv2.INTER_AREA)
                 for image in (previous, current, reference))
             fits = _solve_expansion(before, after, reference, skip, keep, _RIDGE)
         else:
             fits = _solve_area_averaged(previous, current, reference, x0, y0, x1, y1, *size,
                                         skip, keep, _RIDGE)
-    return tuple(Expansion(a * step, b * step, c, d, fit) if solved else None
-                 for solved, a, b, c, d, fit in (fits[:6], fits[6:]))
+    solved, a, b, c, d, fit, rim_solved, ra, rb, rc, rd, rim_fit = fits
+    return (Expansion(a * step, b * step, c, d, fit) if solved else None,
+            Expansion(ra * step, rb * step, rc, rd, rim_fit) if rim_solved else None)
 
 
 def rim_scaled(box: Expansion | None, rim: Expansion | None, side: int = 0,
@@ -248,7 +249,7 @@ def rim_scaled(box: Expansion | None, rim: Expansion | None, side: int = 0,
     if motion_max is not None and rim.rate * min(side, _MAX_SIDE) / 2 > motion_max:
         return box
     k = rim.rate / box.rate
-    return box._replace(drift_x=box.drift_x * k, drift_y=box.drift_y * k, rate=rim.rate)
+    return Expansion(box.drift_x * k, box.drift_y * k, rim.rate, box.brightness, box.fit)
 
 
 # the camera's rig: running means of each frame and of each pixel's frame-to-frame change with
