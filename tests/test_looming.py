@@ -86,6 +86,21 @@ def test_the_scene_is_fitted_without_the_objects_boxes():
     assert moved_by_expansion(tex, scene, box).shape == (y1 - y0, x1 - x0)
 
 
+def test_the_scene_fit_takes_its_last_frame_s_average_from_its_memo():
+    # three frames of a scene expanding about the centre, shrunk by whole factors (320 x 240 to
+    # 64 x 48): the second fit reads the first one's average of the frame they share
+    tex = texture((240, 320), blur=4.0)
+    frames = [tex, warp(tex, 1.02), warp(tex, 1.04)]
+    box = [(140, 100, 180, 140)]
+    kept = [None, None]
+    for before, after in zip(frames, frames[1:]):
+        assert scene_expansion(before, after, box, kept=kept) == scene_expansion(before, after, box)
+        assert kept[0] is after and kept[1].shape == (48, 64)
+    # a memo of another frame is not read
+    kept[1] = kept[1] + 1.0
+    assert scene_expansion(frames[0], frames[1], box, kept=kept) == scene_expansion(
+        frames[0], frames[1], box)
+
 
 def test_an_empty_box_moved_by_the_scene_is_empty():
     # a track's box clipped to the frame is empty once the track has moved out of it (seen on a

@@ -161,6 +161,12 @@ def region_and_rim_expansion(previous: np.ndarray, current: np.ndarray,
         The box's fit and the rim's; each None as :func:`region_expansion` gives None (the
         rim's also without ``rim``).
     """
+    return _fits(previous, current, box, rim, background, exclude)
+
+
+def _fits(previous, current, box, rim, background, exclude, kept=None):
+    """:func:`region_and_rim_expansion`; with ``kept``, a one-slot memo ``[frame, average]``
+    of :func:`scene_expansion` (where the box is shrunk by whole factors: OpenCV's averages)."""
     x0, y0, x1, y1 = box
     if x1 - x0 < _MIN_SIDE or y1 - y0 < _MIN_SIDE:
         return None, None
@@ -185,8 +191,11 @@ def region_and_rim_expansion(previous: np.ndarray, current: np.ndarray,
         if _area_fast((x1 - x0, y1 - y0), size):
             # OpenCV reads the box's rows where they are: no copy of the box
             before, after, reference = (
-                cv2.resize(image[y0:y1, x0:x1], size, interpolation=cv2.INTER_AREA)
+                kept[1] if image is previous and kept is not None and kept[0] is previous
+                else cv2.resize(image[y0:y1, x0:x1], size, interpolation=cv2.INTER_AREA)
                 for image in (previous, current, reference))
+            if kept is not None:
+                kept[:] = current, after
             fits = _solve_expansion(before, after, reference, skip, keep, _RIDGE)
         else:
             fits = _solve_area_averaged(previous, current, reference, x0, y0, x1, y1, *size,
@@ -354,7 +363,8 @@ def _still_edge(up, here, down, still, rig, left, x, right):
 def scene_expansion(previous: np.ndarray, current: np.ndarray,
                     boxes: list[tuple[int, int, int, int]],
                     background: np.ndarray | None = None,
-                    exclude: np.ndarray | None = None) -> Expansion | None:
+                    exclude: np.ndarray | None = None, kept: list | None = None
+                    ) -> Expansion | None:
     """Expansion and drift of the scene around the objects: the fit of :func:`region_expansion`
     over the whole frame, leaving out ``boxes``.
 
@@ -375,6 +385,11 @@ def scene_expansion(previous: np.ndarray, current: np.ndarray,
         ``previous`` moved by the background's translation.
     exclude : ndarray (H, W) of bool, optional
         Pixels to leave out as well (:func:`region_expansion`).
+    kept : list, optional
+        A stream's memo of its last scene fit, ``[current, its area average]`` (start with
+        ``[None, None]``), where the frame is shrunk by whole factors: the next frame's fit
+        takes that average as its previous frame's instead of averaging the frame again (the
+        frames must not change in between).
 
     Returns
     -------
@@ -392,7 +407,7 @@ def scene_expansion(previous: np.ndarray, current: np.ndarray,
     reference = (previous if background is None else background).copy()
     for x0, y0, x1, y1 in boxes:
         reference[y0:y1, x0:x1] = current[y0:y1, x0:x1]
-    return region_expansion(previous, current, (0, 0, w, h), reference, exclude)
+    return _fits(previous, current, (0, 0, w, h), None, reference, exclude, kept)[0]
 
 
 def moved_by_expansion(previous: np.ndarray, scene: Expansion,

@@ -196,6 +196,7 @@ class ApproachStage:
         self.measure_all_against_scene = False
         self._overlap = p.overlap  # the approach test's partial-overlap regime, or None
         self._scene_reference: np.ndarray | None = None
+        self._scene_average: list = [None, None]  # scene_expansion's memo of the last frame
 
     def step(self, attended: np.ndarray | None, g: np.ndarray,
              vectors: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
@@ -362,7 +363,7 @@ class ApproachStage:
                      and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max, 1.0, overlap)}
         growing = ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
                    if self.measure_all_against_scene else set())
-        scene = (scene_expansion(previous, current, boxes, background, rig)
+        scene = (scene_expansion(previous, current, boxes, background, rig, self._scene_average)
                  if chosen or unfit or growing else None)
         contracts = p.receding_scene and scene is not None and scene.rate < 0
         if contracts:
