@@ -963,28 +963,28 @@ def _motion_vectors(r, v, rows, cols, dx, dy):
 
 
 @kernel(**_jit)
-def _box(blur, gamma):
-    """Bounding box (y0, y1, x0, x1), exclusive ends, of ``blur > gamma``; y0 = h if empty."""
-    h, w = blur.shape
-    y0, y1, x0, x1 = h, 0, w, 0
-    for y in range(h):
-        row = blur[y]
+def _box(blur, gamma, r0, r1, c0, c1):
+    """Bounding box (y0, y1, x0, x1), exclusive ends, of ``blur > gamma`` in the rows
+    ``[r0, r1)`` and columns ``[c0, c1)`` of ``blur``, in its indices; y0 = r1 if empty."""
+    y0, y1, x0, x1 = r1, r0, c1, c0
+    for y in range(r0, r1):
+        row = blur[y, c0:c1]
         n = 0
-        for x in range(w):  # a count vectorises; the ends are then searched in the few rows set
-            n += row[x] > gamma
+        for x in range(c1 - c0):  # a count vectorises; the ends are then searched in the few
+            n += row[x] > gamma  # rows set
         if n == 0:
             continue
         first = 0
         while not row[first] > gamma:
             first += 1
-        last = w - 1
+        last = c1 - c0 - 1
         while not row[last] > gamma:
             last -= 1
-        if y0 == h:
+        if y0 == r1:
             y0 = y
         y1 = y + 1
-        x0 = min(x0, first)
-        x1 = max(x1, last + 1)
+        x0 = min(x0, c0 + first)
+        x1 = max(x1, c0 + last + 1)
     return y0, y1, x0, x1
 
 
@@ -1079,23 +1079,27 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
         # interpolation is a convex combination of the four nearest cells: a pixel is above
         # gamma_a only next to a cell that is
         coarse_g = blur.coarse(retina.coarse_grid(g, 2))
-        y0, y1, x0, x1 = _box(coarse_g, float(gamma_a))
+        y0, y1, x0, x1 = _box(coarse_g, float(gamma_a), 0, coarse_g.shape[0], 0,
+                              coarse_g.shape[1])
         if y0 >= y1:
             return 0.0, 0, None, None, (0, 0, 0, 0)
         wy0, wy1, wx0, wx1 = max(2 * y0 - 1, 0), min(2 * y1 + 2, h), max(2 * x0 - 1, 0), \
             min(2 * x1 + 2, w)
-        blur_g = blur.window(coarse_g, wy0, wy1, wx0, wx1)
-        y0, y1, x0, x1 = _box(blur_g, float(gamma_a))
+        # the kernels read the interpolation in the window where it lies (no copy of it)
+        around_g, gy, gx = blur.around(coarse_g, wy0, wy1, wx0, wx1)
+        blur_g = around_g[wy0 - gy:wy1 - gy, wx0 - gx:wx1 - gx]
+        y0, y1, x0, x1 = _box(around_g, float(gamma_a), wy0 - gy, wy1 - gy, wx0 - gx,
+                              wx1 - gx)
         if y0 >= y1:
             return 0.0, 0, blur_g, None, (wy0, wy1, wx0, wx1)
-        y0, y1, x0, x1 = y0 + wy0, y1 + wy0, x0 + wx0, x1 + wx0
-        g_origin = (wy0, wx0)
+        y0, y1, x0, x1 = y0 + gy, y1 + gy, x0 + gx, x1 + gx
+        g_origin = (gy, gx)
     else:
-        blur_g = blur(g)
+        blur_g = around_g = blur(g)
         if full:
             y0, y1, x0, x1 = 0, h, 0, w
         else:
-            y0, y1, x0, x1 = _box(blur_g, float(gamma_a))
+            y0, y1, x0, x1 = _box(blur_g, float(gamma_a), 0, h, 0, w)
             if y0 >= y1:
                 return 0.0, 0, blur_g, None, (0, 0, 0, 0)
         g_origin = (0, 0)
@@ -1109,7 +1113,8 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
         # V' straight onto the coarse grid, blurred there, interpolated back in the window
         coarse = np.empty((h // 2, w // 2), g.dtype)
         _v_prime_halved(v, r, ks[0], signs[0], coarse)
-        blur_v = blur.window(blur.coarse(coarse), y0, y1, x0, x1)
+        around_v, vy, vx = blur.around(blur.coarse(coarse), y0, y1, x0, x1)
+        blur_v = around_v[y0 - vy:y1 - vy, x0 - vx:x1 - vx]
         window = (y0, y1, x0, x1)
     else:
         # the blur of V' is exact inside the window when the window extends by its radius
@@ -1124,9 +1129,10 @@ def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=F
             source = ws.v_prime[wy0:wy1, wx0:wx1]
         else:
             source = v[wy0:wy1, wx0:wx1]
-        blur_v = blur(np.ascontiguousarray(source))
+        blur_v = around_v = blur(np.ascontiguousarray(source))
         window = (wy0, wy1, wx0, wx1)
-    total, count = _attend(blur_g, *g_origin, float(gamma_a), blur_v, window[0], window[2],
+        vy, vx = wy0, wx0
+    total, count = _attend(around_g, *g_origin, float(gamma_a), around_v, vy, vx,
                            float(gamma_d), g, bool(absolute), y0, y1, x0, x1, ws.mask,
                            ws.attended_sums, ws.rows, ws.cols)
     return total, count, blur_g, blur_v, window
@@ -1152,13 +1158,21 @@ class AttentionBlur:
     def window(self, blurred: np.ndarray, y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
         """Rows ``y0:y1``, columns ``x0:x1`` of the bilinear interpolation back of a blur on
         the grid twice coarser (``step`` = 2, an image of even size), bit for bit those of
-        :func:`~asnn.retina.coarse_attention_blur`: the cells around the window are
-        interpolated, with a margin of cells that keeps the border rule of their own edges
-        out of it (each pixel reads the two nearest cells in each direction)."""
+        :func:`~asnn.retina.coarse_attention_blur` (:meth:`around`, cut to the window)."""
+        up, oy, ox = self.around(blurred, y0, y1, x0, x1)
+        return up[y0 - oy:y1 - oy, x0 - ox:x1 - ox]
+
+    def around(self, blurred: np.ndarray, y0: int, y1: int, x0: int, x1: int
+               ) -> tuple[np.ndarray, int, int]:
+        """The bilinear interpolation back (:meth:`window`) over the cells around the window
+        rows ``y0:y1``, columns ``x0:x1``, and the frame's row and column of its first pixel:
+        the cells around the window are interpolated, with a margin of cells that keeps the
+        border rule of their own edges out of the window (each pixel reads the two nearest
+        cells in each direction), so only the window is exact. Contiguous, whatever the
+        window: the kernels it goes to keep one compiled form."""
         h, w = blurred.shape
         a, b = max((y0 - 1) // 2 - 1, 0), min((y1 - 1) // 2 + 3, h)
         c, d = max((x0 - 1) // 2 - 1, 0), min((x1 - 1) // 2 + 3, w)
         up = cv2.resize(blurred[a:b, c:d], (2 * (d - c), 2 * (b - a)),
                         interpolation=cv2.INTER_LINEAR)
-        # contiguous, whatever the window: the kernels it goes to keep one compiled form
-        return np.ascontiguousarray(up[y0 - 2 * a:y1 - 2 * a, x0 - 2 * c:x1 - 2 * c])
+        return up, 2 * a, 2 * c
