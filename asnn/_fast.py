@@ -736,7 +736,6 @@ def to_differences(stages: np.ndarray, leaky: bool) -> np.ndarray:
 # --------------------------------------------------------------------------- luminance
 
 
-@functools.lru_cache(maxsize=1024)  # asked for every looming fit, of a few sizes a stream
 def _area_fast(size: tuple[int, int], shrunk: tuple[int, int]) -> bool:
     """Whether ``cv2.resize`` with INTER_AREA shrinks an image of ``size`` to ``shrunk`` by
     whole factors (its blockwise averages, whose order of additions depends on OpenCV's

@@ -138,8 +138,8 @@ def _on_edge(costs):
 def _accepted(tile_costs, costs, share, spread):
     """The best translation of a search, ``(dx, dy)``, if it explains ``share`` of the frame's
     change and ``share / 2`` of the change in ``spread`` of its tiles, else ``(0, 0)``
-    (:func:`background_shift`); ``costs`` are the tiles' summed. In numba: on these few
-    integers NumPy's calls cost more than the search's own kernel."""
+    (:func:`background_shift`); ``costs`` are the tiles' summed. In numba: NumPy's calls on
+    these few integers took half as long as the search itself."""
     radius = costs.shape[-1] // 2
     dy, dx = _best(costs)
     still = costs[radius, radius]
