@@ -18,7 +18,7 @@ from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import parse_detector
 from asnn.io.pipeline import WriteBehind, read_ahead
-from asnn.io.sources import SourceError, open_source, split_topic
+from asnn.io.sources import BackwardStamps, SourceError, open_source, split_topic
 from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_short,
                            quiet_writer)
 from asnn.io.visualize import annotate_frame, plot_responses
@@ -169,30 +169,24 @@ def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
     return None
 
 
-class _BackwardStamps:
-    """The frames of a bag whose header stamp goes back from an earlier frame's
-    (:meth:`asnn.io.rosbag.BagClip.frames` reports them as ``stamp-backwards``).
-
-    Pass :meth:`on_error` to :func:`~asnn.io.sources.open_source` with ``hold_backwards``, and
-    wrap the source's ``timed_frames()`` in :meth:`frames`, which counts the frames read. Such
-    a frame is taken at the latest frame's time (the model then steps it by the nominal
-    period), so every message still gets its result (CONTRACT.md: one per input frame). Every
-    other error the bag reports is raised, as without ``on_error``; so is the one that makes
-    :data:`STAMP_LIMIT` within :data:`STAMP_WINDOW` frames read.
+class _BackwardStamps(BackwardStamps):
+    """A bag's frames whose header stamp goes back, each taken at the latest frame's time (the
+    model then steps it by the nominal period), so that every message still gets its result
+    (CONTRACT.md: one per input frame): the first :data:`STAMP_LINES` named on stderr, and the
+    one that makes :data:`STAMP_LIMIT` within :data:`STAMP_WINDOW` frames read raised: a clock
+    that went back. Wrap the source's ``timed_frames()`` in :meth:`frames`, which counts the
+    frames read.
     """
 
     def __init__(self, window: int = STAMP_WINDOW, limit: int = STAMP_LIMIT,
                  lines: int = STAMP_LINES):
+        super().__init__()
         self.window, self.limit, self.lines = window, limit, lines
         self.read = 0  # frames read so far
-        self.count = 0  # frames whose stamp went back
-        self._recent: deque[int] = deque()  # their numbers within the window
+        self._recent: deque[int] = deque()  # the numbers of such frames within the window
 
-    def on_error(self, reason: str, message: str) -> None:
-        if reason != "stamp-backwards":
-            raise SourceError(message, reason)
+    def held(self, message: str) -> None:
         number = self.read  # the frame the reader yields next
-        self.count += 1
         self._recent.append(number)
         while self._recent[0] <= number - self.window:
             self._recent.popleft()
@@ -272,7 +266,7 @@ def run(args: argparse.Namespace) -> int:
     busy = model_threads >= available_cores() > 1
     backwards = _BackwardStamps()  # a bag's frames whose header stamp goes back
     try:
-        source = open_source(args.video, topic=args.topic, on_error=backwards.on_error,
+        source = open_source(args.video, topic=args.topic, on_error=backwards,
                              hold_backwards=True, decoder_threads=1 if busy else None)
     except SourceError as exc:
         return _fail(str(exc))

@@ -173,8 +173,8 @@ def test_eval_reports_clips_that_disagree_with_their_labels(tmp_path):
         f"loom.mp4: the clip runs at {scene.fps:g} fps where its label says {2 * scene.fps:g}: "
         "the model's timing and the scoring's disagree"]
     report = (out / "report.md").read_text()
-    assert ("Warnings (clips that disagree with their labels, or run slower than ASNN was "
-            "made for):\n\n- loom.mp4: 24 frames") in report
+    assert ("Warnings (clips that disagree with their labels, run slower than ASNN was made "
+            "for, or are bags with frames stamped out of order):\n\n- loom.mp4: 24 frames") in report
 
 
 def test_label_starts_the_labels_of_a_folder_and_lists_what_is_left(tmp_path, capsys):

@@ -565,6 +565,28 @@ def test_eval_reads_bags_in_a_labelled_folder_and_a_label_names_the_topic(tmp_pa
     assert not (tmp_path / "out2").exists()  # refused before anything ran
 
 
+def test_eval_scores_a_bag_whose_stamps_go_back_with_each_frame_in_its_place(tmp_path, looming):
+    """A label counts a bag's frames in the topic: a frame whose stamp goes back keeps its place
+    (taken at the latest frame's time), and the clip is scored with a warning, not refused."""
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    seconds = [0.05 * i for i in range(len(looming.frames))]
+    seconds[5] = seconds[8] = 0.01  # two frames stamped out of order, well before the onset
+    stamped_bag(clips / "back.mcap", looming.frames, seconds)
+    (clips / "labels.json").write_text(json.dumps([looming.label("back.mcap")]))
+    out = tmp_path / "out"
+    assert main(["eval", str(clips), "--models", "asnn", "--out", str(out), "--no-plots",
+                 "--early-tolerance", "0"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert not results["errors"]
+    assert results["warnings"] == ["back.mcap: 2 frames whose header stamp goes back, taken at "
+                                   "the latest frame's time"]
+    assert results["detectors"]["asnn"]["clips"][0]["outcome"] == "hit"
+    records = (out / "results" / "asnn" / "back.jsonl").read_text().splitlines()
+    assert len(records) == len(looming.frames)
+    assert "stamped out of order" in (out / "report.md").read_text()
+
+
 def test_camera_skips_and_counts_bad_messages_and_a_cut_without_stopping(tmp_path, looming):
     from service.camera import SourceRejections
 

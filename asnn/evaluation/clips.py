@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-from ..io.sources import SourceError, open_source
+from ..io.sources import BackwardStamps, SourceError, open_source
 from ..params import SLOW_FPS
 from . import figures, scoring
 from .labels import (center_outside, clip_hint, load_labels, mismatches, result_name,
@@ -78,9 +78,11 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
               ) -> tuple[int, str | None, tuple[int, float, tuple[int, int] | None] | None]:
     """Worker: one detector on one clip (a bag's ``topic``), its frames perturbed where
     ``perturbation`` names one, results to ``out_path``. Returns the frames run, the error
-    (or None) and the clip as decoded, before any perturbation: its frames, frame rate and
-    frame size (width, height)."""
+    (or None) and the clip as decoded, before any perturbation: its frames, frame rate, frame
+    size (width, height) and the frames of a bag whose header stamp goes back (taken at the
+    latest frame's time, so that each frame keeps its place for the labels)."""
     decoded, size = 0, None
+    backwards = BackwardStamps()
 
     def counted(frames):
         nonlocal decoded, size
@@ -91,12 +93,12 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
             yield item
 
     try:
-        clip = open_source(video, topic=topic)
+        clip = open_source(video, topic=topic, on_error=backwards, hold_backwards=True)
         records = run_detector(perturbed(counted(clip.timed_frames()), perturbation), detector)
     except (SourceError, ValueError) as exc:
         return 0, str(exc), None
     write_jsonl(Path(out_path), records)
-    return len(records), None, (decoded, clip.fps, size)
+    return len(records), None, (decoded, clip.fps, size, backwards.count)
 
 
 def _clips_report(results: Mapping) -> str:
@@ -169,9 +171,10 @@ def _clips_report(results: Mapping) -> str:
         lines += ["", "Videos in the folder without a label (not scored): "
                   + ", ".join(results["unlabelled"])]
     if results.get("warnings"):
-        # mismatches with the labels, and clips slower than ASNN was made for (not a mismatch)
-        lines += ["", "Warnings (clips that disagree with their labels, or run slower than "
-                  "ASNN was made for):", ""] + [
+        # mismatches with the labels, clips slower than ASNN was made for (not a mismatch),
+        # bags whose stamps go back
+        lines += ["", "Warnings (clips that disagree with their labels, run slower than ASNN "
+                  "was made for, or are bags with frames stamped out of order):", ""] + [
             f"- {w}" for w in results["warnings"]]
     return "\n".join(lines) + "\n"
 
@@ -215,7 +218,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         ``summary`` and per-clip ``clips`` scores), ``errors``, ``warnings`` (clips whose
         decoded frames, frame rate or size disagree with their labels:
         :func:`~asnn.evaluation.labels.mismatches`; and, where ASNN is scored unperturbed,
-        clips slower than :data:`~asnn.params.SLOW_FPS`) and ``unlabelled`` (the videos in
+        clips slower than :data:`~asnn.params.SLOW_FPS`; bags with frames whose header stamp
+        goes back, taken at the latest frame's time) and ``unlabelled`` (the videos in
         ``clips_dir`` no label names, not scored:
         :func:`~asnn.evaluation.labels.unlabelled_videos`).
 
@@ -255,7 +259,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
                  else None)
 
     def finished(index: int, frames: int, error: str | None,
-                 decoded: tuple[int, float, tuple[int, int] | None] | None) -> None:
+                 decoded: tuple[int, float, tuple[int, int] | None, int] | None) -> None:
         spec, clip = tasks[index][1], clip_of[index]
         name = f"{spec.name} {labels[clip]['file']}"  # as labelled: sub/clip.mp4, not clip.mp4
         progress.advance(expected[index], name)
@@ -265,8 +269,12 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
             errors.append(f"{name}: {error}")
         if decoded is not None and clip not in checked:  # once a clip, by its first run
             checked.add(clip)
-            frames, fps, size = decoded
+            frames, fps, size, backwards = decoded
             warnings.extend(mismatches(given[clip], frames, fps, size=size))
+            if backwards:
+                warnings.append(f"{labels[clip]['file']}: {backwards} frame"
+                                f"{'' if backwards == 1 else 's'} whose header stamp goes back, "
+                                "taken at the latest frame's time")
             if slow_note and fps and fps < SLOW_FPS:
                 warnings.append(f"{labels[clip]['file']}: {fps:g} frames a second; {slow_note}")
 

@@ -577,9 +577,11 @@ def _trace_item(kind: str, name: str, topic: str | None, params: ASNNParams) -> 
 
 
 def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace:
-    from ..io.sources import open_source
+    from ..io.sources import BackwardStamps, open_source
 
-    return trace_clip(open_source(spec, topic=topic).timed_frames(), params, Path(spec).name)
+    # as asnn eval reads it (asnn.evaluation.clips): each frame in its place
+    source = open_source(spec, topic=topic, on_error=BackwardStamps(), hold_backwards=True)
+    return trace_clip(source.timed_frames(), params, Path(spec).name)
 
 
 def _trace_case(name: str, params: ASNNParams) -> ClipTrace:

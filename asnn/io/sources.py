@@ -31,7 +31,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["SYNTHETIC", "Source", "SourceError", "is_bag", "open_source", "split_topic"]
+__all__ = ["SYNTHETIC", "BackwardStamps", "Source", "SourceError", "is_bag", "open_source",
+           "split_topic"]
 
 SYNTHETIC = "synthetic:"
 BAG_SUFFIX = ".mcap"
@@ -45,6 +46,25 @@ class SourceError(OSError):
     def __init__(self, message: str, reason: str = "unreadable"):
         super().__init__(message)
         self.reason = reason
+
+
+class BackwardStamps:
+    """``on_error`` for a bag opened with ``hold_backwards``: counts its frames whose header
+    stamp goes back (``count``; the reader yields each at the latest frame's time, so every
+    message keeps its frame and its place) and raises every other error, as without a handler.
+    :meth:`held` is called for each such frame: a subclass may report it, or raise to stop."""
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def __call__(self, reason: str, message: str) -> None:
+        if reason != "stamp-backwards":
+            raise SourceError(message, reason)
+        self.count += 1
+        self.held(message)
+
+    def held(self, message: str) -> None:
+        """A frame whose header stamp goes back (``message`` names it), the ``count``-th."""
 
 
 @dataclass
