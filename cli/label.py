@@ -56,6 +56,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"asnn label: {exc}", file=sys.stderr)
         return 2
     todo = []
+    # the videos no entry names (as ./clip.mp4 or sub/../clip.mp4 too): the ones to add, and
+    # the names a missing clip's file may be a typo of
+    new_names = unlabelled_videos(folder, entries)
     for index, entry in enumerate(entries):  # the entries there are, each on its own
         problem = label_problem(entry)
         if problem is not None:
@@ -65,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         clip = folder / entry["file"]
         if not clip.is_file():
             todo.append(f"{entry['file']}: no such clip in {folder}"
-                        + clip_hint(entry["file"], unlabelled_videos(folder, entries)))
+                        + clip_hint(entry["file"], new_names))
         elif clip.suffix.lower() in VIDEO_SUFFIXES:
             try:
                 frames, fps, (height, width) = _decode(clip, todo)
@@ -81,8 +84,7 @@ def run(args: argparse.Namespace) -> int:
             check_labels(entries, str(path))
         except ValueError as exc:
             todo.append(str(exc))
-    # an entry names its clip relative to the folder, perhaps as ./clip.mp4 or sub/../clip.mp4
-    new_videos = [folder / name for name in unlabelled_videos(folder, entries)]
+    new_videos = [folder / name for name in new_names]
     if not entries and not new_videos:
         print(f"asnn label: {folder} holds no video ({', '.join(VIDEO_SUFFIXES)}; subfolders "
               "are not searched: enter their clips by hand, as sub/clip.mp4, and bags with "

@@ -36,6 +36,7 @@ def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
     Checked before anything runs, so that a clip that cannot be scored stops the
     evaluation instead of leaving the rates without it."""
     counts, problems, sizes = [], [], []
+    candidates = None  # the folder's videos no label names, listed once if a clip is missing
     for lab in labels:
         try:
             source = open_source(str(Path(clips_dir) / lab["file"]), topic=lab.get("topic"))
@@ -44,7 +45,9 @@ def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
             hint = "; in labels.json, the entry's topic names it" if (
                 exc.reason == "several-topics") else ""
             if exc.reason == "missing" and not (Path(clips_dir) / lab["file"]).exists():
-                hint = clip_hint(lab["file"], unlabelled_videos(clips_dir, labels))
+                if candidates is None:
+                    candidates = unlabelled_videos(clips_dir, labels)
+                hint = clip_hint(lab["file"], candidates)
             problems.append(str(exc) + hint)
             counts.append(0)
             sizes.append(None)
