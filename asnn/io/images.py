@@ -168,6 +168,12 @@ def check_encoded(data: bytes, format: str, size: tuple[int, int] | None = None,
         a whole image of its size (a truncated file would be padded by the decoder);
         ``bad-size`` for sides outside 1..``max_side`` or other than ``size``.
     """
+    header = _checked_header(data, format, size, max_side, max_depth)
+    return header.width, header.height
+
+
+def _checked_header(data, format, size, max_side, max_depth):
+    """The header :func:`check_encoded` checks, once checked."""
     if format not in ENCODED_FORMATS:
         raise ImageError("bad-format", f"{format!r} is not one of {', '.join(ENCODED_FORMATS)}")
     header = _read_header(data, format)
@@ -200,7 +206,7 @@ def check_encoded(data: bytes, format: str, size: tuple[int, int] | None = None,
         raise ImageError("bad-image", f"{format} of {len(data)} bytes cannot hold a whole "
                          f"{w}x{h} image (at least {need} bytes of compressed pixels): "
                          "truncated")
-    return w, h
+    return header
 
 
 def _png_inflates_within(data: bytes, limit: int) -> bool:
@@ -251,9 +257,9 @@ def decode_encoded(data: bytes, format: str, size: tuple[int, int] | None = None
         As :func:`check_encoded`; ``bad-image`` also for data that does not decode, and
         ``bad-size`` for a picture of another size than its header says.
     """
-    w, h = check_encoded(data, format, size, max_side=max_side, max_depth=max_depth)
+    header = _checked_header(data, format, size, max_side, max_depth)
+    w, h = header.width, header.height
     if format == "png":
-        header = _read_header(data, format)
         # the rows, their filter bytes, and room for interlacing's shorter rows
         rows = h * (1 + -(-w * header.channels * header.depth // 8))
         if not _png_inflates_within(data, rows + 4 * h + 1024):
