@@ -8,7 +8,10 @@ their pixel count checked against the data they come with (a compressed picture'
 describe a whole image its data can hold, :func:`asnn.io.images.check_encoded`).
 
 A frame's time is its ``header.stamp`` relative to the first frame's (the recorder's log time
-when the first stamp is zero: drivers that leave it unset).
+when the first stamp is zero: drivers that leave it unset). A stamp before the latest one taken
+is refused (``stamp-backwards``), unless :data:`CLOCK_RESET_FRAMES` of them in a row advance among
+themselves: a camera's clock reset, on which the times are re-based (``clock-reset``,
+:meth:`BagClip.frames`).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ import cv2
 import numpy as np
 
 from .images import MAX_SIDE, ImageError, decode_encoded, to_uint8
-from .sources import SourceError
+from .sources import CLOCK_RESET, SourceError
 
 try:
     import yaml
@@ -38,9 +41,9 @@ except ImportError as exc:  # the optional extra is missing: say which one, in o
     raise ImportError("reading ROS 2 bags needs the 'ros' extra: pip install 'asnn[ros]'"
                       f" ({exc.name} is missing)") from exc
 
-__all__ = ["BagClip", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_SCHEMAS", "MAX_RECORD_BYTES",
-           "RAW_ENCODINGS", "TopicInfo", "bag_topics", "choose_topic", "image_from_compressed",
-           "image_from_raw", "open_bag", "write_bag", "IMAGE_MSGDEF",
+__all__ = ["BagClip", "CLOCK_RESET_FRAMES", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_SCHEMAS",
+           "MAX_RECORD_BYTES", "RAW_ENCODINGS", "TopicInfo", "bag_topics", "choose_topic",
+           "image_from_compressed", "image_from_raw", "open_bag", "write_bag", "IMAGE_MSGDEF",
            "COMPRESSED_IMAGE_MSGDEF"]
 
 IMAGE = "sensor_msgs/msg/Image"
@@ -50,6 +53,13 @@ MAX_RECORD_BYTES = 512 * 2**20  # largest MCAP record or decompressed chunk read
 MAX_SUMMARY_BYTES = 64 * 2**20  # largest summary section used (a larger one: read through)
 _FOOTER_BYTES = 1 + 8 + 20  # the footer record: opcode, length, summary_start, offsets, crc
 FPS_PROBE = 30                  # frames whose stamps estimate a bag's nominal frame rate
+# Frames in a row whose header stamps all go back from the latest taken, yet advance among
+# themselves, that make a new timeline (a driver restart resetting the camera's clock, or one
+# stamp far ahead that every later frame is late against). Real bags carry the odd frame out of
+# order, one or two, and then stamps past the latest again; a reset clock goes on from its new
+# time to the end. Three tells them apart while holding (detect, eval) or skipping (the camera)
+# only the two frames before it.
+CLOCK_RESET_FRAMES = 3
 
 # The message definitions rosbag2 embeds as schemas (ros2msg: the type, then its dependencies).
 _HEADER_MSGDEF = """
@@ -583,40 +593,131 @@ class BagClip:
         ----------
         on_error : callable(reason, message), optional
             Called for a message that cannot be used (it is skipped) and for a cut or corrupt
-            file (the frames end there). Without it, these raise :class:`SourceError`.
+            file (the frames end there). Without it, these raise :class:`SourceError`, and so
+            does the first frame whose header stamp goes back (a clock reset included: its
+            first frame is one).
         hold_backwards : bool
             With ``on_error``: a frame whose header stamp goes back from the latest is reported
             (``stamp-backwards``) and then yielded at the latest frame's time instead of
             skipped, so that every message gives a frame and the times never go back.
+
+        Notes
+        -----
+        :data:`CLOCK_RESET_FRAMES` frames in a row whose stamps go back from the latest but
+        advance among themselves are a new timeline (a camera's clock reset, or a latest stamp
+        far ahead): the last of them is reported to ``on_error`` as ``clock-reset`` (naming the
+        message and the jump back) and yielded, ``t`` going on from the latest frame's by the
+        differences of the new stamps, against whose latest the next ones are checked. The
+        frames of the run before it were reported as ``stamp-backwards`` (held or skipped).
         """
-        latest, latest_t = 0, 0.0  # the latest header stamp taken, and its frame's t
+        timeline = _Timeline(self.start_ns)
         for index, (message, log_time) in enumerate(self._messages(on_error)):
             try:
                 image = self._decode(message, index)
-                latest = self._check_stamp(message, index, latest)
+                reset = self._check_stamp(message, index, timeline)
             except SourceError as exc:
                 if on_error is None:
                     raise
                 on_error(exc.reason, str(exc))
                 if hold_backwards and exc.reason == "stamp-backwards":
-                    yield latest_t, image
+                    yield timeline.latest_t, image
                 continue
-            latest_t = (self._time_ns(message, log_time) - self.start_ns) / 1e9
-            yield latest_t, image
+            if reset is not None:  # the frame is kept: on_error hears of the new timeline
+                on_error(CLOCK_RESET, reset)
+            timeline.latest_t = self._frame_t(message, log_time, timeline)
+            yield timeline.latest_t, image
 
-    def _check_stamp(self, message, index: int, latest: int) -> int:
-        """The latest header stamp with this message's; SourceError where its stamp goes back
+    def _frame_t(self, message, log_time: int, timeline: "_Timeline") -> float:
+        """A frame's ``t``: its header stamp on the timeline, or its log time (a stamp left
+        unset, or a bag timed by the recorder) relative to the first frame's; after a clock
+        reset such a frame is held at the latest frame's time instead, as the recorder's clock
+        is not the new timeline's."""
+        stamp = _stamp_ns(message) if self.clock == "header" else 0
+        if stamp:
+            return timeline.t(stamp)
+        if timeline.rebased:
+            return timeline.latest_t
+        return (int(log_time) - self.start_ns) / 1e9
+
+    def _check_stamp(self, message, index: int, timeline: "_Timeline") -> str | None:
+        """Take this message's header stamp on the timeline; SourceError where it goes back
         from the latest: a camera's clock only advances, and frames timed backwards would give
-        the targets' expansion and time to contact the wrong sign. (A stamp left unset, zero,
-        takes the log time instead: that is not checked.)"""
+        the targets' expansion and time to contact the wrong sign. Returns what to report when
+        the stamp completes a clock reset (:data:`CLOCK_RESET_FRAMES` in a row going back and
+        advancing; the timeline is then re-based on them), else None. (A stamp left unset,
+        zero, takes the log time instead: that is not checked.)"""
         stamp = _stamp_ns(message) if self.clock == "header" else 0
         if not stamp:
-            return latest
-        if stamp < latest:
+            return None
+        if stamp >= timeline.latest:
+            timeline.take(stamp)
+            return None
+        latest = timeline.latest
+        if timeline.behind(stamp) < CLOCK_RESET_FRAMES:
             raise SourceError(f"{self.path}: {self.topic} message {index}: its header stamp is "
                               f"{(latest - stamp) / 1e9:g} s before an earlier frame's; a "
                               "camera's stamps never go back", "stamp-backwards")
-        return stamp
+        jump = timeline.rebase()
+        return (f"{self.path}: {self.topic} message {index}: clock reset: the header stamps "
+                f"went back {_seconds(jump)} s and advance again ({CLOCK_RESET_FRAMES} frames "
+                "in a row; the camera's clock was reset, or the latest stamp was far ahead): "
+                "timed on from the latest frame's time")
+
+
+class _Timeline:
+    """Where a bag's header stamps put its frames in time: ``t`` of a stamp, the latest stamp
+    taken, and the frames in a row whose stamps go back from it while advancing among
+    themselves (a clock reset, once :data:`CLOCK_RESET_FRAMES` long).
+
+    Attributes
+    ----------
+    latest : int
+        The latest header stamp taken, nanoseconds (0: none yet).
+    latest_t : float
+        The latest frame's ``t``.
+    rebased : bool
+        Whether a clock reset re-based the timeline.
+    """
+
+    def __init__(self, start_ns: int):
+        self._origin_ns, self._origin_t = start_ns, 0.0  # a stamp and its t: the others follow
+        self.latest, self.latest_t = 0, 0.0
+        self.rebased = False
+        self._run: list[int] = []  # the stamps in a row going back from latest, advancing
+
+    def t(self, stamp: int) -> float:
+        """Seconds since the first frame of a frame stamped ``stamp`` (ns) on this timeline."""
+        return self._origin_t + (stamp - self._origin_ns) / 1e9
+
+    def take(self, stamp: int) -> None:
+        """A stamp at or after the latest: the latest now (a run going back ends here)."""
+        self.latest = stamp
+        self._run.clear()
+
+    def behind(self, stamp: int) -> int:
+        """Count a stamp before the latest: the frames of the run it makes, itself included
+        (one that does not advance from the run's last starts a new run)."""
+        if not (self._run and stamp > self._run[-1]):
+            self._run.clear()
+        self._run.append(stamp)
+        return len(self._run)
+
+    def rebase(self) -> float:
+        """Make the run a new timeline: its first stamp at the latest frame's ``t`` (where the
+        run's frames were held, so ``t`` does not go back), its last stamp the latest.
+        Returns how far the stamps went back, in seconds."""
+        first, last = self._run[0], self._run[-1]
+        jump = (self.latest - first) / 1e9
+        self._origin_ns, self._origin_t = first, self.latest_t
+        self.latest, self.rebased = last, True
+        self._run.clear()
+        return jump
+
+
+def _seconds(value: float) -> str:
+    """Seconds to the millisecond, without trailing zeros, never in exponent notation (a
+    clock reset to zero goes back some 1.7e9 s)."""
+    return f"{value:.3f}".rstrip("0").rstrip(".")
 
 
 def _stamp_ns(message) -> int:

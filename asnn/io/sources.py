@@ -31,11 +31,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["SYNTHETIC", "BackwardStamps", "Source", "SourceError", "is_bag", "open_source",
-           "split_topic"]
+__all__ = ["CLOCK_RESET", "SYNTHETIC", "BackwardStamps", "Source", "SourceError", "is_bag",
+           "open_source", "split_topic"]
 
 SYNTHETIC = "synthetic:"
 BAG_SUFFIX = ".mcap"
+# The reason a bag reader gives ``on_error`` for a camera's clock reset (:mod:`asnn.io.rosbag`):
+# a notice, not a rejection, as the frame it names is kept, on the new timeline.
+CLOCK_RESET = "clock-reset"
 
 ErrorHandler = Callable[[str, str], None]
 
@@ -51,13 +54,23 @@ class SourceError(OSError):
 class BackwardStamps:
     """``on_error`` for a bag opened with ``hold_backwards``: counts its frames whose header
     stamp goes back (``count``; the reader yields each at the latest frame's time, so every
-    message keeps its frame and its place) and raises every other error, as without a handler.
-    :meth:`held` is called for each such frame: a subclass may report it, or raise to stop."""
+    message keeps its frame and its place) and its clock resets (``resets``, the first one's
+    message ``first_reset``: the frame is kept, on the new timeline), and raises every other
+    error, as without a handler. :meth:`held` is called for each such frame, :meth:`rebased`
+    for each reset: a subclass may report them, or raise to stop."""
 
     def __init__(self) -> None:
         self.count = 0
+        self.resets = 0
+        self.first_reset: str | None = None
 
     def __call__(self, reason: str, message: str) -> None:
+        if reason == CLOCK_RESET:
+            self.resets += 1
+            if self.first_reset is None:
+                self.first_reset = message
+            self.rebased(message)
+            return
         if reason != "stamp-backwards":
             raise SourceError(message, reason)
         self.count += 1
@@ -65,6 +78,10 @@ class BackwardStamps:
 
     def held(self, message: str) -> None:
         """A frame whose header stamp goes back (``message`` names it), the ``count``-th."""
+
+    def rebased(self, message: str) -> None:
+        """A clock reset (``message`` names the frame and the jump), the ``resets``-th: the
+        reader yields that frame next, on the new timeline."""
 
 
 @dataclass
@@ -156,7 +173,9 @@ def open_source(spec: str, *, topic: str | None = None,
     hold_backwards : bool
         For bags, with ``on_error``: a frame whose header stamp goes back is reported
         (``stamp-backwards``) and then taken at the latest frame's time instead of skipped
-        (``asnn detect``: one result per message).
+        (``asnn detect``: one result per message). Either way a clock reset (frames in a row
+        going back and advancing, :meth:`asnn.io.rosbag.BagClip.frames`) is reported as
+        :data:`CLOCK_RESET` and its frames go on from the latest frame's time.
     decoder_threads : int, optional
         For video files: the threads the decoder may use (default: OpenCV's choice).
 
