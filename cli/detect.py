@@ -81,9 +81,10 @@ class _OutputError(Exception):
 
 READ_AHEAD = 8  # decoded frames waiting for the model
 # A bag's frame whose header stamp goes back is taken at the latest frame's time (the odd stamp
-# out of order) until STAMP_LIMIT of them fall within STAMP_WINDOW frames read: then the clock
-# itself went back (a camera restarted, or one stamp far ahead makes every later frame look
-# late) and the run stops.
+# out of order) until STAMP_LIMIT of them fall within STAMP_WINDOW frames read: stamps going back
+# that often, and not as a clock reset (which the reader re-bases on, asnn.io.rosbag's
+# CLOCK_RESET_FRAMES in a row advancing among themselves), are no timeline to go by: the run
+# stops.
 STAMP_WINDOW = 100
 STAMP_LIMIT = 5
 STAMP_LINES = 5  # such frames named on stderr one by one; the rest are counted at the end
@@ -173,9 +174,11 @@ class _BackwardStamps(BackwardStamps):
     """A bag's frames whose header stamp goes back, each taken at the latest frame's time (the
     model then steps it by the nominal period), so that every message still gets its result
     (CONTRACT.md: one per input frame): the first :data:`STAMP_LINES` named on stderr, and the
-    one that makes :data:`STAMP_LIMIT` within :data:`STAMP_WINDOW` frames read raised: a clock
-    that went back. Wrap the source's ``timed_frames()`` in :meth:`frames`, which counts the
-    frames read.
+    one that makes :data:`STAMP_LIMIT` within :data:`STAMP_WINDOW` frames read raised: stamps
+    that keep going back. A clock reset (the reader re-bases on it) is named on stderr, the
+    first :data:`STAMP_LINES` of them, and counts toward no limit, nor do its frames held
+    before it. Wrap the source's ``timed_frames()`` in :meth:`frames`, which counts the frames
+    read.
     """
 
     def __init__(self, window: int = STAMP_WINDOW, limit: int = STAMP_LIMIT,
@@ -193,23 +196,41 @@ class _BackwardStamps(BackwardStamps):
         if len(self._recent) >= self.limit:
             raise SourceError(
                 f"{message}. {len(self._recent)} of the last {self.window} frames read went "
-                "back: not the odd stamp out of order but a clock that went back (a camera "
-                "restarted, or an earlier stamp far ahead)", "stamps-backwards")
+                "back: neither the odd stamp out of order nor a clock reset (stamps that advance "
+                "again from an earlier time)", "stamps-backwards")
         if self.count <= self.lines:
-            # on a terminal, over the progress bar's line (it is drawn again below)
-            lead = "\r\033[K" if sys.stderr.isatty() else ""
-            print(f"{lead}asnn detect: warning: {message}; taken at the latest frame's time",
-                  file=sys.stderr, flush=True)
+            _warn(f"{message}; taken at the latest frame's time")
             if self.count == self.lines:
                 print("asnn detect: warning: further frames whose stamp goes back are taken "
                       "at the latest frame's time and counted in the summary", file=sys.stderr,
                       flush=True)
+
+    def rebased(self, message: str) -> None:
+        from asnn.io.rosbag import CLOCK_RESET_FRAMES  # a reset comes from a bag: it is there
+
+        # the frames of the reset held before it were the new clock's first, not stamps out of
+        # order: they leave the window
+        number = self.read  # the re-based frame, which the reader yields next
+        while self._recent and self._recent[-1] >= number - (CLOCK_RESET_FRAMES - 1):
+            self._recent.pop()
+        if self.resets <= self.lines:
+            _warn(message)
+            if self.resets == self.lines:
+                print("asnn detect: warning: further clock resets are counted in the summary",
+                      file=sys.stderr, flush=True)
 
     def frames(self, timed):
         """``timed``'s ``(t, image)``, counted."""
         for item in timed:
             self.read += 1
             yield item
+
+
+def _warn(message: str) -> None:
+    """A warning line on stderr; on a terminal, over the progress bar's line (it is drawn
+    again below)."""
+    lead = "\r\033[K" if sys.stderr.isatty() else ""
+    print(f"{lead}asnn detect: warning: {message}", file=sys.stderr, flush=True)
 
 
 def _check_annotated(video: list, path: str | None, frames: int) -> None:
@@ -395,6 +416,9 @@ def run(args: argparse.Namespace) -> int:
     warned = sum(r["collision"] for r in records)
     held = (f", {backwards.count} taken at the latest frame's time (header stamp before an "
             "earlier frame's)" if backwards.count else "")
+    if backwards.resets:
+        held += (f", {backwards.resets} clock reset{'' if backwards.resets == 1 else 's'} "
+                 "(timed on from the latest frame's time)")
     print(f"asnn detect: {len(records)} frames, {warned} with a collision warning{held}",
           file=sys.stderr)
     return 0
