@@ -82,8 +82,9 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
     """Worker: one detector on one clip (a bag's ``topic``), its frames perturbed where
     ``perturbation`` names one, results to ``out_path``. Returns the frames run, the error
     (or None) and the clip as decoded, before any perturbation: its frames, frame rate, frame
-    size (width, height) and the frames of a bag whose header stamp goes back (taken at the
-    latest frame's time, so that each frame keeps its place for the labels)."""
+    size (width, height), the frames of a bag whose header stamp goes back (taken at the
+    latest frame's time, so that each frame keeps its place for the labels), and its clock
+    resets (re-based by the reader) with the first one's message."""
     decoded, size = 0, None
     backwards = BackwardStamps()
 
@@ -101,7 +102,8 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
     except (SourceError, ValueError) as exc:
         return 0, str(exc), None
     write_jsonl(Path(out_path), records)
-    return len(records), None, (decoded, clip.fps, size, backwards.count)
+    return len(records), None, (decoded, clip.fps, size, backwards.count, backwards.resets,
+                                backwards.first_reset)
 
 
 def _clips_report(results: Mapping) -> str:
@@ -175,7 +177,7 @@ def _clips_report(results: Mapping) -> str:
                   + ", ".join(results["unlabelled"])]
     if results.get("warnings"):
         # mismatches with the labels, clips slower than ASNN was made for (not a mismatch),
-        # bags whose stamps go back
+        # bags whose stamps go back (a clock reset among them)
         lines += ["", "Warnings (clips that disagree with their labels, run slower than ASNN "
                   "was made for, or are bags with frames stamped out of order):", ""] + [
             f"- {w}" for w in results["warnings"]]
@@ -262,7 +264,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
                  else None)
 
     def finished(index: int, frames: int, error: str | None,
-                 decoded: tuple[int, float, tuple[int, int] | None, int] | None) -> None:
+                 decoded: tuple[int, float, tuple[int, int] | None, int, int, str | None]
+                 | None) -> None:
         spec, clip = tasks[index][1], clip_of[index]
         name = f"{spec.name} {labels[clip]['file']}"  # as labelled: sub/clip.mp4, not clip.mp4
         progress.advance(expected[index], name)
@@ -272,12 +275,16 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
             errors.append(f"{name}: {error}")
         if decoded is not None and clip not in checked:  # once a clip, by its first run
             checked.add(clip)
-            frames, fps, size, backwards = decoded
+            frames, fps, size, backwards, resets, first_reset = decoded
             warnings.extend(mismatches(given[clip], frames, fps, size=size))
             if backwards:
                 warnings.append(f"{labels[clip]['file']}: {backwards} frame"
                                 f"{'' if backwards == 1 else 's'} whose header stamp goes back, "
                                 "taken at the latest frame's time")
+            if resets:
+                warnings.append(f"{labels[clip]['file']}: {resets} clock reset"
+                                f"{'' if resets == 1 else 's'}, timed on from the latest "
+                                f"frame's time; the first: {first_reset}")
             if slow_note and fps and fps < SLOW_FPS:
                 warnings.append(f"{labels[clip]['file']}: {fps:g} frames a second; {slow_note}")
 
