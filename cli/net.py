@@ -40,8 +40,9 @@ def cmd_camera(args: argparse.Namespace) -> int:
                                loop=args.loop, format=args.format, wait=args.wait, stop=stop,
                                preview_hz=args.preview_hz, refusals=refusals)
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(rejections.counts.items())) or "none"
-    log.info("camera %s: %d frames published; rejected: %s; refused by workers: %s", args.robot,
-             count, rejected, refusals.summary())
+    resets = f"; clock resets (re-based): {rejections.resets}" if rejections.resets else ""
+    log.info("camera %s: %d frames published; rejected: %s%s; refused by workers: %s",
+             args.robot, count, rejected, resets, refusals.summary())
     return 0
 
 

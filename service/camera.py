@@ -10,7 +10,9 @@ live source, and a replayed one's recorded time shifted to start now (:func:`pub
 Files and scenes are replayed at their frame rate, bags at their recorded pace (the differences
 of their header stamps; a pause longer than :data:`MAX_REPLAY_GAP` is shortened to it), unless
 ``fps`` sets a rate. A bag message that cannot be used, or a cut in the file, is a counted and
-logged rejection (:class:`SourceRejections`), never the end of the camera.
+logged rejection (:class:`SourceRejections`), never the end of the camera. After a bag's clock
+reset the reader's times go on from the latest frame's (:meth:`asnn.io.rosbag.BagClip.frames`),
+so the pace is the new stamps' differences: no wait for the jump, nor a burst.
 
 The camera announces itself with the liveliness token ``<prefix>/@camera/<robot>`` while it
 publishes (an optional extension, docs/contract.md): the robot's worker then subscribes to its
@@ -35,7 +37,7 @@ from collections import Counter
 import numpy as np
 import zenoh
 
-from asnn.io.sources import Source, SourceError, open_source
+from asnn.io.sources import CLOCK_RESET, Source, SourceError, open_source
 
 from . import keys
 from .logutil import RateLimitedLog
@@ -57,15 +59,25 @@ MAX_NOTICES = 64  # workers whose latest refusal notice a camera keeps
 
 class SourceRejections:
     """What a camera could not publish, counted per reason (``counts``) and logged at WARNING,
-    at most one line per reason every 10 s. Pass it as ``on_error`` to :func:`open_source`."""
+    at most one line per reason every 10 s. Pass it as ``on_error`` to :func:`open_source`.
+
+    A bag's clock reset (:data:`~asnn.io.sources.CLOCK_RESET`) is no rejection: its frame is
+    published, paced on the new timeline. It is counted apart (``resets``) and logged at
+    WARNING, at most one line every 10 s."""
 
     def __init__(self, robot: str):
         self.robot = robot
         self.counts: Counter = Counter()
+        self.resets = 0
         self._log = RateLimitedLog(log)
         self._lock = threading.Lock()
 
     def __call__(self, reason: str, message: str) -> None:
+        if reason == CLOCK_RESET:
+            with self._lock:
+                self.resets += 1
+            self._log.warning(reason, "camera %s: %s", self.robot, message[:300])
+            return
         with self._lock:
             self.counts[reason] += 1
         self._log.warning(reason, "camera %s: rejected (%s): %s", self.robot, reason,
