@@ -627,10 +627,14 @@ def test_camera_replays_a_bag_at_its_recorded_pace(zenoh_net, tmp_path, looming)
 
 def stamped_bag(path, frames, seconds) -> str:
     """A bag of mono8 ``frames`` whose header stamps are ``seconds`` after START_NS."""
+    return ns_bag(path, frames, [START_NS + round(s * 1e9) for s in seconds])
+
+
+def ns_bag(path, frames, stamps) -> str:
+    """A bag of mono8 ``frames`` whose header stamps are ``stamps`` (ns since the epoch)."""
     messages = []
-    for frame, s in zip(frames, seconds):
+    for frame, ns in zip(frames, stamps):
         m = raw_message(frame, "mono8")
-        ns = START_NS + round(s * 1e9)
         m["header"]["stamp"] = {"sec": ns // 10**9, "nanosec": ns % 10**9}
         messages.append(m)
     return str(write_messages(path, {"/c": (rosbag.IMAGE, messages)}))
@@ -683,17 +687,186 @@ def test_stamps_that_go_back_now_and_then_are_named_five_times_then_counted(tmp_
 
 
 @pytest.mark.parametrize("threads", [[], ["--threads", "1"]])  # in turn; reading ahead
-def test_a_clock_that_went_back_stops_detect_with_one_error(tmp_path, looming, capsys, threads):
-    """Stamps that keep going back are no odd frame out of order: the camera's clock was
-    reset (or an earlier stamp lies far ahead). Holding them all at the last good time would
-    stop the clock: the run stops at the fifth within 100 frames, the frames before written."""
-    seconds = [10 + 0.05 * i for i in range(12)] + [0.05 * i for i in range(13)]
-    bag = stamped_bag(tmp_path / "reset.mcap", looming.frames, seconds)
+def test_stamps_that_keep_going_back_stop_detect_with_one_error(tmp_path, looming, capsys,
+                                                                threads):
+    """Stamps that keep going back, yet never as a clock reset (two clocks interleaved on one
+    topic: each frame going back alone), are no odd frame out of order: holding them all at
+    the last good time would stop the clock. The run stops at the fifth within 100 frames,
+    the frames before written."""
+    seconds = [0.05 * i - (10 if i > 10 and i % 2 else 0) for i in range(25)]
+    bag = stamped_bag(tmp_path / "interleaved.mcap", looming.frames, seconds)
     out = tmp_path / "out.jsonl"
     assert main(["detect", bag, "--jsonl", str(out), *threads]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 5
     assert all("taken at the latest frame's time" in line for line in err[:4])
-    assert "message 16" in err[4] and "a clock that went back" in err[4]
-    assert "results written for the 16 frames before" in err[4]
-    assert len(out.read_text().splitlines()) == 16
+    assert "message 19" in err[4] and "5 of the last 100 frames read went back" in err[4]
+    assert "neither the odd stamp out of order nor a clock reset" in err[4]
+    assert "results written for the 19 frames before" in err[4]
+    assert len(out.read_text().splitlines()) == 19
+
+
+# --------------------------------------------------------------------------- clock resets
+
+def reset_seconds(count: int, at: int, jump: float) -> list[float]:
+    """Stamps 0.05 s apart whose clock goes back ``jump`` seconds at frame ``at``."""
+    return [0.05 * i - (jump if i >= at else 0.0) for i in range(count)]
+
+
+@pytest.mark.parametrize("threads", [[], ["--threads", "1"]])  # in turn; reading ahead
+@pytest.mark.parametrize("to_zero", [False, True])
+def test_a_camera_clock_reset_mid_bag_is_re_based_and_detect_goes_on(tmp_path, looming, capsys,
+                                                                     threads, to_zero):
+    """A driver restart resets the camera's clock (back an hour, or to near zero) and its
+    stamps advance from there: the rest of the bag is a new timeline. Detect gives every frame
+    its record, ``t`` going on from the latest frame's with the recorded spacing, and warns of
+    the reset once; no stop."""
+    stamps = [START_NS + round(s * 1e9) for s in reset_seconds(25, 12, 0.0)]
+    jump = stamps[12] - 1_000_000_000 if to_zero else 3600 * 10**9  # to 1 s after the epoch
+    stamps[12:] = [ns - jump for ns in stamps[12:]]
+    bag = ns_bag(tmp_path / "reset.mcap", looming.frames, stamps)
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", bag, "--jsonl", str(out), *threads]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    back = f"{(jump - 50_000_000) / 1e9:.3f}".rstrip("0").rstrip(".")  # from 0.55 to 0.6 - jump
+    assert len(err) == 4, err
+    assert all("taken at the latest frame's time" in line for line in err[:2])
+    assert "message 14: clock reset: the header stamps went back " + back + " s" in err[2]
+    assert err[3].endswith(", 2 taken at the latest frame's time (header stamp before an "
+                           "earlier frame's), 1 clock reset (timed on from the latest frame's "
+                           "time)")
+    records = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [r["frame"] for r in records] == list(range(25))
+    times = [r["t"] for r in records]
+    assert all(b >= a for a, b in zip(times, times[1:]))
+    # the two frames before the reset held at the latest time; from the third, the new stamps'
+    # spacing, going on from there (the run's first stamp at the latest frame's time)
+    assert times[:14] == pytest.approx([0.05 * i for i in range(12)] + [0.55, 0.55])
+    assert times[14:] == pytest.approx([0.55 + 0.05 * k for k in range(2, 13)])
+
+
+def test_a_stamp_far_ahead_then_normal_frames_is_re_based_on_them(tmp_path, looming, capsys):
+    """One frame stamped an hour ahead makes every later frame look late: they are a new
+    timeline after CLOCK_RESET_FRAMES of them, timed on their own spacing from the latest
+    frame's time (that frame's own, which was taken before the ones after it showed it wrong)."""
+    seconds = reset_seconds(25, 99, 0.0)
+    seconds[10] = 3600.0
+    bag = stamped_bag(tmp_path / "ahead.mcap", looming.frames, seconds)
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", bag, "--jsonl", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "message 13: clock reset: the header stamps went back 3599.45 s" in err
+    assert "frames read went back" not in err
+    times = [json.loads(line)["t"] for line in out.read_text().splitlines()]
+    assert len(times) == 25 and all(b >= a for a, b in zip(times, times[1:]))
+    assert times[10:13] == [3600.0] * 3  # the frame ahead, then two held at its time
+    assert times[13:] == pytest.approx([3600.0 + 0.05 * k for k in range(2, 14)])
+
+
+def test_the_reader_re_bases_only_on_frames_in_a_row_that_advance(tmp_path, looming):
+    """Two frames in a row out of order (CLOCK_RESET_FRAMES - 1), or frames going back that do
+    not advance among themselves, are held as today, each reported; the reader alone (without
+    a handler) still refuses the first frame going back, a reset's included."""
+    assert rosbag.CLOCK_RESET_FRAMES == 3  # the bags below are written for it
+    seconds = reset_seconds(20, 99, 0.0)
+    seconds[5], seconds[6] = 0.1, 0.15  # two in a row, advancing, then past the latest again
+    seconds[10], seconds[11], seconds[12] = 0.3, 0.25, 0.2  # three in a row, going back
+    bag = stamped_bag(tmp_path / "odd.mcap", looming.frames, seconds)
+    reasons = []
+    frames = list(open_source(bag, on_error=lambda r, m: reasons.append(r),
+                              hold_backwards=True).timed_frames())
+    assert reasons == ["stamp-backwards"] * 5
+    assert [t for t, _ in frames] == pytest.approx(
+        [0.0, 0.05, 0.1, 0.15, 0.2, 0.2, 0.2, 0.35, 0.4, 0.45, 0.45, 0.45, 0.45,
+         *(0.05 * i for i in range(13, 20))])
+    reset = stamped_bag(tmp_path / "reset.mcap", looming.frames, reset_seconds(25, 12, 3600))
+    with pytest.raises(SourceError, match="message 12: its header stamp is 3599.95 s before"):
+        list(rosbag.open_bag(reset).frames())
+
+
+def test_after_a_reset_stamps_are_checked_against_the_new_timeline(tmp_path, looming):
+    """The odd frame out of order after a reset goes back from the new clock's latest stamp:
+    held there, and the frames after it go on."""
+    seconds = reset_seconds(25, 10, 3600)
+    seconds[18] = seconds[15]  # before the new latest (seconds[17])
+    bag = stamped_bag(tmp_path / "reset.mcap", looming.frames, seconds)
+    reasons = []
+    frames = list(open_source(bag, on_error=lambda r, m: reasons.append(r),
+                              hold_backwards=True).timed_frames())
+    assert reasons == ["stamp-backwards", "stamp-backwards", "clock-reset", "stamp-backwards"]
+    times = [t for t, _ in frames]
+    assert times[10:13] == pytest.approx([0.45, 0.45, 0.55])
+    assert times[17:20] == pytest.approx([0.8, 0.8, 0.9])  # 18 held at 17's time
+    assert times[-1] == pytest.approx(0.45 + 0.05 * 14)
+
+
+def test_eval_lists_a_bag_s_clock_reset_in_its_warnings(tmp_path, looming):
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    count = len(looming.frames)
+    stamped_bag(clips / "reset.mcap", looming.frames, reset_seconds(count, 12, 3600))
+    (clips / "labels.json").write_text(json.dumps([looming.label("reset.mcap")]))
+    out = tmp_path / "out"
+    assert main(["eval", str(clips), "--models", "lgmd1", "--out", str(out), "--no-plots"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert not results["errors"]
+    first, reset = results["warnings"]
+    assert first == "reset.mcap: 2 frames whose header stamp goes back, taken at the latest " \
+                    "frame's time"
+    assert reset.startswith("reset.mcap: 1 clock reset, timed on from the latest frame's time; "
+                            "the first: ")
+    assert "message 14: clock reset: the header stamps went back 3599.95 s" in reset
+    assert len((out / "results" / "lgmd1" / "reset.jsonl").read_text().splitlines()) == count
+
+
+def test_the_camera_skips_at_most_the_frames_before_a_reset_and_logs_it(tmp_path, looming,
+                                                                      caplog):
+    """The camera's source: the frames of the run before the reset are skipped as rejections,
+    the reset is logged but not counted as rejected, and every frame after it is yielded."""
+    from service.camera import SourceRejections
+
+    bag = stamped_bag(tmp_path / "reset.mcap", looming.frames, reset_seconds(25, 12, 3600))
+    rejections = SourceRejections("r1")
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        frames = list(open_source(bag, on_error=rejections).timed_frames())
+    assert len(frames) == 25 - (rosbag.CLOCK_RESET_FRAMES - 1)
+    assert rejections.counts == {"stamp-backwards": rosbag.CLOCK_RESET_FRAMES - 1}
+    assert rejections.resets == 1
+    assert any("camera r1: " in r.message and "message 14: clock reset" in r.message
+               and "rejected" not in r.message for r in caplog.records)
+    times = [t for t, _ in frames]
+    assert times == pytest.approx([0.05 * i for i in range(12)]
+                                  + [0.55 + 0.05 * k for k in range(2, 13)])
+
+
+def test_the_camera_publishes_past_a_reset_at_the_recorded_pace(zenoh_net, tmp_path, looming,
+                                                               monkeypatch):
+    """After a reset the camera publishes the rest of the bag at the new stamps' pace: its
+    waits between frames (on a clock of the test's, so no real time passes) are the recorded
+    spacing, neither the jump (a long sleep) nor none (a burst)."""
+    import threading
+    import types
+
+    from service import camera
+
+    clock = [1000.0]
+
+    class Stop(threading.Event):
+        waits: list = []
+
+        def wait(self, timeout=None):
+            self.waits.append(timeout)
+            clock[0] += timeout
+            return False
+
+    monkeypatch.setattr(camera, "time", types.SimpleNamespace(
+        monotonic=lambda: clock[0], time=time.time, sleep=time.sleep))
+    bag = stamped_bag(tmp_path / "reset.mcap", looming.frames, reset_seconds(25, 12, 3600))
+    source = open_source(bag, on_error=camera.SourceRejections("r1"))
+    stop = Stop()
+    published = camera.publish_frames(zenoh_net.spoke(), "r1", source, wait=0.0, preview_hz=0,
+                                      stop=stop)
+    assert published == 25 - (rosbag.CLOCK_RESET_FRAMES - 1)
+    # 0.1 s to the frame after the reset: from the latest frame's stamp to the new clock's
+    # third (its first at the latest frame's time)
+    assert stop.waits == pytest.approx([0.05] * 11 + [0.1] + [0.05] * 10)
