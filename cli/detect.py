@@ -18,7 +18,8 @@ from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import parse_detector
 from asnn.io.pipeline import WriteBehind, read_ahead
-from asnn.io.sources import BackwardStamps, SourceError, open_source, split_topic
+from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
+                              split_topic)
 from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_short,
                            quiet_writer)
 from asnn.io.visualize import annotate_frame, plot_responses
@@ -82,7 +83,7 @@ class _OutputError(Exception):
 READ_AHEAD = 8  # decoded frames waiting for the model
 # A bag's frame whose header stamp goes back is taken at the latest frame's time (the odd stamp
 # out of order) until STAMP_LIMIT of them fall within STAMP_WINDOW frames read: stamps going back
-# that often, and not as a clock reset (which the reader re-bases on, asnn.io.rosbag's
+# that often, and not as a clock reset (which the bag reader re-bases on,
 # CLOCK_RESET_FRAMES in a row advancing among themselves), are no timeline to go by: the run
 # stops.
 STAMP_WINDOW = 100
@@ -206,8 +207,6 @@ class _BackwardStamps(BackwardStamps):
                       flush=True)
 
     def rebased(self, message: str) -> None:
-        from asnn.io.rosbag import CLOCK_RESET_FRAMES  # a reset comes from a bag: it is there
-
         # the frames of the reset held before it were the new clock's first, not stamps out of
         # order: they leave the window
         number = self.read  # the re-based frame, which the reader yields next

@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from .images import MAX_SIDE, ImageError, decode_encoded, to_uint8
-from .sources import CLOCK_RESET, SourceError
+from .sources import CLOCK_RESET, CLOCK_RESET_FRAMES, SourceError
 
 try:
     import yaml
@@ -53,13 +53,6 @@ MAX_RECORD_BYTES = 512 * 2**20  # largest MCAP record or decompressed chunk read
 MAX_SUMMARY_BYTES = 64 * 2**20  # largest summary section used (a larger one: read through)
 _FOOTER_BYTES = 1 + 8 + 20  # the footer record: opcode, length, summary_start, offsets, crc
 FPS_PROBE = 30                  # frames whose stamps estimate a bag's nominal frame rate
-# Frames in a row whose header stamps all go back from the latest taken, yet advance among
-# themselves, that make a new timeline (a driver restart resetting the camera's clock, or one
-# stamp far ahead that every later frame is late against). Real bags carry the odd frame out of
-# order, one or two, and then stamps past the latest again; a reset clock goes on from its new
-# time to the end. Three tells them apart while holding (detect, eval) or skipping (the camera)
-# only the two frames before it.
-CLOCK_RESET_FRAMES = 3
 
 # The message definitions rosbag2 embeds as schemas (ros2msg: the type, then its dependencies).
 _HEADER_MSGDEF = """
@@ -614,7 +607,8 @@ class BagClip:
         for index, (message, log_time) in enumerate(self._messages(on_error)):
             try:
                 image = self._decode(message, index)
-                reset = self._check_stamp(message, index, timeline)
+                stamp = _stamp_ns(message) if self.clock == "header" else 0  # 0: unset
+                reset = self._check_stamp(stamp, index, timeline)
             except SourceError as exc:
                 if on_error is None:
                     raise
@@ -624,29 +618,27 @@ class BagClip:
                 continue
             if reset is not None:  # the frame is kept: on_error hears of the new timeline
                 on_error(CLOCK_RESET, reset)
-            timeline.latest_t = self._frame_t(message, log_time, timeline)
+            timeline.latest_t = self._frame_t(stamp, log_time, timeline)
             yield timeline.latest_t, image
 
-    def _frame_t(self, message, log_time: int, timeline: "_Timeline") -> float:
+    def _frame_t(self, stamp: int, log_time: int, timeline: "_Timeline") -> float:
         """A frame's ``t``: its header stamp on the timeline, or its log time (a stamp left
         unset, or a bag timed by the recorder) relative to the first frame's; after a clock
         reset such a frame is held at the latest frame's time instead, as the recorder's clock
         is not the new timeline's."""
-        stamp = _stamp_ns(message) if self.clock == "header" else 0
         if stamp:
             return timeline.t(stamp)
         if timeline.rebased:
             return timeline.latest_t
         return (int(log_time) - self.start_ns) / 1e9
 
-    def _check_stamp(self, message, index: int, timeline: "_Timeline") -> str | None:
-        """Take this message's header stamp on the timeline; SourceError where it goes back
-        from the latest: a camera's clock only advances, and frames timed backwards would give
-        the targets' expansion and time to contact the wrong sign. Returns what to report when
-        the stamp completes a clock reset (:data:`CLOCK_RESET_FRAMES` in a row going back and
-        advancing; the timeline is then re-based on them), else None. (A stamp left unset,
-        zero, takes the log time instead: that is not checked.)"""
-        stamp = _stamp_ns(message) if self.clock == "header" else 0
+    def _check_stamp(self, stamp: int, index: int, timeline: "_Timeline") -> str | None:
+        """Take a message's header stamp (ns; 0 where unset) on the timeline; SourceError where
+        it goes back from the latest: a camera's clock only advances, and frames timed
+        backwards would give the targets' expansion and time to contact the wrong sign. Returns
+        what to report when the stamp completes a clock reset (:data:`CLOCK_RESET_FRAMES` in a
+        row going back and advancing; the timeline is then re-based on them), else None. (A
+        stamp left unset, zero, takes the log time instead: that is not checked.)"""
         if not stamp:
             return None
         if stamp >= timeline.latest:

@@ -31,14 +31,21 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["CLOCK_RESET", "SYNTHETIC", "BackwardStamps", "Source", "SourceError", "is_bag",
-           "open_source", "split_topic"]
+__all__ = ["CLOCK_RESET", "CLOCK_RESET_FRAMES", "SYNTHETIC", "BackwardStamps", "Source",
+           "SourceError", "is_bag", "open_source", "split_topic"]
 
 SYNTHETIC = "synthetic:"
 BAG_SUFFIX = ".mcap"
 # The reason a bag reader gives ``on_error`` for a camera's clock reset (:mod:`asnn.io.rosbag`):
 # a notice, not a rejection, as the frame it names is kept, on the new timeline.
 CLOCK_RESET = "clock-reset"
+# Frames in a row whose header stamps all go back from the latest taken, yet advance among
+# themselves, that make a new timeline for the bag reader (asnn.io.rosbag): a driver restart
+# resetting the camera's clock, or one stamp far ahead that every later frame is late against.
+# Real bags carry the odd frame out of order, one or two, and then stamps past the latest again;
+# a reset clock goes on from its new time to the end. Three tell them apart while holding
+# (detect, eval) or skipping (the camera) only the two frames before it.
+CLOCK_RESET_FRAMES = 3
 
 ErrorHandler = Callable[[str, str], None]
 
@@ -263,5 +270,6 @@ def _open_bag(path: str, topic: str | None, on_error: ErrorHandler | None,
         raise SourceError(f"{path}: {exc}", "missing-extra") from None
     clip = rosbag.open_bag(path, topic)
     return Source(f"{clip.path}#{clip.topic}", clip.fps, False,
-                  lambda: clip.frames(on_error, hold_backwards=hold_backwards), timed=True, frame_count=clip.frame_count,
+                  lambda: clip.frames(on_error, hold_backwards=hold_backwards), timed=True,
+                  frame_count=clip.frame_count,
                   start_ns=clip.start_ns, frame_id=clip.frame_id)
