@@ -870,3 +870,19 @@ def test_the_camera_publishes_past_a_reset_at_the_recorded_pace(zenoh_net, tmp_p
     # 0.1 s to the frame after the reset: from the latest frame's stamp to the new clock's
     # third (its first at the latest frame's time)
     assert stop.waits == pytest.approx([0.05] * 11 + [0.1] + [0.05] * 10)
+
+
+def test_after_a_reset_a_frame_with_an_unset_stamp_is_held_at_the_latest_time(tmp_path,
+                                                                               looming):
+    """A stamp left unset (zero) takes the recorder's log time, which is not the new clock's
+    after a reset: such a frame is held at the latest frame's time, and the frames after it go
+    on the new timeline."""
+    stamps = [START_NS + round(s * 1e9) for s in reset_seconds(25, 10, 3600)]
+    stamps[20] = 0
+    bag = ns_bag(tmp_path / "reset.mcap", looming.frames, stamps)
+    reasons = []
+    times = [t for t, _ in open_source(bag, on_error=lambda r, m: reasons.append(r),
+                                       hold_backwards=True).timed_frames()]
+    assert reasons == ["stamp-backwards", "stamp-backwards", "clock-reset"]
+    assert times[20] == pytest.approx(times[19])
+    assert times[21] == pytest.approx(times[19] + 0.1)
