@@ -54,16 +54,23 @@ def _worker_signals() -> None:
 
 def _stop(pool: ProcessPoolExecutor) -> None:
     """Cancel the queued tasks and end the workers now (the running tasks' results are lost:
-    the caller is leaving). The executor keeps its processes in a private mapping; where a
-    Python version has none, the workers finish their current task and exit."""
+    the caller is leaving). The executor keeps its processes and its manager thread in private
+    attributes; where a Python version has none, the workers finish their current task and exit."""
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         if process.is_alive():
             # SIGKILL: a worker forked a moment ago may not have reset the SIGTERM handler it
             # inherited yet (_worker_signals), and a kept handler made terminate() do nothing
             process.kill()
+    # The manager thread joins the workers itself once it sees them die. Two threads reaping
+    # one child race: the loser's waitpid fails, and multiprocessing then reports the dead
+    # worker as still running until the winner records its exit code. So the manager reaps
+    # first, and the joins below only confirm. SIGKILL cannot be refused, but a busy machine
+    # may take seconds to tear a forked copy of a large process down (a full test run under
+    # load once took longer than 5 s).
+    if manager is not None:
+        manager.join(timeout=60)
     for process in processes:
-        # SIGKILL cannot be refused, but a busy machine may take seconds to tear a forked
-        # copy of a large process down (a full test run under load once took longer than 5 s)
         process.join(timeout=60)
