@@ -162,7 +162,7 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
     rng = np.random.default_rng(3)
     for frame in (rng.integers(0, 256, (24, 32), dtype=np.uint8),
                   rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)):
-        for name in (name for name in PERTURBATIONS if name != "half-rate"):
+        for name in (name for name in PERTURBATIONS if name not in ("half-rate", "mpeg4")):
             out = perturb_frame(frame, name, index=7)
             factor = {"half-size": 0.5, "double-size": 2}.get(name, 1)
             assert out.shape == (24 * factor, 32 * factor, *frame.shape[2:])
@@ -194,6 +194,8 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
         perturb_frame(frame.astype(np.float32), "noise", 0)
     with pytest.raises(ValueError, match="drops frames"):
         perturb_frame(frame, "half-rate", 0)
+    with pytest.raises(ValueError, match="codes a clip's frames together"):
+        perturb_frame(frame, "mpeg4", 0)
     # jpeg90 is what the service's camera sends with --format jpeg, decoded as the worker does
     from service.messages import Frame
     for colour in (np.ascontiguousarray(frame[..., 0]), frame):  # gray, BGR
@@ -282,6 +284,111 @@ def test_a_clip_at_half_its_frame_rate_is_scored_on_the_frames_kept(tmp_path):
     assert score["outcome"] == "hit"
     # the lead in seconds at the halved rate: frames kept are 0.1 s apart
     assert score["lead_s"] == pytest.approx(score["lead_frames"] * 2 / scene.fps)
+
+
+def _textured_clip(shape, frames=30):
+    """A still blurred texture (colour: tinted) with a dark disk moving right across it:
+    (t, frame) pairs at 20 fps, and the disk's centre per frame."""
+    import cv2
+
+    rng = np.random.default_rng(5)
+    texture = cv2.GaussianBlur(rng.integers(40, 216, shape[:2]).astype(np.uint8), (0, 0), 1.5)
+    if len(shape) == 3:
+        texture = np.rint(texture[..., None] * [0.8, 1.0, 1.15]).clip(0, 255).astype(np.uint8)
+    clip, centres = [], []
+    for i in range(frames):
+        frame = texture.copy()
+        centre = (12 + 2 * i, shape[0] // 2)
+        cv2.circle(frame, centre, 6, (20, 20, 20) if len(shape) == 3 else 20, -1)
+        clip.append((i / 20, frame))
+        centres.append(centre)
+    return clip, centres
+
+
+def test_mpeg4_reencodes_a_clip_with_skipped_blocks_and_quantised_residuals(tmp_path,
+                                                                             monkeypatch):
+    import tempfile
+
+    from asnn.evaluation.perturb import perturbed, reencoded
+
+    folder = tmp_path / "tmp"
+    folder.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))  # where the coded clip goes
+    # gray at the suite's size; colour at odd sizes, which the writer alone would cut
+    for shape in ((120, 160), (61, 81, 3), (121, 160)):
+        clip, centres = _textured_clip(shape)
+        out = list(perturbed(clip, "mpeg4"))
+        assert [t for t, _ in out] == [t for t, _ in clip]  # every frame, at its own time
+        assert all(f.shape == shape and f.dtype == np.uint8 for _, f in out)
+        errors = [np.abs(f.astype(int) - g).mean() for (_, f), (_, g) in zip(out, clip)]
+        assert min(errors) > 0 and max(errors) < 4  # lossy, but close
+        # the same frames from a second encoding (each detector of a run encodes its own)
+        assert all(np.array_equal(f, g) for (_, f), (_, g) in zip(out, reencoded(clip)))
+        if len(shape) == 3:
+            continue
+        # between consecutive P-frames the still texture away from the disk is copied exactly
+        # (skipped blocks; every 12th frame is coded on its own), and the moving disk comes
+        # with residual errors
+        ys, xs = np.mgrid[:shape[0], :shape[1]]
+        for i in range(1, len(out)):
+            if i % 12 == 0:
+                continue
+            far = np.hypot(xs - centres[i][0], ys - centres[i][1]) > 24
+            assert np.mean(out[i][1][far] == out[i - 1][1][far]) > 0.95
+            near = np.hypot(xs - centres[i][0], ys - centres[i][1]) < 9
+            assert (out[i][1][near] != clip[i][1][near]).any()
+        assert np.mean([np.mean(out[i][1] == out[i - 1][1]) for i in range(1, 30)]) > 0.9
+    assert not list(folder.iterdir())  # the temporary file removed
+    # and removed when the caller stops early, or the frames change size
+    stopped = perturbed(clip, "mpeg4")
+    next(stopped)
+    stopped.close()
+    with pytest.raises(ValueError, match="change shape"):
+        list(perturbed([clip[0], (1.0, clip[1][1][:-2])], "mpeg4"))
+    with pytest.raises(ValueError, match="uint8"):
+        list(perturbed([(0.0, clip[0][1].astype(np.float32))], "mpeg4"))
+    assert list(perturbed([], "mpeg4")) == []
+    assert not list(folder.iterdir())
+
+    # a file that gives back fewer frames than went in is an error, not a shorter clip
+    import cv2
+
+    capture = cv2.VideoCapture
+
+    class Short:
+        def __init__(self, *args):
+            self.capture, self.left = capture(*args), 5
+
+        def read(self):
+            self.left -= 1
+            return self.capture.read() if self.left >= 0 else (False, None)
+
+        def release(self):
+            self.capture.release()
+
+    monkeypatch.setattr("asnn.evaluation.perturb.cv2.VideoCapture", Short)
+    with pytest.raises(ValueError, match="gave back 5 of its 30 frames"):
+        list(perturbed(clip, "mpeg4"))
+    assert not list(folder.iterdir())
+
+
+def test_a_re_encoded_clip_is_scored_against_its_own_label(tmp_path):
+    from asnn.evaluation.perturb import perturb_label
+
+    scene = make_scene("looming", size=(64, 64), start=8, stop=30, center=(32.0, 30.0))
+    write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
+    label = scene.label("loom.mp4")
+    assert perturb_label(label, "mpeg4") == label
+    (tmp_path / "labels.json").write_text(json.dumps([label]))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "asnn", "--perturb", "mpeg4",
+                 "--out", str(out), "--no-plots"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["settings"]["perturbation"] == "mpeg4" and not results["errors"]
+    assert "Frames perturbed: mpeg4" in (out / "report.md").read_text()
+    records = [json.loads(line) for line in (out / "results" / "asnn" / "loom.jsonl").open()]
+    assert len(records) == len(scene.frames)
+    assert results["detectors"]["asnn"]["clips"][0]["outcome"] == "hit"
 
 
 def test_eval_detector_specs_name_presets_and_their_result_directories(clips, tmp_path):

@@ -260,6 +260,18 @@ def test_synthetic_eval_of_perturbed_frames(tmp_path):
     score = json.loads((out / "results.json").read_text())["detectors"]["asnn"]["clips"][0]
     assert score["outcome"] == "hit" and score["localisation_px"] < 20
 
+    # re-encoded by an inter-frame codec: every frame back, the label as it was
+    out = tmp_path / "mpeg4"
+    assert main(["eval", "--synthetic", "--perturb", "mpeg4", "--cases",
+                 "course-disk-dark-right", "--detectors", "asnn", "--no-plots", "--out",
+                 str(out)]) == 0
+    assert json.loads((out / "labels.json").read_text())[0] == original
+    assert "Frames perturbed: mpeg4" in (out / "report.md").read_text()
+    records = (out / "results" / "asnn" / "course-disk-dark-right.jsonl").read_text().splitlines()
+    assert len(records) == original["frames"]
+    score = json.loads((out / "results.json").read_text())["detectors"]["asnn"]["clips"][0]
+    assert score["outcome"] == "hit" and score["localisation_px"] < 10
+
 
 def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):
     out, labels = tmp_path / "case.avi", tmp_path / "labels.json"
