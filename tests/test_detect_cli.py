@@ -223,6 +223,24 @@ def test_an_output_that_cannot_be_written_is_a_one_line_error(looming_video, tmp
     assert says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+def test_an_output_folder_that_cannot_be_made_is_refused_before_the_run(looming_video, tmp_path,
+                                                                        capsys, monkeypatch):
+    # the tests run as root, who may write anywhere: the folder's refusal is simulated
+    import os
+
+    video, _ = looming_video
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    access = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode: Path(path) != locked
+                        and access(path, mode))
+    out = locked / "new" / "out.jsonl"
+    assert main(["detect", str(video), "--jsonl", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"cannot make {out.parent} in {locked} (no write access)" in err[0]
+    assert list(locked.iterdir()) == []  # refused before anything was made
+
+
 def test_outputs_in_folders_that_do_not_exist_yet_are_written_there(looming_video, tmp_path,
                                                                      capsys):
     """As ``asnn scene OUT`` does, detect makes the folders its outputs go into."""

@@ -679,6 +679,20 @@ def test_eval_refuses_an_out_that_cannot_be_a_folder_before_it_runs(tmp_path, ca
     assert (tmp_path / "afile.txt").read_text() == "mine\n"
 
 
+def test_eval_refuses_an_out_it_may_not_make_before_it_runs(tmp_path, capsys, monkeypatch):
+    # the tests run as root, who may write anywhere: the folder's refusal is simulated
+    import os
+
+    access = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode: Path(path) != tmp_path
+                        and access(path, mode))
+    out = tmp_path / "new" / "out"
+    assert main(["eval", "--paper", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"asnn eval: --out {out}: cannot make it in {tmp_path} (no write access)"]
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_clips_report_says_which_detector_is_which_and_what_its_columns_count(tmp_path):
     # a reader of report.md alone must learn that a bare asnn is the robust preset, what the
     # LGMD names stand for, and what the false-alarm rate and the warning frames count over
