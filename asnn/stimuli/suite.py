@@ -182,6 +182,10 @@ _WALKER = dict(shape="ellipse", aspect=0.7, contrast=0.4, height=15.0, tau=3.6, 
                background=Background("texture", 0.3, 1.5), noise=2.0, seed=3)
 
 
+# a hand-held camera's sway: 3 px and 0.75 degrees at most, a new direction every 6 frames
+_HANDHELD = Shake(3.0, 0.75, smooth=6, seed=5)
+
+
 def _approach_cases() -> list[Case]:
     cases = []
     for polarity in ("dark", "light"):
@@ -644,6 +648,18 @@ def _extra_cases() -> list[Case]:
                  **sharp, **right),
         _driving("extra-night-sharp-left", "extra-clear", "night", "turn", night=True,
                  **sharp, **left),
+        # the suite's walkers seen by a hand-held camera swaying (a bird walking up to a phone
+        # or a camera bumped on a table), and one already close at onset
+        _planar("extra-walk-light-c0.4-handheld", "extra-threat", "light", "gait", "shake",
+                **_WALKER, polarity="light", gait=Gait(), camera=_HANDHELD),
+        _planar("extra-walk-dark-c0.4-handheld", "extra-threat", "dark", "gait", "shake",
+                **_WALKER, gait=Gait(), camera=_HANDHELD),
+        _planar("extra-walk-light-c0.4-handheld-close", "extra-threat", "light", "gait",
+                "shake", **{**_WALKER, "height": 45.0, "tau": 4.5}, polarity="light",
+                gait=Gait(), camera=_HANDHELD),
+        _planar("extra-walk-dark-c0.4-handheld-close", "extra-threat", "dark", "gait",
+                "shake", **{**_WALKER, "height": 45.0, "tau": 4.5},
+                gait=Gait(), camera=_HANDHELD),
     ]
 
 
