@@ -649,16 +649,17 @@ def _extra_cases() -> list[Case]:
         _driving("extra-night-sharp-left", "extra-clear", "night", "turn", night=True,
                  **sharp, **left),
         # the suite's walkers seen by a hand-held camera swaying (a bird walking up to a phone
-        # or a camera bumped on a table), and one already close at onset
+        # or a camera bumped on a table), and one already close at onset (a third of the frame
+        # high, 0.6 s from contact when its image fills the frame)
         _planar("extra-walk-light-c0.4-handheld", "extra-threat", "light", "gait", "shake",
                 **_WALKER, polarity="light", gait=Gait(), camera=_HANDHELD),
         _planar("extra-walk-dark-c0.4-handheld", "extra-threat", "dark", "gait", "shake",
                 **_WALKER, gait=Gait(), camera=_HANDHELD),
         _planar("extra-walk-light-c0.4-handheld-close", "extra-threat", "light", "gait",
-                "shake", **{**_WALKER, "height": 45.0, "tau": 4.5}, polarity="light",
+                "shake", **{**_WALKER, "height": 40.0, "tau": 1.8}, polarity="light",
                 gait=Gait(), camera=_HANDHELD),
         _planar("extra-walk-dark-c0.4-handheld-close", "extra-threat", "dark", "gait",
-                "shake", **{**_WALKER, "height": 45.0, "tau": 4.5},
+                "shake", **{**_WALKER, "height": 40.0, "tau": 1.8},
                 gait=Gait(), camera=_HANDHELD),
     ]
 
