@@ -294,6 +294,7 @@ class ASNN:
         # compute the next frame's pass and the one after it is taken (two passes in flight:
         # a worker never waits for this thread to join one).
         pending: deque[_Frame] = deque()
+        taken = None  # the frame taken latest, until it is pending
         try:
             while True:
                 try:
@@ -314,6 +315,7 @@ class ASNN:
                 if taken.photo is not None:
                     banded.run_own(taken.flight)
                 pending.append(taken)
+                taken = None
             while pending:
                 yield self._finish(self._joined(pending.popleft()))
         except GeneratorExit:
@@ -321,6 +323,10 @@ class ASNN:
             # dropped), so that the model is as step() would leave it after ``index`` frames
             while pending:
                 self._finish(self._joined(pending.popleft()))
+            if taken is not None:  # taken before the response that was yielded last
+                if taken.photo is not None:
+                    banded.run_own(taken.flight)
+                self._finish(self._joined(taken))
             raise
         finally:
             banded.abandon()  # an abandoned stream: no worker goes on behind the caller
