@@ -160,12 +160,12 @@ def test_synthetic_eval_of_the_extra_drives_outside_the_suite(tmp_path, capsys):
     assert [(c["name"], c["group"]) for c in results["cases"]] == [
         ("extra-day-moves-in", "extra-threat"), ("extra-day-moves-in-stays-beside", "extra-pass")]
     report = (out / "report.md").read_text()
-    assert "Extra drives outside the suite" in report
+    assert "Extra cases outside the suite" in report
     assert "extra-day-moves-in-stays-beside" in report.split("## Near misses")[1]  # paired
     capsys.readouterr()
     assert main(["scene", "--list", "extra-*"]) == 0
     listed = capsys.readouterr().out.splitlines()
-    assert len(listed) == 22 and all(line.startswith("extra-") for line in listed)
+    assert len(listed) == 26 and all(line.startswith("extra-") for line in listed)
     assert open_source("synthetic:extra-day-sharp-left").fps == 20.0
 
 

@@ -297,7 +297,7 @@ def suite_report(results: Mapping) -> str:
            " The default preset was designed on the suite as it is (variant 0), its region"
            " persistence and motion layers on variants 1-5 (README, 'fresh scenery').",
            ""] if settings.get("variant") else []),
-        *(["Extra drives outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
+        *(["Extra cases outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
            "version, and not looked at while the default preset was designed.", ""]
           if any(c["group"] in EXTRA_GROUPS for c in cases) else []),
         *([f"Frames perturbed: {settings['perturbation']} "

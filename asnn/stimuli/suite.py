@@ -52,13 +52,17 @@ objects (their places along the road, kinds and shades), and fresh seeds for the
 have their own (a background's texture, a shake's or a sway's path, a random flicker). A near
 miss and its collision-course twin keep sharing theirs.
 
-**Extra cases.** :data:`EXTRA_CASES` are drives the suite does not hold, kept apart so that
+**Extra cases.** :data:`EXTRA_CASES` are scenes the suite does not hold, kept apart so that
 its figures stay those of its version (their groups and names start with ``extra-``; only a
 pattern that names them selects them, :func:`suite_cases`): the motions of real collisions the
 default missed (an oncoming car turning across our path, a slower car moving into our lane
 ahead), each with a twin that keeps its lane; sharp bends (radius 15 m at 7 m/s), where our own
 turning moves the whole image sideways, with a car standing or oncoming in our lane, one
-oncoming in the next lane, or nothing; and a car standing at night 1.2 m to the side of ours.
+oncoming in the next lane, or nothing; a car standing at night 1.2 m to the side of ours; and
+the suite's walkers seen by a swaying hand-held camera (:class:`~.effects.Shake`, 3 px and 0.75
+degrees), as they are and starting close (a third of the frame high), light and dark: proxies
+for a bird walking up to a hand-held or bumped camera (docs/design-notes.md, "A walker seen by
+a swaying camera, whole").
 
 **Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
 drives at S times their size (their world is in metres and degrees), the planar scenes with
