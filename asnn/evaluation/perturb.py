@@ -35,6 +35,7 @@ import cv2
 import numpy as np
 
 from ..io.images import JPEG_QUALITY as WIRE_JPEG_QUALITY
+from ..io.video import quiet_writer
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
 
 __all__ = ["PERTURBATIONS", "check_perturbation", "perturb_frame", "perturbed", "perturb_label",
@@ -176,7 +177,10 @@ def reencoded(timed_frames: Iterable[tuple[float, np.ndarray]]
     fd, path = tempfile.mkstemp(prefix="asnn-mpeg4-", suffix=".mp4")
     os.close(fd)
     try:
-        times, shape = _encoded(timed_frames, path)
+        # a writer that fails (a full disk) would log a warning for every frame: the frames
+        # missing when the file is read back are reported once, below
+        with quiet_writer():
+            times, shape = _encoded(timed_frames, path)
         if not times:
             return
         height, width = shape[:2]
