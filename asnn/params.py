@@ -304,6 +304,13 @@ class ASNNParams(BaseModel):
         "frame (a walker whose sway splits its outline) persists where it is seen; not where "
         "a track that counts by its own frames overlaps it (a fragment of that object) "
         "(asnn.approach.tracking.TargetTracker.judge); a part of the approach gate")
+    region_cover: float = Field(
+        0.0, ge=0, le=1, description="with region_persistence, an earlier frame's passing "
+        "track speaks for the region only where the overlap of its box covers at least this "
+        "share of the box of the track that passes now: fragments of one object overlap each "
+        "other by a fair part, while a large new track that takes in a few small passing ones "
+        "around it (a wet road's headlight reflections, re-encoded) has to persist by its own "
+        "frames (asnn.approach.tracking.persists_in_region); 0: any overlap")
     ignore_rig: bool = Field(
         False, description="leave out of the looming fits the edges that stay still at the "
         "frame's top and bottom (asnn.approach.looming.rig_pixels): the camera's own hood or "
@@ -470,7 +477,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
-    region_persistence=True, object_ids=True, motion_layers=True, ignore_rig=True,
+    region_persistence=True, region_cover=0.2, object_ids=True, motion_layers=True, ignore_rig=True,
 ))
 DEFAULT_PRESET = "robust"
 # frames a second below which the default preset loses hits (README, "At half the frame rate"):

@@ -457,6 +457,37 @@ def test_an_approach_persists_in_its_region_across_tracks():
         TargetTracker(region_frames=-1)
 
 
+def test_a_large_track_over_small_passing_ones_has_not_persisted():
+    from asnn.approach.tracking import Observation, box_cover, persists_in_region
+
+    large, small, half = (0.0, 0.0, 100.0, 60.0), (40.0, 20.0, 55.0, 30.0), (0.0, 0.0, 50.0, 60.0)
+    assert box_cover(large, small) == pytest.approx(150 / 6000)
+    assert box_cover(small, large) == 1.0 and box_cover(large, half) == 0.5
+    assert box_cover(large, (200.0, 200.0, 210.0, 210.0)) == 0.0
+    assert box_cover((5.0, 5.0, 5.0, 9.0), large) == 0.0  # an empty box
+    assert persists_in_region(large, [[small], [small]], 3)  # any overlap
+    assert not persists_in_region(large, [[small], [small]], 3, 0.2)
+    assert persists_in_region(large, [[small, half], [half]], 3, 0.2)
+    assert persists_in_region(small, [[large], [large]], 3, 1.0)
+
+    def run(cover, earlier):
+        """Two frames of a small passing track (a new one each frame), then a large track that
+        takes it in: whether the large one counts."""
+        tracker = TargetTracker(max_missed=0, region_frames=3, region_cover=cover)
+        # centres far apart, so the tracks do not link: only their boxes meet
+        for y, box in ((20.0, earlier), (95.0, earlier), (170.0, large)):
+            tracks = tracker.update([Observation(50.0, y, 5.0, 1.0, box)], 0.05)
+            tracks[0].measure(1.0, 5.0, 0.0)  # ttc 1 s, offset 0.25: passing
+            coming = tracker.judge(tracks, 1.5, 1.0, 3)
+        return coming == [True]
+
+    assert run(0.0, small) and not run(0.2, small)  # a few reflections taken in with the road
+    assert run(0.2, half)  # fragments of one object, each a fair part of it
+    for cover in (-0.1, 1.5):
+        with pytest.raises(ValueError):
+            TargetTracker(region_frames=3, region_cover=cover)
+
+
 def test_a_fragment_is_named_after_the_object_it_appears_over():
     from asnn.approach.tracking import Observation, fragment_of
 

@@ -350,6 +350,32 @@ def test_a_walker_seen_in_fragments_warns_by_region_persistence(case):
         assert not _hit(scene, without) or _first(without) >= scene.contact_frame
 
 
+def test_a_large_track_over_a_wet_roads_reflections_does_not_inherit_their_persistence():
+    # real c06 (night, wet road) re-encoded as `asnn camera --format jpeg` sends it: at frame
+    # 27, 1.5 s before the oncoming pickup's onset, a new track four times the size of the
+    # small reflections passing the approach test around it takes them in (their boxes cover
+    # 2-14 % of its box) and, by region persistence from any overlap, warned at once
+    from asnn.evaluation.perturb import perturb_frame
+    from asnn.io.video import open_video
+    from shared_data import SHARED
+
+    clip = SHARED / "data" / "real" / "c06.mp4"
+    if not clip.exists():
+        pytest.skip(f"{clip} is absent")
+
+    def first_warning(**overrides):
+        model = ASNN(preset("robust", **overrides))
+        for i, frame in enumerate(open_video(clip)):
+            if model.step(perturb_frame(frame, "jpeg90", i), i / 30.0).collision:
+                return i
+        return None
+
+    onset = 72  # the label's onset frame
+    assert first_warning(region_cover=0.0) < onset
+    warned = first_warning()
+    assert warned is None or warned >= onset
+
+
 def _run_half_rate(case, **overrides):
     """The case at half its frame rate (10 fps), scored against its label at that rate."""
     from asnn.evaluation.perturb import perturb_label, perturbed

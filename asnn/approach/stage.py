@@ -187,7 +187,7 @@ class ApproachStage:
         self.tracker = TargetTracker(p.track_link, p.track_missed, p.track_smoothing,
                                      p.track_box,
                                      p.approach_frames if p.region_persistence else 0,
-                                     p.object_ids)
+                                     p.object_ids, p.region_cover)
         self.rig = CameraRig()
         self.objects: list = []
         self.against_scene: dict[int, float | None] = {}

@@ -30,6 +30,9 @@ outline, so its head, its feet and its sides are tracked as different objects in
 gives one track that many; with ``region_frames`` the tracker also counts a track that passes
 now where approaching tracks overlapped its box in enough of the frames before
 (:func:`persists_in_region`): persistence of the approach where it is seen, not of a track id.
+An overlap speaks for the region only where it covers a fair share of the box that passes now
+(``region_cover``): a large track appearing over a few small passing ones, which it takes in
+with the scene around them, has not persisted.
 
 Motion layers: where one box holds two motions (a car pulling away in front of the roadside
 that expands behind it under our own forward motion), the fit over the box blends them into an
@@ -60,7 +63,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approaching", "better_fit",
-           "against_scene", "smoothed_run", "boxes_overlap", "persists_in_region",
+           "against_scene", "smoothed_run", "boxes_overlap", "box_cover", "persists_in_region",
            "persistence_frames", "count_in_regions", "fragment_of", "layer_estimates",
            "layers_pass", "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR",
            "LAYER_OFFSET_FACTOR", "ApproachVerdict", "approach_verdict", "approach_parts"]
@@ -417,12 +420,22 @@ def boxes_overlap(a: Sequence[float], b: Sequence[float]) -> bool:
 
 
 def persists_in_region(box: Sequence[float], history: Iterable[Sequence[Sequence[float]]],
-                       frames: int) -> bool:
+                       frames: int, cover: float = 0.0) -> bool:
     """Whether an approach seen in ``box`` now persisted in its region: in at least
     ``frames - 1`` of the earlier frames of ``history`` (each a list of the boxes of the tracks
-    that passed the approach test then) a box overlapped it (:func:`boxes_overlap`)."""
-    seen = sum(any(boxes_overlap(box, b) for b in boxes) for boxes in history)
+    that passed the approach test then) a box overlapped it (:func:`boxes_overlap`) and covered
+    at least the share ``cover`` of its area (:func:`box_cover`; 0: any overlap)."""
+    seen = sum(any(boxes_overlap(box, b) and box_cover(box, b) >= cover for b in boxes)
+               for boxes in history)
     return seen >= frames - 1
+
+
+def box_cover(box: Sequence[float], other: Sequence[float]) -> float:
+    """The share of ``box``'s area that ``other`` covers, in [0, 1] (0 for an empty box)."""
+    width = min(box[2], other[2]) - max(box[0], other[0])
+    height = min(box[3], other[3]) - max(box[1], other[1])
+    area = (box[2] - box[0]) * (box[3] - box[1])
+    return max(width, 0.0) * max(height, 0.0) / area if area > 0 else 0.0
 
 
 def persistence_frames(frames: int, seconds: float | None, period: float) -> int:
@@ -443,18 +456,19 @@ def persistence_frames(frames: int, seconds: float | None, period: float) -> int
 
 def count_in_regions(boxes: Sequence[Sequence[float]], passing: Sequence[bool],
                      steady: Sequence[bool], history: Iterable[Sequence[Sequence[float]]],
-                     frames: int) -> list[bool]:
+                     frames: int, cover: float = 0.0) -> list[bool]:
     """Which of a frame's tracks count as coming at the camera with region persistence.
 
     A track counts when it passed the approach test in its own last ``frames`` frames
     (``steady``), or when it passes now (``passing``), the approach persisted in its region
-    (:func:`persists_in_region` over ``history``) and no steady track's box overlaps it: that
+    (:func:`persists_in_region` over ``history``, with ``cover``) and no steady track's box
+    overlaps it: that
     track speaks for the object, and this one would be a fragment of it (one target per
     object).
     """
     counted = [box for box, ok in zip(boxes, steady) if ok]
     return [ok or (passed and not any(boxes_overlap(box, other) for other in counted)
-                   and persists_in_region(box, history, frames))
+                   and persists_in_region(box, history, frames, cover))
             for box, passed, ok in zip(boxes, passing, steady)]
 
 
@@ -486,6 +500,9 @@ class TargetTracker:
         With N > 0, :meth:`judge` also counts a track that passes the approach test now where
         passing tracks overlapped its box in ``frames - 1`` of the previous N frames
         (:func:`persists_in_region`); 0 counts each track's own frames only.
+    region_cover : float
+        With ``region_frames``, the share of the passing track's box an earlier box must cover
+        to speak for its region, in [0, 1] (0: any overlap).
     object_ids : bool
         Name a fragment after the object it is part of (:meth:`object_id`): a track that,
         before it counted under its own id, overlapped a track counting in that frame or the
@@ -498,12 +515,16 @@ class TargetTracker:
     """
 
     def __init__(self, link: float = 1.0, max_missed: int = 3, smoothing: float = 0.5,
-                 box_weight: float = 1.0, region_frames: int = 0, object_ids: bool = False):
+                 box_weight: float = 1.0, region_frames: int = 0, object_ids: bool = False,
+                 region_cover: float = 0.0):
         for name, value in (("smoothing", smoothing), ("box_weight", box_weight)):
             if not 0.0 < value <= 1.0:
                 raise ValueError(f"{name} must lie in (0, 1], got {value}")
         if region_frames < 0:
             raise ValueError(f"region_frames must be >= 0, got {region_frames}")
+        if not 0.0 <= region_cover <= 1.0:
+            raise ValueError(f"region_cover must lie in [0, 1], got {region_cover}")
+        self.region_cover = region_cover
         self.link = link
         self.max_missed = max_missed
         self.smoothing = smoothing
@@ -565,7 +586,8 @@ class TargetTracker:
             boxes = [track.box for track in tracks]
             passing = [track.streak > 0 for track in tracks]
             history = list(self._passed)[-frames - 1:-1]  # the previous `frames` frames
-            coming = count_in_regions(boxes, passing, coming, history, frames)
+            coming = count_in_regions(boxes, passing, coming, history, frames,
+                                      self.region_cover)
             self._passed[-1] = [box for box, passed in zip(boxes, passing) if passed]
         if self._object_of is not None:
             self._name_objects(tracks, coming)

@@ -221,7 +221,7 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
             coming = [ok for _, _, ok in judged]
             if p.region_persistence:  # as TargetTracker.judge
                 coming = count_in_regions(boxes, passing, coming, list(passed)[-frames:],
-                                          frames)
+                                          frames, p.region_cover)
             total, targets = 0.0, []
             for ((share, x, y, _), _, _), counts in zip(judged, coming):
                 if counts:

@@ -55,6 +55,7 @@ ABLATIONS = {
     "no fit against a receding scene": "asnn:robust/receding_scene=false",
     "no persistence (one frame of approach)": "asnn:robust/approach_frames=1",
     "persistence per track only (no region persistence)": "asnn:robust/region_persistence=false",
+    "region persistence from any overlap (no region_cover)": "asnn:robust/region_cover=0",
     "as many frames of approach at any frame rate": "asnn:robust/approach_seconds=none",
     "each track its own id (no object ids)": "asnn:robust/object_ids=false",
     "no input scale (frames at their own size)": "asnn:robust/max_width=none",
