@@ -462,9 +462,8 @@ def count_in_regions(boxes: Sequence[Sequence[float]], passing: Sequence[bool],
     A track counts when it passed the approach test in its own last ``frames`` frames
     (``steady``), or when it passes now (``passing``), the approach persisted in its region
     (:func:`persists_in_region` over ``history``, with ``cover``) and no steady track's box
-    overlaps it: that
-    track speaks for the object, and this one would be a fragment of it (one target per
-    object).
+    overlaps it: that track speaks for the object, and this one would be a fragment of it (one
+    target per object).
     """
     counted = [box for box, ok in zip(boxes, steady) if ok]
     return [ok or (passed and not any(boxes_overlap(box, other) for other in counted)
