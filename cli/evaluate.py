@@ -21,7 +21,7 @@ from pathlib import Path, PurePosixPath
 
 from asnn.evaluation import scoring
 from asnn.evaluation.heldout import TIE_BREAKS
-from asnn.evaluation.perturb import PERTURBATIONS
+from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS, check_perturbation
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
 from asnn.params import preset_names
@@ -41,6 +41,15 @@ def _detectors(text: str) -> list[str]:
         return [spec.name for spec in parse_detectors(text)]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def perturbation(name: str) -> str:
+    """A ``--perturb`` value: a perturbation's name, or a family's with its strength."""
+    try:
+        check_perturbation(name)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return name
 
 
 def _summary_line(name: str, s: dict) -> str:
@@ -148,11 +157,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "the planar scenes at S times 160x120 with their sizes, positions and "
                         "speeds in pixels scaled alike, the driving scenes at S times 192x128 "
                         "(default: 1; not with --size)")
-    p.add_argument("--perturb", choices=list(PERTURBATIONS), metavar="NAME",
+    p.add_argument("--perturb", type=perturbation, metavar="NAME",
                    help="with CLIPS_DIR or --synthetic: score the detectors on the frames "
                         "perturbed, "
                         "to see whether their scores hold on another camera: "
-                        + "; ".join(f"{name}: {what}" for name, what in PERTURBATIONS.items()))
+                        + "; ".join(f"{name}: {what}" for name, what in
+                                    {**PERTURBATIONS, **FAMILIES}.items()))
     p.add_argument("--no-plots", action="store_true", help="skip the PNGs")
     p.add_argument("--case-plots", action="store_true",
                    help="with --synthetic: also plot every case's responses (slower)")

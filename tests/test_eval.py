@@ -207,6 +207,27 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
     assert perturb_frame(frame, "double-size", 0).mean() == pytest.approx(frame.mean(), abs=2)
 
 
+def test_jpeg_and_gain_take_their_strength_in_their_name(tmp_path, capsys):
+    from asnn.evaluation.perturb import describe, perturb_frame, perturb_label
+
+    frame = np.random.default_rng(5).integers(0, 256, (24, 32, 3), dtype=np.uint8)
+    assert np.array_equal(perturb_frame(frame, "jpeg30", 0), perturb_frame(frame, "jpeg", 0))
+    assert np.array_equal(perturb_frame(frame, "gain0.6", 0), perturb_frame(frame, "dim", 0))
+    assert not np.array_equal(perturb_frame(frame, "jpeg80", 0), perturb_frame(frame, "jpeg", 0))
+    brighter = perturb_frame(frame, "gain1.04", 0)
+    assert np.array_equal(brighter, np.clip(np.rint(frame * 1.04), 0, 255).astype(np.uint8))
+    assert perturb_frame(np.full_like(frame, 200), "gain2", 0).max() == 255  # clipped, not wrapped
+    assert describe("jpeg80") == "every frame re-encoded as JPEG at quality 80"
+    assert describe("gain1.04").startswith("1.04 times the brightness")
+    assert perturb_label({"file": "a.mp4", "center": [3, 4]}, "gain1.04")["center"] == [3, 4]
+    for wrong in ("jpeg0", "jpeg101", "jpegx", "gain0", "gain11", "gain1.", "gain-1", "Jpeg80"):
+        with pytest.raises(ValueError, match="unknown perturbation"):
+            perturb_frame(frame, wrong, 0)
+        with pytest.raises(SystemExit):
+            main(["eval", str(tmp_path), "--perturb", wrong])
+        assert "unknown perturbation" in capsys.readouterr().err
+
+
 def test_a_mirrored_clip_is_scored_against_its_mirrored_label(tmp_path):
     from asnn.evaluation.perturb import perturb_label
 

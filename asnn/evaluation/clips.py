@@ -16,7 +16,7 @@ from ..params import SLOW_FPS
 from . import figures, scoring
 from .labels import (center_outside, clip_hint, load_labels, mismatches, result_name,
                      unlabelled_videos)
-from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
+from .perturb import check_perturbation, describe, perturb_label, perturbed
 from .pool import run_tasks
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
@@ -119,7 +119,7 @@ def _clips_report(results: Mapping) -> str:
         " frames]; an earlier first warning is an early warning (a false alarm); any warning on a"
         " non-collision clip is a false alarm. " + TARGET_QUALITY_NOTE + (
             f" Frames perturbed: {settings['perturbation']}"
-            f" ({PERTURBATIONS[settings['perturbation']]})."
+            f" ({describe(settings['perturbation'])})."
             if settings.get("perturbation") else ""),
         "",
         "| detector | hits | early | late | misses | false alarms (nc) | quiet (nc) | hit rate |"
@@ -213,7 +213,9 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         Draw the PNGs.
     perturbation : str, optional
         Run on the clips' frames perturbed by one of
-        :data:`~asnn.evaluation.perturb.PERTURBATIONS` (the labels follow a mirrored frame).
+        :data:`~asnn.evaluation.perturb.PERTURBATIONS` or a family of
+        :data:`~asnn.evaluation.perturb.FAMILIES` (``jpeg80``, ``gain1.04``; the labels follow a
+        mirrored frame).
     progress : ProgressPrinter-like, optional
 
     Returns

@@ -16,6 +16,11 @@ meet objects and motions twice as large);
 the generated suite, 15 fps for the 30 fps dashcam clips) would deliver the same scene, and maps
 the labels' frames onto the frames kept.
 
+Two families take their strength in their name, for a camera's own settings: ``jpegQ`` re-encodes
+every frame as JPEG at quality Q (1-100; ``jpeg90`` is the wire's, ``jpeg`` is ``jpeg30``) and
+``gainG`` scales the brightness by G (0.1-10, rounded and clipped as a camera's 8 bits would be;
+``dim`` is ``gain0.6``).
+
 Every perturbation but two changes each frame on its own (:func:`perturb_frame`). ``half-rate``
 and ``mpeg4`` take the clip as a whole (:func:`perturbed`): ``mpeg4`` re-encodes it with an
 inter-frame codec, MPEG-4 Part 2 through OpenCV's FFmpeg writer, as a camera's video file is
@@ -28,6 +33,7 @@ are; two encodings of the same frames have given the same frames (:func:`reencod
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 
@@ -38,8 +44,8 @@ from ..io.images import JPEG_QUALITY as WIRE_JPEG_QUALITY
 from ..io.video import quiet_writer
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
 
-__all__ = ["PERTURBATIONS", "check_perturbation", "perturb_frame", "perturbed", "perturb_label",
-           "reencoded"]
+__all__ = ["PERTURBATIONS", "check_perturbation", "describe", "perturb_frame", "perturbed",
+           "perturb_label", "reencoded"]
 
 # name -> what it does (asnn eval -h lists them)
 PERTURBATIONS = {
@@ -86,11 +92,43 @@ CODEC_FOURCC = "mp4v"
 CODEC_FPS = 30.0  # the rate written in the file: the decoded frames do not depend on it
 
 
+# the families named with their strength: jpegQ (quality Q) and gainG (brightness times G)
+FAMILIES = {"jpegQ": "every frame re-encoded as JPEG at quality Q (1-100)",
+            "gainG": "the brightness times G (0.1-10), rounded and clipped to 8 bits"}
+_FAMILY = re.compile(r"(jpeg)([0-9]{1,3})|(gain)([0-9]{1,2}(?:\.[0-9]{1,4})?)")
+GAIN_RANGE = (0.1, 10.0)
+
+
+def _strength(name: str) -> tuple[str, float] | None:
+    """``('jpeg', Q)`` or ``('gain', G)`` for a family's name within its range, else None."""
+    match = _FAMILY.fullmatch(name)
+    if match is None:
+        return None
+    if match.group(1):
+        quality = int(match.group(2))
+        return ("jpeg", quality) if 1 <= quality <= 100 else None
+    gain = float(match.group(4))
+    return ("gain", gain) if GAIN_RANGE[0] <= gain <= GAIN_RANGE[1] else None
+
+
 def check_perturbation(name: str | None) -> None:
-    """Raise ValueError unless ``name`` is None or one of :data:`PERTURBATIONS`."""
-    if name is not None and name not in PERTURBATIONS:
+    """Raise ValueError unless ``name`` is None, one of :data:`PERTURBATIONS` or of the
+    :data:`FAMILIES` within its range (``jpeg80``, ``gain1.04``)."""
+    if name is not None and name not in PERTURBATIONS and _strength(name) is None:
         raise ValueError(f"unknown perturbation {name!r}; choose one of "
-                         f"{', '.join(PERTURBATIONS)}")
+                         f"{', '.join(PERTURBATIONS)}, or jpegQ (quality Q, 1-100) or gainG "
+                         f"(brightness times G, {GAIN_RANGE[0]:g}-{GAIN_RANGE[1]:g})")
+
+
+def describe(name: str) -> str:
+    """What the perturbation ``name`` does, in words (the reports print it)."""
+    check_perturbation(name)
+    if name in PERTURBATIONS:
+        return PERTURBATIONS[name]
+    family, strength = _strength(name)
+    if family == "jpeg":
+        return f"every frame re-encoded as JPEG at quality {strength:g}"
+    return f"{strength:g} times the brightness, rounded and clipped to 8 bits"
 
 
 def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
@@ -118,8 +156,9 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
         factor = _SCALE[name]
         return cv2.resize(frame, (max(1, round(w * factor)), max(1, round(h * factor))),
                           interpolation=cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR)
-    if name in JPEG_QUALITY:
-        return jpeg(frame[None], JPEG_QUALITY[name])[0]
+    family = _strength(name) if name not in PERTURBATIONS else None
+    if name in JPEG_QUALITY or (family and family[0] == "jpeg"):
+        return jpeg(frame[None], JPEG_QUALITY.get(name) or family[1])[0]
     if name == "hood":
         covered, values = camera_rig(frame.shape[1::-1])
         changed = frame.astype(np.float64)
@@ -131,8 +170,8 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
         changed = frame * (1.0 - blade) + WIPER_GRAY * blade
     elif name == "noise":
         changed = sensor_noise(frame.astype(np.float64), NOISE_SIGMA, seed=index)
-    else:
-        changed = frame * DIM_GAIN
+    else:  # dim, or gainG
+        changed = frame * (family[1] if family else DIM_GAIN)
     return np.clip(np.rint(changed), 0, 255).astype(np.uint8)
 
 

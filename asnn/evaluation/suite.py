@@ -26,7 +26,7 @@ from ..stimuli.suite import (CASES, DRIVING_SIZE, EXTRA_GROUPS, GROUPS, PLANAR_S
                              SUITE_VERSION, check_driving_size, check_scale, check_variant,
                              make_case, suite_cases)
 from . import scoring
-from .perturb import PERTURBATIONS, check_perturbation, perturb_label, perturbed
+from .perturb import check_perturbation, describe, perturb_label, perturbed
 from .pool import run_tasks
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
@@ -167,7 +167,9 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
         (:func:`asnn.stimuli.suite.make_case`).
     perturbation : str, optional
         Run on the cases' frames perturbed by one of
-        :data:`~asnn.evaluation.perturb.PERTURBATIONS` (the labels follow a mirrored frame).
+        :data:`~asnn.evaluation.perturb.PERTURBATIONS` or a family of
+        :data:`~asnn.evaluation.perturb.FAMILIES` (``jpeg80``, ``gain1.04``; the labels follow a
+        mirrored frame).
     driving_size : (width, height), optional
         Render the driving scenes at this size instead of 192x128 (the same drives seen with
         more or fewer pixels; :func:`asnn.stimuli.suite.make_case`); the planar scenes keep
@@ -301,7 +303,7 @@ def suite_report(results: Mapping) -> str:
            "version, and not looked at while the default preset was designed.", ""]
           if any(c["group"] in EXTRA_GROUPS for c in cases) else []),
         *([f"Frames perturbed: {settings['perturbation']} "
-           f"({PERTURBATIONS[settings['perturbation']]}).", ""]
+           f"({describe(settings['perturbation'])}).", ""]
           if settings.get("perturbation") else []),
         *([f"Driving scenes rendered at {settings['driving_size'][0]}x"
            f"{settings['driving_size'][1]} (the suite's are {DRIVING_SIZE[0]}x{DRIVING_SIZE[1]}:"
