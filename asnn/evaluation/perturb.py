@@ -99,9 +99,15 @@ _FAMILY = re.compile(r"(jpeg)([0-9]{1,3})|(gain)([0-9]{1,2}(?:\.[0-9]{1,4})?)")
 GAIN_RANGE = (0.1, 10.0)
 
 
+# the named perturbations that are members of a family
+_MEMBERS = {**{name: f"jpeg{quality}" for name, quality in JPEG_QUALITY.items()},
+            "dim": f"gain{DIM_GAIN:g}"}
+
+
 def _strength(name: str) -> tuple[str, float] | None:
-    """``('jpeg', Q)`` or ``('gain', G)`` for a family's name within its range, else None."""
-    match = _FAMILY.fullmatch(name)
+    """``('jpeg', Q)`` or ``('gain', G)`` for a family's name within its range, or for a named
+    member of one (``jpeg``, ``jpeg90``, ``dim``), else None."""
+    match = _FAMILY.fullmatch(_MEMBERS.get(name, name))
     if match is None:
         return None
     if match.group(1):
@@ -156,9 +162,9 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
         factor = _SCALE[name]
         return cv2.resize(frame, (max(1, round(w * factor)), max(1, round(h * factor))),
                           interpolation=cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR)
-    family = _strength(name) if name not in PERTURBATIONS else None
-    if name in JPEG_QUALITY or (family and family[0] == "jpeg"):
-        return jpeg(frame[None], JPEG_QUALITY.get(name) or family[1])[0]
+    family = _strength(name)
+    if family and family[0] == "jpeg":
+        return jpeg(frame[None], family[1])[0]
     if name == "hood":
         covered, values = camera_rig(frame.shape[1::-1])
         changed = frame.astype(np.float64)
@@ -171,7 +177,7 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
     elif name == "noise":
         changed = sensor_noise(frame.astype(np.float64), NOISE_SIGMA, seed=index)
     else:  # dim, or gainG
-        changed = frame * (family[1] if family else DIM_GAIN)
+        changed = frame * family[1]
     return np.clip(np.rint(changed), 0, 255).astype(np.uint8)
 
 
