@@ -3,6 +3,7 @@ showing what the corresponding stage does by switching it off (the ablation spec
 asnn.evaluation.runs)."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -359,18 +360,20 @@ def test_a_large_track_over_a_wet_roads_reflections_does_not_inherit_their_persi
     from asnn.io.video import open_video
     from shared_data import SHARED
 
-    clip = SHARED / "data" / "real" / "c06.mp4"
-    if not clip.exists():
-        pytest.skip(f"{clip} is absent")
+    folder = SHARED / "data" / "real"
+    if not (folder / "c06.mp4").exists():
+        pytest.skip(f"{folder / 'c06.mp4'} is absent")
+    label = next(entry for entry in json.loads((folder / "labels.json").read_text())
+                 if entry["file"] == "c06.mp4")
 
     def first_warning(**overrides):
         model = ASNN(preset("robust", **overrides))
-        for i, frame in enumerate(open_video(clip)):
-            if model.step(perturb_frame(frame, "jpeg90", i), i / 30.0).collision:
+        for i, frame in enumerate(open_video(folder / "c06.mp4")):
+            if model.step(perturb_frame(frame, "jpeg90", i), i / label["fps"]).collision:
                 return i
         return None
 
-    onset = 72  # the label's onset frame
+    onset = label["onset_frame"]
     assert first_warning(region_cover=0.0) < onset
     warned = first_warning()
     assert warned is None or warned >= onset
