@@ -182,21 +182,39 @@ def test_maps_are_recorded_on_request_only():
     np.testing.assert_allclose(m.R[4:], -m.R[:4])
 
 
-def test_model_runs_where_numba_can_write_no_cache():
+def test_kernels_import_and_run_where_numba_can_write_no_cache():
     """A read-only install without a writable home (a locked-down container): numba finds no
-    cache locator; the kernels must still import and compile."""
+    cache locator and refuses ``cache=True`` when a kernel is decorated, at import. Every module
+    that defines kernels must still import (``asnn._jit.kernel`` falls back to no cache), and
+    its kernels compile at first use: one looming fit, growing and shrinking, shows it. (The
+    whole model compiled cold is what ``test_demo_on_a_fresh_install_warns`` runs; once is
+    enough for the suite's time.)"""
     import os
     import subprocess
     import sys
+    from pathlib import Path
 
-    code = ("from asnn import ASNN; from asnn.stimuli import make_scene; m = ASNN(); "
-            "print(max(m.step(f).u for f in make_scene('looming', size=(64, 64), start=2, "
-            "stop=12).frames))")
+    import asnn
+
+    package = Path(asnn.__file__).parent
+    modules = sorted(".".join(("asnn",) + path.relative_to(package).with_suffix("").parts)
+                     for path in package.rglob("*.py") if "@kernel(" in path.read_text())
+    assert {"asnn._fast", "asnn.approach.looming", "asnn.targets"} <= set(modules)
+    code = (f"import importlib; [importlib.import_module(m) for m in {modules!r}]\n"
+            "import numpy as np\n"
+            "from asnn.approach.looming import region_expansion, _solve_expansion\n"
+            "assert type(_solve_expansion._cache).__name__ == 'NullCache'\n"
+            "y, x = np.mgrid[0:48, 0:48].astype(np.float32)\n"
+            "disk = lambda r: (np.hypot(x - 24, y - 24) < r).astype(np.float32)\n"
+            "box = (4, 4, 44, 44)\n"
+            "print(region_expansion(disk(10), disk(11), box).rate,"
+            " region_expansion(disk(11), disk(10), box).rate)\n")
     env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "ZipCacheLocator"}  # never applies
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert float(proc.stdout) > 0
+    growing, shrinking = map(float, proc.stdout.split())
+    assert growing > 0 > shrinking
 
 
 def test_a_still_scene_leaves_no_subnormal_numbers_in_the_float32_state():
