@@ -7,6 +7,7 @@ import math
 
 # FPS_RANGE bounds every --fps: beyond it no camera runs, and a video writer given such a rate
 # (inf) may never return
+from asnn.evaluation.perturb import PERTURBATIONS, check_perturbation, keeps_frames
 from asnn.io.video import FPS_RANGE
 from asnn.stimuli.suite import LARGEST_SIZE
 from service import keys
@@ -189,3 +190,25 @@ def preset_spec(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc).replace(repr(f"asnn:{text}"), repr(text))
                                          ) from None
     return text
+
+
+def perturbation(name: str) -> str:
+    """A ``--perturb`` value: a perturbation's name, or a family's with its strength."""
+    try:
+        check_perturbation(name)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return name
+
+
+def frame_perturbation(name: str) -> str:
+    """A ``--perturb`` value that keeps every frame at its size and in its place
+    (:func:`asnn.evaluation.perturb.keeps_frames`): ``asnn detect`` writes one record per
+    input frame, its targets in the input's pixels."""
+    name = perturbation(name)
+    if not keeps_frames(name):
+        kept = ", ".join(n for n in PERTURBATIONS if keeps_frames(n))
+        raise argparse.ArgumentTypeError(
+            f"{name} changes the frames' number or size; asnn detect takes those that keep "
+            f"every frame ({kept}, jpegQ, gainG), asnn eval takes them all")
+    return name

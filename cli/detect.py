@@ -15,6 +15,7 @@ import cv2
 
 from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
+from asnn.evaluation.perturb import describe, perturbed
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import parse_detector
 from asnn.io.pipeline import WriteBehind, read_ahead
@@ -25,7 +26,7 @@ from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_sho
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import SLOW_FPS, preset_names
-from cli.arguments import nonempty_path, preset_spec, threads
+from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -63,6 +64,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mcap", type=nonempty_path, metavar="OUT.mcap",
                    help="write the frames, targets, warnings and response numbers as an MCAP "
                         "for Foxglove (docs/foxglove.md; the 'ros' extra)")
+    p.add_argument("--perturb", type=frame_perturbation, metavar="NAME",
+                   help="run on the frames perturbed as another camera would give them, to see "
+                        "what the detector does and why (with --tracks) under that camera: "
+                        "asnn eval's perturbations that keep every frame at its size and in "
+                        "its place, e.g. jpeg80 (JPEG at quality 80), gain1.04 (4 %% brighter), "
+                        "noise, mpeg4 (the outputs show the perturbed frames)")
     p.set_defaults(func=run)
 
 
@@ -365,7 +372,7 @@ def run(args: argparse.Namespace) -> int:
         taken = deque()  # the frames the detector has taken and not answered yet
 
         def frames():
-            decoded = backwards.frames(source.timed_frames())
+            decoded = perturbed(backwards.frames(source.timed_frames()), args.perturb)
             for t, frame in decoded if busy else read_ahead(decoded, depth=READ_AHEAD):
                 taken.append((t, frame))
                 yield t, frame
@@ -418,6 +425,8 @@ def run(args: argparse.Namespace) -> int:
     if backwards.resets:
         held += (f", {backwards.resets} clock reset{'' if backwards.resets == 1 else 's'} "
                  "(timed on from the latest frame's time)")
+    if args.perturb:
+        held += f", on frames perturbed: {describe(args.perturb)}"
     print(f"asnn detect: {len(records)} frames, {warned} with a collision warning{held}",
           file=sys.stderr)
     return 0

@@ -21,13 +21,13 @@ from pathlib import Path, PurePosixPath
 
 from asnn.evaluation import scoring
 from asnn.evaluation.heldout import TIE_BREAKS
-from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS, check_perturbation
+from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
 from asnn.params import preset_names
 
-from .arguments import (count, finite, frame_size, nonempty_path, preset_spec, tolerance_seconds,
-                        warmup_frames, whole)
+from .arguments import (count, finite, frame_size, nonempty_path, perturbation, preset_spec,
+                        tolerance_seconds, warmup_frames, whole)
 
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
@@ -41,15 +41,6 @@ def _detectors(text: str) -> list[str]:
         return [spec.name for spec in parse_detectors(text)]
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def perturbation(name: str) -> str:
-    """A ``--perturb`` value: a perturbation's name, or a family's with its strength."""
-    try:
-        check_perturbation(name)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-    return name
 
 
 def _summary_line(name: str, s: dict) -> str:

@@ -472,3 +472,40 @@ def test_an_empty_path_is_refused(looming_video, capsys, args, says):
     with pytest.raises(SystemExit) as exit_:
         main(["detect", *(a.format(video=video) for a in args)])
     assert exit_.value.code == 2 and says in capsys.readouterr().err
+
+
+def test_perturb_runs_on_the_frames_as_another_camera_would_give_them(tmp_path, capsys):
+    # an off-centre approach: mirrored, its targets come out mirrored, frame for frame
+    scene = make_scene("looming", size=(96, 96), start=5, stop=30, center=(30.0, 40.0))
+    path = tmp_path / "left.avi"
+    write_video(scene.frames, path, fps=20.0)
+    plain = [json.loads(x) for x in _detect_lines(path, capsys)]
+    assert main(["detect", str(path), "--jsonl", "-", "--perturb", "mirror"]) == 0
+    out = capsys.readouterr()
+    mirrored = [json.loads(x) for x in out.out.splitlines()]
+    assert "on frames perturbed: every frame flipped left to right" in out.err
+    assert len(mirrored) == len(plain) == len(scene.frames)
+    assert [r["collision"] for r in mirrored] == [r["collision"] for r in plain]
+    both = [(a["targets"], b["targets"]) for a, b in zip(plain, mirrored) if a["targets"]]
+    assert both and all(len(a) == len(b) for a, b in both)
+    for a, b in both:
+        assert b[0]["x"] == pytest.approx(95 - a[0]["x"], abs=0.5)
+        assert b[0]["y"] == pytest.approx(a[0]["y"], abs=0.5)
+    # a family's member with its strength: the frames change, so do the numbers
+    assert main(["detect", str(path), "--jsonl", "-", "--perturb", "gain0.5"]) == 0
+    darker = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
+    assert len(darker) == len(plain) and [r["u"] for r in darker] != [r["u"] for r in plain]
+
+
+@pytest.mark.parametrize("name", ["half-rate", "half-size", "double-size", "jpeg0", "blur"])
+def test_perturb_refuses_what_would_change_the_frames_number_or_size(looming_video, capsys,
+                                                                      name):
+    path, _ = looming_video
+    with pytest.raises(SystemExit) as exit_:
+        main(["detect", str(path), "--perturb", name])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert "argument --perturb" in err
+    if name in ("half-rate", "half-size", "double-size"):
+        assert "changes the frames' number or size" in err
+        assert "asnn detect takes those that keep every frame (noise, jpeg, jpeg90," in err

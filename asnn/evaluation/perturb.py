@@ -44,8 +44,8 @@ from ..io.images import JPEG_QUALITY as WIRE_JPEG_QUALITY
 from ..io.video import quiet_writer
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
 
-__all__ = ["PERTURBATIONS", "check_perturbation", "describe", "perturb_frame", "perturbed",
-           "perturb_label", "reencoded"]
+__all__ = ["PERTURBATIONS", "check_perturbation", "describe", "keeps_frames", "perturb_frame",
+           "perturbed", "perturb_label", "reencoded"]
 
 # name -> what it does (asnn eval -h lists them)
 PERTURBATIONS = {
@@ -124,6 +124,14 @@ def check_perturbation(name: str | None) -> None:
         raise ValueError(f"unknown perturbation {name!r}; choose one of "
                          f"{', '.join(PERTURBATIONS)}, or jpegQ (quality Q, 1-100) or gainG "
                          f"(brightness times G, {GAIN_RANGE[0]:g}-{GAIN_RANGE[1]:g})")
+
+
+def keeps_frames(name: str) -> bool:
+    """Whether the perturbation ``name`` gives back every frame at its size and in its place
+    (all but ``half-rate``, ``half-size`` and ``double-size``), so that what a detector reports
+    on the perturbed frames is about the frames as given: one record per frame, in their
+    pixels."""
+    return name not in _RATE_STEP and name not in _SCALE
 
 
 def describe(name: str) -> str:
