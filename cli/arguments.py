@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import math
 
+from asnn.evaluation.perturb import PERTURBATIONS, check_perturbation, keeps_frames
 # FPS_RANGE bounds every --fps: beyond it no camera runs, and a video writer given such a rate
 # (inf) may never return
-from asnn.evaluation.perturb import PERTURBATIONS, check_perturbation, keeps_frames
 from asnn.io.video import FPS_RANGE
 from asnn.stimuli.suite import LARGEST_SIZE
 from service import keys
