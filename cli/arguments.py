@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from asnn.evaluation.perturb import PERTURBATIONS, check_perturbation, keeps_frames
+from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS, check_perturbation, keeps_frames
 # FPS_RANGE bounds every --fps: beyond it no camera runs, and a video writer given such a rate
 # (inf) may never return
 from asnn.io.video import FPS_RANGE
@@ -207,8 +207,8 @@ def frame_perturbation(name: str) -> str:
     input frame, its targets in the input's pixels."""
     name = perturbation(name)
     if not keeps_frames(name):
-        kept = ", ".join(n for n in PERTURBATIONS if keeps_frames(n))
+        kept = ", ".join([n for n in PERTURBATIONS if keeps_frames(n)] + list(FAMILIES))
         raise argparse.ArgumentTypeError(
             f"{name} changes the frames' number or size; asnn detect takes those that keep "
-            f"every frame ({kept}, jpegQ, gainG), asnn eval takes them all")
+            f"every frame ({kept}), asnn eval takes them all")
     return name
