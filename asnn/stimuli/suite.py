@@ -82,6 +82,7 @@ from .driving import LANE_WIDTH, Vehicle, driving_scene
 from .effects import Flicker, Headlights, Pan, Ramp, Shake, Step, Sweep, scaled_size
 from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
+from .surface import surface_scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "Case", "SUITE_CASES", "EXTRA_CASES",
            "CASES", "suite_cases", "make_case", "check_variant", "check_driving_size",
@@ -162,6 +163,11 @@ def _planar(name: str, group: str, *tags: str, twin: str | None = None, **option
 
 def _driving(name: str, group: str, *tags: str, twin: str | None = None, **options) -> Case:
     return Case(name, driving_scene, {"size": DRIVING_SIZE, **options}, (group, *tags), twin)
+
+
+def _surface(name: str, group: str, *tags: str, **options) -> Case:
+    return Case(name, surface_scene, {"size": PLANAR_SIZE, "onset": 20, "noise": 2.0,
+                                      **options}, (group, "surface", *tags))
 
 
 def _c(contrast: float) -> str:
@@ -665,6 +671,18 @@ def _extra_cases() -> list[Case]:
         _planar("extra-walk-dark-c0.4-handheld-close", "extra-threat", "dark", "gait",
                 "shake", **{**_WALKER, "height": 40.0, "tau": 1.8},
                 gait=Gait(), camera=_HANDHELD),
+        # a camera closing on a textured plane that fills the view (a robot driving at a wall,
+        # a car at a lorry's back), 3 s from contact at onset, its front 0.12 of the starting
+        # distance ahead of the lens; or backing away; or passing along one
+        _surface("extra-wall-approach", "extra-threat"),
+        _surface("extra-wall-approach-faint", "extra-threat", "contrast", contrast=0.2),
+        _surface("extra-wall-approach-slant", "extra-threat", slant_deg=40.0),
+        _surface("extra-wall-approach-heading", "extra-threat", heading_deg=15.0),
+        _surface("extra-wall-approach-fast", "extra-threat", tau=2.0, period=5.0),
+        _surface("extra-wall-recede", "extra-clear", motion="recede"),
+        _surface("extra-wall-alongside", "extra-pass", motion="alongside", slant_deg=90.0),
+        _surface("extra-wall-alongside-near", "extra-pass", motion="alongside", slant_deg=90.0,
+                 offset=0.25, tau=2.0),
     ]
 
 

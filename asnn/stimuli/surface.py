@@ -1,0 +1,196 @@
+"""A camera moving in front of one textured plane: a wall, a door, the back of a lorry that
+fills the view.
+
+:func:`surface_scene` renders the plane through a pinhole camera (horizontal field of view
+60 degrees) that does not turn. The plane holds a random texture and is seen at a slant (its
+normal turned about the vertical axis by ``slant_deg``: 0 faces the camera, 90 runs along its
+line of sight); where a ray misses it, a uniform backdrop is seen. Every frame is drawn at
+twice its size and area-averaged, so that the far parts of a slanted plane do not alias.
+
+``approach``
+    The camera moves at constant speed along its heading (``heading_deg`` from the optical
+    axis, to the right for positive angles: the focus of expansion lies ``f tan(heading)``
+    pixels right of the frame's centre) until its front, ``standoff`` ahead of the lens,
+    touches the plane: ``tau`` seconds after the onset. Then it stands against it for ``tail``
+    frames. A collision: the contact frame is the one where the front touches; the centre is
+    the focus of expansion.
+``recede``
+    The same motion backwards, for as long: not a collision.
+``alongside``
+    The camera moves parallel to a plane that runs along its line of sight (``slant_deg`` 90)
+    at ``offset`` to its right, as past a corridor's wall or a hedge, at the speed that would
+    take it ``tau`` seconds to cover the distance of the plane's point at the frame's edge: not
+    a collision.
+
+Distances are in units of the plane's distance along the optical axis at the onset.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from . import effects
+from .render import noise_tile
+from .scene import Scene
+
+__all__ = ["SURFACE_MOTIONS", "surface_scene"]
+
+SURFACE_MOTIONS = ("approach", "recede", "alongside")
+_FIELD_OF_VIEW = math.radians(60.0)
+_SUPERSAMPLE = 2
+
+
+def _plane_image(size: tuple[int, int], camera: np.ndarray, normal: np.ndarray,
+                 point: np.ndarray, tile: np.ndarray, texels: float, backdrop: float,
+                 contrast: float, mean: float) -> np.ndarray:
+    """One frame: the plane through ``point`` with unit ``normal``, seen from ``camera``."""
+    w, h = size
+    sw, sh = w * _SUPERSAMPLE, h * _SUPERSAMPLE
+    f = 0.5 * sw / math.tan(0.5 * _FIELD_OF_VIEW)
+    u = (np.arange(sw) - 0.5 * (sw - 1)) / f
+    v = (np.arange(sh) - 0.5 * (sh - 1)) / f
+    rx, ry = np.meshgrid(u, v)
+    facing = normal[0] * rx + normal[1] * ry + normal[2]  # n . ray, ray = (rx, ry, 1)
+    reach = float(normal @ (point - camera))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = reach / facing
+    hit = np.isfinite(s) & (s > 0)
+    # the plane's own axes: horizontal within it, and the vertical
+    across = np.array([normal[2], 0.0, -normal[0]])
+    px = camera[0] + s * rx - point[0]
+    py = camera[1] + s * ry - point[1]
+    pz = camera[2] + s - point[2]
+    tx = np.where(hit, (px * across[0] + pz * across[2]) * texels, 0.0).astype(np.float32)
+    ty = np.where(hit, py * texels, 0.0).astype(np.float32)
+    n = tile.shape[0]
+    values = cv2.remap(tile, np.mod(tx, n), np.mod(ty, n), cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_WRAP)
+    image = np.where(hit, mean * (1.0 + contrast * values), backdrop)
+    return cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
+
+
+def surface_scene(motion: str = "approach", *, name: str = "surface",
+                  size: tuple[int, int] = (160, 120), fps: float = 20.0, onset: int = 20,
+                  tau: float = 3.0, heading_deg: float = 0.0, slant_deg: float = 0.0,
+                  offset: float = 0.5, standoff: float = 0.12, contrast: float = 0.5,
+                  period: float = 3.0, mean: float = 127.5, backdrop: float = 150.0,
+                  tail: int = 2, noise: float = 0.0, seed: int = 0,
+                  category: Sequence[str] = (), twin: str | None = None,
+                  scale: float = 1.0) -> Scene:
+    """A labelled clip of a camera moving in front of a textured plane (module text).
+
+    Parameters
+    ----------
+    motion : str
+        One of :data:`SURFACE_MOTIONS`.
+    name : str
+    size : (width, height)
+    fps : float
+    onset : int
+        Frames of still camera before the motion.
+    tau : float
+        Time to contact at the onset, seconds (``approach``; the same speed for ``recede``).
+    heading_deg : float
+        The camera's heading from its optical axis, degrees (positive: to the right).
+    slant_deg : float
+        The plane's slant, degrees: 0 faces the camera; ``alongside`` needs 90.
+    offset : float
+        The plane's distance to the right of the camera's path (``alongside``).
+    standoff : float
+        How far the camera's front is ahead of its lens (it touches the plane there).
+    contrast : float
+        The texture's Weber contrast: it spans ``mean * (1 +- contrast)``.
+    period : float
+        The texture's smallest structure, in pixels where the plane is at distance 1.
+    mean, backdrop : float
+        Gray levels of the texture's mean and of what lies beyond the plane.
+    tail : int
+        Frames after contact (``approach``).
+    noise : float
+        Standard deviation of the per-frame Gaussian sensor noise, gray levels.
+    seed : int
+        Of the texture and the noise.
+    category : sequence of str
+    twin : str, optional
+    scale : float
+        Drawn with this many times the pixels (the frame size and ``period``).
+
+    Returns
+    -------
+    Scene
+
+    Raises
+    ------
+    ValueError
+        For an unknown motion, a plane the camera does not face, an ``alongside`` plane that
+        does not run along the line of sight, or levels outside 0..255.
+    """
+    if motion not in SURFACE_MOTIONS:
+        raise ValueError(f"unknown motion {motion!r}; choose one of {', '.join(SURFACE_MOTIONS)}")
+    if not scale > 0:
+        raise ValueError(f"scale must be positive, got {scale!r}")
+    if not 0.0 <= contrast < 1.0 or not 0.0 <= mean * (1 + contrast) <= 255:
+        raise ValueError(f"a texture of contrast {contrast} does not fit around mean {mean}")
+    if not tau > 0 or not 0 < standoff < 1:
+        raise ValueError(f"tau must be positive and standoff within (0, 1), got {tau}, {standoff}")
+    if motion == "alongside" and slant_deg != 90.0:
+        raise ValueError("a plane alongside the camera's path runs along its line of sight: "
+                         "slant_deg must be 90")
+    if motion != "alongside" and not abs(slant_deg) < 80.0:
+        raise ValueError(f"the camera must face the plane: |slant_deg| < 80, got {slant_deg}")
+    params = dict(motion=motion, size=tuple(size), fps=fps, onset=onset, tau=tau,
+                  heading_deg=heading_deg, slant_deg=slant_deg, offset=offset,
+                  standoff=standoff, contrast=contrast, period=period, mean=mean,
+                  backdrop=backdrop, tail=tail, noise=noise, seed=seed, scale=scale)
+    if scale != 1.0:
+        size = effects.scaled_size(size, scale)
+        period *= scale
+    w, h = size
+    slant, heading = math.radians(slant_deg), math.radians(heading_deg)
+    normal = np.array([math.sin(slant), 0.0, -math.cos(slant)])  # toward the camera
+    direction = np.array([math.sin(heading), 0.0, math.cos(heading)])
+    f = 0.5 * w / math.tan(0.5 * _FIELD_OF_VIEW)
+    texels = f * _SUPERSAMPLE  # one texel a supersampled pixel at distance 1
+    tile = noise_tile(seed, period * _SUPERSAMPLE, size=512)
+    if motion == "alongside":
+        point = np.array([offset, 0.0, 0.0])
+        edge = offset / math.tan(0.5 * _FIELD_OF_VIEW)  # the plane's point at the frame's edge
+        speed, steps = edge / tau, round(tau * fps)
+        collision = False
+    else:
+        point = np.array([0.0, 0.0, 1.0])
+        along = float(normal @ point) / float(normal @ direction)  # lens to the plane
+        if not along > standoff:
+            raise ValueError("the camera's heading does not meet the plane ahead of it")
+        speed = (along - standoff) / tau
+        steps = round(tau * fps)
+        collision = motion == "approach"
+    sign = -1.0 if motion == "recede" else 1.0
+    total = onset + steps + 1 + (tail if collision else 0)
+    frames = np.empty((total, h, w), np.uint8)
+    ttc = np.full(total, np.nan)
+    rng = np.random.default_rng(seed)
+    for k in range(total):
+        moved = min(max(k - onset, 0), steps) / fps
+        camera = sign * speed * moved * direction
+        image = _plane_image((w, h), camera, normal, point, tile, texels, backdrop, contrast,
+                             mean)
+        if noise:
+            image = image + rng.normal(0.0, noise, image.shape)
+        frames[k] = np.clip(np.rint(image), 0, 255)
+        if collision and onset <= k <= onset + steps:
+            ttc[k] = tau - moved
+    focus = ((w - 1) / 2 + f * math.tan(heading), (h - 1) / 2)
+    track = None
+    if collision:
+        track = np.full((total, 2), np.nan)
+        track[onset:] = focus
+    return Scene(name=name, frames=frames, fps=fps, collision=collision,
+                 onset_frame=onset if collision else None,
+                 contact_frame=onset + steps if collision else None,
+                 center=focus if collision else None, params=params, track=track,
+                 ttc=ttc if collision else None, category=tuple(category), twin=twin)
