@@ -311,6 +311,13 @@ class ASNNParams(BaseModel):
         "other by a fair part, while a large new track that takes in a few small passing ones "
         "around it (a wet road's headlight reflections, re-encoded) has to persist by its own "
         "frames (asnn.approach.tracking.persists_in_region); 0: any overlap")
+    surface_ahead: bool = Field(
+        False, description="a second pathway for a surface that fills the view and closes in "
+        "(a wall, a door, a lorry's back at a metre), which the retina's filtering cancels: "
+        "where the whole frame expands as one plane, its tiles alike, with a time to contact "
+        "of at most tau_max and its focus within offset_max of the centre, in approach_frames "
+        "frames in a row, u(t) gains the potential of one spike a frame and the view is a "
+        "target (asnn.approach.surface); needs targets='objects'")
     ignore_rig: bool = Field(
         False, description="leave out of the looming fits the edges that stay still at the "
         "frame's top and bottom (asnn.approach.looming.rig_pixels): the camera's own hood or "
@@ -370,7 +377,7 @@ class ASNNParams(BaseModel):
             raise ValueError(f"dt * decay / tau is {step:g}: the temporal filter (eq. 5) is "
                              "unstable at 2 or more; lower dt or decay, or raise tau")
         needing = [name for name in ("approach_gate", "scene_relative", "object_ids",
-                                     "ignore_rig") if getattr(self, name)]
+                                     "ignore_rig", "surface_ahead") if getattr(self, name)]
         if needing and self.targets != "objects":  # every stage that works on the objects
             raise ValueError(f"{', '.join(needing)} need{'s' if len(needing) == 1 else ''} "
                              f"targets='objects': set {'=False, '.join(needing)}=False too")
@@ -478,6 +485,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     max_width=480, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
     region_persistence=True, region_cover=0.2, object_ids=True, motion_layers=True, ignore_rig=True,
+    surface_ahead=True,
 ))
 DEFAULT_PRESET = "robust"
 # frames a second below which the default preset loses hits (README, "At half the frame rate"):

@@ -36,6 +36,7 @@ from ..targets import Target, extract_objects
 from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
                       region_expansion, rig_pixels, rig_rows, rim_scaled, scene_expansion)
 from .motion_layers import motion_layers
+from .surface import SurfaceWatch
 from .tracking import Observation, TargetTracker, approach_test, persistence_frames
 
 __all__ = ["ApproachStage", "CameraRig", "FramePair", "frame_pixel"]
@@ -164,6 +165,8 @@ class ApproachStage:
         The tracked objects.
     rig : CameraRig
         The camera's rig, which the looming fits leave out (``ignore_rig``).
+    surface : SurfaceWatch
+        The whole view's expansion and its verdicts (``surface_ahead``).
     objects : list of (Track, float)
         The objects seen in the latest frame with their share of ``sum |G'|`` (or
         ``sum G'``), in the frame's order; what the approach gate decided on.
@@ -189,6 +192,7 @@ class ApproachStage:
                                      p.approach_frames if p.region_persistence else 0,
                                      p.object_ids, p.region_cover)
         self.rig = CameraRig()
+        self.surface = SurfaceWatch()
         self.objects: list = []
         self.against_scene: dict[int, float | None] = {}
         self.fit_against_scene: dict[int, float | None] = {}
@@ -243,12 +247,17 @@ class ApproachStage:
         self.against_scene = {}
         self.fit_against_scene = {}
         self.layers = {}
+        persistence = persistence_frames(p.approach_frames, p.approach_seconds, period)
+        surface = self._surface_ahead(frames, g.size, persistence, scale)
         if attended is None:
             self.tracker.update([], elapsed)
             if p.scene_relative:
                 self._measure_against_scene([], [], [], frames)
             self.objects = []
-            return (0.0 if p.approach_gate else total), [], ([] if record else None)
+            total = 0.0 if p.approach_gate else total
+            if surface is not None:
+                return total + surface[0], [surface[1]], ([] if record else None)
+            return total, [], ([] if record else None)
         regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
                                   points=points)
         h, w = attended.shape
@@ -282,7 +291,6 @@ class ApproachStage:
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frames)
-        persistence = persistence_frames(p.approach_frames, p.approach_seconds, period)
         coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, persistence,
                                     self._overlap, p.scene_tolerance)
         self.objects = list(zip(tracks, shares))
@@ -304,7 +312,36 @@ class ApproachStage:
             # an object seen as several fragments is one target: its largest
             if target.id not in targets or target.pixels > targets[target.id].pixels:
                 targets[target.id] = target
+        if surface is not None:
+            total += surface[0]
+            targets[surface[1].id] = surface[1]
         return total, list(targets.values()), reports
+
+    def _surface_ahead(self, frames: FramePair, cells: int, persistence: int,
+                       scale: tuple[float, float]) -> tuple[float, Target] | None:
+        """With ``surface_ahead``, the whole view measured (:class:`SurfaceWatch`); where it
+        has been a surface ahead in ``persistence`` frames in a row, what it adds to the
+        summed ``G'`` (the potential of one spike on ``cells`` cells: eq. 32-33) and its target
+        (the focus of expansion, the whole frame's pixels, a new id for each run of frames)."""
+        p = self.params
+        if not p.surface_ahead:
+            return None
+        watch = self.surface
+        s = watch.step(frames.previous, frames.current, frames.elapsed, p.tau_max, p.offset_max,
+                       self.rig.mask)
+        if watch.streak < persistence:
+            return None
+        if watch.id is None:
+            watch.id = self.tracker.new_id()
+        sx, sy = scale
+        h, w = frames.current.shape
+        # out(t) at T_sp + 1 / (2 K_sp): one spike a frame (floor(e^0.5)), whatever the preset
+        out = min(p.t_sp + 0.5 / p.k_sp, 0.999)
+        potential = math.log(out / (1.0 - out)) * cells / p.u_scale
+        target = Target(x=frame_pixel(s.x, sx), y=frame_pixel(s.y, sy), direction=0.0,
+                        energy=0.0, pixels=round(w * h * sx * sy), id=watch.id,
+                        expansion=s.rate, ttc=1.0 / s.rate, offset=s.offset, approaching=True)
+        return potential, target
 
     def _report(self, track, counts: bool, share: float, sx: float, sy: float) -> TrackReport:
         """A track as the approach test saw it in this frame, in the input frame's pixels."""

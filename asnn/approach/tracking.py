@@ -592,6 +592,12 @@ class TargetTracker:
             self._name_objects(tracks, coming)
         return coming
 
+    def new_id(self) -> int:
+        """An id no track has had or will have: for a target that is not a track (the
+        surface ahead, :mod:`asnn.approach.surface`)."""
+        self._next_id += 1
+        return self._next_id - 1
+
     def object_id(self, track: Track) -> int:
         """The id to report ``track`` under: its object's (with ``object_ids``, the track a
         fragment was named after), else its own."""

@@ -1,0 +1,187 @@
+"""A surface ahead: the whole view expanding as one plane, as when the camera drives at a wall.
+
+The retina's layers answer an object's edges moving against its surround; where one textured
+surface fills the view and the camera closes on it (a wall, a door, the back of a lorry at a
+metre), every part of the view moves alike, the centre-surround and direction-selective
+filtering cancel it, and the attention finds nothing: the published model, both LGMD
+baselines and the object stage all stay silent up to contact. Flies have a separate pathway for
+this, the landing response to wide-field expansion, apart from collision avoidance of a small
+looming object (Tammero & Dickinson 2002 [1]_).
+
+:func:`surface_expansion` measures it with the looming model of the object stage
+(:func:`asnn.approach.looming.region_expansion`, Horn et al.'s time to contact relative to a
+planar surface [2]_) on the two frames area-averaged to 64 pixels, over the whole frame and
+over each of its 3x3 tiles; :class:`SurfaceWatch` keeps a stream's verdicts. The view is a
+surface ahead when the whole frame's fit explains at least :data:`FIT_MIN` of its change with a
+time to contact of at most ``tau_max`` and a focus of expansion within ``offset_max`` of the
+frame's centre (in the frame's RMS radius), and the tiles agree: at least :data:`TILES_MIN` of
+them expand, each fitted with at least :data:`TILE_FIT_MIN`, at a median rate of at least
+:data:`TILE_RATE_SHARE` of the whole frame's. The tiles are what tell a wall from a road: under
+forward motion over the ground the sky does not move and the road's expansion grows toward the
+frame's bottom, so the whole-frame fit may read a short time to contact while the tiles
+disagree; and a looming object in the middle of a still view expands in the middle tile alone.
+The four numbers were set on generated walls against every other generated scene
+(docs/design-notes.md, "A surface ahead").
+
+References
+----------
+.. [1] L. F. Tammero, M. H. Dickinson, "Collision-avoidance and landing responses are mediated
+   by separate pathways in the fruit fly, Drosophila melanogaster", Journal of Experimental
+   Biology 205, 2002, pp. 2785-2798.
+.. [2] B. K. P. Horn, Y. Fang, I. Masaki, "Time to contact relative to a planar surface",
+   IEEE Intelligent Vehicles Symposium, 2007, pp. 68-74.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+
+from .looming import region_expansion
+
+__all__ = ["FIT_MIN", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN", "TILE_RATE_SHARE",
+           "Surface", "SurfaceWatch", "shrunk", "surface_expansion"]
+
+SIDE = 64  # pixels on the frames' larger side for the fits
+FIT_MIN = 0.3
+TILES = 3  # tiles a side
+TILES_MIN = 8  # of 9
+TILE_FIT_MIN = 0.1
+TILE_RATE_SHARE = 0.5  # the tiles' median rate against the whole frame's: not a looming object
+
+
+class Surface(NamedTuple):
+    """The whole view's expansion in one frame.
+
+    Attributes
+    ----------
+    rate : float
+        Expansion rate of the whole frame, per second (> 0: closing in).
+    x, y : float
+        The focus of expansion, model pixels (the frame's centre less drift over rate).
+    offset : float
+        The focus's distance from the frame's centre over the frame's RMS radius
+        ``sqrt((w^2 + h^2) / 12)``: 0 heading at the frame's centre.
+    fit : float
+        The share of the frame's change the whole-frame fit explains.
+    tiles : int
+        Tiles of the 3x3 grid that expand with a fit of at least :data:`TILE_FIT_MIN`
+        (0 where not measured: the whole frame failed first).
+    tile_rate : float
+        The median of the tiles' expansion rates, per second (0 where not measured).
+    """
+
+    rate: float
+    x: float
+    y: float
+    offset: float
+    fit: float
+    tiles: int
+    tile_rate: float
+
+
+def shrunk(image: np.ndarray) -> np.ndarray:
+    """``image`` area-averaged to at most :data:`SIDE` pixels on its larger side (as it is)."""
+    h, w = image.shape
+    step = max(w, h) / SIDE
+    if step <= 1.0:
+        return image
+    size = (max(round(w / step), 1), max(round(h / step), 1))
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+
+
+def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
+                      tau_max: float, offset_max: float, exclude: np.ndarray | None = None
+                      ) -> tuple[Surface | None, bool]:
+    """The whole view's expansion between two frames, and whether it is a surface ahead.
+
+    Both frames are area-averaged to at most :data:`SIDE` pixels a side first (:func:`shrunk`),
+    so that each tile is fitted, as the whole frame is, on averages in which sensor noise
+    does not hide the change.
+
+    Parameters
+    ----------
+    previous, current : ndarray (H, W)
+        Luminance of two frames, float (or already :func:`shrunk`, with ``exclude`` alike).
+    elapsed : float
+        Seconds between them.
+    tau_max, offset_max : float
+        The approach test's longest time to contact (s) and largest offset, here of the focus
+        of expansion in the frame's RMS radius.
+    exclude : ndarray (H, W) of bool, optional
+        Pixels to leave out (the camera's rig); a shrunk pixel is left out when a quarter of
+        its area is.
+
+    Returns
+    -------
+    surface : Surface or None
+        In the frames' pixels; None where the frame holds nothing to fit.
+    ahead : bool
+        Whether this frame passes the test (module text); the tiles are fitted only where the
+        whole frame passes.
+    """
+    h, w = current.shape
+    before, after = shrunk(previous), shrunk(current)
+    sh, sw = after.shape
+    if exclude is not None:
+        exclude = (exclude if (sh, sw) == (h, w) else
+                   cv2.resize(exclude.astype(np.float32), (sw, sh),
+                              interpolation=cv2.INTER_AREA) > 0.25)
+    whole = region_expansion(before, after, (0, 0, sw, sh), None, exclude)
+    if whole is None or not elapsed > 0 or whole.rate <= 0:
+        return None, False
+    rate = whole.rate / elapsed
+    offset = (math.hypot(whole.drift_x, whole.drift_y)
+              / (whole.rate * math.sqrt((sw * sw + sh * sh) / 12.0)))
+    # the focus of expansion, back in the frames' pixels
+    x = (0.5 * (sw - 1) - whole.drift_x / whole.rate + 0.5) * w / sw - 0.5
+    y = (0.5 * (sh - 1) - whole.drift_y / whole.rate + 0.5) * h / sh - 0.5
+    if not (rate * tau_max >= 1.0 and offset <= offset_max and whole.fit >= FIT_MIN):
+        return Surface(rate, x, y, offset, whole.fit, 0, 0.0), False
+    rates, expanding = [], 0
+    for i in range(TILES):
+        for j in range(TILES):
+            box = (j * sw // TILES, i * sh // TILES, (j + 1) * sw // TILES,
+                   (i + 1) * sh // TILES)
+            tile = region_expansion(before, after, box, None, exclude)
+            if tile is None:
+                continue
+            rates.append(tile.rate / elapsed)
+            expanding += tile.rate > 0 and tile.fit >= TILE_FIT_MIN
+    tile_rate = float(np.median(rates)) if rates else 0.0
+    ahead = expanding >= TILES_MIN and tile_rate >= TILE_RATE_SHARE * rate
+    return Surface(rate, x, y, offset, whole.fit, expanding, tile_rate), ahead
+
+
+class SurfaceWatch:
+    """One stream's surface-ahead verdicts: the frames in a row that passed, and the id the
+    surface is reported under while it persists.
+
+    Attributes
+    ----------
+    streak : int
+        Frames in a row that passed :func:`surface_expansion`'s test.
+    surface : Surface or None
+        The latest frame's measurement.
+    id : int or None
+        The target id of the current run of passing frames (a new one for each run).
+    """
+
+    def __init__(self) -> None:
+        self.streak = 0
+        self.surface: Surface | None = None
+        self.id: int | None = None
+
+    def step(self, previous: np.ndarray, current: np.ndarray, elapsed: float, tau_max: float,
+             offset_max: float, exclude: np.ndarray | None = None) -> Surface | None:
+        """Measure one frame; the surface where it has passed in enough frames is for the
+        caller to judge from :attr:`streak`."""
+        self.surface, ahead = surface_expansion(previous, current, elapsed, tau_max, offset_max,
+                                                exclude)
+        self.streak = self.streak + 1 if ahead else 0
+        if not ahead:
+            self.id = None
+        return self.surface
