@@ -56,7 +56,10 @@ class Maps:
 @dataclass(frozen=True, slots=True)
 class TrackReport:
     """One tracked object as the approach test saw it in one frame, for tracing why the model
-    warned or stayed silent (:class:`asnn.model.ASNN` with ``record_tracks``).
+    warned or stayed silent (:class:`asnn.model.ASNN` with ``record_tracks``). The surface
+    ahead (``surface_ahead``), in the frames it counts, is reported as one more: the whole
+    frame as its box, its RMS radius as its size, the whole frame's fit, and a test passed on
+    the collision course.
 
     Attributes
     ----------

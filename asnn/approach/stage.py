@@ -36,8 +36,9 @@ from ..targets import Target, extract_objects
 from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
                       region_expansion, rig_pixels, rig_rows, rim_scaled, scene_expansion)
 from .motion_layers import motion_layers
-from .surface import SurfaceWatch
-from .tracking import Observation, TargetTracker, approach_test, persistence_frames
+from .surface import SurfaceWatch, surface_frames
+from .tracking import (ApproachVerdict, Observation, TargetTracker, approach_test,
+                       persistence_frames)
 
 __all__ = ["ApproachStage", "CameraRig", "FramePair", "frame_pixel"]
 
@@ -247,8 +248,7 @@ class ApproachStage:
         self.against_scene = {}
         self.fit_against_scene = {}
         self.layers = {}
-        persistence = persistence_frames(p.approach_frames, p.approach_seconds, period)
-        surface = self._surface_ahead(frames, g.size, persistence, scale)
+        surface = self._surface_ahead(frames, g.size, period, scale)
         if attended is None:
             self.tracker.update([], elapsed)
             if p.scene_relative:
@@ -256,7 +256,8 @@ class ApproachStage:
             self.objects = []
             total = 0.0 if p.approach_gate else total
             if surface is not None:
-                return total + surface[0], [surface[1]], ([] if record else None)
+                potential, target, report = surface
+                return total + potential, [target], ([report] if record else None)
             return total, [], ([] if record else None)
         regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
                                   points=points)
@@ -291,6 +292,7 @@ class ApproachStage:
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frames)
+        persistence = persistence_frames(p.approach_frames, p.approach_seconds, period)
         coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, persistence,
                                     self._overlap, p.scene_tolerance)
         self.objects = list(zip(tracks, shares))
@@ -313,23 +315,28 @@ class ApproachStage:
             if target.id not in targets or target.pixels > targets[target.id].pixels:
                 targets[target.id] = target
         if surface is not None:
-            total += surface[0]
-            targets[surface[1].id] = surface[1]
+            potential, target, report = surface
+            total += potential
+            targets[target.id] = target
+            if record:
+                reports.append(report)
         return total, list(targets.values()), reports
 
-    def _surface_ahead(self, frames: FramePair, cells: int, persistence: int,
-                       scale: tuple[float, float]) -> tuple[float, Target] | None:
+    def _surface_ahead(self, frames: FramePair, cells: int, period: float,
+                       scale: tuple[float, float]) -> tuple[float, Target, TrackReport] | None:
         """With ``surface_ahead``, the whole view measured (:class:`SurfaceWatch`); where it
-        has been a surface ahead in ``persistence`` frames in a row, what it adds to the
-        summed ``G'`` (the potential of one spike on ``cells`` cells: eq. 32-33) and its target
-        (the focus of expansion, the whole frame's pixels, a new id for each run of frames)."""
+        has been a surface ahead for :data:`~asnn.approach.surface.SECONDS` at the stream's
+        frame ``period`` (:func:`~asnn.approach.surface.surface_frames`), what it adds to the
+        summed ``G'`` (the potential of one spike on ``cells`` cells: eq. 32-33), its target
+        (the focus of expansion, the whole frame's pixels, a new id for each run of frames)
+        and its report for ``--tracks`` (the whole frame as its box)."""
         p = self.params
         if not p.surface_ahead:
             return None
         watch = self.surface
         s = watch.step(frames.previous, frames.current, frames.elapsed, p.tau_max, p.offset_max,
                        self.rig.mask)
-        if watch.streak < persistence:
+        if watch.streak < surface_frames(period):
             return None
         if watch.id is None:
             watch.id = self.tracker.new_id()
@@ -338,10 +345,17 @@ class ApproachStage:
         # out(t) at T_sp + 1 / (2 K_sp): one spike a frame (floor(e^0.5)), whatever the preset
         out = min(p.t_sp + 0.5 / p.k_sp, 0.999)
         potential = math.log(out / (1.0 - out)) * cells / p.u_scale
-        target = Target(x=frame_pixel(s.x, sx), y=frame_pixel(s.y, sy), direction=0.0,
-                        energy=0.0, pixels=round(w * h * sx * sy), id=watch.id,
-                        expansion=s.rate, ttc=1.0 / s.rate, offset=s.offset, approaching=True)
-        return potential, target
+        x, y, ttc = frame_pixel(s.x, sx), frame_pixel(s.y, sy), 1.0 / s.rate
+        target = Target(x=x, y=y, direction=0.0, energy=0.0, pixels=round(w * h * sx * sy),
+                        id=watch.id, expansion=s.rate, ttc=ttc, offset=s.offset,
+                        approaching=True)
+        report = TrackReport(
+            id=watch.id, object_id=watch.id, x=x, y=y,
+            size=math.sqrt((w * w + h * h) / 12.0 * sx * sy), box=(0.0, 0.0, w * sx, h * sy),
+            expansion=s.rate, ttc=ttc, offset=s.offset, fit=s.fit, own_expansion=None,
+            layers=None, streak=watch.streak,
+            test=ApproachVerdict(True, True, False, True, True), counts=True, share=potential)
+        return potential, target, report
 
     def _report(self, track, counts: bool, share: float, sx: float, sy: float) -> TrackReport:
         """A track as the approach test saw it in this frame, in the input frame's pixels."""

@@ -16,12 +16,13 @@ surface ahead when the whole frame's fit explains at least :data:`FIT_MIN` of it
 time to contact of at most ``tau_max`` and a focus of expansion within ``offset_max`` of the
 frame's centre (in the frame's RMS radius), and the tiles agree: at least :data:`TILES_MIN` of
 them expand, each fitted with at least :data:`TILE_FIT_MIN`, at a median rate of at least
-:data:`TILE_RATE_SHARE` of the whole frame's. The tiles are what tell a wall from a road: under
-forward motion over the ground the sky does not move and the road's expansion grows toward the
-frame's bottom, so the whole-frame fit may read a short time to contact while the tiles
-disagree; and a looming object in the middle of a still view expands in the middle tile alone.
-The four numbers were set on generated walls against every other generated scene
-(docs/design-notes.md, "A surface ahead").
+:data:`TILE_RATE_SHARE` of the whole frame's; in every frame of :data:`SECONDS` in a row. The
+tiles tell a wall from a looming object in a still view, which expands in its middle tile
+alone. From a road they tell it only in part: under forward motion the sky does not move and
+the road's expansion grows toward the frame's bottom, yet where roadside things fill the view
+the tiles agree in runs of a few frames; the drives' runs are short, a wall's last, and the
+duration is what tells them apart (docs/design-notes.md, "A surface ahead, adopted", where the
+numbers were set on generated walls against every other generated scene).
 
 References
 ----------
@@ -42,10 +43,14 @@ import numpy as np
 
 from .looming import region_expansion
 
-__all__ = ["FIT_MIN", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN", "TILE_RATE_SHARE",
+__all__ = ["FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN", "TILE_RATE_SHARE",
            "Surface", "SurfaceWatch", "shrunk", "surface_expansion"]
 
 SIDE = 64  # pixels on the frames' larger side for the fits
+# how long the view must read as a surface ahead: 7 frames at 20 fps. The generated drives'
+# whole frame passes in runs of up to 5 frames (0.2 s; a truck overtaking, turns past oncoming
+# cars), a wall's in runs of 11 or more from about a second before contact
+SECONDS = 0.3
 FIT_MIN = 0.3
 TILES = 3  # tiles a side
 TILES_MIN = 8  # of 9
@@ -154,6 +159,15 @@ def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
     tile_rate = float(np.median(rates)) if rates else 0.0
     ahead = expanding >= TILES_MIN and tile_rate >= TILE_RATE_SHARE * rate
     return Surface(rate, x, y, offset, whole.fit, expanding, tile_rate), ahead
+
+
+def surface_frames(period: float) -> int:
+    """Frames in a row the surface test must pass at the frame ``period`` (s): as many as span
+    :data:`SECONDS` (7 at 20 fps, 10 at 30, 4 at 10)."""
+    if not period > 0.0:
+        return 1 + math.ceil(SECONDS / 0.05 - 1e-3)
+    # a thousandth of a frame's slack, as for the tracks' persistence: 0.05 s stamps read 0.0499...
+    return 1 + math.ceil(SECONDS / period - 1e-3)
 
 
 class SurfaceWatch:
