@@ -9,6 +9,9 @@
     A box's dense motion split into its layers (a car and the scenery behind it).
 ``tracking.py``
     Objects linked across frames, their time to contact and offset, and the approach test.
+``surface.py``
+    The surface ahead: the whole view expanding as one plane (a wall filling it), which the
+    retina's filtering cancels, measured on the frames beside the objects.
 
 The retina (:mod:`asnn.retina`, :class:`asnn.model.ASNN`) hands it each frame's attended mask
 and approach map; the paper's own presets do not use it.

@@ -44,7 +44,7 @@ import numpy as np
 from .looming import region_expansion
 
 __all__ = ["FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN", "TILE_RATE_SHARE",
-           "Surface", "SurfaceWatch", "shrunk", "surface_expansion"]
+           "Surface", "SurfaceWatch", "shrunk", "surface_expansion", "surface_frames"]
 
 SIDE = 64  # pixels on the frames' larger side for the fits
 # how long the view must read as a surface ahead: 7 frames at 20 fps. The generated drives'
@@ -99,8 +99,8 @@ def shrunk(image: np.ndarray) -> np.ndarray:
 
 
 def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
-                      tau_max: float, offset_max: float, exclude: np.ndarray | None = None
-                      ) -> tuple[Surface | None, bool]:
+                      tau_max: float, offset_max: float, exclude: np.ndarray | None = None,
+                      kept: list | None = None) -> tuple[Surface | None, bool]:
     """The whole view's expansion between two frames, and whether it is a surface ahead.
 
     Both frames are area-averaged to at most :data:`SIDE` pixels a side first (:func:`shrunk`),
@@ -119,6 +119,10 @@ def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
     exclude : ndarray (H, W) of bool, optional
         Pixels to leave out (the camera's rig); a shrunk pixel is left out when a quarter of
         its area is.
+    kept : list, optional
+        A stream's memo ``[frame, its shrunk form]`` (start with ``[None, None]``): where
+        ``previous`` is the frame it holds, its shrunk form is taken from it; it then holds
+        ``current``'s (the frames must not change in between).
 
     Returns
     -------
@@ -129,7 +133,10 @@ def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
         whole frame passes.
     """
     h, w = current.shape
-    before, after = shrunk(previous), shrunk(current)
+    before = kept[1] if kept is not None and kept[0] is previous else shrunk(previous)
+    after = shrunk(current)
+    if kept is not None:
+        kept[:] = current, after
     sh, sw = after.shape
     if exclude is not None:
         exclude = (exclude if (sh, sw) == (h, w) else
@@ -163,9 +170,10 @@ def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
 
 def surface_frames(period: float) -> int:
     """Frames in a row the surface test must pass at the frame ``period`` (s): as many as span
-    :data:`SECONDS` (7 at 20 fps, 10 at 30, 4 at 10)."""
+    :data:`SECONDS` (7 at 20 fps, 10 at 30, 4 at 10); a period not known yet (0) is taken as
+    20 fps's, the rate the rule was set at."""
     if not period > 0.0:
-        return 1 + math.ceil(SECONDS / 0.05 - 1e-3)
+        period = 0.05
     # a thousandth of a frame's slack, as for the tracks' persistence: 0.05 s stamps read 0.0499...
     return 1 + math.ceil(SECONDS / period - 1e-3)
 
@@ -188,13 +196,14 @@ class SurfaceWatch:
         self.streak = 0
         self.surface: Surface | None = None
         self.id: int | None = None
+        self._kept: list = [None, None]  # the latest frame and its shrunk form
 
     def step(self, previous: np.ndarray, current: np.ndarray, elapsed: float, tau_max: float,
              offset_max: float, exclude: np.ndarray | None = None) -> Surface | None:
         """Measure one frame; the surface where it has passed in enough frames is for the
         caller to judge from :attr:`streak`."""
         self.surface, ahead = surface_expansion(previous, current, elapsed, tau_max, offset_max,
-                                                exclude)
+                                                exclude, self._kept)
         self.streak = self.streak + 1 if ahead else 0
         if not ahead:
             self.id = None

@@ -22,6 +22,13 @@ frame recorded (their time to contact, offset and share of ``u``), and the gate,
 the warning are replayed for each grid point (:func:`replay`); the replay with the preset's own
 thresholds reproduces the model's warnings frame for frame (``tests/test_heldout.py``), and
 every held-out run checks that it does on each clip it traced (:func:`check_replay`).
+
+The surface-ahead pathway (``surface_ahead``) is not replayed: it reads the frames, not the
+objects. Where it counts, the check above fails, so a traced clip it warned on is refused
+rather than scored wrong. On the clips and cases this procedure traces it never counts: at the
+grid's loosest limits (``tau_max`` 2.5 s, ``offset_max`` 2) the rule passes in at most one
+frame in a row of the real clips and three of the suite's cases, where 0.3 s of frames (10 at
+30 fps, 7 at 20) are needed (a screen of the rule on the frames, 2026-11-29).
 """
 
 from __future__ import annotations
