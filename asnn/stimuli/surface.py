@@ -171,19 +171,15 @@ def surface_scene(motion: str = "approach", *, name: str = "surface",
         collision = motion == "approach"
     sign = -1.0 if motion == "recede" else 1.0
     total = onset + steps + 1 + (tail if collision else 0)
-    frames = np.empty((total, h, w), np.uint8)
+    clip = np.empty((total, h, w))
     ttc = np.full(total, np.nan)
-    rng = np.random.default_rng(seed)
     for k in range(total):
         moved = min(max(k - onset, 0), steps) / fps
-        camera = sign * speed * moved * direction
-        image = _plane_image((w, h), camera, normal, point, tile, texels, backdrop, contrast,
-                             mean)
-        if noise:
-            image = image + rng.normal(0.0, noise, image.shape)
-        frames[k] = np.clip(np.rint(image), 0, 255)
+        clip[k] = _plane_image((w, h), sign * speed * moved * direction, normal, point, tile,
+                               texels, backdrop, contrast, mean)
         if collision and onset <= k <= onset + steps:
             ttc[k] = tau - moved
+    frames = np.clip(np.rint(effects.sensor_noise(clip, noise, seed)), 0, 255).astype(np.uint8)
     focus = ((w - 1) / 2 + f * math.tan(heading), (h - 1) / 2)
     track = None
     if collision:
