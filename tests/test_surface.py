@@ -201,3 +201,17 @@ def test_a_drive_whose_whole_view_agrees_for_a_few_frames_stays_quiet_by_the_dur
     monkeypatch.setattr(surface, "SECONDS", 0.1)
     _, shorter = _run(*case)
     assert _warned(shorter)
+
+
+def test_the_tracks_report_the_surface_in_the_frames_it_counts():
+    scene = make_case("extra-wall-approach")
+    model = ASNN(record_tracks=True)
+    responses = [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
+    warned = [r for r in responses if r.collision and r.targets]
+    assert warned
+    for r in warned:
+        (surface,) = [t for t in r.tracks if t.box == (0.0, 0.0, 160.0, 120.0)]
+        assert surface.counts and surface.test.passes and surface.streak >= 7
+        assert surface.id == r.targets[0].id and surface.share > 0
+    quiet = [r for r in responses if not r.targets]
+    assert quiet and not any(t.box == (0.0, 0.0, 160.0, 120.0) for r in quiet for t in r.tracks)
