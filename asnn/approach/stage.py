@@ -196,6 +196,10 @@ class ApproachStage:
                                      p.object_ids, p.region_cover)
         self.rig = CameraRig()
         self.surface = SurfaceWatch()
+        # |u| / N at which out(t) (eq. 32) reads T_sp + 1 / (2 K_sp): one spike a frame
+        # (floor(e^0.5), eq. 33) while a surface ahead counts, whatever the preset
+        out = min(p.t_sp + 0.5 / p.k_sp, 0.999)
+        self._surface_potential = math.log(out / (1.0 - out))
         self.objects: list = []
         self.against_scene: dict[int, float | None] = {}
         self.fit_against_scene: dict[int, float | None] = {}
@@ -250,7 +254,7 @@ class ApproachStage:
         self.against_scene = {}
         self.fit_against_scene = {}
         self.layers = {}
-        surface = self._surface_ahead(frames, g.size, period, scale)
+        surface = self._surface_ahead(frames, g.size, period, scale, record)
         if attended is None:
             self.tracker.update([], elapsed)
             if p.scene_relative:
@@ -259,7 +263,7 @@ class ApproachStage:
             total = 0.0 if p.approach_gate else total
             if surface is not None:
                 potential, target, report = surface
-                return total + potential, [target], ([report] if record else None)
+                return total + potential, [target], report
             return total, [], ([] if record else None)
         regions = extract_objects(attended, g, vectors, p.min_object_pixels, p.u_abs,
                                   points=points)
@@ -321,17 +325,19 @@ class ApproachStage:
             total += potential
             targets[target.id] = target
             if record:
-                reports.append(report)
+                reports += report
         return total, list(targets.values()), reports
 
     def _surface_ahead(self, frames: FramePair, cells: int, period: float,
-                       scale: tuple[float, float]) -> tuple[float, Target, TrackReport] | None:
+                       scale: tuple[float, float], record: bool
+                       ) -> tuple[float, Target, list[TrackReport] | None] | None:
         """With ``surface_ahead``, the whole view measured (:class:`SurfaceWatch`); where it
         has been a surface ahead for :data:`~asnn.approach.surface.SECONDS` at the stream's
         frame ``period`` (:func:`~asnn.approach.surface.surface_frames`), what it adds to the
         summed ``G'`` (the potential of one spike on ``cells`` cells: eq. 32-33), its target
         (the focus of expansion, the whole frame's pixels, a new id for each run of frames)
-        and its report for ``--tracks`` (the whole frame as its box)."""
+        and, with ``record``, its report for ``--tracks`` (the whole frame as its box) in a
+        list."""
         p = self.params
         if not p.surface_ahead:
             return None
@@ -344,20 +350,20 @@ class ApproachStage:
             watch.id = self.tracker.new_id()
         sx, sy = scale
         h, w = frames.current.shape
-        # out(t) at T_sp + 1 / (2 K_sp): one spike a frame (floor(e^0.5)), whatever the preset
-        out = min(p.t_sp + 0.5 / p.k_sp, 0.999)
-        potential = math.log(out / (1.0 - out)) * cells / p.u_scale
+        potential = self._surface_potential * cells / p.u_scale
         x, y, ttc = frame_pixel(s.x, sx), frame_pixel(s.y, sy), 1.0 / s.rate
         target = Target(x=x, y=y, direction=0.0, energy=0.0, pixels=round(w * h * sx * sy),
                         id=watch.id, expansion=s.rate, ttc=ttc, offset=s.offset,
                         approaching=True)
+        if not record:
+            return potential, target, None
         report = TrackReport(
             id=watch.id, object_id=watch.id, x=x, y=y,
             size=math.sqrt((w * w + h * h) / 12.0 * sx * sy), box=(0.0, 0.0, w * sx, h * sy),
             expansion=s.rate, ttc=ttc, offset=s.offset, fit=s.fit, own_expansion=None,
             layers=None, streak=watch.streak,
             test=ApproachVerdict(True, True, False, True, True), counts=True, share=potential)
-        return potential, target, report
+        return potential, target, [report]
 
     def _report(self, track, counts: bool, share: float, sx: float, sy: float) -> TrackReport:
         """A track as the approach test saw it in this frame, in the input frame's pixels."""

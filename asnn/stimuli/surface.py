@@ -44,17 +44,25 @@ _FIELD_OF_VIEW = math.radians(60.0)
 _SUPERSAMPLE = 2
 
 
-def _plane_image(size: tuple[int, int], camera: np.ndarray, normal: np.ndarray,
-                 point: np.ndarray, tile: np.ndarray, texels: float, backdrop: float,
-                 contrast: float, mean: float) -> np.ndarray:
-    """One frame: the plane through ``point`` with unit ``normal``, seen from ``camera``."""
+def _rays(size: tuple[int, int], normal: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The supersampled pixels' rays ``(rx, ry, 1)`` of a camera that does not turn, and their
+    dot product with the plane's ``normal``: the same in every frame."""
     w, h = size
     sw, sh = w * _SUPERSAMPLE, h * _SUPERSAMPLE
     f = 0.5 * sw / math.tan(0.5 * _FIELD_OF_VIEW)
     u = (np.arange(sw) - 0.5 * (sw - 1)) / f
     v = (np.arange(sh) - 0.5 * (sh - 1)) / f
     rx, ry = np.meshgrid(u, v)
-    facing = normal[0] * rx + normal[1] * ry + normal[2]  # n . ray, ray = (rx, ry, 1)
+    return rx, ry, normal[0] * rx + normal[1] * ry + normal[2]
+
+
+def _plane_image(size: tuple[int, int], rays: tuple[np.ndarray, ...], camera: np.ndarray,
+                 normal: np.ndarray, point: np.ndarray, tile: np.ndarray, texels: float,
+                 backdrop: float, contrast: float, mean: float) -> np.ndarray:
+    """One frame: the plane through ``point`` with unit ``normal``, seen from ``camera`` along
+    ``rays`` (:func:`_rays`)."""
+    w, h = size
+    rx, ry, facing = rays
     reach = float(normal @ (point - camera))
     with np.errstate(divide="ignore", invalid="ignore"):
         s = reach / facing
@@ -173,10 +181,11 @@ def surface_scene(motion: str = "approach", *, name: str = "surface",
     total = onset + steps + 1 + (tail if collision else 0)
     clip = np.empty((total, h, w))
     ttc = np.full(total, np.nan)
+    rays = _rays((w, h), normal)
     for k in range(total):
         moved = min(max(k - onset, 0), steps) / fps
-        clip[k] = _plane_image((w, h), sign * speed * moved * direction, normal, point, tile,
-                               texels, backdrop, contrast, mean)
+        clip[k] = _plane_image((w, h), rays, sign * speed * moved * direction, normal, point,
+                               tile, texels, backdrop, contrast, mean)
         if collision and onset <= k <= onset + steps:
             ttc[k] = tau - moved
     frames = np.clip(np.rint(effects.sensor_noise(clip, noise, seed)), 0, 255).astype(np.uint8)
