@@ -131,9 +131,10 @@ def test_the_camera_s_rig_is_left_out_and_shrunk_with_the_frames():
 
 def test_a_watch_counts_frames_in_a_row_and_forgets_its_id_when_they_end():
     scene = make_case("extra-wall-approach")
+    frames = list(scene.frames.astype(np.float64) / 255)  # one object per frame, as a stream's
     watch, streaks = SurfaceWatch(), []
-    for k in range(1, len(scene.frames)):
-        watch.step(*_pair(scene, k), 1 / FPS, 1.5, 1.0)
+    for k in range(1, len(frames)):
+        watch.step(frames[k - 1], frames[k], 1 / FPS, 1.5, 1.0)
         if watch.streak:
             watch.id = 7
         streaks.append(watch.streak)
@@ -145,7 +146,8 @@ def test_a_watch_counts_frames_in_a_row_and_forgets_its_id_when_they_end():
 # the default's pathway
 
 @pytest.mark.parametrize("case", ["extra-wall-approach", "extra-wall-approach-slant",
-                                  "extra-wall-approach-heading", "extra-wall-approach-fast"])
+                                  "extra-wall-approach-heading", "extra-wall-approach-fast",
+                                  "extra-wall-approach-faint"])
 def test_a_wall_filling_the_view_warns_before_contact_and_only_with_the_pathway(case):
     scene, responses = _run(case)
     warned = _warned(responses)
@@ -176,6 +178,65 @@ def test_a_wall_backed_away_from_or_passed_alongside_stays_quiet(case):
     assert not _warned(responses)
 
 
+def test_a_faint_wall_is_seen_over_a_tenth_of_a_second_not_over_one_frame(monkeypatch):
+    # contrast 0.2 under 2 grey levels of noise: one frame's change is too small against the
+    # noise for the tiles to agree in 7 frames in a row; two frames' change is twice as large
+    import asnn.approach.surface as surface
+
+    scene, responses = _run("extra-wall-approach-faint")
+    warned = _warned(responses)
+    assert warned and warned[0] <= scene.contact_frame - 6  # 0.3 s ahead
+    monkeypatch.setattr(surface, "BASELINE", 0.05)
+    _, one_frame = _run("extra-wall-approach-faint")
+    assert not _warned(one_frame)
+
+
+class _Recorded:
+    """Stands in for the measurement: the frames and the seconds a watch compares."""
+
+    def __init__(self):
+        self.calls = []
+
+    def __call__(self, before, after, shape, elapsed, *args):
+        self.calls.append((float(before[0, 0]), float(after[0, 0]), round(elapsed, 6)))
+        return None, False
+
+
+@pytest.mark.parametrize("fps, back", [(20.0, 2), (30.0, 3), (10.0, 1), (25.0, 3)])
+def test_a_watch_compares_each_frame_with_the_one_a_tenth_of_a_second_before(monkeypatch, fps,
+                                                                            back):
+    import asnn.approach.surface as surface
+
+    recorded = _Recorded()
+    monkeypatch.setattr(surface, "_measure", recorded)
+    frames = [np.full((48, 64), float(k)) for k in range(12)]
+    watch = SurfaceWatch()
+    for k in range(1, 12):
+        watch.step(frames[k - 1], frames[k], 1 / fps, 1.5, 1.0)
+    # at the stream's start, the oldest frame it has
+    first = [(0.0, float(k), round(k / fps, 6)) for k in range(1, back)]
+    later = [(float(k - back), float(k), round(back / fps, 6)) for k in range(back, 12)]
+    assert recorded.calls == first + later
+    assert len(watch._history) == back + 1  # no more frames kept than the baseline needs
+
+
+def test_a_watch_starts_again_where_the_stream_does_not_follow_on(monkeypatch):
+    import asnn.approach.surface as surface
+
+    recorded = _Recorded()
+    monkeypatch.setattr(surface, "_measure", recorded)
+    a = [np.full((48, 64), float(k)) for k in range(4)]
+    b = [np.full((48, 64), 10.0 + k) for k in range(3)]
+    watch = SurfaceWatch()
+    for k in range(1, 4):
+        watch.step(a[k - 1], a[k], 0.05, 1.5, 1.0)
+    watch.step(b[0], b[1], 0.05, 1.5, 1.0)  # not the frame it was last given: a new stream
+    watch.step(b[1], b[2], 0.05, 1.5, 1.0)
+    # a stamp gap as long as the baseline: the frame just before
+    watch.step(b[2], a[0], 0.2, 1.5, 1.0)
+    assert recorded.calls[3:] == [(10.0, 11.0, 0.05), (10.0, 12.0, 0.1), (12.0, 0.0, 0.2)]
+
+
 def test_the_warning_ends_once_the_camera_stands_at_the_wall():
     scene = surface_scene("approach", tau=2.0, tail=30, noise=2.0, seed=4)
     model = ASNN()
@@ -190,17 +251,30 @@ def test_the_surface_must_last_a_third_of_a_second_whatever_the_frame_rate():
     assert [surface_frames(p) for p in (0.05, 1 / 30, 0.1, 0.0)] == [7, 10, 4, 7]
 
 
-def test_a_drive_whose_whole_view_agrees_for_a_few_frames_stays_quiet_by_the_duration(monkeypatch):
-    # a truck overtaking on the right, in fresh scenery: the whole view reads as a surface ahead
-    # in runs of up to 4 frames; asked for 3, the pathway would warn
+def test_a_drive_whose_whole_view_agrees_in_one_frame_stays_quiet_by_the_duration(monkeypatch):
+    # over bumps the whole view reads as a surface ahead in a single frame; asked for one, the
+    # pathway would warn
+    import asnn.approach.surface as surface
+
+    _, responses = _run("drive-day-bumps")
+    assert not _warned(responses)
+    monkeypatch.setattr(surface, "SECONDS", 0.0)
+    _, one = _run("drive-day-bumps")
+    assert _warned(one)
+
+
+def test_over_one_frame_a_drive_agrees_for_longer(monkeypatch):
+    # a truck overtaking on the right, in fresh scenery: compared frame to frame the whole view
+    # reads as a surface ahead in runs of up to 4 frames, and 3 would warn; over 0.1 s in none
     import asnn.approach.surface as surface
 
     case = ("drive-day-overtake-truck-right", 2)
+    monkeypatch.setattr(surface, "SECONDS", 0.1)
     _, responses = _run(*case)
     assert not _warned(responses)
-    monkeypatch.setattr(surface, "SECONDS", 0.1)
-    _, shorter = _run(*case)
-    assert _warned(shorter)
+    monkeypatch.setattr(surface, "BASELINE", 0.05)
+    _, one_frame = _run(*case)
+    assert _warned(one_frame)
 
 
 def test_the_tracks_report_the_surface_in_the_frames_it_counts():

@@ -11,8 +11,8 @@ looming object (Tammero & Dickinson 2002 [1]_).
 :func:`surface_expansion` measures it with the looming model of the object stage
 (:func:`asnn.approach.looming.region_expansion`, Horn et al.'s time to contact relative to a
 planar surface [2]_) on the two frames area-averaged to 64 pixels, over the whole frame and
-over each of its 3x3 tiles; :class:`SurfaceWatch` keeps a stream's verdicts. The view is a
-surface ahead when the whole frame's fit explains at least :data:`FIT_MIN` of its change with a
+over each of its 3x3 tiles; :class:`SurfaceWatch` keeps a stream's verdicts, comparing each
+frame with the one :data:`BASELINE` seconds before it. The view is a surface ahead when the whole frame's fit explains at least :data:`FIT_MIN` of its change with a
 time to contact of at most ``tau_max`` and a focus of expansion within ``offset_max`` of the
 frame's centre (in the frame's RMS radius), and the tiles agree: at least :data:`TILES_MIN` of
 them expand, each fitted with at least :data:`TILE_FIT_MIN`, at a median rate of at least
@@ -22,7 +22,8 @@ alone. From a road they tell it only in part: under forward motion the sky does 
 the road's expansion grows toward the frame's bottom, yet where roadside things fill the view
 the tiles agree in runs of a few frames; the drives' runs are short, a wall's last, and the
 duration is what tells them apart (docs/design-notes.md, "A surface ahead, adopted", where the
-numbers were set on generated walls against every other generated scene).
+numbers were set on generated walls against every other generated scene, and "A surface ahead
+over a tenth of a second", where the baseline was).
 
 References
 ----------
@@ -36,6 +37,7 @@ References
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import NamedTuple
 
 import cv2
@@ -43,7 +45,7 @@ import numpy as np
 
 from .looming import region_expansion
 
-__all__ = ["FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN", "TILE_RATE_SHARE",
+__all__ = ["BASELINE", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN", "TILE_RATE_SHARE",
            "Surface", "SurfaceWatch", "shrunk", "surface_expansion", "surface_frames"]
 
 SIDE = 64  # pixels on the frames' larger side for the fits
@@ -51,6 +53,11 @@ SIDE = 64  # pixels on the frames' larger side for the fits
 # whole frame passes in runs of up to 5 frames (0.2 s; a truck overtaking, turns past oncoming
 # cars), a wall's in runs of 11 or more from about a second before contact
 SECONDS = 0.3
+# seconds between the two frames compared (2 frames at 20 fps, 3 at 30, 1 at 10): a faint wall's
+# change over one frame at 20 fps is small against sensor noise (fits of 0.25-0.45, the faint wall
+# caught in 3 of 11 variants); over two it doubles while the noise does not, and a drive's view,
+# which is not one plane, fits worse, so that its runs shorten (the longest from 5 frames to 2)
+BASELINE = 0.1
 FIT_MIN = 0.3
 TILES = 3  # tiles a side
 TILES_MIN = 8  # of 9
@@ -99,8 +106,8 @@ def shrunk(image: np.ndarray) -> np.ndarray:
 
 
 def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
-                      tau_max: float, offset_max: float, exclude: np.ndarray | None = None,
-                      kept: list | None = None) -> tuple[Surface | None, bool]:
+                      tau_max: float, offset_max: float, exclude: np.ndarray | None = None
+                      ) -> tuple[Surface | None, bool]:
     """The whole view's expansion between two frames, and whether it is a surface ahead.
 
     Both frames are area-averaged to at most :data:`SIDE` pixels a side first (:func:`shrunk`),
@@ -110,7 +117,7 @@ def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
     Parameters
     ----------
     previous, current : ndarray (H, W)
-        Luminance of two frames, float (or already :func:`shrunk`, with ``exclude`` alike).
+        Luminance of two frames, float.
     elapsed : float
         Seconds between them.
     tau_max, offset_max : float
@@ -119,10 +126,6 @@ def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
     exclude : ndarray (H, W) of bool, optional
         Pixels to leave out (the camera's rig); a shrunk pixel is left out when a quarter of
         its area is.
-    kept : list, optional
-        A stream's memo ``[frame, its shrunk form]`` (start with ``[None, None]``): where
-        ``previous`` is the frame it holds, its shrunk form is taken from it; it then holds
-        ``current``'s (the frames must not change in between).
 
     Returns
     -------
@@ -132,16 +135,20 @@ def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
         Whether this frame passes the test (module text); the tiles are fitted only where the
         whole frame passes.
     """
-    h, w = current.shape
-    before = kept[1] if kept is not None and kept[0] is previous else shrunk(previous)
-    after = shrunk(current)
-    if kept is not None:
-        kept[:] = current, after
+    return _measure(shrunk(previous), shrunk(current), current.shape, elapsed, tau_max,
+                    offset_max, exclude)
+
+
+def _measure(before: np.ndarray, after: np.ndarray, shape: tuple[int, int], elapsed: float,
+             tau_max: float, offset_max: float, exclude: np.ndarray | None
+             ) -> tuple[Surface | None, bool]:
+    """:func:`surface_expansion` of two frames already :func:`shrunk` from frames of
+    ``shape`` (H, W), the shape ``exclude`` has."""
+    h, w = shape
     sh, sw = after.shape
-    if exclude is not None:
-        exclude = (exclude if (sh, sw) == (h, w) else
-                   cv2.resize(exclude.astype(np.float32), (sw, sh),
-                              interpolation=cv2.INTER_AREA) > 0.25)
+    if exclude is not None and exclude.shape != (sh, sw):
+        exclude = cv2.resize(exclude.astype(np.float32), (sw, sh),
+                             interpolation=cv2.INTER_AREA) > 0.25
     whole = region_expansion(before, after, (0, 0, sw, sh), None, exclude)
     if whole is None or not elapsed > 0 or whole.rate <= 0:
         return None, False
@@ -180,7 +187,9 @@ def surface_frames(period: float) -> int:
 
 class SurfaceWatch:
     """One stream's surface-ahead verdicts: the frames in a row that passed, and the id the
-    surface is reported under while it persists.
+    surface is reported under while it persists. Each frame is compared with the one
+    :data:`BASELINE` seconds before it (or the oldest the stream has, at its start), whose
+    shrunk form it keeps.
 
     Attributes
     ----------
@@ -196,14 +205,33 @@ class SurfaceWatch:
         self.streak = 0
         self.surface: Surface | None = None
         self.id: int | None = None
-        self._kept: list = [None, None]  # the latest frame and its shrunk form
+        self._latest: np.ndarray | None = None  # the frame last given as ``current``
+        # the shrunk frames back to the baseline's, oldest first, each with the seconds since
+        # the one before it
+        self._history: deque[tuple[np.ndarray, float]] = deque()
 
     def step(self, previous: np.ndarray, current: np.ndarray, elapsed: float, tau_max: float,
              offset_max: float, exclude: np.ndarray | None = None) -> Surface | None:
-        """Measure one frame; the surface where it has passed in enough frames is for the
-        caller to judge from :attr:`streak`."""
-        self.surface, ahead = surface_expansion(previous, current, elapsed, tau_max, offset_max,
-                                                exclude, self._kept)
+        """Measure one frame (``elapsed`` seconds after ``previous``); the surface where it has
+        passed in enough frames is for the caller to judge from :attr:`streak`. Where
+        ``previous`` is not the frame the last step was given as ``current`` (the stream
+        restarted), the frames kept are dropped."""
+        history = self._history
+        if self._latest is not previous or not history:
+            history.clear()
+            history.append((shrunk(previous), 0.0))
+        history.append((shrunk(current), elapsed))
+        self._latest = current
+        # back to the frame BASELINE before (a thousandth of a frame's slack, as for the
+        # persistence: 0.05 s stamps read 0.0499...), or the oldest kept
+        span, k = 0.0, len(history) - 1
+        while k > 0 and span < BASELINE - 1e-3:
+            span += history[k][1]
+            k -= 1
+        for _ in range(k):
+            history.popleft()
+        self.surface, ahead = _measure(history[0][0], history[-1][0], current.shape, span,
+                                       tau_max, offset_max, exclude)
         self.streak = self.streak + 1 if ahead else 0
         if not ahead:
             self.id = None
