@@ -12,10 +12,11 @@ looming object (Tammero & Dickinson 2002 [1]_).
 (:func:`asnn.approach.looming.region_expansion`, Horn et al.'s time to contact relative to a
 planar surface [2]_) on the two frames area-averaged to 64 pixels, over the whole frame and
 over each of its 3x3 tiles; :class:`SurfaceWatch` keeps a stream's verdicts, comparing each
-frame with the one :data:`BASELINE` seconds before it. The view is a surface ahead when the whole frame's fit explains at least :data:`FIT_MIN` of its change with a
-time to contact of at most ``tau_max`` and a focus of expansion within ``offset_max`` of the
-frame's centre (in the frame's RMS radius), and the tiles agree: at least :data:`TILES_MIN` of
-them expand, each fitted with at least :data:`TILE_FIT_MIN`, at a median rate of at least
+frame with the one :data:`BASELINE` seconds before it. The view is a surface ahead when the
+whole frame's fit explains at least :data:`FIT_MIN` of its change with a time to contact of at
+most ``tau_max`` and a focus of expansion within ``offset_max`` of the frame's centre (in the
+frame's RMS radius), and the tiles agree: at least :data:`TILES_MIN` of them expand, each
+fitted with at least :data:`TILE_FIT_MIN`, at a median rate of at least
 :data:`TILE_RATE_SHARE` of the whole frame's; in every frame of :data:`SECONDS` in a row. The
 tiles tell a wall from a looming object in a still view, which expands in its middle tile
 alone. From a road they tell it only in part: under forward motion the sky does not move and
@@ -45,13 +46,15 @@ import numpy as np
 
 from .looming import region_expansion
 
-__all__ = ["BASELINE", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN", "TILE_RATE_SHARE",
-           "Surface", "SurfaceWatch", "shrunk", "surface_expansion", "surface_frames"]
+__all__ = ["BASELINE", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN",
+           "TILE_RATE_SHARE", "Surface", "SurfaceWatch", "shrunk", "surface_expansion",
+           "surface_frames"]
 
 SIDE = 64  # pixels on the frames' larger side for the fits
-# how long the view must read as a surface ahead: 7 frames at 20 fps. The generated drives'
-# whole frame passes in runs of up to 5 frames (0.2 s; a truck overtaking, turns past oncoming
-# cars), a wall's in runs of 11 or more from about a second before contact
+# how long the view must read as a surface ahead: 7 frames at 20 fps. Set where the generated
+# drives' whole frame passed in runs of up to 5 frames compared frame to frame (a truck
+# overtaking, turns past oncoming cars), a wall's in runs of 11 or more from about a second before
+# contact; compared over BASELINE, the drives' runs are 2 frames at most, a wall's 15 or more
 SECONDS = 0.3
 # seconds between the two frames compared (2 frames at 20 fps, 3 at 30, 1 at 10): a faint wall's
 # change over one frame at 20 fps is small against sensor noise (fits of 0.25-0.45, the faint wall
