@@ -191,6 +191,15 @@ def test_a_faint_wall_is_seen_over_a_tenth_of_a_second_not_over_one_frame(monkey
     assert not _warned(one_frame)
 
 
+@pytest.mark.parametrize("fps", [10.0, 30.0])
+def test_a_faint_wall_warns_at_other_frame_rates_too(fps):
+    # the baseline and the duration are in seconds: 1 and 4 frames at 10 fps, 3 and 10 at 30
+    scene = surface_scene(contrast=0.2, noise=2.0, fps=fps, onset=round(fps))
+    model = ASNN()
+    warned = [i for i, f in enumerate(scene.frames) if model.step(f, i / fps).collision]
+    assert warned and scene.contact_frame - 0.3 * fps >= warned[0] >= scene.onset_frame
+
+
 class _Recorded:
     """Stands in for the measurement: the frames and the seconds a watch compares."""
 
