@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from asnn import ASNN, preset
-from asnn.approach.surface import SurfaceWatch, shrunk, surface_expansion
+from asnn.approach.surface import SurfaceWatch, corridor, shrunk, surface_expansion
 from asnn.stimuli.suite import make_case
-from asnn.stimuli.surface import surface_scene
+from asnn.stimuli.surface import corridor_scene, surface_scene
 
 FPS = 20.0
 
@@ -261,6 +261,49 @@ def test_a_wall_seen_over_a_still_hood_band_warns_with_the_band_left_out():
     assert rig is not None and rig[90:].mean() > 0.3 and not rig[:60].any()
 
 
+# a corridor: the whole view expands, the walls around the faster, and nothing is ahead
+
+def test_a_corridor_is_a_collision_only_where_the_clip_reaches_its_end_wall():
+    long = corridor_scene(speed=2.0, seconds=2.0, end=60.0)
+    assert not long.collision and long.contact_frame is None and len(long.frames) == 41
+    short = corridor_scene(speed=2.0, seconds=2.0, end=3.3, standoff=0.3)
+    assert short.collision and short.contact_frame == 30 and short.ttc[0] == pytest.approx(1.5)
+    with pytest.raises(ValueError, match="inside the corridor"):
+        corridor_scene(half_width=0.0)
+
+
+def test_the_tiles_around_the_middle_expand_faster_in_a_corridor_not_on_a_wall():
+    scene = make_case("extra-corridor")
+    frames = scene.frames.astype(np.float64) / 255
+    surface, _ = surface_expansion(frames[38], frames[40], 0.1, 1.5, 1.0)
+    assert surface.tiles and corridor(surface.tile_rates)
+    wall = make_case("extra-wall-approach")
+    frames = wall.frames.astype(np.float64) / 255
+    k = wall.contact_frame - 10
+    surface, ahead = surface_expansion(frames[k - 2], frames[k], 0.1, 1.5, 1.0)
+    assert ahead and not corridor(surface.tile_rates)
+
+
+def _surface_frames(responses, size=(160.0, 120.0)):
+    return [r.index for r in responses
+            if any(t.box == (0.0, 0.0, *size) for t in r.tracks or [])]
+
+
+def test_driving_down_a_corridor_is_not_a_surface_ahead(monkeypatch):
+    # its whole view passes the surface test frame after frame; summed over 0.3 s, its tiles
+    # read walls passing around the camera, and the pathway adds nothing
+    import asnn.approach.surface as surface
+
+    scene = make_case("extra-corridor")
+    model = ASNN(record_tracks=True)
+    responses = [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
+    assert not _surface_frames(responses)
+    monkeypatch.setattr(surface, "CORRIDOR_RATIO", float("inf"))
+    model = ASNN(record_tracks=True)
+    responses = [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
+    assert len(_surface_frames(responses)) > 50
+
+
 def test_the_warning_ends_once_the_camera_stands_at_the_wall():
     scene = surface_scene("approach", tau=2.0, tail=30, noise=2.0, seed=4)
     model = ASNN()
@@ -289,11 +332,13 @@ def test_a_drive_whose_whole_view_agrees_in_one_frame_stays_quiet_by_the_duratio
 
 def test_over_one_frame_a_drive_agrees_for_longer(monkeypatch):
     # a truck overtaking on the right, in fresh scenery: compared frame to frame the whole view
-    # reads as a surface ahead in runs of up to 4 frames, and 3 would warn; over 0.1 s in none
+    # reads as a surface ahead in runs of up to 4 frames, and 3 would warn (without the
+    # corridor test, which refuses them too); over 0.1 s in none
     import asnn.approach.surface as surface
 
     case = ("drive-day-overtake-truck-right", 2)
     monkeypatch.setattr(surface, "SECONDS", 0.1)
+    monkeypatch.setattr(surface, "CORRIDOR_RATIO", float("inf"))
     _, responses = _run(*case)
     assert not _warned(responses)
     monkeypatch.setattr(surface, "BASELINE", 0.05)

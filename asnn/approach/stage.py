@@ -344,7 +344,7 @@ class ApproachStage:
         watch = self.surface
         s = watch.step(frames.previous, frames.current, frames.elapsed, p.tau_max, p.offset_max,
                        self.rig.mask)
-        if watch.streak < surface_frames(period):
+        if watch.streak < surface_frames(period) or watch.corridor:
             return None
         if watch.id is None:
             watch.id = self.tracker.new_id()

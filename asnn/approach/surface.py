@@ -46,9 +46,9 @@ import numpy as np
 
 from .looming import region_expansion
 
-__all__ = ["BASELINE", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN",
-           "TILE_RATE_SHARE", "Surface", "SurfaceWatch", "shrunk", "surface_expansion",
-           "surface_frames"]
+__all__ = ["BASELINE", "CORRIDOR_RATIO", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN",
+           "TILE_RATE_SHARE", "Surface", "SurfaceWatch", "corridor", "shrunk",
+           "surface_expansion", "surface_frames"]
 
 SIDE = 64  # pixels on the frames' larger side for the fits
 # how long the view must read as a surface ahead: 7 frames at 20 fps. Set where the generated
@@ -66,6 +66,11 @@ TILES = 3  # tiles a side
 TILES_MIN = 8  # of 9
 TILE_FIT_MIN = 0.1
 TILE_RATE_SHARE = 0.5  # the tiles' median rate against the whole frame's: not a looming object
+# a corridor or a tunnel: its walls expand faster the nearer they pass, so the tiles on both
+# sides of the one the camera heads into expand faster than it, where a wall's are alike or
+# rise on one side only (slanted). Above this many times its rate on both sides, not a surface
+# ahead: generated corridors read 2-4, the generated walls 0.4-1.4 but near contact
+CORRIDOR_RATIO = 1.75
 
 
 class Surface(NamedTuple):
@@ -87,6 +92,9 @@ class Surface(NamedTuple):
         (0 where not measured: the whole frame failed first).
     tile_rate : float
         The median of the tiles' expansion rates, per second (0 where not measured).
+    tile_rates : ndarray (3, 3) or None
+        Each tile's expansion rate, per second (NaN where a tile holds nothing to fit; None
+        where not measured).
     """
 
     rate: float
@@ -96,6 +104,7 @@ class Surface(NamedTuple):
     fit: float
     tiles: int
     tile_rate: float
+    tile_rates: np.ndarray | None = None
 
 
 def shrunk(image: np.ndarray) -> np.ndarray:
@@ -164,6 +173,7 @@ def _measure(before: np.ndarray, after: np.ndarray, shape: tuple[int, int], elap
     if not (rate * tau_max >= 1.0 and offset <= offset_max and whole.fit >= FIT_MIN):
         return Surface(rate, x, y, offset, whole.fit, 0, 0.0), False
     rates, expanding = [], 0
+    grid = np.full((TILES, TILES), np.nan)
     for i in range(TILES):
         for j in range(TILES):
             box = (j * sw // TILES, i * sh // TILES, (j + 1) * sw // TILES,
@@ -172,10 +182,22 @@ def _measure(before: np.ndarray, after: np.ndarray, shape: tuple[int, int], elap
             if tile is None:
                 continue
             rates.append(tile.rate / elapsed)
+            grid[i, j] = tile.rate / elapsed
             expanding += tile.rate > 0 and tile.fit >= TILE_FIT_MIN
     tile_rate = float(np.median(rates)) if rates else 0.0
     ahead = expanding >= TILES_MIN and tile_rate >= TILE_RATE_SHARE * rate
-    return Surface(rate, x, y, offset, whole.fit, expanding, tile_rate), ahead
+    return Surface(rate, x, y, offset, whole.fit, expanding, tile_rate, grid), ahead
+
+
+def corridor(tile_rates: np.ndarray) -> bool:
+    """Whether the tiles around the middle one expand, at their median, more than
+    :data:`CORRIDOR_RATIO` times faster than it (``tile_rates`` as :attr:`Surface.tile_rates`,
+    or their sum over frames): walls, floor and ceiling passing around the camera, not one
+    surface ahead. A middle tile not measured refuses nothing."""
+    middle = tile_rates[TILES // 2, TILES // 2]
+    around = np.delete(tile_rates.ravel(), tile_rates.size // 2)
+    around = around[np.isfinite(around)]
+    return bool(around.size and np.median(around) > CORRIDOR_RATIO * middle)
 
 
 def surface_frames(period: float) -> int:
@@ -200,6 +222,11 @@ class SurfaceWatch:
         Frames in a row that passed :func:`surface_expansion`'s test.
     surface : Surface or None
         The latest frame's measurement.
+    corridor : bool
+        Whether the tiles' expansion rates summed over the streak's latest :data:`SECONDS`
+        read as a corridor (:func:`corridor`): the streak is then walls passing around the
+        camera, not a surface ahead. Judged over frames, not in each, since the middle tile's
+        rate is the noisiest (the motion vanishes at the focus).
     id : int or None
         The target id of the current run of passing frames (a new one for each run).
     """
@@ -208,6 +235,9 @@ class SurfaceWatch:
         self.streak = 0
         self.surface: Surface | None = None
         self.id: int | None = None
+        self.corridor = False
+        # the streak's latest tile rates, each with the seconds since the frame before
+        self._rates: deque[tuple[np.ndarray, float]] = deque()
         self._latest: np.ndarray | None = None  # the frame last given as ``current``
         # the shrunk frames back to the baseline's, oldest first, each with the seconds since
         # the one before it
@@ -236,6 +266,13 @@ class SurfaceWatch:
         self.surface, ahead = _measure(history[0][0], history[-1][0], current.shape, span,
                                        tau_max, offset_max, exclude)
         self.streak = self.streak + 1 if ahead else 0
-        if not ahead:
-            self.id = None
+        if ahead:
+            kept = self._rates
+            kept.append((self.surface.tile_rates, elapsed))
+            while sum(dt for _, dt in list(kept)[1:]) > SECONDS + 1e-3:
+                kept.popleft()
+            self.corridor = corridor(sum(r for r, _ in kept))
+        else:
+            self.id, self.corridor = None, False
+            self._rates.clear()
         return self.surface

@@ -82,7 +82,7 @@ from .driving import LANE_WIDTH, Vehicle, driving_scene
 from .effects import Flicker, Headlights, Pan, Ramp, Shake, Step, Sweep, scaled_size
 from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
-from .surface import surface_scene
+from .surface import corridor_scene, surface_scene
 
 __all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "Case", "SUITE_CASES", "EXTRA_CASES",
            "CASES", "suite_cases", "make_case", "check_variant", "check_driving_size",
@@ -109,7 +109,7 @@ class Case:
     ----------
     name : str
     generator : callable
-        ``planar_scene`` or ``driving_scene``.
+        ``planar_scene``, ``driving_scene``, ``surface_scene`` or ``corridor_scene``.
     options : dict
         Keyword arguments of the generator.
     category : tuple of str
@@ -683,6 +683,13 @@ def _extra_cases() -> list[Case]:
         _surface("extra-wall-alongside", "extra-pass", motion="alongside", slant_deg=90.0),
         _surface("extra-wall-alongside-near", "extra-pass", motion="alongside", slant_deg=90.0,
                  offset=0.25, tau=2.0),
+        # a robot driving down a textured corridor 2 m wide, its end wall 60 m ahead: every part
+        # of the view expands, the nearer the faster, and nothing is in the way
+        Case("extra-corridor", corridor_scene, {"size": PLANAR_SIZE, "noise": 2.0},
+             ("extra-clear", "surface", "corridor")),
+        Case("extra-corridor-slow", corridor_scene, {"size": PLANAR_SIZE, "noise": 2.0,
+                                                     "speed": 1.0},
+             ("extra-clear", "surface", "corridor")),
     ]
 
 
