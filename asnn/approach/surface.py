@@ -46,8 +46,8 @@ import numpy as np
 
 from .looming import region_expansion
 
-__all__ = ["BASELINE", "CORRIDOR_RATIO", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN", "TILE_FIT_MIN",
-           "TILE_RATE_SHARE", "Surface", "SurfaceWatch", "corridor", "shrunk",
+__all__ = ["BASELINE", "CORRIDOR_RATIO", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN",
+           "TILE_FIT_MIN", "TILE_RATE_SHARE", "Surface", "SurfaceWatch", "corridor", "shrunk",
            "surface_expansion", "surface_frames"]
 
 SIDE = 64  # pixels on the frames' larger side for the fits
@@ -66,10 +66,10 @@ TILES = 3  # tiles a side
 TILES_MIN = 8  # of 9
 TILE_FIT_MIN = 0.1
 TILE_RATE_SHARE = 0.5  # the tiles' median rate against the whole frame's: not a looming object
-# a corridor or a tunnel: its walls expand faster the nearer they pass, so the tiles on both
-# sides of the one the camera heads into expand faster than it, where a wall's are alike or
-# rise on one side only (slanted). Above this many times its rate on both sides, not a surface
-# ahead: generated corridors read 2-4, the generated walls 0.4-1.4 but near contact
+# a corridor or a tunnel: its walls expand faster the nearer they pass, so the tiles around the
+# middle one expand faster than it, where a wall's are alike or rise on one side only (slanted).
+# Their median above this many times its rate, summed over SECONDS, is not a surface ahead:
+# generated corridors read 2-4, the generated walls 0.4-1.4 in single frames
 CORRIDOR_RATIO = 1.75
 
 
