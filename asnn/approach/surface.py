@@ -19,9 +19,8 @@ frame's RMS radius), and the tiles agree: at least :data:`TILES_MIN` of them exp
 fitted with at least :data:`TILE_FIT_MIN`, at a median rate of at least
 :data:`TILE_RATE_SHARE` of the whole frame's; in every frame of :data:`SECONDS` in a row, the
 tiles around the middle one not expanding much faster than it over those frames (a corridor's
-walls do: :func:`corridor`). The
-tiles tell a wall from a looming object in a still view, which expands in its middle tile
-alone. From a road they tell it only in part: under forward motion the sky does not move and
+walls do: :func:`corridor`). The tiles tell a wall from a looming object in a still view,
+which expands in its middle tile alone. From a road they tell it only in part: under forward motion the sky does not move and
 the road's expansion grows toward the frame's bottom, yet where roadside things fill the view
 the tiles agree in runs of a few frames; the drives' runs are short, a wall's last, and the
 duration is what tells them apart (docs/design-notes.md, "A surface ahead, adopted", where the
