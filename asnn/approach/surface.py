@@ -173,8 +173,7 @@ def _measure(before: np.ndarray, after: np.ndarray, shape: tuple[int, int], elap
     y = (0.5 * (sh - 1) - whole.drift_y / whole.rate + 0.5) * h / sh - 0.5
     if not (rate * tau_max >= 1.0 and offset <= offset_max and whole.fit >= FIT_MIN):
         return Surface(rate, x, y, offset, whole.fit, 0, 0.0), False
-    rates, expanding = [], 0
-    grid = np.full((TILES, TILES), np.nan)
+    grid, expanding = np.full((TILES, TILES), np.nan), 0
     for i in range(TILES):
         for j in range(TILES):
             box = (j * sw // TILES, i * sh // TILES, (j + 1) * sw // TILES,
@@ -182,10 +181,10 @@ def _measure(before: np.ndarray, after: np.ndarray, shape: tuple[int, int], elap
             tile = region_expansion(before, after, box, None, exclude)
             if tile is None:
                 continue
-            rates.append(tile.rate / elapsed)
             grid[i, j] = tile.rate / elapsed
             expanding += tile.rate > 0 and tile.fit >= TILE_FIT_MIN
-    tile_rate = float(np.median(rates)) if rates else 0.0
+    measured = grid[np.isfinite(grid)]
+    tile_rate = float(np.median(measured)) if measured.size else 0.0
     ahead = expanding >= TILES_MIN and tile_rate >= TILE_RATE_SHARE * rate
     return Surface(rate, x, y, offset, whole.fit, expanding, tile_rate, grid), ahead
 
