@@ -272,6 +272,18 @@ def test_a_corridor_is_a_collision_only_where_the_clip_reaches_its_end_wall():
         corridor_scene(half_width=0.0)
 
 
+def test_a_corridor_drawn_at_twice_the_scale_is_the_same_corridor():
+    import cv2
+
+    one = corridor_scene(seconds=1.0)
+    two = corridor_scene(seconds=1.0, scale=2.0)
+    assert two.frames.shape[1:] == (240, 320)
+    averaged = cv2.resize(two.frames[-1].astype(np.float32), (160, 120),
+                          interpolation=cv2.INTER_AREA)
+    # the same texture in metres, magnified with the frame: alike to within the resampling
+    assert np.abs(averaged - one.frames[-1]).mean() < 0.2 * one.frames[-1].std()
+
+
 def test_the_tiles_around_the_middle_expand_faster_in_a_corridor_not_on_a_wall():
     scene = make_case("extra-corridor")
     frames = scene.frames.astype(np.float64) / 255

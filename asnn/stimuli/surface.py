@@ -217,8 +217,9 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
     lens, its end wall ``end`` m ahead at the start; the camera (60 degrees across, as
     :func:`surface_scene`'s) looks along it. A collision where its front, ``standoff`` m ahead
     of the lens, reaches the end wall within the clip (the contact frame), else not. Walls,
-    floor, ceiling and end wall carry the same random texture (structure of 3 px at 1 m),
-    shaded a little differently, drawn at twice the size and area-averaged.
+    floor, ceiling and end wall carry the same random texture (its finest structure about
+    6.5 cm: 9 px at 1 m, 160 px across), shaded a little differently, drawn at twice the size
+    and area-averaged; at another ``scale`` the same texture, magnified with the frame.
 
     Raises
     ------
@@ -241,8 +242,9 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
     w, h = size
     rx, ry, _ = _rays((w, h), np.array([0.0, 0.0, -1.0]))
     f = 0.5 * w / math.tan(0.5 * _FIELD_OF_VIEW)
-    texels = f * _SUPERSAMPLE / 3.0  # texels per metre: 3 px structures at 1 m
-    tile = noise_tile(seed, 3.0 * _SUPERSAMPLE, size=512)
+    texels = f * _SUPERSAMPLE / 3.0  # texels per metre
+    # structures of 3 texels at 160 px across (6.5 cm), magnified with the frame
+    tile = noise_tile(seed, 3.0 * _SUPERSAMPLE, size=512, zoom=w / params["size"][0])
     n = tile.shape[0]
     with np.errstate(divide="ignore"):
         # distance along the axis to each side, per ray: left, right, floor, ceiling
