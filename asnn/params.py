@@ -314,10 +314,11 @@ class ASNNParams(BaseModel):
     surface_ahead: bool = Field(
         False, description="a second pathway for a surface that fills the view and closes in "
         "(a wall, a door, a lorry's back at a metre), which the retina's filtering cancels: "
-        "where the whole frame expands as one plane, its tiles alike, with a time to contact "
-        "of at most tau_max and its focus within offset_max of the centre, for 0.3 s of frames "
-        "in a row (7 at 20 fps), u(t) gains the potential of one spike a frame and the view is a "
-        "target (asnn.approach.surface); needs targets='objects'")
+        "where the whole frame expands as one plane over 0.1 s, its tiles alike (not faster "
+        "around the middle, as a corridor's walls), with a time to contact of at most tau_max "
+        "and its focus within offset_max of the centre, for 0.3 s of frames in a row (7 at 20 "
+        "fps), u(t) gains the potential of one spike a frame and the view is a target "
+        "(asnn.approach.surface); needs targets='objects'")
     ignore_rig: bool = Field(
         False, description="leave out of the looming fits the edges that stay still at the "
         "frame's top and bottom (asnn.approach.looming.rig_pixels): the camera's own hood or "

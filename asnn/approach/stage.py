@@ -18,7 +18,8 @@ mask ``M_a M_d`` and approach map ``G`` to one :class:`ApproachStage` per stream
    the retina's filtering cancels: :mod:`asnn.approach.surface`, ``surface_ahead``);
 
 and gives back the membrane potential summed over the approaching objects only (the approach
-gate, ``approach_gate``), and a surface ahead's, with one target per approaching object. Every stage is in
+gate, ``approach_gate``), and a surface ahead's, with one target per approaching object. Every
+stage is in
 ``docs/robust-preset.md`` with its reason and its switch.
 """
 

@@ -20,12 +20,13 @@ fitted with at least :data:`TILE_FIT_MIN`, at a median rate of at least
 :data:`TILE_RATE_SHARE` of the whole frame's; in every frame of :data:`SECONDS` in a row, the
 tiles around the middle one not expanding much faster than it over those frames (a corridor's
 walls do: :func:`corridor`). The tiles tell a wall from a looming object in a still view,
-which expands in its middle tile alone. From a road they tell it only in part: under forward motion the sky does not move and
-the road's expansion grows toward the frame's bottom, yet where roadside things fill the view
-the tiles agree in runs of a few frames; the drives' runs are short, a wall's last, and the
-duration is what tells them apart (docs/design-notes.md, "A surface ahead, adopted", where the
-numbers were set on generated walls against every other generated scene; "A surface ahead
-over a tenth of a second", where the baseline was; and "A corridor is not a surface ahead").
+which expands in its middle tile alone. From a road they tell it only in part: under forward
+motion the sky does not move and the road's expansion grows toward the frame's bottom, yet
+where roadside things fill the view the tiles agree in runs of a few frames; the drives' runs
+are short, a wall's last, and the duration is what tells them apart (docs/design-notes.md, "A
+surface ahead, adopted", where the numbers were set on generated walls against every other
+generated scene; "A surface ahead over a tenth of a second", where the baseline was; and "A
+corridor is not a surface ahead").
 
 References
 ----------
@@ -269,8 +270,10 @@ class SurfaceWatch:
         if ahead:
             kept = self._rates
             kept.append((self.surface.tile_rates, elapsed))
-            while sum(dt for _, dt in list(kept)[1:]) > SECONDS + 1e-3:
+            span = sum(dt for _, dt in kept) - kept[0][1]  # from the oldest kept to this one
+            while span > SECONDS + 1e-3:
                 kept.popleft()
+                span -= kept[0][1]
             self.corridor = corridor(sum(r for r, _ in kept))
         else:
             self.id, self.corridor = None, False
