@@ -62,7 +62,10 @@ oncoming in the next lane, or nothing; a car standing at night 1.2 m to the side
 the suite's walkers seen by a swaying hand-held camera (:class:`~.effects.Shake`, 3 px and 0.75
 degrees), as they are and starting close (a third of the frame high), light and dark: proxies
 for a bird walking up to a hand-held or bumped camera (docs/design-notes.md, "A walker seen by
-a swaying camera, whole").
+a swaying camera, whole"); a camera closing on a textured wall that fills the view (head-on,
+slanted, off its heading, faster, faint), backing away from one or passing along it
+(:func:`.surface.surface_scene`); and a robot driving down a textured corridor, with nothing
+ahead or with a board a person's size standing in it (:func:`.surface.corridor_scene`).
 
 **Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
 drives at S times their size (their world is in metres and degrees), the planar scenes with
@@ -590,6 +593,9 @@ def _driving_cases() -> list[Case]:
     ]
 
 
+_BOARD = {"size": PLANAR_SIZE, "noise": 2.0, "obstacle": 8.0, "seconds": 4.35}
+
+
 def _extra_cases() -> list[Case]:
     lit = dict(albedo=0.45)  # a body our headlights light up at night
     # 50 m ahead in the oncoming lane, closing at 20 m/s: turning across at 1.5 m/s its centre
@@ -690,6 +696,16 @@ def _extra_cases() -> list[Case]:
         Case("extra-corridor-slow", corridor_scene, {"size": PLANAR_SIZE, "noise": 2.0,
                                                      "speed": 1.0},
              ("extra-clear", "surface", "corridor")),
+        # the same corridor with a board a person's size standing in its middle (3.85 s from
+        # contact at the start at 2 m/s, 4.7 s at 1 m/s), darker or lighter than the walls;
+        # the clip ends half a second after contact
+        Case("extra-corridor-board", corridor_scene, {**_BOARD, "obstacle_shade": 0.55},
+             ("extra-threat", "surface", "corridor", "dark")),
+        Case("extra-corridor-board-light", corridor_scene, {**_BOARD, "obstacle_shade": 1.3},
+             ("extra-threat", "surface", "corridor", "light")),
+        Case("extra-corridor-board-slow", corridor_scene,
+             {**_BOARD, "obstacle": 5.0, "speed": 1.0, "seconds": 5.2, "obstacle_shade": 0.55},
+             ("extra-threat", "surface", "corridor", "dark")),
     ]
 
 

@@ -209,17 +209,23 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
                    fps: float = 20.0, speed: float = 2.0, seconds: float = 6.0,
                    half_width: float = 1.0, below: float = 0.5, above: float = 1.9,
                    end: float = 60.0, standoff: float = 0.3, contrast: float = 0.5,
-                   noise: float = 0.0, seed: int = 0, category: Sequence[str] = (),
-                   twin: str | None = None, scale: float = 1.0) -> Scene:
+                   obstacle: float | None = None,
+                   obstacle_size: tuple[float, float] = (0.5, 1.7),
+                   obstacle_shade: float = 0.55, noise: float = 0.0, seed: int = 0,
+                   category: Sequence[str] = (), twin: str | None = None,
+                   scale: float = 1.0) -> Scene:
     """A labelled clip of a camera driven down a corridor at ``speed`` m/s for ``seconds``.
 
     The corridor is ``2 half_width`` m wide, its floor ``below`` and its ceiling ``above`` the
     lens, its end wall ``end`` m ahead at the start; the camera (60 degrees across, as
     :func:`surface_scene`'s) looks along it. A collision where its front, ``standoff`` m ahead
-    of the lens, reaches the end wall within the clip (the contact frame), else not. Walls,
-    floor, ceiling and end wall carry the same random texture (its finest structure about
-    6.5 cm: 9 px at 1 m, 160 px across), shaded a little differently, drawn at twice the size
-    and area-averaged; at another ``scale`` the same texture, magnified with the frame.
+    of the lens, reaches the end wall within the clip (the contact frame), else not. With
+    ``obstacle``, a board ``obstacle_size`` m wide and high (a person's size by default) stands
+    on the floor in the corridor's middle, across the lens's height, ``obstacle`` m ahead at the start, shaded
+    ``obstacle_shade`` (the walls are 0.75-1.1): the collision is then with it. Walls, floor,
+    ceiling, end wall and board carry the same random texture (its finest structure about
+    6.5 cm: 9 px at 1 m, 160 px across), shaded differently, drawn at twice the size and
+    area-averaged; at another ``scale`` the same texture, magnified with the frame.
 
     Raises
     ------
@@ -230,13 +236,20 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
     if not (half_width > 0 and below > 0 and above > 0 and end > standoff > 0):
         raise ValueError("the camera must be inside the corridor, its end wall ahead of its "
                          "front")
+    board_w, board_h = (float(v) for v in obstacle_size)
+    if obstacle is not None and not (end > obstacle > standoff and 0 < board_w <= 2 * half_width
+                                     and below <= board_h <= below + above and obstacle_shade > 0):
+        raise ValueError("the obstacle must stand between the camera's front and the end wall, "
+                         "within the corridor and across the lens's height, with a positive shade")
     if not (speed > 0 and seconds > 0 and fps > 0 and scale > 0):
         raise ValueError("speed, seconds, fps and scale must be positive")
     if not 0.0 <= contrast < 1.0 or not 127.5 * 1.1 * (1 + contrast) <= 255:
         raise ValueError(f"a texture of contrast {contrast} does not fit the levels")
     params = dict(size=tuple(size), fps=fps, speed=speed, seconds=seconds,
                   half_width=half_width, below=below, above=above, end=end,
-                  standoff=standoff, contrast=contrast, noise=noise, seed=seed, scale=scale)
+                  standoff=standoff, contrast=contrast, obstacle=obstacle,
+                  obstacle_size=(board_w, board_h), obstacle_shade=obstacle_shade, noise=noise,
+                  seed=seed, scale=scale)
     if scale != 1.0:
         size = effects.scaled_size(size, scale)
     w, h = size
@@ -252,35 +265,43 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
                           np.where(rx > 0, half_width / rx, np.inf),
                           np.where(ry > 0, below / ry, np.inf),
                           np.where(ry < 0, -above / ry, np.inf)])
-    shade = np.array([0.9, 0.9, 0.75, 1.1, 1.0])
+    shade = np.array([0.9, 0.9, 0.75, 1.1, 1.0, obstacle_shade])
     total = round(seconds * fps) + 1
     clip = np.empty((total, h, w))
     for k in range(total):
         travelled = speed * k / fps
-        depth = np.concatenate([sides, np.full((1, *rx.shape), end - travelled)])
+        surfaces = [sides, np.full((1, *rx.shape), end - travelled)]
+        if obstacle is not None:
+            z = obstacle - travelled
+            board = ((z > 0) & (np.abs(z * rx) <= 0.5 * board_w) & (z * ry <= below)
+                     & (z * ry >= below - board_h))
+            surfaces.append(np.where(board, z, np.inf)[None])
+        depth = np.concatenate(surfaces)
         which = depth.argmin(axis=0)
         z = depth.min(axis=0)
         x, y = z * rx, z * ry
         # each surface's own two coordinates (metres), the surfaces apart in the texture
-        a = np.choose(which, [z + travelled, z + travelled, x, x, x])
-        b = np.choose(which, [y, y, z + travelled, z + travelled, y]) + 37.0 * which
+        a = np.choose(which, [z + travelled, z + travelled, x, x, x, x][:len(depth)])
+        b = np.choose(which, [y, y, z + travelled, z + travelled, y, y][:len(depth)]) + 37.0 * which
         values = cv2.remap(tile, np.mod(a * texels, n).astype(np.float32),
                            np.mod(b * texels, n).astype(np.float32), cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_WRAP)
         image = 127.5 * shade[which] * (1.0 + contrast * values)
         clip[k] = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
     frames = np.clip(np.rint(effects.sensor_noise(clip, noise, seed)), 0, 255).astype(np.uint8)
-    contact = (end - standoff) / speed * fps
+    ahead = end if obstacle is None else obstacle
+    contact = (ahead - standoff) / speed * fps
     collision = contact <= total - 1
     ttc = track = None
+    centre = (0.5 * (w - 1), 0.5 * (h - 1))  # the point the lens heads at, on the wall or board
     if collision:
         contact = int(math.ceil(contact))
         ttc = np.full(total, np.nan)
-        ttc[:contact + 1] = (end - standoff) / speed - np.arange(contact + 1) / fps
-        track = np.tile([(w - 1) / 2, (h - 1) / 2], (total, 1))
+        ttc[:contact + 1] = (ahead - standoff) / speed - np.arange(contact + 1) / fps
+        track = np.tile(centre, (total, 1))
     return Scene(name=name, frames=frames, fps=fps, collision=collision,
                  onset_frame=0 if collision else None,
                  contact_frame=contact if collision else None,
-                 center=((w - 1) / 2, (h - 1) / 2) if collision else None, params=params,
+                 center=centre if collision else None, params=params,
                  track=track, ttc=ttc, category=tuple(category), twin=twin)
 
