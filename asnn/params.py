@@ -319,6 +319,14 @@ class ASNNParams(BaseModel):
         "and its focus within offset_max of the centre, for 0.3 s of frames in a row (7 at 20 "
         "fps), u(t) gains the potential of one spike a frame and the view is a target "
         "(asnn.approach.surface); needs targets='objects'")
+    corridor_gate: bool = Field(
+        False, description="where the whole view has passed surface_ahead's test for 0.3 s "
+        "but its tiles read a corridor (the walls around the middle expanding faster than it), "
+        "no object counts either: the object stage's boxes there are pieces of the walls "
+        "around our heading, which expand about it as a stopped object would; an object "
+        "standing ahead ends the corridor reading by expanding the middle tile "
+        "(asnn.approach.surface.SurfaceWatch.corridor; the view is measured with either "
+        "switch on); needs targets='objects'")
     ignore_rig: bool = Field(
         False, description="leave out of the looming fits the edges that stay still at the "
         "frame's top and bottom (asnn.approach.looming.rig_pixels): the camera's own hood or "
@@ -378,7 +386,8 @@ class ASNNParams(BaseModel):
             raise ValueError(f"dt * decay / tau is {step:g}: the temporal filter (eq. 5) is "
                              "unstable at 2 or more; lower dt or decay, or raise tau")
         needing = [name for name in ("approach_gate", "scene_relative", "object_ids",
-                                     "ignore_rig", "surface_ahead") if getattr(self, name)]
+                                     "ignore_rig", "surface_ahead", "corridor_gate")
+                   if getattr(self, name)]
         if needing and self.targets != "objects":  # every stage that works on the objects
             raise ValueError(f"{', '.join(needing)} need{'s' if len(needing) == 1 else ''} "
                              f"targets='objects': set {'=False, '.join(needing)}=False too")
@@ -486,7 +495,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     max_width=480, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
     region_persistence=True, region_cover=0.2, object_ids=True, motion_layers=True, ignore_rig=True,
-    surface_ahead=True,
+    surface_ahead=True, corridor_gate=True,
 ))
 DEFAULT_PRESET = "robust"
 # frames a second below which the default preset loses hits (README, "At half the frame rate"):

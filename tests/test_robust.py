@@ -597,8 +597,9 @@ def test_the_partial_overlap_regime_is_a_part_of_the_gate():
         ASNNParams(approach_gate=True)
     # every stage on the objects named at once, so one try finds them all
     with pytest.raises(ValueError, match="approach_gate, scene_relative, object_ids, ignore_rig, "
-                                         "surface_ahead need targets='objects': set "
-                                         "approach_gate=False, scene_relative=False, "
+                                         "surface_ahead, corridor_gate need targets='objects': "
+                                         "set approach_gate=False, scene_relative=False, "
                                          "object_ids=False, ignore_rig=False, "
-                                         "surface_ahead=False too"):
+                                         "surface_ahead=False, corridor_gate=False too"):
         preset("default", targets="clusters")
+

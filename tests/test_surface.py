@@ -284,6 +284,23 @@ def test_a_corridor_drawn_at_twice_the_scale_is_the_same_corridor():
     assert np.abs(averaged - one.frames[-1]).mean() < 0.2 * one.frames[-1].std()
 
 
+def test_a_board_standing_in_a_corridor_is_the_collision_and_grows_about_the_middle():
+    board = corridor_scene(speed=2.0, seconds=2.5, obstacle=4.3, obstacle_shade=0.55, seed=3)
+    assert board.collision and board.contact_frame == 40
+    assert board.ttc[0] == pytest.approx(2.0) and board.center == (79.5, 59.5)
+    plain = corridor_scene(speed=2.0, seconds=2.5, seed=3)  # the same walls, nothing ahead
+    differs = [np.nonzero(np.abs(board.frames[k].astype(int) - plain.frames[k]) > 0)
+               for k in (0, 30)]
+    # the board hides the corridor in the middle, and its image grows as we close in
+    assert differs[1][0].size > 4 * differs[0][0].size > 0
+    for rows, cols in differs:
+        assert cols.mean() == pytest.approx(79.5, abs=3.0)
+    with pytest.raises(ValueError, match="between the camera's front and the end wall"):
+        corridor_scene(obstacle=70.0)
+    with pytest.raises(ValueError, match="across the lens's height"):
+        corridor_scene(obstacle=5.0, obstacle_size=(0.5, 0.3))
+
+
 def test_the_tiles_around_the_middle_expand_faster_in_a_corridor_not_on_a_wall():
     scene = make_case("extra-corridor")
     frames = scene.frames.astype(np.float64) / 255
@@ -314,6 +331,29 @@ def test_driving_down_a_corridor_is_not_a_surface_ahead(monkeypatch):
     model = ASNN(record_tracks=True)
     responses = [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
     assert len(_surface_frames(responses)) > 50
+
+
+def test_a_corridor_s_walls_tracked_as_objects_do_not_count_while_it_reads_as_a_corridor():
+    # pieces of the walls around our heading expand about it as a stopped object would, and
+    # the object stage warns on them; the whole view reads as a corridor, and they do not count
+    _, responses = _run("extra-corridor")
+    assert not _warned(responses)
+    _, ungated = _run("extra-corridor", corridor_gate=False)
+    assert len(_warned(ungated)) > 5
+    # the gate reads the whole view's watch without the surface pathway too
+    _, pathway_off = _run("extra-corridor", surface_ahead=False)
+    assert not _warned(pathway_off)
+
+
+@pytest.mark.parametrize("case", ["extra-corridor-board", "extra-corridor-board-light"])
+def test_a_board_standing_in_a_corridor_warns_once_it_ends_the_corridor_reading(case):
+    # without the gate the walls warn 2.5 s and more before contact; with it, the board is
+    # warned about in the last 1.5 s before contact, and nothing earlier
+    scene, responses = _run(case)
+    warned = _warned(responses)
+    assert warned and scene.contact_frame - 1.5 * FPS <= warned[0] < scene.contact_frame - 10
+    _, ungated = _run(case, corridor_gate=False)
+    assert _warned(ungated)[0] < scene.contact_frame - 2.5 * FPS
 
 
 def test_the_warning_ends_once_the_camera_stands_at_the_wall():

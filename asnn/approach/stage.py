@@ -15,7 +15,8 @@ mask ``M_a M_d`` and approach map ``G`` to one :class:`ApproachStage` per stream
 4. judges the approach test with its persistence
    (:meth:`asnn.approach.tracking.TargetTracker.judge`);
 5. beside the objects, measures the whole view for a surface ahead (a wall filling it, which
-   the retina's filtering cancels: :mod:`asnn.approach.surface`, ``surface_ahead``);
+   the retina's filtering cancels: :mod:`asnn.approach.surface`, ``surface_ahead``), and
+   where it reads as a corridor instead, lets no object count (its walls: ``corridor_gate``);
 
 and gives back the membrane potential summed over the approaching objects only (the approach
 gate, ``approach_gate``), and a surface ahead's, with one target per approaching object. Every
@@ -302,6 +303,10 @@ class ApproachStage:
         persistence = persistence_frames(p.approach_frames, p.approach_seconds, period)
         coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, persistence,
                                     self._overlap, p.scene_tolerance)
+        if p.corridor_gate and self._in_corridor(period):
+            # a corridor's objects are pieces of its walls (the tracks keep their state: an
+            # object standing ahead counts once it ends the corridor reading)
+            coming = [False] * len(coming)
         self.objects = list(zip(tracks, shares))
         if p.approach_gate:  # NumPy's sum, in its order (none coming: 0)
             total = float(regions.share[np.asarray(coming, bool)].sum()) if any(coming) else 0.0
@@ -332,20 +337,21 @@ class ApproachStage:
     def _surface_ahead(self, frames: FramePair, cells: int, period: float,
                        scale: tuple[float, float], record: bool
                        ) -> tuple[float, Target, list[TrackReport] | None] | None:
-        """With ``surface_ahead``, the whole view measured (:class:`SurfaceWatch`); where it
-        has been a surface ahead for :data:`~asnn.approach.surface.SECONDS` at the stream's
+        """With ``surface_ahead`` (or ``corridor_gate``, which reads the same watch), the whole
+        view measured (:class:`SurfaceWatch`); with ``surface_ahead``, where it has been a
+        surface ahead for :data:`~asnn.approach.surface.SECONDS` at the stream's
         frame ``period`` (:func:`~asnn.approach.surface.surface_frames`), what it adds to the
         summed ``G'`` (the potential of one spike on ``cells`` cells: eq. 32-33), its target
         (the focus of expansion, the whole frame's pixels, a new id for each run of frames)
         and, with ``record``, its report for ``--tracks`` (the whole frame as its box) in a
         list."""
         p = self.params
-        if not p.surface_ahead:
+        if not (p.surface_ahead or p.corridor_gate):
             return None
         watch = self.surface
         s = watch.step(frames.previous, frames.current, frames.elapsed, p.tau_max, p.offset_max,
                        self.rig.mask)
-        if watch.streak < surface_frames(period) or watch.corridor:
+        if not p.surface_ahead or watch.streak < surface_frames(period) or watch.corridor:
             return None
         if watch.id is None:
             watch.id = self.tracker.new_id()
@@ -365,6 +371,13 @@ class ApproachStage:
             layers=None, streak=watch.streak,
             test=ApproachVerdict(True, True, False, True, True), counts=True, share=potential)
         return potential, target, [report]
+
+    def _in_corridor(self, period: float) -> bool:
+        """Whether the whole view has passed the surface test for
+        :data:`~asnn.approach.surface.SECONDS` at the frame ``period`` and its tiles read a
+        corridor (:attr:`SurfaceWatch.corridor`): walls passing around the camera."""
+        watch = self.surface
+        return watch.corridor and watch.streak >= surface_frames(period)
 
     def _report(self, track, counts: bool, share: float, sx: float, sy: float) -> TrackReport:
         """A track as the approach test saw it in this frame, in the input frame's pixels."""

@@ -50,6 +50,7 @@ ABLATIONS = {
     "no motion layers (mixed boxes)": "asnn:robust/motion_layers=false",
     "the camera's rig kept in the fits (hood, overlay)": "asnn:robust/ignore_rig=false",
     "no surface-ahead pathway (a wall filling the view)": "asnn:robust/surface_ahead=false",
+    "objects counted in a corridor (no corridor gate)": "asnn:robust/corridor_gate=false",
     "scene-relative test without its tolerance": "asnn:robust/scene_tolerance=0",
     "no partial-overlap regime": "asnn:robust/partial_overlap=false",
     "partial overlaps without the fit test": "asnn:robust/overlap_fit_min=-1",
