@@ -28,7 +28,9 @@ objects. Where it counts, the check above fails, so a traced clip it warned on i
 rather than scored wrong. On the clips and cases this procedure traces it never counts: at the
 grid's loosest limits (``tau_max`` 2.5 s, ``offset_max`` 2) the rule passes in at most one
 frame in a row of the real clips and three of the suite's cases, where 0.3 s of frames (10 at
-30 fps, 7 at 20) are needed (a screen of the rule on the frames, 2026-11-29).
+30 fps, 7 at 20) are needed (a screen of the rule on the frames, 2026-11-29). The corridor gate
+(``corridor_gate``), which reads the same watch, is not replayed either, and for the same
+reason never applies on them.
 """
 
 from __future__ import annotations
