@@ -315,13 +315,15 @@ class ASNNParams(BaseModel):
         False, description="a second pathway for a surface that fills the view and closes in "
         "(a wall, a door, a lorry's back at a metre), which the retina's filtering cancels: "
         "where the whole frame expands as one plane over 0.1 s, its tiles alike (not faster "
-        "around the middle, as a corridor's walls), with a time to contact of at most tau_max "
+        "around the middle over one frame, as a corridor's walls), with a time to contact of "
+        "at most tau_max "
         "and its focus within offset_max of the centre, for 0.3 s of frames in a row (7 at 20 "
         "fps), u(t) gains the potential of one spike a frame and the view is a target "
         "(asnn.approach.surface); needs targets='objects'")
     corridor_gate: bool = Field(
-        False, description="where the whole view has passed surface_ahead's test for 0.3 s "
-        "but its tiles read a corridor (the walls around the middle expanding faster than it), "
+        False, description="where the whole view has passed surface_ahead's test (over 0.1 s "
+        "or over one frame) for 0.3 s but its tiles read a corridor (the walls around the "
+        "middle expanding faster than it), "
         "no object counts either: the object stage's boxes there are pieces of the walls "
         "around our heading, which expand about it as a stopped object would; an object "
         "standing ahead ends the corridor reading by expanding the middle tile "

@@ -373,11 +373,12 @@ class ApproachStage:
         return potential, target, [report]
 
     def _in_corridor(self, period: float) -> bool:
-        """Whether the whole view has passed the surface test for
-        :data:`~asnn.approach.surface.SECONDS` at the frame ``period`` and its tiles read a
-        corridor (:attr:`SurfaceWatch.corridor`): walls passing around the camera."""
+        """Whether the whole view has passed the surface test (over the baseline or over one
+        frame: :attr:`SurfaceWatch.view_streak`) for :data:`~asnn.approach.surface.SECONDS` at
+        the frame ``period`` and its tiles read a corridor (:attr:`SurfaceWatch.corridor`):
+        walls passing around the camera."""
         watch = self.surface
-        return watch.corridor and watch.streak >= surface_frames(period)
+        return watch.corridor and watch.view_streak >= surface_frames(period)
 
     def _report(self, track, counts: bool, share: float, sx: float, sy: float) -> TrackReport:
         """A track as the approach test saw it in this frame, in the input frame's pixels."""

@@ -18,15 +18,18 @@ most ``tau_max`` and a focus of expansion within ``offset_max`` of the frame's c
 frame's RMS radius), and the tiles agree: at least :data:`TILES_MIN` of them expand, each
 fitted with at least :data:`TILE_FIT_MIN`, at a median rate of at least
 :data:`TILE_RATE_SHARE` of the whole frame's; in every frame of :data:`SECONDS` in a row, the
-tiles around the middle one not expanding much faster than it over those frames (a corridor's
-walls do: :func:`corridor`). The tiles tell a wall from a looming object in a still view,
-which expands in its middle tile alone. From a road they tell it only in part: under forward
+tiles around the middle one not expanding much faster than it over those frames, each measured
+over one frame (a corridor's walls do: :func:`corridor`; at speed its walls at the frame's edge
+move beyond the fit's range over the baseline, so the watch measures each frame over the frame
+before it too, and the view counts as one surface expanding, a corridor included, where either
+passes: :attr:`SurfaceWatch.view_streak`). The tiles tell a wall from a looming object in a
+still view, which expands in its middle tile alone. From a road they tell it only in part: under forward
 motion the sky does not move and the road's expansion grows toward the frame's bottom, yet
 where roadside things fill the view the tiles agree in runs of a few frames; the drives' runs
 are short, a wall's last, and the duration is what tells them apart (docs/design-notes.md, "A
 surface ahead, adopted", where the numbers were set on generated walls against every other
-generated scene; "A surface ahead over a tenth of a second", where the baseline was; and "A
-corridor is not a surface ahead").
+generated scene; "A surface ahead over a tenth of a second", where the baseline was; "A
+corridor is not a surface ahead"; and "A fast corridor, read over one frame").
 
 References
 ----------
@@ -70,9 +73,10 @@ TILE_FIT_MIN = 0.1
 TILE_RATE_SHARE = 0.5  # the tiles' median rate against the whole frame's: not a looming object
 # a corridor or a tunnel: its walls expand faster the nearer they pass, so the tiles around the
 # middle one expand faster than it, where a wall's are alike or rise on one side only (slanted).
-# Their median above this many times its rate, summed over SECONDS, is not a surface ahead:
-# generated corridors read 2-4, the generated walls 0.4-1.4 in single frames
-CORRIDOR_RATIO = 1.75
+# Their median above this many times its rate, each over one frame and summed over SECONDS, is
+# not a surface ahead: in the generated corridors at 2 and 3 m/s 2.3 and more, on the generated
+# walls 1.65 at most (variants 0-3, in the frames the wall counts), and this between them
+CORRIDOR_RATIO = 2.0
 
 
 class Surface(NamedTuple):
@@ -160,9 +164,7 @@ def _measure(before: np.ndarray, after: np.ndarray, shape: tuple[int, int], elap
     ``shape`` (H, W), the shape ``exclude`` has."""
     h, w = shape
     sh, sw = after.shape
-    if exclude is not None and exclude.shape != (sh, sw):
-        exclude = cv2.resize(exclude.astype(np.float32), (sw, sh),
-                             interpolation=cv2.INTER_AREA) > 0.25
+    exclude = _shrunk_mask(exclude, (sh, sw))
     whole = region_expansion(before, after, (0, 0, sw, sh), None, exclude)
     if whole is None or not elapsed > 0 or whole.rate <= 0:
         return None, False
@@ -174,6 +176,28 @@ def _measure(before: np.ndarray, after: np.ndarray, shape: tuple[int, int], elap
     y = (0.5 * (sh - 1) - whole.drift_y / whole.rate + 0.5) * h / sh - 0.5
     if not (rate * tau_max >= 1.0 and offset <= offset_max and whole.fit >= FIT_MIN):
         return Surface(rate, x, y, offset, whole.fit, 0, 0.0), False
+    grid, expanding = _tile_rates(before, after, elapsed, exclude)
+    measured = grid[np.isfinite(grid)]
+    tile_rate = float(np.median(measured)) if measured.size else 0.0
+    ahead = expanding >= TILES_MIN and tile_rate >= TILE_RATE_SHARE * rate
+    return Surface(rate, x, y, offset, whole.fit, expanding, tile_rate, grid), ahead
+
+
+def _shrunk_mask(exclude: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray | None:
+    """``exclude`` at the shrunk frames' ``shape`` (h, w): a shrunk pixel is left out when a
+    quarter of its area is."""
+    if exclude is None or exclude.shape == shape:
+        return exclude
+    return cv2.resize(exclude.astype(np.float32), shape[::-1],
+                      interpolation=cv2.INTER_AREA) > 0.25
+
+
+def _tile_rates(before: np.ndarray, after: np.ndarray, elapsed: float,
+                exclude: np.ndarray | None) -> tuple[np.ndarray, int]:
+    """Each of the 3x3 tiles' expansion rate per second between two shrunk frames ``elapsed``
+    seconds apart (NaN where a tile holds nothing to fit), and how many expand with a fit of
+    at least :data:`TILE_FIT_MIN`."""
+    sh, sw = after.shape
     grid, expanding = np.full((TILES, TILES), np.nan), 0
     for i in range(TILES):
         for j in range(TILES):
@@ -184,10 +208,7 @@ def _measure(before: np.ndarray, after: np.ndarray, shape: tuple[int, int], elap
                 continue
             grid[i, j] = tile.rate / elapsed
             expanding += tile.rate > 0 and tile.fit >= TILE_FIT_MIN
-    measured = grid[np.isfinite(grid)]
-    tile_rate = float(np.median(measured)) if measured.size else 0.0
-    ahead = expanding >= TILES_MIN and tile_rate >= TILE_RATE_SHARE * rate
-    return Surface(rate, x, y, offset, whole.fit, expanding, tile_rate, grid), ahead
+    return grid, expanding
 
 
 def corridor(tile_rates: np.ndarray) -> bool:
@@ -215,29 +236,37 @@ class SurfaceWatch:
     """One stream's surface-ahead verdicts: the frames in a row that passed, and the id the
     surface is reported under while it persists. Each frame is compared with the one
     :data:`BASELINE` seconds before it (or the oldest the stream has, at its start), whose
-    shrunk form it keeps.
+    shrunk form it keeps, and, where that is more than a frame back, with the frame before it
+    too: at speed a corridor's walls at the frame's edge move beyond the fit's range over the
+    baseline, and read slower than they are.
 
     Attributes
     ----------
     streak : int
-        Frames in a row that passed :func:`surface_expansion`'s test.
+        Frames in a row that passed :func:`surface_expansion`'s test over the baseline: the
+        surface pathway's.
+    view_streak : int
+        Frames in a row that passed it over the baseline or over the latest frame: how long
+        the view has read as one surface expanding, a corridor included.
     surface : Surface or None
-        The latest frame's measurement.
+        The latest frame's measurement over the baseline.
     corridor : bool
-        Whether the tiles' expansion rates summed over the streak's latest :data:`SECONDS`
-        read as a corridor (:func:`corridor`): the streak is then walls passing around the
-        camera, not a surface ahead. Judged over frames, not in each, since the middle tile's
-        rate is the noisiest (the motion vanishes at the focus).
+        Whether the tiles' expansion rates over one frame, summed over the view streak's latest
+        :data:`SECONDS`, read as a corridor (:func:`corridor`): the view is then walls passing
+        around the camera, not a surface ahead. Judged over frames, not in each, since the
+        middle tile's rate is the noisiest (the motion vanishes at the focus).
     id : int or None
         The target id of the current run of passing frames (a new one for each run).
     """
 
     def __init__(self) -> None:
         self.streak = 0
+        self.view_streak = 0
         self.surface: Surface | None = None
         self.id: int | None = None
         self.corridor = False
-        # the streak's latest tile rates, each with the seconds since the frame before
+        # the view streak's latest tile rates over one frame, each with the seconds since the
+        # frame before
         self._rates: deque[tuple[np.ndarray, float]] = deque()
         self._latest: np.ndarray | None = None  # the frame last given as ``current``
         # the shrunk frames back to the baseline's, oldest first, each with the seconds since
@@ -264,18 +293,29 @@ class SurfaceWatch:
             k -= 1
         for _ in range(k):
             history.popleft()
-        self.surface, ahead = _measure(history[0][0], history[-1][0], current.shape, span,
-                                       tau_max, offset_max, exclude)
+        after = history[-1][0]
+        exclude = _shrunk_mask(exclude, after.shape)
+        self.surface, ahead = _measure(history[0][0], after, current.shape, span, tau_max,
+                                       offset_max, exclude)
+        one, one_ahead = self.surface, ahead  # over the latest frame
+        if len(history) > 2 and elapsed > 0:
+            one, one_ahead = _measure(history[-2][0], after, current.shape, elapsed, tau_max,
+                                      offset_max, exclude)
         self.streak = self.streak + 1 if ahead else 0
-        if ahead:
+        if not ahead:
+            self.id = None
+        self.view_streak = self.view_streak + 1 if ahead or one_ahead else 0
+        if self.view_streak:
+            grid = (one.tile_rates if one_ahead
+                    else _tile_rates(history[-2][0], after, elapsed, exclude)[0])
             kept = self._rates
-            kept.append((self.surface.tile_rates, elapsed))
+            kept.append((grid, elapsed))
             span = sum(dt for _, dt in kept) - kept[0][1]  # from the oldest kept to this one
             while span > SECONDS + 1e-3:
                 kept.popleft()
                 span -= kept[0][1]
             self.corridor = corridor(sum(r for r, _ in kept))
         else:
-            self.id, self.corridor = None, False
+            self.corridor = False
             self._rates.clear()
         return self.surface

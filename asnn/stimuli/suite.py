@@ -689,12 +689,15 @@ def _extra_cases() -> list[Case]:
         _surface("extra-wall-alongside", "extra-pass", motion="alongside", slant_deg=90.0),
         _surface("extra-wall-alongside-near", "extra-pass", motion="alongside", slant_deg=90.0,
                  offset=0.25, tau=2.0),
-        # a robot driving down a textured corridor 2 m wide, its end wall 60 m ahead: every part
-        # of the view expands, the nearer the faster, and nothing is in the way
+        # a robot driving down a textured corridor 2 m wide at 2, 1 and 3 m/s, its end wall 60 m
+        # ahead: every part of the view expands, the nearer the faster, and nothing is in the way
         Case("extra-corridor", corridor_scene, {"size": PLANAR_SIZE, "noise": 2.0},
              ("extra-clear", "surface", "corridor")),
         Case("extra-corridor-slow", corridor_scene, {"size": PLANAR_SIZE, "noise": 2.0,
                                                      "speed": 1.0},
+             ("extra-clear", "surface", "corridor")),
+        Case("extra-corridor-fast", corridor_scene, {"size": PLANAR_SIZE, "noise": 2.0,
+                                                     "speed": 3.0},
              ("extra-clear", "surface", "corridor")),
         # the same corridor with a board a person's size standing in its middle (3.85 s from
         # contact at the start at 2 m/s, 4.7 s at 1 m/s), darker or lighter than the walls;
