@@ -23,12 +23,12 @@ over one frame (a corridor's walls do: :func:`corridor`; at speed its walls at t
 move beyond the fit's range over the baseline, so the watch measures each frame over the frame
 before it too, and the view counts as one surface expanding, a corridor included, where either
 passes: :attr:`SurfaceWatch.view_streak`). The tiles tell a wall from a looming object in a
-still view, which expands in its middle tile alone. From a road they tell it only in part: under forward
-motion the sky does not move and the road's expansion grows toward the frame's bottom, yet
-where roadside things fill the view the tiles agree in runs of a few frames; the drives' runs
-are short, a wall's last, and the duration is what tells them apart (docs/design-notes.md, "A
-surface ahead, adopted", where the numbers were set on generated walls against every other
-generated scene; "A surface ahead over a tenth of a second", where the baseline was; "A
+still view, which expands in its middle tile alone. From a road they tell it only in part:
+under forward motion the sky does not move and the road's expansion grows toward the frame's
+bottom, yet where roadside things fill the view the tiles agree in runs of a few frames; the
+drives' runs are short, a wall's last, and the duration is what tells them apart
+(docs/design-notes.md, "A surface ahead, adopted", where the numbers were set on generated
+walls against every other generated scene; "A surface ahead over a tenth of a second", where the baseline was; "A
 corridor is not a surface ahead"; and "A fast corridor, read over one frame").
 
 References

@@ -221,8 +221,9 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
     :func:`surface_scene`'s) looks along it. A collision where its front, ``standoff`` m ahead
     of the lens, reaches the end wall within the clip (the contact frame), else not. With
     ``obstacle``, a board ``obstacle_size`` m wide and high (a person's size by default) stands
-    on the floor in the corridor's middle, across the lens's height, ``obstacle`` m ahead at the start, shaded
-    ``obstacle_shade`` (the walls are 0.75-1.1): the collision is then with it. Walls, floor,
+    on the floor in the corridor's middle, across the lens's height, ``obstacle`` m ahead at
+    the start, shaded ``obstacle_shade`` (the walls are 0.75-1.1): the collision is then with
+    it. Walls, floor,
     ceiling, end wall and board carry the same random texture (its finest structure about
     6.5 cm: 9 px at 1 m, 160 px across), shaded differently, drawn at twice the size and
     area-averaged; at another ``scale`` the same texture, magnified with the frame.
