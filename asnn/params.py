@@ -316,19 +316,17 @@ class ASNNParams(BaseModel):
         "(a wall, a door, a lorry's back at a metre), which the retina's filtering cancels: "
         "where the whole frame expands as one plane over 0.1 s, its tiles alike (not faster "
         "around the middle over one frame, as a corridor's walls), with a time to contact of "
-        "at most tau_max "
-        "and its focus within offset_max of the centre, for 0.3 s of frames in a row (7 at 20 "
-        "fps), u(t) gains the potential of one spike a frame and the view is a target "
-        "(asnn.approach.surface); needs targets='objects'")
+        "at most tau_max and its focus within offset_max of the centre, for 0.3 s of frames in "
+        "a row (7 at 20 fps), u(t) gains the potential of one spike a frame and the view is a "
+        "target (asnn.approach.surface); needs targets='objects'")
     corridor_gate: bool = Field(
         False, description="where the whole view has passed surface_ahead's test (over 0.1 s "
         "or over one frame) for 0.3 s but its tiles read a corridor (the walls around the "
-        "middle expanding faster than it), "
-        "no object counts either: the object stage's boxes there are pieces of the walls "
-        "around our heading, which expand about it as a stopped object would; an object "
-        "standing ahead ends the corridor reading by expanding the middle tile "
-        "(asnn.approach.surface.SurfaceWatch.corridor; the view is measured with either "
-        "switch on); needs targets='objects'")
+        "middle expanding faster than it), no object counts either: the object stage's boxes "
+        "there are pieces of the walls around our heading, which expand about it as a stopped "
+        "object would; an object standing ahead ends the corridor reading by expanding the "
+        "middle tile (asnn.approach.surface.SurfaceWatch.corridor; the view is measured with "
+        "either switch on); needs targets='objects'")
     ignore_rig: bool = Field(
         False, description="leave out of the looming fits the edges that stay still at the "
         "frame's top and bottom (asnn.approach.looming.rig_pixels): the camera's own hood or "
