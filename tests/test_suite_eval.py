@@ -165,7 +165,7 @@ def test_synthetic_eval_of_the_extra_drives_outside_the_suite(tmp_path, capsys):
     capsys.readouterr()
     assert main(["scene", "--list", "extra-*"]) == 0
     listed = capsys.readouterr().out.splitlines()
-    assert len(listed) == 40 and all(line.startswith("extra-") for line in listed)
+    assert len(listed) == 42 and all(line.startswith("extra-") for line in listed)
     assert open_source("synthetic:extra-day-sharp-left").fps == 20.0
 
 

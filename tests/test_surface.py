@@ -274,6 +274,9 @@ def test_a_corridor_is_a_collision_only_where_the_clip_reaches_its_end_wall():
     assert not long.collision and long.contact_frame is None and len(long.frames) == 41
     short = corridor_scene(speed=2.0, seconds=2.0, end=3.3, standoff=0.3)
     assert short.collision and short.contact_frame == 30 and short.ttc[0] == pytest.approx(1.5)
+    # moving up to contact, then standing at the wall
+    change = np.abs(np.diff(short.frames.astype(int), axis=0)).mean(axis=(1, 2))
+    assert change[:30].min() > 1 and change[30:].max() == 0
     with pytest.raises(ValueError, match="inside the corridor"):
         corridor_scene(half_width=0.0)
 
@@ -370,10 +373,11 @@ def test_a_corridor_s_walls_tracked_as_objects_do_not_count_while_it_reads_as_a_
     assert not _warned(pathway_off)
 
 
-@pytest.mark.parametrize("case", ["extra-corridor-board", "extra-corridor-board-light"])
+@pytest.mark.parametrize("case", ["extra-corridor-board", "extra-corridor-board-light",
+                                  "extra-corridor-end"])
 def test_a_board_standing_in_a_corridor_warns_once_it_ends_the_corridor_reading(case):
-    # without the gate the walls warn 2.5 s and more before contact; with it, the board is
-    # warned about in the last 1.5 s before contact, and nothing earlier
+    # without the gate the walls warn 2.5 s and more before contact; with it, the board (or the
+    # corridor's end wall) is warned about in the last 1.5 s before contact, and nothing earlier
     scene, responses = _run(case)
     warned = _warned(responses)
     assert warned and scene.contact_frame - 1.5 * FPS <= warned[0] < scene.contact_frame - 10

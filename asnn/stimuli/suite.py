@@ -65,7 +65,8 @@ for a bird walking up to a hand-held or bumped camera (docs/design-notes.md, "A 
 a swaying camera, whole"); a camera closing on a textured wall that fills the view (head-on,
 slanted, off its heading, faster, faint), backing away from one or passing along it
 (:func:`.surface.surface_scene`); and a robot driving down a textured corridor, with nothing
-ahead or with a board a person's size standing in it (:func:`.surface.corridor_scene`).
+ahead, with a board a person's size standing in it, or up to its end wall
+(:func:`.surface.corridor_scene`).
 
 **Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
 drives at S times their size (their world is in metres and degrees), the planar scenes with
@@ -709,6 +710,13 @@ def _extra_cases() -> list[Case]:
         Case("extra-corridor-board-slow", corridor_scene,
              {**_BOARD, "obstacle": 5.0, "speed": 1.0, "seconds": 5.2, "obstacle_shade": 0.55},
              ("extra-threat", "surface", "corridor", "dark")),
+        # nothing in the corridor, but its end wall 8 m ahead at 2 m/s, 5 m ahead at 1 m/s
+        Case("extra-corridor-end", corridor_scene,
+             {"size": PLANAR_SIZE, "noise": 2.0, "end": 8.0, "seconds": 4.35},
+             ("extra-threat", "surface", "corridor")),
+        Case("extra-corridor-end-slow", corridor_scene,
+             {"size": PLANAR_SIZE, "noise": 2.0, "end": 5.0, "speed": 1.0, "seconds": 5.2},
+             ("extra-threat", "surface", "corridor")),
     ]
 
 

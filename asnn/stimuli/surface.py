@@ -219,14 +219,14 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
     The corridor is ``2 half_width`` m wide, its floor ``below`` and its ceiling ``above`` the
     lens, its end wall ``end`` m ahead at the start; the camera (60 degrees across, as
     :func:`surface_scene`'s) looks along it. A collision where its front, ``standoff`` m ahead
-    of the lens, reaches the end wall within the clip (the contact frame), else not. With
-    ``obstacle``, a board ``obstacle_size`` m wide and high (a person's size by default) stands
-    on the floor in the corridor's middle, across the lens's height, ``obstacle`` m ahead at
-    the start, shaded ``obstacle_shade`` (the walls are 0.75-1.1): the collision is then with
-    it. Walls, floor,
-    ceiling, end wall and board carry the same random texture (its finest structure about
-    6.5 cm: 9 px at 1 m, 160 px across), shaded differently, drawn at twice the size and
-    area-averaged; at another ``scale`` the same texture, magnified with the frame.
+    of the lens, reaches the end wall within the clip (the contact frame, after which it stands
+    there), else not. With ``obstacle``, a board ``obstacle_size`` m wide and high (a person's
+    size by default) stands on the floor in the corridor's middle, across the lens's height,
+    ``obstacle`` m ahead at the start, shaded ``obstacle_shade`` (the walls are 0.75-1.1): the
+    collision is then with it. Walls, floor, ceiling, end wall and board carry the same random
+    texture (its finest structure about 6.5 cm: 9 px at 1 m, 160 px across), shaded
+    differently, drawn at twice the size and area-averaged; at another ``scale`` the same
+    texture, magnified with the frame.
 
     Raises
     ------
@@ -266,11 +266,13 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
                           np.where(rx > 0, half_width / rx, np.inf),
                           np.where(ry > 0, below / ry, np.inf),
                           np.where(ry < 0, -above / ry, np.inf)])
+    ahead = end if obstacle is None else obstacle
     shade = np.array([0.9, 0.9, 0.75, 1.1, 1.0, obstacle_shade])
     total = round(seconds * fps) + 1
     clip = np.empty((total, h, w))
     for k in range(total):
-        travelled = speed * k / fps
+        # the camera stops where its front meets the end wall or the board
+        travelled = min(speed * k / fps, ahead - standoff)
         surfaces = [sides, np.full((1, *rx.shape), end - travelled)]
         if obstacle is not None:
             z = obstacle - travelled
@@ -290,7 +292,6 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
         image = 127.5 * shade[which] * (1.0 + contrast * values)
         clip[k] = cv2.resize(image, (w, h), interpolation=cv2.INTER_AREA)
     frames = np.clip(np.rint(effects.sensor_noise(clip, noise, seed)), 0, 255).astype(np.uint8)
-    ahead = end if obstacle is None else obstacle
     contact = (ahead - standoff) / speed * fps
     collision = contact <= total - 1
     ttc = track = None
