@@ -28,8 +28,9 @@ under forward motion the sky does not move and the road's expansion grows toward
 bottom, yet where roadside things fill the view the tiles agree in runs of a few frames; the
 drives' runs are short, a wall's last, and the duration is what tells them apart
 (docs/design-notes.md, "A surface ahead, adopted", where the numbers were set on generated
-walls against every other generated scene; "A surface ahead over a tenth of a second", where the baseline was; "A
-corridor is not a surface ahead"; and "A fast corridor, read over one frame").
+walls against every other generated scene; "A surface ahead over a tenth of a second", where
+the baseline was; "A corridor is not a surface ahead"; and "A fast corridor, read over one
+frame").
 
 References
 ----------

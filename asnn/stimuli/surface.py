@@ -284,8 +284,8 @@ def corridor_scene(*, name: str = "corridor", size: tuple[int, int] = (160, 120)
         z = depth.min(axis=0)
         x, y = z * rx, z * ry
         # each surface's own two coordinates (metres), the surfaces apart in the texture
-        a = np.choose(which, [z + travelled, z + travelled, x, x, x, x][:len(depth)])
-        b = np.choose(which, [y, y, z + travelled, z + travelled, y, y][:len(depth)]) + 37.0 * which
+        a = np.choose(which, [z + travelled, z + travelled, x, x, x, x])
+        b = np.choose(which, [y, y, z + travelled, z + travelled, y, y]) + 37.0 * which
         values = cv2.remap(tile, np.mod(a * texels, n).astype(np.float32),
                            np.mod(b * texels, n).astype(np.float32), cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_WRAP)
