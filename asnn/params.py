@@ -274,6 +274,16 @@ class ASNNParams(BaseModel):
         0.0, ge=0, description="the scene-relative test passes a rate against the scene down "
         "to -scene_tolerance times the track's own expansion rate (zero within the second "
         "fit's noise)")
+    own_motion_weight: float = Field(
+        1.0, ge=1, le=10, description="a counting object whose expansion against the scene is "
+        "at least own_motion_ratio of its own (it closes on us by its own motion, not only "
+        "because we drive at it) adds this many times its share to u(t): a car turning across "
+        "our path at night, dim and small, reaches the warning with less energy "
+        "(asnn.approach.tracking.own_motion_weight); 1: every object alike; inert without "
+        "scene_relative and approach_gate")
+    own_motion_ratio: float = Field(
+        0.75, gt=0, le=1, description="the share of a track's own expansion that its expansion "
+        "against the scene must keep for own_motion_weight")
     receding_scene: bool = Field(
         False, description="where the scene contracts (the camera moves away from it: a rear "
         "camera, reversing), a track that passes the partial-overlap regime but for its fit is "
@@ -495,7 +505,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     max_width=480, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
     region_persistence=True, region_cover=0.2, object_ids=True, motion_layers=True, ignore_rig=True,
-    surface_ahead=True, corridor_gate=True,
+    surface_ahead=True, corridor_gate=True, own_motion_weight=2.0,
 ))
 DEFAULT_PRESET = "robust"
 # frames a second below which the default preset loses hits (README, "At half the frame rate"):

@@ -541,6 +541,21 @@ def test_the_scene_relative_test_tolerates_a_fraction_of_the_tracks_expansion():
     assert not against_scene(-0.01, expansion=-1.0, tolerance=0.1)  # a shrinking track: none
 
 
+def test_an_object_approaching_by_its_own_motion_counts_more():
+    from asnn.approach.tracking import own_motion_weight
+
+    # a parked car we drive at: its expansion is the scene's, left out of its own
+    assert own_motion_weight(0.2, 2.0, 2.0, 0.75) == 1.0
+    # a car turning across our path: the scene explains little of its expansion
+    assert own_motion_weight(1.9, 2.0, 2.0, 0.75) == 2.0
+    assert own_motion_weight(1.5, 2.0, 2.0, 0.75) == 2.0  # the ratio itself passes
+    assert own_motion_weight(1.9, 2.0, 1.0, 0.75) == 1.0  # weight 1: the stage is off
+    # not measured, or not growing: as any object
+    assert own_motion_weight(None, 2.0, 2.0, 0.75) == 1.0
+    assert own_motion_weight(1.0, None, 2.0, 0.75) == 1.0
+    assert own_motion_weight(-1.0, -0.5, 2.0, 0.75) == 1.0
+
+
 def test_tracker_rejects_a_smoothing_outside_its_range():
     with pytest.raises(ValueError):
         TargetTracker(smoothing=0.0)

@@ -23,6 +23,7 @@ NO_MOTION_LAYERS = dict(motion_layers=False)
 NO_RIG = dict(ignore_rig=False)
 NO_RIM = dict(rim_expansion=False)
 NO_RIM_LIMIT = dict(rim_motion_max=None)
+NO_OWN_MOTION_WEIGHT = dict(own_motion_weight=1.0)
 
 
 def _run(case, variant=0, perturbation=None, scale=None, every=1, **overrides):
@@ -330,6 +331,23 @@ def test_a_rate_against_the_scene_that_is_zero_within_noise_does_not_break_an_ap
     assert _hit(*_run("rear-night-catchup-offset", region_persistence=False))
     assert _quiet(_run("rear-night-catchup-offset", scene_tolerance=0.0,
                        region_persistence=False)[1])
+
+
+def test_an_object_closing_by_its_own_motion_counts_twice_and_one_we_drive_at_once():
+    # a disk looming at a still camera closes on it by its own motion: every frame it counts
+    # in, its share of u is doubled, and the warning comes a frame sooner
+    _, weighted = _run("loom-dark-c0.6-d6-center")
+    _, plain = _run("loom-dark-c0.6-d6-center", **NO_OWN_MOTION_WEIGHT)
+    counted = [(w.u, p.u) for w, p in zip(weighted, plain) if p.u > 0]
+    assert len(counted) >= 10 and all(w == pytest.approx(2 * p) for w, p in counted)
+    assert _first(weighted) < _first(plain)
+    # a stopped car we drive at expands because we do: the scene explains it, and until it
+    # fills the view its share is as before, the warning no sooner
+    _, weighted = _run("drive-day-stopped-car")
+    _, plain = _run("drive-day-stopped-car", **NO_OWN_MOTION_WEIGHT)
+    counted = [(w.u, p.u) for w, p in zip(weighted, plain) if p.u > 0]
+    assert len(counted) >= 10 and all(w == p for w, p in counted[:10])
+    assert _first(weighted) == _first(plain)
 
 
 def test_a_car_catching_up_off_axis_with_a_rear_camera_is_fitted_against_the_receding_scene():

@@ -42,7 +42,7 @@ from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
 from .motion_layers import motion_layers
 from .surface import SurfaceWatch, surface_frames
 from .tracking import (ApproachVerdict, Observation, TargetTracker, approach_test,
-                       persistence_frames)
+                       own_motion_weight, persistence_frames)
 
 __all__ = ["ApproachStage", "CameraRig", "FramePair", "frame_pixel"]
 
@@ -309,7 +309,12 @@ class ApproachStage:
             coming = [False] * len(coming)
         self.objects = list(zip(tracks, shares))
         if p.approach_gate:  # NumPy's sum, in its order (none coming: 0)
-            total = float(regions.share[np.asarray(coming, bool)].sum()) if any(coming) else 0.0
+            shares_counted = regions.share
+            if p.own_motion_weight != 1.0:
+                shares_counted = shares_counted * np.array(
+                    [own_motion_weight(tr.own_expansion, tr.expansion, p.own_motion_weight,
+                                       p.own_motion_ratio) for tr in tracks])
+            total = float(shares_counted[np.asarray(coming, bool)].sum()) if any(coming) else 0.0
         sx, sy = scale
         reports = ([self._report(tr, coming[k], shares[k], sx, sy)
                     for k, tr in enumerate(tracks)] if record else None)

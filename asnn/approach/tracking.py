@@ -66,7 +66,8 @@ __all__ = ["Observation", "Track", "TargetTracker", "approach_test", "approachin
            "against_scene", "smoothed_run", "boxes_overlap", "box_cover", "persists_in_region",
            "persistence_frames", "count_in_regions", "fragment_of", "layer_estimates",
            "layers_pass", "layers_approach", "LAYER_SHARE", "LAYER_TAU_FACTOR",
-           "LAYER_OFFSET_FACTOR", "ApproachVerdict", "approach_verdict", "approach_parts"]
+           "LAYER_OFFSET_FACTOR", "ApproachVerdict", "approach_verdict", "approach_parts",
+           "own_motion_weight"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -386,6 +387,45 @@ def against_scene(own_expansion: float | None, expansion: float | None = None,
     if own_expansion is None:
         return True
     return own_expansion >= -tolerance * max(expansion or 0.0, 0.0)
+
+
+def own_motion_weight(own_expansion: float | None, expansion: float | None, weight: float,
+                      ratio: float) -> float:
+    """The weight of a counting object's share of ``u``: ``weight`` where it approaches by its
+    own motion, its expansion against the scene at least ``ratio`` of its own
+    (``own_expansion >= ratio * expansion``), else 1.
+
+    We drive at a parked car or the roadside, so their expansion is mostly the scene's; an
+    object whose expansion the scene does not explain (a car turning across our path, a
+    walker coming at a still camera) closes on us by itself, and is the more salient: the
+    retina's object-motion-sensitive ganglion cells answer motion against the background and
+    are silenced by the global motion the eye's own movement makes [1]_. Such an object's
+    energy counts ``weight`` times (a dim one at night reaches the warning with less).
+
+    Parameters
+    ----------
+    own_expansion : float or None
+        The track's expansion rate against the scene, per second
+        (:attr:`Track.own_expansion`; None where not measured: weight 1).
+    expansion : float or None
+        Its own expansion rate, per second (None or not above 0: weight 1).
+    weight : float
+        The weight of an object approaching by its own motion (1: every object alike).
+    ratio : float
+        The share of its own expansion its expansion against the scene must keep.
+
+    Returns
+    -------
+    float
+
+    References
+    ----------
+    .. [1] B. P. Olveczky, S. A. Baccus and M. Meister, "Segregation of object and
+       background motion in the retina", Nature 423, 401-408 (2003).
+    """
+    if own_expansion is None or expansion is None or expansion <= 0:
+        return 1.0
+    return weight if own_expansion >= ratio * expansion else 1.0
 
 
 def approach_test(ttc: float | None, offset: float | None, tau_max: float,

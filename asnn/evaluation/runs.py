@@ -52,6 +52,8 @@ ABLATIONS = {
     "no surface-ahead pathway (a wall filling the view)": "asnn:robust/surface_ahead=false",
     "objects counted in a corridor (no corridor gate)": "asnn:robust/corridor_gate=false",
     "scene-relative test without its tolerance": "asnn:robust/scene_tolerance=0",
+    "objects closing by their own motion counted once (no own-motion weight)": (
+        "asnn:robust/own_motion_weight=1"),
     "no partial-overlap regime": "asnn:robust/partial_overlap=false",
     "partial overlaps without the fit test": "asnn:robust/overlap_fit_min=-1",
     "no fit against a receding scene": "asnn:robust/receding_scene=false",
