@@ -19,7 +19,8 @@ mask ``M_a M_d`` and approach map ``G`` to one :class:`ApproachStage` per stream
    where it reads as a corridor instead, lets no object count (its walls: ``corridor_gate``);
 
 and gives back the membrane potential summed over the approaching objects only (the approach
-gate, ``approach_gate``), and a surface ahead's, with one target per approaching object. Every
+gate, ``approach_gate``; an object closing on us by its own motion counts ``own_motion_weight``
+times), and a surface ahead's, with one target per approaching object. Every
 stage is in
 ``docs/robust-preset.md`` with its reason and its switch.
 """
