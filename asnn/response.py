@@ -85,7 +85,8 @@ class TrackReport:
         Whether it counts as coming at the camera in this frame (its streak, or the region's
         persistence: :meth:`asnn.approach.tracking.TargetTracker.judge`): only these drive u(t).
     share : float
-        Its share of u(t) before ``u_scale``, where it counts.
+        What it adds to u(t) before ``u_scale``, where it counts: its share of the attended
+        ``G'``, times ``own_motion_weight`` where it closes on us by its own motion.
     """
 
     id: int

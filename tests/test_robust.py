@@ -472,13 +472,16 @@ def _traced(case, variant=0, **overrides):
 
 def test_every_tracked_object_reports_the_approach_test_that_decided_the_warning():
     scene, responses = _traced("loom-dark-c0.6-d6-center")
-    tau_max = preset("robust").tau_max
+    tau_max, u_scale = preset("robust").tau_max, preset("robust").u_scale
     warned = [r for r in responses if r.collision and r.index > 0]
     assert len(warned) >= 10
     for r in responses[1:]:
         counting = [t for t in r.tracks if t.counts]
         # only counting objects drive u(t), and the warning's targets are theirs
         assert (r.u > 0) == bool(counting)
+        # their shares make up u: each object's, counted twice where it closes on us by its own
+        # motion (a disk looming at a still camera does)
+        assert r.u == pytest.approx(u_scale * sum(t.share for t in counting), rel=1e-9)
         assert {t.object_id for t in counting} == {t.id for t in r.targets}
         for t in r.tracks:
             assert (t.streak > 0) == t.test.passes

@@ -309,15 +309,17 @@ class ApproachStage:
             # object standing ahead counts once it ends the corridor reading)
             coming = [False] * len(coming)
         self.objects = list(zip(tracks, shares))
+        # what each object adds to u where it counts: its share, times own_motion_weight where it
+        # closes on us by its own motion
+        counted = regions.share
+        if p.own_motion_weight != 1.0:
+            counted = counted * np.array(
+                [own_motion_weight(tr.own_expansion, tr.expansion, p.own_motion_weight,
+                                   p.own_motion_ratio) for tr in tracks])
         if p.approach_gate:  # NumPy's sum, in its order (none coming: 0)
-            shares_counted = regions.share
-            if p.own_motion_weight != 1.0:
-                shares_counted = shares_counted * np.array(
-                    [own_motion_weight(tr.own_expansion, tr.expansion, p.own_motion_weight,
-                                       p.own_motion_ratio) for tr in tracks])
-            total = float(shares_counted[np.asarray(coming, bool)].sum()) if any(coming) else 0.0
+            total = float(counted[np.asarray(coming, bool)].sum()) if any(coming) else 0.0
         sx, sy = scale
-        reports = ([self._report(tr, coming[k], shares[k], sx, sy)
+        reports = ([self._report(tr, coming[k], float(counted[k]), sx, sy)
                     for k, tr in enumerate(tracks)] if record else None)
         targets: dict[int, Target] = {}  # by object id
         for k, tr in enumerate(tracks):
