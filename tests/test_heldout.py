@@ -123,6 +123,27 @@ def test_leave_one_out_chooses_without_the_clip_it_scores(traced):
         heldout.leave_one_out(traces, labels, base, [False] * len(grid))
 
 
+def test_the_grid_replayed_in_processes_scores_as_in_one(traced):
+    # the grid's points go out in runs to worker processes: every point's figures come back,
+    # in grid order, and the progress counts each point once
+    class Count:
+        done = 0
+
+        def advance(self, n=1, note=""):
+            self.done += n
+
+    base, scenes, traces = traced
+    labels = [s.label(s.name) for s in scenes]
+    pick = [CASES.index("nearmiss-disk-dark-right"), CASES.index("drive-day-cut-in-dark")]
+    traces, labels = [traces[k] for k in pick], [labels[k] for k in pick]
+    alone, spread = Count(), Count()
+    one = heldout.suite_summaries(traces, labels, base, progress=alone)
+    two = heldout.suite_summaries(traces, labels, base, jobs=2, progress=spread)
+    assert one == two and alone.done == spread.done == len(heldout.grid(base))
+    # the points tell the two clips apart: a wrong order would show
+    assert len({(s["hit"], s["false_alarms"]) for s in one}) > 1
+
+
 def test_the_selection_prefers_hits_minus_false_alarms_then_fewer_false_alarms():
     summary = lambda hit, fa, inside, frames: {"hit": hit, "false_alarms": fa,
                                                "window_warning_frames": inside,

@@ -22,7 +22,8 @@ after everything else, so each clip is run once (:func:`trace_clip`) with the ob
 frame recorded (their time to contact, offset and share of ``u``), and the gate, the spikes and
 the warning are replayed for each grid point (:func:`replay`); the replay with the preset's own
 thresholds reproduces the model's warnings frame for frame (``tests/test_heldout.py``), and
-every held-out run checks that it does on each clip it traced (:func:`check_replay`).
+every held-out run checks that it does on each clip it traced (:func:`check_replay`). The
+replays, a grid point's on every clip at a time, are spread over the run's processes (``jobs``).
 
 The surface-ahead pathway (``surface_ahead``) is not replayed: it reads the frames, not the
 objects. Where it counts, the check above fails, so a traced clip it warned on is refused
@@ -48,7 +49,7 @@ from ..approach.tracking import (approach_parts, approach_test, better_fit, coun
                                  smoothed_run)
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
-from ..retina import collision_warning
+from ..retina import collision_warning, sigmoid_output, spike_count, spike_rate
 from . import scoring
 from .clips import check_clips
 from .labels import load_labels
@@ -194,13 +195,16 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
     """The per-frame records (``frame``, ``collision``, ``targets``) the model would give with
     ``params``' gate thresholds, from a trace made with the same parameters otherwise."""
     p = params
-    overlap = p.overlap
     streak: dict[int, int] = {}
-    own: dict[int, float | None] = {}  # smoothed expansion against the scene, as Track keeps it
-    own_fits: dict[int, float | None] = {}  # and that fit's share (Track.own_fit)
+    # the smoothed expansion against the scene, as Track keeps it, and that fit's share
+    # (Track.own_fit), per track measured in the frame before
+    own: tuple[dict, dict] = ({}, {})
     window: deque[int] = deque(maxlen=p.n_t)
     # the boxes of the tracks that passed, per processed frame (TargetTracker.judge)
     passed: deque[list] = deque(maxlen=p.approach_frames)
+    # in a frame where nothing counts (most frames) u is 0, whose spikes (eq. 32-33) never vary
+    quiet = spike_count(sigmoid_output(0.0, 1), p.k_sp, p.t_sp)
+    window_dt = p.window_dt
     records = []
     previous = {"collision": False, "targets": []}
     for index, frame in enumerate(trace.frames):
@@ -209,49 +213,65 @@ def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
         elif frame.repeat:
             record = {**previous, "frame": index}
         else:
-            frames = persistence_frames(p.approach_frames, p.approach_seconds, frame.period)
-            judged = []  # (object, passes now, counts by its own frames)
-            measured, measured_fits = {}, {}
-            for ident, ttc, offset, share, x, y, against, fit, own_fit, box, layers in (
-                    frame.objects):
-                passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, overlap)
-                # where the scene contracts, the regime's candidates but for the fit test are
-                # measured too (their fit against the scene is known only there); one whose
-                # fit is not known would fail the regime anyway, and is left unmeasured
-                unfit = (not passes and p.receding_scene and own_fit is not None
-                         and approach_test(ttc, offset, p.tau_max, p.offset_max, 1.0, overlap))
-                if p.scene_relative and (passes or unfit):
-                    measured[ident] = smoothed_run(own.get(ident), against, p.track_smoothing)
-                    measured_fits[ident] = smoothed_run(own_fits.get(ident), own_fit,
-                                                        p.track_smoothing)
-                    passes = approach_parts(
-                        ttc, offset, better_fit(fit, measured_fits[ident]), measured[ident],
-                        1.0 / ttc, layers if p.motion_layers else None, p.tau_max, p.offset_max,
-                        overlap, p.scene_tolerance).passes
-                streak[ident] = streak.get(ident, 0) + 1 if passes else 0
-                weight = own_motion_weight(measured.get(ident), 1.0 / ttc if ttc else None,
-                                           p.own_motion_weight, p.own_motion_ratio)
-                judged.append(((weight * share, x, y, box), passes, streak[ident] >= frames))
-            boxes = [obj[3] for obj, _, _ in judged]
-            passing = [passes for _, passes, _ in judged]
-            coming = [ok for _, _, ok in judged]
-            if p.region_persistence:  # as TargetTracker.judge
-                coming = count_in_regions(boxes, passing, coming, list(passed)[-frames:],
-                                          frames, p.region_cover)
-            total, targets = 0.0, []
-            for ((share, x, y, _), _, _), counts in zip(judged, coming):
-                if counts:
-                    total += share
-                    targets.append({"x": x, "y": y})
-            # a track not measured in this frame starts afresh (Track.measure_own)
-            own, own_fits = measured, measured_fits
-            passed.append([box for box, passes in zip(boxes, passing) if passes])
-            _, _, rate = spike_step(p.u_scale * total, trace.cells, window, p)
+            if frame.objects:
+                total, targets, own = _judge(frame, p, streak, own, passed)
+            else:  # a track not seen in this frame starts afresh (Track.measure_own)
+                total, targets, own = 0.0, [], ({}, {})
+                passed.append([])
+            if total:
+                rate = spike_step(p.u_scale * total, trace.cells, window, p)[2]
+            else:
+                window.append(quiet)
+                rate = spike_rate(window, p.n_t, window_dt)
             record = {"frame": index, "collision": collision_warning(rate, p.t_c),
                       "targets": targets}
         records.append(record)
         previous = record
     return records
+
+
+def _judge(frame: FrameTrace, p: ASNNParams, streak: dict[int, int], own: tuple[dict, dict],
+           passed: deque) -> tuple[float, list[dict], tuple[dict, dict]]:
+    """One processed frame's objects judged as the approach gate would with ``p``: the u
+    they add before ``u_scale``, the targets that count, and the tracks' smoothed expansion
+    against the scene and its fit (``own``, for the next frame). Updates ``streak`` (frames
+    of approach per track) and ``passed``."""
+    frames = persistence_frames(p.approach_frames, p.approach_seconds, frame.period)
+    overlap = p.overlap
+    judged = []  # (object, passes now, counts by its own frames)
+    measured, measured_fits = {}, {}
+    for ident, ttc, offset, share, x, y, against, fit, own_fit, box, layers in frame.objects:
+        passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, overlap)
+        # where the scene contracts, the regime's candidates but for the fit test are
+        # measured too (their fit against the scene is known only there); one whose
+        # fit is not known would fail the regime anyway, and is left unmeasured
+        unfit = (not passes and p.receding_scene and own_fit is not None
+                 and approach_test(ttc, offset, p.tau_max, p.offset_max, 1.0, overlap))
+        if p.scene_relative and (passes or unfit):
+            measured[ident] = smoothed_run(own[0].get(ident), against, p.track_smoothing)
+            measured_fits[ident] = smoothed_run(own[1].get(ident), own_fit, p.track_smoothing)
+            passes = approach_parts(
+                ttc, offset, better_fit(fit, measured_fits[ident]), measured[ident],
+                1.0 / ttc, layers if p.motion_layers else None, p.tau_max, p.offset_max,
+                overlap, p.scene_tolerance).passes
+        streak[ident] = streak.get(ident, 0) + 1 if passes else 0
+        weight = own_motion_weight(measured.get(ident), 1.0 / ttc if ttc else None,
+                                   p.own_motion_weight, p.own_motion_ratio)
+        judged.append(((weight * share, x, y, box), passes, streak[ident] >= frames))
+    boxes = [obj[3] for obj, _, _ in judged]
+    passing = [passes for _, passes, _ in judged]
+    coming = [ok for _, _, ok in judged]
+    if p.region_persistence:  # as TargetTracker.judge
+        coming = count_in_regions(boxes, passing, coming, list(passed)[-frames:],
+                                  frames, p.region_cover)
+    total, targets = 0.0, []
+    for ((share, x, y, _), _, _), counts in zip(judged, coming):
+        if counts:
+            total += share
+            targets.append({"x": x, "y": y})
+    passed.append([box for box, passes in zip(boxes, passing) if passes])
+    # a track not measured in this frame starts afresh (Track.measure_own)
+    return total, targets, (measured, measured_fits)
 
 
 def grid(base: ASNNParams) -> list[ASNNParams]:
@@ -270,14 +290,41 @@ def grid(base: ASNNParams) -> list[ASNNParams]:
 
 
 def suite_summaries(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
-                    base: ASNNParams, warmup: int = scoring.WARMUP_FRAMES) -> list[dict]:
+                    base: ASNNParams, warmup: int = scoring.WARMUP_FRAMES,
+                    jobs: int = 1, progress=None) -> list[dict]:
     """For each grid point, its summary (:func:`~asnn.evaluation.scoring.summarize`) on the
     generated suite, from the suite's traces and labels (scored as generated clips: no early
-    tolerance)."""
-    return [scoring.summarize(scoring.score_clip(replay(tr, g), lab, warmup=warmup,
-                                                 early_tolerance_s=0.0)
-                              for tr, lab in zip(traces, labels))
-            for g in grid(base)]
+    tolerance); the grid's points replayed in ``jobs`` processes, ``progress`` advanced by
+    each point."""
+    return [scoring.summarize(scores) for scores in
+            _grid_scores(traces, labels, grid(base), warmup, 0.0, jobs, progress)]
+
+
+def _grid_scores(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
+                 points: Sequence[ASNNParams], warmup: int, early_tolerance_s: float,
+                 jobs: int, progress=None) -> list[list[scoring.ClipScore]]:
+    """Per grid point, each clip's score under it, replayed in ``jobs`` processes. The points
+    go out in runs of consecutive points, eight per process (a replay takes milliseconds: one
+    task per point would spend more on sending the traces than on replaying them), and
+    ``progress`` advances by each run's points."""
+    chunks = max(1, min(8 * max(jobs, 1), len(points)))
+    bounds = [len(points) * k // chunks for k in range(chunks + 1)]
+    tasks = [(traces, labels, points[a:b], warmup, early_tolerance_s)
+             for a, b in zip(bounds, bounds[1:])]
+    found = {}
+    for index, scores in run_tasks(_score_points, tasks, jobs):
+        found[index] = scores
+        if progress is not None:
+            progress.advance(len(scores))
+    return [scores for k in range(chunks) for scores in found[k]]
+
+
+def _score_points(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
+                  points: Sequence[ASNNParams], warmup: int,
+                  early_tolerance_s: float) -> list[list[scoring.ClipScore]]:
+    return [[scoring.score_clip(replay(tr, g), lab, warmup=warmup,
+                                early_tolerance_s=early_tolerance_s)
+             for tr, lab in zip(traces, labels)] for g in points]
 
 
 def suite_admissible(summaries: Sequence[Mapping]) -> list[bool]:
@@ -331,7 +378,8 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
                   warmup: int = scoring.WARMUP_FRAMES,
                   early_tolerance_s: float = scoring.EARLY_TOLERANCE_S,
                   tie_break: str = "warning-frames",
-                  suite: Sequence[Mapping] | None = None) -> dict:
+                  suite: Sequence[Mapping] | None = None, jobs: int = 1,
+                  progress=None) -> dict:
     """In-sample and leave-one-clip-out scores of the gate thresholds.
 
     Parameters
@@ -347,6 +395,10 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
     suite : sequence of dict, optional
         Per grid point, its summary on the generated suite (:func:`suite_summaries`); needed
         by the ``suite`` tie-break.
+    jobs : int
+        Processes the grid's points are replayed in.
+    progress : optional
+        Advanced by each grid point replayed (:mod:`asnn.evaluation.progress`).
 
     Returns
     -------
@@ -369,9 +421,7 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
     allowed = [k for k in range(len(points)) if admissible is None or admissible[k]]
     if not allowed:
         raise ValueError("no grid point keeps the generated suite within its aims")
-    scores = [[scoring.score_clip(replay(tr, g), lab, warmup=warmup,
-                                  early_tolerance_s=early_tolerance_s)
-               for tr, lab in zip(traces, labels)] for g in points]
+    scores = _grid_scores(traces, labels, points, warmup, early_tolerance_s, jobs, progress)
 
     def ranked(exclude: int | None) -> tuple[int, list[int]]:
         """The point chosen without clip ``exclude``, and every point that ties with it on
@@ -670,10 +720,17 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     for trace in (*traces, *suite_traces):
         check_replay(trace, base)
     suite_labels = [make_case(name).label(name) for name in cases]
-    suite = suite_summaries(suite_traces, suite_labels, base)
+    # every grid point replayed on the suite, then on the clips
+    points = len(grid(base))
+    progress.start(2 * points, "eval --held-out: replaying the grid")
+    suite = suite_summaries(suite_traces, suite_labels, base, jobs=jobs, progress=progress)
+    progress.note(f"{points} points on the suite")
     results = {"clips_dir": str(clips_dir), "preset": preset_name,
                "overrides": dict(overrides or {}), "suite_cases": len(cases),
                **leave_one_out(traces, labels, base, suite_admissible(suite),
-                               tie_break=tie_break, suite=suite)}
+                               tie_break=tie_break, suite=suite, jobs=jobs,
+                               progress=progress)}
+    progress.note(f"{points} points on the clips")
+    progress.finish()
     held_out_report(results, out_dir)
     return results
