@@ -157,6 +157,8 @@ def test_eval_exits_1_when_a_run_fails_after_it_started(clips, tmp_path, monkeyp
 
 
 def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_deterministic():
+    import cv2
+
     from asnn.evaluation.perturb import PERTURBATIONS, perturb_frame
 
     rng = np.random.default_rng(3)
@@ -205,6 +207,17 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
     assert perturb_frame(frame, "half-size", 0)[0, 0] == pytest.approx(
         frame[:2, :2].astype(float).mean(axis=(0, 1)), abs=1)
     assert perturb_frame(frame, "double-size", 0).mean() == pytest.approx(frame.mean(), abs=2)
+    # half the detail at the frame's own size: the half-size frame enlarged back, so a pattern
+    # finer than two pixels is gone and a coarse one stays
+    checker = np.indices((24, 32)).sum(axis=0) % 2 * 255
+    bars = np.repeat(np.arange(8) % 2 * 255, 4)[None].repeat(24, axis=0)
+    for pattern in (checker, bars):
+        coarse = perturb_frame(pattern.astype(np.uint8), "half-detail", 0).astype(float)
+        assert np.array_equal(coarse, cv2.resize(
+            perturb_frame(pattern.astype(np.uint8), "half-size", 0), (32, 24),
+            interpolation=cv2.INTER_LINEAR))
+    assert np.ptp(perturb_frame(checker.astype(np.uint8), "half-detail", 0)) <= 1
+    assert np.ptp(perturb_frame(bars.astype(np.uint8), "half-detail", 0)) >= 200
 
 
 def test_jpeg_and_gain_take_their_strength_in_their_name(tmp_path, capsys):

@@ -11,7 +11,10 @@ Every perturbation is deterministic (the noise is seeded by the frame's index; `
 as checked, below) and keeps the frames' channels and uint8 type. ``half-size`` and
 ``double-size`` change their size, as a camera of half or twice the resolution would (the
 labels' centres scaled with them; enlarging adds no detail, but the model's parameters in pixels
-meet objects and motions twice as large);
+meet objects and motions twice as large); ``half-detail`` halves them and enlarges them back, so
+that the model sees a half-resolution camera's detail at the clip's own pixel scale (and the
+labels stay as they are): beside ``half-size`` it tells what in the loss at half size is the
+detail and what the pixel sizes of the model's kernels;
 ``half-rate`` drops every second frame, as a camera running at half the frame rate (10 fps for
 the generated suite, 15 fps for the 30 fps dashcam clips) would deliver the same scene, and maps
 the labels' frames onto the frames kept.
@@ -62,6 +65,9 @@ PERTURBATIONS = {
                  "resolution; the labels' centres with it)",
     "double-size": "every frame enlarged to twice its width and height, bilinearly (the labels' "
                    "centres with it)",
+    "half-detail": "every frame averaged down to half its width and height and enlarged back to "
+                   "its size, bilinearly (a camera of half the resolution whose frames are "
+                   "upscaled before the model; the labels as they are)",
     "half-rate": "every second frame dropped, as a camera at half the frame rate would deliver "
                  "them; the labels follow the frames kept",
     "mpeg4": "every clip re-encoded by an inter-frame codec (MPEG-4 Part 2 through OpenCV's "
@@ -166,10 +172,10 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
     if name == "mirror":
         return np.ascontiguousarray(frame[:, ::-1])
     if name in _SCALE:
-        h, w = frame.shape[:2]
-        factor = _SCALE[name]
-        return cv2.resize(frame, (max(1, round(w * factor)), max(1, round(h * factor))),
-                          interpolation=cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR)
+        return _resized(frame, _SCALE[name])
+    if name == "half-detail":
+        return cv2.resize(_resized(frame, 0.5), frame.shape[1::-1],
+                          interpolation=cv2.INTER_LINEAR)
     family = _strength(name)
     if family and family[0] == "jpeg":
         return jpeg(frame[None], family[1])[0]
@@ -187,6 +193,14 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
     else:  # dim, or gainG
         changed = frame * family[1]
     return np.clip(np.rint(changed), 0, 255).astype(np.uint8)
+
+
+def _resized(frame: np.ndarray, factor: float) -> np.ndarray:
+    """``frame`` at ``factor`` times its width and height: averaged down, or enlarged
+    bilinearly."""
+    h, w = frame.shape[:2]
+    return cv2.resize(frame, (max(1, round(w * factor)), max(1, round(h * factor))),
+                      interpolation=cv2.INTER_AREA if factor < 1 else cv2.INTER_LINEAR)
 
 
 def perturbed(timed_frames: Iterable[tuple[float, np.ndarray]], name: str | None
