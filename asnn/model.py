@@ -217,35 +217,46 @@ class ASNN:
     # ------------------------------------------------------------------ step
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
-        width = self.params.max_width
-        shrink = (width is not None and isinstance(frame, np.ndarray) and frame.ndim >= 2
-                  and frame.shape[1] > width)
+        p = self.params
+        width = frame.shape[1] if isinstance(frame, np.ndarray) and frame.ndim >= 2 else None
+        shrink = width is not None and p.max_width is not None and width > p.max_width
+        resize = shrink or (width is not None and p.min_width is not None and width < p.min_width)
         if shrink and self.optimised and frame.dtype == np.uint8:
             # the same luminance as below, bit for bit, without the float64 frame
             frame = check_frame(frame, self._min_side, self.shape)
             h, w = self.shape = frame.shape[:2]
             gray = np.ascontiguousarray(luma(frame))  # one compiled form of the kernel
-            lum = _fast.shrunk_luminance(gray, self._shrunk_size(h, w), LEVELS, self.dtype)
+            lum = _fast.shrunk_luminance(gray, self._retina_size(h, w), LEVELS, self.dtype)
         else:
-            # a frame to shrink is converted in float64 (the scale its area averages are taken at)
+            # a frame to resize is converted and resized in float64, so that the float32 and
+            # float64 forms of a preset see the same luminance to its last rounding
             lum = to_luminance(frame, self._min_side, self.shape,
-                               np.float64 if shrink else self.dtype)
+                               np.float64 if resize else self.dtype)
             if self.shape is None:
                 self.shape = lum.shape
-            if shrink:
-                lum = cv2.resize(lum, self._shrunk_size(*lum.shape), interpolation=cv2.INTER_AREA)
+            size = self._retina_size(*lum.shape)
+            if size != lum.shape[::-1]:
+                lum = cv2.resize(lum, size,
+                                 interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
         if lum.dtype != self.dtype:
             lum = lum.astype(self.dtype)
-        if self.params.input_blur:
+        if p.input_blur:
             lum = cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
         return lum
 
-    def _shrunk_size(self, h: int, w: int) -> tuple[int, int]:
-        """(W, H) of a frame wider than ``max_width`` on the retina: the retina's kernels have a
-        fixed size in pixels, so a large frame is seen at the scale they were made for (targets
-        are reported in the frame's own pixels)."""
-        width = self.params.max_width
-        return width, max(round(h * width / w), self._min_side)
+    def _retina_size(self, h: int, w: int) -> tuple[int, int]:
+        """(W, H) of an (H, W) frame on the retina. The retina's kernels and the added stages
+        count in pixels, so a frame wider than ``max_width`` or narrower than ``min_width`` is
+        seen at the scale they were made for (targets are reported in the frame's own pixels).
+        An enlarged frame is at most ``4 * min_width`` high (or its own height): a tall, narrow
+        frame does not make the model's state grow past what a large frame's does."""
+        p = self.params
+        if p.max_width is not None and w > p.max_width:
+            return p.max_width, max(round(h * p.max_width / w), self._min_side)
+        if p.min_width is not None and w < p.min_width:
+            factor = max(1.0, min(p.min_width / w, 4 * p.min_width / h))
+            return round(w * factor), round(h * factor)
+        return w, h
 
     def step(self, frame: np.ndarray, t: float | None = None) -> Response:
         """Process one frame and return the model's response to it.

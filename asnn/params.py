@@ -90,6 +90,13 @@ class ASNNParams(BaseModel):
         "(aspect kept) before the retina, whose kernels have a fixed size in pixels; targets "
         "stay in the frame's pixels. None: every frame at its own size",
     )
+    min_width: int | None = Field(
+        None, ge=32, description="frames narrower than this are enlarged to this width "
+        "(bilinear, aspect kept) before the retina: a small camera's objects and motions then "
+        "meet the added stages' sizes in pixels (the smallest box, the linking margin, the "
+        "gain control's pool) at the scale they were made for; it adds no detail. Targets stay "
+        "in the frame's pixels. None: every frame at its own size",
+    )
 
     # --- background stabilisation (robust addition) ---
     stabilise: bool = Field(
@@ -398,6 +405,10 @@ class ASNNParams(BaseModel):
         needing = [name for name in ("approach_gate", "scene_relative", "object_ids",
                                      "ignore_rig", "surface_ahead", "corridor_gate")
                    if getattr(self, name)]
+        if (self.min_width is not None and self.max_width is not None
+                and self.min_width > self.max_width):
+            raise ValueError(f"min_width ({self.min_width}) must not exceed max_width "
+                             f"({self.max_width})")
         if needing and self.targets != "objects":  # every stage that works on the objects
             raise ValueError(f"{', '.join(needing)} need{'s' if len(needing) == 1 else ''} "
                              f"targets='objects': set {'=False, '.join(needing)}=False too")
@@ -502,7 +513,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
-    max_width=480, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
+    max_width=480, min_width=160, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
     region_persistence=True, region_cover=0.2, object_ids=True, motion_layers=True, ignore_rig=True,
     surface_ahead=True, corridor_gate=True, own_motion_weight=2.0,

@@ -43,7 +43,7 @@ class Target:
         ``sqrt(V_X^2 + V_Y^2)``, the mean motion vector's length.
     pixels : int
         Number of pixels in the cluster, counted in input-frame pixels (where ``max_width``
-        shrinks the frame, the model's grid's count scaled back).
+        shrinks the frame or ``min_width`` enlarges it, the model's grid's count scaled back).
     id : int or None
         Stable identifier of the object across the stream's frames (tracked presets).
     expansion : float or None

@@ -545,7 +545,8 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
     assert sweeps["contrast"]["values"] == list(paper.CONTRAST_SWEEP)
     assert sweeps["speed"]["peak"] == [max(u) for u in sweeps["speed"]["u"]]
     maps = json.loads((out / "fig8_maps.json").read_text())
-    assert np.asarray(maps["V"]).shape == (64, 64)
+    # on the model's grid: the default sees frames narrower than 160 px enlarged to 160
+    assert np.asarray(maps["V"]).shape == (160, 160)
     assert set(np.unique(maps["M_a"])) <= {0, 1}
     g_prime = np.asarray(maps["G_prime"])
     assert np.all(g_prime[np.asarray(maps["M_a"]) * np.asarray(maps["M_d"]) == 0] == 0)

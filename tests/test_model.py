@@ -177,7 +177,8 @@ def test_maps_are_recorded_on_request_only():
         a, b = plain.step(f), recorded.step(f)
     assert a.maps is None
     m = b.maps
-    assert m.R.shape == (8, 48, 48) and m.G.shape == m.V.shape == m.phi.shape == (48, 48)
+    # on the model's grid: the default enlarges frames narrower than 160 px to 160
+    assert m.R.shape == (8, 160, 160) and m.G.shape == m.V.shape == m.phi.shape == (160, 160)
     np.testing.assert_array_equal(m.G_prime, m.G * (m.M_a & m.M_d))
     np.testing.assert_allclose(m.R[4:], -m.R[:4])
 

@@ -4,6 +4,7 @@ asnn.evaluation.runs)."""
 
 import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
@@ -607,6 +608,28 @@ def test_large_frames_are_seen_at_the_scale_of_the_kernels_and_targets_stay_in_t
         assert len(a.targets) == len(b.targets)
         for ta, tb in zip(a.targets, b.targets):
             assert (tb.x, tb.y) == pytest.approx((4 * ta.x + 1.5, 4 * ta.y + 1.5), abs=0.5)
+
+
+def test_small_frames_are_enlarged_to_the_scale_the_added_stages_were_made_for():
+    # a truck passing close, seen by a camera of half the suite's resolution (80x60): at its own
+    # size its outline is a few of the stages' pixels and it warns; enlarged to 160 px, not
+    case = "nearmiss-truck-dark-right-close"
+    assert not _quiet(_run(case, perturbation="half-size", min_width=None)[1])
+    assert _quiet(_run(case, perturbation="half-size")[1])
+    # an approach at that size is still caught, its targets in the frame's own pixels
+    scene, responses = _run("loom-light-c0.6-d12-bottomleft", perturbation="half-size")
+    assert _hit(scene, responses)
+    first = next(r for r in responses if r.collision and r.index >= 5)
+    x, y = scene.track[first.index]
+    assert min(math.hypot(t.x - x / 2, t.y - y / 2) for t in first.targets) < 6
+    # bounded: a tall, narrow frame is enlarged to at most four times 160 px high
+    model = ASNN()
+    assert model._retina_size(60, 80) == (160, 120)
+    assert model._retina_size(400, 40) == (64, 640)
+    assert model._retina_size(4096, 32) == (32, 4096)
+    assert model._retina_size(120, 160) == (160, 120)  # from 160 px on, as it is
+    with pytest.raises(ValueError, match="min_width"):
+        preset("robust", min_width=600)
 
 
 def test_the_partial_overlap_regime_is_a_part_of_the_gate():

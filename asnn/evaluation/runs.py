@@ -63,6 +63,7 @@ ABLATIONS = {
     "as many frames of approach at any frame rate": "asnn:robust/approach_seconds=none",
     "each track its own id (no object ids)": "asnn:robust/object_ids=false",
     "no input scale (frames at their own size)": "asnn:robust/max_width=none",
+    "small frames at their own size (no min_width)": "asnn:robust/min_width=none",
     "attention blur at full resolution": "asnn:robust/attention_step=1",
 }
 
