@@ -513,7 +513,8 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
-    max_width=480, min_width=160, track_box=0.3, approach_frames=3, approach_seconds=0.1, attention_step=2,
+    max_width=480, min_width=160, track_box=0.3, approach_frames=3, approach_seconds=0.1,
+    attention_step=2,
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
     region_persistence=True, region_cover=0.2, object_ids=True, motion_layers=True, ignore_rig=True,
     surface_ahead=True, corridor_gate=True, own_motion_weight=2.0,
