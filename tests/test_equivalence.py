@@ -22,21 +22,18 @@ SUITE = [("looming", "dark"), ("approach_recession", "light"), ("translating_bar
          ("looming_over_stripes", "dark"), ("stripes", "light")]
 
 
-CENTRE = {"looming": (68.8, 56.0), "approach_recession": (87.8, 65.3),
-          "looming_over_stripes": (74.3, 51.5)}
+CENTRE = {"looming": (41.3, 33.6), "approach_recession": (52.7, 39.2),
+          "looming_over_stripes": (44.6, 30.9)}
 
 
 @pytest.fixture(scope="module")
 def scenes():
     # disks off centre: a disk looming at the exact centre is symmetric, so the orientation
     # sums tie and the inhibited orientation is decided by rounding (in any implementation).
-    # 160x120, the default's smallest working width: narrower frames it enlarges first, and
-    # on the stripes enlarged from 96x72 the two forms part in one frame, by the own-motion
-    # weight: the refit against the scene of a box holding most of the frame picks, per pixel,
-    # whichever of two references lies nearer the frame, and where the frame lies midway
-    # between them float32 and float64 pick apart (14 of its 15,360 pixels, up to 1.3e-4),
-    # which that fit's few remaining pixels turn into 0.016 against 0.043 per frame
-    return {(name, pol): make_scene(name, polarity=pol, size=(160, 120), frames=48, start=8,
+    # 96x72: the default enlarges them to 160 px (min_width), in float64 in both forms; on the
+    # stripes so enlarged the forms parted by the own-motion weight in one frame while a scene
+    # expanding at 1e-5 per second was refitted against (approach.stage._SCENE_MOVES)
+    return {(name, pol): make_scene(name, polarity=pol, size=(96, 72), frames=48, start=8,
                                     stop=40, hold=4, center=CENTRE.get(name)).frames
             for name, pol in SUITE}
 

@@ -50,6 +50,11 @@ __all__ = ["ApproachStage", "CameraRig", "FramePair", "frame_pixel"]
 # the scene "expands" (our own forward motion) from this rate per second: driving scenes expand
 # at about 0.7, a still camera's noise reads below 0.1
 _SCENE_EXPANDS = 0.2
+# the scene moves in depth at all from this rate per second (a time to contact of 50 s): a
+# refit against a scene "expanding" at 1e-5 per second, a fit of noise, leaves out the pixels
+# where its reference, within rounding of the previous frame, ties with it, and float32 and
+# float64 break those ties apart
+_SCENE_MOVES = 0.02
 
 
 class FramePair(NamedTuple):
@@ -409,12 +414,15 @@ class ApproachStage:
         (:func:`~asnn.approach.looming.scene_expansion`); where it expands, a track's box is fitted
         again leaving out the pixels it explains better than no motion (or than the background's
         translation): what is left is the object's motion against the scene. Where the scene
-        does not expand nothing is left out, and the box's own rate stands. The rates go to
+        does not expand, or by 0.02 per second or less (a time to contact of 50 s or more: no
+        motion in depth, and a refit would only trade pixels by rounding), nothing is left out,
+        and the box's own rate stands. The rates go to
         :attr:`against_scene` too; with :attr:`measure_all_against_scene` (the held-out
         replay's trace) every growing track's is measured there, and the tracks' state is
         still only that of the candidates.
 
-        With ``receding_scene``, where the scene contracts (the camera moves away from it),
+        With ``receding_scene``, where the scene contracts (the camera moves away from it; by
+        more than 0.02 per second),
         the boxes are fitted against it in the same way, and so are those of the tracks that
         pass the partial-overlap regime but for its fit test; the share of each box's change
         that this fit explains goes to :attr:`fit_against_scene` and to the track
@@ -447,10 +455,11 @@ class ApproachStage:
                    if self.measure_all_against_scene else set())
         scene = (scene_expansion(previous, current, boxes, background, rig, self._scene_average)
                  if chosen or unfit or growing else None)
-        contracts = p.receding_scene and scene is not None and scene.rate < 0
+        scene_rate = 0.0 if scene is None else scene.rate / elapsed
+        contracts = p.receding_scene and scene_rate < -_SCENE_MOVES
         if contracts:
             chosen |= unfit
-        against = scene is not None and (scene.rate > 0 or contracts)
+        against = scene_rate > _SCENE_MOVES or contracts
         if against and (self._scene_reference is None
                         or self._scene_reference.shape != current.shape):
             self._scene_reference = np.empty_like(current)
@@ -472,8 +481,7 @@ class ApproachStage:
                     fit = own.fit
             self.against_scene[tracks[k].id] = rate
             self.fit_against_scene[tracks[k].id] = fit
-        layered = (p.motion_layers and scene is not None
-                   and scene.rate / elapsed >= _SCENE_EXPANDS)
+        layered = p.motion_layers and scene_rate >= _SCENE_EXPANDS
         for k in sorted(chosen | growing) if layered else ():
             self.layers[tracks[k].id] = [
                 (layer.share, layer.rate / elapsed, layer.drift_x / elapsed,
