@@ -50,11 +50,13 @@ __all__ = ["ApproachStage", "CameraRig", "FramePair", "frame_pixel"]
 # the scene "expands" (our own forward motion) from this rate per second: driving scenes expand
 # at about 0.7, a still camera's noise reads below 0.1
 _SCENE_EXPANDS = 0.2
-# the scene moves in depth at all from this rate per second (a time to contact of 50 s): a
+# the scene moves in depth at all from this rate per second (a time to contact of 500 s): a
 # refit against a scene "expanding" at 1e-5 per second, a fit of noise, leaves out the pixels
 # where its reference, within rounding of the previous frame, ties with it, and float32 and
-# float64 break those ties apart
-_SCENE_MOVES = 0.02
+# float64 break those ties apart. (At 0.02, a turn's slight expansion was no longer refitted
+# against, and a generated cut-in in a turn warned: design notes, "A scene that does not move
+# in depth is not refitted against".)
+_SCENE_MOVES = 0.002
 
 
 class FramePair(NamedTuple):
@@ -414,7 +416,7 @@ class ApproachStage:
         (:func:`~asnn.approach.looming.scene_expansion`); where it expands, a track's box is fitted
         again leaving out the pixels it explains better than no motion (or than the background's
         translation): what is left is the object's motion against the scene. Where the scene
-        does not expand, or by 0.02 per second or less (a time to contact of 50 s or more: no
+        does not expand, or by 0.002 per second or less (a time to contact of 500 s or more: no
         motion in depth, and a refit would only trade pixels by rounding), nothing is left out,
         and the box's own rate stands. The rates go to
         :attr:`against_scene` too; with :attr:`measure_all_against_scene` (the held-out
@@ -422,7 +424,7 @@ class ApproachStage:
         still only that of the candidates.
 
         With ``receding_scene``, where the scene contracts (the camera moves away from it; by
-        more than 0.02 per second),
+        more than 0.002 per second),
         the boxes are fitted against it in the same way, and so are those of the tracks that
         pass the partial-overlap regime but for its fit test; the share of each box's change
         that this fit explains goes to :attr:`fit_against_scene` and to the track
