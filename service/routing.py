@@ -84,7 +84,8 @@ class Routes:
         Seconds a robot stays known after its last claim, announcement or frame went.
     max_known : int
         Robots known at most (claims, announcements and adoptions beyond it are ignored, so a
-        flood of ids cannot grow the worker's memory).
+        flood of ids cannot grow the worker's memory); a remembered robot is forgotten to make
+        room for one with live evidence.
     clock : callable
         Monotonic seconds.
     """
@@ -248,12 +249,21 @@ class Routes:
                 or robot in self._claimed or robot in self._remembered)
 
     def _room_locked(self, robot: str) -> bool:
-        """Whether one more robot may be known."""
+        """Whether one more robot may be known. When the table is full, the robot remembered
+        longest is forgotten to make room: a robot with live evidence (a camera announcing it,
+        a claim) outranks one whose evidence went, which after a flood of ids would otherwise
+        keep real robots out for ``remember`` seconds."""
         if self._known_locked(robot):
             return True
-        known = (len(self._claims.keys() | self._cameras | self._adopted | self._claimed
-                     | self._remembered.keys()))
-        return known < self.max_known
+        live = self._claims.keys() | self._cameras | self._adopted | self._claimed
+        if len(live | self._remembered.keys()) < self.max_known:
+            return True
+        while self._remembered:
+            oldest = next(iter(self._remembered))
+            del self._remembered[oldest]
+            if oldest not in live:  # else it was known twice (until the next plan): go on
+                return True
+        return False
 
     def _role_locked(self, robot: str) -> str | None:
         me = self.me

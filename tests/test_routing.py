@@ -110,6 +110,16 @@ def test_known_robots_are_bounded():
     assert routes.claim("w3", "b", True)  # a robot already known takes no room
     assert routes.counts() == {"claimed": 0, "claimed_by_others": 1, "announced": 1,
                                "adopted": 1, "remembered": 0}
+    # a robot whose evidence went gives its place to one with live evidence, the robot
+    # remembered longest first
+    assert routes.camera("a", False) and routes.claim("w2", "b", False)
+    assert routes.claim("w3", "b", False)
+    assert routes.counts()["remembered"] == 2
+    assert routes.camera("d", True) and not routes.known("a") and routes.known("b")
+    assert routes.claim("w2", "e", True) and not routes.known("b")
+    assert not routes.adopt("f")  # full again, with nothing remembered to forget
+    assert routes.counts() == {"claimed": 0, "claimed_by_others": 1, "announced": 1,
+                               "adopted": 1, "remembered": 0}
 
 
 def test_a_new_owner_answers_as_a_model_that_saw_the_whole_stream():
@@ -208,3 +218,8 @@ def test_a_flood_of_robot_ids_leaves_a_bounded_number_of_robots_planned():
     # the latest ids are the ones remembered, and a robot that comes back is served
     assert routes.known("flood199") and not routes.known("flood0")
     assert roles(routes, {"flood0": COLD})["flood0"] == ("serving", True)
+    # the remembered ids fill the table, yet a robot whose camera announces itself is let in
+    # at once (it took the place of the id remembered longest), not after --idle-timeout
+    assert routes.counts()["remembered"] == 16
+    assert routes.camera("real", True) and routes.counts()["remembered"] == 15
+    assert roles(routes, {})["real"] == ("serving", False)
