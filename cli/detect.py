@@ -181,12 +181,14 @@ def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
 class _BackwardStamps(BackwardStamps):
     """A bag's frames whose header stamp goes back, each taken at the latest frame's time (the
     model then steps it by the nominal period), so that every message still gets its result
-    (CONTRACT.md: one per input frame): the first :data:`STAMP_LINES` named on stderr, and the
-    one that makes :data:`STAMP_LIMIT` within :data:`STAMP_WINDOW` frames read raised: stamps
-    that keep going back. A clock reset (the reader re-bases on it) is named on stderr, the
-    first :data:`STAMP_LINES` of them, and counts toward no limit, nor do its frames held
-    before it. Wrap the source's ``timed_frames()`` in :meth:`frames`, which counts the frames
-    read.
+    (CONTRACT.md: one per input frame): the first :data:`STAMP_LINES` named on stderr, and
+    :data:`STAMP_LIMIT` within :data:`STAMP_WINDOW` frames read raised: stamps that keep going
+    back. A clock reset (the reader re-bases on it) is named on stderr, the first
+    :data:`STAMP_LINES` of them, and counts toward no limit, nor do its frames held before it.
+    Those frames are known only when the reset completes, so the last
+    ``CLOCK_RESET_FRAMES - 1`` frames read count toward the limit only once the frame after
+    them is read (or the bag ends): odd frames before a reset do not stop the run. Wrap the
+    source's ``timed_frames()`` in :meth:`frames`, which counts the frames read and raises.
     """
 
     def __init__(self, window: int = STAMP_WINDOW, limit: int = STAMP_LIMIT,
@@ -194,18 +196,14 @@ class _BackwardStamps(BackwardStamps):
         super().__init__()
         self.window, self.limit, self.lines = window, limit, lines
         self.read = 0  # frames read so far
-        self._recent: deque[int] = deque()  # the numbers of such frames within the window
+        # the numbers and messages of such frames within the window
+        self._recent: deque[tuple[int, str]] = deque()
 
     def held(self, message: str) -> None:
         number = self.read  # the frame the reader yields next
-        self._recent.append(number)
-        while self._recent[0] <= number - self.window:
+        self._recent.append((number, message))
+        while self._recent[0][0] <= number - self.window:
             self._recent.popleft()
-        if len(self._recent) >= self.limit:
-            raise SourceError(
-                f"{message}. {len(self._recent)} of the last {self.window} frames read went "
-                "back: neither the odd stamp out of order nor a clock reset (stamps that advance "
-                "again from an earlier time)", "stamps-backwards")
         if self.count <= self.lines:
             _warn(f"{message}; taken at the latest frame's time")
             if self.count == self.lines:
@@ -217,7 +215,7 @@ class _BackwardStamps(BackwardStamps):
         # the frames of the reset held before it were the new clock's first, not stamps out of
         # order: they leave the window
         number = self.read  # the re-based frame, which the reader yields next
-        while self._recent and self._recent[-1] >= number - (CLOCK_RESET_FRAMES - 1):
+        while self._recent and self._recent[-1][0] >= number - (CLOCK_RESET_FRAMES - 1):
             self._recent.pop()
         if self.resets <= self.lines:
             _warn(message)
@@ -225,11 +223,26 @@ class _BackwardStamps(BackwardStamps):
                 print("asnn detect: warning: further clock resets are counted in the summary",
                       file=sys.stderr, flush=True)
 
+    def _check(self, settled: int) -> None:
+        """Raise where the frames before number ``settled`` that went back, which no clock
+        reset can take back any more, reach the limit."""
+        confirmed = [entry for entry in self._recent if entry[0] < settled]
+        if len(confirmed) >= self.limit:
+            raise SourceError(
+                f"{confirmed[-1][1]}. {len(confirmed)} of the last {self.window} frames read "
+                "went back: neither the odd stamp out of order nor a clock reset (stamps that "
+                "advance again from an earlier time)", "stamps-backwards")
+
     def frames(self, timed):
-        """``timed``'s ``(t, image)``, counted."""
+        """``timed``'s ``(t, image)``, counted; raises SourceError where stamps keep going
+        back."""
         for item in timed:
             self.read += 1
+            # a reset completing at the next frame would take back the frames from this one's
+            # predecessor on (CLOCK_RESET_FRAMES - 1 of them)
+            self._check(self.read - (CLOCK_RESET_FRAMES - 1))
             yield item
+        self._check(self.read)
 
 
 def _warn(message: str) -> None:

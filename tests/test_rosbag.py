@@ -691,19 +691,46 @@ def test_stamps_that_keep_going_back_stop_detect_with_one_error(tmp_path, loomin
                                                                 threads):
     """Stamps that keep going back, yet never as a clock reset (two clocks interleaved on one
     topic: each frame going back alone), are no odd frame out of order: holding them all at
-    the last good time would stop the clock. The run stops at the fifth within 100 frames,
-    the frames before written."""
+    the last good time would stop the clock. The run stops once the fifth within 100 frames
+    can no longer be the start of a clock reset (two frames on), the frames before written."""
     seconds = [0.05 * i - (10 if i > 10 and i % 2 else 0) for i in range(25)]
     bag = stamped_bag(tmp_path / "interleaved.mcap", looming.frames, seconds)
     out = tmp_path / "out.jsonl"
     assert main(["detect", bag, "--jsonl", str(out), *threads]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 5
-    assert all("taken at the latest frame's time" in line for line in err[:4])
-    assert "message 19" in err[4] and "5 of the last 100 frames read went back" in err[4]
-    assert "neither the odd stamp out of order nor a clock reset" in err[4]
-    assert "results written for the 19 frames before" in err[4]
-    assert len(out.read_text().splitlines()) == 19
+    assert len(err) == 7
+    assert all("taken at the latest frame's time" in line for line in err[:5])
+    assert "message 19" in err[4] and "further frames whose stamp goes back" in err[5]
+    assert "message 19" in err[6] and "5 of the last 100 frames read went back" in err[6]
+    assert "neither the odd stamp out of order nor a clock reset" in err[6]
+    assert "results written for the 21 frames before" in err[6]
+    assert len(out.read_text().splitlines()) == 21
+
+
+def test_odd_stamps_then_a_clock_reset_do_not_stop_detect(tmp_path, looming, capsys):
+    """Three odd frames out of order, then a camera's clock reset: its first two frames go
+    back too, which made five within 100 frames and stopped the run before the reset's third
+    frame showed what they were (until 2026-11-30)."""
+    seconds = reset_seconds(30, 20, 3600.0)
+    for i in (5, 9, 13):
+        seconds[i] -= 0.2
+    bag = stamped_bag(tmp_path / "odd-then-reset.mcap", looming.frames, seconds)
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", bag, "--jsonl", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "message 22: clock reset" in err and "frames read went back" not in err
+    assert err.strip().splitlines()[-1].endswith(
+        ", 5 taken at the latest frame's time (header stamp before an earlier frame's), "
+        "1 clock reset (timed on from the latest frame's time)")
+    assert len(out.read_text().splitlines()) == 30
+    # without the reset, the same five frames going back within 100 frames stop the run,
+    # at the end of the bag at the latest
+    seconds = [0.05 * i for i in range(22)]
+    for i in (5, 9, 13, 20, 21):
+        seconds[i] -= 0.2 if i < 20 else 10.0
+    bag = stamped_bag(tmp_path / "odd.mcap", looming.frames, seconds)
+    assert main(["detect", bag, "--jsonl", str(out)]) == 2
+    assert "5 of the last 100 frames read went back" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- clock resets
