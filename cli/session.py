@@ -63,13 +63,21 @@ def stop_on_signals() -> threading.Event:
 
 
 def open_session(config):
-    """zenoh.open, with Zenoh's failures (no router reachable, port taken) as one clear line."""
+    """zenoh.open, with Zenoh's failures (no router reachable, port taken) as one clear line;
+    where it could not connect, why (:func:`service.diagnosis.connect_failure`)."""
     import zenoh
 
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:
-        raise ConfigError(f"cannot open a Zenoh session: {zenoh_error(exc)}") from None
+        message = f"cannot open a Zenoh session: {zenoh_error(exc)}"
+        if "Unable to connect" in str(exc):
+            from service.diagnosis import connect_failure
+
+            why = connect_failure(config)
+            if why:
+                message += f" ({why})"
+        raise ConfigError(message) from None
 
 
 def session_for(args: argparse.Namespace):

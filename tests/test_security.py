@@ -254,6 +254,51 @@ def test_mtls_refuses_clients_without_a_trusted_certificate(certs, rogue):
         assert fails_to_open(conf)
 
 
+def test_a_refused_connection_says_why(certs, rogue):
+    """Zenoh reports every failure to connect alike ("Unable to connect to any of ..."); the
+    commands say which step failed: nothing listening, the router's certificate not trusted,
+    the client's refused or missing, or the user and password after TLS worked."""
+    from cli.session import open_session
+    from service.config import ConfigError
+
+    def why(conf):
+        with pytest.raises(ConfigError) as caught:
+            open_session(conf)
+        assert "Unable to connect" in str(caught.value)
+        return str(caught.value)
+
+    port = free_port()
+    with zenoh.open(router_config(certs, port)):
+        assert "certificate is not trusted by " + str(rogue / "ca.pem") in why(
+            client_config(certs, "alerts", port, ca=rogue / "ca.pem"))
+        assert "refused this client's certificate " + str(rogue / "dashboard" / "dashboard.pem") \
+            in why(client_config(certs, "dashboard", port, cert_from=rogue))
+        conf = client_config(certs, "dashboard", port)
+        for key in ("connect_certificate", "connect_private_key"):
+            set_json(conf, f"transport/link/tls/{key}", None)
+        assert "requires a client certificate" in why(conf)
+        assert "check the user 'camera-r1' and its password" in why(
+            client_config(certs, "camera-r1", port, password="not-the-password"))
+        conf = client_config(certs, "alerts", port)
+        set_json(conf, "connect/endpoints", [f"tcp/127.0.0.1:{port}"])
+        assert "does it speak TLS" in why(conf)
+        conf = client_config(certs, "alerts", port)
+        set_json(conf, "transport/link/tls/root_ca_certificate", str(certs / "absent.pem"))
+        assert f"root_ca_certificate {certs / 'absent.pem'} cannot be read" in why(conf)
+        open_session(client_config(certs, "alerts", port)).close()  # the control
+    assert "nothing accepts connections at 127.0.0.1" in why(client_config(certs, "alerts", port))
+
+
+def test_endpoints_are_split_for_the_check():
+    from service.diagnosis import split_endpoint
+
+    assert split_endpoint("tls/routerhost.example:7447") == ("tls", "routerhost.example", 7447)
+    assert split_endpoint("tcp/[::1]:7447#iface=lo") == ("tcp", "::1", 7447)
+    assert split_endpoint("tcp/10.0.0.1:7447?prio=1-7") == ("tcp", "10.0.0.1", 7447)
+    for endpoint in ("udp/10.0.0.1:7447", "tcp/10.0.0.1", "unixsock-stream/tmp/z", "tls/"):
+        assert split_endpoint(endpoint) is None
+
+
 def test_no_secret_is_committed():
     tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
     if tracked.returncode != 0:

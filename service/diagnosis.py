@@ -1,0 +1,142 @@
+"""Why a session could not connect to its router, told from outside Zenoh.
+
+Zenoh reports every failure to connect the same way ("Unable to connect to any of [...]"):
+nothing listening, a router certificate the client does not trust, a client certificate the
+router refuses (mTLS) and a wrong user or password all read alike. :func:`connect_failure`
+tries each ``tcp`` and ``tls`` endpoint of the configuration again, one step at a time (TCP,
+the TLS handshake with the configuration's own certificates, the router's first answer), and
+says which step failed. It reads the configuration only; nothing it learns is kept.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import ssl
+
+import zenoh
+
+__all__ = ["connect_failure", "split_endpoint"]
+
+TIMEOUT = 2.0  # seconds for each step of one endpoint's check
+_TLS = "transport/link/tls/"
+
+
+def split_endpoint(endpoint: str) -> tuple[str, str, int] | None:
+    """``(protocol, host, port)`` of a ``tcp`` or ``tls`` endpoint (``tls/host:port``,
+    ``tcp/[::1]:7447``, with or without ``?``/``#`` metadata), else None."""
+    protocol, _, address = endpoint.partition("/")
+    if protocol not in ("tcp", "tls") or not address:
+        return None
+    address = address.split("?", 1)[0].split("#", 1)[0]
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        return None
+    return protocol, host.strip("[]"), int(port)
+
+
+def _value(conf: zenoh.Config, key: str):
+    try:
+        return json.loads(conf.get_json(key))
+    except Exception:  # an unknown key in this Zenoh version
+        return None
+
+
+def _tls_context(conf: zenoh.Config) -> tuple[ssl.SSLContext, str | None]:
+    """The client's TLS context as the configuration describes it, and its certificate's path
+    (None without one). Raises OSError or ssl.SSLError for a file that cannot be used."""
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    for name in ("root_ca_certificate", "connect_certificate", "connect_private_key"):
+        path = _value(conf, _TLS + name)
+        if path and not os.access(path, os.R_OK):
+            raise OSError(f"{name} {path} cannot be read")
+    ca = _value(conf, _TLS + "root_ca_certificate")
+    if ca:
+        context.load_verify_locations(ca)
+    else:
+        context.load_default_certs()
+    if _value(conf, _TLS + "verify_name_on_connect") is False:
+        context.check_hostname = False
+    certificate = _value(conf, _TLS + "connect_certificate")
+    if certificate:
+        context.load_cert_chain(certificate, _value(conf, _TLS + "connect_private_key"))
+    return context, certificate
+
+
+def _uses_base64(conf: zenoh.Config) -> bool:
+    return any(_value(conf, _TLS + name + "_base64")
+               for name in ("root_ca_certificate", "connect_certificate", "connect_private_key"))
+
+
+def _check_endpoint(conf: zenoh.Config, endpoint: str, timeout: float) -> str | None:
+    parts = split_endpoint(endpoint)
+    if parts is None:
+        return None
+    protocol, host, port = parts
+    try:
+        raw = socket.create_connection((host, port), timeout=timeout)
+    except OSError as exc:
+        return f"nothing accepts connections at {host}:{port} ({exc.strerror or exc})"
+    with raw:
+        if protocol == "tcp":
+            return ("a router answers there, but refused the session: does it speak TLS "
+                    "(tls/...), or ask for a user and password (transport/auth/usrpwd)?")
+        if _uses_base64(conf):
+            return None  # certificates given inline: not checked here
+        try:
+            context, certificate = _tls_context(conf)
+        except (OSError, ssl.SSLError) as exc:
+            return f"this client's TLS files cannot be used: {exc}"
+        try:
+            tls = context.wrap_socket(raw, server_hostname=host)
+        except ssl.SSLCertVerificationError as exc:
+            ca = _value(conf, _TLS + "root_ca_certificate") or "the system's CAs"
+            return (f"the router's certificate is not trusted by {ca} ({exc.verify_message}): "
+                    "root_ca_certificate must be the CA that signed the router's certificate")
+        except (ssl.SSLError, OSError) as exc:
+            return f"the TLS handshake failed ({getattr(exc, 'reason', None) or exc})"
+        with tls:
+            tls.settimeout(timeout)
+            try:
+                tls.recv(1)  # the router speaks only after the client: an alert, or nothing
+            except TimeoutError:
+                pass
+            except ssl.SSLError as exc:  # TLS 1.3: the client certificate is judged here
+                if certificate is None:
+                    return (f"the router requires a client certificate ({exc.reason}): set "
+                            f"{_TLS}connect_certificate and connect_private_key (mTLS)")
+                return (f"the router refused this client's certificate {certificate} "
+                        f"({exc.reason}): it must be signed by the CA the router trusts")
+            except OSError:
+                pass
+    user = _value(conf, "transport/auth/usrpwd/user")
+    return ("TLS with this client's certificate works, but the router refused the session "
+            + (f"after it: check the user {user!r} and its password (transport/auth/usrpwd)"
+               if user else "after it: does it ask for a user and password "
+               "(transport/auth/usrpwd)?"))
+
+
+def connect_failure(conf: zenoh.Config, timeout: float = TIMEOUT) -> str | None:
+    """What stops a session of ``conf`` from connecting to its ``connect/endpoints``, one
+    clause per ``tcp`` or ``tls`` endpoint checked (``"ENDPOINT: why"``, joined by ``"; "``),
+    or None where none could be checked.
+
+    Parameters
+    ----------
+    conf : zenoh.Config
+        The configuration the session was opened with.
+    timeout : float
+        Seconds each step may take (connecting, the handshake, the router's answer).
+    """
+    endpoints = _value(conf, "connect/endpoints") or []
+    if isinstance(endpoints, dict):  # endpoints per mode
+        endpoints = endpoints.get(_value(conf, "mode") or "peer", [])
+    reasons = []
+    for endpoint in endpoints:
+        if not isinstance(endpoint, str):
+            continue
+        reason = _check_endpoint(conf, endpoint, timeout)
+        if reason:
+            reasons.append(f"{endpoint}: {reason}")
+    return "; ".join(reasons) or None
