@@ -370,6 +370,41 @@ def test_a_walker_seen_in_fragments_warns_by_region_persistence(case):
         assert not _hit(scene, without) or _first(without) >= scene.contact_frame
 
 
+def _twinkling_blobs(dark: bool, frames: int = 50) -> list[np.ndarray]:
+    """Short-lived blobs (a wet road's reflections, drops catching the light) at 160x120, 20
+    fps: from frame 16 one at a time, each growing from a radius of 2 to 4 px over two frames and
+    gone, in turn at four places 80 and 50 px apart, whose tracks' boxes touch at their edges."""
+    background, blob = (200.0, 60.0) if dark else (60.0, 200.0)
+    spots = ((40, 35), (120, 85), (120, 35), (40, 85))
+    yy, xx = np.mgrid[0:120, 0:160]
+    clip = []
+    for k in range(frames):
+        image = np.full((120, 160), background)
+        if k >= 16:
+            turn, age = divmod(k - 16, 2)
+            cx, cy = spots[turn % len(spots)]
+            cover = np.clip(2.5 + 2.0 * age - np.hypot(xx - cx, yy - cy), 0.0, 1.0)
+            image += (blob - background) * cover
+        clip.append(image.astype(np.uint8))
+    return clip
+
+
+@pytest.mark.parametrize("dark", [True, False])
+def test_blobs_that_twinkle_around_the_frame_do_not_make_a_region_persist(dark):
+    # each blob passes the approach test for two frames as its own track, never three; from any
+    # overlap (region_cover=0) a blob's box inherits its neighbours' passing frames, which
+    # touch it at their edges (covering a few per cent of it), and the model warned with
+    # nothing coming at the camera; a fifth of the box is what speaks for the region
+    clip = _twinkling_blobs(dark)
+
+    def warnings(**overrides):
+        model = ASNN(preset("robust", **overrides))
+        return sum(model.step(frame, i / 20).collision for i, frame in enumerate(clip))
+
+    assert warnings(region_cover=0.0) > 0
+    assert warnings() == 0 and warnings(region_persistence=False) == 0
+
+
 def test_a_large_track_over_a_wet_roads_reflections_does_not_inherit_their_persistence():
     # real c06 (night, wet road) re-encoded as `asnn camera --format jpeg` sends it: at frame
     # 27, 1.5 s before the oncoming pickup's onset, a new track four times the size of the
