@@ -26,6 +26,27 @@ def traced():
     return base, scenes, traces
 
 
+_REPLAYED: dict = {}
+
+
+@pytest.fixture
+def replayed_once(monkeypatch):
+    """The whole grid replayed once per traces, labels and scoring, for the tests that choose
+    thresholds on the same clips several times (each choice replays every grid point: some
+    ten seconds); the figures are those of the replay itself."""
+    replay_grid = heldout._grid_scores
+
+    def once(traces, labels, points, warmup, early_tolerance_s, jobs, progress=None):
+        key = (tuple(map(id, traces)), json.dumps(labels, sort_keys=True), len(points),
+               points[0].model_dump_json(), warmup, early_tolerance_s)
+        if key not in _REPLAYED:
+            _REPLAYED[key] = replay_grid(traces, labels, points, warmup, early_tolerance_s,
+                                         jobs, progress)
+        return _REPLAYED[key]
+
+    monkeypatch.setattr(heldout, "_grid_scores", once)
+
+
 def test_the_replay_reproduces_the_models_warnings_frame_by_frame(traced):
     base, scenes, traces = traced
     for scene, trace in zip(scenes, traces):
@@ -106,9 +127,10 @@ def test_the_replay_asks_a_slow_stream_for_as_few_frames_as_the_model():
     assert not any(r["collision"] for r in heldout.replay(trace, fixed))
 
 
+@pytest.mark.usefixtures("replayed_once")
 def test_leave_one_out_chooses_without_the_clip_it_scores(traced):
     base, scenes, traces = traced
-    labels = [s.label(s.name) for s in scenes]
+    labels = [s.label(f"{s.name}.mp4") for s in scenes]
     result = heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0)
     assert len(result["held_out"]["clips"]) == len(CASES)
     assert all(set(c["chosen"]) == set(heldout.GATE_GRID) for c in result["held_out"]["clips"])
@@ -169,6 +191,7 @@ def test_the_selection_prefers_hits_minus_false_alarms_then_fewer_false_alarms()
         heldout.selection_key(summary(4, 0, 10, 12), "suite")
 
 
+@pytest.mark.usefixtures("replayed_once")
 def test_the_tie_break_decides_between_thresholds_that_score_alike(traced):
     base, scenes, traces = traced
     labels = [scene.label(f"{scene.name}.mp4") for scene in scenes]
@@ -183,6 +206,7 @@ def test_the_tie_break_decides_between_thresholds_that_score_alike(traced):
         heldout.leave_one_out(traces, labels, base, tie_break="luck")
 
 
+@pytest.mark.usefixtures("replayed_once")
 def test_the_suite_breaks_ties_by_the_generated_scenes(traced):
     base, scenes, traces = traced
     labels = [scene.label(f"{scene.name}.mp4") for scene in scenes]
@@ -212,6 +236,7 @@ def test_the_suite_breaks_ties_by_the_generated_scenes(traced):
         heldout.leave_one_out(traces, labels, base, tie_break="suite")
 
 
+@pytest.mark.usefixtures("replayed_once")
 def test_the_figures_over_ties_do_not_depend_on_the_tie_break(traced):
     base, scenes, traces = traced
     labels = [scene.label(f"{scene.name}.mp4") for scene in scenes]
