@@ -80,8 +80,9 @@ def _check_endpoint(conf: zenoh.Config, endpoint: str, timeout: float) -> str | 
         return f"nothing accepts connections at {host}:{port} ({exc.strerror or exc})"
     with raw:
         if protocol == "tcp":
-            return ("a router answers there, but refused the session: does it speak TLS "
-                    "(tls/...), or ask for a user and password (transport/auth/usrpwd)?")
+            return ("something accepts connections there, but the session was refused: "
+                    "does the router speak TLS (tls/...), or ask for a user and password "
+                    "(transport/auth/usrpwd)?")
         if _uses_base64(conf):
             return None  # certificates given inline: not checked here
         try:

@@ -281,7 +281,7 @@ def test_a_refused_connection_says_why(certs, rogue):
             client_config(certs, "camera-r1", port, password="not-the-password"))
         conf = client_config(certs, "alerts", port)
         set_json(conf, "connect/endpoints", [f"tcp/127.0.0.1:{port}"])
-        assert "does it speak TLS" in why(conf)
+        assert "does the router speak TLS" in why(conf)
         conf = client_config(certs, "alerts", port)
         set_json(conf, "transport/link/tls/root_ca_certificate", str(certs / "absent.pem"))
         assert f"root_ca_certificate {certs / 'absent.pem'} cannot be read" in why(conf)
