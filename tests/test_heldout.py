@@ -89,6 +89,22 @@ def test_the_replay_follows_other_thresholds(traced):
     assert first(base.model_copy(update={"tau_max": 0.5})) > first(base)
 
 
+def test_own_motion_ratios_replayed_in_one_pass_are_each_ones_replay(traced):
+    # the ratio weighs what counts, not which counts: the grid's ratios share one pass, whose
+    # warnings are those of each ratio replayed alone
+    base, scenes, traces = traced
+    ratios = (0.75, 1.0, 2.0)
+    for trace in traces:
+        assert heldout._replays(trace, base, ratios) == [
+            heldout.replay(trace, base.model_copy(update={"own_motion_ratio": r}))
+            for r in ratios]
+    # ... and the ratio matters: the looming disk on a still background closes by its own
+    # motion only as far as a ratio of 1 (its expansion against the scene is its own)
+    first = [next(r["frame"] for r in run if r["collision"])
+             for run in heldout._replays(traces[0], base, ratios)]
+    assert first[0] == first[1] < first[2]
+
+
 def test_the_replay_reproduces_the_partial_overlap_regime():
     # a car 1.2 m to the side of ours, stopped ahead: a partial overlap, caught only with the
     # regime; a car cutting in at night, whose box holds the roadside too: quiet with the fit

@@ -194,51 +194,60 @@ def check_replay(trace: ClipTrace, params: ASNNParams) -> None:
 def replay(trace: ClipTrace, params: ASNNParams) -> list[dict]:
     """The per-frame records (``frame``, ``collision``, ``targets``) the model would give with
     ``params``' gate thresholds, from a trace made with the same parameters otherwise."""
+    return _replays(trace, params, (params.own_motion_ratio,))[0]
+
+
+def _replays(trace: ClipTrace, params: ASNNParams, ratios: Sequence[float]) -> list[list[dict]]:
+    """:func:`replay` for ``params`` with each ``own_motion_ratio`` of ``ratios``, in one pass:
+    the ratio weighs the objects that count, not which count, so the gate is judged once and
+    the spikes and warnings follow each ratio's sum."""
     p = params
     streak: dict[int, int] = {}
     # the smoothed expansion against the scene, as Track keeps it, and that fit's share
     # (Track.own_fit), per track measured in the frame before
     own: tuple[dict, dict] = ({}, {})
-    window: deque[int] = deque(maxlen=p.n_t)
+    windows: list[deque[int]] = [deque(maxlen=p.n_t) for _ in ratios]
     # the boxes of the tracks that passed, per processed frame (TargetTracker.judge)
     passed: deque[list] = deque(maxlen=p.approach_frames)
     # in a frame where nothing counts (most frames) u is 0, whose spikes (eq. 32-33) never vary
     quiet = spike_count(sigmoid_output(0.0, 1), p.k_sp, p.t_sp)
     window_dt = p.window_dt
-    records = []
-    previous = {"collision": False, "targets": []}
+    runs: list[list[dict]] = [[] for _ in ratios]
     for index, frame in enumerate(trace.frames):
-        if index == 0:
-            record = {"frame": 0, "collision": False, "targets": []}
-        elif frame.repeat:
-            record = {**previous, "frame": index}
-        else:
+        if index > 0 and not frame.repeat:
             if frame.objects:
-                total, targets, own = _judge(frame, p, streak, own, passed)
+                totals, targets, own = _judge(frame, p, streak, own, passed, ratios)
             else:  # a track not seen in this frame starts afresh (Track.measure_own)
-                total, targets, own = 0.0, [], ({}, {})
+                totals, targets, own = [0.0] * len(ratios), [], ({}, {})
                 passed.append([])
-            if total:
-                rate = spike_step(p.u_scale * total, trace.cells, window, p)[2]
+        for k, records in enumerate(runs):
+            if index == 0:
+                record = {"frame": 0, "collision": False, "targets": []}
+            elif frame.repeat:
+                record = {**records[-1], "frame": index}
             else:
-                window.append(quiet)
-                rate = spike_rate(window, p.n_t, window_dt)
-            record = {"frame": index, "collision": collision_warning(rate, p.t_c),
-                      "targets": targets}
-        records.append(record)
-        previous = record
-    return records
+                if totals[k]:
+                    rate = spike_step(p.u_scale * totals[k], trace.cells, windows[k], p)[2]
+                else:
+                    windows[k].append(quiet)
+                    rate = spike_rate(windows[k], p.n_t, window_dt)
+                record = {"frame": index, "collision": collision_warning(rate, p.t_c),
+                          "targets": targets}
+            records.append(record)
+    return runs
 
 
 def _judge(frame: FrameTrace, p: ASNNParams, streak: dict[int, int], own: tuple[dict, dict],
-           passed: deque) -> tuple[float, list[dict], tuple[dict, dict]]:
+           passed: deque, ratios: Sequence[float]) -> tuple[list[float], list[dict],
+                                                         tuple[dict, dict]]:
     """One processed frame's objects judged as the approach gate would with ``p``: the u
-    they add before ``u_scale``, the targets that count, and the tracks' smoothed expansion
-    against the scene and its fit (``own``, for the next frame). Updates ``streak`` (frames
-    of approach per track) and ``passed``."""
+    they add before ``u_scale`` with each ``own_motion_ratio`` of ``ratios``, the targets that
+    count, and the tracks' smoothed expansion against the scene and its fit (``own``, for the
+    next frame). Updates ``streak`` (frames of approach per track) and ``passed``."""
     frames = persistence_frames(p.approach_frames, p.approach_seconds, frame.period)
     overlap = p.overlap
-    judged = []  # (object, passes now, counts by its own frames)
+    judged = []  # (id, ttc, share, x, y) of each object
+    boxes, passing, coming = [], [], []  # its box, passes now, counts by its own frames
     measured, measured_fits = {}, {}
     for ident, ttc, offset, share, x, y, against, fit, own_fit, box, layers in frame.objects:
         passes = approach_test(ttc, offset, p.tau_max, p.offset_max, fit, overlap)
@@ -255,23 +264,23 @@ def _judge(frame: FrameTrace, p: ASNNParams, streak: dict[int, int], own: tuple[
                 1.0 / ttc, layers if p.motion_layers else None, p.tau_max, p.offset_max,
                 overlap, p.scene_tolerance).passes
         streak[ident] = streak.get(ident, 0) + 1 if passes else 0
-        weight = own_motion_weight(measured.get(ident), 1.0 / ttc if ttc else None,
-                                   p.own_motion_weight, p.own_motion_ratio)
-        judged.append(((weight * share, x, y, box), passes, streak[ident] >= frames))
-    boxes = [obj[3] for obj, _, _ in judged]
-    passing = [passes for _, passes, _ in judged]
-    coming = [ok for _, _, ok in judged]
-    if p.region_persistence:  # as TargetTracker.judge
+        judged.append((ident, ttc, share, x, y))
+        boxes.append(box)
+        passing.append(passes)
+        coming.append(streak[ident] >= frames)
+    if p.region_persistence and any(passing):  # as TargetTracker.judge
         coming = count_in_regions(boxes, passing, coming, list(passed)[-frames:],
                                   frames, p.region_cover)
-    total, targets = 0.0, []
-    for ((share, x, y, _), _, _), counts in zip(judged, coming):
+    totals, targets = [0.0] * len(ratios), []
+    for (ident, ttc, share, x, y), counts in zip(judged, coming):
         if counts:
-            total += share
+            totals = [total + own_motion_weight(measured.get(ident), 1.0 / ttc if ttc else None,
+                                                p.own_motion_weight, ratio) * share
+                      for total, ratio in zip(totals, ratios)]
             targets.append({"x": x, "y": y})
     passed.append([box for box, passes in zip(boxes, passing) if passes])
     # a track not measured in this frame starts afresh (Track.measure_own)
-    return total, targets, (measured, measured_fits)
+    return totals, targets, (measured, measured_fits)
 
 
 def grid(base: ASNNParams) -> list[ASNNParams]:
@@ -322,9 +331,18 @@ def _grid_scores(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
 def _score_points(traces: Sequence[ClipTrace], labels: Sequence[Mapping],
                   points: Sequence[ASNNParams], warmup: int,
                   early_tolerance_s: float) -> list[list[scoring.ClipScore]]:
-    return [[scoring.score_clip(replay(tr, g), lab, warmup=warmup,
-                                early_tolerance_s=early_tolerance_s)
-             for tr, lab in zip(traces, labels)] for g in points]
+    """Each point's scores on the clips; consecutive points that differ in
+    ``own_motion_ratio`` alone (the grid's last name) are replayed together (:func:`_replays`)."""
+    scores = []
+    for _, group in itertools.groupby(points, key=lambda g: g.model_dump(
+            exclude={"own_motion_ratio"})):
+        group = list(group)
+        per_clip = [_replays(tr, group[0], [g.own_motion_ratio for g in group])
+                    for tr in traces]
+        scores += [[scoring.score_clip(runs[k], lab, warmup=warmup,
+                                       early_tolerance_s=early_tolerance_s)
+                    for runs, lab in zip(per_clip, labels)] for k in range(len(group))]
+    return scores
 
 
 def suite_admissible(summaries: Sequence[Mapping]) -> list[bool]:
