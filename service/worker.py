@@ -281,12 +281,12 @@ class Worker:
             same robots).
         """
         if self.core.model == "asnn":
-            # a cold numba cache takes about a minute: frames waiting that long would all be
+            # a cold numba cache takes under a minute: frames waiting that long would all be
             # dropped, and a worker silent that long looks hung
-            log.info("worker %s: loading the model's kernels (compiling them takes about a "
+            log.info("worker %s: loading the model's kernels (compiling them takes under a "
                      "minute where numba has no cache yet)", self.core.worker_id)
             started = time.monotonic()
-            compile_kernels()
+            compile_kernels((self.core.preset,))  # its own preset's: the others' are not run
             log.info("worker %s: kernels ready in %.1f s", self.core.worker_id,
                      time.monotonic() - started)
         prefix, me = self.core.prefix, self.core.worker_id
