@@ -255,6 +255,6 @@ def test_the_worker_check_waits_out_a_cold_kernel_compile():
     from service.worker import Worker
 
     start = inspect.getsource(Worker.start)
-    assert start.index("compile_kernels()") < start.index("declare_queryable")
+    assert start.index("compile_kernels(") < start.index("declare_queryable")
     check = load_compose()["services"]["worker"]["healthcheck"]
     assert int(check["start_period"].rstrip("s")) >= 150

@@ -16,6 +16,7 @@ import msgpack
 import pytest
 import zenoh
 
+from asnn.params import DEFAULT_PRESET
 from asnn.stimuli import make_scene, write_video
 from clients.alerts import WarningListener
 from cli.main import main
@@ -260,6 +261,19 @@ def test_a_starting_worker_says_it_loads_the_model_s_kernels(zenoh_net, caplog):
     messages = [r.getMessage() for r in caplog.records if r.name == "asnn.worker"]
     loading = next(i for i, m in enumerate(messages) if "loading the model's kernels" in m)
     assert re.search(r"kernels ready in [0-9.]+ s", messages[loading + 1])
+
+
+def test_a_starting_worker_loads_the_kernels_of_its_own_preset(zenoh_net, monkeypatch):
+    # a worker runs one preset: it loads that one's kernels before its first frame (those of
+    # another preset would leave its first frames waiting for the compiler), and no others
+    import service.worker
+
+    loaded = []
+    monkeypatch.setattr(service.worker, "compile_kernels", loaded.append)
+    for preset_name in ("translation", None):
+        with Worker(zenoh_net.hub, WorkerCore(preset=preset_name), stats_every=0):
+            pass
+    assert loaded == [("translation",), (DEFAULT_PRESET,)]
 
 
 def test_camera_sources_open_files_scenes_and_fail_clearly(tmp_path):
