@@ -21,6 +21,7 @@ __all__ = ["connect_failure", "split_endpoint"]
 
 TIMEOUT = 2.0  # seconds for each step of one endpoint's check
 _TLS = "transport/link/tls/"
+_TLS_FILES = ("root_ca_certificate", "connect_certificate", "connect_private_key")
 
 
 def split_endpoint(endpoint: str) -> tuple[str, str, int] | None:
@@ -43,30 +44,28 @@ def _value(conf: zenoh.Config, key: str):
         return None
 
 
-def _tls_context(conf: zenoh.Config) -> tuple[ssl.SSLContext, str | None]:
-    """The client's TLS context as the configuration describes it, and its certificate's path
-    (None without one). Raises OSError or ssl.SSLError for a file that cannot be used."""
-    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
-    for name in ("root_ca_certificate", "connect_certificate", "connect_private_key"):
-        path = _value(conf, _TLS + name)
+def _tls_context(conf: zenoh.Config) -> tuple[ssl.SSLContext, dict]:
+    """The client's TLS context as the configuration describes it, and its files' paths by
+    name (:data:`_TLS_FILES`; None where not set). Raises OSError or ssl.SSLError for a file
+    that cannot be used."""
+    files = {name: _value(conf, _TLS + name) for name in _TLS_FILES}
+    for name, path in files.items():
         if path and not os.access(path, os.R_OK):
             raise OSError(f"{name} {path} cannot be read")
-    ca = _value(conf, _TLS + "root_ca_certificate")
-    if ca:
-        context.load_verify_locations(ca)
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    if files["root_ca_certificate"]:
+        context.load_verify_locations(files["root_ca_certificate"])
     else:
         context.load_default_certs()
     if _value(conf, _TLS + "verify_name_on_connect") is False:
         context.check_hostname = False
-    certificate = _value(conf, _TLS + "connect_certificate")
-    if certificate:
-        context.load_cert_chain(certificate, _value(conf, _TLS + "connect_private_key"))
-    return context, certificate
+    if files["connect_certificate"]:
+        context.load_cert_chain(files["connect_certificate"], files["connect_private_key"])
+    return context, files
 
 
 def _uses_base64(conf: zenoh.Config) -> bool:
-    return any(_value(conf, _TLS + name + "_base64")
-               for name in ("root_ca_certificate", "connect_certificate", "connect_private_key"))
+    return any(_value(conf, _TLS + name + "_base64") for name in _TLS_FILES)
 
 
 def _check_endpoint(conf: zenoh.Config, endpoint: str, timeout: float) -> str | None:
@@ -86,13 +85,14 @@ def _check_endpoint(conf: zenoh.Config, endpoint: str, timeout: float) -> str | 
         if _uses_base64(conf):
             return None  # certificates given inline: not checked here
         try:
-            context, certificate = _tls_context(conf)
+            context, files = _tls_context(conf)
         except (OSError, ssl.SSLError) as exc:
             return f"this client's TLS files cannot be used: {exc}"
+        certificate = files["connect_certificate"]
         try:
             tls = context.wrap_socket(raw, server_hostname=host)
         except ssl.SSLCertVerificationError as exc:
-            ca = _value(conf, _TLS + "root_ca_certificate") or "the system's CAs"
+            ca = files["root_ca_certificate"] or "the system's CAs"
             return (f"the router's certificate is not trusted by {ca} ({exc.verify_message}): "
                     "root_ca_certificate must be the CA that signed the router's certificate")
         except (ssl.SSLError, OSError) as exc:
