@@ -21,8 +21,9 @@ is a short stable label that receivers count (REASONS; docs/operations.md):
 Bounds on what a message makes a receiver allocate (docs/operations.md, "Hostile input"):
 
 * msgpack: a map may have at most MAX_MAP_LEN entries, an array MAX_ARRAY_LEN items, a string
-  MAX_STR_LEN bytes, and a whole message at most MAX_ITEMS container entries in all, so an
-  8-million-entry map (under MAX_PAYLOAD) is refused when its header is read
+  MAX_STR_LEN bytes, and a whole message at most MAX_ITEMS container entries in all, counted
+  on the containers' headers before msgpack reads any, so an 8-million-entry map (under
+  MAX_PAYLOAD), or a thousand nested headers of arrays that never complete, is refused
   (``undecodable``), not built;
 * jpeg/png: the header is read before anything is decoded (:mod:`asnn.io.images`, shared with
   the ROS 2 bag reader). Its size must be the message's, the file must be an 8-bit image of a
@@ -223,6 +224,77 @@ class _TooManyItems(ValueError):
     pass
 
 
+def _msgpack_layout() -> tuple[tuple[int, ...], dict[int, tuple[str, int, int]]]:
+    """How :func:`_declared_entries` steps over each msgpack type byte: the bytes a scalar
+    takes in all (its type byte included) by type byte, 0 for the others; and for those,
+    ``(kind, width, extra)``: a str, bin or ext (``"sized"``) whose length is ``width`` bytes,
+    followed by ``extra`` bytes before its body, or a container (``"array"``, ``"map"``) whose
+    count is ``width`` bytes (0: in the type byte itself)."""
+    fixed = [0] * 256
+    sized: dict[int, tuple[str, int, int]] = {}
+    for b in range(256):
+        if b < 0x80 or b >= 0xe0:  # fixint
+            fixed[b] = 1
+        elif b < 0x90:
+            sized[b] = ("map", 0, 0)
+        elif b < 0xa0:
+            sized[b] = ("array", 0, 0)
+        elif b < 0xc0:  # fixstr
+            fixed[b] = 1 + (b & 0x1f)
+    # nil, (never used), false, true, float 32/64, uint 8-64, int 8-64, fixext 1-16
+    for b, size in zip([0xc0, 0xc1, 0xc2, 0xc3, 0xca, 0xcb, *range(0xcc, 0xd9)],
+                       [1, 1, 1, 1, 5, 9, 2, 3, 5, 9, 2, 3, 5, 9, 3, 4, 6, 10, 18]):
+        fixed[b] = size
+    for b, width in ((0xc4, 1), (0xc5, 2), (0xc6, 4), (0xd9, 1), (0xda, 2), (0xdb, 4)):
+        sized[b] = ("sized", width, 0)  # bin, str
+    for b, width in ((0xc7, 1), (0xc8, 2), (0xc9, 4)):
+        sized[b] = ("sized", width, 1)  # ext: its type byte
+    for b, width in ((0xdc, 2), (0xdd, 4)):
+        sized[b] = ("array", width, 0)
+    for b, width in ((0xde, 2), (0xdf, 4)):
+        sized[b] = ("map", width, 0)
+    return tuple(fixed), sized
+
+
+_FIXED_SIZE, _SIZED = _msgpack_layout()
+
+
+def _declared_entries(payload: bytes, max_items: int) -> None:
+    """Walk the msgpack headers of ``payload`` (skipping every string's and binary's body) and
+    refuse it where its containers declare more than ``max_items`` entries in all (each
+    container counting its entries plus one, map pairs as one entry): :class:`_TooManyItems`.
+
+    msgpack allocates a container's slots when it reads its header, before its entries are
+    read, and its nesting goes 1024 deep: 1023 array headers of 4,096 items (3 KB) took 32 MiB
+    and 27 ms of unpacking before the payload was found to end there. Counted here, at the
+    headers, before anything is built, the slots of everything msgpack may allocate are at most
+    ``max_items``. A payload that ends early or holds a byte msgpack never uses is left to
+    msgpack to refuse.
+    """
+    end, pos, pending, items = len(payload), 0, 1, 0
+    fixed, sized = _FIXED_SIZE, _SIZED
+    while pending and pos < end:
+        pending -= 1
+        b = payload[pos]
+        step = fixed[b]
+        if step:
+            pos += step
+            continue
+        kind, width, extra = sized[b]
+        if width:
+            count = int.from_bytes(payload[pos + 1:pos + 1 + width], "big")
+        else:
+            count = b & 0x0f
+        pos += 1 + width
+        if kind == "sized":
+            pos += extra + count
+            continue
+        items += count + 1
+        if items > max_items:
+            raise _TooManyItems(f"more than {max_items} entries in all")
+        pending += 2 * count if kind == "map" else count
+
+
 class _DuplicateKey(ValueError):
     pass
 
@@ -234,18 +306,17 @@ def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_
     total's larger for a worker's status: :func:`decode_status`).
 
     The per-container limits (MAX_MAP_LEN, MAX_ARRAY_LEN, MAX_STR_LEN, MAX_EXT_LEN) make msgpack
-    refuse a container when it reads its header, before building it; the total (MAX_ITEMS) is
-    counted as containers complete, so nested containers cannot multiply the per-container
-    limits. What is built is therefore at most about 2 x MAX_ITEMS objects plus the bytes of
-    the strings and binaries, which the payload holds anyway, plus what the containers still
-    being read hold (uncounted until they complete): at most msgpack's nesting depth (1024) of
-    them, each within its own limit.
+    refuse a container when it reads its header, before building it; the total (``max_items``)
+    is counted on the containers' headers before msgpack reads the payload
+    (:func:`_declared_entries`), so neither nesting nor containers that never complete can
+    multiply the per-container limits. What is built is therefore at most about 2 x
+    ``max_items`` objects plus the bytes of the strings and binaries, which the payload holds
+    anyway.
 
     With ``unique_keys`` a map that gives a key twice is refused (``undecodable``): its pairs
-    are then kept until the map completes, about 64 bytes each beyond a dict's entry, so that
-    the containers still being read may hold 1024 x ``max_map_len`` of them (16 MiB for a
-    message's bounds, under the 32 MiB of 1024 arrays of MAX_ARRAY_LEN read at once; 512 MiB
-    for a status map's, hence :func:`decode_status` reads without the check).
+    are then kept until the map completes, about 64 bytes each beyond a dict's entry, at most
+    ``max_items`` of them (1 MiB for a message's bounds, 16 MiB for a status map's, hence
+    :func:`decode_status` reads without the check).
 
     Raises
     ------
@@ -255,31 +326,24 @@ def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_
     if len(payload) > max_payload:
         raise MessageError("oversized", f"{what} of {len(payload)} bytes, the limit is "
                            f"{max_payload}")
-    items = 0
-
-    def count(container):
-        nonlocal items
-        items += len(container) + 1
-        if items > max_items:
-            raise _TooManyItems(f"more than {max_items} entries in all")
-        return container
 
     def unique(pairs):
         # a key given twice would be read as its last value here and maybe its first by
         # another reader (a dashboard, a proxy): refuse the ambiguity rather than pick one
-        mapping = count(dict(pairs))
+        mapping = dict(pairs)
         if len(mapping) < len(pairs):
             seen = set()
             twice = next(key for key, _ in pairs if key in seen or seen.add(key))
             raise _DuplicateKey(f"a map gives the key {twice!r:.80} twice")
         return mapping
 
-    hook = {"object_pairs_hook": unique} if unique_keys else {"object_hook": count}
+    hook = {"object_pairs_hook": unique} if unique_keys else {}
     try:
+        _declared_entries(payload, max_items)
         obj = msgpack.unpackb(payload, raw=False, strict_map_key=False, **hook,
-                              list_hook=count, max_str_len=MAX_STR_LEN,
-                              max_bin_len=max_payload, max_array_len=MAX_ARRAY_LEN,
-                              max_map_len=max_map_len, max_ext_len=MAX_EXT_LEN)
+                              max_str_len=MAX_STR_LEN, max_bin_len=max_payload,
+                              max_array_len=MAX_ARRAY_LEN, max_map_len=max_map_len,
+                              max_ext_len=MAX_EXT_LEN)
     except Exception as exc:  # msgpack raises several unrelated types on garbage
         why = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         raise MessageError("undecodable", f"{what} is not msgpack ({why})") from None
@@ -304,9 +368,9 @@ def encode_status(status: dict) -> bytes:
 def decode_status(payload: bytes) -> dict:
     """A worker's status map (built by :meth:`service.core.WorkerCore.status` and the worker),
     unpacked within the status bounds. A key given twice is read as its last value: refusing it
-    (as messages do) would keep every pair of the maps being read, and the status bounds let
-    1024 nested maps of 8,192 pairs hold half a GiB before any completes
-    (:func:`unpack_map`); a status only informs (``asnn status``, the health check).
+    (as messages do) would keep every pair of the maps being read, up to the status bounds'
+    262,144 (16 MiB, :func:`unpack_map`); a status only informs (``asnn status``, the health
+    check).
 
     Raises
     ------

@@ -272,23 +272,73 @@ def test_a_map_that_gives_a_key_twice_is_refused_not_read_as_its_last_value(nest
 def test_a_status_map_of_nested_repeated_pairs_is_read_without_keeping_them():
     """A status map is read with the status bounds (8,192 pairs a map): the duplicate-key check
     keeps every pair of the maps still being read, 64 bytes each, so 64 nested maps of 8,192
-    repeated pairs (1 MiB) held 32 MiB, a full 16 MiB status half a GiB. Read as a dict, each
-    such map is one entry; a message's maps (256 pairs) keep the check, and their worst case
-    stays under that of arrays read at once."""
-    from service.messages import MAX_ARRAY_LEN, MAX_MAP_LEN, STATUS_MAX_MAP_LEN, decode_status
+    repeated pairs (1 MiB) held 32 MiB. Read as a dict, each such map is one entry."""
+    from service.messages import STATUS_MAX_MAP_LEN, decode_status
 
-    def nested(n: int, depth: int, item: bytes) -> bytes:
-        opened = (b"\xde" if item else b"\xdc") + n.to_bytes(2, "big")
-        return b"\x81\xa1x" + (opened + item * (n - 1)) * depth + b"\x00"
-
-    status = nested(STATUS_MAX_MAP_LEN, 64, b"\x00\x00")  # key 0, value 0, again and again
+    status = b"\x81\xa1x" + (b"\xde" + STATUS_MAX_MAP_LEN.to_bytes(2, "big")
+                             + b"\x00\x00" * (STATUS_MAX_MAP_LEN - 1)) * 64 + b"\x00"
     assert len(status) < 1.1e6
     assert allocated_peak(lambda: pytest.raises(MessageError, decode_status, status)) < 4e6
-    maps = nested(MAX_MAP_LEN, 1000, msgpack.packb("k") + b"\x00")
-    arrays = b"\x81\xa1x" + (b"\xdc" + MAX_ARRAY_LEN.to_bytes(2, "big")
-                            + b"\x00" * (MAX_ARRAY_LEN - 1)) * 1000 + b"\x00"
-    assert rejected(maps) == rejected(arrays) == "undecodable"
-    assert allocated_peak(rejected, maps) < allocated_peak(rejected, arrays)
+
+
+@pytest.mark.parametrize("opened", [b"\xdc", b"\xde"], ids=["arrays", "maps"])
+def test_containers_that_never_complete_are_refused_at_their_headers(opened):
+    """1,023 nested headers of 4,096-item arrays, each within its own limit, and nothing after
+    them (3 KB): msgpack allocates each array's slots at its header, so the frame took 32 MiB
+    and 27 ms before it was found to end there. The entries are counted at the headers now."""
+    from service.messages import MAX_ARRAY_LEN, MAX_MAP_LEN
+
+    n = MAX_ARRAY_LEN if opened == b"\xdc" else MAX_MAP_LEN
+    junk = b"\x81\xa1x" + (opened + n.to_bytes(2, "big")) * 1023
+    assert len(junk) < 4 * 1024
+    assert rejected(junk) == "undecodable"
+    assert allocated_peak(rejected, junk) < MB / 4
+
+
+def test_the_entries_are_counted_as_msgpack_builds_them():
+    """The header count is exact: a message of MAX_ITEMS container entries (each container's
+    entries plus one) is read, one more is refused, and random nestings of every msgpack type
+    read as msgpack reads them."""
+    from service.messages import unpack_map
+
+    def fields(entries: int) -> bytes:
+        # {"x": [160 rows of zeros]}: the map 1 + 1, the list 160 + 1, each row its k + 1
+        rows = 160
+        last = entries - 3 - 2 * rows - 100 * (rows - 1)
+        return msgpack.packb({"x": [[0] * 100] * (rows - 1) + [[0] * last]})
+
+    assert unpack_map(fields(MAX_ITEMS))["x"]
+    with pytest.raises(MessageError, match="entries in all"):
+        unpack_map(fields(MAX_ITEMS + 1))
+    rng = np.random.default_rng(5)
+    scalars = [None, True, False, 0, 127, -32, 255, -129, 70000, -70000, 2**40, -2**40, 2**63,
+               0.5, "", "s" * 31, "t" * 300, "u" * 1000, b"", b"b" * 300,
+               *(msgpack.ExtType(3, b"e" * n) for n in (1, 2, 4, 8, 16, 40))]
+
+    def value(depth: int):
+        if depth > 3 or rng.random() < 0.4:
+            return scalars[rng.integers(len(scalars))]
+        n = int(rng.choice([0, 3, 15, 16, 80]))
+        if rng.random() < 0.5:
+            return [value(depth + 1) for _ in range(n)]
+        return {f"k{i}": value(depth + 1) for i in range(n)}
+
+    def entries(v) -> int:
+        inner = v.values() if isinstance(v, dict) else v if isinstance(v, list) else None
+        return 0 if inner is None else len(v) + 1 + sum(map(entries, inner))
+
+    read = refused = 0
+    for i in range(120):
+        message = {"a": value(1), "b": value(1), "c": b"b" * 70000}  # bin 32
+        payload = msgpack.packb(message, use_bin_type=True, use_single_float=i % 2 == 1)
+        if entries(message) <= MAX_ITEMS:
+            assert unpack_map(payload) == msgpack.unpackb(payload, raw=False)
+            read += 1
+        else:
+            with pytest.raises(MessageError, match="entries in all"):
+                unpack_map(payload)
+            refused += 1
+    assert read > 80 and refused > 5  # both sides of the bound were tried
 
 
 # ---------------------------------------------------------------- 3. robot-slot lockout
