@@ -53,13 +53,16 @@ def format_warning(r: Response) -> str:
 
 
 def _target(t) -> str:
-    """A target as text; a tracked one leads with its id and time to contact."""
-    where = (f"({t.x:.0f}, {t.y:.0f}) heading {math.degrees(t.direction):+.0f} deg"
-             f" energy {t.energy:.3g} {t.pixels} px")
+    """A target as text. A tracked one leads with its id, time to contact and path offset,
+    and leaves out the motion's direction: an object on a collision course grows about its
+    centre, its motion vectors cancel and their direction reads at random from frame to
+    frame (the offset says instead how far its path passes from the camera)."""
     if t.id is None:
-        return where
+        return (f"({t.x:.0f}, {t.y:.0f}) heading {math.degrees(t.direction):+.0f} deg"
+                f" energy {t.energy:.3g} {t.pixels} px")
     ttc = "no contact" if t.ttc is None else f"contact in {t.ttc:.2f} s"
-    return f"#{track_label(t.id)} {ttc} at {where}"
+    offset = "" if t.offset is None else f", path offset {t.offset:.2f}"
+    return f"#{track_label(t.id)} {ttc}{offset} at ({t.x:.0f}, {t.y:.0f}) {t.pixels} px"
 
 
 def format_json(r: Response) -> str:

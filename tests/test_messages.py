@@ -333,12 +333,13 @@ def test_alert_lines_lead_tracked_targets_with_their_id_and_time_to_contact():
     place = dict(x=10.0, y=20.0, direction=0.0, energy=0.1, pixels=40)
     tracked = format_warning(Response(**common, targets=[
         TargetMsg(**place, id=3, expansion=2.0, ttc=0.5, offset=0.1, approaching=True)]))
-    assert "#3 contact in 0.50 s at (10, 20)" in tracked
+    assert "#3 contact in 0.50 s, path offset 0.10 at (10, 20) 40 px" in tracked
+    assert "heading" not in tracked  # a collision course's motion has no direction to read
     handed = format_warning(Response(**common, targets=[
         TargetMsg(**place, id=25 * 2**16 + 3, expansion=2.0, ttc=0.5, approaching=True)]))
     assert "#25:3 contact in 0.50 s" in handed  # track 3 of the model that started at seq 25
     plain = format_warning(Response(**common, targets=[TargetMsg(**place)]))
-    assert "#" not in plain and "(10, 20)" in plain
+    assert "#" not in plain and "(10, 20) heading +0 deg energy 0.1 40 px" in plain
 
 
 def test_a_status_map_is_read_within_bounds_of_its_own():
