@@ -63,7 +63,7 @@ from importlib import resources
 from asnn.params import SLOW_FPS
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import Preview, Refusal, Response
+from service.messages import Preview, Refusal, Response, track_label
 
 from .fleet import STALE_S, declare_warning_subscribers, stale_robot, take_fleet_sample
 
@@ -103,10 +103,12 @@ SECURITY_HEADERS = {
 
 def _target(t) -> dict:
     """A target as the page draws it: the contract's fields, and the tracker's id and time to
-    contact where the model gives them (robust default)."""
+    contact where the model gives them (robust default); ``label``, the id as ``asnn alerts``
+    shows it (``"25:3"`` for track 3 of a model started at frame 25)."""
     out = {"x": t.x, "y": t.y, "direction": t.direction, "energy": t.energy, "pixels": t.pixels}
     if t.id is not None:
         out["id"] = t.id
+        out["label"] = track_label(t.id)
     if t.ttc is not None:
         out["ttc"] = t.ttc
     return out

@@ -43,7 +43,7 @@ from foxglove.messages import CompressedImage
 
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import Preview, Response
+from service.messages import Preview, Response, track_label
 
 from .fleet import STALE_S, stale_robot, take_fleet_sample
 
@@ -215,8 +215,11 @@ class FoxgloveBridge:
         fields = response.model_dump()
         state.response.log(response_message(fields, stamp_ns))
         if state.size is not None:  # without a thumbnail there is no picture to draw on
+            # ids as asnn alerts and the dashboard show them: "25:3" for a new owner's track 3
+            targets = [t if t.get("id") is None else {**t, "id": track_label(t["id"])}
+                       for t in fields["targets"]]
             state.annotations.log(target_annotations(
-                fields["targets"], stamp_ns, state.size, collision=response.collision,
+                targets, stamp_ns, state.size, collision=response.collision,
                 scale=state.scale))
 
     def _forget_locked(self, now: float) -> None:

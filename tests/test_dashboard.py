@@ -226,8 +226,12 @@ def test_targets_carry_the_trackers_id_and_time_to_contact_when_the_model_gives_
     r = response(seq=3, collision=True).model_copy(update={"targets": [tracked, plain]})
     offer_response(store, r)
     shown = store.delta(0)["robots"]["r1"]["targets"]
-    assert shown[0]["id"] == 7 and shown[0]["ttc"] == 0.8
-    assert "id" not in shown[1] and "ttc" not in shown[1]
+    assert shown[0]["id"] == 7 and shown[0]["ttc"] == 0.8 and shown[0]["label"] == "7"
+    assert "id" not in shown[1] and "ttc" not in shown[1] and "label" not in shown[1]
+    # a new owner's track 3 from frame 25 reads as asnn alerts shows it
+    handed = tracked.model_copy(update={"id": 25 * 2**16 + 3})
+    offer_response(store, r.model_copy(update={"seq": 4, "targets": [handed]}))
+    assert store.delta(0)["robots"]["r1"]["targets"][0]["label"] == "25:3"
 
 
 def test_consecutive_warnings_make_one_log_entry_per_episode():

@@ -277,6 +277,31 @@ def test_live_server_shows_a_robots_preview_annotations_and_numbers(zenoh_net):
     assert bridge.received["preview"] >= 1 and bridge.received["response"] == 1
 
 
+def test_live_annotations_label_a_new_owners_tracks_as_asnn_alerts_does(monkeypatch):
+    """A worker that took the robot over numbers its tracks from the frame it started at
+    (id 25 * 2**16 + 3): drawn "#25:3", as asnn alerts and the dashboard show it."""
+    import clients.foxglove as live
+
+    drawn = []
+
+    def annotations(targets, *args, **kwargs):
+        drawn.append(list(targets))
+        return target_annotations(targets, *args, **kwargs)
+
+    monkeypatch.setattr(live, "target_annotations", annotations)
+    preview = Preview.from_frame_image(np.full((64, 128), 90, np.uint8), seq=1, stamp=1.0,
+                                       width=64)
+    with live.FoxgloveBridge(port=0) as bridge:
+        assert bridge.offer("asnn/r1/preview", encode(preview)) == "r1"
+        assert bridge.offer("asnn/r1/response", response("r1", 1, 1.0, id=25 * 2**16 + 3,
+                                                         ttc=1.25)) == "r1"
+    (target,) = drawn[-1]
+    assert target["id"] == "25:3" and target["ttc"] == 1.25
+    from asnn.io.visualize import target_label
+
+    assert target_label(target) == "#25:3 ttc 1.2 s"  # the annotation's text
+
+
 def test_bridge_counts_bad_messages_and_bounds_its_robots():
     from clients.foxglove import FoxgloveBridge
 

@@ -165,7 +165,7 @@
       ctx.moveTo(x, y);
       ctx.lineTo(x + Math.cos(t.direction) * (r + 8), y + Math.sin(t.direction) * (r + 8));
       ctx.stroke();
-      const label = (t.id !== undefined ? `#${t.id}` : "") +
+      const label = (t.id !== undefined ? `#${t.label ?? t.id}` : "") +
         (typeof t.ttc === "number" ? ` ${t.ttc.toFixed(1)} s` : "");
       if (label) {
         ctx.fillStyle = "#ff3b30";
