@@ -270,14 +270,15 @@ def test_a_map_that_gives_a_key_twice_is_refused_not_read_as_its_last_value(nest
     assert decode_frame(msgpack.packb(fields)).seq == 0  # the same fields once each decode
 
 def test_a_status_map_of_nested_repeated_pairs_is_read_without_keeping_them():
-    """A status map is read with the status bounds (8,192 pairs a map): the duplicate-key check
-    keeps every pair of the maps still being read, 64 bytes each, so 64 nested maps of 8,192
-    repeated pairs (1 MiB) held 32 MiB. Read as a dict, each such map is one entry."""
-    from service.messages import STATUS_MAX_MAP_LEN, decode_status
+    """A status map is read with the status bounds (8,192 pairs a map, 262,144 entries): the
+    duplicate-key check keeps every pair of the maps still being read, 64 bytes each, so 30
+    nested maps of 8,192 repeated pairs (0.5 MiB, within the bounds) would hold 15 MiB. Read as
+    a dict, each such map is one entry."""
+    from service.messages import STATUS_MAX_ITEMS, STATUS_MAX_MAP_LEN, decode_status
 
     status = b"\x81\xa1x" + (b"\xde" + STATUS_MAX_MAP_LEN.to_bytes(2, "big")
-                             + b"\x00\x00" * (STATUS_MAX_MAP_LEN - 1)) * 64 + b"\x00"
-    assert len(status) < 1.1e6
+                             + b"\x00\x00" * (STATUS_MAX_MAP_LEN - 1)) * 30 + b"\x00"
+    assert len(status) < 0.6e6 and 30 * (STATUS_MAX_MAP_LEN + 1) < STATUS_MAX_ITEMS
     assert allocated_peak(lambda: pytest.raises(MessageError, decode_status, status)) < 4e6
 
 
