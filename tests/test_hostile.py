@@ -150,6 +150,54 @@ def test_a_png_whose_data_inflates_past_its_image_is_refused_before_it_is_decode
         assert decode_encoded(out.getvalue(), "png", (83, 61)).shape[:2] == (61, 83)
 
 
+def test_a_jpeg_of_a_million_markers_is_refused_from_its_first_thousand():
+    """4 MB of fill bytes (or a million empty APP0 segments) before a jpeg's frame header kept
+    the reader 0.7 s on the thread that receives the worker's frames: each marker was read in
+    turn. What encoders write, an ICC profile in 50 APP2 segments and a few fill bytes
+    included, passes."""
+    from asnn.io.images import MAX_JPEG_MARKERS
+
+    jpeg = encode_image(np.zeros((64, 64), np.uint8), "jpeg")
+    core = WorkerCore()
+    for k, junk in enumerate((b"\xff" * 4_000_000, b"\xff\xe0\x00\x02" * 1_000_000)):
+        bomb = jpeg[:2] + junk + jpeg[2:]
+        with pytest.raises(ImageError, match="markers"):
+            check_encoded(bomb, "jpeg", (64, 64))
+        assert core.offer(f"asnn/r{k}/frame", frame_map(width=64, height=64, format="jpeg",
+                                                         data=bomb)) is None
+    assert core.stats()["invalid"] == {"bad-image": 2}
+    profile = (b"\xff\xe2" + (2 + 1000).to_bytes(2, "big") + b"\0" * 1000) * 50
+    legit = jpeg[:2] + b"\xff" * 7 + profile + jpeg[2:]
+    assert check_encoded(legit, "jpeg", (64, 64)) == (64, 64)
+    assert 50 + 20 < MAX_JPEG_MARKERS
+
+
+def test_png_chunks_libpng_would_warn_about_or_read_by_the_million_are_refused(capfd):
+    """libpng writes two lines to stderr for each ancillary chunk whose CRC is wrong: 1,000 of
+    them, 2,000 lines per frame, past every rate limit of the worker's log. Chunks with wrong
+    CRCs, more than MAX_PNG_ANCILLARY ancillary ones, or more chunks than two a row (300,000
+    empty IDATs) are refused before the decoder sees them; a few text chunks pass."""
+    import struct
+    import zlib
+
+    from asnn.io.images import MAX_PNG_ANCILLARY, decode_encoded
+
+    def chunk(kind, body, crc=None):
+        crc = zlib.crc32(kind + body) if crc is None else crc
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
+
+    png = encode_image(np.zeros((64, 64), np.uint8), "png")
+    at = png.index(b"IDAT") - 4
+    text = chunk(b"tEXt", b"k\0v")
+    for extra, why in ((chunk(b"tEXt", b"", crc=0) * 1000, "CRC"),
+                       (text * (MAX_PNG_ANCILLARY + 1), "ancillary"),
+                       (chunk(b"IDAT", b"") * 300_000, "in all")):
+        with pytest.raises(ImageError, match=why):
+            decode_encoded(png[:at] + extra + png[at:], "png", (64, 64))
+    assert "libpng" not in capfd.readouterr().err
+    assert decode_encoded(png[:at] + text * 10 + png[at:], "png", (64, 64)).shape == (64, 64)
+
+
 CHILD = r"""
 import json, os, resource, sys
 import numpy as np, msgpack

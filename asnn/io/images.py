@@ -9,7 +9,10 @@ cameras make (baseline, extended or progressive Huffman jpeg of 8-bit samples; p
 ``max_depth`` bits per sample); and it must be long enough to hold that many pixels at the best
 compression its coding allows (:func:`min_encoded_bytes`). A truncated file whose header
 declares 4096x4096 is thus refused before the decoder pads it into a 48 MiB picture (and a
-worker builds a model state of 0.9 GB for it).
+worker builds a model state of 0.9 GB for it). The parts read one by one are bounded too: a
+jpeg's markers before its first scan (:data:`MAX_JPEG_MARKERS`) and its scans
+(:data:`MAX_JPEG_SCANS`); a png's chunks (:data:`MAX_PNG_ANCILLARY`, two a row in all), each
+with its CRC checked so that libpng has nothing to warn about on stderr.
 """
 
 from __future__ import annotations
@@ -20,7 +23,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-__all__ = ["ENCODED_FORMATS", "JPEG_QUALITY", "MAX_JPEG_SCANS", "MAX_SIDE", "ImageError",
+__all__ = ["ENCODED_FORMATS", "JPEG_QUALITY", "MAX_JPEG_MARKERS", "MAX_JPEG_SCANS",
+           "MAX_PNG_ANCILLARY", "MAX_SIDE", "ImageError",
            "check_encoded", "decode_encoded", "encoded_size", "min_encoded_bytes", "to_uint8"]
 
 MAX_SIDE = 4096  # largest accepted picture width or height, whatever its source
@@ -32,6 +36,15 @@ JPEG_QUALITY = 90  # what the project encodes jpeg at: the camera's frames, the 
 # (baseline) to about 10 (progressive); markers inside other segments (an EXIF thumbnail's
 # scan) count too, which errs on the side of refusing.
 MAX_JPEG_SCANS = 64
+# Markers and fill bytes before a jpeg's first scan, each read in turn: 4 MB of fill bytes (or a
+# million empty APP0 segments) held the reader 0.7 s, on the thread that receives a worker's
+# frames. Encoders write about 10 (an ICC profile split into APP2 segments: some 50 more).
+MAX_JPEG_MARKERS = 1024
+# png chunks: libpng writes a warning line to stderr for each ancillary chunk whose CRC is
+# wrong (1,000 such chunks, 2,000 lines per frame, past any rate limit of ours), and reads
+# every chunk, so their number is bounded: ancillary ones (text, colour profile, time...;
+# encoders write a handful), and in all (encoders write a chunk or two per row at most).
+MAX_PNG_ANCILLARY = 64
 
 
 class ImageError(ValueError):
@@ -76,7 +89,9 @@ def _read_header(data: bytes, format: str) -> _Header | None:
     if format != "jpeg" or bytes(data[:2]) != b"\xff\xd8":
         return None
     i, frame = 2, None
-    while i + 4 <= len(data):
+    for _ in range(MAX_JPEG_MARKERS):
+        if i + 4 > len(data):
+            break
         if data[i] != 0xFF:
             return None
         marker = data[i + 1]
@@ -102,13 +117,20 @@ def _read_header(data: bytes, format: str) -> _Header | None:
                      int.from_bytes(data[i + 5:i + 7], "big"),  # height
                      _JPEG_PROCESSES.get(marker, f"0x{marker:02x}"), data[i + 4], data[i + 9])
         i += 2 + length
+    else:
+        raise ImageError("bad-image", f"jpeg of more than {MAX_JPEG_MARKERS} markers and fill "
+                         "bytes before its first scan")
     return None if frame is None else _Header(*frame, body=-1)
 
 
 def encoded_size(data: bytes, format: str) -> tuple[int, int] | None:
     """(width, height) from a png or jpeg file's header without decoding it; None if the data
-    does not start like such a file."""
-    header = _read_header(data, format)
+    does not start like such a file (or is a jpeg of more than :data:`MAX_JPEG_MARKERS`
+    markers before its pixels)."""
+    try:
+        header = _read_header(data, format)
+    except ImageError:
+        return None
     return None if header is None else (header.width, header.height)
 
 
@@ -209,29 +231,46 @@ def _checked_header(data, format, size, max_side, max_depth):
     return header
 
 
-def _png_inflates_within(data: bytes, limit: int) -> bool:
-    """Whether a png's compressed pixels (its IDAT chunks) inflate to at most ``limit`` bytes,
-    found by inflating them a MiB at a time, none of it kept. The decoder inflates whatever
-    follows the rows too: 1 MB of deflate that inflates to 1 GB after a 1024x1024 image took
-    it 0.97 s (a frame of 48 MiB: 45 s of a processing thread)."""
-    inflater, total, i = zlib.decompressobj(), 0, 8
+_PNG_CRITICAL = (b"IHDR", b"PLTE", b"IDAT", b"IEND")
+
+
+def _check_png_chunks(data: bytes, limit: int, height: int) -> None:
+    """Refuse a png (:class:`ImageError`, ``bad-image``) whose chunks the decoder should not be
+    given: a chunk whose CRC does not match its bytes (libpng warns on stderr for each
+    ancillary one), more than :data:`MAX_PNG_ANCILLARY` ancillary chunks or more than
+    ``1024 + 2 x height`` chunks in all, or compressed pixels (its IDAT chunks) that inflate to
+    more than ``limit`` bytes, found by inflating them a MiB at a time, none of it kept. The
+    decoder inflates whatever follows the rows too: 1 MB of deflate that inflates to 1 GB after
+    a 1024x1024 image took it 0.97 s (a frame of 48 MiB: 45 s of a processing thread)."""
+    inflater, total, i, chunks, ancillary = zlib.decompressobj(), 0, 8, 0, 0
     view = memoryview(data).cast("B")
-    try:
-        while i + 8 <= len(view):
-            length, kind = int.from_bytes(view[i:i + 4], "big"), bytes(view[i + 4:i + 8])
-            if kind == b"IEND":
-                break
-            if kind == b"IDAT":
-                chunk = view[i + 8:i + 8 + length]
+    while i + 12 <= len(view):
+        length, kind = int.from_bytes(view[i:i + 4], "big"), bytes(view[i + 4:i + 8])
+        if i + 12 + length > len(view):
+            break  # cut short: the decoder says so
+        chunks += 1
+        if kind not in _PNG_CRITICAL:
+            ancillary += 1
+        if ancillary > MAX_PNG_ANCILLARY or chunks > 1024 + 2 * height:
+            raise ImageError("bad-image", f"png of more than {MAX_PNG_ANCILLARY} ancillary "
+                             f"chunks or {1024 + 2 * height} chunks in all")
+        if zlib.crc32(view[i + 4:i + 8 + length]) != int.from_bytes(
+                view[i + 8 + length:i + 12 + length], "big"):
+            raise ImageError("bad-image", f"png chunk {kind!r:.20} at byte {i} fails its CRC")
+        if kind == b"IEND":
+            break
+        if kind == b"IDAT":
+            chunk = view[i + 8:i + 8 + length]
+            try:
                 while len(chunk) and not inflater.eof:
                     total += len(inflater.decompress(chunk, 1 << 20))
                     if total > limit:
-                        return False
+                        raise ImageError("bad-image", "png data inflates to more than its "
+                                         "image's rows")
                     chunk = inflater.unconsumed_tail
-            i += 12 + length
-    except zlib.error:  # not deflate: the decoder says so
-        return True
-    return True
+            except zlib.error:  # not deflate: the decoder says so
+                return
+        i += 12 + length
 
 
 def decode_encoded(data: bytes, format: str, size: tuple[int, int] | None = None, *,
@@ -262,8 +301,7 @@ def decode_encoded(data: bytes, format: str, size: tuple[int, int] | None = None
     if format == "png":
         # the rows, their filter bytes, and room for interlacing's shorter rows
         rows = h * (1 + -(-w * header.channels * header.depth // 8))
-        if not _png_inflates_within(data, rows + 4 * h + 1024):
-            raise ImageError("bad-image", f"png data inflates to more than a {w}x{h} image")
+        _check_png_chunks(data, rows + 4 * h + 1024, h)
     try:
         image = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     except cv2.error as exc:
