@@ -175,8 +175,9 @@ def test_a_jpeg_of_a_million_markers_is_refused_from_its_first_thousand():
 def test_png_chunks_libpng_would_warn_about_or_read_by_the_million_are_refused(capfd):
     """libpng writes two lines to stderr for each ancillary chunk whose CRC is wrong: 1,000 of
     them, 2,000 lines per frame, past every rate limit of the worker's log. Chunks with wrong
-    CRCs, more than MAX_PNG_ANCILLARY ancillary ones, or more chunks than two a row (300,000
-    empty IDATs) are refused before the decoder sees them; a few text chunks pass."""
+    CRCs, more than MAX_PNG_ANCILLARY ancillary ones, more chunks than two a row (300,000
+    empty IDATs) or pixels that are not deflate (libpng's one error line) are refused before
+    the decoder sees them; a few text chunks pass."""
     import struct
     import zlib
 
@@ -191,7 +192,8 @@ def test_png_chunks_libpng_would_warn_about_or_read_by_the_million_are_refused(c
     text = chunk(b"tEXt", b"k\0v")
     for extra, why in ((chunk(b"tEXt", b"", crc=0) * 1000, "CRC"),
                        (text * (MAX_PNG_ANCILLARY + 1), "ancillary"),
-                       (chunk(b"IDAT", b"") * 300_000, "in all")):
+                       (chunk(b"IDAT", b"") * 300_000, "in all"),
+                       (chunk(b"IDAT", b"\xff" * 64), "inflate")):  # not deflate: one line
         with pytest.raises(ImageError, match=why):
             decode_encoded(png[:at] + extra + png[at:], "png", (64, 64))
     assert "libpng" not in capfd.readouterr().err
