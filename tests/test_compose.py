@@ -54,6 +54,16 @@ def test_every_asnn_service_command_parses_with_the_cli_parser():
         assert (ROOT / "deploy" / "zenoh" / Path(args.config).name).is_file()
 
 
+def test_every_service_keeps_a_bounded_log():
+    """Docker's json-file log grows without end unless told: asnn alerts prints a line per
+    warning, for as long as it runs."""
+    for name, service in load_compose()["services"].items():
+        logging = service.get("logging", {})
+        assert logging.get("driver") == "json-file", name
+        options = logging.get("options", {})
+        assert options.get("max-size") == "10m" and int(options.get("max-file")) == 5, name
+
+
 def test_topology_has_the_official_router_and_the_service_image():
     services = load_compose()["services"]
     assert services["router"]["image"].split(":")[0] == "eclipse/zenoh"
