@@ -176,8 +176,8 @@ def test_png_chunks_libpng_would_warn_about_or_read_by_the_million_are_refused(c
     """libpng writes two lines to stderr for each ancillary chunk whose CRC is wrong: 1,000 of
     them, 2,000 lines per frame, past every rate limit of the worker's log. Chunks with wrong
     CRCs, more than MAX_PNG_ANCILLARY ancillary ones, more chunks than two a row (300,000
-    empty IDATs) or pixels that are not deflate (libpng's one error line) are refused before
-    the decoder sees them; a few text chunks pass."""
+    empty IDATs), pixels that are not deflate or a file cut short (libpng's and OpenCV's
+    lines) are refused before the decoder sees them; a few text chunks pass."""
     import struct
     import zlib
 
@@ -196,6 +196,9 @@ def test_png_chunks_libpng_would_warn_about_or_read_by_the_million_are_refused(c
                        (chunk(b"IDAT", b"\xff" * 64), "inflate")):  # not deflate: one line
         with pytest.raises(ImageError, match=why):
             decode_encoded(png[:at] + extra + png[at:], "png", (64, 64))
+    for cut in (png[:-40], png[:-12]):  # inside the pixels, or without IEND: two lines each
+        with pytest.raises(ImageError, match="truncated"):
+            decode_encoded(cut, "png", (64, 64))
     assert "libpng" not in capfd.readouterr().err
     assert decode_encoded(png[:at] + text * 10 + png[at:], "png", (64, 64)).shape == (64, 64)
 
