@@ -172,6 +172,22 @@ def test_a_jpeg_of_a_million_markers_is_refused_from_its_first_thousand():
     assert 50 + 20 < MAX_JPEG_MARKERS
 
 
+def test_a_jpeg_cut_short_is_refused_from_its_end(capfd):
+    """A jpeg that lost its tail on the way passed the size check and was refused by the
+    decoder only, on the processing thread, after libjpeg's line on stderr. It is refused on
+    arrival now, quietly. Padding after the end-of-image marker passes."""
+    image = make_scene("looming").frames[40]
+    jpeg = encode_image(image, "jpeg")
+    for cut in (jpeg[:-2], jpeg[:-200]):
+        frame = Frame(seq=0, stamp=0.0, width=128, height=128, format="jpeg", data=cut)
+        with pytest.raises(MessageError) as err:
+            frame.check_size()
+        assert err.value.reason == "bad-image" and "truncated" in err.value.detail
+    assert "JPEG" not in capfd.readouterr().err
+    for padded in (jpeg + b"\0" * 100, jpeg + b"\xff" * 5):
+        assert check_encoded(padded, "jpeg", (128, 128)) == (128, 128)
+
+
 def test_png_chunks_libpng_would_warn_about_or_read_by_the_million_are_refused(capfd):
     """libpng writes two lines to stderr for each ancillary chunk whose CRC is wrong: 1,000 of
     them, 2,000 lines per frame, past every rate limit of the worker's log. Chunks with wrong

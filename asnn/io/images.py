@@ -216,10 +216,14 @@ def _checked_header(data, format, size, max_side, max_depth):
                              f"{header.depth} bits, not 8-bit gray or colour")
         if header.body < 0:
             raise ImageError("bad-image", "jpeg without a start of scan: no pixels")
-        scans = (data if isinstance(data, bytes) else bytes(data)).count(b"\xff\xda")
+        whole = data if isinstance(data, bytes) else bytes(data)
+        scans = whole.count(b"\xff\xda")
         if scans > MAX_JPEG_SCANS:
             raise ImageError("bad-image", f"jpeg of {scans} scans; at most {MAX_JPEG_SCANS} are "
                              "decoded (cameras' progressive files have about 10)")
+        # a file cut short: refused here rather than by the decoder, after its line on stderr
+        if not whole.rstrip(b"\x00\xff").endswith(b"\xff\xd9"):
+            raise ImageError("bad-image", "jpeg without its end-of-image marker: truncated")
     elif header.depth not in (1, 2, 4, 8, 16) or header.depth > max_depth or not header.channels:
         raise ImageError("bad-image", f"png of {header.depth}-bit samples (colour type "
                          f"{header.kind[3:]}); at most {max_depth}-bit are read")
