@@ -90,12 +90,12 @@ def cmd_status(args: argparse.Namespace) -> int:
         session = session_for(args)
     except ConfigError as exc:
         return fail(str(exc))
-    with session:
-        statuses = query_status(session, args.prefix, args.worker, timeout=args.timeout)
+    keep = None
     if args.local:
-        from service.core import started_here
-
-        statuses = {worker: s for worker, s in statuses.items() if started_here(worker)}
+        from service.core import started_here as keep
+    with session:
+        statuses = query_status(session, args.prefix, args.worker, timeout=args.timeout,
+                                keep=keep)
     for worker, status in sorted(statuses.items()):
         if args.json:
             print(json.dumps(status, separators=(", ", ": ")), flush=True)

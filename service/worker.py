@@ -31,6 +31,7 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Callable
 
 import zenoh
 from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
@@ -87,6 +88,12 @@ HANDOVER_TIMEOUT = 5.0
 STALE_AFTER = 2.0
 # Seconds between two passes of the routes when nothing changed (warm-ups, scan windows, expiry).
 ROUTE_TICK = 0.05
+# ``query_status``: any process on the prefix may answer a status query, as often as it likes,
+# with maps of up to STATUS_MAX_BYTES (16 MiB) each, and the worker's own health check runs in
+# its container: replies waiting to be read, and statuses kept, are bounded
+STATUS_QUEUE = 8  # replies Zenoh holds until they are read
+MAX_STATUSES = 256  # workers answering
+MAX_STATUS_BYTES_KEPT = 64 * 2**20  # of the statuses kept, as received
 
 
 def tune_process() -> None:
@@ -169,20 +176,44 @@ def announced_cameras(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
 
 
 def query_status(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
-                 worker: str | None = None, timeout: float = 2.0) -> dict[str, dict]:
-    """The status maps of one worker or (``worker=None``) of all, by worker id."""
+                 worker: str | None = None, timeout: float = 2.0,
+                 keep: Callable[[str], bool] | None = None) -> dict[str, dict]:
+    """The status maps of one worker or (``worker=None``) of all, by worker id; with ``keep``,
+    of the workers whose id it accepts (the others are dropped unread, by their reply's key).
+
+    Any process on the prefix may answer, so what is held is bounded: :data:`STATUS_QUEUE`
+    replies waiting, each decoded within the status bounds, and at most :data:`MAX_STATUSES`
+    statuses of :data:`MAX_STATUS_BYTES_KEPT` in all kept (the first to come).
+    """
     key = keys.worker_status_key(worker, prefix) if worker else keys.worker_statuses(prefix)
-    out = {}
-    for reply in session.get(key, target=zenoh.QueryTarget.ALL, timeout=timeout,
+    out, kept = {}, 0
+    for reply in session.get(key, zenoh.handlers.FifoChannel(STATUS_QUEUE),
+                             target=zenoh.QueryTarget.ALL, timeout=timeout,
                              consolidation=zenoh.ConsolidationMode.NONE):
         if reply.ok is None:  # an error reply
             continue
-        try:  # bounded: any process on the prefix may answer
-            status = decode_status(reply.ok.payload.to_bytes())
+        if keep is not None and not keep(_replier(str(reply.ok.key_expr), prefix)):
+            continue  # not decoded at all
+        payload = reply.ok.payload.to_bytes()
+        if len(out) >= MAX_STATUSES or kept + len(payload) > MAX_STATUS_BYTES_KEPT:
+            continue
+        try:
+            status = decode_status(payload)
         except MessageError:
             continue
-        out[status["worker"]] = status
+        if keep is None or keep(status["worker"]):
+            kept += len(payload)  # an id answering twice counts twice: the bound holds
+            out[status["worker"]] = status
     return out
+
+
+def _replier(key: str, prefix: str) -> str:
+    """The worker id of a status reply's key (``<prefix>/@worker/<id>/status``); "" for a key
+    of another form."""
+    try:
+        return keys.parse_worker_token(key.removesuffix("/status"), prefix)
+    except keys.KeySchemeError:
+        return ""
 
 
 class _Outlets:

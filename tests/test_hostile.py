@@ -810,3 +810,41 @@ def test_a_forged_sequence_number_cannot_silence_a_robots_warnings(zenoh_net):
         assert len(real) == len(set(real))
     sniffer.undeclare()
     outlets.undeclare()
+
+
+def test_status_replies_from_anyone_are_bounded_and_a_health_check_reads_only_its_own(
+        zenoh_net, monkeypatch):
+    """Any process on the prefix may answer a status query, as often as it likes, with maps of
+    up to 16 MiB: ``asnn status`` keeps at most MAX_STATUSES of them (and MAX_STATUS_BYTES_KEPT
+    bytes), and its health check (``--local``, run in the worker's container) decodes only the
+    replies whose key names a worker it asks about."""
+    import service.worker as worker_module
+    from service.messages import encode_status
+
+    monkeypatch.setattr(worker_module, "MAX_STATUSES", 5)
+    padding = "p" * 1000
+
+    def flood(query):
+        for i in range(40):
+            query.reply(f"asnn/@worker/x{i}/status",
+                        encode_status({"worker": f"x{i}", "padding": padding}))
+
+    queryable = zenoh_net.hub.declare_queryable("asnn/@worker/*/status", flood)
+    try:
+        decoded = []
+        real = worker_module.decode_status
+        monkeypatch.setattr(worker_module, "decode_status",
+                            lambda payload: decoded.append(1) or real(payload))
+        asker = zenoh_net.spoke()
+        wait_for(lambda: worker_module.query_status(asker, timeout=0.5),
+                 what="the flood's queryable to answer")
+        everyone = worker_module.query_status(asker, timeout=3.0)
+        assert len(everyone) == 5 and all(k.startswith("x") for k in everyone)
+        decoded.clear()
+        mine = worker_module.query_status(asker, timeout=3.0, keep=lambda w: w == "x7")
+        assert list(mine) == ["x7"] and len(decoded) == 1
+        monkeypatch.setattr(worker_module, "MAX_STATUSES", 100)
+        monkeypatch.setattr(worker_module, "MAX_STATUS_BYTES_KEPT", 10_500)
+        assert len(worker_module.query_status(asker, timeout=3.0)) == 10  # ~1 KB each
+    finally:
+        queryable.undeclare()
