@@ -3,10 +3,12 @@ containers, robot-slot lockout, unfair scheduling under overload and a second pu
 robot's key. Memory is measured (RSS of a child process, or tracemalloc), never time."""
 
 import json
+import struct
 import subprocess
 import sys
 import time
 import tracemalloc
+import zlib
 
 import msgpack
 import numpy as np
@@ -32,6 +34,12 @@ def lying_jpeg(width=4096, height=4096) -> bytes:
     data[sof + 5:sof + 7] = height.to_bytes(2, "big")
     data[sof + 7:sof + 9] = width.to_bytes(2, "big")
     return bytes(data)
+
+
+def png_chunk(kind: bytes, body: bytes, crc: int | None = None) -> bytes:
+    """A png chunk: length, type, body and its CRC (``crc`` where given: a wrong one)."""
+    crc = zlib.crc32(kind + body) if crc is None else crc
+    return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
 
 
 def frame_map(**fields) -> bytes:
@@ -113,22 +121,15 @@ def test_a_png_whose_data_inflates_past_its_image_is_refused_before_it_is_decode
     """A hostile review: the decoder inflates whatever deflate data follows a png's rows: 1 MB
     that inflates to 1 GB after a 1024x1024 image took 0.97 s to decode (5 ms without it); a
     48 MiB frame, 45 s of a processing thread."""
-    import struct
-    import zlib
-
     import asnn.io.images as images
     from asnn.io.images import decode_encoded
-
-    def chunk(kind, body):
-        return (struct.pack(">I", len(body)) + kind + body
-                + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF))
 
     def png(rows, extra):
         packer = zlib.compressobj(9)
         body = packer.compress(rows) + packer.compress(b"\0" * extra) + packer.flush()
-        return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 1024, 1024,
-                                                                      8, 0, 0, 0, 0))
-                + chunk(b"IDAT", body) + chunk(b"IEND", b""))
+        header = struct.pack(">IIBBBBB", 1024, 1024, 8, 0, 0, 0, 0)
+        return (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", header) + png_chunk(b"IDAT", body)
+                + png_chunk(b"IEND", b""))
 
     rows = b"\0" * (1025 * 1024)
     decoded = []
@@ -194,22 +195,15 @@ def test_png_chunks_libpng_would_warn_about_or_read_by_the_million_are_refused(c
     CRCs, more than MAX_PNG_ANCILLARY ancillary ones, more chunks than two a row (300,000
     empty IDATs), pixels that are not deflate or a file cut short (libpng's and OpenCV's
     lines) are refused before the decoder sees them; a few text chunks pass."""
-    import struct
-    import zlib
-
     from asnn.io.images import MAX_PNG_ANCILLARY, decode_encoded
-
-    def chunk(kind, body, crc=None):
-        crc = zlib.crc32(kind + body) if crc is None else crc
-        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
 
     png = encode_image(np.zeros((64, 64), np.uint8), "png")
     at = png.index(b"IDAT") - 4
-    text = chunk(b"tEXt", b"k\0v")
-    for extra, why in ((chunk(b"tEXt", b"", crc=0) * 1000, "CRC"),
+    text = png_chunk(b"tEXt", b"k\0v")
+    for extra, why in ((png_chunk(b"tEXt", b"", crc=0) * 1000, "CRC"),
                        (text * (MAX_PNG_ANCILLARY + 1), "ancillary"),
-                       (chunk(b"IDAT", b"") * 300_000, "in all"),
-                       (chunk(b"IDAT", b"\xff" * 64), "inflate")):  # not deflate: one line
+                       (png_chunk(b"IDAT", b"") * 300_000, "in all"),
+                       (png_chunk(b"IDAT", b"\xff" * 64), "inflate")):  # not deflate: one line
         with pytest.raises(ImageError, match=why):
             decode_encoded(png[:at] + extra + png[at:], "png", (64, 64))
     for cut in (png[:-40], png[:-12]):  # inside the pixels, or without IEND: two lines each
