@@ -64,10 +64,12 @@ def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespa
 
 
 def main(argv: list[str] | None = None) -> int:
-    if (sys.argv[1:] if argv is None else argv)[:1] == ["detect"]:
-        _prefer_wide_vectors()  # before the commands' modules import numba
-    args = _parse(build_parser(), sys.argv[1:] if argv is None else argv)
+    argv = sys.argv[1:] if argv is None else argv
     try:
+        # the commands' modules take a second or two to import: Ctrl-C then is an interrupt too
+        if argv[:1] == ["detect"]:
+            _prefer_wide_vectors()  # before the commands' modules import numba
+        args = _parse(build_parser(), argv)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:  # a progress bar may hold the line: start a new one
         print("\nasnn: interrupted", file=sys.stderr)

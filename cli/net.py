@@ -11,7 +11,7 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import (count, finite, frame_rate, non_negative, nonempty_path, positive,
+from .arguments import (count, frame_rate, non_negative, nonempty_path, positive,
                         robot_id, threads, whole, worker_id)
 from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
     zenoh_options
@@ -60,11 +60,12 @@ def cmd_worker(args: argparse.Namespace) -> int:
         session = session_for(args)
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(str(exc))
-    stop = stop_on_signals()
     tune_process()
     with session, RouterWatch(session, f"worker {core.worker_id}"):
         worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
                         handover_timeout=args.handover_timeout)
+        worker.load_kernels()  # before the signal handlers: Ctrl-C stops a cold compile at once
+        stop = stop_on_signals()
         try:
             worker.start()
         except WorkerIdTaken as exc:
@@ -251,7 +252,7 @@ def register(subparsers) -> None:
     p.add_argument("--loop", action="store_true", help="replay a file, scene or bag forever")
     p.add_argument("--format", choices=FORMATS, default="gray8",
                    help="frame encoding on the wire (default: %(default)s)")
-    p.add_argument("--wait", type=finite, default=2.0, metavar="SECONDS",
+    p.add_argument("--wait", type=non_negative, default=2.0, metavar="SECONDS",
                    help="wait up to SECONDS for a subscriber before the first frame "
                         "(default: %(default)s)")
     p.add_argument("--preview-hz", type=non_negative, default=PREVIEW_HZ, metavar="HZ",

@@ -209,6 +209,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         while (not publisher.matching_status.matching and time.monotonic() < deadline
                and not stop.is_set()):
             time.sleep(0.05)
+        if stop.is_set():  # stopped while it waited: nothing was published
+            return 0
         if wait and not publisher.matching_status.matching:
             log.warning("no subscriber on %s after %.1f s; publishing anyway", key, wait)
         # a worker that dies or stops later leaves the camera publishing into nothing: say so

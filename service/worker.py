@@ -293,6 +293,7 @@ class Worker:
         self._router: threading.Thread | None = None
         self._token = self._status = None
         self._watchers: list = []  # liveliness subscribers: workers, claims, cameras
+        self._kernels_loaded = False
 
     def __enter__(self) -> Worker:
         self.start()
@@ -301,8 +302,25 @@ class Worker:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    def load_kernels(self) -> None:
+        """Compile the model's kernels (its own preset's: the others' are not run), or load
+        them from numba's cache; once. :meth:`start` calls it; a process may call it first,
+        while an interrupt still stops it (``asnn worker``: a cold compile takes under a
+        minute, and Ctrl-C meanwhile should not wait for it)."""
+        if self.core.model != "asnn" or self._kernels_loaded:
+            return
+        # a cold numba cache takes under a minute: frames waiting that long would all be
+        # dropped, and a worker silent that long looks hung
+        log.info("worker %s: loading the model's kernels (compiling them takes under a "
+                 "minute where numba has no cache yet)", self.core.worker_id)
+        started = time.monotonic()
+        compile_kernels((self.core.preset,))
+        self._kernels_loaded = True
+        log.info("worker %s: kernels ready in %.1f s", self.core.worker_id,
+                 time.monotonic() - started)
+
     def start(self) -> None:
-        """Compile the model's kernels, learn the fleet (live workers, claims, announced
+        """Compile the model's kernels (:meth:`load_kernels`), learn the fleet (live workers, claims, announced
         cameras), join it, subscribe to this worker's robots, then take frames.
 
         Raises
@@ -311,15 +329,7 @@ class Worker:
             If a live worker already has this id (two workers with one id would both serve the
             same robots).
         """
-        if self.core.model == "asnn":
-            # a cold numba cache takes under a minute: frames waiting that long would all be
-            # dropped, and a worker silent that long looks hung
-            log.info("worker %s: loading the model's kernels (compiling them takes under a "
-                     "minute where numba has no cache yet)", self.core.worker_id)
-            started = time.monotonic()
-            compile_kernels((self.core.preset,))  # its own preset's: the others' are not run
-            log.info("worker %s: kernels ready in %.1f s", self.core.worker_id,
-                     time.monotonic() - started)
+        self.load_kernels()
         prefix, me = self.core.prefix, self.core.worker_id
         if self.shared:
             # the fleet first, so that no frame is taken while this worker thinks it is alone

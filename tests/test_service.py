@@ -441,6 +441,47 @@ def test_a_file_without_a_camera_s_frame_rate_is_replayed_at_20_fps_with_a_warni
     assert "frame rate" not in caplog.text  # --fps given: nothing guessed
 
 
+def test_a_camera_stopped_while_it_waits_publishes_nothing_and_blames_no_subscriber(
+        zenoh_net, caplog):
+    _, source = scene_source("looming", start=2, stop=8, frames=10)
+    stop = threading.Event()
+    threading.Timer(0.3, stop.set).start()
+    with caplog.at_level("INFO", logger="asnn.camera"):
+        assert publish_frames(zenoh_net.spoke(), "r11", source, wait=30.0, stop=stop) == 0
+    assert "no subscriber" not in caplog.text and "fps as" not in caplog.text
+    with pytest.raises(SystemExit):  # a wait cannot be negative
+        main(["camera", "--robot", "r11", "--source", "synthetic:looming", "--wait", "-5"])
+
+
+def test_ctrl_c_while_the_commands_load_or_a_worker_compiles_is_an_interrupt(
+        procs, tmp_path, monkeypatch, capsys):
+    """The commands' modules take seconds to import, and a worker's first compile up to a
+    minute: Ctrl-C then stops the process at once, as an interrupt (status 130, one line)."""
+    import cli.main
+
+    def importing(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli.main, "build_parser", importing)
+    try:
+        code = main(["status"])
+    except KeyboardInterrupt:  # out of main: a traceback (pytest would stop here)
+        code = "raised"
+    assert code == 130
+    assert capsys.readouterr().err.strip() == "asnn: interrupted"
+    monkeypatch.undo()
+    from service.demo import free_port
+
+    config, endpoint = tmp_path / "zenoh.json5", f"tcp/127.0.0.1:{free_port()}"
+    config.write_text("{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
+    procs("router", "--listen", endpoint, "--config", str(config)).wait_line("listening on")
+    worker = procs("worker", "--config", str(config), "--connect", endpoint, "--mode", "client",
+                   env={"NUMBA_CACHE_DIR": str(tmp_path / "cold")})
+    worker.wait_line("loading the model's kernels", timeout=60)
+    assert worker.stop(signal.SIGINT) == 130
+    assert "asnn: interrupted" in worker.err and not any("ready" in e for e in worker.err)
+
+
 def test_the_camera_waits_for_a_subscriber_that_comes_late_and_loses_no_frame(zenoh_net, caplog):
     got = []
     camera = zenoh_net.spoke()
