@@ -509,3 +509,48 @@ def test_perturb_refuses_what_would_change_the_frames_number_or_size(looming_vid
     if name in ("half-rate", "half-size", "double-size"):
         assert "changes the frames' number or size" in err
         assert "asnn detect takes those that keep every frame (noise, jpeg, jpeg90," in err
+
+
+def _shown_numbers(text: str) -> dict[str, str]:
+    """``"key": number`` pairs of a JSON line as written (top level and first target)."""
+    import re
+
+    return dict(re.findall(r'"(\w+)": (-?[\d.]+(?:e-?\d+)?)', text))
+
+
+def test_readmes_offline_examples_are_what_the_commands_print(tmp_path, monkeypatch, capsys):
+    """README's looming and translating-bar transcripts, rerun: the warning counts, and every
+    number shown, to the digits shown (README rounds them)."""
+    import re
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
+    start = readme.index("On the generated looming clip")
+    blocks = re.findall(r"```text\n(.*?)```", readme[start:], re.S)[:2]
+    monkeypatch.chdir(tmp_path)
+    for block in blocks:
+        lines = block.splitlines()
+        commands = [line[2:] for line in lines if line.startswith("$ ")]
+        printed = []
+        for command in commands:
+            for part in command.split(" && "):
+                words = part.split(" | ")[0].split()
+                if words[0] == "asnn":
+                    assert main(words[1:]) == 0, part
+                    out = capsys.readouterr()
+                    printed += out.err.splitlines() + out.out.splitlines()
+                else:  # sed -n 'Np;Mp' FILE: the lines asked for (a pipe into sed: all)
+                    rows = [int(n) for n in re.findall(r"(\d+)p", part)]
+                    records = Path(words[-1]).read_text().splitlines()
+                    printed += [records[n - 1] for n in rows]
+        for expected in (line for line in lines if not line.startswith("$ ")):
+            if not expected.startswith("{"):
+                assert expected in printed, expected
+                continue
+            frame = json.loads(expected)["frame"]
+            actual = next(line for line in printed if line.startswith(f'{{"frame": {frame},'))
+            got = _shown_numbers(actual)
+            for key, shown in _shown_numbers(expected).items():
+                digits = len(shown.split(".")[1]) if "." in shown and "e" not in shown else 0
+                tolerance = 0.5 * 10.0 ** -digits if "e" not in shown else abs(float(shown)) / 10
+                assert abs(float(got[key]) - float(shown)) <= tolerance * 1.0001, \
+                    (frame, key, shown, got[key])
