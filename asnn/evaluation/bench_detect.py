@@ -6,7 +6,9 @@ growing over 50 frames, played forwards then backwards, again and again, as ``as
 and ``asnn detect CLIP --jsonl OUT`` runs as its own process ``repeat`` times on each. The
 per-frame cost is (median time on the long clip - median time on the short one) / (frames - 2):
 the start-up (interpreter, imports, the kernels loaded from numba's cache, opening the file)
-cancels out. One untimed run on the short clip comes first: ``asnn detect`` has numba use
+cancels out. Where the long clip's median is not longer than the short one's by more than the
+short runs' own spread (too few frames for the start-up's noise), the per-frame cost is not
+measured: ``None``, "n/a" in the table (:func:`per_frame_ms`). One untimed run on the short clip comes first: ``asnn detect`` has numba use
 512-bit vectors where the processor has them (``cli/main.py``), so the first such process
 compiles its kernels. The process uses the machine's cores as ``asnn detect`` does: the model
 computes each frame's fused pass in bands on a thread per core and finishes each frame while
@@ -49,7 +51,7 @@ import numpy as np
 
 from .bench import SCENE, THREAD_VARIABLES
 
-__all__ = ["DEFAULT_SIZES", "DEFAULT_FRAMES", "STREAM_BYTES", "run", "format_table",
+__all__ = ["DEFAULT_SIZES", "DEFAULT_FRAMES", "STREAM_BYTES", "run", "per_frame_ms", "format_table",
            "time_stages"]
 
 DEFAULT_SIZES = ((320, 240), (640, 480))
@@ -178,6 +180,18 @@ def _clip(loop: np.ndarray, frames: int):
     return (loop[i % len(loop)] for i in range(frames))
 
 
+def per_frame_ms(long_runs: Sequence[float], short_runs: Sequence[float],
+                 frames: int) -> float | None:
+    """Milliseconds per frame from the processes' seconds on the long clip (``frames``
+    frames) and on the two-frame one: the difference of their medians over ``frames - 2``.
+    None where that difference is not above the spread of the short runs (the start-up's
+    noise): with few frames it can even come out negative."""
+    extra = float(np.median(long_runs) - np.median(short_runs))
+    if extra <= float(np.ptp(short_runs)) or extra <= 0:
+        return None
+    return extra / (frames - 2) * 1e3
+
+
 def run(command: Sequence[str], sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAMES,
         repeat: int = 4, preset: str | None = None, progress=None) -> dict:
     """Time ``asnn detect`` at every size; the report as a dict (see the module notes).
@@ -222,14 +236,15 @@ def run(command: Sequence[str], sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAME
                 short_runs.append(_detect_seconds(command, short_clip, tmp / "short.jsonl", preset))
             produced = [json.loads(line) for line in out.read_text().splitlines()]
             stages, records = time_stages(long_clip, preset, tmp / "loop.jsonl")
-            per_frame = (np.median(long_runs) - np.median(short_runs)) / (frames - 2) * 1e3
+            per_frame = per_frame_ms(long_runs, short_runs, frames)
             baseline = float(np.median(baselines))
             rows.append({
                 "size": f"{w}x{h}", "frames": frames, "repeat": repeat,
-                "detect_ms": float(per_frame), "startup_s": float(np.median(short_runs)),
+                "detect_ms": per_frame, "startup_s": float(np.median(short_runs)),
                 "stages_ms": stages,
                 "loop_ms": float(sum(v for k, v in stages.items() if k != "stream")),
-                "straightforward_ms": baseline, "ratio": baseline / per_frame,
+                "straightforward_ms": baseline,
+                "ratio": None if per_frame is None else baseline / per_frame,
                 "identical": produced == json.loads(json.dumps(records))})
     return {"scene": SCENE, "preset": name, "results": rows,
             "baseline": f"ASNN({name!r}, optimised=False) on the same frames, one thread, "
@@ -241,10 +256,19 @@ def format_table(report: dict) -> str:
     lines = ["| size | asnn detect ms/frame | decode | model | targets | output | one loop | "
              "model stream | straightforward ms | straightforward / detect | identical |",
              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |"]
+    unmeasured = False
     for r in report["results"]:
         s = r["stages_ms"]
-        lines.append(f"| {r['size']} | {r['detect_ms']:.2f} | {s['decode']:.2f} | "
+        if r["detect_ms"] is None:
+            unmeasured = True
+            detect, ratio = "n/a", "n/a"
+        else:
+            detect, ratio = f"{r['detect_ms']:.2f}", f"1/{r['ratio']:.1f}"
+        lines.append(f"| {r['size']} | {detect} | {s['decode']:.2f} | "
                      f"{s['model']:.2f} | {s['targets']:.2f} | {s['output']:.3f} | "
                      f"{r['loop_ms']:.2f} | {s['stream']:.2f} | {r['straightforward_ms']:.1f} | "
-                     f"1/{r['ratio']:.1f} | {'yes' if r['identical'] else 'NO'} |")
+                     f"{ratio} | {'yes' if r['identical'] else 'NO'} |")
+    if unmeasured:
+        lines.append("\nn/a: the longer clip took no longer than the start-up's own spread; "
+                     "give more --frames (the stages are timed all the same)")
     return "\n".join(lines)
