@@ -108,6 +108,14 @@ def positive(value: str) -> float:
     return number
 
 
+def contrast(value: str) -> float:
+    """A Weber contrast a scene can draw: more than 0 (an object to see), at most 1."""
+    number = _number(value)
+    if not 0 < number <= 1:
+        raise argparse.ArgumentTypeError(f"must lie in (0, 1]: {value!r}")
+    return number
+
+
 def non_negative(value: str) -> float:
     """A number of 0 or more."""
     number = _number(value)
@@ -204,10 +212,15 @@ def perturbation(name: str) -> str:
 def frame_perturbation(name: str) -> str:
     """A ``--perturb`` value that keeps every frame at its size and in its place
     (:func:`asnn.evaluation.perturb.keeps_frames`): ``asnn detect`` writes one record per
-    input frame, its targets in the input's pixels."""
-    name = perturbation(name)
+    input frame, its targets in the input's pixels. An unknown name's error lists these only."""
+    kept = ", ".join([n for n in PERTURBATIONS if keeps_frames(n)] + list(FAMILIES))
+    try:
+        check_perturbation(name)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"unknown perturbation {name!r}; asnn detect takes those that keep every frame "
+            f"({kept}; jpegQ: quality Q, 1-100; gainG: brightness times G)") from None
     if not keeps_frames(name):
-        kept = ", ".join([n for n in PERTURBATIONS if keeps_frames(n)] + list(FAMILIES))
         raise argparse.ArgumentTypeError(
             f"{name} changes the frames' number or size; asnn detect takes those that keep "
             f"every frame ({kept}), asnn eval takes them all")

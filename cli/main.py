@@ -12,9 +12,17 @@ COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.la
                    "cli.dashboard", "cli.foxglove"]
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose errors are one line, as the commands' own are: the option's
+    message and where the usage is, not the usage itself (a long block for some commands)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full parser (also used by tests to check docker-compose commands)."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="asnn", description="Approach-Sensitive Neural Network collision detection")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:

@@ -18,7 +18,7 @@ from asnn.io.video import FPS_RANGE, WRITABLE_SUFFIXES
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 from asnn.stimuli.suite import CASES, make_case, suite_cases
 
-from .arguments import finite, frame_rate, frame_size, nonempty_path, positive, whole
+from .arguments import contrast, finite, frame_rate, frame_size, nonempty_path, positive, whole
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -57,7 +57,7 @@ _PAPER_OPTIONS = (
     ("--size", {"type": frame_size, "metavar": "WxH"}, "128x128", "frame size"),
     ("--polarity", {"choices": ("dark", "light")}, "dark",
      "dark (the object darker than its ground) or light"),
-    ("--contrast", {"type": positive}, 1.0, "Weber contrast"),
+    ("--contrast", {"type": contrast}, 1.0, "Weber contrast, more than 0 and at most 1"),
     ("--speed", {"type": positive}, "the scene's own", "edge speed, px/frame"),
     ("--fps", {"type": frame_rate}, 20.0, f"frame rate, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}"))
 

@@ -509,6 +509,9 @@ def test_perturb_refuses_what_would_change_the_frames_number_or_size(looming_vid
     if name in ("half-rate", "half-size", "double-size"):
         assert "changes the frames' number or size" in err
         assert "asnn detect takes those that keep every frame (noise, jpeg, jpeg90," in err
+    else:  # what it may be instead: only those asnn detect takes
+        assert "unknown perturbation" in err and "noise, jpeg, jpeg90," in err
+        assert not any(n in err for n in ("half-rate", "half-size", "double-size"))
 
 
 def _shown_numbers(text: str) -> dict[str, str]:
@@ -554,3 +557,16 @@ def test_readmes_offline_examples_are_what_the_commands_print(tmp_path, monkeypa
                 tolerance = 0.5 * 10.0 ** -digits if "e" not in shown else abs(float(shown)) / 10
                 assert abs(float(got[key]) - float(shown)) <= tolerance * 1.0001, \
                     (frame, key, shown, got[key])
+
+
+@pytest.mark.parametrize("argv", [["detect", "clip.mp4", "--threads", "257"], ["detect"],
+                                  ["camera", "--robot", "r1", "--source", "x", "--fps", "0"],
+                                  ["eval", "--jobs", "0"], ["bogus"]])
+def test_a_command_line_error_is_one_line(argv, capsys):
+    """README: an option out of its range (or missing) is a one-line error and exit status 2,
+    as a missing file is; argparse's usage block would come first."""
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and err.startswith("asnn") and "--help" in err, err

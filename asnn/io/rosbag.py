@@ -38,7 +38,7 @@ try:
     from mcap_ros2.decoder import DecoderFactory
     from mcap_ros2.writer import Writer as Ros2Writer
 except ImportError as exc:  # the optional extra is missing: say which one, in one line
-    raise ImportError("reading ROS 2 bags needs the 'ros' extra: pip install 'asnn[ros]'"
+    raise ImportError("ROS 2 bags (read or written) need the 'ros' extra: pip install 'asnn[ros]'"
                       f" ({exc.name} is missing)") from exc
 
 __all__ = ["BagClip", "CLOCK_RESET_FRAMES", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_SCHEMAS",
