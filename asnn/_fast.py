@@ -567,15 +567,16 @@ def _front(p, env, sc, stages_on, stages_off, other_on, other_off, read, write, 
             if y0 <= t < y1:
                 new_on, new_off = (stages_on, stages_off) if write[t] == 0 else \
                     (other_on, other_off)
-                _advance_row(p, t, env, sc, zero, swap, old_on, old_off, t, new_on, new_off, t,
-                             a, b, e_x, j, tiny, col, x0, csl[0])
-                _readout_row(new_on, t, gain, n_fast, n_slow, ro[0, slot], ro[1, slot])
-                _readout_row(new_off, t, gain, n_fast, n_slow, ro[2, slot], ro[3, slot])
+                y_new = t
             else:
-                _advance_row(p, t, env, sc, zero, swap, old_on, old_off, t, spare_on, spare_off,
-                             0, a, b, e_x, j, tiny, col, x0, csl[0])
-                _readout_row(spare_on, 0, gain, n_fast, n_slow, ro[0, slot], ro[1, slot])
-                _readout_row(spare_off, 0, gain, n_fast, n_slow, ro[2, slot], ro[3, slot])
+                new_on, new_off, y_new = spare_on, spare_off, 0
+            # one call site each: numba copies an inlined function into every call site, and
+            # the two copies of this stage made this kernel the slowest of all to compile
+            _advance_row(p, t, env, sc, zero, swap, old_on, old_off, t, new_on, new_off, y_new,
+                         a, b, e_x, j, tiny, col, x0, csl[0])
+            for ch in range(2):
+                _readout_row(new_on if ch == 0 else new_off, y_new, gain, n_fast, n_slow,
+                             ro[2 * ch, slot], ro[2 * ch + 1, slot])
         y = t - RADIUS
         if g0 <= y < g1:  # stage 2: row t - 2 through the 5x5 filters
             s0 = y % DEPTH
