@@ -54,6 +54,13 @@ __all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "MAX_KERNEL", "preset", "p
 MAX_KERNEL = 255  # px of a kernel's side (the frame must be at least as large)
 MAX_STAGES = 32  # stages of the temporal filters, each a frame of state
 MAX_FRAMES = 1000  # frames of a window or a track's memory (50 s at 20 fps)
+# Bounds of the real-valued parameters: the presets use magnitudes of at most 255, and gains of
+# 1e20 made the float32 state overflow to inf and the model silently blind; a sigma or a
+# wavelength of 1e-300 px divides by zero in its kernel.
+MAX_MAGNITUDE = 1e4
+MIN_SCALE = 0.05  # px, the least sigma or wavelength of a kernel
+_SCALES = ("dog_sigma1", "dog_sigma2", "ds_sigma", "ds_wavelength", "cs_sigma", "cs_wavelength",
+           "attention_sigma", "contrast_pool", "kernel_extent")
 
 
 class ASNNParams(BaseModel):
@@ -86,12 +93,12 @@ class ASNNParams(BaseModel):
 
     # --- input scale (robust addition) ---
     max_width: int | None = Field(
-        None, ge=32, description="frames wider than this are averaged down to this width "
+        None, ge=32, le=4096, description="frames wider than this are averaged down to this width "
         "(aspect kept) before the retina, whose kernels have a fixed size in pixels; targets "
         "stay in the frame's pixels. None: every frame at its own size",
     )
     min_width: int | None = Field(
-        None, ge=32, description="frames narrower than this are enlarged to this width "
+        None, ge=32, le=1024, description="frames narrower than this are enlarged to this width "
         "(bilinear, aspect kept) before the retina: a small camera's objects and motions then "
         "meet the added stages' sizes in pixels (the smallest box, the linking margin, the "
         "gain control's pool) at the scale they were made for; it adds no detail. Targets stay "
@@ -209,8 +216,10 @@ class ASNNParams(BaseModel):
     attention_step: int = Field(
         1, ge=1, le=4, description="g_sigma applied on a grid this many times coarser "
         "(area-averaged, interpolated back): the blurred maps are smooth at that scale")
-    gamma_a: float = Field(0.005, description="gamma_a, threshold of the approach attention M_a")
-    gamma_d: float = Field(0.005, description="gamma_d, threshold of the direction attention M_d")
+    gamma_a: float = Field(0.005, ge=0,
+                           description="gamma_a, threshold of the approach attention M_a")
+    gamma_d: float = Field(0.005, ge=0,
+                           description="gamma_d, threshold of the direction attention M_d")
     top_k: int = Field(1, ge=0, le=7, description="k of the top-k inhibited orientations "
                        "(eq. 24); 1, the top-1 direction of the paper's robot tests (the paper "
                        "gives no other k)")
@@ -225,7 +234,7 @@ class ASNNParams(BaseModel):
     k_sp: float = Field(10.0, ge=0, le=100, description="K_sp, spike gain")
     t_sp: float = Field(0.7, ge=0, le=1, description="T_sp, spike threshold on out(t)")
     n_t: int = Field(4, ge=1, le=MAX_FRAMES, description="N_t, spike window in frames")
-    t_c: float = Field(1.0, description="T_c, spike-rate threshold of the warning, Hz")
+    t_c: float = Field(1.0, ge=0, description="T_c, spike-rate threshold of the warning, Hz")
     spike_dt: float | None = Field(
         None, gt=0, description="frame period used in the spike rate; None means dt"
     )
@@ -236,10 +245,12 @@ class ASNNParams(BaseModel):
         description="'clusters': DBSCAN of the attended pixels (paper eqs. 29-31); 'objects': "
         "connected regions of the attended mask, tracked across frames (robust)",
     )
-    min_object_pixels: int = Field(30, ge=1, description="smallest region kept as an object")
-    cluster_eps: float = Field(5.0, gt=0, le=4096, description="DBSCAN eps, pixels of the "
+    min_object_pixels: int = Field(30, ge=1, le=4096 * 4096,
+                                   description="smallest region kept as an object")
+    cluster_eps: float = Field(5.0, gt=0, le=MAX_KERNEL, description="DBSCAN eps, pixels of the "
                                "model's grid (at most a frame's largest side, 4096)")
-    cluster_min_samples: int = Field(2, ge=1, description="DBSCAN min_samples (a point counts itself)")
+    cluster_min_samples: int = Field(2, ge=1, le=4096 * 4096,
+                                     description="DBSCAN min_samples (a point counts itself)")
     origin_seed: bool = Field(
         False, description="add the pixel (0, 0) to the clustered points, as the reference does"
     )
@@ -391,6 +402,12 @@ class ASNNParams(BaseModel):
 
     @model_validator(mode="after")
     def _check(self) -> "ASNNParams":
+        for name, value in self:
+            if isinstance(value, float) and abs(value) > MAX_MAGNITUDE:
+                raise ValueError(f"{name} is {value:g}: at most {MAX_MAGNITUDE:g} in magnitude")
+        for name in _SCALES:
+            if getattr(self, name) < MIN_SCALE:
+                raise ValueError(f"{name} is {getattr(self, name):g}: at least {MIN_SCALE:g} px")
         for name in ("dog_size", "kernel_size", "attention_size"):
             if getattr(self, name) % 2 == 0:
                 raise ValueError(f"{name} must be odd, got {getattr(self, name)}")

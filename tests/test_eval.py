@@ -686,6 +686,15 @@ def test_a_spec_value_of_another_type_is_refused_not_converted(spec, says):
     assert parse_detector("asnn:robust/gain=5/stabilise=false").params.gain == 5.0  # int: float
 
 
+def test_a_spec_that_gives_a_field_twice_is_refused():
+    from asnn.evaluation.runs import parse_detector
+
+    with pytest.raises(ValueError, match="top_k is given twice"):  # the last one won
+        parse_detector("asnn:robust/top_k=0/top_k=7")
+    # the spec's own override changes the default preset's, once
+    assert parse_detector("asnn:/top_k=2", default_preset="robust/top_k=0").params.top_k == 2
+
+
 def test_detect_refuses_a_preset_value_of_another_type(capsys):
     with pytest.raises(SystemExit):
         main(["detect", "clip.mp4", "--preset", "robust/top_k=true"])

@@ -158,15 +158,21 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
             raise ValueError(f"{model} has no presets: {spec!r}")
         return DetectorSpec(model)
     preset_name, *items = rest.split("/")
+    given = len(items)
     if not preset_name:
         preset_name, *base = (default_preset or "default").split("/")
         items = base + items
-    overrides = []
-    for item in items:
+    overrides, named = [], set()
+    for i, item in enumerate(items):
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
             raise ValueError(f"{spec!r}: an override is name=value, got {item!r}")
-        overrides.append((key.strip(), _value(value)))
+        key = key.strip()
+        if i >= len(items) - given:  # the spec's own (they may change the default's)
+            if key in named:
+                raise ValueError(f"{spec!r}: {key} is given twice")
+            named.add(key)
+        overrides.append((key, _value(value)))
     try:
         # as preset(name, **overrides) checks them, but strictly: a spec's true is no top_k
         # of 1, nor its 1 a stabilise of true
