@@ -18,6 +18,11 @@ MAX_FRAMES = 10_000
 # beyond the cores only take turns; 256 is more cores than a machine running it has, where
 # thousands of threads stall the machine or cannot be started
 MAX_THREADS = 256
+# --jobs, --workers: processes of about 100 MB each, all started at once (a pool of 10000 forked
+# processes filled the machine for one case)
+MAX_PROCESSES = 64
+# --cameras of the service bench: as many robots as a worker takes by default (--max-robots)
+MAX_CAMERAS = 256
 
 
 def nonempty_path(value: str) -> str:
@@ -180,6 +185,16 @@ def warmup_frames(value: str) -> int:
 def threads(value: str) -> int:
     """A model's number of threads: 1 to :data:`MAX_THREADS`."""
     return _whole(value, 1, MAX_THREADS)
+
+
+def processes(value: str) -> int:
+    """A number of processes: 1 to :data:`MAX_PROCESSES`."""
+    return _whole(value, 1, MAX_PROCESSES)
+
+
+def cameras(value: str) -> int:
+    """A number of cameras: 1 to :data:`MAX_CAMERAS`."""
+    return _whole(value, 1, MAX_CAMERAS)
 
 
 def seed(value: str) -> int:

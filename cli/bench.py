@@ -7,8 +7,8 @@ import json
 import sys
 
 from asnn.detectors import MODELS
-from cli.arguments import (count, frame_rate, frame_size, frames, positive, preset_spec, seed,
-                           threads)
+from cli.arguments import (cameras, count, frame_rate, frame_size, frames, positive, preset_spec,
+                           processes, seed, threads)
 
 # how the benches that time whole processes run asnn: this interpreter, this checkout's CLI
 ASNN_COMMAND = (sys.executable, "-m", "cli.main")
@@ -44,8 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="camera rate for --service (default: %(default)s)")
     p.add_argument("--seconds", type=positive, default=4.0,
                    help="duration of each --service step (default: %(default)s)")
-    p.add_argument("--cameras", type=count, action="append", metavar="N",
-                   help="camera counts for --service (repeatable; default 1, 2, 4, 8, 12, 16, 20, 24)")
+    p.add_argument("--cameras", type=cameras, action="append", metavar="N",
+                   help="camera counts for --service, at most 256 (repeatable; default 1, 2, 4, "
+                        "8, 12, 16, 20, 24)")
     p.add_argument("--phases", choices=("spread", "random"), default="spread",
                    help="when each --service camera publishes within a frame period: evenly "
                         "spread, or at random (default: %(default)s)")
@@ -74,8 +75,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--worker-threads", type=threads, default=None, metavar="N",
                    help="processing threads of each --service worker (asnn worker --threads; "
                         "default: the cores available, divided among the workers)")
-    p.add_argument("--workers", type=count, default=1, metavar="N",
-                   help="--service: worker processes sharing the cameras (default: %(default)s)")
+    p.add_argument("--workers", type=processes, default=1, metavar="N",
+                   help="--service: worker processes sharing the cameras, at most 64 "
+                        "(default: %(default)s)")
     p.add_argument("--router", action="store_true",
                    help="--service: connect through an asnn router process even with one "
                         "worker (with several there always is one)")

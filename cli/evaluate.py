@@ -27,7 +27,7 @@ from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detect
 from asnn.params import preset_names
 
 from .arguments import (count, finite, frame_size, nonempty_path, perturbation, preset_spec,
-                        tolerance_seconds, warmup_frames, whole)
+                        processes, tolerance_seconds, warmup_frames, whole)
 
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
@@ -136,8 +136,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "onsets are exact and use 0)")
     p.add_argument("--warmup", type=warmup_frames, default=scoring.WARMUP_FRAMES, metavar="FRAMES",
                    help="frames ignored at the start of each clip (default: %(default)s)")
-    p.add_argument("--jobs", type=count, default=1, metavar="N",
-                   help="clips or cases evaluated in parallel processes (default: %(default)s)")
+    p.add_argument("--jobs", type=processes, default=1, metavar="N",
+                   help="clips or cases evaluated in parallel processes, at most 64 "
+                        "(default: %(default)s)")
     p.add_argument("--size", type=frame_size, metavar="WxH",
                    help="with --paper: frame size of the scenes (default: 128x128, the paper's); "
                         "with --synthetic: render the driving scenes at this size, the same "

@@ -845,3 +845,23 @@ def test_a_clip_slower_than_the_model_was_made_for_is_named_in_the_warnings(tmp_
                  "--no-plots"]) == 0
     assert not [w for w in json.loads((out / "results.json").read_text())["warnings"]
                 if "frames a second" in w]
+
+
+def _task(value):
+    return value
+
+
+def test_a_pool_of_more_jobs_than_tasks_starts_a_process_per_task_only(capsys):
+    """A pool starts all its processes at once: --jobs 10000 for one case forked thousands of
+    processes (a user trial). The command line bounds --jobs, and the pool its tasks."""
+    import multiprocessing
+
+    from asnn.evaluation.pool import run_tasks
+
+    seen = []
+    for _ in run_tasks(_task, [(1,), (2,)], jobs=40):
+        seen.append(len(multiprocessing.active_children()))
+    assert seen and max(seen) <= 2
+    with pytest.raises(SystemExit):
+        main(["eval", "--synthetic", "--jobs", "65"])
+    assert "argument --jobs: must be at most 64" in capsys.readouterr().err

@@ -25,6 +25,7 @@ def run_tasks(function: Callable, tasks: Sequence[tuple], jobs: int
     caller stops early (an exception, Ctrl-C, or a generator left unfinished) the tasks not yet
     started are cancelled and the workers are ended without waiting for the running ones.
     """
+    jobs = min(jobs, len(tasks))  # a pool starts all its processes at once
     if jobs <= 1:
         for index, task in enumerate(tasks):
             yield index, function(*task)
