@@ -36,9 +36,13 @@ def cmd_camera(args: argparse.Namespace) -> int:
         return fail(str(exc))
     stop = stop_on_signals()
     with session, RouterWatch(session, f"camera {args.robot}"):
-        count = publish_frames(session, args.robot, source, prefix=args.prefix, fps=args.fps,
-                               loop=args.loop, format=args.format, wait=args.wait, stop=stop,
-                               preview_hz=args.preview_hz, refusals=refusals)
+        try:
+            count = publish_frames(session, args.robot, source, prefix=args.prefix,
+                                   fps=args.fps, loop=args.loop, format=args.format,
+                                   wait=args.wait, stop=stop, preview_hz=args.preview_hz,
+                                   refusals=refusals)
+        except OSError as exc:  # a live source's frame the wire cannot carry (VideoError)
+            return fail(str(exc))
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(rejections.counts.items())) or "none"
     resets = f"; clock resets (re-based): {rejections.resets}" if rejections.resets else ""
     log.info("camera %s: %d frames published; rejected: %s%s; refused by workers: %s",

@@ -570,3 +570,34 @@ def test_a_command_line_error_is_one_line(argv, capsys):
     assert exit_.value.code == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and err.startswith("asnn") and "--help" in err, err
+
+
+def test_frames_larger_than_the_wire_takes_are_refused_in_a_file_and_a_live_capture(
+        tmp_path, capsys):
+    """An 8192x8192 clip took 6.5 GB in asnn detect, and asnn camera died on it with a
+    traceback: video frames are bounded as the wire's and the bags' are (4096 a side)."""
+    import cv2
+
+    from asnn.io.video import VideoError, read_frames
+
+    path = tmp_path / "wide.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 20, (4100, 32))
+    for _ in range(2):
+        writer.write(np.zeros((32, 4100, 3), np.uint8))
+    writer.release()
+    assert main(["detect", str(path)]) == 2
+    assert "frames of 4100x32; at most 4096 px a side" in capsys.readouterr().err
+
+    class Capture:  # a live source whose second frame is too large
+        frames = [np.zeros((8, 8, 3), np.uint8), np.zeros((8, 5000, 3), np.uint8)]
+
+        def read(self):
+            return True, self.frames.pop(0)
+
+        def release(self):
+            pass
+
+    frames = read_frames(Capture(), "cam0")
+    assert next(frames).shape == (8, 8, 3)
+    with pytest.raises(VideoError, match="cam0: frames of 5000x8"):
+        next(frames)

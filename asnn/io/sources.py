@@ -246,7 +246,7 @@ def _open_capture(spec: str) -> Source:
         what = "capture device" if _is_device(spec) else "capture source"
         raise SourceError(f"cannot open {what} {spec!r}", "missing")
     fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
-    return Source(spec, DEFAULT_FPS if fps is None else fps, True, lambda: read_frames(cap),
+    return Source(spec, DEFAULT_FPS if fps is None else fps, True, lambda: read_frames(cap, spec),
                   fps_stated=fps is not None)
 
 
