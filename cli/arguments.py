@@ -21,6 +21,9 @@ MAX_THREADS = 256
 # --jobs, --workers: processes of about 100 MB each, all started at once (a pool of 10000 forked
 # processes filled the machine for one case)
 MAX_PROCESSES = 64
+# durations given by hand (timeouts, waits): 11 days; Python's waits overflow past 9.2e9 s and
+# Zenoh took 1e20 s for a negative timeout
+MAX_SECONDS = 1e6
 # --cameras of the service bench: as many robots as a worker takes by default (--max-robots)
 MAX_CAMERAS = 256
 
@@ -118,6 +121,22 @@ def contrast(value: str) -> float:
     number = _number(value)
     if not 0 < number <= 1:
         raise argparse.ArgumentTypeError(f"must lie in (0, 1]: {value!r}")
+    return number
+
+
+def seconds(value: str) -> float:
+    """A duration of more than 0 and at most :data:`MAX_SECONDS`."""
+    number = _number(value)
+    if not 0 < number <= MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"must lie in (0, {MAX_SECONDS:g}] seconds: {value!r}")
+    return number
+
+
+def seconds_or_zero(value: str) -> float:
+    """A duration of 0 to :data:`MAX_SECONDS`."""
+    number = _number(value)
+    if not 0 <= number <= MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"must lie in [0, {MAX_SECONDS:g}] seconds: {value!r}")
     return number
 
 

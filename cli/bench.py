@@ -7,8 +7,8 @@ import json
 import sys
 
 from asnn.detectors import MODELS
-from cli.arguments import (cameras, count, frame_rate, frame_size, frames, positive, preset_spec,
-                           processes, seed, threads)
+from cli.arguments import (cameras, count, frame_rate, frame_size, frames, preset_spec,
+                           processes, seconds, seed, threads)
 
 # how the benches that time whole processes run asnn: this interpreter, this checkout's CLI
 ASNN_COMMAND = (sys.executable, "-m", "cli.main")
@@ -42,7 +42,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "default the default preset)")
     p.add_argument("--fps", type=frame_rate, default=25.0,
                    help="camera rate for --service (default: %(default)s)")
-    p.add_argument("--seconds", type=positive, default=4.0,
+    p.add_argument("--seconds", type=seconds, default=4.0,
                    help="duration of each --service step (default: %(default)s)")
     p.add_argument("--cameras", type=cameras, action="append", metavar="N",
                    help="camera counts for --service, at most 256 (repeatable; default 1, 2, 4, "

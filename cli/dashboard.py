@@ -6,7 +6,7 @@ import argparse
 import logging
 import sys
 
-from cli.arguments import port, positive
+from cli.arguments import port, seconds
 from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
 from clients.dashboard import HOLD_S
 from clients.fleet import STALE_S
@@ -68,10 +68,10 @@ def register(subparsers) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default: %(default)s; 0.0.0.0 for every "
                         "interface, as in a container)")
-    p.add_argument("--stale-after", type=positive, default=STALE_S, metavar="SECONDS",
+    p.add_argument("--stale-after", type=seconds, default=STALE_S, metavar="SECONDS",
                    help="mark a robot stale after SECONDS without a response, whatever previews "
                         "its camera still sends (default: %(default)s)")
-    p.add_argument("--hold", type=positive, default=HOLD_S, metavar="SECONDS",
+    p.add_argument("--hold", type=seconds, default=HOLD_S, metavar="SECONDS",
                    help="keep a robot in the collision state for SECONDS (camera clock) after "
                         "its latest warning (default: %(default)s)")
     add_zenoh_options(p)

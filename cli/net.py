@@ -11,8 +11,8 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import (count, frame_rate, non_negative, nonempty_path, positive,
-                        robot_id, threads, whole, worker_id)
+from .arguments import (count, frame_rate, non_negative, nonempty_path,
+                        robot_id, seconds, seconds_or_zero, threads, whole, worker_id)
 from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
     zenoh_options
 
@@ -256,7 +256,7 @@ def register(subparsers) -> None:
     p.add_argument("--loop", action="store_true", help="replay a file, scene or bag forever")
     p.add_argument("--format", choices=FORMATS, default="gray8",
                    help="frame encoding on the wire (default: %(default)s)")
-    p.add_argument("--wait", type=non_negative, default=2.0, metavar="SECONDS",
+    p.add_argument("--wait", type=seconds_or_zero, default=2.0, metavar="SECONDS",
                    help="wait up to SECONDS for a subscriber before the first frame "
                         "(default: %(default)s)")
     p.add_argument("--preview-hz", type=non_negative, default=PREVIEW_HZ, metavar="HZ",
@@ -275,7 +275,7 @@ def register(subparsers) -> None:
                    help="ASNN preset (default: the default preset)")
     p.add_argument("--id", type=worker_id, default=None,
                    help="worker id reported in responses (default: <host>-<pid>)")
-    p.add_argument("--idle-timeout", type=positive, default=IDLE_TIMEOUT_S, metavar="SECONDS",
+    p.add_argument("--idle-timeout", type=seconds, default=IDLE_TIMEOUT_S, metavar="SECONDS",
                    help="forget a robot after SECONDS without frames (default: %(default)s)")
     p.add_argument("--max-gap", type=whole, default=MAX_GAP, metavar="N",
                    help="reset a robot's state when seq jumps ahead by more than N of the "
@@ -284,7 +284,7 @@ def register(subparsers) -> None:
     p.add_argument("--max-robots", type=count, default=MAX_ROBOTS, metavar="N",
                    help="robots tracked at once; frames of more are rejected. A robot takes "
                         "a place once one of its frames is valid (default: %(default)s)")
-    p.add_argument("--takeover-after", type=positive, default=TAKEOVER_AFTER_S,
+    p.add_argument("--takeover-after", type=seconds, default=TAKEOVER_AFTER_S,
                    metavar="SECONDS",
                    help="once a second publisher was seen on a robot's key, refuse frames that "
                         "do not continue the robot's stream until it has been silent for "
@@ -296,10 +296,10 @@ def register(subparsers) -> None:
                    help="frames a worker taking a robot over steps silently before it answers, "
                         "while the previous owner still answers (default: %(default)s, "
                         "measured for the default preset: asnn bench --handover)")
-    p.add_argument("--handover-timeout", type=non_negative, default=HANDOVER_TIMEOUT,
+    p.add_argument("--handover-timeout", type=seconds_or_zero, default=HANDOVER_TIMEOUT,
                    metavar="SECONDS", help="when stopping, answer the robots until their new "
                    "owners are warm, at most SECONDS (default: %(default)s)")
-    p.add_argument("--scan-interval", type=non_negative, default=SCAN_INTERVAL,
+    p.add_argument("--scan-interval", type=seconds_or_zero, default=SCAN_INTERVAL,
                    metavar="SECONDS", help="with several workers, one of them looks for cameras "
                    "that do not announce themselves every SECONDS, receiving every frame for "
                    f"{SCAN_WINDOW:g} s (default: %(default)s; 0: serve only announced robots, "
@@ -319,7 +319,7 @@ def register(subparsers) -> None:
                            "<host>-<pid>: in a container, whose host name is its own, its "
                            "worker (a health check)")
     p.add_argument("--json", action="store_true", help="one JSON object per worker")
-    p.add_argument("--timeout", type=positive, default=2.0, metavar="SECONDS",
+    p.add_argument("--timeout", type=seconds, default=2.0, metavar="SECONDS",
                    help="how long to wait for answers (default: %(default)s)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_status)

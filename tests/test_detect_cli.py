@@ -601,3 +601,16 @@ def test_frames_larger_than_the_wire_takes_are_refused_in_a_file_and_a_live_capt
     assert next(frames).shape == (8, 8, 3)
     with pytest.raises(VideoError, match="cam0: frames of 5000x8"):
         next(frames)
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["status", "--timeout", "1e20"], "argument --timeout: must lie in (0, 1e+06] seconds"),
+    (["worker", "--handover-timeout", "1e20"], "must lie in [0, 1e+06] seconds"),
+    (["camera", "--robot", "r1", "--source", "x", "--wait", "1e10"], "must lie in [0, 1e+06]"),
+    (["dashboard", "--stale-after", "0"], "must lie in (0, 1e+06] seconds")])
+def test_durations_are_bounded_where_waits_would_overflow(argv, says, capsys):
+    """Python's waits overflow past 9.2e9 s, and Zenoh took a 1e20 s query timeout for a
+    negative one (a traceback in asnn status): every duration given by hand is bounded."""
+    with pytest.raises(SystemExit):
+        main(argv)
+    assert says in capsys.readouterr().err
