@@ -13,8 +13,8 @@ from service.link import RouterWatch
 
 from .arguments import (count, frame_rate, non_negative, nonempty_path,
                         robot_id, seconds, seconds_or_zero, threads, whole, worker_id)
-from .session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals, \
-    zenoh_options
+from .session import add_zenoh_options, exit_on_interrupt, fail, session_for, setup_logging, \
+    stop_on_signals, zenoh_options
 
 __all__ = ["register"]
 
@@ -68,7 +68,8 @@ def cmd_worker(args: argparse.Namespace) -> int:
     with session, RouterWatch(session, f"worker {core.worker_id}"):
         worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
                         handover_timeout=args.handover_timeout)
-        worker.load_kernels()  # before the signal handlers: Ctrl-C stops a cold compile at once
+        with exit_on_interrupt():  # a cold compile takes under a minute
+            worker.load_kernels()
         stop = stop_on_signals()
         try:
             worker.start()

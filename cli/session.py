@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
+import os
 import signal
 import sys
 import threading
@@ -48,6 +50,25 @@ def setup_logging(args: argparse.Namespace) -> None:
     logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     zenoh.try_init_log_from_env()  # Zenoh's own logs only when RUST_LOG is set
+
+
+@contextlib.contextmanager
+def exit_on_interrupt():
+    """Within the block, Ctrl-C ends the process at once, with the status and line of an
+    interrupt (130). For work before anything needs an orderly close (a worker compiling its
+    kernels before it joins the fleet): a KeyboardInterrupt raised there can be lost, since
+    numba's compiler calls back from C through ctypes, which prints and ignores an exception
+    raised in the callback, and the compile would go on for up to a minute."""
+    def handler(signum, frame):
+        print("\nasnn: interrupted", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(130)
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def stop_on_signals() -> threading.Event:
