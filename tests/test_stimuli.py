@@ -467,6 +467,9 @@ def test_suite_cases_are_deterministic_and_selectable(suite):
     assert suite_cases() == suite_cases("all") == list(SUITE_CASES)
     with pytest.raises(ValueError):
         suite_cases("no-such-*")
+    for empty in ("", " , ,"):  # ',' selected no case: an eval of nothing, which exited 0
+        with pytest.raises(ValueError, match="no case pattern"):
+            suite_cases(empty)
     with pytest.raises(ValueError):
         make_case("no-such-case")
 

@@ -744,11 +744,14 @@ def suite_cases(pattern: str | None = None) -> list[str]:
     Raises
     ------
     ValueError
-        If a pattern matches no case.
+        If a pattern matches no case, or there is none (``""``, ``","``: a list left empty
+        selects nothing, rather than every case).
     """
-    if pattern is None or pattern.strip() in ("", "all"):
+    if pattern is None or pattern.strip() == "all":
         return list(SUITE_CASES)
     patterns = [p.strip() for p in pattern.split(",") if p.strip()]
+    if not patterns:
+        raise ValueError(f"no case pattern in {pattern!r}")
     selected = []
     for p in patterns:
         matched = [name for name, case in CASES.items()
