@@ -42,6 +42,11 @@ DEFAULTS: dict[str, object] = {
 
 
 SHARED_MEMORY = "transport/shared_memory/enabled"
+# A config file is read whole and its nesting parsed recursively by Zenoh: /dev/zero took 4 GB
+# before failing, 27 MB of config 2.2 GB, and 50,000 nested objects crashed the process
+# (SIGSEGV). Zenoh's own configs are a few KB, nested 5 deep.
+MAX_CONFIG_BYTES = 1 << 20
+MAX_CONFIG_DEPTH = 64
 
 
 class ConfigError(ValueError):
@@ -67,6 +72,52 @@ _COMMENTS = re.compile(r"/\*.*?\*/|//[^\n]*", re.S)
 _SHARED_MEMORY_KEY = re.compile(r"""["']?\bshared_memory["']?\s*:""")
 
 
+def _nesting(text: str) -> int:
+    """The deepest nesting of ``{`` and ``[`` in a JSON5 (or YAML flow) text, outside its
+    strings and comments."""
+    depth = deepest = 0
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if c in "\"'":
+            i += 1
+            while i < n and text[i] != c:
+                i += 2 if text[i] == "\\" else 1
+        elif text.startswith("//", i) or c == "#":
+            i = text.find("\n", i)
+            i = n if i < 0 else i
+        elif text.startswith("/*", i):
+            i = text.find("*/", i + 2)
+            i = n if i < 0 else i + 1
+        elif c in "{[":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif c in "}]":
+            depth -= 1
+        i += 1
+    return deepest
+
+
+def _read_config_file(path: str | Path) -> str:
+    """A config file's text, checked before Zenoh parses it: a regular file of at most
+    :data:`MAX_CONFIG_BYTES`, nested at most :data:`MAX_CONFIG_DEPTH` deep."""
+    path = Path(path)
+    try:
+        if not path.is_file():
+            raise ConfigError(f"Zenoh config {path}: not a regular file" if path.exists()
+                              else f"Zenoh config {path}: no such file")
+        with path.open("rb") as f:
+            data = f.read(MAX_CONFIG_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(f"cannot read Zenoh config {path}: {exc.strerror or exc}") from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(f"Zenoh config {path}: larger than {MAX_CONFIG_BYTES >> 20} MiB")
+    text = data.decode("utf-8", errors="replace")
+    if _nesting(text) > MAX_CONFIG_DEPTH:
+        raise ConfigError(f"Zenoh config {path}: nested more than {MAX_CONFIG_DEPTH} deep")
+    return text
+
+
 def _sets_shared_memory(text: str) -> bool:
     """Whether a JSON5 config's text has a ``shared_memory`` key outside its comments."""
     return bool(_SHARED_MEMORY_KEY.search(_COMMENTS.sub("", text)))
@@ -83,6 +134,7 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
     opts = options or ZenohOptions()
     if overrides:
         opts = ZenohOptions(**{**opts.__dict__, **overrides})
+    text = _read_config_file(opts.config_file) if opts.config_file else ""
     try:
         conf = zenoh.Config.from_file(str(opts.config_file)) if opts.config_file else zenoh.Config()
     except Exception as exc:  # zenoh.ZError, or an OS error surfaced by zenoh
@@ -93,8 +145,7 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
         if json.loads(conf.get_json(key)) is None:
             settings.append((key, value))
     # Zenoh's own default is true, so whether the file chose it is read from the file itself
-    if not (opts.config_file and _sets_shared_memory(
-            Path(opts.config_file).read_text(encoding="utf-8", errors="replace"))):
+    if not _sets_shared_memory(text):
         settings.append((SHARED_MEMORY, False))
     if opts.mode is not None:
         if opts.mode not in MODES:

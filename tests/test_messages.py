@@ -284,6 +284,29 @@ def test_bad_config_is_a_clear_error(options):
         make_config(options)
 
 
+def test_a_config_file_zenoh_would_choke_on_is_refused_before_it_reads_it(tmp_path):
+    """Zenoh parses a config file whole and recursively: 50,000 nested objects crashed the
+    process (SIGSEGV), and /dev/zero took 4 GB before failing."""
+    deep = tmp_path / "deep.json5"
+    deep.write_text("{a:" * 50_000 + "1" + "}" * 50_000)
+    with pytest.raises(ConfigError, match="nested more than 64 deep"):
+        make_config(ZenohOptions(config_file=deep))
+    with pytest.raises(ConfigError, match="not a regular file"):
+        make_config(ZenohOptions(config_file="/dev/zero"))
+    big = tmp_path / "big.json5"
+    big.write_text("{ mode: 'peer' }" + " " * (1 << 20))
+    with pytest.raises(ConfigError, match="larger than 1 MiB"):
+        make_config(ZenohOptions(config_file=big))
+    # brackets in strings and comments are not nesting; the deployed configs pass
+    quoted = tmp_path / "quoted.json5"
+    quoted.write_text("{ // " + "{" * 100 + "\n /* " + "[" * 100 + " */ id: '" + "{" * 100 + "' }")
+    with pytest.raises(ConfigError, match="id"):  # Zenoh's own complaint: the id's form
+        make_config(ZenohOptions(config_file=quoted))
+    root = pathlib.Path(__file__).parents[1]
+    for deployed in (root / "deploy" / "zenoh").glob("*.json5"):
+        make_config(ZenohOptions(config_file=deployed))
+
+
 def test_a_config_zenoh_refuses_is_named_without_the_rust_source_location(tmp_path):
     bad = tmp_path / "bad.json5"
     bad.write_text('{ mode: "client", bogus_key: 1 }')
