@@ -614,3 +614,10 @@ def test_durations_are_bounded_where_waits_would_overflow(argv, says, capsys):
     with pytest.raises(SystemExit):
         main(argv)
     assert says in capsys.readouterr().err
+
+
+def test_a_pipe_given_as_a_video_is_named_as_such(tmp_path, capsys):
+    fifo = tmp_path / "clip.mp4"
+    os.mkfifo(fifo)  # was "no such file": it is there, and reading it would block
+    assert main(["detect", str(fifo)]) == 2
+    assert "clip.mp4: not a regular file (a pipe or a device)" in capsys.readouterr().err

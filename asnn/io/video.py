@@ -58,7 +58,8 @@ class VideoClip:
         if self.path.is_dir():
             raise VideoError(f"{self.path}: is a folder, not a video file")
         if not self.path.is_file():
-            raise VideoError(f"{self.path}: no such file")
+            raise VideoError(f"{self.path}: not a regular file (a pipe or a device)"
+                             if self.path.exists() else f"{self.path}: no such file")
         cap = self._capture()
         ok, first = cap.read() if cap.isOpened() else (False, None)
         if not ok or first is None:
