@@ -180,8 +180,11 @@ def _fits(previous, current, box, rim, background, exclude, kept=None):
             skip = np.ascontiguousarray(exclude[y0:y1, x0:x1])
         # the rim's pixels: also kept by the box (the kernel asks both)
         keep = _NO_SKIP if rim is None else np.ascontiguousarray(rim[y0:y1, x0:x1])
-        fits = _solve_expansion(previous[y0:y1, x0:x1], current[y0:y1, x0:x1],
-                                reference[y0:y1, x0:x1], skip, keep, _RIDGE)
+        # contiguous, as the resized boxes are: one compiled kernel for both (the views'
+        # own took numba 3 s more to compile), for a copy of at most 64x64 pixels each
+        fits = _solve_expansion(*(np.ascontiguousarray(image[y0:y1, x0:x1])
+                                  for image in (previous, current, reference)),
+                                skip, keep, _RIDGE)
     else:
         size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
         if skip is None:
