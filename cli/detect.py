@@ -27,6 +27,7 @@ from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import SLOW_FPS, preset_names
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
+from cli.session import exit_on_interrupt
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -321,8 +322,10 @@ def run(args: argparse.Namespace) -> int:
     detector = make_detector(args.model, params, **options)
     if args.model == "asnn":
         # numba loads a kernel from its cache when it is first called: all of them now, before
-        # the first frame, rather than on the frames where a stage first has work
-        compile_kernels((params,), threads=model_threads)
+        # the first frame, rather than on the frames where a stage first has work; nothing is
+        # written yet, so Ctrl-C may end the process at once
+        with exit_on_interrupt():
+            compile_kernels((params,), threads=model_threads)
     records = []
     for _, path in outputs:  # their folders, made as asnn scene makes them (checked above)
         if path and path != "-":
