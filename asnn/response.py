@@ -137,7 +137,10 @@ class Response:
     spikes : int
         Spikes fired in this frame.
     spike_rate : float
-        Spikes per second over the warning window.
+        The spikes of the warning window (the last ``n_t`` frames) over ``n_t`` times the
+        window's frame period (``spike_dt``, or ``dt``): spikes per second of the frames where
+        ``spike_dt`` is None; twice that in the presets that keep the published window of
+        25 ms a frame (``reference``, ``reference32``, ``light``, the default; eq. 34).
     collision : bool
         The collision warning.
     targets : list of Target
