@@ -47,7 +47,7 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from .frames import to_luminance
+from .frames import frame_time, to_luminance
 from .retina import photoreceptor_weights, spike_count, spike_rate
 from .response import Response
 
@@ -261,6 +261,8 @@ class _LGMDBase:
         FrameError
             If the frame is not an image the model accepts, or its size differs from the stream's.
         """
+        if t is not None:
+            frame_time(t)  # checked as ASNN checks it, though not used
         lum = self._luminance(frame)
         index = self.index
         self.index += 1

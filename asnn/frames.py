@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import numbers
+
 import cv2
 import numpy as np
 
-__all__ = ["FrameError", "LEVELS", "check_frame", "luma", "to_luminance"]
+__all__ = ["FrameError", "LEVELS", "check_frame", "frame_time", "luma", "to_luminance"]
 
 _LUMA = np.array([0.114, 0.587, 0.299])  # B, G, R weights of OpenCV's BGR -> gray
 LEVELS = np.arange(256) / 255.0  # uint8 value -> luminance: one table look-up per pixel
@@ -85,3 +87,12 @@ def check_frame(frame: np.ndarray, min_side: int,
 def luma(frame: np.ndarray) -> np.ndarray:
     """The uint8 gray image of a checked uint8 frame: itself, or OpenCV's rounded luma of BGR."""
     return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
+
+
+def frame_time(t: object) -> float:
+    """A frame's time ``t`` (seconds) as a float; FrameError for one that is not a real number
+    (a str, a bool), before a detector's step changes any state. NaN or infinite times are
+    taken: the detectors read them as no usable time."""
+    if isinstance(t, bool) or not isinstance(t, numbers.Real):
+        raise FrameError(f"a frame's time t must be a number of seconds or None, got {t!r}")
+    return float(t)

@@ -33,7 +33,7 @@ from . import _fast, _parallel, retina
 from .approach import ApproachStage, CameraRig, FramePair
 from .approach.looming import region_expansion
 from .approach.motion_layers import motion_layers
-from .frames import LEVELS, FrameError, check_frame, luma, to_luminance
+from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
 from .params import MAX_FRAME_GAP_S, PERIOD_FRAMES, ASNNParams, preset
 from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
@@ -357,7 +357,7 @@ class ASNN:
         """The first part of a step: the frame's luminance, whether it is new, and P."""
         p = self.params
         index = self.index
-        stamp = index * p.dt if t is None else _stamp(t)  # checked before any state changes
+        stamp = index * p.dt if t is None else frame_time(t)  # before any state changes
         lum = self._luminance(frame)
         self.index += 1
         blocks = self._blocks(lum) if p.skip_repeats else None
@@ -615,14 +615,6 @@ class _Frame:
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined
     tracks: list | None = None  # its objects' approach tests (record_tracks)
-
-
-def _stamp(t: object) -> float:
-    """A frame's time as a float; FrameError (before the step changes any state) for one that
-    is not a real number. NaN or infinite times are taken, and read as no usable time."""
-    if isinstance(t, bool) or not isinstance(t, numbers.Real):
-        raise FrameError(f"a frame's time t must be a number of seconds or None, got {t!r}")
-    return float(t)
 
 
 def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams

@@ -154,3 +154,12 @@ def test_feed_forward_inhibition_suppresses_a_whole_field_flash(cls, options):
     assert not any(r.collision for r in on)
     assert all(r.out == 0.5 for r in on[6:10])
     assert any(r.collision for r in off)
+
+
+@pytest.mark.parametrize("make", [LGMD1, LGMD2])
+def test_a_frame_time_that_is_not_a_number_is_refused_as_asnn_refuses_it(make):
+    model = make()
+    model.step(np.zeros((64, 64), np.uint8))
+    with pytest.raises(FrameError, match="must be a number of seconds"):
+        model.step(np.zeros((64, 64), np.uint8), "abc")  # was taken without a word
+    assert model.step(np.zeros((64, 64), np.uint8), 0.1).index == 1  # nothing counted before

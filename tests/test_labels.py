@@ -288,6 +288,8 @@ def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
 
 @pytest.mark.parametrize("text, says", [
     ("[" * 100000 + "]" * 100000, "labels.json: not JSON (nested too deeply)"),
+    ('[{"fps": ' + "9" * 5000 + "}]", "labels.json: not JSON this reads (Exceeds the limit"),
+    (" " * (64 << 20) + "[]", "labels.json: larger than 64 MiB"),
     ("[]", "labels.json: no clip labels in it"),
     ('{"clips": []}', "labels.json: no clip labels in it")])
 def test_a_labels_file_nested_too_deeply_or_empty_is_one_error_line(tmp_path, capsys, text,
@@ -367,3 +369,13 @@ def test_a_misspelt_clip_name_is_answered_with_the_unlabelled_video_it_likely_me
     assert main(["label", str(tmp_path)]) == 1
     assert (f"loom_25.mp4: no such clip in {tmp_path} (did you mean loom25.mp4?)"
             in capsys.readouterr().out)
+
+
+def test_a_labels_path_that_is_a_pipe_is_refused_not_read_without_end(tmp_path):
+    import os
+
+    from asnn.evaluation.labels import read_entries
+
+    os.mkfifo(tmp_path / "labels.json")
+    with pytest.raises(ValueError, match="labels.json: not a regular file"):
+        read_entries(tmp_path / "labels.json")

@@ -706,3 +706,15 @@ def test_scene_names_the_extensions_it_writes_before_drawing(tmp_path, capsys):
         f"asnn scene: {out}: name the format by its extension: a video (.avi, .m4v, .mkv, .mov, "
         ".mp4) or a bag (.mcap)"]
     assert not out.exists()
+
+
+def test_a_paper_scene_refuses_a_rate_or_speed_it_cannot_draw_and_records_its_arguments():
+    from asnn.stimuli import make_scene
+
+    with pytest.raises(ValueError, match="fps must be a positive number"):
+        make_scene("looming", fps=0)  # its label was then refused by the label check
+    with pytest.raises(ValueError, match="speed must be a positive number"):
+        make_scene("looming", speed=-1)
+    scene = make_scene("looming_over_stripes", radius=4.0, stripe_speed=3.0, fps=25.0)
+    assert (scene.params["radius"], scene.params["stripe_speed"], scene.params["fps"]) == \
+        (4.0, 3.0, 25.0)

@@ -230,6 +230,10 @@ def load_labels(path: str | Path) -> list[dict]:
     return check_labels(entries, str(path))
 
 
+# the largest labels.json read: a label with per-frame tracks for 10,000 frames is about 1 MB
+MAX_LABELS_BYTES = 64 << 20
+
+
 def read_entries(path: str | Path) -> list:
     """The entries of a ``labels.json`` (a list, or an object's ``clips`` list), unchecked.
 
@@ -240,14 +244,23 @@ def read_entries(path: str | Path) -> list:
     ValueError
         If it is not JSON or holds neither form.
     """
+    path = Path(path)
+    if path.exists() and not path.is_file():  # a pipe or /dev/zero would be read without end
+        raise ValueError(f"{path}: not a regular file")
+    with path.open("rb") as f:
+        raw = f.read(MAX_LABELS_BYTES + 1)
+    if len(raw) > MAX_LABELS_BYTES:
+        raise ValueError(f"{path}: larger than {MAX_LABELS_BYTES >> 20} MiB")
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
+        data = json.loads(raw.decode("utf-8"))
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not JSON ({exc})") from None
     except RecursionError:  # lists in lists, thousands deep: Python's parser gives up
         raise ValueError(f"{path}: not JSON (nested too deeply)") from None
     except UnicodeDecodeError:
         raise ValueError(f"{path}: not UTF-8 text (save it as UTF-8)") from None
+    except ValueError as exc:  # an integer of thousands of digits, which Python refuses
+        raise ValueError(f"{path}: not JSON this reads ({exc})") from None
     if isinstance(data, dict):
         data = data.get("clips")
     if not isinstance(data, list):

@@ -120,6 +120,10 @@ def make_scene(name: str, *, size: tuple[int, int] = (128, 128), frames: int | N
         raise ValueError(f"scene size must be at least 8x8, got {w}x{h}")
     if not 0 <= start < stop:
         raise ValueError("need 0 <= start < stop")
+    if not (math.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps must be a positive number, got {fps}")
+    if speed is not None and not (math.isfinite(speed) and speed > 0):
+        raise ValueError(f"speed must be a positive number of px a step, got {speed}")
     two_phase = name in ("approach_recession", "translation", "approach_recession_over_stripes")
     if frames is None:
         frames = 130 if two_phase else (stop + 5 if name in ("looming", "looming_over_stripes")
@@ -127,7 +131,9 @@ def make_scene(name: str, *, size: tuple[int, int] = (128, 128), frames: int | N
     background, target = levels(contrast, polarity)
     cx, cy = center if center is not None else (w / 2.0, h / 2.0)
     params = dict(size=size, frames=frames, contrast=contrast, polarity=polarity, speed=speed,
-                  start=start, stop=stop, hold=hold)
+                  start=start, stop=stop, hold=hold, radius=radius, center=center, bar=bar,
+                  stripe_period=stripe_period, stripe_width=stripe_width,
+                  stripe_speed=stripe_speed, fps=fps)
 
     images = np.empty((frames, h, w), dtype=np.float64)
     stripes = name in ("stripes", "looming_over_stripes", "approach_recession_over_stripes")
