@@ -178,7 +178,7 @@ class Response(_Message):
     spikes: int = Field(ge=0)  # counts and rates: a negative one is no model's output
     spike_rate: float = Field(ge=0)
     collision: bool
-    targets: list[TargetMsg] = Field(default_factory=list)
+    targets: list[TargetMsg]
     worker: str
     latency_ms: float = Field(ge=0)
     dropped: int = Field(ge=0)
@@ -415,7 +415,9 @@ def decode_refusal(payload: bytes, robot: str | None = None) -> Refusal:
 
 def _unpack(payload: bytes, what: str) -> dict[str, Any]:
     obj = unpack_map(payload, what)
-    version = obj.get("v", VERSION)
+    if "v" not in obj:  # CONTRACT.md lists it in every message: a message without it is invalid
+        raise MessageError("missing-field", f"{what} without its version 'v'")
+    version = obj["v"]
     if version != VERSION or isinstance(version, bool):
         raise MessageError("unsupported-version", f"{what} version {version!r}, expected {VERSION}")
     return obj

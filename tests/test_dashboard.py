@@ -258,7 +258,7 @@ def test_invalid_messages_are_counted_never_raised():
     huge = msgpack.packb({**preview().model_dump(), "data": b"\0" * 300_000})
     cases = [
         ("asnn/r1/response", b"\xc1"), ("asnn/r1/response", msgpack.packb([1])),
-        ("asnn/r1/response", msgpack.packb({"robot": "r1", "seq": "1"})),
+        ("asnn/r1/response", msgpack.packb({"v": 1, "robot": "r1", "seq": "1"})),
         ("asnn/r1/response", msgpack.packb({**response().model_dump(), "v": 2})),
         ("asnn/r2/response", good),  # the message names another robot
         ("asnn/r1/warning", good),  # a warning without a collision

@@ -43,7 +43,7 @@ def png_chunk(kind: bytes, body: bytes, crc: int | None = None) -> bytes:
 
 
 def frame_map(**fields) -> bytes:
-    return msgpack.packb({"seq": 0, "stamp": 0.0, **fields})
+    return msgpack.packb({"v": 1, "seq": 0, "stamp": 0.0, **fields})
 
 
 # ---------------------------------------------------------------- 1. image amplification
@@ -227,14 +227,14 @@ data = bytes.fromhex(sys.argv[1])
 core = WorkerCore(idle_timeout=600)
 scene = make_scene("looming")
 for seq in range(3):  # a real robot first: the kernels are loaded, the allocator warm
-    core.offer("asnn/real/frame", msgpack.packb({"seq": seq, "stamp": seq * 0.05,
+    core.offer("asnn/real/frame", msgpack.packb({"v": 1, "seq": seq, "stamp": seq * 0.05,
                "width": 128, "height": 128, "format": "jpeg",
                "data": encode_image(scene.frames[seq], "jpeg")}))
     core.process(core.take())
 before, peak_before = rss(), resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 for i in range(int(sys.argv[2])):
     for seq in range(2):
-        core.offer(f"asnn/evil{i}/frame", msgpack.packb({"seq": seq, "stamp": 0.05 * seq,
+        core.offer(f"asnn/evil{i}/frame", msgpack.packb({"v": 1, "seq": seq, "stamp": 0.05 * seq,
                    "width": 4096, "height": 4096, "format": "jpeg", "data": data}))
         job = core.take()
         if job is not None:
@@ -291,7 +291,7 @@ def test_huge_or_deep_containers_are_refused_without_building_them(shape):
         junk = huge_map(8_000_000)
     elif shape == "nested arrays":  # 4096 x 4096 small ints: every container within its limit
         inner = msgpack.packb([1] * 4096)
-        junk = msgpack.packb({"seq": 0})[:-2] + b"\xa4junk" + b"\xdd" + (4096).to_bytes(
+        junk = msgpack.packb({"v": 1, "seq": 0})[:-2] + b"\xa4junk" + b"\xdd" + (4096).to_bytes(
             4, "big") + inner * 4096
         junk = b"\x81" + junk[1:]
     else:
@@ -682,7 +682,7 @@ def test_status_says_why_a_camera_none_of_whose_frames_is_taken_gets_no_response
     clock = FakeClock()
     core = WorkerCore(worker_id="w1", clock=clock)
     for seq in range(3):  # raw data one byte short: never a robot, never answered
-        core.offer("asnn/cam7/frame", msgpack.packb({"seq": seq, "stamp": 0.0, "width": 64,
+        core.offer("asnn/cam7/frame", msgpack.packb({"v": 1, "seq": seq, "stamp": 0.0, "width": 64,
                                                      "height": 64, "format": "gray8",
                                                      "data": b"\x00" * 4095}))
     status = msgpack.unpackb(msgpack.packb(core.status()))
@@ -714,8 +714,8 @@ def test_every_warning_is_printed_whatever_its_stamp(stamp, shown):
     out = io.StringIO()
     show = printer(False, out)
     show(Response(robot="r1", seq=7, stamp=stamp, model="asnn", preset="p", u=1.0, out=0.9,
-                  spikes=3, spike_rate=60.0, collision=True, worker="w", latency_ms=1.0,
-                  dropped=0))
+                  spikes=3, spike_rate=60.0, collision=True, targets=[], worker="w",
+                  latency_ms=1.0, dropped=0))
     line = out.getvalue()
     assert line.count("\n") == 1 and "WARNING robot r1 seq 7" in line
     assert line.split()[0] == shown
@@ -768,8 +768,8 @@ def test_a_forged_sequence_number_cannot_silence_a_robots_warnings(zenoh_net):
 
     def warning(seq):
         return Response(robot="r1", seq=seq, stamp=1000.0 + seq, model="asnn", preset="p",
-                        u=1.0, out=0.9, spikes=3, spike_rate=60.0, collision=True, worker="w1",
-                        latency_ms=1.0, dropped=0)
+                        u=1.0, out=0.9, spikes=3, spike_rate=60.0, collision=True, targets=[],
+                        worker="w1", latency_ms=1.0, dropped=0)
 
     # peers do not route for each other: the worker's and the attacker's puts leave from the
     # hub, the viewers and the attacker's ears are on spokes

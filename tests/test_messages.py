@@ -184,8 +184,12 @@ def test_target_ids_on_the_wire_start_at_the_models_first_seq():
 def test_invalid_responses_are_rejected():
     good = msgpack.unpackb(encode(Response(
         robot="r", seq=1, stamp=1.0, model="asnn", preset="p", u=1.0, out=0.5, spikes=0,
-        spike_rate=0.0, collision=True, worker="w", latency_ms=1.0, dropped=0)))
+        spike_rate=0.0, collision=True, targets=[], worker="w", latency_ms=1.0, dropped=0)))
     assert decode_response(msgpack.packb(good)).collision
+    # CONTRACT.md lists v and targets in every response: one without them is invalid
+    for field in ("v", "targets"):
+        short = {k: v for k, v in good.items() if k != field}
+        assert reason(msgpack.packb(short), decode_response) == "missing-field"
     assert decode_response(msgpack.packb(good)).model_ms is None  # optional: older workers
     assert reason(msgpack.packb({**good, "model_ms": -1.0}), decode_response) == "invalid-field"
     assert decode_response(msgpack.packb(good)).stream_frames is None

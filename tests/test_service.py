@@ -155,8 +155,8 @@ def test_frame_size_change_resets_the_robot_over_zenoh(service):
 def test_malformed_frames_are_counted_while_valid_frames_keep_flowing(service):
     session = service.spoke()
     scene = make_scene("looming")
-    junk = [b"\xc1\xc1", msgpack.packb([1, 2]), msgpack.packb({"seq": "x"}),
-            msgpack.packb({"seq": 1, "stamp": 0.0, "width": 64, "height": 64, "format": "gray8",
+    junk = [b"\xc1\xc1", msgpack.packb([1, 2]), msgpack.packb({"v": 1, "seq": "x"}),
+            msgpack.packb({"v": 1, "seq": 1, "stamp": 0.0, "width": 64, "height": 64, "format": "gray8",
                            "data": b"\x00"})]
     for seq in range(25):
         for payload in junk:

@@ -222,9 +222,9 @@ def test_malformed_frames_are_counted_while_valid_frames_flow(looming):
     bad = {
         "undecodable": b"\x00\xc1 not msgpack",
         "not-a-map": msgpack.packb("a string"),
-        "invalid-field": msgpack.packb({"seq": "one", "stamp": 0.0}),
+        "invalid-field": msgpack.packb({"v": 1, "seq": "one", "stamp": 0.0}),
         "unsupported-version": msgpack.packb({"v": 9}),
-        "bad-pixels": msgpack.packb({"seq": 0, "stamp": 0.0, "width": 128, "height": 128,
+        "bad-pixels": msgpack.packb({"v": 1, "seq": 0, "stamp": 0.0, "width": 128, "height": 128,
                                      "format": "gray8", "data": b"\x00" * 10}),
     }
     responses = []
@@ -259,7 +259,7 @@ def undecodable_jpeg(image, seq, stamp=None) -> bytes:
             out += data[i:i + 2 + length]
         i += 2 + length
     h, w = image.shape[:2]
-    return msgpack.packb({"seq": seq, "stamp": seq * 0.05 if stamp is None else stamp,
+    return msgpack.packb({"v": 1, "seq": seq, "stamp": seq * 0.05 if stamp is None else stamp,
                           "width": w, "height": h, "format": "jpeg",
                           "data": bytes(out + data[i:])})
 
@@ -277,7 +277,7 @@ def test_compressed_frames_with_bad_data_are_counted_at_processing(looming):
 
 def test_an_encoded_frame_whose_header_cannot_be_whole_is_refused_on_arrival(looming):
     core = WorkerCore()
-    junk = msgpack.packb({"seq": 0, "stamp": 0.0, "width": 128, "height": 128,
+    junk = msgpack.packb({"v": 1, "seq": 0, "stamp": 0.0, "width": 128, "height": 128,
                           "format": "jpeg", "data": b"\xff\xd8 broken"})
     assert core.offer("asnn/r1/frame", junk) is None
     assert core.stats()["invalid"] == {"bad-image": 1} and core.robots() == []
