@@ -11,8 +11,8 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import (count, frame_rate, non_negative, nonempty_path,
-                        robot_id, seconds, seconds_or_zero, threads, whole, worker_id)
+from .arguments import (count, frame_rate, non_negative, nonempty_path, robot_id, seconds,
+                        seconds_or_zero, threads, whole, worker_id)
 from .session import add_zenoh_options, exit_on_interrupt, fail, session_for, setup_logging, \
     stop_on_signals, zenoh_options
 
