@@ -130,12 +130,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "there, unchanged since, and this one did not write again are removed "
                         f"(each run's are listed in DIR/{MANIFEST}); nothing else is touched")
     p.add_argument("--early-tolerance", type=tolerance_seconds, metavar="SECONDS",
-                   help="with CLIPS_DIR: a first warning up to this long before the labelled "
+                   help="with CLIPS_DIR (not --held-out, which scores by SPEC's rule): a first "
+                        "warning up to this long before the labelled "
                         f"onset still counts as a hit (0 to 60; default: "
                         f"{scoring.EARLY_TOLERANCE_S}, for onsets judged by eye; the suite's "
                         "onsets are exact and use 0)")
-    p.add_argument("--warmup", type=warmup_frames, default=scoring.WARMUP_FRAMES, metavar="FRAMES",
-                   help="frames ignored at the start of each clip (default: %(default)s)")
+    p.add_argument("--warmup", type=warmup_frames, metavar="FRAMES",
+                   help="frames ignored at the start of each clip (default: "
+                        f"{scoring.WARMUP_FRAMES}; not with --held-out, which scores by SPEC's)")
     p.add_argument("--jobs", type=processes, default=1, metavar="N",
                    help="clips or cases evaluated in parallel processes, at most 64 "
                         "(default: %(default)s)")
@@ -259,7 +261,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         ("--ablation", args.ablation, not (args.paper or args.held_out)),
         ("--labels", args.labels, not (args.synthetic or args.paper)),
         ("--early-tolerance", args.early_tolerance is not None,
-         not (args.synthetic or args.paper)),
+         not (args.synthetic or args.paper or args.held_out)),
+        # the held-out figures are scored by SPEC's rule, as the grid's choices were made
+        ("--warmup", args.warmup is not None, not args.held_out),
         ("--perturb", args.perturb, not (args.paper or args.held_out)),
         ("--tie-break", args.tie_break != "warning-frames", args.held_out),
     ) if given and not mode]
@@ -273,6 +277,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         return 2
     tolerance = (scoring.EARLY_TOLERANCE_S if args.early_tolerance is None
                  else args.early_tolerance)  # its type bounds it
+    warmup = scoring.WARMUP_FRAMES if args.warmup is None else args.warmup
     if args.clips_dir and not (args.synthetic or args.paper):
         labels = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
         if not Path(args.clips_dir).is_dir():
@@ -285,11 +290,11 @@ def _evaluate(args: argparse.Namespace) -> int:
     try:
         if args.paper:
             paper.paper_figures(args.out, preset_name=preset_name, detectors=args.detectors,
-                                size=args.size or (128, 128), warmup=args.warmup,
+                                size=args.size or (128, 128), warmup=warmup,
                                 progress=progress)
         elif args.synthetic:
             suite.evaluate_suite(args.out, detectors=args.detectors, preset_name=preset_name,
-                                 cases=args.cases, jobs=args.jobs, warmup=args.warmup,
+                                 cases=args.cases, jobs=args.jobs, warmup=warmup,
                                  plots=not args.no_plots, case_plots=args.case_plots,
                                  variant=args.variant, perturbation=args.perturb,
                                  driving_size=args.size, scale=args.scale, progress=progress)
@@ -320,7 +325,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             results = clips.evaluate_clips(
                 args.clips_dir, args.out, labels_path=args.labels, detectors=args.detectors,
                 preset_name=preset_name, early_tolerance_s=tolerance,
-                warmup=args.warmup, jobs=args.jobs, plots=not args.no_plots,
+                warmup=warmup, jobs=args.jobs, plots=not args.no_plots,
                 perturbation=args.perturb, progress=progress)
             for name, entry in results["detectors"].items():
                 print(_summary_line(name, entry["summary"]))

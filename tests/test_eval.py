@@ -303,6 +303,10 @@ def test_half_rate_keeps_every_second_frame_with_its_time_and_maps_the_label_ont
     assert half["track"] == [[0.0, 0.0], [2.0, 0.0], [4.0, 0.0], [6.0, 0.0]]
     assert half["ttc"] == [0.3, 0.2, 0.1, None] and half["center"] == [1.0, 2.0]
     assert label["fps"] == 20.0 and len(label["track"]) == 7  # the label itself unchanged
+    # onset and contact on one odd frame: no kept frame between them, a window of one frame
+    # (the onset moved past the contact, and the label was refused after every run)
+    odd = perturb_label({**label, "onset_frame": 5, "contact_frame": 5}, "half-rate")
+    assert (odd["onset_frame"], odd["contact_frame"]) == (2, 2)
 
 
 def test_a_clip_at_half_its_frame_rate_is_scored_on_the_frames_kept(tmp_path):
@@ -470,7 +474,10 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
     for misplaced in ([str(tmp_path), "--size", "64x64"], ["--paper", "--cases", "loom-*"],
                       ["--synthetic", "--early-tolerance", "0.5"], ["--paper", "--labels", "x"],
                       ["--paper", "--perturb", "noise"], ["--paper", "--variant", "1"],
-                      ["--synthetic", "--tie-break", "grid"]):
+                      ["--synthetic", "--tie-break", "grid"],
+                      # scored by SPEC's rule, as its grid chose: these were silently ignored
+                      [str(tmp_path), "--held-out", "--warmup", "30"],
+                      [str(tmp_path), "--held-out", "--early-tolerance", "0"]):
         assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
         assert "does not go with" in capsys.readouterr().err
 

@@ -59,8 +59,12 @@ def test_tolerance_and_warmup_are_parameters():
     assert scoring.score_clip(records((19,)), COLLISION, early_tolerance_s=0).outcome == "early"
     assert scoring.score_clip(records((20,)), COLLISION, early_tolerance_s=0).outcome == "hit"
     assert scoring.score_clip(records((8, 30)), COLLISION, warmup=9).outcome == "hit"
-    no_fps = {**COLLISION, "fps": None}
-    assert scoring.score_clip(records((15,)), no_fps).outcome == "early"  # no fps: no tolerance
+    # a label built in code without fps or collision (the label format requires both): the
+    # tolerance was 0, the lead and the minutes unknown; a clip without collision scored as none
+    for broken in ({**COLLISION, "fps": None}, {k: v for k, v in COLLISION.items() if k != "fps"},
+                   {k: v for k, v in COLLISION.items() if k != "collision"}):
+        with pytest.raises(ValueError, match="a label needs"):
+            scoring.score_clip(records((15,)), broken)
     # "up to 0.5 s before onset": whole frames within it, at 15 fps 7 (8 would be 0.53 s)
     for fps, earliest in ((15.0, 13), (29.97, 6), (30.0, 5), (20.0, 10)):
         label = {**COLLISION, "fps": fps}

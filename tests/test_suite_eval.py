@@ -47,8 +47,9 @@ def test_category_summaries_count_each_tag_over_its_cases():
     label = {"fps": 20.0, "collision": True, "onset_frame": 10, "contact_frame": 30}
     records = [{"frame": i, "collision": i == 25} for i in range(40)]
     hit = scoring.score_clip(records, {**label, "file": "a"})
-    quiet = scoring.score_clip([{"frame": 0, "collision": False}], {"file": "b", "collision": False})
-    false = scoring.score_clip(records, {"file": "c", "collision": False})
+    quiet = scoring.score_clip([{"frame": 0, "collision": False}],
+                               {"file": "b", "fps": 20.0, "collision": False})
+    false = scoring.score_clip(records, {"file": "c", "fps": 20.0, "collision": False})
     cases = [{"category": ["approach", "dark"]}, {"category": ["translation", "dark"]},
              {"category": ["translation", "light"]}]
     table = suite.category_summaries(cases, [hit, quiet, false])

@@ -357,7 +357,8 @@ def _label_at_rate(label: dict, step: int) -> dict:
 
     The onset moves to the first frame kept at or after it and the contact to the last kept at
     or before it, so the hit window never grows and a lead is never credited with time the
-    clip did not show; per-frame lists keep the frames kept.
+    clip did not show; per-frame lists keep the frames kept. Where no kept frame lies between
+    them (onset and contact one odd frame), both move to the contact's: a window of one frame.
     """
     if label.get("fps"):
         label["fps"] = float(label["fps"]) / step
@@ -367,6 +368,8 @@ def _label_at_rate(label: dict, step: int) -> dict:
         label["onset_frame"] = -(-int(label["onset_frame"]) // step)
     if label.get("contact_frame") is not None:
         label["contact_frame"] = int(label["contact_frame"]) // step
+        if label.get("onset_frame") is not None:
+            label["onset_frame"] = min(label["onset_frame"], label["contact_frame"])
     for key in _PER_FRAME:
         if isinstance(label.get(key), list):
             label[key] = label[key][::step]

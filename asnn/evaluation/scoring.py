@@ -258,7 +258,8 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     Raises
     ------
     ValueError
-        If a collision label lacks its onset or contact frame, or its onset is after its
+        If a label lacks ``collision`` or a positive ``fps``, a collision label its onset or
+        contact frame, or its onset is after its
         contact (labels read from a file are checked in full before: :mod:`.labels`; this
         check is the one a label built in code needs for a meaningful window), or the
         tolerance is outside 0 to :data:`MAX_EARLY_TOLERANCE_S`.
@@ -267,11 +268,16 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
         raise ValueError(f"early_tolerance_s must be 0 to {MAX_EARLY_TOLERANCE_S:g}, got "
                          f"{early_tolerance_s!r}")
     clip = clip_name(label)
-    collision = bool(label.get("collision"))
+    if not isinstance(label.get("collision"), bool):  # a missing one was scored as none
+        raise ValueError(f"{clip}: a label needs collision, true or false")
+    fps = label.get("fps")
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not fps > 0:
+        # without it the tolerance was 0, the lead and the minutes of video unknown
+        raise ValueError(f"{clip}: a label needs fps, a positive number, got {fps!r}")
+    collision, fps = label["collision"], float(fps)
     first, count = first_warning(records, warmup)
-    fps = float(label.get("fps") or 0.0)
     scored = sum(1 for r in records if int(r["frame"]) >= warmup)
-    duration = scored / fps if fps > 0 else None
+    duration = scored / fps
     if not collision:
         return ClipScore(clip=clip, collision=False, outcome="false" if count else "quiet",
                          first_warning=first, warning_frames=count, false_alarm=bool(count),
@@ -283,7 +289,7 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
     if int(onset) > int(contact):
         raise ValueError(f"{clip}: onset_frame {onset} is after contact_frame {contact}")
     # whole frames within the tolerance (SPEC: "up to 0.5 s"): at 15 fps 7 frames, not 8
-    tolerance = math.floor(early_tolerance_s * fps + 1e-9) if fps > 0 else 0
+    tolerance = math.floor(early_tolerance_s * fps + 1e-9)
     window = (int(onset) - tolerance, int(contact) + contact_slack)
     if first is None:
         return ClipScore(clip=clip, collision=True, outcome="miss", window=window,
@@ -303,7 +309,7 @@ def score_clip(records: Sequence[Mapping], label: Mapping, *, warmup: int = WARM
                      warning_frames=count, window_warning_frames=in_window,
                      after_warning_frames=sum(1 for f in warned if f > window[1]),
                      false_alarm=outcome == "early",
-                     lead_frames=lead, lead_s=lead / fps if fps > 0 else None,
+                     lead_frames=lead, lead_s=lead / fps,
                      localisation_px=_nearest_target_distance(records, first,
                                                               _labelled_center(label, first)),
                      ttc_error=ttc_error, ttc_ratio=ttc_ratio, target_ids=target_ids,
