@@ -25,7 +25,7 @@ from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_sho
                            quiet_writer)
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
-from asnn.params import SLOW_FPS, preset_names
+from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, preset_names
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
 from cli.session import exit_on_interrupt
 
@@ -316,8 +316,13 @@ def run(args: argparse.Namespace) -> int:
               f"frames are timed at {source.fps:g} a second, so the targets' expansion and ttc "
               "are only as right as that guess", file=sys.stderr)
     elif args.model == "asnn" and source.fps < SLOW_FPS:
+        # frames further apart than the model believes a gap (MAX_FRAME_GAP_S): it takes the
+        # nominal period instead, and its times to contact would read short without a word
+        slow = (f"; its frames are more than {MAX_FRAME_GAP_S:g} s apart, so the targets' "
+                f"expansion and ttc are computed for {params.dt:g} s a frame"
+                if 1.0 / source.fps > MAX_FRAME_GAP_S else "")
         print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second; ASNN "
-              f"loses hits below {SLOW_FPS:g} (README, 'At half the frame rate')",
+              f"loses hits below {SLOW_FPS:g} (README, 'At half the frame rate'){slow}",
               file=sys.stderr)
     detector = make_detector(args.model, params, **options)
     if args.model == "asnn":

@@ -621,3 +621,22 @@ def test_a_pipe_given_as_a_video_is_named_as_such(tmp_path, capsys):
     os.mkfifo(fifo)  # was "no such file": it is there, and reading it would block
     assert main(["detect", str(fifo)]) == 2
     assert "clip.mp4: not a regular file (a pipe or a device)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("fps, apart", [(0.5, True), (10.0, False)])
+def test_a_slow_clip_is_noted_and_one_whose_frames_the_model_times_by_default_says_so(
+        tmp_path, capsys, fps, apart):
+    """Frames more than 1 s apart are timed by the model at its nominal 0.05 s (a stalled
+    clock looks the same): its times to contact would read 40 times short without a word."""
+    import cv2
+
+    path = tmp_path / "slow.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (64, 64))
+    for _ in range(3):
+        writer.write(np.full((64, 64, 3), 100, np.uint8))
+    writer.release()
+    assert main(["detect", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert f"runs at {fps:g} frames a second; ASNN loses hits below 18" in err
+    assert ("frames are more than 1 s apart, so the targets' expansion and ttc are computed "
+            "for 0.05 s a frame" in err) == apart
