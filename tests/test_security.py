@@ -121,7 +121,7 @@ def collector(session, key):
 
 def fake_response(robot="r1") -> bytes:
     return encode(Response(robot=robot, seq=999, stamp=1.0, model="asnn", preset="x", u=1.0,
-                           out=1.0, spikes=9, spike_rate=99.0, collision=True,
+                           out=1.0, spikes=9, spike_rate=99.0, collision=True, targets=[],
                            worker="intruder", latency_ms=0.0, dropped=0))
 
 
