@@ -13,14 +13,14 @@ is not there. Exit status 0 when every entry is ready for
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from asnn.evaluation.labels import (VIDEO_SUFFIXES, center_outside, check_labels, clip_hint,
                                     label_problem, mismatches, read_entries, unlabelled,
-                                    unlabelled_videos)
+                                    unlabelled_videos, write_entries)
 from asnn.evaluation.scoring import WARMUP_FRAMES
+from asnn.io.files import folder_lock
 from asnn.io.sources import SourceError, open_source
 from asnn.io.video import cut_short
 from asnn.params import preset
@@ -98,17 +98,24 @@ def run(args: argparse.Namespace) -> int:
             todo.append(str(exc))
             continue
         entries.append(unlabelled(video.name, frames, fps, width, height))
-        added.append(video.name)
+        added.append(entries[-1])
         todo.append(f"{video.name}: {label_problem(entries[-1])}")
     if added:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)  # as asnn scene --labels makes it
-            path.write_text(json.dumps(entries, indent=2) + "\n", encoding="utf-8")
-        except OSError as exc:
+            # read again under a lock on the folder: what another process entered meanwhile
+            # (asnn scene --labels) stays; replaced whole, the file is never left half written
+            with folder_lock(path):
+                current = read_entries(path) if path.exists() else []
+                named = {e.get("file") for e in current if isinstance(e, dict)}
+                write_entries(path, current + [e for e in added if e["file"] not in named],
+                              indent=2)
+        except (OSError, ValueError) as exc:
             print(f"asnn label: cannot write {path}: {exc.strerror or exc}", file=sys.stderr)
             return 2
+        names = ", ".join(e["file"] for e in added)
         print(f"{path}: {len(added)} {'entry' if len(added) == 1 else 'entries'} added "
-              f"({', '.join(added)}): fill in collision, and for a collision onset_frame and "
+              f"({names}): fill in collision, and for a collision onset_frame and "
               "contact_frame (and center, the object's [x, y] at contact, for the scores of "
               "the targets)")
     for line in todo:

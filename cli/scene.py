@@ -8,12 +8,12 @@ cases with their groups. ``OUT`` ending in ``.mcap`` writes a ROS 2 bag instead 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 from pathlib import Path
 
-from asnn.evaluation.labels import read_entries
+from asnn.evaluation.labels import read_entries, write_entries
+from asnn.io.files import folder_lock
 from asnn.io.video import FPS_RANGE, WRITABLE_SUFFIXES
 from asnn.stimuli import SCENE_NAMES, make_scene, write_video
 from asnn.stimuli.suite import CASES, make_case, suite_cases
@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         if Path(out).suffix.lower() not in (*WRITABLE_SUFFIXES, ".mcap"):  # before drawing
             raise ValueError(f"{out}: name the format by its extension: a video "
                              f"({', '.join(WRITABLE_SUFFIXES)}) or a bag (.mcap)")
-        entries = _label_entries(Path(args.labels), Path(out)) if args.labels else None
+        if args.labels:  # a labels file that cannot take the clip stops the command first
+            _label_entries(Path(args.labels), Path(out))
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         if out.lower().endswith(".mcap"):
             from asnn.io.rosbag import write_bag
@@ -106,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             write_video(scene.frames, out, fps=scene.fps)
         if args.labels:
-            _enter_label(Path(args.labels), Path(out), scene, entries)
+            _enter_label(Path(args.labels), Path(out), scene)
     except BrokenPipeError:  # stdout's reader went away: cli.main handles it
         raise
     except (ValueError, OSError, ImportError) as exc:
@@ -144,13 +145,16 @@ def _label_entries(labels: Path, out: Path) -> list:
     return read_entries(labels) if labels.exists() else []
 
 
-def _enter_label(labels: Path, out: Path, scene, entries: list) -> None:
+def _enter_label(labels: Path, out: Path, scene) -> None:
     """Enter the clip's label in ``labels`` (a labels.json, made where it is missing): its
     ``file`` named relative to the labels' folder, as ``asnn eval`` reads it, replacing an
-    entry of the same file among ``entries`` (:func:`_label_entries`) and keeping the others,
-    so that one call per clip builds a folder's labels."""
+    entry of the same file and keeping the others, so that one call per clip builds a
+    folder's labels. The file is read again under a lock on its folder and replaced whole
+    (:func:`asnn.evaluation.labels.write_entries`): scenes drawn at once for one labels file
+    keep each other's entries, and a process killed while it writes leaves the old file."""
     file = _label_name(labels, out)
-    entries = [e for e in entries if not (isinstance(e, dict) and e.get("file") == file)]
     labels.parent.mkdir(parents=True, exist_ok=True)
-    labels.write_text(json.dumps(entries + [scene.label(file)], indent=1) + "\n",
-                      encoding="utf-8")
+    with folder_lock(labels):
+        entries = read_entries(labels) if labels.exists() else []
+        entries = [e for e in entries if not (isinstance(e, dict) and e.get("file") == file)]
+        write_entries(labels, entries + [scene.label(file)], indent=1)

@@ -290,6 +290,11 @@ def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
     ("[" * 100000 + "]" * 100000, "labels.json: not JSON (nested too deeply)"),
     ('[{"fps": ' + "9" * 5000 + "}]", "labels.json: not JSON this reads (Exceeds the limit"),
     (" " * (64 << 20) + "[]", "labels.json: larger than 64 MiB"),
+    # accepted, then the evaluation stopped once it had run (NaN), or a rewrite lost a value
+    ('[{"file": "a.mp4", "fps": 20.0, "note": NaN}]', "labels.json: NaN is not a JSON number"),
+    ('[{"file": "a.mp4", "fps": 1e400}]', "labels.json: 1e400 is beyond a float's range"),
+    ('[{"file": "a.mp4", "collision": true, "collision": false}]',
+     "labels.json: an entry gives 'collision' twice"),
     ("[]", "labels.json: no clip labels in it"),
     ('{"clips": []}', "labels.json: no clip labels in it")])
 def test_a_labels_file_nested_too_deeply_or_empty_is_one_error_line(tmp_path, capsys, text,
@@ -379,3 +384,48 @@ def test_a_labels_path_that_is_a_pipe_is_refused_not_read_without_end(tmp_path):
     os.mkfifo(tmp_path / "labels.json")
     with pytest.raises(ValueError, match="labels.json: not a regular file"):
         read_entries(tmp_path / "labels.json")
+
+
+def test_labels_are_written_whole_in_their_form_and_writers_at_once_keep_each_others(
+        tmp_path, monkeypatch):
+    """asnn label and asnn scene --labels rewrote an object-form labels.json as a bare list
+    (its other fields lost), in place (a SIGKILL mid-write left 0 bytes), and four scenes
+    entered at once kept three entries (a user trial)."""
+    import json
+    import os
+    import threading
+
+    from asnn.io import files
+    from asnn.stimuli import make_scene, write_video
+
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    write_video(make_scene("looming", size=(64, 64), frames=8).frames, folder / "a.mp4", 20.0)
+    labels = folder / "labels.json"
+    labels.write_text(json.dumps({"version": 3, "author": "me", "clips": []}))
+    main(["label", str(folder)])
+    document = json.loads(labels.read_text())
+    assert document["author"] == "me" and [e["file"] for e in document["clips"]] == ["a.mp4"]
+    threads = [threading.Thread(target=main, args=(["scene", "looming", str(folder / f"s{i}.mp4"),
+                                                    "--size", "64x64", "--labels", str(labels)],))
+               for i in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    document = json.loads(labels.read_text())
+    assert sorted(e["file"] for e in document["clips"]) == ["a.mp4", "s0.mp4", "s1.mp4",
+                                                           "s2.mp4", "s3.mp4"]
+    assert document["version"] == 3
+    # a write that fails leaves the file as it was, and no temporary file; a link stays a link
+    before = labels.read_text()
+    monkeypatch.setattr(files.os, "replace", lambda *a: (_ for _ in ()).throw(OSError("full")))
+    with pytest.raises(OSError):
+        files.write_atomically(labels, "[]")
+    monkeypatch.undo()
+    assert labels.read_text() == before and sorted(os.listdir(folder)) == sorted(
+        ["a.mp4", "labels.json", *(f"s{i}.mp4" for i in range(4))])
+    link = tmp_path / "link.json"
+    link.symlink_to(labels)
+    files.write_atomically(link, "[]\n")
+    assert link.is_symlink() and labels.read_text() == "[]\n"

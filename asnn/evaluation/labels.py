@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import difflib
 import json
+import math
 import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -28,6 +29,7 @@ from pathlib import Path
 from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, ValidationError,
                       field_validator, model_validator)
 
+from ..io.files import write_atomically
 from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside, a mistake
 
 # what OpenCV's FFmpeg backend commonly reads (dashcams write .ts and .mts too); bags (.mcap)
@@ -37,7 +39,7 @@ VIDEO_SUFFIXES = (".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4
 
 __all__ = ["VIDEO_SUFFIXES", "ClipLabel", "center_outside", "check_labels", "clip_hint",
            "label_problem", "load_labels", "mismatches", "read_entries", "result_name",
-           "unlabelled", "unlabelled_videos"]
+           "unlabelled", "unlabelled_videos", "write_entries"]
 
 
 class ClipLabel(BaseModel):
@@ -234,15 +236,45 @@ def load_labels(path: str | Path) -> list[dict]:
 MAX_LABELS_BYTES = 64 << 20
 
 
-def read_entries(path: str | Path) -> list:
-    """The entries of a ``labels.json`` (a list, or an object's ``clips`` list), unchecked.
+class _LabelsError(ValueError):
+    """What the JSON reader's hooks find (a ValueError of json.loads' own is a syntax error)."""
+
+
+def _no_constant(name: str):
+    """NaN and Infinity are not JSON: a label holding one passed every check and stopped the
+    evaluation once it had run, when its results were written as JSON."""
+    raise _LabelsError(f"{name} is not a JSON number")
+
+
+def _finite(text: str) -> float:
+    """A JSON number as a float; one beyond float's range (1e400) would be infinite."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise _LabelsError(f"{text} is beyond a float's range")
+    return value
+
+
+def _unique_keys(pairs: list[tuple[str, object]]) -> dict:
+    """A JSON object whose keys are given once: a second ``collision`` silently replaced the
+    first, and a rewrite of the file lost it."""
+    seen = {}
+    for key, value in pairs:
+        if key in seen:
+            raise _LabelsError(f"an entry gives {key!r} twice")
+        seen[key] = value
+    return seen
+
+
+def _read_document(path: str | Path):
+    """A ``labels.json``'s JSON as it is (a list, or an object with ``clips``), unchecked.
 
     Raises
     ------
     OSError
         If the file cannot be read.
     ValueError
-        If it is not JSON or holds neither form.
+        If it is not a regular file of at most :data:`MAX_LABELS_BYTES` of JSON (NaN, a
+        number beyond a float's range or a key given twice in an object is not JSON here).
     """
     path = Path(path)
     if path.exists() and not path.is_file():  # a pipe or /dev/zero would be read without end
@@ -252,7 +284,10 @@ def read_entries(path: str | Path) -> list:
     if len(raw) > MAX_LABELS_BYTES:
         raise ValueError(f"{path}: larger than {MAX_LABELS_BYTES >> 20} MiB")
     try:
-        data = json.loads(raw.decode("utf-8"))
+        data = json.loads(raw.decode("utf-8"), parse_constant=_no_constant,
+                          parse_float=_finite, object_pairs_hook=_unique_keys)
+    except _LabelsError as exc:
+        raise ValueError(f"{path}: {exc}") from None
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path}: not JSON ({exc})") from None
     except RecursionError:  # lists in lists, thousands deep: Python's parser gives up
@@ -261,11 +296,48 @@ def read_entries(path: str | Path) -> list:
         raise ValueError(f"{path}: not UTF-8 text (save it as UTF-8)") from None
     except ValueError as exc:  # an integer of thousands of digits, which Python refuses
         raise ValueError(f"{path}: not JSON this reads ({exc})") from None
+    return data
+
+
+def read_entries(path: str | Path) -> list:
+    """The entries of a ``labels.json`` (a list, or an object's ``clips`` list), unchecked.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be read.
+    ValueError
+        If it is not JSON (:func:`_read_document`) or holds neither form.
+    """
+    data = _read_document(path)
     if isinstance(data, dict):
         data = data.get("clips")
     if not isinstance(data, list):
         raise ValueError(f"{path}: expected a list of clip labels (or an object with 'clips')")
     return data
+
+
+def write_entries(path: str | Path, entries: list, indent: int = 2) -> None:
+    """Write the entries of a ``labels.json``, keeping the file's form: where it holds an object,
+    the object with its other fields and ``clips`` replaced; otherwise a list. The file is
+    replaced whole (:func:`asnn.io.files.write_atomically`): a process killed meanwhile leaves
+    the old labels or the new ones. Hold :func:`asnn.io.files.folder_lock` from the read that
+    chose ``entries`` to this write, so that processes adding clips at once keep each other's.
+
+    Raises
+    ------
+    OSError
+        If it cannot be written (the file is then as it was).
+    """
+    document = entries
+    if Path(path).exists():
+        try:
+            existing = _read_document(path)
+        except ValueError:  # entries read from it were checked; a file replaced by junk since
+            existing = None
+        if isinstance(existing, dict):
+            document = {**existing, "clips": entries}
+    write_atomically(path, json.dumps(document, indent=indent, allow_nan=False) + "\n")
 
 
 def center_outside(label: Mapping, width: int, height: int) -> str | None:

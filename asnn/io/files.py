@@ -1,0 +1,60 @@
+"""Files written whole: a process killed while it writes leaves the old file or the new one,
+and processes that read, change and write one file take turns."""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+__all__ = ["folder_lock", "write_atomically"]
+
+
+def write_atomically(path: str | Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file beside it, flushed to disk
+    and renamed over it. Where ``path`` is a symbolic link, its target is replaced and the
+    link kept. The file keeps its permission bits (a new one gets the umask's).
+
+    Raises
+    ------
+    OSError
+        If the folder cannot take the temporary file or the rename fails; ``path`` is then
+        as it was.
+    """
+    target = Path(os.path.realpath(path))
+    mode = target.stat().st_mode & 0o7777 if target.exists() else None
+    fd, temporary = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.",
+                                     suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        if mode is None:
+            umask = os.umask(0)
+            os.umask(umask)
+            mode = 0o666 & ~umask
+        os.chmod(temporary, mode)
+        os.replace(temporary, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(temporary)
+        raise
+
+
+@contextlib.contextmanager
+def folder_lock(path: str | Path) -> Iterator[None]:
+    """Hold an exclusive lock on the folder of ``path`` (a link's target's folder): other
+    processes taking it for the same folder wait. For a read, change and write of one file
+    that :func:`write_atomically` replaces (a lock on the file itself would be on the inode
+    the rename retires)."""
+    folder = os.path.dirname(os.path.realpath(path))
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
