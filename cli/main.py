@@ -73,6 +73,12 @@ def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespa
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    for arg in argv:  # bytes of another encoding (a file name): OpenCV crashes on such a path
+        try:
+            arg.encode("utf-8")
+        except UnicodeEncodeError:
+            print(f"asnn: error: {arg!r} is not UTF-8 text (rename the file)", file=sys.stderr)
+            return 2
     try:
         # the commands' modules take a second or two to import: Ctrl-C then is an interrupt too
         if argv[:1] == ["detect"]:

@@ -640,3 +640,16 @@ def test_a_slow_clip_is_noted_and_one_whose_frames_the_model_times_by_default_sa
     assert f"runs at {fps:g} frames a second; ASNN loses hits below 18" in err
     assert ("frames are more than 1 s apart, so the targets' expansion and ttc are computed "
             "for 0.05 s a frame" in err) == apart
+
+
+def test_a_file_name_that_is_not_utf8_is_refused_where_opencv_would_crash(tmp_path, capsys):
+    """OpenCV 5 crashes (SIGSEGV) on a path holding bytes of another encoding: asnn label,
+    scene and detect died with status 139 on such a name (a user trial)."""
+    from asnn.io.video import VideoError, open_video
+
+    name = os.fsdecode(b"x\xff.mp4")
+    assert main(["scene", "looming", str(tmp_path / name)]) == 2
+    assert "is not UTF-8 text" in capsys.readouterr().err
+    (tmp_path / name).write_bytes(b"\0" * 10)
+    with pytest.raises(VideoError, match="a file name that is not UTF-8"):
+        open_video(tmp_path / name)

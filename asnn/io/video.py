@@ -55,6 +55,11 @@ class VideoClip:
     def __init__(self, path: str | Path, decoder_threads: int | None = None):
         self.path = Path(path)
         self.decoder_threads = decoder_threads
+        try:
+            str(self.path).encode("utf-8")
+        except UnicodeEncodeError:  # bytes of another encoding: OpenCV crashes on the name
+            raise VideoError(f"{str(self.path)!r}: a file name that is not UTF-8, which OpenCV "
+                             "cannot open: rename the file") from None
         if self.path.is_dir():
             raise VideoError(f"{self.path}: is a folder, not a video file")
         if not self.path.is_file():
