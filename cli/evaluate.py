@@ -175,12 +175,14 @@ def _eval_output(relative: PurePosixPath) -> bool:
             or (len(parts) == 3 and parts[0] == "results" and suffix == ".jsonl"))
 
 
-def _replace_previous_run(out: Path, since: float) -> None:
+def _replace_previous_run(out: Path, since: float, read: Path | None = None) -> None:
     """Leave ``out`` holding this run's files only: remove those the previous run listed in
     the manifest, if unchanged since (their time as listed) and not written again by this run,
     and list this run's: the files of eval's kinds (:func:`_eval_output`) written since
-    ``since``. A file of another kind, one edited since it was listed, and anything outside
-    ``out`` are never removed."""
+    ``since``. A file of another kind, one edited since it was listed, the labels file this run
+    read (``read``: a suite's labels.json scored as a clips folder in place), and anything
+    outside ``out`` are never removed."""
+    kept = None if read is None else read.resolve()
     if not out.is_dir():
         return
     previous: dict[str, int] = {}
@@ -205,6 +207,7 @@ def _replace_previous_run(out: Path, since: float) -> None:
         path = out / name
         if (name in written or not _eval_output(PurePosixPath(name)) or path.is_symlink()
                 or not path.is_file() or root not in path.resolve().parents
+                or path.resolve() == kept
                 or path.stat().st_mtime_ns != mtime):
             continue
         path.unlink()
@@ -237,7 +240,10 @@ def run(args: argparse.Namespace) -> int:
     since = time.time()
     status = _evaluate(args)
     if status in (0, 1):  # a report was written
-        _replace_previous_run(Path(args.out), since)
+        read = None
+        if args.clips_dir and not (args.synthetic or args.paper):
+            read = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
+        _replace_previous_run(Path(args.out), since, read)
     return status
 
 

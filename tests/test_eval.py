@@ -646,6 +646,13 @@ def test_an_out_folder_keeps_what_eval_did_not_write_and_what_was_edited(tmp_pat
     assert not ours.exists() and not (out / "results").exists()
     assert edited.read_text() == "# report" and mine.read_text() == "mine"
     assert (out / MANIFEST).read_text() == ""
+    # a suite's folder scored in place as a clips folder: its labels.json, listed by the suite's
+    # run and not written by this one, was removed after being scored (a user trial)
+    labels = out / "labels.json"
+    labels.write_text("[]")
+    _replace_previous_run(out, since=0.0)
+    _replace_previous_run(out, since=later, read=labels)
+    assert labels.exists()
 
 
 def test_the_maps_figure_draws_motion_where_it_points_on_the_image():
