@@ -119,7 +119,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _label_name(labels: Path, out: Path) -> str:
     """The clip's ``file`` in ``labels``: its path relative to the labels' folder."""
-    return Path(os.path.relpath(out.resolve(), labels.resolve().parent)).as_posix()
+    # the folder of the labels path as given, not of a link's target: asnn label and asnn
+    # eval read the names relative to the folder the file is found in
+    return Path(os.path.relpath(os.path.abspath(out), os.path.abspath(labels.parent))).as_posix()
 
 
 def _label_entries(labels: Path, out: Path) -> list:
@@ -156,5 +158,7 @@ def _enter_label(labels: Path, out: Path, scene) -> None:
     labels.parent.mkdir(parents=True, exist_ok=True)
     with folder_lock(labels):
         entries = read_entries(labels) if labels.exists() else []
-        entries = [e for e in entries if not (isinstance(e, dict) and e.get("file") == file)]
+        entries = [e for e in entries  # ./clip.mp4 names the same clip as clip.mp4
+                   if not (isinstance(e, dict) and isinstance(e.get("file"), str)
+                           and os.path.normpath(e["file"]) == os.path.normpath(file))]
         write_entries(labels, entries + [scene.label(file)], indent=1)

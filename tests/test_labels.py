@@ -429,3 +429,21 @@ def test_labels_are_written_whole_in_their_form_and_writers_at_once_keep_each_ot
     link.symlink_to(labels)
     files.write_atomically(link, "[]\n")
     assert link.is_symlink() and labels.read_text() == "[]\n"
+
+
+def test_a_scene_is_named_from_the_labels_folder_given_and_replaces_its_own_entry(tmp_path):
+    """scene --labels named the clip from a linked labels file's target folder (refused, or
+    a name asnn label could not find), and added a second entry where one said ./s.mp4."""
+    import json
+
+    (tmp_path / "store").mkdir()
+    (tmp_path / "clips").mkdir()
+    (tmp_path / "store" / "real.json").write_text(
+        '[{"file": "./s.mp4", "fps": 20.0, "collision": false}]')
+    labels = tmp_path / "clips" / "labels.json"
+    labels.symlink_to(tmp_path / "store" / "real.json")
+    assert main(["scene", "looming", str(tmp_path / "clips" / "s.mp4"), "--size", "64x64",
+                 "--labels", str(labels)]) == 0
+    entries = json.loads(labels.read_text())
+    assert [e["file"] for e in entries] == ["s.mp4"] and entries[0]["collision"] is True
+    assert labels.is_symlink()
