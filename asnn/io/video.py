@@ -1,5 +1,5 @@
-"""Reading video files into frames, and checking one written (the only file I/O of the asnn
-package)."""
+"""Reading video files into frames (at most :data:`asnn.io.images.MAX_SIDE` a side), and
+checking one written."""
 
 from __future__ import annotations
 
