@@ -17,6 +17,7 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path, PurePosixPath
 
 from asnn.evaluation import scoring
@@ -128,7 +129,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="output directory (default: %(default)s); it then holds this run's "
                         "results: the reports, results, plots and figures an earlier run wrote "
                         "there, unchanged since, and this one did not write again are removed "
-                        f"(each run's are listed in DIR/{MANIFEST}); nothing else is touched")
+                        f"(each run's are listed in DIR/{MANIFEST}); nothing else is touched, "
+                        "and a labels.json or report.md there that no eval wrote stops the "
+                        "run before it starts")
     p.add_argument("--early-tolerance", type=tolerance_seconds, metavar="SECONDS",
                    help="with CLIPS_DIR (not --held-out, which scores by SPEC's rule): a first "
                         "warning up to this long before the labelled "
@@ -219,11 +222,26 @@ def _replace_previous_run(out: Path, since: float, read: Path | None = None) -> 
                                         in sorted(written.items())), encoding="utf-8")
 
 
-def _out_problem(out: Path) -> str | None:
+def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
     """Why ``--out`` cannot be the results' folder, found before anything runs, or None: a file
-    there, or a file or a folder without write access where it would be made."""
+    there, a file or a folder without write access where it would be made, or a file of the
+    names this run ``writes`` there that no asnn eval wrote (not in its manifest: a user's
+    labels.json or report.md, which the run would replace)."""
     if out.exists():
-        return None if out.is_dir() else f"--out {out}: not a folder"
+        if not out.is_dir():
+            return f"--out {out}: not a folder"
+        try:
+            listed = {line.partition("\t")[2] for line in
+                      (out / MANIFEST).read_text(encoding="utf-8").splitlines()}
+        except (OSError, UnicodeDecodeError):
+            listed = set()
+        foreign = [name for name in writes if (out / name).exists() and name not in listed]
+        if foreign:
+            verb, them = ("was", "it") if len(foreign) == 1 else ("were", "them")
+            return (f"--out {out}: {', '.join(foreign)} there {verb} not written by asnn eval "
+                    f"(not in {MANIFEST}), and this run would replace {them}: move {them}, or "
+                    "choose another --out")
+        return None
     parent = out.parent
     while not parent.exists():  # the nearest folder there is, where the rest is made
         parent = parent.parent
@@ -277,7 +295,10 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
               file=sys.stderr)
         return 2
-    problem = _out_problem(Path(args.out))
+    writes = (("held_out.md", "held_out.json") if args.held_out else
+              ("labels.json", "report.md", "results.json") if args.synthetic else
+              ("report.md", "results.json"))
+    problem = _out_problem(Path(args.out), writes)
     if problem is not None:  # before the first clip runs, not when its results are written
         print(f"asnn eval: {problem}", file=sys.stderr)
         return 2

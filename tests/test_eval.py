@@ -879,3 +879,21 @@ def test_a_pool_of_more_jobs_than_tasks_starts_a_process_per_task_only(capsys):
     with pytest.raises(SystemExit):
         main(["eval", "--synthetic", "--jobs", "65"])
     assert "argument --jobs: must be at most 64" in capsys.readouterr().err
+
+
+def test_an_out_folder_whose_labels_or_report_no_eval_wrote_is_refused_before_the_run(
+        tmp_path, capsys):
+    """asnn eval --synthetic --out DIR replaced a labels.json and a report.md the user had
+    written there (its help says nothing else is touched)."""
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "labels.json").write_text('[{"file": "a.mp4", "description": "MY HAND LABEL"}]')
+    assert main(["eval", "--synthetic", "--cases", "loom-dark-c1.0-d12-center", "--detectors",
+                 "lgmd1", "--no-plots", "--out", str(out)]) == 2
+    assert "labels.json there was not written by asnn eval" in capsys.readouterr().err
+    assert "MY HAND LABEL" in (out / "labels.json").read_text()
+    # what an eval wrote and listed is replaced by the next one
+    again = tmp_path / "again"
+    for _ in range(2):
+        assert main(["eval", "--synthetic", "--cases", "loom-dark-c1.0-d12-center",
+                     "--detectors", "lgmd1", "--no-plots", "--out", str(again)]) in (0, 1)
