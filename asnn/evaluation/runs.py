@@ -21,6 +21,7 @@ from pydantic import ValidationError
 
 from . import scoring
 from ..detectors import MODELS, Detector, make_detector
+from ..io.files import write_atomically
 from ..params import DEFAULT_PRESET, ASNNParams, preset
 
 __all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
@@ -243,9 +244,10 @@ def write_jsonl(path: Path, records: Sequence[Mapping]) -> Path:
 
 
 def write_json(path: Path, data) -> Path:
-    """Write JSON (indented, no NaN)."""
+    """Write JSON (indented, no NaN), replacing the file whole: a run stopped meanwhile leaves
+    the previous file or the new one, never a part (:func:`asnn.io.files.write_atomically`)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    write_atomically(path, json.dumps(data, indent=1, allow_nan=False) + "\n")
     return path
 
 
