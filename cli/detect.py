@@ -140,8 +140,11 @@ def _output_problem(path: str | None, flag: str) -> str | None:
     """Why an output path cannot be written, found before the run, or None. Its folder need
     not exist: the folders missing are made once the input opens (as ``asnn scene`` makes
     them), where the nearest existing one is a folder this process may write."""
-    if not path or path == "-":
+    if not path:
         return None
+    if path == "-":  # standard output: the JSON lines' outputs only; the others write files
+        return None if flag in ("--jsonl", "--tracks") else \
+            f"{flag} -: writes a file (- is standard output, for --jsonl and --tracks)"
     target = Path(path)
     if target.is_dir():
         return f"{flag} {path}: is a folder"
@@ -164,18 +167,31 @@ def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
     """Why the outputs would overwrite the input or each other, or None: an output that is the
     input file (or lies in the input's bag folder) would be truncated before a frame is read."""
     source = Path(split_topic(video)[0]).resolve()
-    seen: dict[Path, str] = {}
+    seen: dict[object, str] = {}
+    try:
+        stdout = os.fstat(sys.stdout.fileno())
+        stdout = (stdout.st_dev, stdout.st_ino)
+    except (OSError, ValueError, AttributeError):  # no real standard output (in-process)
+        stdout = None
     for flag, path in outputs:
-        if not path or path == "-":
+        if not path:
             continue
         target = Path(path).resolve()
-        if target.exists() and source.exists() and os.path.samefile(target, source):
+        if path != "-" and target.exists() and source.exists() and \
+                os.path.samefile(target, source):
             return f"{flag} {path}: is the input {video}"  # by any name or link
-        if source.is_dir() and source in target.parents:
+        if path != "-" and source.is_dir() and source in target.parents:
             return f"{flag} {path}: inside the input bag's folder {video}"
-        if target in seen:
-            return f"{flag} and {seen[target]} both write {path}"
-        seen[target] = flag
+        # the same file by any name: a hard link, /dev/stdout beside -
+        key = target
+        if path == "-":
+            key = stdout or "-"
+        elif target.exists():
+            stat = target.stat()
+            key = (stat.st_dev, stat.st_ino)
+        if key in seen:
+            return f"{flag} and {seen[key]} both write {path}"
+        seen[key] = flag
     return None
 
 

@@ -273,9 +273,23 @@ def test_an_output_over_the_input_or_another_output_is_refused_before_it_is_open
     for args, says in [(["--annotate", str(copy)], f"--annotate {copy}: is the input"),
                        (["--jsonl", str(link)], "is the input"),  # the same file by another name
                        (["--jsonl", str(tmp_path / "a"), "--tracks", str(tmp_path / "a")],
-                        "--tracks and --jsonl both write")]:
+                        "--tracks and --jsonl both write"),
+                       # a hard link to another output: the two interleaved, exit 0
+                       (["--jsonl", str(tmp_path / "b"), "--tracks", str(tmp_path / "b2")],
+                        "--tracks and --jsonl both write"),
+                       # - is standard output, for the JSON lines: these wrote a file named -
+                       # (or -.png), or failed once the run had truncated the other outputs
+                       (["--mcap", "-"], "--mcap -: writes a file"),
+                       (["--plot", "-"], "--plot -: writes a file"),
+                       (["--jsonl", str(tmp_path / "keep"), "--annotate", "-"],
+                        "--annotate -: writes a file")]:
+        (tmp_path / "b").write_text("")
+        if not (tmp_path / "b2").exists():
+            os.link(tmp_path / "b", tmp_path / "b2")
+        (tmp_path / "keep").write_text("mine")
         assert main(["detect", str(copy), *args]) == 2
         assert says in capsys.readouterr().err
+        assert (tmp_path / "keep").read_text() == "mine"
     assert copy.read_bytes() == before  # the recording is intact
 
 
