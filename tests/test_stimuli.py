@@ -718,3 +718,15 @@ def test_a_paper_scene_refuses_a_rate_or_speed_it_cannot_draw_and_records_its_ar
     scene = make_scene("looming_over_stripes", radius=4.0, stripe_speed=3.0, fps=25.0)
     assert (scene.params["radius"], scene.params["stripe_speed"], scene.params["fps"]) == \
         (4.0, 3.0, 25.0)
+
+
+def test_a_clip_the_encoder_would_write_at_another_size_is_refused(tmp_path):
+    """OpenCV's encoders wrote a 161x121 scene as 160x120 without a word, its label still in
+    the 161x121 frames' pixels (an output trial)."""
+    from asnn.stimuli import make_scene, write_video
+
+    frames = make_scene("looming", size=(161, 121), frames=4).frames
+    with pytest.raises(OSError, match="at 161x121: OpenCV's encoder writes even sizes only"):
+        write_video(frames, tmp_path / "odd.mp4")
+    assert not (tmp_path / "odd.mp4").exists()
+    assert write_video(frames[:, :120, :160], tmp_path / "even.mp4").exists()

@@ -151,8 +151,9 @@ def open_video(path: str | Path, decoder_threads: int | None = None) -> VideoCli
     return VideoClip(path, decoder_threads)
 
 
-def check_written(path: str | Path, frames: int) -> None:
-    """Check that a video OpenCV's ``VideoWriter`` has written and released holds its frames.
+def check_written(path: str | Path, frames: int) -> tuple[int, int]:
+    """Check that a video OpenCV's ``VideoWriter`` has written and released holds its frames;
+    their size as written, (width, height): the encoders round an odd one down without a word.
 
     The writer reports nothing when a write fails (``write`` returns None in Python; FFmpeg
     only logs a warning): on a full disk an MP4 loses its index, written last, and does not
@@ -169,10 +170,12 @@ def check_written(path: str | Path, frames: int) -> None:
     try:
         stated = int(capture.get(cv2.CAP_PROP_FRAME_COUNT) or 0) if capture.isOpened() else -1
         last_decodes = stated == frames and _decodes(capture, frames - 1)
+        size = (int(capture.get(cv2.CAP_PROP_FRAME_WIDTH)),
+                int(capture.get(cv2.CAP_PROP_FRAME_HEIGHT)))
     finally:
         capture.release()
     if last_decodes:
-        return
+        return size
     if _disk_full(path):
         raise VideoError(f"cannot write {path}: No space left on device (the video is cut "
                          "short)")

@@ -100,7 +100,8 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
     ------
     OSError
         If OpenCV cannot open a writer for the path, or the file written does not hold the
-        frames (a full disk: the writer itself fails silently).
+        frames (a full disk: the writer itself fails silently), or holds them at another size
+        (an odd width or height, which the encoders round down; the file is removed).
     ValueError
         For an iterable without frames (an empty array writes an empty video).
     """
@@ -126,8 +127,10 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
                 written += 1
     finally:
         writer.release()
-    if written:
-        check_written(path, written)
+    if written and check_written(path, written) != (w, h):
+        path.unlink()  # not the frames asked for, whose labels are in their pixels
+        raise OSError(f"cannot write {path} at {w}x{h}: OpenCV's encoder writes even sizes "
+                      "only (give an even size, or a .mcap bag)")
     return path
 
 
