@@ -116,28 +116,29 @@ def positive(value: str) -> float:
     return number
 
 
+def _interval(value: str, low: float, high: float, *, open_low: bool, unit: str = "") -> float:
+    """A finite number in (low, high] (``open_low``) or [low, high]."""
+    number = _number(value)
+    if not (low < number if open_low else low <= number) or not number <= high:
+        raise argparse.ArgumentTypeError(
+            f"must lie in {'(' if open_low else '['}{low:g}, {high:g}]{' ' + unit if unit else ''}"
+            f": {value!r}")
+    return number
+
+
 def contrast(value: str) -> float:
     """A Weber contrast a scene can draw: more than 0 (an object to see), at most 1."""
-    number = _number(value)
-    if not 0 < number <= 1:
-        raise argparse.ArgumentTypeError(f"must lie in (0, 1]: {value!r}")
-    return number
+    return _interval(value, 0, 1, open_low=True)
 
 
 def seconds(value: str) -> float:
     """A duration of more than 0 and at most :data:`MAX_SECONDS`."""
-    number = _number(value)
-    if not 0 < number <= MAX_SECONDS:
-        raise argparse.ArgumentTypeError(f"must lie in (0, {MAX_SECONDS:g}] seconds: {value!r}")
-    return number
+    return _interval(value, 0, MAX_SECONDS, open_low=True, unit="seconds")
 
 
 def seconds_or_zero(value: str) -> float:
     """A duration of 0 to :data:`MAX_SECONDS`."""
-    number = _number(value)
-    if not 0 <= number <= MAX_SECONDS:
-        raise argparse.ArgumentTypeError(f"must lie in [0, {MAX_SECONDS:g}] seconds: {value!r}")
-    return number
+    return _interval(value, 0, MAX_SECONDS, open_low=False, unit="seconds")
 
 
 def non_negative(value: str) -> float:

@@ -178,6 +178,19 @@ def _eval_output(relative: PurePosixPath) -> bool:
             or (len(parts) == 3 and parts[0] == "results" and suffix == ".jsonl"))
 
 
+def _listed(out: Path) -> dict[str, int]:
+    """The files the last eval into ``out`` listed in its manifest, with their times (none
+    where it has no readable manifest)."""
+    listed: dict[str, int] = {}
+    try:
+        for line in (out / MANIFEST).read_text(encoding="utf-8").splitlines():
+            mtime, _, name = line.partition("\t")
+            listed[name] = int(mtime)
+    except (OSError, UnicodeDecodeError, ValueError):
+        pass
+    return listed
+
+
 def _replace_previous_run(out: Path, since: float, read: Path | None = None) -> None:
     """Leave ``out`` holding this run's files only: remove those the previous run listed in
     the manifest, if unchanged since (their time as listed) and not written again by this run,
@@ -188,13 +201,7 @@ def _replace_previous_run(out: Path, since: float, read: Path | None = None) -> 
     kept = None if read is None else read.resolve()
     if not out.is_dir():
         return
-    previous: dict[str, int] = {}
-    try:
-        for line in (out / MANIFEST).read_text(encoding="utf-8").splitlines():
-            mtime, _, name = line.partition("\t")
-            previous[name] = int(mtime)
-    except (OSError, UnicodeDecodeError, ValueError):
-        pass
+    previous = _listed(out)
     root = out.resolve()
     written = {}
     # only where eval writes: a whole tree (--out .) is not walked
@@ -230,11 +237,7 @@ def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
     if out.exists():
         if not out.is_dir():
             return f"--out {out}: not a folder"
-        try:
-            listed = {line.partition("\t")[2] for line in
-                      (out / MANIFEST).read_text(encoding="utf-8").splitlines()}
-        except (OSError, UnicodeDecodeError):
-            listed = set()
+        listed = _listed(out)
         foreign = [name for name in writes if (out / name).exists() and name not in listed]
         if foreign:
             verb, them = ("was", "it") if len(foreign) == 1 else ("were", "them")

@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"{out}: name the format by its extension: a video "
                              f"({', '.join(WRITABLE_SUFFIXES)}) or a bag (.mcap)")
         if args.labels:  # a labels file that cannot take the clip stops the command first
-            _label_entries(Path(args.labels), Path(out))
+            _check_labels_file(Path(args.labels), Path(out))
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         if out.lower().endswith(".mcap"):
             from asnn.io.rosbag import write_bag
@@ -124,9 +124,10 @@ def _label_name(labels: Path, out: Path) -> str:
     return Path(os.path.relpath(os.path.abspath(out), os.path.abspath(labels.parent))).as_posix()
 
 
-def _label_entries(labels: Path, out: Path) -> list:
-    """The entries already in ``labels`` (none where it is missing), read before the clip is
-    written so that a labels file that cannot take it stops the command first.
+def _check_labels_file(labels: Path, out: Path) -> None:
+    """Check, before the clip is written, that ``labels`` can take it (read where it exists:
+    :func:`_enter_label` reads it again when it enters the clip), so that a labels file that
+    cannot stops the command first.
 
     Raises
     ------
@@ -144,7 +145,8 @@ def _label_entries(labels: Path, out: Path) -> list:
         raise ValueError(f"{out} is not in the folder of {labels} or below it: asnn eval and "
                          "asnn label read the names in a labels file relative to the clips' "
                          "folder, so keep the labels beside their clips")
-    return read_entries(labels) if labels.exists() else []
+    if labels.exists():
+        read_entries(labels)
 
 
 def _enter_label(labels: Path, out: Path, scene) -> None:
