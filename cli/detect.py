@@ -270,9 +270,10 @@ def _warn(message: str) -> None:
 
 
 def _check_annotated(video: list, path: str | None, frames: int) -> None:
-    """Close the annotated video's writer (``video``: it, once the first frame opened it) and
-    check the file holds its ``frames`` frames: OpenCV's writer fails silently on a full disk,
-    leaving a file that does not play.
+    """Close the annotated video's writer (``video``: it and the frames' size (width, height),
+    once the first frame opened it) and check the file holds its ``frames`` frames: OpenCV's
+    writer fails silently on a full disk, leaving a file that does not play. A size the encoder
+    rounded down (an odd width or height) is a warning: the picture lacks its last column or row.
 
     Raises
     ------
@@ -281,11 +282,16 @@ def _check_annotated(video: list, path: str | None, frames: int) -> None:
     """
     if not video:
         return
-    video[0].release()
+    writer, size = video
+    writer.release()
     try:
-        check_written(path, frames)
+        written = check_written(path, frames)
     except VideoError as exc:
         raise _OutputError(str(exc)) from None
+    if written != size:
+        _warn(f"--annotate {path}: written {written[0]}x{written[1]}, the frames' {size[0]}x"
+              f"{size[1]} rounded down by the encoder (it takes even sizes only): the last "
+              "column or row is left out")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -399,7 +405,7 @@ def run(args: argparse.Namespace) -> int:
                     if not writer.isOpened():
                         raise _OutputError(f"cannot write {args.annotate}")
                     stack.callback(writer.release)
-                    video.append(writer)
+                    video.extend((writer, frame.shape[1::-1]))
                 video[0].write(annotate_frame(frame, response))
             progress.advance()
 

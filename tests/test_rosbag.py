@@ -220,6 +220,22 @@ def test_detect_on_a_mono8_bag_equals_detect_on_the_same_frames_in_a_lossless_vi
     assert any(r["collision"] and r["targets"] for r in from_bag)  # the comparison is not empty
 
 
+def test_an_odd_sized_bag_annotates_with_a_warning_for_the_column_the_encoder_drops(
+        tmp_path, looming, capsys):
+    frames = [f[:95, :95] for f in looming.frames][:6]  # the encoders take even sizes only
+    bag = write_messages(tmp_path / "odd.mcap", {"/camera/image_raw": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(frames)])})
+    video = tmp_path / "odd.mp4"
+    assert main(["detect", str(bag), "--annotate", str(video), "--threads", "1"]) == 0
+    capture = cv2.VideoCapture(str(video))
+    assert (capture.get(cv2.CAP_PROP_FRAME_WIDTH), capture.get(cv2.CAP_PROP_FRAME_HEIGHT)) == (94, 94)
+    capture.release()
+    warnings = [line for line in capsys.readouterr().err.splitlines() if ": warning:" in line]
+    assert warnings == [f"asnn detect: warning: --annotate {video}: written 94x94, the frames' "
+                        "95x95 rounded down by the encoder (it takes even sizes only): the last "
+                        "column or row is left out"]
+
+
 def test_detect_on_colour_and_compressed_bags_equals_the_lossless_video(tmp_path, looming):
     rng = np.random.default_rng(2)
     tint = rng.integers(0, 30, 3)  # colour frames whose channels differ
