@@ -36,7 +36,9 @@ a row the worker logs it at WARNING, and every response says how many frames its
 stepped in the current stream (``stream_frames``, docs/contract.md).
 
 The retina integrates with its fixed time step (0.05 s) whatever the stamps say; the targets'
-time to contact, and with it the default's approach gate, read the stamps' gaps. A robot that
+time to contact, and with it the default's approach gate, read the stamps' gaps (a gap of 0 s
+or more than MAX_FRAME_GAP_S reads as the nominal period, logged when it lasts: a camera
+clock in other units). A robot that
 sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten); when every slot
 is taken, one silent for ``takeover_after`` seconds is forgotten to make room for a new robot.
 
@@ -262,6 +264,8 @@ class _Robot:
     periods: deque = field(default_factory=lambda: deque(maxlen=PERIOD_FRAMES))
     slow_frames: int = 0  # frames in a row whose rate read below SLOW_FPS
     slow_logged: bool = False  # this slow spell was logged
+    untimed_frames: int = 0  # frames in a row whose stamp gap the model cannot believe
+    untimed_logged: bool = False  # this spell was logged
 
     @property
     def fps(self) -> float | None:
@@ -704,9 +708,13 @@ class WorkerCore:
         default preset loses hits there (README, "At half the frame rate")."""
         if state.stepped == 1:
             state.periods.clear()
-            state.slow_frames = 0
-        elif state.stamp is not None and 0.0 < stamp - state.stamp <= MAX_FRAME_GAP_S:
-            state.periods.append(stamp - state.stamp)
+            state.slow_frames = state.untimed_frames = 0
+        elif state.stamp is not None:
+            gap = stamp - state.stamp
+            timed = 0.0 < gap <= MAX_FRAME_GAP_S
+            if timed:
+                state.periods.append(gap)
+            self._note_untimed(robot, state, timed, gap)
         state.stamp = stamp
         slow = len(state.periods) == PERIOD_FRAMES and state.fps < SLOW_FPS
         state.slow_frames = state.slow_frames + 1 if slow else 0
@@ -719,6 +727,23 @@ class WorkerCore:
                 f"slow:{robot}", "robot %s: its frames are detected at %.1f per second (the "
                 "camera's rate, or frames skipped under load); the default preset is made for "
                 "20 or more", robot, state.fps)
+
+    def _note_untimed(self, robot: str, state: _Robot, timed: bool, gap: float) -> None:
+        """Log when PERIOD_FRAMES frames in a row are stamped 0 s apart or more than
+        MAX_FRAME_GAP_S apart: the model then times them at its nominal period, so the targets'
+        time to contact is off by the camera's true period over the nominal one (a clock
+        in milliseconds, or one that never moves); once per spell, rate-limited."""
+        state.untimed_frames = 0 if timed else state.untimed_frames + 1
+        if self.model != "asnn":  # the baselines time nothing
+            return
+        if timed:
+            state.untimed_logged = False
+        elif state.untimed_frames >= PERIOD_FRAMES and not state.untimed_logged:
+            state.untimed_logged = self._rejections.warning(
+                f"untimed:{robot}", "robot %s: its frames' stamps are %g s apart, not a frame "
+                "period the model believes (0 to %g s): the targets' time to contact is timed "
+                "at %g frames a second instead; stamps are the camera's clock in seconds "
+                "(CONTRACT.md)", robot, gap, MAX_FRAME_GAP_S, 1.0 / state.detector.params.dt)
 
     def _refuse_taken(self, state: _Robot, job: Job, reason: str, detail: str) -> None:
         """A frame taken in is refused when it is processed (its image, its robot's place, the

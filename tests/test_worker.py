@@ -459,6 +459,26 @@ def test_the_rate_a_robot_is_detected_at_is_reported_and_a_slow_one_logged(caplo
     assert core.status()["robots"]["slow"]["fps"] is None
 
 
+@pytest.mark.parametrize("model, stamps, logged", [
+    ("asnn", [k * 50.0 for k in range(12)], "50 s apart"),  # a clock in milliseconds
+    ("asnn", [7.0] * 12, "0 s apart"),  # a clock that never moves
+    ("asnn", [k * 0.05 for k in range(12)], None),
+    ("asnn", [k * 50.0 for k in range(4)], None),  # fewer than PERIOD_FRAMES gaps in a row
+    ("lgmd1", [k * 50.0 for k in range(12)], None),  # it reads no times
+])
+def test_stamps_the_model_cannot_time_by_are_logged_once(caplog, looming, model, stamps,
+                                                         logged):
+    core = WorkerCore(model)
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for seq, stamp in enumerate(stamps):
+            feed(core, "r1", looming.frames[seq], seq, stamp=stamp)
+    lines = [r.getMessage() for r in caplog.records if "stamps are" in r.getMessage()]
+    if logged is None:
+        assert lines == []
+    else:
+        assert len(lines) == 1 and logged in lines[0] and "at 20 frames a second" in lines[0]
+
+
 def test_a_moments_skipped_frames_are_not_logged_as_slow_but_a_later_slowdown_is(caplog,
                                                                                   looming):
     clock = FakeClock()
