@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from ..io.files import write_atomically
 from ..io.sources import BackwardStamps, SourceError, open_source
 from ..params import SLOW_FPS
 from . import figures, scoring
@@ -315,7 +316,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
                                       "clips": [s.to_dict() for s in clip_scores]}
     results["paired"] = paired_comparisons(scores)
     write_json(out_dir / "results.json", results)
-    (out_dir / "report.md").write_text(_clips_report(results), encoding="utf-8")
+    write_atomically(out_dir / "report.md", _clips_report(results))
     if plots:
         _plot_clips(out_dir, labels, specs, results, warmup)
     return results

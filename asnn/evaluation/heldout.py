@@ -47,6 +47,7 @@ from ..approach import frame_pixel
 from ..approach.tracking import (approach_parts, approach_test, better_fit, count_in_regions,
                                  layer_estimates, own_motion_weight, persistence_frames,
                                  smoothed_run)
+from ..io.files import write_atomically
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from ..retina import collision_warning, sigmoid_output, spike_count, spike_rate
@@ -579,7 +580,7 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
     if ties is not None:
         lines += _ties_lines(ties)
     path = out_dir / "held_out.md"
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    write_atomically(path, "\n".join(lines) + "\n")
     return path
 
 

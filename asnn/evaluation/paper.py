@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import retina
+from ..io.files import write_atomically
 from ..model import ASNN
 from ..params import preset
 from ..stimuli import make_scene
@@ -234,5 +235,5 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
                "speed": {k: sweeps["speed"][k] for k in ("values", "peak")},
                "figures": written}
     write_json(out_dir / "results.json", results)
-    (out_dir / "report.md").write_text(_paper_report(results), encoding="utf-8")
+    write_atomically(out_dir / "report.md", _paper_report(results))
     return results

@@ -235,11 +235,10 @@ def run_detector(timed_frames: Iterable[tuple[float, np.ndarray]],
 
 
 def write_jsonl(path: Path, records: Sequence[Mapping]) -> Path:
-    """Write records as JSON lines (the ``asnn detect --jsonl`` format)."""
+    """Write records as JSON lines (the ``asnn detect --jsonl`` format), replacing the file
+    whole (:func:`asnn.io.files.write_atomically`)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", encoding="utf-8") as fh:
-        for r in records:
-            fh.write(json.dumps(r) + "\n")
+    write_atomically(path, "".join(json.dumps(r) + "\n" for r in records))
     return path
 
 

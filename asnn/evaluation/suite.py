@@ -21,6 +21,7 @@ import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from ..io.files import write_atomically
 from ..stimuli.effects import scaled_size
 from ..stimuli.suite import (CASES, DRIVING_SIZE, EXTRA_GROUPS, GROUPS, PLANAR_SIZE,
                              SUITE_VERSION, check_driving_size, check_scale, check_variant,
@@ -256,7 +257,7 @@ def evaluate_suite(out_dir: str | Path, *, detectors: Sequence[str] = DEFAULT_DE
     }
     write_json(out_dir / "labels.json", labels)
     write_json(out_dir / "results.json", results)
-    (out_dir / "report.md").write_text(suite_report(results), encoding="utf-8")
+    write_atomically(out_dir / "report.md", suite_report(results))
     if plots:
         from . import figures
 
