@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 
 from . import _fast, _parallel, retina
-from .approach import ApproachStage, CameraRig, FramePair
+from .approach import ApproachStage, CameraRig, FramePair, frame_pixel
 from .approach.looming import region_expansion
 from .approach.motion_layers import motion_layers
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
@@ -511,9 +511,9 @@ class ASNN:
         else:
             targets = []
             if count:
-                targets = extract_targets(attended, None, None, p.cluster_eps,
-                                          p.cluster_min_samples, p.origin_seed, vectors=vectors,
-                                          points=(ws.rows[:count], ws.cols[:count]))
+                targets = self._in_frame(extract_targets(
+                    attended, None, None, p.cluster_eps, p.cluster_min_samples, p.origin_seed,
+                    vectors=vectors, points=(ws.rows[:count], ws.cols[:count])), g.shape)
         u = float(p.u_scale * total)
         out, spikes, spike_rate = self._spikes(u, g.size)
         maps = None
@@ -572,14 +572,25 @@ class ASNN:
             u = float(p.u_scale * total)
         else:
             u = retina.membrane_potential(g_prime, p.u_scale, p.u_abs)
-            targets = extract_targets(attended, dx, dy, p.cluster_eps, p.cluster_min_samples,
-                                      p.origin_seed)
+            targets = self._in_frame(extract_targets(attended, dx, dy, p.cluster_eps,
+                                                     p.cluster_min_samples, p.origin_seed),
+                                     g.shape)
         out, spikes, spike_rate = self._spikes(u, g.size)
         maps = Maps(P=photo, R=r, V=v, phi=phi, G=g, M_a=m_a, M_d=m_d, G_prime=g_prime,
                     rig=self._rig_mask()) if self.record_maps else None
         return Response(index=frame.index, u=u, out=out, spikes=spikes, spike_rate=spike_rate,
                         collision=retina.collision_warning(spike_rate, p.t_c), targets=targets,
                         maps=maps, tracks=frame.tracks)
+
+    def _in_frame(self, targets: list, grid: tuple[int, int]) -> list:
+        """Cluster targets found on the model's ``grid`` (rows, cols) in the input frame's
+        pixels, where ``max_width`` or ``min_width`` resized the frame (the objects' stage
+        scales its own)."""
+        sx, sy = self.shape[1] / grid[1], self.shape[0] / grid[0]
+        if sx == sy == 1.0:
+            return targets
+        return [dataclasses.replace(t, x=frame_pixel(t.x, sx), y=frame_pixel(t.y, sy),
+                                    pixels=round(t.pixels * sx * sy)) for t in targets]
 
     def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, frame: "_Frame",
                  total: float, points: tuple[np.ndarray, np.ndarray] | None = None

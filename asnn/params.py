@@ -248,7 +248,7 @@ class ASNNParams(BaseModel):
     min_object_pixels: int = Field(30, ge=1, le=4096 * 4096,
                                    description="smallest region kept as an object")
     cluster_eps: float = Field(5.0, gt=0, le=MAX_KERNEL, description="DBSCAN eps, pixels of the "
-                               "model's grid (at most a frame's largest side, 4096)")
+                               "model's grid (at most 255, as the kernels' sizes)")
     cluster_min_samples: int = Field(2, ge=1, le=4096 * 4096,
                                      description="DBSCAN min_samples (a point counts itself)")
     origin_seed: bool = Field(

@@ -42,8 +42,10 @@ class Target:
     energy : float
         ``sqrt(V_X^2 + V_Y^2)``, the mean motion vector's length.
     pixels : int
-        Number of pixels in the cluster, counted in input-frame pixels (where ``max_width``
-        shrinks the frame or ``min_width`` enlarges it, the model's grid's count scaled back).
+        The target's size in input-frame pixels (where ``max_width`` shrinks the frame or
+        ``min_width`` enlarges it, the model's grid's count scaled back): a cluster's core
+        samples (and the origin seed, where ``origin_seed`` adds it and it is a core sample),
+        an object's attended pixels.
     id : int or None
         Stable identifier of the object across the stream's frames (tracked presets).
     expansion : float or None

@@ -527,3 +527,21 @@ def test_kernels_are_compiled_for_a_preset_whose_kernels_are_larger_than_the_war
     from asnn.model import compile_kernels
 
     compile_kernels((asnn_preset("robust", attention_size=101),))
+
+
+@pytest.mark.parametrize("optimised", [True, False])
+def test_cluster_targets_of_a_resized_frame_are_in_the_frames_own_pixels(optimised):
+    import cv2
+
+    scene = make_scene("looming", size=(96, 96), start=2, stop=30, center=(60.0, 30.0))
+    big = [cv2.resize(f, None, fx=4, fy=4, interpolation=cv2.INTER_NEAREST)
+           for f in scene.frames]
+    native = ASNN(asnn_preset("reference"), optimised=optimised)
+    shrunk = ASNN(asnn_preset("reference", max_width=96), optimised=optimised)  # back to 96
+    pairs = [(native.step(f), shrunk.step(g)) for f, g in zip(scene.frames, big)]
+    assert sum(len(a.targets) for a, _ in pairs) > 5
+    for a, b in pairs:
+        assert len(a.targets) == len(b.targets)
+        for ta, tb in zip(a.targets, b.targets):
+            assert (tb.x, tb.y) == pytest.approx((4 * ta.x + 1.5, 4 * ta.y + 1.5), abs=1e-6)
+            assert tb.pixels == 16 * ta.pixels
