@@ -41,7 +41,8 @@ from asnn.io.sources import CLOCK_RESET, Source, SourceError, open_source
 
 from . import keys
 from .logutil import RateLimitedLog
-from .messages import FORMATS, Frame, MessageError, Preview, decode_refusal, encode
+from .messages import (FORMATS, PREVIEW_WIDTH, Frame, MessageError, Preview, decode_refusal,
+                       encode)
 
 __all__ = ["FRAME_QOS", "MAX_NOTICES", "MAX_REPLAY_GAP", "PREVIEW_HZ", "PREVIEW_WIDTH",
            "RefusalNotices", "Source", "SourceError", "SourceRejections", "SubscriberWatch",
@@ -52,7 +53,6 @@ log = logging.getLogger("asnn.camera")
 FRAME_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
                  priority=zenoh.Priority.DATA_LOW, reliability=zenoh.Reliability.BEST_EFFORT)
 PREVIEW_HZ = 2.0     # thumbnails per second on <prefix>/<robot>/preview (0: none)
-PREVIEW_WIDTH = 160  # thumbnail width in pixels (never scaled up)
 MAX_REPLAY_GAP = 5.0  # seconds: a longer pause between two recorded frames is shortened to this
 MAX_NOTICES = 64  # workers whose latest refusal notice a camera keeps
 

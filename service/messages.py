@@ -44,8 +44,8 @@ import msgpack
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from asnn.io.images import (JPEG_QUALITY, MAX_SIDE, ImageError, check_encoded, decode_encoded,
-                             encoded_size)
+from asnn.io import images
+from asnn.io.images import MAX_SIDE, ImageError, check_encoded, decode_encoded, encoded_size
 
 __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
            "Refusal", "Response", "TargetMsg", "VERSION", "decode_frame", "decode_refusal",
@@ -207,11 +207,7 @@ def encode_image(image: np.ndarray, format: str) -> bytes:
         bgr = image if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
         return np.ascontiguousarray(bgr).tobytes()
     if format in ("jpeg", "png"):
-        params = [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY] if format == "jpeg" else []
-        ok, buf = cv2.imencode(".jpg" if format == "jpeg" else ".png", image, params)
-        if not ok:
-            raise ValueError(f"cannot encode a {image.shape} image as {format}")
-        return buf.tobytes()
+        return images.encode(image, format)
     raise ValueError(f"unknown frame format {format!r}; choose one of {', '.join(FORMATS)}")
 
 
@@ -512,10 +508,12 @@ def _finite(fields: dict) -> dict:
 # ``<prefix>/<robot>/preview``: a low-rate thumbnail of the camera's frames for dashboards
 # (docs/contract.md; not part of CONTRACT.md's required interface, the worker ignores it).
 
-__all__ += ["MAX_PREVIEW_BYTES", "MAX_PREVIEW_PIXELS", "Preview", "check_preview", "decode_preview"]
+__all__ += ["MAX_PREVIEW_BYTES", "MAX_PREVIEW_PIXELS", "PREVIEW_WIDTH", "Preview", "check_preview",
+            "decode_preview"]
 
 PreviewFormat = Literal["jpeg", "png"]
 PREVIEW_QUALITY = 70
+PREVIEW_WIDTH = 160  # thumbnail width in pixels (never scaled up)
 MAX_PREVIEW_BYTES = 64 * 1024  # receivers refuse larger thumbnails (asnn camera's are ~5 KiB)
 # ... and thumbnails of more pixels, before decoding them: 64 KiB of png can declare a whole
 # 4096x4096 RGBA image, which took a viewer 0.36 s of CPU and 110 MB to decode (a legit
@@ -535,18 +533,15 @@ class Preview(Frame):
     frame_height: int | None = Field(None, ge=1, le=MAX_SIDE)
 
     @classmethod
-    def from_frame_image(cls, image: np.ndarray, *, seq: int, stamp: float, width: int = 160,
-                         format: str = "jpeg") -> Preview:
-        """Scale a gray or BGR uint8 frame down to ``width`` pixels (never up) and encode it."""
+    def from_frame_image(cls, image: np.ndarray, *, seq: int, stamp: float,
+                         width: int = PREVIEW_WIDTH, format: str = "jpeg") -> Preview:
+        """Scale a gray or BGR uint8 frame down to ``width`` pixels (never up) and encode it
+        (ValueError where the encoder refuses it)."""
         h, w = image.shape[:2]
         tw = max(1, min(int(width), w))
         th = max(1, round(h * tw / w))
         small = image if tw == w else cv2.resize(image, (tw, th), interpolation=cv2.INTER_AREA)
-        if format == "jpeg":
-            ok, buf = cv2.imencode(".jpg", small, [cv2.IMWRITE_JPEG_QUALITY, PREVIEW_QUALITY])
-            data = buf.tobytes() if ok else b""
-        else:
-            data = encode_image(small, format)
+        data = images.encode(small, format, PREVIEW_QUALITY)
         return cls(seq=seq, stamp=stamp, width=tw, height=th, format=format, data=data,
                    frame_width=w, frame_height=h)
 

@@ -18,10 +18,9 @@ import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import cv2
 import numpy as np
 
-from .images import JPEG_QUALITY
+from .images import ENCODED_FORMATS, encode
 from .visualize import target_arrow, target_label
 
 try:
@@ -38,7 +37,7 @@ __all__ = ["DEFAULT_TOPIC_PREFIX", "IMAGE_FORMATS", "RESPONSE_SCHEMA", "Foxglove
            "image_message", "response_message", "target_annotations", "time_ns", "timestamp"]
 
 DEFAULT_TOPIC_PREFIX = "/asnn"
-IMAGE_FORMATS = ("jpeg", "png")
+IMAGE_FORMATS = ENCODED_FORMATS
 TARGET_COLOR = Color(r=0.0, g=0.31, b=1.0, a=1.0)   # the blue of the annotated videos
 WARNING_COLOR = Color(r=1.0, g=0.0, b=0.0, a=1.0)
 LABEL_BACKGROUND = Color(r=1.0, g=1.0, b=1.0, a=0.7)
@@ -89,15 +88,8 @@ def timestamp(ns: int) -> Timestamp:
 def image_message(image: np.ndarray, stamp_ns: int, *, frame_id: str = "camera",
                   format: str = "jpeg") -> CompressedImage:
     """A gray or BGR uint8 frame as a ``foxglove.CompressedImage`` (jpeg, or png: lossless)."""
-    if format not in IMAGE_FORMATS:
-        raise ValueError(f"unknown image format {format!r}; choose one of "
-                         f"{', '.join(IMAGE_FORMATS)}")
-    params = [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY] if format == "jpeg" else []
-    ok, data = cv2.imencode(".jpg" if format == "jpeg" else ".png", image, params)
-    if not ok:
-        raise ValueError(f"cannot encode a {image.shape} frame as {format}")
     return CompressedImage(timestamp=timestamp(stamp_ns), frame_id=frame_id,
-                           data=data.tobytes(), format=format)
+                           data=encode(image, format), format=format)
 
 
 def target_annotations(targets: Sequence[Mapping], stamp_ns: int, size: tuple[int, int], *,

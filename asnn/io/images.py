@@ -25,7 +25,8 @@ import numpy as np
 
 __all__ = ["ENCODED_FORMATS", "JPEG_QUALITY", "MAX_JPEG_MARKERS", "MAX_JPEG_SCANS",
            "MAX_PNG_ANCILLARY", "MAX_SIDE", "ImageError",
-           "check_encoded", "decode_encoded", "encoded_size", "min_encoded_bytes", "to_uint8"]
+           "check_encoded", "decode_encoded", "encode", "encoded_size", "min_encoded_bytes",
+           "to_uint8"]
 
 MAX_SIDE = 4096  # largest accepted picture width or height, whatever its source
 ENCODED_FORMATS = ("jpeg", "png")
@@ -329,6 +330,24 @@ def decode_encoded(data: bytes, format: str, size: tuple[int, int] | None = None
         raise ImageError("bad-size", f"{format} image decodes to {image.shape[1]}x"
                          f"{image.shape[0]}, its header says {w}x{h}")
     return image
+
+
+def encode(image: np.ndarray, format: str, quality: int = JPEG_QUALITY) -> bytes:
+    """A gray or BGR uint8 image as a jpeg (at ``quality``) or png file's bytes.
+
+    Raises
+    ------
+    ValueError
+        For another format, or an image the encoder refuses.
+    """
+    if format not in ENCODED_FORMATS:
+        raise ValueError(f"unknown image format {format!r}; choose one of "
+                         f"{', '.join(ENCODED_FORMATS)}")
+    params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)] if format == "jpeg" else []
+    ok, data = cv2.imencode(".jpg" if format == "jpeg" else ".png", image, params)
+    if not ok:
+        raise ValueError(f"cannot encode a {image.shape} image as {format}")
+    return data.tobytes()
 
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
