@@ -421,3 +421,19 @@ def test_detect_mcap_on_a_full_disk_is_one_error_line(tmp_path, capsys):
     assert main(["detect", str(video), "--mcap", "/dev/full"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "cannot write /dev/full: No space left on device" in err[0]
+
+
+def test_the_response_schema_names_every_field_of_both_kinds_of_response():
+    from asnn.io.foxglove_mcap import RESPONSE_SCHEMA
+    from asnn.model import ASNN
+
+    properties = RESPONSE_SCHEMA["properties"]
+    target = properties["targets"]["items"]["properties"]
+    assert set(Response.model_fields) <= set(properties)
+    assert set(TargetMsg.model_fields) <= set(target)
+    scene = make_scene("looming", size=(96, 96), start=2, stop=30)
+    model = ASNN("robust")
+    records = [model.step(f, i / 20).record(i, i / 20) for i, f in enumerate(scene.frames)]
+    assert set().union(*records) <= set(properties)
+    tracked = [t for r in records for t in r["targets"]]
+    assert tracked and set().union(*tracked) <= set(target)

@@ -48,7 +48,9 @@ _TIME = {"type": "object", "description": "the frame's time (header stamp of a b
          "time of a camera)", "properties": {"sec": _INTEGER, "nsec": _INTEGER}}
 _TARGET = {"type": "object", "properties": {
     "x": _NUMBER, "y": _NUMBER, "direction": _NUMBER, "energy": _NUMBER, "pixels": _INTEGER,
-    "id": {"type": ["integer", "null"]}, "ttc": {"type": ["number", "null"]}}}
+    "id": {"type": ["integer", "null"]}, "expansion": {"type": ["number", "null"]},
+    "ttc": {"type": ["number", "null"]}, "offset": {"type": ["number", "null"]},
+    "approaching": {"type": ["boolean", "null"]}}}
 RESPONSE_SCHEMA = {
     "title": "asnn.Response",
     "description": "The detector's response to one frame (CONTRACT.md): asnn detect's record, "
@@ -58,12 +60,14 @@ RESPONSE_SCHEMA = {
         "timestamp": _TIME,
         "frame": {**_INTEGER, "description": "0-based frame index (asnn detect)"},
         "t": {**_NUMBER, "description": "seconds since the first frame (asnn detect)"},
+        "v": {**_INTEGER, "description": "wire format version (the service's Response)"},
         "robot": {"type": "string"}, "seq": _INTEGER, "stamp": _NUMBER,
         "u": _NUMBER, "out": _NUMBER, "spikes": _INTEGER, "spike_rate": _NUMBER,
         "collision": {"type": "boolean"},
         "targets": {"type": "array", "items": _TARGET},
         "model": {"type": "string"}, "preset": {"type": "string"}, "worker": {"type": "string"},
         "latency_ms": _NUMBER, "dropped": _INTEGER, "model_ms": {"type": ["number", "null"]},
+        "stream_frames": {"type": ["integer", "null"]},
     },
 }
 
