@@ -76,10 +76,9 @@ def key_prefix(value: str) -> str:
 def _key_chunk(value: str, what: str) -> str:
     """An id that is one key chunk, ``[A-Za-z0-9_-]{1,64}`` (a robot's or a worker's)."""
     try:
-        return keys.check_robot(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"invalid {what} id {value!r}: use 1 to 64 of A-Z a-z 0-9 _ -") from None
+        return keys.check_robot(value, what)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def robot_id(value: str) -> str:

@@ -75,7 +75,7 @@ most its pending frame held (at most ``max_robots`` candidates at once), and it 
 soon as a frame of it fails. So ids that send only undecodable frames cannot lock new robots out.
 
 Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``,
-the labels of :data:`service.messages.REASONS` plus ``bad-key``, ``frame-rejected``,
+the labels of :data:`service.messages.REASONS` plus ``frame-rejected``,
 ``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING, rate-limited:
 the first rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
 with the count of those not shown.

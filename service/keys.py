@@ -44,10 +44,11 @@ class KeySchemeError(ValueError):
     """A robot id, prefix or key that does not follow the key scheme."""
 
 
-def check_robot(robot: str) -> str:
-    """Return ``robot`` if it is a valid robot id (one chunk of ``[A-Za-z0-9_-]{1,64}``)."""
+def check_robot(robot: str, what: str = "robot") -> str:
+    """Return ``robot`` if it is a valid robot id (one chunk of ``[A-Za-z0-9_-]{1,64}``);
+    ``what`` names the id in the error (a worker's ids take the same alphabet)."""
     if not isinstance(robot, str) or not ROBOT_PATTERN.fullmatch(robot):
-        raise KeySchemeError(f"invalid robot id {robot!r}: use 1 to 64 of A-Z a-z 0-9 _ -")
+        raise KeySchemeError(f"invalid {what} id {robot!r}: use 1 to 64 of A-Z a-z 0-9 _ -")
     return robot
 
 

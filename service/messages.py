@@ -17,6 +17,8 @@ is a short stable label that receivers count (REASONS; docs/operations.md):
                          of another size than the message says
 ``bad-image``            jpeg/png data that does not decode to an 8-bit image, or whose header
                          already shows it cannot be a whole image of its size (see below)
+``bad-key``              a message on a key it does not belong to (a refusal naming another
+                         robot than its key's; receivers count keys off the scheme so too)
 
 Bounds on what a message makes a receiver allocate (docs/operations.md, "Hostile input"):
 
@@ -47,6 +49,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from asnn.io import images
 from asnn.io.images import MAX_SIDE, ImageError, check_encoded, decode_encoded, encoded_size
 
+from . import keys
+
 __all__ = ["FORMATS", "Frame", "MAX_ITEMS", "MAX_PAYLOAD", "MAX_SIDE", "MessageError", "REASONS",
            "Refusal", "Response", "TargetMsg", "VERSION", "decode_frame", "decode_refusal",
            "decode_response", "decode_status", "encode", "encode_image", "encode_status",
@@ -67,7 +71,8 @@ MAX_NOTE_LEN = 200  # characters of a refusal's detail and worker id
 MAX_REASON_LEN = 64  # characters of a refusal's reason
 MAX_REFUSAL_BYTES = 4096
 REASONS = ("oversized", "undecodable", "not-a-map", "unsupported-version", "missing-field",
-           "invalid-field", "bad-stamp", "bad-size", "bad-format", "bad-pixels", "bad-image")
+           "invalid-field", "bad-stamp", "bad-size", "bad-format", "bad-pixels", "bad-image",
+           "bad-key")
 
 
 class MessageError(ValueError):
@@ -387,7 +392,7 @@ class Refusal(_Message):
     per robot, so that the camera can say why nothing answers it."""
 
     v: int = Field(VERSION, description="message version (1)")
-    robot: str = Field(pattern=r"^[A-Za-z0-9_-]{1,64}$")
+    robot: str = Field(pattern=f"^{keys.ROBOT_PATTERN.pattern}$")
     worker: str = Field(min_length=1, max_length=MAX_NOTE_LEN)
     reason: str = Field(pattern=rf"^[A-Za-z0-9_.:-]{{1,{MAX_REASON_LEN}}}$",
                         description="the label counted, REASONS and the worker's own "
