@@ -27,7 +27,7 @@ from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
 from asnn.params import preset_names
 
-from .arguments import (count, finite, frame_size, nonempty_path, perturbation, preset_spec,
+from .arguments import (finite, frame_size, nonempty_path, perturbation, preset_spec,
                         processes, tolerance_seconds, warmup_frames, whole)
 
 

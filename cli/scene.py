@@ -15,7 +15,8 @@ from pathlib import Path
 from asnn.evaluation.labels import read_entries, write_entries
 from asnn.io.files import folder_lock
 from asnn.io.video import FPS_RANGE, WRITABLE_SUFFIXES
-from asnn.stimuli import SCENE_NAMES, make_scene, write_video
+from asnn.io.video import write_video
+from asnn.stimuli import SCENE_NAMES, make_scene
 from asnn.stimuli.suite import CASES, make_case, suite_cases
 
 from .arguments import contrast, finite, frame_rate, frame_size, nonempty_path, positive, whole

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from asnn.stimuli import make_scene, write_video
+from asnn.io.video import write_video
+from asnn.stimuli import make_scene
 from cli.main import main
 
 FIELDS = {"frame": int, "t": float, "u": float, "out": float, "spikes": int,

@@ -13,7 +13,8 @@ import pytest
 from asnn.evaluation import paper, scoring
 from asnn.params import preset
 from asnn.evaluation.progress import ProgressPrinter
-from asnn.stimuli import make_scene, write_video
+from asnn.io.video import write_video
+from asnn.stimuli import make_scene
 from cli.main import main
 
 DETECTORS = ("asnn", "asnn:reference", "lgmd1", "lgmd2")

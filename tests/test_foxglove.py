@@ -414,7 +414,7 @@ def test_an_mcap_on_a_full_disk_stops_at_the_first_frame_it_could_not_write():
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full here")
 def test_detect_mcap_on_a_full_disk_is_one_error_line(tmp_path, capsys):
-    from asnn.stimuli import write_video
+    from asnn.io.video import write_video
     from cli.main import main
 
     video = write_video(make_scene("looming", size=(64, 64)).frames, tmp_path / "clip.avi")

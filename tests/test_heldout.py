@@ -10,7 +10,7 @@ import pytest
 from asnn import ASNN, preset
 from asnn.evaluation import heldout, scoring
 from asnn.evaluation.runs import ABLATIONS, at_rate, parse_detector, parse_detectors
-from asnn.stimuli import write_video
+from asnn.io.video import write_video
 from asnn.stimuli.suite import make_case
 from cli.main import main
 

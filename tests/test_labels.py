@@ -10,7 +10,8 @@ import pytest
 
 from asnn.evaluation import scoring
 from asnn.evaluation.labels import check_labels, load_labels, mismatches
-from asnn.stimuli import make_scene, write_video
+from asnn.io.video import write_video
+from asnn.stimuli import make_scene
 from cli.main import main
 from shared_data import SHARED
 
@@ -396,7 +397,8 @@ def test_labels_are_written_whole_in_their_form_and_writers_at_once_keep_each_ot
     import threading
 
     from asnn.io import files
-    from asnn.stimuli import make_scene, write_video
+    from asnn.io.video import write_video
+    from asnn.stimuli import make_scene
 
     folder = tmp_path / "clips"
     folder.mkdir()

@@ -17,7 +17,8 @@ import pytest
 import zenoh
 
 from asnn.params import DEFAULT_PRESET
-from asnn.stimuli import make_scene, write_video
+from asnn.io.video import write_video
+from asnn.stimuli import make_scene
 from clients.alerts import WarningListener
 from cli.main import main
 from service import keys

@@ -619,7 +619,8 @@ def test_brightness_and_noise_cases_of_the_suite_do_what_their_names_say(suite):
 def test_write_video_takes_frames_one_by_one_as_it_takes_an_array(tmp_path):
     """A clip written from a generator of frames (not held at once) decodes to the frames of
     the same clip written from an array; a generator without frames is refused."""
-    from asnn.stimuli import make_scene, write_video
+    from asnn.io.video import write_video
+    from asnn.stimuli import make_scene
 
     frames = make_scene("looming", size=(64, 48), frames=12, start=2, stop=10).frames
     whole = write_video(frames, tmp_path / "whole.avi", fps=20.0)
@@ -643,7 +644,9 @@ def test_write_video_takes_frames_one_by_one_as_it_takes_an_array(tmp_path):
 
 def test_write_video_raises_where_the_file_lost_frames(tmp_path, monkeypatch):
     """OpenCV's writer fails silently (a full disk): the file is read back."""
-    from asnn.stimuli import make_scene, scene, write_video
+    from asnn.io import video
+    from asnn.io.video import write_video
+    from asnn.stimuli import make_scene
 
     real = cv2.VideoWriter
 
@@ -659,7 +662,7 @@ def test_write_video_raises_where_the_file_lost_frames(tmp_path, monkeypatch):
                 self._left -= 1
                 self._real.write(image)
 
-    monkeypatch.setattr(scene.cv2, "VideoWriter", Stops)
+    monkeypatch.setattr(video.cv2, "VideoWriter", Stops)
     frames = make_scene("looming", size=(64, 64), frames=5).frames
     with pytest.raises(OSError, match="the video written holds 1 of 5 frames"):
         write_video(frames, tmp_path / "clip.avi")
@@ -723,7 +726,8 @@ def test_a_paper_scene_refuses_a_rate_or_speed_it_cannot_draw_and_records_its_ar
 def test_a_clip_the_encoder_would_write_at_another_size_is_refused(tmp_path):
     """OpenCV's encoders wrote a 161x121 scene as 160x120 without a word, its label still in
     the 161x121 frames' pixels (an output trial)."""
-    from asnn.stimuli import make_scene, write_video
+    from asnn.io.video import write_video
+    from asnn.stimuli import make_scene
 
     frames = make_scene("looming", size=(161, 121), frames=4).frames
     with pytest.raises(OSError, match="at 161x121: OpenCV's encoder writes even sizes only"):

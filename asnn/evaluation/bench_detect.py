@@ -132,7 +132,7 @@ def time_stages(clip: Path, preset: str | None, out: Path) -> tuple[dict, list[d
             start = time.perf_counter()
             response = detector.step(frame, t)
             stepped = time.perf_counter()
-            record = {"frame": index, "t": round(t, 6), **response.to_dict()}
+            record = response.record(index, t)
             fh.write(json.dumps(record) + "\n")
             output += time.perf_counter() - stepped
             step += stepped - start
@@ -206,7 +206,7 @@ def run(command: Sequence[str], sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAME
     """
     from ..model import compile_kernels
     from ..params import DEFAULT_PRESET, preset_key
-    from ..stimuli import write_video
+    from ..io.video import write_video
 
     if frames < 10:
         raise ValueError(f"--detect needs at least 10 frames, got {frames}")

@@ -3,8 +3,9 @@ checking one written."""
 
 from __future__ import annotations
 
+import itertools
 import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from .images import MAX_SIDE
 
 __all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "WRITABLE_SUFFIXES", "VideoError", "VideoClip",
            "check_written", "cut_short", "open_video", "quiet_writer", "read_frames",
-           "stated_fps"]
+           "stated_fps", "write_video"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 MAX_FPS = 240.0  # above this a stated rate is a container's time base, not a camera's
@@ -210,3 +211,46 @@ def _disk_full(path: Path) -> bool:
     except (OSError, AttributeError):  # no statvfs on Windows
         return False
     return stats.f_bavail * stats.f_frsize < 64 * 1024
+
+
+def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
+                fps: float = 20.0) -> Path:
+    """Write gray uint8 frames (T, H, W), or (H, W) frames one by one from an iterable (a long
+    clip need not be held at once), to a video file (mp4v for .mp4, MJPG for .avi).
+
+    Raises
+    ------
+    OSError
+        If OpenCV cannot open a writer for the path, or the file written does not hold the
+        frames (a full disk: the writer itself fails silently), or holds them at another size
+        (an odd width or height, which the encoders round down; the file is removed).
+    ValueError
+        For an iterable without frames (an empty array writes an empty video).
+    """
+    path = Path(path)
+    if isinstance(frames, np.ndarray):
+        h, w = frames.shape[1:3]
+    else:
+        frames = iter(frames)
+        first = next(frames, None)
+        if first is None:
+            raise ValueError(f"no frames to write to {path}")
+        h, w = first.shape[:2]
+        frames = itertools.chain([first], frames)
+    fourcc = cv2.VideoWriter_fourcc(*("MJPG" if path.suffix.lower() == ".avi" else "mp4v"))
+    writer = cv2.VideoWriter(str(path), fourcc, fps, (w, h), isColor=True)
+    if not writer.isOpened():
+        raise OSError(f"cannot write video {path}")
+    written = 0
+    try:
+        with quiet_writer():  # a failed write is raised once, below
+            for frame in frames:
+                writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
+                written += 1
+    finally:
+        writer.release()
+    if written and check_written(path, written) != (w, h):
+        path.unlink()  # not the frames asked for, whose labels are in their pixels
+        raise OSError(f"cannot write {path} at {w}x{h}: OpenCV's encoder writes even sizes "
+                      "only (give an even size, or a .mcap bag)")
+    return path

@@ -15,10 +15,11 @@
     The named, versioned, labelled suite of such scenes (``make_case``, :data:`SUITE_CASES`)
     that ``asnn eval --synthetic`` scores.
 :mod:`~asnn.stimuli.render`, :mod:`~asnn.stimuli.effects`, :mod:`~asnn.stimuli.scene`
-    Anti-aliased drawing; camera and image effects; the :class:`Scene` and writing it to files.
+    Anti-aliased drawing; camera and image effects; the :class:`Scene` (written to a video file by
+    :func:`asnn.io.video.write_video`).
 """
 
 from .paper import SCENE_NAMES, make_scene
-from .scene import Scene, write_frames, write_video
+from .scene import Scene
 
-__all__ = ["Scene", "SCENE_NAMES", "make_scene", "write_video", "write_frames"]
+__all__ = ["Scene", "SCENE_NAMES", "make_scene"]

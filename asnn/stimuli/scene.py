@@ -1,19 +1,13 @@
-"""A generated clip with its ground truth, and writing clips to files."""
+"""A generated clip with its ground truth."""
 
 from __future__ import annotations
 
-import itertools
 import math
-from collections.abc import Iterable
 from dataclasses import dataclass, field
-from pathlib import Path
 
-import cv2
 import numpy as np
 
-from ..io.video import check_written, quiet_writer
-
-__all__ = ["Scene", "write_video", "write_frames"]
+__all__ = ["Scene"]
 
 
 @dataclass
@@ -89,59 +83,3 @@ class Scene:
         if self.twin is not None:
             label["twin"] = self.twin
         return label
-
-
-def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
-                fps: float = 20.0) -> Path:
-    """Write gray uint8 frames (T, H, W), or (H, W) frames one by one from an iterable (a long
-    clip need not be held at once), to a video file (mp4v for .mp4, MJPG for .avi).
-
-    Raises
-    ------
-    OSError
-        If OpenCV cannot open a writer for the path, or the file written does not hold the
-        frames (a full disk: the writer itself fails silently), or holds them at another size
-        (an odd width or height, which the encoders round down; the file is removed).
-    ValueError
-        For an iterable without frames (an empty array writes an empty video).
-    """
-    path = Path(path)
-    if isinstance(frames, np.ndarray):
-        h, w = frames.shape[1:3]
-    else:
-        frames = iter(frames)
-        first = next(frames, None)
-        if first is None:
-            raise ValueError(f"no frames to write to {path}")
-        h, w = first.shape[:2]
-        frames = itertools.chain([first], frames)
-    fourcc = cv2.VideoWriter_fourcc(*("MJPG" if path.suffix.lower() == ".avi" else "mp4v"))
-    writer = cv2.VideoWriter(str(path), fourcc, fps, (w, h), isColor=True)
-    if not writer.isOpened():
-        raise OSError(f"cannot write video {path}")
-    written = 0
-    try:
-        with quiet_writer():  # a failed write is raised once, below
-            for frame in frames:
-                writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
-                written += 1
-    finally:
-        writer.release()
-    if written and check_written(path, written) != (w, h):
-        path.unlink()  # not the frames asked for, whose labels are in their pixels
-        raise OSError(f"cannot write {path} at {w}x{h}: OpenCV's encoder writes even sizes "
-                      "only (give an even size, or a .mcap bag)")
-    return path
-
-
-def write_frames(frames: np.ndarray, directory: str | Path) -> list[Path]:
-    """Write frames as numbered PNG files (lossless) and return their paths."""
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for i, frame in enumerate(frames):
-        path = directory / f"frame_{i:05d}.png"
-        if not cv2.imwrite(str(path), frame):
-            raise OSError(f"cannot write {path}")
-        paths.append(path)
-    return paths
