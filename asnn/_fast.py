@@ -676,8 +676,17 @@ def front(p, stages, coefficients, maps, scratch, rows=None, other=None, version
 
     Parameters
     ----------
+    p : ndarray (H, W)
+        The photoreceptor output P of the frame (eq. 1; after the contrast gain control where
+        the preset has it).
     stages : (ndarray, ndarray)
         The ON and OFF cascades, advanced by one frame in place.
+    coefficients : FrontCoefficients
+        The kernels and constants of the preset (:class:`FrontCoefficients`).
+    maps : FrontMaps
+        Where R^theta, V and G (and the column sums) are written.
+    scratch : Scratch
+        The ring buffers of the row stage, one per thread.
     rows : (y0, y1), optional
         Compute these rows only (default: all). Every pixel of a row is computed the same way
         whatever the band, so bands computed separately, on threads of their own, give the

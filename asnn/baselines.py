@@ -48,6 +48,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .frames import frame_time, to_luminance
+from .params import fields_section
 from .retina import photoreceptor_weights, spike_count, spike_rate
 from .response import Response
 
@@ -145,6 +146,12 @@ class LGMD2Params(_LGMDParams):
     dt: float = Field(0.05, gt=0, description=(
         "frame period in seconds, used in every a = dt/(dt + tau); 0.05 as the ASNN model's dt"))
     rate_window: int = Field(4, ge=1, description="frames of the reported spike rate (ASNN's N_t)")
+
+
+for _params in (LGMD1Params, LGMD2Params):  # help() shows what each field means
+    if _params.__doc__:  # None under python -OO
+        _params.__doc__ += fields_section(_params)
+del _params
 
 
 # --------------------------------------------------------------------------- layers

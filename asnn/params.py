@@ -475,7 +475,7 @@ def _weights(name: str) -> dict:
     return dict(zip(keys, _WEIGHTS[name]))
 
 
-def _fields_section(model: type[BaseModel]) -> str:
+def fields_section(model: type[BaseModel]) -> str:
     """A numpydoc Attributes section from a model's field descriptions, so that ``help()``
     shows what each field means (pydantic keeps them in ``model_fields`` only)."""
     lines = ["", "", "    Attributes", "    ----------"]
@@ -489,7 +489,7 @@ def _fields_section(model: type[BaseModel]) -> str:
 
 
 if ASNNParams.__doc__:  # None under python -OO
-    ASNNParams.__doc__ += _fields_section(ASNNParams)
+    ASNNParams.__doc__ += fields_section(ASNNParams)
 
 
 _PAPER = ASNNParams()

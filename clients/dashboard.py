@@ -160,6 +160,23 @@ class FleetStore:
     ----------
     prefix : str
         Key prefix of the samples given to :meth:`offer`.
+    history : float
+        Seconds of the camera's clock the spike-rate sparkline spans.
+    hold : float
+        Seconds a warning keeps the robot in the collision state.
+    stale_after : float
+        Seconds without a response after which a robot is shown stale, and may be dropped to
+        make room for a new one.
+    forget_after : float
+        Seconds of silence after which a robot is dropped.
+    max_robots : int
+        Robots held at once (a message of one more is counted, ``too-many-robots``).
+    max_preview_total : int
+        Encoded bytes of all thumbnails held.
+    log_size : int
+        Warning episodes kept in the log.
+    log_interval : float
+        Seconds between two log lines of the same rejection reason.
     clock : callable
         Seconds, monotonic (arrival times, staleness); injectable for tests.
     """

@@ -81,7 +81,8 @@ class _Robot:
 
 
 class FoxgloveBridge:
-    """A Foxglove WebSocket server showing the fleet, fed with raw Zenoh samples.
+    """A Foxglove WebSocket server showing the fleet, fed with raw Zenoh samples. Use as a
+    context manager, or call :meth:`close`.
 
     Parameters
     ----------
@@ -93,6 +94,8 @@ class FoxgloveBridge:
     max_robots : int
         Robots served at once; a message of one more is counted (``too-many-robots``) and
         dropped unless a robot silent for ``stale_after`` seconds makes room.
+    stale_after : float
+        Seconds without a response after which a robot may give up its place.
     forget_after : float
         Seconds of silence after which a robot's channels are closed.
     backlog : int
@@ -101,8 +104,6 @@ class FoxgloveBridge:
         Seconds between two log lines of the same rejection reason.
     clock : callable
         Seconds, monotonic (staleness, forgetting, log rate); injectable for tests.
-
-    Use as a context manager, or call :meth:`close`.
     """
 
     def __init__(self, prefix: str = keys.DEFAULT_PREFIX, *, host: str = "127.0.0.1",

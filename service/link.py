@@ -28,6 +28,8 @@ class RouterWatch:
     session : zenoh.Session
     name : str
         What the log lines call the process (``camera r1``, ``worker w1``, ``dashboard``).
+    interval : float
+        Seconds between two looks.
     """
 
     def __init__(self, session, name: str, interval: float = WATCH_INTERVAL):

@@ -163,3 +163,10 @@ def test_a_frame_time_that_is_not_a_number_is_refused_as_asnn_refuses_it(make):
     with pytest.raises(FrameError, match="must be a number of seconds"):
         model.step(np.zeros((64, 64), np.uint8), "abc")  # was taken without a word
     assert model.step(np.zeros((64, 64), np.uint8), 0.1).index == 1  # nothing counted before
+
+
+@pytest.mark.parametrize("params", [LGMD1Params, LGMD2Params])
+def test_the_parameters_docstring_describes_every_field(params):
+    for name, info in params.model_fields.items():  # help() shows them
+        assert f"    {name} : " in params.__doc__
+        assert info.description.split(";")[0][:40] in params.__doc__

@@ -127,6 +127,8 @@ def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
 
     Parameters
     ----------
+    path : str or Path
+        The PNG to write.
     summaries : dict
         ``{model: scoring.summarize(...)}``.
     """
@@ -168,6 +170,8 @@ def plot_synthetic_responses(path: str | Path, data: Mapping) -> Path:
 
     Parameters
     ----------
+    path : str or Path
+        The PNG to write.
     data : dict
         ``title`` and ``scenes``: a list of ``{"title", "snapshot" (2-D list, uint8),
         "snapshot_frame", "onset", "contact", "models": {model: {"out": [...],
@@ -201,6 +205,8 @@ def plot_sweeps(path: str | Path, data: Mapping) -> Path:
 
     Parameters
     ----------
+    path : str or Path
+        The PNG to write.
     data : dict
         ``contrast`` and ``speed``, each ``{"values": [...], "u": [[...], ...], "peak": [...]}``,
         plus ``onset`` and ``contact``.
@@ -230,6 +236,8 @@ def plot_maps(path: str | Path, data: Mapping) -> Path:
 
     Parameters
     ----------
+    path : str or Path
+        The PNG to write.
     data : dict
         ``frame`` (2-D gray), ``V``, ``phi``, ``G``, ``M_a``, ``M_d``, ``G_prime`` (2-D lists),
         ``step`` and ``title``.
@@ -275,6 +283,8 @@ def plot_temporal_filter(path: str | Path, data: Mapping) -> Path:
 
     Parameters
     ----------
+    path : str or Path
+        The PNG to write.
     data : dict
         ``t`` (seconds), ``impulse`` and ``step`` (``{str(n): [...]}``), ``title``.
     """

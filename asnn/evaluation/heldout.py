@@ -413,6 +413,10 @@ def leave_one_out(traces: Sequence[ClipTrace], labels: Sequence[Mapping], base: 
     admissible : sequence of bool, optional
         Per grid point (:func:`grid`), whether it may be chosen (:func:`suite_admissible`);
         all by default.
+    warmup : int
+        Frames at the start of each clip whose warnings are not scored (SPEC section 5).
+    early_tolerance_s : float
+        Seconds before the onset a first warning still counts as a hit.
     tie_break : str
         How grid points that tie on hits and false alarms are told apart (:data:`TIE_BREAKS`).
     suite : sequence of dict, optional

@@ -792,9 +792,15 @@ def write_bag(frames, path: str | Path, *, topic: str = "/camera/image_raw", fps
     Parameters
     ----------
     frames : iterable of ndarray
+    path : str or Path
+        The ``.mcap`` file written.
     topic : str
     fps : float
         The header stamps advance by ``1 / fps``, from ``start_ns``.
+    start_ns : int
+        The first frame's header stamp and log time, nanoseconds since the epoch.
+    frame_id : str
+        The headers' ``frame_id``.
     format : {'raw', 'png', 'jpeg'}
         ``sensor_msgs/msg/Image`` (mono8 or bgr8) or ``sensor_msgs/msg/CompressedImage``.
     """
