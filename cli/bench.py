@@ -153,9 +153,9 @@ def run(args: argparse.Namespace) -> int:
               f"{report['baseline']}")
         print(bench_detect.format_table(report))
     elif args.handover:
-        from service.core import WARMUP_FRAMES
+        from service.core import HANDOVER_WARMUP_FRAMES
 
-        print(handover.format_report(report, WARMUP_FRAMES))
+        print(handover.format_report(report, HANDOVER_WARMUP_FRAMES))
     elif args.service:
         print(f"# threads: {pinning}")
         print(service_bench.format_report(report))

@@ -236,8 +236,8 @@ def register(subparsers) -> None:
     from asnn.detectors import MODELS
     from asnn.stimuli import SCENE_NAMES
     from service.camera import PREVIEW_HZ
-    from service.core import (IDLE_TIMEOUT_S, MAX_GAP, MAX_ROBOTS, TAKEOVER_AFTER_S,
-                              WARMUP_FRAMES, default_threads)
+    from service.core import (HANDOVER_WARMUP_FRAMES, IDLE_TIMEOUT_S, MAX_GAP, MAX_ROBOTS,
+                              TAKEOVER_AFTER_S, default_threads)
     from service.demo import DEMO_SCENE
     from service.messages import FORMATS
     from service.worker import HANDOVER_TIMEOUT, SCAN_INTERVAL, SCAN_WINDOW
@@ -293,7 +293,7 @@ def register(subparsers) -> None:
     p.add_argument("--threads", type=threads, default=default_threads(), metavar="N",
                    help="processing threads (default: the cores available, here %(default)s; "
                         "one robot is never processed by two at once)")
-    p.add_argument("--warmup-frames", type=whole, default=WARMUP_FRAMES, metavar="N",
+    p.add_argument("--warmup-frames", type=whole, default=HANDOVER_WARMUP_FRAMES, metavar="N",
                    help="frames a worker taking a robot over steps silently before it answers, "
                         "while the previous owner still answers (default: %(default)s, "
                         "measured for the default preset: asnn bench --handover)")

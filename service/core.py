@@ -122,8 +122,8 @@ from .logutil import RateLimitedLog
 from .messages import (MAX_NOTE_LEN, MAX_PAYLOAD, MAX_REASON_LEN, MAX_SIDE, VERSION, Frame,
                        MessageError, Response, decode_frame, response_from, track_id_base)
 
-__all__ = ["Job", "RateLimitedLog", "RobotView", "WARMUP_FRAMES", "WorkerCore",
-           "default_threads", "default_worker_id", "started_here", "worker_host"]
+__all__ = ["HANDOVER_WARMUP_FRAMES", "Job", "RobotView", "WorkerCore", "default_threads",
+           "default_worker_id", "started_here", "worker_host"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -133,7 +133,7 @@ log = logging.getLogger("asnn.worker")
 # approach (the tracker needs a few frames of approach in a row, and the camera-rig stage its
 # running means; the worst need 53 during an approach, 64 before one):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
-WARMUP_FRAMES = 30
+HANDOVER_WARMUP_FRAMES = 30
 # streams in a row that last one frame before the worker logs that a robot's model cannot warn
 RESTARTS_WARNED = 10
 # robot ids whose latest refusal the status keeps (the most recently refused)
@@ -360,7 +360,8 @@ class WorkerCore:
                  clock: Callable[[], float] = time.monotonic,
                  owns: Callable[[str], bool] | None = None,
                  answers: Callable[[str], bool] | None = None,
-                 warmup_frames: int = WARMUP_FRAMES, log_interval: float = 10.0):
+                 warmup_frames: int = HANDOVER_WARMUP_FRAMES,
+                 log_interval: float = 10.0):
         make_detector(model, preset)  # fail now, not on the first frame
         self.model = model
         self.preset = (DEFAULT_PRESET if preset in (None, "default") else preset) \

@@ -269,9 +269,9 @@ def test_handover_bench_reports_the_warmup_distribution(capsys, monkeypatch):
     # a fresh model on a looming disk needs a few frames of approach before it warns: some
     # hand-overs need a few frames, and the 99 % quantile during approaches is the worker's
     # default at most
-    from service.core import WARMUP_FRAMES
+    from service.core import HANDOVER_WARMUP_FRAMES
 
-    assert rows["max"] > 0 and report["approach"]["quantile"] <= WARMUP_FRAMES
+    assert rows["max"] > 0 and report["approach"]["quantile"] <= HANDOVER_WARMUP_FRAMES
 
 
 def test_detect_bench_reports_the_whole_process_and_its_stages(capsys, monkeypatch):

@@ -6,7 +6,7 @@ import pytest
 from asnn import ASNN
 from asnn.stimuli import make_scene
 from service import keys
-from service.core import WARMUP_FRAMES, RobotView, WorkerCore
+from service.core import HANDOVER_WARMUP_FRAMES, RobotView, WorkerCore
 from service.messages import track_id_base
 from service.ownership import owner
 from service.routing import SCAN_KEY, Routes
@@ -129,7 +129,7 @@ def test_a_new_owner_answers_as_a_model_that_saw_the_whole_stream():
     reference = ASNN()
     expected = [reference.step(f, i / 20) for i, f in enumerate(scene.frames)]
     answering = set()
-    warmup = WARMUP_FRAMES
+    warmup = HANDOVER_WARMUP_FRAMES
     core = WorkerCore(answers=answering.__contains__)
     # the new owner's first frame as the disk starts to grow: it answers from frame 40, in the
     # middle of the warning (frames 13-46)

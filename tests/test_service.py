@@ -23,7 +23,7 @@ from clients.alerts import WarningListener
 from cli.main import main
 from service import keys
 from service.camera import RefusalNotices, Source, SourceError, open_source, publish_frames
-from service.core import WARMUP_FRAMES, WorkerCore
+from service.core import HANDOVER_WARMUP_FRAMES, WorkerCore
 from service.messages import Frame, decode_frame, decode_response, encode
 from service.worker import COMPUTE_NICENESS, Worker
 
@@ -417,7 +417,8 @@ def test_worker_scan_and_handover_options_are_checked(capsys):
     from cli.main import build_parser
 
     args = build_parser().parse_args(["worker"])
-    assert (args.warmup_frames, args.scan_interval, args.handover_timeout) == (WARMUP_FRAMES, 1.0, 5.0)
+    assert (args.warmup_frames, args.scan_interval, args.handover_timeout) == (
+        HANDOVER_WARMUP_FRAMES, 1.0, 5.0)
     for bad in (["--warmup-frames", "-1"], ["--scan-interval", "-1"],
                 ["--handover-timeout", "x"]):
         with pytest.raises(SystemExit):

@@ -8,7 +8,8 @@ import pytest
 
 from asnn import ASNN
 from asnn.stimuli import make_scene
-from service.core import RateLimitedLog, WorkerCore
+from service.core import WorkerCore
+from service.logutil import RateLimitedLog
 from service.messages import MAX_PAYLOAD, Frame, encode, encode_image
 from service.ownership import Membership, owner
 
