@@ -78,7 +78,9 @@ MAX_ROBOTS = 1000     # bound on the state a misbehaving publisher can make us k
 MAX_POINTS = 400      # per robot, whatever the stamps say (10 s at 40 responses a second)
 LOG_SIZE = 50         # warning episodes kept in the log
 EPISODE_GAP = 20      # a warning at most this many frames after a robot's previous one extends
-                      # the same log entry (one row per episode, not twenty rows a second)
+                      # the same log entry (one row per episode, not twenty rows a second) ...
+EPISODE_GAP_S = 5.0   # ... and at most this many seconds later by its stamp (not a camera that
+                      # restarted with its seq counting up again from below)
 RECENT_TARGETS = 32   # responses whose targets are kept to match a preview's seq
 MAX_PREVIEW_TOTAL = 16 * 1024 * 1024   # all thumbnails held, encoded
 IDLE_TIMEOUT = 10.0   # seconds a connection may wait for a whole request
@@ -137,8 +139,9 @@ class _Robot:
     previews: int = 0
 
     def latest_stamp(self) -> float | None:
-        stamps = [m.stamp for m in (self.response, self.warning) if m is not None]
-        return max(stamps) if stamps else None
+        """The latest response's stamp, where the spike-rate history ends (a warning's is not:
+        one of a clock gone back since, or forged far ahead, would push the history out)."""
+        return None if self.response is None else self.response.stamp
 
     def collision(self, hold: float) -> bool:
         if self.response is not None and self.response.collision:
@@ -239,7 +242,7 @@ class FleetStore:
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:
             self.invalid[reason] += 1
-        self._log_limited.warning(reason, "invalid message on %s (%s): %s", str(key)[:200],
+        self._log_limited.warning(reason, "invalid message on %r (%s): %s", str(key)[:200],
                                   reason, detail[:300])
         return None
 
@@ -302,7 +305,7 @@ class FleetStore:
         entry = state.episode
         if (entry is not None and self._log and entry["id"] >= self._log[0][1]["id"]
                 and entry["first_seq"] <= w.seq <= entry["seq"] + EPISODE_GAP
-                and w.stamp >= entry["first_stamp"]):
+                and entry["first_stamp"] <= w.stamp <= entry["stamp"] + EPISODE_GAP_S):
             entry["count"] += 1
             entry["peak_rate"] = max(entry["peak_rate"], w.spike_rate)
             entry["peak_out"] = max(entry["peak_out"], w.out)
@@ -398,7 +401,8 @@ class FleetStore:
                 "version": self._version, "full": full, "robots": robots, "live": live,
                 "warnings": warnings,
                 "config": {"history": self.history, "hold": self.hold,
-                           "stale_after": self.stale_after, "slow_fps": SLOW_FPS},
+                           "stale_after": self.stale_after, "slow_fps": SLOW_FPS,
+                           "max_points": MAX_POINTS},
                 "counts": {"robots": len(self._robots),
                            "collision": sum(v[2] for v in live.values()),
                            "stale": sum(v[1] for v in live.values()),

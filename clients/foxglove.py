@@ -174,7 +174,7 @@ class FoxgloveBridge:
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:
             self.invalid[reason] += 1
-        self._log.warning(reason, "invalid message on %s (%s): %s", str(key)[:200], reason,
+        self._log.warning(reason, "invalid message on %r (%s): %s", str(key)[:200], reason,
                           detail[:300])
         return None
 
@@ -187,8 +187,8 @@ class FoxgloveBridge:
                 if quiet is None:
                     return None
                 self._robots.pop(quiet).close()
-                log.info("robot %s: silent for more than %.0f s, its topics are closed to make "
-                         "room for %s", quiet, self.stale_after, robot)
+                self._log.info("make-room", "robot %s: silent for more than %.0f s, its topics "
+                               "are closed to make room for %s", quiet, self.stale_after, robot)
             topics = robot_topics(self.prefix, robot)
             context = self._context
             state = self._robots[robot] = _Robot(
@@ -198,7 +198,7 @@ class FoxgloveBridge:
                                           context=context),
                 warning=foxglove.Channel(topics["warning"], schema=RESPONSE_SCHEMA,
                                          context=context))
-            log.info("robot %s: serving %s", robot, ", ".join(topics.values()))
+            self._log.info("serving", "robot %s: serving %s", robot, ", ".join(topics.values()))
         return state
 
     @staticmethod

@@ -567,7 +567,7 @@ class WorkerCore:
                                     "at": self.clock(), "told": False}
             if len(self._refused) > MAX_REFUSED:
                 self._refused.popitem(last=False)
-        self._rejections.warning(reason, "invalid frame on %s (%s, #%d): %s", str(key)[:200],
+        self._rejections.warning(reason, "invalid frame on %r (%s, #%d): %s", str(key)[:200],
                                  reason, n, detail[:300])
 
     def refusals_to_tell(self) -> list[tuple[str, str, str, int]]:

@@ -48,12 +48,19 @@ class RateLimitedLog:
         return hidden
 
     def warning(self, reason: str, message: str, *args) -> bool:
-        """Log (or count) one event of ``reason``; True if a line was written."""
+        """Log (or count) one event of ``reason`` at WARNING; True if a line was written."""
+        return self._write(logging.WARNING, reason, message, args)
+
+    def info(self, reason: str, message: str, *args) -> bool:
+        """Log (or count) one event of ``reason`` at INFO; True if a line was written."""
+        return self._write(logging.INFO, reason, message, args)
+
+    def _write(self, level: int, reason: str, message: str, args: tuple) -> bool:
         hidden = self.allow(reason)
         if hidden is None:
             return False
         if hidden:
             message += " (%d more %s since the last line)"
             args = (*args, hidden, reason)
-        self.logger.warning(message, *args)
+        self.logger.log(level, message, *args)
         return True

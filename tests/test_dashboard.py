@@ -249,6 +249,34 @@ def test_consecutive_warnings_make_one_log_entry_per_episode():
     assert [e["seq"] for e in store.delta(version)["warnings"]] == [25, 80]
 
 
+def test_a_warning_after_the_camera_restarted_is_a_new_log_entry():
+    """A probe: warnings at seq 100-130, then, after a restart, seq 110-125 an hour later on
+    the camera's clock were counted into the first row, shown with its old time."""
+    store = FleetStore(clock=Clock())
+    for seq in range(100, 131):
+        offer_response(store, response(seq=seq, collision=True), "warning")
+    for seq in range(110, 126):
+        offer_response(store, response(seq=seq, stamp=4600.0 + seq * 0.05, collision=True),
+                       "warning")
+    log = store.delta(0)["warnings"]
+    assert [(e["first_seq"], e["seq"], e["count"]) for e in log] == [(100, 130, 31),
+                                                                      (110, 125, 16)]
+    assert log[1]["stamp"] == pytest.approx(4600.0 + 125 * 0.05)
+
+
+def test_the_spike_history_ends_at_the_latest_response_whatever_a_warning_says():
+    """A probe: one warning forged with a stamp of 1e300 (or one from before the camera's
+    clock went back) made the page drop every point of the history, until the next warning."""
+    store = FleetStore(clock=Clock())
+    for seq in range(20):
+        offer_response(store, response(seq=seq, rate=10.0))
+    offer_response(store, response(seq=20, stamp=1e300, collision=True), "warning")
+    tile = store.delta(0)["robots"]["r1"]
+    assert tile["latest_stamp"] == pytest.approx(1000.0 + 19 * 0.05)
+    assert len(tile["points"]) == 20
+    assert store.delta(0)["config"]["max_points"] == 400  # the page keeps no more either
+
+
 def test_invalid_messages_are_counted_never_raised():
     store = FleetStore(clock=Clock())
     good = encode(response())

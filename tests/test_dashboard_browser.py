@@ -331,3 +331,54 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
     assert shown["robot33"]["stats"] == ("refused by w2: too-many-robots (4 frames) · already "
                                          "tracking 256 robots")
     assert "refused" not in shown["robot07"]["stats"]
+
+
+def test_browser_recovers_a_refused_stream_forgets_any_name_and_shows_no_stale_collision(
+        browser):
+    """Found by a probe: a page whose event stream was refused (503, every stream taken) never
+    opened another; tiles of robots named after an object's own properties (``constructor``)
+    were never removed; and a tile whose server went away turned stale but kept its COLLISION
+    badge."""
+    import socket
+
+    store = FleetStore(stale_after=1.0, forget_after=2.0)
+    stop = threading.Event()
+    quiet = threading.Event()  # the oddly named robots stop reporting
+
+    def feed():
+        seq = 0
+        while not stop.is_set():
+            names = ["warn", "plain"] + ([] if quiet.is_set() else ["constructor", "toString"])
+            for name in names:
+                store.offer(f"asnn/{name}/response",
+                            fake_response(name, seq, 1000.0 + seq * 0.05, name == "warn"))
+            seq += 1
+            stop.wait(0.05)
+
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    try:
+        with DashboardServer(store, "127.0.0.1", 0, max_streams=1) as server:
+            host, port = server.address
+            holder = socket.create_connection((host, port), timeout=TIMEOUT)
+            holder.sendall(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+            assert b"200" in holder.recv(64)  # it holds the one stream
+            chrome = browser(server.url)
+            chrome.wait_for("document.getElementById('conn')?.dataset.state === 'lost'",
+                            "the page refused its stream")
+            holder.close()
+            chrome.wait_for("document.getElementById('conn')?.dataset.state === 'live'",
+                            "the page opening a new stream once one is free")
+            wait_for_tiles(chrome, lambda s: set(s) == {"warn", "plain", "constructor",
+                                                        "toString"}, "four tiles")
+            quiet.set()
+            shown = wait_for_tiles(chrome, lambda s: set(s) == {"warn", "plain"},
+                                   "the silent robots forgotten, whatever their names")
+            assert shown["warn"]["collision"] == "true"
+        stop.set()  # the server is gone: every tile turns stale, none stays in collision
+        shown = wait_for_tiles(chrome, lambda s: all(t["stale"] == "true" for t in s.values()),
+                               "every tile stale after the server went away")
+    finally:
+        stop.set()
+        feeder.join(timeout=TIMEOUT)
+    assert shown["warn"]["collision"] == "false" and shown["warn"]["badge"] == "none"

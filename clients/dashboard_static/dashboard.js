@@ -15,12 +15,13 @@
 
   const robots = new Map(); // name -> view
   const dirty = new Set();
-  let config = { history: 10, hold: 3, stale_after: 3, slow_fps: 18 };
+  let config = { history: 10, hold: 3, stale_after: 3, slow_fps: 18, max_points: 400 };
   let counts = null;
   let framePending = false;
 
   function clock(stamp) {
     const d = new Date(stamp * 1000);
+    if (Number.isNaN(d.getTime())) return `${stamp} s`; // beyond what a Date holds
     const pad = (n, w = 2) => String(n).padStart(w, "0");
     return `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}.` +
       pad(d.getMilliseconds(), 3);
@@ -88,12 +89,14 @@
     if (tile.points_reset) v.points = [];
     for (const p of tile.points) v.points.push(p);
     const latest = tile.latest_stamp;
+    // the server's bounds: the history's span, and at most max_points (a clock that does not
+    // advance keeps every point inside the span)
+    let drop = Math.max(0, v.points.length - config.max_points);
     if (latest !== null) {
       const horizon = latest - config.history;
-      let drop = 0;
       while (drop < v.points.length && v.points[drop][0] < horizon) drop++;
-      if (drop) v.points.splice(0, drop);
     }
+    if (drop) v.points.splice(0, drop);
     if (tile.preview && tile.preview.src && tile.preview.src !== v.imageSrc) {
       const img = new Image();
       const src = tile.preview.src;
@@ -317,7 +320,7 @@
     config = delta.config || config;
     counts = delta.counts;
     if (delta.full) {
-      for (const name of [...robots.keys()]) if (!(name in delta.live)) remove(name);
+      for (const name of [...robots.keys()]) if (!Object.hasOwn(delta.live, name)) remove(name);
     }
     for (const tile of Object.values(delta.robots)) applyTile(tile);
     const now = performance.now();
@@ -327,7 +330,7 @@
       v.ageAt = now;
       setFlags(v, stale, collision);
     }
-    for (const name of [...robots.keys()]) if (!(name in delta.live)) remove(name);
+    for (const name of [...robots.keys()]) if (!Object.hasOwn(delta.live, name)) remove(name);
     addWarnings(delta.warnings, delta.full);
     showSummary();
     document.body.dataset.version = String(delta.version);
@@ -340,11 +343,14 @@
     const now = performance.now();
     for (const v of robots.values()) {
       const age = v.age === null ? null : v.age + (now - v.ageAt) / 1000;
-      if (age === null || age > config.stale_after) setFlags(v, true, v.collision);
+      // stale is never shown in collision (nothing watches the robot: as the server shows it)
+      if (age === null || age > config.stale_after) setFlags(v, true, false);
     }
     showSummary();
     schedule();
   }, 500);
+
+  let retry = 1000; // ms before a new stream, after one the server refused or closed
 
   function connect() {
     const source = new EventSource("/events");
@@ -358,12 +364,20 @@
     source.addEventListener("snapshot", handle);
     source.addEventListener("update", handle);
     source.onopen = () => {
+      retry = 1000;
       conn.dataset.state = "live";
       conn.textContent = "live";
     };
     source.onerror = () => {
       conn.dataset.state = "lost";
       conn.textContent = "reconnecting";
+      // the browser retries a dropped stream by itself, but gives up for good on an HTTP
+      // error status (503 while every stream is taken): open a new one then, backing off
+      if (source.readyState === EventSource.CLOSED) {
+        source.close();
+        setTimeout(connect, retry);
+        retry = Math.min(retry * 2, 30000);
+      }
     };
   }
 
