@@ -341,6 +341,86 @@ def test_a_chunk_overwritten_in_place_is_found_by_its_crc(tmp_path, looming):
     bag.write_bytes(bytes(data))
     assert "does not match its CRC" in detect_fails(bag)  # not a run on damaged pixels
 
+def crafted_bag(path, looming, *chunks):
+    """A bag of one good frame (its schema, channel and message as the third-party writer
+    made them) followed by the given chunk records, written record by record."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Footer, Header
+    from mcap.stream_reader import StreamReader
+
+    good = write_messages(path.with_suffix(".good.mcap"), {"/c": (rosbag.IMAGE, [
+        raw_message(looming.frames[0], "mono8")])})
+    with open(good, "rb") as fh:
+        kept = [r for r in StreamReader(fh).records
+                if type(r).__name__ in ("Schema", "Channel", "Message")]
+    builder = RecordBuilder()
+    Header(profile="ros2", library="test").write(builder)
+    for record in [*kept, *chunks]:
+        record.write(builder)
+    DataEnd(data_section_crc=0).write(builder)
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
+    magic = b"\x89MCAP0\r\n"
+    path.write_bytes(magic + builder.end() + magic)
+    return path
+
+
+def test_chunks_that_would_fill_the_memory_or_hold_the_reader_are_refused(tmp_path, looming,
+                                                                           monkeypatch):
+    """A probe: an lz4 chunk without a content size that inflated 13 MB to 3 GiB, a chunk of
+    millions of tiny records (5 GB of objects), a chunk of zeros read as millions of empty
+    records (minutes); here at a small scale, each refused after the good frame."""
+    import lz4.frame
+    import zstandard
+    from mcap.records import Chunk
+
+    def chunk(compression, data, size):
+        return Chunk(compression=compression, data=data, message_start_time=0,
+                     message_end_time=0, uncompressed_crc=0, uncompressed_size=size)
+
+    inflating = chunk("lz4", lz4.frame.compress(b"\0" * 2**20, store_size=False), 1000)
+    zeros = chunk("zstd", zstandard.ZstdCompressor().compress(b"\0" * 2**20), 2**20)
+    tiny = b"\x80" + (4).to_bytes(8, "little") + b"junk"  # a user record of 4 bytes, 13 in all
+    many = chunk("", tiny * 200, 13 * 200)
+    monkeypatch.setattr(rosbag, "MAX_CHUNK_RECORDS", 100)
+    for name, bad, says in [("inflating", inflating, "decompresses to more"),
+                            ("zeros", zeros, "opcode 0"),
+                            ("many", many, "more than 100 records")]:
+        bag = crafted_bag(tmp_path / f"{name}.mcap", looming, bad)
+        clip = rosbag.BagClip(bag)
+        errors = []
+        frames = list(clip.frames(lambda reason, message: errors.append(message)))
+        assert len(frames) == 1 and len(errors) == 1 and says in errors[0], (name, errors)
+
+
+def test_a_file_of_zeros_after_its_records_is_refused_at_once(tmp_path, looming):
+    bag = crafted_bag(tmp_path / "zeros.mcap", looming)
+    data = bag.read_bytes()
+    bag.write_bytes(data[:-len(b"\x89MCAP0\r\n") - 40] + b"\0" * 2**24)  # cut, then 16 MiB
+    errors = []
+    frames = list(rosbag.BagClip(bag).frames(lambda reason, message: errors.append(message)))
+    assert len(frames) == 1 and "opcode 0" in errors[0]
+
+
+def test_images_are_decoded_by_the_types_own_definition_not_the_bags_text(tmp_path, looming):
+    """The bag's schema text is not trusted (a probe's 1.9 KB bag whose "Image" declared an
+    array of a million one-byte structures took 4.9 GB to decode): an Image whose text names
+    its fields otherwise, on the same bytes, reads as the Image it is."""
+    renamed = rosbag.IMAGE_MSGDEF.replace("uint32 height\nuint32 width", "uint32 rows\nuint32 cols")
+    messages = []
+    for i, frame in enumerate(looming.frames[:5]):
+        m = raw_message(frame, "mono8", i)
+        m["rows"], m["cols"] = m.pop("height"), m.pop("width")
+        messages.append(m)
+    path = tmp_path / "renamed.mcap"
+    with open(path, "wb") as fh, Ros2Writer(fh) as writer:
+        schema = writer.register_msgdef(rosbag.IMAGE, renamed)
+        for i, m in enumerate(messages):
+            ns = START_NS + i * 50_000_000
+            writer.write_message("/c", schema, m, log_time=ns, publish_time=ns, sequence=i)
+    frames = [image for _, image in rosbag.BagClip(path).frames()]
+    assert len(frames) == 5 and all(np.array_equal(a, b) for a, b in zip(frames, looming.frames))
+
+
 def detect_fails(*args) -> str:
     proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", *map(str, args)],
                           capture_output=True, text=True, timeout=300)

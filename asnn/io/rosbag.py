@@ -19,6 +19,7 @@ from __future__ import annotations
 import io
 import re
 import struct
+import zlib
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +35,9 @@ try:
     from mcap.exceptions import McapError
     from mcap.reader import SeekingReader
     from mcap.records import Channel, Chunk, Message, Schema
-    from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
+    from mcap.stream_reader import StreamReader
     from mcap_ros2.decoder import DecoderFactory
     from mcap_ros2.writer import Writer as Ros2Writer
 except ImportError as exc:  # the optional extra is missing: say which one, in one line
@@ -50,6 +53,9 @@ IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 IMAGE_SCHEMAS = (IMAGE, COMPRESSED_IMAGE)
 MAX_RECORD_BYTES = 512 * 2**20  # largest MCAP record or decompressed chunk read
+# records read from one chunk (each becomes a Python object in turn): rosbag2's chunks of about
+# 1 MB hold a few images, or a few thousand small messages
+MAX_CHUNK_RECORDS = 1_000_000
 MAX_SUMMARY_BYTES = 64 * 2**20  # largest summary section used (a larger one: read through)
 _FOOTER_BYTES = 1 + 8 + 20  # the footer record: opcode, length, summary_start, offsets, crc
 FPS_PROBE = 30                  # frames whose stamps estimate a bag's nominal frame rate
@@ -219,32 +225,80 @@ class _BoundedFile:
         return self._raw.read(size)
 
 
-def _chunk_records(chunk: Chunk) -> list:
-    """The records of a chunk, its decompressed size checked before it is decompressed and its
-    CRC after (where the writer stored one): a chunk overwritten in place may still decompress,
-    or be stored uncompressed, and its frames would be read as if nothing had happened."""
+def _chunk_data(chunk: Chunk) -> bytes:
+    """A chunk's records, decompressed: at most its declared ``uncompressed_size`` (at most
+    :data:`MAX_RECORD_BYTES`) whatever the compressed frame claims or omits (an lz4 frame
+    without a content size inflated 13 MB to 3 GiB), its CRC checked where the writer stored
+    one (a chunk overwritten in place may still decompress, and its frames would be read as if
+    nothing had happened)."""
+    size = chunk.uncompressed_size
+    if size > MAX_RECORD_BYTES:
+        raise McapError(f"a chunk of {size} bytes uncompressed, more than {MAX_RECORD_BYTES}")
     try:
-        declared = [chunk.uncompressed_size]
         if chunk.compression == "zstd":
             import zstandard
 
-            declared.append(zstandard.frame_content_size(chunk.data))
+            reader = zstandard.ZstdDecompressor().stream_reader(chunk.data)
+            data = reader.read(size + 1)
         elif chunk.compression == "lz4":
             import lz4.frame
 
-            declared.append(lz4.frame.get_frame_info(chunk.data).get("content_size") or 0)
+            data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=size + 1)
         elif chunk.compression:
             raise McapError(f"unknown chunk compression {chunk.compression!r}")
-        if max(declared) > MAX_RECORD_BYTES:
-            raise McapError(f"a chunk of {max(declared)} bytes uncompressed, more than "
-                            f"{MAX_RECORD_BYTES}")
-        return breakup_chunk(chunk, validate_crc=True)
+        else:
+            data = chunk.data
     except McapError:
         raise
-    except CRCValidationError:
-        raise McapError("a chunk's data does not match its CRC: the file was damaged") from None
     except Exception as exc:  # the decompressors' own error types
-        raise McapError(f"a chunk does not decompress ({type(exc).__name__}: {exc})") from None
+        raise McapError(f"a chunk does not decompress ({type(exc).__name__}: "
+                        f"{str(exc)[:120]})") from None
+    if len(data) != size:
+        raise McapError(f"a chunk declared {size} bytes uncompressed decompresses to "
+                        f"{'more' if len(data) > size else len(data)}")
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise McapError("a chunk's data does not match its CRC: the file was damaged")
+    return data
+
+
+def _chunk_records(chunk: Chunk) -> Iterator:
+    """The Schema, Channel and Message records of a chunk, one at a time: a 52 KB bag whose
+    chunk held 12 million tiny records made as many objects at once (5 GB) where the mcap
+    library breaks a chunk up into a list. At most :data:`MAX_CHUNK_RECORDS` of them, and a
+    record of opcode 0 (reserved: zeros where records should be) ends it."""
+    data = _chunk_data(chunk)
+    stream = ReadDataStream(io.BytesIO(data))
+    for _ in range(MAX_CHUNK_RECORDS):
+        if stream.count >= len(data):
+            return
+        opcode, length = stream.read1(), stream.read8()
+        if opcode == 0:
+            raise McapError("a chunk holds a record of opcode 0 (zeros where records should "
+                            "be: the file was damaged)")
+        if length > len(data) - stream.count:
+            raise McapError(f"a chunk's record of {length} bytes runs past its end")
+        start = stream.count
+        if opcode == Opcode.MESSAGE:
+            yield Message.read(stream, length)
+        elif opcode == Opcode.CHANNEL:
+            yield Channel.read(stream)
+        elif opcode == Opcode.SCHEMA:
+            yield Schema.read(stream)
+        stream.read(length - (stream.count - start))  # the rest, or an unknown record
+    if stream.count < len(data):
+        raise McapError(f"a chunk of more than {MAX_CHUNK_RECORDS} records")
+
+
+class _StreamReader(StreamReader):
+    """The mcap library's reader, refusing a record of opcode 0 (reserved) at once: a file of
+    zeros reads as 9-byte records of it, which the library skips one by one (an 8 GiB sparse
+    file: about an hour)."""
+
+    def _read_record(self, opcode: int, length: int):
+        if opcode == 0:
+            raise McapError("a record of opcode 0 (zeros where records should be: the file "
+                            "was damaged)")
+        return super()._read_record(opcode, length)
 
 
 def _records(fh, topic: str | None = None) -> Iterator:
@@ -258,8 +312,8 @@ def _records(fh, topic: str | None = None) -> Iterator:
     chunks = _topic_chunks(fh, topic) if topic is not None else None
     if chunks is None:
         fh.seek(0)
-        reader = StreamReader(_BoundedFile(fh), emit_chunks=True,
-                              record_size_limit=MAX_RECORD_BYTES)
+        reader = _StreamReader(_BoundedFile(fh), emit_chunks=True,
+                               record_size_limit=MAX_RECORD_BYTES)
         for record in reader.records:
             if isinstance(record, Chunk):
                 yield from _chunk_records(record)
@@ -271,8 +325,8 @@ def _records(fh, topic: str | None = None) -> Iterator:
     yield from summary.channels.values()
     for offset in offsets:
         fh.seek(offset)
-        reader = StreamReader(_BoundedFile(fh), skip_magic=True, emit_chunks=True,
-                              record_size_limit=MAX_RECORD_BYTES)
+        reader = _StreamReader(_BoundedFile(fh), skip_magic=True, emit_chunks=True,
+                               record_size_limit=MAX_RECORD_BYTES)
         record = next(iter(reader.records), None)
         if not isinstance(record, Chunk):
             raise McapError(f"the chunk index points at offset {offset}, where no chunk is")
@@ -553,8 +607,15 @@ class BagClip:
         if schema is None or schema.name not in IMAGE_SCHEMAS:
             raise SourceError(f"{self.path}: topic {self.topic} changed its type to "
                               f"{_schema_name(schema) or 'none'}", "no-topic")
+        # decoded by the type's own definition, not the bag's text: a schema named Image whose
+        # text declares an array of a million one-byte structures made a Python object per
+        # byte (a 1.9 KB bag took 4.9 GB); a real Image's bytes are the same either way
+        ours = Schema(id=schema.id, name=schema.name, encoding="ros2msg",
+                      data=(IMAGE_MSGDEF if schema.name == IMAGE
+                            else COMPRESSED_IMAGE_MSGDEF).encode())
         try:
-            decode = decoders.decoder_for(channel.message_encoding, schema)
+            decode = (decoders.decoder_for(channel.message_encoding, ours)
+                      if schema.encoding in ("ros2msg", "ros2idl") else None)
         except Exception as exc:
             decode, why = None, f"{type(exc).__name__}: {str(exc)[:120]}"
         else:
