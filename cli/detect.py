@@ -8,7 +8,7 @@ import json
 import os
 import sys
 from collections import deque
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
 import cv2
@@ -446,6 +446,16 @@ def run(args: argparse.Namespace) -> int:
             return _fail(str(exc))
         except OSError as exc:
             return _fail(str(exc))
+        for flag, path, fh in (("--jsonl", args.jsonl, jsonl), ("--tracks", args.tracks, tracks)):
+            try:  # a short run's lines are all still buffered: a full disk shows here
+                if fh is not None:
+                    fh.flush()
+            except BrokenPipeError:  # stdout's reader went away: cli.main ends quietly
+                raise
+            except OSError as exc:
+                with suppress(OSError):  # closed now, its lines dropped: not again at exit
+                    fh.close()
+                return _fail(f"{flag} {path}: cannot write: {exc.strerror or exc}")
         if failure is not None:
             progress.finish()
             return _fail(failure)

@@ -224,6 +224,19 @@ def test_an_output_that_cannot_be_written_is_a_one_line_error(looming_video, tmp
     assert says in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
+@pytest.mark.parametrize("flag", ["--jsonl", "--tracks"])
+def test_a_short_runs_output_on_a_full_disk_is_a_one_line_error(tmp_path, capsys, flag):
+    """A probe: a run short enough for its lines to stay buffered met the full disk when the
+    file was closed, after every handler: a traceback, exit 1."""
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full here")
+    video = write_video(make_scene("looming", size=(64, 48), frames=4).frames,
+                        tmp_path / "short.avi")
+    assert main(["detect", str(video), flag, "/dev/full", "--threads", "1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"asnn detect: {flag} /dev/full: cannot write: No space left on device"]
+
+
 def test_an_output_folder_that_cannot_be_made_is_refused_before_the_run(looming_video, tmp_path,
                                                                         capsys, monkeypatch):
     # the tests run as root, who may write anywhere: the folder's refusal is simulated
