@@ -4,6 +4,7 @@ same frames from a lossless video, eval and camera on bags, and every kind of ba
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -167,6 +168,25 @@ def test_bad_compressed_images_are_refused_with_a_reason(format, data, reason):
     with pytest.raises(ImageError) as info:
         rosbag.image_from_compressed(format, data)
     assert info.value.reason == reason
+
+
+def test_names_read_from_a_bag_are_shortened_in_error_lines(tmp_path, looming):
+    """A probe: a 20 MB encoding string made a 20 MB "one-line" error, and so did 5000 image
+    topics or three topic names of a megabyte."""
+    with pytest.raises(ImageError) as info:
+        rosbag.image_from_raw(4, 4, "x" * 10**6, 0, 4, bytes(16))
+    assert len(str(info.value)) < 1000 and "1000000 characters" in str(info.value)
+    with pytest.raises(ImageError) as info:
+        rosbag.image_from_compressed("y" * 10**6, b"\xff\xd8")
+    assert len(str(info.value)) < 1000
+    frame = raw_message(looming.frames[0], "mono8")
+    names = [f"/cam{k:03d}/" + "z" * 5000 for k in range(30)]
+    bag = write_messages(tmp_path / "many.mcap", {n: (rosbag.IMAGE, [frame]) for n in names})
+    line = detect_fails(bag)
+    assert "several image topics" in line and len(line) < 3000 and "and 10 more" in line
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    assert "not a regular file" in detect_fails(fifo)
 
 
 def lying_jpeg(width: int = 4096, height: int = 4096) -> bytes:

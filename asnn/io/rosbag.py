@@ -138,7 +138,7 @@ def image_from_raw(width: int, height: int, encoding: str, is_bigendian: int, st
     """
     bpp = RAW_ENCODINGS.get(encoding)
     if bpp is None:
-        raise ImageError("unknown-encoding", f"image encoding {encoding!r} is not one of "
+        raise ImageError("unknown-encoding", f"image encoding {_shown(encoding)!r} is not one of "
                          f"{', '.join(RAW_ENCODINGS)}")
     if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
         raise ImageError("bad-size", f"image of {width}x{height}; sides must be 1..{MAX_SIDE}")
@@ -195,7 +195,7 @@ def image_from_compressed(format: str, data: bytes) -> np.ndarray:
     else:
         kind = None
     if kind is None:
-        raise ImageError("unknown-encoding", f"compressed image format {format!r}; "
+        raise ImageError("unknown-encoding", f"compressed image format {_shown(format)!r}; "
                          "jpeg and png are read")
     return to_uint8(decode_encoded(data, kind, max_depth=16))
 
@@ -390,6 +390,8 @@ def bag_topics(path: str | Path) -> dict[str, TopicInfo]:
     """
     path = Path(path)
     if not path.is_file():
+        if path.exists():  # a pipe, a device: an MCAP file is read where its summary is
+            raise SourceError(f"{path}: not a regular file", "not-a-bag")
         raise SourceError(f"{path}: no such file", "missing")
     with open(path, "rb") as raw:
         if raw.read(len(_MAGIC)) != _MAGIC:
@@ -440,9 +442,24 @@ def _schema_name(schema: Schema | None) -> str:
     return schema.name if schema is not None else ""
 
 
+def _shown(text: str, most: int = 80) -> str:
+    """A name or label read from a bag, for an error line: its first ``most`` characters and how
+    long it was (a probe's 20 MB encoding string made a 20 MB "one-line" error)."""
+    text = str(text)
+    return text if len(text) <= most else f"{text[:most]}... ({len(text)} characters)"
+
+
+def _names(topics: dict[str, TopicInfo], most: int = 20) -> str:
+    """The first ``most`` topic names in order, for an error line."""
+    names = sorted(topics)
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(_shown(n) for n in names[:most]) + more
+
+
 def _topic_list(topics: dict[str, TopicInfo], most: int = 20) -> str:
     """The first ``most`` topics with their types, for a one-line error."""
-    names = [f"{t.name} ({t.schema or 'no schema'})" for t in list(topics.values())[:most]]
+    names = [f"{_shown(t.name)} ({_shown(t.schema) or 'no schema'})"
+             for t in list(topics.values())[:most]]
     more = f" and {len(topics) - most} more" if len(topics) > most else ""
     return (", ".join(names) or "none") + more
 
@@ -463,17 +480,18 @@ def choose_topic(path: Path, topics: dict[str, TopicInfo], topic: str | None) ->
                               f"topics: {_topic_list(topics)}", "no-topic")
         if len(images) > 1:
             raise SourceError(f"{path}: several image topics, choose one with --topic (or "
-                              f"FILE.mcap#TOPIC): {', '.join(sorted(images))}", "several-topics")
+                              f"FILE.mcap#TOPIC): {_names(images)}", "several-topics")
         topic = next(iter(images))
     info = topics.get(topic)
     if info is None:
-        raise SourceError(f"{path}: no topic {topic!r}; image topics: "
-                          f"{', '.join(sorted(images)) or 'none'}", "no-topic")
+        raise SourceError(f"{path}: no topic {_shown(topic)!r}; image topics: "
+                          f"{_names(images) or 'none'}", "no-topic")
     if not info.is_image:
-        raise SourceError(f"{path}: topic {topic} is {info.schema or 'schemaless'}, not "
+        raise SourceError(f"{path}: topic {_shown(topic)} is "
+                          f"{_shown(info.schema) or 'schemaless'}, not "
                           f"{' or '.join(IMAGE_SCHEMAS)}", "no-topic")
     if info.count == 0:
-        raise SourceError(f"{path}: topic {topic} holds no message", "empty-topic")
+        raise SourceError(f"{path}: topic {_shown(topic)} holds no message", "empty-topic")
     return info
 
 
@@ -501,7 +519,7 @@ class BagClip:
     width, height : int
         Size of the first frame.
     frame_id : str
-        ``header.frame_id`` of the first frame.
+        ``header.frame_id`` of the first frame (its first 256 characters).
     """
 
     def __init__(self, path: str | Path, topic: str | None = None, *,
@@ -512,6 +530,7 @@ class BagClip:
         # frames in a later part only
         info = choose_topic(self.path, _merged_topics(self.parts), topic)
         self.topic, self.schema = info.name, info.schema
+        self._topic = _shown(self.topic)  # in error lines
         self.frame_count = info.count or 0
         self.clock = "header"
         self.start_ns = 0
@@ -524,14 +543,15 @@ class BagClip:
                 if _stamp_ns(message) == 0:
                     self.clock = "log"
                 first = self._decode(message, 0)
-                self.frame_id = str(getattr(message.header, "frame_id", ""))
+                # the results' frame of reference; a name, not a payload (at most 256 characters)
+                self.frame_id = str(getattr(message.header, "frame_id", ""))[:256]
             stamps.append(self._time_ns(*item))
             if len(stamps) >= FPS_PROBE:
                 break
         probe.close()
         if first is None:
             raise errors[0] if errors else SourceError(
-                f"{self.path}: topic {self.topic} holds no message", "empty-topic")
+                f"{self.path}: topic {self._topic} holds no message", "empty-topic")
         self.height, self.width = first.shape[:2]
         self.start_ns = stamps[0]
         steps = np.diff(np.asarray(stamps, dtype=np.int64))
@@ -570,7 +590,7 @@ class BagClip:
                 except StopIteration:
                     return index, False
                 except _CORRUPT as exc:
-                    error = _corrupt(path, exc, f"after {index} messages of {self.topic}")
+                    error = _corrupt(path, exc, f"after {index} messages of {self._topic}")
                     if on_error is None:
                         raise error from None
                     on_error(error.reason, str(error))
@@ -591,7 +611,7 @@ class BagClip:
                         message = decode(record.data)
                         _stamp_ns(message)  # a message without a header is not an image
                     except Exception as exc:  # the decoder is generated from the bag's text
-                        error = SourceError(f"{path}: {self.topic} message {index} does "
+                        error = SourceError(f"{path}: {self._topic} message {index} does "
                                             f"not decode ({type(exc).__name__}: "
                                             f"{str(exc)[:120]})", "bad-message")
                         if on_error is None:
@@ -605,8 +625,8 @@ class BagClip:
                  schemas: dict[int, Schema]) -> Callable:
         schema = schemas.get(channel.schema_id)
         if schema is None or schema.name not in IMAGE_SCHEMAS:
-            raise SourceError(f"{self.path}: topic {self.topic} changed its type to "
-                              f"{_schema_name(schema) or 'none'}", "no-topic")
+            raise SourceError(f"{self.path}: topic {self._topic} changed its type to "
+                              f"{_shown(_schema_name(schema)) or 'none'}", "no-topic")
         # decoded by the type's own definition, not the bag's text: a schema named Image whose
         # text declares an array of a million one-byte structures made a Python object per
         # byte (a 1.9 KB bag took 4.9 GB); a real Image's bytes are the same either way
@@ -621,7 +641,7 @@ class BagClip:
         else:
             why = f"messages in {channel.message_encoding!r} with a {schema.encoding!r} schema"
         if decode is None:
-            raise SourceError(f"{self.path}: cannot decode {self.topic} ({why}); ROS 2 bags "
+            raise SourceError(f"{self.path}: cannot decode {self._topic} ({why}); ROS 2 bags "
                               "hold cdr messages with ros2msg schemas", "bad-schema")
         return decode
 
@@ -633,10 +653,10 @@ class BagClip:
                                       int(message.step), bytes(message.data))
             return image_from_compressed(str(message.format), bytes(message.data))
         except ImageError as exc:
-            raise SourceError(f"{self.path}: {self.topic} message {index}: {exc.detail}",
+            raise SourceError(f"{self.path}: {self._topic} message {index}: {exc.detail}",
                               exc.reason) from None
         except (AttributeError, TypeError, ValueError) as exc:
-            raise SourceError(f"{self.path}: {self.topic} message {index} is not a "
+            raise SourceError(f"{self.path}: {self._topic} message {index} is not a "
                               f"{self.schema} ({exc})", "bad-message") from None
 
     def frames(self, on_error: Callable[[str, str], None] | None = None, *,
@@ -707,11 +727,11 @@ class BagClip:
             return None
         latest = timeline.latest
         if timeline.behind(stamp) < CLOCK_RESET_FRAMES:
-            raise SourceError(f"{self.path}: {self.topic} message {index}: its header stamp is "
+            raise SourceError(f"{self.path}: {self._topic} message {index}: its header stamp is "
                               f"{(latest - stamp) / 1e9:g} s before an earlier frame's; a "
                               "camera's stamps never go back", "stamp-backwards")
         jump = timeline.rebase()
-        return (f"{self.path}: {self.topic} message {index}: clock reset: the header stamps "
+        return (f"{self.path}: {self._topic} message {index}: clock reset: the header stamps "
                 f"went back {_seconds(jump)} s and advance again ({CLOCK_RESET_FRAMES} frames "
                 "in a row; the camera's clock was reset, or the latest stamp was far ahead): "
                 "timed on from the latest frame's time")
