@@ -285,11 +285,32 @@ def test_t_is_the_header_stamp_relative_to_the_first_frame(tmp_path, looming):
     source = open_source(str(bag))
     assert source.timed and source.start_ns == START_NS and source.frame_id == "cam"
     assert source.frame_count == 6 and source.fps == pytest.approx(10.0)  # median step 0.1 s
-    # a driver that stops stamping partway: those frames take their log time, not 1970
+    # a driver that stops stamping partway: those frames take their log time (the recorder's
+    # clock: here 0.05 s apart), not 1970, and never one before the latest frame's t
     for m in messages[3:]:
         m["header"]["stamp"] = {"sec": 0, "nanosec": 0}
     bag = write_messages(tmp_path / "unstamped.mcap", {"/c": (rosbag.IMAGE, messages)})
-    assert [r["t"] for r in detect_records(bag)] == [0.0, 0.1, 0.25, 0.15, 0.2, 0.25]
+    assert [r["t"] for r in detect_records(bag)] == [0.0, 0.1, 0.25, 0.25, 0.25, 0.25]
+    for m, s in zip(messages[:3], [0.0, 0.05, 0.1]):  # stamped as the recorder logs them
+        ns = START_NS + round(s * 1e9)
+        m["header"]["stamp"] = {"sec": ns // 10**9, "nanosec": ns % 10**9}
+    bag = write_messages(tmp_path / "unstamped2.mcap", {"/c": (rosbag.IMAGE, messages)})
+    assert [r["t"] for r in detect_records(bag)] == [0.0, 0.05, 0.1, 0.15, 0.2, 0.25]
+    for m, s in zip(messages[:3], [5.0, 5.05, 5.1]):  # simulated time: not the recorder's
+        m["header"]["stamp"] = {"sec": int(s), "nanosec": round(s % 1 * 1e9)}
+    bag = write_messages(tmp_path / "simulated.mcap", {"/c": (rosbag.IMAGE, messages)})
+    assert [r["t"] for r in detect_records(bag)] == pytest.approx([0.0, 0.05, 0.1, 0.1, 0.1,
+                                                                   0.1])
+    # a bag timed by the recorder whose log times came swapped: never back either
+    for m in messages:
+        m["header"]["stamp"] = {"sec": 0, "nanosec": 0}
+    path = tmp_path / "logged.mcap"
+    with open(path, "wb") as fh, Ros2Writer(fh) as writer:
+        schema = writer.register_msgdef(rosbag.IMAGE, rosbag.IMAGE_MSGDEF)
+        for i, (m, ms) in enumerate(zip(messages, [0, 50, 150, 100, 200, 250])):
+            ns = START_NS + ms * 1_000_000
+            writer.write_message("/c", schema, m, log_time=ns, publish_time=ns, sequence=i)
+    assert [r["t"] for r in detect_records(path)] == [0.0, 0.05, 0.15, 0.15, 0.2, 0.25]
 
 
 def test_a_rosbag2_directory_and_asnn_scene_bags_open(tmp_path, looming):

@@ -27,6 +27,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from ..params import MAX_FRAME_GAP_S
 from .images import MAX_SIDE, ImageError, decode_encoded, to_uint8
 from .sources import CLOCK_RESET, CLOCK_RESET_FRAMES, SourceError
 
@@ -704,14 +705,20 @@ class BagClip:
 
     def _frame_t(self, stamp: int, log_time: int, timeline: "_Timeline") -> float:
         """A frame's ``t``: its header stamp on the timeline, or its log time (a stamp left
-        unset, or a bag timed by the recorder) relative to the first frame's; after a clock
-        reset such a frame is held at the latest frame's time instead, as the recorder's clock
-        is not the new timeline's."""
+        unset, or a bag timed by the recorder) relative to the first frame's, never before the
+        latest frame's (the recorder logs a frame when it arrives, and two may arrive swapped).
+        A stamp left unset among header stamps takes its log time only within
+        MAX_FRAME_GAP_S after the latest frame's ``t``, else the latest frame's: the recorder's
+        clock need not be the camera's (simulated time), and after a clock reset it is not the
+        new timeline's."""
         if stamp:
             return timeline.t(stamp)
-        if timeline.rebased:
+        logged = (int(log_time) - self.start_ns) / 1e9
+        if self.clock == "log":
+            return max(logged, timeline.latest_t)
+        if timeline.rebased or not 0.0 <= logged - timeline.latest_t <= MAX_FRAME_GAP_S:
             return timeline.latest_t
-        return (int(log_time) - self.start_ns) / 1e9
+        return logged
 
     def _check_stamp(self, stamp: int, index: int, timeline: "_Timeline") -> str | None:
         """Take a message's header stamp (ns; 0 where unset) on the timeline; SourceError where
