@@ -26,15 +26,20 @@ Bounds (docs/operations.md, "Hostile input"): at most ``max_robots`` robots (whe
 full, the one silent longest makes room if it is stale); per robot a preview of at most
 ``service.messages.MAX_PREVIEW_BYTES`` and at most ``clients.fleet.MAX_TARGETS`` targets per
 response (:func:`clients.fleet.decode_fleet_sample`, shared with the Foxglove server and
-``asnn alerts``), at most MAX_POINTS spike-rate points; all previews together at most ``max_preview_total`` bytes (the oldest previews are forgotten
-first). The server closes connections idle for ``idle_timeout`` seconds (a request that does not
+``asnn alerts``), at most MAX_POINTS spike-rate points; all previews together at most
+``max_preview_total`` bytes (the oldest previews are forgotten first), taken at most one a robot
+every PREVIEW_INTERVAL seconds and PREVIEW_RATE bytes a second in all (the others are counted
+as ``skipped``), so what a page is sent is bounded in bytes a second too. The server closes connections idle for ``idle_timeout`` seconds (a request that does not
 arrive whole, a kept-alive connection without a next request), drops an event stream whose
 client has not taken an event within ``send_timeout`` seconds (at most SEND_BUFFER bytes wait in
 the kernel for each), holds at most ``max_streams`` event streams (``max_streams_per_address``
 from one address) and ``max_streams + spare_connections`` connections in all
 (``max_streams_per_address + spare_connections / 2`` from one address), so that a browser can
-still load the page while another address holds what it may. Invalid messages and dropped
-connections are logged rate-limited, without tracebacks.
+still load the page while another address holds what it may (clients at three addresses can
+hold every connection: expose the dashboard to untrusted networks only behind a proxy that
+authenticates), and sends at most MAX_FULL_SENDS full snapshots (``/state``, a new stream's
+first event) at once, each the whole state encoded. Invalid messages and dropped connections
+are logged rate-limited, without tracebacks.
 
 Robot state as shown: **stale** when no response arrived for ``stale_after`` seconds (or none
 ever did: a robot known only from a cached warning, or from its camera's previews): its camera
@@ -83,6 +88,15 @@ EPISODE_GAP_S = 5.0   # ... and at most this many seconds later by its stamp (no
                       # restarted with its seq counting up again from below)
 RECENT_TARGETS = 32   # responses whose targets are kept to match a preview's seq
 MAX_PREVIEW_TOTAL = 16 * 1024 * 1024   # all thumbnails held, encoded
+# thumbnails taken, so that what every page is sent stays bounded in bytes a second (a flood of
+# 30 KB previews from 1,000 ids sent each page 20-34 MB/s, and a browser fell behind and was
+# dropped): at most one a robot every PREVIEW_INTERVAL seconds (cameras send 2 a second), and
+# PREVIEW_RATE encoded bytes a second in all; the others are skipped (counted)
+PREVIEW_INTERVAL = 0.25
+PREVIEW_RATE = 2 * 1024 * 1024
+# full snapshots (a new event stream's first event, /state) encoded and being sent at once: each
+# holds the whole state encoded (up to about 35 MB) until a slow client has taken it
+MAX_FULL_SENDS = 4
 IDLE_TIMEOUT = 10.0   # seconds a connection may wait for a whole request
 SEND_TIMEOUT = 10.0   # seconds an event stream may wait for its client to take an event
 SEND_BUFFER = 256 * 1024  # bytes the kernel may hold for one event stream
@@ -134,6 +148,7 @@ class _Robot:
     episode: dict | None = None       # its latest entry in the warning log
     refused: Refusal | None = None    # a worker's latest notice that it refuses its frames
     refused_at: float = 0.0           # its arrival (store clock)
+    preview_at: float | None = None   # arrival (store clock) of the latest preview taken
     responses: int = 0
     warnings: int = 0
     previews: int = 0
@@ -196,6 +211,8 @@ class FleetStore:
         self.clock = clock
         self._log_limited = RateLimitedLog(log, log_interval, clock)
         self._preview_bytes = 0  # encoded bytes of every preview held
+        self._preview_budget, self._budget_at = float(PREVIEW_RATE), clock()  # PREVIEW_RATE
+        self.skipped: Counter = Counter()  # valid messages not shown (previews over the rate)
         self.invalid: Counter = Counter()
         self.received: Counter = Counter()
         self._robots: dict[str, _Robot] = {}
@@ -225,9 +242,12 @@ class FleetStore:
                                           "showing %d robots", kind, robot, self.max_robots)
                 return None
             self.received[kind] += 1
-            version = self._bump_locked()
             now = self.clock()
             state.touched = now
+            if kind == "preview" and not self._take_preview_locked(state, len(message.data), now):
+                self.skipped["preview"] += 1
+                return robot
+            version = self._bump_locked()
             if kind == "preview":
                 self._add_preview_locked(state, message, version)
             elif kind == "refused":
@@ -328,6 +348,21 @@ class FleetStore:
             "worker": w.worker}
         self._log.append((version, entry))
 
+    def _take_preview_locked(self, state: _Robot, size: int, now: float) -> bool:
+        """Whether a thumbnail of ``size`` bytes arriving at ``now`` is taken: at most one a
+        robot every PREVIEW_INTERVAL seconds, and PREVIEW_RATE bytes a second in all (a bucket
+        that fills at that rate, holding at most a second's worth)."""
+        if state.preview_at is not None and now - state.preview_at < PREVIEW_INTERVAL:
+            return False
+        self._preview_budget = min(PREVIEW_RATE, self._preview_budget
+                                   + (now - self._budget_at) * PREVIEW_RATE)
+        self._budget_at = now
+        if size > self._preview_budget:
+            return False
+        self._preview_budget -= size
+        state.preview_at = now
+        return True
+
     def _add_preview_locked(self, state: _Robot, preview: Preview, version: int) -> None:
         if state.preview is not None:
             self._preview_bytes -= state.preview["bytes"]
@@ -406,7 +441,8 @@ class FleetStore:
                 "counts": {"robots": len(self._robots),
                            "collision": sum(v[2] for v in live.values()),
                            "stale": sum(v[1] for v in live.values()),
-                           "received": dict(self.received), "invalid": dict(self.invalid)},
+                           "received": dict(self.received), "invalid": dict(self.invalid),
+                           "skipped": dict(self.skipped)},
             }
 
     def _tile_locked(self, state: _Robot, since: int, full: bool, collision: bool,
@@ -626,6 +662,7 @@ class DashboardServer:
         self.dropped_streams = 0  # event streams dropped because their client did not read
         self._streams_by_address: Counter = Counter()
         self._clients_lock = threading.Lock()
+        self._full_sends = threading.BoundedSemaphore(MAX_FULL_SENDS)
         self._log_limited = RateLimitedLog(log, log_interval)
         self._static = load_static()
         self._httpd = _HTTPServer((host, port), self._handler_class(),
@@ -721,8 +758,16 @@ class DashboardServer:
                     name = path[8:]
                     self._send(200, STATIC_FILES[name], server._static[name], head)
                 elif path == "/state":
-                    body = json.dumps(server.store.delta(0)).encode()
-                    self._send(200, "application/json", body, head, cache=False)
+                    if not server._full_sends.acquire(timeout=server.send_timeout):
+                        self.close_connection = True
+                        self._send(503, "text/plain; charset=utf-8", b"busy: try again\n",
+                                   head, cache=False)
+                        return
+                    try:
+                        body = json.dumps(server.store.delta(0)).encode()
+                        self._send(200, "application/json", body, head, cache=False)
+                    finally:
+                        server._full_sends.release()
                 elif path == "/events" and head:
                     # a health check's HEAD: the stream's headers, no stream held open
                     server._stream_headers(self)
@@ -775,10 +820,18 @@ class DashboardServer:
             out.write(b"retry: 2000\n\n")
             since, event, last = 0, "snapshot", 0.0
             while not self.closing.is_set():
-                delta = self.store.delta(since)
-                since = delta["version"]
-                out.write(f"event: {event}\ndata: {json.dumps(delta)}\n\n".encode())
-                out.flush()
+                full = since == 0  # the whole state, at most MAX_FULL_SENDS at once
+                if full and not self._full_sends.acquire(timeout=self.send_timeout):
+                    break  # closed: the page opens another stream
+                try:
+                    delta = self.store.delta(since)
+                    since = delta["version"]
+                    out.write(f"event: {event}\ndata: {json.dumps(delta)}\n\n".encode())
+                    out.flush()
+                finally:
+                    if full:
+                        self._full_sends.release()
+                del delta  # not held while waiting: a snapshot is the whole state
                 event, last = "update", time.monotonic()
                 self.store.wait(since, self.heartbeat)
                 # coalesce: everything that arrives within the interval goes in one delta

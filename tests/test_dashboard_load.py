@@ -33,9 +33,11 @@ def big_preview(seq=0) -> bytes:
 
 def test_previews_and_state_are_bounded_in_bytes_per_robot_and_in_total():
     """1,000 robot ids with big previews made /state 335 MB."""
-    store = FleetStore(clock=Clock())
+    clock = Clock()
+    store = FleetStore(clock=clock)
     payload = big_preview()
     for i in range(1000):
+        clock.now += 0.05  # within the thumbnails' rate (PREVIEW_RATE bytes a second)
         assert store.offer(f"asnn/r{i}/preview", payload) == f"r{i}"
     offer_response(store, response("r0", targets=[(i, i) for i in range(500)]))
     assert store.preview_bytes <= MAX_PREVIEW_TOTAL
@@ -45,6 +47,32 @@ def test_previews_and_state_are_bounded_in_bytes_per_robot_and_in_total():
     assert len(json.loads(state)["robots"]["r0"]["targets"]) == MAX_TARGETS
     # the newest previews are the ones kept
     assert "src" in json.loads(state)["robots"]["r999"]["preview"]
+
+
+def test_a_flood_of_previews_is_taken_at_a_bounded_rate_in_bytes_and_per_robot():
+    """A probe: 1,000 ids sending 30 KB previews made every page receive 20-34 MB/s, and a
+    browser that fell behind was dropped (its robots shown stale)."""
+    from clients.dashboard import PREVIEW_INTERVAL, PREVIEW_RATE
+
+    clock = Clock()
+    store = FleetStore(clock=clock)
+    payload = big_preview()
+    size = len(msgpack.unpackb(payload)["data"])
+    for second in range(3):
+        for step in range(20):  # 20 a second from each of 100 robots
+            clock.now += 0.05
+            for i in range(100):
+                store.offer(f"asnn/r{i}/preview", payload)
+    taken = store.received["preview"] - store.skipped["preview"]
+    assert taken * size <= PREVIEW_RATE * (3 + 1)  # the bucket starts full
+    assert taken * size > PREVIEW_RATE * 2  # and the rate is used
+    assert store.delta(0)["counts"]["skipped"]["preview"] == store.skipped["preview"]
+    # one robot alone: at most one every PREVIEW_INTERVAL seconds
+    lone = FleetStore(clock=clock)
+    for step in range(16):
+        clock.now += 0.125  # eight a second, exact in binary
+        lone.offer("asnn/solo/preview", payload)
+    assert lone.received["preview"] - lone.skipped["preview"] == 16 * 0.125 / PREVIEW_INTERVAL
 
 
 def test_long_names_in_responses_are_shortened_not_held_per_robot():
@@ -256,3 +284,21 @@ def test_floods_of_invalid_messages_and_dropped_connections_log_a_few_lines(capl
     warnings = [r for r in caplog.records if r.levelno >= logging.WARNING]
     assert len(warnings) <= 3, [r.getMessage() for r in warnings]
     assert "Traceback" not in capfd.readouterr().err
+
+
+def test_full_snapshots_are_sent_a_few_at_a_time():
+    """A probe: 63 connections asking for /state (24 MB) and reading slowly held 2.3 GB, each
+    its own encoded copy. At most MAX_FULL_SENDS are encoded and sent at once; past the wait,
+    /state is 503."""
+    from clients.dashboard import MAX_FULL_SENDS
+
+    store = FleetStore()
+    offer_response(store, response("r0"))
+    with DashboardServer(store, "127.0.0.1", 0, send_timeout=0.5) as server:
+        for _ in range(MAX_FULL_SENDS):  # as many slow readers are being sent theirs
+            assert server._full_sends.acquire(timeout=1)
+        status, _, body = get(server, "/state")
+        assert status == 503 and body == b"busy: try again\n"
+        server._full_sends.release()
+        status, _, body = get(server, "/state")
+        assert status == 200 and "r0" in json.loads(body)["robots"]
