@@ -103,6 +103,7 @@ SEND_BUFFER = 256 * 1024  # bytes the kernel may hold for one event stream
 MAX_STREAMS = 32
 MAX_STREAMS_PER_ADDRESS = 8
 SPARE_CONNECTIONS = 32  # connections beyond the streams: page loads, /state
+MAX_REQUEST_BYTES = 64 * 1024  # a request line and its headers (the pages send about 1 KB)
 
 STATIC_FILES = {  # the only files served: name -> content type
     "index.html": "text/html; charset=utf-8",
@@ -564,8 +565,14 @@ class _RequestDeadline(io.RawIOBase):
         remaining = self._handler.deadline - time.monotonic()
         if remaining <= 0:
             raise TimeoutError("the request did not arrive whole in time")
+        # the request line and headers in bytes: the standard library takes 100 headers of
+        # 64 KiB each, 6.4 MB held per connection (a probe: 400 MB over 64 of them)
+        if self._handler.request_bytes >= MAX_REQUEST_BYTES:
+            raise ConnectionAbortedError(f"a request of more than {MAX_REQUEST_BYTES} bytes")
         self._sock.settimeout(remaining)
-        return self._sock.recv_into(buffer)
+        received = self._sock.recv_into(buffer)
+        self._handler.request_bytes += received
+        return received
 
 
 class _HTTPServer(http.server.ThreadingHTTPServer):
@@ -722,6 +729,7 @@ class DashboardServer:
             sys_version = ""
             timeout = server.idle_timeout  # a request must arrive whole within it
             deadline = 0.0
+            request_bytes = 0  # read for the request in hand (MAX_REQUEST_BYTES)
 
             def setup(self):
                 super().setup()
@@ -730,6 +738,7 @@ class DashboardServer:
             def handle_one_request(self):
                 # from the connection's start or the previous answer: idle time counts too
                 self.deadline = time.monotonic() + self.timeout
+                self.request_bytes = 0
                 super().handle_one_request()
 
             def parse_request(self):

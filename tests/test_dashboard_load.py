@@ -302,3 +302,28 @@ def test_full_snapshots_are_sent_a_few_at_a_time():
         server._full_sends.release()
         status, _, body = get(server, "/state")
         assert status == 200 and "r0" in json.loads(body)["robots"]
+
+
+def test_a_request_of_more_than_64_kib_of_headers_is_cut_off():
+    """A probe: 99 headers of 64 KiB each (the standard library's limits) on 64 connections
+    held 400 MB. A request line and headers are read up to MAX_REQUEST_BYTES."""
+    from clients.dashboard import MAX_REQUEST_BYTES
+
+    store = FleetStore()
+    with DashboardServer(store, "127.0.0.1", 0) as server:
+        host, port = server.address
+        with socket.create_connection((host, port), timeout=10) as sock:
+            header = b"X-Pad: " + b"a" * 8000 + b"\r\n"
+            sent = b"GET / HTTP/1.1\r\nHost: x\r\n"
+            try:
+                sock.sendall(sent)
+                while len(sent) < 4 * MAX_REQUEST_BYTES:
+                    sock.sendall(header)
+                    sent += header
+                sock.sendall(b"\r\n")
+                answer = sock.recv(4096)
+            except (ConnectionResetError, BrokenPipeError):
+                answer = b""
+        assert answer == b""  # closed without an answer, before the request was read
+        status, _, _ = get(server, "/")  # and the server serves on
+        assert status == 200
