@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import threading
+import unicodedata
 from collections import OrderedDict
 from collections.abc import Callable
 
@@ -34,7 +35,8 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
     (:func:`service.messages.check_preview`); a response or warning must name the robot of its
     key, and a warning must say ``collision``. Targets beyond MAX_TARGETS are left out (the
     worker finds a few; a viewer keeps or draws no more), and so are the characters of
-    ``model``, ``preset`` and ``worker`` beyond MAX_NOTE_LEN (CONTRACT.md bounds none of them).
+    ``model``, ``preset`` and ``worker`` (and a refusal's ``worker`` and ``detail``) beyond
+    MAX_NOTE_LEN (CONTRACT.md bounds none of them), and their control and format characters.
 
     Raises
     ------
@@ -49,7 +51,7 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
         message = decode_preview(payload)
         check_preview(message)  # the viewers only ever get images of the announced size
     elif kind == "refused":
-        message = decode_refusal(payload, robot)
+        message = _with_notes(decode_refusal(payload, robot), ("worker", "detail"))
     elif kind in ("response", "warning"):
         message = decode_response(payload)
         if message.robot != robot:
@@ -58,13 +60,27 @@ def decode_fleet_sample(key: str, payload: bytes, prefix: str
             raise MessageError("invalid-field", "a warning without collision: true")
         if len(message.targets) > MAX_TARGETS:
             message = message.model_copy(update={"targets": message.targets[:MAX_TARGETS]})
-        long = {name: getattr(message, name)[:MAX_NOTE_LEN] for name in ("model", "preset",
-                "worker") if len(getattr(message, name)) > MAX_NOTE_LEN}
-        if long:  # CONTRACT.md bounds none of them: shortened, never refused
-            message = message.model_copy(update=long)
+        message = _with_notes(message, ("model", "preset", "worker"))
     else:
         raise MessageError("bad-key", f"{key!r} is not a response, warning, preview or refusal")
     return robot, kind, message
+
+
+def _note(text: str) -> str:
+    """A name or note from the wire as the viewers show it: without control and format
+    characters (a terminal's escape sequences, a right-to-left override that reverses what
+    follows on a tile) and at most MAX_NOTE_LEN characters."""
+    if text.isprintable() and len(text) <= MAX_NOTE_LEN:
+        return text
+    return "".join(c for c in text if unicodedata.category(c) not in ("Cc", "Cf"))[:MAX_NOTE_LEN]
+
+
+def _with_notes(message, names: tuple[str, ...]):
+    """``message`` with the string fields ``names`` as :func:`_note` shows them (CONTRACT.md
+    bounds none of them: shortened and cleaned, never refused)."""
+    changed = {name: _note(getattr(message, name)) for name in names}
+    changed = {name: v for name, v in changed.items() if v != getattr(message, name)}
+    return message.model_copy(update=changed) if changed else message
 
 
 def take_fleet_sample(key: str, payload: bytes, prefix: str,

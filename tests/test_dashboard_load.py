@@ -327,3 +327,15 @@ def test_a_request_of_more_than_64_kib_of_headers_is_cut_off():
         assert answer == b""  # closed without an answer, before the request was read
         status, _, _ = get(server, "/")  # and the server serves on
         assert status == 200
+
+
+def test_control_and_format_characters_of_names_are_left_out():
+    """A probe: a right-to-left override in ``model`` reversed the rest of a tile's line; an
+    escape sequence in ``worker`` would reach ``asnn alerts``' terminal."""
+    from clients.fleet import decode_fleet_sample
+
+    fields = response("r0").model_dump()
+    payload = msgpack.packb({**fields, "model": "asnn\u202e tsubor", "worker": "w\x1b[31mred"})
+    _, _, message = decode_fleet_sample("asnn/r0/response", payload, "asnn")
+    assert (message.model, message.worker) == ("asnn tsubor", "w[31mred")
+    assert message.preset == fields["preset"]  # printable names as they are
