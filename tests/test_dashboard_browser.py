@@ -43,12 +43,24 @@ def find_chromium() -> str | None:
     return None
 
 
+def _above_nine(fd: int) -> int:
+    """``fd`` duplicated to a descriptor above 9 (the original closed)."""
+    import fcntl
+
+    moved = fcntl.fcntl(fd, fcntl.F_DUPFD, 10)
+    os.close(fd)
+    return moved
+
+
 class Chromium:
     """Headless Chromium driven over the DevTools protocol on a pipe (fds 3 and 4)."""
 
     def __init__(self, exe: str, url: str, profile: str, size=(1400, 1000)):
         to_browser_r, self._to_browser = os.pipe()
         self._from_browser, from_browser_w = os.pipe()
+        # the child's ends moved above 9, so that the redirections below never close one
+        # another (an end that is already descriptor 3 or 4 was closed by its own move)
+        to_browser_r, from_browser_w = (_above_nine(fd) for fd in (to_browser_r, from_browser_w))
         # bash moves the pipe ends to the descriptors Chromium expects, then becomes Chromium
         script = f'exec "$0" "$@" 3<&{to_browser_r} 4>&{from_browser_w} {to_browser_r}<&- ' \
                  f'{from_browser_w}>&-'
