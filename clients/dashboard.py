@@ -29,10 +29,11 @@ response (:func:`clients.fleet.decode_fleet_sample`, shared with the Foxglove se
 ``asnn alerts``), at most MAX_POINTS spike-rate points; all previews together at most
 ``max_preview_total`` bytes (the oldest previews are forgotten first), taken at most one a robot
 every PREVIEW_INTERVAL seconds and PREVIEW_RATE bytes a second in all (the others are counted
-as ``skipped``), so what a page is sent is bounded in bytes a second too. The server closes connections idle for ``idle_timeout`` seconds (a request that does not
-arrive whole, a kept-alive connection without a next request), drops an event stream whose
-client has not taken an event within ``send_timeout`` seconds (at most SEND_BUFFER bytes wait in
-the kernel for each), holds at most ``max_streams`` event streams (``max_streams_per_address``
+as ``skipped``), so what a page is sent is bounded in bytes a second too. The server closes
+connections idle for ``idle_timeout`` seconds (a request that does not arrive whole, a
+kept-alive connection without a next request), reads a request's line and headers up to
+MAX_REQUEST_BYTES, drops an event stream whose client has not taken an event within
+``send_timeout`` seconds (at most SEND_BUFFER bytes wait in the kernel for each), holds at most ``max_streams`` event streams (``max_streams_per_address``
 from one address) and ``max_streams + spare_connections`` connections in all
 (``max_streams_per_address + spare_connections / 2`` from one address), so that a browser can
 still load the page while another address holds what it may (clients at three addresses can

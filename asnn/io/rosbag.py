@@ -611,7 +611,7 @@ class BagClip:
                     try:
                         message = decode(record.data)
                         _stamp_ns(message)  # a message without a header is not an image
-                    except Exception as exc:  # the decoder is generated from the bag's text
+                    except Exception as exc:  # bytes that are no Image of the type's definition
                         error = SourceError(f"{path}: {self._topic} message {index} does "
                                             f"not decode ({type(exc).__name__}: "
                                             f"{str(exc)[:120]})", "bad-message")
