@@ -83,6 +83,7 @@ FORGET_S = 600.0      # a robot silent this long is dropped from the dashboard
 MAX_ROBOTS = 1000     # bound on the state a misbehaving publisher can make us keep
 MAX_POINTS = 400      # per robot, whatever the stamps say (10 s at 40 responses a second)
 LOG_SIZE = 50         # warning episodes kept in the log
+LATE_RESPONSES = 3    # responses in a row behind the latest (a seq above 0) that are a restart
 EPISODE_GAP = 20      # a warning at most this many frames after a robot's previous one extends
                       # the same log entry (one row per episode, not twenty rows a second) ...
 EPISODE_GAP_S = 5.0   # ... and at most this many seconds later by its stamp (not a camera that
@@ -151,6 +152,7 @@ class _Robot:
     refused: Refusal | None = None    # a worker's latest notice that it refuses its frames
     refused_at: float = 0.0           # its arrival (store clock)
     preview_at: float | None = None   # arrival (store clock) of the latest preview taken
+    behind: int = 0                   # responses in a row stamped before the latest shown
     responses: int = 0
     warnings: int = 0
     previews: int = 0
@@ -300,8 +302,15 @@ class FleetStore:
             return
         state.shown.append((response.seq, response.stamp))
         if previous is not None and response.stamp < previous.stamp:
+            state.behind += 1
+            if response.seq > 0 and state.behind < LATE_RESPONSES:
+                # a late answer (a worker that stalled and resumed after another took the robot
+                # over answered frames seconds old): counted, not shown, the history kept
+                state.responses += 1
+                return
             state.points.clear()  # the camera's clock went back (restart): a new history
             state.points_reset = version
+        state.behind = 0
         state.response, state.answered, state.changed = response, now, version
         state.responses += 1
         state.points.append((version, response.stamp, response.spike_rate))

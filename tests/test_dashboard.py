@@ -100,6 +100,25 @@ def test_a_camera_restart_starts_a_new_spike_history():
     assert tile["points_reset"] and tile["points"] == [[900.0, 0.0]]
 
 
+def test_a_late_answer_is_not_taken_for_a_camera_restart():
+    """An operations trial: a worker stopped for 5 s (SIGSTOP), whose robot another took over,
+    resumed and published answers to frames seconds old; the dashboard took them for a
+    camera's clock going back and dropped the robot's history."""
+    store = FleetStore(clock=Clock())
+    for seq in range(100, 120):
+        offer_response(store, response(seq=seq))
+    for seq in (60, 70):  # late: before the latest, not a restart at seq 0
+        offer_response(store, response(seq=seq))
+    tile = store.delta(0)["robots"]["r1"]
+    assert tile["response"]["seq"] == 119 and len(tile["points"]) == 20
+    assert tile["responses"] == 22
+    offer_response(store, response(seq=120))
+    for seq in (5, 6, 7):  # a third in a row behind: the clock went back after all
+        offer_response(store, response(seq=seq, stamp=500.0 + seq))
+    tile = store.delta(0)["robots"]["r1"]
+    assert tile["response"]["seq"] == 7 and [p[0] for p in tile["points"]] == [507.0]
+
+
 def test_a_second_answer_to_a_frame_shown_is_no_restart():
     store = FleetStore(clock=Clock())
     for seq in range(5):
