@@ -109,9 +109,12 @@ class RefusalNotices:
         with self._lock:
             if len(self.latest) < MAX_NOTICES or notice.worker in self.latest:
                 self.latest[notice.worker] = (notice.reason, notice.count)
-        self._log.warning("refused", "camera %s: worker %r refuses its frames (%r, %d so far): "
-                          "%r", self.robot, notice.worker, notice.reason, notice.count,
-                          notice.detail)
+        # the notices are the worker's for the robot id, whoever published the frames: with
+        # two cameras on one key both hear them (an operations trial read the good camera's
+        # log as the intruder's)
+        self._log.warning("refused", "camera %s: worker %r refuses frames on this robot's key "
+                          "(%r, %d so far, this camera's or another publisher's): %r",
+                          self.robot, notice.worker, notice.reason, notice.count, notice.detail)
 
     def summary(self) -> str:
         """``count by worker (latest reason)`` per worker, or ``none``."""

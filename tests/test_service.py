@@ -567,8 +567,8 @@ def test_a_camera_whose_frames_the_worker_refuses_is_told_why(zenoh_net, caplog)
     worker, (reason, count) = next(iter(refusals.latest.items()))
     assert (worker, reason) == (core.worker_id, "too-many-robots") and count >= 1
     assert refusals.summary() == f"{count} by {core.worker_id!r} (latest too-many-robots)"
-    assert (f"camera second: worker '{core.worker_id}' refuses its frames ('too-many-robots', "
-            in caplog.text) and "'already tracking 1 robots'" in caplog.text
+    assert (f"camera second: worker '{core.worker_id}' refuses frames on this robot's key "
+            "('too-many-robots', " in caplog.text) and "'already tracking 1 robots'" in caplog.text
 
 
 def test_refusal_notices_keep_each_workers_latest_and_log_one_line_whatever_they_say(caplog):
@@ -587,7 +587,7 @@ def test_refusal_notices_keep_each_workers_latest_and_log_one_line_whatever_they
             notices(sample(reason=f"made-up-{k}", count=12 + k))
         notices(sample(reason="not\na label", count=99))  # not a Refusal: ignored
     assert notices.summary() == "61 by 'w1' (latest made-up-49)" and notices.invalid == 1
-    lines = [r.getMessage() for r in caplog.records if "refuses its frames" in r.getMessage()]
+    lines = [r.getMessage() for r in caplog.records if "refuses frames" in r.getMessage()]
     assert len(lines) == 1 and "\n" not in lines[0]  # its text shown as data, on one line
 
 
