@@ -151,10 +151,12 @@ def format_status(status: dict) -> str:
                           for r, s in robots.items() if s.get("contested")) or "none"
     slow = ", ".join(f"{r} ({s['fps']:g} fps)" for r, s in robots.items()
                      if s.get("fps") is not None and s["fps"] < SLOW_FPS)
-    # robots refused in the last minute, the latest first: why a camera gets no response
+    # robots refused in the last minute, the latest first: why a camera gets no response (not a
+    # robot refused for want of a place that has one now)
     refused = ", ".join(f"{r} ({e['reason']} x{e['count']}: {_clipped(e['detail'], 60)})"
                         for r, e in reversed(status.get("refused", {}).items())
-                        if e.get("seconds_ago", 0) <= 60)
+                        if e.get("seconds_ago", 0) <= 60
+                        and not (e["reason"] == "too-many-robots" and r in tracked))
     return (f"worker {status['worker']}: {status['model']}/{status['preset'] or '-'}, up "
             f"{status['uptime_s']:.0f} s, robots {', '.join(tracked) or 'none'}"
             f" (+{stats.get('candidates', 0)} waiting for a valid frame); "

@@ -690,6 +690,12 @@ def test_status_says_why_a_camera_none_of_whose_frames_is_taken_gets_no_response
     assert status["refused"]["cam7"]["reason"] == "bad-pixels"
     assert status["refused"]["cam7"]["count"] == 3
     assert "refused lately: cam7 (bad-pixels x3" in format_status(status)
+    # refused for want of a place, then given one: no longer listed as refused (a trial)
+    status["refused"]["r1"] = {"reason": "too-many-robots", "detail": "already tracking 2",
+                               "count": 5, "seconds_ago": 1.0}
+    assert "r1 (too-many" in format_status(status)
+    status["robots"]["r1"] = {"candidate": False}
+    assert "r1 (too-many" not in format_status(status)
     clock.now += 120  # a minute later the line no longer lists it; the status still does
     status = msgpack.unpackb(msgpack.packb(core.status()))
     assert "refused lately" not in format_status(status)
