@@ -454,3 +454,21 @@ def test_motion_vectors_are_v_times_cos_and_sin_of_phi():
     np.testing.assert_allclose(dx, v[rows, cols] * np.cos(phi[rows, cols]), rtol=0, atol=1e-15)
     np.testing.assert_allclose(dy, v[rows, cols] * np.sin(phi[rows, cols]), rtol=0, atol=1e-15)
     assert (dx[(rows == 0) & (cols < 5)] < 0).all()
+
+
+def test_at_an_orientation_tie_the_forms_part_by_rounding_but_warn_alike():
+    """A disk looming at the exact centre: the orientations' summed energies (eq. 24) are equal
+    to rounding, and each form (fused float64 kernels, the straightforward retina, float32)
+    picks the inhibited one by its own rounding. README, presets: u within a few per cent, the
+    same warnings."""
+    frames = make_scene("looming").frames
+    forms = {name: ASNN(preset, optimised=optimised) for name, (preset, optimised) in {
+        "fused": ("reference", True), "straightforward": ("reference", False),
+        "float32": ("reference32", True)}.items()}
+    runs = {name: [model.step(f) for f in frames] for name, model in forms.items()}
+    base = runs["straightforward"]
+    assert sum(r.collision for r in base) > 10
+    for name in ("fused", "float32"):
+        assert [r.collision for r in runs[name]] == [r.collision for r in base]
+        gaps = [abs(a.u - b.u) / abs(b.u) for a, b in zip(runs[name], base) if b.u]
+        assert max(gaps) < 0.03, name
