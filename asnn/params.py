@@ -429,8 +429,9 @@ class ASNNParams(BaseModel):
             raise ValueError(f"min_width ({self.min_width}) must not exceed max_width "
                              f"({self.max_width})")
         if needing and self.targets != "objects":  # every stage that works on the objects
+            off = ", ".join(f"{name}={type(self).model_fields[name].default}" for name in needing)
             raise ValueError(f"{', '.join(needing)} need{'s' if len(needing) == 1 else ''} "
-                             f"targets='objects': set {'=False, '.join(needing)}=False too")
+                             f"targets='objects': set {off} too")
         return self
 
     @property

@@ -12,7 +12,7 @@ from asnn.evaluation import scoring, suite
 from asnn.evaluation.labels import load_labels
 from asnn.evaluation.runs import at_rate, parse_detector, parse_detectors, run_detector
 from asnn.io.video import open_video
-from asnn.stimuli.suite import make_case
+from asnn.stimuli.suite import EXTRA_CASES, make_case
 from cli.main import main
 from service.camera import open_source
 
@@ -166,7 +166,7 @@ def test_synthetic_eval_of_the_extra_drives_outside_the_suite(tmp_path, capsys):
     capsys.readouterr()
     assert main(["scene", "--list", "extra-*"]) == 0
     listed = capsys.readouterr().out.splitlines()
-    assert len(listed) == 42 and all(line.startswith("extra-") for line in listed)
+    assert len(listed) == len(EXTRA_CASES) and all(line.startswith("extra-") for line in listed)
     assert open_source("synthetic:extra-day-sharp-left").fps == 20.0
 
 
