@@ -267,8 +267,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         if wait and not publisher.matching_status.matching:
             log.warning("no subscriber on %s after %.1f s; publishing anyway", key, wait)
         # a worker that dies or stops later leaves the camera publishing into nothing: say so
-        declare(publisher.declare_matching_listener(
-            SubscriberWatch(robot, key, publisher.matching_status.matching)))
+        subscribed = SubscriberWatch(robot, key, publisher.matching_status.matching)
+        declare(publisher.declare_matching_listener(subscribed))
         log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
         if not (fps or source.live or source.fps_stated):  # a live source stamps its own times
             log.warning("camera %s: %s states no frame rate a camera runs at; its frames are "
@@ -306,7 +306,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                 frame = Frame.from_image(np.ascontiguousarray(image), seq=seq, stamp=stamp,
                                          format=format)
                 publisher.put(encode(frame))
-                answers.check(publisher.matching_status.matching)
+                answers.check(bool(subscribed.matching))
                 if previews is not None and time.monotonic() >= next_preview:
                     next_preview = max(next_preview + 1.0 / preview_hz, time.monotonic())
                     try:
