@@ -651,7 +651,7 @@ def _warmup_clip(min_side: int) -> np.ndarray:
 
 
 def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference"),
-                    threads: int = 1) -> None:
+                    threads: int = 1, straightforward: bool = False) -> None:
     """Compile the optimised step's numba kernels, or load them from numba's on-disk cache
     (seconds on a fresh install, milliseconds afterwards).
 
@@ -668,9 +668,14 @@ def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference
     threads : int
         As the models that will run (``ASNN(..., threads=N)``): with more than 1, the kernel of
         the model's worker threads too.
+    straightforward : bool
+        The straightforward form's too (``ASNN(..., optimised=False)``): it runs the objects'
+        kernels in float64, which a float32 preset's optimised form never calls (a benchmark
+        of it would otherwise time their compiling).
     """
-    for name in presets:
-        with ASNN(name, threads=threads) as model:
+    forms = (True, False) if straightforward else (True,)
+    for name, optimised in ((name, form) for name in presets for form in forms):
+        with ASNN(name, threads=threads, optimised=optimised) as model:
             for _ in model.stream((None, frame) for frame in _warmup_clip(model.params.min_side)):
                 pass
             # the looming fit of boxes larger than its grid, which the clip's objects are not:

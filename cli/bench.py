@@ -99,6 +99,19 @@ def run(args: argparse.Namespace) -> int:
         if (args.detect or args.service) and any("/" in name for name in args.preset or ()):
             raise ValueError("--preset with changed fields is timed per frame (or with "
                              "--handover): --detect and --service take a preset's name")
+        modes = [flag for flag in ("--detect", "--handover", "--service")
+                 if getattr(args, flag[2:])]
+        if len(modes) > 1:  # each would run alone, the others' options ignored
+            raise ValueError(f"{' and '.join(modes)}: one bench at a time")
+        if modes and args.model and set(args.model) != {"asnn"}:
+            raise ValueError(f"{modes[0]} times the ASNN model: --model does not apply")
+        if args.service:
+            from service.bench import START_S
+
+            if args.seconds < START_S + 1.0:  # the start is left out of each step's figures
+                raise ValueError(f"--seconds must be at least {START_S + 1.0:g} with --service "
+                                 f"(the first {START_S:g} s of each step are its start-up, "
+                                 "not timed)")
         if args.repeat is not None and (args.handover or args.service):
             raise ValueError("--repeat repeats the per-frame comparison or --detect's runs: "
                              "not with --handover or --service")
@@ -157,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
 
         print(handover.format_report(report, HANDOVER_WARMUP_FRAMES))
     elif args.service:
-        print(f"# threads: {pinning}")
+        print(f"# threads of the process that plays the cameras: {pinning}")
         print(service_bench.format_report(report))
     else:
         m = report["machine"]

@@ -104,7 +104,8 @@ def summarise_warmups(rows: Sequence[dict], quantile: float = 0.99) -> dict:
             return {"handovers": 0, "max": None, "quantile": None, "counts": {}}
         counts = dict(zip(*np.unique(values, return_counts=True)))
         return {"handovers": int(len(values)), "max": int(values.max()),
-                "quantile": int(np.ceil(np.quantile(values, quantile))),
+                # a value taken (not one between two): "99 % need at most it" then holds
+                "quantile": int(np.quantile(values, quantile, method="higher")),
                 "counts": {int(k): int(v) for k, v in counts.items()}}
 
     worst = sorted(rows, key=lambda r: -r["warmup"])[:5]
