@@ -44,8 +44,8 @@ from .logutil import RateLimitedLog
 from .messages import (FORMATS, PREVIEW_WIDTH, Frame, MessageError, Preview, decode_refusal,
                        encode)
 
-__all__ = ["ANSWER_TIMEOUT", "AnswerWatch", "FRAME_QOS", "MAX_NOTICES", "MAX_REPLAY_GAP",
-           "PREVIEW_HZ", "PREVIEW_WIDTH", "RefusalNotices", "Source", "SourceError", "SourceRejections", "SubscriberWatch",
+__all__ = ["FRAME_QOS", "MAX_NOTICES", "MAX_REPLAY_GAP", "PREVIEW_HZ", "PREVIEW_WIDTH",
+           "RefusalNotices", "Source", "SourceError", "SourceRejections", "SubscriberWatch",
            "open_source", "publish_frames"]
 
 log = logging.getLogger("asnn.camera")
@@ -55,8 +55,6 @@ FRAME_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
 PREVIEW_HZ = 2.0     # thumbnails per second on <prefix>/<robot>/preview (0: none)
 MAX_REPLAY_GAP = 5.0  # seconds: a longer pause between two recorded frames is shortened to this
 MAX_NOTICES = 64  # workers whose latest refusal notice a camera keeps
-# seconds of frames taken by a subscriber but answered by no worker before the camera says so
-ANSWER_TIMEOUT = 10.0
 
 
 class SourceRejections:
@@ -163,56 +161,12 @@ class SubscriberWatch:
                         self.robot, self.key, more)
 
 
-class AnswerWatch:
-    """Logs when a camera's frames have a subscriber but no worker answers them for
-    ``timeout`` seconds (a handler of the robot's response key): the frames reach no worker
-    that serves the robot. On a secured router, a camera whose credentials are another robot's
-    has every frame dropped by the router while a worker's subscription to every robot's frames
-    still matches; a worker stopped (SIGSTOP) keeps its subscription until its lease ends.
-    Once per silent spell, and an INFO line when answers come again. :meth:`check` is called
-    with each frame published; ``answers`` counts the responses heard."""
-
-    def __init__(self, robot: str, key: str, *, timeout: float = ANSWER_TIMEOUT,
-                 clock=time.monotonic):
-        self.robot, self.key, self.timeout, self.clock = robot, key, timeout, clock
-        self.answers = 0
-        self._since = clock()  # the latest answer, or when the frames found a subscriber
-        self._silent = False
-        self._lock = threading.Lock()
-
-    def __call__(self, sample) -> None:
-        with self._lock:
-            self.answers += 1
-            self._since = self.clock()
-            silent, self._silent = self._silent, False
-        if silent:
-            log.info("camera %s: a worker answers its frames again (%s)", self.robot, self.key)
-
-    def check(self, matching: bool) -> None:
-        """After a frame is published; ``matching``: whether a subscriber takes the frames
-        (without one, :class:`SubscriberWatch` speaks, and the wait starts again)."""
-        now = self.clock()
-        with self._lock:
-            if not matching:
-                self._since = now
-                return
-            if self._silent or now - self._since < self.timeout:
-                return
-            self._silent = True
-        log.warning("camera %s: no worker has answered its frames for %.0f s (nothing on %s) "
-                    "though a subscriber takes them: no worker serves this robot. On a secured "
-                    "router, check that the camera runs with its own robot's credentials "
-                    "(--robot and the --config identity agree)", self.robot, self.timeout,
-                    self.key)
-
-
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    prefix: str = keys.DEFAULT_PREFIX, fps: float | None = None,
                    loop: bool = False, format: str = "gray8", wait: float = 0.0,
                    stop: threading.Event | None = None, max_frames: int | None = None,
                    preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH,
-                   announce: bool = True, refusals: RefusalNotices | None = None,
-                   answers: AnswerWatch | None = None) -> int:
+                   announce: bool = True, refusals: RefusalNotices | None = None) -> int:
     """Publish the source's frames paced at ``fps`` (default: the source's own times).
 
     ``stamp``: the capture time of a live source's frame (wall clock when it was read); a
@@ -224,8 +178,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     ``preview_hz``: thumbnails (``preview_width`` pixels wide) per second on the preview key,
     at most one per frame; 0 publishes none.
     ``refusals``: collects and logs the workers' notices that they refuse the frames (a new
-    :class:`RefusalNotices` if not given); ``answers``: hears the workers' responses to them
-    and logs when none comes (a new :class:`AnswerWatch` if not given).
+    :class:`RefusalNotices` if not given).
     Returns the number of frames published. Ends at the end of the source unless ``loop``
     (a live source is never replayed), when ``stop`` is set, or after ``max_frames``.
     """
@@ -248,9 +201,6 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
 
         declare(session.declare_subscriber(keys.refusal_key(robot, prefix),
                                            refusals or RefusalNotices(robot)))
-        response_key = keys.response_key(robot, prefix)
-        answers = answers or AnswerWatch(robot, response_key)
-        declare(session.declare_subscriber(response_key, answers))
         publisher = declare(session.declare_publisher(key, **FRAME_QOS))
         if announce:
             declare(session.liveliness().declare_token(keys.camera_token_key(robot, prefix)))
@@ -267,8 +217,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         if wait and not publisher.matching_status.matching:
             log.warning("no subscriber on %s after %.1f s; publishing anyway", key, wait)
         # a worker that dies or stops later leaves the camera publishing into nothing: say so
-        subscribed = SubscriberWatch(robot, key, publisher.matching_status.matching)
-        declare(publisher.declare_matching_listener(subscribed))
+        declare(publisher.declare_matching_listener(
+            SubscriberWatch(robot, key, publisher.matching_status.matching)))
         log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
         if not (fps or source.live or source.fps_stated):  # a live source stamps its own times
             log.warning("camera %s: %s states no frame rate a camera runs at; its frames are "
@@ -306,7 +256,6 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                 frame = Frame.from_image(np.ascontiguousarray(image), seq=seq, stamp=stamp,
                                          format=format)
                 publisher.put(encode(frame))
-                answers.check(bool(subscribed.matching))
                 if previews is not None and time.monotonic() >= next_preview:
                     next_preview = max(next_preview + 1.0 / preview_hz, time.monotonic())
                     try:

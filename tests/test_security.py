@@ -187,29 +187,6 @@ def test_each_role_does_its_job_and_nothing_else(fleet):
         assert (late[0].robot, late[0].seq) == ("r1", sent[-1].seq)
 
 
-def test_a_camera_hears_its_own_robots_answers_and_says_so_when_its_frames_reach_no_worker(
-        fleet, caplog):
-    """An operations trial: a camera run with robot r1's credentials as ``--robot r2`` had
-    every frame dropped by the router while the worker's subscription to every robot's frames
-    matched, and logged that all was well. A camera hears its own robot's responses (only)."""
-    from service.camera import AnswerWatch, Source, publish_frames
-
-    session, _ = fleet
-    scene = make_scene("looming", frames=40)
-    source = Source("looming", 20.0, False, lambda: iter(scene.frames))
-    with Worker(session("worker"), WorkerCore(worker_id="secure-w1"), stats_every=0):
-        camera = session("camera-r1")
-        other = collector(camera, keys.response_key("r2"))
-        answered = AnswerWatch("r1", keys.response_key("r1"), timeout=1.0)
-        with caplog.at_level("WARNING", logger="asnn.camera"):
-            publish_frames(camera, "r1", source, wait=10.0, preview_hz=0, answers=answered)
-            assert answered.answers > 0 and "no worker has answered" not in caplog.text
-            wrong = AnswerWatch("r2", keys.response_key("r2"), timeout=1.0)
-            publish_frames(camera, "r2", source, wait=10.0, preview_hz=0, answers=wrong)
-        assert wrong.answers == 0 and other == []
-        assert "camera r2: no worker has answered its frames for 1 s" in caplog.text
-
-
 def test_the_worker_identity_may_ask_the_workers_status_for_its_health_check(fleet):
     """A worker's container checks its health with its own credentials (``asnn status --local``
     in deploy/compose.secure.yml): the worker identity may query the status queryables; a

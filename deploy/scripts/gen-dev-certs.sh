@@ -172,17 +172,11 @@ for robot in "${robots[@]}"; do
   rules+=" messages: [\"declare_subscriber\"], key_exprs: [\"asnn/$robot/refused\"] },"$'\n'
   rules+="      { id: \"camera-$robot-refusals-out\", permission: \"allow\", flows: [\"egress\"],"
   rules+=" messages: [\"put\"], key_exprs: [\"asnn/$robot/refused\"] },"$'\n'
-  # its own robot's responses: a camera whose frames no worker answers says so
-  rules+="      { id: \"camera-$robot-answers-in\", permission: \"allow\", flows: [\"ingress\"],"
-  rules+=" messages: [\"declare_subscriber\"], key_exprs: [\"asnn/$robot/response\"] },"$'\n'
-  rules+="      { id: \"camera-$robot-answers-out\", permission: \"allow\", flows: [\"egress\"],"
-  rules+=" messages: [\"put\"], key_exprs: [\"asnn/$robot/response\"] },"$'\n'
   subjects+="      { id: \"camera-$robot\", usernames: [\"camera-$robot\"],"
   subjects+=" cert_common_names: [\"camera-$robot\"] },"$'\n'
   policies+="      { subjects: [\"camera-$robot\"], rules: [\"camera-$robot-publish\","
   policies+=" \"camera-$robot-announce\", \"camera-$robot-refusals-in\","
-  policies+=" \"camera-$robot-refusals-out\", \"camera-$robot-answers-in\","
-  policies+=" \"camera-$robot-answers-out\", \"camera-matching\"] },"$'\n'
+  policies+=" \"camera-$robot-refusals-out\", \"camera-matching\"] },"$'\n'
 done
 dir=$(where router)
 {
