@@ -95,4 +95,8 @@ def frame_time(t: object) -> float:
     taken: the detectors read them as no usable time."""
     if isinstance(t, bool) or not isinstance(t, numbers.Real):
         raise FrameError(f"a frame's time t must be a number of seconds or None, got {t!r}")
-    return float(t)
+    try:
+        return float(t)
+    except OverflowError:  # an int beyond any float (10**400)
+        raise FrameError("a frame's time t is beyond a float's range (a number of seconds "
+                         "or None)") from None

@@ -34,7 +34,7 @@ from .approach import ApproachStage, CameraRig, FramePair, frame_pixel
 from .approach.looming import region_expansion
 from .approach.motion_layers import motion_layers
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
-from .params import MAX_FRAME_GAP_S, PERIOD_FRAMES, ASNNParams, preset
+from .params import MAX_FRAME_GAP_S, MAX_THREADS, PERIOD_FRAMES, ASNNParams, preset
 from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
 from .targets import extract_targets
@@ -63,7 +63,8 @@ class ASNN:
         straightforward float64 form of :mod:`asnn.retina` (``False``; for comparisons). Kernel
         sizes other than 5x5 always use the straightforward form.
     threads : int
-        Threads the optimised form uses for one stream (default 1: only the calling one). With
+        Threads the optimised form uses for one stream, 1 to :data:`asnn.params.MAX_THREADS`
+        (256; default 1: only the calling one). With
         more, each frame's fused pass is computed in bands of rows, one per thread, and
         :meth:`stream` finishes each frame (attention, objects, tracking, output) on the calling
         thread while the worker threads compute the next frame's pass. The results are the same
@@ -142,8 +143,8 @@ class ASNN:
                                          p.kernel_size, p.kernel_extent) for k in range(half)]
         self._cs = retina.center_surround_kernel(p.cs_sigma, p.cs_wavelength, p.cs_phase,
                                                  p.kernel_size, p.kernel_extent)
-        if threads < 1:
-            raise ValueError(f"threads must be at least 1, got {threads}")
+        if not 1 <= threads <= MAX_THREADS:
+            raise ValueError(f"threads must be 1 to {MAX_THREADS}, got {threads}")
         # band servers poll POSIX clocks (asnn._parallel); elsewhere the model uses one thread
         self.threads = int(threads) if self.optimised and _parallel.supported() else 1
         self._banded: _parallel.BandedFront | None = None
@@ -268,8 +269,9 @@ class ASNN:
         t : float, optional
             The frame's time in seconds (any origin, increasing). Used for expansion rates and
             time to contact; without it, or where it is NaN or infinite or does not advance by
-            more than 0 and at most 1 s (a clock in other units, a stall), frames are
-            ``params.dt`` apart.
+            more than 0 and at most 1 s (a clock in milliseconds or smaller units, a stall),
+            frames are ``params.dt`` apart. A clock in larger units (minutes) is believed as
+            seconds: its expansion reads 60 times too fast, and the default warns early.
 
         Raises
         ------

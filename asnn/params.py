@@ -54,6 +54,11 @@ __all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "MAX_KERNEL", "preset", "p
 MAX_KERNEL = 255  # px of a kernel's side (the frame must be at least as large)
 MAX_STAGES = 32  # stages of the temporal filters, each a frame of state
 MAX_FRAMES = 1000  # frames of a window or a track's memory (50 s at 20 fps)
+# threads of a model (ASNN(..., threads=N)): it splits each frame into bands, one for each
+# thread, and threads beyond the cores only take turns; 256 is more cores than a machine
+# running it has, where thousands of threads stall the machine (3,000: 0.6 s a frame on 2
+# cores, 10,000 not two frames in ten minutes)
+MAX_THREADS = 256
 # Bounds of the real-valued parameters: the presets use magnitudes of at most 255, and gains of
 # 1e20 made the float32 state overflow to inf and the model silently blind; a sigma or a
 # wavelength of 1e-300 px divides by zero in its kernel.

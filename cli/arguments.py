@@ -9,15 +9,12 @@ from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS, check_perturbation,
 # FPS_RANGE bounds every --fps: beyond it no camera runs, and a video writer given such a rate
 # (inf) may never return
 from asnn.io.video import FPS_RANGE
+from asnn.params import MAX_THREADS  # --threads
 from asnn.stimuli.suite import LARGEST_SIZE
 from service import keys
 
 # --frames: 10000 frames, over 8 minutes at 20 a second; a generated clip is held at once
 MAX_FRAMES = 10_000
-# --threads of a model: it splits each frame into bands, one for each thread, and threads
-# beyond the cores only take turns; 256 is more cores than a machine running it has, where
-# thousands of threads stall the machine or cannot be started
-MAX_THREADS = 256
 # --jobs, --workers: processes of about 100 MB each, all started at once (a pool of 10000 forked
 # processes filled the machine for one case)
 MAX_PROCESSES = 64

@@ -107,6 +107,8 @@ def test_a_rejected_frame_leaves_the_state_untouched():
             for t in ("1.5", [1.0], True):
                 with pytest.raises(FrameError, match="time t must be a number"):
                     disturbed.step(np.zeros((80, 80), np.uint8), t)
+            with pytest.raises(FrameError, match="beyond a float's range"):  # not OverflowError
+                disturbed.step(np.zeros((80, 80), np.uint8), 10**400)
         a, b = clean.step(frame), disturbed.step(frame)
     assert (a.u, a.index) == (b.u, b.index)
 
@@ -120,6 +122,13 @@ def test_a_rejected_frame_leaves_the_state_untouched():
 def test_a_model_of_something_else_than_parameters_is_refused(params, threads, message):
     with pytest.raises(TypeError, match=message):
         ASNN(params, threads=threads)
+
+
+@pytest.mark.parametrize("threads", [0, 257])
+def test_a_model_of_more_threads_than_any_machine_has_is_refused(threads):
+    """A probe: 10,000 threads did not step two frames in ten minutes on two cores."""
+    with pytest.raises(ValueError, match="threads must be 1 to 256"):
+        ASNN("default", threads=threads)
 
 
 @pytest.mark.parametrize("changes, message", [

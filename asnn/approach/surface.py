@@ -67,6 +67,9 @@ SECONDS = 0.3
 # caught in 3 of 11 variants); over two it doubles while the noise does not, and a drive's view,
 # which is not one plane, fits worse, so that its runs shorten (the longest from 5 frames to 2)
 BASELINE = 0.1
+# frames the watch keeps for its baseline and its corridor's rates at most (0.3 s at 850 fps): the
+# spans above count seconds, and a clock stepping a microsecond a frame kept 100,000 of them
+MAX_KEPT = 256
 FIT_MIN = 0.3
 TILES = 3  # tiles a side
 TILES_MIN = 8  # of 9
@@ -285,6 +288,8 @@ class SurfaceWatch:
             history.clear()
             history.append((shrunk(previous), 0.0))
         history.append((shrunk(current), elapsed))
+        if len(history) > MAX_KEPT:  # frames a hair apart (a clock in microseconds' steps)
+            history.popleft()
         self._latest = current
         # back to the frame BASELINE before (a thousandth of a frame's slack, as for the
         # persistence: 0.05 s stamps read 0.0499...), or the oldest kept
@@ -311,6 +316,8 @@ class SurfaceWatch:
                     else _tile_rates(history[-2][0], after, elapsed, exclude)[0])
             kept = self._rates
             kept.append((grid, elapsed))
+            if len(kept) > MAX_KEPT:
+                kept.popleft()
             span = sum(dt for _, dt in kept) - kept[0][1]  # from the oldest kept to this one
             while span > SECONDS + 1e-3:
                 kept.popleft()
