@@ -22,6 +22,7 @@ import functools
 import math
 import numbers
 import statistics
+import threading
 import weakref
 from collections import deque
 from collections.abc import Iterable, Iterator
@@ -148,6 +149,7 @@ class ASNN:
         # band servers poll POSIX clocks (asnn._parallel); elsewhere the model uses one thread
         self.threads = int(threads) if self.optimised and _parallel.supported() else 1
         self._banded: _parallel.BandedFront | None = None
+        self._in_use = threading.Lock()  # a step or a stream in progress (_claim)
         if self.optimised:
             t = self.dtype
             env, scales = _fast.dog_factors(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
@@ -279,10 +281,36 @@ class ASNN:
             If the frame is not an image the model accepts, its size differs from the stream's,
             or ``t`` is not a number (a str, a bool); the model's state is then as it was.
         """
-        taken = self._take(frame, t)
-        if taken.photo is not None:
-            self._front(taken)
-        return self._finish(taken)
+        self._claim()
+        try:
+            taken = self._take(frame, t)
+            if taken.photo is not None:
+                self._front(taken)
+            return self._finish(taken)
+        finally:
+            self._in_use.release()
+
+    def _claim(self) -> None:
+        """Take the model for one step or one stream with worker threads: RuntimeError where
+        another thread steps it, or a stream of it is under way (a model serves one stream
+        from one thread at a time: two at once mixed their states without a word)."""
+        if not self._in_use.acquire(blocking=False):
+            raise RuntimeError("this ASNN model is stepping already (on another thread, or in "
+                               "a stream not finished): one model serves one stream, from one "
+                               "thread at a time")
+
+    def __getstate__(self) -> dict:
+        """For copy and pickle: without the lock and the worker threads, which a copy starts
+        again when it needs them."""
+        state = dict(self.__dict__)
+        del state["_in_use"]
+        state.pop("_finalizer", None)
+        state["_banded"] = None
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._in_use = threading.Lock()
 
     def stream(self, frames: Iterable[tuple[float | None, np.ndarray]]) -> Iterator[Response]:
         """The responses to ``(t, frame)`` pairs, in order: ``step(frame, t)`` for each.
@@ -301,6 +329,15 @@ class ASNN:
             for t, frame in frames:
                 yield self.step(frame, t)
             return
+        self._claim()
+        try:
+            yield from self._banded_stream(frames)
+        finally:
+            self._in_use.release()
+
+    def _banded_stream(self, frames: Iterable[tuple[float | None, np.ndarray]]
+                       ) -> Iterator[Response]:
+        """:meth:`stream` with worker threads (``threads`` > 1)."""
         banded = self._banded_front()
         iterator = iter(frames)
         # Taken frames not finished yet, oldest first: a frame is finished while the workers

@@ -554,3 +554,56 @@ def test_cluster_targets_of_a_resized_frame_are_in_the_frames_own_pixels(optimis
         for ta, tb in zip(a.targets, b.targets):
             assert (tb.x, tb.y) == pytest.approx((4 * ta.x + 1.5, 4 * ta.y + 1.5), abs=1e-6)
             assert tb.pixels == 16 * ta.pixels
+
+
+def test_a_model_stepped_from_two_threads_at_once_says_so():
+    """A probe: one model stepped from two threads mixed their states without a word (threads=1)
+    or stayed broken (threads=2)."""
+    import threading
+
+    frames = make_scene("looming", size=(64, 64), frames=6).frames
+    model = ASNN("default")
+    inside, release = threading.Event(), threading.Event()
+    take = model._take
+
+    def slow_take(frame, t):  # the first thread's step, held inside
+        inside.set()
+        release.wait(10)
+        return take(frame, t)
+
+    model._take = slow_take
+    first = threading.Thread(target=model.step, args=(frames[0],))
+    first.start()
+    assert inside.wait(10)
+    with pytest.raises(RuntimeError, match="stepping already"):
+        model.step(frames[1])
+    release.set()
+    first.join(10)
+    del model._take
+    assert model.step(frames[1]).index == 1  # the refused step changed nothing
+    # a stream with worker threads holds the model until it is finished
+    threaded = ASNN("default", threads=2)
+    stream = threaded.stream((None, f) for f in frames)
+    next(stream)
+    with pytest.raises(RuntimeError, match="stepping already"):
+        threaded.step(frames[0])
+    stream.close()
+    assert threaded.step(frames[0]).index == threaded.index - 1
+    threaded.close()
+
+
+def test_a_model_with_worker_threads_copies_and_pickles_mid_stream():
+    """A probe: copy.deepcopy or pickle of a threads=2 model raised once its threads ran."""
+    import copy
+    import pickle
+
+    frames = make_scene("looming", size=(64, 64), frames=30).frames
+    model = ASNN("default", threads=2)
+    for f in frames[:10]:
+        model.step(f)
+    copies = [copy.deepcopy(model), pickle.loads(pickle.dumps(model))]
+    rest = [model.step(f).to_dict() for f in frames[10:]]
+    for other in copies:
+        assert [other.step(f).to_dict() for f in frames[10:]] == rest
+        other.close()
+    model.close()
