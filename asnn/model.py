@@ -280,6 +280,9 @@ class ASNN:
         FrameError
             If the frame is not an image the model accepts, its size differs from the stream's,
             or ``t`` is not a number (a str, a bool); the model's state is then as it was.
+        RuntimeError
+            If the model is stepping already, on another thread or in a :meth:`stream` with
+            worker threads not finished: one model serves one stream from one thread at a time.
         """
         self._claim()
         try:
