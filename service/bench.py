@@ -388,7 +388,8 @@ def run(command: Sequence[str], size=(320, 240), fps: float = 25.0, seconds: flo
     return {"size": f"{w}x{h}", "fps": fps, "seconds": seconds, "scene": SCENE,
             "preset": preset or DEFAULT_PRESET, "model_ms": model,
             "workers": workers, "worker_threads": threads, "cores": cores,
-            "worker": f"{workers} separate process(es), {threads} processing thread(s) each",
+            "worker": (f"{workers} separate process{'es' if workers > 1 else ''}, {threads} "
+                       f"processing thread{'s' if threads > 1 else ''} each"),
             "steady_state_after_s": START_S,
             "cameras": f"one thread, phases {phases}" + (f" (seed {seed})"
                                                           if phases == "random" else ""),

@@ -792,7 +792,8 @@ def make_case(name: str, variant: int = 0,
     try:
         case = CASES[name]
     except KeyError:
-        raise ValueError(f"unknown suite case {name!r} (see asnn.stimuli.suite.CASES)") from None
+        raise ValueError(f"unknown suite case {name!r} (`asnn scene --list` names them: "
+                         "asnn.stimuli.suite.CASES)") from None
     variant = check_variant(variant)
     if driving_size is not None and scale is not None:
         raise ValueError("give a driving size or a scale, not both")
