@@ -160,7 +160,8 @@ class _Collector:
         self._sub.undeclare()
 
 
-def summarise(records, sent: int, fps: float, model_ms: float) -> dict:
+def summarise(records, sent: int, fps: float, model_ms: float,
+              workers: Sequence[str] = ()) -> dict:
     """One step's figures (see the module notes) from its responses.
 
     Parameters
@@ -174,6 +175,9 @@ def summarise(records, sent: int, fps: float, model_ms: float) -> dict:
         Camera rate (the backlog test allows two frame periods).
     model_ms : float
         Model time to subtract for a response that does not report its own.
+    workers : sequence of str
+        The workers' ids, so that one that answered no robot counts 0 in
+        ``robots_per_worker`` (a 2/0 split is not shown as 2).
     """
     out = {"frames": sent, "responses": len(records),
            "answered": len(records) / sent if sent else 0.0}
@@ -183,7 +187,7 @@ def summarise(records, sent: int, fps: float, model_ms: float) -> dict:
     added = latency - np.array([model_ms if r[4] is None else r[4] for r in records])
     stamps = np.array([r[3] for r in records])
     if all(len(r) > 5 for r in records):
-        robots: dict[str, set] = {}
+        robots: dict[str, set] = {w: set() for w in workers}
         for r in records:
             robots.setdefault(r[5], set()).add(r[0])
         out["robots_per_worker"] = {w: len(rs) for w, rs in sorted(robots.items())}
@@ -266,7 +270,7 @@ def camera_phases(n: int, phases: str, seed: int = 0) -> np.ndarray:
 
 
 def _step(session, collector, n: int, step: int, frames, fps: float, seconds: float,
-          model_ms: float, prefix: str, phases: str, seed: int) -> dict:
+          model_ms: float, prefix: str, phases: str, seed: int, workers: Sequence[str]) -> dict:
     robots = [f"bench{step + 1}-{i}" for i in range(n)]
     collector.take()
     started = time.time()
@@ -274,7 +278,8 @@ def _step(session, collector, n: int, step: int, frames, fps: float, seconds: fl
                                 camera_phases(n, phases, seed), prefix)
     time.sleep(0.5 + 2.0 / fps)  # the last responses
     records = [r for r in collector.take() if r[0] in published]
-    report = {"cameras": n, **summarise(records, sum(published.values()), fps, model_ms)}
+    report = {"cameras": n, **summarise(records, sum(published.values()), fps, model_ms,
+                                        workers)}
     report["wall_s"] = time.time() - started
     return report
 
@@ -287,6 +292,10 @@ def _switch_interval(seconds: float):
         yield
     finally:
         sys.setswitchinterval(before)
+
+
+def _worker_ids(workers: int) -> list[str]:
+    return ["bench"] if workers == 1 else [f"bench-w{i + 1}" for i in range(workers)]
 
 
 def _fleet(command: Sequence[str], tmp: Path, workers: int, router: bool, preset: str | None,
@@ -309,8 +318,7 @@ def _fleet(command: Sequence[str], tmp: Path, workers: int, router: bool, preset
     else:  # one worker, listening: the cameras and the collector connect to it
         where = ["--mode", "peer", "--listen", endpoint]
         session = loopback_options(int(endpoint.rsplit(":", 1)[1]))[1]
-    for i in range(workers):
-        worker_id = "bench" if workers == 1 else f"bench-w{i + 1}"
+    for worker_id in _worker_ids(workers):
         processes.append(_Process(command, _worker_args(worker_id, config, preset, threads) + where,
                                   "ready"))
     for process in processes:
@@ -367,13 +375,14 @@ def run(command: Sequence[str], size=(320, 240), fps: float = 25.0, seconds: flo
             try:
                 # warm-up, not reported: the workers load their compiled kernels, the sessions
                 # match
+                ids = _worker_ids(workers)
                 _step(session, collector, 2 * workers, -1, frames, fps, 1.5, model["median_ms"],
-                      DEFAULT_PREFIX, phases, seed)
+                      DEFAULT_PREFIX, phases, seed, ids)
                 for step, n in enumerate(counts):
                     if progress:
                         progress(f"{n} cameras")
                     result = _step(session, collector, n, step, frames, fps, seconds,
-                                   model["median_ms"], DEFAULT_PREFIX, phases, seed)
+                                   model["median_ms"], DEFAULT_PREFIX, phases, seed, ids)
                     steps.append(result)
                     if not result["keeps_up"]:
                         break
@@ -432,7 +441,7 @@ def format_report(report: dict) -> str:
     else:
         per = ""
         if report.get("cameras_per_core") is not None:
-            per = (f"; {report['cameras_per_worker']:g} per worker, "
+            per = (f"; {report['cameras_per_worker']:g} per worker on average, "
                    f"{report['cameras_per_core']:g} per core of {report['cores']}")
         lines.append(f"largest number of cameras that keeps up: {best} "
                      f"(steady-state p99 added latency {report['added_p99_ms_at_max']:.1f} ms"

@@ -94,6 +94,17 @@ def test_service_summary_flags_a_growing_backlog_and_missing_answers():
         "frames": 10, "responses": 0, "answered": 0.0, "keeps_up": False}
 
 
+def test_service_summary_counts_a_worker_that_answered_no_robot():
+    """A review: with two workers, one answering both cameras, the split read "2", not 2/0."""
+    from service.bench import summarise
+
+    fps, t0 = 25.0, 1000.0
+    records = [(robot, k, t0 + k / fps + 0.002, t0 + k / fps, 1.0, "w1")
+               for robot in ("a", "b") for k in range(50)]
+    out = summarise(records, sent=100, fps=fps, model_ms=1.0, workers=["w1", "w2"])
+    assert out["robots_per_worker"] == {"w1": 2, "w2": 0}
+
+
 def test_camera_phases():
     from service.bench import camera_phases
 
