@@ -628,11 +628,15 @@ class ASNN:
         """Cluster targets found on the model's ``grid`` (rows, cols) in the input frame's
         pixels, where ``max_width`` or ``min_width`` resized the frame (the objects' stage
         scales its own)."""
-        sx, sy = self.shape[1] / grid[1], self.shape[0] / grid[0]
+        sx, sy = self._frame_scale(grid)
         if sx == sy == 1.0:
             return targets
         return [dataclasses.replace(t, x=frame_pixel(t.x, sx), y=frame_pixel(t.y, sy),
                                     pixels=round(t.pixels * sx * sy)) for t in targets]
+
+    def _frame_scale(self, grid: tuple[int, int]) -> tuple[float, float]:
+        """Input-frame pixels per pixel of the model's ``grid`` (rows, cols): (x, y)."""
+        return self.shape[1] / grid[1], self.shape[0] / grid[0]
 
     def _objects(self, attended: np.ndarray | None, g: np.ndarray, vectors, frame: "_Frame",
                  total: float, points: tuple[np.ndarray, np.ndarray] | None = None
@@ -640,12 +644,10 @@ class ASNN:
         """The approach stage's step (``targets='objects'``): the (unscaled) membrane
         potential and the targets (:meth:`asnn.approach.ApproachStage.step`); the tracks'
         reports go to the frame (``record_tracks``)."""
-        h, w = g.shape
         total, targets, frame.tracks = self.approach.step(
             attended, g, vectors,
             FramePair(frame.previous, frame.lum, frame.background, frame.elapsed), total,
-            self.frame_period, (self.shape[1] / w, self.shape[0] / h), points,
-            self.record_tracks)
+            self.frame_period, self._frame_scale(g.shape), points, self.record_tracks)
         return total, targets
 
     def _rig_mask(self) -> np.ndarray | None:

@@ -25,22 +25,22 @@ for scripts).
 Bounds (docs/operations.md, "Hostile input"): at most ``max_robots`` robots (when the table is
 full, the one silent longest makes room if it is stale); per robot a preview of at most
 ``service.messages.MAX_PREVIEW_BYTES`` and at most ``clients.fleet.MAX_TARGETS`` targets per
-response (:func:`clients.fleet.decode_fleet_sample`, shared with the Foxglove server and
-``asnn alerts``), at most MAX_POINTS spike-rate points; all previews together at most
-``max_preview_total`` bytes (the oldest previews are forgotten first), taken at most one a robot
-every PREVIEW_INTERVAL seconds and PREVIEW_RATE bytes a second in all (the others are counted
-as ``skipped``), so what a page is sent is bounded in bytes a second too. The server closes
-connections idle for ``idle_timeout`` seconds (a request that does not arrive whole, a
+response (:func:`clients.fleet.decode_fleet_sample`, shared with the Foxglove server and ``asnn
+alerts``), at most MAX_POINTS spike-rate points; all previews together at most
+``max_preview_total`` bytes (the oldest previews are forgotten first), taken at most one a
+robot every PREVIEW_INTERVAL seconds and PREVIEW_RATE bytes a second in all (the others are
+counted as ``skipped``), so what a page is sent is bounded in bytes a second too. The server
+closes connections idle for ``idle_timeout`` seconds (a request that does not arrive whole, a
 kept-alive connection without a next request), reads a request's line and headers up to
 MAX_REQUEST_BYTES, drops an event stream whose client has not taken an event within
-``send_timeout`` seconds (at most SEND_BUFFER bytes wait in the kernel for each), holds at most ``max_streams`` event streams (``max_streams_per_address``
-from one address) and ``max_streams + spare_connections`` connections in all
-(``max_streams_per_address + spare_connections / 2`` from one address), so that a browser can
-still load the page while another address holds what it may (clients at three addresses can
-hold every connection: expose the dashboard to untrusted networks only behind a proxy that
-authenticates), and sends at most MAX_FULL_SENDS full snapshots (``/state``, a new stream's
-first event) at once, each the whole state encoded. Invalid messages and dropped connections
-are logged rate-limited, without tracebacks.
+``send_timeout`` seconds (at most SEND_BUFFER bytes wait in the kernel for each), holds at most
+``max_streams`` event streams (``max_streams_per_address`` from one address) and ``max_streams
++ spare_connections`` connections in all (``max_streams_per_address + spare_connections / 2``
+from one address), so that a browser can still load the page while another address holds what
+it may (clients at three addresses can hold every connection: expose the dashboard to untrusted
+networks only behind a proxy that authenticates), and sends at most MAX_FULL_SENDS full
+snapshots (``/state``, a new stream's first event) at once, each the whole state encoded.
+Invalid messages and dropped connections are logged rate-limited, without tracebacks.
 
 Robot state as shown: **stale** when no response arrived for ``stale_after`` seconds (or none
 ever did: a robot known only from a cached warning, or from its camera's previews): its camera
@@ -54,6 +54,7 @@ held in collision.
 from __future__ import annotations
 
 import base64
+import contextlib
 import http.server
 import io
 import json
@@ -777,16 +778,14 @@ class DashboardServer:
                     name = path[8:]
                     self._send(200, STATIC_FILES[name], server._static[name], head)
                 elif path == "/state":
-                    if not server._full_sends.acquire(timeout=server.send_timeout):
-                        self.close_connection = True
-                        self._send(503, "text/plain; charset=utf-8", b"busy: try again\n",
-                                   head, cache=False)
-                        return
-                    try:
+                    with server._full_send() as taken:
+                        if not taken:
+                            self.close_connection = True
+                            self._send(503, "text/plain; charset=utf-8", b"busy: try again\n",
+                                       head, cache=False)
+                            return
                         body = json.dumps(server.store.delta(0)).encode()
                         self._send(200, "application/json", body, head, cache=False)
-                    finally:
-                        server._full_sends.release()
                 elif path == "/events" and head:
                     # a health check's HEAD: the stream's headers, no stream held open
                     server._stream_headers(self)
@@ -805,6 +804,17 @@ class DashboardServer:
                     self.wfile.write(body)
 
         return Handler
+
+    @contextlib.contextmanager
+    def _full_send(self):
+        """One of the MAX_FULL_SENDS slots for a full snapshot, waited for up to
+        ``send_timeout``: yields whether it was taken (each holds the whole state encoded)."""
+        taken = self._full_sends.acquire(timeout=self.send_timeout)
+        try:
+            yield taken
+        finally:
+            if taken:
+                self._full_sends.release()
 
     @staticmethod
     def _stream_headers(handler) -> None:
@@ -839,17 +849,13 @@ class DashboardServer:
             out.write(b"retry: 2000\n\n")
             since, event, last = 0, "snapshot", 0.0
             while not self.closing.is_set():
-                full = since == 0  # the whole state, at most MAX_FULL_SENDS at once
-                if full and not self._full_sends.acquire(timeout=self.send_timeout):
-                    break  # closed: the page opens another stream
-                try:
+                with self._full_send() if since == 0 else contextlib.nullcontext(True) as taken:
+                    if not taken:
+                        break  # closed: the page opens another stream
                     delta = self.store.delta(since)
                     since = delta["version"]
                     out.write(f"event: {event}\ndata: {json.dumps(delta)}\n\n".encode())
                     out.flush()
-                finally:
-                    if full:
-                        self._full_sends.release()
                 del delta  # not held while waiting: a snapshot is the whole state
                 event, last = "update", time.monotonic()
                 self.store.wait(since, self.heartbeat)
