@@ -81,3 +81,19 @@ def test_the_import_reader_resolves_relative_imports():
     modules = imported_modules(ROOT / "asnn" / "approach" / "stage.py")
     assert {"asnn._jit", "asnn.params", "asnn.targets", "asnn.approach.looming",
             "asnn.approach.tracking", "cv2", "numpy"} <= modules
+
+
+def test_the_command_line_loads_no_plotting_library_until_it_plots():
+    # matplotlib takes 0.2-0.6 s to import and wants a writable cache folder: a worker or
+    # camera started under systemd's sandbox (no home) logged its font-cache complaints on
+    # every start when the parser's evaluation modules loaded it
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom cli import main\nsys.argv = ['asnn', 'worker', '--help']\n"
+            "try:\n    main.main()\nexcept SystemExit:\n    pass\n"
+            "assert 'asnn.evaluation.clips' in sys.modules, 'the parser no longer loads eval'\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                         timeout=120, check=True).stdout
+    assert out.strip().splitlines()[-1] == "[]"

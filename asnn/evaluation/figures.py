@@ -9,12 +9,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from ..retina import motion_components
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "MODEL_COLOURS",
@@ -35,6 +37,11 @@ _OUTCOME_COLOURS = {"hit": "tab:green", "early": "tab:orange", "late": "tab:purp
 
 
 def _figure(width: float, height: float) -> Figure:
+    # matplotlib (0.2-0.6 s, and a writable cache folder) is loaded for a plot only: every
+    # ``asnn`` command imports the evaluation's modules through its parser
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(width, height), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
