@@ -22,6 +22,9 @@ __all__ = ["connect_failure", "split_endpoint"]
 TIMEOUT = 2.0  # seconds for each step of one endpoint's check
 _TLS = "transport/link/tls/"
 _TLS_FILES = ("root_ca_certificate", "connect_certificate", "connect_private_key")
+# OpenSSL's verification results (X509_V_ERR_*) that another CA would not fix
+_NOT_YET_VALID, _EXPIRED, _HOSTNAME_MISMATCH, _IP_ADDRESS_MISMATCH = 9, 10, 62, 64
+_SCRIPT = "deploy/scripts/gen-dev-certs.sh"  # the development fleet's certificates
 
 
 def split_endpoint(endpoint: str) -> tuple[str, str, int] | None:
@@ -68,6 +71,23 @@ def _uses_base64(conf: zenoh.Config) -> bool:
     return any(_value(conf, _TLS + name + "_base64") for name in _TLS_FILES)
 
 
+def _untrusted_router(exc: ssl.SSLCertVerificationError, host: str, ca: str | None) -> str:
+    """Why the router's certificate failed verification, and the fix for that failure: an
+    expired certificate or one issued for other names is not fixed by another CA."""
+    why = f"({exc.verify_message})"
+    if exc.verify_code in (_EXPIRED, _NOT_YET_VALID):
+        return (f"the router's certificate is out of its validity {why}: check this machine's "
+                f"clock, or issue the router's certificate again (the development fleet's: run "
+                f"{_SCRIPT} again)")
+    if exc.verify_code in (_HOSTNAME_MISMATCH, _IP_ADDRESS_MISMATCH):
+        return (f"the router's certificate does not name {host} {why}: connect by a name it "
+                f"holds, or issue it again naming {host} (the development fleet's: {_SCRIPT} "
+                f"[--robots ...] [OUT_DIR] {host})")
+    trusted = ca or "the system's CAs"
+    return (f"the router's certificate is not trusted by {trusted} {why}: "
+            "root_ca_certificate must be the CA that signed the router's certificate")
+
+
 def _check_endpoint(conf: zenoh.Config, endpoint: str, timeout: float) -> str | None:
     parts = split_endpoint(endpoint)
     if parts is None:
@@ -92,9 +112,7 @@ def _check_endpoint(conf: zenoh.Config, endpoint: str, timeout: float) -> str | 
         try:
             tls = context.wrap_socket(raw, server_hostname=host)
         except ssl.SSLCertVerificationError as exc:
-            ca = files["root_ca_certificate"] or "the system's CAs"
-            return (f"the router's certificate is not trusted by {ca} ({exc.verify_message}): "
-                    "root_ca_certificate must be the CA that signed the router's certificate")
+            return _untrusted_router(exc, host, files["root_ca_certificate"])
         except (ssl.SSLError, OSError) as exc:
             return f"the TLS handshake failed ({getattr(exc, 'reason', None) or exc})"
         with tls:
@@ -107,6 +125,10 @@ def _check_endpoint(conf: zenoh.Config, endpoint: str, timeout: float) -> str | 
                 if certificate is None:
                     return (f"the router requires a client certificate ({exc.reason}): set "
                             f"{_TLS}connect_certificate and connect_private_key (mTLS)")
+                if "EXPIRED" in (exc.reason or ""):
+                    return (f"the router refused this client's certificate {certificate} "
+                            f"({exc.reason}): it has expired (or is not valid yet); issue it "
+                            f"again (the development fleet's: run {_SCRIPT} again)")
                 return (f"the router refused this client's certificate {certificate} "
                         f"({exc.reason}): it must be signed by the CA the router trusts")
             except OSError:
