@@ -289,6 +289,62 @@ def test_a_refused_connection_says_why(certs, rogue):
     assert "nothing accepts connections at 127.0.0.1" in why(client_config(certs, "alerts", port))
 
 
+def _reissue(certs: Path, folder: str, days: int) -> None:
+    """Sign ``folder``'s certificate again with its key, valid for ``days`` (-1: expired)."""
+    name = certs / folder / folder
+    csr = name.with_suffix(".csr")
+    subprocess.run(["openssl", "req", "-new", "-key", f"{name}.key", "-subj", f"/CN={folder}",
+                    "-out", str(csr)], check=True, capture_output=True, timeout=60)
+    extensions = certs / "ext.cnf"
+    extensions.write_text("subjectAltName=DNS:localhost,IP:127.0.0.1,DNS:router\n"
+                          "extendedKeyUsage=serverAuth,clientAuth\n")
+    subprocess.run(["openssl", "x509", "-req", "-in", str(csr), "-CA", str(certs / "ca.pem"),
+                    "-CAkey", str(certs / "ca.key"), "-days", str(days), "-extfile",
+                    str(extensions), "-out", f"{name}.pem"],
+                   check=True, capture_output=True, timeout=60)
+
+
+def test_a_refused_certificate_says_what_would_fix_it(certs, tmp_path):
+    """An expired certificate, or one that does not name the address connected to, is not
+    fixed by another CA: the message says what is wrong with it (a deployment trial)."""
+    from cli.session import open_session
+    from service.config import ConfigError
+
+    def why(conf):
+        with pytest.raises(ConfigError) as caught:
+            open_session(conf)
+        return str(caught.value)
+
+    expired = tmp_path / "expired"
+    shutil.copytree(certs, expired)
+    for folder in ("router", "alerts"):
+        _reissue(expired, folder, -1)
+    # the router's config names its files in ``certs``: point it at the copy's
+    port = free_port()
+    conf = router_config(certs, port)
+    for key in ("listen_certificate", "listen_private_key"):
+        set_json(conf, f"transport/link/tls/{key}",
+                 str(expired / "router" / f"router.{'pem' if 'cert' in key else 'key'}"))
+    with zenoh.open(conf):
+        message = why(client_config(certs, "alerts", port))
+        assert "out of its validity (certificate has expired)" in message, message
+        assert "gen-dev-certs.sh again" in message
+    port = free_port()
+    with zenoh.open(router_config(certs, port)):
+        message = why(client_config(certs, "alerts", port, cert_from=expired))
+        assert "it has expired" in message and "gen-dev-certs.sh again" in message, message
+        # the router's certificate names 127.0.0.1, not 127.0.0.2 (the same loopback)
+    port = free_port()
+    conf = router_config(certs, port)
+    set_json(conf, "listen/endpoints", [f"tls/127.0.0.2:{port}"])
+    with zenoh.open(conf):
+        client = client_config(certs, "alerts", port)
+        set_json(client, "connect/endpoints", [f"tls/127.0.0.2:{port}"])
+        message = why(client)
+        assert "does not name 127.0.0.2 (IP address mismatch" in message, message
+        assert "gen-dev-certs.sh [--robots ...] [OUT_DIR] 127.0.0.2" in message
+
+
 def test_endpoints_are_split_for_the_check():
     from service.diagnosis import split_endpoint
 
@@ -457,6 +513,35 @@ def test_the_generator_refuses_bad_robot_ids(tmp_path):
     out = subprocess.run(["bash", str(SCRIPT), "--robots", "r1,bad/id", str(tmp_path / "s")],
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "invalid robot id" in out.stderr
+
+
+def test_the_generator_refuses_bad_hosts_and_days_before_writing_anything(tmp_path):
+    # each exited 1 without a word (openssl's errors were thrown away), and a bad host left a
+    # half-made folder; a comma would have added names of its own to the router's certificate
+    cases = [((str(tmp_path / "a"), "bad,host"), {}, "invalid host 'bad,host'"),
+             ((str(tmp_path / "b"), "two words"), {}, "invalid host 'two words'"),
+             ((str(tmp_path / "c"),), {"ASNN_CERT_DAYS": "0"}, "ASNN_CERT_DAYS must be"),
+             ((str(tmp_path / "d"),), {"ASNN_CERT_DAYS": "abc"}, "ASNN_CERT_DAYS must be")]
+    for args, env, said in cases:
+        out = subprocess.run(["bash", str(SCRIPT), *args], capture_output=True, text=True,
+                             timeout=60, env={**os.environ, **env})
+        assert out.returncode == 2 and said in out.stderr, out.stderr
+        assert not Path(args[0]).exists()
+
+
+def test_the_generator_names_an_ipv6_host_and_says_why_openssl_failed(tmp_path):
+    out = tmp_path / "s"
+    subprocess.run(["bash", str(SCRIPT), str(out), "[fd00::2]", "routerhost.example"],
+                   check=True, capture_output=True, timeout=180)
+    names = subprocess.run(["openssl", "x509", "-in", str(out / "router" / "router.pem"),
+                            "-noout", "-ext", "subjectAltName"],
+                           check=True, capture_output=True, text=True).stdout
+    assert "IP Address:FD00:0:0:0:0:0:0:2" in names and "DNS:routerhost.example" in names
+    (out / "ca.key").write_text("not a key\n")
+    failed = subprocess.run(["bash", str(SCRIPT), str(out)], capture_output=True, text=True,
+                            timeout=180)
+    assert failed.returncode == 1
+    assert "openssl x509 failed" in failed.stderr and "CA private key" in failed.stderr
 
 
 def test_the_fleet_keys_pass_the_access_control_for_their_owners_only(fleet):

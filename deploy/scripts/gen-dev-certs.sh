@@ -61,6 +61,23 @@ template=$(cd "$(dirname "$0")/../zenoh/secure" && pwd)/router.json5
 names=(worker dashboard alerts foxglove)
 for robot in "${robots[@]}"; do names+=("camera-$robot"); done
 days=${ASNN_CERT_DAYS:-365}
+[[ $days =~ ^[1-9][0-9]{0,4}$ ]] && (( days <= 36500 )) || {
+  echo "gen-dev-certs: ASNN_CERT_DAYS must be a whole number of days, 1 to 36500 (not '$days')" >&2
+  exit 2; }
+# checked before anything is written: a name openssl refuses would leave a half-made folder,
+# and a comma would add names of its own to the router's certificate
+for i in "${!hosts[@]}"; do
+  host=${hosts[i]}
+  [[ $host =~ ^\[(.*)\]$ ]] && host=${BASH_REMATCH[1]}  # [fd00::2], as in an endpoint
+  if [[ $host =~ ^[0-9]{1,3}(\.[0-9]{1,3}){3}$ || ( $host == *:* && $host =~ ^[0-9A-Fa-f:.]+$ ) ]]; then
+    hosts[i]="IP:$host"
+  elif [[ $host =~ ^[A-Za-z0-9]([A-Za-z0-9-]{0,62})(\.[A-Za-z0-9]([A-Za-z0-9-]{0,62}))*$ ]]; then
+    hosts[i]="DNS:$host"
+  else
+    echo "gen-dev-certs: invalid host '$host': give a DNS name or an IP address" >&2
+    exit 2
+  fi
+done
 
 command -v openssl >/dev/null || { echo "gen-dev-certs: openssl is required" >&2; exit 2; }
 mkdir -p "$out"
@@ -76,6 +93,15 @@ where() {  # where NAME: the path the configs of NAME's folder name its files by
   echo "${ASNN_SECRETS_PATH:-$top/$1}"
 }
 
+ssl() {  # ssl ARGS...: openssl, quiet unless it fails, then its own words and exit 1
+  local said
+  said=$(openssl "$@" 2>&1) || {
+    echo "gen-dev-certs: openssl $1 failed:" >&2
+    printf '%s\n' "$said" | grep -v '^[.+*]*$' >&2
+    exit 1
+  }
+}
+
 valid() {  # valid CERT: signed by this CA and valid for $renew seconds more
   [[ -f $1 ]] && openssl verify -CAfile ca.pem "$1" >/dev/null 2>&1 \
     && openssl x509 -in "$1" -noout -checkend "$renew" >/dev/null 2>&1
@@ -85,10 +111,9 @@ if [[ -f ca.key && -f ca.pem ]] && openssl x509 -in ca.pem -noout -checkend "$re
     >/dev/null 2>&1; then
   echo "gen-dev-certs: keeping the CA in $top" >&2
 else
-  (umask 077; openssl req -x509 -newkey rsa:2048 -nodes -sha256 -days "$(( days * 10 ))" \
+  ssl req -x509 -newkey rsa:2048 -nodes -sha256 -days "$(( days * 10 ))" \
     -subj "/CN=asnn development CA" -keyout ca.key -out ca.pem \
-    -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign" \
-    2>/dev/null)
+    -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign"
 fi
 chmod 600 ca.key
 chmod 644 ca.pem
@@ -98,10 +123,10 @@ issue() {  # issue NAME EXTENSIONS...: NAME/NAME.pem and NAME/NAME.key
   local ext
   ext=$(mktemp)
   printf '%s\n' "$@" > "$ext"
-  openssl req -newkey rsa:2048 -nodes -sha256 -subj "/CN=$name" -keyout "$name/$name.key" \
-    -out "$name/$name.csr" 2>/dev/null
-  openssl x509 -req -in "$name/$name.csr" -CA ca.pem -CAkey ca.key -CAcreateserial \
-    -days "$days" -sha256 -extfile "$ext" -out "$name/$name.pem" 2>/dev/null
+  ssl req -newkey rsa:2048 -nodes -sha256 -subj "/CN=$name" -keyout "$name/$name.key" \
+    -out "$name/$name.csr"
+  ssl x509 -req -in "$name/$name.csr" -CA ca.pem -CAkey ca.key -CAcreateserial \
+    -days "$days" -sha256 -extfile "$ext" -out "$name/$name.pem"
   rm -f "$name/$name.csr" "$ext" ca.srl
 }
 
@@ -112,9 +137,7 @@ folder() {  # folder NAME: NAME/ with the CA's certificate
 }
 
 san="DNS:localhost,IP:127.0.0.1,DNS:router"
-for host in "${hosts[@]}"; do
-  if [[ $host =~ ^[0-9.]+$ || $host == *:* ]]; then san+=",IP:$host"; else san+=",DNS:$host"; fi
-done
+for host in "${hosts[@]}"; do san+=",$host"; done
 folder router
 issue router "basicConstraints=CA:FALSE" "keyUsage=digitalSignature,keyEncipherment" \
   "extendedKeyUsage=serverAuth,clientAuth" "subjectAltName=$san"
