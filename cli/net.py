@@ -153,7 +153,9 @@ def format_status(status: dict) -> str:
                      if s.get("fps") is not None and s["fps"] < SLOW_FPS)
     # robots refused in the last minute, the latest first: why a camera gets no response (not a
     # robot refused for want of a place that has one now)
-    refused = ", ".join(f"{r} ({e['reason']} x{e['count']}: {_clipped(e['detail'], 60)})"
+    # (``count`` is every refusal of the robot's, for any reason: the latest reason is one)
+    refused = ", ".join(f"{r} ({e['count']} refused, the latest {e['reason']}: "
+                        f"{_clipped(e['detail'], 60)})"
                         for r, e in reversed(status.get("refused", {}).items())
                         if e.get("seconds_ago", 0) <= 60
                         and not (e["reason"] == "too-many-robots" and r in tracked))

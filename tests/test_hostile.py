@@ -667,12 +667,12 @@ def test_status_shows_candidates_and_second_publishers():
     assert "robots r1 (+1 waiting for a valid frame)" in line
     assert "second publishers: 1, contested: r1 (1 intrusions)" in line
     assert "second-publisher 1" in line
-    assert "refused lately: r1 (second-publisher x1: frame 0 does not continue" in line
+    assert "refused lately: r1 (1 refused, the latest second-publisher: frame 0 does not continue" in line
     # a detail cut to fit ends in an ellipsis (its own brackets then do not look closed)
     status = core.status()
     status["refused"]["r1"]["detail"] = ("frame 369 does not continue the stream of r3 (last "
                                          "seq 18953)")
-    assert "x1: frame 369 does not continue the stream of r3 (last seq 1895…); " in \
+    assert "second-publisher: frame 369 does not continue the stream of r3 (last seq 1895…); " in \
         format_status(status)
 
 
@@ -689,13 +689,19 @@ def test_status_says_why_a_camera_none_of_whose_frames_is_taken_gets_no_response
     assert "cam7" not in status["robots"]
     assert status["refused"]["cam7"]["reason"] == "bad-pixels"
     assert status["refused"]["cam7"]["count"] == 3
-    assert "refused lately: cam7 (bad-pixels x3" in format_status(status)
+    assert "refused lately: cam7 (3 refused, the latest bad-pixels" in format_status(status)
+    for seq in range(2):  # the count is the robot's, whatever the reason (it read "undecodable x5")
+        core.offer("asnn/cam7/frame", b"\xc1")
+    line = format_status(msgpack.unpackb(msgpack.packb(core.status())))
+    assert "cam7 (5 refused, the latest undecodable" in line
+    assert "invalid: bad-pixels 3, undecodable 2" in line
+    status = msgpack.unpackb(msgpack.packb(core.status()))
     # refused for want of a place, then given one: no longer listed as refused (a trial)
     status["refused"]["r1"] = {"reason": "too-many-robots", "detail": "already tracking 2",
                                "count": 5, "seconds_ago": 1.0}
-    assert "r1 (too-many" in format_status(status)
+    assert "r1 (5 refused, the latest too-many-robots" in format_status(status)
     status["robots"]["r1"] = {"candidate": False}
-    assert "r1 (too-many" not in format_status(status)
+    assert "r1 (5 refused" not in format_status(status)
     clock.now += 120  # a minute later the line no longer lists it; the status still does
     status = msgpack.unpackb(msgpack.packb(core.status()))
     assert "refused lately" not in format_status(status)
