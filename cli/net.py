@@ -343,7 +343,7 @@ def register(subparsers) -> None:
                               "workers and subscribers --connect to it. It routes every key: "
                               "--prefix, common to the networked commands (CONTRACT.md), "
                               "changes nothing here.")
-    add_zenoh_options(p, modes=())
+    add_zenoh_options(p, modes=("router",))
     p.set_defaults(func=cmd_router)
 
     p = subparsers.add_parser("demo", help="camera, worker and alerts in one process",

@@ -20,15 +20,17 @@ __all__ = ["add_zenoh_options", "zenoh_options", "setup_logging", "stop_on_signa
 
 
 def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client")) -> None:
-    """The common Zenoh options of every networked command (CONTRACT.md)."""
+    """The common Zenoh options of every networked command (CONTRACT.md); a command that can
+    run in one mode only (the router) takes ``--mode`` with that mode alone."""
     group = parser.add_argument_group("Zenoh")
     group.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                        help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
     group.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                        help="endpoint to listen on, e.g. tcp/0.0.0.0:7448 (repeatable)")
-    if modes:
-        group.add_argument("--mode", choices=modes, default=None,
-                           help="Zenoh session mode (default: the config's, else peer)")
+    group.add_argument("--mode", choices=modes, default=None,
+                       help="Zenoh session mode (default: the config's, else peer)"
+                       if len(modes) > 1 else f"{modes[0]} only: taken for the contract's "
+                       "common options")
     group.add_argument("--config", metavar="FILE", default=None,
                        help="Zenoh JSON5 configuration file (options above override it)")
     group.add_argument("--prefix", default=keys.DEFAULT_PREFIX, type=key_prefix,

@@ -379,6 +379,24 @@ def test_worker_threads_option():
         build_parser().parse_args(["worker", "--threads", "0"])
 
 
+def test_every_networked_command_takes_the_contract_s_common_options(capsys):
+    # CONTRACT.md: --connect, --listen, --mode, --config, --prefix on every networked command;
+    # the router is a router (--mode peer there was "unrecognized arguments", now a clear no)
+    from cli.main import build_parser
+
+    common = ["--connect", "tcp/127.0.0.1:7447", "--listen", "tcp/127.0.0.1:0",
+              "--config", "zenoh.json5", "--prefix", "fleet/a"]
+    for command, mode in (("camera --robot r1 --source scene:looming", "client"),
+                          ("worker", "client"), ("alerts", "peer"), ("status", "client"),
+                          ("dashboard", "client"), ("foxglove", "client"), ("router", "router")):
+        args = build_parser().parse_args([*command.split(), *common, "--mode", mode])
+        assert (args.connect, args.listen, args.mode, args.config, args.prefix) == (
+            ["tcp/127.0.0.1:7447"], ["tcp/127.0.0.1:0"], mode, "zenoh.json5", "fleet/a")
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["router", "--mode", "peer"])
+    assert "invalid choice: 'peer' (choose from 'router')" in capsys.readouterr().err
+
+
 def test_tune_process_shortens_the_switch_interval():
     import sys
 
