@@ -62,7 +62,7 @@ def test_the_header_fits_a_small_frame_and_keeps_its_size_on_a_large_one():
 
     from asnn.io.visualize import header_scale
 
-    text = "#30 spikes/s 1110 WARNING"
+    text = "#30 spike rate 1110 WARNING"
     assert header_scale(text, 640) == 0.4
     scale = header_scale(text, 128)
     assert scale < 0.4

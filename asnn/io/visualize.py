@@ -86,7 +86,7 @@ def annotate_frame(frame: np.ndarray, response: Response) -> np.ndarray:
                         0.35, (255, 80, 0), 1, cv2.LINE_AA)
     if response.collision:
         cv2.rectangle(image, (0, 0), (image.shape[1] - 1, image.shape[0] - 1), (0, 0, 255), 3)
-    text = (f"#{response.index} spikes/s {response.spike_rate:.0f}"
+    text = (f"#{response.index} spike rate {response.spike_rate:.0f}"
             + (" WARNING" if response.collision else ""))
     scale = header_scale(text, image.shape[1])
     for colour, thickness in (((0, 0, 0), 3), ((255, 255, 255), 1)):  # white on a dark rim

@@ -208,7 +208,7 @@
     ctx.fillStyle = "#9aa7b4";
     ctx.font = "10px sans-serif";
     ctx.textAlign = "right";
-    ctx.fillText(`${Math.round(pts[pts.length - 1][1])} spikes/s`, w - 4, 11);
+    ctx.fillText(`spike rate ${Math.round(pts[pts.length - 1][1])}`, w - 4, 11);
   }
 
   // the rate a robot's frames are answered at: the median of its last 5 response intervals
@@ -249,8 +249,8 @@
     // tile's width
     v.stats.textContent = (v.contact === null ? "" : `contact in ${v.contact.toFixed(1)} s · `) +
       (slow ? `${rate} (slow) · ` : "") +
-      `seq ${r.seq} · out ${fmt(r.out)} · ${Math.round(r.spike_rate)} ` +
-      `spikes/s · ${fmt(r.latency_ms, 0)} ms` + (r.dropped ? ` · ${r.dropped} dropped` : "") +
+      `seq ${r.seq} · out ${fmt(r.out)} · spike rate ${Math.round(r.spike_rate)} ` +
+      `· ${fmt(r.latency_ms, 0)} ms` + (r.dropped ? ` · ${r.dropped} dropped` : "") +
       (rate && !slow ? ` · ${rate}` : "") + ` · ${r.model}${r.preset ? "/" + r.preset : ""}`;
     v.stats.title = `worker ${r.worker}, frame at ${clock(r.stamp)}`;
   }
