@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 
 from asnn.params import preset_names
@@ -171,7 +172,7 @@ def format_status(status: dict) -> str:
 
 
 def cmd_alerts(args: argparse.Namespace) -> int:
-    from clients.alerts import WarningListener, printer
+    from clients.alerts import LinePrinter, WarningListener
 
     setup_logging(args)
     try:
@@ -179,12 +180,29 @@ def cmd_alerts(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         return fail(str(exc))
     stop = stop_on_signals()
+    show = LinePrinter(args.json, sys.stdout, on_error=stop.set)
     with session, RouterWatch(session, "alerts"), \
-            WarningListener(session, printer(args.json, sys.stdout), prefix=args.prefix,
-                            robot=args.robot) as listener:
+            WarningListener(session, show, prefix=args.prefix, robot=args.robot) as listener:
         print(f"listening on {listener.key}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
+    return _printed(show)
+
+
+def _printed(show) -> int:
+    """The exit status once a command's warnings are printed (or could not be): 141 when the
+    reader of standard output went away (as ``cli.main`` ends a command on a broken pipe), 1
+    when a write failed otherwise or the output still blocks after two seconds."""
+    flushed = show.close()
+    if isinstance(show.error, BrokenPipeError):
+        raise BrokenPipeError  # cli.main: quietly, with the status of the pipe's signal
+    if show.error is not None:
+        return fail(f"cannot write the warnings: {show.error.strerror or show.error}", 1)
+    if not flushed:
+        # the writing thread holds standard output: Python's own flush at exit would wait on it
+        print(f"asnn: the output is not read: {show.unprinted} warnings not printed",
+              file=sys.stderr, flush=True)
+        os._exit(1)
     return 0
 
 
@@ -211,7 +229,7 @@ def cmd_router(args: argparse.Namespace) -> int:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from clients.alerts import WarningListener, printer
+    from clients.alerts import LinePrinter, WarningListener
     from service.camera import open_source
     from service.core import WorkerCore
     from service.demo import run_pipeline
@@ -227,12 +245,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"asnn demo: camera -> worker ({core.model}, preset {core.preset or '-'}) -> alerts, "
           f"scene {args.scene!r}, {source.fps:g} fps, over Zenoh on 127.0.0.1", file=info,
           flush=True)
-    result = run_pipeline(source, core,
-                          lambda s: WarningListener(s, printer(args.json, sys.stdout)),
-                          fps=args.fps)
+    show = LinePrinter(args.json, sys.stdout)
+    result = run_pipeline(source, core, lambda s: WarningListener(s, show), fps=args.fps)
+    status = _printed(show)
     print(f"{result['published']} frames published, {result['responses']} responses, "
           f"{result['received']} warnings received", file=info, flush=True)
-    return 0
+    return status
 
 
 # ---------------------------------------------------------------- registration

@@ -12,7 +12,7 @@ import logging
 import math
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 
 import zenoh
@@ -23,7 +23,7 @@ from service.messages import MessageError, Response, track_label
 
 from .fleet import decode_fleet_sample, declare_warning_subscribers
 
-__all__ = ["WarningListener", "format_stamp", "format_warning"]
+__all__ = ["LinePrinter", "WarningListener", "format_json", "format_stamp", "format_warning"]
 
 log = logging.getLogger("asnn.alerts")
 
@@ -49,7 +49,7 @@ def format_warning(r: Response) -> str:
     else:
         targets = "none located"
     return (f"{clock} WARNING robot {r.robot} seq {r.seq}: out {r.out:.3f}, "
-            f"{r.spike_rate:.0f} spikes/s, targets: {targets}")
+            f"spike rate {r.spike_rate:.0f}, targets: {targets}")
 
 
 def _target(t) -> str:
@@ -88,7 +88,19 @@ class WarningListener:
         self._lock = threading.Lock()
         self.key = keys.warnings(prefix, robot)
         # an advanced subscriber (history, recovery) and a plain one, each warning taken once
-        self._subscribers = declare_warning_subscribers(session, self.key, self._on_sample)
+        self.missed = 0
+        self._subscribers = declare_warning_subscribers(session, self.key, self._on_sample,
+                                                        self._on_miss)
+
+    def _on_miss(self, count: int, publisher: str) -> None:
+        with self._lock:
+            self.missed += count
+            missed = self.missed
+        # a cut longer than the link's lease loses what was sent meanwhile: say so, or the
+        # gap in the robots' seq is the only trace (an integrator's trial)
+        self._log.warning("missed", "%d warnings of publisher %s were missed and could not be "
+                          "recovered (%d in all): was this subscriber cut off from the router?",
+                          count, publisher, missed)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         try:
@@ -120,19 +132,91 @@ class WarningListener:
             subscriber.undeclare()
 
 
-def printer(json_lines: bool, out) -> Callable[[Response], None]:
-    """A handler writing one line per warning to ``out`` (flushed: pipes see it at once)."""
-    lock = threading.Lock()
-    fmt = format_json if json_lines else format_warning
+class LinePrinter:
+    """A warning handler writing one line per warning to ``out``, from a thread of its own.
 
-    def show(response: Response) -> None:
+    Zenoh calls the handler on its own threads: a write there that blocks (a reader that stopped
+    reading: a pager, a stalled journal) held them, and with them Ctrl-C, until the reader went
+    away. Lines wait in a queue of at most ``max_lines``; beyond it a warning is counted in
+    ``unprinted`` and logged (at most one line every 10 s), not written. A write that fails
+    (the reader gone: ``BrokenPipeError``; a full disk) ends the printing: ``error`` holds it and
+    ``on_error()`` is called once, so that the command can stop.
+
+    Parameters
+    ----------
+    json_lines : bool
+        One JSON object per line (:func:`format_json`) instead of :func:`format_warning`.
+    out : text file
+        Where the lines go; flushed after each, so that a pipe sees a warning at once.
+    on_error : callable, optional
+        Called (from the writing thread) when a write fails.
+    max_lines : int
+        Lines kept waiting for ``out`` at most.
+    """
+
+    def __init__(self, json_lines: bool, out, *, on_error: Callable[[], None] | None = None,
+                 max_lines: int = 1000):
+        self.out = out
+        self.on_error = on_error
+        self.max_lines = max_lines
+        self.error: OSError | None = None
+        self.unprinted = 0
+        self._format = format_json if json_lines else format_warning
+        self._lines: deque[str] = deque()
+        self._ready = threading.Condition()
+        self._closing = False
+        self._log = RateLimitedLog(log)
+        self._writer = threading.Thread(target=self._write, name="alerts-printer", daemon=True)
+        self._writer.start()
+
+    def __call__(self, response: Response) -> None:
         try:
-            line = fmt(response)
+            line = self._format(response)
         except Exception:  # never lose a warning to its formatting: fall back to JSON
             log.exception("cannot format a warning of %s; printed as JSON", response.robot)
             line = format_json(response)
-        with lock:
-            out.write(line + "\n")
-            out.flush()
+        with self._ready:
+            if self.error is None and len(self._lines) < self.max_lines:
+                self._lines.append(line + "\n")
+                self._ready.notify()
+                return
+            self.unprinted += 1
+            unprinted = self.unprinted
+        if self.error is None:
+            self._log.warning("unprinted", "the output is not read: %d warnings not printed "
+                              "(%d lines wait for it)", unprinted, self.max_lines)
 
-    return show
+    def _write(self) -> None:
+        while True:
+            with self._ready:
+                while not self._lines and not self._closing:
+                    self._ready.wait()
+                if not self._lines:
+                    return
+                line = self._lines.popleft()
+            try:
+                self.out.write(line)
+                self.out.flush()
+            except OSError as exc:
+                with self._ready:
+                    self.error = exc
+                    self.unprinted += 1 + len(self._lines)
+                    self._lines.clear()
+                if self.on_error is not None:
+                    self.on_error()
+                return
+
+    def close(self, timeout: float = 2.0) -> bool:
+        """Write the lines still waiting, for at most ``timeout`` seconds; True when all were
+        written (or a write failed), False when ``out`` still blocks: those lines are then
+        counted in ``unprinted``."""
+        with self._ready:
+            self._closing = True
+            self._ready.notify()
+        self._writer.join(timeout)
+        if not self._writer.is_alive():
+            return True
+        with self._ready:
+            self.unprinted += len(self._lines)
+            self._lines.clear()
+        return False

@@ -127,9 +127,12 @@ class RecentSamples:
             return True
 
 
-def declare_warning_subscribers(session, key: str, callback: Callable) -> list:
+def declare_warning_subscribers(session, key: str, callback: Callable,
+                                on_miss: Callable[[int, str], None] | None = None) -> list:
     """The subscribers a fleet viewer takes warnings on ``key`` with: ``callback(sample)`` once
-    per warning.
+    per warning, and ``on_miss(count, publisher)`` (``publisher``: its Zenoh id and entity id,
+    ``zid/eid``) where a publisher's warnings were missed and could not be recovered (the link
+    to the router cut for longer than its lease).
 
     An advanced subscriber asks the workers' caches for history (a late joiner gets each
     robot's latest warning, docs/contract.md) and recovers missed warnings; it orders a
@@ -153,7 +156,11 @@ def declare_warning_subscribers(session, key: str, callback: Callable) -> list:
             session, key, once,
             history=HistoryConfig(detect_late_publishers=True, max_samples=1),
             recovery=RecoveryConfig(periodic_queries=None, heartbeat=True)))
+        if on_miss is not None:
+            subscribers.append(subscribers[1].sample_miss_listener(
+                lambda miss: on_miss(miss.nb, f"{miss.source.zid}/{miss.source.eid}")))
     except Exception:
-        subscribers[0].undeclare()
+        for subscriber in reversed(subscribers):
+            subscriber.undeclare()
         raise
     return subscribers

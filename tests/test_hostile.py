@@ -720,14 +720,15 @@ def test_every_warning_is_printed_whatever_its_stamp(stamp, shown):
     """Issue 13 (7): a stamp in nanoseconds made time.localtime raise for every warning."""
     import io
 
-    from clients.alerts import printer
+    from clients.alerts import LinePrinter
     from service.messages import Response
 
     out = io.StringIO()
-    show = printer(False, out)
+    show = LinePrinter(False, out)
     show(Response(robot="r1", seq=7, stamp=stamp, model="asnn", preset="p", u=1.0, out=0.9,
                   spikes=3, spike_rate=60.0, collision=True, targets=[], worker="w",
                   latency_ms=1.0, dropped=0))
+    assert show.close()
     line = out.getvalue()
     assert line.count("\n") == 1 and "WARNING robot r1 seq 7" in line
     assert line.split()[0] == shown

@@ -4,13 +4,17 @@ Every session uses a free port, multicast scouting and gossip are off, and every
 stopped at the end of its test. Waits are generous timeouts on messages, never timing assertions.
 """
 
+import io
 import json
+import logging
 import os
 import re
 import signal
+import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 
 import msgpack
 import pytest
@@ -24,10 +28,12 @@ from cli.main import main
 from service import keys
 from service.camera import RefusalNotices, Source, SourceError, open_source, publish_frames
 from service.core import HANDOVER_WARMUP_FRAMES, WorkerCore
-from service.messages import Frame, decode_frame, decode_response, encode
+from service.messages import Frame, Response, decode_frame, decode_response, encode
 from service.worker import COMPUTE_NICENESS, Worker
 
 from netutil import TIMEOUT, Fleet, wait_for
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 
@@ -340,6 +346,71 @@ def test_demo_plays_the_papers_scenes_and_rejects_unknown_ones(capsys):
     assert "unknown scene 'nothing'" in capsys.readouterr().err
 
 
+def _warning(seq: int = 0) -> Response:
+    return Response(robot="r1", seq=seq, stamp=1.0, model="asnn", preset="p", u=1.0, out=0.9,
+                    spikes=3, spike_rate=60.0, collision=True, targets=[], worker="w",
+                    latency_ms=1.0, dropped=0)
+
+
+def test_a_reader_that_stops_reading_holds_no_zenoh_thread_and_loses_warnings_counted(caplog):
+    """A write that blocks (a pager, a stalled journal) held Zenoh's callback threads, and with
+    them Ctrl-C, until the reader went away (an integrator's trial)."""
+    from clients.alerts import LinePrinter
+
+    entered, release = threading.Event(), threading.Event()
+
+    class Stalled(io.StringIO):
+        def write(self, text):
+            entered.set()
+            release.wait()
+            return super().write(text)
+
+    show = LinePrinter(True, Stalled(), max_lines=5)
+    show(_warning(0))
+    assert entered.wait(30)  # the first line is in the write that blocks
+
+    def more():
+        for seq in range(1, 20):
+            show(_warning(seq))
+
+    with caplog.at_level(logging.WARNING, logger="asnn.alerts"):
+        calls = threading.Thread(target=more, daemon=True)
+        calls.start()
+        calls.join(60)
+    assert not calls.is_alive()  # the handler returned: it never waited on the output
+    assert show.unprinted == 14  # five lines wait, the other fourteen are not printed
+    assert "the output is not read: 1 warnings not printed" in caplog.text
+    assert show.close(timeout=0.2) is False and show.unprinted == 19
+    release.set()
+
+
+def test_a_failed_write_stops_the_printing_and_says_so_once():
+    from clients.alerts import LinePrinter
+
+    class Gone(io.StringIO):
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    stopped = threading.Event()
+    show = LinePrinter(False, Gone(), on_error=stopped.set)
+    show(_warning(0))
+    assert stopped.wait(10)
+    show(_warning(1))
+    assert show.close() and isinstance(show.error, BrokenPipeError) and show.unprinted == 2
+
+
+def test_demo_piped_into_head_ends_quietly_with_the_pipe_s_status():
+    """`asnn demo | head -2` printed a BrokenPipe traceback for every later warning."""
+    demo = subprocess.Popen([sys.executable, "-m", "cli.main", "demo", "--json", "--fps", "100"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    first = demo.stdout.readline()
+    assert json.loads(first)["collision"] is True
+    demo.stdout.close()
+    _, err = demo.communicate(timeout=300)
+    assert demo.returncode == 141, err.decode()
+    assert b"Traceback" not in err and b"warning handler failed" not in err
+
+
 # ---------------------------------------------------------------- separate processes
 
 def test_router_worker_camera_alerts_as_separate_processes(procs, tmp_path):
@@ -623,6 +694,22 @@ def test_the_alerts_take_a_warning_only_for_the_robot_of_its_key_and_with_collis
         wait_for(lambda: warnings, what="the valid warning")
     assert [(w.robot, w.seq) for w in warnings] == [("r1", 3)]
     assert listener.invalid == {"bad-key": 1, "invalid-field": 1}
+
+
+def test_warnings_missed_beyond_recovery_are_said_not_only_seen_as_a_gap(zenoh_net, caplog):
+    """An integrator's trial: alerts stopped for 4 s (a lease of 1 s) lost 51 warnings, which
+    Zenoh's advanced subscriber knew of, and said nothing."""
+    with WarningListener(zenoh_net.spoke(), lambda r: None) as listener:
+        # the advanced subscriber, its plain twin and the miss listener, all closed with it
+        assert len(listener._subscribers) == 3
+        assert all(hasattr(s, "undeclare") for s in listener._subscribers)
+        with caplog.at_level(logging.WARNING, logger="asnn.alerts"):
+            listener._on_miss(51, "9c9e/17")
+            listener._on_miss(3, "9c9e/17")  # within 10 s of the first: counted, not logged
+    assert listener.missed == 54
+    lines = [r.getMessage() for r in caplog.records if "missed" in r.getMessage()]
+    assert lines == ["51 warnings of publisher 9c9e/17 were missed and could not be recovered "
+                     "(51 in all): was this subscriber cut off from the router?"]
 
 
 def test_a_camera_says_at_most_a_line_of_each_kind_when_its_subscriber_comes_and_goes(caplog):
