@@ -65,7 +65,21 @@ def responses(detector: Detector, timed_frames: Iterable[tuple[float | None, np.
               ) -> Iterator[Response]:
     """The detector's responses to ``(t, frame)`` pairs, in order: its ``stream`` where it has
     one (:meth:`asnn.model.ASNN.stream`, which uses the model's threads), else ``step`` for
-    each frame."""
+    each frame.
+
+    Parameters
+    ----------
+    detector : Detector
+        An ASNN model or an LGMD baseline (:func:`make_detector`), at the start of its stream
+        or where the frames go on from.
+    timed_frames : iterable of (float or None, ndarray)
+        Each frame with its time in seconds (None: the detector's ``dt`` a frame).
+
+    Yields
+    ------
+    Response
+        One per frame, in order.
+    """
     stream = getattr(detector, "stream", None)
     if stream is not None:
         yield from stream(timed_frames)

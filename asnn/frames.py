@@ -51,6 +51,20 @@ def check_frame(frame: np.ndarray, min_side: int,
                 stream_shape: tuple[int, int] | None = None) -> np.ndarray:
     """The frame, (H, W, 1) taken as (H, W), once it passes :func:`to_luminance`'s checks.
 
+    Parameters
+    ----------
+    frame : ndarray
+        Gray (H, W) or (H, W, 1), or BGR (H, W, 3): uint8, or floats in [0, 1].
+    min_side : int
+        The smallest height and width the detector takes (its kernels' size).
+    stream_shape : (int, int), optional
+        The stream's (H, W), fixed by its first frame: a frame of another size is refused.
+
+    Returns
+    -------
+    ndarray
+        ``frame``, or its (H, W) view.
+
     Raises
     ------
     FrameError

@@ -77,6 +77,8 @@ class ASNN:
     Attributes
     ----------
     params : ASNNParams
+    index : int
+        Frames taken since the stream began (or :meth:`reset`): the next response's ``index``.
     shape : (H, W) or None
         The stream's frame size, fixed by its first frame.
     previous : ndarray (H, W)
@@ -123,16 +125,20 @@ class ASNN:
                             f"**changes) makes one), got {type(params).__name__}")
         if isinstance(threads, bool) or not isinstance(threads, numbers.Integral):
             raise TypeError(f"threads must be an int, got {threads!r}")
+        for name, flag in (("record_maps", record_maps), ("record_tracks", record_tracks),
+                           ("optimised", optimised)):
+            if not isinstance(flag, (bool, np.bool_)):  # bool("no") is True
+                raise TypeError(f"{name} must be True or False, got {flag!r}")
         # validated again: pydantic's model_copy(update=...) skips the checks, and the kernels
         # index by the parameters without bounds checks (n_fast >= n_slow read past an array)
         params = ASNNParams.model_validate(params.model_dump())
         self.params = params
-        self.record_maps = record_maps
+        self.record_maps = bool(record_maps)
         p = self.params
         if record_tracks and p.targets != "objects":
             raise ValueError("record_tracks needs a preset that tracks objects "
                              f"(targets='objects'), not targets={p.targets!r}")
-        self.record_tracks = record_tracks
+        self.record_tracks = bool(record_tracks)
         self.optimised = bool(optimised) and _fast.supported(p)
         self.dtype = np.dtype(p.precision if self.optimised else np.float64)
         self._min_side = p.min_side
@@ -304,7 +310,11 @@ class ASNN:
 
     def __getstate__(self) -> dict:
         """For copy and pickle: without the lock and the worker threads, which a copy starts
-        again when it needs them."""
+        again when it needs them. RuntimeError while the model steps, or a stream of it is under
+        way: its worker threads then hold part of its state, which the copy would miss."""
+        if self._in_use.locked():
+            raise RuntimeError("this ASNN model is stepping (a stream of it is under way, or a "
+                               "step on another thread): copy it between steps")
         state = dict(self.__dict__)
         del state["_in_use"]
         state.pop("_finalizer", None)

@@ -580,6 +580,19 @@ def preset_key(name: str) -> str:
 def preset(name: str, **overrides) -> ASNNParams:
     """Return the named preset, optionally with some parameters overridden.
 
+    Parameters
+    ----------
+    name : str
+        A preset's name (:func:`preset_names`; ``"default"`` is the default's, ``robust``).
+    **overrides
+        Fields of :class:`ASNNParams` to change, by name (``top_k=0``); validated with the
+        rest, so that a value out of range or a combination the model does not run is refused.
+
+    Returns
+    -------
+    ASNNParams
+        The preset itself without overrides (presets are immutable), else a new parameter set.
+
     Raises
     ------
     ValueError

@@ -165,8 +165,15 @@ class Response:
 
     @classmethod
     def silent(cls, index: int, tracks: list[TrackReport] | None = None) -> "Response":
-        """The response to a frame that only primes a stream (its first): u = 0, no spikes
-        (``tracks``: none yet, ``[]`` where they are recorded)."""
+        """The response to a frame that only primes a stream (its first): u = 0, no spikes.
+
+        Parameters
+        ----------
+        index : int
+            The frame's index in its stream.
+        tracks : list of TrackReport, optional
+            None where tracks are not recorded, ``[]`` where they are (there are none yet).
+        """
         return cls(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False,
                    tracks=tracks)
 
@@ -177,7 +184,19 @@ class Response:
                 "targets": [t.to_dict() for t in self.targets]}
 
     def record(self, frame: int, t: float) -> dict:
-        """The frame's line of ``asnn detect --jsonl`` (CONTRACT.md): its number in the clip
-        ``frame``, its time ``t`` in seconds (to the microsecond), and :meth:`to_dict`'s
-        fields; what :func:`asnn.evaluation.scoring.score_clip` reads."""
+        """The frame's line of ``asnn detect --jsonl`` (CONTRACT.md), what
+        :func:`asnn.evaluation.scoring.score_clip` reads.
+
+        Parameters
+        ----------
+        frame : int
+            The frame's number in the clip (0-based).
+        t : float
+            Its time in seconds, rounded to the microsecond.
+
+        Returns
+        -------
+        dict
+            ``frame``, ``t`` and :meth:`to_dict`'s fields.
+        """
         return {"frame": frame, "t": round(t, 6), **self.to_dict()}

@@ -606,4 +606,22 @@ def test_a_model_with_worker_threads_copies_and_pickles_mid_stream():
     for other in copies:
         assert [other.step(f).to_dict() for f in frames[10:]] == rest
         other.close()
+    # inside a stream its worker threads hold frames under way: a copy then missed them and
+    # answered u = 0 where the model warned (an integrator's probe)
+    stream = model.stream((None, f) for f in frames)
+    next(stream)
+    for take in (copy.deepcopy, lambda m: pickle.loads(pickle.dumps(m))):
+        with pytest.raises(RuntimeError, match="copy it between steps"):
+            take(model)
+    stream.close()
+    copy.deepcopy(model).close()  # between steps again
     model.close()
+
+
+@pytest.mark.parametrize("flag", ["optimised", "record_maps", "record_tracks"])
+def test_the_model_s_switches_are_true_or_false(flag):
+    # ASNN(optimised="no") built the optimised model: bool("no") is True
+    for value in ("no", 0, None, "yes"):
+        with pytest.raises(TypeError, match=f"{flag} must be True or False"):
+            ASNN("default", **{flag: value})
+    assert getattr(ASNN("default", **{flag: np.bool_(False)}), flag) is False
