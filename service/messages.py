@@ -494,8 +494,15 @@ def response_from(result, *, robot: str, frame: Frame, model: str, preset: str, 
                     stream_frames=stream_frames, **_finite(fields))
 
 
+# a target's fields that may be left out: a value the model could not measure (a degenerate
+# fit's infinite time to contact) goes out as absent, where 0 would break ttc > 0
+_OPTIONAL = frozenset(name for name, field in TargetMsg.model_fields.items()
+                      if not field.is_required())
+
+
 def _finite(fields: dict) -> dict:
-    """Plain Python scalars (numpy ones are rejected by strict models); non-finite -> 0."""
+    """Plain Python scalars (numpy ones are rejected by strict models); non-finite -> 0, or
+    absent (None) for an optional field."""
     out = {}
     for key, value in fields.items():
         if isinstance(value, (bool, np.bool_)):
@@ -503,7 +510,8 @@ def _finite(fields: dict) -> dict:
         elif isinstance(value, (int, np.integer)):
             out[key] = int(value)
         elif isinstance(value, (float, np.floating)):
-            out[key] = float(value) if math.isfinite(value) else 0.0
+            out[key] = float(value) if math.isfinite(value) else (
+                None if key in _OPTIONAL else 0.0)
         else:
             out[key] = value
     return out

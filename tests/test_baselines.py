@@ -140,6 +140,21 @@ def test_lgmd2_adaptation_quiets_a_steady_translation(translating):
     np.testing.assert_allclose([r.u for r in adapted], [r.u for r in unadapted])
 
 
+@pytest.mark.parametrize("spikes, warns", [((0, 0, 3, 0, 3, 0, 3), False), ((0, 0, 3, 3), True)])
+def test_lgmd2_counts_spikes_in_a_run_that_a_frame_without_spikes_ends(monkeypatch, looming,
+                                                                        spikes, warns):
+    # SPEC section 4: a running count of spikes, reset when a frame has none, reaches N_ts;
+    # without the reset, scattered single spikes added up to a warning (a mutation probe)
+    import asnn.baselines as baselines
+
+    counts = iter(spikes)
+    monkeypatch.setattr(baselines, "spike_count", lambda *args: next(counts))
+    model = LGMD2(LGMD2Params(sfa=False, n_ts=5, t_ffi=1e9))
+    responses = [model.step(frame) for frame in looming.frames[:len(spikes) + 1]]
+    assert any(r.collision for r in responses) is warns
+    assert responses[-1].collision is warns
+
+
 @pytest.mark.parametrize("cls, options", [(LGMD1, {}), (LGMD2, {"sfa": False})])
 def test_feed_forward_inhibition_suppresses_a_whole_field_flash(cls, options):
     # LGMD1-2 without adaptation, which on its own would quiet a steady flash after a few frames

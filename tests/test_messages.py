@@ -155,6 +155,29 @@ def test_response_from_a_model_step_round_trips_with_targets():
     json.dumps(back.model_dump())  # JSON-ready for `asnn alerts --json`
 
 
+def test_a_model_s_non_finite_or_numpy_values_go_out_as_plain_finite_numbers():
+    """The wire's models refuse inf and NaN, and numpy scalars: a degenerate fit's ttc or
+    energy must not cost the frame its response (a mutation probe: nothing tested it)."""
+    from types import SimpleNamespace
+
+    result = SimpleNamespace(to_dict=lambda: {
+        "u": math.inf, "out": np.float32(0.75), "spikes": np.int64(3),
+        "spike_rate": np.float64(60.0), "collision": np.bool_(True),
+        "targets": [{"x": 1.0, "y": 2.0, "direction": math.nan, "energy": math.nan,
+                     "pixels": np.int32(40), "id": 4, "ttc": math.inf, "expansion": -math.inf,
+                     "offset": 0.5, "approaching": np.bool_(True)}]})
+    frame = Frame.from_image(np.zeros((32, 32), np.uint8), seq=7, stamp=1.0)
+    back = decode_response(encode(response_from(result, robot="r1", frame=frame, model="asnn",
+                                                preset="p", worker="w", latency_ms=1.0,
+                                                dropped=0)))
+    assert (back.u, back.out, back.spikes, back.spike_rate, back.collision) == (
+        0.0, 0.75, 3, 60.0, True)
+    target = back.targets[0]
+    assert (target.direction, target.energy) == (0.0, 0.0)  # required: 0
+    assert (target.ttc, target.expansion, target.offset) == (None, None, 0.5)  # optional: absent
+    assert type(target.pixels) is int and target.approaching is True and target.id == 4
+
+
 def test_target_ids_on_the_wire_start_at_the_models_first_seq():
     """A model's target ids go out offset by track_id_base of the seq it started at, so that the
     models of one stream (before and after a hand-over or a reset) number apart; the base stays

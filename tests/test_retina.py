@@ -86,10 +86,31 @@ def test_center_surround_kernel_has_silent_centre_and_live_surround():
     assert k[0, 0] > 0.9 and k.sum() > 20
 
 
+def test_center_surround_kernel_is_eq_11_on_the_sampled_grid():
+    # g_CS = 1 - exp(-r^2 / (2 sigma^2)) cos(2 pi r^2 / lambda + psi), x and y on [-1, 1]: the
+    # ring's radius follows lambda, which the two forms share (a mutation probe: doubling it
+    # was caught only by the golden data)
+    sigma, wavelength, phase = 0.5, 0.5, 0.3
+    k = retina.center_surround_kernel(sigma, wavelength, phase, 5)
+    for row, col in ((2, 3), (1, 1), (0, 2), (0, 0)):
+        r2 = ((col - 2) / 2) ** 2 + ((row - 2) / 2) ** 2
+        expected = 1 - math.exp(-r2 / (2 * sigma**2)) * math.cos(2 * math.pi * r2 / wavelength
+                                                                   + phase)
+        assert k[row, col] == pytest.approx(expected, abs=1e-12)
+
+
 def test_dog_kernel_is_centre_on():
     k = retina.dog_kernel(5.0, 1.0, 3.0, 5, "paper")
     assert k[2, 2] > 0 and k[2, 2] == k.max()
     assert np.allclose(k, k.T) and np.allclose(k, k[::-1, ::-1])
+
+
+def test_the_warning_is_a_spike_rate_of_at_least_t_c():
+    # eq. 34: Col(t) = 1 for S_rate >= T_c; with the shipped presets' steps of 5-10 Hz and
+    # T_c = 1 a strict '>' answered the same, so only this pins the boundary (a mutation probe)
+    assert retina.collision_warning(5.0, 5.0) is True
+    assert retina.collision_warning(math.nextafter(5.0, 0.0), 5.0) is False
+    assert retina.collision_warning(0.0, 0.0) is True
 
 
 def test_spike_count_and_output():

@@ -73,14 +73,14 @@ def test_the_spike_rate_divides_by_n_t_dt_from_the_first_frames():
 def test_a_clusters_direction_is_atan2_of_v_y_and_v_x_in_image_coordinates():
     """SPEC: atan2(V_Y, V_X), not the printed atan2(V_X, V_Y); x right, y down."""
     mask = np.zeros((20, 20), bool)
-    mask[8:12, 8:12] = True
+    mask[4:8, 10:16] = True  # off the diagonal: a centre with x and y swapped would not pass
     for angle in (0.0, math.pi / 2, 3 * math.pi / 4, -math.pi / 3):
         dx = np.full(mask.shape, 2.0 * math.cos(angle))
         dy = np.full(mask.shape, 2.0 * math.sin(angle))
         (target,) = extract_targets(mask, dx, dy, 5.0, 2)
         assert target.direction == pytest.approx(angle)
         assert target.energy == pytest.approx(2.0)
-        assert (target.x, target.y) == (9.5, 9.5)
+        assert (target.x, target.y) == (12.5, 5.5)
 
 
 def test_the_retina_integrates_with_the_fixed_dt_whatever_the_timestamps(looming):
