@@ -102,9 +102,13 @@ class ClipLabel(BaseModel):
                 raise ValueError(f"center ({x:g}, {y:g}) is outside the {self.width}x"
                                  f"{self.height} frame")
         for key in self.model_extra or {}:  # a misspelt field would be kept and never read
-            near = difflib.get_close_matches(key, _FIELDS, n=1, cutoff=0.75)
+            # (TTC and CENTER too: a field's name in capitals was kept)
+            near = difflib.get_close_matches(key.lower(), _FIELDS, n=1, cutoff=0.75)
             if near:
                 raise ValueError(f"unknown field {key!r}: did you mean {near[0]!r}?")
+        if self.topic is not None and not self.file.lower().endswith(".mcap"):
+            # asnn eval refuses to open it so; asnn label said it was ready
+            raise ValueError(f"a topic applies to ROS 2 bags (.mcap) only, not {self.file}")
         if self.frames is not None:
             for name in ("track", "target_size", "ttc"):
                 values = getattr(self, name)
