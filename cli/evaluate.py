@@ -348,6 +348,8 @@ def _evaluate(args: argparse.Namespace) -> int:
                 overrides=overrides)
             for line in heldout.summary_lines(results):
                 print(line)
+            for warning in results["warnings"]:  # as the plain run says them
+                print(f"asnn eval: {warning}", file=sys.stderr)
             print(f"{args.out}/held_out.md")
             return 0
         else:

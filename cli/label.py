@@ -19,7 +19,7 @@ from pathlib import Path
 from asnn.evaluation.labels import (VIDEO_SUFFIXES, center_outside, check_labels, clip_hint,
                                     label_problem, mismatches, read_entries, unlabelled,
                                     unlabelled_videos, write_entries)
-from asnn.evaluation.scoring import WARMUP_FRAMES
+from asnn.evaluation.scoring import unscored
 from asnn.io.files import folder_lock
 from asnn.io.sources import SourceError, open_source
 from asnn.io.video import cut_short
@@ -76,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
                 todo.append(str(exc))
                 continue
             todo += mismatches(entry, frames, fps, size=(width, height))
+            todo += unscored(entry, frames)  # as asnn eval warns of it
             outside = center_outside(entry, width, height)
             if outside is not None:
                 todo.append(outside)
@@ -99,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
             continue
         entries.append(unlabelled(video.name, frames, fps, width, height))
         added.append(entries[-1])
+        todo += unscored(entries[-1], frames)
         todo.append(f"{video.name}: {label_problem(entries[-1])}")
     if added:
         try:
@@ -134,9 +136,6 @@ def _decode(video: Path, todo: list[str]) -> tuple[int, float, tuple[int, int]]:
     for image in clip.frames():
         frames, shape = frames + 1, image.shape[:2]
     smallest = preset("default").min_side
-    if frames <= WARMUP_FRAMES:
-        todo.append(f"{video.name}: {frames} frames: asnn eval ignores the first "
-                    f"{WARMUP_FRAMES}, so nothing of it would be scored")
     if min(shape) < smallest:
         todo.append(f"{video.name}: its {shape[1]}x{shape[0]} frames are smaller than the "
                     f"model's {smallest}x{smallest} kernels: asnn eval cannot score it")

@@ -71,6 +71,11 @@ def test_good_labels_come_back_unchanged_in_either_form(tmp_path):
                               "track.2.1: Field required; and 57 more"),
     ({"ttc": [1.0] * 59 + [-0.5]}, "never negative"),
     ({"topic": ""}, "topic"),
+    # an evaluation review: a field in capitals was kept and never read; a topic on a video
+    # file passed asnn label, which said the entry was ready, and asnn eval refused it
+    ({"TTC": [1.0] * 60}, "unknown field 'TTC': did you mean 'ttc'?"),
+    ({"CENTER": [1, 2]}, "unknown field 'CENTER': did you mean 'center'?"),
+    ({"topic": "/camera/image_raw"}, "a topic applies to ROS 2 bags (.mcap) only, not c.mp4"),
     # taken quietly before the hostile-input trial: a bool or a string for a number, a frame
     # rate no camera has, a centre outside the frame the label gives
     ({"onset_frame": True}, "onset_frame: Input should be a valid integer"),
@@ -283,7 +288,7 @@ def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
     assert main(["label", str(tmp_path)]) == 1
     out = capsys.readouterr().out
     assert "tiny.avi: its 30x30 frames are smaller than the model's 31x31 kernels" in out
-    assert "tiny.avi: 3 frames: asnn eval ignores the first 5" in out
+    assert "tiny.avi: 3 frames decoded: the scoring ignores the first 5" in out
     assert "cut.avi:" in out and "where the file states 40: it may be cut" in out
 
 
@@ -361,6 +366,50 @@ def test_eval_names_unlabelled_videos_and_label_disagreements_on_the_terminal(tm
     assert results["unlabelled"] == ["forgotten.mp4"]
     report = (out / "report.md").read_text()
     assert "Videos in the folder without a label (not scored): forgotten.mp4" in report
+
+
+def test_clips_no_detector_can_be_scored_on_are_said_in_eval_and_held_out(tmp_path, capsys):
+    """An evaluation review: a 3-frame clip scored 'quiet' (a correct rejection) and a hit
+    window inside the warm-up, without a word; --held-out said nothing of a label's fps or
+    frames that disagree with its clip, as the plain run does."""
+    scene = make_scene("looming", size=(64, 64), frames=24, start=4, stop=20)
+    write_video(scene.frames[:3], tmp_path / "tiny.mp4", scene.fps)
+    write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
+    labels = [{"file": "tiny.mp4", "fps": scene.fps, "collision": False},
+              {"file": "loom.mp4", "fps": 2 * scene.fps, "collision": True, "onset_frame": 0,
+               "contact_frame": 1}]
+    (tmp_path / "labels.json").write_text(json.dumps(labels))
+    assert main(["eval", str(tmp_path), "--detectors", "lgmd2", "--out", str(tmp_path / "a"),
+                 "--no-plots"]) == 0
+    err = capsys.readouterr().err
+    said = ["tiny.mp4: 3 frames decoded: the scoring ignores the first 5, so nothing of it is "
+            "scored",
+            "loom.mp4: its hit window ends at frame 3, inside the first 5 frames the scoring "
+            "ignores: no detector can hit it",
+            f"loom.mp4: the clip runs at {scene.fps:g} fps where its label says"]
+    assert all(line in err for line in said), err
+    (tmp_path / "labels.json").write_text(json.dumps(labels[1:]))
+    out = tmp_path / "b"
+    assert main(["eval", str(tmp_path), "--held-out", "--cases", "nearmiss-disk-dark-right",
+                 "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert all(line in err for line in said[1:]), err
+    assert "one clip: its fold's thresholds are chosen on no clip" in err
+    report = (out / "held_out.md").read_text()
+    assert "Warnings (clips that disagree with their labels" in report and said[1] in report
+
+
+def test_scored_records_say_collision_with_true_or_false(tmp_path):
+    # "false" (a string) counted as a warning: asnn detect's output edited by hand, say
+    path = tmp_path / "c.jsonl"
+    for record, said in [({"frame": 3, "collision": "false"}, "collision must be true or false"),
+                         ({"frame": "3", "collision": False}, "frame must be a whole number"),
+                         ({"frame": 3.0}, "frame must be a whole number")]:
+        path.write_text(json.dumps(record) + "\n")
+        with pytest.raises(ValueError, match=said):
+            scoring.load_records(path)
+    path.write_text('{"frame": 3, "collision": true}\n{"frame": 4}\n')
+    assert len(scoring.load_records(path)) == 2
 
 
 def test_a_misspelt_clip_name_is_answered_with_the_unlabelled_video_it_likely_means(tmp_path,

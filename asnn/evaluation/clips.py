@@ -280,6 +280,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
             checked.add(clip)
             frames, fps, size, backwards, resets, first_reset = decoded
             warnings.extend(mismatches(given[clip], frames, fps, size=size))
+            warnings.extend(scoring.unscored(given[clip], frames, warmup))
             if backwards:
                 warnings.append(f"{labels[clip]['file']}: {backwards} frame"
                                 f"{'' if backwards == 1 else 's'} whose header stamp goes back, "

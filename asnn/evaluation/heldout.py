@@ -53,7 +53,7 @@ from ..params import ASNNParams
 from ..retina import collision_warning, sigmoid_output, spike_count, spike_rate
 from . import scoring
 from .clips import check_clips
-from .labels import load_labels
+from .labels import load_labels, mismatches
 from .pool import run_tasks
 from .runs import write_json
 
@@ -132,6 +132,8 @@ class ClipTrace:
     cells: int
     frames: list[FrameTrace] = field(default_factory=list)
     warnings: list[bool] | None = None
+    fps: float | None = None  # the clip's frame rate as decoded, and its frames' (width, height):
+    size: tuple[int, int] | None = None  # what its label is checked against
 
 
 def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
@@ -151,6 +153,7 @@ def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
     for index, (t, frame) in enumerate(timed_frames):
         trace.warnings.append(bool(model.step(frame, t).collision))
         if index == 0:
+            trace.size = (frame.shape[1], frame.shape[0])
             trace.frames.append(FrameTrace(repeat=False))
             continue
         if model.repeated:
@@ -583,6 +586,9 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
     ties = results.get("over_ties")
     if ties is not None:
         lines += _ties_lines(ties)
+    if results.get("warnings"):
+        lines += ["", "Warnings (clips that disagree with their labels, cannot be scored, or run "
+                  "slower than ASNN was made for):", ""] + [f"- {w}" for w in results["warnings"]]
     path = out_dir / "held_out.md"
     write_atomically(path, "\n".join(lines) + "\n")
     return path
@@ -674,7 +680,9 @@ def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace
 
     # as asnn eval reads it (asnn.evaluation.clips): each frame in its place
     source = open_source(spec, topic=topic, on_error=BackwardStamps(), hold_backwards=True)
-    return trace_clip(source.timed_frames(), params, Path(spec).name)
+    trace = trace_clip(source.timed_frames(), params, Path(spec).name)
+    trace.fps = source.fps
+    return trace
 
 
 def _trace_case(name: str, params: ASNNParams) -> ClipTrace:
@@ -683,6 +691,26 @@ def _trace_case(name: str, params: ASNNParams) -> ClipTrace:
 
     scene = make_case(name)
     return trace_clip(at_rate(scene.frames, scene.fps), params, name)
+
+
+def _label_warnings(labels: Sequence[Mapping], traces: Sequence[ClipTrace]) -> list[str]:
+    """What ``asnn eval`` warns of the clips (:func:`~asnn.evaluation.labels.mismatches`,
+    :func:`~asnn.evaluation.scoring.unscored`, a frame rate below ``SLOW_FPS``), and a fold
+    chosen on no clip at all."""
+    from ..params import SLOW_FPS
+
+    found = []
+    for label, trace in zip(labels, traces):
+        if trace.fps:
+            found += mismatches(label, len(trace.frames), trace.fps, size=trace.size)
+            if trace.fps < SLOW_FPS:
+                found.append(f"{label['file']}: {trace.fps:g} frames a second; ASNN loses hits "
+                             f"below {SLOW_FPS:g} (README, 'At half the frame rate')")
+        found += scoring.unscored(label, len(trace.frames))
+    if len(labels) == 1:
+        found.append("one clip: its fold's thresholds are chosen on no clip (the first grid "
+                     "point the suite admits), so its held-out figure says nothing")
+    return found
 
 
 def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
@@ -746,6 +774,7 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     progress.finish()
     for trace in (*traces, *suite_traces):
         check_replay(trace, base)
+    warnings = _label_warnings(labels, traces)
     suite_labels = [make_case(name).label(name) for name in cases]
     # every grid point replayed on the suite, then on the clips
     points = len(grid(base))
@@ -754,6 +783,7 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     progress.note(f"{points} points on the suite")
     results = {"clips_dir": str(clips_dir), "preset": preset_name,
                "overrides": dict(overrides or {}), "suite_cases": len(cases),
+               "warnings": warnings,
                **leave_one_out(traces, labels, base, suite_admissible(suite),
                                tie_break=tie_break, suite=suite, jobs=jobs,
                                progress=progress)}

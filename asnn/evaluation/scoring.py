@@ -69,6 +69,7 @@ __all__ = [
     "EARLY_TOLERANCE_S",
     "MAX_EARLY_TOLERANCE_S",
     "ClipScore",
+    "unscored",
     "first_warning",
     "score_clip",
     "missing_clip",
@@ -87,6 +88,39 @@ CONTACT_SLACK_FRAMES = 2
 EARLY_TOLERANCE_S = 0.5
 MAX_EARLY_TOLERANCE_S = 60.0  # an onset judged by eye is off by a second or two, not a minute
 OUTCOMES = ("hit", "early", "late", "miss", "false", "quiet", "missing")
+
+
+def unscored(label: Mapping, frames: int, warmup: int = WARMUP_FRAMES) -> list[str]:
+    """Why a clip's score would say nothing of a detector: too few frames decoded to score any
+    after the warm-up, or a collision whose hit window ends inside the warm-up, which no
+    detector can hit (each was scored as any other clip without a word).
+
+    Parameters
+    ----------
+    label : mapping
+        The clip's label (``file``, ``collision``, ``contact_frame``).
+    frames : int
+        The frames decoded.
+    warmup : int
+        The first frames the scoring ignores.
+
+    Returns
+    -------
+    list of str
+        One sentence per reason, naming the clip; empty where it can be scored.
+    """
+    name = label.get("file", "?")
+    found = []
+    if frames <= warmup:
+        found.append(f"{name}: {frames} frame{'' if frames == 1 else 's'} decoded: the scoring "
+                     f"ignores the first {warmup}, so nothing of it is scored")
+    contact = label.get("contact_frame")
+    if label.get("collision") and contact is not None \
+            and int(contact) + CONTACT_SLACK_FRAMES < warmup:
+        found.append(f"{name}: its hit window ends at frame {int(contact) + CONTACT_SLACK_FRAMES}"
+                     f", inside the first {warmup} frames the scoring ignores: no detector can "
+                     "hit it")
+    return found
 
 
 @dataclass(frozen=True)
@@ -495,7 +529,8 @@ def load_records(path: str | Path) -> list[dict]:
     Raises
     ------
     ValueError
-        If a line is not a JSON object with a ``frame``.
+        If a line is not a JSON object with a whole ``frame`` and, where it has one, a
+        ``collision`` of true or false (the string "false" counted as a warning).
     """
     text = Path(path).read_text(encoding="utf-8")
     stripped = text.lstrip()
@@ -506,6 +541,12 @@ def load_records(path: str | Path) -> list[dict]:
     for r in records:
         if not isinstance(r, dict) or "frame" not in r:
             raise ValueError(f"{path}: every record must be a JSON object with a 'frame'")
+        if isinstance(r["frame"], bool) or not isinstance(r["frame"], int):
+            raise ValueError(f"{path}: a record's frame must be a whole number, got "
+                             f"{r['frame']!r}")
+        if not isinstance(r.get("collision", False), bool):
+            raise ValueError(f"{path}: frame {r['frame']}: collision must be true or false, "
+                             f"got {r['collision']!r}")
     return records
 
 
