@@ -293,6 +293,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         ("--warmup", args.warmup is not None, not args.held_out),
         ("--perturb", args.perturb, not (args.paper or args.held_out)),
         ("--tie-break", args.tie_break != "warning-frames", args.held_out),
+        ("--jobs", args.jobs != 1, not args.paper),  # the paper's runs take seconds, in turn
     ) if given and not mode]
     if misplaced:
         print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
@@ -321,7 +322,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         if args.paper:
             paper.paper_figures(args.out, preset_name=preset_name, detectors=args.detectors,
                                 size=args.size or (128, 128), warmup=warmup,
-                                progress=progress)
+                                plots=not args.no_plots, progress=progress)
         elif args.synthetic:
             suite.evaluate_suite(args.out, detectors=args.detectors, preset_name=preset_name,
                                  cases=args.cases, jobs=args.jobs, warmup=warmup,

@@ -478,7 +478,8 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
                       ["--synthetic", "--tie-break", "grid"],
                       # scored by SPEC's rule, as its grid chose: these were silently ignored
                       [str(tmp_path), "--held-out", "--warmup", "30"],
-                      [str(tmp_path), "--held-out", "--early-tolerance", "0"]):
+                      [str(tmp_path), "--held-out", "--early-tolerance", "0"],
+                      ["--paper", "--jobs", "2"]):  # its runs go in turn
         assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
         assert "does not go with" in capsys.readouterr().err
 
@@ -558,6 +559,35 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
     assert set(np.unique(maps["M_a"])) <= {0, 1}
     g_prime = np.asarray(maps["G_prime"])
     assert np.all(g_prime[np.asarray(maps["M_a"]) * np.asarray(maps["M_d"]) == 0] == 0)
+    # the table's peak out is the scored frames': LGMD1-1 over the stripes read 1.000 from a
+    # flash in the warm-up where it never fired after it (a paper-figure check)
+    for row in results["table"]:
+        fig = fig6 if row["polarity"] == "dark" else json.loads(
+            (out / "fig7_light_responses.json").read_text())
+        (scene,) = [c for c in fig["scenes"] if c["scene"] == row["scene"]]
+        assert row["peak_out"] == max(scene["models"][row["detector"]]["out"][5:])
+    # --no-plots: the figures' data, no PNG (it drew them all)
+    bare = tmp_path / "bare"
+    assert main(["eval", "--paper", "--detectors", "lgmd2", "--size", "64x64", "--no-plots",
+                 "--out", str(bare)]) == 0
+    assert not list(bare.glob("*.png")) and (bare / "fig8_maps.json").is_file()
+
+
+def test_the_maps_figure_draws_the_flow_on_the_models_grid(tmp_path):
+    """A paper-figure check: the default enlarges 128-px frames to 160, and Fig. 8(a)'s arrows,
+    sampled on the frame's 128-px grid, stood off the disk they belong to."""
+    from asnn.evaluation.figures import _maps_figure
+
+    v = np.zeros((160, 160))
+    v[100:110, 130:140] = 1.0  # motion at (135, 105) of the model's grid only
+    maps = {"frame": np.zeros((128, 128)).tolist(), "V": v, "phi": np.zeros((160, 160)),
+            **{k: np.zeros((160, 160)) for k in ("G", "M_a", "M_d", "G_prime")}, "step": 32}
+    fig = _maps_figure(maps)
+    arrows = fig.axes[0].collections[0]
+    offsets = arrows.get_offsets()[np.hypot(arrows.U, arrows.V) > 0]
+    assert len(offsets) and np.all((offsets >= [130, 100]) & (offsets < [140, 110]))
+    assert fig.axes[0].images[0].get_extent() == [-0.5, 159.5, 159.5, -0.5]
+    assert "the model's grid: 160x160, the frame 128x128" in fig._suptitle.get_text()
 
 
 def _mark(folder: str, index: int) -> int:

@@ -80,9 +80,9 @@ def _mark_events(ax, onset: int | None, contact: int | None, window: Sequence[in
     if window is not None:
         ax.axvspan(window[0], window[1], color="tab:green", alpha=0.08, lw=0)
     if onset is not None:
-        ax.axvline(onset, color="black", ls="--", lw=0.8)
+        ax.axvline(onset, color="black", ls="--", lw=0.8, label="onset")
     if contact is not None:
-        ax.axvline(contact, color="black", ls="-", lw=1.0)
+        ax.axvline(contact, color="black", ls="-", lw=1.0, label="contact")
 
 
 def plot_clip_responses(path: str | Path, clip: Mapping) -> Path:
@@ -172,6 +172,9 @@ def plot_summary(path: str | Path, summaries: Mapping[str, Mapping]) -> Path:
     return _save(fig, path)
 
 
+_TICK_ROW, _TICK_STEP = 1.015, 0.02  # where the synthetic figures' warning ticks are drawn
+
+
 def plot_synthetic_responses(path: str | Path, data: Mapping) -> Path:
     """Paper Figs. 6 and 7: a stimulus frame and the models' outputs, one column per scene.
 
@@ -192,16 +195,19 @@ def plot_synthetic_responses(path: str | Path, data: Mapping) -> Path:
         img_ax.imshow(np.asarray(scene["snapshot"]), cmap="gray", vmin=0, vmax=255)
         img_ax.set_title(f"{scene['title']}\n(frame {scene['snapshot_frame']})", fontsize=9)
         img_ax.set_axis_off()
-        for model, series in scene["models"].items():
+        for row, (model, series) in enumerate(scene["models"].items()):
             out = np.asarray(series["out"])
             ax.plot(np.arange(len(out)), out, color=_colour(model), lw=1.2, label=model)
+            # a row of ticks per model, above out's range: on one row the last drawn hid the
+            # others' warnings
             warn = np.flatnonzero(np.asarray(series["collision"], dtype=bool))
-            ax.scatter(warn, np.full(len(warn), 1.0), marker="|", s=25, color=_colour(model))
+            ax.scatter(warn, np.full(len(warn), _TICK_ROW + _TICK_STEP * row), marker="|",
+                       s=20, color=_colour(model))
         _mark_events(ax, scene.get("onset"), scene.get("contact"))
-        ax.set_ylim(0.48, 1.03)
+        ax.set_ylim(0.48, _TICK_ROW + _TICK_STEP * len(scene["models"]))
         ax.set_xlabel("step")
         if col == 0:
-            ax.set_ylabel("out(t); ticks at 1 = warnings")
+            ax.set_ylabel("out(t); ticks above 1: warnings, a row per model")
             ax.legend(fontsize=8, loc="center right")
     fig.suptitle(data.get("title", ""))
     return _save(fig, path)
@@ -258,17 +264,23 @@ def _maps_figure(data: Mapping) -> Figure:
     fig = _figure(12.0, 7.6)
     axes = fig.subplots(2, 3)
     ax = axes[0, 0]
-    ax.imshow(frame, cmap="gray", vmin=0, vmax=255)
-    stride = max(min(frame.shape) // 24, 1)
-    ys, xs = np.mgrid[stride // 2:frame.shape[0]:stride, stride // 2:frame.shape[1]:stride]
+    # the maps are on the model's grid, which the input-scale stage may make larger or smaller
+    # than the frame (a 128-px frame is seen at 160): the frame is drawn over the maps' pixels
+    # and the arrows sampled there, or they stand off the objects they belong to
+    h, w = v.shape
+    ax.imshow(frame, cmap="gray", vmin=0, vmax=255, extent=(-0.5, w - 0.5, h - 0.5, -0.5))
+    stride = max(min(h, w) // 24, 1)
+    ys, xs = np.mgrid[stride // 2:h:stride, stride // 2:w:stride]
     vv = np.clip(v[ys, xs], 0.0, None)
     scale = vv.max() if vv.max() > 0 else 1.0
-    vx, vy = motion_components(vv / scale, phi[ys, xs])  # eq. 29
+    # lengths by the square root of V: the stripes' energy, a hundredth of the disk's rim,
+    # would be dots drawn in proportion
+    vx, vy = motion_components(np.sqrt(vv / scale), phi[ys, xs])  # eq. 29's direction
     # phi is in image coordinates (y down), and so are the axes imshow sets up: angles="xy"
     # draws the vector in them as it is
     ax.quiver(xs, ys, vx, vy,
               color="tab:red", angles="xy", scale_units="xy", scale=1.0 / (1.5 * stride))
-    ax.set_title("(a) flow of motion energy")
+    ax.set_title("(a) flow of motion energy (~ sqrt V)", fontsize=10)
     panels = [("V", "(b) maximal motion energy V", "magma"),
               ("G", "(c) approach-sensitive map G", "magma"),
               ("M_a", "(d) approach-sensitive attention M_a", "gray"),
@@ -281,7 +293,10 @@ def _maps_figure(data: Mapping) -> Figure:
     for ax in axes.ravel():
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.suptitle(data.get("title", f"intermediate maps at step {data.get('step')}"))
+    title = data.get("title", f"intermediate maps at step {data.get('step')}")
+    if (h, w) != frame.shape[:2]:
+        title += f" (the model's grid: {w}x{h}, the frame {frame.shape[1]}x{frame.shape[0]})"
+    fig.suptitle(title)
     return fig
 
 
@@ -306,6 +321,7 @@ def plot_temporal_filter(path: str | Path, data: Mapping) -> Path:
         ax.set_xlabel("t, s")
         ax.set_title(title)
         ax.legend(fontsize=8)
-    axes[0].set_ylabel("K (z_n - z_{n+1})")
+    axes[0].set_ylabel("$K\\,(z_n - z_{n+1})$")
+    axes[1].set_ylabel("$K\\,(z_n - z_{n+1})$ for a unit step")
     fig.suptitle(data.get("title", "temporal filter L(K, n, z0)"))
     return _save(fig, path)

@@ -102,7 +102,8 @@ def _paper_report(results: Mapping) -> str:
         "with no early tolerance (generated clips); `approach` counts warning frames in "
         "[onset, contact + 2], `other` the warning frames elsewhere after the warm-up.",
         "",
-        "| scene | target | detector | outcome | first warning | approach | other | peak out |",
+        "| scene | target | detector | outcome | first warning | approach | other | "
+        "peak out after the warm-up |",
         "| --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for row in results["table"]:
@@ -121,7 +122,8 @@ def _paper_report(results: Mapping) -> str:
 
 def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
                   detectors: Sequence[str] = DEFAULT_DETECTORS, size: tuple[int, int] = (128, 128),
-                  warmup: int = scoring.WARMUP_FRAMES, progress=None) -> dict:
+                  warmup: int = scoring.WARMUP_FRAMES, plots: bool = True,
+                  progress=None) -> dict:
     """Regenerate the paper's synthetic experiments and write figures, JSON and a report.
 
     Writes to ``out_dir``: ``fig3_temporal_filter`` (with the paper's own simulation settings,
@@ -140,6 +142,9 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
     size : (width, height)
         Frame size; the paper's is 128x128.
     warmup : int
+        Frames each clip's scoring ignores (and its table's peak out).
+    plots : bool
+        Draw the PNGs; without, only their data (``.json``), the results and the report.
     progress : ProgressPrinter-like, optional
 
     Returns
@@ -159,10 +164,12 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
 
     # Fig. 3: the temporal filter, with the simulation's own settings (the paper's text)
     filt = temporal_filter_responses(preset("paper", **FIG3_FILTER), steps=FIG3_STEPS)
-    filt["title"] = ("temporal filter L(K, n, z0) as in the paper's Fig. 3: K=5, C=60, tau=8, "
-                     f"dt 0.05 s, {FIG3_STEPS} steps")
+    filt["title"] = ("temporal filter L(K, n, z0) as in the paper's Fig. 3: K=5, C=A=60, tau=8, "
+                     f"dt 0.05 s (Euler steps), {FIG3_STEPS} steps")
     write_json(out_dir / "fig3_temporal_filter.json", filt)
-    written.append(figures.plot_temporal_filter(out_dir / "fig3_temporal_filter.png", filt).name)
+    if plots:
+        written.append(figures.plot_temporal_filter(out_dir / "fig3_temporal_filter.png",
+                                                    filt).name)
     progress.advance(1, "fig. 3")
 
     # Figs. 6 and 7: three scenes, dark and light targets, every model
@@ -188,11 +195,15 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
                 table.append({"scene": scene_name, "polarity": polarity, "detector": m,
                               "outcome": score.outcome, "first_warning": score.first_warning,
                               "approach_warnings": inside, "other_warnings": other,
-                              "peak_out": max(entry["models"][m]["out"])})
+                              # the scored frames' (the warm-up's may read 1 on a flash of
+                              # the first frames, as LGMD1-1's do over the stripes)
+                              "peak_out": max(entry["models"][m]["out"][warmup:], default=0.5)})
                 progress.advance(1, f"{scene_name} {polarity} {m}")
             data["scenes"].append(entry)
         write_json(out_dir / f"{fig_name}.json", data)
-        written.append(figures.plot_synthetic_responses(out_dir / f"{fig_name}.png", data).name)
+        if plots:
+            written.append(figures.plot_synthetic_responses(out_dir / f"{fig_name}.png",
+                                                            data).name)
 
     # Fig. 9: contrast and speed sweeps of ASNN on the dark approach-recession
     sweeps = {"title": f"ASNN (preset {preset_name or 'default'}): contrast and speed",
@@ -208,7 +219,8 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
             progress.advance(1, f"{key} {value:g}")
         sweeps[key] = sweep
     write_json(out_dir / "fig9_contrast_speed.json", sweeps)
-    written.append(figures.plot_sweeps(out_dir / "fig9_contrast_speed.png", sweeps).name)
+    if plots:
+        written.append(figures.plot_sweeps(out_dir / "fig9_contrast_speed.png", sweeps).name)
 
     # Fig. 8: intermediate maps at step 32 of the dark approach-recession over stripes
     scene = make_scene("approach_recession_over_stripes", polarity="dark", size=size)
@@ -225,7 +237,8 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
             "G_prime": _round_map(maps.G_prime), "u": response.u,
             "targets": [t.to_dict() for t in response.targets]}
     write_json(out_dir / "fig8_maps.json", data)
-    written.append(figures.plot_maps(out_dir / "fig8_maps.png", data).name)
+    if plots:
+        written.append(figures.plot_maps(out_dir / "fig8_maps.png", data).name)
     progress.advance(1, "fig. 8")
     progress.finish()
 
