@@ -32,8 +32,8 @@ from pathlib import Path
 
 import zenoh
 
-__all__ = ["DEFAULTS", "MODES", "SHARED_MEMORY", "ConfigError", "ZenohOptions", "make_config",
-           "zenoh_error"]
+__all__ = ["DEFAULTS", "MAX_MESSAGE", "MAX_MESSAGE_BYTES", "MODES", "SHARED_MEMORY", "ConfigError",
+           "ZenohOptions", "make_config", "zenoh_error"]
 
 MODES = ("peer", "client", "router")
 DEFAULTS: dict[str, object] = {
@@ -42,6 +42,12 @@ DEFAULTS: dict[str, object] = {
 
 
 SHARED_MEMORY = "transport/shared_memory/enabled"
+# No message above 50 MiB is taken off a link (the largest valid one, a 4096x4096 bgr8 frame,
+# is 48 MiB: messages.MAX_PAYLOAD). Zenoh's default, 1 GiB, let one message cost a worker or
+# a dashboard twice its size before the payload check refused it, and they kept the memory: a
+# 300 MB frame left each 300 MB larger. Above the cap Zenoh drops the message; the link stays.
+MAX_MESSAGE = "transport/link/rx/max_message_size"
+MAX_MESSAGE_BYTES = 50 << 20
 # A config file is read whole and its nesting parsed recursively by Zenoh: /dev/zero took 4 GB
 # before failing, 27 MB of config 2.2 GB, and 50,000 nested objects crashed the process
 # (SIGSEGV). Zenoh's own configs are a few KB, nested 5 deep.
@@ -70,6 +76,7 @@ class ZenohOptions:
 
 _COMMENTS = re.compile(r"/\*.*?\*/|//[^\n]*", re.S)
 _SHARED_MEMORY_KEY = re.compile(r"""["']?\bshared_memory["']?\s*:""")
+_MAX_MESSAGE_KEY = re.compile(r"""["']?\bmax_message_size["']?\s*:""")
 
 
 def _nesting(text: str) -> int:
@@ -147,6 +154,8 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
     # Zenoh's own default is true, so whether the file chose it is read from the file itself
     if not _sets_shared_memory(text):
         settings.append((SHARED_MEMORY, False))
+    if not _MAX_MESSAGE_KEY.search(_COMMENTS.sub("", text)):  # a file's own cap is kept
+        settings.append((MAX_MESSAGE, MAX_MESSAGE_BYTES))
     if opts.mode is not None:
         if opts.mode not in MODES:
             raise ConfigError(f"unknown Zenoh mode {opts.mode!r}; choose one of {', '.join(MODES)}")

@@ -279,6 +279,42 @@ def test_config_options_override_the_file(tmp_path):
     assert json.loads(conf.get_json("scouting/multicast/enabled")) is False
 
 
+def test_no_message_above_the_cap_is_taken_off_a_link_and_the_largest_frame_is(zenoh_net,
+                                                                                  tmp_path):
+    """A soak: one 300 MB frame cost the worker, the dashboard and the router twice its size
+    before the payload check refused it, and they kept it (Zenoh takes up to 1 GiB)."""
+    import time
+
+    import zenoh
+
+    from service.config import MAX_MESSAGE, MAX_MESSAGE_BYTES
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    assert MAX_PAYLOAD + 64 * 1024 < MAX_MESSAGE_BYTES <= 2 * MAX_PAYLOAD
+    assert json.loads(make_config().get_json(MAX_MESSAGE)) == MAX_MESSAGE_BYTES
+    own = tmp_path / "own.json5"
+    own.write_text("{ transport: { link: { rx: { max_message_size: 1000000 } } } }")
+    assert json.loads(make_config(ZenohOptions(config_file=own)).get_json(MAX_MESSAGE)) == 1000000
+    for name in ("client.json5", "router.json5", "secure/router.json5"):  # zenohd's too
+        deployed = root / "deploy" / "zenoh" / name
+        assert json.loads(zenoh.Config.from_file(str(deployed)).get_json(MAX_MESSAGE)) \
+            == MAX_MESSAGE_BYTES, name
+    got = []
+    zenoh_net.spoke().declare_subscriber("big/*", lambda s: got.append(
+        (str(s.key_expr), len(s.payload))))
+    publisher = zenoh_net.hub  # the spoke's link takes it off: the spoke's cap is the test
+    time.sleep(0.5)
+    block = zenoh.CongestionControl.BLOCK
+    publisher.put("big/over", bytes(MAX_MESSAGE_BYTES + (1 << 20)), congestion_control=block)
+    publisher.put("big/largest", bytes(MAX_PAYLOAD), congestion_control=block)
+    publisher.put("big/after", b"x", congestion_control=block)
+    deadline = time.monotonic() + 30
+    while len(got) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    assert got == [("big/largest", MAX_PAYLOAD), ("big/after", 1)]
+
+
 def test_zenohs_shared_memory_is_off_unless_a_config_file_chooses_it(tmp_path):
     """Zenoh 1.10.2 turns it on by default, and each closed session's 16 MiB pool then stays
     mapped in the router and the worker (docs/operations.md)."""
