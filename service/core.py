@@ -52,7 +52,8 @@ intrusion, logs it (rate-limited), marks the robot *contested* and returns to th
 was there first (a ``second-publisher`` reset if the other's frame was processed meanwhile);
 the other's later frames, continuing its own stream, are refused as ``second-publisher``.
 From then on, while the robot's stream keeps sending (a frame less than ``takeover_after``
-seconds ago), a frame that does not continue it is refused as ``second-publisher``. So an
+seconds ago), a frame that does not continue it is refused as ``second-publisher``, until
+``CONTESTED_FOR_S`` (30 s) after the last frame so refused. So an
 intruder costs the robot at most two resets, however long it keeps publishing. A camera that
 really restarts is followed as soon as its previous stream has been silent for
 ``takeover_after`` seconds. A publisher that copies the robot's ``seq`` and ``stamp`` cannot be
@@ -143,6 +144,11 @@ IDLE_TIMEOUT_S = 60.0
 MAX_GAP = 20
 MAX_ROBOTS = 256
 TAKEOVER_AFTER_S = 3.0
+# a robot stays contested this long after the last frame refused as a second publisher's: then
+# a restart of its own camera is followed at once again (contested for good, each later
+# restart lost takeover_after seconds of frames: a soak); an intruder that keeps publishing
+# keeps it contested, one that comes back less often costs the robot its two resets again
+CONTESTED_FOR_S = 30.0
 # A robot's rate is the median over asnn.params.PERIOD_FRAMES gaps between the stamps of its
 # frames processed, as its model measures its own; when it reads below SLOW_FPS for
 # PERIOD_FRAMES frames in a row the worker logs it (_measure_rate)
@@ -239,7 +245,8 @@ class _Robot:
     streams: int = 0  # streams started
     processed_stream: int | None = None  # number of the stream the model state belongs to
     stepped: int = 0  # frames the model state has stepped since it was (re)started
-    contested: bool = False  # a second publisher was seen on its key
+    contested: bool = False  # a second publisher was seen on its key (in CONTESTED_FOR_S)
+    intruder_seen: float = 0.0  # when the second publisher's latest frame arrived
     intrusions: int = 0
     restarts: int = 0  # streams in a row that ended after one frame (a seq that never grows)
     pending: tuple[Frame, float, _Stream] | None = None  # (frame, received, its stream)
@@ -507,9 +514,10 @@ class WorkerCore:
             if previous.number > current.number:
                 # the intruder's stream goes on while the one there first keeps sending
                 previous.advance(frame, received)
+                state.intruder_seen = received
                 return None
             # the stream this one replaced goes on: two publishers interleave on the key
-            state.contested = True
+            state.contested, state.intruder_seen = True, received
             state.intrusions += 1
             self._stats.intrusions += 1
             self._rejections.warning(
@@ -521,8 +529,12 @@ class WorkerCore:
             previous.advance(frame, received)
             state.stream, state.previous = previous, current
             return previous
+        if state.contested and received - state.intruder_seen > CONTESTED_FOR_S:
+            state.contested = False
         if (state.contested and current is not None
                 and received - current.arrival <= self.takeover_after):
+            # an intruder's frame, or the robot's camera restarting: either keeps it contested
+            state.intruder_seen = received
             return None
         if current is not None:
             state.restarts = state.restarts + 1 if current.frames == 1 else 0

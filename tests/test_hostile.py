@@ -604,6 +604,58 @@ def test_after_an_intrusion_a_restarted_camera_is_followed_once_the_old_stream_i
     assert feed(core, "r1", scene.frames[1], 1) is not None
 
 
+def test_a_robot_is_contested_no_longer_once_no_frame_is_refused_for_a_while():
+    """A soak: contested for good, every later quick restart of the robot's own camera lost
+    takeover_after seconds of frames, refused as a second publisher's."""
+    from service.core import CONTESTED_FOR_S
+
+    scene = make_scene("looming")
+    clock = FakeClock()
+    core = WorkerCore(clock=clock, takeover_after=3.0)
+    seq = 100
+    for k in range(10):
+        clock.now += 0.05
+        feed(core, "r1", scene.frames[k], seq + k)
+        if k in (4, 5):  # an intruder's frame, then the robot's again: detected
+            core.offer("asnn/r1/frame", payload(scene.frames[0], 0))
+    assert core.status()["robots"]["r1"]["contested"]
+    seq += 9
+
+    def run(frames):  # the robot's own stream, 20 fps
+        nonlocal seq
+        for k in range(frames):
+            clock.now += 0.05
+            seq += 1
+            assert feed(core, "r1", scene.frames[k % 20], seq) is not None
+
+    run(int(CONTESTED_FOR_S / 0.05) - 20)  # refused nothing since: still contested
+    clock.now += 0.05
+    assert core.offer("asnn/r1/frame", payload(scene.frames[0], 0)) is None  # a restart: refused
+    run(int(CONTESTED_FOR_S / 0.05) + 20)  # now nothing refused for longer than that
+    assert core.status()["robots"]["r1"]["contested"]  # (cleared as the next frame arrives)
+    clock.now += 0.05
+    response = feed(core, "r1", scene.frames[0], 0)  # the camera restarts: followed at once
+    assert response is not None and response.u == 0.0
+    assert not core.status()["robots"]["r1"]["contested"]
+    assert core.stats()["intrusions"] == 1
+
+
+def test_an_intruder_that_keeps_publishing_keeps_the_robot_contested():
+    from service.core import CONTESTED_FOR_S
+
+    scene = make_scene("looming", size=(64, 64))
+    blank = np.zeros_like(scene.frames[0])
+    clock = FakeClock()
+    core = WorkerCore(clock=clock)
+    for k in range(int(1.5 * CONTESTED_FOR_S / 0.05)):  # blank frames with seq 0 between
+        clock.now += 0.05
+        feed(core, "r1", scene.frames[k % 40], 100 + k)
+        if k >= 5:
+            core.offer("asnn/r1/frame", payload(blank, 0))
+    assert core.stats()["intrusions"] == 1 and sum(core.stats()["resets"].values()) <= 2
+    assert core.status()["robots"]["r1"]["contested"]
+
+
 def test_a_camera_restart_without_an_intruder_is_followed_at_once():
     scene = make_scene("looming")
     core = WorkerCore()
