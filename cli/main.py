@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import importlib
 import os
+import signal
 import sys
 
 # Each module defines ``register(subparsers)``, adding its sub-commands with ``func`` set.
@@ -15,6 +18,10 @@ COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.la
 class _Parser(argparse.ArgumentParser):
     """argparse's parser, whose errors are one line, as the commands' own are: the option's
     message and where the usage is, not the usage itself (a long block for some commands)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)  # `detect --json X` was taken as --jsonl X
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -71,8 +78,52 @@ def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespa
     return parser.parse_args(argv)  # the usual error for what is left
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM (``timeout``, docker, systemd), raised as Ctrl-C's interrupt is, so that a command
+    closes its outputs and ends its processes alike: by default SIGTERM killed it on the spot,
+    leaving an unplayable video, an unreadable MCAP, and a benchmark's router and workers or
+    an evaluation's pool running on. The networked commands set their own handlers."""
+
+
+def _raise_terminated(signum, frame):
+    raise _Terminated
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts():
+    try:
+        previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:  # not the main thread (main() called from a test's thread)
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+_WRITE_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO}
+
+
+def _stdout_failed() -> OSError | None:
+    """The error standard output gives now, if it fails (a full disk: ``> /dev/full``)."""
+    try:
+        sys.stdout.flush()
+    except OSError as exc:
+        return exc
+    return None
+
+
+def _quiet_stdout() -> None:
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())  # so that Python's flush at exit fails no more
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if sys.stdout is None:  # started with standard output closed (>&-): output would be lost
+        print("asnn: error: standard output is closed", file=sys.stderr)
+        return 2
     for arg in argv:  # bytes of another encoding (a file name): OpenCV crashes on such a path
         try:
             arg.encode("utf-8")
@@ -80,20 +131,34 @@ def main(argv: list[str] | None = None) -> int:
             print(f"asnn: error: {arg!r} is not UTF-8 text (rename the file)", file=sys.stderr)
             return 2
     try:
-        # the commands' modules take a second or two to import: Ctrl-C then is an interrupt too
-        if argv[:1] == ["detect"]:
-            _prefer_wide_vectors()  # before the commands' modules import numba
-        args = _parse(build_parser(), argv)
-        return int(args.func(args) or 0)
+        with _sigterm_interrupts():
+            # the commands' modules take a second or two to import: Ctrl-C then is an
+            # interrupt too
+            if argv[:1] == ["detect"]:
+                _prefer_wide_vectors()  # before the commands' modules import numba
+            args = _parse(build_parser(), argv)
+            return int(args.func(args) or 0)
+    except _Terminated:
+        print("\nasnn: terminated", file=sys.stderr)
+        return 143  # 128 + SIGTERM, as the signal's own end
     except KeyboardInterrupt:  # a progress bar may hold the line: start a new one
         print("\nasnn: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         # the reader of our standard output went away (`asnn detect --jsonl - | head`): stop
         # quietly, with the status of a command the pipe's signal ends (128 + SIGPIPE)
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())  # so that Python's flush at exit fails no more
+        _quiet_stdout()
         return 141
+    except OSError as exc:
+        # a write that failed where the command expects none to (standard output on a full
+        # disk: `> /dev/full`); an error naming a file is the command's own, to be said by it
+        failed = _stdout_failed()
+        if failed is None and (exc.filename is not None or exc.errno not in _WRITE_ERRORS):
+            raise
+        _quiet_stdout()
+        failed = failed or exc
+        print(f"asnn: error: a write failed: {failed.strerror or failed}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -681,3 +681,19 @@ def test_a_file_name_that_is_not_utf8_is_refused_where_opencv_would_crash(tmp_pa
     (tmp_path / name).write_bytes(b"\0" * 10)
     with pytest.raises(VideoError, match="a file name that is not UTF-8"):
         open_video(tmp_path / name)
+
+
+def test_a_closed_or_full_standard_output_is_one_error_line_not_lost_output(tmp_path):
+    """A CLI trial: with stdout closed (>&-) asnn detect --jsonl - wrote nothing and exited 0;
+    to a full disk asnn status, bench --json and label printed a traceback."""
+    root = Path(__file__).resolve().parents[1]
+    command = [sys.executable, "-m", "cli.main", "label", str(tmp_path)]
+    closed = subprocess.run(command, cwd=root, capture_output=False, stderr=subprocess.PIPE,
+                            text=True, timeout=120, preexec_fn=lambda: os.close(1))
+    assert closed.returncode == 2 and "standard output is closed" in closed.stderr
+    with open("/dev/full", "w") as full:
+        failed = subprocess.run(command, cwd=root, stdout=full, stderr=subprocess.PIPE,
+                                text=True, timeout=120)
+    assert failed.returncode == 2, failed.stderr
+    assert failed.stderr.strip().splitlines() == [
+        "asnn: error: a write failed: No space left on device"]

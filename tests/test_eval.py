@@ -630,6 +630,39 @@ def _left_early(tmp_path, run_tasks):
     assert len(list(tmp_path.glob("*.done"))) == finished  # nor finishes anything later
 
 
+def test_sigterm_ends_an_evaluation_as_ctrl_c_does_with_its_pool(tmp_path):
+    """A CLI trial: SIGTERM (timeout, docker, systemd) killed asnn eval on the spot, and its
+    pool's workers stayed blocked on a pipe for good; asnn detect's video was left unplayable."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    run = subprocess.Popen([sys.executable, "-m", "cli.main", "eval", "--synthetic", "--cases",
+                            "loom-*", "--jobs", "2", "--no-plots", "--out", str(tmp_path / "o")],
+                           cwd=Path(__file__).parents[1], stderr=subprocess.PIPE, text=True)
+
+    def children():
+        try:
+            return {int(c) for t in os.listdir(f"/proc/{run.pid}/task") for c in
+                    open(f"/proc/{run.pid}/task/{t}/children").read().split()}
+        except OSError:
+            return set()
+
+    deadline = time.monotonic() + 240
+    while len(children()) < 2 and run.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+    pool = children()
+    assert len(pool) >= 2, "the evaluation's pool never started"
+    run.send_signal(signal.SIGTERM)
+    _, err = run.communicate(timeout=120)
+    assert run.returncode == 143 and "asnn: terminated" in err and "Traceback" not in err, err
+    for pid in pool:  # every worker of the pool ended with it
+        assert not os.path.exists(f"/proc/{pid}") or \
+            open(f"/proc/{pid}/stat").read().split()[2] == "Z"
+
+
 def test_an_out_folder_holds_the_latest_run_s_files_only(clips, tmp_path):
     root, _ = clips
     out = tmp_path / "out"
