@@ -33,6 +33,15 @@ def nonempty_path(value: str) -> str:
     return value
 
 
+def host_address(value: str) -> str:
+    """An address to serve on: not empty (an empty one served on every interface, where the
+    default is this machine only) and without spaces."""
+    if not value or value != value.strip() or " " in value:
+        raise argparse.ArgumentTypeError(f"not an address to serve on: {value!r} (127.0.0.1 "
+                                         "for this machine, 0.0.0.0 for every interface)")
+    return value
+
+
 def frame_size(text: str) -> tuple[int, int]:
     """``WxH`` (or ``N`` for NxN) as (width, height); at least 32x32, a round size just above
     the smallest frame the model takes (31x31, ``ASNNParams.min_side``), and at most 1920x1080,
@@ -125,6 +134,16 @@ def _interval(value: str, low: float, high: float, *, open_low: bool, unit: str 
 def contrast(value: str) -> float:
     """A Weber contrast a scene can draw: more than 0 (an object to see), at most 1."""
     return _interval(value, 0, 1, open_low=True)
+
+
+MAX_EDGE_SPEED = 1024.0  # px a frame: a scene's edge faster than that leaves the largest frame
+
+
+def edge_speed(value: str) -> float:
+    """A generated scene's edge speed, px a frame: more than 0, at most
+    :data:`MAX_EDGE_SPEED` (1e308 drew black frames and a label whose contact was not the
+    clip's)."""
+    return _interval(value, 0, MAX_EDGE_SPEED, open_low=True, unit="px a frame")
 
 
 def seconds(value: str) -> float:

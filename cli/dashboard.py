@@ -6,7 +6,7 @@ import argparse
 import logging
 import sys
 
-from cli.arguments import port, seconds
+from cli.arguments import host_address, port, seconds
 from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
 from clients.dashboard import HOLD_S
 from clients.fleet import STALE_S
@@ -65,7 +65,7 @@ def register(subparsers) -> None:
                               "package (works offline).")
     p.add_argument("--port", type=port, default=8080,
                    help="HTTP port (default: %(default)s; 0 picks a free one)")
-    p.add_argument("--host", default="127.0.0.1",
+    p.add_argument("--host", default="127.0.0.1", type=host_address,
                    help="address to serve on (default: %(default)s; 0.0.0.0 for every "
                         "interface, as in a container)")
     p.add_argument("--stale-after", type=seconds, default=STALE_S, metavar="SECONDS",

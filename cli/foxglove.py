@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from cli.arguments import count, port
+from cli.arguments import count, host_address, port
 from cli.dashboard import serve_fleet
 from cli.session import add_zenoh_options, fail, setup_logging
 
@@ -36,7 +36,7 @@ def register(subparsers) -> None:
                     "the 'ros' extra.")
     p.add_argument("--port", type=port, default=8765,
                    help="WebSocket port (default: %(default)s; 0 picks a free one)")
-    p.add_argument("--host", default="127.0.0.1",
+    p.add_argument("--host", default="127.0.0.1", type=host_address,
                    help="address to serve on (default: %(default)s; the protocol has no "
                         "authentication, so 0.0.0.0 shows the fleet to the whole network)")
     p.add_argument("--max-robots", type=count, default=256, metavar="N",

@@ -19,7 +19,7 @@ from asnn.io.video import write_video
 from asnn.stimuli import SCENE_NAMES, make_scene
 from asnn.stimuli.suite import CASES, make_case, suite_cases
 
-from .arguments import contrast, finite, frame_rate, frame_size, nonempty_path, positive, whole
+from .arguments import contrast, edge_speed, finite, frame_rate, frame_size, nonempty_path, whole
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -59,7 +59,7 @@ _PAPER_OPTIONS = (
     ("--polarity", {"choices": ("dark", "light")}, "dark",
      "dark (the object darker than its ground) or light"),
     ("--contrast", {"type": contrast}, 1.0, "Weber contrast, more than 0 and at most 1"),
-    ("--speed", {"type": positive}, "the scene's own", "edge speed, px/frame"),
+    ("--speed", {"type": edge_speed}, "the scene's own", "edge speed, px/frame, at most 1024"),
     ("--fps", {"type": frame_rate}, 20.0, f"frame rate, {FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}"))
 
 

@@ -369,6 +369,8 @@ class WorkerCore:
                  answers: Callable[[str], bool] | None = None,
                  warmup_frames: int = HANDOVER_WARMUP_FRAMES,
                  log_interval: float = 10.0):
+        if model != "asnn" and preset is not None:  # dropped without a word, and not reported
+            raise ValueError(f"--preset applies to the ASNN model only, not {model}")
         make_detector(model, preset)  # fail now, not on the first frame
         self.model = model
         self.preset = (DEFAULT_PRESET if preset in (None, "default") else preset) \

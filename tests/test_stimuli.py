@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from asnn.stimuli import render
+from asnn.stimuli import make_scene, render
 from asnn.stimuli.driving import LANE_WIDTH, Vehicle, driving_scene, path_pose, road_coordinates
 from asnn.stimuli.effects import Pan, Shake, Step
 from asnn.stimuli.planar import Background, Gait, Prop, planar_scene
@@ -620,7 +620,6 @@ def test_write_video_takes_frames_one_by_one_as_it_takes_an_array(tmp_path):
     """A clip written from a generator of frames (not held at once) decodes to the frames of
     the same clip written from an array; a generator without frames is refused."""
     from asnn.io.video import write_video
-    from asnn.stimuli import make_scene
 
     frames = make_scene("looming", size=(64, 48), frames=12, start=2, stop=10).frames
     whole = write_video(frames, tmp_path / "whole.avi", fps=20.0)
@@ -734,3 +733,15 @@ def test_a_clip_the_encoder_would_write_at_another_size_is_refused(tmp_path):
         write_video(frames, tmp_path / "odd.mp4")
     assert not (tmp_path / "odd.mp4").exists()
     assert write_video(frames[:, :120, :160], tmp_path / "even.mp4").exists()
+
+
+def test_a_disk_that_fills_the_view_before_it_stops_growing_has_reached_contact():
+    # a CLI trial: at 100 px a step the disk covered the frame from step 11, and the label
+    # still put contact at 55 (asnn scene --labels)
+    assert make_scene("looming").contact_frame == 55  # the paper's: grows 6 -> 51 px
+    fast = make_scene("looming", speed=10.0)
+    assert fast.onset_frame == 10 and 10 < fast.contact_frame < 55
+    full = fast.frames[fast.contact_frame]
+    assert (full == full[0, 0]).all()  # the disk covers every pixel at contact
+    before = fast.frames[fast.contact_frame - 1]
+    assert not (before == before[0, 0]).all()

@@ -333,6 +333,8 @@ def test_unknown_model_or_preset_fails_at_start():
         WorkerCore(preset="nope")
     with pytest.raises(ValueError, match=r"in Python: preset\('robust', FIELD=VALUE\)"):
         WorkerCore(preset="robust/top_k=0")  # the command line's spec, given to the library
+    with pytest.raises(ValueError, match="--preset applies to the ASNN model only, not lgmd1"):
+        WorkerCore(model="lgmd1", preset="robust")  # ran, and the status named no preset
 
 
 def test_a_negative_max_gap_is_refused_on_the_command_line(capsys):

@@ -99,6 +99,8 @@ def make_scene(name: str, *, size: tuple[int, int] = (128, 128), frames: int | N
         (default 2).
     start, stop, hold : int
         The motion runs over frames [start, stop); two-phase scenes reverse after ``hold`` frames.
+        A collision's onset is ``start`` and its contact ``stop``, or the first frame the disk
+        fills the view where it does so sooner (a fast ``speed``).
     radius : float
         Initial disk radius.
     center : (x, y), optional
@@ -168,9 +170,15 @@ def make_scene(name: str, *, size: tuple[int, int] = (128, 128), frames: int | N
     clip = np.clip(np.rint(images), 0, 255).astype(np.uint8)
 
     collision = disk and name != "receding"
+    contact = stop
+    if collision:  # a disk that fills the view before it stops growing has reached the camera
+        reach = max(math.hypot(x - cx, y - cy) for x in (0, w) for y in (0, h))
+        full = np.flatnonzero(radii[:stop + 1] >= reach)
+        if len(full):
+            contact = max(int(full[0]), start)
     return Scene(name=name, frames=clip, fps=fps, collision=collision,
                  onset_frame=start if collision else None,
-                 contact_frame=stop if collision else None,
+                 contact_frame=contact if collision else None,
                  center=(cx, cy) if collision else None, params=params)
 
 
