@@ -157,6 +157,10 @@ def _output_problem(path: str | None, flag: str) -> str | None:
         return f"{flag} {path}: cannot make {target.parent} in {parent} (no write access)"
     if flag == "--plot" and target.suffix.lower() not in PLOT_FORMATS:
         return f"--plot {path}: name the format by its extension ({', '.join(PLOT_FORMATS)})"
+    if flag in ("--annotate", "--mcap") and target.exists() and not target.is_file():
+        return f"{flag} {path}: not a regular file (a pipe or a device): it is written with seeks"
+    if flag == "--mcap" and target.suffix.lower() != ".mcap":
+        return f"--mcap {path}: name it .mcap"
     if flag == "--annotate" and target.suffix.lower() not in WRITABLE_SUFFIXES:
         return (f"--annotate {path}: name the format by its extension "
                 f"({', '.join(WRITABLE_SUFFIXES)})")

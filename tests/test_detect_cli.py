@@ -697,3 +697,18 @@ def test_a_closed_or_full_standard_output_is_one_error_line_not_lost_output(tmp_
     assert failed.returncode == 2, failed.stderr
     assert failed.stderr.strip().splitlines() == [
         "asnn: error: a write failed: No space left on device"]
+
+
+def test_a_video_or_bag_is_not_written_to_a_pipe_and_a_bag_is_named_mcap(tmp_path, capsys):
+    # a CLI trial: OpenCV's writer waited without a word for the pipe's reader (and a video is
+    # written with seeks anyway); --mcap out.txt was taken
+    scene = make_scene("looming", size=(64, 64), frames=8, start=2, stop=7)
+    clip = write_video(scene.frames, tmp_path / "c.mp4", scene.fps)
+    pipe = tmp_path / "pipe.mp4"
+    os.mkfifo(pipe)
+    assert main(["detect", str(clip), "--annotate", str(pipe)]) == 2
+    assert "--annotate" in capsys.readouterr().err
+    assert main(["detect", str(clip), "--mcap", str(tmp_path / "out.txt")]) == 2
+    assert "--mcap " in capsys.readouterr().err and not (tmp_path / "out.txt").exists()
+    assert main(["scene", "looming", "--size", "64x64", str(pipe)]) == 2
+    assert "not a regular file" in capsys.readouterr().err

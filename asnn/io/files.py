@@ -10,7 +10,16 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["folder_lock", "write_atomically"]
+__all__ = ["folder_lock", "seekable_target", "write_atomically"]
+
+
+def seekable_target(path: str | Path) -> None:
+    """Refuse to write a video or a bag to a path that exists and is not a regular file: their
+    writers seek back, and OpenCV's waited without a word for a pipe's reader (ValueError)."""
+    path = Path(path)
+    if path.exists() and not path.is_file():
+        raise ValueError(f"{path}: not a regular file (a pipe, a device or a folder): a video "
+                         "or a bag is written with seeks")
 
 
 def write_atomically(path: str | Path, text: str) -> None:

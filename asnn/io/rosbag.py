@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from ..params import MAX_FRAME_GAP_S
+from .files import seekable_target
 from .images import MAX_SIDE, ImageError, decode_encoded, to_uint8
 from .sources import CLOCK_RESET, CLOCK_RESET_FRAMES, SourceError
 
@@ -895,6 +896,7 @@ def write_bag(frames, path: str | Path, *, topic: str = "/camera/image_raw", fps
     if format not in ("raw", "png", "jpeg"):
         raise ValueError(f"unknown bag image format {format!r}; choose raw, png or jpeg")
     path = Path(path)
+    seekable_target(path)
     with open(path, "wb") as fh, Ros2Writer(fh) as writer:
         raw = format == "raw"
         schema = writer.register_msgdef(IMAGE if raw else COMPRESSED_IMAGE,

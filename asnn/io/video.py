@@ -12,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .files import seekable_target
 from .images import MAX_SIDE
 
 __all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "WRITABLE_SUFFIXES", "VideoError", "VideoClip",
@@ -225,9 +226,11 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
         frames (a full disk: the writer itself fails silently), or holds them at another size
         (an odd width or height, which the encoders round down; the file is removed).
     ValueError
-        For an iterable without frames (an empty array writes an empty video).
+        For an iterable without frames (an empty array writes an empty video), or a path that
+        exists and is not a regular file (:func:`~asnn.io.files.seekable_target`).
     """
     path = Path(path)
+    seekable_target(path)
     if isinstance(frames, np.ndarray):
         h, w = frames.shape[1:3]
     else:
