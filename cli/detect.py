@@ -298,6 +298,29 @@ def _check_annotated(video: list, path: str | None, frames: int) -> None:
               "column or row is left out")
 
 
+class _OpenedAtFirstLine:
+    """A JSON-lines output opened, and so emptied, when its first line is written: a run that
+    stops before its first frame (frames smaller than the model takes, an MCAP that cannot be
+    written) leaves a file already there as it was, where it used to empty it."""
+
+    def __init__(self, path: str, stack: ExitStack):
+        self.path, self._file = path, None
+        stack.callback(self.close)
+
+    def write(self, text: str) -> None:
+        if self._file is None:
+            self._file = open(self.path, "w", encoding="utf-8")  # noqa: SIM115 (close())
+        self._file.write(text)
+
+    def flush(self) -> None:
+        if self._file is not None:
+            self._file.flush()
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+
+
 def run(args: argparse.Namespace) -> int:
     """Decode ahead and write behind on threads of their own while the model steps on this one
     (:mod:`asnn.io.pipeline`), or, when the model has threads of its own for every core,
@@ -366,13 +389,8 @@ def run(args: argparse.Namespace) -> int:
                 return _fail(f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
     with ExitStack() as stack:
         stack.enter_context(_settings(busy))
-        try:
-            jsonl, tracks = (
-                sys.stdout if path == "-"
-                else stack.enter_context(open(path, "w", encoding="utf-8")) if path else None
-                for path in (args.jsonl, args.tracks))
-        except OSError as exc:
-            return _fail(f"cannot write {exc.filename}: {exc.strerror or exc}")
+        jsonl, tracks = (sys.stdout if path == "-" else _OpenedAtFirstLine(path, stack)
+                         if path else None for path in (args.jsonl, args.tracks))
         mcap = None
         if args.mcap:
             try:

@@ -712,3 +712,20 @@ def test_a_video_or_bag_is_not_written_to_a_pipe_and_a_bag_is_named_mcap(tmp_pat
     assert "--mcap " in capsys.readouterr().err and not (tmp_path / "out.txt").exists()
     assert main(["scene", "looming", "--size", "64x64", str(pipe)]) == 2
     assert "not a regular file" in capsys.readouterr().err
+
+
+def test_a_run_that_stops_before_its_first_frame_leaves_an_existing_output_as_it_was(tmp_path,
+                                                                                     capsys):
+    # a CLI trial: frames smaller than the model takes, or an MCAP that cannot be written,
+    # emptied the --jsonl file of an earlier run before saying so
+    kept = tmp_path / "kept.jsonl"
+    kept.write_text('{"frame": 0}\n')
+    tiny = write_video(np.zeros((10, 16, 16), np.uint8), tmp_path / "tiny.mp4")
+    assert main(["detect", str(tiny), "--jsonl", str(kept)]) == 2
+    assert "smaller than the model's" in capsys.readouterr().err
+    if os.path.isdir("/proc"):  # a folder no file can be made in, whoever runs the test
+        scene = make_scene("looming", size=(64, 64), frames=8, start=2, stop=7)
+        clip = write_video(scene.frames, tmp_path / "c.mp4", scene.fps)
+        assert main(["detect", str(clip), "--jsonl", str(kept), "--mcap", "/proc/x.mcap"]) == 2
+        assert "cannot write /proc/x.mcap" in capsys.readouterr().err
+    assert kept.read_text() == '{"frame": 0}\n'
