@@ -81,7 +81,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--router", action="store_true",
                    help="--service: connect through an asnn router process even with one "
                         "worker (with several there always is one)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, parser=p)
+
+
+# the options of one kind of bench (None: the per-frame one), by their parser's dest: given to
+# another, they were ignored without a word
+_MODE_OPTIONS = {
+    "fps": ("--service",), "seconds": ("--service",), "cameras": ("--service",),
+    "phases": ("--service",), "seed": ("--service",), "worker_threads": ("--service",),
+    "workers": ("--service",), "router": ("--service",),
+    "every": ("--handover",), "cases": ("--handover",),
+    "no_straightforward": (None,), "frames": (None, "--detect"),
+    "size": (None, "--detect", "--service"),
+}
+
+
+def _misplaced(args: argparse.Namespace, mode: str | None) -> list[str]:
+    """The options given (other than their default) that the bench ``mode`` does not use."""
+    return ["--" + dest.replace("_", "-") for dest, modes in _MODE_OPTIONS.items()
+            if mode not in modes and getattr(args, dest) != args.parser.get_default(dest)]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -103,6 +121,11 @@ def run(args: argparse.Namespace) -> int:
                  if getattr(args, flag[2:])]
         if len(modes) > 1:  # each would run alone, the others' options ignored
             raise ValueError(f"{' and '.join(modes)}: one bench at a time")
+        misplaced = _misplaced(args, modes[0] if modes else None)
+        if misplaced:
+            raise ValueError(f"{', '.join(misplaced)} "
+                             f"{'does' if len(misplaced) == 1 else 'do'} not go with "
+                             f"{modes[0] if modes else 'the per-frame bench'} (see asnn bench -h)")
         if modes and args.model and set(args.model) != {"asnn"}:
             raise ValueError(f"{modes[0]} times the ASNN model: --model does not apply")
         if args.service:

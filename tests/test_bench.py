@@ -455,6 +455,12 @@ def test_the_straightforward_forms_kernels_are_loaded_too_when_it_is_timed():
     (["--detect", "--model", "lgmd2"], "--detect times the ASNN model"),
     (["--service", "--model", "lgmd1"], "--service times the ASNN model"),
     (["--service", "--seconds", "1"], "--seconds must be at least 2 with --service"),
+    # a CLI sweep: another mode's options were ignored without a word
+    (["--model", "lgmd1", "--cameras", "5", "--every", "2"],
+     "--cameras, --every do not go with the per-frame bench"),
+    (["--service", "--frames", "3"], "--frames does not go with --service"),
+    (["--handover", "--size", "64x64"], "--size does not go with --handover"),
+    (["--detect", "--workers", "2"], "--workers does not go with --detect"),
 ])
 def test_bench_refuses_options_that_would_be_ignored(capsys, monkeypatch, args, says):
     """A review: these ran another bench than asked, or a step too short to measure reported
