@@ -197,6 +197,15 @@ def _whole(value: str, at_least: int, at_most: int | None = None) -> int:
     return number
 
 
+MAX_FLEET = 4096  # robots one worker or viewer keeps a place for, at most
+
+
+def fleet_size(value: str) -> int:
+    """A number of robots to keep places for: 1 to :data:`MAX_FLEET` (10**27 was taken, and
+    a worker's routing table is sized by it)."""
+    return _whole(value, 1, MAX_FLEET)
+
+
 def count(value: str) -> int:
     """A whole number of at least 1."""
     return _whole(value, 1)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from cli.arguments import count, host_address, port
+from cli.arguments import fleet_size, host_address, port
 from cli.dashboard import serve_fleet
 from cli.session import add_zenoh_options, fail, setup_logging
 
@@ -39,7 +39,7 @@ def register(subparsers) -> None:
     p.add_argument("--host", default="127.0.0.1", type=host_address,
                    help="address to serve on (default: %(default)s; the protocol has no "
                         "authentication, so 0.0.0.0 shows the fleet to the whole network)")
-    p.add_argument("--max-robots", type=count, default=256, metavar="N",
+    p.add_argument("--max-robots", type=fleet_size, default=256, metavar="N",
                    help="robots served at once; messages of more are counted and dropped "
                         "(default: %(default)s)")
     add_zenoh_options(p)

@@ -12,8 +12,8 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import (count, frame_rate, non_negative, nonempty_path, robot_id, seconds,
-                        seconds_or_zero, threads, whole, worker_id)
+from .arguments import (count, fleet_size, frame_rate, non_negative, nonempty_path, robot_id,
+                        seconds, seconds_or_zero, threads, warmup_frames, whole, worker_id)
 from .session import add_zenoh_options, exit_on_interrupt, fail, session_for, setup_logging, \
     stop_on_signals, zenoh_options
 
@@ -305,7 +305,7 @@ def register(subparsers) -> None:
                    help="reset a robot's state when seq jumps ahead by more than N of the "
                         "robot's steps (1, or the growth of its seq that three frames in a row "
                         "agree on; default: %(default)s)")
-    p.add_argument("--max-robots", type=count, default=MAX_ROBOTS, metavar="N",
+    p.add_argument("--max-robots", type=fleet_size, default=MAX_ROBOTS, metavar="N",
                    help="robots tracked at once; frames of more are rejected. A robot takes "
                         "a place once one of its frames is valid (default: %(default)s)")
     p.add_argument("--takeover-after", type=seconds, default=TAKEOVER_AFTER_S,
@@ -316,7 +316,8 @@ def register(subparsers) -> None:
     p.add_argument("--threads", type=threads, default=default_threads(), metavar="N",
                    help="processing threads (default: the cores available, here %(default)s; "
                         "one robot is never processed by two at once)")
-    p.add_argument("--warmup-frames", type=whole, default=HANDOVER_WARMUP_FRAMES, metavar="N",
+    p.add_argument("--warmup-frames", type=warmup_frames, default=HANDOVER_WARMUP_FRAMES,
+                   metavar="N",
                    help="frames a worker taking a robot over steps silently before it answers, "
                         "while the previous owner still answers (default: %(default)s, "
                         "measured for the default preset: asnn bench --handover)")

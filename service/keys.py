@@ -52,11 +52,17 @@ def check_robot(robot: str, what: str = "robot") -> str:
     return robot
 
 
+MAX_PREFIX_LEN = 256  # characters of a prefix: every key and log line of the fleet holds it
+
+
 def check_prefix(prefix: str) -> str:
-    """Return ``prefix`` if it is one or more literal chunks (no wildcards, no empty chunk)."""
+    """Return ``prefix`` if it is one or more literal chunks (no wildcards, no empty chunk), at
+    most :data:`MAX_PREFIX_LEN` characters."""
     if not isinstance(prefix, str) or not prefix or not all(
             _CHUNK.fullmatch(c) for c in prefix.split("/")):
         raise KeySchemeError(f"invalid key prefix {prefix!r}: literal chunks separated by '/'")
+    if len(prefix) > MAX_PREFIX_LEN:
+        raise KeySchemeError(f"key prefix of {len(prefix)} characters: at most {MAX_PREFIX_LEN}")
     return prefix
 
 

@@ -468,6 +468,21 @@ def test_every_networked_command_takes_the_contract_s_common_options(capsys):
     assert "invalid choice: 'peer' (choose from 'router')" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("args, says", [
+    (["worker", "--max-robots", str(10**27)], "--max-robots: must be at most 4096"),
+    (["foxglove", "--max-robots", str(10**20)], "--max-robots: must be at most 4096"),
+    (["worker", "--warmup-frames", str(10**23)], "--warmup-frames: must be at most 10000"),
+    (["alerts", "--prefix", "a" * 5000], "key prefix of 5000 characters: at most 256"),
+])
+def test_sizes_a_process_keeps_places_for_are_bounded(capsys, args, says):
+    # a CLI sweep: each was taken (a worker's routing table is sized by --max-robots)
+    from cli.main import build_parser
+
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(args)
+    assert says in capsys.readouterr().err
+
+
 def test_tune_process_shortens_the_switch_interval():
     import sys
 
