@@ -97,7 +97,8 @@ _MODE_OPTIONS = {
 
 
 def _misplaced(args: argparse.Namespace, mode: str | None) -> list[str]:
-    """The options given (other than their default) that the bench ``mode`` does not use."""
+    """The options set to other than their default that the bench ``mode`` does not use (one
+    given its default value, ``--workers 1``, cannot be told from one not given)."""
     return ["--" + dest.replace("_", "-") for dest, modes in _MODE_OPTIONS.items()
             if mode not in modes and getattr(args, dest) != args.parser.get_default(dest)]
 

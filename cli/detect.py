@@ -18,6 +18,7 @@ from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.evaluation.perturb import describe, perturbed
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import parse_detector
+from asnn.io.files import seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
                               split_topic)
@@ -25,7 +26,7 @@ from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_sho
                            quiet_writer)
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
-from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, preset_names
+from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_names
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
 from cli.session import exit_on_interrupt
 
@@ -157,8 +158,17 @@ def _output_problem(path: str | None, flag: str) -> str | None:
         return f"{flag} {path}: cannot make {target.parent} in {parent} (no write access)"
     if flag == "--plot" and target.suffix.lower() not in PLOT_FORMATS:
         return f"--plot {path}: name the format by its extension ({', '.join(PLOT_FORMATS)})"
-    if flag in ("--annotate", "--mcap") and target.exists() and not target.is_file():
-        return f"{flag} {path}: not a regular file (a pipe or a device): it is written with seeks"
+    if flag in ("--annotate", "--mcap"):
+        try:
+            seekable_target(target)
+        except ValueError as exc:
+            return f"{flag} {exc}"
+    elif flag in ("--jsonl", "--tracks") and parent == target.parent:
+        try:  # opened now without emptying it (that waits for its first line), so that a path
+            # that cannot be written is said before the kernels compile, not after
+            open(target, "a").close()  # noqa: SIM115
+        except OSError as exc:
+            return f"{flag} {path}: cannot write: {exc.strerror or exc}"
     if flag == "--mcap" and target.suffix.lower() != ".mcap":
         return f"--mcap {path}: name it .mcap"
     if flag == "--annotate" and target.suffix.lower() not in WRITABLE_SUFFIXES:
@@ -370,9 +380,8 @@ def run(args: argparse.Namespace) -> int:
         slow = (f"; its frames are more than {MAX_FRAME_GAP_S:g} s apart, so the targets' "
                 f"expansion and ttc are computed for {params.dt:g} s a frame"
                 if 1.0 / source.fps > MAX_FRAME_GAP_S else "")
-        print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second; ASNN "
-              f"loses hits below {SLOW_FPS:g} (README, 'At half the frame rate'){slow}",
-              file=sys.stderr)
+        print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second; "
+              f"{SLOW_NOTE}{slow}", file=sys.stderr)
     detector = make_detector(args.model, params, **options)
     if args.model == "asnn":
         # numba loads a kernel from its cache when it is first called: all of them now, before

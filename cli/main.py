@@ -102,7 +102,9 @@ def _sigterm_interrupts():
         signal.signal(signal.SIGTERM, previous)
 
 
-_WRITE_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO}
+_WRITE_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+# the long-running parts, whose standard output is a line or two a supervisor may close
+_SERVICES = {"camera", "worker", "router", "dashboard", "foxglove"}
 
 
 def _stdout_failed() -> OSError | None:
@@ -121,7 +123,8 @@ def _quiet_stdout() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    if sys.stdout is None:  # started with standard output closed (>&-): output would be lost
+    if sys.stdout is None and argv[:1] and argv[0] not in _SERVICES:
+        # started with standard output closed (>&-): a command's output would be lost
         print("asnn: error: standard output is closed", file=sys.stderr)
         return 2
     for arg in argv:  # bytes of another encoding (a file name): OpenCV crashes on such a path
@@ -156,6 +159,8 @@ def main(argv: list[str] | None = None) -> int:
         if failed is None and (exc.filename is not None or exc.errno not in _WRITE_ERRORS):
             raise
         _quiet_stdout()
+        if isinstance(failed, BrokenPipeError):
+            return 141  # as above: the reader went away
         failed = failed or exc
         print(f"asnn: error: a write failed: {failed.strerror or failed}", file=sys.stderr)
         return 2

@@ -57,20 +57,22 @@ def setup_logging(args: argparse.Namespace) -> None:
 @contextlib.contextmanager
 def exit_on_interrupt():
     """Within the block, Ctrl-C ends the process at once, with the status and line of an
-    interrupt (130). For work before anything needs an orderly close (a worker compiling its
+    interrupt (130), and SIGTERM with its own (143). For work before anything needs an orderly close (a worker compiling its
     kernels before it joins the fleet): a KeyboardInterrupt raised there can be lost, since
     numba's compiler calls back from C through ctypes, which prints and ignores an exception
     raised in the callback, and the compile would go on for up to a minute."""
     def handler(signum, frame):
-        print("\nasnn: interrupted", file=sys.stderr, flush=True)
+        term = signum == signal.SIGTERM  # docker stop's grace is 10 s: not a minute's compile
+        print(f"\nasnn: {'terminated' if term else 'interrupted'}", file=sys.stderr, flush=True)
         sys.stdout.flush()
-        os._exit(130)
+        os._exit(143 if term else 130)
 
-    previous = signal.signal(signal.SIGINT, handler)
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 def stop_on_signals() -> threading.Event:

@@ -208,8 +208,8 @@ class LinePrinter:
 
     def close(self, timeout: float = 2.0) -> bool:
         """Write the lines still waiting, for at most ``timeout`` seconds; True when all were
-        written (or a write failed), False when ``out`` still blocks: those lines are then
-        counted in ``unprinted``."""
+        written (or a write failed), False when ``out`` still blocks: those lines, and the one
+        in the write that blocks, are then counted in ``unprinted``."""
         with self._ready:
             self._closing = True
             self._ready.notify()
@@ -217,6 +217,6 @@ class LinePrinter:
         if not self._writer.is_alive():
             return True
         with self._ready:
-            self.unprinted += len(self._lines)
+            self.unprinted += len(self._lines) + 1  # and the line in the write that blocks
             self._lines.clear()
         return False

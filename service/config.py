@@ -75,8 +75,6 @@ class ZenohOptions:
 
 
 _COMMENTS = re.compile(r"/\*.*?\*/|//[^\n]*", re.S)
-_SHARED_MEMORY_KEY = re.compile(r"""["']?\bshared_memory["']?\s*:""")
-_MAX_MESSAGE_KEY = re.compile(r"""["']?\bmax_message_size["']?\s*:""")
 
 
 def _nesting(text: str) -> int:
@@ -125,9 +123,11 @@ def _read_config_file(path: str | Path) -> str:
     return text
 
 
-def _sets_shared_memory(text: str) -> bool:
-    """Whether a JSON5 config's text has a ``shared_memory`` key outside its comments."""
-    return bool(_SHARED_MEMORY_KEY.search(_COMMENTS.sub("", text)))
+def _sets(text: str, name: str) -> bool:
+    """Whether a JSON5 config's text has a ``name`` key outside its comments: where Zenoh has a
+    default of its own, whether the file chose the value is read from the file itself."""
+    pattern = r"""["']?\b""" + re.escape(name) + r"""["']?\s*:"""
+    return re.search(pattern, _COMMENTS.sub("", text)) is not None
 
 
 def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Config:
@@ -151,10 +151,10 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
     for key, value in DEFAULTS.items():
         if json.loads(conf.get_json(key)) is None:
             settings.append((key, value))
-    # Zenoh's own default is true, so whether the file chose it is read from the file itself
-    if not _sets_shared_memory(text):
+    # Zenoh's own defaults (shared memory on, 1 GiB messages) unless the file chose its own
+    if not _sets(text, "shared_memory"):
         settings.append((SHARED_MEMORY, False))
-    if not _MAX_MESSAGE_KEY.search(_COMMENTS.sub("", text)):  # a file's own cap is kept
+    if not _sets(text, "max_message_size"):
         settings.append((MAX_MESSAGE, MAX_MESSAGE_BYTES))
     if opts.mode is not None:
         if opts.mode not in MODES:

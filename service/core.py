@@ -149,6 +149,12 @@ TAKEOVER_AFTER_S = 3.0
 # restart lost takeover_after seconds of frames: a soak); an intruder that keeps publishing
 # keeps it contested, one that comes back less often costs the robot its two resets again
 CONTESTED_FOR_S = 30.0
+
+
+def _contested(state, now: float) -> bool:
+    """Whether a robot is contested at ``now``: a frame of it was refused as a second
+    publisher's within :data:`CONTESTED_FOR_S`."""
+    return state.contested and now - state.intruder_seen <= CONTESTED_FOR_S
 # A robot's rate is the median over asnn.params.PERIOD_FRAMES gaps between the stamps of its
 # frames processed, as its model measures its own; when it reads below SLOW_FPS for
 # PERIOD_FRAMES frames in a row the worker logs it (_measure_rate)
@@ -531,8 +537,7 @@ class WorkerCore:
             previous.advance(frame, received)
             state.stream, state.previous = previous, current
             return previous
-        if state.contested and received - state.intruder_seen > CONTESTED_FOR_S:
-            state.contested = False
+        state.contested = _contested(state, received)
         if (state.contested and current is not None
                 and received - current.arrival <= self.takeover_after):
             # an intruder's frame, or the robot's camera restarting: either keeps it contested
@@ -849,17 +854,17 @@ class WorkerCore:
         """What the status queryable answers (docs/operations.md): identity, limits, counters
         and the robots tracked, with their pending work."""
         with self._lock:
+            now = self.clock()
             robots = {r: {"processed": s.processed, "resets": s.resets,
                           "pending": s.pending is not None, "busy": s.busy,
                           "last_seq": s.last_seq, "seq_step": s.seq_step,
                           "size": list(s.shape) if s.shape else None,
-                          "candidate": not s.proven, "contested": s.contested,
+                          "candidate": not s.proven, "contested": _contested(s, now),
                           "intrusions": s.intrusions, "frames": s.arrived,
                           "bytes": s.arrived_bytes, "warm": self._warm_locked(s),
                           "fps": s.fps}
                       for r, s in sorted(self._robots.items())}
             backlog = sum((s.pending is not None) + s.busy for s in self._robots.values())
-            now = self.clock()
             refused = {r: {"reason": e["reason"], "detail": e["detail"], "count": e["count"],
                            "seconds_ago": round(now - e["at"], 1)}
                        for r, e in self._refused.items()}

@@ -75,7 +75,7 @@ def test_good_labels_come_back_unchanged_in_either_form(tmp_path):
     # file passed asnn label, which said the entry was ready, and asnn eval refused it
     ({"TTC": [1.0] * 60}, "unknown field 'TTC': did you mean 'ttc'?"),
     ({"CENTER": [1, 2]}, "unknown field 'CENTER': did you mean 'center'?"),
-    ({"topic": "/camera/image_raw"}, "a topic applies to ROS 2 bags (.mcap) only, not c.mp4"),
+    ({"topic": "/camera/image_raw"}, "a topic applies to ROS 2 bags only, not to the video c.mp4"),
     # taken quietly before the hostile-input trial: a bool or a string for a number, a frame
     # rate no camera has, a centre outside the frame the label gives
     ({"onset_frame": True}, "onset_frame: Input should be a valid integer"),

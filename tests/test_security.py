@@ -520,6 +520,8 @@ def test_the_generator_refuses_bad_hosts_and_days_before_writing_anything(tmp_pa
     # half-made folder; a comma would have added names of its own to the router's certificate
     cases = [((str(tmp_path / "a"), "bad,host"), {}, "invalid host 'bad,host'"),
              ((str(tmp_path / "b"), "two words"), {}, "invalid host 'two words'"),
+             ((str(tmp_path / "e"), "999.1.1.1"), {}, "invalid host '999.1.1.1'"),
+             ((str(tmp_path / "f"), ":"), {}, "invalid host ':'"),
              ((str(tmp_path / "c"),), {"ASNN_CERT_DAYS": "0"}, "ASNN_CERT_DAYS must be"),
              ((str(tmp_path / "d"),), {"ASNN_CERT_DAYS": "abc"}, "ASNN_CERT_DAYS must be")]
     for args, env, said in cases:

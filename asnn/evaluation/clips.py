@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..io.files import write_atomically
 from ..io.sources import BackwardStamps, SourceError, open_source
-from ..params import SLOW_FPS
+from ..params import SLOW_FPS, SLOW_NOTE
 from . import figures, scoring
 from .labels import (center_outside, clip_hint, load_labels, mismatches, result_name,
                      unlabelled_videos)
@@ -262,8 +262,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     errors, warnings, checked = [], [], set()
     # a slow camera's clip is scored as any other, but the default was made for 20 fps or more
     # (a perturbation that halves the rate is that experiment, and says so itself)
-    slow_note = (f"ASNN loses hits below {SLOW_FPS:g} (README, 'At half the frame rate')"
-                 if perturbation is None and any(spec.model == "asnn" for spec in specs)
+    slow_note = (SLOW_NOTE if perturbation is None and any(spec.model == "asnn" for spec in specs)
                  else None)
 
     def finished(index: int, frames: int, error: str | None,

@@ -76,13 +76,14 @@ def response_series(records: Sequence[Mapping], outcome: str | None = None) -> d
     return series
 
 
-def _mark_events(ax, onset: int | None, contact: int | None, window: Sequence[int] | None = None):
+def _mark_events(ax, onset: int | None, contact: int | None, window: Sequence[int] | None = None,
+                 legend: bool = False):
     if window is not None:
         ax.axvspan(window[0], window[1], color="tab:green", alpha=0.08, lw=0)
     if onset is not None:
-        ax.axvline(onset, color="black", ls="--", lw=0.8, label="onset")
+        ax.axvline(onset, color="black", ls="--", lw=0.8, label="onset" if legend else None)
     if contact is not None:
-        ax.axvline(contact, color="black", ls="-", lw=1.0, label="contact")
+        ax.axvline(contact, color="black", ls="-", lw=1.0, label="contact" if legend else None)
 
 
 def plot_clip_responses(path: str | Path, clip: Mapping) -> Path:
@@ -203,7 +204,7 @@ def plot_synthetic_responses(path: str | Path, data: Mapping) -> Path:
             warn = np.flatnonzero(np.asarray(series["collision"], dtype=bool))
             ax.scatter(warn, np.full(len(warn), _TICK_ROW + _TICK_STEP * row), marker="|",
                        s=20, color=_colour(model))
-        _mark_events(ax, scene.get("onset"), scene.get("contact"))
+        _mark_events(ax, scene.get("onset"), scene.get("contact"), legend=True)
         ax.set_ylim(0.48, _TICK_ROW + _TICK_STEP * len(scene["models"]))
         ax.set_xlabel("step")
         if col == 0:

@@ -697,15 +697,14 @@ def _label_warnings(labels: Sequence[Mapping], traces: Sequence[ClipTrace]) -> l
     """What ``asnn eval`` warns of the clips (:func:`~asnn.evaluation.labels.mismatches`,
     :func:`~asnn.evaluation.scoring.unscored`, a frame rate below ``SLOW_FPS``), and a fold
     chosen on no clip at all."""
-    from ..params import SLOW_FPS
+    from ..params import SLOW_FPS, SLOW_NOTE
 
     found = []
     for label, trace in zip(labels, traces):
         if trace.fps:
             found += mismatches(label, len(trace.frames), trace.fps, size=trace.size)
             if trace.fps < SLOW_FPS:
-                found.append(f"{label['file']}: {trace.fps:g} frames a second; ASNN loses hits "
-                             f"below {SLOW_FPS:g} (README, 'At half the frame rate')")
+                found.append(f"{label['file']}: {trace.fps:g} frames a second; {SLOW_NOTE}")
         found += scoring.unscored(label, len(trace.frames))
     if len(labels) == 1:
         found.append("one clip: its fold's thresholds are chosen on no clip (the first grid "
@@ -731,8 +730,9 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     Returns
     -------
     dict
-        :func:`leave_one_out`'s result, with the run's ``clips_dir``, ``preset``, ``overrides``
-        and ``suite_cases`` (how many cases decided admissibility); written to
+        :func:`leave_one_out`'s result, with the run's ``clips_dir``, ``preset``, ``overrides``,
+        ``suite_cases`` (how many cases decided admissibility) and ``warnings`` (what
+        :func:`_label_warnings` finds of the clips and their labels); written to
         ``held_out.json``, and as ``held_out.md`` (:func:`held_out_report`).
 
     Raises

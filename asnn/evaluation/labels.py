@@ -106,9 +106,10 @@ class ClipLabel(BaseModel):
             near = difflib.get_close_matches(key.lower(), _FIELDS, n=1, cutoff=0.75)
             if near:
                 raise ValueError(f"unknown field {key!r}: did you mean {near[0]!r}?")
-        if self.topic is not None and not self.file.lower().endswith(".mcap"):
-            # asnn eval refuses to open it so; asnn label said it was ready
-            raise ValueError(f"a topic applies to ROS 2 bags (.mcap) only, not {self.file}")
+        if self.topic is not None and self.file.lower().endswith(VIDEO_SUFFIXES):
+            # asnn eval refuses to open it so; asnn label said it was ready (a bag is a .mcap
+            # file or a rosbag2 folder)
+            raise ValueError(f"a topic applies to ROS 2 bags only, not to the video {self.file}")
         if self.frames is not None:
             for name in ("track", "target_size", "ttc"):
                 values = getattr(self, name)

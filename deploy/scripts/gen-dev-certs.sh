@@ -28,7 +28,8 @@
 # runs its containers as this user (ASNN_UID, ASNN_GID), and a systemd unit's user must own its
 # folder (docs/operations.md, "Secrets on disk").
 #
-# Run again (to add a robot, or a HOST), it keeps the CA and every identity whose certificate
+# A HOST is a DNS name or an IP address (python3 checks the addresses; [fd00::2] as in an
+# endpoint is taken too). Run again (to add a robot, or a HOST), it keeps the CA and every identity whose certificate
 # is valid for 30 more days (a third of its validity where that is shorter), with its password,
 # so the configs already deployed stay valid; it issues what is new or expiring, and the
 # router's certificate and config each time. A robot left out can no longer connect (its folder
@@ -69,7 +70,10 @@ days=${ASNN_CERT_DAYS:-365}
 for i in "${!hosts[@]}"; do
   host=${hosts[i]}
   [[ $host =~ ^\[(.*)\]$ ]] && host=${BASH_REMATCH[1]}  # [fd00::2], as in an endpoint
-  if [[ $host =~ ^[0-9]{1,3}(\.[0-9]{1,3}){3}$ || ( $host == *:* && $host =~ ^[0-9A-Fa-f:.]+$ ) ]]; then
+  if [[ $host =~ ^[0-9.]+$ || $host == *:* ]]; then  # an address: one a machine can have
+    python3 -c 'import ipaddress, sys; a = ipaddress.ip_address(sys.argv[1])
+sys.exit(a.is_unspecified or a.is_multicast)' "$host" 2>/dev/null || {
+      echo "gen-dev-certs: invalid host '$host': not an address a router can have" >&2; exit 2; }
     hosts[i]="IP:$host"
   elif [[ $host =~ ^[A-Za-z0-9]([A-Za-z0-9-]{0,62})(\.[A-Za-z0-9]([A-Za-z0-9-]{0,62}))*$ ]]; then
     hosts[i]="DNS:$host"
