@@ -6,6 +6,7 @@ import argparse
 import logging
 import os
 import sys
+import threading
 
 from asnn.params import preset_names
 from service import keys
@@ -245,8 +246,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"asnn demo: camera -> worker ({core.model}, preset {core.preset or '-'}) -> alerts, "
           f"scene {args.scene!r}, {source.fps:g} fps, over Zenoh on 127.0.0.1", file=info,
           flush=True)
-    show = LinePrinter(args.json, sys.stdout)
-    result = run_pipeline(source, core, lambda s: WarningListener(s, show), fps=args.fps)
+    stop = threading.Event()  # set when the warnings can no longer be printed (| head)
+    show = LinePrinter(args.json, sys.stdout, on_error=stop.set)
+    result = run_pipeline(source, core, lambda s: WarningListener(s, show), fps=args.fps,
+                          stop=stop)
     status = _printed(show)
     print(f"{result['published']} frames published, {result['responses']} responses, "
           f"{result['received']} warnings received", file=info, flush=True)

@@ -7,6 +7,7 @@ off, so the demo needs no router, no well-known port and no network.
 from __future__ import annotations
 
 import socket
+import threading
 import time
 
 import zenoh
@@ -41,13 +42,16 @@ def loopback_options(port: int) -> tuple[ZenohOptions, ZenohOptions]:
 
 
 def run_pipeline(source: Source, core: WorkerCore, listener_factory, *, robot: str = "demo",
-                 fps: float | None = None, format: str = "gray8", timeout: float = 10.0) -> dict:
+                 fps: float | None = None, format: str = "gray8", timeout: float = 10.0,
+                 stop: threading.Event | None = None) -> dict:
     """Play ``source`` as robot ``robot`` through a worker running ``core``.
 
     ``listener_factory(session)`` declares the warning subscriber (a context manager with a
-    ``received`` count). Returns counters: frames published, responses, warnings sent and
-    received.
+    ``received`` count); ``stop``, when set, ends the play and the waits for its answers (the
+    reader of the warnings went away). Returns counters: frames published, responses,
+    warnings sent and received.
     """
+    stop = stop or threading.Event()
     hub, spoke = loopback_options(free_port())
     responses: list = []
 
@@ -60,15 +64,15 @@ def run_pipeline(source: Source, core: WorkerCore, listener_factory, *, robot: s
             Worker(worker_session, core, on_response=on_response, stats_every=0) as worker, \
             listener_factory(alerts_session) as listener:
         published = publish_frames(camera_session, robot, source, prefix=core.prefix, fps=fps,
-                                   format=format, wait=timeout)
+                                   format=format, wait=timeout, stop=stop)
         deadline = time.monotonic() + timeout
         # frames are best effort: stop waiting when the last one is answered or nothing moves
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not stop.is_set():
             if responses and responses[-1].seq == published - 1 and worker.idle():
                 break
             time.sleep(0.02)
         sent = sum(r.collision for r in responses)
-        while listener.received < sent and time.monotonic() < deadline:
+        while listener.received < sent and time.monotonic() < deadline and not stop.is_set():
             time.sleep(0.02)
         return {"published": published, "responses": len(responses), "warnings": sent,
                 "received": listener.received, "stats": core.stats()}
