@@ -109,6 +109,8 @@ _SERVICES = {"camera", "worker", "router", "dashboard", "foxglove"}
 
 def _stdout_failed() -> OSError | None:
     """The error standard output gives now, if it fails (a full disk: ``> /dev/full``)."""
+    if sys.stdout is None:  # closed, for a service (main's check)
+        return None
     try:
         sys.stdout.flush()
     except OSError as exc:
@@ -117,6 +119,8 @@ def _stdout_failed() -> OSError | None:
 
 
 def _quiet_stdout() -> None:
+    if sys.stdout is None:
+        return
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, sys.stdout.fileno())  # so that Python's flush at exit fails no more
 
