@@ -99,6 +99,12 @@ def test_a_refused_entry_is_named_with_its_field(change, reason):
     assert reason in message
 
 
+def test_a_topic_names_a_bags_camera_whether_the_bag_is_a_file_or_a_rosbag2_folder():
+    # the topic rule refused rosbag2 folders once (a review): only a video file has no topic
+    for file in ("drive.mcap", "rosbag2_2026_01_01", "bags/front"):
+        assert check_labels([{**QUIET, "file": file, "topic": "/cam/image_raw"}], "l.json")
+
+
 def test_a_missing_field_and_a_quiet_clip_with_an_onset_are_refused():
     for label, reason in [({k: v for k, v in QUIET.items() if k != "fps"}, "fps: Field required"),
                           ({k: v for k, v in QUIET.items() if k != "collision"}, "collision"),
