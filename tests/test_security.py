@@ -356,6 +356,8 @@ def test_endpoints_are_split_for_the_check():
 
 
 def test_no_secret_is_committed():
+    if shutil.which("git") is None:  # a source tarball's tests, on a machine without git
+        pytest.skip("no git here")
     tracked = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True)
     if tracked.returncode != 0:
         pytest.skip("not a git checkout")
