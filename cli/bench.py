@@ -40,18 +40,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="cameras at --fps through one worker process over Zenoh on loopback, "
                    "ramping the number of cameras (first --size, default 320x240; first --preset, "
                    "default the default preset)")
-    p.add_argument("--fps", type=frame_rate, default=25.0,
-                   help="camera rate for --service (default: %(default)s)")
-    p.add_argument("--seconds", type=seconds, default=4.0,
-                   help="duration of each --service step (default: %(default)s)")
+    # the options of one kind of bench default to None, their value set in run(): one given
+    # to another kind is then told from one not given (_misplaced), whatever its value
+    p.add_argument("--fps", type=frame_rate, default=None,
+                   help=f"camera rate for --service (default: {MODE_DEFAULTS['fps']:g})")
+    p.add_argument("--seconds", type=seconds, default=None,
+                   help=f"duration of each --service step (default: "
+                        f"{MODE_DEFAULTS['seconds']:g})")
     p.add_argument("--cameras", type=cameras, action="append", metavar="N",
                    help="camera counts for --service, at most 256 (repeatable; default 1, 2, 4, "
                         "8, 12, 16, 20, 24)")
-    p.add_argument("--phases", choices=("spread", "random"), default="spread",
+    p.add_argument("--phases", choices=("spread", "random"), default=None,
                    help="when each --service camera publishes within a frame period: evenly "
-                        "spread, or at random (default: %(default)s)")
-    p.add_argument("--seed", type=seed, default=0,
-                   help="seed of --phases random (default: %(default)s)")
+                        f"spread, or at random (default: {MODE_DEFAULTS['phases']})")
+    p.add_argument("--seed", type=seed, default=None,
+                   help=f"seed of --phases random (default: {MODE_DEFAULTS['seed']})")
     p.add_argument("--case", metavar="NAME", default=None,
                    help="time on this case of the labelled suite (asnn scene --list), at its own "
                    "size and length, instead of the generated scene: e.g. a drive, where the "
@@ -68,22 +71,26 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="instead, how many frames a worker taking a robot over needs before it "
                    "warns as the previous owner would (the worker's --warmup-frames), over the "
                    "labelled suite (first --preset)")
-    p.add_argument("--every", type=count, default=3, metavar="N",
-                   help="--handover: try a hand-over every N frames (default: %(default)s)")
+    p.add_argument("--every", type=count, default=None, metavar="N",
+                   help=f"--handover: try a hand-over every N frames (default: "
+                        f"{MODE_DEFAULTS['every']})")
     p.add_argument("--cases", metavar="PATTERN", default=None,
                    help="--handover: suite cases or groups, shell patterns (default: all)")
     p.add_argument("--worker-threads", type=threads, default=None, metavar="N",
                    help="processing threads of each --service worker (asnn worker --threads; "
                         "default: the cores available, divided among the workers)")
-    p.add_argument("--workers", type=processes, default=1, metavar="N",
+    p.add_argument("--workers", type=processes, default=None, metavar="N",
                    help="--service: worker processes sharing the cameras, at most 64 "
-                        "(default: %(default)s)")
+                        f"(default: {MODE_DEFAULTS['workers']})")
     p.add_argument("--router", action="store_true",
                    help="--service: connect through an asnn router process even with one "
                         "worker (with several there always is one)")
     p.set_defaults(func=run, parser=p)
 
 
+# the values of the options of one kind of bench that default to None (register)
+MODE_DEFAULTS = {"fps": 25.0, "seconds": 4.0, "phases": "spread", "seed": 0, "workers": 1,
+                    "every": 3}
 # the options of one kind of bench (None: the per-frame one), by their parser's dest: given to
 # another, they were ignored without a word
 _MODE_OPTIONS = {
@@ -97,8 +104,8 @@ _MODE_OPTIONS = {
 
 
 def _misplaced(args: argparse.Namespace, mode: str | None) -> list[str]:
-    """The options set to other than their default that the bench ``mode`` does not use (one
-    given its default value, ``--workers 1``, cannot be told from one not given)."""
+    """The options given that the bench ``mode`` does not use (those set to other than their
+    parser's default, which is None or False for each of another kind's)."""
     return ["--" + dest.replace("_", "-") for dest, modes in _MODE_OPTIONS.items()
             if mode not in modes and getattr(args, dest) != args.parser.get_default(dest)]
 
@@ -123,6 +130,9 @@ def run(args: argparse.Namespace) -> int:
         if len(modes) > 1:  # each would run alone, the others' options ignored
             raise ValueError(f"{' and '.join(modes)}: one bench at a time")
         misplaced = _misplaced(args, modes[0] if modes else None)
+        for dest, value in MODE_DEFAULTS.items():  # what was not given
+            if getattr(args, dest) is None:
+                setattr(args, dest, value)
         if misplaced:
             raise ValueError(f"{', '.join(misplaced)} "
                              f"{'does' if len(misplaced) == 1 else 'do'} not go with "

@@ -461,6 +461,7 @@ def test_the_straightforward_forms_kernels_are_loaded_too_when_it_is_timed():
     (["--service", "--frames", "3"], "--frames does not go with --service"),
     (["--handover", "--size", "64x64"], "--size does not go with --handover"),
     (["--detect", "--workers", "2"], "--workers does not go with --detect"),
+    (["--every", "3"], "--every does not go with the per-frame bench"),  # its default, given
 ])
 def test_bench_refuses_options_that_would_be_ignored(capsys, monkeypatch, args, says):
     """A review: these ran another bench than asked, or a step too short to measure reported
