@@ -179,6 +179,16 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
 _RUST_LOCATION = re.compile(r"\s+at /\S+\.rs:\d+\.?")
 
 
+_PARSER_PLACE = re.compile(r"-->\s*(\d+):(\d+)")
+_PARSER_SAYS = re.compile(r"^\s*=\s*(.+)$", re.M)
+
+
 def zenoh_error(exc: BaseException) -> str:
-    """A Zenoh error's text for a user: without the Rust source locations it carries."""
-    return _RUST_LOCATION.sub("", str(exc)).strip()
+    """A Zenoh error's text for a user, on one line: without the Rust source locations it
+    carries, and a config parser's drawing of the line at fault (six lines) said as the place
+    and what the parser expected there."""
+    text = _RUST_LOCATION.sub("", str(exc)).strip()
+    place, says = _PARSER_PLACE.search(text), _PARSER_SAYS.search(text)
+    if place and says:
+        return f"line {place[1]}, column {place[2]}: {says[1].strip()}"
+    return " ".join(line.strip() for line in text.splitlines() if line.strip())

@@ -380,6 +380,13 @@ def test_a_config_zenoh_refuses_is_named_without_the_rust_source_location(tmp_pa
 
     assert zenoh_error(Exception("bad at /a/b.rs:3. rule repeated at /c/d.rs:395.")) \
         == "bad rule repeated"
+    # a file Zenoh's parser cannot read: its drawing of the line at fault took six lines
+    broken = tmp_path / "broken.json5"
+    broken.write_text('{ mode: "client", connect: { endpoints: [ }\n')
+    with pytest.raises(ConfigError) as caught:
+        make_config(ZenohOptions(config_file=broken))
+    assert "\n" not in str(caught.value)
+    assert "broken.json5: line 1, column 43: expected array" in str(caught.value)
 
 
 def test_tracked_target_fields_cross_the_wire_and_are_left_out_where_unset():
