@@ -90,7 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 # the values of the options of one kind of bench that default to None (register)
 MODE_DEFAULTS = {"fps": 25.0, "seconds": 4.0, "phases": "spread", "seed": 0, "workers": 1,
-                    "every": 3}
+                 "every": 3}
 # the options of one kind of bench (None: the per-frame one), by their parser's dest: given to
 # another, they were ignored without a word
 _MODE_OPTIONS = {
@@ -130,13 +130,13 @@ def run(args: argparse.Namespace) -> int:
         if len(modes) > 1:  # each would run alone, the others' options ignored
             raise ValueError(f"{' and '.join(modes)}: one bench at a time")
         misplaced = _misplaced(args, modes[0] if modes else None)
-        for dest, value in MODE_DEFAULTS.items():  # what was not given
-            if getattr(args, dest) is None:
-                setattr(args, dest, value)
         if misplaced:
             raise ValueError(f"{', '.join(misplaced)} "
                              f"{'does' if len(misplaced) == 1 else 'do'} not go with "
                              f"{modes[0] if modes else 'the per-frame bench'} (see asnn bench -h)")
+        for dest, value in MODE_DEFAULTS.items():  # what was not given
+            if getattr(args, dest) is None:
+                setattr(args, dest, value)
         if modes and args.model and set(args.model) != {"asnn"}:
             raise ValueError(f"{modes[0]} times the ASNN model: --model does not apply")
         if args.service:

@@ -57,8 +57,9 @@ def setup_logging(args: argparse.Namespace) -> None:
 @contextlib.contextmanager
 def exit_on_interrupt():
     """Within the block, Ctrl-C ends the process at once, with the status and line of an
-    interrupt (130), and SIGTERM with its own (143). For work before anything needs an orderly close (a worker compiling its
-    kernels before it joins the fleet): a KeyboardInterrupt raised there can be lost, since
+    interrupt (130), and SIGTERM with its own (143). For work before anything needs an orderly
+    close (a worker compiling its kernels before it joins the fleet): a KeyboardInterrupt
+    raised there can be lost, since
     numba's compiler calls back from C through ctypes, which prints and ignores an exception
     raised in the callback, and the compile would go on for up to a minute."""
     def handler(signum, frame):

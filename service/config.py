@@ -177,8 +177,7 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
 
 
 _RUST_LOCATION = re.compile(r"\s+at /\S+\.rs:\d+\.?")
-
-
+# a config parser's report: "--> LINE:COLUMN", a drawing of the line, "= what it expected"
 _PARSER_PLACE = re.compile(r"-->\s*(\d+):(\d+)")
 _PARSER_SAYS = re.compile(r"^\s*=\s*(.+)$", re.M)
 

@@ -149,12 +149,6 @@ TAKEOVER_AFTER_S = 3.0
 # restart lost takeover_after seconds of frames: a soak); an intruder that keeps publishing
 # keeps it contested, one that comes back less often costs the robot its two resets again
 CONTESTED_FOR_S = 30.0
-
-
-def _contested(state, now: float) -> bool:
-    """Whether a robot is contested at ``now``: a frame of it was refused as a second
-    publisher's within :data:`CONTESTED_FOR_S`."""
-    return state.contested and now - state.intruder_seen <= CONTESTED_FOR_S
 # A robot's rate is the median over asnn.params.PERIOD_FRAMES gaps between the stamps of its
 # frames processed, as its model measures its own; when it reads below SLOW_FPS for
 # PERIOD_FRAMES frames in a row the worker logs it (_measure_rate)
@@ -251,8 +245,9 @@ class _Robot:
     streams: int = 0  # streams started
     processed_stream: int | None = None  # number of the stream the model state belongs to
     stepped: int = 0  # frames the model state has stepped since it was (re)started
-    contested: bool = False  # a second publisher was seen on its key (in CONTESTED_FOR_S)
-    intruder_seen: float = 0.0  # when the second publisher's latest frame arrived
+    # when a second publisher's frame on its key last arrived (None: never), found by an
+    # intrusion or refused as one: it is *contested* for CONTESTED_FOR_S after
+    intruder_seen: float | None = None
     intrusions: int = 0
     restarts: int = 0  # streams in a row that ended after one frame (a seq that never grows)
     pending: tuple[Frame, float, _Stream] | None = None  # (frame, received, its stream)
@@ -284,6 +279,10 @@ class _Robot:
     def fps(self) -> float | None:
         """Frames a second its model is stepped at: the median of :attr:`periods`."""
         return round(1.0 / statistics.median(self.periods), 1) if self.periods else None
+
+    def contested(self, now: float) -> bool:
+        """Whether a second publisher's frame arrived on its key within CONTESTED_FOR_S."""
+        return self.intruder_seen is not None and now - self.intruder_seen <= CONTESTED_FOR_S
 
 
 @dataclass(frozen=True)
@@ -525,7 +524,7 @@ class WorkerCore:
                 state.intruder_seen = received
                 return None
             # the stream this one replaced goes on: two publishers interleave on the key
-            state.contested, state.intruder_seen = True, received
+            state.intruder_seen = received
             state.intrusions += 1
             self._stats.intrusions += 1
             self._rejections.warning(
@@ -537,8 +536,7 @@ class WorkerCore:
             previous.advance(frame, received)
             state.stream, state.previous = previous, current
             return previous
-        state.contested = _contested(state, received)
-        if (state.contested and current is not None
+        if (state.contested(received) and current is not None
                 and received - current.arrival <= self.takeover_after):
             # an intruder's frame, or the robot's camera restarting: either keeps it contested
             state.intruder_seen = received
@@ -859,7 +857,7 @@ class WorkerCore:
                           "pending": s.pending is not None, "busy": s.busy,
                           "last_seq": s.last_seq, "seq_step": s.seq_step,
                           "size": list(s.shape) if s.shape else None,
-                          "candidate": not s.proven, "contested": _contested(s, now),
+                          "candidate": not s.proven, "contested": s.contested(now),
                           "intrusions": s.intrusions, "frames": s.arrived,
                           "bytes": s.arrived_bytes, "warm": self._warm_locked(s),
                           "fps": s.fps}

@@ -25,7 +25,7 @@ from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE
                    parse_detectors,
                    rate_interval, run_detector, target_quality_cells, write_json, write_jsonl)
 
-__all__ = ["check_clips", "evaluate_clips", "open_clips"]
+__all__ = ["check_clips", "clip_warnings", "evaluate_clips", "open_clips"]
 
 
 def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
@@ -57,6 +57,18 @@ def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
             first = next(iter(source.frames()), None)
             sizes.append(None if first is None else (first.shape[1], first.shape[0]))
     return counts, problems, sizes
+
+
+def clip_warnings(label: Mapping, frames: int, fps: float, size: tuple[int, int] | None,
+                  warmup: int = scoring.WARMUP_FRAMES, *, slow: bool = True) -> list[str]:
+    """What ``asnn eval`` (and ``--held-out``) says of a clip as it was decoded: where it
+    disagrees with its label (:func:`~asnn.evaluation.labels.mismatches`), why it cannot be
+    scored (:func:`~asnn.evaluation.scoring.unscored`) and, with ``slow``, a frame rate below
+    :data:`~asnn.params.SLOW_FPS`. One sentence each, naming the clip."""
+    found = mismatches(label, frames, fps, size=size) + scoring.unscored(label, frames, warmup)
+    if slow and fps and fps < SLOW_FPS:
+        found.append(f"{label['file']}: {fps:g} frames a second; {SLOW_NOTE}")
+    return found
 
 
 def check_clips(clips_dir: str | Path, labels: Sequence[Mapping], most: int = 5) -> list[int]:
@@ -262,8 +274,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     errors, warnings, checked = [], [], set()
     # a slow camera's clip is scored as any other, but the default was made for 20 fps or more
     # (a perturbation that halves the rate is that experiment, and says so itself)
-    slow_note = (SLOW_NOTE if perturbation is None and any(spec.model == "asnn" for spec in specs)
-                 else None)
+    slow = perturbation is None and any(spec.model == "asnn" for spec in specs)
 
     def finished(index: int, frames: int, error: str | None,
                  decoded: tuple[int, float, tuple[int, int] | None, int, int, str | None]
@@ -278,8 +289,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
         if decoded is not None and clip not in checked:  # once a clip, by its first run
             checked.add(clip)
             frames, fps, size, backwards, resets, first_reset = decoded
-            warnings.extend(mismatches(given[clip], frames, fps, size=size))
-            warnings.extend(scoring.unscored(given[clip], frames, warmup))
+            warnings.extend(clip_warnings(given[clip], frames, fps, size, warmup, slow=slow))
             if backwards:
                 warnings.append(f"{labels[clip]['file']}: {backwards} frame"
                                 f"{'' if backwards == 1 else 's'} whose header stamp goes back, "
@@ -288,8 +298,6 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
                 warnings.append(f"{labels[clip]['file']}: {resets} clock reset"
                                 f"{'' if resets == 1 else 's'}, timed on from the latest "
                                 f"frame's time; the first: {first_reset}")
-            if slow_note and fps and fps < SLOW_FPS:
-                warnings.append(f"{labels[clip]['file']}: {fps:g} frames a second; {slow_note}")
 
     for index, result in run_tasks(_run_clip, tasks, jobs):
         finished(index, *result)

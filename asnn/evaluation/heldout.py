@@ -52,8 +52,8 @@ from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from ..retina import collision_warning, sigmoid_output, spike_count, spike_rate
 from . import scoring
-from .clips import check_clips
-from .labels import load_labels, mismatches
+from .clips import check_clips, clip_warnings
+from .labels import load_labels
 from .pool import run_tasks
 from .runs import write_json
 
@@ -694,18 +694,10 @@ def _trace_case(name: str, params: ASNNParams) -> ClipTrace:
 
 
 def _label_warnings(labels: Sequence[Mapping], traces: Sequence[ClipTrace]) -> list[str]:
-    """What ``asnn eval`` warns of the clips (:func:`~asnn.evaluation.labels.mismatches`,
-    :func:`~asnn.evaluation.scoring.unscored`, a frame rate below ``SLOW_FPS``), and a fold
-    chosen on no clip at all."""
-    from ..params import SLOW_FPS, SLOW_NOTE
-
-    found = []
-    for label, trace in zip(labels, traces):
-        if trace.fps:
-            found += mismatches(label, len(trace.frames), trace.fps, size=trace.size)
-            if trace.fps < SLOW_FPS:
-                found.append(f"{label['file']}: {trace.fps:g} frames a second; {SLOW_NOTE}")
-        found += scoring.unscored(label, len(trace.frames))
+    """What ``asnn eval`` warns of the clips (:func:`~asnn.evaluation.clips.clip_warnings`),
+    and a fold chosen on no clip at all."""
+    found = [warning for label, trace in zip(labels, traces)
+             for warning in clip_warnings(label, len(trace.frames), trace.fps, trace.size)]
     if len(labels) == 1:
         found.append("one clip: its fold's thresholds are chosen on no clip (the first grid "
                      "point the suite admits), so its held-out figure says nothing")
