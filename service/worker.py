@@ -138,6 +138,25 @@ def _undeclare(entity) -> None:
         pass
 
 
+def _on_network_thread(callback: Callable[[zenoh.Sample], None]):
+    """A frame subscriber's handler that runs ``callback`` on the Zenoh thread that received
+    the sample.
+
+    A plain Python callable gets a thread of its own per subscriber (zenoh-python's default),
+    fed by a queue with no bound: a worker serving 40 robots kept 40 more threads, and a
+    callback that falls behind queues every sample (a 1 MB stream at twice a slow callback's
+    pace: +370 MB in 10 s). Run where they arrive, frames that come faster than the worker
+    takes them wait in the link's bounded buffers and are dropped there, as their best-effort
+    QoS allows. The frame callbacks only decode and file the frame, under locks never held
+    across a Zenoh call, so they cannot stall the thread. ``indirect`` is marked unstable in
+    zenoh-python 1.x: without it, the default applies.
+    """
+    try:
+        return zenoh.handlers.Callback(callback, indirect=False)
+    except TypeError:
+        return callback
+
+
 class WorkerIdTaken(RuntimeError):
     """Another live worker already uses this worker id."""
 
@@ -473,7 +492,7 @@ class Worker:
             plan = self.routes.plan(self.core.views())
             for robot in plan.keys() - self._subscriptions.keys():
                 self._subscriptions[robot] = self.session.declare_subscriber(
-                    keys.frame_key(robot, prefix), self._on_frame)
+                    keys.frame_key(robot, prefix), _on_network_thread(self._on_frame))
                 # which robots a worker serves, in its log as well as in its status
                 log.info("robot %s: subscribed to its frames", robot)
             for robot in self._subscriptions.keys() - plan.keys():
@@ -503,8 +522,8 @@ class Worker:
         else:
             wanted = False
         if wanted and self._catch_all is None:
-            self._catch_all = self.session.declare_subscriber(keys.frames(self.core.prefix),
-                                                              self._on_scanned_frame)
+            self._catch_all = self.session.declare_subscriber(
+                keys.frames(self.core.prefix), _on_network_thread(self._on_scanned_frame))
         elif not wanted and self._catch_all is not None:
             self._release("_catch_all")
 

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import msgpack
+import numpy as np
 import pytest
 import zenoh
 
@@ -146,6 +147,30 @@ def test_two_processing_threads_keep_each_robot_exact(zenoh_net):
         got = {r.seq: r.u for r in responses.of(robot)}
         assert [got[seq] for seq in range(len(expected[robot]))] == expected[robot]
     assert max(expected["a"]) > 0 and max(expected["b"]) > 0
+
+
+def _threads() -> int:
+    """The process's threads, Zenoh's own among them (``threading`` sees only Python's)."""
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) for line in status if line.startswith("Threads:"))
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs Linux's /proc")
+def test_a_worker_serving_many_robots_keeps_no_thread_per_robot(service):
+    """Each robot's frame subscription runs its callback where Zenoh receives the frame: with
+    zenoh-python's default, each would keep a thread (and a queue with no bound) of its own."""
+    session, image = service.spoke(), np.zeros((64, 64), np.uint8)
+    send_one(session, service.responses, "r0", image, 0)
+    wait_for(lambda: "r0" in service.worker._subscriptions, what="r0's subscription")
+    before = _threads()
+    robots = [f"r{i}" for i in range(1, 31)]
+    for robot in robots:
+        send_one(session, service.responses, robot, image, 0)
+    wait_for(lambda: set(robots) <= service.worker._subscriptions.keys(),
+             what="a subscription per robot")
+    for robot in robots:  # and the subscriptions deliver
+        send_one(session, service.responses, robot, image, 1)
+    assert _threads() - before < 10
 
 
 def test_frame_size_change_resets_the_robot_over_zenoh(service):
