@@ -722,6 +722,11 @@ def test_eval_scores_a_bag_whose_stamps_go_back_with_each_frame_in_its_place(tmp
     records = (out / "results" / "asnn" / "back.jsonl").read_text().splitlines()
     assert len(records) == len(looming.frames)
     assert "stamped out of order" in (out / "report.md").read_text()
+    # the held-out evaluation reads the clip the same way, and says so too
+    held = tmp_path / "held"
+    assert main(["eval", str(clips), "--held-out", "--cases", "nearmiss-disk-dark-right",
+                 "--out", str(held)]) == 0
+    assert results["warnings"][0] in json.loads((held / "held_out.json").read_text())["warnings"]
 
 
 def test_camera_skips_and_counts_bad_messages_and_a_cut_without_stopping(tmp_path, looming):

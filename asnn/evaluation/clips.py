@@ -25,7 +25,8 @@ from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE
                    parse_detectors,
                    rate_interval, run_detector, target_quality_cells, write_json, write_jsonl)
 
-__all__ = ["check_clips", "clip_warnings", "evaluate_clips", "open_clips"]
+__all__ = ["check_clips", "clip_warnings", "evaluate_clips", "open_clips",
+           "open_labelled_clip"]
 
 
 def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
@@ -59,15 +60,35 @@ def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
     return counts, problems, sizes
 
 
+def open_labelled_clip(spec: str, topic: str | None = None):
+    """A labelled clip opened as ``asnn eval`` reads it: a bag's frames whose header stamp goes
+    back taken at the latest frame's time and its clock resets re-based, so that each frame
+    keeps its place for the labels. Returns the :class:`~asnn.io.sources.Source` and the
+    :class:`~asnn.io.sources.BackwardStamps` that counts both as the frames are read (for
+    :func:`clip_warnings`)."""
+    stamps = BackwardStamps()
+    return open_source(spec, topic=topic, on_error=stamps, hold_backwards=True), stamps
+
+
 def clip_warnings(label: Mapping, frames: int, fps: float, size: tuple[int, int] | None,
-                  warmup: int = scoring.WARMUP_FRAMES, *, slow: bool = True) -> list[str]:
+                  warmup: int = scoring.WARMUP_FRAMES, *, slow: bool = True,
+                  stamps: tuple[int, int, str | None] = (0, 0, None)) -> list[str]:
     """What ``asnn eval`` (and ``--held-out``) says of a clip as it was decoded: where it
     disagrees with its label (:func:`~asnn.evaluation.labels.mismatches`), why it cannot be
-    scored (:func:`~asnn.evaluation.scoring.unscored`) and, with ``slow``, a frame rate below
-    :data:`~asnn.params.SLOW_FPS`. One sentence each, naming the clip."""
+    scored (:func:`~asnn.evaluation.scoring.unscored`), with ``slow`` a frame rate below
+    :data:`~asnn.params.SLOW_FPS`, and a bag's ``stamps`` as :func:`open_labelled_clip` counted
+    them (frames whose header stamp goes back, clock resets, the first reset's message). One
+    sentence each, naming the clip."""
     found = mismatches(label, frames, fps, size=size) + scoring.unscored(label, frames, warmup)
     if slow and fps and fps < SLOW_FPS:
         found.append(f"{label['file']}: {fps:g} frames a second; {SLOW_NOTE}")
+    backwards, resets, first_reset = stamps
+    if backwards:
+        found.append(f"{label['file']}: {backwards} frame{'' if backwards == 1 else 's'} whose "
+                     "header stamp goes back, taken at the latest frame's time")
+    if resets:
+        found.append(f"{label['file']}: {resets} clock reset{'' if resets == 1 else 's'}, "
+                     f"timed on from the latest frame's time; the first: {first_reset}")
     return found
 
 
@@ -91,15 +112,12 @@ def check_clips(clips_dir: str | Path, labels: Sequence[Mapping], most: int = 5)
 
 def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | None = None,
               perturbation: str | None = None
-              ) -> tuple[int, str | None, tuple[int, float, tuple[int, int] | None] | None]:
+              ) -> tuple[int, str | None, tuple | None]:
     """Worker: one detector on one clip (a bag's ``topic``), its frames perturbed where
     ``perturbation`` names one, results to ``out_path``. Returns the frames run, the error
     (or None) and the clip as decoded, before any perturbation: its frames, frame rate, frame
-    size (width, height), the frames of a bag whose header stamp goes back (taken at the
-    latest frame's time, so that each frame keeps its place for the labels), and its clock
-    resets (re-based by the reader) with the first one's message."""
+    size (width, height) and stamps (:func:`clip_warnings`'s)."""
     decoded, size = 0, None
-    backwards = BackwardStamps()
 
     def counted(frames):
         nonlocal decoded, size
@@ -110,13 +128,13 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
             yield item
 
     try:
-        clip = open_source(video, topic=topic, on_error=backwards, hold_backwards=True)
+        clip, stamps = open_labelled_clip(video, topic)
         records = run_detector(perturbed(counted(clip.timed_frames()), perturbation), detector)
     except (SourceError, ValueError) as exc:
         return 0, str(exc), None
     write_jsonl(Path(out_path), records)
-    return len(records), None, (decoded, clip.fps, size, backwards.count, backwards.resets,
-                                backwards.first_reset)
+    return len(records), None, (decoded, clip.fps, size,
+                                (stamps.count, stamps.resets, stamps.first_reset))
 
 
 def _clips_report(results: Mapping) -> str:
@@ -277,8 +295,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     slow = perturbation is None and any(spec.model == "asnn" for spec in specs)
 
     def finished(index: int, frames: int, error: str | None,
-                 decoded: tuple[int, float, tuple[int, int] | None, int, int, str | None]
-                 | None) -> None:
+                 decoded: tuple | None) -> None:
         spec, clip = tasks[index][1], clip_of[index]
         name = f"{spec.name} {labels[clip]['file']}"  # as labelled: sub/clip.mp4, not clip.mp4
         progress.advance(expected[index], name)
@@ -288,16 +305,9 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
             errors.append(f"{name}: {error}")
         if decoded is not None and clip not in checked:  # once a clip, by its first run
             checked.add(clip)
-            frames, fps, size, backwards, resets, first_reset = decoded
-            warnings.extend(clip_warnings(given[clip], frames, fps, size, warmup, slow=slow))
-            if backwards:
-                warnings.append(f"{labels[clip]['file']}: {backwards} frame"
-                                f"{'' if backwards == 1 else 's'} whose header stamp goes back, "
-                                "taken at the latest frame's time")
-            if resets:
-                warnings.append(f"{labels[clip]['file']}: {resets} clock reset"
-                                f"{'' if resets == 1 else 's'}, timed on from the latest "
-                                f"frame's time; the first: {first_reset}")
+            frames, fps, size, stamps = decoded
+            warnings.extend(clip_warnings(given[clip], frames, fps, size, warmup, slow=slow,
+                                          stamps=stamps))
 
     for index, result in run_tasks(_run_clip, tasks, jobs):
         finished(index, *result)

@@ -52,7 +52,7 @@ from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from ..retina import collision_warning, sigmoid_output, spike_count, spike_rate
 from . import scoring
-from .clips import check_clips, clip_warnings
+from .clips import check_clips, clip_warnings, open_labelled_clip
 from .labels import load_labels
 from .pool import run_tasks
 from .runs import write_json
@@ -134,6 +134,7 @@ class ClipTrace:
     warnings: list[bool] | None = None
     fps: float | None = None  # the clip's frame rate as decoded, and its frames' (width, height):
     size: tuple[int, int] | None = None  # what its label is checked against
+    stamps: tuple[int, int, str | None] = (0, 0, None)  # a bag's (clips.clip_warnings)
 
 
 def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
@@ -676,12 +677,10 @@ def _trace_item(kind: str, name: str, topic: str | None, params: ASNNParams) -> 
 
 
 def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace:
-    from ..io.sources import BackwardStamps, open_source
-
-    # as asnn eval reads it (asnn.evaluation.clips): each frame in its place
-    source = open_source(spec, topic=topic, on_error=BackwardStamps(), hold_backwards=True)
+    source, stamps = open_labelled_clip(spec, topic)  # as asnn eval reads it
     trace = trace_clip(source.timed_frames(), params, Path(spec).name)
     trace.fps = source.fps
+    trace.stamps = (stamps.count, stamps.resets, stamps.first_reset)
     return trace
 
 
@@ -697,7 +696,8 @@ def _label_warnings(labels: Sequence[Mapping], traces: Sequence[ClipTrace]) -> l
     """What ``asnn eval`` warns of the clips (:func:`~asnn.evaluation.clips.clip_warnings`),
     and a fold chosen on no clip at all."""
     found = [warning for label, trace in zip(labels, traces)
-             for warning in clip_warnings(label, len(trace.frames), trace.fps, trace.size)]
+             for warning in clip_warnings(label, len(trace.frames), trace.fps, trace.size,
+                                          stamps=trace.stamps)]
     if len(labels) == 1:
         found.append("one clip: its fold's thresholds are chosen on no clip (the first grid "
                      "point the suite admits), so its held-out figure says nothing")
