@@ -149,9 +149,9 @@ TAKEOVER_AFTER_S = 3.0
 # restart lost takeover_after seconds of frames: a soak); an intruder that keeps publishing
 # keeps it contested, one that comes back less often costs the robot its two resets again
 CONTESTED_FOR_S = 30.0
-# A robot's rate is the median over asnn.params.PERIOD_FRAMES gaps between the stamps of its
-# frames processed, as its model measures its own; when it reads below SLOW_FPS for
-# PERIOD_FRAMES frames in a row the worker logs it (_measure_rate)
+# A robot's rate is its model's own (the median over asnn.params.PERIOD_FRAMES gaps between the
+# stamps of the new frames it stepped); when it reads below SLOW_FPS for PERIOD_FRAMES frames in
+# a row the worker logs it (_measure_rate)
 
 
 def worker_host() -> str:
@@ -266,8 +266,8 @@ class _Robot:
     # between arriving frames, from which a steady step is read (_learn_step)
     seq_step: int = 1
     seq_growths: deque = field(default_factory=lambda: deque(maxlen=STEP_FRAMES))
-    # the rate its model is stepped at: the stamps' gaps between the frames processed in the
-    # current stream (after the worker's own skips), and how long it has read slow
+    # the stamps' gaps between the frames processed in the current stream (after the worker's
+    # own skips; the rate of a baseline, which times nothing), and how long it has read slow
     stamp: float | None = None
     periods: deque = field(default_factory=lambda: deque(maxlen=PERIOD_FRAMES))
     slow_frames: int = 0  # frames in a row whose rate read below SLOW_FPS
@@ -276,9 +276,18 @@ class _Robot:
     untimed_logged: bool = False  # this spell was logged
 
     @property
+    def model_periods(self) -> deque:
+        """The gaps its rate is read from: the ASNN model's own (:attr:`asnn.ASNN.periods`: a
+        repeated frame is no new frame to it, an untimed gap is its nominal period), else
+        :attr:`periods` (the baselines time nothing)."""
+        own = getattr(self.detector, "periods", None)
+        return self.periods if own is None else own
+
+    @property
     def fps(self) -> float | None:
-        """Frames a second its model is stepped at: the median of :attr:`periods`."""
-        return round(1.0 / statistics.median(self.periods), 1) if self.periods else None
+        """New frames a second its model is stepped at: the median of :attr:`model_periods`."""
+        periods = self.model_periods
+        return round(1.0 / statistics.median(periods), 1) if periods else None
 
     def contested(self, now: float) -> bool:
         """Whether a second publisher's frame arrived on its key within CONTESTED_FOR_S."""
@@ -736,7 +745,7 @@ class WorkerCore:
                 state.periods.append(gap)
             self._note_untimed(robot, state, timed, gap)
         state.stamp = stamp
-        slow = len(state.periods) == PERIOD_FRAMES and state.fps < SLOW_FPS
+        slow = len(state.model_periods) == PERIOD_FRAMES and state.fps < SLOW_FPS
         state.slow_frames = state.slow_frames + 1 if slow else 0
         if not slow:
             state.slow_logged = False

@@ -467,6 +467,19 @@ def test_the_rate_a_robot_is_detected_at_is_reported_and_a_slow_one_logged(caplo
     assert core.status()["robots"]["slow"]["fps"] is None
 
 
+def test_a_camera_that_sends_each_frame_twice_is_detected_at_the_rate_of_its_new_frames(
+        caplog, looming):
+    """A 10 fps camera up-sampled to 20 (every second frame repeats the one before): the model
+    steps 10 new frames a second, and the worker says so, as for a slow camera."""
+    core = WorkerCore()
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for seq in range(24):
+            feed(core, "twice", looming.frames[seq - seq % 2], seq, stamp=seq * 0.05)
+    assert core.status()["robots"]["twice"]["fps"] == 10.0
+    assert any("robot twice" in r.getMessage() and "10.0 per second" in r.getMessage()
+               for r in caplog.records)
+
+
 @pytest.mark.parametrize("model, stamps, logged", [
     ("asnn", [k * 50.0 for k in range(12)], "50 s apart"),  # a clock in milliseconds
     ("asnn", [7.0] * 12, "0 s apart"),  # a clock that never moves
