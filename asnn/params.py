@@ -545,11 +545,12 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     surface_ahead=True, corridor_gate=True, own_motion_weight=2.0,
 ))
 DEFAULT_PRESET = "robust"
-# frames a second below which the default preset loses hits (README, "At half the frame rate"):
-# it is made for 20 or more, and a 20 fps camera's timestamps jitter
+# frames a second below which the default preset loses hits (docs/evaluation.md, "At half the
+# frame rate"): it is made for 20 or more, and a 20 fps camera's timestamps jitter
 SLOW_FPS = 18.0
 # what the evaluation and asnn detect say of a slower clip
-SLOW_NOTE = f"ASNN loses hits below {SLOW_FPS:g} (README, 'At half the frame rate')"
+SLOW_NOTE = (f"ASNN loses hits below {SLOW_FPS:g} "
+             "(docs/evaluation.md, 'At half the frame rate')")
 # a stream's frame period: the median of the last PERIOD_FRAMES gaps between its frames' times
 # (one lost frame does not move it), each believed only above 0 and up to MAX_FRAME_GAP_S
 # seconds (beyond, a clock in other units or a stall: the nominal period instead)

@@ -123,8 +123,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--variant", type=whole, default=0, metavar="K",
                    help="with --synthetic: K >= 1 scores the same cases with fresh scene seeds "
                         "(other textures, sensor noise and roadside objects; the same geometry, "
-                        "motion and labels; README, 'fresh scenery') (default: 0, the suite as "
-                        "it is)")
+                        "motion and labels; docs/evaluation.md, 'The same cases in fresh "
+                        "scenery') (default: 0, the suite as it is)")
     p.add_argument("--out", type=nonempty_path, metavar="DIR", default="eval-out",
                    help="output directory (default: %(default)s); it then holds this run's "
                         "results: the reports, results, plots and figures an earlier run wrote "

@@ -734,7 +734,7 @@ class WorkerCore:
         been stepped at less than :data:`asnn.params.SLOW_FPS` for PERIOD_FRAMES frames in a row
         (a slow camera, or frames skipped under load; a moment's skips are not logged, and a
         slowdown after the rate recovered is logged again, at most once every 10 s): the
-        default preset loses hits there (README, "At half the frame rate")."""
+        default preset loses hits there (docs/evaluation.md, "At half the frame rate")."""
         if state.stepped == 1:
             state.periods.clear()
             state.slow_frames = state.untimed_frames = 0

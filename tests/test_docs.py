@@ -106,3 +106,40 @@ def test_links_land(document):
 @pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
 def test_table_rows_have_their_headers_cells(document):
     assert ragged_rows(document) == []
+
+
+_POINTER = re.compile(r"""(README|CONTRIBUTING|docs/[\w-]+)(?:\.md)?, ["']([^"']+)["']""")
+
+
+def headings(text: str) -> list[str]:
+    """The text of a document's headings (outside code blocks)."""
+    return [m.group(1) for line in prose_lines(text) for m in [re.match(r"#{1,6}\s+(.*)", line)]
+            if m]
+
+
+def lost_pointers(source: str) -> list[str]:
+    """The pointers into the documents in a module's text (``README, "Ablation"``,
+    ``docs/operations.md, "Hostile input"``; line breaks and comment marks between their words
+    ignored) whose words begin no heading of that document."""
+    flat = re.sub(r"\s*\n\s*(?:#\s*)?", " ", source)
+    lost = []
+    for document, words in _POINTER.findall(flat):
+        path = ROOT / (document if document.startswith("docs/") else document.upper()
+                       ).replace(".md", "")
+        path = path.with_suffix(".md")
+        titles = [re.sub(r"[`*]", "", h).lower() for h in headings(path.read_text())] \
+            if path.exists() else []
+        if not any(title.startswith(words.lower()) for title in titles):
+            lost.append(f"{document}, {words!r}")
+    return lost
+
+
+def test_pointers_from_the_code_name_sections_that_exist():
+    """What the code tells a user to read (a warning's "docs/evaluation.md, 'At half the frame
+    rate'") is there: a section renamed or moved leaves the pointer leading nowhere."""
+    assert lost_pointers('x = 1  # (README, "Nowhere at all")') == ["README, 'Nowhere at all'"]
+    lost = {str(path.relative_to(ROOT)): found
+            for folder in ("asnn", "service", "clients", "cli")
+            for path in sorted((ROOT / folder).rglob("*.py"))
+            for found in [lost_pointers(path.read_text())] if found}
+    assert lost == {}

@@ -298,7 +298,8 @@ def suite_report(results: Mapping) -> str:
         *([f"Variant {settings['variant']}: the suite's cases with fresh scene seeds (other "
            "textures, sensor noise and roadside objects; the same geometry, motion and labels)."
            " The default preset was designed on the suite as it is (variant 0), its region"
-           " persistence and motion layers on variants 1-5 (README, 'fresh scenery').",
+           " persistence and motion layers on variants 1-5 (docs/evaluation.md, 'The same cases"
+           " in fresh scenery').",
            ""] if settings.get("variant") else []),
         *(["Extra cases outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
            "version, and not looked at while the default preset was designed.", ""]
