@@ -528,10 +528,19 @@ class WorkerCore:
                 and received - previous.arrival <= self.takeover_after
                 and previous.continues(frame, max_gap) is None):
             if previous.number > current.number:
-                # the intruder's stream goes on while the one there first keeps sending
+                if received - current.arrival <= self.takeover_after:
+                    # the intruder's stream goes on while the one there first keeps sending
+                    previous.advance(frame, received)
+                    state.intruder_seen = received
+                    return None
+                # the stream there first has been silent for takeover_after: its camera went
+                # (or restarted as this one), so this stream is the robot's now
+                log.info("robot %s: its stream of seq %d went silent; following the other "
+                         "publisher's (seq %d)", robot, current.seq, frame.seq)
+                previous.reason = "second-publisher"
                 previous.advance(frame, received)
-                state.intruder_seen = received
-                return None
+                state.stream, state.previous = previous, current
+                return previous
             # the stream this one replaced goes on: two publishers interleave on the key
             state.intruder_seen = received
             state.intrusions += 1

@@ -604,6 +604,31 @@ def test_after_an_intrusion_a_restarted_camera_is_followed_once_the_old_stream_i
     assert feed(core, "r1", scene.frames[1], 1) is not None
 
 
+def test_a_camera_left_alone_after_an_intrusion_is_followed_once_the_first_is_silent():
+    """A camera replaced while the old one still sent a frame or two: the new one publishes on,
+    the old one is gone. Its frames were refused as a second publisher's for as long as they
+    came (each refreshed its stream), until the robot was forgotten as idle: 60 s blind."""
+    scene = make_scene("looming")
+    clock = FakeClock()
+    core = WorkerCore(clock=clock, takeover_after=3.0)
+    for seq in range(10):  # the old camera; the new one's first frames among its last ones
+        clock.now += 0.05
+        feed(core, "r1", scene.frames[seq], 100 + seq)
+        if seq >= 8:
+            core.offer("asnn/r1/frame", payload(scene.frames[seq - 8], seq - 8))
+    assert core.stats()["intrusions"] == 1
+    answered = []
+    for seq in range(2, 102):  # the new camera alone, at 20 fps for 5 s
+        clock.now += 0.05
+        core.offer("asnn/r1/frame", payload(scene.frames[seq % 20], seq))
+        job = core.take()
+        if job is not None and core.process(job) is not None:
+            answered.append(seq)
+    # refused while the old stream might still be sending, followed from then on
+    assert answered, "the new camera was never followed"
+    assert answered == list(range(answered[0], 102)) and 3.0 <= (answered[0] - 2) * 0.05 <= 3.2
+
+
 def test_a_robot_is_contested_no_longer_once_no_frame_is_refused_for_a_while():
     """A soak: contested for good, every later quick restart of the robot's own camera lost
     takeover_after seconds of frames, refused as a second publisher's."""
