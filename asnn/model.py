@@ -35,7 +35,7 @@ from .approach import ApproachStage, CameraRig, FramePair, frame_pixel
 from .approach.looming import region_expansion
 from .approach.motion_layers import motion_layers
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
-from .params import MAX_FRAME_GAP_S, MAX_THREADS, PERIOD_FRAMES, ASNNParams, preset
+from .params import MAX_THREADS, PERIOD_FRAMES, ASNNParams, preset, timed_gap
 from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
 from .targets import extract_targets
@@ -425,7 +425,7 @@ class ASNN:
         if self.repeated:
             return _Frame(index, repeat=True)
         elapsed = stamp - self._stamp
-        if not 0.0 < elapsed <= MAX_FRAME_GAP_S:  # no usable times: the nominal frame period
+        if not timed_gap(elapsed):  # no usable times: the nominal frame period
             elapsed = p.dt
         self._stamp = stamp
         self.periods.append(elapsed)

@@ -552,10 +552,19 @@ SLOW_FPS = 18.0
 SLOW_NOTE = (f"ASNN loses hits below {SLOW_FPS:g} "
              "(docs/evaluation.md, 'At half the frame rate')")
 # a stream's frame period: the median of the last PERIOD_FRAMES gaps between its frames' times
-# (one lost frame does not move it), each believed only above 0 and up to MAX_FRAME_GAP_S
-# seconds (beyond, a clock in other units or a stall: the nominal period instead)
+# (one lost frame does not move it), each believed only from MIN_FRAME_GAP_S (a camera at 10
+# kHz) up to MAX_FRAME_GAP_S seconds (outside, a clock in other units, one that never moves, or
+# a stall: the nominal period instead; stamps a subnormal number apart made frame counts of
+# seconds over the period infinite)
 PERIOD_FRAMES = 5
+MIN_FRAME_GAP_S = 1e-4
 MAX_FRAME_GAP_S = 1.0
+
+
+def timed_gap(gap: float) -> bool:
+    """Whether the time between two frames, seconds, is one a stream's timing believes:
+    ``MIN_FRAME_GAP_S <= gap <= MAX_FRAME_GAP_S`` (NaN is not)."""
+    return MIN_FRAME_GAP_S <= gap <= MAX_FRAME_GAP_S
 
 
 def preset_names() -> list[str]:

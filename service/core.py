@@ -36,8 +36,8 @@ a row the worker logs it at WARNING, and every response says how many frames its
 stepped in the current stream (``stream_frames``, docs/contract.md).
 
 The retina integrates with its fixed time step (0.05 s) whatever the stamps say; the targets'
-time to contact, and with it the default's approach gate, read the stamps' gaps (a gap of 0 s
-or more than MAX_FRAME_GAP_S reads as the nominal period, logged when it lasts: a camera
+time to contact, and with it the default's approach gate, read the stamps' gaps (a gap below
+MIN_FRAME_GAP_S or above MAX_FRAME_GAP_S reads as the nominal period, logged when it lasts: a camera
 clock in other units). A robot that
 sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten); when every slot
 is taken, one silent for ``takeover_after`` seconds is forgotten to make room for a new robot.
@@ -76,8 +76,8 @@ most its pending frame held (at most ``max_robots`` candidates at once), and it 
 soon as a frame of it fails. So ids that send only undecodable frames cannot lock new robots out.
 
 Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``,
-the labels of :data:`service.messages.REASONS` plus ``frame-rejected``,
-``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING, rate-limited:
+the labels of :data:`service.messages.REASONS` plus ``frame-rejected``, ``model-failed``
+(a bug), ``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING, rate-limited:
 the first rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
 with the count of those not shown.
 
@@ -116,7 +116,8 @@ from dataclasses import dataclass, field
 
 from asnn import FrameError
 from asnn.detectors import available_cores, make_detector
-from asnn.params import DEFAULT_PRESET, MAX_FRAME_GAP_S, PERIOD_FRAMES, SLOW_FPS
+from asnn.params import (DEFAULT_PRESET, MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, PERIOD_FRAMES,
+                         SLOW_FPS, timed_gap)
 
 from . import keys
 from .logutil import RateLimitedLog
@@ -715,6 +716,15 @@ class WorkerCore:
                     state.proven = False
             self._refuse_taken(state, job, "frame-rejected", str(exc))
             return None
+        except Exception as exc:  # a bug: the frame is refused, counted and told, not lost,
+            # its traceback logged at most once per log_interval (not once per frame), and the
+            # model, stopped halfway through a step, starts afresh on the next frame
+            if self._rejections.allow("model-failed-trace") is not None:
+                log.error("robot %s: the model failed on frame %d", job.robot, frame.seq,
+                          exc_info=True)
+            state.detector = state.processed_stream = None
+            self._refuse_taken(state, job, "model-failed", f"{type(exc).__name__}: {exc}")
+            return None
         if state.processed == 0:
             log.info("robot %s: first frame (%dx%d %s)", job.robot, frame.width, frame.height,
                      frame.format)
@@ -749,7 +759,7 @@ class WorkerCore:
             state.slow_frames = state.untimed_frames = 0
         elif state.stamp is not None:
             gap = stamp - state.stamp
-            timed = 0.0 < gap <= MAX_FRAME_GAP_S
+            timed = timed_gap(gap)
             if timed:
                 state.periods.append(gap)
             self._note_untimed(robot, state, timed, gap)
@@ -767,8 +777,8 @@ class WorkerCore:
                 "20 or more", robot, state.fps)
 
     def _note_untimed(self, robot: str, state: _Robot, timed: bool, gap: float) -> None:
-        """Log when PERIOD_FRAMES frames in a row are stamped 0 s apart or more than
-        MAX_FRAME_GAP_S apart: the model then times them at its nominal period, so the targets'
+        """Log when PERIOD_FRAMES frames in a row are stamped less than MIN_FRAME_GAP_S or more
+        than MAX_FRAME_GAP_S apart: the model then times them at its nominal period, so the targets'
         time to contact is off by the camera's true period over the nominal one (a clock
         in milliseconds, or one that never moves); once per spell, rate-limited."""
         state.untimed_frames = 0 if timed else state.untimed_frames + 1
@@ -779,9 +789,10 @@ class WorkerCore:
         elif state.untimed_frames >= PERIOD_FRAMES and not state.untimed_logged:
             state.untimed_logged = self._rejections.warning(
                 f"untimed:{robot}", "robot %s: its frames' stamps are %g s apart, not a frame "
-                "period the model believes (0 to %g s): the targets' time to contact is timed "
+                "period the model believes (%g to %g s): the targets' time to contact is timed "
                 "at %g frames a second instead; stamps are the camera's clock in seconds "
-                "(CONTRACT.md)", robot, gap, MAX_FRAME_GAP_S, 1.0 / state.detector.params.dt)
+                "(CONTRACT.md)", robot, gap, MIN_FRAME_GAP_S, MAX_FRAME_GAP_S,
+                1.0 / state.detector.params.dt)
 
     def _refuse_taken(self, state: _Robot, job: Job, reason: str, detail: str) -> None:
         """A frame taken in is refused when it is processed (its image, its robot's place, the

@@ -624,3 +624,23 @@ def test_one_strangers_frame_cannot_change_a_robot_s_seq_step(looming):
     assert len(answered) >= len(looming.frames) - 2
     assert "late" not in core.stats()["invalid"]
     assert core.status()["robots"]["r1"]["seq_step"] == 40
+
+
+def test_a_frame_the_model_fails_on_is_refused_counted_and_told_with_one_traceback(
+        caplog, looming, monkeypatch):
+    """A bug in the model (stamps a subnormal number apart once made every step raise): each
+    frame accepted was left unanswered and uncounted, a traceback logged per frame."""
+    from asnn import ASNN
+
+    core, step = WorkerCore(), ASNN.step
+    feed(core, "r1", looming.frames[0], 0)
+    monkeypatch.setattr(ASNN, "step", lambda self, *a, **k: 1 / 0)
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        assert [feed(core, "r1", looming.frames[seq], seq) for seq in range(1, 6)] == [None] * 5
+    stats = core.stats()
+    assert stats["invalid"] == {"model-failed": 5} and stats["received"] == 1
+    assert sum(r.exc_info is not None for r in caplog.records) == 1
+    assert core.refusals_to_tell()[0][:2] == ("r1", "model-failed")
+    monkeypatch.setattr(ASNN, "step", step)
+    response = feed(core, "r1", looming.frames[6], 6)  # the model starts afresh
+    assert response is not None and response.u == 0.0 and response.stream_frames == 1
