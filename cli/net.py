@@ -105,12 +105,21 @@ def cmd_status(args: argparse.Namespace) -> int:
     with session:
         statuses = query_status(session, args.prefix, args.worker, timeout=args.timeout,
                                 keep=keep)
+    readable = 0
     for worker, status in sorted(statuses.items()):
-        if args.json:
-            print(json.dumps(status, separators=(", ", ": ")), flush=True)
-        else:
-            print(format_status(status), flush=True)
-    if not statuses:
+        # anything on the prefix may answer: a map this asnn cannot read is said on stderr, and
+        # neither hides the others' nor passes a health check
+        try:
+            line = format_status(status)
+            if args.json:
+                line = json.dumps(status, separators=(", ", ": "), allow_nan=False)
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            print(_printable(f"worker {worker}: a status this asnn cannot read "
+                             f"({type(exc).__name__}: {exc})"), file=sys.stderr)
+            continue
+        readable += 1
+        print(_printable(line), flush=True)
+    if not readable:
         key = (keys.worker_status_key(args.worker, args.prefix) if args.worker
                else keys.worker_statuses(args.prefix))
         if args.local:
@@ -122,6 +131,12 @@ def cmd_status(args: argparse.Namespace) -> int:
             print(f"no worker answered on {key}", file=sys.stderr)
         return 1
     return 0
+
+
+def _printable(text: str) -> str:
+    """``text`` with its control characters escaped (a worker's id or a robot's can carry
+    none, but a status from anything else on the prefix can carry a terminal's commands)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def _clipped(text: str, length: int) -> str:

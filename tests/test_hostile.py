@@ -933,3 +933,37 @@ def test_status_replies_from_anyone_are_bounded_and_a_health_check_reads_only_it
         assert len(worker_module.query_status(asker, timeout=3.0)) == 10  # ~1 KB each
     finally:
         queryable.undeclare()
+
+
+@pytest.mark.parametrize("as_json", [False, True])
+def test_a_status_asnn_cannot_read_is_said_and_hides_no_other(zenoh_net, tmp_path, capsys,
+                                                               as_json):
+    """Anything on the prefix may answer a status query: a map without the fields of a
+    worker's (or with a NaN, or a terminal's escape sequences) made ``asnn status`` end in a
+    traceback, the real worker's line unprinted, and a health check fail."""
+    from cli.main import main
+    from service.messages import encode_status
+
+    def fake(query):
+        query.reply("asnn/@worker/fake/status", encode_status({"worker": "fake\x1b[2J"}))
+        query.reply("asnn/@worker/nan/status",
+                    encode_status({"worker": "nan", "stats": float("nan")}))
+
+    config = tmp_path / "zenoh.json5"
+    config.write_text('{"scouting": {"multicast": {"enabled": false}, '
+                      '"gossip": {"enabled": false}}}')
+    ask = ["status", "--config", str(config), "--connect", zenoh_net.endpoint, "--mode",
+           "client", "--timeout", "1", *(["--json"] if as_json else [])]
+    queryable = zenoh_net.hub.declare_queryable("asnn/@worker/*/status", fake)
+    try:
+        assert main(ask) == 1  # nothing readable: nobody answered
+        with Worker(zenoh_net.hub, WorkerCore(worker_id="w1"), stats_every=0):
+            capsys.readouterr()
+            assert main(ask) == 0
+    finally:
+        queryable.undeclare()
+    out, err = capsys.readouterr()
+    assert len(out.splitlines()) == 1 and '"w1"' in out if as_json else out.startswith(
+        "worker w1: ")
+    assert "worker fake\\x1b[2J: a status this asnn cannot read (KeyError" in err
+    assert "worker nan: a status this asnn cannot read" in err and "\x1b" not in out + err
