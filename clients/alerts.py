@@ -137,8 +137,9 @@ class LinePrinter:
 
     Zenoh calls the handler on its own threads: a write there that blocks (a reader that stopped
     reading: a pager, a stalled journal) held them, and with them Ctrl-C, until the reader went
-    away. Lines wait in a queue of at most ``max_lines``; beyond it a warning is counted in
-    ``unprinted`` and logged (at most one line every 10 s), not written. A write that fails
+    away. Lines wait in a queue of at most ``max_lines``; beyond it the oldest waiting line
+    makes room for the newest, counted in ``unprinted`` and logged (at most one line every 10
+    s): a reader slower than the warnings gets the latest, not ones many seconds old. A write that fails
     (the reader gone: ``BrokenPipeError``; a full disk) ends the printing: ``error`` holds it and
     ``on_error()`` is called once, so that the command can stop.
 
@@ -176,15 +177,19 @@ class LinePrinter:
             log.exception("cannot format a warning of %s; printed as JSON", response.robot)
             line = format_json(response)
         with self._ready:
-            if self.error is None and len(self._lines) < self.max_lines:
-                self._lines.append(line + "\n")
-                self._ready.notify()
+            if self.error is not None:
+                self.unprinted += 1
                 return
+            self._lines.append(line + "\n")
+            self._ready.notify()
+            if len(self._lines) <= self.max_lines:
+                return
+            self._lines.popleft()
             self.unprinted += 1
             unprinted = self.unprinted
-        if self.error is None:
-            self._log.warning("unprinted", "the output is not read: %d warnings not printed "
-                              "(%d lines wait for it)", unprinted, self.max_lines)
+        self._log.warning("unprinted", "the output is read slower than warnings come: %d older "
+                          "warnings not printed (the latest %d wait for it)", unprinted,
+                          self.max_lines)
 
     def _write(self) -> None:
         while True:

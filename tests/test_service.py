@@ -403,8 +403,9 @@ def test_a_reader_that_stops_reading_holds_no_zenoh_thread_and_loses_warnings_co
         calls.start()
         calls.join(60)
     assert not calls.is_alive()  # the handler returned: it never waited on the output
-    assert show.unprinted == 14  # five lines wait, the other fourteen are not printed
-    assert "the output is not read: 1 warnings not printed" in caplog.text
+    assert show.unprinted == 14  # the latest five lines wait, the fourteen before are dropped
+    assert [json.loads(line)["seq"] for line in show._lines] == [15, 16, 17, 18, 19]
+    assert "read slower than warnings come: 1 older warnings not printed" in caplog.text
     assert show.close(timeout=0.2) is False and show.unprinted == 20  # the blocked one too
     release.set()
 
