@@ -23,7 +23,7 @@ from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
                               split_topic)
 from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_short,
-                           quiet_writer)
+                           open_writer, quiet_writer, writable_fps)
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_names
@@ -431,10 +431,11 @@ def run(args: argparse.Namespace) -> int:
                 raise _OutputError(f"cannot write the output at frame {index}: {exc}") from None
             if args.annotate:
                 if not video:
-                    writer = cv2.VideoWriter(args.annotate, cv2.VideoWriter_fourcc(*"mp4v"),
-                                             source.fps, frame.shape[1::-1])
-                    if not writer.isOpened():
-                        raise _OutputError(f"cannot write {args.annotate}")
+                    try:
+                        writer = open_writer(args.annotate, writable_fps(source.fps),
+                                             frame.shape[1::-1])
+                    except OSError:
+                        raise _OutputError(f"cannot write {args.annotate}") from None
                     stack.callback(writer.release)
                     video.extend((writer, frame.shape[1::-1]))
                 video[0].write(annotate_frame(frame, response))

@@ -454,11 +454,11 @@ def test_an_annotated_video_that_loses_frames_is_one_error_line(looming_video, t
                                                                 capsys, monkeypatch, threads):
     import cv2
 
-    import cli.detect
+    import asnn.io.video
 
     real = cv2.VideoWriter
-    monkeypatch.setattr(cli.detect.cv2, "VideoWriter",
-                        lambda *args: _WriterThatStops(real(*args), keep=3))
+    monkeypatch.setattr(asnn.io.video.cv2, "VideoWriter",
+                        lambda *args, **kwargs: _WriterThatStops(real(*args, **kwargs), keep=3))
     path, scene = looming_video
     target = tmp_path / "ann.mp4"
     assert main(["detect", str(path), "--annotate", str(target), "--threads", threads]) == 2

@@ -1055,3 +1055,17 @@ def test_after_a_reset_a_frame_with_an_unset_stamp_is_held_at_the_latest_time(tm
     assert reasons == ["stamp-backwards", "stamp-backwards", "clock-reset"]
     assert times[20] == pytest.approx(times[19])
     assert times[21] == pytest.approx(times[19] + 0.1)
+
+
+@pytest.mark.parametrize("gap", [1e-6, 2000.0])
+def test_a_bag_whose_stamps_no_video_rate_can_hold_is_annotated_at_the_default_rate(
+        tmp_path, looming, gap):
+    """Stamps microseconds or half an hour apart: the mpeg4 writer takes no such rate, and
+    ``--annotate`` failed with OpenCV's own error lines (a bag reader's round)."""
+    from asnn.io.video import DEFAULT_FPS, open_video
+
+    bag = stamped_bag(tmp_path / "odd.mcap", looming.frames[:8], [k * gap for k in range(8)])
+    out = tmp_path / "odd.mp4"
+    assert main(["detect", bag, "--annotate", str(out)]) == 0
+    clip = open_video(out)
+    assert clip.fps == DEFAULT_FPS and len(list(clip)) == 8

@@ -16,8 +16,8 @@ from .files import seekable_target
 from .images import MAX_SIDE
 
 __all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "WRITABLE_SUFFIXES", "VideoError", "VideoClip",
-           "check_written", "cut_short", "open_video", "quiet_writer", "read_frames",
-           "stated_fps", "write_video"]
+           "check_written", "cut_short", "open_video", "open_writer", "quiet_writer",
+           "read_frames", "stated_fps", "writable_fps", "write_video"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 MAX_FPS = 240.0  # above this a stated rate is a container's time base, not a camera's
@@ -27,6 +27,9 @@ FPS_RANGE = (1.0, MAX_FPS)
 # the containers our video writers (OpenCV's, mp4v or MJPG) write and read back; OpenCV takes
 # the container from the name, and refuses others (.txt) or writes what it cannot read (.mpg)
 WRITABLE_SUFFIXES = (".avi", ".m4v", ".mkv", ".mov", ".mp4")
+# the slowest rate a video is written at: mpeg4's writer fails below about 0.002 frames a
+# second, and above 65535 (a bag whose stamps are minutes or microseconds apart)
+MIN_WRITTEN_FPS = 0.01
 
 # FFmpeg prints its own decoder complaints on stderr; our errors say it in one line instead.
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
@@ -214,6 +217,23 @@ def _disk_full(path: Path) -> bool:
     return stats.f_bavail * stats.f_frsize < 64 * 1024
 
 
+def writable_fps(fps: float) -> float:
+    """A source's frame rate for the video written of it: ``fps`` where the encoders take it
+    (from MIN_WRITTEN_FPS to :data:`MAX_FPS`), else :data:`DEFAULT_FPS`."""
+    return fps if MIN_WRITTEN_FPS <= fps <= MAX_FPS else DEFAULT_FPS
+
+
+def open_writer(path: str | Path, fps: float, size: tuple[int, int]) -> cv2.VideoWriter:
+    """OpenCV's writer of a BGR video of ``size`` (width, height) frames at ``fps``: MJPG for
+    .avi, mp4v for the other :data:`WRITABLE_SUFFIXES`. OSError where OpenCV cannot open it."""
+    path = Path(path)
+    fourcc = cv2.VideoWriter_fourcc(*("MJPG" if path.suffix.lower() == ".avi" else "mp4v"))
+    writer = cv2.VideoWriter(str(path), fourcc, fps, size, isColor=True)
+    if not writer.isOpened():
+        raise OSError(f"cannot write video {path}")
+    return writer
+
+
 def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
                 fps: float = 20.0) -> Path:
     """Write gray uint8 frames (T, H, W), or (H, W) frames one by one from an iterable (a long
@@ -240,10 +260,7 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
             raise ValueError(f"no frames to write to {path}")
         h, w = first.shape[:2]
         frames = itertools.chain([first], frames)
-    fourcc = cv2.VideoWriter_fourcc(*("MJPG" if path.suffix.lower() == ".avi" else "mp4v"))
-    writer = cv2.VideoWriter(str(path), fourcc, fps, (w, h), isColor=True)
-    if not writer.isOpened():
-        raise OSError(f"cannot write video {path}")
+    writer = open_writer(path, fps, (w, h))
     written = 0
     try:
         with quiet_writer():  # a failed write is raised once, below
