@@ -363,8 +363,27 @@ def test_a_rosbag2_directory_is_the_files_its_metadata_lists(tmp_path, looming):
     (directory / "metadata.yaml").write_text(
         "rosbag2_bagfile_information:\n  storage_identifier: sqlite3\n")
     assert "only MCAP bags are read" in detect_fails(directory)
+    for value in ("[1, 2]", "hello"):  # one line, not a traceback (a bag reader's round)
+        (directory / "metadata.yaml").write_text(f"rosbag2_bagfile_information: {value}\n")
+        assert "not a rosbag2 metadata file" in detect_fails(directory)
     (directory / "metadata.yaml").unlink()  # a recording killed before it wrote its metadata
     assert "without the metadata.yaml of a rosbag2 directory" in detect_fails(directory)
+
+
+def test_a_summary_whose_statistics_give_no_message_counts_does_not_empty_the_topic(
+        tmp_path, looming):
+    """An empty channel_message_counts means the statistic is not available (the MCAP
+    specification), not that every topic is empty: the bag was refused, "holds no message"."""
+    path = tmp_path / "nocounts.mcap"
+    with open(path, "wb") as fh, Ros2Writer(fh) as writer:
+        schema = writer.register_msgdef(rosbag.IMAGE, rosbag.IMAGE_MSGDEF)
+        for index, frame in enumerate(looming.frames[:10]):
+            ns = START_NS + index * 50_000_000
+            writer.write_message("/c", schema, raw_message(frame, "mono8", index), log_time=ns,
+                                 publish_time=ns, sequence=index)
+        writer._writer._Writer__statistics.channel_message_counts.clear()  # the writer's own
+    assert rosbag.bag_topics(path)["/c"].count is None
+    assert len(detect_records(path)) == 10
 
 
 # --------------------------------------------------------------------------- bad bags

@@ -402,8 +402,9 @@ def bag_topics(path: str | Path) -> dict[str, TopicInfo]:
         if summary is not None and summary.channels:
             stats = summary.statistics
             return {c.topic: TopicInfo(c.topic, _schema_name(summary.schemas.get(c.schema_id)),
-                                       stats.channel_message_counts.get(c.id, 0) if stats
-                                       else None)
+                                       # an empty map: the statistic is not available
+                                       stats.channel_message_counts.get(c.id, 0)
+                                       if stats and stats.channel_message_counts else None)
                     for c in summary.channels.values()}
         raw.seek(0)
         schemas: dict[int, str] = {}
@@ -845,6 +846,9 @@ def _bag_files(folder: Path) -> list[Path]:
     except (OSError, UnicodeDecodeError, yaml.YAMLError, AttributeError) as exc:
         raise SourceError(f"{meta}: not a rosbag2 metadata file ({type(exc).__name__})",
                           "not-a-bag") from None
+    if not isinstance(info, dict):  # a list, a string
+        raise SourceError(f"{meta}: not a rosbag2 metadata file (its "
+                          "rosbag2_bagfile_information is not a mapping)", "not-a-bag")
     storage = str(info.get("storage_identifier") or "mcap")
     if storage != "mcap":
         raise SourceError(f"{folder}: a bag stored in {storage}; only MCAP bags are read "
