@@ -34,8 +34,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 # first: without the 'ros' extra, this import fails with a message naming it
-from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, response_message, target_annotations,
-                                   time_ns, timestamp)
+from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, close_channels, response_message,
+                                   target_annotations, time_ns, timestamp)
 
 import foxglove
 from foxglove.channels import CompressedImageChannel, ImageAnnotationsChannel
@@ -76,8 +76,7 @@ class _Robot:
     touched: float = 0.0
 
     def close(self) -> None:
-        for channel in (self.preview, self.annotations, self.response, self.warning):
-            channel.close()
+        close_channels(self.preview, self.annotations, self.response, self.warning)
 
 
 class FoxgloveBridge:

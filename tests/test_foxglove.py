@@ -333,6 +333,37 @@ def test_bridge_counts_bad_messages_and_bounds_its_robots():
         assert bridge.robots() == ["r2", "r3"]
 
 
+def test_a_robot_the_bridge_forgets_leaves_nothing_behind_in_the_sdk():
+    """foxglove-sdk keeps every JSON channel made in a table of its own, and closing one left
+    it there: a live server whose robots came and went grew some 5 kB a robot for good (a
+    Foxglove server round: 1.3 GB an hour under a flood of new ids)."""
+    import foxglove.channel
+
+    from clients.foxglove import FoxgloveBridge
+
+    clock = [0.0]
+    with FoxgloveBridge(port=0, max_robots=2, forget_after=1.0,
+                        clock=lambda: clock[0]) as bridge:
+        before = len(foxglove.channel._channels_by_id)
+        for k in range(200):  # each new robot takes the place of one silent past forget_after
+            clock[0] += 2.0
+            assert bridge.offer(f"asnn/r{k}/response", response(f"r{k}", 1, 1.0)) == f"r{k}"
+        assert len(bridge.robots()) == 1
+        assert len(foxglove.channel._channels_by_id) - before <= 2 * 2
+
+
+def test_an_mcap_writer_closed_leaves_no_channel_behind(tmp_path):
+    import foxglove.channel
+
+    from asnn.io.foxglove_mcap import FoxgloveMcapWriter
+
+    before = len(foxglove.channel._channels_by_id)
+    for k in range(3):
+        with FoxgloveMcapWriter(tmp_path / f"{k}.mcap") as writer:
+            writer.write(np.zeros((32, 32), np.uint8), {"collision": False}, 0)
+    assert len(foxglove.channel._channels_by_id) == before
+
+
 def test_bridge_follows_the_dashboards_hostile_input_rules(caplog):
     """docs/operations.md, "Hostile input": the Foxglove server takes samples as the dashboard
     does: the same preview cap, targets per response bounded, a stale robot makes room for a new
