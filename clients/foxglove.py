@@ -127,6 +127,11 @@ class FoxgloveBridge:
         except Exception as exc:  # the SDK's own error type: the port is taken, a bad address
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {exc}") from None
         self.host = host
+        # robots are forgotten in silence too: with the whole fleet quiet (its cameras stopped,
+        # the router gone) no message comes to do it, and every new viewer saw the dead topics
+        self._stopped = threading.Event()
+        self._sweeper = threading.Thread(target=self._sweep, name="foxglove-sweep", daemon=True)
+        self._sweeper.start()
 
     @property
     def port(self) -> int:
@@ -134,7 +139,10 @@ class FoxgloveBridge:
 
     @property
     def url(self) -> str:
-        return f"ws://{'127.0.0.1' if self.host in ('0.0.0.0', '') else self.host}:{self.port}"
+        """Where a viewer connects: the loopback address for a server on every interface, an
+        IPv6 address in brackets."""
+        host = {"0.0.0.0": "127.0.0.1", "": "127.0.0.1", "::": "::1"}.get(self.host, self.host)
+        return f"ws://{f'[{host}]' if ':' in host else host}:{self.port}"
 
     def robots(self) -> list[str]:
         with self._lock:
@@ -222,6 +230,11 @@ class FoxgloveBridge:
                 targets, stamp_ns, state.size, collision=response.collision,
                 scale=state.scale))
 
+    def _sweep(self) -> None:
+        while not self._stopped.wait(min(self.forget_after / 10, 1.0)):
+            with self._lock:
+                self._forget_locked(self.clock())
+
     def _forget_locked(self, now: float) -> None:
         if now < self._next_sweep:
             return
@@ -241,6 +254,8 @@ class FoxgloveBridge:
 
     def close(self) -> None:
         """Stop serving and close every robot's channels."""
+        self._stopped.set()
+        self._sweeper.join()
         with self._lock:
             for state in self._robots.values():
                 state.close()

@@ -29,6 +29,7 @@ from asnn.io.foxglove_mcap import target_annotations  # noqa: E402
 from asnn.stimuli import make_scene  # noqa: E402
 from service import keys  # noqa: E402
 from service.messages import MAX_PREVIEW_BYTES, Preview, Response, TargetMsg, encode  # noqa: E402
+from netutil import wait_for  # noqa: E402
 
 TOPICS = {"/asnn/image": ("foxglove.CompressedImage", "protobuf"),
           "/asnn/annotations": ("foxglove.ImageAnnotations", "protobuf"),
@@ -350,6 +351,27 @@ def test_a_robot_the_bridge_forgets_leaves_nothing_behind_in_the_sdk():
             assert bridge.offer(f"asnn/r{k}/response", response(f"r{k}", 1, 1.0)) == f"r{k}"
         assert len(bridge.robots()) == 1
         assert len(foxglove.channel._channels_by_id) - before <= 2 * 2
+
+
+def test_a_robot_silent_past_forget_after_is_forgotten_with_nothing_else_arriving():
+    """Robots were forgotten only when a message came: a whole fleet gone quiet kept its
+    topics advertised to every new viewer (a Foxglove server round)."""
+    from clients.foxglove import FoxgloveBridge
+
+    with FoxgloveBridge(port=0, forget_after=0.3) as bridge:
+        assert bridge.offer("asnn/r1/response", response("r1", 1, 1.0)) == "r1"
+        wait_for(lambda: bridge.robots() == [], what="r1 forgotten in silence")
+
+
+@pytest.mark.parametrize("host, shown", [("127.0.0.1", "127.0.0.1"), ("0.0.0.0", "127.0.0.1"),
+                                         ("::", "[::1]"), ("::1", "[::1]"),
+                                         ("fe80::1", "[fe80::1]")])
+def test_the_url_to_paste_into_foxglove_brackets_an_ipv6_address(host, shown):
+    from clients.foxglove import FoxgloveBridge
+
+    with FoxgloveBridge(port=0) as bridge:
+        bridge.host = host  # as if it listened there (the machine may have no IPv6)
+        assert bridge.url == f"ws://{shown}:{bridge.port}"
 
 
 def test_an_mcap_writer_closed_leaves_no_channel_behind(tmp_path):
