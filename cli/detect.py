@@ -28,7 +28,7 @@ from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
 from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_names
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
-from cli.session import exit_on_interrupt
+from cli.session import exit_on_interrupt, signals_held
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -416,29 +416,32 @@ def run(args: argparse.Namespace) -> int:
 
         def write(item) -> None:
             index, t, frame, response = item
-            record = response.record(index, t)
-            records.append(record)
-            try:
-                if jsonl is not None:
-                    jsonl.write(json.dumps(record) + "\n")
-                if tracks is not None:
-                    tracks.write(json.dumps(_tracks_record(index, t, response)) + "\n")
-                if mcap is not None:
-                    mcap.write(frame, record, (source.start_ns or 0) + round(t * 1e9))
-            except BrokenPipeError:  # stdout's reader went away: cli.main ends quietly
-                raise
-            except (OSError, RuntimeError) as exc:  # a full disk; the MCAP writer's errors
-                raise _OutputError(f"cannot write the output at frame {index}: {exc}") from None
-            if args.annotate:
-                if not video:
-                    try:
-                        writer = open_writer(args.annotate, writable_fps(source.fps),
-                                             frame.shape[1::-1])
-                    except OSError:
-                        raise _OutputError(f"cannot write {args.annotate}") from None
-                    stack.callback(writer.release)
-                    video.extend((writer, frame.shape[1::-1]))
-                video[0].write(annotate_frame(frame, response))
+            # every output takes the frame, or none does: a Ctrl-C or SIGTERM that came between
+            # two of them left the MCAP's frame without its response, the JSON lines with it
+            with signals_held():
+                record = response.record(index, t)
+                records.append(record)
+                try:
+                    if jsonl is not None:
+                        jsonl.write(json.dumps(record) + "\n")
+                    if tracks is not None:
+                        tracks.write(json.dumps(_tracks_record(index, t, response)) + "\n")
+                    if mcap is not None:
+                        mcap.write(frame, record, (source.start_ns or 0) + round(t * 1e9))
+                except BrokenPipeError:  # stdout's reader went away: cli.main ends quietly
+                    raise
+                except (OSError, RuntimeError) as exc:  # a full disk; the MCAP writer's errors
+                    raise _OutputError(f"cannot write the output at frame {index}: {exc}") from None
+                if args.annotate:
+                    if not video:
+                        try:
+                            writer = open_writer(args.annotate, writable_fps(source.fps),
+                                                 frame.shape[1::-1])
+                        except OSError:
+                            raise _OutputError(f"cannot write {args.annotate}") from None
+                        stack.callback(writer.release)
+                        video.extend((writer, frame.shape[1::-1]))
+                    video[0].write(annotate_frame(frame, response))
             progress.advance()
 
         output = _WriteNow(write) if busy else WriteBehind(write, depth=WRITE_BEHIND)

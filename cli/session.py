@@ -76,6 +76,31 @@ def exit_on_interrupt():
             signal.signal(sig, old)
 
 
+@contextlib.contextmanager
+def signals_held():
+    """Ctrl-C and SIGTERM held for the block, then given to the handlers in place before it:
+    for a step whose parts must all be done or none (a frame's lines in every output). On the
+    main thread only (the only one Python's handlers run on); elsewhere, the block as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = []
+    previous = {sig: signal.signal(sig, lambda signum, frame: held.append((signum, frame)))
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+        if held:
+            signum, frame = held[0]
+            handler = previous[signum]
+            if callable(handler):
+                handler(signum, frame)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(signum)
+
+
 def stop_on_signals() -> threading.Event:
     """An event set by SIGINT or SIGTERM (docker stop), for a clean shutdown."""
     stop = threading.Event()

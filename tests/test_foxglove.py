@@ -8,6 +8,7 @@ import base64
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -372,6 +373,35 @@ def test_the_url_to_paste_into_foxglove_brackets_an_ipv6_address(host, shown):
     with FoxgloveBridge(port=0) as bridge:
         bridge.host = host  # as if it listened there (the machine may have no IPv6)
         assert bridge.url == f"ws://{shown}:{bridge.port}"
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_an_interrupt_while_a_frame_is_written_leaves_every_output_whole(tmp_path, monkeypatch,
+                                                                        signum):
+    """A Ctrl-C or SIGTERM that came while the MCAP took a frame left its image without its
+    response, and the JSON lines one frame ahead of it (a Foxglove server round)."""
+    import asnn.io.foxglove_mcap as foxglove_mcap
+    from asnn.io.video import write_video
+    from cli.main import main
+
+    video = write_video(make_scene("looming").frames, tmp_path / "l.mp4")
+    real, calls = foxglove_mcap.response_message, [0]
+
+    def response_message(fields, stamp_ns):  # the signal comes between the frame's messages
+        calls[0] += 1
+        if calls[0] == 20:
+            os.kill(os.getpid(), signum)
+        return real(fields, stamp_ns)
+
+    monkeypatch.setattr(foxglove_mcap, "response_message", response_message)
+    out = tmp_path / "out"
+    assert main(["detect", str(video), "--mcap", f"{out}.mcap", "--jsonl", f"{out}.jsonl",
+                 "--threads", str(os.cpu_count() or 1)]) == (143 if signum == signal.SIGTERM
+                                                             else 130)
+    with open(f"{out}.mcap", "rb") as fh:
+        counts = make_reader(fh).get_summary().statistics.channel_message_counts
+    lines = len(Path(f"{out}.jsonl").read_text().splitlines())
+    assert sorted(counts.values())[-3:] == [lines] * 3 and lines >= 20
 
 
 def test_an_mcap_writer_closed_leaves_no_channel_behind(tmp_path):
