@@ -50,6 +50,7 @@ __all__ = [
     "attended_response",
     "membrane_potential",
     "sigmoid_output",
+    "potential_for_output",
     "spike_count",
     "spike_rate",
     "collision_warning",
@@ -595,6 +596,12 @@ def sigmoid_output(u: float, n_cells: int) -> float:
     """out(t) = 1 / (1 + exp(-|u| / N)), in [0.5, 1) (SPEC ruling on paper eq. 32); in floating
     point it rounds to exactly 1.0 once |u| / N passes about 37."""
     return 1.0 / (1.0 + math.exp(-abs(u) / n_cells))
+
+
+def potential_for_output(out: float) -> float:
+    """|u| / N at which :func:`sigmoid_output` reads ``out`` (in (0.5, 1)): eq. 32 inverted,
+    log(out / (1 - out))."""
+    return math.log(out / (1.0 - out))
 
 
 MAX_SPIKES = 2**31 - 1  # the spike count saturates here (eq. 33 grows without bound)

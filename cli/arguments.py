@@ -113,14 +113,6 @@ def finite(value: str) -> float:
     return _number(value)
 
 
-def positive(value: str) -> float:
-    """A number greater than 0."""
-    number = _number(value)
-    if not number > 0:
-        raise argparse.ArgumentTypeError(f"must be positive: {value!r}")
-    return number
-
-
 def _interval(value: str, low: float, high: float, *, open_low: bool, unit: str = "") -> float:
     """A finite number in (low, high] (``open_low``) or [low, high]."""
     number = _number(value)

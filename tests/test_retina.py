@@ -116,5 +116,8 @@ def test_the_warning_is_a_spike_rate_of_at_least_t_c():
 def test_spike_count_and_output():
     assert retina.sigmoid_output(0.0, 100) == 0.5
     assert retina.sigmoid_output(-50.0, 100) == retina.sigmoid_output(50.0, 100) > 0.5
+    for out in (0.51, 0.75, 0.999):  # eq. 32 inverted
+        u = 100 * retina.potential_for_output(out)
+        assert retina.sigmoid_output(u, 100) == pytest.approx(out, abs=1e-12)
     assert retina.spike_count(0.5, 10.0, 0.51) == 0
     assert retina.spike_count(0.8, 10.0, 0.51) == math.floor(math.exp(2.9))

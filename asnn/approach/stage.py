@@ -36,6 +36,7 @@ import numpy as np
 
 from .._jit import kernel
 from ..params import ASNNParams
+from ..retina import potential_for_output
 from ..response import TrackReport
 from ..targets import Target, extract_objects
 from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
@@ -208,8 +209,7 @@ class ApproachStage:
         self.surface = SurfaceWatch()
         # |u| / N at which out(t) (eq. 32) reads T_sp + 1 / (2 K_sp): one spike a frame
         # (floor(e^0.5), eq. 33) while a surface ahead counts, whatever the preset
-        out = min(p.t_sp + 0.5 / p.k_sp, 0.999)
-        self._surface_potential = math.log(out / (1.0 - out))
+        self._surface_potential = potential_for_output(min(p.t_sp + 0.5 / p.k_sp, 0.999))
         self.objects: list = []
         self.against_scene: dict[int, float | None] = {}
         self.fit_against_scene: dict[int, float | None] = {}

@@ -90,10 +90,12 @@ def _timed_targets(totals: list[float]):
                 totals[0] += time.perf_counter() - start
         return call
 
-    # (owner, name) of each call timed; one the model no longer has is counted in the model
-    places = [(owner, name) for owner, name in ((model, "extract_targets"),
-                                                (model.ASNN, "_objects"))
-              if hasattr(owner, name)]
+    # (owner, name) of each call timed: one renamed must fail here, not read 0 s in the column
+    places = [(model, "extract_targets"), (model.ASNN, "_objects")]
+    missing = [name for owner, name in places if not hasattr(owner, name)]
+    if missing:
+        raise AttributeError(f"the targets' time cannot be measured: the model has no "
+                             f"{', '.join(missing)}")
     originals = [getattr(owner, name) for owner, name in places]
     for (owner, name), original in zip(places, originals):
         setattr(owner, name, timed(original))
