@@ -43,10 +43,10 @@ from __future__ import annotations
 import textwrap
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "MAX_KERNEL", "preset", "preset_key",
-           "preset_names"]
+__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "MAX_KERNEL", "check_overrides",
+           "parse_preset_spec", "preset", "preset_from_spec", "preset_key", "preset_names"]
 
 # Upper bounds of the sizes and counts, far above what the presets and the paper use (kernels
 # of 5 and 31 px, 2 and 4 filter stages, windows of a few frames) but below what allocates
@@ -587,6 +587,71 @@ def preset_key(name: str) -> str:
         raise ValueError(f"unknown preset {name!r}{hint}; choose one of "
                          f"{', '.join(preset_names())}")
     return key
+
+
+def parse_preset_spec(spec: str, label: str | None = None
+                      ) -> tuple[str, tuple[tuple[str, object], ...]]:
+    """Read a preset spec of the command line, ``NAME[/FIELD=VALUE...]`` (``robust/top_k=0``;
+    an empty name is the default's): the name and the overrides, in their order.
+
+    A value reads as none, true, false, an int, a float or else the word itself, and is
+    checked strictly (:func:`check_overrides`): ``true`` is no ``top_k`` of 1, nor ``1`` a
+    ``stabilise`` of true.
+
+    Raises
+    ------
+    ValueError
+        For an override that is not ``FIELD=VALUE``, a field given twice, an unknown preset
+        or field, or a value the preset does not take; the message names ``label`` (the spec
+        as the user gave it: ``asnn:robust/top_k=x``), else the spec.
+    """
+    label = spec if label is None else label
+    name, *items = spec.strip().split("/")
+    name = name.strip() or "default"
+    overrides, named = [], set()
+    for item in items:
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ValueError(f"{label!r}: an override is name=value, got {item!r}")
+        if key in named:
+            raise ValueError(f"{label!r}: {key} is given twice")
+        named.add(key)
+        overrides.append((key, _spec_value(value)))
+    check_overrides(name, overrides, label)
+    return name, tuple(overrides)
+
+
+def check_overrides(name: str, overrides, label: str) -> None:
+    """Check a preset's overrides ``(field, value)`` as :func:`preset` does, but strictly (no
+    conversion of a value's type); ValueError naming ``label`` and the field."""
+    try:
+        base = preset(name)  # raises for an unknown preset
+        ASNNParams.model_validate({**base.model_dump(), **dict(overrides)}, strict=True)
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        where = f"{error['loc'][0]}: " if error["loc"] else ""  # a check of the whole set
+        raise ValueError(f"{label!r}: {where}{error['msg']}") from None
+
+
+def preset_from_spec(spec: str) -> ASNNParams:
+    """The parameters a preset spec (:func:`parse_preset_spec`) names."""
+    name, overrides = parse_preset_spec(spec)
+    return preset(name, **dict(overrides))
+
+
+def _spec_value(text: str):
+    """A spec's override value: none, true, false, a number, or the word itself."""
+    word = text.strip()
+    lowered = word.lower()
+    if lowered in ("none", "true", "false"):
+        return {"none": None, "true": True, "false": False}[lowered]
+    for kind in (int, float):
+        try:
+            return kind(word)
+        except ValueError:
+            pass
+    return word
 
 
 def preset(name: str, **overrides) -> ASNNParams:

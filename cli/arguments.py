@@ -239,15 +239,14 @@ def seed(value: str) -> int:
 
 
 def preset_spec(text: str) -> str:
-    """An ASNN preset name with optional ``/field=value`` changes (``robust/top_k=0``), checked
-    as a detector spec's."""
-    from asnn.evaluation.runs import parse_detector  # only when a preset is given
+    """An ASNN preset name with optional ``/field=value`` changes (``robust/top_k=0``;
+    :func:`asnn.params.parse_preset_spec`)."""
+    from asnn.params import parse_preset_spec
 
     try:
-        parse_detector(f"asnn:{text}")
+        parse_preset_spec(text)
     except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc).replace(repr(f"asnn:{text}"), repr(text))
-                                         ) from None
+        raise argparse.ArgumentTypeError(str(exc)) from None
     return text
 
 

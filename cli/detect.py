@@ -17,7 +17,6 @@ from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.evaluation.perturb import describe, perturbed
 from asnn.evaluation.progress import ProgressPrinter
-from asnn.evaluation.runs import parse_detector
 from asnn.io.files import seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
@@ -26,7 +25,7 @@ from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_sho
                            open_writer, quiet_writer, writable_fps)
 from asnn.io.visualize import annotate_frame, plot_responses
 from asnn.model import compile_kernels
-from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_names
+from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_from_spec, preset_names
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
 from cli.session import exit_on_interrupt, signals_held
 
@@ -349,7 +348,7 @@ def run(args: argparse.Namespace) -> int:
     model_threads = 1
     if args.model != "asnn" and args.preset != "default":
         return _fail(f"--preset applies to the ASNN model only, not {args.model}")
-    params = parse_detector(f"asnn:{args.preset}").params
+    params = preset_from_spec(args.preset)
     if args.tracks:
         if args.model != "asnn" or params.targets != "objects":
             return _fail("--tracks needs the ASNN model with a preset that tracks objects "

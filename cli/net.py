@@ -13,8 +13,9 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import (count, fleet_size, frame_rate, non_negative, nonempty_path, robot_id,
-                        seconds, seconds_or_zero, threads, warmup_frames, whole, worker_id)
+from .arguments import (count, fleet_size, frame_rate, non_negative, nonempty_path, preset_spec,
+                        robot_id, seconds, seconds_or_zero, threads, warmup_frames, whole,
+                        worker_id)
 from .session import add_zenoh_options, exit_on_interrupt, fail, session_for, setup_logging, \
     stop_on_signals, zenoh_options
 
@@ -313,8 +314,10 @@ def register(subparsers) -> None:
                               "each serves its share) and publish a response per processed frame "
                               "and a warning per collision.")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
-    p.add_argument("--preset", choices=preset_names(), default=None,
-                   help="ASNN preset (default: the default preset)")
+    p.add_argument("--preset", type=preset_spec, default=None, metavar="NAME[/FIELD=VALUE...]",
+                   help=f"ASNN parameter preset ({', '.join(preset_names())}), with any fields "
+                        "changed after slashes (robust/ignore_rig=false; default: the default "
+                        "preset)")
     p.add_argument("--id", type=worker_id, default=None,
                    help="worker id reported in responses (default: <host>-<pid>)")
     p.add_argument("--idle-timeout", type=seconds, default=IDLE_TIMEOUT_S, metavar="SECONDS",
@@ -394,7 +397,9 @@ def register(subparsers) -> None:
     p.add_argument("--fps", type=frame_rate, default=None,
                    help="playback rate (default: the scene's, 20)")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
-    p.add_argument("--preset", choices=preset_names(), default=None,
-                   help="ASNN preset (default: the default preset)")
+    p.add_argument("--preset", type=preset_spec, default=None, metavar="NAME[/FIELD=VALUE...]",
+                   help=f"ASNN parameter preset ({', '.join(preset_names())}), with any fields "
+                        "changed after slashes (robust/ignore_rig=false; default: the default "
+                        "preset)")
     p.add_argument("--json", action="store_true", help="print the warnings as JSON lines")
     p.set_defaults(func=cmd_demo)

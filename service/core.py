@@ -117,7 +117,7 @@ from dataclasses import dataclass, field
 from asnn import FrameError
 from asnn.detectors import available_cores, make_detector
 from asnn.params import (DEFAULT_PRESET, MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, PERIOD_FRAMES,
-                         SLOW_FPS, timed_gap)
+                         SLOW_FPS, preset_from_spec, timed_gap)
 
 from . import keys
 from .logutil import RateLimitedLog
@@ -339,7 +339,8 @@ class WorkerCore:
     ----------
     model : {'asnn', 'lgmd1', 'lgmd2'}
     preset : str, optional
-        ASNN preset (``None``: the default preset).
+        ASNN preset spec, ``NAME[/FIELD=VALUE...]`` (:func:`asnn.params.parse_preset_spec`;
+        ``None``: the default preset), reported as given in every response.
     worker_id : str, optional
         Reported in every response; default ``<host>-<pid>``.
     prefix : str
@@ -386,10 +387,13 @@ class WorkerCore:
                  log_interval: float = 10.0):
         if model != "asnn" and preset is not None:  # dropped without a word, and not reported
             raise ValueError(f"--preset applies to the ASNN model only, not {model}")
-        make_detector(model, preset)  # fail now, not on the first frame
         self.model = model
         self.preset = (DEFAULT_PRESET if preset in (None, "default") else preset) \
             if model == "asnn" else ""
+        # the parameters each robot's model is made of (a spec checked now, not on the first
+        # frame); the responses report the spec as given
+        self.params = preset_from_spec(self.preset) if model == "asnn" else None
+        make_detector(model, self.params)
         self.worker_id = worker_id or default_worker_id()
         if len(self.worker_id) > MAX_NOTE_LEN:  # viewers show no more of it (clients.fleet)
             raise ValueError(f"a worker id has at most {MAX_NOTE_LEN} characters, got "
@@ -695,7 +699,7 @@ class WorkerCore:
                 self._refuse_taken(state, job, "too-many-robots", full)
                 return None
         if state.detector is None:
-            state.detector = make_detector(self.model, self.preset or None)
+            state.detector = make_detector(self.model, self.params)
             state.id_base = track_id_base(frame.seq)
         elif state.processed_stream not in (None, job.stream):
             reason = job.reset_reason or "seq-backwards"

@@ -333,7 +333,7 @@ class Worker:
         log.info("worker %s: loading the model's kernels (compiling them takes under a "
                  "minute where numba has no cache yet)", self.core.worker_id)
         started = time.monotonic()
-        compile_kernels((self.core.preset,))
+        compile_kernels((self.core.params,))
         self._kernels_loaded = True
         log.info("worker %s: kernels ready in %.1f s", self.core.worker_id,
                  time.monotonic() - started)

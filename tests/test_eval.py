@@ -911,8 +911,8 @@ def test_a_clip_slower_than_the_model_was_made_for_is_named_in_the_warnings(tmp_
                  "--no-plots"]) == 0
     warned = json.loads((out / "results.json").read_text())["warnings"]
     assert [w for w in warned if "frames a second" in w] == [
-        "slow.mp4: 10 frames a second; ASNN loses hits below 18 (README, 'At half the frame "
-        "rate')"]
+        "slow.mp4: 10 frames a second; ASNN loses hits below 18 (docs/evaluation.md, 'At half "
+        "the frame rate')"]
     assert "slow.mp4: 10 frames a second" in capsys.readouterr().err
     # its label is right: the report must not list it as a clip that disagrees with its label
     report = (out / "report.md").read_text()

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from asnn.params import DEFAULT_PRESET
+from asnn.params import DEFAULT_PRESET, preset
 from asnn.io.video import write_video
 from asnn.stimuli import make_scene
 from clients.alerts import WarningListener
@@ -305,7 +305,7 @@ def test_a_starting_worker_loads_the_kernels_of_its_own_preset(zenoh_net, monkey
     for preset_name in ("translation", None):
         with Worker(zenoh_net.hub, WorkerCore(preset=preset_name), stats_every=0):
             pass
-    assert loaded == [("translation",), (DEFAULT_PRESET,)]
+    assert loaded == [(preset("translation"),), (preset(DEFAULT_PRESET),)]
 
 
 def test_camera_sources_open_files_scenes_and_fail_clearly(tmp_path):
@@ -474,6 +474,26 @@ def test_worker_threads_option():
     assert build_parser().parse_args(["worker"]).threads == len(os.sched_getaffinity(0))
     with pytest.raises(SystemExit):
         build_parser().parse_args(["worker", "--threads", "0"])
+
+
+@pytest.mark.parametrize("command", ["worker", "demo"])
+def test_the_service_takes_a_preset_with_fields_changed_as_detect_does(command, capsys):
+    """The README's advice for a camera (``robust/ignore_rig=false`` for a still one) could be
+    followed offline only: the worker and the demo took preset names alone (a docs audit)."""
+    from cli.main import build_parser
+
+    spec = "robust/ignore_rig=false"
+    assert build_parser().parse_args([command, "--preset", spec]).preset == spec
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([command, "--preset", "robust/ignore_rig=maybe"])
+    assert "'robust/ignore_rig=maybe': ignore_rig: Input should be a valid boolean" in \
+        capsys.readouterr().err
+    core = WorkerCore(preset=spec)
+    looming = make_scene("looming")
+    assert core.offer("asnn/r1/frame", encode(Frame.from_image(looming.frames[0], seq=0,
+                                                                stamp=0.0))) == "r1"
+    response = core.process(core.take())
+    assert response.preset == spec and core._robots["r1"].detector.params.ignore_rig is False
 
 
 def test_every_networked_command_takes_the_contract_s_common_options(capsys):

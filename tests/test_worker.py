@@ -331,8 +331,10 @@ def test_unknown_model_or_preset_fails_at_start():
         WorkerCore(model="nope")
     with pytest.raises(ValueError):
         WorkerCore(preset="nope")
-    with pytest.raises(ValueError, match=r"in Python: preset\('robust', FIELD=VALUE\)"):
-        WorkerCore(preset="robust/top_k=0")  # the command line's spec, given to the library
+    with pytest.raises(ValueError, match="top_k: Input should be a valid integer"):
+        WorkerCore(preset="robust/top_k=x")
+    core = WorkerCore(preset="robust/top_k=0")  # the command line's spec (asnn worker --preset)
+    assert core.preset == "robust/top_k=0" and core.params.top_k == 0
     with pytest.raises(ValueError, match="--preset applies to the ASNN model only, not lgmd1"):
         WorkerCore(model="lgmd1", preset="robust")  # ran, and the status named no preset
 

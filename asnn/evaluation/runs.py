@@ -17,12 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pydantic import ValidationError
-
 from . import scoring
 from ..detectors import MODELS, Detector, make_detector
 from ..io.files import write_atomically
-from ..params import DEFAULT_PRESET, ASNNParams, preset
+from ..params import DEFAULT_PRESET, ASNNParams, check_overrides, parse_preset_spec, preset
 
 __all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
            "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
@@ -120,20 +118,6 @@ def _spell(value) -> str:
         str(value)
 
 
-def _value(text: str):
-    """A spec's override value: none, true, false, a number, or the word itself."""
-    word = text.strip()
-    lowered = word.lower()
-    if lowered in ("none", "true", "false"):
-        return {"none": None, "true": True, "false": False}[lowered]
-    for kind in (int, float):
-        try:
-            return kind(word)
-        except ValueError:
-            pass
-    return word
-
-
 def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec:
     """Read a detector spec.
 
@@ -158,31 +142,12 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
         if rest:
             raise ValueError(f"{model} has no presets: {spec!r}")
         return DetectorSpec(model)
-    preset_name, *items = rest.split("/")
-    given = len(items)
-    if not preset_name:
-        preset_name, *base = (default_preset or "default").split("/")
-        items = base + items
-    overrides, named = [], set()
-    for i, item in enumerate(items):
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise ValueError(f"{spec!r}: an override is name=value, got {item!r}")
-        key = key.strip()
-        if i >= len(items) - given:  # the spec's own (they may change the default's)
-            if key in named:
-                raise ValueError(f"{spec!r}: {key} is given twice")
-            named.add(key)
-        overrides.append((key, _value(value)))
-    try:
-        # as preset(name, **overrides) checks them, but strictly: a spec's true is no top_k
-        # of 1, nor its 1 a stabilise of true
-        base = preset(preset_name)  # raises for an unknown preset
-        ASNNParams.model_validate({**base.model_dump(), **dict(overrides)}, strict=True)
-    except ValidationError as exc:
-        error = exc.errors()[0]
-        where = f"{error['loc'][0]}: " if error["loc"] else ""  # a check of the whole set
-        raise ValueError(f"{spec!r}: {where}{error['msg']}") from None
+    if rest.split("/", 1)[0].strip():
+        preset_name, overrides = parse_preset_spec(rest, spec)
+    else:  # the default preset's, then the spec's own (which may change the default's)
+        preset_name, base = parse_preset_spec(default_preset or "default", spec)
+        overrides = base + parse_preset_spec(preset_name + rest, spec)[1]
+        check_overrides(preset_name, overrides, spec)
     return DetectorSpec("asnn", None if preset_name == "default" else preset_name,
                         tuple(overrides))
 
