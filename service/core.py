@@ -368,7 +368,8 @@ class WorkerCore:
     warmup_frames : int
         Frames a robot's model must step on its current stream before it is :meth:`warm`.
     log_interval : float
-        Seconds between two WARNING lines about rejected frames of the same reason.
+        Seconds between two WARNING lines of the same kind (a rejection's reason, a robot's
+        intrusion, restarts, lost frames, slow or untimed stream; a model's failure).
 
     Raises
     ------
@@ -410,7 +411,7 @@ class WorkerCore:
             raise ValueError(f"warmup_frames must be 0 or more, got {warmup_frames}")
         self.warmup_frames = int(warmup_frames)
         self.started = clock()
-        self._rejections = RateLimitedLog(log, log_interval, clock)
+        self._limited_log = RateLimitedLog(log, log_interval, clock)
         # the latest refusal of each of the last MAX_REFUSED robot ids refused, for the status:
         # a camera none of whose frames is taken never appears among the robots
         self._refused: OrderedDict[str, dict] = OrderedDict()
@@ -550,7 +551,7 @@ class WorkerCore:
             state.intruder_seen = received
             state.intrusions += 1
             self._stats.intrusions += 1
-            self._rejections.warning(
+            self._limited_log.warning(
                 f"intrusion:{robot}", "robot %s: two publishers interleave frames on %s (seq "
                 "%d after %d); following the stream that was there first and refusing "
                 "frames that do not continue it", robot, keys.frame_key(robot, self.prefix),
@@ -567,7 +568,7 @@ class WorkerCore:
         if current is not None:
             state.restarts = state.restarts + 1 if current.frames == 1 else 0
             if state.restarts >= RESTARTS_WARNED:
-                self._rejections.warning(
+                self._limited_log.warning(
                     f"restarts:{robot}", "robot %s: its last %d frames each started a new "
                     "stream (%s): its model is reset on every frame and cannot warn; a "
                     "camera's seq must grow from frame to frame and its stamp must not go back",
@@ -576,7 +577,7 @@ class WorkerCore:
             # frames lost on the way (a link that drops, a camera faster than its link or its
             # worker can take): each such gap resets the model, which cannot warn until it has
             # stepped a few frames again; an INFO line per reset hid a soak trial's 28 in 32 s
-            self._rejections.warning(
+            self._limited_log.warning(
                 f"seq-gap:{robot}", "robot %s: seq %d after %d: frames lost on the way, more "
                 "than --max-gap (%d steps of %d); its model starts again and cannot warn until "
                 "it has warmed up (frequent: a link that drops frames, or a camera faster than "
@@ -607,7 +608,7 @@ class WorkerCore:
                                     "at": self.clock(), "told": False}
             if len(self._refused) > MAX_REFUSED:
                 self._refused.popitem(last=False)
-        self._rejections.warning(reason, "invalid frame on %r (%s, #%d): %s", str(key)[:200],
+        self._limited_log.warning(reason, "invalid frame on %r (%s, #%d): %s", str(key)[:200],
                                  reason, n, detail[:300])
 
     def refusals_to_tell(self) -> list[tuple[str, str, str, int]]:
@@ -723,7 +724,7 @@ class WorkerCore:
         except Exception as exc:  # a bug: the frame is refused, counted and told, not lost,
             # its traceback logged at most once per log_interval (not once per frame), and the
             # model, stopped halfway through a step, starts afresh on the next frame
-            if self._rejections.allow("model-failed-trace") is not None:
+            if self._limited_log.allow("model-failed-trace") is not None:
                 log.error("robot %s: the model failed on frame %d", job.robot, frame.seq,
                           exc_info=True)
             state.detector = state.processed_stream = None
@@ -775,7 +776,7 @@ class WorkerCore:
         elif state.slow_frames >= PERIOD_FRAMES and not state.slow_logged:
             # slow for a while, not a moment's skips; logged once per slow spell, when the
             # rate limit lets it through (so a relapse soon after one is logged later)
-            state.slow_logged = self._rejections.warning(
+            state.slow_logged = self._limited_log.warning(
                 f"slow:{robot}", "robot %s: its frames are detected at %.1f per second (the "
                 "camera's rate, or frames skipped under load); the default preset is made for "
                 "20 or more", robot, state.fps)
@@ -791,7 +792,7 @@ class WorkerCore:
         if timed:
             state.untimed_logged = False
         elif state.untimed_frames >= PERIOD_FRAMES and not state.untimed_logged:
-            state.untimed_logged = self._rejections.warning(
+            state.untimed_logged = self._limited_log.warning(
                 f"untimed:{robot}", "robot %s: its frames' stamps are %g s apart, not a frame "
                 "period the model believes (%g to %g s): the targets' time to contact is timed "
                 "at %g frames a second instead; stamps are the camera's clock in seconds "

@@ -310,7 +310,7 @@ class Worker:
         self._stop_routes = threading.Event()
         self._threads: list[threading.Thread] = []
         self._router: threading.Thread | None = None
-        self._token = self._status = None
+        self._token = self._status_queryable = None
         self._watchers: list = []  # liveliness subscribers: workers, claims, cameras
         self._kernels_loaded = False
 
@@ -370,7 +370,7 @@ class Worker:
                 liveliness.declare_subscriber(keys.camera_tokens(prefix), self._on_camera,
                                               history=True)]
             self._token = liveliness.declare_token(keys.worker_token_key(me, prefix))
-        self._status = self.session.declare_queryable(keys.worker_status_key(me, prefix),
+        self._status_queryable = self.session.declare_queryable(keys.worker_status_key(me, prefix),
                                                       self._on_status_query)
         self._threads = [threading.Thread(target=self._run, daemon=True,
                                           name=f"asnn-worker-{i}") for i in range(self.threads)]
@@ -656,7 +656,7 @@ class Worker:
         self._threads = []
         for robot in list(self._claims):
             _undeclare(self._claims.pop(robot))
-        self._release("_status")
+        self._release("_status_queryable")
         for watcher in self._watchers:
             _undeclare(watcher)
         self._watchers = []

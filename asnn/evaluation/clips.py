@@ -25,11 +25,11 @@ from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE
                    parse_detectors,
                    rate_interval, run_detector, target_quality_cells, write_json, write_jsonl)
 
-__all__ = ["check_clips", "clip_warnings", "evaluate_clips", "open_clips",
+__all__ = ["check_clips", "clip_warnings", "evaluate_clips", "probe_clips",
            "open_labelled_clip"]
 
 
-def open_clips(clips_dir: str | Path, labels: Sequence[Mapping]
+def probe_clips(clips_dir: str | Path, labels: Sequence[Mapping]
                ) -> tuple[list[int], list[str], list[tuple[int, int] | None]]:
     """Open every labelled clip (:func:`~asnn.io.sources.open_source`, which decodes its first
     frame): the frames each states (0 where unknown or unreadable), one line per clip that
@@ -93,10 +93,10 @@ def clip_warnings(label: Mapping, frames: int, fps: float, size: tuple[int, int]
 
 
 def check_clips(clips_dir: str | Path, labels: Sequence[Mapping], most: int = 5) -> list[int]:
-    """The frames each labelled clip states (:func:`open_clips`); ValueError naming the clips
+    """The frames each labelled clip states (:func:`probe_clips`); ValueError naming the clips
     that cannot be opened, the first ``most`` of them, or else the labels whose ``center`` is
     outside their clip's frames (:func:`~asnn.evaluation.labels.center_outside`)."""
-    counts, problems, sizes = open_clips(clips_dir, labels)
+    counts, problems, sizes = probe_clips(clips_dir, labels)
     if problems:
         more = f"; and {len(problems) - most} more" if len(problems) > most else ""
         raise ValueError(f"{len(problems)} of the {len(labels)} labelled clips cannot be read "
