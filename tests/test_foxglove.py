@@ -243,7 +243,7 @@ def response(robot: str, seq: int, stamp: float, collision: bool = True, **targe
 
 
 def test_live_server_shows_a_robots_preview_annotations_and_numbers(zenoh_net):
-    from clients.dashboard import FleetSubscriber
+    from clients.fleet import FleetSubscriber
     from clients.foxglove import FoxgloveBridge
 
     frame = np.full((64, 128), 200, np.uint8)
@@ -395,9 +395,14 @@ def test_an_interrupt_while_a_frame_is_written_leaves_every_output_whole(tmp_pat
 
     monkeypatch.setattr(foxglove_mcap, "response_message", response_message)
     out = tmp_path / "out"
-    assert main(["detect", str(video), "--mcap", f"{out}.mcap", "--jsonl", f"{out}.jsonl",
-                 "--threads", str(os.cpu_count() or 1)]) == (143 if signum == signal.SIGTERM
-                                                             else 130)
+    # Python's own Ctrl-C, whatever an earlier test in this process left (a served fleet's)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        code = main(["detect", str(video), "--mcap", f"{out}.mcap", "--jsonl", f"{out}.jsonl",
+                     "--threads", str(os.cpu_count() or 1)])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert code == (143 if signum == signal.SIGTERM else 130)
     with open(f"{out}.mcap", "rb") as fh:
         counts = make_reader(fh).get_summary().statistics.channel_message_counts
     lines = len(Path(f"{out}.jsonl").read_text().splitlines())
