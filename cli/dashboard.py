@@ -23,7 +23,7 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
     """Feed ``store`` from the fleet's subscribers (``refusals``: the workers' refusal notices
     too) while ``server`` (a context manager that serves it) runs, until SIGINT or SIGTERM;
     ``server`` is closed on every path."""
-    from clients.dashboard import FleetSubscriber
+    from clients.fleet import FleetSubscriber
 
     try:
         session = session_for(args)

@@ -13,7 +13,7 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import (count, fleet_size, frame_rate, non_negative, nonempty_path, preset_spec,
+from .arguments import (fleet_size, frame_rate, non_negative, nonempty_path, preset_spec,
                         robot_id, seconds, seconds_or_zero, threads, warmup_frames, whole,
                         worker_id)
 from .session import add_zenoh_options, exit_on_interrupt, fail, session_for, setup_logging, \

@@ -9,6 +9,7 @@ most MAX_TARGETS targets per response (docs/operations.md, "Hostile input").
 from __future__ import annotations
 
 import hashlib
+import logging
 import threading
 import unicodedata
 from collections import OrderedDict
@@ -18,8 +19,11 @@ from service import keys
 from service.messages import (MAX_NOTE_LEN, MessageError, Preview, Refusal, Response,
                               check_preview, decode_preview, decode_refusal, decode_response)
 
-__all__ = ["MAX_TARGETS", "RECENT_SAMPLES", "STALE_S", "RecentSamples", "decode_fleet_sample",
-           "declare_warning_subscribers", "stale_robot", "take_fleet_sample"]
+__all__ = ["MAX_TARGETS", "RECENT_SAMPLES", "STALE_S", "FleetSubscriber", "RecentSamples",
+           "decode_fleet_sample", "declare_warning_subscribers", "stale_robot",
+           "take_fleet_sample"]
+
+log = logging.getLogger("asnn.fleet")
 
 MAX_TARGETS = 16      # targets kept per response (the worker finds a few)
 STALE_S = 3.0         # no response for this long: stale (no worker watches it)
@@ -164,3 +168,44 @@ def declare_warning_subscribers(session, key: str, callback: Callable,
             subscriber.undeclare()
         raise
     return subscribers
+
+
+class FleetSubscriber:
+    """Declares the fleet viewers' subscribers on ``session`` (responses, previews, warnings,
+    and with ``refusals`` the workers' refusal notices), feeding ``store`` (a
+    :class:`clients.dashboard.store.FleetStore`, or anything with a ``prefix`` and an
+    ``offer(key, payload)`` that never raises, such as the Foxglove bridge of
+    :mod:`clients.foxglove`)."""
+
+    def __init__(self, session, store, *, refusals: bool = False):
+        prefix = store.prefix
+        self.store = store
+        self.keys = [keys.responses(prefix), keys.warnings(prefix), keys.previews(prefix)]
+        if refusals:
+            self.keys.append(keys.refusals(prefix))
+        self._subscribers = [
+            *(session.declare_subscriber(key, self._on_sample)
+              for key in self.keys if key != keys.warnings(prefix)),
+            # an advanced subscriber (history, recovery) and a plain one, each warning once
+            *declare_warning_subscribers(session, keys.warnings(prefix), self._on_sample),
+        ]
+
+    def _on_sample(self, sample) -> None:
+        try:
+            self.store.offer(str(sample.key_expr), sample.payload.to_bytes())
+        except Exception:  # offer never raises for bad input; this is a bug, keep listening
+            log.exception("unexpected error on %s", sample.key_expr)
+
+    def __enter__(self) -> FleetSubscriber:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        for subscriber in self._subscribers:
+            try:
+                subscriber.undeclare()
+            except Exception:  # the session may already be closed
+                pass
+        self._subscribers = []

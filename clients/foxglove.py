@@ -2,7 +2,7 @@
 through the Foxglove SDK's WebSocket server (``asnn foxglove``).
 
 :class:`FoxgloveBridge` takes the samples of ``<prefix>/<robot>/(response|warning|preview)``
-(fed by :class:`clients.dashboard.FleetSubscriber`, the dashboard's subscribers) and logs them on
+(fed by :class:`clients.fleet.FleetSubscriber`, the dashboard's subscribers) and logs them on
 topics named after the robot, in the schemas ``asnn detect --mcap`` writes
 (:mod:`asnn.io.foxglove_mcap`), so one Foxglove layout serves a recorded run and the fleet:
 

@@ -14,7 +14,8 @@ import cv2
 import msgpack
 import numpy as np
 
-from clients.dashboard import MAX_PREVIEW_TOTAL, DashboardServer, FleetStore
+from clients.dashboard import DashboardServer, FleetStore
+from clients.dashboard.store import MAX_PREVIEW_TOTAL
 from clients.fleet import MAX_TARGETS
 from service.messages import Preview, encode
 
@@ -52,7 +53,7 @@ def test_previews_and_state_are_bounded_in_bytes_per_robot_and_in_total():
 def test_a_flood_of_previews_is_taken_at_a_bounded_rate_in_bytes_and_per_robot():
     """A probe: 1,000 ids sending 30 KB previews made every page receive 20-34 MB/s, and a
     browser that fell behind was dropped (its robots shown stale)."""
-    from clients.dashboard import PREVIEW_INTERVAL, PREVIEW_RATE
+    from clients.dashboard.store import PREVIEW_INTERVAL, PREVIEW_RATE
 
     clock = Clock()
     store = FleetStore(clock=clock)
@@ -290,7 +291,7 @@ def test_full_snapshots_are_sent_a_few_at_a_time():
     """A probe: 63 connections asking for /state (24 MB) and reading slowly held 2.3 GB, each
     its own encoded copy. At most MAX_FULL_SENDS are encoded and sent at once; past the wait,
     /state is 503."""
-    from clients.dashboard import MAX_FULL_SENDS
+    from clients.dashboard.server import MAX_FULL_SENDS
 
     store = FleetStore()
     offer_response(store, response("r0"))
@@ -307,7 +308,7 @@ def test_full_snapshots_are_sent_a_few_at_a_time():
 def test_a_request_of_more_than_64_kib_of_headers_is_cut_off():
     """A probe: 99 headers of 64 KiB each (the standard library's limits) on 64 connections
     held 400 MB. A request line and headers are read up to MAX_REQUEST_BYTES."""
-    from clients.dashboard import MAX_REQUEST_BYTES
+    from clients.dashboard.server import MAX_REQUEST_BYTES
 
     store = FleetStore()
     with DashboardServer(store, "127.0.0.1", 0) as server:
