@@ -31,16 +31,14 @@ import cv2
 import numpy as np
 
 from . import _fast, _parallel, retina
-from .approach import ApproachStage, CameraRig, FramePair, frame_pixel
-from .approach.looming import region_expansion
-from .approach.motion_layers import motion_layers
+from .approach import ApproachStage, FramePair, frame_pixel
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
 from .params import MAX_THREADS, PERIOD_FRAMES, ASNNParams, preset, timed_gap
 from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
 from .targets import extract_targets
 
-__all__ = ["ASNN", "FrameError", "compile_kernels", "spike_step"]
+__all__ = ["ASNN", "FrameError", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
 
@@ -691,62 +689,3 @@ def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams
     spikes = retina.spike_count(out, params.k_sp, params.t_sp)
     window.append(spikes)
     return out, spikes, retina.spike_rate(window, params.n_t, params.window_dt)
-
-
-def _warmup_clip(min_side: int) -> np.ndarray:
-    """The frames :func:`compile_kernels` steps a model over: a small off-centre looming disk,
-    so that every stage, including the clustering, has work; 64x64, or as large as the
-    smallest frame the model takes (``min_side``: a preset with larger kernels)."""
-    from .stimuli import make_scene
-
-    side = max(64, min_side)
-    return make_scene("looming", size=(side, side), start=2, stop=12,
-                      center=(30.0 * side / 64, 33.0 * side / 64)).frames
-
-
-def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference"),
-                    threads: int = 1, straightforward: bool = False) -> None:
-    """Compile the optimised step's numba kernels, or load them from numba's on-disk cache
-    (seconds on a fresh install, milliseconds afterwards).
-
-    Long-running processes call it before they take their first frame, so that frame does not
-    wait for the compiler; and numba loads a kernel from its cache only when it is first
-    called, so without it the first frames that need a stage (the first object, the first
-    looming fit) wait for its kernels.
-
-    Parameters
-    ----------
-    presets : iterable of str or ASNNParams
-        The presets (by name or as parameters) whose kernels to load (default: both
-        precisions, float32 and float64).
-    threads : int
-        As the models that will run (``ASNN(..., threads=N)``): with more than 1, the kernel of
-        the model's worker threads too.
-    straightforward : bool
-        The straightforward form's too (``ASNN(..., optimised=False)``): it runs the objects'
-        kernels in float64, which a float32 preset's optimised form never calls (a benchmark
-        of it would otherwise time their compiling).
-    """
-    forms = (True, False) if straightforward else (True,)
-    for name, optimised in ((name, form) for name in presets for form in forms):
-        with ASNN(name, threads=threads, optimised=optimised) as model:
-            for _ in model.stream((None, frame) for frame in _warmup_clip(model.params.min_side)):
-                pass
-            # the looming fit of boxes larger than its grid, which the clip's objects are not:
-            # area-averaged in the fit's kernel, and by whole factors (cv2.resize)
-            flat = np.zeros((128, 128), model.dtype)
-            for box in ((0, 0, 90, 80), (0, 0, 128, 64)):
-                region_expansion(flat, flat, box, flat)
-            # the motion layers' kernel, which the clip (a still camera) never reaches
-            texture = np.random.default_rng(0).random((64, 64)).astype(model.dtype)
-            motion_layers(texture, texture, (0, 0, 64, 64))
-            # frames wider than max_width, shrunk as they are taken
-            _fast.shrunk_luminance(np.zeros((16, 20), np.uint8), (15, 12), LEVELS, model.dtype)
-            # the camera rig's edge test and its mask, which a stream first needs after 20
-            # frames with its own hood in view (a still edge at the frames' bottom)
-            if model.approach is not None:
-                hood = np.zeros((16, 16), model.dtype)
-                hood[12:] = 1.0
-                rig = CameraRig()
-                for _ in range(21):
-                    rig.update(hood, hood)

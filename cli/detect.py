@@ -24,7 +24,7 @@ from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, op
 from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_short,
                            open_writer, quiet_writer, writable_fps)
 from asnn.io.visualize import annotate_frame, plot_responses
-from asnn.model import compile_kernels
+from asnn.warmup import compile_kernels
 from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_from_spec, preset_names
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
 from cli.session import exit_on_interrupt, signals_held

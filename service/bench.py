@@ -73,7 +73,7 @@ def model_time(preset: str | None, frames: np.ndarray) -> dict:
     the kernels are loaded first, as the worker does before it takes frames)."""
     from asnn.evaluation.bench import time_detector
     from asnn.detectors import make_detector
-    from asnn.model import compile_kernels
+    from asnn.warmup import compile_kernels
 
     compile_kernels()
     seconds = time_detector(lambda: make_detector("asnn", preset), frames, warmup=2)

@@ -36,7 +36,7 @@ from collections.abc import Callable
 import zenoh
 from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
-from asnn.model import compile_kernels
+from asnn.warmup import compile_kernels
 
 from . import keys
 from .core import WorkerCore

@@ -13,7 +13,7 @@ def compiled_kernels():
     """Compile the numba kernels once (numba caches them on disk) before any test starts worker
     processes: on a fresh checkout a worker's first frame would otherwise wait seconds for the
     compiler, which time-bounded service tests mistake for a failure."""
-    from asnn.model import compile_kernels
+    from asnn.warmup import compile_kernels
 
     compile_kernels()
 

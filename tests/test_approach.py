@@ -137,7 +137,7 @@ def test_compile_kernels_loads_the_rig_kernels_before_a_stream_needs_them():
     import sys
 
     loaded = subprocess.run(
-        [sys.executable, "-c", "from asnn.model import compile_kernels; compile_kernels(); "
+        [sys.executable, "-c", "from asnn.warmup import compile_kernels; compile_kernels(); "
          "from asnn.approach.looming import _mark_still_edges; "
          "from asnn.approach.stage import _doubled; "
          "print(len(_mark_still_edges.signatures), len(_doubled.signatures))"],
@@ -146,7 +146,8 @@ def test_compile_kernels_loads_the_rig_kernels_before_a_stream_needs_them():
     # and a stream with a hood in view needs no other form of them
     from asnn.approach.looming import _mark_still_edges
     from asnn.approach.stage import _doubled
-    from asnn.model import ASNN, compile_kernels
+    from asnn.model import ASNN
+    from asnn.warmup import compile_kernels
 
     compile_kernels()
     kernels = (_mark_still_edges, _doubled)

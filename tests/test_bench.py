@@ -235,11 +235,11 @@ def test_kernels_are_loaded_before_anything_is_timed(monkeypatch):
     import numpy as np
 
     import asnn.evaluation.bench
-    import asnn.model
+    import asnn.warmup
     from service.bench import model_time
 
     calls = []
-    monkeypatch.setattr(asnn.model, "compile_kernels",
+    monkeypatch.setattr(asnn.warmup, "compile_kernels",
                         lambda straightforward=False: calls.append("compile"))
     timed = asnn.evaluation.bench.time_detector
 
@@ -440,7 +440,7 @@ def test_the_straightforward_forms_kernels_are_loaded_too_when_it_is_timed():
     import subprocess
     import sys
 
-    code = ("from asnn.model import compile_kernels\n"
+    code = ("from asnn.warmup import compile_kernels\n"
             "from asnn import targets\n"
             "compile_kernels(straightforward={})\n"
             "print(any('float64' in str(s) for s in targets._region_moments.signatures))")

@@ -75,6 +75,22 @@ def test_the_models_core_reads_no_files_and_opens_no_network():
     assert not crossings, "\n".join(crossings)
 
 
+def test_the_model_imports_none_of_the_tooling_beside_it():
+    """The stimuli, file I/O and evaluation sit beside the model in ``asnn/``, above it: only
+    the kernels' warm-up (``asnn/warmup.py``, which steps a generated approach) reads the
+    stimuli."""
+    tooling = [ROOT / "asnn" / name for name in ("io", "evaluation", "stimuli")]
+    core = [path for path in _sources("asnn") if path.name != "warmup.py"
+            and not any(path.is_relative_to(folder) for folder in tooling)]
+    crossings = [
+        f"{path.relative_to(ROOT)} imports {module}"
+        for path in core
+        for module in sorted(imported_modules(path))
+        if any(_within(module, f"asnn.{name}") for name in ("io", "evaluation", "stimuli"))
+    ]
+    assert not crossings, "\n".join(crossings)
+
+
 def test_the_import_reader_resolves_relative_imports():
     # the reader itself must see an import written relatively (``from ..params import``), or
     # the tests above would pass whatever the code imports

@@ -498,7 +498,7 @@ def test_where_the_attended_window_lies_compiles_no_second_form_of_a_kernel():
     form, first needed at contact, stalled a service worker for seconds on a cold cache and
     the frames that came meanwhile went unanswered."""
     from asnn import _fast
-    from asnn.model import compile_kernels
+    from asnn.warmup import compile_kernels
     from asnn.stimuli.planar import planar_scene
 
     compile_kernels()
@@ -533,7 +533,7 @@ def test_help_on_the_parameters_shows_what_each_field_means():
 
 def test_kernels_are_compiled_for_a_preset_whose_kernels_are_larger_than_the_warmup_clip():
     # asnn detect --preset robust/attention_size=101 stopped here: the warm-up clip was 64x64
-    from asnn.model import compile_kernels
+    from asnn.warmup import compile_kernels
 
     compile_kernels((asnn_preset("robust", attention_size=101),))
 

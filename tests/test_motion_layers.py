@@ -88,13 +88,13 @@ def test_layer_estimates_are_in_the_tracks_terms():
 def test_compile_kernels_loads_the_motion_layers_kernel_before_a_drive_needs_it():
     # a worker's first frame with a candidate in an expanding scene must not wait for numba
     from asnn import ASNN
-    from asnn.model import compile_kernels
+    from asnn.warmup import compile_kernels
     from asnn.approach.motion_layers import _best_hypothesis
     from asnn.stimuli.suite import make_case
 
     # in a fresh process (here other tests may have compiled it already)
     loaded = subprocess.run(
-        [sys.executable, "-c", "from asnn.model import compile_kernels; compile_kernels(); "
+        [sys.executable, "-c", "from asnn.warmup import compile_kernels; compile_kernels(); "
          "from asnn.approach.motion_layers import _best_hypothesis; "
          "print(len(_best_hypothesis.signatures))"],
         capture_output=True, text=True, check=True)

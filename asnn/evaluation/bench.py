@@ -6,7 +6,7 @@ clustering have work to do) at each size, one thread: :func:`pin_threads` sets O
 count and the OpenMP / BLAS / numba variables to 1 before anything is timed. Each frame is timed
 with ``time.perf_counter`` around ``step``, targets included; the first ``warmup`` frames (the
 first one only primes the state) are not counted. The numba kernels are compiled, or loaded from
-numba's cache, before anything is timed (:func:`asnn.model.compile_kernels`): some are first
+numba's cache, before anything is timed (:func:`asnn.warmup.compile_kernels`): some are first
 called only on a later frame (the clustering on the first frame with attended pixels), and that
 call would otherwise be timed as a step of 10 ms or more. The same run
 times the straightforward float64 form (``ASNN(params, optimised=False)``) of the default preset
@@ -207,7 +207,8 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     if repeat < 1:
         raise ValueError(f"repeat must be at least 1, not {repeat}")
     from ..detectors import make_detector
-    from ..model import ASNN, compile_kernels
+    from ..model import ASNN
+    from ..warmup import compile_kernels
     from ..params import DEFAULT_PRESET
     from ..stimuli import make_scene
 

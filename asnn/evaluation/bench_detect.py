@@ -206,7 +206,7 @@ def run(command: Sequence[str], sizes=DEFAULT_SIZES, frames: int = DEFAULT_FRAME
     RuntimeError
         If ``asnn detect`` fails.
     """
-    from ..model import compile_kernels
+    from ..warmup import compile_kernels
     from ..params import DEFAULT_PRESET, preset_key
     from ..io.video import write_video
 
