@@ -17,7 +17,7 @@ from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
 from asnn.evaluation.perturb import describe, perturbed
 from asnn.evaluation.progress import ProgressPrinter
-from asnn.io.files import seekable_target
+from asnn.io.files import folder_problem, seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
                               split_topic)
@@ -148,13 +148,9 @@ def _output_problem(path: str | None, flag: str) -> str | None:
     target = Path(path)
     if target.is_dir():
         return f"{flag} {path}: is a folder"
-    parent = target.parent
-    while not parent.exists() and parent != parent.parent:  # the folders to make, as scene does
-        parent = parent.parent
-    if not parent.is_dir():
-        return f"{flag} {path}: {parent} is not a folder"
-    if target.parent != parent and not os.access(parent, os.W_OK | os.X_OK):
-        return f"{flag} {path}: cannot make {target.parent} in {parent} (no write access)"
+    problem = folder_problem(target.parent)  # its folders are made as scene makes them
+    if problem:
+        return f"{flag} {path}: {problem}"
     if flag == "--plot" and target.suffix.lower() not in PLOT_FORMATS:
         return f"--plot {path}: name the format by its extension ({', '.join(PLOT_FORMATS)})"
     if flag in ("--annotate", "--mcap"):
@@ -162,7 +158,7 @@ def _output_problem(path: str | None, flag: str) -> str | None:
             seekable_target(target)
         except ValueError as exc:
             return f"{flag} {exc}"
-    elif flag in ("--jsonl", "--tracks") and parent == target.parent:
+    elif flag in ("--jsonl", "--tracks") and target.parent.is_dir():
         try:  # opened now without emptying it (that waits for its first line), so that a path
             # that cannot be written is said before the kernels compile, not after
             open(target, "a").close()  # noqa: SIM115

@@ -14,7 +14,6 @@ missing, named in the report's errors), 130 when interrupted.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from collections.abc import Sequence
@@ -25,6 +24,7 @@ from asnn.evaluation.heldout import TIE_BREAKS
 from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS
 from asnn.evaluation.progress import ProgressPrinter
 from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
+from asnn.io.files import folder_problem
 from asnn.params import preset_names
 
 from .arguments import (finite, frame_size, nonempty_path, perturbation, preset_spec,
@@ -245,14 +245,8 @@ def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
                     f"(not in {MANIFEST}), and this run would replace {them}: move {them}, or "
                     "choose another --out")
         return None
-    parent = out.parent
-    while not parent.exists():  # the nearest folder there is, where the rest is made
-        parent = parent.parent
-    if not parent.is_dir():
-        return f"--out {out}: {parent} is not a folder"
-    if not os.access(parent, os.W_OK | os.X_OK):
-        return f"--out {out}: cannot make it in {parent} (no write access)"
-    return None
+    problem = folder_problem(out)
+    return f"--out {out}: {problem}" if problem else None
 
 
 def run(args: argparse.Namespace) -> int:

@@ -811,7 +811,7 @@ def test_eval_refuses_an_out_it_may_not_make_before_it_runs(tmp_path, capsys, mo
     out = tmp_path / "new" / "out"
     assert main(["eval", "--paper", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"asnn eval: --out {out}: cannot make it in {tmp_path} (no write access)"]
+    assert err == [f"asnn eval: --out {out}: cannot make {out} in {tmp_path} (no write access)"]
     assert list(tmp_path.iterdir()) == []
 
 

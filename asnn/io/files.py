@@ -10,7 +10,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["folder_lock", "seekable_target", "write_atomically"]
+__all__ = ["folder_lock", "folder_problem", "seekable_target", "write_atomically"]
 
 
 def seekable_target(path: str | Path) -> None:
@@ -20,6 +20,23 @@ def seekable_target(path: str | Path) -> None:
     if path.exists() and not path.is_file():
         raise ValueError(f"{path}: not a regular file (a pipe, a device or a folder): a video "
                          "or a bag is written with seeks")
+
+
+def folder_problem(folder: str | Path) -> str | None:
+    """Why ``folder`` cannot be had for writing into, found before a run, or None: it exists,
+    or the folders missing on the way to it can be made, since the nearest one there is is a
+    folder this process may write (the outputs' folders are made as they are written)."""
+    folder = Path(folder)
+    if folder.is_dir():
+        return None
+    parent = folder
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        return f"{parent} is not a folder"
+    if parent != folder and not os.access(parent, os.W_OK | os.X_OK):
+        return f"cannot make {folder} in {parent} (no write access)"
+    return None
 
 
 def write_atomically(path: str | Path, text: str) -> None:
