@@ -291,7 +291,7 @@ def test_the_box_and_its_rim_in_one_pass_are_the_two_fits_bit_for_bit():
     to exclude and a background; where the box is area-averaged, with the rim sampled at the
     centres of the smaller box's pixels: a rim over the whole box is the box, a rim off every
     centre leaves nothing to fit."""
-    from asnn.approach.looming import _MAX_SIDE
+    from asnn.approach.looming import FIT_SIDE
 
     rng = np.random.default_rng(18)
     averaged = 0
@@ -304,7 +304,7 @@ def test_the_box_and_its_rim_in_one_pass_are_the_two_fits_bit_for_bit():
         whole = region_expansion(previous, current, box, reference, exclude)
         got = region_and_rim_expansion(previous, current, box, rim, reference, exclude)
         assert got[0] == whole
-        if max(x1 - x0, y1 - y0) <= _MAX_SIDE:
+        if max(x1 - x0, y1 - y0) <= FIT_SIDE:
             off = ~rim if exclude is None else ~rim | exclude
             assert got[1] == region_expansion(previous, current, box, reference, off)
             continue

@@ -43,10 +43,11 @@ from .._fast import _area_fast, _area_table, _reflect
 from .._jit import kernel
 
 __all__ = ["Expansion", "region_expansion", "region_and_rim_expansion", "rim_scaled",
-           "scene_expansion", "moved_by_expansion", "rig_pixels", "rig_rows", "RIG_WEIGHT"]
+           "scene_expansion", "moved_by_expansion", "rig_pixels", "rig_rows", "shrunk_mask",
+           "shrink_step", "shrunk_size", "FIT_SIDE", "RIG_WEIGHT"]
 
 _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
-_MAX_SIDE = 64  # pixels: a larger box is area-averaged down to this before the fit
+FIT_SIDE = 64  # pixels: a larger box is area-averaged down to this before a fit (every fit's)
 _RIDGE = 1e-6  # relative regularisation of the normal equations (no texture: C -> 0)
 _NO_SKIP = np.zeros((0, 0), np.bool_)  # no pixel left out by a mask
 _NO_SUMS = (0.0,) * 17  # a fit's sums before its first pixel (_add_pixel)
@@ -127,6 +128,24 @@ def region_expansion(previous: np.ndarray, current: np.ndarray,
     return region_and_rim_expansion(previous, current, box, None, background, exclude)[0]
 
 
+def shrink_step(width: int, height: int, side: int = FIT_SIDE) -> float:
+    """The pixels of a box that make one pixel of the box area-averaged before a fit, at most
+    ``side`` on its larger side: 1 where it is no larger (:func:`shrunk_size`)."""
+    return max(1.0, max(width, height) / side)
+
+
+def shrunk_size(width: int, height: int, step: float) -> tuple[int, int]:
+    """The (width, height) a box is area-averaged to at a :func:`shrink_step`, its shape
+    kept."""
+    return max(round(width / step), 1), max(round(height / step), 1)
+
+
+def shrunk_mask(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """A mask (bool) area-averaged to ``size`` (W, H): a shrunk pixel is in it where a quarter
+    of its area is (a mask of pixels left out leaves out what they would sway)."""
+    return cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_AREA) > 0.25
+
+
 def _rim_sampled(rim: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """``rim`` (bool) sampled at the centres of a grid of ``size`` (W, H) pixels."""
     return cv2.resize(rim.view(np.uint8), size, interpolation=cv2.INTER_NEAREST_EXACT).view(
@@ -173,9 +192,8 @@ def _fits(previous, current, box, rim, background, exclude, kept=None):
     # without a background every pixel counts: |after - before| < itself is never true
     reference = previous if background is None else background
     skip = _NO_SKIP if exclude is None or not exclude[y0:y1, x0:x1].any() else None
-    step = max(x1 - x0, y1 - y0) / _MAX_SIDE
-    if step <= 1.0:
-        step = 1.0
+    step = shrink_step(x1 - x0, y1 - y0)
+    if step == 1.0:
         if skip is None:
             skip = np.ascontiguousarray(exclude[y0:y1, x0:x1])
         # the rim's pixels: also kept by the box (the kernel asks both)
@@ -186,10 +204,9 @@ def _fits(previous, current, box, rim, background, exclude, kept=None):
                                   for image in (previous, current, reference)),
                                 skip, keep, _RIDGE)
     else:
-        size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
+        size = shrunk_size(x1 - x0, y1 - y0, step)
         if skip is None:
-            skip = cv2.resize(exclude[y0:y1, x0:x1].astype(np.float32), size,
-                              interpolation=cv2.INTER_AREA) > 0.25
+            skip = shrunk_mask(exclude[y0:y1, x0:x1], size)
         keep = _NO_SKIP if rim is None else _rim_sampled(rim[y0:y1, x0:x1], size)
         if _area_fast((x1 - x0, y1 - y0), size):
             # OpenCV reads the box's rows where they are: no copy of the box
@@ -258,7 +275,7 @@ def rim_scaled(box: Expansion | None, rim: Expansion | None, side: int = 0,
     """
     if box is None or rim is None or not rim.rate > box.rate > 0.0:
         return box
-    if motion_max is not None and rim.rate * min(side, _MAX_SIDE) / 2 > motion_max:
+    if motion_max is not None and rim.rate * min(side, FIT_SIDE) / 2 > motion_max:
         return box
     k = rim.rate / box.rate
     return Expansion(box.drift_x * k, box.drift_y * k, rim.rate, box.brightness, box.fit)

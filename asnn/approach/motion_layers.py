@@ -33,10 +33,10 @@ import cv2
 import numpy as np
 
 from .._jit import kernel
+from .looming import shrink_step, shrunk_size
 
 __all__ = ["Layer", "motion_layers"]
 
-_MAX_SIDE = 64  # pixels: a larger box is area-averaged down to this first (as the looming fit)
 _MIN_SIDE = 8  # pixels: a smaller box holds too little flow to split
 _SAMPLES = 60  # hypotheses per layer: two points each
 _MIN_SHARE = 0.15  # a rest smaller than this share of the textured pixels is not a motion
@@ -107,9 +107,9 @@ def motion_layers(previous: np.ndarray, current: np.ndarray,
         return []
     before = np.ascontiguousarray(previous[y0:y1, x0:x1], np.float32)
     after = np.ascontiguousarray(current[y0:y1, x0:x1], np.float32)
-    step = max(1.0, max(x1 - x0, y1 - y0) / _MAX_SIDE)
+    step = shrink_step(x1 - x0, y1 - y0)  # a larger box is area-averaged first, as for a fit
     if step > 1.0:
-        size = (max(round((x1 - x0) / step), 1), max(round((y1 - y0) / step), 1))
+        size = shrunk_size(x1 - x0, y1 - y0, step)
         before = cv2.resize(before, size, interpolation=cv2.INTER_AREA)
         after = cv2.resize(after, size, interpolation=cv2.INTER_AREA)
     low, high = min(before.min(), after.min()), max(before.max(), after.max())

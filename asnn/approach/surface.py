@@ -50,7 +50,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from .looming import region_expansion
+from .looming import region_expansion, shrink_step, shrunk_mask, shrunk_size
 
 __all__ = ["BASELINE", "CORRIDOR_RATIO", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN",
            "TILE_FIT_MIN", "TILE_RATE_SHARE", "Surface", "SurfaceWatch", "corridor", "shrunk",
@@ -120,11 +120,10 @@ class Surface(NamedTuple):
 def shrunk(image: np.ndarray) -> np.ndarray:
     """``image`` area-averaged to at most :data:`SIDE` pixels on its larger side (as it is)."""
     h, w = image.shape
-    step = max(w, h) / SIDE
-    if step <= 1.0:
+    step = shrink_step(w, h, SIDE)
+    if step == 1.0:
         return image
-    size = (max(round(w / step), 1), max(round(h / step), 1))
-    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    return cv2.resize(image, shrunk_size(w, h, step), interpolation=cv2.INTER_AREA)
 
 
 def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
@@ -192,8 +191,7 @@ def _shrunk_mask(exclude: np.ndarray | None, shape: tuple[int, int]) -> np.ndarr
     quarter of its area is."""
     if exclude is None or exclude.shape == shape:
         return exclude
-    return cv2.resize(exclude.astype(np.float32), shape[::-1],
-                      interpolation=cv2.INTER_AREA) > 0.25
+    return shrunk_mask(exclude, shape[::-1])
 
 
 def _tile_rates(before: np.ndarray, after: np.ndarray, elapsed: float,
