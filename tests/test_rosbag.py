@@ -3,6 +3,7 @@ same frames from a lossless video, eval and camera on bags, and every kind of ba
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -401,9 +402,10 @@ def test_a_chunk_overwritten_in_place_is_found_by_its_crc(tmp_path, looming):
     bag.write_bytes(bytes(data))
     assert "does not match its CRC" in detect_fails(bag)  # not a run on damaged pixels
 
-def crafted_bag(path, looming, *chunks):
+def crafted_bag(path, looming, *chunks, before=()):
     """A bag of one good frame (its schema, channel and message as the third-party writer
-    made them) followed by the given chunk records, written record by record."""
+    made them) followed by the given chunk records, written record by record (``before``:
+    records between the channel and the message)."""
     from mcap.data_stream import RecordBuilder
     from mcap.records import DataEnd, Footer, Header
     from mcap.stream_reader import StreamReader
@@ -415,7 +417,8 @@ def crafted_bag(path, looming, *chunks):
                 if type(r).__name__ in ("Schema", "Channel", "Message")]
     builder = RecordBuilder()
     Header(profile="ros2", library="test").write(builder)
-    for record in [*kept, *chunks]:
+    message = next(i for i, r in enumerate(kept) if type(r).__name__ == "Message")
+    for record in [*kept[:message], *before, *kept[message:], *chunks]:
         record.write(builder)
     DataEnd(data_section_crc=0).write(builder)
     Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
@@ -450,6 +453,139 @@ def test_chunks_that_would_fill_the_memory_or_hold_the_reader_are_refused(tmp_pa
         errors = []
         frames = list(clip.frames(lambda reason, message: errors.append(message)))
         assert len(frames) == 1 and len(errors) == 1 and says in errors[0], (name, errors)
+
+
+def traced_peak(work) -> int:
+    """The most memory ``work()`` held at once, in bytes (tracemalloc)."""
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        work()
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def records_chunk(*records):
+    """A zstd chunk of the given MCAP records."""
+    import zlib
+
+    import zstandard
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import Chunk
+
+    builder = RecordBuilder()
+    for record in records:
+        record.write(builder)
+    data = builder.end()
+    return Chunk(compression="zstd", data=zstandard.ZstdCompressor().compress(data),
+                 message_start_time=0, message_end_time=0, uncompressed_crc=zlib.crc32(data),
+                 uncompressed_size=len(data))
+
+
+def test_a_message_larger_than_any_picture_is_refused_before_it_is_copied(tmp_path, looming,
+                                                                          monkeypatch):
+    """A probe: an 18 KB bag whose "64x64" Image held 500 MiB of zeros took 1.67 GB, the chunk
+    and two copies of the message at once (the record's, the decoder's). Here at a small scale
+    (the bound lowered to 1 MiB, a message of 8 MiB): one copy, the chunk's, and the message is
+    a bad one, skipped."""
+    monkeypatch.setattr(rosbag, "MAX_MESSAGE_BYTES", 2**20, raising=False)
+    size = 8 * 2**20
+    bomb = {**raw_message(looming.frames[1][:64, :64], "mono8", 1), "data": bytes(size)}
+    messages = [raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:10])]
+    bag = write_messages(tmp_path / "bomb.mcap", {"/c": (rosbag.IMAGE, [
+        messages[0], bomb, *messages[2:]])})
+    errors, frames = [], []
+
+    def read():
+        clip = rosbag.BagClip(bag)
+        frames.extend(clip.frames(lambda reason, message: errors.append((reason, message))))
+
+    peak = traced_peak(read)
+    assert peak < 1.5 * size, peak  # the decompressed chunk; the old reader held three copies
+    assert len(frames) == 9 and len(errors) == 1, errors
+    assert errors[0][0] == "bad-message" and f"message 1 is {size + 48} bytes" in errors[0][1]
+
+
+def test_a_chunk_of_more_records_than_its_compressed_bytes_can_hold_is_refused(tmp_path,
+                                                                               looming):
+    """A probe: a 15 KB bag of five chunks of a million empty messages each, on another topic,
+    took 68 s to read (three passes of 5 million records). A chunk holds at most
+    RECORDS_PER_COMPRESSED_BYTE records per compressed byte (and a thousand)."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import DataEnd, Footer, Header, Message
+
+    empty = Message(channel_id=99, log_time=START_NS, publish_time=START_NS, sequence=0,
+                    data=b"")
+    junk = records_chunk(*[empty] * 50_000)  # 1.5 MB of records, some 200 bytes compressed
+    assert len(junk.data) * 4 + 1000 < 50_000
+    bag = crafted_bag(tmp_path / "junk.mcap", looming, junk)
+    errors = []
+    frames = list(rosbag.BagClip(bag).frames(lambda reason, message: errors.append(message)))
+    assert len(frames) == 1 and len(errors) == 1 and "bytes compressed" in errors[0], errors
+    # before the topic's first message: the damage is named, not "holds no message"
+    bag = crafted_bag(tmp_path / "junk_first.mcap", looming, before=[junk])
+    assert rosbag.bag_topics(bag)["/c"].count is None  # not known: the damage came first
+    line = detect_fails(bag)
+    assert "truncated or corrupt bag after 0 messages" in line and "bytes compressed" in line
+
+
+def test_index_records_are_skipped_unparsed_in_a_read_through(tmp_path, looming):
+    """A probe: a bag without a summary holding a 64 MiB MessageIndex record took 534 MB and
+    16 s (the mcap library makes a tuple of each of its 4 million entries). A read-through
+    parses only the records it uses."""
+    from mcap.records import MessageIndex
+
+    index = MessageIndex(channel_id=1, records=[(START_NS, 0)] * 2**19)  # 8 MiB
+    bag = crafted_bag(tmp_path / "index.mcap", looming, index)
+    frames = []
+    peak = traced_peak(lambda: frames.extend(rosbag.BagClip(bag).frames()))
+    assert len(frames) == 1 and peak < 4 * 2**20, peak  # the old reader: 70 MB
+
+
+def test_a_summary_of_many_chunk_indexes_is_read_once_and_kept_small(tmp_path, looming,
+                                                                    monkeypatch):
+    """A probe: a 60 MB summary of 723k chunk indexes became 605 MB of objects, read on each of
+    the three passes over the bag (47 s). The chunk indexes are kept as offsets per channel,
+    the summary read once."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import Chunk, ChunkIndex, DataEnd, Footer, Header
+    from mcap.stream_reader import StreamReader
+
+    good = write_messages(tmp_path / "good.mcap", {"/c": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:5])])})
+    with open(good, "rb") as fh:
+        records = list(StreamReader(fh, emit_chunks=True).records)
+    schemas = [r for r in records if type(r).__name__ == "Schema"][:3]
+    channel = next(r for r in records if type(r).__name__ == "Channel")
+    chunk = next(r for r in records if isinstance(r, Chunk))
+    builder = RecordBuilder()
+    Header(profile="ros2", library="test").write(builder)
+    for record in schemas + [channel]:
+        record.write(builder)
+    start = 8 + builder.count  # after the magic
+    chunk.write(builder)
+    DataEnd(data_section_crc=0).write(builder)
+    summary_start = 8 + builder.count
+    for record in schemas + [channel]:
+        record.write(builder)
+    for _ in range(50_000):  # 3.6 MB, all pointing at the one chunk
+        ChunkIndex(message_start_time=0, message_end_time=0, chunk_start_offset=start,
+                   chunk_length=0, message_index_offsets={channel.id: 0},
+                   message_index_length=0, compression="zstd", compressed_size=0,
+                   uncompressed_size=0).write(builder)
+    Footer(summary_start=summary_start, summary_offset_start=0, summary_crc=0).write(builder)
+    bag = tmp_path / "indexes.mcap"
+    bag.write_bytes(b"\x89MCAP0\r\n" + builder.end() + b"\x89MCAP0\r\n")
+    parsed = []
+    original = getattr(rosbag, "_parse_summary", None)
+    monkeypatch.setattr(rosbag, "_parse_summary",
+                        lambda *a: parsed.append(1) or original(*a), raising=False)
+    frames = []
+    peak = traced_peak(lambda: frames.extend(rosbag.BagClip(bag).frames()))
+    assert peak < 8 * 2**20, peak  # the section read, its offsets; the old reader: 40 MB
+    assert len(frames) == 5 and len(parsed) == 1
 
 
 def test_a_file_of_zeros_after_its_records_is_refused_at_once(tmp_path, looming):
@@ -547,7 +683,7 @@ def test_only_the_chunks_holding_the_image_topic_are_decompressed(tmp_path, loom
     opened = []
     original = rosbag._chunk_records
     monkeypatch.setattr(rosbag, "_chunk_records",
-                        lambda chunk: opened.append(chunk) or original(chunk))
+                        lambda chunk, *rest: opened.append(chunk) or original(chunk, *rest))
     clip = rosbag.BagClip(path, "/camera")
     opened.clear()
     read = [image for _, image in clip.frames()]
@@ -590,8 +726,8 @@ def test_a_summary_over_the_bound_is_not_loaded_and_the_bag_is_read_through(tmp_
         raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:12])])},
         chunk_size=20_000)
     loaded = []
-    original = rosbag.SeekingReader
-    monkeypatch.setattr(rosbag, "SeekingReader",
+    original = rosbag._parse_summary
+    monkeypatch.setattr(rosbag, "_parse_summary",
                         lambda *a, **k: loaded.append(1) or original(*a, **k))
     monkeypatch.setattr(rosbag, "MAX_SUMMARY_BYTES", 64)  # smaller than this bag's summary
     read = [image for _, image in rosbag.open_bag(bag).frames()]
@@ -610,8 +746,9 @@ def test_a_chunk_the_index_lists_twice_is_read_once(tmp_path, looming, monkeypat
 
     def doubled(fh):
         summary = original(fh)
-        if summary is not None:
-            summary.chunk_indexes = summary.chunk_indexes + summary.chunk_indexes[:1]
+        if summary is not None:  # the first chunk of each channel listed twice
+            summary = dataclasses.replace(summary, chunks={
+                channel: offsets + offsets[:1] for channel, offsets in summary.chunks.items()})
         return summary
 
     monkeypatch.setattr(rosbag, "_summary", doubled)
