@@ -647,6 +647,15 @@ def test_a_missing_or_non_image_topic_is_an_error(two_topics, topic, words):
     assert words in detect_fails(two_topics, "--topic", topic)
 
 
+def test_a_topic_named_twice_two_ways_must_agree(two_topics):
+    """``BAG#/front/image --topic /rear/image`` read the rear camera without a word (a bag
+    reader's round)."""
+    line = detect_fails(f"{two_topics}#/front/image", "--topic", "/rear/image")
+    assert "names the topic /front/image, and the topic given is /rear/image" in line
+    assert len(detect_records(f"{two_topics}#/front/image", "--topic", "/front/image")) == len(
+        detect_records(two_topics, "--topic", "/front/image"))
+
+
 def test_an_empty_topic_and_a_bag_without_images_are_errors(tmp_path):
     with open(tmp_path / "empty.mcap", "wb") as fh, Ros2Writer(fh) as writer:
         schema = writer.register_msgdef(rosbag.IMAGE, rosbag.IMAGE_MSGDEF)

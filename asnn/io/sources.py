@@ -195,6 +195,9 @@ def open_source(spec: str, *, topic: str | None = None,
     """
     spec = str(spec)
     path, suffix_topic = split_topic(spec)
+    if topic is not None and suffix_topic is not None and topic != suffix_topic:
+        raise SourceError(f"{spec}: names the topic {suffix_topic}, and the topic given is "
+                          f"{topic}: give one", "two-topics")
     if is_bag(path):
         return _open_bag(path, topic or suffix_topic, on_error, hold_backwards)
     if Path(path).is_dir() and any(Path(path).glob("*.mcap")):
