@@ -574,10 +574,12 @@ class TargetTracker:
         self._passed: deque[list] | None = (deque(maxlen=region_frames + 1) if region_frames
                                             else None)
         # with object_ids: the object each fragment was named after, the ids that counted under
-        # their own name, and the (id, box) of the tracks that counted in the previous frame
+        # their own name, and the (id, box) of the tracks that counted in each of the frames
+        # before, as many as region persistence looks back over (a track counted through its
+        # region, after the object's own track missed the test for a frame, is a fragment of it)
         self._object_of: dict[int, int] | None = {} if object_ids else None
         self._named: set[int] = set()
-        self._counted: list[tuple[int, tuple]] = []
+        self._counted: deque[list[tuple[int, tuple]]] = deque(maxlen=max(region_frames, 1))
 
     def update(self, observations: list[Observation], elapsed: float) -> list[Track]:
         """Link this frame's observations to tracks, ``elapsed`` seconds after the previous frame.
@@ -651,11 +653,12 @@ class TargetTracker:
         for track in tracks:
             if track.id in self._object_of or track.id in self._named:
                 continue
-            older = fragment_of(track.box, track.id, counting + self._counted)
+            older = fragment_of(track.box, track.id,
+                                counting + [c for frame in self._counted for c in frame])
             if older is not None:
                 self._object_of[track.id] = self._object_of.get(older, older)
         self._named.update(i for i, _ in counting if i not in self._object_of)
-        self._counted = counting
+        self._counted.append(counting)
         # only live tracks need a name: the stream's state stays as small as its tracks
         live = {track.id for track in self.tracks}
         self._object_of = {i: name for i, name in self._object_of.items() if i in live}
