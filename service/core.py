@@ -50,7 +50,9 @@ worker detects it when the stream that a frame has just replaced continues (a fr
 previous stream, which sent a frame less than ``takeover_after`` seconds ago): it counts an
 intrusion, logs it (rate-limited), marks the robot *contested* and returns to the stream that
 was there first (a ``second-publisher`` reset if the other's frame was processed meanwhile);
-the other's later frames, continuing its own stream, are refused as ``second-publisher``.
+the other's later frames, continuing its own stream, are refused as ``second-publisher``
+(until the stream there first has been silent for ``CONTESTED_FOR_S``: then the other's is the
+robot's, said at WARNING).
 From then on, while the robot's stream keeps sending (a frame less than ``takeover_after``
 seconds ago), a frame that does not continue it is refused as ``second-publisher``, until
 ``CONTESTED_FOR_S`` (30 s) after the last frame so refused. So an
@@ -534,15 +536,21 @@ class WorkerCore:
                 and received - previous.arrival <= self.takeover_after
                 and previous.continues(frame, max_gap) is None):
             if previous.number > current.number:
-                if received - current.arrival <= self.takeover_after:
+                # the other publisher's stream takes the robot only once the stream there first
+                # has been silent for CONTESTED_FOR_S: a camera that pauses or restarts for a
+                # few seconds (a new stream of its own: followed after takeover_after, below)
+                # must not hand its robot to an intruder that kept publishing
+                if received - current.arrival <= max(self.takeover_after, CONTESTED_FOR_S):
                     # the intruder's stream goes on while the one there first keeps sending
                     previous.advance(frame, received)
                     state.intruder_seen = received
                     return None
                 # the stream there first has been silent for takeover_after: its camera went
                 # (or restarted as this one), so this stream is the robot's now
-                log.info("robot %s: its stream of seq %d went silent; following the other "
-                         "publisher's (seq %d)", robot, current.seq, frame.seq)
+                self._limited_log.warning(
+                    f"takeover:{robot}", "robot %s: its stream of seq %d has been silent for "
+                    "%.0f s; following the other publisher's (seq %d)", robot, current.seq,
+                    received - current.arrival, frame.seq)
                 previous.reason = "second-publisher"
                 previous.advance(frame, received)
                 state.stream, state.previous = previous, current

@@ -604,29 +604,60 @@ def test_after_an_intrusion_a_restarted_camera_is_followed_once_the_old_stream_i
     assert feed(core, "r1", scene.frames[1], 1) is not None
 
 
-def test_a_camera_left_alone_after_an_intrusion_is_followed_once_the_first_is_silent():
+def test_a_camera_left_alone_after_an_intrusion_is_followed_once_the_first_is_silent(caplog):
     """A camera replaced while the old one still sent a frame or two: the new one publishes on,
     the old one is gone. Its frames were refused as a second publisher's for as long as they
-    came (each refreshed its stream), until the robot was forgotten as idle: 60 s blind."""
+    came (each refreshed its stream), until the robot was forgotten as idle (60 s blind); now
+    until the stream there first has been silent for CONTESTED_FOR_S (not takeover_after: a
+    camera that pauses for a few seconds must not hand its robot to an intruder)."""
+    from service.core import CONTESTED_FOR_S
+
     scene = make_scene("looming")
     clock = FakeClock()
-    core = WorkerCore(clock=clock, takeover_after=3.0)
+    core = WorkerCore(clock=clock, takeover_after=3.0, idle_timeout=120.0)
     for seq in range(10):  # the old camera; the new one's first frames among its last ones
         clock.now += 0.05
-        feed(core, "r1", scene.frames[seq], 100 + seq)
+        feed(core, "r1", scene.frames[seq], 100_000 + seq)
         if seq >= 8:
             core.offer("asnn/r1/frame", payload(scene.frames[seq - 8], seq - 8))
     assert core.stats()["intrusions"] == 1
     answered = []
-    for seq in range(2, 102):  # the new camera alone, at 20 fps for 5 s
-        clock.now += 0.05
-        core.offer("asnn/r1/frame", payload(scene.frames[seq % 20], seq))
-        job = core.take()
-        if job is not None and core.process(job) is not None:
-            answered.append(seq)
-    # refused while the old stream might still be sending, followed from then on
+    last = 2 + int((CONTESTED_FOR_S + 5) * 20)
+    with caplog.at_level("WARNING", logger="asnn.worker"):
+        for seq in range(2, last):  # the new camera alone, at 20 fps
+            clock.now += 0.05
+            core.offer("asnn/r1/frame", payload(scene.frames[seq % 20], seq))
+            job = core.take()
+            if job is not None and core.process(job) is not None:
+                answered.append(seq)
+    # refused while the old stream might only be pausing, followed from then on
     assert answered, "the new camera was never followed"
-    assert answered == list(range(answered[0], 102)) and 3.0 <= (answered[0] - 2) * 0.05 <= 3.2
+    assert answered == list(range(answered[0], last))
+    assert CONTESTED_FOR_S <= (answered[0] - 2) * 0.05 <= CONTESTED_FOR_S + 0.2
+    assert any("following the other publisher's" in r.getMessage() for r in caplog.records)
+
+
+def test_an_intruder_does_not_take_the_robot_while_its_camera_pauses_or_restarts():
+    """A review of the fix above: with the takeover after takeover_after, an intruder that kept
+    publishing took the robot whenever its camera paused for 3 s, and kept it."""
+    scene = make_scene("looming")
+    clock = FakeClock()
+    core = WorkerCore(clock=clock, takeover_after=3.0)
+    for seq in range(10):  # the camera, with an intruder's frames among its last ones
+        clock.now += 0.05
+        feed(core, "r1", scene.frames[seq], 100_000 + seq)
+        if seq >= 8:
+            core.offer("asnn/r1/frame", payload(scene.frames[seq - 8], 50_000 + seq - 8))
+    followed = {"camera": 0, "intruder": 0}
+    for k in range(200):  # the camera silent 3.5 s then back from seq 0; the intruder on
+        clock.now += 0.05
+        sources = [("intruder", 50_002 + k)] + ([("camera", k - 70)] if k >= 70 else [])
+        for who, seq in sources:
+            core.offer("asnn/r1/frame", payload(scene.frames[seq % 20], seq))
+            job = core.take()
+            if job is not None and core.process(job) is not None:
+                followed[who] += 1
+    assert followed["intruder"] == 0 and followed["camera"] > 100
 
 
 def test_a_robot_is_contested_no_longer_once_no_frame_is_refused_for_a_while():
