@@ -1234,3 +1234,48 @@ def test_a_bag_whose_stamps_no_video_rate_can_hold_is_annotated_at_the_default_r
     assert main(["detect", bag, "--annotate", str(out)]) == 0
     clip = open_video(out)
     assert clip.fps == DEFAULT_FPS and len(list(clip)) == 8
+
+
+def test_a_summary_too_large_to_keep_is_read_again_rather_than_kept(tmp_path, looming):
+    """The summaries of the latest files are kept for the passes over a bag, but one of many
+    channels (60,000: some 75 MB) kept four files' for the life of the process (a review)."""
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Footer, Header
+    from mcap.stream_reader import StreamReader
+
+    good = write_messages(tmp_path / "good.mcap", {"/c": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:3])])})
+    with open(good, "rb") as fh:
+        records = list(StreamReader(fh, emit_chunks=True).records)
+    kept = [r for r in records if type(r).__name__ in ("Schema", "Channel")]
+    channel = next(r for r in kept if isinstance(r, Channel))
+    chunk = next(r for r in records if isinstance(r, Chunk))
+
+    def bag(name, extra_channels):
+        builder = RecordBuilder()
+        Header(profile="ros2", library="test").write(builder)
+        for record in kept:
+            record.write(builder)
+        start = 8 + builder.count
+        chunk.write(builder)
+        DataEnd(data_section_crc=0).write(builder)
+        summary_start = 8 + builder.count
+        for record in kept:
+            record.write(builder)
+        for i in range(extra_channels):
+            Channel(id=1000 + i, schema_id=channel.schema_id, topic=f"/x{i}",
+                    message_encoding="cdr", metadata={}).write(builder)
+        ChunkIndex(message_start_time=0, message_end_time=0, chunk_start_offset=start,
+                   chunk_length=0, message_index_offsets={channel.id: 0},
+                   message_index_length=0, compression="zstd", compressed_size=0,
+                   uncompressed_size=0).write(builder)
+        Footer(summary_start=summary_start, summary_offset_start=0, summary_crc=0).write(builder)
+        path = tmp_path / name
+        path.write_bytes(b"\x89MCAP0\r\n" + builder.end() + b"\x89MCAP0\r\n")
+        return path
+
+    rosbag._summaries.clear()
+    assert len(list(rosbag.BagClip(bag("small.mcap", 10), "/c").frames())) == 3
+    assert len(rosbag._summaries) == 1  # kept for the passes over it
+    assert len(list(rosbag.BagClip(bag("many.mcap", 10_000), "/c").frames())) == 3
+    assert len(rosbag._summaries) == 1  # 10 MB of channels: read on each pass instead

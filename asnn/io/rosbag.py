@@ -70,6 +70,10 @@ RECORDS_PER_COMPRESSED_BYTE = 4
 MAX_MESSAGE_BYTES = 8 * MAX_SIDE**2 + 2**20
 MAX_SUMMARY_BYTES = 64 * 2**20  # largest summary section used (a larger one: read through)
 _SUMMARIES_KEPT = 4  # summaries of the latest files kept: a bag is read in three passes
+# ... those that hold at most this many bytes, about (a channel or a schema some 1 KB, a chunk
+# offset 8 bytes): one of 60,000 channels is some 75 MB, which four files' would hold for the
+# life of the process; a long recording's twenty channels in 10,000 chunks, 1.6 MB
+_SUMMARY_KEPT_BYTES = 8 * 2**20
 _SKIP_BYTES = 2**20  # a record skipped in a read-through is read a piece of this size at a time
 _FOOTER_BYTES = 1 + 8 + 20  # the footer record: opcode, length, summary_start, offsets, crc
 FPS_PROBE = 30                  # frames whose stamps estimate a bag's nominal frame rate
@@ -529,6 +533,11 @@ class _Summary:
     chunk_count: int = 0
     indexed: bool = True
 
+    def weight(self) -> int:
+        """About the bytes it holds: what keeping it costs."""
+        return (1024 * (len(self.schemas) + len(self.channels))
+                + 8 * sum(len(offsets) for offsets in self.chunks.values()))
+
 
 _summaries: dict[tuple, _Summary | None] = {}
 _summaries_lock = threading.Lock()
@@ -537,8 +546,9 @@ _summaries_lock = threading.Lock()
 def _summary(fh) -> _Summary | None:
     """The bag's summary section, or None when it has none, it does not parse, or it is larger
     than :data:`MAX_SUMMARY_BYTES`. Read once for the latest :data:`_SUMMARIES_KEPT` files
-    (known by their identity, size, time of change and footer): a bag is read in three passes
-    (its topics, the first frames, the frames), a camera's replay in one a loop."""
+    (known by their identity, size, time of change and footer) whose summary holds at most
+    about :data:`_SUMMARY_KEPT_BYTES`: a bag is read in three passes (its topics, the first
+    frames, the frames), a camera's replay in one a loop."""
     try:
         info = os.fstat(fh.fileno())
         end = fh.seek(0, io.SEEK_END)
@@ -551,6 +561,8 @@ def _summary(fh) -> _Summary | None:
         if key in _summaries:
             return _summaries[key]
     summary = _read_summary(fh)
+    if summary is not None and summary.weight() > _SUMMARY_KEPT_BYTES:
+        return summary  # read again on each pass rather than kept
     with _summaries_lock:
         while len(_summaries) >= _SUMMARIES_KEPT:
             _summaries.pop(next(iter(_summaries)))
