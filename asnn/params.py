@@ -46,7 +46,8 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 __all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "MAX_KERNEL", "check_overrides",
-           "parse_preset_spec", "preset", "preset_from_spec", "preset_key", "preset_names"]
+           "parse_preset_spec", "preset", "preset_from_spec", "preset_key", "preset_names",
+           "split_preset_spec"]
 
 # Upper bounds of the sizes and counts, far above what the presets and the paper use (kernels
 # of 5 and 31 px, 2 and 4 filter stages, windows of a few frames) but below what allocates
@@ -606,6 +607,16 @@ def parse_preset_spec(spec: str, label: str | None = None
         as the user gave it: ``asnn:robust/top_k=x``), else the spec.
     """
     label = spec if label is None else label
+    name, overrides = split_preset_spec(spec, label)
+    check_overrides(name, overrides, label)
+    return name, overrides
+
+
+def split_preset_spec(spec: str, label: str | None = None
+                      ) -> tuple[str, tuple[tuple[str, object], ...]]:
+    """:func:`parse_preset_spec` without the check of the values against the preset (for
+    overrides that apply over others: a detector spec's over the default preset's)."""
+    label = spec if label is None else label
     name, *items = spec.strip().split("/")
     name = name.strip() or "default"
     overrides, named = [], set()
@@ -618,7 +629,6 @@ def parse_preset_spec(spec: str, label: str | None = None
             raise ValueError(f"{label!r}: {key} is given twice")
         named.add(key)
         overrides.append((key, _spec_value(value)))
-    check_overrides(name, overrides, label)
     return name, tuple(overrides)
 
 

@@ -243,6 +243,8 @@ def preset_spec(text: str) -> str:
     :func:`asnn.params.parse_preset_spec`)."""
     from asnn.params import parse_preset_spec
 
+    if not text.strip():  # the default's name, if that is meant
+        raise argparse.ArgumentTypeError("give a preset's name (default: the default preset)")
     try:
         parse_preset_spec(text)
     except ValueError as exc:

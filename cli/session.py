@@ -84,19 +84,20 @@ def signals_held():
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    held = []
-    previous = {sig: signal.signal(sig, lambda signum, frame: held.append((signum, frame)))
-                for sig in (signal.SIGINT, signal.SIGTERM)}
+    held, previous = {}, {}
     try:
+        for sig in (signal.SIGINT, signal.SIGTERM):  # each restored below once installed
+            previous[sig] = signal.signal(
+                sig, lambda signum, frame: held.setdefault(signum, frame))
         yield
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
-        if held:
-            signum, frame = held[0]
+        if held:  # SIGTERM before Ctrl-C where both came: the process is to end terminated
+            signum = signal.SIGTERM if signal.SIGTERM in held else signal.SIGINT
             handler = previous[signum]
             if callable(handler):
-                handler(signum, frame)
+                handler(signum, held[signum])
             elif handler == signal.SIG_DFL:
                 signal.raise_signal(signum)
 

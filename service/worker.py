@@ -145,11 +145,14 @@ def _on_network_thread(callback: Callable[[zenoh.Sample], None]):
     A plain Python callable gets a thread of its own per subscriber (zenoh-python's default),
     fed by a queue with no bound: a worker serving 40 robots kept 40 more threads, and a
     callback that falls behind queues every sample (a 1 MB stream at twice a slow callback's
-    pace: +370 MB in 10 s). Run where they arrive, frames that come faster than the worker
-    takes them wait in the link's bounded buffers and are dropped there, as their best-effort
-    QoS allows. The frame callbacks only decode and file the frame, under locks never held
-    across a Zenoh call, so they cannot stall the thread. ``indirect`` is marked unstable in
-    zenoh-python 1.x: without it, the default applies.
+    pace: +370 MB in 10 s). Run where they arrive, frames that come faster than the model
+    takes them are replaced by newer ones (the worker's own drops, counted in its status) or,
+    past what the thread can file, wait in the link's bounded buffers and are dropped there, as
+    their best-effort QoS allows (a 100-robot flood: a thread per robot before, none now; the
+    frames answered and the latency as before). The frame callbacks only decode and file the
+    frame, under locks never held across a Zenoh call, so they cannot stall the thread (they
+    may log, rate-limited). ``indirect`` is marked unstable in zenoh-python 1.x: without it,
+    the default applies.
     """
     try:
         return zenoh.handlers.Callback(callback, indirect=False)

@@ -729,3 +729,30 @@ def test_a_run_that_stops_before_its_first_frame_leaves_an_existing_output_as_it
         assert main(["detect", str(clip), "--jsonl", str(kept), "--mcap", "/proc/x.mcap"]) == 2
         assert "cannot write /proc/x.mcap" in capsys.readouterr().err
     assert kept.read_text() == '{"frame": 0}\n'
+
+
+def test_signals_held_in_a_block_are_given_after_it_sigterm_first():
+    """A Ctrl-C then a SIGTERM within a frame's writing ended the command as interrupted (130),
+    not terminated (143); each handler in place before the block is back after it."""
+    import os
+    import signal
+
+    from cli.session import signals_held
+
+    got = []
+    handlers = {sig: signal.signal(sig, lambda signum, frame: got.append(signum))
+                for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with signals_held():
+            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGTERM)
+            assert got == []  # held
+        assert got == [signal.SIGTERM]
+        with signals_held():
+            os.kill(os.getpid(), signal.SIGINT)
+        assert got == [signal.SIGTERM, signal.SIGINT]
+        os.kill(os.getpid(), signal.SIGINT)  # the handler before the block is back
+        assert got[-1] == signal.SIGINT and len(got) == 3
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)

@@ -771,6 +771,9 @@ def test_a_spec_that_gives_a_field_twice_is_refused():
         parse_detector("asnn:robust/top_k=0/top_k=7")
     # the spec's own override changes the default preset's, once
     assert parse_detector("asnn:/top_k=2", default_preset="robust/top_k=0").params.top_k == 2
+    # and is checked with the default's, not against the bare preset (a review)
+    wide = parse_detector("asnn:/min_width=500", default_preset="robust/max_width=1000").params
+    assert (wide.min_width, wide.max_width) == (500, 1000)
 
 
 def test_detect_refuses_a_preset_value_of_another_type(capsys):

@@ -544,8 +544,9 @@ class TargetTracker:
         to speak for its region, in [0, 1] (0: any overlap).
     object_ids : bool
         Name a fragment after the object it is part of (:meth:`object_id`): a track that,
-        before it counted under its own id, overlapped a track counting in that frame or the
-        one before, takes the older track's object id for good (:func:`fragment_of`).
+        before it counted under its own id, overlapped a track counting in that frame or in
+        one of the ``region_frames`` before it (one, without region persistence), takes the
+        older track's object id for good (:func:`fragment_of`).
 
     Attributes
     ----------

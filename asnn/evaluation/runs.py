@@ -20,7 +20,8 @@ import numpy as np
 from . import scoring
 from ..detectors import MODELS, Detector, make_detector
 from ..io.files import write_atomically
-from ..params import DEFAULT_PRESET, ASNNParams, check_overrides, parse_preset_spec, preset
+from ..params import (DEFAULT_PRESET, ASNNParams, check_overrides, parse_preset_spec,
+                      preset, split_preset_spec)
 
 __all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
            "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
@@ -146,7 +147,7 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
         preset_name, overrides = parse_preset_spec(rest, spec)
     else:  # the default preset's, then the spec's own (which may change the default's)
         preset_name, base = parse_preset_spec(default_preset or "default", spec)
-        overrides = base + parse_preset_spec(preset_name + rest, spec)[1]
+        overrides = base + split_preset_spec(preset_name + rest, spec)[1]
         check_overrides(preset_name, overrides, spec)
     return DetectorSpec("asnn", None if preset_name == "default" else preset_name,
                         tuple(overrides))

@@ -27,8 +27,8 @@ FPS_RANGE = (1.0, MAX_FPS)
 # the containers our video writers (OpenCV's, mp4v or MJPG) write and read back; OpenCV takes
 # the container from the name, and refuses others (.txt) or writes what it cannot read (.mpg)
 WRITABLE_SUFFIXES = (".avi", ".m4v", ".mkv", ".mov", ".mp4")
-# the slowest rate a video is written at: mpeg4's writer fails below about 0.002 frames a
-# second, and above 65535 (a bag whose stamps are minutes or microseconds apart)
+# the slowest rate a video is written at (mpeg4's writer fails below about 0.002 frames a
+# second: a bag whose stamps are minutes apart; the fastest is MAX_FPS)
 MIN_WRITTEN_FPS = 0.01
 
 # FFmpeg prints its own decoder complaints on stderr; our errors say it in one line instead.
