@@ -19,7 +19,7 @@ pytest.importorskip("mcap_ros2", reason="the 'ros' extra is not installed")
 from mcap_ros2.writer import Writer as Ros2Writer  # noqa: E402  (the third-party writer)
 
 from asnn.evaluation.clips import evaluate_clips  # noqa: E402
-from asnn.io import rosbag  # noqa: E402
+from asnn.io import mcap_reader, rosbag  # noqa: E402
 from asnn.io.images import ImageError  # noqa: E402
 from asnn.io.sources import SourceError, open_source  # noqa: E402
 from asnn.stimuli import make_scene  # noqa: E402
@@ -444,7 +444,7 @@ def test_chunks_that_would_fill_the_memory_or_hold_the_reader_are_refused(tmp_pa
     zeros = chunk("zstd", zstandard.ZstdCompressor().compress(b"\0" * 2**20), 2**20)
     tiny = b"\x80" + (4).to_bytes(8, "little") + b"junk"  # a user record of 4 bytes, 13 in all
     many = chunk("", tiny * 200, 13 * 200)
-    monkeypatch.setattr(rosbag, "MAX_CHUNK_RECORDS", 100)
+    monkeypatch.setattr(mcap_reader, "MAX_CHUNK_RECORDS", 100)
     for name, bad, says in [("inflating", inflating, "decompresses to more"),
                             ("zeros", zeros, "opcode 0"),
                             ("many", many, "more than 100 records")]:
@@ -490,7 +490,7 @@ def test_a_message_larger_than_any_picture_is_refused_before_it_is_copied(tmp_pa
     and two copies of the message at once (the record's, the decoder's). Here at a small scale
     (the bound lowered to 1 MiB, a message of 8 MiB): one copy, the chunk's, and the message is
     a bad one, skipped."""
-    monkeypatch.setattr(rosbag, "MAX_MESSAGE_BYTES", 2**20, raising=False)
+    monkeypatch.setattr(mcap_reader, "MAX_MESSAGE_BYTES", 2**20, raising=False)
     size = 8 * 2**20
     bomb = {**raw_message(looming.frames[1][:64, :64], "mono8", 1), "data": bytes(size)}
     messages = [raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:10])]
@@ -513,8 +513,7 @@ def test_a_chunk_of_more_records_than_its_compressed_bytes_can_hold_is_refused(t
     """A probe: a 15 KB bag of five chunks of a million empty messages each, on another topic,
     took 68 s to read (three passes of 5 million records). A chunk holds at most
     RECORDS_PER_COMPRESSED_BYTE records per compressed byte (and a thousand)."""
-    from mcap.data_stream import RecordBuilder
-    from mcap.records import DataEnd, Footer, Header, Message
+    from mcap.records import Message
 
     empty = Message(channel_id=99, log_time=START_NS, publish_time=START_NS, sequence=0,
                     data=b"")
@@ -579,8 +578,8 @@ def test_a_summary_of_many_chunk_indexes_is_read_once_and_kept_small(tmp_path, l
     bag = tmp_path / "indexes.mcap"
     bag.write_bytes(b"\x89MCAP0\r\n" + builder.end() + b"\x89MCAP0\r\n")
     parsed = []
-    original = getattr(rosbag, "_parse_summary", None)
-    monkeypatch.setattr(rosbag, "_parse_summary",
+    original = getattr(mcap_reader, "_parse_summary", None)
+    monkeypatch.setattr(mcap_reader, "_parse_summary",
                         lambda *a: parsed.append(1) or original(*a), raising=False)
     frames = []
     peak = traced_peak(lambda: frames.extend(rosbag.BagClip(bag).frames()))
@@ -690,8 +689,8 @@ def test_only_the_chunks_holding_the_image_topic_are_decompressed(tmp_path, loom
                 writer.write_message("/scan", schemas["std_msgs/msg/String"],
                                      {"data": "x" * 30_000}, log_time=ns + k, publish_time=ns + k)
     opened = []
-    original = rosbag._chunk_records
-    monkeypatch.setattr(rosbag, "_chunk_records",
+    original = mcap_reader._chunk_records
+    monkeypatch.setattr(mcap_reader, "_chunk_records",
                         lambda chunk, *rest: opened.append(chunk) or original(chunk, *rest))
     clip = rosbag.BagClip(path, "/camera")
     opened.clear()
@@ -735,14 +734,14 @@ def test_a_summary_over_the_bound_is_not_loaded_and_the_bag_is_read_through(tmp_
         raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:12])])},
         chunk_size=20_000)
     loaded = []
-    original = rosbag._parse_summary
-    monkeypatch.setattr(rosbag, "_parse_summary",
+    original = mcap_reader._parse_summary
+    monkeypatch.setattr(mcap_reader, "_parse_summary",
                         lambda *a, **k: loaded.append(1) or original(*a, **k))
-    monkeypatch.setattr(rosbag, "MAX_SUMMARY_BYTES", 64)  # smaller than this bag's summary
+    monkeypatch.setattr(mcap_reader, "MAX_SUMMARY_BYTES", 64)  # smaller than this bag's summary
     read = [image for _, image in rosbag.open_bag(bag).frames()]
     assert not loaded and len(read) == 12
     assert all(np.array_equal(a, b) for a, b in zip(read, looming.frames[:12]))
-    monkeypatch.setattr(rosbag, "MAX_SUMMARY_BYTES", 2**20)  # the control
+    monkeypatch.setattr(mcap_reader, "MAX_SUMMARY_BYTES", 2**20)  # the control
     rosbag.open_bag(bag)
     assert loaded
 
@@ -751,7 +750,7 @@ def test_a_chunk_the_index_lists_twice_is_read_once(tmp_path, looming, monkeypat
     bag = write_messages(tmp_path / "ok.mcap", {"/c": (rosbag.IMAGE, [
         raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:12])])},
         chunk_size=20_000)
-    original = rosbag._summary
+    original = mcap_reader.bag_summary
 
     def doubled(fh):
         summary = original(fh)
@@ -760,7 +759,7 @@ def test_a_chunk_the_index_lists_twice_is_read_once(tmp_path, looming, monkeypat
                 channel: offsets + offsets[:1] for channel, offsets in summary.chunks.items()})
         return summary
 
-    monkeypatch.setattr(rosbag, "_summary", doubled)
+    monkeypatch.setattr(mcap_reader, "bag_summary", doubled)
     read = [image for _, image in rosbag.open_bag(bag).frames()]
     assert len(read) == 12
     assert all(np.array_equal(a, b) for a, b in zip(read, looming.frames[:12]))
@@ -1274,8 +1273,8 @@ def test_a_summary_too_large_to_keep_is_read_again_rather_than_kept(tmp_path, lo
         path.write_bytes(b"\x89MCAP0\r\n" + builder.end() + b"\x89MCAP0\r\n")
         return path
 
-    rosbag._summaries.clear()
+    mcap_reader._summaries.clear()
     assert len(list(rosbag.BagClip(bag("small.mcap", 10), "/c").frames())) == 3
-    assert len(rosbag._summaries) == 1  # kept for the passes over it
+    assert len(mcap_reader._summaries) == 1  # kept for the passes over it
     assert len(list(rosbag.BagClip(bag("many.mcap", 10_000), "/c").frames())) == 3
-    assert len(rosbag._summaries) == 1  # 10 MB of channels: read on each pass instead
+    assert len(mcap_reader._summaries) == 1  # 10 MB of channels: read on each pass instead
