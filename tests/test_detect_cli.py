@@ -756,3 +756,17 @@ def test_signals_held_in_a_block_are_given_after_it_sigterm_first():
     finally:
         for sig, handler in handlers.items():
             signal.signal(sig, handler)
+
+
+def test_a_sigterm_held_under_the_default_handler_still_ends_the_process():
+    import signal
+    import subprocess
+    import sys
+
+    code = ("import os, signal\nfrom cli.session import signals_held\n"
+            "signal.signal(signal.SIGTERM, signal.SIG_DFL)\n"
+            "with signals_held():\n    os.kill(os.getpid(), signal.SIGTERM)\n"
+            "    print('held', flush=True)\nprint('alive', flush=True)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == -signal.SIGTERM and done.stdout.split() == ["held"]

@@ -771,7 +771,14 @@ def test_a_spec_that_gives_a_field_twice_is_refused():
         parse_detector("asnn:robust/top_k=0/top_k=7")
     # the spec's own override changes the default preset's, once
     assert parse_detector("asnn:/top_k=2", default_preset="robust/top_k=0").params.top_k == 2
-    # and is checked with the default's, not against the bare preset (a review)
+    # and is checked with the default's, not against the bare preset (a review), strictly
+    with pytest.raises(ValueError, match="top_k: Input should be a valid integer"):
+        parse_detector("asnn:/top_k=true")
+    from asnn.params import parse_preset_spec
+
+    assert parse_preset_spec("/top_k=0") == ("default", (("top_k", 0),))  # the default's name
+    with pytest.raises(ValueError, match="an override is name=value"):
+        parse_preset_spec("robust/=1")
     wide = parse_detector("asnn:/min_width=500", default_preset="robust/max_width=1000").params
     assert (wide.min_width, wide.max_width) == (500, 1000)
 
@@ -964,3 +971,15 @@ def test_an_out_folder_whose_labels_or_report_no_eval_wrote_is_refused_before_th
     for _ in range(2):
         assert main(["eval", "--synthetic", "--cases", "loom-dark-c1.0-d12-center",
                      "--detectors", "lgmd1", "--no-plots", "--out", str(again)]) in (0, 1)
+
+
+def test_a_clips_stamps_are_said_one_frame_or_reset_each():
+    from asnn.evaluation.clips import clip_warnings
+
+    label = {"file": "a.mcap", "fps": 20.0, "collision": False, "frames": 40}
+    assert clip_warnings(label, 40, 20.0, None, stamps=(1, 0, None)) == [
+        "a.mcap: 1 frame whose header stamp goes back, taken at the latest frame's time"]
+    assert clip_warnings(label, 40, 20.0, None, stamps=(0, 1, "message 9: 3 s back")) == [
+        "a.mcap: 1 clock reset, timed on from the latest frame's time; the first: message 9: "
+        "3 s back"]
+    assert clip_warnings(label, 40, 20.0, None) == []

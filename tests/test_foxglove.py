@@ -359,9 +359,12 @@ def test_a_robot_silent_past_forget_after_is_forgotten_with_nothing_else_arrivin
     topics advertised to every new viewer (a Foxglove server round)."""
     from clients.foxglove import FoxgloveBridge
 
+    import threading
+
     with FoxgloveBridge(port=0, forget_after=0.3) as bridge:
         assert bridge.offer("asnn/r1/response", response("r1", 1, 1.0)) == "r1"
         wait_for(lambda: bridge.robots() == [], what="r1 forgotten in silence")
+    assert not any(t.name == "foxglove-sweep" for t in threading.enumerate())  # closed with it
 
 
 @pytest.mark.parametrize("host, shown", [("127.0.0.1", "127.0.0.1"), ("0.0.0.0", "127.0.0.1"),

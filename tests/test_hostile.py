@@ -634,7 +634,12 @@ def test_a_camera_left_alone_after_an_intrusion_is_followed_once_the_first_is_si
     assert answered, "the new camera was never followed"
     assert answered == list(range(answered[0], last))
     assert CONTESTED_FOR_S <= (answered[0] - 2) * 0.05 <= CONTESTED_FOR_S + 0.2
-    assert any("following the other publisher's" in r.getMessage() for r in caplog.records)
+    assert sum("following the other publisher's" in r.getMessage()
+               for r in caplog.records) == 1  # the stream is the robot's from then on
+    clock.now += 0.05  # the old camera back: the other publisher now, refused
+    assert core.offer("asnn/r1/frame", payload(scene.frames[0], 100_010)) is None
+    clock.now += 0.05
+    assert feed(core, "r1", scene.frames[1], last) is not None
 
 
 def test_an_intruder_does_not_take_the_robot_while_its_camera_pauses_or_restarts():
@@ -975,10 +980,19 @@ def test_a_status_asnn_cannot_read_is_said_and_hides_no_other(zenoh_net, tmp_pat
     from cli.main import main
     from service.messages import encode_status
 
+    whole = WorkerCore(worker_id="x").status()  # as a worker's, but for what it says
+    readable = []
+
     def fake(query):
         query.reply("asnn/@worker/fake/status", encode_status({"worker": "fake\x1b[2J"}))
         query.reply("asnn/@worker/nan/status",
                     encode_status({"worker": "nan", "stats": float("nan")}))
+        if not readable:
+            return
+        query.reply("asnn/@worker/nanstats/status", encode_status(
+            {**whole, "worker": "nanstats", "uptime_s": float("nan")}))
+        query.reply("asnn/@worker/esc/status",
+                    encode_status({**whole, "worker": "esc\x1b]0;t\x07"}))
 
     config = tmp_path / "zenoh.json5"
     config.write_text('{"scouting": {"multicast": {"enabled": false}, '
@@ -988,13 +1002,20 @@ def test_a_status_asnn_cannot_read_is_said_and_hides_no_other(zenoh_net, tmp_pat
     queryable = zenoh_net.hub.declare_queryable("asnn/@worker/*/status", fake)
     try:
         assert main(ask) == 1  # nothing readable: nobody answered
+        readable.append(True)
         with Worker(zenoh_net.hub, WorkerCore(worker_id="w1"), stats_every=0):
             capsys.readouterr()
             assert main(ask) == 0
     finally:
         queryable.undeclare()
     out, err = capsys.readouterr()
-    assert len(out.splitlines()) == 1 and '"w1"' in out if as_json else out.startswith(
-        "worker w1: ")
+    lines = sorted(out.splitlines())
     assert "worker fake\\x1b[2J: a status this asnn cannot read (KeyError" in err
     assert "worker nan: a status this asnn cannot read" in err and "\x1b" not in out + err
+    if as_json:  # the NaN map refused, every line printed is JSON
+        assert len(lines) == 2 and [json.loads(line)["worker"] for line in lines] == [
+            "esc\x1b]0;t\x07", "w1"]
+        assert "worker nanstats: a status this asnn cannot read" in err
+    else:  # shown, escaped
+        assert len(lines) == 3 and lines[0].startswith("worker esc\\x1b]0;t\\x07: ")
+        assert lines[2].startswith("worker w1: ")

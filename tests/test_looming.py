@@ -803,3 +803,42 @@ def test_an_object_whose_track_misses_the_test_for_a_frame_keeps_its_id():
     ids = {target.id for k, frame in enumerate(scene.frames)
            for target in model.step(frame, k / 60).targets if k <= scene.contact_frame}
     assert len(ids) == 1
+
+
+def test_a_stream_is_timed_by_gaps_from_a_10_khz_camera_to_a_second():
+    from asnn.params import MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, timed_gap
+
+    assert timed_gap(MIN_FRAME_GAP_S) and timed_gap(MAX_FRAME_GAP_S) and timed_gap(1 / 240)
+    assert not timed_gap(MIN_FRAME_GAP_S / 2) and not timed_gap(1.5) and not timed_gap(0.0)
+    assert not timed_gap(float("nan"))
+
+
+def test_without_region_persistence_a_fragment_is_named_after_the_frame_before():
+    from asnn.approach.tracking import Observation, TargetTracker
+
+    tracker = TargetTracker(max_missed=0, region_frames=0, object_ids=True)
+    body = Observation(50, 20, 5, 1, (30, 0, 70, 60))
+    rim = Observation(50, 55, 5, 1, (30, 40, 70, 70))
+
+    def frame(observations):
+        tracks = tracker.update(observations, 0.05)
+        for track in tracks:
+            track.measure(1.0, 5.0, 0.0)  # ttc 1 s, offset 0.25: passes
+        coming = tracker.judge(tracks, 1.5, 1.0, 3)
+        return [(tracker.object_id(track), ok) for track, ok in zip(tracks, coming)]
+
+    for _ in range(3):
+        frame([body])
+    assert frame([body, rim]) == [(0, True), (0, False)]  # over the counting body: its id
+
+
+def test_a_shrunk_mask_leaves_out_a_pixel_a_quarter_of_which_it_covers():
+    from asnn.approach.looming import shrink_step, shrunk_mask, shrunk_size
+
+    assert shrink_step(128, 64) == 2.0 and shrink_step(60, 40) == 1.0
+    assert shrunk_size(128, 64, 2.0) == (64, 32) and shrunk_size(3, 1, 4.0) == (1, 1)
+    mask = np.zeros((128, 128), bool)
+    mask[0, :2] = True  # half of the shrunk pixel (0, 0)
+    mask[0, 4] = True  # a quarter of (0, 2)
+    shrunk = shrunk_mask(mask, (64, 64))
+    assert shrunk[0, 0] and not shrunk[0, 2] and shrunk.sum() == 1

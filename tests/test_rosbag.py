@@ -519,6 +519,7 @@ def test_a_chunk_of_more_records_than_its_compressed_bytes_can_hold_is_refused(t
                     data=b"")
     junk = records_chunk(*[empty] * 50_000)  # 1.5 MB of records, some 200 bytes compressed
     assert len(junk.data) * 4 + 1000 < 50_000
+    assert mcap_reader._chunk_record_limit(junk) == 4 * len(junk.data) + 1000  # not looser
     bag = crafted_bag(tmp_path / "junk.mcap", looming, junk)
     errors = []
     frames = list(rosbag.BagClip(bag).frames(lambda reason, message: errors.append(message)))
@@ -1278,3 +1279,11 @@ def test_a_summary_too_large_to_keep_is_read_again_rather_than_kept(tmp_path, lo
     assert len(mcap_reader._summaries) == 1  # kept for the passes over it
     assert len(list(rosbag.BagClip(bag("many.mcap", 10_000), "/c").frames())) == 3
     assert len(mcap_reader._summaries) == 1  # 10 MB of channels: read on each pass instead
+
+
+def test_a_summary_s_weight_counts_its_chunk_offsets_too():
+    from array import array
+
+    offsets = mcap_reader._Summary({}, {}, None, {1: array("Q", range(2**20 + 1))})
+    assert offsets.weight() > mcap_reader._SUMMARY_KEPT_BYTES  # 8 MiB of offsets and one
+    assert mcap_reader._Summary({}, {}, None, {1: array("Q", range(10))}).weight() == 80

@@ -68,3 +68,19 @@ def test_the_header_fits_a_small_frame_and_keeps_its_size_on_a_large_one():
     assert scale < 0.4
     (w, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, 3)
     assert w <= 128 - 10
+
+
+def test_an_avi_is_written_as_motion_jpeg_and_an_mp4_as_mpeg4(tmp_path):
+    import cv2
+
+    from asnn.io.video import write_video
+
+    def codec(path):  # as OpenCV reads it back
+        capture = cv2.VideoCapture(str(path))
+        fourcc = int(capture.get(cv2.CAP_PROP_FOURCC))
+        capture.release()
+        return "".join(chr((fourcc >> 8 * i) & 0xFF) for i in range(4)).lower()
+
+    frames = np.zeros((3, 32, 48), np.uint8)
+    assert codec(write_video(frames, tmp_path / "x.avi")) == "mjpg"
+    assert codec(write_video(frames, tmp_path / "x.mp4")) in ("mp4v", "fmp4")

@@ -485,6 +485,7 @@ def test_a_camera_that_sends_each_frame_twice_is_detected_at_the_rate_of_its_new
 @pytest.mark.parametrize("model, stamps, logged", [
     ("asnn", [k * 50.0 for k in range(12)], "50 s apart"),  # a clock in milliseconds
     ("asnn", [7.0] * 12, "0 s apart"),  # a clock that never moves
+    ("asnn", [k * 1e-5 for k in range(12)], "1e-05 s apart"),  # closer than MIN_FRAME_GAP_S
     ("asnn", [k * 0.05 for k in range(12)], None),
     ("asnn", [k * 50.0 for k in range(4)], None),  # fewer than PERIOD_FRAMES gaps in a row
     ("lgmd1", [k * 50.0 for k in range(12)], None),  # it reads no times
