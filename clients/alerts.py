@@ -138,10 +138,10 @@ class LinePrinter:
     Zenoh calls the handler on its own threads: a write there that blocks (a reader that stopped
     reading: a pager, a stalled journal) held them, and with them Ctrl-C, until the reader went
     away. Lines wait in a queue of at most ``max_lines``; beyond it the oldest waiting line
-    makes room for the newest, counted in ``unprinted`` and logged (at most one line every 10
-    s): a reader slower than the warnings gets the latest, not ones many seconds old. A write that fails
-    (the reader gone: ``BrokenPipeError``; a full disk) ends the printing: ``error`` holds it and
-    ``on_error()`` is called once, so that the command can stop.
+    makes room for the newest, counted in ``unprinted`` and logged (at most one line every
+    10 s): a reader slower than the warnings gets the latest, not ones many seconds old. A
+    write that fails (the reader gone: ``BrokenPipeError``; a full disk) ends the printing:
+    ``error`` holds it and ``on_error()`` is called once, so that the command can stop.
 
     Parameters
     ----------

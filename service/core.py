@@ -37,9 +37,8 @@ stepped in the current stream (``stream_frames``, docs/contract.md).
 
 The retina integrates with its fixed time step (0.05 s) whatever the stamps say; the targets'
 time to contact, and with it the default's approach gate, read the stamps' gaps (a gap below
-MIN_FRAME_GAP_S or above MAX_FRAME_GAP_S reads as the nominal period, logged when it lasts: a camera
-clock in other units). A robot that
-sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten); when every slot
+MIN_FRAME_GAP_S or above MAX_FRAME_GAP_S reads as the nominal period, logged when it lasts: a
+camera clock in other units). A robot that sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten); when every slot
 is taken, one silent for ``takeover_after`` seconds is forgotten to make room for a new robot.
 
 Two publishers on one key
@@ -79,8 +78,8 @@ soon as a frame of it fails. So ids that send only undecodable frames cannot loc
 
 Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``,
 the labels of :data:`service.messages.REASONS` plus ``frame-rejected``, ``model-failed``
-(a bug), ``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING, rate-limited:
-the first rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
+(a bug), ``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING,
+rate-limited: the first rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
 with the count of those not shown.
 
 Ownership: with ``owns`` (a predicate on robot ids, see :mod:`service.ownership` and
