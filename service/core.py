@@ -38,8 +38,9 @@ stepped in the current stream (``stream_frames``, docs/contract.md).
 The retina integrates with its fixed time step (0.05 s) whatever the stamps say; the targets'
 time to contact, and with it the default's approach gate, read the stamps' gaps (a gap below
 MIN_FRAME_GAP_S or above MAX_FRAME_GAP_S reads as the nominal period, logged when it lasts: a
-camera clock in other units). A robot that sends no frame for ``idle_timeout`` seconds is evicted (its state is forgotten); when every slot
-is taken, one silent for ``takeover_after`` seconds is forgotten to make room for a new robot.
+camera clock in other units). A robot that sends no frame for ``idle_timeout`` seconds is
+evicted (its state is forgotten); when every slot is taken, one silent for ``takeover_after``
+seconds is forgotten to make room for a new robot.
 
 Two publishers on one key
 -------------------------
