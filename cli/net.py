@@ -274,6 +274,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 # ---------------------------------------------------------------- registration
 
+def _add_preset_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--preset", type=preset_spec, default=None, metavar="NAME[/FIELD=VALUE...]",
+                   help=f"ASNN parameter preset ({', '.join(preset_names())}), with any fields "
+                        "changed after slashes (robust/ignore_rig=false; default: the default "
+                        "preset)")
+
+
 def register(subparsers) -> None:
     from asnn.detectors import MODELS
     from asnn.stimuli import SCENE_NAMES
@@ -314,10 +321,7 @@ def register(subparsers) -> None:
                               "each serves its share) and publish a response per processed frame "
                               "and a warning per collision.")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
-    p.add_argument("--preset", type=preset_spec, default=None, metavar="NAME[/FIELD=VALUE...]",
-                   help=f"ASNN parameter preset ({', '.join(preset_names())}), with any fields "
-                        "changed after slashes (robust/ignore_rig=false; default: the default "
-                        "preset)")
+    _add_preset_option(p)
     p.add_argument("--id", type=worker_id, default=None,
                    help="worker id reported in responses (default: <host>-<pid>)")
     p.add_argument("--idle-timeout", type=seconds, default=IDLE_TIMEOUT_S, metavar="SECONDS",
@@ -397,9 +401,6 @@ def register(subparsers) -> None:
     p.add_argument("--fps", type=frame_rate, default=None,
                    help="playback rate (default: the scene's, 20)")
     p.add_argument("--model", choices=MODELS, default="asnn", help="detector (default: asnn)")
-    p.add_argument("--preset", type=preset_spec, default=None, metavar="NAME[/FIELD=VALUE...]",
-                   help=f"ASNN parameter preset ({', '.join(preset_names())}), with any fields "
-                        "changed after slashes (robust/ignore_rig=false; default: the default "
-                        "preset)")
+    _add_preset_option(p)
     p.add_argument("--json", action="store_true", help="print the warnings as JSON lines")
     p.set_defaults(func=cmd_demo)

@@ -373,8 +373,8 @@ class Worker:
                 liveliness.declare_subscriber(keys.camera_tokens(prefix), self._on_camera,
                                               history=True)]
             self._token = liveliness.declare_token(keys.worker_token_key(me, prefix))
-        self._status_queryable = self.session.declare_queryable(keys.worker_status_key(me, prefix),
-                                                      self._on_status_query)
+        self._status_queryable = self.session.declare_queryable(
+            keys.worker_status_key(me, prefix), self._on_status_query)
         self._threads = [threading.Thread(target=self._run, daemon=True,
                                           name=f"asnn-worker-{i}") for i in range(self.threads)]
         for thread in self._threads:

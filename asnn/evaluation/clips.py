@@ -133,8 +133,7 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
     except (SourceError, ValueError) as exc:
         return 0, str(exc), None
     write_jsonl(Path(out_path), records)
-    return len(records), None, (decoded, clip.fps, size,
-                                (stamps.count, stamps.resets, stamps.first_reset))
+    return len(records), None, (decoded, clip.fps, size, stamps.tally)
 
 
 def _clips_report(results: Mapping) -> str:

@@ -680,7 +680,7 @@ def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace
     source, stamps = open_labelled_clip(spec, topic)  # as asnn eval reads it
     trace = trace_clip(source.timed_frames(), params, Path(spec).name)
     trace.fps = source.fps
-    trace.stamps = (stamps.count, stamps.resets, stamps.first_reset)
+    trace.stamps = stamps.tally
     return trace
 
 

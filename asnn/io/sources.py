@@ -83,6 +83,13 @@ class BackwardStamps:
         self.count += 1
         self.held(message)
 
+    @property
+    def tally(self) -> tuple[int, int, str | None]:
+        """``(count, resets, first_reset)``: what a clip's warnings say of its stamps
+        (:func:`asnn.evaluation.clips.clip_warnings`), as plain values a worker process can
+        send back."""
+        return self.count, self.resets, self.first_reset
+
     def held(self, message: str) -> None:
         """A frame whose header stamp goes back (``message`` names it), the ``count``-th."""
 
