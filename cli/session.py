@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import atexit
 import contextlib
 import logging
+import logging.handlers
 import os
+import queue
 import signal
 import sys
 import threading
@@ -46,11 +49,68 @@ def zenoh_options(args: argparse.Namespace) -> ZenohOptions:
                         listen=tuple(args.listen), config_file=args.config)
 
 
+LOG_QUEUE_RECORDS = 10_000
+"""Log records a long-running command holds while stderr is slow; beyond them, dropped and
+counted."""
+
+
+class _DroppingQueueHandler(logging.handlers.QueueHandler):
+    """Hands each record to the writer thread, and drops it (counted) when that thread is
+    :data:`LOG_QUEUE_RECORDS` behind: a logging call never waits for stderr."""
+
+    def __init__(self, records: queue.Queue) -> None:
+        super().__init__(records)
+        self._lock = threading.Lock()
+        self._dropped = 0
+
+    def enqueue(self, record: logging.LogRecord) -> None:
+        try:
+            self.queue.put_nowait(record)
+        except queue.Full:
+            with self._lock:
+                self._dropped += 1
+
+    def take_dropped(self) -> int:
+        with self._lock:
+            dropped, self._dropped = self._dropped, 0
+        return dropped
+
+
+class _StderrWriter(logging.StreamHandler):
+    """The writer thread's handler: says how many records were dropped before the next one."""
+
+    def __init__(self, stream, dropped_by: _DroppingQueueHandler) -> None:
+        super().__init__(stream)
+        self._dropped_by = dropped_by
+
+    def handle(self, record: logging.LogRecord) -> bool:
+        dropped = self._dropped_by.take_dropped()
+        if dropped:
+            super().handle(logging.makeLogRecord({
+                "name": "asnn.logging", "levelno": logging.WARNING, "levelname": "WARNING",
+                "msg": f"{dropped} log records dropped: stderr was too slow"}))
+        return super().handle(record)
+
+
 def setup_logging(args: argparse.Namespace) -> None:
+    """Log at ``--log-level`` on stderr, written by a thread of its own: the worker logs from
+    Zenoh's receiving thread and its processing threads, and a stderr that blocks (a full
+    pipe, a stalled journal) must not stall them. At most :data:`LOG_QUEUE_RECORDS` records
+    wait; beyond them records are dropped and the count is logged when writing resumes. Does
+    nothing when the root logger is already configured (as :func:`logging.basicConfig`)."""
     import zenoh
 
-    logging.basicConfig(level=args.log_level.upper(), stream=sys.stderr,
-                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    root = logging.getLogger()
+    if not root.handlers:
+        records = queue.Queue(LOG_QUEUE_RECORDS)
+        handler = _DroppingQueueHandler(records)
+        writer = _StderrWriter(sys.stderr, handler)
+        writer.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+        listener = logging.handlers.QueueListener(records, writer)
+        listener.start()
+        atexit.register(listener.stop)  # before logging's own shutdown: what waits is written
+        root.addHandler(handler)
+        root.setLevel(args.log_level.upper())
     zenoh.try_init_log_from_env()  # Zenoh's own logs only when RUST_LOG is set
 
 

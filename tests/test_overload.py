@@ -95,3 +95,48 @@ def test_four_times_overload_keeps_memory_bounded_and_loses_no_response(overload
     assert stats["warnings"] > 0
     assert sorted((w.robot, w.seq) for w in warnings) == \
         sorted((r.robot, r.seq) for r in got if r.collision)
+
+
+_BLOCKED_STDERR = r"""
+import argparse, logging, os, sys, threading, time
+r, w = os.pipe()
+sys.stderr = os.fdopen(w, "w")  # nobody reads it yet: a full pipe blocks its writer
+from cli.session import LOG_QUEUE_RECORDS, setup_logging
+setup_logging(argparse.Namespace(log_level="info"))
+log = logging.getLogger("asnn.worker")
+for i in range(3 * LOG_QUEUE_RECORDS):
+    log.info("rec %d", i)
+print("logged", flush=True)
+chunks = []
+threading.Thread(target=lambda: [chunks.append(c) for c in iter(lambda: os.read(r, 65536), b"")],
+                 daemon=True).start()
+log.warning("after")
+deadline = time.monotonic() + 60
+while b"after" not in b"".join(chunks) and time.monotonic() < deadline:
+    time.sleep(0.05)
+sys.stdout.write(b"".join(chunks).decode())
+sys.stdout.flush()
+os._exit(0)
+"""
+
+
+def test_logging_never_waits_for_a_blocked_stderr_and_counts_what_it_drops():
+    """The worker logs from Zenoh's receiving thread: a stderr nobody reads (a full pipe) must
+    not stall it. The records beyond the queue's bound are dropped, and their number said."""
+    import re
+    import subprocess
+    import sys
+
+    from cli.session import LOG_QUEUE_RECORDS
+
+    done = subprocess.run([sys.executable, "-c", _BLOCKED_STDERR], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert lines[0] == "logged"  # every logging call returned while stderr was blocked
+    kept = sum(1 for line in lines if re.search(r" INFO rec \d+$", line))
+    dropped = [int(m.group(1)) for line in lines
+               if (m := re.search(r"WARNING (\d+) log records dropped", line))]
+    assert dropped and kept + sum(dropped) == 3 * LOG_QUEUE_RECORDS
+    assert kept <= LOG_QUEUE_RECORDS + 2000  # the queue, and the 64 KiB the pipe held
+    assert lines[-1].endswith("WARNING after")
