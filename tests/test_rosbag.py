@@ -371,6 +371,22 @@ def test_a_rosbag2_directory_is_the_files_its_metadata_lists(tmp_path, looming):
     assert "without the metadata.yaml of a rosbag2 directory" in detect_fails(directory)
 
 
+def test_bags_in_formats_not_read_are_named_as_such(tmp_path):
+    """A rosbag2 SQLite file (alone or in its folder without metadata) or a ROS 1 bag is
+    refused as the bag it is, with the way out, not as a video OpenCV cannot decode."""
+    sqlite = tmp_path / "run" / "run_0.db3"
+    sqlite.parent.mkdir()
+    sqlite.write_bytes(b"SQLite format 3\x00" + bytes(100))
+    ros1 = tmp_path / "drive.bag"
+    ros1.write_bytes(b"#ROSBAG V2.0\n" + bytes(100))
+    for path, said in ((sqlite, "stored in SQLite"), (sqlite.parent, "stored in SQLite"),
+                       (ros1, "a ROS 1 bag")):
+        with pytest.raises(SourceError, match=said) as refused:
+            open_source(str(path))
+        assert refused.value.reason == "not-a-bag"
+        assert said in detect_fails(path)
+
+
 def test_a_summary_whose_statistics_give_no_message_counts_does_not_empty_the_topic(
         tmp_path, looming):
     """An empty channel_message_counts means the statistic is not available (the MCAP

@@ -211,6 +211,7 @@ def open_source(spec: str, *, topic: str | None = None,
         raise SourceError(f"{path}: a folder of .mcap files without the metadata.yaml of a "
                           "rosbag2 directory: give one .mcap file, or rebuild the metadata "
                           "(ros2 bag reindex)", "not-a-bag")
+    _refuse_other_bags(path)
     if topic is not None:
         raise SourceError(f"{spec}: a topic applies to ROS 2 bags (.mcap) only", "no-topic")
     if spec.startswith(SYNTHETIC):
@@ -220,6 +221,20 @@ def open_source(spec: str, *, topic: str | None = None,
     if _is_device(spec):  # /dev/video0: what people type for their camera
         return _open_capture(spec)
     return _open_file(spec, decoder_threads)
+
+
+_OTHER_BAGS = {".db3": "a rosbag2 bag stored in SQLite; only MCAP bags are read "
+                       "(ros2 bag convert makes one)",
+               ".bag": "a ROS 1 bag; only ROS 2 bags in MCAP are read (convert it to one)"}
+
+
+def _refuse_other_bags(path: str) -> None:
+    """A bag in a format not read, by its suffix (or a folder of such files), said as such:
+    OpenCV's "not a video" would send the user looking in the wrong place."""
+    folder = Path(path)
+    for suffix, what in _OTHER_BAGS.items():
+        if path.lower().endswith(suffix) or (folder.is_dir() and any(folder.glob(f"*{suffix}"))):
+            raise SourceError(f"{path}: {what}", "not-a-bag")
 
 
 def _is_device(path: str) -> bool:
