@@ -66,6 +66,15 @@ _PAPER_OPTIONS = (
 def run(args: argparse.Namespace) -> int:
     try:
         if args.list is not None:
+            given = [flag for flag, value in (("--case", args.case), ("NAME/OUT", args.args),
+                                              ("--variant", args.variant),
+                                              ("--scale", args.scale), ("--labels", args.labels))
+                     if value] + [flag for flag, *_ in _PAPER_OPTIONS
+                                  if getattr(args, flag[2:]) is not None]
+            if given:
+                print(f"asnn scene: --list lists the suite's cases and exits; not with "
+                      f"{', '.join(given)}", file=sys.stderr)
+                return 2
             for name in suite_cases(args.list):
                 case = CASES[name]
                 print(f"{name}\t{' '.join(case.category)}")

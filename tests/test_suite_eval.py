@@ -285,6 +285,10 @@ def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):
     assert main(["scene", "--list", "driving-pass"]) == 0
     listed = capsys.readouterr().out.splitlines()
     assert listed and all(line.split("\t")[1].startswith("driving-pass") for line in listed)
+    # --list lists and exits: a case, a file or a scene's option beside it is a mistake
+    assert main(["scene", "--list", "--case", "halt-dark-c0.6", str(out)]) == 2
+    assert main(["scene", "--list", "--fps", "10"]) == 2
+    assert "not with --case, NAME/OUT" in capsys.readouterr().err
     assert main(["scene", "--case", "no-such-case", str(out)]) == 2
     assert main(["scene", "--case", "halt-dark-c0.6"]) == 2          # no OUT
     assert main(["scene", "bogus", str(out)]) == 2
