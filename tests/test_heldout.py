@@ -1,5 +1,5 @@
-"""Held-out figures of the approach gate (asnn/evaluation/heldout.py), detector specs with
-parameter overrides, and the robust preset's two forms."""
+"""Held-out figures of the approach gate (asnn/evaluation/heldout.py, its replay
+gate_replay.py), detector specs with parameter overrides, and the robust preset's two forms."""
 
 import json
 from pathlib import Path
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from asnn import ASNN, preset
-from asnn.evaluation import heldout, scoring
+from asnn.evaluation import gate_replay, heldout, scoring
 from asnn.evaluation.runs import ABLATIONS, at_rate, parse_detector, parse_detectors
 from asnn.io.video import write_video
 from asnn.stimuli.suite import make_case
@@ -22,7 +22,7 @@ CASES = ("loom-dark-c0.6-d6-center", "nearmiss-disk-dark-right", "course-disk-da
 def traced():
     base = preset("robust")
     scenes = [make_case(name) for name in CASES]
-    traces = [heldout.trace_clip(at_rate(s.frames, s.fps), base, s.name) for s in scenes]
+    traces = [gate_replay.trace_clip(at_rate(s.frames, s.fps), base, s.name) for s in scenes]
     return base, scenes, traces
 
 
@@ -52,7 +52,7 @@ def test_the_replay_reproduces_the_models_warnings_frame_by_frame(traced):
     for scene, trace in zip(scenes, traces):
         model = ASNN(base)
         own = [model.step(f, t).collision for t, f in at_rate(scene.frames, scene.fps)]
-        assert [r["collision"] for r in heldout.replay(trace, base)] == own
+        assert [r["collision"] for r in gate_replay.replay(trace, base)] == own
         assert trace.warnings == own  # what check_replay holds the replay to
 
 
@@ -63,29 +63,29 @@ def test_a_replay_that_misses_a_stage_of_the_gate_is_refused(traced):
 
     base, _, traces = traced
     trace = traces[0]  # the loom: it warns
-    heldout.check_replay(trace, base)
+    gate_replay.check_replay(trace, base)
     assert any(trace.warnings)
     silenced = dataclasses.replace(trace, warnings=[False] * len(trace.warnings))
     with pytest.raises(ValueError, match="does not reproduce the model's warnings on "
                                          "'loom-dark-c0.6-d6-center'"):
-        heldout.check_replay(silenced, base)
+        gate_replay.check_replay(silenced, base)
 
 
 def test_the_replay_follows_other_thresholds(traced):
     base, scenes, traces = traced
     # a near miss the offset test keeps quiet warns once the test is loosened
     miss = traces[CASES.index("nearmiss-disk-dark-right")]
-    assert not any(r["collision"] for r in heldout.replay(miss, base))
+    assert not any(r["collision"] for r in gate_replay.replay(miss, base))
     loose = base.model_copy(update={"offset_max": 1000.0})
-    assert any(r["collision"] for r in heldout.replay(miss, loose))
+    assert any(r["collision"] for r in gate_replay.replay(miss, loose))
     # a car cutting in ahead, quiet with the scene-relative test, warns without it
     cut_in = traces[CASES.index("drive-day-cut-in-dark")]
-    assert not any(r["collision"] for r in heldout.replay(cut_in, base))
+    assert not any(r["collision"] for r in gate_replay.replay(cut_in, base))
     plain = base.model_copy(update={"scene_relative": False})
-    assert any(r["collision"] for r in heldout.replay(cut_in, plain))
+    assert any(r["collision"] for r in gate_replay.replay(cut_in, plain))
     # a later time to contact threshold warns later
     loom = traces[0]
-    first = lambda params: next(r["frame"] for r in heldout.replay(loom, params) if r["collision"])
+    first = lambda params: next(r["frame"] for r in gate_replay.replay(loom, params) if r["collision"])
     assert first(base.model_copy(update={"tau_max": 0.5})) > first(base)
 
 
@@ -95,13 +95,13 @@ def test_own_motion_ratios_replayed_in_one_pass_are_each_ones_replay(traced):
     base, scenes, traces = traced
     ratios = (0.75, 1.0, 2.0)
     for trace in traces:
-        assert heldout._replays(trace, base, ratios) == [
-            heldout.replay(trace, base.model_copy(update={"own_motion_ratio": r}))
+        assert gate_replay.replays(trace, base, ratios) == [
+            gate_replay.replay(trace, base.model_copy(update={"own_motion_ratio": r}))
             for r in ratios]
     # ... and the ratio matters: the looming disk on a still background closes by its own
     # motion only as far as a ratio of 1 (its expansion against the scene is its own)
     first = [next(r["frame"] for r in run if r["collision"])
-             for run in heldout._replays(traces[0], base, ratios)]
+             for run in gate_replay.replays(traces[0], base, ratios)]
     assert first[0] == first[1] < first[2]
 
 
@@ -121,12 +121,12 @@ def test_the_replay_reproduces_the_partial_overlap_regime():
             ("walk-light-c0.4-gait", 0, True, {"region_persistence": False}),
             ("drive-day-cut-in-dark", 2, False, {"motion_layers": False})):
         scene = make_case(name, variant)
-        trace = heldout.trace_clip(at_rate(scene.frames, scene.fps), base, name)
+        trace = gate_replay.trace_clip(at_rate(scene.frames, scene.fps), base, name)
         model = ASNN(base)
         own = [model.step(f, t).collision for t, f in at_rate(scene.frames, scene.fps)]
-        assert [r["collision"] for r in heldout.replay(trace, base)] == own
+        assert [r["collision"] for r in gate_replay.replay(trace, base)] == own
         assert any(own) == warned
-        assert any(r["collision"] for r in heldout.replay(trace, base.model_copy(
+        assert any(r["collision"] for r in gate_replay.replay(trace, base.model_copy(
             update=without))) != warned
 
 
@@ -135,12 +135,12 @@ def test_the_replay_asks_a_slow_stream_for_as_few_frames_as_the_model():
     base = preset("robust")
     scene = make_case("walk-dark-c0.4-gait")
     frames = list(at_rate(scene.frames, scene.fps))[::2]
-    trace = heldout.trace_clip(frames, base, scene.name)
+    trace = gate_replay.trace_clip(frames, base, scene.name)
     model = ASNN(base)
     own = [model.step(f, t).collision for t, f in frames]
-    assert [r["collision"] for r in heldout.replay(trace, base)] == own and any(own)
+    assert [r["collision"] for r in gate_replay.replay(trace, base)] == own and any(own)
     fixed = base.model_copy(update={"approach_seconds": None})
-    assert not any(r["collision"] for r in heldout.replay(trace, fixed))
+    assert not any(r["collision"] for r in gate_replay.replay(trace, fixed))
 
 
 @pytest.mark.usefixtures("replayed_once")
@@ -229,7 +229,7 @@ def test_the_suite_breaks_ties_by_the_generated_scenes(traced):
     # a suite of one case the clips do not hold: a partial overlap, which only the regime
     # catches; among the points that tie on the clips, the choice takes one that hits it
     case = make_case("rear-day-catchup-offset")
-    suite = heldout.suite_summaries([heldout.trace_clip(at_rate(case.frames, case.fps), base)],
+    suite = heldout.suite_summaries([gate_replay.trace_clip(at_rate(case.frames, case.fps), base)],
                                     [case.label(case.name)], base)
     by_suite = heldout.leave_one_out(traces, labels, base, early_tolerance_s=0.0,
                                      tie_break="suite", suite=suite)
@@ -243,7 +243,7 @@ def test_the_suite_breaks_ties_by_the_generated_scenes(traced):
     assert suite[k]["hit"] == 1
     # ... and it still ties with the grid's choice on the clips themselves
     in_sample = [heldout.scoring.summarize(
-        heldout.scoring.score_clip(heldout.replay(tr, g), lab, early_tolerance_s=0.0)
+        scoring.score_clip(gate_replay.replay(tr, g), lab, early_tolerance_s=0.0)
         for tr, lab in zip(traces, labels))
         for g in (base.model_copy(update=chosen), base.model_copy(update=by_grid["chosen_all"]))]
     assert heldout.selection_key(in_sample[0], "grid") == heldout.selection_key(in_sample[1],

@@ -195,7 +195,7 @@ class ApproachStage:
         where measured (``motion_layers``, while the scene expands).
     measure_all_against_scene : bool
         Measure every growing track against the scene, not only the candidates (the held-out
-        replay's trace, :mod:`asnn.evaluation.heldout`); the tracks' state is still only that
+        replay's trace, :mod:`asnn.evaluation.gate_replay`); the tracks' state is still only that
         of the candidates.
     """
 
