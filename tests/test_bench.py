@@ -471,3 +471,17 @@ def test_bench_refuses_options_that_would_be_ignored(capsys, monkeypatch, args, 
     assert main(["bench", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0]
+
+
+def test_the_service_bench_starts_workers_with_options_the_cli_takes(tmp_path):
+    """The service bench spells `asnn worker`'s command line itself: a renamed or removed flag
+    would break the benchmark with nothing else to say so."""
+    from cli.main import build_parser
+    from service.bench import _worker_args
+
+    config = tmp_path / "zenoh.json5"
+    args = build_parser().parse_args(_worker_args("w1", config, "robust/top_k=0", 3))
+    assert args.func.__name__ == "cmd_worker"
+    assert (args.config, args.log_level, args.id, args.threads) == (str(config), "warning",
+                                                                   "w1", 3)
+    assert args.preset is not None and "top_k" in str(args.preset)
