@@ -15,6 +15,8 @@ loads matplotlib):
     Every detector over the labelled suite of generated scenes (``asnn eval --synthetic``).
 :mod:`~asnn.evaluation.paper`
     The paper's synthetic experiments, Figs. 3 and 6-9 (``asnn eval --paper``).
+:mod:`~asnn.evaluation.ttc`
+    The targets' time to contact on approaches of known contact time (``asnn eval --ttc``).
 :mod:`~asnn.evaluation.bench`
     Per-frame timing of every model and preset (``asnn bench``).
 :mod:`~asnn.evaluation.figures`, :mod:`~asnn.evaluation.progress`

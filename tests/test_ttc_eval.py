@@ -1,0 +1,147 @@
+"""``asnn eval --ttc``: the targets' time to contact against approaches of known contact time."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+
+import pytest
+
+from asnn import ASNN
+from asnn.evaluation import ttc
+from cli.main import main
+
+# two approaches, 10 and 60 fps: a time base ignored reads half or three times the truth
+SMALL = ttc.Design(frame_rates=(10.0, 60.0), polarities=("dark",), heights=(12.0,), taus=(2.0,),
+                   positions=(None,))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return ttc.loom_scene(ttc.looms(SMALL)[0])  # 10 fps
+
+
+def _targets(scene, ttc_of):
+    """One target per frame at the labelled centre, with ``ttc_of(true)`` (a far one too)."""
+    out = []
+    for (x, y), true in zip(scene.track, scene.ttc):
+        value = ttc_of(float(true)) if math.isfinite(true) and true > 0 else None
+        out.append([{"x": 150.0, "y": 110.0, "ttc": 0.01},  # elsewhere: never the object's
+                    {"x": float(x) + 2.0, "y": float(y), "ttc": value}])
+    return out
+
+
+def test_the_samples_are_the_approach_frames_with_their_growth_and_error(scene):
+    exact = ttc.scene_samples(scene, _targets(scene, lambda true: true))
+    assert [s["frame"] for s in exact] == list(range(scene.onset_frame, scene.contact_frame + 1))
+    assert all(s["error"] == pytest.approx(0.0) for s in exact)
+    first, last = exact[0], exact[-1]
+    assert first["true"] == pytest.approx(2.0) and first["growth"] == pytest.approx(0.0)
+    k = last["frame"]
+    assert last["growth"] == pytest.approx(scene.target_size[k] / scene.target_size[k - 1] - 1)
+    assert last["growth"] > 0.2  # the last frames at 10 fps grow by more than a fifth
+
+    doubled = ttc.scene_samples(scene, _targets(scene, lambda true: 2 * true))
+    assert all(s["error"] == pytest.approx(1.0) for s in doubled)
+    none = ttc.scene_samples(scene, _targets(scene, lambda true: None))
+    assert all(s["ttc"] is None and s["error"] is None for s in none)
+    far = [[{"x": 150.0, "y": 110.0, "ttc": 1.0}] for _ in scene.frames]
+    assert all(s["ttc"] is None for s in ttc.scene_samples(scene, far))
+    with pytest.raises(ValueError):
+        ttc.scene_samples(scene, far[:-1])
+
+
+def test_summaries_and_rows_by_frame_rate_and_growth():
+    samples = [{"fps": 10.0, "true": 1.0, "growth": 0.01, "error": e, "ttc": None}
+               for e in (None, None)]
+    samples += [{"fps": 10.0, "true": 0.5, "growth": 0.3, "error": e / 10, "ttc": 1.0}
+                for e in range(11)]  # errors 0, 0.1, ... 1.0
+    samples += [{"fps": 30.0, "true": 2.0, "growth": 0.03, "error": -0.1, "ttc": 1.8}]
+    s = ttc.summarise(samples[2:13])
+    assert (s["frames"], s["with_ttc"], s["share"]) == (11, 11, 1.0)
+    assert s["median"] == pytest.approx(0.5) and s["median_abs"] == pytest.approx(0.5)
+    assert s["p10"] == pytest.approx(0.1) and s["p90"] == pytest.approx(0.9)
+    assert s["long"] == pytest.approx(8 / 11)  # 0.3 ... 1.0
+    assert ttc.summarise(samples[:2])["median"] is None
+    assert ttc.summarise(samples, horizon=0.8)["share_within"] == 1.0
+    assert ttc.summarise(samples, horizon=1.5)["share_within"] == pytest.approx(11 / 13)
+    rows = ttc.ttc_rows(samples, horizon=1.5)
+    assert [(r["fps"], r["growth"], r["frames"]) for r in rows] == [
+        (10.0, "< 2 %", 2), (10.0, "20-50 %", 11), (10.0, "all", 13),
+        (30.0, "2-5 %", 1), (30.0, "all", 1),
+        (None, "< 2 %", 2), (None, "2-5 %", 1), (None, "20-50 %", 11), (None, "all", 14)]
+    assert [ttc.growth_bin(g) for g in (0.0, 0.019, 0.02, 0.5, 3.0)] == [0, 0, 1, 5, 5]
+
+
+def test_the_design_is_every_combination_each_with_its_own_seed():
+    assert ttc.DEFAULT_DESIGN == ttc.Design()
+    looms = ttc.looms(ttc.Design(seed=7))
+    assert len(looms) == 96 and len({loom.seed for loom in looms}) == 96
+    assert looms[0].seed == 7 and {loom.onset for loom in looms} == {10, 15, 30}
+    for empty in (ttc.Design(frame_rates=()), ttc.Design(heights=(0.0,))):
+        with pytest.raises(ValueError):
+            ttc.looms(empty)
+
+
+@pytest.fixture(scope="module")
+def measured():
+    return ttc.evaluate_ttc("asnn", SMALL)
+
+
+def _row(results, fps, growth):
+    return next(r for r in results["rows"] if r["fps"] == fps and r["growth"] == growth)
+
+
+def test_the_default_preset_s_ttc_is_near_the_truth_while_the_image_grows_slowly(measured):
+    """A ttc doubled, or timed without the frames' times (at 0.05 s a frame: half the truth at
+    10 fps, three times it at 60), fails this; the saturation in the last frames (more than a
+    fifth of growth per frame) is left out."""
+    assert measured["horizon_s"] == 1.5
+    for fps in (10.0, 60.0):
+        slow = [r for r in measured["rows"] if r["fps"] == fps
+                and r["growth"] in ("< 2 %", "2-5 %", "5-10 %", "10-20 %") and r["with_ttc"] >= 3]
+        assert sum(r["with_ttc"] for r in slow) >= 5
+        for row in slow:
+            assert -0.25 <= row["median"] <= 0.15, (fps, row)
+        assert _row(measured, fps, "all")["share_within"] >= 0.3
+    assert json.loads(json.dumps(measured, allow_nan=False)) == measured  # ttc.json as it is
+
+
+class _Untimed:
+    """A detector stepped without the frames' times (what a broken time base amounts to)."""
+
+    def __init__(self):
+        self.model = ASNN("default")
+
+    def step(self, frame, t=None):
+        return self.model.step(frame, None)
+
+
+def test_a_detector_that_ignores_the_frames_times_is_caught():
+    loom = ttc.looms(SMALL)[0]  # 10 fps: timed at 20 fps, the ttc halves
+    errors = [s["error"] for s in ttc.loom_samples(loom, _Untimed)
+              if s["error"] is not None and s["growth"] < 0.2]
+    assert errors and sorted(errors)[len(errors) // 2] < -0.3
+
+
+def test_eval_ttc_prints_the_table_and_writes_it(tmp_path, monkeypatch):
+    monkeypatch.setattr(ttc, "DEFAULT_DESIGN", SMALL)
+    out, stdout = tmp_path / "o", io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(io.StringIO()):
+        assert main(["eval", "--ttc", "--out", str(out)]) == 0
+    text = stdout.getvalue()
+    assert "| fps | growth per frame | frames | with ttc |" in text
+    assert "| 10 | **all** |" in text and "| all | **all** |" in text
+    assert text.rstrip().endswith(f"{out}/ttc.md")
+    assert (out / "ttc.md").read_text() in text
+    results = json.loads((out / "ttc.json").read_text())
+    assert results["detector"] == "asnn" and len(results["looms"]) == 2
+
+
+def test_eval_ttc_refuses_what_does_not_go_with_it(tmp_path, capsys):
+    for misplaced in (["--detectors", "lgmd1"], ["--cases", "loom-*"], ["--warmup", "3"],
+                      ["--perturb", "noise"], [str(tmp_path)]):
+        assert main(["eval", "--ttc", *misplaced, "--out", str(tmp_path / "o")]) == 2
+    assert not (tmp_path / "o").exists()
