@@ -683,3 +683,26 @@ def test_the_partial_overlap_regime_is_a_part_of_the_gate():
                                          "surface_ahead=False, corridor_gate=False too"):
         preset("default", targets="clusters")
 
+
+
+def test_a_warning_without_a_target_only_outlasts_its_objects_by_the_spike_window():
+    """docs/contract.md: a frame that warns may list no target (the object the frame's edge
+    cuts is lost for a frame), but only for up to n_t - 1 frames after a frame whose targets
+    counted: the warning is the spike rate over the last n_t frames."""
+    from asnn.stimuli.planar import planar_scene
+
+    model = ASNN("default")
+    window = model.params.n_t
+    scene = planar_scene("loom", fps=20.0, onset=10, height=24, tau=4.0, position=(40.0, 30.0),
+                         contrast=0.6, noise=2.0, seed=0)
+    since_target, bare = None, 0
+    for k, frame in enumerate(scene.frames):
+        response = model.step(frame, k / scene.fps)
+        if response.targets:
+            since_target = 0
+        elif since_target is not None:
+            since_target += 1
+        if response.collision and not response.targets:
+            bare += 1
+            assert since_target is not None and since_target <= window - 1, k
+    assert bare  # the case the document describes does occur here
