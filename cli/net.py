@@ -13,8 +13,8 @@ from service import keys
 from service.config import ConfigError, zenoh_error
 from service.link import RouterWatch
 
-from .arguments import (fleet_size, frame_rate, non_negative, nonempty_path, preset_spec,
-                        robot_id, seconds, seconds_or_zero, threads, warmup_frames, whole,
+from .arguments import (count, fleet_size, frame_rate, non_negative, nonempty_path, preset_spec,
+                        robot_id, seconds, seconds_or_zero, threads, warmup_frames,
                         worker_id)
 from .session import add_zenoh_options, exit_on_interrupt, fail, session_for, setup_logging, \
     stop_on_signals, zenoh_options
@@ -326,10 +326,10 @@ def register(subparsers) -> None:
                    help="worker id reported in responses (default: <host>-<pid>)")
     p.add_argument("--idle-timeout", type=seconds, default=IDLE_TIMEOUT_S, metavar="SECONDS",
                    help="forget a robot after SECONDS without frames (default: %(default)s)")
-    p.add_argument("--max-gap", type=whole, default=MAX_GAP, metavar="N",
+    p.add_argument("--max-gap", type=count, default=MAX_GAP, metavar="N",
                    help="reset a robot's state when seq jumps ahead by more than N of the "
                         "robot's steps (1, or the growth of its seq that three frames in a row "
-                        "agree on; default: %(default)s)")
+                        "agree on; 1: any frame lost resets; default: %(default)s)")
     p.add_argument("--max-robots", type=fleet_size, default=MAX_ROBOTS, metavar="N",
                    help="robots tracked at once; frames of more are rejected. A robot takes "
                         "a place once one of its frames is valid (default: %(default)s)")

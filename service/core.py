@@ -403,6 +403,9 @@ class WorkerCore:
                              f"{len(self.worker_id)}")
         self.prefix = keys.check_prefix(prefix)
         self.idle_timeout = float(idle_timeout)
+        if max_gap < 1:  # a gap of 0 steps would make every next frame a new stream
+            raise ValueError(f"max_gap must be 1 or more (1: any frame lost starts the robot's "
+                             f"model afresh), got {max_gap}")
         self.max_gap = int(max_gap)
         self.max_robots = int(max_robots)
         self.takeover_after = float(takeover_after)

@@ -339,12 +339,23 @@ def test_unknown_model_or_preset_fails_at_start():
         WorkerCore(model="lgmd1", preset="robust")  # ran, and the status named no preset
 
 
-def test_a_negative_max_gap_is_refused_on_the_command_line(capsys):
+@pytest.mark.parametrize("gap", ["-5", "0"])
+def test_a_max_gap_below_one_is_refused(gap, capsys):
+    """Every next frame would break the seq-gap rule and start the model afresh: a worker that
+    could never warn, and logged frames as lost that were not (a fleet trial)."""
     from cli.main import build_parser
 
-    with pytest.raises(SystemExit):  # every frame would break the seq-gap rule and reset
-        build_parser().parse_args(["worker", "--max-gap", "-5"])
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["worker", "--max-gap", gap])
     assert "--max-gap" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="max_gap must be 1 or more"):
+        WorkerCore(max_gap=int(gap))
+
+def test_a_max_gap_of_one_resets_on_any_frame_lost(looming):
+    core = WorkerCore(max_gap=1)
+    for seq in (0, 1, 2, 4, 5):
+        feed(core, "r1", looming.frames[10 + seq], seq)
+    assert core.stats()["resets"] == {"seq-gap": 1}  # 4 after 2, not 1 after 0
 
 
 def test_every_kind_of_bad_input_is_counted_under_its_reason(looming):
