@@ -302,7 +302,11 @@ def register(subparsers) -> None:
                         "asnn scene --list) or a ROS 2 bag BAG.mcap[#TOPIC], replayed at its "
                         "recorded pace")
     p.add_argument("--fps", type=frame_rate, default=None,
-                   help="publishing rate (default: the source's frame rate)")
+                   help="publishing rate (default: the source's frame rate). A replayed file, "
+                        "scene or bag is played and stamped at it: at another rate than its "
+                        "own the detector sees the scene sped up or slowed down (a 30 fps clip "
+                        "at 20 is slow motion, and warns later or not at all); a live source "
+                        "is thinned out to it")
     p.add_argument("--loop", action="store_true", help="replay a file, scene or bag forever")
     p.add_argument("--format", choices=FORMATS, default="gray8",
                    help="frame encoding on the wire (default: %(default)s)")

@@ -171,7 +171,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
 
     ``stamp``: the capture time of a live source's frame (wall clock when it was read); a
     replayed source's (file, bag, generated scene) recorded time shifted to start now, so that
-    frames published late or bunched keep the spacing the scene was recorded with.
+    frames published late or bunched keep the spacing the scene was recorded with; with
+    ``fps``, a replayed source is played and stamped ``1 / fps`` apart instead (the scene sped
+    up or slowed down: a fast-forward for tests and benchmarks), and a live one thinned out.
 
     ``wait``: seconds to wait, at most, for a subscriber (a worker) before the first frame.
     ``announce``: declare the camera's liveliness token while publishing.
