@@ -134,6 +134,7 @@ def test_eval_ttc_prints_the_table_and_writes_it(tmp_path, monkeypatch):
     text = stdout.getvalue()
     assert "| fps | growth per frame | frames | with ttc |" in text
     assert "| 10 | **all** |" in text and "| all | **all** |" in text
+    assert "| fps | approaches | warned | median lead | p10 lead |" in text
     assert text.rstrip().endswith(f"{out}/ttc.md")
     assert (out / "ttc.md").read_text() in text
     results = json.loads((out / "ttc.json").read_text())
@@ -145,3 +146,22 @@ def test_eval_ttc_refuses_what_does_not_go_with_it(tmp_path, capsys):
                       ["--perturb", "noise"], [str(tmp_path)]):
         assert main(["eval", "--ttc", *misplaced, "--out", str(tmp_path / "o")]) == 2
     assert not (tmp_path / "o").exists()
+
+
+def test_the_lead_runs_from_the_first_warning_to_contact():
+    samples = [{"frame": k, "fps": 20.0, "warned": k in (12, 13, 16)} for k in range(10, 21)]
+    assert ttc.lead(samples) == pytest.approx(0.4)  # frame 12 to 20 at 20 fps
+    assert ttc.lead([{**s, "warned": False} for s in samples]) is None
+    quiet = [{**s, "fps": 10.0, "warned": False} for s in samples]
+    rows = ttc.lead_rows([samples, quiet])
+    assert [(r["fps"], r["approaches"], r["warned"]) for r in rows] == [
+        (10.0, 1, 0), (20.0, 1, 1), (None, 2, 1)]
+    assert rows[0]["median"] is None and rows[1]["median"] == pytest.approx(0.4)
+
+
+def test_the_default_warns_as_early_at_60_fps_as_at_30(measured):
+    """The frame-rate ceiling (min_frame_gap): stepped at every frame of a 60 fps camera, the
+    default warned of the small design's approach 1.2 s ahead at 10 fps and 0.67 s at 60."""
+    leads = {row["fps"]: row["median"] for row in measured["leads"]}
+    assert leads[10.0] is not None and leads[60.0] is not None
+    assert leads[60.0] >= 0.75 * leads[10.0]  # 0.56 without the ceiling

@@ -37,8 +37,8 @@ from .progress import Silent
 from .runs import DetectorSpec, parse_detector
 
 __all__ = ["DEFAULT_DESIGN", "Design", "GROWTH_EDGES", "Loom", "MATCH_MARGIN_PX", "evaluate_ttc",
-           "format_report", "growth_bin", "loom_samples", "loom_scene", "looms", "scene_samples",
-           "summarise", "ttc_rows"]
+           "format_report", "growth_bin", "lead", "lead_rows", "loom_samples", "loom_scene",
+           "looms", "scene_samples", "summarise", "ttc_rows"]
 
 # image growth per frame, size[k] / size[k - 1] - 1: the bins' edges (the last is open)
 GROWTH_EDGES = (0.0, 0.02, 0.05, 0.1, 0.2, 0.5, math.inf)
@@ -220,13 +220,39 @@ def scene_samples(scene: Scene, targets: Sequence[Sequence]) -> list[dict]:
 
 
 def loom_samples(loom: Loom, make: Callable[[], object]) -> list[dict]:
-    """Worker: generate one approach, step a fresh detector (``make()``) through it with the
-    frames' own times, and return its samples (:func:`scene_samples`), each with ``fps``."""
+    """A worker's task: generate one approach, step a fresh detector (``make()``) through it
+    with the frames' own times, and return its samples (:func:`scene_samples`), each with
+    ``fps`` and ``warned`` (whether the detector warned in that frame)."""
     scene = loom_scene(loom)
     detector = make()
-    targets = [list(detector.step(frame, index / loom.fps).targets)
-               for index, frame in enumerate(scene.frames)]
-    return [{**sample, "fps": loom.fps} for sample in scene_samples(scene, targets)]
+    responses = [detector.step(frame, index / loom.fps) for index, frame in enumerate(scene.frames)]
+    targets = [list(response.targets) for response in responses]
+    return [{**sample, "fps": loom.fps, "warned": bool(responses[sample["frame"]].collision)}
+            for sample in scene_samples(scene, targets)]
+
+
+def lead(samples: Sequence[Mapping]) -> float | None:
+    """Seconds from the first warning in an approach's samples to its contact (its last sample:
+    the image as tall as the frame); None where it never warned."""
+    first = next((s for s in samples if s.get("warned")), None)
+    if first is None:
+        return None
+    return (samples[-1]["frame"] - first["frame"]) / samples[-1]["fps"]
+
+
+def lead_rows(per_loom: Sequence[Sequence[Mapping]]) -> list[dict]:
+    """Per frame rate, then over all: ``approaches``, ``warned`` (how many warned before
+    contact), and the ``median`` and ``p10`` of their first warning's :func:`lead`, seconds
+    (None where none warned)."""
+    leads = [(group[-1]["fps"], lead(group)) for group in per_loom if group]
+    rows = []
+    for fps in [*sorted({f for f, _ in leads}), None]:
+        chosen = [value for f, value in leads if fps is None or f == fps]
+        warned = np.array([value for value in chosen if value is not None], float)
+        rows.append({"fps": fps, "approaches": len(chosen), "warned": int(warned.size),
+                     "median": float(np.median(warned)) if warned.size else None,
+                     "p10": float(np.percentile(warned, 10)) if warned.size else None})
+    return rows
 
 
 def summarise(samples: Iterable[Mapping], horizon: float | None = None) -> dict:
@@ -314,7 +340,7 @@ def evaluate_ttc(detector: DetectorSpec | str = "asnn", design: Design | None = 
         longest time to contact its targets are reported at; None for the LGMDs), ``looms``
         (the approaches: their options,
         ``onset``, and ``frames``, ``with_ttc`` and ``median`` of their samples), ``rows``
-        (:func:`ttc_rows`).
+        (:func:`ttc_rows`), ``leads`` (:func:`lead_rows`: how soon before contact it warned).
 
     Raises
     ------
@@ -345,7 +371,7 @@ def evaluate_ttc(detector: DetectorSpec | str = "asnn", design: Design | None = 
             "looms": [{**asdict(loom), "onset": loom.onset,
                        **{k: summarise(group)[k] for k in ("frames", "with_ttc", "median")}}
                       for loom, group in zip(approaches, per_loom)],
-            "rows": ttc_rows(samples, horizon)}
+            "rows": ttc_rows(samples, horizon), "leads": lead_rows(per_loom)}
 
 
 def _percent(value: float | None, sign: bool = True, digits: int = 1) -> str:
@@ -396,4 +422,11 @@ def format_report(results: Mapping) -> str:
                      f"{within}{_percent(row['median'])} | {_percent(row['p10'])} | "
                      f"{_percent(row['p90'])} | {_percent(row['median_abs'], False)} | "
                      f"{_percent(row['long'], False, 0)} |")
+    lines += ["", "First warning before contact, per frame rate (the same approaches):", "",
+              "| fps | approaches | warned | median lead | p10 lead |", "| --- " * 5 + "|"]
+    for row in results["leads"]:
+        fps = "all" if row["fps"] is None else f"{row['fps']:g}"
+        seconds = ["–" if v is None else f"{v:.2f} s" for v in (row["median"], row["p10"])]
+        lines.append(f"| {fps} | {row['approaches']} | {row['warned']} | {seconds[0]} | "
+                     f"{seconds[1]} |")
     return "\n".join(lines) + "\n"
