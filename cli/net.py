@@ -93,7 +93,9 @@ def cmd_worker(args: argparse.Namespace) -> int:
 def cmd_status(args: argparse.Namespace) -> int:
     import json
 
-    from service.worker import query_status
+    from collections import Counter
+
+    from service.worker import status_replies
 
     setup_logging(args)
     try:
@@ -104,10 +106,11 @@ def cmd_status(args: argparse.Namespace) -> int:
     if args.local:
         from service.core import started_here as keep
     with session:
-        statuses = query_status(session, args.prefix, args.worker, timeout=args.timeout,
-                                keep=keep)
+        statuses = status_replies(session, args.prefix, args.worker, timeout=args.timeout,
+                                  keep=keep)
     readable = 0
-    for worker, status in sorted(statuses.items()):
+    for status in sorted(statuses, key=lambda s: s["worker"]):
+        worker = status["worker"]
         # anything on the prefix may answer: a map this asnn cannot read is said on stderr, and
         # neither hides the others' nor passes a health check
         try:
@@ -120,6 +123,12 @@ def cmd_status(args: argparse.Namespace) -> int:
             continue
         readable += 1
         print(_printable(line), flush=True)
+    twins = sorted(w for w, n in Counter(s["worker"] for s in statuses).items() if n > 1)
+    for worker in twins:  # a health check fails on them: every frame answered twice
+        print(_printable(f"worker {worker}: answered by more than one process (two workers "
+                         "with one id both serve its robots; stop one)"), file=sys.stderr)
+    if twins:
+        return 1
     if not readable:
         key = (keys.worker_status_key(args.worker, args.prefix) if args.worker
                else keys.worker_statuses(args.prefix))
@@ -364,7 +373,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("status", help="ask the workers for their status",
                               description="Query <prefix>/@worker/<id>/status: each worker's "
                               "counters (rejected frames per reason, dropped frames), robots "
-                              "and the live workers. Exit status 1 when no worker answers.")
+                              "and the live workers. Exit status 1 when no worker answers, or when "
+                              "two processes answer for one worker id.")
     only = p.add_mutually_exclusive_group()
     only.add_argument("--worker", type=worker_id, default=None,
                       help="only this worker (default: all)")

@@ -47,7 +47,7 @@ from .routing import Routes
 __all__ = ["COMPUTE_NICENESS", "HANDOVER_TIMEOUT", "REFUSAL_QOS", "RESPONSE_QOS", "SCAN_INTERVAL",
            "SCAN_WINDOW", "SWITCH_INTERVAL", "WARNING_QOS", "Worker", "WorkerIdTaken",
            "announced_cameras", "check_scan", "fleet_claims", "live_workers", "query_status",
-           "tune_process"]
+           "status_replies", "tune_process"]
 
 log = logging.getLogger("asnn.worker")
 
@@ -88,6 +88,8 @@ HANDOVER_TIMEOUT = 5.0
 STALE_AFTER = 2.0
 # Seconds between two passes of the routes when nothing changed (warm-ups, scan windows, expiry).
 ROUTE_TICK = 0.05
+# how often a worker asks who else answers for its id (Worker._check_twins)
+TWIN_CHECK_S = 10.0
 # ``query_status``: any process on the prefix may answer a status query, as often as it likes,
 # with maps of up to STATUS_MAX_BYTES (16 MiB) each, and the worker's own health check runs in
 # its container: replies waiting to be read, and statuses kept, are bounded
@@ -200,15 +202,25 @@ def announced_cameras(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
 def query_status(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
                  worker: str | None = None, timeout: float = 2.0,
                  keep: Callable[[str], bool] | None = None) -> dict[str, dict]:
-    """The status maps of one worker or (``worker=None``) of all, by worker id; with ``keep``,
-    of the workers whose id it accepts (the others are dropped unread, by their reply's key).
+    """The status maps of one worker or (``worker=None``) of all, by worker id (where two
+    processes answer for one id, the last to answer: :func:`status_replies` keeps both)."""
+    return {status["worker"]: status
+            for status in status_replies(session, prefix, worker, timeout, keep)}
+
+
+def status_replies(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
+                   worker: str | None = None, timeout: float = 2.0,
+                   keep: Callable[[str], bool] | None = None) -> list[dict]:
+    """The status maps of one worker or (``worker=None``) of all, as they answered (one per
+    process: two processes with one id give two); with ``keep``, of the workers whose id it
+    accepts (the others are dropped unread, by their reply's key).
 
     Any process on the prefix may answer, so what is held is bounded: :data:`STATUS_QUEUE`
     replies waiting, each decoded within the status bounds, and at most :data:`MAX_STATUSES`
     statuses of :data:`MAX_STATUS_BYTES_KEPT` in all kept (the first to come).
     """
     key = keys.worker_status_key(worker, prefix) if worker else keys.worker_statuses(prefix)
-    out, kept = {}, 0
+    out, kept = [], 0
     for reply in session.get(key, zenoh.handlers.FifoChannel(STATUS_QUEUE),
                              target=zenoh.QueryTarget.ALL, timeout=timeout,
                              consolidation=zenoh.ConsolidationMode.NONE):
@@ -224,8 +236,8 @@ def query_status(session: zenoh.Session, prefix: str = keys.DEFAULT_PREFIX,
         except MessageError:
             continue
         if keep is None or keep(status["worker"]):
-            kept += len(payload)  # an id answering twice counts twice: the bound holds
-            out[status["worker"]] = status
+            kept += len(payload)
+            out.append(status)
     return out
 
 
@@ -289,6 +301,7 @@ class Worker:
         if not handover_timeout >= 0:
             raise ValueError(f"need handover_timeout >= 0, got {handover_timeout}")
         self.session = session
+        self._instance = str(session.zid())  # tells this process from another with its id
         self.core = core
         self.on_response = on_response
         self.stats_every = stats_every
@@ -420,6 +433,7 @@ class Worker:
     def _on_status_query(self, query: zenoh.Query) -> None:
         try:
             status = self.core.status()
+            status["instance"] = self._instance
             status["workers"] = self.membership.live()
             status["traffic"] = self.traffic()
             status["routes"] = self.routes.counts()
@@ -533,6 +547,7 @@ class Worker:
     def _run_routes(self) -> None:
         """Follow the fleet: route passes, idle robots, the counters in the log."""
         last_stats = last_evict = time.monotonic()
+        last_twin_check = last_stats - TWIN_CHECK_S + 1.0  # the first a second after start
         while not self._stop_routes.is_set():
             self._changed.wait(ROUTE_TICK)
             self._changed.clear()
@@ -549,6 +564,37 @@ class Worker:
             if self.stats_every and now - last_stats >= self.stats_every:
                 last_stats = now
                 log.info("stats %s; frames in %s", self.core.stats(), self.traffic())
+            if now - last_twin_check >= TWIN_CHECK_S:
+                last_twin_check = now
+                self._check_twins()
+
+    def _check_twins(self) -> None:
+        """Ask this worker's own status key who answers (the replies come on Zenoh's thread):
+        another process answering for this id was started where this one had gone silent (a
+        hang past the lease) or with the same ``--id`` on another host, and both serve the same
+        robots, every frame answered twice. Logged at ERROR, every :data:`TWIN_CHECK_S`
+        seconds while it lasts; ``asnn status`` lists both."""
+        try:
+            self.session.get(keys.worker_status_key(self.core.worker_id, self.core.prefix),
+                             self._on_twin_reply, target=zenoh.QueryTarget.ALL,
+                             timeout=TWIN_CHECK_S / 2, consolidation=zenoh.ConsolidationMode.NONE)
+        except Exception:  # e.g. the session closing under us
+            if not self._stop_routes.is_set():
+                log.exception("checking this worker's id failed")
+
+    def _on_twin_reply(self, reply) -> None:
+        try:
+            if reply.ok is None:
+                return
+            status = decode_status(reply.ok.payload.to_bytes())
+        except Exception:  # anything may answer on the key: only a worker's status counts
+            return
+        instance = status.get("instance")
+        if isinstance(instance, str) and instance != self._instance:
+            log.error("worker id %s is also answered by another process (instance %s, up "
+                      "%s s): both serve the same robots and every frame is answered twice; "
+                      "stop one of them", self.core.worker_id, instance[:40],
+                      status.get("uptime_s"))
 
     def _tell_refusals(self) -> None:
         """Tell each robot refused since the last call why, on ``<prefix>/<robot>/refused``

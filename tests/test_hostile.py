@@ -3,6 +3,7 @@ containers, robot-slot lockout, unfair scheduling under overload and a second pu
 robot's key. Memory is measured (RSS of a child process, or tracemalloc), never time."""
 
 import json
+import logging
 import struct
 import subprocess
 import sys
@@ -1019,3 +1020,38 @@ def test_a_status_asnn_cannot_read_is_said_and_hides_no_other(zenoh_net, tmp_pat
     else:  # shown, escaped
         assert len(lines) == 3 and lines[0].startswith("worker esc\\x1b]0;t\\x07: ")
         assert lines[2].startswith("worker w1: ")
+
+
+def test_a_second_process_answering_for_a_worker_id_is_found_and_said(zenoh_net, tmp_path,
+                                                                      capsys, caplog,
+                                                                      monkeypatch):
+    """A worker that hung past the lease and was replaced comes back (or one --id is given on
+    two hosts): the check at start cannot see it, and both answered every frame, status showing
+    one of them. Each now logs an ERROR, and asnn status lists both and exits 1."""
+    import service.worker as worker_module
+    from cli.main import main
+
+    monkeypatch.setattr(worker_module, "TWIN_CHECK_S", 1.0)
+    config = tmp_path / "zenoh.json5"
+    config.write_text('{"scouting": {"multicast": {"enabled": false}, '
+                      '"gossip": {"enabled": false}}}')
+    ask = ["status", "--config", str(config), "--connect", zenoh_net.endpoint, "--mode",
+           "client", "--timeout", "1", "--json"]
+    with caplog.at_level(logging.ERROR, logger="asnn.worker"):
+        with Worker(zenoh_net.hub, WorkerCore(worker_id="w1"), stats_every=0, shared=False):
+            time.sleep(1.5)  # two checks: alone, nobody else is said to answer
+            assert not [r for r in caplog.records if "also answered" in r.getMessage()]
+            capsys.readouterr()
+            assert main(ask) == 0
+            with Worker(zenoh_net.spoke(), WorkerCore(worker_id="w1"), stats_every=0,
+                        shared=False):
+                wait_for(lambda: [r for r in caplog.records
+                                  if "also answered by another process" in r.getMessage()],
+                         what="the twin to be found", timeout=20)
+                capsys.readouterr()
+                assert main(ask) == 1
+                captured = capsys.readouterr()
+                lines = [json.loads(line) for line in captured.out.splitlines()]
+                assert [s["worker"] for s in lines] == ["w1", "w1"]
+                assert len({s["instance"] for s in lines}) == 2
+                assert "w1: answered by more than one process" in captured.err

@@ -725,7 +725,7 @@ def _first_warning_lead(scene, params) -> float | None:
 
 
 def test_a_camera_faster_than_the_ceiling_is_seen_at_half_its_rate(loom_60fps):
-    """min_frame_gap (25 ms): at 60 fps every second frame is answered as the one before, and
+    """min_frame_gap (22 ms): at 60 fps every second frame is answered as the one before, and
     the frames processed give exactly what the model gives the 30 fps stream of them."""
     scene = loom_60fps
     fast, slow = ASNN("default"), ASNN("default")
