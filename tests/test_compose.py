@@ -180,9 +180,11 @@ def read_unit(path: Path) -> dict[str, list[tuple[str, str]]]:
     return sections
 
 
-def unit_command(service: list[tuple[str, str]], instance: str) -> list[str]:
-    """ExecStart's words as systemd runs them: ``%i``, ``%C`` and ``${VAR}`` of the unit's own
-    Environment= (the defaults, before any EnvironmentFile) replaced."""
+def unit_command(service: list[tuple[str, str]], instance: str,
+                 env_file: dict[str, str] | None = None) -> list[str]:
+    """ExecStart's words as systemd runs them: ``%i``, ``%C``, ``${VAR}`` (one word) and
+    ``$VAR`` (split at whitespace, zero words when empty) of the unit's own Environment=, then
+    of ``env_file`` (an EnvironmentFile's settings), replaced."""
     import re
     import shlex
 
@@ -190,11 +192,17 @@ def unit_command(service: list[tuple[str, str]], instance: str) -> list[str]:
     for key, value in service:
         if key == "Environment":
             env.update(word.split("=", 1) for word in shlex.split(value))
+    env.update(env_file or {})
     (exec_start,) = [value for key, value in service if key == "ExecStart"]
     exec_start = exec_start.replace("%i", instance).replace("%C", "/var/cache")
-    exec_start = re.sub(r"\$\{(\w+)\}", lambda m: env[m.group(1)].replace("%i", instance),
-                        exec_start)
-    return shlex.split(exec_start)
+    words = []
+    for word in shlex.split(exec_start):
+        if re.fullmatch(r"\$\w+", word):
+            words += env[word[1:]].split()
+            continue
+        words.append(re.sub(r"\$\{(\w+)\}",
+                            lambda m: env[m.group(1)].replace("%i", instance), word))
+    return words
 
 
 def test_systemd_units_run_asnn_commands_the_parser_takes():
@@ -218,6 +226,16 @@ def test_systemd_units_run_asnn_commands_the_parser_takes():
         assert "NUMBA_CACHE_DIR=%C/asnn/numba" in env and service["CacheDirectory"] == "asnn"
         assert unit["Install"] == [("WantedBy", "multi-user.target")]
     assert set(commands) == {"router", "worker", "camera", "alerts", "dashboard", "foxglove"}
+    # the clients take further options from their environment file (a fleet trial could set
+    # neither --id nor --preset there): ASNN_ARGS, empty by default
+    for name in ("asnn-worker.service", "asnn-camera@.service", "asnn-alerts.service",
+                 "asnn-dashboard.service", "asnn-foxglove.service"):
+        unit = read_unit(SYSTEMD / name)
+        assert unit_command(unit["Service"], "robot1")[-1] == "client", name  # nothing added
+    worker = parser.parse_args(unit_command(
+        read_unit(SYSTEMD / "asnn-worker.service")["Service"], "robot1",
+        {"ASNN_ARGS": "--id gpu1 --preset robust/top_k=0"})[1:])
+    assert worker.id == "gpu1" and "top_k" in str(worker.preset)
     name, camera, service = commands["camera"]
     assert name == "asnn-camera@.service" and camera.robot == "robot1" and camera.source == "0"
     assert "PrivateDevices" not in service and service["DeviceAllow"] == "char-video4linux rw"
