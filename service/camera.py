@@ -84,6 +84,11 @@ class SourceRejections:
                           message[:300])
 
 
+# seconds without a refusal notice after which a camera says the refusals are over (a worker
+# that refuses a robot's frames says so at most once a second, and keeps saying it)
+REFUSALS_OVER_S = 5.0
+
+
 class RefusalNotices:
     """What the workers say about this camera's frames (``<prefix>/<robot>/refused``,
     :class:`~service.messages.Refusal`): per worker (at most MAX_NOTICES), its latest notice
@@ -92,12 +97,14 @@ class RefusalNotices:
     notice that is not a valid Refusal of this robot is counted under ``invalid`` and otherwise
     ignored."""
 
-    def __init__(self, robot: str):
+    def __init__(self, robot: str, clock=time.monotonic):
         self.robot = robot
         self.latest: dict[str, tuple[str, int]] = {}
         self.invalid = 0
         self._log = RateLimitedLog(log)
         self._lock = threading.Lock()
+        self._clock = clock
+        self._refused_at: float | None = None  # the latest valid notice, until said over
 
     def __call__(self, sample: zenoh.Sample) -> None:
         try:
@@ -109,12 +116,28 @@ class RefusalNotices:
         with self._lock:
             if len(self.latest) < MAX_NOTICES or notice.worker in self.latest:
                 self.latest[notice.worker] = (notice.reason, notice.count)
+            self._refused_at = self._clock()
         # the notices are the worker's for the robot id, whoever published the frames: with
         # two cameras on one key both hear them (an operations trial read the good camera's
         # log as the intruder's)
         self._log.warning("refused", "camera %s: worker %r refuses frames on this robot's key "
                           "(%r, %d so far, this camera's or another publisher's): %r",
                           self.robot, notice.worker, notice.reason, notice.count, notice.detail)
+
+    def check_quiet(self) -> bool:
+        """Say once (INFO) when no notice has come for :data:`REFUSALS_OVER_S` after one did: a
+        refusing worker repeats its notice every second, so the refusals are over (the last
+        WARNING would otherwise stand as the camera's state). True when it said so."""
+        with self._lock:
+            over = (self._refused_at is not None
+                    and self._clock() - self._refused_at > REFUSALS_OVER_S)
+            if over:
+                self._refused_at = None
+        if over:
+            log.info("camera %s: no worker has refused this robot's frames for %.0f s: they are "
+                     "taken again (or none receives them: the subscriber lines say)", self.robot,
+                     REFUSALS_OVER_S)
+        return over
 
     def summary(self) -> str:
         """``count by worker (latest reason)`` per worker, or ``none``."""
@@ -201,8 +224,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
             declared.callback(entity.undeclare)
             return entity
 
-        declare(session.declare_subscriber(keys.refusal_key(robot, prefix),
-                                           refusals or RefusalNotices(robot)))
+        refusals = refusals or RefusalNotices(robot)
+        declare(session.declare_subscriber(keys.refusal_key(robot, prefix), refusals))
         publisher = declare(session.declare_publisher(key, **FRAME_QOS))
         if announce:
             declare(session.liveliness().declare_token(keys.camera_token_key(robot, prefix)))
@@ -258,6 +281,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                 frame = Frame.from_image(np.ascontiguousarray(image), seq=seq, stamp=stamp,
                                          format=format)
                 publisher.put(encode(frame))
+                refusals.check_quiet()
                 if previews is not None and time.monotonic() >= next_preview:
                     next_preview = max(next_preview + 1.0 / preview_hz, time.monotonic())
                     try:

@@ -741,6 +741,28 @@ def test_refusal_notices_keep_each_workers_latest_and_log_one_line_whatever_they
     assert len(lines) == 1 and "\n" not in lines[0]  # its text shown as data, on one line
 
 
+def test_a_camera_says_once_when_the_refusals_are_over(caplog):
+    """A refused camera later served logged nothing when the refusals stopped: its last line
+    still read "refuses" (a fleet trial)."""
+    from types import SimpleNamespace
+
+    from service.camera import REFUSALS_OVER_S
+
+    now = [100.0]
+    payload = msgpack.packb({"v": 1, "robot": "r1", "worker": "w1", "detail": "",
+                             "reason": "too-many-robots", "count": 3})
+    notices = RefusalNotices("r1", clock=lambda: now[0])
+    assert not notices.check_quiet()  # never refused: nothing to say
+    with caplog.at_level("INFO", logger="asnn.camera"):
+        notices(SimpleNamespace(payload=SimpleNamespace(to_bytes=lambda: payload)))
+        now[0] += REFUSALS_OVER_S - 1
+        assert not notices.check_quiet()  # the worker's next notice may still come
+        now[0] += 2
+        assert notices.check_quiet() and not notices.check_quiet()  # said once
+    over = [r for r in caplog.records if "no worker has refused" in r.getMessage()]
+    assert len(over) == 1 and over[0].levelname == "INFO"
+
+
 def test_the_alerts_take_a_warning_only_for_the_robot_of_its_key_and_with_collision(zenoh_net):
     from test_dashboard import response
 
