@@ -7,8 +7,8 @@ import json
 import sys
 
 from asnn.detectors import MODELS
-from cli.arguments import (cameras, count, frame_rate, frame_size, frames, preset_spec,
-                           processes, seconds, seed, threads)
+from cli.arguments import (cameras, count, frame_rate, frame_size, frames, nonempty_path,
+                           preset_spec, processes, seconds, seed, threads)
 
 # how the benches that time whole processes run asnn: this interpreter, this checkout's CLI
 ASNN_COMMAND = (sys.executable, "-m", "cli.main")
@@ -76,6 +76,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"{MODE_DEFAULTS['every']})")
     p.add_argument("--cases", metavar="PATTERN", default=None,
                    help="--handover: suite cases or groups, shell patterns (default: all)")
+    p.add_argument("--clips", type=nonempty_path, metavar="DIR", default=None,
+                   help="--handover: over the labelled clips of DIR (its labels.json, as asnn "
+                        "eval reads them) instead of the suite, e.g. ../shared/data/real")
     p.add_argument("--worker-threads", type=threads, default=None, metavar="N",
                    help="processing threads of each --service worker (asnn worker --threads; "
                         "default: the cores available, divided among the workers)")
@@ -97,7 +100,7 @@ _MODE_OPTIONS = {
     "fps": ("--service",), "seconds": ("--service",), "cameras": ("--service",),
     "phases": ("--service",), "seed": ("--service",), "worker_threads": ("--service",),
     "workers": ("--service",), "router": ("--service",),
-    "every": ("--handover",), "cases": ("--handover",),
+    "every": ("--handover",), "cases": ("--handover",), "clips": ("--handover",),
     "no_straightforward": (None,), "frames": (None, "--detect"),
     "size": (None, "--detect", "--service"),
 }
@@ -162,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
 
             preset = args.preset[0] if args.preset else None
             report = handover.run(f"asnn:{preset}" if preset else "asnn", cases=args.cases,
-                                  every=args.every, progress=_progress())
+                                  every=args.every, progress=_progress(), clips_dir=args.clips)
         elif args.service:
             from service import bench as service_bench
 

@@ -1,7 +1,7 @@
 """How many frames a detector started cold needs before it warns as one that ran all along.
 
 When a robot's stream moves to another worker (a worker joins, stops or dies), the new owner's
-model starts from an empty state. This module measures, over generated scenes, how many frames
+model starts from an empty state. This module measures, over generated scenes (or labelled clips), how many frames
 that fresh model must see before its warnings equal those of a model that saw the whole stream:
 the *warm-up* a hand-over needs (``asnn bench --handover``; the service's ``--warmup-frames``,
 docs/operations.md).
@@ -14,7 +14,9 @@ uninterrupted detector's on every frame from k + j to the end. Hand-overs are tr
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -58,7 +60,8 @@ def handover_warmups(scenes: Iterable[tuple[str, object]], detector: DetectorSpe
     ----------
     scenes : iterable of (name, Scene)
         :class:`asnn.stimuli.scene.Scene` objects (frames, fps, and for collisions the onset
-        and contact frames).
+        and contact frames), or clips of the same fields with ``times`` (each frame's, seconds;
+        without it, frames are ``1 / fps`` apart).
     detector : DetectorSpec or str
         The detector (``asnn`` is the default preset).
     every : int
@@ -78,7 +81,8 @@ def handover_warmups(scenes: Iterable[tuple[str, object]], detector: DetectorSpe
     rows = []
     for name, scene in scenes:
         frames = np.asarray(scene.frames)
-        times = np.arange(len(frames)) / scene.fps
+        times = getattr(scene, "times", None)
+        times = np.arange(len(frames)) / scene.fps if times is None else np.asarray(times)
         reference = _warnings(spec, frames, times)
         onset, contact = getattr(scene, "onset_frame", None), getattr(scene, "contact_frame", None)
         for k in range(1, len(frames) - 1, every):
@@ -113,23 +117,67 @@ def summarise_warmups(rows: Sequence[dict], quantile: float = 0.99) -> dict:
             "approach": part([r for r in rows if r["approach"]]), "worst": worst}
 
 
+@dataclass(frozen=True)
+class _Clip:
+    """A labelled clip's frames as :func:`handover_warmups` takes a scene."""
+
+    frames: list
+    times: list
+    fps: float
+    onset_frame: int | None
+    contact_frame: int | None
+
+
+def _labelled_clips(clips_dir: Path, labels: Sequence[Mapping]):
+    """``(file, clip)`` of each labelled clip, read as ``asnn eval`` reads it (one at a time:
+    a clip's frames are held while its hand-overs are tried)."""
+    from .clips import open_labelled_clip
+
+    for label in labels:
+        source, _ = open_labelled_clip(str(clips_dir / label["file"]), label.get("topic"))
+        times, frames = zip(*source.timed_frames())
+        yield label["file"], _Clip(list(frames), list(times), source.fps,
+                                   label.get("onset_frame"), label.get("contact_frame"))
+
+
 def run(detector: str = "asnn", cases: str | None = None, every: int = 3,
-        progress: Callable[[str], None] | None = None) -> dict:
-    """Warm-ups over the labelled suite (``asnn bench --handover``); the report as a dict.
+        progress: Callable[[str], None] | None = None,
+        clips_dir: str | Path | None = None) -> dict:
+    """Warm-ups over the labelled suite (``asnn bench --handover``), or over the labelled clips
+    of ``clips_dir`` (its ``labels.json``, as ``asnn eval`` reads them); the report as a dict.
 
     ``cases`` selects suite cases (patterns of :func:`asnn.stimuli.suite.suite_cases`; None:
     all of them).
+
+    Raises
+    ------
+    ValueError
+        For ``cases`` with ``clips_dir``, a labels file that cannot be read, or a labelled clip
+        that cannot be opened (before anything runs).
     """
     from ..params import DEFAULT_PRESET
-    from ..stimuli.suite import make_case, suite_cases
 
-    names = suite_cases(cases)
     spec = parse_detector(detector)
-    rows = handover_warmups(((name, make_case(name)) for name in names), spec, every=every,
-                            on_scene=progress)
+    if clips_dir is not None:
+        from .clips import check_clips
+        from .labels import load_labels
+
+        if cases is not None:
+            raise ValueError("cases select suite cases: not with labelled clips")
+        clips_dir = Path(clips_dir)
+        labels = load_labels(clips_dir / "labels.json")
+        check_clips(clips_dir, labels)
+        scenes, count, source = _labelled_clips(clips_dir, labels), len(labels), str(clips_dir)
+    else:
+        from ..stimuli.suite import make_case, suite_cases
+
+        names = suite_cases(cases)
+        scenes = ((name, make_case(name)) for name in names)
+        count, source = len(names), None
+    rows = handover_warmups(scenes, spec, every=every, on_scene=progress)
     return {"detector": spec.name,
             "preset": (spec.preset or DEFAULT_PRESET) if spec.model == "asnn" else None,
-            "cases": len(names), "every": every, **summarise_warmups(rows)}
+            "cases": count, "clips_dir": source, "every": every, **summarise_warmups(rows)}
 
 
 def covered(counts: dict, frames: int) -> float:
@@ -141,7 +189,9 @@ def covered(counts: dict, frames: int) -> float:
 def format_report(report: dict, current: int | None = None) -> str:
     """The report as text; ``current``: the warm-up in use, with the hand-overs it covers."""
     preset = f" (preset {report['preset']})" if report.get("preset") else ""
-    lines = [f"# {report['detector']}{preset}: {report['cases']} cases of the labelled suite, a hand-over "
+    where = (f"{report['cases']} labelled clips of {report['clips_dir']}"
+             if report.get("clips_dir") else f"{report['cases']} cases of the labelled suite")
+    lines = [f"# {report['detector']}{preset}: {where}, a hand-over "
              f"every {report['every']} frames; warm-up = frames a fresh model steps before its "
              "warnings equal an uninterrupted one's for good"]
     for part, title in (("all", "all hand-overs"), ("approach", "during an approach")):
