@@ -509,15 +509,22 @@ if ASNNParams.__doc__:  # None under python -OO
     ASNNParams.__doc__ += fields_section(ASNNParams)
 
 
+def _derived(base: ASNNParams, **update) -> ASNNParams:
+    """``base`` with ``update``'s fields, validated as a new set would be (``model_copy``'s
+    update is not: a preset could hold a value out of bounds, found only when someone
+    overrode one of its fields)."""
+    return ASNNParams.model_validate({**base.model_dump(), **update})
+
+
 _PAPER = ASNNParams()
 
 PRESETS: dict[str, ASNNParams] = {
     "paper": _PAPER,
-    "approach": _PAPER.model_copy(update=dict(**_weights("approach"), u_scale=255.0)),
-    "translation": _PAPER.model_copy(update=dict(**_weights("translation"), u_scale=255.0)),
-    "vehicle": _PAPER.model_copy(update=dict(k_sp=10.0, t_sp=0.7, n_t=4, t_c=1.0, u_scale=255.0)),
-    "robot": _PAPER.model_copy(update=dict(**_weights("robot"), k_sp=20.0, t_sp=0.52, n_t=4,
-                                           t_c=1.0, u_scale=255.0)),
+    "approach": _derived(_PAPER, **_weights("approach"), u_scale=255.0),
+    "translation": _derived(_PAPER, **_weights("translation"), u_scale=255.0),
+    "vehicle": _derived(_PAPER, k_sp=10.0, t_sp=0.7, n_t=4, t_c=1.0, u_scale=255.0),
+    "robot": _derived(_PAPER, **_weights("robot"), k_sp=20.0, t_sp=0.52, n_t=4, t_c=1.0,
+                      u_scale=255.0),
     "reference": ASNNParams(
         input_blur=True,
         n_p=0,
@@ -537,11 +544,12 @@ PRESETS: dict[str, ASNNParams] = {
 
 # reference's parameters computed in float32: within 2e-6 of float64 on u(t), same warnings
 # (tests/test_equivalence.py), about twice as fast; reference itself stays exact in float64
-PRESETS["reference32"] = PRESETS["reference"].model_copy(update={"precision": "float32"})
-PRESETS["light"] = PRESETS["reference32"].model_copy(update={"target_polarity": "light"})
+PRESETS["reference32"] = _derived(PRESETS["reference"], precision="float32")
+PRESETS["light"] = _derived(PRESETS["reference32"], target_polarity="light")
 # the published variant plus the robust additions (README, "The robust preset"): each addition
 # has the parameter that switches it off
-PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
+PRESETS["robust"] = _derived(
+    PRESETS["reference32"],
     skip_repeats=True, min_frame_gap=0.022,  # under 40 fps's 25 ms: no common rate at the boundary
     stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
     rim_motion_max=8.0,
@@ -554,7 +562,7 @@ PRESETS["robust"] = PRESETS["reference32"].model_copy(update=dict(
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
     region_persistence=True, region_cover=0.2, object_ids=True, motion_layers=True, ignore_rig=True,
     surface_ahead=True, corridor_gate=True, own_motion_weight=2.0,
-))
+)
 DEFAULT_PRESET = "robust"
 # frames a second below which the default preset loses hits (docs/evaluation.md, "At half the
 # frame rate"): it is made for 20 or more, and a 20 fps camera's timestamps jitter

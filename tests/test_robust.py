@@ -753,3 +753,49 @@ def test_the_ceiling_warns_of_a_small_far_object_earlier_at_60_fps(loom_60fps):
     without = _first_warning_lead(loom_60fps, preset("default", min_frame_gap=None))
     assert with_ceiling is not None and without is not None
     assert with_ceiling >= without + 0.15
+
+
+def test_every_preset_holds_values_its_own_validation_accepts():
+    """The presets are built from one another: an update that pydantic does not check
+    (model_copy) could hold a value out of bounds, found only when someone overrode another
+    field of the preset, with an error naming the wrong field (a contributor trial)."""
+    from asnn.params import PRESETS, ASNNParams, _derived
+
+    for name, params in PRESETS.items():
+        assert ASNNParams.model_validate(params.model_dump()) == params, name
+    with pytest.raises(ValueError, match="tau_max"):
+        _derived(PRESETS["robust"], tau_max=-1.0)
+
+
+# the default's fields that differ from the published variant's and that no ablation row
+# switches, each with why: a new addition goes in ABLATIONS (README, "Ablation"), not here
+NOT_ABLATED = {
+    "gamma_a": "the attention thresholds on the contrast gain control's scale: part of it",
+    "gamma_d": "the attention thresholds on the contrast gain control's scale: part of it",
+    "targets": "objects, what the approach gate and the stages after it read (their rows)",
+    "origin_seed": "the published variant's DBSCAN seed: clusters only",
+    "track_box": "the tracker's box smoothing, part of the tracker the approach gate reads",
+}
+
+
+def test_every_addition_of_the_default_has_an_ablation_row():
+    """A contributor trial: nothing tied a new switch to `asnn eval --ablation` or to the
+    README's table, and five fields of the default differed from the published variant's
+    unexplained."""
+    import itertools
+    from pathlib import Path
+
+    from asnn.evaluation.runs import ABLATIONS
+    from asnn.params import PRESETS
+
+    robust, published = PRESETS["robust"], PRESETS["reference32"]
+    differ = {name for name in type(robust).model_fields
+              if getattr(robust, name) != getattr(published, name)}
+    switched = {part.split("=")[0] for spec in ABLATIONS.values() for part in spec.split("/")[1:]}
+    assert differ - switched == set(NOT_ABLATED)
+    # one row of the README's table per row of the ablation (after its header and rule)
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    lines = readme[readme.index("#### Ablation: each addition switched off"):].splitlines()
+    start = next(k for k, line in enumerate(lines) if line.startswith("| preset |"))
+    rows = list(itertools.takewhile(lambda line: line.startswith("| "), lines[start + 2:]))
+    assert len(rows) == len(ABLATIONS)
