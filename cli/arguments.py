@@ -25,6 +25,25 @@ MAX_SECONDS = 1e6
 MAX_CAMERAS = 256
 
 
+class Joined(argparse.Action):
+    """A comma-separated list option given more than once: the uses add up (``--cases 'a-*'
+    --cases 'b-*'`` is ``--cases 'a-*,b-*'``; it kept the last alone). A str value is joined
+    with commas, a list one (its type's result) extended without repeats. The first use
+    replaces the default."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        marker = f"_{self.dest}_given"
+        before = getattr(namespace, self.dest) if getattr(namespace, marker, False) else None
+        setattr(namespace, marker, True)
+        if before is None:
+            joined = values
+        elif isinstance(values, list):
+            joined = before + [v for v in values if v not in before]
+        else:
+            joined = f"{before},{values}"
+        setattr(namespace, self.dest, joined)
+
+
 def nonempty_path(value: str) -> str:
     """A file or folder name, not empty: an empty one would be taken as no output at all, or
     as the current folder."""

@@ -7,7 +7,7 @@ import json
 import sys
 
 from asnn.detectors import MODELS
-from cli.arguments import (cameras, count, frame_rate, frame_size, frames, nonempty_path,
+from cli.arguments import (Joined, cameras, count, frame_rate, frame_size, frames, nonempty_path,
                            preset_spec, processes, seconds, seed, threads)
 
 # how the benches that time whole processes run asnn: this interpreter, this checkout's CLI
@@ -74,8 +74,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--every", type=count, default=None, metavar="N",
                    help=f"--handover: try a hand-over every N frames (default: "
                         f"{MODE_DEFAULTS['every']})")
-    p.add_argument("--cases", metavar="PATTERN", default=None,
-                   help="--handover: suite cases or groups, shell patterns (default: all)")
+    p.add_argument("--cases", metavar="PATTERN", default=None, action=Joined,
+                   help="--handover: suite cases or groups, comma-separated shell patterns "
+                        "(repeatable: the uses add up; default: all)")
     p.add_argument("--clips", type=nonempty_path, metavar="DIR", default=None,
                    help="--handover: over the labelled clips of DIR (its labels.json, as asnn "
                         "eval reads them) instead of the suite, e.g. ../shared/data/real")

@@ -29,7 +29,7 @@ from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detect
 from asnn.io.files import folder_problem
 from asnn.params import preset_names
 
-from .arguments import (finite, frame_size, nonempty_path, perturbation, preset_spec,
+from .arguments import (Joined, finite, frame_size, nonempty_path, perturbation, preset_spec,
                         processes, tolerance_seconds, warmup_frames, whole)
 
 
@@ -111,9 +111,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         + " (default: %(default)s)")
     p.add_argument("--labels", type=nonempty_path, metavar="FILE",
                    help="labels file (default: CLIPS_DIR/labels.json)")
-    p.add_argument("--detectors", "--models", dest="detectors", type=_detectors,
+    p.add_argument("--detectors", "--models", dest="detectors", type=_detectors, action=Joined,
                    default=list(DEFAULT_DETECTORS), metavar="LIST",
-                   help="comma-separated detector specs: asnn, asnn:PRESET, lgmd1, lgmd2 "
+                   help="comma-separated detector specs (repeatable: the uses add up): asnn, "
+                        "asnn:PRESET, lgmd1, lgmd2 "
                         f"(default: {','.join(DEFAULT_DETECTORS)})")
     p.add_argument("--ablation", action="store_true",
                    help="run the robust preset with each of its additions switched off in turn "
@@ -124,10 +125,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "default: %(default)s), with fields of asnn.params.ASNNParams changed "
                         "after slashes as in the detector specs (robust/top_k=0); with --paper "
                         "also the preset of the maps and the sweeps")
-    p.add_argument("--cases", metavar="PATTERN",
+    p.add_argument("--cases", metavar="PATTERN", action=Joined,
                    help="with --synthetic (or --held-out: the cases that decide which "
                         "thresholds are admissible): comma-separated patterns of case names or "
-                        "groups, e.g. 'loom-*,nearmiss-*' or 'driving-*' (default: every case); "
+                        "groups, e.g. 'loom-*,nearmiss-*' or 'driving-*' (repeatable: the uses add "
+                        "up; default: every case); "
                         "'extra-*' runs the extra drives outside the suite")
     p.add_argument("--variant", type=whole, default=0, metavar="K",
                    help="with --synthetic: K >= 1 scores the same cases with fresh scene seeds "

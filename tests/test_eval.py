@@ -983,3 +983,20 @@ def test_a_clips_stamps_are_said_one_frame_or_reset_each():
         "a.mcap: 1 clock reset, timed on from the latest frame's time; the first: message 9: "
         "3 s back"]
     assert clip_warnings(label, 40, 20.0, None) == []
+
+
+def test_a_list_option_given_twice_adds_up():
+    """A contributor trial: --cases 'halt-*' --cases 'approach-recede-*' ran the last pattern
+    alone, without a word."""
+    from cli.main import build_parser
+
+    parser = build_parser()
+    args = parser.parse_args(["eval", "--synthetic", "--cases", "halt-*", "--cases",
+                              "approach-recede-*", "--detectors", "asnn", "--detectors",
+                              "lgmd1,asnn"])
+    assert args.cases == "halt-*,approach-recede-*" and args.detectors == ["asnn", "lgmd1"]
+    plain = parser.parse_args(["eval", "--synthetic"])
+    assert plain.cases is None and plain.detectors == ["asnn", "asnn:reference", "lgmd1",
+                                                       "lgmd2"]
+    assert parser.parse_args(["bench", "--handover", "--cases", "a-*", "--cases",
+                              "b-*"]).cases == "a-*,b-*"
