@@ -251,6 +251,7 @@ def cmd_router(args: argparse.Namespace) -> int:
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
+    print("router stopped", file=sys.stderr, flush=True)  # the clients now lose it: say when
     return 0
 
 

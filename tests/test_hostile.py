@@ -4,6 +4,7 @@ robot's key. Memory is measured (RSS of a child process, or tracemalloc), never 
 
 import json
 import logging
+import signal
 import struct
 import subprocess
 import sys
@@ -870,6 +871,7 @@ def test_router_prints_the_endpoints_of_its_config_file(procs, tmp_path):
     router.wait_line("listening on")
     line = next(line for line in router.err if "listening on" in line)
     assert line.endswith(f"listening on {endpoint}"), line
+    assert router.stop(signal.SIGTERM) == 0 and router.err[-1] == "router stopped"
 
 
 def test_a_worker_id_too_long_for_a_response_is_refused_at_start():
