@@ -842,3 +842,99 @@ def test_a_shrunk_mask_leaves_out_a_pixel_a_quarter_of_which_it_covers():
     mask[0, 4] = True  # a quarter of (0, 2)
     shrunk = shrunk_mask(mask, (64, 64))
     assert shrunk[0, 0] and not shrunk[0, 2] and shrunk.sum() == 1
+
+
+# ---------------------------------------------------------------- mutation-probe additions
+
+
+def test_a_target_that_neither_grows_nor_shrinks_has_no_time_to_contact():
+    still = Track(0, 50.0, 50.0, 10.0, 1.0, (40, 40, 60, 60))
+    still.measure(0.0, 3.0, 4.0)  # an expansion of exactly 0 (a still camera, a still object)
+    assert still.ttc is None and still.offset is None
+    assert not approaching(still, tau_max=1.5, offset_max=1.0)
+
+
+def test_frames_of_approach_must_be_in_a_row_a_frame_that_fails_starts_the_count_again():
+    track = Track(0, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
+    track.measure(1.0, 5.0, 0.0)  # ttc 1 s, offset 0.25: passes
+    assert [track.judge(1.5, 1.0, 3) for _ in range(2)] == [False, False]
+    track.missed = 1  # unseen for a frame: fails the test
+    assert track.judge(1.5, 1.0, 3) is False and track.streak == 0
+    track.missed = 0
+    assert [track.judge(1.5, 1.0, 3) for _ in range(3)] == [False, False, True]
+
+
+def test_a_10_fps_stream_timed_by_float_stamps_needs_two_frames_of_approach():
+    from asnn.approach.tracking import persistence_frames
+
+    period = 0.3 - 0.2  # 0.09999999999999998: stamps 0.1 s apart, as floats subtract
+    assert period < 0.1 and persistence_frames(3, 0.1, period) == 2
+    assert persistence_frames(3, 0.1, 0.05) == 3
+
+
+def test_the_strongest_track_takes_an_observation_two_tracks_compete_for():
+    tracker = TargetTracker()
+    strong = Observation(0.0, 0.0, 5.0, 10.0, (-5, -5, 5, 5))
+    weak = Observation(20.0, 0.0, 5.0, 1.0, (15, -5, 25, 5))
+    a, b = tracker.update([strong, weak], 0.05)
+    between = Observation(10.0, 0.0, 5.0, 5.0, (5, -5, 15, 5))  # within reach of both
+    (seen,) = tracker.update([between], 0.05)
+    assert seen.id == a.id and a.missed == 0 and b.missed == 1
+
+
+def test_region_persistence_looks_back_over_the_frames_the_stream_needs_now():
+    """At a slow rate a track needs fewer frames (persistence_frames): 2 of a tracker built for
+    3. Its region's history is then the previous frame only (2 - 1 of the previous 2), not
+    three frames back."""
+
+    def run(passing_at):
+        tracker = TargetTracker(max_missed=0, region_frames=3)
+        first = Observation(50.0, 50.0, 1.0, 1.0, (0, 0, 100, 100))
+        for frame in (1, 2, 3):
+            tracks = tracker.update([first] if frame == passing_at else [], 0.1)
+            for track in tracks:
+                track.measure(1.0, 0.0, 0.0)  # ttc 1 s, offset 0: passes
+            assert tracker.judge(tracks, 1.5, 1.0, 2) == [False] * len(tracks)
+        other = Observation(90.0, 50.0, 1.0, 1.0, (50, 0, 150, 100))  # a new track, overlapping
+        (track,) = tracker.update([other], 0.1)
+        track.measure(1.0, 0.0, 0.0)
+        return tracker.judge([track], 1.5, 1.0, 2)
+
+    assert run(passing_at=3) == [True]  # the frame before: persisted in its region
+    assert run(passing_at=1) == [False]  # three frames back: outside the 2 frames it needs
+
+
+def test_a_tracks_box_carries_the_previous_box_grown_by_its_expansion():
+    track = Track(0, 5.0, 5.0, 5.0, 1.0, (0.0, 0.0, 10.0, 10.0))
+    track.measure(1.0, 0.0, 0.0)  # grows 100 % per second, no drift
+    track.observe(Observation(5.0, 5.0, 5.0, 1.0, (0.0, 0.0, 10.0, 10.0)), elapsed=1.0,
+                  box_weight=0.5)
+    # the previous box carried over 1 s: (-5, -5, 15, 15); half of it, half the observation's
+    assert track.box == pytest.approx((-2.5, -2.5, 12.5, 12.5))
+
+
+def test_a_trackers_memory_of_earlier_frames_stays_within_its_window():
+    tracker = TargetTracker(region_frames=3, object_ids=True)
+    obs = Observation(50.0, 50.0, 5.0, 1.0, (40, 40, 60, 60))
+    for _ in range(200):
+        tracks = tracker.update([obs], 0.05)
+        for track in tracks:
+            track.measure(1.0, 0.0, 0.0)
+        tracker.judge(tracks, 1.5, 1.0, 3)
+    assert len(tracker._passed) <= 4 and len(tracker._counted) <= 3
+
+
+def test_a_motion_layer_that_does_not_expand_has_no_time_to_contact():
+    from asnn.approach.tracking import layer_estimates
+
+    assert layer_estimates([(0.5, 0.0, 3.0, 4.0), (0.5, 2.0, 3.0, 4.0)], 10.0) == (
+        (0.5, None, None), (0.5, 0.5, pytest.approx(5.0 / 20.0)))
+
+
+def test_the_partial_overlap_regime_takes_the_better_of_the_box_s_two_fits():
+    overlap = (1.0, 2.0, 0.4)  # ttc <= 1 s, offset <= 2, fit >= 0.4
+    for fit, own_fit in [(0.2, 0.6), (0.6, 0.2)]:
+        track = Track(0, 0.0, 0.0, 20.0, 1.0, (0, 0, 40, 40))
+        track.measure(1.25, 37.5, 0.0, fit=fit)  # ttc 0.8 s, offset 1.5: an overlap
+        track.measure_own(1.0, own_fit)
+        assert approaching(track, tau_max=0.5, offset_max=1.0, overlap=overlap), (fit, own_fit)

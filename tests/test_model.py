@@ -625,3 +625,20 @@ def test_the_model_s_switches_are_true_or_false(flag):
         with pytest.raises(TypeError, match=f"{flag} must be True or False"):
             ASNN("default", **{flag: value})
     assert getattr(ASNN("default", **{flag: np.bool_(False)}), flag) is False
+
+
+# ---------------------------------------------------------------- mutation-probe additions
+
+
+@pytest.mark.parametrize("field", ["approach_gate", "scene_relative", "object_ids"])
+def test_a_stage_that_works_on_the_objects_is_refused_without_them(field):
+    with pytest.raises(ValidationError, match="targets='objects'"):
+        asnn_preset("reference", **{field: True})
+    asnn_preset("reference", targets="objects", **{field: True})  # the control
+
+
+def test_a_spec_value_of_none_is_none():
+    from asnn.params import parse_preset_spec, preset_from_spec
+
+    assert parse_preset_spec("robust/max_width=none") == ("robust", (("max_width", None),))
+    assert preset_from_spec("robust/max_width=None").max_width is None

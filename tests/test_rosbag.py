@@ -1303,3 +1303,230 @@ def test_a_summary_s_weight_counts_its_chunk_offsets_too():
     offsets = mcap_reader._Summary({}, {}, None, {1: array("Q", range(2**20 + 1))})
     assert offsets.weight() > mcap_reader._SUMMARY_KEPT_BYTES  # 8 MiB of offsets and one
     assert mcap_reader._Summary({}, {}, None, {1: array("Q", range(10))}).weight() == 80
+
+
+# ---------------------------------------------------------------- mutation-probe additions
+
+
+def test_a_channel_id_declared_again_for_another_topic_no_longer_gives_the_topics_frames(
+        tmp_path, looming):
+    """A read-through (no summary) learns the topic's channels from the Channel records as they
+    come: an id declared again for another topic stops being the topic's."""
+    from mcap.records import Channel, Message
+
+    good = crafted_bag(tmp_path / "probe.mcap", looming)
+    with open(good, "rb") as fh:
+        channel = next(r for r in mcap_reader.bag_records(fh, "/c") if isinstance(r, Channel))
+    frame = raw_message(looming.frames[1], "mono8", 1)
+    with open(write_messages(tmp_path / "one.mcap", {"/c": (rosbag.IMAGE, [frame])}), "rb") as fh:
+        data = next(r for r in mcap_reader.bag_records(fh, "/c") if isinstance(r, Message)).data
+    other = Channel(id=channel.id, schema_id=0, topic="/other", message_encoding="cdr",
+                    metadata={})
+    message = Message(channel_id=channel.id, sequence=1, log_time=START_NS + 50_000_000,
+                      publish_time=START_NS + 50_000_000, data=data)
+
+    def messages(bag):
+        with open(bag, "rb") as fh:
+            return [r for r in mcap_reader.bag_records(fh, "/c") if isinstance(r, Message)]
+
+    counts = {}
+    bag = crafted_bag(tmp_path / "redeclared.mcap", looming, other, message)
+    with open(bag, "rb") as fh:
+        assert len([r for r in mcap_reader.bag_records(fh, "/c", counts)
+                    if isinstance(r, Message)]) == 1
+    assert counts == {channel.id: 1}  # the second message is /other's: counted, not read
+    control = crafted_bag(tmp_path / "control.mcap", looming, message)
+    assert len(messages(control)) == 2
+
+
+def test_an_oversized_message_outside_chunks_is_skipped_a_piece_at_a_time(tmp_path, looming,
+                                                                          monkeypatch):
+    """In a read-through, a message of the topic longer than MAX_MESSAGE_BYTES is read past in
+    pieces, never whole (as in a chunk, it comes as a bad message)."""
+    from mcap.records import Channel, Message
+
+    monkeypatch.setattr(mcap_reader, "MAX_MESSAGE_BYTES", 2**20)
+    probe = crafted_bag(tmp_path / "probe.mcap", looming)
+    with open(probe, "rb") as fh:
+        channel = next(r for r in mcap_reader.bag_records(fh, "/c") if isinstance(r, Channel))
+    size = 16 * 2**20
+    bomb = Message(channel_id=channel.id, sequence=1, log_time=START_NS + 50_000_000,
+                   publish_time=START_NS + 50_000_000, data=bytes(size))
+    bag = crafted_bag(tmp_path / "bomb.mcap", looming, bomb)
+    del bomb
+    records = []
+
+    def read():
+        with open(bag, "rb") as fh:
+            records.extend(type(r).__name__ for r in mcap_reader.bag_records(fh, "/c"))
+
+    peak = traced_peak(read)
+    assert records.count("TooLarge") == 1 and records.count("Message") == 1, records
+    assert peak < 4 * 2**20, peak  # a piece of _SKIP_BYTES at a time, not the 16 MiB
+
+
+def test_a_bag_whose_chunk_indexes_have_no_message_indexes_is_read_through(tmp_path, looming):
+    """A writer that stores chunk indexes without message indexes (mcap's IndexType.CHUNK):
+    the indexes do not say which channels a chunk holds, so every chunk is read."""
+    from mcap.writer import IndexType, Writer
+
+    frames = looming.frames[:12]
+    path = tmp_path / "chunk_index_only.mcap"
+    with open(path, "wb") as fh:
+        writer = Writer(fh, chunk_size=20_000, index_types=IndexType.CHUNK)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema(rosbag.IMAGE, "ros2msg",
+                                        rosbag.IMAGE_MSGDEF.encode())
+        channel = writer.register_channel("/c", "cdr", schema)
+        from mcap_ros2._dynamic import serialize_dynamic
+
+        encode = serialize_dynamic(rosbag.IMAGE, rosbag.IMAGE_MSGDEF)[rosbag.IMAGE]
+        for index, frame in enumerate(frames):
+            ns = START_NS + index * 50_000_000
+            writer.add_message(channel, log_time=ns, publish_time=ns,
+                               data=encode(raw_message(frame, "mono8", index)), sequence=index)
+        writer.finish()
+    with open(path, "rb") as fh:
+        summary = mcap_reader.bag_summary(fh)
+    assert summary.chunk_count > 1 and not summary.indexed
+    read = [image for _, image in rosbag.open_bag(path).frames()]
+    assert len(read) == len(frames)
+    assert all(np.array_equal(a, b) for a, b in zip(read, frames))
+
+
+def test_a_chunk_that_decompresses_to_less_than_it_declares_is_refused(tmp_path, looming):
+    import dataclasses as dc
+
+    from mcap.records import Channel, Message
+
+    probe = crafted_bag(tmp_path / "probe.mcap", looming)
+    with open(probe, "rb") as fh:
+        records = list(mcap_reader.bag_records(fh, "/c"))
+    channel = next(r for r in records if isinstance(r, Channel))
+    message = next(r for r in records if isinstance(r, Message))
+    later = dc.replace(message, sequence=1, log_time=message.log_time + 50_000_000)
+    chunk = records_chunk(later)
+    short = dc.replace(chunk, uncompressed_size=chunk.uncompressed_size + 100)  # its CRC holds
+    errors = []
+    bag = crafted_bag(tmp_path / "short.mcap", looming, short)
+    frames = list(rosbag.BagClip(bag, "/c").frames(lambda reason, msg: errors.append(msg)))
+    assert len(frames) == 1 and len(errors) == 1 and "decompresses to" in errors[0], errors
+    assert channel.topic == "/c"
+    good = crafted_bag(tmp_path / "whole.mcap", looming, chunk)  # the control
+    assert len(list(rosbag.BagClip(good, "/c").frames())) == 2
+
+
+def test_a_chunk_index_pointing_at_another_record_is_a_corrupt_bag_error(tmp_path, looming):
+    """A chunk index whose offset lands on a record that is not a chunk (here the message index
+    after it): a corrupt bag, said in one line, never a traceback."""
+    import struct
+
+    from mcap.reader import SeekingReader
+
+    bag = write_messages(tmp_path / "ok.mcap", {"/c": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(looming.frames[:12])])},
+        chunk_size=20_000)
+    data = bytearray(bag.read_bytes())
+    with open(bag, "rb") as fh:
+        index = SeekingReader(fh).get_summary().chunk_indexes[-1]
+    start, after = index.chunk_start_offset, index.chunk_start_offset + index.chunk_length
+    assert data[after] == 0x07  # the chunk's message index follows it
+    at = data.rindex(struct.pack("<Q", start), 0, len(data) - 28)
+    data[at:at + 8] = struct.pack("<Q", after)
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(bytes(data))
+    with pytest.raises(SourceError, match="truncated or corrupt"):
+        list(rosbag.open_bag(broken).frames())
+
+
+def test_a_length_field_inside_a_record_is_bounded_too(tmp_path, looming):
+    """A chunk record of a few bytes whose data length field claims 8 GiB: refused at that
+    field (the record's own length is small: only the bounded file sees it), not read to the
+    end of the file, however large the file."""
+    import struct
+
+    data = crafted_bag(tmp_path / "probe.mcap", looming).read_bytes()
+    tail = 8 + 29 + 13  # magic, footer, data end
+    fields = struct.pack("<QQQII", 0, 0, 16, 0, 0) + struct.pack("<Q", 2**33) + b"\0" * 16
+    chunk = struct.pack("<BQ", 0x06, len(fields)) + fields
+    bag = tmp_path / "field.mcap"
+    bag.write_bytes(data[:-tail] + chunk + data[-tail:])
+    errors = []
+    frames = list(rosbag.BagClip(bag, "/c").frames(lambda reason, message: errors.append(message)))
+    assert len(frames) == 1 and len(errors) == 1, errors
+    assert f"a record field of {2**33} bytes" in errors[0], errors
+
+
+def test_an_lz4_chunk_is_decompressed_no_further_than_it_declares(tmp_path, looming):
+    """An lz4 frame without a content size decompresses to what its data says: the reader stops
+    one byte past the declared size (here 64 MiB of zeros declared as 1000 bytes)."""
+    import lz4.frame
+    from mcap.records import Chunk
+
+    bomb = Chunk(compression="lz4", data=lz4.frame.compress(bytes(64 * 2**20), store_size=False),
+                 message_start_time=0, message_end_time=0, uncompressed_crc=0,
+                 uncompressed_size=1000)
+    bag = crafted_bag(tmp_path / "lz4.mcap", looming, bomb)
+    errors = []
+
+    def read():
+        list(rosbag.BagClip(bag, "/c").frames(lambda reason, message: errors.append(message)))
+
+    peak = traced_peak(read)
+    assert len(errors) == 1 and "decompresses to more" in errors[0], errors
+    assert peak < 16 * 2**20, peak
+
+
+def test_a_record_that_runs_past_the_end_of_its_chunk_is_refused(tmp_path, looming):
+    import struct
+    import zlib
+
+    import zstandard
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import Chunk, Message
+
+    probe = crafted_bag(tmp_path / "probe.mcap", looming)
+    with open(probe, "rb") as fh:
+        message = next(r for r in mcap_reader.bag_records(fh, "/c") if isinstance(r, Message))
+    builder = RecordBuilder()
+    Message(channel_id=message.channel_id, sequence=1, log_time=message.log_time + 50_000_000,
+            publish_time=message.log_time + 50_000_000, data=message.data).write(builder)
+    data = bytearray(builder.end())
+    (length,) = struct.unpack_from("<Q", data, 1)
+    struct.pack_into("<Q", data, 1, length + 100)  # the record says it is longer than the chunk
+    data = bytes(data)
+    chunk = Chunk(compression="zstd", data=zstandard.ZstdCompressor().compress(data),
+                  message_start_time=0, message_end_time=0, uncompressed_crc=zlib.crc32(data),
+                  uncompressed_size=len(data))
+    bag = crafted_bag(tmp_path / "past.mcap", looming, chunk)
+    errors = []
+    frames = list(rosbag.BagClip(bag, "/c").frames(lambda reason, msg: errors.append(msg)))
+    assert len(frames) == 1 and len(errors) == 1 and "runs past its end" in errors[0], errors
+
+
+def test_a_chunk_declaring_more_than_the_record_bound_uncompressed_is_refused_unread(
+        tmp_path, looming):
+    import zstandard
+    from mcap.records import Chunk
+
+    huge = Chunk(compression="zstd", data=zstandard.ZstdCompressor().compress(b"x" * 1000),
+                 message_start_time=0, message_end_time=0, uncompressed_crc=0,
+                 uncompressed_size=mcap_reader.MAX_RECORD_BYTES + 1)
+    bag = crafted_bag(tmp_path / "huge.mcap", looming, huge)
+    errors = []
+
+    def read():
+        list(rosbag.BagClip(bag, "/c").frames(lambda reason, message: errors.append(message)))
+
+    peak = traced_peak(read)
+    assert len(errors) == 1 and "uncompressed, more than" in errors[0], errors
+    assert peak < 64 * 2**20, peak
+
+
+def test_the_summaries_kept_are_those_of_the_latest_few_files(tmp_path, looming):
+    messages = [raw_message(looming.frames[0], "mono8")]
+    for k in range(mcap_reader._SUMMARIES_KEPT + 3):
+        bag = write_messages(tmp_path / f"bag{k}.mcap", {"/c": (rosbag.IMAGE, messages)})
+        with open(bag, "rb") as fh:
+            assert mcap_reader.bag_summary(fh) is not None
+    assert len(mcap_reader._summaries) <= mcap_reader._SUMMARIES_KEPT

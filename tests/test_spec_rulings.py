@@ -88,3 +88,42 @@ def test_the_retina_integrates_with_the_fixed_dt_whatever_the_timestamps(looming
     times = np.cumsum(np.r_[0.0, np.random.default_rng(1).uniform(0.01, 0.2, len(looming) - 1)])
     for t, frame in zip(times, looming):
         assert stamped.step(frame, float(t)).u == plain.step(frame).u
+
+
+def test_the_origin_seed_counts_in_the_cluster_it_joins():
+    """The published variant adds the point (0, 0) to DBSCAN: where it is a core sample it
+    belongs to a cluster, whose size, centre and mean motion count it (its motion is the
+    pixel's at (0, 0))."""
+    mask = np.zeros((20, 20), bool)
+    mask[0:5, 0:5] = True  # a blob at the corner, (0, 0) in it
+    dx, dy = np.full(mask.shape, 1.0), np.zeros(mask.shape)
+    dx[0, 0] = 3.5  # the seed's motion: 26 vectors of mean (25 + 3.5) / 26, with (0, 0)'s twice
+    (target,) = extract_targets(mask, dx, dy, 2.0, 3, origin_seed=True)
+    assert target.pixels == 26  # 25 core pixels and the seed
+    assert (target.x, target.y) == (pytest.approx(50 / 26), pytest.approx(50 / 26))
+    assert target.energy == pytest.approx((24 + 3.5 * 2) / 26)
+    (plain,) = extract_targets(mask, dx, dy, 2.0, 3)
+    assert plain.pixels == 25 and (plain.x, plain.y) == (2.0, 2.0)
+
+
+def test_only_a_cluster_centred_within_a_pixel_of_the_origin_is_dropped():
+    dx, dy = np.ones((20, 20)), np.zeros((20, 20))
+    near = np.zeros((20, 20), bool)
+    near[0:3, 0:3] = True  # with the seed: centred at (0.9, 0.9), 1.27 px from the origin
+    (target,) = extract_targets(near, dx, dy, 2.0, 3, origin_seed=True)
+    assert (target.x, target.y) == (pytest.approx(0.9), pytest.approx(0.9))
+    on = np.zeros((20, 20), bool)
+    on[0:2, 0:2] = True  # centred at (0.4, 0.4): the seed's own cluster, dropped
+    assert extract_targets(on, dx, dy, 1.5, 3, origin_seed=True) == []
+
+
+def test_a_seed_that_is_a_cluster_of_its_own_is_dropped_beside_the_others():
+    """Two pixels 2 px from the origin make the seed a core sample but are not core samples
+    themselves: the seed is a cluster alone (numbered after the pixels' clusters), centred on
+    the origin and dropped."""
+    mask = np.zeros((20, 20), bool)
+    mask[0, 2] = mask[2, 0] = True
+    mask[10:13, 10:13] = True
+    dx, dy = np.ones(mask.shape), np.zeros(mask.shape)
+    (target,) = extract_targets(mask, dx, dy, 2.0, 3, origin_seed=True)
+    assert (target.x, target.y, target.pixels) == (11.0, 11.0, 9)

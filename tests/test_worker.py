@@ -658,3 +658,129 @@ def test_a_frame_the_model_fails_on_is_refused_counted_and_told_with_one_traceba
     monkeypatch.setattr(ASNN, "step", step)
     response = feed(core, "r1", looming.frames[6], 6)  # the model starts afresh
     assert response is not None and response.u == 0.0 and response.stream_frames == 1
+
+
+# ---------------------------------------------------------------- mutation-probe additions
+
+
+def test_growths_that_differ_by_twice_or_more_set_no_seq_step(looming):
+    """A step needs STEP_FRAMES growths whose largest is less than twice the smallest: 10, 20,
+    20 (a counter by 10 that lost a frame, or a counter by 20 and a stray) sets none, so a
+    jump of 100 afterwards is still a gap of more than max_gap steps of 1."""
+    core = WorkerCore(max_gap=20)
+    for k, seq in enumerate([0, 10, 30, 50]):
+        feed(core, "r1", looming.frames[10 + k], seq)
+    assert core.status()["robots"]["r1"]["seq_step"] == 1
+    assert feed(core, "r1", looming.frames[14], 150).stream_frames == 1
+    assert core.stats()["resets"] == {"seq-gap": 1}
+
+
+def test_a_frame_exactly_max_gap_behind_the_latest_is_late(looming):
+    core = WorkerCore(max_gap=20)
+    for seq in range(22):
+        feed(core, "r1", looming.frames[seq], seq)
+    assert core.offer("asnn/r1/frame", payload(looming.frames[30], 1)) is None  # 21 - 20
+    assert core.stats()["invalid"] == {"late": 1} and core.stats()["resets"] == {}
+
+
+def test_a_full_table_forgets_the_robot_silent_longest(looming):
+    clock = FakeClock()
+    core = WorkerCore(max_robots=2, clock=clock, takeover_after=3.0)
+    feed(core, "a", looming.frames[0], 0)
+    clock.now += 1.0
+    feed(core, "b", looming.frames[0], 0)
+    clock.now += 5.0  # both silent for takeover_after: a for longer
+    assert feed(core, "c", looming.frames[0], 0) is not None
+    assert core.robots() == ["b", "c"]
+
+
+def test_one_frame_streams_are_reported_from_the_restarts_warned_th_in_a_row(looming, caplog):
+    from service.core import RESTARTS_WARNED
+
+    core = WorkerCore()
+
+    def warned():
+        return [r for r in caplog.records if "cannot warn" in r.getMessage()]
+
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        stamp = iter(k * 0.05 for k in range(1000))
+        # RESTARTS_WARNED - 1 streams of one frame, then one of two: the run is broken
+        for _ in range(RESTARTS_WARNED):
+            feed(core, "r1", looming.frames[0], 0, stamp=next(stamp))
+        feed(core, "r1", looming.frames[1], 1, stamp=next(stamp))
+        for _ in range(RESTARTS_WARNED - 1):
+            feed(core, "r1", looming.frames[0], 0, stamp=next(stamp))
+        assert warned() == []
+        # a run of RESTARTS_WARNED one-frame streams: said at the frame that ends the last
+        feed(core, "r1", looming.frames[0], 0, stamp=next(stamp))
+        assert warned() == []
+        feed(core, "r1", looming.frames[0], 0, stamp=next(stamp))
+        assert len(warned()) == 1
+
+
+def test_a_candidate_whose_first_frame_fails_keeps_the_frame_waiting_behind_it(looming):
+    core = WorkerCore()
+    assert core.offer("asnn/r1/frame", undecodable_jpeg(looming.frames[0], 0)) == "r1"
+    job = core.take()
+    assert core.offer("asnn/r1/frame", payload(looming.frames[1], 1)) == "r1"
+    assert core.process(job) is None
+    job = core.take()
+    assert job is not None and job.frame.seq == 1
+    assert core.process(job) is not None
+    assert core.robots() == ["r1"] and core.stats()["robots"] == 1
+
+
+def test_a_baselines_rate_is_measured_afresh_on_a_new_stream_and_never_from_untimed_gaps(
+        looming, caplog):
+    core = WorkerCore("lgmd1")
+    for seq in range(8):  # 10 fps
+        feed(core, "r1", looming.frames[seq], seq, stamp=seq * 0.1)
+    assert core.status()["robots"]["r1"]["fps"] == 10.0
+    feed(core, "r1", looming.frames[0], 0, stamp=100.0)  # the camera restarted
+    assert core.status()["robots"]["r1"]["fps"] is None
+    feed(core, "r1", looming.frames[1], 1, stamp=100.05)
+    assert core.status()["robots"]["r1"]["fps"] == 20.0
+    # a clock in milliseconds: no rate, and no slow camera said
+    ms = WorkerCore("lgmd1")
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for seq in range(14):
+            feed(ms, "r2", looming.frames[seq], seq, stamp=seq * 50.0)
+    assert ms.status()["robots"]["r2"]["fps"] is None
+    assert not [r for r in caplog.records if "per second" in r.getMessage()]
+
+
+def test_a_camera_slow_for_its_first_frames_only_is_not_logged_as_slow(looming, caplog):
+    """The rate is read over a full window of PERIOD_FRAMES gaps: five slow gaps at the start
+    of a stream, then 20 fps, never read slow for PERIOD_FRAMES frames in a row."""
+    core = WorkerCore()
+    stamps = [k * 0.1 for k in range(6)] + [0.5 + k * 0.05 for k in range(1, 20)]
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for seq, stamp in enumerate(stamps):
+            feed(core, "r1", looming.frames[seq], seq, stamp=stamp)
+    assert not [r for r in caplog.records if "per second" in r.getMessage()]
+    assert core.status()["robots"]["r1"]["fps"] == 20.0
+
+
+def test_an_untimed_spell_after_the_stamps_recovered_is_logged_again(looming, caplog):
+    clock = FakeClock()
+    core = WorkerCore(clock=clock)
+    stamps = ([k * 50.0 for k in range(8)] + [350.0 + k * 0.05 for k in range(1, 9)]
+              + [400.0 + k * 50.0 for k in range(8)])
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for seq, stamp in enumerate(stamps):
+            clock.now += 2.0  # the rate limit lets each spell through
+            feed(core, "r1", looming.frames[seq % 40], seq, stamp=stamp)
+    lines = [r.getMessage() for r in caplog.records if "stamps are" in r.getMessage()]
+    assert len(lines) == 2, lines
+
+
+def test_a_robot_handed_over_while_busy_is_released_when_its_frame_is_done(looming):
+    mine = {"r1": True}
+    core = WorkerCore(owns=lambda robot: mine[robot])
+    assert core.offer("asnn/r1/frame", payload(looming.frames[0], 0)) == "r1"
+    job = core.take()
+    mine["r1"] = False
+    assert core.release_unowned() == []  # busy: forgotten when its frame is done
+    assert core.robots() == ["r1"]
+    core.process(job)
+    assert core.robots() == [] and core.stats()["released"] == 1

@@ -537,8 +537,9 @@ class TargetTracker:
         Weight of a new observation's box in the track's box, (0, 1] (see :class:`Track`).
     region_frames : int
         With N > 0, :meth:`judge` also counts a track that passes the approach test now where
-        passing tracks overlapped its box in ``frames - 1`` of the previous N frames
-        (:func:`persists_in_region`); 0 counts each track's own frames only.
+        passing tracks overlapped its box in ``frames - 1`` of the previous ``frames`` frames
+        (:func:`persists_in_region`; ``frames`` is :meth:`judge`'s, the stream's persistence,
+        at most N: N frames are kept); 0 counts each track's own frames only.
     region_cover : float
         With ``region_frames``, the share of the passing track's box an earlier box must cover
         to speak for its region, in [0, 1] (0: any overlap).
