@@ -110,6 +110,10 @@ print("logged", flush=True)
 chunks = []
 threading.Thread(target=lambda: [chunks.append(c) for c in iter(lambda: os.read(r, 65536), b"")],
                  daemon=True).start()
+waiting = logging.getLogger().handlers[0].queue
+deadline = time.monotonic() + 60
+while waiting.qsize() and time.monotonic() < deadline:  # "after" finds room: not dropped
+    time.sleep(0.01)
 log.warning("after")
 deadline = time.monotonic() + 60
 while b"after" not in b"".join(chunks) and time.monotonic() < deadline:
