@@ -483,6 +483,17 @@ def traced_peak(work) -> int:
         tracemalloc.stop()
 
 
+def errors_and_peak(bag) -> tuple[list[str], int]:
+    """The messages of what reading ``bag``'s ``/c`` frames reported, and the most memory the
+    reading held at once (:func:`traced_peak`)."""
+    errors = []
+
+    def read():
+        list(rosbag.BagClip(bag, "/c").frames(lambda reason, message: errors.append(message)))
+
+    return errors, traced_peak(read)
+
+
 def records_chunk(*records):
     """A zstd chunk of the given MCAP records."""
     import zlib
@@ -1466,13 +1477,7 @@ def test_an_lz4_chunk_is_decompressed_no_further_than_it_declares(tmp_path, loom
     bomb = Chunk(compression="lz4", data=lz4.frame.compress(bytes(64 * 2**20), store_size=False),
                  message_start_time=0, message_end_time=0, uncompressed_crc=0,
                  uncompressed_size=1000)
-    bag = crafted_bag(tmp_path / "lz4.mcap", looming, bomb)
-    errors = []
-
-    def read():
-        list(rosbag.BagClip(bag, "/c").frames(lambda reason, message: errors.append(message)))
-
-    peak = traced_peak(read)
+    errors, peak = errors_and_peak(crafted_bag(tmp_path / "lz4.mcap", looming, bomb))
     assert len(errors) == 1 and "decompresses to more" in errors[0], errors
     assert peak < 16 * 2**20, peak
 
@@ -1512,13 +1517,7 @@ def test_a_chunk_declaring_more_than_the_record_bound_uncompressed_is_refused_un
     huge = Chunk(compression="zstd", data=zstandard.ZstdCompressor().compress(b"x" * 1000),
                  message_start_time=0, message_end_time=0, uncompressed_crc=0,
                  uncompressed_size=mcap_reader.MAX_RECORD_BYTES + 1)
-    bag = crafted_bag(tmp_path / "huge.mcap", looming, huge)
-    errors = []
-
-    def read():
-        list(rosbag.BagClip(bag, "/c").frames(lambda reason, message: errors.append(message)))
-
-    peak = traced_peak(read)
+    errors, peak = errors_and_peak(crafted_bag(tmp_path / "huge.mcap", looming, huge))
     assert len(errors) == 1 and "uncompressed, more than" in errors[0], errors
     assert peak < 64 * 2**20, peak
 
