@@ -419,14 +419,10 @@ class ASNN:
             self.stages_off = np.zeros_like(self.stages_on)
             self._stamp = stamp
             return _Frame(index)
-        elapsed = stamp - self._stamp
-        if p.min_frame_gap is not None and t is not None and timed_gap(elapsed) \
-                and elapsed < p.min_frame_gap:
-            self.repeated = True  # too soon after the last frame processed: answered as it
-            return _Frame(index, repeat=True)
         self.repeated = blocks is not None and self._is_repeat(blocks)
         if self.repeated:
             return _Frame(index, repeat=True)
+        elapsed = stamp - self._stamp
         if not timed_gap(elapsed):  # no usable times: the nominal frame period
             elapsed = p.dt
         self._stamp = stamp

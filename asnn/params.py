@@ -97,16 +97,6 @@ class ASNNParams(BaseModel):
         description="at most this many repeats in a row: after that the scene has "
         "stopped moving, and the model sees it")
 
-    min_frame_gap: float | None = Field(
-        None, gt=0, le=1.0,
-        description="frame-rate ceiling: a timed frame that comes sooner than this many "
-        "seconds after the last frame processed is answered as a repeat (the state held, the "
-        "previous response repeated), so that a camera faster than 1 / min_frame_gap frames "
-        "per second is seen at half its rate or less: the retina steps once per frame "
-        "whatever the time between frames, and at 60 fps a far object's change per frame is "
-        "a third of what the added stages were set on (20-30 fps). Untimed frames (no t) are "
-        "all processed. None: every frame")
-
     # --- input scale (robust addition) ---
     max_width: int | None = Field(
         None, ge=32, le=4096, description="frames wider than this are averaged down to this width "
@@ -550,7 +540,7 @@ PRESETS["light"] = _derived(PRESETS["reference32"], target_polarity="light")
 # has the parameter that switches it off
 PRESETS["robust"] = _derived(
     PRESETS["reference32"],
-    skip_repeats=True, min_frame_gap=0.022,  # under 40 fps's 25 ms: no common rate at the boundary
+    skip_repeats=True,
     stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
     rim_motion_max=8.0,
     contrast_gain=0.005,

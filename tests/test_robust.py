@@ -708,53 +708,6 @@ def test_a_warning_without_a_target_only_outlasts_its_objects_by_the_spike_windo
     assert bare  # the case the document describes does occur here
 
 
-@pytest.fixture(scope="module")
-def loom_60fps():
-    """A small, far object coming at a 60 fps camera (6 px tall 4 s before contact)."""
-    from asnn.stimuli.planar import planar_scene
-
-    return planar_scene("loom", fps=60.0, onset=30, polarity="dark", height=6, tau=4.0,
-                        contrast=0.6, noise=2.0, seed=1)
-
-
-def _first_warning_lead(scene, params) -> float | None:
-    model = ASNN(params)
-    first = next((k for k, frame in enumerate(scene.frames)
-                  if model.step(frame, k / scene.fps).collision), None)
-    return None if first is None else (scene.contact_frame - first) / scene.fps
-
-
-def test_a_camera_faster_than_the_ceiling_is_seen_at_half_its_rate(loom_60fps):
-    """min_frame_gap (22 ms): at 60 fps every second frame is answered as the one before, and
-    the frames processed give exactly what the model gives the 30 fps stream of them."""
-    scene = loom_60fps
-    fast, slow = ASNN("default"), ASNN("default")
-    every = [fast.step(frame, k / 60.0) for k, frame in enumerate(scene.frames)]
-    half = [slow.step(frame, k / 60.0) for k, frame in enumerate(scene.frames) if k % 2 == 0]
-    key = lambda r: (r.u, r.collision, [(t.x, t.y, t.ttc) for t in r.targets])  # noqa: E731
-    assert [key(r) for r in every[::2]] == [key(r) for r in half]
-    assert all(key(every[k]) == key(every[k - 1]) for k in range(1, len(every), 2))
-    assert any(r.collision for r in half)
-    # without the ceiling every frame is stepped, and the model sees another stream
-    off = ASNN(preset("default", min_frame_gap=None))
-    assert [key(off.step(f, k / 60.0)) for k, f in enumerate(scene.frames)][::2] != \
-        [key(r) for r in half]
-    # untimed frames are all processed (their period is the nominal 50 ms)
-    untimed = ASNN("default")
-    for frame in scene.frames[:5]:
-        untimed.step(frame)
-    assert len(untimed.periods) == 4
-
-
-def test_the_ceiling_warns_of_a_small_far_object_earlier_at_60_fps(loom_60fps):
-    """At 60 fps a far object's image changes by a third of what it does at 20 fps from frame
-    to frame: stepped at every frame, the default warned 0.3 s later than at 20-30 fps."""
-    with_ceiling = _first_warning_lead(loom_60fps, preset("default"))
-    without = _first_warning_lead(loom_60fps, preset("default", min_frame_gap=None))
-    assert with_ceiling is not None and without is not None
-    assert with_ceiling >= without + 0.15
-
-
 def test_every_preset_holds_values_its_own_validation_accepts():
     """The presets are built from one another: an update that pydantic does not check
     (model_copy) could hold a value out of bounds, found only when someone overrode another
