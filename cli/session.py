@@ -76,39 +76,80 @@ class _DroppingQueueHandler(logging.handlers.QueueHandler):
         return dropped
 
 
-class _StderrWriter(logging.StreamHandler):
-    """The writer thread's handler: says how many records were dropped before the next one."""
+LOG_DRAIN_S = 2.0
+"""Seconds a process's exit waits, at most, for the records still queued to be written."""
 
-    def __init__(self, stream, dropped_by: _DroppingQueueHandler) -> None:
-        super().__init__(stream)
-        self._dropped_by = dropped_by
 
-    def handle(self, record: logging.LogRecord) -> bool:
-        dropped = self._dropped_by.take_dropped()
+class _LogWriter:
+    """The thread that writes the queued records to stderr, through a descriptor of its own
+    (a copy of stderr's) with plain ``os.write``: a write blocked on a stderr nobody reads holds
+    no lock that the exit, logging's shutdown or another thread's print would wait for. Says
+    how many records were dropped before the next one it writes."""
+
+    def __init__(self, records: queue.Queue, dropped_by: _DroppingQueueHandler,
+                 formatter: logging.Formatter) -> None:
+        self.records, self.dropped_by, self.formatter = records, dropped_by, formatter
+        try:
+            self.fd: int | None = os.dup(sys.stderr.fileno())
+        except (AttributeError, OSError, ValueError):  # a stream without a descriptor
+            self.fd = None
+        self.thread = threading.Thread(target=self._run, daemon=True, name="asnn-log-writer")
+        self.thread.start()
+
+    def _run(self) -> None:
+        while True:
+            record = self.records.get()
+            self._say_dropped()
+            if record is None:  # the exit's: what was queued before it is written
+                return
+            self._write(self.formatter.format(record))
+
+    def _say_dropped(self) -> None:
+        dropped = self.dropped_by.take_dropped()
         if dropped:
-            super().handle(logging.makeLogRecord({
+            self._write(self.formatter.format(logging.makeLogRecord({
                 "name": "asnn.logging", "levelno": logging.WARNING, "levelname": "WARNING",
-                "msg": f"{dropped} log records dropped: stderr was too slow"}))
-        return super().handle(record)
+                "msg": f"{dropped} log records dropped: stderr was too slow"})))
+
+    def _write(self, text: str) -> None:
+        data = (text + "\n").encode("utf-8", "backslashreplace")
+        try:
+            if self.fd is None:
+                sys.stderr.write(data.decode("utf-8"))
+                sys.stderr.flush()
+                return
+            while data:
+                data = data[os.write(self.fd, data):]
+        except (OSError, ValueError):  # stderr closed, or a pipe nobody reads any more
+            pass
+
+    def close(self) -> None:
+        """At exit: let the writer finish what is queued, for at most :data:`LOG_DRAIN_S`
+        seconds (a stderr nobody reads must not hold the process; the thread is a daemon)."""
+        try:
+            self.records.put(None, timeout=LOG_DRAIN_S)
+        except queue.Full:
+            return
+        self.thread.join(LOG_DRAIN_S)
 
 
 def setup_logging(args: argparse.Namespace) -> None:
     """Log at ``--log-level`` on stderr, written by a thread of its own: the worker logs from
     Zenoh's receiving thread and its processing threads, and a stderr that blocks (a full
     pipe, a stalled journal) must not stall them. At most :data:`LOG_QUEUE_RECORDS` records
-    wait; beyond them records are dropped and the count is logged when writing resumes. Does
-    nothing when the root logger is already configured (as :func:`logging.basicConfig`)."""
+    wait; beyond them records are dropped and the count is logged when writing resumes. At exit
+    what waits is written, for at most :data:`LOG_DRAIN_S` seconds (a process ended at once by
+    :func:`exit_on_interrupt` loses what waits). Does nothing when the root logger is already
+    configured (as :func:`logging.basicConfig`)."""
     import zenoh
 
     root = logging.getLogger()
     if not root.handlers:
         records = queue.Queue(LOG_QUEUE_RECORDS)
         handler = _DroppingQueueHandler(records)
-        writer = _StderrWriter(sys.stderr, handler)
-        writer.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
-        listener = logging.handlers.QueueListener(records, writer)
-        listener.start()
-        atexit.register(listener.stop)  # before logging's own shutdown: what waits is written
+        writer = _LogWriter(records, handler, logging.Formatter(
+            "%(asctime)s %(name)s %(levelname)s %(message)s"))
+        atexit.register(writer.close)
         root.addHandler(handler)
         root.setLevel(args.log_level.upper())
     zenoh.try_init_log_from_env()  # Zenoh's own logs only when RUST_LOG is set

@@ -144,3 +144,29 @@ def test_logging_never_waits_for_a_blocked_stderr_and_counts_what_it_drops():
     assert dropped and kept + sum(dropped) == 3 * LOG_QUEUE_RECORDS
     assert kept <= LOG_QUEUE_RECORDS + 2000  # the queue, and the 64 KiB the pipe held
     assert lines[-1].endswith("WARNING after")
+
+
+_EXIT_WITH_STDERR_BLOCKED = r"""
+import argparse, logging, os, sys
+r, w = os.pipe()
+sys.stderr = os.fdopen(w, "w")  # nobody reads it, ever
+from cli.session import LOG_QUEUE_RECORDS, setup_logging
+setup_logging(argparse.Namespace(log_level="info"))
+log = logging.getLogger("asnn.worker")
+for i in range(2 * LOG_QUEUE_RECORDS):  # the queue full at exit, its writer blocked
+    log.info("rec %d", i)
+print("logged", flush=True)
+sys.exit(0)
+"""
+
+
+def test_a_process_whose_stderr_is_blocked_still_exits():
+    """A review: the exit joined the writer thread blocked on the pipe and hung (a systemd stop
+    waited for its SIGKILL), or with the queue full printed a traceback and wrote nothing more.
+    The exit now waits a bounded time for what is queued."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", _EXIT_WITH_STDERR_BLOCKED],
+                          capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout) == (0, "logged\n"), done
