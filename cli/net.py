@@ -123,7 +123,10 @@ def cmd_status(args: argparse.Namespace) -> int:
             continue
         readable += 1
         print(_printable(line), flush=True)
-    twins = sorted(w for w, n in Counter(s["worker"] for s in statuses).items() if n > 1)
+    # one id answered by processes of different instances (a map without one says nothing)
+    instances = Counter((s["worker"], s["instance"]) for s in statuses
+                        if isinstance(s.get("instance"), str))
+    twins = sorted(w for w, n in Counter(w for w, _ in instances).items() if n > 1)
     for worker in twins:  # a health check fails on them: every frame answered twice
         print(_printable(f"worker {worker}: answered by more than one process (two workers "
                          "with one id both serve its robots; stop one)"), file=sys.stderr)

@@ -27,6 +27,7 @@ the live workers, the routes and the frames received).
 from __future__ import annotations
 
 import logging
+import math
 import os
 import sys
 import threading
@@ -302,6 +303,8 @@ class Worker:
             raise ValueError(f"need handover_timeout >= 0, got {handover_timeout}")
         self.session = session
         self._instance = str(session.zid())  # tells this process from another with its id
+        self._twin_lock = threading.Lock()
+        self._twin_check = self._twin_logged = 0  # the latest check, and the one that logged
         self.core = core
         self.on_response = on_response
         self.stats_every = stats_every
@@ -572,8 +575,10 @@ class Worker:
         """Ask this worker's own status key who answers (the replies come on Zenoh's thread):
         another process answering for this id was started where this one had gone silent (a
         hang past the lease) or with the same ``--id`` on another host, and both serve the same
-        robots, every frame answered twice. Logged at ERROR, every :data:`TWIN_CHECK_S`
-        seconds while it lasts; ``asnn status`` lists both."""
+        robots, every frame answered twice. Logged at ERROR, once per check (every
+        :data:`TWIN_CHECK_S` seconds) while it lasts; ``asnn status`` lists both."""
+        with self._twin_lock:
+            self._twin_check += 1
         try:
             self.session.get(keys.worker_status_key(self.core.worker_id, self.core.prefix),
                              self._on_twin_reply, target=zenoh.QueryTarget.ALL,
@@ -590,11 +595,19 @@ class Worker:
         except Exception:  # anything may answer on the key: only a worker's status counts
             return
         instance = status.get("instance")
-        if isinstance(instance, str) and instance != self._instance:
-            log.error("worker id %s is also answered by another process (instance %s, up "
-                      "%s s): both serve the same robots and every frame is answered twice; "
-                      "stop one of them", self.core.worker_id, instance[:40],
-                      status.get("uptime_s"))
+        if (status["worker"] != self.core.worker_id or not isinstance(instance, str)
+                or instance == self._instance):
+            return
+        with self._twin_lock:  # anyone on the prefix may answer, as often as it likes
+            if self._twin_logged == self._twin_check:
+                return
+            self._twin_logged = self._twin_check
+        uptime = status.get("uptime_s")
+        shown = "".join(c if c.isprintable() else "?" for c in instance[:40])
+        log.error("worker id %s is also answered by another process (instance %s%s): both "
+                  "serve the same robots and every frame is answered twice; stop one of them",
+                  self.core.worker_id, shown, f", up {uptime:.0f} s"
+                  if isinstance(uptime, (int, float)) and math.isfinite(uptime) else "")
 
     def _tell_refusals(self) -> None:
         """Tell each robot refused since the last call why, on ``<prefix>/<robot>/refused``

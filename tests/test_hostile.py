@@ -1057,3 +1057,33 @@ def test_a_second_process_answering_for_a_worker_id_is_found_and_said(zenoh_net,
                 assert [s["worker"] for s in lines] == ["w1", "w1"]
                 assert len({s["instance"] for s in lines}) == 2
                 assert "w1: answered by more than one process" in captured.err
+
+
+def test_answers_on_a_workers_status_key_make_at_most_one_line_a_check(zenoh_net, caplog,
+                                                                      monkeypatch):
+    """A review: any process on the prefix could answer a worker's own status key hundreds of
+    times a query, with a newline in its instance: as many forged ERROR lines."""
+    import service.worker as worker_module
+    from service.messages import encode_status
+
+    monkeypatch.setattr(worker_module, "TWIN_CHECK_S", 1.0)
+
+    def flood(query):
+        for _ in range(50):
+            query.reply("asnn/@worker/w1/status", encode_status(
+                {"worker": "w1", "instance": "x\n2026-11-30 asnn.worker INFO all clear",
+                 "uptime_s": "soon"}))
+        query.reply("asnn/@worker/w1/status", encode_status({"worker": "w2", "instance": "y"}))
+
+    queryable = zenoh_net.spoke().declare_queryable("asnn/@worker/w1/status", flood)
+    try:
+        with caplog.at_level(logging.ERROR, logger="asnn.worker"):
+            with Worker(zenoh_net.hub, WorkerCore(worker_id="w1"), stats_every=0, shared=False):
+                wait_for(lambda: [r for r in caplog.records if "also answered" in r.getMessage()],
+                         what="the forged twin", timeout=20)
+                time.sleep(2.5)  # two or three more checks
+    finally:
+        queryable.undeclare()
+    lines = [r.getMessage() for r in caplog.records if "also answered" in r.getMessage()]
+    assert 1 <= len(lines) <= 5 and all("\n" not in line for line in lines), lines
+    assert "instance x?2026" in lines[0] and "up " not in lines[0]
