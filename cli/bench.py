@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
                                straightforward=not args.no_straightforward,
                                progress=_progress(), case=args.case,
                                repeat=args.repeat or 1)
-    except (RuntimeError, ValueError) as exc:
+    except (RuntimeError, ValueError, OSError) as exc:  # OSError: a clip that fails as read
         print(f"{name}: {exc}", file=sys.stderr)
         return 2
     report["threads"] = pinning

@@ -417,6 +417,15 @@ def test_a_chunk_overwritten_in_place_is_found_by_its_crc(tmp_path, looming):
     data[middle:middle + 200] = bytes(b ^ 0x5A for b in data[middle:middle + 200])  # pixels
     bag.write_bytes(bytes(data))
     assert "does not match its CRC" in detect_fails(bag)  # not a run on damaged pixels
+    # a hand-over bench over the clip: one line and status 2, not a traceback (a review)
+    (tmp_path / "labels.json").write_text(json.dumps([{
+        "file": bag.name, "collision": False, "fps": 20.0, "frames": len(messages),
+        "width": looming.frames[0].shape[1], "height": looming.frames[0].shape[0]}]))
+    bench = subprocess.run([sys.executable, "-m", "cli.main", "bench", "--handover", "--clips",
+                            str(tmp_path), "--every", "50"], capture_output=True, text=True,
+                           timeout=300)
+    assert bench.returncode == 2 and "Traceback" not in bench.stderr, bench.stderr
+    assert "does not match its CRC" in bench.stderr.strip().splitlines()[-1]
 
 def crafted_bag(path, looming, *chunks, before=()):
     """A bag of one good frame (its schema, channel and message as the third-party writer

@@ -121,7 +121,7 @@ def summarise_warmups(rows: Sequence[dict], quantile: float = 0.99) -> dict:
 class _Clip:
     """A labelled clip's frames as :func:`handover_warmups` takes a scene."""
 
-    frames: list
+    frames: np.ndarray
     times: list
     fps: float
     onset_frame: int | None
@@ -135,8 +135,12 @@ def _labelled_clips(clips_dir: Path, labels: Sequence[Mapping]):
 
     for label in labels:
         source, _ = open_labelled_clip(str(clips_dir / label["file"]), label.get("topic"))
-        times, frames = zip(*source.timed_frames())
-        yield label["file"], _Clip(list(frames), list(times), source.fps,
+        timed = list(source.timed_frames())
+        if not timed:
+            raise ValueError(f"{label['file']}: no frame to hand over")
+        times, frames = zip(*timed)
+        del timed
+        yield label["file"], _Clip(np.stack(frames), list(times), source.fps,
                                    label.get("onset_frame"), label.get("contact_frame"))
 
 
