@@ -351,6 +351,7 @@ def test_a_max_gap_below_one_is_refused(gap, capsys):
     with pytest.raises(ValueError, match="max_gap must be 1 or more"):
         WorkerCore(max_gap=int(gap))
 
+
 def test_a_max_gap_of_one_resets_on_any_frame_lost(looming):
     core = WorkerCore(max_gap=1)
     for seq in (0, 1, 2, 4, 5):
