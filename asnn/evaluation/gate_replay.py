@@ -236,8 +236,9 @@ def _judge(frame: FrameTrace, p: ASNNParams, streak: dict[int, int], own: tuple[
 
 
 def trace_item(kind: str, name: str, topic: str | None, params: ASNNParams) -> ClipTrace:
-    """A worker's task (:func:`asnn.evaluation.pool.run_tasks`): the trace of a clip (``kind`` ``"clip"``: ``name`` its path, ``topic`` its bag's
-    image topic) or of a suite case (``"case"``: ``name`` the case's)."""
+    """A worker's task (:func:`asnn.evaluation.pool.run_tasks`): the trace of a clip (``kind``
+    ``"clip"``: ``name`` its path, ``topic`` its bag's image topic) or of a suite case
+    (``"case"``: ``name`` the case's)."""
     if kind == "case":
         return _trace_case(name, params)
     return _trace_source(name, topic, params)

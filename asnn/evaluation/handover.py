@@ -1,10 +1,10 @@
 """How many frames a detector started cold needs before it warns as one that ran all along.
 
 When a robot's stream moves to another worker (a worker joins, stops or dies), the new owner's
-model starts from an empty state. This module measures, over generated scenes (or labelled clips), how many frames
-that fresh model must see before its warnings equal those of a model that saw the whole stream:
-the *warm-up* a hand-over needs (``asnn bench --handover``; the service's ``--warmup-frames``,
-docs/operations.md).
+model starts from an empty state. This module measures, over generated scenes (or labelled
+clips), how many frames that fresh model must see before its warnings equal those of a model
+that saw the whole stream: the *warm-up* a hand-over needs (``asnn bench --handover``; the
+service's ``--warmup-frames``, docs/operations.md).
 
 For a scene of n frames and a hand-over at frame k, a fresh detector steps frames k, k+1, ...
 (each with its time); its warm-up is the smallest j such that its ``collision`` equals the
@@ -135,12 +135,13 @@ def _labelled_clips(clips_dir: Path, labels: Sequence[Mapping]):
 
     for label in labels:
         source, _ = open_labelled_clip(str(clips_dir / label["file"]), label.get("topic"))
-        timed = list(source.timed_frames())
-        if not timed:
+        times, frames = [], []
+        for t, frame in source.timed_frames():
+            times.append(t)
+            frames.append(frame)
+        if not frames:
             raise ValueError(f"{label['file']}: no frame to hand over")
-        times, frames = zip(*timed)
-        del timed
-        yield label["file"], _Clip(np.stack(frames), list(times), source.fps,
+        yield label["file"], _Clip(np.stack(frames), times, source.fps,
                                    label.get("onset_frame"), label.get("contact_frame"))
 
 

@@ -355,10 +355,11 @@ def evaluate_ttc(detector: DetectorSpec | str = "asnn", design: Design | None = 
     progress = progress or Silent()
     progress.start(len(approaches), "eval --ttc")
     per_loom: list[list[dict] | None] = [None] * len(approaches)
+    summaries: list[dict | None] = [None] * len(approaches)
     for index, samples in run_tasks(loom_samples, [(loom, spec.make) for loom in approaches],
                                     jobs):
-        per_loom[index] = samples
-        loom, summary = approaches[index], summarise(samples)
+        per_loom[index], summaries[index] = samples, summarise(samples)
+        loom, summary = approaches[index], summaries[index]
         name = f"{loom.fps:g} fps {loom.polarity} d{loom.height:g} tau {loom.tau:g} s {loom.where}"
         progress.advance(1, name)
         progress.note(f"{name}: {summary['with_ttc']}/{summary['frames']} frames with a ttc")
@@ -369,8 +370,8 @@ def evaluate_ttc(detector: DetectorSpec | str = "asnn", design: Design | None = 
             "growth_edges": [e if math.isfinite(e) else None for e in GROWTH_EDGES],
             "match_margin_px": MATCH_MARGIN_PX, "horizon_s": horizon,
             "looms": [{**asdict(loom), "onset": loom.onset,
-                       **{k: summarise(group)[k] for k in ("frames", "with_ttc", "median")}}
-                      for loom, group in zip(approaches, per_loom)],
+                       **{k: summary[k] for k in ("frames", "with_ttc", "median")}}
+                      for loom, summary in zip(approaches, summaries)],
             "rows": ttc_rows(samples, horizon), "leads": lead_rows(per_loom)}
 
 
