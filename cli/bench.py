@@ -80,6 +80,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clips", type=nonempty_path, metavar="DIR", default=None,
                    help="--handover: over the labelled clips of DIR (its labels.json, as asnn "
                         "eval reads them) instead of the suite, e.g. ../shared/data/real")
+    p.add_argument("--looms", type=frame_rate, default=None, metavar="FPS",
+                   help="--handover: over the 24 constant-speed approaches of asnn eval --ttc "
+                        "at FPS frames a second instead of the suite (which is 20 fps): a "
+                        "camera faster than 36 fps has frames held by the default's frame-rate "
+                        "ceiling, and the warm-up counts the frames stepped")
     p.add_argument("--worker-threads", type=threads, default=None, metavar="N",
                    help="processing threads of each --service worker (asnn worker --threads; "
                         "default: the cores available, divided among the workers)")
@@ -102,6 +107,7 @@ _MODE_OPTIONS = {
     "phases": ("--service",), "seed": ("--service",), "worker_threads": ("--service",),
     "workers": ("--service",), "router": ("--service",),
     "every": ("--handover",), "cases": ("--handover",), "clips": ("--handover",),
+    "looms": ("--handover",),
     "no_straightforward": (None,), "frames": (None, "--detect"),
     "size": (None, "--detect", "--service"),
 }
@@ -166,7 +172,8 @@ def run(args: argparse.Namespace) -> int:
 
             preset = args.preset[0] if args.preset else None
             report = handover.run(f"asnn:{preset}" if preset else "asnn", cases=args.cases,
-                                  every=args.every, progress=_progress(), clips_dir=args.clips)
+                                  every=args.every, progress=_progress(), clips_dir=args.clips,
+                                  looms=args.looms)
         elif args.service:
             from service import bench as service_bench
 

@@ -1,6 +1,8 @@
 """Smoke test of ``asnn bench`` (output shape only; no timing assertions)."""
 
+import dataclasses
 import json
+import types
 
 import numpy as np
 import pytest
@@ -268,6 +270,59 @@ def test_warmup_after_a_handover():
     assert covered({0: 8, 3: 1, 12: 1}, 3) == 0.9 and covered({}, 0) == 1.0
 
 
+class _HoldingDetector:
+    """Warns from frame 20 of the stream on, once it has stepped 6 frames; holds every second
+    frame as a fast camera's frame-rate ceiling does."""
+
+    def __init__(self):
+        self.index = self.ceiling_held = 0
+
+    def step(self, frame, t=None):
+        from asnn.response import Response
+
+        self.index += 1
+        self.ceiling_held += self.index % 2 == 0
+        response = Response.silent(self.index - 1)
+        return dataclasses.replace(response, collision=t >= 20 and self.index >= 12)
+
+
+def test_the_handover_warmup_counts_the_frames_the_model_stepped():
+    """A hand-over's warm-up is what the worker's --warmup-frames counts: frames stepped, not
+    the frames a frame-rate ceiling held."""
+    from asnn.evaluation.handover import handover_warmups
+
+    class Spec:
+        make = _HoldingDetector
+
+    scene = types.SimpleNamespace(frames=np.zeros((40, 8, 8), np.uint8), fps=1.0)
+    rows = handover_warmups([("s", scene)], Spec(), every=4)
+    # from frame k > 9 the fresh model agrees after j = 11 frames (where the scene is that
+    # long), of which it stepped j - j // 2; from k <= 9 at once
+    frames = {k: 0 if k <= 9 else min(11, 40 - k) for k in range(1, 39, 4)}
+    assert {(r["frame"], r["warmup"]) for r in rows} == {
+        (k, j - j // 2) for k, j in frames.items()}
+    assert {r["warmup"] for r in rows} == {0, 6, 4, 2}
+
+
+def test_handover_bench_over_the_approaches_of_a_fast_camera(capsys, monkeypatch):
+    """--looms FPS: the hand-overs of eval --ttc's approaches at that rate (the suite is
+    20 fps); not with the suite's cases or labelled clips."""
+    from asnn.evaluation import ttc
+
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(ttc, "DEFAULT_DESIGN", ttc.Design(
+        polarities=("dark",), heights=(12.0,), taus=(2.0,), positions=(None,)))
+    assert main(["bench", "--handover", "--looms", "60", "--every", "25", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["cases"] == 1 and report["source"] == "approaches at 60 fps"
+    assert {w["scene"] for w in report["worst"]} == {"loom-dark-d12-tau2s-centre-60fps"}
+    assert report["all"]["handovers"] >= 5
+    assert main(["bench", "--handover", "--looms", "60", "--cases", "loom-*"]) == 2
+    assert "one of them" in capsys.readouterr().err
+    assert main(["bench", "--looms", "60"]) == 2
+
+
 def test_handover_bench_takes_labelled_clips(tmp_path, capsys, monkeypatch):
     """The warm-up measured on real video (a fleet trial found hand-overs on the real clips
     that lose a warning after the worker's 30 frames, where the suite said 99 % are covered):
@@ -281,7 +336,7 @@ def test_handover_bench_takes_labelled_clips(tmp_path, capsys, monkeypatch):
     assert main(["bench", "--handover", "--clips", str(tmp_path), "--every", "15",
                  "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["cases"] == 1 and report["clips_dir"] == str(tmp_path)
+    assert report["cases"] == 1 and report["source"] == f"labelled clips of {tmp_path}"
     frames = json.loads(labels.read_text())[0]["frames"]
     assert report["all"]["handovers"] == len(range(1, frames - 1, 15))
     assert 0 < report["approach"]["handovers"] < report["all"]["handovers"]
@@ -484,7 +539,7 @@ def test_the_straightforward_forms_kernels_are_loaded_too_when_it_is_timed():
     (["--every", "3"], "--every does not go with the per-frame bench"),  # its default, given
     (["--clips", "."], "--clips does not go with the per-frame bench"),
     (["--handover", "--clips", ".", "--cases", "loom-*"],
-     "cases select suite cases: not with labelled clips"),
+     "labelled clips or generated approaches: one of them"),
 ])
 def test_bench_refuses_options_that_would_be_ignored(capsys, monkeypatch, args, says):
     """A review: these ran another bench than asked, or a step too short to measure reported

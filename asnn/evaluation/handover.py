@@ -7,13 +7,16 @@ that saw the whole stream: the *warm-up* a hand-over needs (``asnn bench --hando
 service's ``--warmup-frames``, docs/operations.md).
 
 For a scene of n frames and a hand-over at frame k, a fresh detector steps frames k, k+1, ...
-(each with its time); its warm-up is the smallest j such that its ``collision`` equals the
-uninterrupted detector's on every frame from k + j to the end. Hand-overs are tried every
+(each with its time); it agrees after j frames when its ``collision`` equals the uninterrupted
+detector's on every frame from k + j to the end, and its warm-up is the frames its model stepped
+among those j: all of them but those a fast camera's frame-rate ceiling held
+(:attr:`asnn.ASNN.ceiling_held`), which is what the worker counts. Hand-overs are tried every
 ``every`` frames.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,9 +50,16 @@ def warmup_after(reference: Sequence[bool], cold: Sequence[bool]) -> int:
     return disagree[-1] + 1 if disagree else 0
 
 
-def _warnings(spec: DetectorSpec, frames: np.ndarray, times: np.ndarray) -> list[bool]:
+def _warnings(spec: DetectorSpec, frames: np.ndarray, times: np.ndarray
+              ) -> tuple[list[bool], list[int]]:
+    """A fresh detector's warnings on the frames, and after each frame how many of them its
+    model stepped (the frames its frame-rate ceiling held not counted)."""
     detector = spec.make()
-    return [detector.step(frame, float(t)).collision for frame, t in zip(frames, times)]
+    warnings, steps = [], []
+    for count, (frame, t) in enumerate(zip(frames, times), 1):
+        warnings.append(detector.step(frame, float(t)).collision)
+        steps.append(count - getattr(detector, "ceiling_held", 0))
+    return warnings, steps
 
 
 def handover_warmups(scenes: Iterable[tuple[str, object]], detector: DetectorSpec | str = "asnn",
@@ -72,8 +82,8 @@ def handover_warmups(scenes: Iterable[tuple[str, object]], detector: DetectorSpe
     Returns
     -------
     list of dict
-        One per hand-over: ``scene``, ``frame`` (k), ``warmup`` (frames), ``approach`` (whether
-        k lies within the scene's approach, onset to contact).
+        One per hand-over: ``scene``, ``frame`` (k), ``warmup`` (frames the model stepped),
+        ``approach`` (whether k lies within the scene's approach, onset to contact).
     """
     spec = parse_detector(detector) if isinstance(detector, str) else detector
     if every < 1:
@@ -83,11 +93,12 @@ def handover_warmups(scenes: Iterable[tuple[str, object]], detector: DetectorSpe
         frames = np.asarray(scene.frames)
         times = getattr(scene, "times", None)
         times = np.arange(len(frames)) / scene.fps if times is None else np.asarray(times)
-        reference = _warnings(spec, frames, times)
+        reference, _ = _warnings(spec, frames, times)
         onset, contact = getattr(scene, "onset_frame", None), getattr(scene, "contact_frame", None)
         for k in range(1, len(frames) - 1, every):
-            cold = _warnings(spec, frames[k:], times[k:])
-            rows.append({"scene": name, "frame": k, "warmup": warmup_after(reference[k:], cold),
+            cold, steps = _warnings(spec, frames[k:], times[k:])
+            agrees = warmup_after(reference[k:], cold)
+            rows.append({"scene": name, "frame": k, "warmup": steps[agrees - 1] if agrees else 0,
                          "approach": onset is not None and contact is not None
                          and onset <= k <= contact})
         if on_scene is not None:
@@ -147,9 +158,11 @@ def _labelled_clips(clips_dir: Path, labels: Sequence[Mapping]):
 
 def run(detector: str = "asnn", cases: str | None = None, every: int = 3,
         progress: Callable[[str], None] | None = None,
-        clips_dir: str | Path | None = None) -> dict:
-    """Warm-ups over the labelled suite (``asnn bench --handover``), or over the labelled clips
-    of ``clips_dir`` (its ``labels.json``, as ``asnn eval`` reads them); the report as a dict.
+        clips_dir: str | Path | None = None, looms: float | None = None) -> dict:
+    """Warm-ups over the labelled suite (``asnn bench --handover``), over the labelled clips
+    of ``clips_dir`` (its ``labels.json``, as ``asnn eval`` reads them), or over the
+    constant-speed approaches of ``asnn eval --ttc`` at ``looms`` frames a second (24; the suite
+    and the clips are 30 fps or slower); the report as a dict.
 
     ``cases`` selects suite cases (patterns of :func:`asnn.stimuli.suite.suite_cases`; None:
     all of them).
@@ -157,32 +170,42 @@ def run(detector: str = "asnn", cases: str | None = None, every: int = 3,
     Raises
     ------
     ValueError
-        For ``cases`` with ``clips_dir``, a labels file that cannot be read, or a labelled clip
-        that cannot be opened (before anything runs).
+        For ``cases`` with ``clips_dir`` or ``looms``, both of those, a frame rate that is not
+        positive, a labels file that cannot be read, or a labelled clip that cannot be opened
+        (before anything runs).
     """
     from ..params import DEFAULT_PRESET
 
     spec = parse_detector(detector)
-    if clips_dir is not None:
+    if (cases is not None) + (clips_dir is not None) + (looms is not None) > 1:
+        raise ValueError("the hand-overs run over suite cases, labelled clips or generated "
+                         "approaches: one of them (cases, clips_dir, looms)")
+    source = None
+    if looms is not None:
+        from . import ttc
+
+        approaches = ttc.looms(dataclasses.replace(ttc.DEFAULT_DESIGN, frame_rates=(looms,)))
+        scenes = ((scene.name, scene) for scene in map(ttc.loom_scene, approaches))
+        count, source = len(approaches), f"approaches at {looms:g} fps"
+    elif clips_dir is not None:
         from .clips import check_clips
         from .labels import load_labels
 
-        if cases is not None:
-            raise ValueError("cases select suite cases: not with labelled clips")
         clips_dir = Path(clips_dir)
         labels = load_labels(clips_dir / "labels.json")
         check_clips(clips_dir, labels)
-        scenes, count, source = _labelled_clips(clips_dir, labels), len(labels), str(clips_dir)
+        scenes, count = _labelled_clips(clips_dir, labels), len(labels)
+        source = f"labelled clips of {clips_dir}"
     else:
         from ..stimuli.suite import make_case, suite_cases
 
         names = suite_cases(cases)
         scenes = ((name, make_case(name)) for name in names)
-        count, source = len(names), None
+        count = len(names)
     rows = handover_warmups(scenes, spec, every=every, on_scene=progress)
     return {"detector": spec.name,
             "preset": (spec.preset or DEFAULT_PRESET) if spec.model == "asnn" else None,
-            "cases": count, "clips_dir": source, "every": every, **summarise_warmups(rows)}
+            "cases": count, "source": source, "every": every, **summarise_warmups(rows)}
 
 
 def covered(counts: dict, frames: int) -> float:
@@ -194,11 +217,11 @@ def covered(counts: dict, frames: int) -> float:
 def format_report(report: dict, current: int | None = None) -> str:
     """The report as text; ``current``: the warm-up in use, with the hand-overs it covers."""
     preset = f" (preset {report['preset']})" if report.get("preset") else ""
-    where = (f"{report['cases']} labelled clips of {report['clips_dir']}"
-             if report.get("clips_dir") else f"{report['cases']} cases of the labelled suite")
+    where = f"{report['cases']} {report.get('source') or 'cases of the labelled suite'}"
     lines = [f"# {report['detector']}{preset}: {where}, a hand-over "
-             f"every {report['every']} frames; warm-up = frames a fresh model steps before its "
-             "warnings equal an uninterrupted one's for good"]
+             f"every {report['every']} frames; warm-up = frames a fresh model steps (those a "
+             "fast camera's frame-rate ceiling holds not counted) before its warnings equal an "
+             "uninterrupted one's for good"]
     for part, title in (("all", "all hand-overs"), ("approach", "during an approach")):
         s = report[part]
         if not s["handovers"]:
