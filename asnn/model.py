@@ -33,7 +33,8 @@ import numpy as np
 from . import _fast, _parallel, retina
 from .approach import ApproachStage, FramePair, frame_pixel
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
-from .params import MAX_THREADS, PERIOD_FRAMES, ASNNParams, preset, timed_gap
+from .params import (CEILING_GAPS, CEILING_MARGIN, CEILING_MIN_GAPS, MAX_THREADS, PERIOD_FRAMES, ASNNParams, preset,
+                     timed_gap)
 from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
 from .targets import extract_targets
@@ -100,7 +101,11 @@ class ASNN:
         (:class:`~asnn.approach.ApproachStage`: the tracker, the objects of the latest frame,
         the camera's rig), for presets with ``targets='objects'``; None for the others.
     repeated : bool
-        Whether the latest frame was a repeat (its response repeats the one before).
+        Whether the latest frame was a repeat (its response repeats the one before), or was
+        held by the frame-rate ceiling (``params.max_step_rate``).
+    ceiling_held : int
+        Frames of the stream the frame-rate ceiling held: :attr:`index` less this is the
+        frames the model stepped (what a hand-over's warm-up counts).
     periods : deque of float
         The times between the last processed frames, seconds (at most 5; repeats not counted):
         :attr:`frame_period` is their median.
@@ -214,6 +219,9 @@ class ASNN:
         self._repeats = 0
         self._difference = 0.0
         self.repeated = False
+        self._received: float | None = None  # the latest timed frame's time, held or not
+        self._gaps: deque[float] = deque(maxlen=CEILING_GAPS)  # between the frames received
+        self.ceiling_held = 0
 
     @property
     def frame_period(self) -> float:
@@ -418,7 +426,12 @@ class ASNN:
             self.stages_on = np.zeros((p.n_slow + 2, *lum.shape), self.dtype)
             self.stages_off = np.zeros_like(self.stages_on)
             self._stamp = stamp
+            self._received = None if t is None else stamp
             return _Frame(index)
+        if self._held(None if t is None else stamp):
+            self.repeated = True
+            self.ceiling_held += 1
+            return _Frame(index, repeat=True)
         self.repeated = blocks is not None and self._is_repeat(blocks)
         if self.repeated:
             return _Frame(index, repeat=True)
@@ -485,6 +498,34 @@ class ASNN:
         else:
             self._last = self._respond(frame)
         return self._last
+
+    def _held(self, stamp: float | None) -> bool:
+        """Whether the frame-rate ceiling holds a frame of time ``stamp`` (None: untimed)
+        (``params.max_step_rate``, r): while the median of the last gaps between the frames
+        received (:data:`CEILING_GAPS`, from :data:`CEILING_MIN_GAPS` on) is under
+        1 / (:data:`CEILING_MARGIN` r), a frame in the same cell of a grid of 1 / r seconds as
+        the frame received before it is held.
+
+        The cells are fixed by the times alone, not by the frames stepped, so that two models
+        started on different frames of a stream step the same frames once both have judged the
+        rate (a worker taking a robot over); a hold counted from the last frame stepped kept a
+        model started on an odd frame of a 60 fps stream on the other half for good. A camera
+        slower than :data:`CEILING_MARGIN` r is never held, and its stamps may jitter (those of
+        a 30 fps camera by 5 ms hold none: the median of the gaps must be well under 1 / r). A
+        camera between that and 2 r is stepped unevenly (at 40 fps 25 or 50 ms apart, at 50 fps
+        20 or 40)."""
+        rate = self.params.max_step_rate
+        previous, self._received = self._received, stamp
+        if rate is None or stamp is None or previous is None:
+            return False
+        gap = stamp - previous
+        if not timed_gap(gap):  # a clock that jumped, or stamps in other units: stepped
+            self._gaps.clear()
+            return False
+        self._gaps.append(gap)
+        return (len(self._gaps) >= CEILING_MIN_GAPS
+                and statistics.median(self._gaps) < 1.0 / (CEILING_MARGIN * rate)
+                and _grid_cell(stamp, rate) == _grid_cell(previous, rate))
 
     def _blocks(self, lum: np.ndarray) -> np.ndarray:
         """The frame's means over ``repeat_block`` x ``repeat_block`` blocks (the frame itself
@@ -689,3 +730,10 @@ def spike_step(u: float, n_cells: int, window: deque, params: ASNNParams
     spikes = retina.spike_count(out, params.k_sp, params.t_sp)
     window.append(spikes)
     return out, spikes, retina.spike_rate(window, params.n_t, params.window_dt)
+
+
+def _grid_cell(stamp: float, rate: float) -> int:
+    """The cell of a grid of ``1 / rate`` seconds that a time lies in (:meth:`ASNN._held`). A
+    millionth of a cell is added so that times generated on the grid's lines (``k / 60`` at a
+    rate of 30) fall in the cell they begin, not in the one before by a rounding."""
+    return math.floor(stamp * rate + 1e-6)

@@ -97,6 +97,19 @@ class ASNNParams(BaseModel):
         description="at most this many repeats in a row: after that the scene has "
         "stopped moving, and the model sees it")
 
+    max_step_rate: float | None = Field(
+        None, ge=1.0, le=1000.0,
+        description="frame-rate ceiling, frames a second: a camera faster than 1.2 times this "
+        "(the median gap between its last 15 frames' times; 36 fps at 30) is stepped at about "
+        "this rate. Its frames are taken on a grid of 1 / max_step_rate seconds of its own clock, "
+        "the first frame in each cell; the others are held (the state kept, the previous "
+        "response repeated). The retina steps once per frame whatever the time between frames, "
+        "and at 60 fps a far object's change per frame is a third of what the added stages were "
+        "set on (20-30 fps). The grid is fixed by the stamps alone, so two models given the "
+        "same frames from different starts step the same frames once both have judged the "
+        "rate (a hand-over). "
+        "Untimed frames, and slower cameras, are all stepped. None: every frame")
+
     # --- input scale (robust addition) ---
     max_width: int | None = Field(
         None, ge=32, le=4096, description="frames wider than this are averaged down to this width "
@@ -540,7 +553,7 @@ PRESETS["light"] = _derived(PRESETS["reference32"], target_polarity="light")
 # has the parameter that switches it off
 PRESETS["robust"] = _derived(
     PRESETS["reference32"],
-    skip_repeats=True,
+    skip_repeats=True, max_step_rate=30.0,
     stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
     rim_motion_max=8.0,
     contrast_gain=0.005,
@@ -566,6 +579,14 @@ SLOW_NOTE = (f"ASNN loses hits below {SLOW_FPS:g} "
 # a stall: the nominal period instead; stamps a subnormal number apart made frame counts of
 # seconds over the period infinite)
 PERIOD_FRAMES = 5
+# the frame-rate ceiling (max_step_rate, r) holds frames of a camera whose median gap over the
+# last CEILING_GAPS frames (from CEILING_MIN_GAPS on) is below 1 / (CEILING_MARGIN r): 36 fps at
+# 30, so that a 30 fps camera whose stamps jitter by 5 ms has none held, and a 40 fps one is
+# stepped near 30; a fresh model (a worker taking a robot over) judges the rate within a few
+# frames, and from then on steps the frames the old owner steps
+CEILING_GAPS = 15
+CEILING_MIN_GAPS = 3
+CEILING_MARGIN = 1.2
 MIN_FRAME_GAP_S = 1e-4
 MAX_FRAME_GAP_S = 1.0
 

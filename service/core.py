@@ -90,7 +90,8 @@ longer takes. With ``answers`` (another predicate), the frames of a robot the wo
 answer yet are stepped without a response (counted in ``warmup``): a worker taking a robot over
 warms its model up on them while the previous owner still answers (docs/operations.md). A robot
 is *warm* (:meth:`WorkerCore.warm`) once its model has stepped ``warmup_frames`` frames of the
-stream it is on, without a reset pending.
+stream it is on (a fast camera's frames its frame-rate ceiling held do not count), without a reset
+pending.
 
 A frame whose ``seq``, ``stamp`` and data equal those of the robot's previous arrival is the same
 frame delivered twice (two subscriptions of the worker matched it for a moment): it is ignored and
@@ -287,6 +288,13 @@ class _Robot:
         return self.periods if own is None else own
 
     @property
+    def model_steps(self) -> int:
+        """Frames of the current stream its model stepped, what a hand-over's warm-up counts:
+        :attr:`stepped` less those the ASNN model's frame-rate ceiling held
+        (:attr:`asnn.ASNN.ceiling_held`: at 60 fps, every second frame)."""
+        return self.stepped - getattr(self.detector, "ceiling_held", 0)
+
+    @property
     def fps(self) -> float | None:
         """New frames a second its model is stepped at: the median of :attr:`model_periods`."""
         periods = self.model_periods
@@ -368,7 +376,8 @@ class WorkerCore:
         ``answers(robot) -> bool``: whether its frames are answered (default: every robot's);
         the others are stepped silently (warming up to take the robot over).
     warmup_frames : int
-        Frames a robot's model must step on its current stream before it is :meth:`warm`.
+        Frames a robot's model must step on its current stream before it is :meth:`warm` (the
+        frames the ASNN model's frame-rate ceiling holds do not count).
     log_interval : float
         Seconds between two WARNING lines of the same kind (a rejection's reason, a robot's
         intrusion, restarts, lost frames, slow or untimed stream; a model's failure).
@@ -858,13 +867,14 @@ class WorkerCore:
 
     def warm(self, robot: str) -> bool:
         """Whether the robot's model has stepped ``warmup_frames`` frames of the stream its
-        frames arrive in (so its responses are those of a model that saw the whole stream)."""
+        frames arrive in, the frames its frame-rate ceiling held not counted (so its responses
+        are those of a model that saw the whole stream)."""
         with self._lock:
             state = self._robots.get(robot)
             return state is not None and self._warm_locked(state)
 
     def _warm_locked(self, state: _Robot) -> bool:
-        return (state.detector is not None and state.stepped >= self.warmup_frames
+        return (state.detector is not None and state.model_steps >= self.warmup_frames
                 and (state.stream is None or state.stream.number == state.processed_stream))
 
     def views(self) -> dict[str, RobotView]:

@@ -223,3 +223,30 @@ def test_a_flood_of_robot_ids_leaves_a_bounded_number_of_robots_planned():
     assert routes.counts()["remembered"] == 16
     assert routes.camera("real", True) and routes.counts()["remembered"] == 15
     assert roles(routes, {})["real"] == ("serving", False)
+
+
+def test_a_fast_camera_s_new_owner_warms_up_on_the_frames_its_model_steps():
+    """At 60 fps the default's frame-rate ceiling holds every second frame: the warm-up counts
+    the frames the model stepped, so a new owner that started on an odd frame is warm after
+    about twice the frames, and then answers as a model that saw the whole stream."""
+    from asnn.stimuli.planar import planar_scene
+
+    frames = planar_scene("loom", fps=60.0, onset=30, polarity="dark", height=12, tau=2.0,
+                          contrast=0.6, noise=2.0, seed=1).frames
+    reference = ASNN()
+    expected = [reference.step(f, 10.0 + i / 60) for i, f in enumerate(frames)]
+    answering = set()
+    core = WorkerCore(answers=answering.__contains__, warmup_frames=10)
+    start, warm_at = 7, None
+    for seq in range(start, len(frames)):
+        core.offer("asnn/r1/frame", payload(frames[seq], seq, 10.0 + seq / 60))
+        response = core.process(core.take())
+        if warm_at is None and core.warm("r1"):
+            warm_at = seq - start + 1
+            answering.add("r1")
+        elif response is not None:
+            assert response.collision == expected[seq].collision, seq
+    # 10 steps: the first frames all stepped while the rate is judged, then one in two
+    assert warm_at is not None and 15 <= warm_at <= 20
+    assert core.stats()["warmup"] == warm_at
+    assert any(expected[seq].collision for seq in range(start + warm_at, len(frames)))

@@ -157,3 +157,11 @@ def test_the_lead_runs_from_the_first_warning_to_contact():
     assert [(r["fps"], r["approaches"], r["warned"]) for r in rows] == [
         (10.0, 1, 0), (20.0, 1, 1), (None, 2, 1)]
     assert rows[0]["median"] is None and rows[1]["median"] == pytest.approx(0.4)
+
+
+def test_the_default_warns_as_early_at_60_fps_as_at_10(measured):
+    """The frame-rate ceiling (max_step_rate): stepped at every frame of a 60 fps camera, the
+    default warned of the small design's approach 1.2 s ahead at 10 fps and 0.67 s at 60."""
+    leads = {row["fps"]: row["median"] for row in measured["leads"]}
+    assert leads[10.0] is not None and leads[60.0] is not None
+    assert leads[60.0] >= 0.75 * leads[10.0]

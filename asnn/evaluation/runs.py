@@ -32,6 +32,8 @@ DEFAULT_DETECTORS = ("asnn", "asnn:reference", "lgmd1", "lgmd2")
 ABLATIONS = {
     "robust (all additions)": "asnn:robust",
     "no repeated-frame hold": "asnn:robust/skip_repeats=false",
+    "every frame of a fast camera stepped (no frame-rate ceiling)": (
+        "asnn:robust/max_step_rate=none"),
     "no background stabilisation": "asnn:robust/stabilise=false",
     "the stabilisation's search fixed at 3 px at any width": "asnn:robust/stabilise_reach=none",
     "the stabilisation's translation judged on the whole frame only": (
