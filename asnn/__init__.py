@@ -1,11 +1,31 @@
-"""ASNN: the Approach-Sensitive Neural Network for collision detection (numerical core, no I/O)."""
+"""ASNN: the Approach-Sensitive Neural Network for collision detection (numerical core, no I/O).
 
-from .frames import FrameError
-from .model import ASNN
+The parameters are imported with the package; the model and its results (numba, OpenCV) when
+first named (``asnn.ASNN``, ``from asnn import ASNN``), so that a process that reads a preset's
+name but runs no model (``asnn router``, ``asnn status``, the command line's parser) loads
+neither.
+"""
+
 from .params import ASNNParams, preset, preset_names
-from .response import Maps, Response, TrackReport
-from .targets import Target
 
 __all__ = ["ASNN", "ASNNParams", "FrameError", "Maps", "Response", "Target", "TrackReport",
            "preset", "preset_names"]
 __version__ = "0.1.0"
+
+# the names above imported from their module when first asked for (PEP 562)
+_MODULE_OF = {"ASNN": "model", "FrameError": "frames", "Maps": "response", "Response": "response",
+              "TrackReport": "response", "Target": "targets"}
+
+
+def __getattr__(name: str):
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(f".{_MODULE_OF[name]}", __name__), name)
+    globals()[name] = value  # asked once
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_MODULE_OF))

@@ -1,16 +1,21 @@
-"""One factory for every detector: the ASNN model and the LGMD baselines."""
+"""One factory for every detector: the ASNN model and the LGMD baselines.
+
+The models are imported when one is made, so that :data:`MODELS` and
+:func:`available_cores` cost a process that runs none (the command line's parser) neither
+numba nor OpenCV."""
 
 from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Iterator
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
-import numpy as np
-
-from .model import ASNN
 from .params import ASNNParams, preset
-from .response import Response
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from .response import Response
 
 __all__ = ["Detector", "MODELS", "available_cores", "make_detector", "responses"]
 
@@ -44,6 +49,8 @@ def make_detector(model: str = "asnn", preset_name: str | ASNNParams | None = No
         For an unknown model or preset.
     """
     if model == "asnn":
+        from .model import ASNN
+
         params = (preset_name if isinstance(preset_name, ASNNParams)
                   else preset(preset_name or "default"))
         return ASNN(params, **options)

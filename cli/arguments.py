@@ -1,16 +1,15 @@
-"""Argument types shared by several sub-commands."""
+"""Argument types shared by several sub-commands.
+
+The parser is built by every command, the router's too: what a type checks against that lives
+beside the model or the evaluation (OpenCV, numba) is imported when the type is called, as
+:func:`preset_spec` does."""
 
 from __future__ import annotations
 
 import argparse
 import math
 
-from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS, check_perturbation, keeps_frames
-# FPS_RANGE bounds every --fps: beyond it no camera runs, and a video writer given such a rate
-# (inf) may never return
-from asnn.io.video import FPS_RANGE
 from asnn.params import MAX_THREADS  # --threads
-from asnn.stimuli.suite import LARGEST_SIZE
 from service import keys
 
 # --frames: 10000 frames, over 8 minutes at 20 a second; a generated clip is held at once
@@ -70,6 +69,8 @@ def frame_size(text: str) -> tuple[int, int]:
         size = (int(w), int(h or w))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    from asnn.stimuli.suite import LARGEST_SIZE
+
     if min(size) < 32:
         raise argparse.ArgumentTypeError(f"frames must be at least 32x32, got {text!r}")
     largest = LARGEST_SIZE
@@ -187,7 +188,10 @@ def tolerance_seconds(value: str) -> float:
 
 
 def frame_rate(value: str) -> float:
-    """Frames a second, within :data:`FPS_RANGE`."""
+    """Frames a second, within :data:`asnn.io.video.FPS_RANGE`: beyond it no camera runs, and a
+    video writer given such a rate (inf) may never return."""
+    from asnn.io.video import FPS_RANGE
+
     number = _number(value)
     low, high = FPS_RANGE
     if not low <= number <= high:
@@ -273,6 +277,8 @@ def preset_spec(text: str) -> str:
 
 def perturbation(name: str) -> str:
     """A ``--perturb`` value: a perturbation's name, or a family's with its strength."""
+    from asnn.evaluation.perturb import check_perturbation
+
     try:
         check_perturbation(name)
     except ValueError as exc:
@@ -284,6 +290,8 @@ def frame_perturbation(name: str) -> str:
     """A ``--perturb`` value that keeps every frame at its size and in its place
     (:func:`asnn.evaluation.perturb.keeps_frames`): ``asnn detect`` writes one record per
     input frame, its targets in the input's pixels. An unknown name's error lists these only."""
+    from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS, check_perturbation, keeps_frames
+
     kept = ", ".join([n for n in PERTURBATIONS if keeps_frames(n)] + list(FAMILIES))
     try:
         check_perturbation(name)

@@ -11,20 +11,11 @@ from collections import deque
 from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
-import cv2
-
-from asnn import FrameError
 from asnn.detectors import MODELS, available_cores, make_detector, responses
-from asnn.evaluation.perturb import describe, perturbed
-from asnn.evaluation.progress import ProgressPrinter
 from asnn.io.files import folder_problem, seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
                               split_topic)
-from asnn.io.video import (WRITABLE_SUFFIXES, VideoError, check_written, cut_short,
-                           open_writer, quiet_writer, writable_fps)
-from asnn.io.visualize import annotate_frame, plot_responses
-from asnn.warmup import compile_kernels
 from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_from_spec, preset_names
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
 from cli.session import exit_on_interrupt, signals_held
@@ -119,6 +110,10 @@ def _settings(busy: bool):
     With a model thread for every core (``busy``), OpenCV's own threads would only take turns
     with them (its results do not depend on how it splits its work).
     """
+    import cv2
+
+    from asnn.io.video import quiet_writer
+
     threads = cv2.getNumThreads()
     if busy:
         cv2.setNumThreads(1)
@@ -140,6 +135,8 @@ def _output_problem(path: str | None, flag: str) -> str | None:
     """Why an output path cannot be written, found before the run, or None. Its folder need
     not exist: the folders missing are made once the input opens (as ``asnn scene`` makes
     them), where the nearest existing one is a folder this process may write."""
+    from asnn.io.video import WRITABLE_SUFFIXES
+
     if not path:
         return None
     if path == "-":  # standard output: the JSON lines' outputs only; the others write files
@@ -289,6 +286,8 @@ def _check_annotated(video: list, path: str | None, frames: int) -> None:
     _OutputError
         If it does not.
     """
+    from asnn.io.video import VideoError, check_written
+
     if not video:
         return
     writer, size = video
@@ -331,6 +330,14 @@ def run(args: argparse.Namespace) -> int:
     (:mod:`asnn.io.pipeline`), or, when the model has threads of its own for every core,
     decode and write between its steps (:meth:`asnn.model.ASNN.stream`): the output is that of
     one loop, in frame order."""
+    # the model, OpenCV and the evaluation's perturbations: when it runs, not with the parser
+    from asnn.evaluation.perturb import describe, perturbed
+    from asnn.evaluation.progress import ProgressPrinter
+    from asnn.frames import FrameError
+    from asnn.io.video import cut_short, open_writer, writable_fps
+    from asnn.io.visualize import annotate_frame, plot_responses
+    from asnn.warmup import compile_kernels
+
     outputs = [("--jsonl", args.jsonl), ("--tracks", args.tracks), ("--annotate", args.annotate),
                ("--plot", args.plot), ("--mcap", args.mcap)]
     for flag, path in outputs:

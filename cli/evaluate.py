@@ -21,11 +21,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path, PurePosixPath
 
-from asnn.evaluation import scoring
-from asnn.evaluation.heldout import TIE_BREAKS
-from asnn.evaluation.perturb import FAMILIES, PERTURBATIONS
-from asnn.evaluation.progress import ProgressPrinter
-from asnn.evaluation.runs import DEFAULT_DETECTORS, parse_detector, parse_detectors
+from asnn.evaluation.options import (DEFAULT_DETECTORS, EARLY_TOLERANCE_S, FAMILIES,
+                                     PERTURBATIONS, TIE_BREAKS, WARMUP_FRAMES)
 from asnn.io.files import folder_problem
 from asnn.params import preset_names
 
@@ -41,6 +38,8 @@ OUTPUT_FILES = ("report.md", "results.json", "labels.json", "held_out.md", "held
 
 
 def _detectors(text: str) -> list[str]:
+    from asnn.evaluation.runs import parse_detectors  # the model's: when the option is given
+
     try:
         return [spec.name for spec in parse_detectors(text)]
     except ValueError as exc:
@@ -147,11 +146,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with CLIPS_DIR (not --held-out, which scores by SPEC's rule): a first "
                         "warning up to this long before the labelled "
                         f"onset still counts as a hit (0 to 60; default: "
-                        f"{scoring.EARLY_TOLERANCE_S}, for onsets judged by eye; the suite's "
+                        f"{EARLY_TOLERANCE_S}, for onsets judged by eye; the suite's "
                         "onsets are exact and use 0)")
     p.add_argument("--warmup", type=warmup_frames, metavar="FRAMES",
                    help="frames ignored at the start of each clip (default: "
-                        f"{scoring.WARMUP_FRAMES}; not with --held-out, which scores by SPEC's)")
+                        f"{WARMUP_FRAMES}; not with --held-out, which scores by SPEC's)")
     p.add_argument("--jobs", type=processes, default=1, metavar="N",
                    help="clips or cases evaluated in parallel processes, at most 64 "
                         "(default: %(default)s)")
@@ -274,8 +273,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from asnn.evaluation import clips, heldout, paper, suite  # matplotlib: only when it runs
-    from asnn.evaluation.runs import ABLATIONS
+    # the tooling (numba, OpenCV, matplotlib): only when it runs
+    from asnn.evaluation import clips, heldout, paper, suite
+    from asnn.evaluation.progress import ProgressPrinter
+    from asnn.evaluation.runs import ABLATIONS, parse_detector
 
     progress = ProgressPrinter(sys.stderr)
     preset_name = None if args.preset == "default" else args.preset
@@ -315,9 +316,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     if problem is not None:  # before the first clip runs, not when its results are written
         print(f"asnn eval: {problem}", file=sys.stderr)
         return 2
-    tolerance = (scoring.EARLY_TOLERANCE_S if args.early_tolerance is None
+    tolerance = (EARLY_TOLERANCE_S if args.early_tolerance is None
                  else args.early_tolerance)  # its type bounds it
-    warmup = scoring.WARMUP_FRAMES if args.warmup is None else args.warmup
+    warmup = WARMUP_FRAMES if args.warmup is None else args.warmup
     if args.clips_dir and not (args.synthetic or args.paper or args.ttc):
         labels = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
         if not Path(args.clips_dir).is_dir():

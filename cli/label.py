@@ -16,13 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from asnn.evaluation.labels import (VIDEO_SUFFIXES, center_outside, check_labels, clip_hint,
-                                    label_problem, mismatches, read_entries, unlabelled,
-                                    unlabelled_videos, write_entries)
-from asnn.evaluation.scoring import unscored
 from asnn.io.files import folder_lock
-from asnn.io.sources import SourceError, open_source
-from asnn.io.video import cut_short
 from asnn.params import preset
 from cli.arguments import nonempty_path
 
@@ -45,6 +39,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # the evaluation's labels and the decoders (OpenCV): when it runs, not with the parser
+    from asnn.evaluation.labels import (VIDEO_SUFFIXES, center_outside, check_labels, clip_hint,
+                                        label_problem, mismatches, read_entries, unlabelled,
+                                        unlabelled_videos, write_entries)
+    from asnn.evaluation.scoring import unscored
+    from asnn.io.sources import SourceError
+
     folder = Path(args.clips_dir)
     path = Path(args.labels) if args.labels else folder / "labels.json"
     if not folder.is_dir():
@@ -131,6 +132,9 @@ def _decode(video: Path, todo: list[str]) -> tuple[int, float, tuple[int, int]]:
     """Frames, frame rate and (height, width) of a video, decoded as ``asnn eval`` does; what
     makes it unfit to score goes to ``todo`` (frames smaller than the model takes, a clip that
     decodes to fewer frames than it states)."""
+    from asnn.io.sources import open_source
+    from asnn.io.video import cut_short
+
     clip = open_source(str(video))
     frames, shape = 0, (0, 0)
     for image in clip.frames():

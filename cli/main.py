@@ -139,10 +139,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     try:
         with _sigterm_interrupts():
-            # the commands' modules take a second or two to import: Ctrl-C then is an
+            # a command imports what it runs (the model: a second or two): Ctrl-C then is an
             # interrupt too
             if argv[:1] == ["detect"]:
-                _prefer_wide_vectors()  # before the commands' modules import numba
+                _prefer_wide_vectors()  # before the command imports numba
             args = _parse(build_parser(), argv)
             return int(args.func(args) or 0)
     except _Terminated:

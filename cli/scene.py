@@ -12,12 +12,9 @@ import os
 import sys
 from pathlib import Path
 
-from asnn.evaluation.labels import read_entries, write_entries
 from asnn.io.files import folder_lock
-from asnn.io.video import FPS_RANGE, WRITABLE_SUFFIXES
-from asnn.io.video import write_video
+from asnn.io.rates import FPS_RANGE
 from asnn.stimuli import SCENE_NAMES, make_scene
-from asnn.stimuli.suite import CASES, make_case, suite_cases
 
 from .arguments import contrast, edge_speed, finite, frame_rate, frame_size, nonempty_path, whole
 
@@ -64,6 +61,9 @@ _PAPER_OPTIONS = (
 
 
 def run(args: argparse.Namespace) -> int:
+    from asnn.io.video import WRITABLE_SUFFIXES, write_video  # OpenCV: when it runs
+    from asnn.stimuli.suite import CASES, make_case, suite_cases
+
     try:
         if args.list is not None:
             given = [flag for flag, value in (("--case", args.case), ("NAME/OUT", args.args),
@@ -156,6 +156,8 @@ def _check_labels_file(labels: Path, out: Path) -> None:
                          "asnn label read the names in a labels file relative to the clips' "
                          "folder, so keep the labels beside their clips")
     if labels.exists():
+        from asnn.evaluation.labels import read_entries
+
         read_entries(labels)
 
 
@@ -166,6 +168,8 @@ def _enter_label(labels: Path, out: Path, scene) -> None:
     folder's labels. The file is read again under a lock on its folder and replaced whole
     (:func:`asnn.evaluation.labels.write_entries`): scenes drawn at once for one labels file
     keep each other's entries, and a process killed while it writes leaves the old file."""
+    from asnn.evaluation.labels import read_entries, write_entries
+
     file = _label_name(labels, out)
     labels.parent.mkdir(parents=True, exist_ok=True)
     with folder_lock(labels):

@@ -117,7 +117,6 @@ from collections import Counter, OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from asnn import FrameError
 from asnn.detectors import available_cores, make_detector
 from asnn.params import (DEFAULT_PRESET, MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, PERIOD_FRAMES,
                          SLOW_FPS, preset_from_spec, timed_gap)
@@ -701,6 +700,8 @@ class WorkerCore:
                         self._ready.notify()
 
     def _process(self, job: Job) -> Response | None:
+        from asnn.frames import FrameError  # with the model (OpenCV): not ``asnn status``'s
+
         frame = job.frame
         with self._lock:
             state = self._robots.get(job.robot)

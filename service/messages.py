@@ -41,7 +41,6 @@ from __future__ import annotations
 import math
 from typing import Any, Literal, get_args
 
-import cv2
 import msgpack
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -205,6 +204,8 @@ def encode_image(image: np.ndarray, format: str) -> bytes:
         raise ValueError(f"need a uint8 gray or BGR image, got {image.dtype} {image.shape}")
     if image.ndim == 3 and image.shape[2] == 1:
         image = image[:, :, 0]
+    import cv2  # OpenCV where pixels are: ``asnn status`` and ``alerts`` touch none
+
     if format == "gray8":
         gray = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
         return np.ascontiguousarray(gray).tobytes()
@@ -550,6 +551,8 @@ class Preview(Frame):
                          width: int = PREVIEW_WIDTH, format: str = "jpeg") -> Preview:
         """Scale a gray or BGR uint8 frame down to ``width`` pixels (never up) and encode it
         (ValueError where the encoder refuses it)."""
+        import cv2
+
         h, w = image.shape[:2]
         tw = max(1, min(int(width), w))
         th = max(1, round(h * tw / w))

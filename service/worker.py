@@ -37,8 +37,6 @@ from collections.abc import Callable
 import zenoh
 from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
-from asnn.warmup import compile_kernels
-
 from . import keys
 from .core import WorkerCore
 from .messages import (MAX_NOTE_LEN, MessageError, Refusal, Response, decode_status, encode,
@@ -351,6 +349,8 @@ class Worker:
         # dropped, and a worker silent that long looks hung
         log.info("worker %s: loading the model's kernels (compiling them takes under a "
                  "minute where numba has no cache yet)", self.core.worker_id)
+        from asnn.warmup import compile_kernels  # the model's: not ``asnn status``'s
+
         started = time.monotonic()
         compile_kernels((self.core.params,))
         self._kernels_loaded = True

@@ -146,15 +146,15 @@ def test_a_preview_declaring_too_many_pixels_is_refused_before_it_is_decoded(mon
     """A hostile review: a 64 KiB png preview of 4096x4096 RGBA took a viewer 0.36 s of CPU
     and 110 MB to decode (a thumbnail from asnn camera: 0.25 ms), so a few a second kept the
     dashboard and the Foxglove server busy."""
-    import asnn.io.images as images
+    import cv2
 
     from service.messages import MAX_PREVIEW_BYTES
 
     bomb = png_of_zeros(4096, 4096)
     assert len(bomb) <= MAX_PREVIEW_BYTES
     decoded = []
-    real = images.cv2.imdecode
-    monkeypatch.setattr(images.cv2, "imdecode", lambda *a: decoded.append(a) or real(*a))
+    real = cv2.imdecode
+    monkeypatch.setattr(cv2, "imdecode", lambda *a: decoded.append(a) or real(*a))
     store = FleetStore(clock=Clock())
     payload = encode(Preview(seq=0, stamp=1.0, width=4096, height=4096, format="png",
                              data=bomb))

@@ -94,13 +94,11 @@ def test_a_jpeg_of_many_scans_is_refused_before_it_is_decoded(monkeypatch):
     image, whatever its few bytes: 1,000 copies of one 33-byte scan made a 99 KB frame (or
     preview) that took 10.8 s to decode (0.08 s without them); a 48 MiB frame holds a million,
     hours of one processing thread."""
-    import cv2
-
-    import asnn.io.images as images
+    import cv2  # its decoder watched: asnn.io.images imports it where it decodes
 
     decoded = []
-    real = images.cv2.imdecode
-    monkeypatch.setattr(images.cv2, "imdecode", lambda *a: decoded.append(a) or real(*a))
+    real = cv2.imdecode
+    monkeypatch.setattr(cv2, "imdecode", lambda *a: decoded.append(a) or real(*a))
     bomb = repeated_scans(1000)
     assert len(bomb) < 100_000
     frame = Frame(seq=0, stamp=0.0, width=4096, height=4096, format="jpeg", data=bomb)
@@ -123,7 +121,8 @@ def test_a_png_whose_data_inflates_past_its_image_is_refused_before_it_is_decode
     """A hostile review: the decoder inflates whatever deflate data follows a png's rows: 1 MB
     that inflates to 1 GB after a 1024x1024 image took 0.97 s to decode (5 ms without it); a
     48 MiB frame, 45 s of a processing thread."""
-    import asnn.io.images as images
+    import cv2
+
     from asnn.io.images import decode_encoded
 
     def png(rows, extra):
@@ -135,8 +134,8 @@ def test_a_png_whose_data_inflates_past_its_image_is_refused_before_it_is_decode
 
     rows = b"\0" * (1025 * 1024)
     decoded = []
-    real = images.cv2.imdecode
-    monkeypatch.setattr(images.cv2, "imdecode", lambda *a: decoded.append(a) or real(*a))
+    real = cv2.imdecode
+    monkeypatch.setattr(cv2, "imdecode", lambda *a: decoded.append(a) or real(*a))
     with pytest.raises(ImageError, match="inflates to more"):
         decode_encoded(png(rows, 64 << 20), "png", (1024, 1024))
     assert not decoded

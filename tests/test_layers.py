@@ -99,17 +99,74 @@ def test_the_import_reader_resolves_relative_imports():
             "asnn.approach.tracking", "cv2", "numpy"} <= modules
 
 
-def test_the_command_line_loads_no_plotting_library_until_it_plots():
-    # matplotlib takes 0.2-0.6 s to import and wants a writable cache folder: a worker or
-    # camera started under systemd's sandbox (no home) logged its font-cache complaints on
-    # every start when the parser's evaluation modules loaded it
+# what a process that runs no model may not load: numba and the model (60 MB of a router's 140
+# when the parser imported every command's module), OpenCV, the evaluation's tooling, and
+# matplotlib (0.2-0.6 s to import, and a writable cache folder wanted: a worker or camera
+# started under systemd's sandbox, no home, logged its font-cache complaints on every start)
+MODEL_FREE = ("numba", "cv2", "asnn.model", "asnn.evaluation.runs", "asnn.evaluation.scoring",
+              "asnn.evaluation.perturb", "matplotlib")
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["router", "--help"], ["status", "--help"],
+                                  ["alerts", "--help"], ["eval", "--help"],
+                                  ["worker", "--help"]])
+def test_the_parser_and_the_commands_without_a_model_load_none_of_it(argv):
+    """Every command builds the whole parser: it takes its choices and defaults from modules
+    that load no model (asnn.params, asnn.evaluation.options, the service's constants), and a
+    command imports what it runs when it runs. ``asnn router``, ``status`` and ``alerts`` run
+    without the model: the modules they run are imported here too."""
     import subprocess
     import sys
 
-    code = ("import sys\nfrom cli import main\nsys.argv = ['asnn', 'worker', '--help']\n"
+    code = ("import sys\nfrom cli import main\n"
+            f"sys.argv = ['asnn', *{argv!r}]\n"
             "try:\n    main.main()\nexcept SystemExit:\n    pass\n"
-            "assert 'asnn.evaluation.clips' in sys.modules, 'the parser no longer loads eval'\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'matplotlib'))")
+            "import clients.alerts, service.router, service.worker\n"
+            "assert 'asnn.params' in sys.modules, 'the parser reads the presets no more'\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numba', 'cv2', "
+            "'matplotlib') or m in " + repr(MODEL_FREE) + "))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
                          timeout=120, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]"
+
+
+def test_a_command_still_loads_what_it_runs():
+    # the model's modules are imported by the command that runs them (a worker's WorkerCore
+    # makes its detector), so that the check above cannot pass by a command losing them
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom service.core import WorkerCore\nWorkerCore('asnn', None)\n"
+            "print('asnn.model' in sys.modules, 'numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                         timeout=120, check=True).stdout
+    assert out.split() == ["True", "True"]
+
+
+def test_the_parser_keeps_the_choices_and_defaults_it_takes_from_the_model_and_the_evaluation():
+    # read from the modules named above without importing their tooling: the same values
+    from asnn.detectors import MODELS, available_cores
+    from asnn.evaluation.heldout import TIE_BREAKS
+    from asnn.evaluation.perturb import FAMILIES
+    from asnn.evaluation.runs import DEFAULT_DETECTORS
+    from asnn.io.video import FPS_RANGE
+    from cli.main import build_parser
+
+    commands = build_parser().commands
+    assert sorted(commands) == ["alerts", "bench", "camera", "dashboard", "demo", "detect",
+                                "eval", "foxglove", "label", "router", "scene", "status",
+                                "worker"]
+    options = {name: {a.dest: a for a in p._actions} for name, p in commands.items()}
+    assert options["eval"]["tie_break"].choices == list(TIE_BREAKS)
+    assert options["eval"]["detectors"].default == list(DEFAULT_DETECTORS)
+    assert all(family in options["eval"]["perturb"].help for family in FAMILIES)
+    assert options["worker"]["model"].choices == options["detect"]["model"].choices == MODELS
+    assert options["worker"]["threads"].default == available_cores()
+    assert f"{FPS_RANGE[0]:g} to {FPS_RANGE[1]:g}" in options["scene"]["fps"].help
+    # the types that check against the model's or the evaluation's tables, imported when called
+    parser = build_parser()
+    assert parser.parse_args(["eval", "--perturb", "jpeg50"]).perturb == "jpeg50"
+    with pytest.raises(SystemExit):
+        parser.parse_args(["detect", "in.mp4", "--perturb", "half-rate"])
+    with pytest.raises(SystemExit):
+        parser.parse_args(["camera", "--robot", "r", "--source", "x", "--fps", "1000"])

@@ -298,10 +298,10 @@ def test_a_starting_worker_says_it_loads_the_model_s_kernels(zenoh_net, caplog):
 def test_a_starting_worker_loads_the_kernels_of_its_own_preset(zenoh_net, monkeypatch):
     # a worker runs one preset: it loads that one's kernels before its first frame (those of
     # another preset would leave its first frames waiting for the compiler), and no others
-    import service.worker
+    import asnn.warmup  # the worker imports it when it loads the kernels
 
     loaded = []
-    monkeypatch.setattr(service.worker, "compile_kernels", loaded.append)
+    monkeypatch.setattr(asnn.warmup, "compile_kernels", loaded.append)
     for preset_name in ("translation", None):
         with Worker(zenoh_net.hub, WorkerCore(preset=preset_name), stats_every=0):
             pass
@@ -332,6 +332,8 @@ def test_camera_sources_open_files_scenes_and_fail_clearly(tmp_path):
 
 def test_a_capture_devices_node_opens_the_device_not_a_file(monkeypatch):
     # /dev/video0 was opened as a video file, and a device is none: "no such file"
+    import cv2
+
     from asnn.io import sources
 
     opened = []
@@ -343,7 +345,7 @@ def test_a_capture_devices_node_opens_the_device_not_a_file(monkeypatch):
         def isOpened(self):
             return False
 
-    monkeypatch.setattr(sources.cv2, "VideoCapture", Capture)
+    monkeypatch.setattr(cv2, "VideoCapture", Capture)  # sources imports it where it opens one
     monkeypatch.setattr(sources, "_is_device", lambda path: path.startswith("/dev/"))
     for spec in ("/dev/video7", "/dev/null", "7"):
         with pytest.raises(SourceError, match="cannot open capture"):

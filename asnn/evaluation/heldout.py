@@ -34,6 +34,7 @@ from . import scoring
 from .clips import check_clips, clip_warnings
 from .gate_replay import ClipTrace, check_replay, replay, replays, trace_item
 from .labels import load_labels
+from .options import TIE_BREAKS
 from .pool import run_tasks
 from .runs import write_json
 
@@ -60,15 +61,6 @@ GATE_GRID: dict[str, tuple] = {
 # this false-alarm rate with it: near misses and passing traffic, the generated cases a fleet
 # would see every day, must stay quiet (one case in a hundred)
 SUITE_AIMS = {"hit_rate": 0.90, "false_alarm_rate": 0.01}
-# how grid points that tie on hits and false alarms are told apart (selection_key); the
-# first rewards thresholds that warn more, so the held-out figures are given with each
-TIE_BREAKS = {
-    "warning-frames": "more warning frames inside the hit windows than outside them, then the "
-                      "first in grid order",
-    "grid": "the first in grid order (smaller thresholds first)",
-    "suite": "more hits minus false alarms on the generated suite, then fewer false alarms "
-             "there, then the first in grid order",
-}
 
 
 def grid(base: ASNNParams) -> list[ASNNParams]:

@@ -46,34 +46,11 @@ import numpy as np
 from ..io.images import JPEG_QUALITY as WIRE_JPEG_QUALITY
 from ..io.video import quiet_writer
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
+from .options import FAMILIES, PERTURBATIONS
 
 __all__ = ["PERTURBATIONS", "check_perturbation", "describe", "keeps_frames", "perturb_frame",
            "perturbed", "perturb_label", "reencoded"]
 
-# name -> what it does (asnn eval -h lists them)
-PERTURBATIONS = {
-    "noise": "Gaussian sensor noise of 4 gray levels on every pixel",
-    "jpeg": "every frame re-encoded as JPEG at quality 30",
-    "jpeg90": "every frame re-encoded as JPEG at quality 90, as asnn camera --format jpeg sends "
-              "frames",
-    "dim": "0.6 times the brightness (an under-exposed camera)",
-    "mirror": "every frame flipped left to right (the labels' centres with it)",
-    "hood": "a dashcam's own hood along the bottom and a timestamp overlay, still in every frame",
-    "wiper": "a windscreen wiper's blurred blade sweeping across the view and back every 40 "
-             "frames (rain: 2 s at 20 fps)",
-    "half-size": "every frame averaged down to half its width and height (a camera of half the "
-                 "resolution; the labels' centres with it)",
-    "double-size": "every frame enlarged to twice its width and height, bilinearly (the labels' "
-                   "centres with it)",
-    "half-detail": "every frame averaged down to half its width and height and enlarged back to "
-                   "its size, bilinearly (a camera of half the resolution whose frames are "
-                   "upscaled before the model; the labels as they are)",
-    "half-rate": "every second frame dropped, as a camera at half the frame rate would deliver "
-                 "them; the labels follow the frames kept",
-    "mpeg4": "every clip re-encoded by an inter-frame codec (MPEG-4 Part 2 through OpenCV's "
-             "FFmpeg writer, as a camera's video file is: unchanged blocks copied, moving ones "
-             "predicted and their residual quantised)",
-}
 # the perturbations that drop frames instead of changing them: frame k kept is frame step * k
 _RATE_STEP = {"half-rate": 2}
 _PER_FRAME = ("track", "target_size", "ttc")  # label fields with one entry per frame
@@ -98,9 +75,6 @@ CODEC_FOURCC = "mp4v"
 CODEC_FPS = 30.0  # the rate written in the file: the decoded frames do not depend on it
 
 
-# the families named with their strength: jpegQ (quality Q) and gainG (brightness times G)
-FAMILIES = {"jpegQ": "every frame re-encoded as JPEG at quality Q (1-100)",
-            "gainG": "the brightness times G (0.1-10), rounded and clipped to 8 bits"}
 _FAMILY = re.compile(r"(jpeg)([0-9]{1,3})|(gain)([0-9]{1,2}(?:\.[0-9]{1,4})?)")
 GAIN_RANGE = (0.1, 10.0)
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from . import scoring
+from .options import DEFAULT_DETECTORS
 from ..detectors import MODELS, Detector, make_detector
 from ..io.files import write_atomically
 from ..params import (DEFAULT_PRESET, ASNNParams, check_overrides, parse_preset_spec,
@@ -26,7 +27,6 @@ from ..params import (DEFAULT_PRESET, ASNNParams, check_overrides, parse_preset_
 __all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
            "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
 
-DEFAULT_DETECTORS = ("asnn", "asnn:reference", "lgmd1", "lgmd2")
 
 # each addition of the robust preset switched off in turn (README, "Ablation")
 ABLATIONS = {

@@ -61,6 +61,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from .labels import check_labels, result_name
+from .options import EARLY_TOLERANCE_S, WARMUP_FRAMES
 
 __all__ = [
     "OUTCOMES",
@@ -83,9 +84,7 @@ __all__ = [
     "score_directory",
 ]
 
-WARMUP_FRAMES = 5
 CONTACT_SLACK_FRAMES = 2
-EARLY_TOLERANCE_S = 0.5
 MAX_EARLY_TOLERANCE_S = 60.0  # an onset judged by eye is off by a second or two, not a minute
 OUTCOMES = ("hit", "early", "late", "miss", "false", "quiet", "missing")
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 import zlib
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 __all__ = ["ENCODED_FORMATS", "JPEG_QUALITY", "MAX_JPEG_MARKERS", "MAX_JPEG_SCANS",
@@ -304,6 +303,8 @@ def decode_encoded(data: bytes, format: str, size: tuple[int, int] | None = None
         As :func:`check_encoded`; ``bad-image`` also for data that does not decode, and
         ``bad-size`` for a picture of another size than its header says.
     """
+    import cv2  # here, not with the module: the status and alerts read no picture
+
     header = _checked_header(data, format, size, max_side, max_depth)
     w, h = header.width, header.height
     if format == "png":
@@ -343,6 +344,8 @@ def encode(image: np.ndarray, format: str, quality: int = JPEG_QUALITY) -> bytes
     if format not in ENCODED_FORMATS:
         raise ValueError(f"unknown image format {format!r}; choose one of "
                          f"{', '.join(ENCODED_FORMATS)}")
+    import cv2
+
     params = [cv2.IMWRITE_JPEG_QUALITY, int(quality)] if format == "jpeg" else []
     ok, data = cv2.imencode(".jpg" if format == "jpeg" else ".png", image, params)
     if not ok:

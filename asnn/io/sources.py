@@ -28,7 +28,6 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 __all__ = ["CLOCK_RESET", "CLOCK_RESET_FRAMES", "SYNTHETIC", "BackwardStamps", "Source",
@@ -261,6 +260,8 @@ def _open_scene(spec: str) -> Source:
 
 
 def _open_capture(spec: str) -> Source:
+    import cv2
+
     from .video import DEFAULT_FPS, read_frames, stated_fps
 
     # a V4L2 node by its index, as OpenCV's backends all take it

@@ -14,16 +14,13 @@ import numpy as np
 
 from .files import seekable_target
 from .images import MAX_SIDE
+from .rates import FPS_RANGE, MAX_FPS
 
 __all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "WRITABLE_SUFFIXES", "VideoError", "VideoClip",
            "check_written", "cut_short", "open_video", "open_writer", "quiet_writer",
            "read_frames", "stated_fps", "writable_fps", "write_video"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
-MAX_FPS = 240.0  # above this a stated rate is a container's time base, not a camera's
-# the frame rates a camera runs at, for every rate given by hand (a clip's label, --fps): a clip
-# written at another would read back at DEFAULT_FPS
-FPS_RANGE = (1.0, MAX_FPS)
 # the containers our video writers (OpenCV's, mp4v or MJPG) write and read back; OpenCV takes
 # the container from the name, and refuses others (.txt) or writes what it cannot read (.mpg)
 WRITABLE_SUFFIXES = (".avi", ".m4v", ".mkv", ".mov", ".mp4")

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 
-import cv2
 import numpy as np
 
 __all__ = [
@@ -331,6 +330,8 @@ def _resized_spectrum(spectrum: np.ndarray, n: int) -> np.ndarray:
 def sample_tile(tile: np.ndarray, shape: tuple[int, int],
                 offset: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     """The periodic ``tile`` repeated over ``shape`` and translated by ``offset`` (bilinear)."""
+    import cv2  # here: the parser's scene names come from this package
+
     h, w = shape
     shift = np.float32([[1, 0, offset[0]], [0, 1, offset[1]]])
     return cv2.warpAffine(tile, shift, (w, h), flags=cv2.INTER_LINEAR,
