@@ -241,9 +241,10 @@ class _LGMDBase:
     """State shared by both models: the previous frame, the frame counter, the spike window."""
 
     params: LGMD1Params | LGMD2Params
+    min_side = _MIN_SIDE  # the smallest height and width of a frame the models take
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
-        lum = to_luminance(frame, _MIN_SIDE, self.shape) * 255.0
+        lum = to_luminance(frame, self.min_side, self.shape) * 255.0
         return lum
 
     def reset(self) -> None:

@@ -25,6 +25,8 @@ MODELS = ("asnn", "lgmd1", "lgmd2")
 class Detector(Protocol):
     """What every model offers: one object per stream."""
 
+    min_side: int  # the smallest height and width of a frame it takes
+
     def step(self, frame: np.ndarray, t: float | None = None) -> Response: ...
 
     def reset(self) -> None: ...

@@ -80,6 +80,8 @@ class ASNN:
         Frames taken since the stream began (or :meth:`reset`): the next response's ``index``.
     shape : (H, W) or None
         The stream's frame size, fixed by its first frame.
+    min_side : int
+        The smallest height and width of a frame the model takes (its largest kernel's).
     previous : ndarray (H, W)
         Luminance of the last frame, after the optional input blur.
     previous_blocks : ndarray or None
@@ -144,7 +146,7 @@ class ASNN:
         self.record_tracks = bool(record_tracks)
         self.optimised = bool(optimised) and _fast.supported(p)
         self.dtype = np.dtype(p.precision if self.optimised else np.float64)
-        self._min_side = p.min_side
+        self.min_side = p.min_side
         self._p_weights = retina.photoreceptor_weights(p.n_p, p.p_u)
         self._dog = retina.dog_kernel(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
                                       p.dog_normalisation)
@@ -238,14 +240,14 @@ class ASNN:
         resize = shrink or (width is not None and p.min_width is not None and width < p.min_width)
         if shrink and self.optimised and frame.dtype == np.uint8:
             # the same luminance as below, bit for bit, without the float64 frame
-            frame = check_frame(frame, self._min_side, self.shape)
+            frame = check_frame(frame, self.min_side, self.shape)
             h, w = self.shape = frame.shape[:2]
             gray = np.ascontiguousarray(luma(frame))  # one compiled form of the kernel
             lum = _fast.shrunk_luminance(gray, self._retina_size(h, w), LEVELS, self.dtype)
         else:
             # a frame to resize is converted and resized in float64, so that the float32 and
             # float64 forms of a preset see the same luminance to its last rounding
-            lum = to_luminance(frame, self._min_side, self.shape,
+            lum = to_luminance(frame, self.min_side, self.shape,
                                np.float64 if resize else self.dtype)
             if self.shape is None:
                 self.shape = lum.shape
@@ -267,7 +269,7 @@ class ASNN:
         frame does not make the model's state grow past what a large frame's does."""
         p = self.params
         if p.max_width is not None and w > p.max_width:
-            return p.max_width, max(round(h * p.max_width / w), self._min_side)
+            return p.max_width, max(round(h * p.max_width / w), self.min_side)
         if p.min_width is not None and w < p.min_width:
             factor = max(1.0, min(p.min_width / w, 4 * p.min_width / h))
             return round(w * factor), round(h * factor)

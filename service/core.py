@@ -404,7 +404,8 @@ class WorkerCore:
         # the parameters each robot's model is made of (a spec checked now, not on the first
         # frame); the responses report the spec as given
         self.params = preset_from_spec(self.preset) if model == "asnn" else None
-        make_detector(model, self.params)
+        # frames smaller than this are refused as they arrive, before they can start a stream
+        self.min_side = make_detector(model, self.params).min_side
         self.worker_id = worker_id or default_worker_id()
         if len(self.worker_id) > MAX_NOTE_LEN:  # viewers show no more of it (clients.fleet)
             raise ValueError(f"a worker id has at most {MAX_NOTE_LEN} characters, got "
@@ -453,6 +454,13 @@ class WorkerCore:
                 return None
             frame = decode_frame(payload)
             frame.check_size()
+            if min(frame.width, frame.height) < self.min_side:
+                # refused here, not by the model: a stray small frame taken in would start a
+                # stream of its own, reset the robot's model and mark the robot contested when
+                # its camera's next frame continued the stream it broke (a client's trial)
+                raise MessageError("frame-rejected", f"frame {frame.width}x{frame.height} is "
+                                   f"smaller than the model's {self.min_side}x{self.min_side} "
+                                   "kernels")
         except keys.KeySchemeError as exc:
             self._reject("bad-key", str(exc), key)
             return None
@@ -720,10 +728,11 @@ class WorkerCore:
             if full:
                 self._refuse_taken(state, job, "too-many-robots", full)
                 return None
+        reset = state.processed_stream not in (None, job.stream)
         if state.detector is None:
             state.detector = make_detector(self.model, self.params)
             state.id_base = track_id_base(frame.seq)
-        elif state.processed_stream not in (None, job.stream):
+        elif reset:
             reason = job.reset_reason or "seq-backwards"
             state.detector.reset()
             state.id_base = track_id_base(frame.seq)
@@ -740,6 +749,8 @@ class WorkerCore:
             if state.processed == 0:
                 with self._lock:
                     state.proven = False
+            if reset:  # the model was reset for the stream this frame began: the next
+                state.processed_stream = None  # response says so (stream_frames 1)
             self._refuse_taken(state, job, "frame-rejected", str(exc))
             return None
         except Exception as exc:  # a bug: the frame is refused, counted and told, not lost,
@@ -827,6 +838,13 @@ class WorkerCore:
         with self._lock:
             state.dropped += job.dropped
             self._stats.received -= 1
+            stream = state.stream
+            if (stream is not None and stream.number == job.stream and stream.frames == 1
+                    and state.previous is not None):
+                # it began a stream (another size, a seq back) and nothing followed it yet:
+                # the frames after it continue the stream before it, as if it had not come
+                # (not a new stream that the next frame would break as an intruder's)
+                state.stream, state.previous = state.previous, None
         self._reject(reason, detail, keys.frame_key(job.robot, self.prefix))
 
     # ------------------------------------------------------------------ housekeeping

@@ -249,8 +249,8 @@ def test_malformed_frames_are_counted_while_valid_frames_flow(looming):
 def test_frames_the_model_refuses_are_counted_not_raised(looming):
     core = WorkerCore()
     tiny = np.zeros((16, 16), np.uint8)
-    assert feed(core, "r1", tiny, 0) is None
-    assert core.stats()["invalid"] == {"frame-rejected": 1}
+    assert core.offer("asnn/r1/frame", payload(tiny, 0)) is None  # refused as it arrives
+    assert core.stats()["invalid"] == {"frame-rejected": 1} and core.take(timeout=0) is None
     assert feed(core, "r1", looming.frames[0], 1) is not None
 
 
@@ -785,3 +785,46 @@ def test_a_robot_handed_over_while_busy_is_released_when_its_frame_is_done(loomi
     assert core.robots() == ["r1"]
     core.process(job)
     assert core.robots() == [] and core.stats()["released"] == 1
+
+
+def test_a_stray_small_frame_is_refused_as_it_arrives_and_leaves_the_stream_alone(looming):
+    """A client's trial: one 20x20 frame amid a warning robot's stream started a stream of its
+    own, was refused by the model after it had reset it (four responses of u 0 in the middle of
+    the warning, stream_frames still counting), and marked the robot contested (its camera's
+    restart a second later lost half its frames as a second publisher's). Now refused on
+    arrival, below the model's kernels: the responses are those of a stream without it."""
+    frames = looming.frames
+    control = WorkerCore()
+    expected = [feed(control, "c", frame, k).collision for k, frame in enumerate(frames)]
+    core = WorkerCore()
+    stray = frames[0][:20, :20]
+    responses = []
+    for k, frame in enumerate(frames):
+        if k == looming.onset_frame + 5:
+            assert core.offer("asnn/r1/frame", payload(stray, k + 1000, k * 0.05)) is None
+        responses.append(feed(core, "r1", frame, k))
+    assert [r.collision for r in responses] == expected
+    assert [r.stream_frames for r in responses] == list(range(1, len(frames) + 1))
+    stats = core.stats()
+    assert stats["invalid"] == {"frame-rejected": 1}
+    assert stats["intrusions"] == 0 and stats["resets"] == {}
+    assert not core.status()["robots"]["r1"]["contested"]
+
+
+def test_a_frame_refused_as_it_is_processed_does_not_break_its_robot_s_stream(looming):
+    """A frame whose header says another size and whose image does not decode began a new
+    stream when it arrived; refused as it is processed, the frames after it continue the
+    stream before it: no reset, no intrusion, the robot not contested."""
+    core = WorkerCore()
+    for k in range(10):
+        feed(core, "r1", looming.frames[k], k)
+    data = bytearray(encode_image(np.full((48, 64), 128, np.uint8), "png"))
+    data[data.find(b"IDAT") + 8] ^= 0xFF  # its header whole, its pixels' checksum wrong
+    liar = encode(Frame(seq=10, stamp=0.5, width=64, height=48, format="png", data=bytes(data)))
+    assert core.offer("asnn/r1/frame", liar) == "r1"
+    assert core.process(core.take()) is None
+    responses = [feed(core, "r1", looming.frames[k], k) for k in range(11, 20)]
+    assert [r.stream_frames for r in responses] == list(range(11, 20))
+    stats = core.stats()
+    assert stats["invalid"] == {"bad-image": 1} and stats["intrusions"] == 0
+    assert stats["resets"] == {} and not core.status()["robots"]["r1"]["contested"]
