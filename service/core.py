@@ -295,9 +295,20 @@ class _Robot:
 
     @property
     def fps(self) -> float | None:
-        """New frames a second its model is stepped at: the median of :attr:`model_periods`."""
+        """New frames a second its model is stepped at: the median of :attr:`model_periods`;
+        None while the stamps tell no rate (the last PERIOD_FRAMES gaps each under
+        MIN_FRAME_GAP_S or over MAX_FRAME_GAP_S: the model times them at its nominal period,
+        which is not the camera's)."""
         periods = self.model_periods
-        return round(1.0 / statistics.median(periods), 1) if periods else None
+        if not periods or self.untimed_frames >= PERIOD_FRAMES:
+            return None
+        return round(1.0 / statistics.median(periods), 1)
+
+    @property
+    def processed_fps(self) -> float | None:
+        """Frames a second the worker processes for it, repeats included: the median of
+        :attr:`periods`."""
+        return round(1.0 / statistics.median(self.periods), 1) if self.periods else None
 
     def contested(self, now: float) -> bool:
         """Whether a second publisher's frame arrived on its key within CONTESTED_FOR_S."""
@@ -801,17 +812,23 @@ class WorkerCore:
                 state.periods.append(gap)
             self._note_untimed(robot, state, timed, gap)
         state.stamp = stamp
-        slow = len(state.model_periods) == PERIOD_FRAMES and state.fps < SLOW_FPS
+        fps = state.fps
+        slow = len(state.model_periods) == PERIOD_FRAMES and fps is not None and fps < SLOW_FPS
         state.slow_frames = state.slow_frames + 1 if slow else 0
         if not slow:
             state.slow_logged = False
         elif state.slow_frames >= PERIOD_FRAMES and not state.slow_logged:
             # slow for a while, not a moment's skips; logged once per slow spell, when the
             # rate limit lets it through (so a relapse soon after one is logged later)
+            processed = state.processed_fps
+            why = ("the camera's rate, or frames skipped under load" if processed is None
+                   or processed < SLOW_FPS else
+                   f"{processed:.1f} frames a second are processed, the others repeating the "
+                   "frame before: a still scene seen without sensor noise, or a camera that "
+                   "sends its frames twice")
             state.slow_logged = self._limited_log.warning(
-                f"slow:{robot}", "robot %s: its frames are detected at %.1f per second (the "
-                "camera's rate, or frames skipped under load); the default preset is made for "
-                "20 or more", robot, state.fps)
+                f"slow:{robot}", "robot %s: its model steps %.1f new frames per second (%s); the "
+                "default preset is made for 20 or more", robot, fps, why)
 
     def _note_untimed(self, robot: str, state: _Robot, timed: bool, gap: float) -> None:
         """Log when PERIOD_FRAMES frames in a row are stamped less than MIN_FRAME_GAP_S or more
