@@ -130,6 +130,19 @@ def cmd_status(args: argparse.Namespace) -> int:
     for worker in twins:  # a health check fails on them: every frame answered twice
         print(_printable(f"worker {worker}: answered by more than one process (two workers "
                          "with one id both serve its robots; stop one)"), file=sys.stderr)
+    # workers that run different detectors: a robot handed over between them is answered by
+    # another model from then on (warnings, ids and ttc change at the hand-over); a rolling
+    # change of preset passes through this, so it is said, not failed
+    detectors = {}
+    for status in statuses:
+        if isinstance(status.get("model"), str) and isinstance(status.get("preset"), str):
+            detectors.setdefault(f"{status['model']}/{status['preset'] or '-'}",
+                                 []).append(str(status["worker"]))
+    if len(detectors) > 1:
+        kinds = "; ".join(f"{kind} on {', '.join(sorted(workers))}"
+                          for kind, workers in sorted(detectors.items()))
+        print(_printable(f"workers run different detectors ({kinds}): a robot handed over "
+                         "between them is answered by another model"), file=sys.stderr)
     if twins:
         return 1
     if not readable:

@@ -1058,6 +1058,30 @@ def test_a_second_process_answering_for_a_worker_id_is_found_and_said(zenoh_net,
                 assert "w1: answered by more than one process" in captured.err
 
 
+def test_status_says_when_the_workers_run_different_detectors(zenoh_net, tmp_path, capsys):
+    """Two workers on one prefix with different presets hand robots between them, each then
+    answered by another model (its warnings, ids, ttc): asnn status says so, without failing
+    (a rolling change of preset passes through it)."""
+    from cli.main import main
+
+    config = tmp_path / "zenoh.json5"
+    config.write_text('{"scouting": {"multicast": {"enabled": false}, '
+                      '"gossip": {"enabled": false}}}')
+    ask = ["status", "--config", str(config), "--connect", zenoh_net.endpoint, "--mode",
+           "client", "--timeout", "1"]
+    with Worker(zenoh_net.hub, WorkerCore(worker_id="w1"), stats_every=0):
+        capsys.readouterr()
+        assert main(ask) == 0
+        assert "different detectors" not in capsys.readouterr().err
+        with Worker(zenoh_net.spoke(), WorkerCore(worker_id="w2", preset="reference"),
+                    stats_every=0):
+            capsys.readouterr()
+            assert main(ask) == 0
+            err = capsys.readouterr().err
+            assert ("workers run different detectors (asnn/reference on w2; asnn/robust on w1)"
+                    in err)
+
+
 def test_answers_on_a_workers_status_key_make_at_most_one_line_a_check(zenoh_net, caplog,
                                                                       monkeypatch):
     """A review: any process on the prefix could answer a worker's own status key hundreds of
