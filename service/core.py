@@ -30,9 +30,10 @@ A frame that belongs to the stream but arrives after later ones did (the same si
 above 0 and at most ``max_gap`` steps behind the latest, a ``stamp`` no later than its: reordered on
 the way) is refused as ``late`` instead: the model does not go back in time, and a restart is
 not what happened. A camera that restarts begins again at ``seq`` 0 (or with a later stamp).
-A robot whose streams keep ending after one frame (a camera whose ``seq`` never grows) has its
-model reset on every frame, so it can never warn: after :data:`RESTARTS_WARNED` such streams in
-a row the worker logs it at WARNING, and every response says how many frames its model has
+A robot whose streams keep ending within a few frames (a camera whose ``seq`` never grows, or
+keeps going back every other frame) has its model reset before it could warn: after
+:data:`RESTARTS_WARNED` streams in a row of at most :data:`SHORT_STREAM_FRAMES` frames the worker
+logs it at WARNING, and every response says how many frames its model has
 stepped in the current stream (``stream_frames``, docs/contract.md).
 
 The retina integrates with its fixed time step (0.05 s) whatever the stamps say; the targets'
@@ -138,8 +139,12 @@ log = logging.getLogger("asnn.worker")
 # running means; the worst need 53 during an approach, 64 before one):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
 HANDOVER_WARMUP_FRAMES = 30
-# streams in a row that last one frame before the worker logs that a robot's model cannot warn
+# streams in a row that last at most SHORT_STREAM_FRAMES frames before the worker logs that a
+# robot's model cannot warn: a fresh model of the default warns from its 5th frame at the
+# soonest (over every sixth case of the suite, a fresh model started at every third frame of
+# each approach); streams of one frame alone were counted, so a seq going 0, 1, 0, 1 ... was not
 RESTARTS_WARNED = 10
+SHORT_STREAM_FRAMES = 4
 # robot ids whose latest refusal the status keeps (the most recently refused)
 MAX_REFUSED = 256
 # the worker's defaults (asnn worker --idle-timeout, --max-gap, --max-robots, --takeover-after)
@@ -252,7 +257,7 @@ class _Robot:
     # intrusion or refused as one: it is *contested* for CONTESTED_FOR_S after
     intruder_seen: float | None = None
     intrusions: int = 0
-    restarts: int = 0  # streams in a row that ended after one frame (a seq that never grows)
+    restarts: int = 0  # streams in a row that ended within SHORT_STREAM_FRAMES frames
     pending: tuple[Frame, float, _Stream] | None = None  # (frame, received, its stream)
     waiting_since: int = 0  # arrival order of the first frame it has been waiting with
     dropped: int = 0  # frames replaced since the last response
@@ -604,13 +609,14 @@ class WorkerCore:
             state.intruder_seen = received
             return None
         if current is not None:
-            state.restarts = state.restarts + 1 if current.frames == 1 else 0
+            short = current.frames <= SHORT_STREAM_FRAMES
+            state.restarts = state.restarts + 1 if short else 0
             if state.restarts >= RESTARTS_WARNED:
                 self._limited_log.warning(
-                    f"restarts:{robot}", "robot %s: its last %d frames each started a new "
-                    "stream (%s): its model is reset on every frame and cannot warn; a "
+                    f"restarts:{robot}", "robot %s: its last %d streams each ended within %d "
+                    "frames (the latest: %s): its model is reset every few frames and cannot warn; a "
                     "camera's seq must grow from frame to frame and its stamp must not go back",
-                    robot, state.restarts, broken)
+                    robot, state.restarts, SHORT_STREAM_FRAMES, broken)
         if broken == "seq-gap":
             # frames lost on the way (a link that drops, a camera faster than its link or its
             # worker can take): each such gap resets the model, which cannot warn until it has

@@ -703,8 +703,8 @@ def test_a_full_table_forgets_the_robot_silent_longest(looming):
     assert core.robots() == ["b", "c"]
 
 
-def test_one_frame_streams_are_reported_from_the_restarts_warned_th_in_a_row(looming, caplog):
-    from service.core import RESTARTS_WARNED
+def test_short_streams_are_reported_from_the_restarts_warned_th_in_a_row(looming, caplog):
+    from service.core import RESTARTS_WARNED, SHORT_STREAM_FRAMES
 
     core = WorkerCore()
 
@@ -713,10 +713,11 @@ def test_one_frame_streams_are_reported_from_the_restarts_warned_th_in_a_row(loo
 
     with caplog.at_level(logging.WARNING, logger="asnn.worker"):
         stamp = iter(k * 0.05 for k in range(1000))
-        # RESTARTS_WARNED - 1 streams of one frame, then one of two: the run is broken
+        # RESTARTS_WARNED - 1 streams of one frame, then a longer one: the run is broken
         for _ in range(RESTARTS_WARNED):
             feed(core, "r1", looming.frames[0], 0, stamp=next(stamp))
-        feed(core, "r1", looming.frames[1], 1, stamp=next(stamp))
+        for seq in range(1, SHORT_STREAM_FRAMES + 1):  # with the 0 before: one frame more
+            feed(core, "r1", looming.frames[seq], seq, stamp=next(stamp))
         for _ in range(RESTARTS_WARNED - 1):
             feed(core, "r1", looming.frames[0], 0, stamp=next(stamp))
         assert warned() == []
@@ -725,6 +726,14 @@ def test_one_frame_streams_are_reported_from_the_restarts_warned_th_in_a_row(loo
         assert warned() == []
         feed(core, "r1", looming.frames[0], 0, stamp=next(stamp))
         assert len(warned()) == 1
+    # a seq that goes back every second frame (0, 1, 0, 1, ...): streams of two frames, never
+    # able to warn, were not counted (only one-frame streams were)
+    caplog.clear()
+    core = WorkerCore()
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for k in range(2 * RESTARTS_WARNED + 2):
+            feed(core, "r2", looming.frames[k], k % 2, stamp=k * 0.05)
+    assert len(warned()) == 1 and "each ended within 4 frames" in warned()[0].getMessage()
 
 
 def test_a_candidate_whose_first_frame_fails_keeps_the_frame_waiting_behind_it(looming):
