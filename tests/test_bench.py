@@ -304,6 +304,60 @@ def test_the_handover_warmup_counts_the_frames_the_model_stepped():
     assert {r["warmup"] for r in rows} == {0, 6, 4, 2}
 
 
+
+class _PlainDetector:
+    """Warns from frame 20 of the stream on, once it has stepped 12 frames; holds none (no
+    ceiling_held, as the LGMD baselines)."""
+
+    def __init__(self):
+        self.index = 0
+
+    def step(self, frame, t=None):
+        from asnn.response import Response
+
+        self.index += 1
+        return dataclasses.replace(Response.silent(self.index - 1),
+                                   collision=t >= 20 and self.index >= 12)
+
+
+def test_the_handover_warmup_of_a_model_that_holds_no_frame_is_the_frames_it_took():
+    """Without a frame-rate ceiling every frame is stepped: the warm-up is the j frames after
+    which the fresh model agrees for good, to the frame (an even j as much as an odd one)."""
+    from asnn.evaluation.handover import handover_warmups
+
+    class Spec:
+        make = _PlainDetector
+
+    scene = types.SimpleNamespace(frames=np.zeros((40, 8, 8), np.uint8), fps=1.0)
+    rows = handover_warmups([("s", scene)], Spec(), every=1)
+    assert {(r["frame"], r["warmup"]) for r in rows} == {
+        (k, 0 if k <= 9 else min(11, 40 - k)) for k in range(1, 39)}
+
+
+def test_the_handover_bench_runs_every_approach_at_the_rate_asked(monkeypatch):
+    """--looms FPS: each of the design's approaches once, at FPS alone, counted in the report
+    (not the design's other rates)."""
+    from asnn.evaluation import handover, ttc
+
+    monkeypatch.setattr(ttc, "DEFAULT_DESIGN", ttc.Design(
+        polarities=("dark", "light"), heights=(12.0,), taus=(2.0,), positions=(None,)))
+    names = []
+    monkeypatch.setattr(handover, "handover_warmups",
+                        lambda scenes, *a, **k: names.extend(name for name, _ in scenes) or [])
+    report = handover.run(looms=60.0)
+    assert report["cases"] == len(names) == 2 and report["source"] == "approaches at 60 fps"
+    assert all(name.endswith("-60fps") for name in names)
+
+
+def test_the_handover_report_names_the_suite_when_it_ran_over_it():
+    from asnn.evaluation.handover import format_report, summarise_warmups
+
+    rows = [{"scene": "a", "frame": 1, "warmup": 3, "approach": True}]
+    text = format_report({"detector": "asnn", "preset": "robust", "cases": 4, "source": None,
+                          "every": 3, **summarise_warmups(rows)})
+    assert text.startswith("# asnn (preset robust): 4 cases of the labelled suite, a hand-over "
+                           "every 3 frames")
+
 def test_handover_bench_over_the_approaches_of_a_fast_camera(capsys, monkeypatch):
     """--looms FPS: the hand-overs of eval --ttc's approaches at that rate (the suite is
     20 fps); not with the suite's cases or labelled clips."""

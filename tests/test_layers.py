@@ -170,3 +170,16 @@ def test_the_parser_keeps_the_choices_and_defaults_it_takes_from_the_model_and_t
         parser.parse_args(["detect", "in.mp4", "--perturb", "half-rate"])
     with pytest.raises(SystemExit):
         parser.parse_args(["camera", "--robot", "r", "--source", "x", "--fps", "1000"])
+
+
+def test_the_package_names_what_it_imports_when_first_asked_for():
+    # the model's names are imported on first use (PEP 562), and still listed and refused as
+    # a module's: dir() shows them (editors, help()), an unknown name is an AttributeError
+    # (hasattr, getattr with a default), not a KeyError
+    import asnn
+
+    assert set(asnn.__all__) <= set(dir(asnn))
+    assert not hasattr(asnn, "no_such_name")
+    from asnn.targets import Target
+
+    assert asnn.Target is Target

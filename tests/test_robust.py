@@ -842,3 +842,89 @@ def test_the_ceiling_warns_of_a_small_far_object_earlier_at_60_fps(loom_60fps):
     with_ceiling, without = lead(preset("default")), lead(preset("default", max_step_rate=None))
     assert with_ceiling is not None and without is not None
     assert with_ceiling >= without + 0.25  # 1.02 s against 0.65 s
+
+
+def _noise_frames(count: int = 4) -> list:
+    rng = np.random.default_rng(0)
+    return [rng.integers(0, 256, (120, 160), dtype=np.uint8) for _ in range(count)]
+
+
+def test_the_ceiling_judges_the_rate_from_the_third_gap():
+    """CEILING_MIN_GAPS: the first three frames of a 60 fps stream are all stepped (the rate
+    not judged yet), the fourth, in the third frame's cell, is the first held; then one in two.
+    A model that judged later stepped more of a new owner's first frames than it counts."""
+    noise = _noise_frames()
+    model = ASNN("default")
+    _, stepped = _stepped(model, [noise[k % 4] for k in range(12)],
+                          [1000.0 + k / 60.0 for k in range(12)])
+    assert stepped == [0, 1, 2, 4, 6, 8, 10]
+    assert model.ceiling_held == 5
+
+
+def test_a_fast_camera_that_drops_a_frame_now_and_then_keeps_its_ceiling():
+    """The rate is the median of the last gaps: a 60 fps camera that loses one frame in ten
+    (a 33 ms gap among 17 ms ones) is still stepped near 30 fps; a rate judged on the longest
+    gap lifted the ceiling for 15 frames after each loss, that is for good."""
+    noise = _noise_frames()
+    times = [1000.0 + k / 60.0 for k in range(300) if k % 10 != 5]
+    model = ASNN("default")
+    _stepped(model, [noise[k % 4] for k in range(len(times))], times)
+    assert model.ceiling_held >= 0.4 * len(times)
+
+
+def test_untimed_frames_are_never_held_whatever_the_nominal_period():
+    """Untimed frames are all stepped (params.max_step_rate): even where the preset's
+    nominal period (dt) is that of a camera above the ceiling."""
+    noise = _noise_frames()
+    model = ASNN(preset("default", dt=1 / 60))
+    for k in range(30):
+        model.step(noise[k % 4])
+    assert model.ceiling_held == 0 and not model.repeated
+
+
+def test_untimed_frames_amid_timed_ones_are_stepped():
+    """A stream whose times come and go (an untimed frame among timed ones, step(frame) then
+    step(frame, t)) is stepped, not broken: the untimed frame is not held and the timed ones
+    after it are judged from the times they have."""
+    noise = _noise_frames()
+    model = ASNN("default")
+    for k in range(10):
+        model.step(noise[k % 4], 1000.0 + k / 60.0)
+    model.step(noise[2])
+    assert not model.repeated
+    for k in range(11, 20):
+        model.step(noise[k % 4], 1000.0 + k / 60.0)
+    assert model.ceiling_held >= 7
+
+
+def test_a_reset_or_a_stalled_clock_judges_the_rate_afresh_as_a_new_model_does():
+    """After reset(), and after a gap the model cannot time (a stall over MAX_FRAME_GAP_S, a
+    clock that jumped), the ceiling judges the camera's rate anew: the model steps and holds
+    the frames a model started there does, and counts its held frames from the new stream
+    (what the worker's warm-up reads after a reset). Gaps or a count kept across them made a
+    model reset for a new stream hold frames a fresh one steps, and read its warm-up short."""
+    noise = _noise_frames()
+    frames = [noise[k % 4] for k in range(40)]
+    times = [1000.0 + k / 60.0 for k in range(40)]
+    fresh = ASNN("default")
+    _, expected = _stepped(fresh, frames[1:], times[1:])
+    model = ASNN("default")
+    _stepped(model, frames, [t - 50.0 for t in times])  # an earlier stream
+    model.reset()
+    _, stepped = _stepped(model, frames[1:], times[1:])
+    assert stepped == expected and model.ceiling_held == fresh.ceiling_held
+    stalled = ASNN("default")
+    _stepped(stalled, frames[:20], [t - 5.0 for t in times[:20]])  # 5 s before the others
+    _, stepped = _stepped(stalled, frames[1:], times[1:])
+    assert stepped == expected
+
+
+def test_a_fast_camera_s_repeated_frames_held_by_the_ceiling_count_as_held():
+    """A 30 fps video up-sampled to 60 fps (each frame sent twice): the ceiling holds every
+    second frame before the repeat test sees it, so the copies count among the frames held and
+    the warm-up counts the frames stepped (half of them); as repeats they counted as steps."""
+    noise = _noise_frames()
+    model = ASNN("default")
+    _stepped(model, [noise[(k // 2) % 4] for k in range(100)],
+             [1000.0 + k / 60.0 for k in range(100)])
+    assert model.ceiling_held >= 100 // 2 - 2

@@ -845,3 +845,127 @@ def test_a_frame_refused_as_it_is_processed_does_not_break_its_robot_s_stream(lo
     stats = core.stats()
     assert stats["invalid"] == {"bad-image": 1} and stats["intrusions"] == 0
     assert stats["resets"] == {} and not core.status()["robots"]["r1"]["contested"]
+
+
+@pytest.mark.parametrize("shape, taken", [((31, 31), True), ((30, 128), False),
+                                          ((128, 30), False)])
+def test_a_frame_is_refused_on_arrival_only_when_a_side_is_below_the_model_s_kernels(
+        looming, shape, taken):
+    """The check on arrival is the model's own (min_side: the default's 31 pixels), on both
+    sides: a frame as small as the kernels is the model's to take, and one too short or too
+    narrow (a 320x20 strip as much as a 20x20 thumbnail) is refused before it can start a
+    stream and reset the robot's model."""
+    core = WorkerCore()
+    assert core.min_side == 31
+    frame = looming.frames[0][:shape[0], :shape[1]]
+    if taken:
+        response = feed(core, "r1", frame, 0)
+        assert response is not None and core.stats()["invalid"] == {}
+    else:
+        assert core.offer("asnn/r1/frame", payload(frame, 0)) is None
+        assert core.stats()["invalid"] == {"frame-rejected": 1} and core.take(timeout=0) is None
+
+
+def test_a_robot_s_rate_is_unknown_from_the_frame_its_untimed_stamps_are_logged(caplog,
+                                                                                looming):
+    """The fps a robot reports turns None on the frame the worker logs its stamps as
+    untimed (PERIOD_FRAMES untimed gaps in a row), not one frame later: until then it is the
+    rate of the stamps before."""
+    core = WorkerCore()
+    stamps = [k * 0.05 for k in range(8)] + [0.35 + k * 50.0 for k in range(1, 6)]
+    fps = []
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for seq, stamp in enumerate(stamps):
+            feed(core, "r1", looming.frames[seq], seq, stamp=stamp)
+            fps.append(core.status()["robots"]["r1"]["fps"])
+            logged = any("stamps are" in r.getMessage() for r in caplog.records)
+            assert seq == 0 or (fps[-1] is None) == logged, seq
+    assert fps[7] == 20.0 and fps[-2] is not None and fps[-1] is None
+
+
+class _Refusing(ASNN):
+    """The ASNN model, refusing a white frame (FrameError) as a model refuses a frame it
+    cannot take."""
+
+    resets = 0
+
+    def reset(self):
+        type(self).resets += 1
+        super().reset()
+
+    def step(self, frame, t=None):
+        from asnn.frames import FrameError
+
+        if frame.min() == 255:
+            raise FrameError("a white frame")
+        return super().step(frame, t)
+
+
+def test_a_frame_the_model_refuses_after_a_reset_for_it_starts_the_next_response_afresh(
+        looming, monkeypatch):
+    """A frame that began a stream (another size) resets the robot's model and is then
+    refused by it: the frames after it continue the stream before it (no second reset, no
+    intrusion), and the first response says the model starts afresh (stream_frames 1), as it
+    does: it counted on from the stream before, from a model that had forgotten it."""
+    import service.core
+
+    monkeypatch.setattr(service.core, "make_detector", lambda model, params: _Refusing(params))
+    monkeypatch.setattr(_Refusing, "resets", 0)
+    core = WorkerCore()
+    for k in range(10):
+        feed(core, "r1", looming.frames[k], k)
+    made = _Refusing.resets  # each model resets itself as it is made
+    white = np.full((64, 96), 255, np.uint8)
+    assert feed(core, "r1", white, 10) is None
+    responses = [feed(core, "r1", looming.frames[k], k) for k in range(11, 16)]
+    assert [r.stream_frames for r in responses] == [1, 2, 3, 4, 5]
+    stats = core.stats()
+    assert stats["invalid"] == {"frame-rejected": 1} and sum(stats["resets"].values()) == 1
+    assert _Refusing.resets == made + 1 and stats["intrusions"] == 0
+
+
+def _corrupt_png(image, seq, stamp):
+    """A png frame whose header is whole (its size that of ``image``) and whose pixels do not
+    decode (bad-image when it is processed)."""
+    data = bytearray(encode_image(image, "png"))
+    data[data.find(b"IDAT") + 8] ^= 0xFF
+    h, w = image.shape[:2]
+    return encode(Frame(seq=seq, stamp=stamp, width=w, height=h, format="png", data=bytes(data)))
+
+
+def test_a_frame_refused_as_it_is_processed_in_a_stream_s_middle_leaves_it_alone(looming):
+    """Only a refused frame that began a stream on its own gives the robot back the stream
+    before it: one refused amid a stream that followed a restart (a camera that came back at
+    another size) leaves that stream, whose frames go on without a reset or an intrusion."""
+    core = WorkerCore()
+    for k in range(5):
+        feed(core, "r1", looming.frames[k], k)
+    small = [frame[:96, :112] for frame in looming.frames]
+    for k in range(5, 10):
+        feed(core, "r1", small[k], k)
+    assert core.offer("asnn/r1/frame", _corrupt_png(small[10], 10, 0.5)) == "r1"
+    assert core.process(core.take()) is None
+    responses = [feed(core, "r1", small[k], k) for k in range(11, 15)]
+    assert [r.stream_frames for r in responses] == [6, 7, 8, 9]
+    stats = core.stats()
+    assert stats["invalid"] == {"bad-image": 1} and sum(stats["resets"].values()) == 1
+    assert stats["intrusions"] == 0
+
+
+def test_a_frame_refused_after_a_new_stream_arrived_leaves_the_new_stream_alone(looming):
+    """A frame of a robot's stream refused as it is processed while the camera's next frame,
+    already arrived, began another stream (a restart at another size): that stream stays the
+    robot's. Given back the one before, its next frames broke it again (a second reset)."""
+    core = WorkerCore()
+    for k in range(10):
+        feed(core, "r1", looming.frames[k], k)
+    assert core.offer("asnn/r1/frame", _corrupt_png(looming.frames[10], 10, 0.5)) == "r1"
+    job = core.take()
+    small = [frame[:96, :112] for frame in looming.frames]
+    assert core.offer("asnn/r1/frame", payload(small[11], 11)) == "r1"
+    assert core.process(job) is None
+    responses = [core.process(core.take())]
+    responses += [feed(core, "r1", small[k], k) for k in range(12, 15)]
+    assert [r.stream_frames for r in responses] == [1, 2, 3, 4]
+    stats = core.stats()
+    assert sum(stats["resets"].values()) == 1 and stats["intrusions"] == 0
