@@ -100,7 +100,7 @@ class ASNNParams(BaseModel):
     max_step_rate: float | None = Field(
         None, ge=1.0, le=1000.0,
         description="frame-rate ceiling, frames a second: a camera faster than 1.2 times this "
-        "(the median gap between its last 15 frames' times; 36 fps at 30) is stepped at about "
+        "(the mean gap between its last 15 frames' times; 36 fps at 30) is stepped at about "
         "this rate. Its frames are taken on a grid of 1 / max_step_rate seconds of its own clock, "
         "the first frame in each cell; the others are held (the state kept, the previous "
         "response repeated). The retina steps once per frame whatever the time between frames, "
@@ -579,11 +579,11 @@ SLOW_NOTE = (f"ASNN loses hits below {SLOW_FPS:g} "
 # a stall: the nominal period instead; stamps a subnormal number apart made frame counts of
 # seconds over the period infinite)
 PERIOD_FRAMES = 5
-# the frame-rate ceiling (max_step_rate, r) holds frames of a camera whose median gap over the
+# the frame-rate ceiling (max_step_rate, r) holds frames of a camera whose mean gap over the
 # last CEILING_GAPS frames (from CEILING_MIN_GAPS on) is below 1 / (CEILING_MARGIN r): 36 fps at
-# 30, so that a 30 fps camera whose stamps jitter by 5 ms has none held, and a 40 fps one is
-# stepped near 30; a fresh model (a worker taking a robot over) judges the rate within a few
-# frames, and from then on steps the frames the old owner steps
+# 30, so that a 30 fps camera whose stamps jitter by 5 ms, or come in pairs, has none held, and
+# a 40 fps one is stepped near 30; a fresh model (a worker taking a robot over) judges the rate
+# within a few frames, and from then on steps the frames the old owner steps
 CEILING_GAPS = 15
 CEILING_MIN_GAPS = 3
 CEILING_MARGIN = 1.2

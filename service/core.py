@@ -252,7 +252,7 @@ class _Robot:
     previous: _Stream | None = None  # the stream the latest break replaced
     streams: int = 0  # streams started
     processed_stream: int | None = None  # number of the stream the model state belongs to
-    stepped: int = 0  # frames the model state has stepped since it was (re)started
+    stepped: int = 0  # frames processed in the model's current stream, held ones included
     # when a second publisher's frame on its key last arrived (None: never), found by an
     # intrusion or refused as one: it is *contested* for CONTESTED_FOR_S after
     intruder_seen: float | None = None
@@ -796,7 +796,7 @@ class WorkerCore:
                                  preset=self.preset, worker=self.worker_id,
                                  latency_ms=(self.clock() - job.received) * 1e3,
                                  dropped=job.dropped, model_ms=(self.clock() - started) * 1e3,
-                                 id_base=state.id_base, stream_frames=state.stepped)
+                                 id_base=state.id_base, stream_frames=state.model_steps)
         with self._lock:
             self._stats.processed += 1
             self._stats.warnings += response.collision

@@ -928,3 +928,34 @@ def test_a_fast_camera_s_repeated_frames_held_by_the_ceiling_count_as_held():
     _stepped(model, [noise[(k // 2) % 4] for k in range(100)],
              [1000.0 + k / 60.0 for k in range(100)])
     assert model.ceiling_held >= 100 // 2 - 2
+
+
+@pytest.mark.parametrize("fps", [20.0, 25.0, 30.0])
+def test_a_camera_read_two_frames_at_a_time_has_no_frame_held(fps):
+    """A 60 fps trial: a camera stamped as its frames are read, two at a time (gaps of 4 ms
+    and 2 / fps - 4 ms), had a median gap of 4 ms: half its frames were held and a 20 fps
+    camera was stepped at 10, below what the default is made for. The ceiling judges the rate
+    on the mean gap, the camera's own."""
+    rng = np.random.default_rng(5)
+    frames = [rng.integers(0, 256, (120, 160), dtype=np.uint8) for _ in range(4)]
+    model = ASNN("default")
+    t = 100.0
+    for k in range(120):
+        model.step(frames[k % 4], t)
+        t += 0.004 if k % 2 == 0 else 2.0 / fps - 0.004
+    assert model.ceiling_held == 0
+
+
+def test_frames_delivered_twice_keep_a_fast_camera_s_ceiling(loom_60fps):
+    """A 60 fps trial: every frame delivered twice with its stamp (a bag's stamp that went back
+    is retimed to the latest, too) cleared the rate's history at each zero gap, so the ceiling
+    never held a frame and the default warned as late as stepped at every frame. A frame at the
+    same instant is held while the camera is fast, and the distinct frames are stepped as
+    without the copies."""
+    frames = loom_60fps.frames
+    once, twice = ASNN("default"), ASNN("default")
+    _, stepped = _stepped(once, frames, [k / 60.0 for k in range(len(frames))])
+    doubled = [f for f in frames for _ in range(2)]
+    _, stepped_twice = _stepped(twice, doubled, [k // 2 / 60.0 for k in range(len(doubled))])
+    assert [k // 2 for k in stepped_twice if k >= 12] == [k for k in stepped if k >= 6]
+    assert twice.ceiling_held >= len(doubled) * 3 // 4 - 4

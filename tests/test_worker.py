@@ -969,3 +969,16 @@ def test_a_frame_refused_after_a_new_stream_arrived_leaves_the_new_stream_alone(
     assert [r.stream_frames for r in responses] == [1, 2, 3, 4]
     stats = core.stats()
     assert sum(stats["resets"].values()) == 1 and stats["intrusions"] == 0
+
+
+def test_stream_frames_counts_the_frames_a_fast_camera_s_model_stepped(looming):
+    """A 60 fps trial: stream_frames counted the frames taken, held ones included, so a client
+    reading "30 means able to warn" trusted a 60 fps robot's model after 16 steps. It counts
+    the frames the model stepped, as the hand-over's warm-up does."""
+    core = WorkerCore()
+    responses = [feed(core, "r1", frame, k, stamp=k / 60.0)
+                 for k, frame in enumerate(looming.frames[:40])]
+    counts = [r.stream_frames for r in responses]
+    assert counts[:5] == [1, 2, 3, 3, 4]  # judged fast from the third gap: one in two held
+    assert all(b - a in (0, 1) for a, b in zip(counts, counts[1:]))
+    assert 20 <= counts[-1] <= 23 and core.status()["robots"]["r1"]["processed"] == 40
