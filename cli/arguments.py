@@ -200,6 +200,14 @@ def frame_rate(value: str) -> float:
     return number
 
 
+def frame_rates(value: str) -> tuple[float, ...]:
+    """Comma-separated frame rates (:func:`frame_rate` each), at least one, none twice."""
+    rates = tuple(frame_rate(part.strip()) for part in value.split(","))
+    if len(set(rates)) < len(rates):
+        raise argparse.ArgumentTypeError(f"a frame rate is given twice in {value!r}")
+    return rates
+
+
 def _whole(value: str, at_least: int, at_most: int | None = None) -> int:
     try:
         number = int(value)

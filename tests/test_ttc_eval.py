@@ -141,6 +141,25 @@ def test_eval_ttc_prints_the_table_and_writes_it(tmp_path, monkeypatch):
     assert results["detector"] == "asnn" and len(results["looms"]) == 2
 
 
+def test_eval_ttc_runs_the_frame_rates_asked(tmp_path, monkeypatch, capsys):
+    """--frame-rates: the same approaches at other rates (a camera faster than the default's
+    frame-rate ceiling); only with --ttc, each rate once."""
+    monkeypatch.setattr(ttc, "DEFAULT_DESIGN", SMALL)
+    out = tmp_path / "o"
+    assert main(["eval", "--ttc", "--frame-rates", "45,120", "--out", str(out)]) == 0
+    results = json.loads((out / "ttc.json").read_text())
+    assert results["design"]["frame_rates"] == [45.0, 120.0]
+    assert [loom["fps"] for loom in results["looms"]] == [45.0, 120.0]
+    assert "at 45/120 fps" in capsys.readouterr().out
+    for wrong in (["--ttc", "--frame-rates", "30,30"], ["--ttc", "--frame-rates", "0"]):
+        with pytest.raises(SystemExit) as exc:
+            main(["eval", *wrong, "--out", str(tmp_path / "x")])
+        assert exc.value.code == 2
+    assert main(["eval", "--synthetic", "--frame-rates", "40", "--out", str(tmp_path / "x")]) == 2
+    assert "--frame-rates does not go with this mode" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
 def test_eval_ttc_refuses_what_does_not_go_with_it(tmp_path, capsys):
     for misplaced in (["--detectors", "lgmd1"], ["--cases", "loom-*"], ["--warmup", "3"],
                       ["--perturb", "noise"], [str(tmp_path)]):
