@@ -100,7 +100,8 @@ class ASNNParams(BaseModel):
     max_step_rate: float | None = Field(
         None, ge=1.0, le=1000.0,
         description="frame-rate ceiling, frames a second: a camera faster than 1.2 times this "
-        "(the mean gap between its last 15 frames' times; 36 fps at 30) is stepped at about "
+        "(its last 15 frames' times: their mean gap and the median span of two gaps, halved; "
+        "36 fps at 30) is stepped at about "
         "this rate. Its frames are taken on a grid of 1 / max_step_rate seconds of its own clock, "
         "the first frame in each cell; the others are held (the state kept, the previous "
         "response repeated). The retina steps once per frame whatever the time between frames, "

@@ -188,9 +188,9 @@ def tolerance_seconds(value: str) -> float:
 
 
 def frame_rate(value: str) -> float:
-    """Frames a second, within :data:`asnn.io.video.FPS_RANGE`: beyond it no camera runs, and a
+    """Frames a second, within :data:`asnn.io.rates.FPS_RANGE`: beyond it no camera runs, and a
     video writer given such a rate (inf) may never return."""
-    from asnn.io.video import FPS_RANGE
+    from asnn.io.rates import FPS_RANGE
 
     number = _number(value)
     low, high = FPS_RANGE

@@ -258,6 +258,9 @@ class _Robot:
     intruder_seen: float | None = None
     intrusions: int = 0
     restarts: int = 0  # streams in a row that ended within SHORT_STREAM_FRAMES frames
+    # the latest intrusion: the number of the stream taken for a second publisher's, and when
+    # one was seen before it (None: never)
+    intrusion: tuple[int, float | None] | None = None
     pending: tuple[Frame, float, _Stream] | None = None  # (frame, received, its stream)
     waiting_since: int = 0  # arrival order of the first frame it has been waiting with
     dropped: int = 0  # frames replaced since the last response
@@ -591,7 +594,8 @@ class WorkerCore:
                 state.stream, state.previous = previous, current
                 return previous
             # the stream this one replaced goes on: two publishers interleave on the key
-            state.intruder_seen = received
+            state.intrusion = (current.number, state.intruder_seen)  # undone if current's
+            state.intruder_seen = received  # one frame is refused (_refuse_taken)
             state.intrusions += 1
             self._stats.intrusions += 1
             self._limited_log.warning(
@@ -851,7 +855,8 @@ class WorkerCore:
                 f"untimed:{robot}", "robot %s: its frames' stamps are %g s apart, not a frame "
                 "period the model believes (%g to %g s): the targets' time to contact is timed "
                 "at %g frames a second instead; stamps are the camera's clock in seconds "
-                "(CONTRACT.md)", robot, gap, MIN_FRAME_GAP_S, MAX_FRAME_GAP_S,
+                "(CONTRACT.md), and a camera slower than a frame a second is far below the 20 "
+                "fps the default is made for", robot, gap, MIN_FRAME_GAP_S, MAX_FRAME_GAP_S,
                 1.0 / state.detector.params.dt)
 
     def _refuse_taken(self, state: _Robot, job: Job, reason: str, detail: str) -> None:
@@ -868,6 +873,16 @@ class WorkerCore:
                 # the frames after it continue the stream before it, as if it had not come
                 # (not a new stream that the next frame would break as an intruder's)
                 state.stream, state.previous = state.previous, None
+            elif (state.previous is not None and state.previous.number == job.stream
+                  and state.previous.frames == 1 and state.intrusion is not None
+                  and state.intrusion[0] == job.stream):
+                # the same, with the camera's next frame come while this one waited or was
+                # processed: it was taken for a second publisher's interleaving (the robot
+                # marked contested, so that its camera's restart would have been refused)
+                state.previous, state.intruder_seen = None, state.intrusion[1]
+                state.intrusion = None
+                state.intrusions -= 1
+                self._stats.intrusions -= 1
         self._reject(reason, detail, keys.frame_key(job.robot, self.prefix))
 
     # ------------------------------------------------------------------ housekeeping

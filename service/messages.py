@@ -417,10 +417,10 @@ def decode_refusal(payload: bytes, robot: str | None = None) -> Refusal:
 
 def _unpack(payload: bytes, what: str) -> dict[str, Any]:
     obj = unpack_map(payload, what)
-    other = next((key for key in obj if not isinstance(key, str)), None)
-    if other is not None:  # a packer that writes keys as bin read as "no version" before
-        raise MessageError("invalid-field", f"{what}'s keys must be msgpack strings (str), got "
-                           f"the {type(other).__name__} key {other!r:.60}")
+    for key in obj:  # a packer that writes keys as bin was read as "no version" before
+        if not isinstance(key, str):
+            raise MessageError("invalid-field", f"{what}'s keys must be msgpack strings (str), "
+                               f"got the {type(key).__name__} key {key!r:.60}")
     if "v" not in obj:  # CONTRACT.md lists it in every message: a message without it is invalid
         raise MessageError("missing-field", f"{what} without its version 'v'")
     version = obj["v"]

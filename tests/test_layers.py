@@ -183,3 +183,8 @@ def test_the_package_names_what_it_imports_when_first_asked_for():
     from asnn.targets import Target
 
     assert asnn.Target is Target
+    # its submodules too, as when the package imported them all (a review: ``asnn.model``
+    # raised AttributeError once the package imported only the parameters)
+    import asnn.model
+
+    assert asnn.model is asnn.__getattr__("model") and asnn.retina.__name__ == "asnn.retina"

@@ -72,6 +72,7 @@ def test_unknown_fields_are_ignored():
     # keys written as bin (a packer's raw strings) were read as a frame without 'v'
     (msgpack.packb({k.encode(): v for k, v in frame_dict().items()}), "invalid-field"),
     (msgpack.packb({**frame_dict(), 7: "seven"}), "invalid-field"),
+    (msgpack.packb({**frame_dict(), None: "nil"}), "invalid-field"),  # a review: let through
     (msgpack.packb({**frame_dict(), 0: "zero"}), "invalid-field"),  # a falsy key is one too
     (msgpack.packb(frame_dict(v=2)), "unsupported-version"),
     (msgpack.packb(frame_dict(v=True)), "unsupported-version"),

@@ -812,7 +812,7 @@ def test_a_fast_camera_is_stepped_on_a_grid_its_stamps_fix(loom_60fps):
 
 @pytest.mark.parametrize("fps", [25.0, 30.0])
 def test_a_camera_at_or_below_30_fps_whose_stamps_jitter_has_no_frame_held(fps):
-    """The ceiling judges a camera's rate on the median of many gaps: a 30 fps camera whose
+    """The ceiling judges a camera's rate over many gaps: a 30 fps camera whose
     stamps jitter by 5 ms, with a read 15 ms late now and then (the next on time, 18 ms after
     it), has every frame stepped; a hold decided on one short gap answered distinct frames of
     such a camera as repeats. A 40 fps camera is stepped near 30 fps (a frame in four held)."""
@@ -862,7 +862,7 @@ def test_the_ceiling_judges_the_rate_from_the_third_gap():
 
 
 def test_a_fast_camera_that_drops_a_frame_now_and_then_keeps_its_ceiling():
-    """The rate is the median of the last gaps: a 60 fps camera that loses one frame in ten
+    """The rate is judged over the last gaps: a 60 fps camera that loses one frame in ten
     (a 33 ms gap among 17 ms ones) is still stepped near 30 fps; a rate judged on the longest
     gap lifted the ceiling for 15 frames after each loss, that is for good."""
     noise = _noise_frames()

@@ -982,3 +982,26 @@ def test_stream_frames_counts_the_frames_a_fast_camera_s_model_stepped(looming):
     assert counts[:5] == [1, 2, 3, 3, 4]  # judged fast from the third gap: one in two held
     assert all(b - a in (0, 1) for a, b in zip(counts, counts[1:]))
     assert 20 <= counts[-1] <= 23 and core.status()["robots"]["r1"]["processed"] == 40
+
+
+def test_a_frame_refused_as_it_is_processed_while_the_next_one_arrives_leaves_no_contest(
+        looming):
+    """A review: the camera's next frame, come while a frame that began a stream of its own (a
+    header of another size, pixels that do not decode) was being processed, was taken for a
+    second publisher's interleaving and marked the robot contested; once that frame is refused,
+    the intrusion is undone, and the stream goes on as if it had not come."""
+    core = WorkerCore()
+    for k in range(10):
+        feed(core, "r1", looming.frames[k], k)
+    assert core.offer("asnn/r1/frame", _corrupt_png(looming.frames[10][:96, :112], 10, 0.5))
+    job = core.take()
+    assert core.offer("asnn/r1/frame", payload(looming.frames[11], 11)) == "r1"
+    assert core.stats()["intrusions"] == 1  # as it arrived, it looked like one
+    assert core.process(job) is None
+    responses = [core.process(core.take())] + [feed(core, "r1", looming.frames[k], k)
+                                               for k in range(12, 15)]
+    assert [r.stream_frames for r in responses] == [11, 12, 13, 14]
+    stats = core.stats()
+    assert stats["intrusions"] == 0 and stats["resets"] == {}
+    robot = core.status()["robots"]["r1"]
+    assert not robot["contested"] and robot["intrusions"] == 0
