@@ -101,15 +101,14 @@ class ASNNParams(BaseModel):
         None, ge=1.0, le=1000.0,
         description="frame-rate ceiling, frames a second: a camera faster than 1.2 times this "
         "(its last 15 frames' times: their mean gap and the median span of two gaps, halved; "
-        "36 fps at 30) is stepped at about "
-        "this rate. Its frames are taken on a grid of 1 / max_step_rate seconds of its own clock, "
-        "the first frame in each cell; the others are held (the state kept, the previous "
-        "response repeated). The retina steps once per frame whatever the time between frames, "
-        "and at 60 fps a far object's change per frame is a third of what the added stages were "
-        "set on (20-30 fps). The grid is fixed by the stamps alone, so two models given the "
-        "same frames from different starts step the same frames once both have judged the "
-        "rate (a hand-over). "
-        "Untimed frames, and slower cameras, are all stepped. None: every frame")
+        "36 fps at 30) is stepped at about this rate. Its frames are taken on a grid of "
+        "1 / max_step_rate seconds of its own clock, the first frame in each cell; the others "
+        "are held (the state kept, the previous response repeated). The retina steps once per "
+        "frame whatever the time between frames, and at 60 fps a far object's change per frame "
+        "is a third of what the added stages were set on (20-30 fps). The grid is fixed by the "
+        "stamps alone, so two models given the same frames from different starts step the same "
+        "frames once both have judged the rate (a hand-over). Untimed frames, and slower "
+        "cameras, are all stepped. None: every frame")
 
     # --- input scale (robust addition) ---
     max_width: int | None = Field(

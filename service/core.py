@@ -618,8 +618,9 @@ class WorkerCore:
             if state.restarts >= RESTARTS_WARNED:
                 self._limited_log.warning(
                     f"restarts:{robot}", "robot %s: its last %d streams each ended within %d "
-                    "frames (the latest: %s): its model is reset every few frames and cannot warn; a "
-                    "camera's seq must grow from frame to frame and its stamp must not go back",
+                    "frames (the latest: %s): its model is reset every few frames and cannot "
+                    "warn; a camera's seq must grow from frame to frame and its stamp must not "
+                    "go back",
                     robot, state.restarts, SHORT_STREAM_FRAMES, broken)
         if broken == "seq-gap":
             # frames lost on the way (a link that drops, a camera faster than its link or its
