@@ -528,7 +528,9 @@ class ASNN:
             self._gaps.clear()
             return False
         self._gaps.append(gap)
-        return self._fast(rate) and _grid_cell(stamp, rate) == _grid_cell(previous, rate)
+        # the cells first: a camera at or below the grid's rate has its frames in cells of
+        # their own, and its rate need not be judged at every frame
+        return _grid_cell(stamp, rate) == _grid_cell(previous, rate) and self._fast(rate)
 
     def _fast(self, rate: float) -> bool:
         """Whether the camera is faster than :data:`CEILING_MARGIN` times ``rate``: over the
