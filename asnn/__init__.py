@@ -13,7 +13,7 @@ __all__ = ["ASNN", "ASNNParams", "FrameError", "Maps", "Response", "Target", "Tr
 __version__ = "0.1.0"
 
 # the names above imported from their module when first asked for (PEP 562)
-_MODULE_OF = {"ASNN": "model", "FrameError": "frames", "Maps": "response", "Response": "response",
+_MODULE_OF = {"ASNN": "model", "FrameError": "errors", "Maps": "response", "Response": "response",
               "TrackReport": "response", "Target": "targets"}
 
 

@@ -7,14 +7,12 @@ import numbers
 import cv2
 import numpy as np
 
+from .errors import FrameError
+
 __all__ = ["FrameError", "LEVELS", "check_frame", "frame_time", "luma", "to_luminance"]
 
 _LUMA = np.array([0.114, 0.587, 0.299])  # B, G, R weights of OpenCV's BGR -> gray
 LEVELS = np.arange(256) / 255.0  # uint8 value -> luminance: one table look-up per pixel
-
-
-class FrameError(ValueError):
-    """A frame the model cannot take: wrong type, shape, range or size."""
 
 
 def to_luminance(frame: np.ndarray, min_side: int,

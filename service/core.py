@@ -119,6 +119,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from asnn.detectors import available_cores, make_detector
+from asnn.errors import FrameError
 from asnn.params import (DEFAULT_PRESET, MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, PERIOD_FRAMES,
                          SLOW_FPS, preset_from_spec, timed_gap)
 
@@ -307,20 +308,23 @@ class _Robot:
         None while the stamps tell no rate (the last PERIOD_FRAMES gaps each under
         MIN_FRAME_GAP_S or over MAX_FRAME_GAP_S: the model times them at its nominal period,
         which is not the camera's)."""
-        periods = self.model_periods
-        if not periods or self.untimed_frames >= PERIOD_FRAMES:
-            return None
-        return round(1.0 / statistics.median(periods), 1)
+        return None if self.untimed_frames >= PERIOD_FRAMES else _rate(self.model_periods)
 
     @property
     def processed_fps(self) -> float | None:
         """Frames a second the worker processes for it, repeats included: the median of
         :attr:`periods`."""
-        return round(1.0 / statistics.median(self.periods), 1) if self.periods else None
+        return _rate(self.periods)
 
     def contested(self, now: float) -> bool:
         """Whether a second publisher's frame arrived on its key within CONTESTED_FOR_S."""
         return self.intruder_seen is not None and now - self.intruder_seen <= CONTESTED_FOR_S
+
+
+def _rate(periods) -> float | None:
+    """Frames a second from the gaps between frames, seconds: the reciprocal of their median,
+    to a tenth (None without a gap)."""
+    return round(1.0 / statistics.median(periods), 1) if periods else None
 
 
 @dataclass(frozen=True)
@@ -730,8 +734,6 @@ class WorkerCore:
                         self._ready.notify()
 
     def _process(self, job: Job) -> Response | None:
-        from asnn.frames import FrameError  # with the model (OpenCV): not ``asnn status``'s
-
         frame = job.frame
         with self._lock:
             state = self._robots.get(job.robot)
