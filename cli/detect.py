@@ -30,8 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="any video OpenCV reads, or a ROS 2 bag: BAG.mcap[#TOPIC] (the 'ros' "
                         "extra)")
     p.add_argument("--topic", metavar="NAME",
-                   help="image topic of a bag (sensor_msgs/msg/Image or CompressedImage); "
-                        "needed when it has several")
+                   help="image topic of a bag (sensor_msgs/msg/Image or CompressedImage, "
+                        "foxglove.RawImage or CompressedImage); needed when it has several")
     p.add_argument("--model", choices=MODELS, default="asnn",
                    help="detector: ASNN or an LGMD baseline (default: %(default)s)")
     p.add_argument("--preset", type=preset_spec, default="default", metavar="NAME[/FIELD=VALUE...]",

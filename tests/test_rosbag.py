@@ -403,6 +403,172 @@ def test_a_summary_whose_statistics_give_no_message_counts_does_not_empty_the_to
     assert len(detect_records(path)) == 10
 
 
+# --------------------------------------------------------------------------- Foxglove's images
+
+def write_foxglove(path, topics: dict[str, list], fps: float = 20.0):
+    """An MCAP as Foxglove's SDK writes one: {topic: [foxglove.RawImage or CompressedImage]},
+    each message logged at its frame's time."""
+    foxglove = pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    from foxglove.channels import CompressedImageChannel, RawImageChannel
+
+    context = foxglove.Context()  # only these channels reach this file
+    with foxglove.open_mcap(str(path), allow_overwrite=True, context=context):
+        for topic, messages in topics.items():
+            kind = RawImageChannel if type(messages[0]).__name__ == "RawImage" else \
+                CompressedImageChannel
+            channel = kind(topic, context=context)
+            for index, message in enumerate(messages):
+                channel.log(message, log_time=START_NS + round(index * 1e9 / fps))
+            channel.close()
+    return path
+
+
+def fox_stamp(index: int, fps: float = 20.0):
+    from foxglove.messages import Timestamp
+
+    ns = START_NS + round(index * 1e9 / fps)
+    return Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
+
+
+def test_foxglove_raw_and_compressed_images_equal_the_lossless_video(tmp_path, looming):
+    """Foxglove's recorders (and detect --mcap) write foxglove.RawImage / CompressedImage in
+    protobuf: read by their field numbers, rows padded, timed by their timestamps."""
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    from foxglove.messages import CompressedImage, RawImage
+
+    tint = np.array([5, 17, 29])
+    frames = [np.clip(np.dstack([f, f, f]).astype(int) - tint, 0, 255).astype(np.uint8)
+              for f in looming.frames]
+    h, w = frames[0].shape[:2]
+    raw = []
+    for i, f in enumerate(frames):
+        rows = np.zeros((h, w * 3 + 4), np.uint8)  # rgb, each row padded by 4 bytes
+        rows[:, :w * 3] = f[..., ::-1].reshape(h, -1)
+        raw.append(RawImage(timestamp=fox_stamp(i), frame_id="front", width=w, height=h,
+                            encoding="rgb8", step=w * 3 + 4, data=rows.tobytes()))
+    png = [CompressedImage(timestamp=fox_stamp(i), frame_id="front", format="png",
+                           data=cv2.imencode(".png", f)[1].tobytes())
+           for i, f in enumerate(frames)]
+    bag = write_foxglove(tmp_path / "fox.mcap", {"/fox/raw": raw, "/fox/png": png})
+    expected = detect_records(write_ffv1(frames, tmp_path / "colour.avi"))
+    assert detect_records(bag, "--topic", "/fox/raw") == expected
+    assert detect_records(f"{bag}#/fox/png") == expected
+    assert any(r["collision"] for r in expected)  # the comparison is not empty
+    source = open_source(f"{bag}#/fox/raw")
+    assert source.frame_id == "front" and source.start_ns == START_NS
+
+
+def test_detect_reads_back_the_mcap_it_wrote(tmp_path, looming):
+    """detect --mcap writes the frames as foxglove.CompressedImage (jpeg): its own output is a
+    source again, at the same times, warning where the first run warned (give or take a frame:
+    jpeg)."""
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    frames = list(looming.frames)
+    bag = write_messages(tmp_path / "run.mcap", {"/camera/image_raw": (rosbag.IMAGE, [
+        raw_message(f, "mono8", i) for i, f in enumerate(frames)])})
+    out = tmp_path / "out.mcap"
+    first = detect_records(bag, "--mcap", out)
+    again = detect_records(out)
+    assert [r["t"] for r in again] == [r["t"] for r in first]
+    warned = [r["frame"] for r in first if r["collision"]]
+    rewarned = [r["frame"] for r in again if r["collision"]]
+    assert warned and rewarned and abs(rewarned[0] - warned[0]) <= 1
+    assert abs(len(rewarned) - len(warned)) <= 2
+
+
+def test_a_foxglove_image_without_a_timestamp_is_timed_by_its_log_time(tmp_path, looming):
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    from foxglove.messages import RawImage
+
+    h, w = looming.frames[0].shape
+    messages = [RawImage(width=w, height=h, encoding="mono8", step=w, data=f.tobytes())
+                for f in looming.frames[:4]]  # no timestamp: protobuf's zero
+    bag = write_foxglove(tmp_path / "unstamped.mcap", {"/c": messages}, fps=10.0)
+    assert [r["t"] for r in detect_records(bag)] == [0.0, 0.1, 0.2, 0.3]
+
+
+def test_the_protobuf_reader_skips_unknown_fields_and_refuses_what_is_no_message():
+    from asnn.io.foxglove_images import (ProtobufError, decode_compressed_image,
+                                         decode_raw_image)
+
+    def key(number, wire):
+        return bytes([number << 3 | wire])
+
+    def text(number, value: bytes):
+        return key(number, 2) + bytes([len(value)]) + value
+
+    stamp = key(1, 0) + bytes([7]) + key(2, 0) + bytes([9])  # 7 s, 9 ns
+    message = (text(1, stamp) + key(15, 0) + bytes([0x96, 0x01])  # an unknown varint
+               + key(14, 1) + bytes(8) + key(13, 5) + bytes(4)  # unknown fixed64, fixed32
+               + text(3, b"jpeg") + text(3, b"png") + text(2, b"\x89PNG") + text(4, b"cam"))
+    decoded = decode_compressed_image(message)
+    assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == (7, 9)
+    assert decoded.format == "png" and bytes(decoded.data) == b"\x89PNG"  # the last one wins
+    assert decoded.header.frame_id == "cam"
+    raw = decode_raw_image(key(2, 5) + (640).to_bytes(4, "little") + key(3, 5)
+                           + (480).to_bytes(4, "little") + text(4, b"mono8"))
+    assert (raw.width, raw.height, raw.step, raw.encoding, bytes(raw.data)) == (
+        640, 480, 0, "mono8", b"")  # absent fields: protobuf's defaults
+    negative = key(2, 0) + bytes([0xFF] * 9 + [0x01])  # nanos -1, as int32 goes on the wire
+    refused = {
+        "group": key(3, 3), "cut varint": key(15, 0) + b"\x80",
+        "endless varint": key(15, 0) + b"\x80" * 11, "cut bytes": key(2, 2) + b"\x05abc",
+        "not utf-8": text(3, b"\xff\xfe"), "nanos out of range": text(1, negative),
+        "wire type": key(2, 0) + b"\x01"}
+    for what, data in refused.items():
+        with pytest.raises(ProtobufError):
+            decode_compressed_image(data)
+            pytest.fail(what)
+    # a name of 20 001 bytes: its first 4096 characters kept, read from its first 16 384
+    # bytes, which cut a two-byte character in half (left out, not an error)
+    long = "a" + "\u00e9" * 10000
+    length = bytes([0xA1, 0x9C, 0x01])  # 20 001 as a varint
+    assert decode_compressed_image(key(3, 2) + length + long.encode()).format == long[:4096]
+
+
+def test_bad_foxglove_messages_are_one_line_errors(tmp_path, looming):
+    """Bytes that are no foxglove message of the type, or Foxglove's images in another
+    encoding than protobuf: refused in one line, exit 2, the reason named."""
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    from foxglove.messages import CompressedImage, RawImage
+    from mcap.writer import Writer
+
+    h, w = looming.frames[0].shape
+    good = RawImage(timestamp=fox_stamp(0), width=w, height=h, encoding="mono8", step=w,
+                    data=looming.frames[0].tobytes()).encode()
+
+    def bag(name, schema, encoding, message_encoding, payloads):
+        path = tmp_path / name
+        with open(path, "wb") as fh:
+            writer = Writer(fh)
+            writer.start(profile="", library="test")
+            sid = writer.register_schema(schema, encoding, b"")
+            cid = writer.register_channel("/c", message_encoding, sid)
+            for i, payload in enumerate(payloads):
+                writer.add_message(cid, log_time=START_NS + i, data=payload,
+                                   publish_time=START_NS + i)
+            writer.finish()
+        return path
+
+    cut = bag("cut.mcap", "foxglove.RawImage", "protobuf", "protobuf", [good[:-10]])
+    assert "does not decode (ProtobufError" in detect_fails(cut)
+    wrong = bytearray(good)
+    wrong[0] = (1 << 3) | 5  # the timestamp as a fixed32: not a RawImage
+    assert "wire type 5" in detect_fails(
+        bag("wrong.mcap", "foxglove.RawImage", "protobuf", "protobuf", [bytes(wrong)]))
+    short = RawImage(timestamp=fox_stamp(0), width=w, height=h, encoding="mono8", step=w,
+                     data=looming.frames[0].tobytes()[:-w]).encode()
+    assert "needs" in detect_fails(
+        bag("short.mcap", "foxglove.RawImage", "protobuf", "protobuf", [short]))
+    as_json = bag("json.mcap", "foxglove.CompressedImage", "jsonschema", "json",
+                  [json.dumps({"format": "png", "data": ""}).encode()])
+    assert "Foxglove's images are read in protobuf" in detect_fails(as_json)
+    depth = CompressedImage(timestamp=fox_stamp(0), format="16UC1; compressedDepth png",
+                            data=b"x").encode()
+    assert "compressedDepth" in detect_fails(
+        bag("depth.mcap", "foxglove.CompressedImage", "protobuf", "protobuf", [depth]))
+
+
 # --------------------------------------------------------------------------- bad bags
 
 

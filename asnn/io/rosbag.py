@@ -2,7 +2,8 @@
 
 Reads ``sensor_msgs/msg/Image`` and ``sensor_msgs/msg/CompressedImage`` topics with the MCAP
 project's reader (``mcap``) and its ROS 2 decoder (``mcap-ros2-support``), the optional ``ros``
-extra. Everything read from a bag is bounded before it is allocated: the container's records,
+extra, and Foxglove's ``foxglove.RawImage`` and ``foxglove.CompressedImage`` in protobuf (what
+Foxglove's recorders and ``asnn detect --mcap`` write; :mod:`asnn.io.foxglove_images`). Everything read from a bag is bounded before it is allocated: the container's records,
 chunks and summary as :mod:`asnn.io.mcap_reader` reads them (the image topic's messages to
 :data:`~asnn.io.mcap_reader.MAX_MESSAGE_BYTES`, the others never copied), pictures to
 :data:`asnn.io.images.MAX_SIDE` per side with their pixel count checked against the data they
@@ -28,6 +29,8 @@ import numpy as np
 
 from ..params import MAX_FRAME_GAP_S
 from .files import seekable_target
+from .foxglove_images import (FOXGLOVE_COMPRESSED_IMAGE, FOXGLOVE_IMAGE_SCHEMAS,
+                              FOXGLOVE_RAW_IMAGE, decode_compressed_image, decode_raw_image)
 from .images import MAX_SIDE, ImageError, decode_encoded, to_uint8
 from .mcap_reader import (MAGIC, MAX_MESSAGE_BYTES, READ_ERRORS, TooLarge, bag_records,
                           bag_summary)
@@ -49,7 +52,8 @@ __all__ = ["BagClip", "CLOCK_RESET_FRAMES", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
-IMAGE_SCHEMAS = (IMAGE, COMPRESSED_IMAGE)
+IMAGE_SCHEMAS = (IMAGE, COMPRESSED_IMAGE, *FOXGLOVE_IMAGE_SCHEMAS)
+RAW_SCHEMAS = (IMAGE, FOXGLOVE_RAW_IMAGE)  # the others are compressed: jpeg or png
 FPS_PROBE = 30                  # frames whose stamps estimate a bag's nominal frame rate
 
 # The message definitions rosbag2 embeds as schemas (ros2msg: the type, then its dependencies).
@@ -80,6 +84,11 @@ RAW_ENCODINGS: dict[str, int] = {
     "mono8": 1, "8UC1": 1, "mono16": 2, "16UC1": 2, "bgr8": 3, "8UC3": 3, "rgb8": 3,
     "bgra8": 4, "8UC4": 4, "rgba8": 4, "yuv422": 2, "uyvy": 2, "yuv422_yuy2": 2, "yuyv": 2,
     **dict.fromkeys(_BAYER, 1)}
+
+
+# Foxglove's images, decoded by their published field numbers (protobuf, no schema text read)
+_FOXGLOVE_DECODERS = {FOXGLOVE_COMPRESSED_IMAGE: decode_compressed_image,
+                      FOXGLOVE_RAW_IMAGE: decode_raw_image}
 
 
 @dataclass(frozen=True)
@@ -326,7 +335,9 @@ class BagClip:
         The bag's files, read one after the other.
     topic : str
     schema : str
-        ``sensor_msgs/msg/Image`` or ``sensor_msgs/msg/CompressedImage``.
+        One of :data:`IMAGE_SCHEMAS`: ``sensor_msgs/msg/Image``,
+        ``sensor_msgs/msg/CompressedImage``, ``foxglove.RawImage`` or
+        ``foxglove.CompressedImage``.
     frame_count : int
         Messages on the topic, from the bag's summaries (0 when they have none).
     start_ns : int
@@ -453,9 +464,16 @@ class BagClip:
     def _decoder(self, decoders: DecoderFactory, channel: Channel,
                  schemas: dict[int, Schema]) -> Callable:
         schema = schemas.get(channel.schema_id)
-        if schema is None or schema.name not in IMAGE_SCHEMAS:
+        if schema is None or schema.name != self.schema:
             raise SourceError(f"{self.path}: topic {self._topic} changed its type to "
                               f"{_shown(_schema_name(schema)) or 'none'}", "no-topic")
+        if schema.name in FOXGLOVE_IMAGE_SCHEMAS:
+            if schema.encoding == "protobuf" and channel.message_encoding == "protobuf":
+                return _FOXGLOVE_DECODERS[schema.name]
+            raise SourceError(
+                f"{self.path}: cannot decode {self._topic} (messages in "
+                f"{_shown(channel.message_encoding)!r} with a {_shown(schema.encoding)!r} "
+                "schema); Foxglove's images are read in protobuf", "bad-schema")
         # decoded by the type's own definition, not the bag's text: a schema named Image whose
         # text declares an array of a million one-byte structures made a Python object per
         # byte (a 1.9 KB bag took 4.9 GB); a real Image's bytes are the same either way
@@ -476,7 +494,7 @@ class BagClip:
 
     def _decode(self, message, index: int) -> np.ndarray:
         try:
-            if self.schema == IMAGE:
+            if self.schema in RAW_SCHEMAS:
                 return image_from_raw(int(message.width), int(message.height),
                                       str(message.encoding), int(message.is_bigendian),
                                       int(message.step), bytes(message.data))
