@@ -345,6 +345,24 @@ def test_a_split_rosbag2_directory_is_read_part_after_part_in_numeric_order(tmp_
     assert detect_records(directory) == detect_records(whole)
 
 
+def test_a_split_bag_whose_topic_changes_its_image_type_stops_at_the_change(tmp_path, looming):
+    """The first part's type decodes the topic: a later part that records it as another image
+    type is a type change (each of its frames read as the first type was "not an Image")."""
+    directory = tmp_path / "run"
+    directory.mkdir()
+    (directory / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    start = 1_700_000_000_000_000_000
+    rosbag.write_bag(looming.frames[:3], directory / "run_0.mcap", start_ns=start)
+    rosbag.write_bag(looming.frames[3:6], directory / "run_1.mcap", format="png",
+                     start_ns=start + 3 * 50_000_000)
+    errors = []
+    read = list(open_source(str(directory), on_error=lambda reason, message: errors.append(
+        (reason, message))).frames())
+    assert len(read) == 3 and len(errors) == 1
+    assert errors[0][0] == "no-topic" and "changed its type to sensor_msgs/msg/CompressedImage" \
+        in errors[0][1]
+
+
 def test_a_rosbag2_directory_is_the_files_its_metadata_lists(tmp_path, looming):
     """A copy, a recovered file or results written beside the bag are not part of it; a split
     bag's camera may start in a later part."""
