@@ -133,8 +133,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --synthetic (or --held-out: the cases that decide which "
                         "thresholds are admissible): comma-separated patterns of case names or "
                         "groups, e.g. 'loom-*,nearmiss-*' or 'driving-*' (repeatable: the uses add "
-                        "up; default: every case); "
-                        "'extra-*' runs the extra drives outside the suite")
+                        "up; default: every case, also written 'all'); "
+                        "'extra-*' runs the extra drives outside the suite ('all,extra-*': "
+                        "both)")
     p.add_argument("--variant", type=whole, default=0, metavar="K",
                    help="with --synthetic: K >= 1 scores the same cases with fresh scene seeds "
                         "(other textures, sensor noise and roadside objects; the same geometry, "

@@ -480,6 +480,9 @@ def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins():
     for pattern in (None, "all", "driving-*", "drive-*,rear-*"):
         assert set(suite_cases(pattern)) <= set(SUITE_CASES)
     assert suite_cases("extra-*") == list(EXTRA_CASES)
+    # 'all' within a list is every suite case ('--cases all --cases extra-*' found no 'all')
+    assert suite_cases("all,extra-*") == list(SUITE_CASES) + list(EXTRA_CASES)
+    assert suite_cases(" all , halt-*") == list(SUITE_CASES)
     assert suite_cases("extra-pass") == [n for n, c in EXTRA_CASES.items()
                                          if c.group == "extra-pass"]
     scenes = {name: make_case(name) for name in EXTRA_CASES}

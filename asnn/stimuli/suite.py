@@ -739,7 +739,7 @@ def suite_cases(pattern: str | None = None) -> list[str]:
         Comma-separated shell-style patterns on the name or the group (``loom-*``,
         ``nearmiss-*,course-*``, ``driving-*``, ``extra-*``); None or ``all`` selects every
         case of the suite, not the :data:`EXTRA_CASES`, which only a pattern that matches
-        them selects.
+        them selects (``all,extra-*``: both).
 
     Raises
     ------
@@ -754,8 +754,9 @@ def suite_cases(pattern: str | None = None) -> list[str]:
         raise ValueError(f"no case pattern in {pattern!r}")
     selected = []
     for p in patterns:
-        matched = [name for name, case in CASES.items()
-                   if fnmatch.fnmatchcase(name, p) or fnmatch.fnmatchcase(case.group, p)]
+        matched = list(SUITE_CASES) if p == "all" else [
+            name for name, case in CASES.items()
+            if fnmatch.fnmatchcase(name, p) or fnmatch.fnmatchcase(case.group, p)]
         if not matched:
             raise ValueError(f"no suite case matches {p!r}")
         selected += matched
