@@ -103,13 +103,13 @@ def test_the_import_reader_resolves_relative_imports():
 # when the parser imported every command's module), OpenCV, the evaluation's tooling, and
 # matplotlib (0.2-0.6 s to import, and a writable cache folder wanted: a worker or camera
 # started under systemd's sandbox, no home, logged its font-cache complaints on every start)
-MODEL_FREE = ("numba", "cv2", "asnn.model", "asnn.evaluation.runs", "asnn.evaluation.scoring",
+MODEL_FREE = ("numba", "llvmlite", "cv2", "asnn.model", "asnn.evaluation.runs", "asnn.evaluation.scoring",
               "asnn.evaluation.perturb", "matplotlib")
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["router", "--help"], ["status", "--help"],
                                   ["alerts", "--help"], ["eval", "--help"],
-                                  ["worker", "--help"]])
+                                  ["worker", "--help"], ["detect", "--help"]])
 def test_the_parser_and_the_commands_without_a_model_load_none_of_it(argv):
     """Every command builds the whole parser: it takes its choices and defaults from modules
     that load no model (asnn.params, asnn.evaluation.options, the service's constants), and a
@@ -123,8 +123,8 @@ def test_the_parser_and_the_commands_without_a_model_load_none_of_it(argv):
             "try:\n    main.main()\nexcept SystemExit:\n    pass\n"
             "import clients.alerts, service.router, service.worker\n"
             "assert 'asnn.params' in sys.modules, 'the parser reads the presets no more'\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numba', 'cv2', "
-            "'matplotlib') or m in " + repr(MODEL_FREE) + "))")
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('numba', 'llvmlite', "
+            "'cv2', 'matplotlib') or m in " + repr(MODEL_FREE) + "))")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
                          timeout=120, check=True).stdout
     assert out.strip().splitlines()[-1] == "[]"
