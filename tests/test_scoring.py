@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from asnn.evaluation import scoring
+from asnn.evaluation import scoring, stats
 
 # fps 20: the 0.5 s tolerance is 10 frames, so the hit window of onset 20, contact 40 is [10, 42]
 COLLISION = {"file": "c.mp4", "fps": 20.0, "frames": 60, "collision": True, "onset_frame": 20,
@@ -230,25 +230,25 @@ def test_summary_of_the_warned_targets_is_over_hits():
 
 
 def test_the_wilson_interval_of_a_rate():
-    low, high = scoring.wilson_interval(5, 9)
+    low, high = stats.wilson_interval(5, 9)
     assert low == pytest.approx(0.267, abs=1e-3) and high == pytest.approx(0.812, abs=1e-3)
     # at none or all of the trials the interval still has a width, within [0, 1]
-    assert scoring.wilson_interval(0, 12) == [0.0, pytest.approx(0.243, abs=1e-3)]
-    assert scoring.wilson_interval(12, 12) == [pytest.approx(0.757, abs=1e-3), 1.0]
-    assert scoring.wilson_interval(0, 0) is None
+    assert stats.wilson_interval(0, 12) == [0.0, pytest.approx(0.243, abs=1e-3)]
+    assert stats.wilson_interval(12, 12) == [pytest.approx(0.757, abs=1e-3), 1.0]
+    assert stats.wilson_interval(0, 0) is None
     with pytest.raises(ValueError, match="0..trials"):
-        scoring.wilson_interval(5, 3)
+        stats.wilson_interval(5, 3)
     # and it narrows as the sample grows
-    assert scoring.wilson_interval(50, 90)[1] - scoring.wilson_interval(50, 90)[0] < high - low
+    assert stats.wilson_interval(50, 90)[1] - stats.wilson_interval(50, 90)[0] < high - low
 
 
 def test_mcnemar_s_exact_test():
-    assert scoring.mcnemar_exact(0, 6) == pytest.approx(2 / 64)
-    assert scoring.mcnemar_exact(6, 0) == scoring.mcnemar_exact(0, 6)
-    assert scoring.mcnemar_exact(1, 10) == pytest.approx(2 * 12 / 2048)
-    assert scoring.mcnemar_exact(3, 2) == 1.0 and scoring.mcnemar_exact(0, 0) == 1.0
+    assert stats.mcnemar_exact(0, 6) == pytest.approx(2 / 64)
+    assert stats.mcnemar_exact(6, 0) == stats.mcnemar_exact(0, 6)
+    assert stats.mcnemar_exact(1, 10) == pytest.approx(2 * 12 / 2048)
+    assert stats.mcnemar_exact(3, 2) == 1.0 and stats.mcnemar_exact(0, 0) == 1.0
     with pytest.raises(ValueError, match="cannot be negative"):
-        scoring.mcnemar_exact(-1, 5)  # not a p-value of 0
+        stats.mcnemar_exact(-1, 5)  # not a p-value of 0
 
 
 def test_a_label_built_in_code_with_its_onset_after_its_contact_is_refused():
@@ -275,5 +275,5 @@ def test_two_detectors_are_compared_clip_by_clip():
     with pytest.raises(ValueError):
         scoring.paired_comparison(first, second[::-1])
     summary = scoring.summarize(first)
-    assert summary["hit_rate_ci"] == scoring.wilson_interval(2, 3)
-    assert summary["false_alarm_rate_ci"] == scoring.wilson_interval(0, 5)
+    assert summary["hit_rate_ci"] == stats.wilson_interval(2, 3)
+    assert summary["false_alarm_rate_ci"] == stats.wilson_interval(0, 5)

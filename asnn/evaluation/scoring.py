@@ -62,6 +62,7 @@ from pathlib import Path
 
 from .labels import check_labels, result_name
 from .options import EARLY_TOLERANCE_S, WARMUP_FRAMES
+from .stats import mcnemar_exact, wilson_interval
 
 __all__ = [
     "OUTCOMES",
@@ -75,8 +76,6 @@ __all__ = [
     "score_clip",
     "missing_clip",
     "summarize",
-    "wilson_interval",
-    "mcnemar_exact",
     "paired_comparison",
     "load_records",
     "results_path",
@@ -388,8 +387,8 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         ``noncollision_minutes`` (of scored non-collision video, where the labels give the fps) and
         ``warning_frames_per_minute`` of it (SPEC.md section 5: a detector that fires once per
         clip and one that fires all the time are not equally useful); ``hit_rate_ci`` and
-        ``false_alarm_rate_ci``, the rates' 95 % :func:`wilson_interval` as ``[low, high]``
-        (None without a denominator).
+        ``false_alarm_rate_ci``, the rates' 95 % :func:`~asnn.evaluation.stats.wilson_interval` as ``[low, high]``
+        (None without a denominator; :mod:`asnn.evaluation.stats`).
     """
     scores = list(scores)
     scored = [s for s in scores if s.outcome != "missing"]
@@ -433,62 +432,6 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
     }
 
 
-def wilson_interval(successes: int, trials: int, z: float = 1.96) -> list[float] | None:
-    """The Wilson score interval of a proportion ``successes / trials`` [1]_.
-
-    Unlike the normal approximation ``p +- z sqrt(p (1 - p) / n)``, it stays within [0, 1] and
-    does not collapse to a point at 0 or ``n`` successes, which a dozen clips often give.
-
-    Parameters
-    ----------
-    successes, trials : int
-    z : float
-        The normal quantile: 1.96 for a 95 % interval.
-
-    Returns
-    -------
-    [low, high] or None
-        None when ``trials`` is 0.
-
-    References
-    ----------
-    .. [1] E. B. Wilson, "Probable inference, the law of succession, and statistical
-       inference", Journal of the American Statistical Association 22, 1927, pp. 209-212.
-    """
-    if trials <= 0:
-        return None
-    if not 0 <= successes <= trials:
-        raise ValueError(f"successes must lie in 0..trials, got {successes} of {trials}")
-    p = successes / trials
-    z2 = z * z
-    scale = 1.0 + z2 / trials
-    centre = (p + z2 / (2 * trials)) / scale
-    half = z * math.sqrt(p * (1.0 - p) / trials + z2 / (4 * trials * trials)) / scale
-    return [max(0.0, centre - half), min(1.0, centre + half)]
-
-
-def mcnemar_exact(only_first: int, only_second: int) -> float:
-    """Two-sided p-value of McNemar's exact test [1]_ on paired outcomes.
-
-    ``only_first`` pairs have the outcome with the first detector alone, ``only_second`` with
-    the second alone (the pairs where both agree carry no information on which is better).
-    Without a difference between them each discordant pair goes either way with probability
-    1/2, so the count is binomial: the p-value is twice the smaller tail, at most 1.
-
-    References
-    ----------
-    .. [1] Q. McNemar, "Note on the sampling error of the difference between correlated
-       proportions or percentages", Psychometrika 12, 1947, pp. 153-157.
-    """
-    if only_first < 0 or only_second < 0:
-        raise ValueError(f"counts of pairs cannot be negative, got {only_first}, {only_second}")
-    n = only_first + only_second
-    if n == 0:
-        return 1.0
-    tail = sum(math.comb(n, k) for k in range(min(only_first, only_second) + 1))
-    return min(1.0, 2.0 * tail / 2 ** n)
-
-
 def paired_comparison(first: Sequence[ClipScore], second: Sequence[ClipScore]) -> dict:
     """Two detectors' scores on the same clips, compared clip by clip.
 
@@ -500,7 +443,7 @@ def paired_comparison(first: Sequence[ClipScore], second: Sequence[ClipScore]) -
     dict
         ``hits`` and ``false_alarms``, each ``{"only_first", "only_second", "p"}``: the clips
         where only the first or only the second has the outcome, and :func:`mcnemar_exact`'s
-        p-value.
+        p-value (:mod:`asnn.evaluation.stats`).
 
     Raises
     ------
