@@ -4,37 +4,14 @@
 robot at a time (``take``, ``process``, from one or more processing threads). It imports no Zenoh,
 so tests can drive it directly.
 
-Per-robot state and its reset rule
-----------------------------------
-A robot's model state is created on its first valid frame. Each frame that arrives is compared
-with the previous frame that arrived for the robot (not with the last one processed, so the
-frames the worker skips itself never count as a gap). It continues the robot's **stream** when
-its size is the same, its ``seq`` is greater by at most ``max_gap`` steps and its ``stamp`` is
-not smaller. A step is how much the robot's ``seq`` grows from one frame to the next: 1, until
-:data:`STEP_FRAMES` growths in a row between arriving frames agree on another (the largest less
-than twice the smallest, which becomes the step): a camera whose ``seq`` counts by 10, or is a
-clock in milliseconds (CONTRACT.md asks only that ``seq`` increase). One frame, a stranger's or
-one after frames were lost, cannot change it. Otherwise a new stream starts, for the first rule that failed:
-
-* ``size``: the frame size (width x height) differs;
-* ``seq-backwards``: ``seq`` is not greater (the camera restarted);
-* ``seq-gap``: ``seq`` jumps ahead by more than ``max_gap`` steps (frames were lost on the
-  way; a camera whose step is larger than 1 resets on its first frames, until its step is
-  known);
-* ``stamp-backwards``: ``stamp`` is smaller.
-
+Per-robot state
+---------------
+A robot's model state is created on its first valid frame. Each frame that arrives is placed
+in the robot's **streams** (:mod:`service.streams`: whether it continues the robot's stream,
+starts a new one for a reset rule, arrives ``late``, or is a second publisher's on its key).
 When the worker processes the first frame of a new stream, the model state is **reset** (that
-frame only primes the model) and the reset is counted under the rule.
-
-A frame that belongs to the stream but arrives after later ones did (the same size, a ``seq``
-above 0 and at most ``max_gap`` steps behind the latest, a ``stamp`` no later than its: reordered on
-the way) is refused as ``late`` instead: the model does not go back in time, and a restart is
-not what happened. A camera that restarts begins again at ``seq`` 0 (or with a later stamp).
-A robot whose streams keep ending within a few frames (a camera whose ``seq`` never grows, or
-keeps going back every other frame) has its model reset before it could warn: after
-:data:`RESTARTS_WARNED` streams in a row of at most :data:`SHORT_STREAM_FRAMES` frames the worker
-logs it at WARNING, and every response says how many frames its model has
-stepped in the current stream (``stream_frames``, docs/contract.md).
+frame only primes the model) and the reset is counted under the rule; every response says how
+many frames its model has stepped in the current stream (``stream_frames``, docs/contract.md).
 
 The retina integrates with its fixed time step (0.05 s) whatever the stamps say; the targets'
 time to contact, and with it the default's approach gate, read the stamps' gaps (a gap below
@@ -42,26 +19,6 @@ MIN_FRAME_GAP_S or above MAX_FRAME_GAP_S reads as the nominal period, logged whe
 camera clock in other units). A robot that sends no frame for ``idle_timeout`` seconds is
 evicted (its state is forgotten); when every slot is taken, one silent for ``takeover_after``
 seconds is forgotten to make room for a new robot.
-
-Two publishers on one key
--------------------------
-A second publisher on a robot's key (a stray camera, or an attacker in an open deployment)
-interleaves its frames with the robot's: every frame of one breaks the other's stream. The
-worker detects it when the stream that a frame has just replaced continues (a frame fits the
-previous stream, which sent a frame less than ``takeover_after`` seconds ago): it counts an
-intrusion, logs it (rate-limited), marks the robot *contested* and returns to the stream that
-was there first (a ``second-publisher`` reset if the other's frame was processed meanwhile);
-the other's later frames, continuing its own stream, are refused as ``second-publisher``
-(until the stream there first has been silent for ``CONTESTED_FOR_S``: then the other's is the
-robot's, said at WARNING).
-From then on, while the robot's stream keeps sending (a frame less than ``takeover_after``
-seconds ago), a frame that does not continue it is refused as ``second-publisher``, until
-``CONTESTED_FOR_S`` (30 s) after the last frame so refused. So an
-intruder costs the robot at most two resets, however long it keeps publishing. A camera that
-really restarts is followed as soon as its previous stream has been silent for
-``takeover_after`` seconds. A publisher that copies the robot's ``seq`` and ``stamp`` cannot be
-told apart this way: only the secured deployment (one credential per camera, allowed to publish
-its own robot's key only) stops it (docs/operations.md).
 
 Newest frame wins, robots in turn
 ---------------------------------
@@ -127,6 +84,8 @@ from . import keys
 from .logutil import RateLimitedLog
 from .messages import (MAX_NOTE_LEN, MAX_PAYLOAD, MAX_REASON_LEN, MAX_SIDE, VERSION, Frame,
                        MessageError, Response, decode_frame, response_from, track_id_base)
+from .streams import (CONTESTED_FOR_S, RESTARTS_WARNED, STEP_FRAMES, _learn_step, _Stream,
+                      place_frame, withdraw_frame)
 
 __all__ = ["HANDOVER_WARMUP_FRAMES", "Job", "RobotView", "WorkerCore", "default_threads",
            "default_worker_id", "started_here", "worker_host"]
@@ -140,12 +99,6 @@ log = logging.getLogger("asnn.worker")
 # running means; the worst need 53 during an approach, 64 before one):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
 HANDOVER_WARMUP_FRAMES = 30
-# streams in a row that last at most SHORT_STREAM_FRAMES frames before the worker logs that a
-# robot's model cannot warn: a fresh model of the default warns from its 5th frame at the
-# soonest (over every sixth case of the suite, a fresh model started at every third frame of
-# each approach); streams of one frame alone were counted, so a seq going 0, 1, 0, 1 ... was not
-RESTARTS_WARNED = 10
-SHORT_STREAM_FRAMES = 4
 # robot ids whose latest refusal the status keeps (the most recently refused)
 MAX_REFUSED = 256
 # the worker's defaults (asnn worker --idle-timeout, --max-gap, --max-robots, --takeover-after)
@@ -153,11 +106,6 @@ IDLE_TIMEOUT_S = 60.0
 MAX_GAP = 20
 MAX_ROBOTS = 256
 TAKEOVER_AFTER_S = 3.0
-# a robot stays contested this long after the last frame refused as a second publisher's: then
-# a restart of its own camera is followed at once again (contested for good, each later
-# restart lost takeover_after seconds of frames: a soak); an intruder that keeps publishing
-# keeps it contested, one that comes back less often costs the robot its two resets again
-CONTESTED_FOR_S = 30.0
 # A robot's rate is its model's own (the median over asnn.params.PERIOD_FRAMES gaps between the
 # stamps of the new frames it stepped); when it reads below SLOW_FPS for PERIOD_FRAMES frames in
 # a row the worker logs it (_measure_rate)
@@ -183,61 +131,6 @@ def started_here(worker_id: str) -> bool:
 def default_threads() -> int:
     """A worker's processing threads by default: the cores this process may run on."""
     return available_cores()
-
-
-# growths of a robot's seq in a row that must agree (the largest less than twice the smallest)
-# before the smallest becomes its step: one frame, a stranger's or a lost one's, cannot change it
-STEP_FRAMES = 3
-
-
-def _learn_step(state: "_Robot", growth: int) -> None:
-    """Take one growth of a robot's ``seq`` between two arriving frames; a run of
-    :data:`STEP_FRAMES` steady ones sets its step (a seq that went back starts a new run)."""
-    if growth <= 0:
-        state.seq_growths.clear()
-        return
-    state.seq_growths.append(growth)
-    if len(state.seq_growths) == STEP_FRAMES:
-        smallest = min(state.seq_growths)
-        if max(state.seq_growths) < 2 * smallest:
-            state.seq_step = smallest
-
-
-@dataclass
-class _Stream:
-    """The frames of one source as they arrive: the latest one's seq, stamp, size and time."""
-
-    number: int          # the robot's stream counter when it started
-    reason: str | None   # why the robot switched to it (a reset rule); None for the first
-    seq: int
-    stamp: float
-    size: tuple[int, int]
-    arrival: float
-    frames: int = 1  # frames that arrived in it
-
-    def continues(self, frame: Frame, max_gap: int) -> str | None:
-        """None if ``frame`` continues this stream, else the rule it breaks."""
-        if (frame.width, frame.height) != self.size:
-            return "size"
-        if frame.seq <= self.seq:
-            return "seq-backwards"
-        if frame.seq - self.seq > max_gap:
-            return "seq-gap"
-        if frame.stamp < self.stamp:
-            return "stamp-backwards"
-        return None
-
-    def outran(self, frame: Frame, max_gap: int) -> bool:
-        """Whether ``frame`` is one of this stream's own, arriving after later ones did: the
-        same size, a ``seq`` at most ``max_gap`` back but not 0 (a camera starts at 0) and no
-        later ``stamp``: a late or reordered delivery, not a camera that restarted."""
-        return ((frame.width, frame.height) == self.size and frame.seq > 0
-                and self.seq - max_gap <= frame.seq <= self.seq and frame.stamp <= self.stamp)
-
-    def advance(self, frame: Frame, arrival: float) -> None:
-        self.seq, self.stamp, self.arrival = frame.seq, frame.stamp, arrival
-        self.size = (frame.width, frame.height)
-        self.frames += 1
 
 
 @dataclass
@@ -275,7 +168,7 @@ class _Robot:
     # one being processed, or the last one processed: never a third frame held)
     last_arrival: tuple[int, float, bytes] | None = None
     # its seq's step (1 until a steady other one is seen) and the latest growths of its seq
-    # between arriving frames, from which a steady step is read (_learn_step)
+    # between arriving frames, from which a steady step is read (streams._learn_step)
     seq_step: int = 1
     seq_growths: deque = field(default_factory=lambda: deque(maxlen=STEP_FRAMES))
     # the stamps' gaps between the frames processed in the current stream (after the worker's
@@ -380,15 +273,15 @@ class WorkerCore:
     idle_timeout : float
         Seconds without frames after which a robot's state is evicted.
     max_gap : int
-        Largest forward jump of ``seq``, in the robot's steps, that keeps the state (see the
-        module notes).
+        Largest forward jump of ``seq``, in the robot's steps, that keeps the state (see
+        :mod:`service.streams`).
     max_robots : int
         Robots with a model state at once; frames of further robots are rejected
         (``too-many-robots``). As many candidates (robots none of whose frames was valid yet)
         may wait besides.
     takeover_after : float
         Seconds a robot's stream must be silent before the frames of another publisher on its
-        key may replace it, once two publishers were seen there (see the module notes).
+        key may replace it, once two publishers were seen there (see :mod:`service.streams`).
     clock : callable
         Monotonic seconds (tests may pass a fake one).
     owns : callable, optional
@@ -506,7 +399,11 @@ class WorkerCore:
                                     f"{state.stream.seq}: the model does not go back in time",
                                     key)
                 return None
-            stream = self._stream_locked(robot, state, frame, received)
+            intrusions = state.intrusions
+            stream = place_frame(robot, state, frame, received, max_gap=self.max_gap,
+                                 takeover_after=self.takeover_after, prefix=self.prefix,
+                                 limited_log=self._limited_log)
+            self._stats.intrusions += state.intrusions - intrusions  # one it found, if any
             if stream is None:
                 self._reject_locked("second-publisher", f"frame {frame.seq} does not continue "
                                     f"the stream of {robot} (last seq {state.stream.seq})",
@@ -562,85 +459,6 @@ class WorkerCore:
         log.info("robot %s: forgotten after %.0f s without frames to make room for a new one",
                  robot, now - last_seen)
         return True
-
-    def _stream_locked(self, robot: str, state: _Robot, frame: Frame,
-                       received: float) -> _Stream | None:
-        """Place an arriving frame in the robot's streams (see the module notes); the stream it
-        belongs to, or None when it is refused as a second publisher's."""
-        current = state.stream
-        max_gap = self._gap(state)
-        broken = None if current is None else current.continues(frame, max_gap)
-        if current is not None and broken is None:
-            current.advance(frame, received)
-            return current
-        previous = state.previous
-        if (current is not None and previous is not None
-                and received - previous.arrival <= self.takeover_after
-                and previous.continues(frame, max_gap) is None):
-            if previous.number > current.number:
-                # the other publisher's stream takes the robot only once the stream there first
-                # has been silent for CONTESTED_FOR_S: a camera that pauses or restarts for a
-                # few seconds (a new stream of its own: followed after takeover_after, below)
-                # must not hand its robot to an intruder that kept publishing
-                if received - current.arrival <= max(self.takeover_after, CONTESTED_FOR_S):
-                    # the intruder's stream goes on while the one there first keeps sending
-                    previous.advance(frame, received)
-                    state.intruder_seen = received
-                    return None
-                # the stream there first has been silent for takeover_after: its camera went
-                # (or restarted as this one), so this stream is the robot's now
-                self._limited_log.warning(
-                    f"takeover:{robot}", "robot %s: its stream of seq %d has been silent for "
-                    "%.0f s; following the other publisher's (seq %d)", robot, current.seq,
-                    received - current.arrival, frame.seq)
-                previous.reason = "second-publisher"
-                previous.advance(frame, received)
-                state.stream, state.previous = previous, current
-                return previous
-            # the stream this one replaced goes on: two publishers interleave on the key
-            state.intrusion = (current.number, state.intruder_seen)  # undone if current's
-            state.intruder_seen = received  # one frame is refused (_refuse_taken)
-            state.intrusions += 1
-            self._stats.intrusions += 1
-            self._limited_log.warning(
-                f"intrusion:{robot}", "robot %s: two publishers interleave frames on %s (seq "
-                "%d after %d); following the stream that was there first and refusing "
-                "frames that do not continue it", robot, keys.frame_key(robot, self.prefix),
-                frame.seq, current.seq)
-            previous.reason = "second-publisher"
-            previous.advance(frame, received)
-            state.stream, state.previous = previous, current
-            return previous
-        if (state.contested(received) and current is not None
-                and received - current.arrival <= self.takeover_after):
-            # an intruder's frame, or the robot's camera restarting: either keeps it contested
-            state.intruder_seen = received
-            return None
-        if current is not None:
-            short = current.frames <= SHORT_STREAM_FRAMES
-            state.restarts = state.restarts + 1 if short else 0
-            if state.restarts >= RESTARTS_WARNED:
-                self._limited_log.warning(
-                    f"restarts:{robot}", "robot %s: its last %d streams each ended within %d "
-                    "frames (the latest: %s): its model is reset every few frames and cannot "
-                    "warn; a camera's seq must grow from frame to frame and its stamp must not "
-                    "go back",
-                    robot, state.restarts, SHORT_STREAM_FRAMES, broken)
-        if broken == "seq-gap":
-            # frames lost on the way (a link that drops, a camera faster than its link or its
-            # worker can take): each such gap resets the model, which cannot warn until it has
-            # stepped a few frames again; an INFO line per reset hid a soak trial's 28 in 32 s
-            self._limited_log.warning(
-                f"seq-gap:{robot}", "robot %s: seq %d after %d: frames lost on the way, more "
-                "than --max-gap (%d steps of %d); its model starts again and cannot warn until "
-                "it has warmed up (frequent: a link that drops frames, or a camera faster than "
-                "its link or worker)", robot, frame.seq, current.seq, self.max_gap,
-                state.seq_step)
-        state.streams += 1
-        state.previous = current
-        state.stream = _Stream(state.streams, broken, frame.seq, frame.stamp,
-                               (frame.width, frame.height), received)
-        return state.stream
 
     def _reject(self, reason: str, detail: str, key: str) -> None:
         with self._lock:
@@ -869,22 +687,7 @@ class WorkerCore:
         with self._lock:
             state.dropped += job.dropped
             self._stats.received -= 1
-            stream = state.stream
-            if (stream is not None and stream.number == job.stream and stream.frames == 1
-                    and state.previous is not None):
-                # it began a stream (another size, a seq back) and nothing followed it yet:
-                # the frames after it continue the stream before it, as if it had not come
-                # (not a new stream that the next frame would break as an intruder's)
-                state.stream, state.previous = state.previous, None
-            elif (state.previous is not None and state.previous.number == job.stream
-                  and state.previous.frames == 1 and state.intrusion is not None
-                  and state.intrusion[0] == job.stream):
-                # the same, with the camera's next frame come while this one waited or was
-                # processed: it was taken for a second publisher's interleaving (the robot
-                # marked contested, so that its camera's restart would have been refused)
-                state.previous, state.intruder_seen = None, state.intrusion[1]
-                state.intrusion = None
-                state.intrusions -= 1
+            if withdraw_frame(state, job.stream):  # it had been taken for an intrusion
                 self._stats.intrusions -= 1
         self._reject(reason, detail, keys.frame_key(job.robot, self.prefix))
 

@@ -611,7 +611,7 @@ def test_a_camera_left_alone_after_an_intrusion_is_followed_once_the_first_is_si
     came (each refreshed its stream), until the robot was forgotten as idle (60 s blind); now
     until the stream there first has been silent for CONTESTED_FOR_S (not takeover_after: a
     camera that pauses for a few seconds must not hand its robot to an intruder)."""
-    from service.core import CONTESTED_FOR_S
+    from service.streams import CONTESTED_FOR_S
 
     scene = make_scene("looming")
     clock = FakeClock()
@@ -669,7 +669,7 @@ def test_an_intruder_does_not_take_the_robot_while_its_camera_pauses_or_restarts
 def test_a_robot_is_contested_no_longer_once_no_frame_is_refused_for_a_while():
     """A soak: contested for good, every later quick restart of the robot's own camera lost
     takeover_after seconds of frames, refused as a second publisher's."""
-    from service.core import CONTESTED_FOR_S
+    from service.streams import CONTESTED_FOR_S
 
     scene = make_scene("looming")
     clock = FakeClock()
@@ -704,7 +704,7 @@ def test_a_robot_is_contested_no_longer_once_no_frame_is_refused_for_a_while():
 
 
 def test_an_intruder_that_keeps_publishing_keeps_the_robot_contested():
-    from service.core import CONTESTED_FOR_S
+    from service.streams import CONTESTED_FOR_S
 
     scene = make_scene("looming", size=(64, 64))
     blank = np.zeros_like(scene.frames[0])

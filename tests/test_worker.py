@@ -200,7 +200,7 @@ def test_each_refused_robot_is_to_be_told_once_with_its_latest_refusal(looming):
 
 
 def test_a_camera_whose_seq_never_grows_is_reported_as_unable_to_warn(looming, caplog):
-    from service.core import RESTARTS_WARNED
+    from service.streams import RESTARTS_WARNED
 
     core = WorkerCore()
     with caplog.at_level("INFO", logger="asnn.worker"):
@@ -704,7 +704,7 @@ def test_a_full_table_forgets_the_robot_silent_longest(looming):
 
 
 def test_short_streams_are_reported_from_the_restarts_warned_th_in_a_row(looming, caplog):
-    from service.core import RESTARTS_WARNED, SHORT_STREAM_FRAMES
+    from service.streams import RESTARTS_WARNED, SHORT_STREAM_FRAMES
 
     core = WorkerCore()
 
