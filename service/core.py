@@ -38,8 +38,8 @@ soon as a frame of it fails. So ids that send only undecodable frames cannot loc
 Invalid input never raises out of ``offer``/``process``: it is counted per reason (``invalid``,
 the labels of :data:`service.messages.REASONS` plus ``frame-rejected``, ``model-failed``
 (a bug), ``too-many-robots``, ``second-publisher`` and ``late``) and logged at WARNING,
-rate-limited: the first rejection of a reason at once, then at most one line per reason every ``log_interval`` seconds,
-with the count of those not shown.
+rate-limited: the first rejection of a reason at once, then at most one line per reason every
+``log_interval`` seconds, with the count of those not shown.
 
 Ownership: with ``owns`` (a predicate on robot ids, see :mod:`service.ownership` and
 :mod:`service.routing`), frames of robots the worker does not take are skipped before they are
@@ -84,7 +84,7 @@ from . import keys
 from .logutil import RateLimitedLog
 from .messages import (MAX_NOTE_LEN, MAX_PAYLOAD, MAX_REASON_LEN, MAX_SIDE, VERSION, Frame,
                        MessageError, Response, decode_frame, response_from, track_id_base)
-from .streams import (CONTESTED_FOR_S, RESTARTS_WARNED, STEP_FRAMES, _learn_step, _Stream,
+from .streams import (CONTESTED_FOR_S, RESTARTS_WARNED, STEP_FRAMES, Stream, learn_step,
                       place_frame, withdraw_frame)
 
 __all__ = ["HANDOVER_WARMUP_FRAMES", "Job", "RobotView", "WorkerCore", "default_threads",
@@ -142,8 +142,8 @@ class _Robot:
     shape: tuple[int, int] | None = None  # (width, height) of the stream being processed
     last_seq: int | None = None
     last_seen: float = 0.0
-    stream: _Stream | None = None  # the stream its frames arrive in
-    previous: _Stream | None = None  # the stream the latest break replaced
+    stream: Stream | None = None  # the stream its frames arrive in
+    previous: Stream | None = None  # the stream the latest break replaced
     streams: int = 0  # streams started
     processed_stream: int | None = None  # number of the stream the model state belongs to
     stepped: int = 0  # frames processed in the model's current stream, held ones included
@@ -155,7 +155,7 @@ class _Robot:
     # the latest intrusion: the number of the stream taken for a second publisher's, and when
     # one was seen before it (None: never)
     intrusion: tuple[int, float | None] | None = None
-    pending: tuple[Frame, float, _Stream] | None = None  # (frame, received, its stream)
+    pending: tuple[Frame, float, Stream] | None = None  # (frame, received, its stream)
     waiting_since: int = 0  # arrival order of the first frame it has been waiting with
     dropped: int = 0  # frames replaced since the last response
     busy: bool = False
@@ -168,7 +168,7 @@ class _Robot:
     # one being processed, or the last one processed: never a third frame held)
     last_arrival: tuple[int, float, bytes] | None = None
     # its seq's step (1 until a steady other one is seen) and the latest growths of its seq
-    # between arriving frames, from which a steady step is read (streams._learn_step)
+    # between arriving frames, from which a steady step is read (streams.learn_step)
     seq_step: int = 1
     seq_growths: deque = field(default_factory=lambda: deque(maxlen=STEP_FRAMES))
     # the stamps' gaps between the frames processed in the current stream (after the worker's
@@ -413,7 +413,7 @@ class WorkerCore:
             state.arrived += 1
             state.arrived_bytes += len(payload)
             if state.last_arrival is not None:  # after the gap rule: a new step counts once
-                _learn_step(state, frame.seq - state.last_arrival[0])
+                learn_step(state, frame.seq - state.last_arrival[0])
             state.last_arrival = (frame.seq, frame.stamp, frame.data)
             if state.pending is not None:
                 state.dropped += 1

@@ -2,9 +2,9 @@
 starts a new one (its model is then reset), arrives late, or is a second publisher's.
 
 :class:`service.core.WorkerCore` places each frame it takes in with :func:`place_frame` (under
-its lock), refuses the late ones first (``_Stream.outran``), learns the robot's ``seq`` step from
-the frames it takes in (:func:`_learn_step`), and undoes a stream a refused frame began with
-:func:`withdraw_frame`. The robot's record (``service.core._Robot``) holds the streams; the
+its lock), refuses the late ones first (``Stream.outran``), learns the robot's ``seq`` step from
+the frames it takes in (:func:`learn_step`), and undoes a stream a refused frame began with
+:func:`withdraw_frame`. The robot's record (:class:`service.core._Robot`) holds the streams; the
 worker holds the counters and the rate-limited log, which it hands in.
 
 The reset rule
@@ -68,8 +68,8 @@ from . import keys
 from .logutil import RateLimitedLog
 from .messages import Frame
 
-__all__ = ["CONTESTED_FOR_S", "RESTARTS_WARNED", "SHORT_STREAM_FRAMES", "STEP_FRAMES",
-           "place_frame", "withdraw_frame"]
+__all__ = ["CONTESTED_FOR_S", "RESTARTS_WARNED", "SHORT_STREAM_FRAMES", "STEP_FRAMES", "Stream",
+           "learn_step", "place_frame", "withdraw_frame"]
 
 # streams in a row that last at most SHORT_STREAM_FRAMES frames before the worker logs that a
 # robot's model cannot warn: a fresh model of the default warns from its 5th frame at the
@@ -87,10 +87,10 @@ CONTESTED_FOR_S = 30.0
 STEP_FRAMES = 3
 
 
-def _learn_step(state, growth: int) -> None:
+def learn_step(state, growth: int) -> None:
     """Take one growth of a robot's ``seq`` between two arriving frames; a run of
     :data:`STEP_FRAMES` steady ones sets its step (a seq that went back starts a new run).
-    ``state`` is the robot's record (``service.core._Robot``)."""
+    ``state`` is the robot's record (:class:`service.core._Robot`)."""
     if growth <= 0:
         state.seq_growths.clear()
         return
@@ -102,7 +102,7 @@ def _learn_step(state, growth: int) -> None:
 
 
 @dataclass
-class _Stream:
+class Stream:
     """The frames of one source as they arrive: the latest one's seq, stamp, size and time."""
 
     number: int          # the robot's stream counter when it started
@@ -141,7 +141,7 @@ class _Stream:
 
 def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: int,
                 takeover_after: float, prefix: str,
-                limited_log: RateLimitedLog) -> _Stream | None:
+                limited_log: RateLimitedLog) -> Stream | None:
     """Place an arriving frame in the robot's streams (see the module notes).
 
     Parameters
@@ -165,7 +165,7 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
 
     Returns
     -------
-    _Stream or None
+    Stream or None
         The stream it belongs to, or None when it is refused as a second publisher's.
     """
     current = state.stream
@@ -238,7 +238,7 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
             state.seq_step)
     state.streams += 1
     state.previous = current
-    state.stream = _Stream(state.streams, broken, frame.seq, frame.stamp,
+    state.stream = Stream(state.streams, broken, frame.seq, frame.stamp,
                            (frame.width, frame.height), received)
     return state.stream
 
