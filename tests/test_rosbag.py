@@ -441,6 +441,27 @@ def write_foxglove(path, topics: dict[str, list], fps: float = 20.0):
     return path
 
 
+def write_channels(path, channels: list[tuple], fps: float = 20.0):
+    """An MCAP written channel by channel: ``(topic, schema name, schema encoding, message
+    encoding, [payload bytes])`` each, declared in that order (several may share a topic), each
+    channel's messages timed on from the previous channel's."""
+    from mcap.writer import Writer
+
+    with open(path, "wb") as fh:
+        writer = Writer(fh)
+        writer.start(profile="", library="test")
+        index = 0
+        for topic, schema, encoding, message_encoding, payloads in channels:
+            sid = writer.register_schema(schema, encoding, b"")
+            cid = writer.register_channel(topic, message_encoding, sid)
+            for payload in payloads:
+                ns = START_NS + round(index * 1e9 / fps)
+                writer.add_message(cid, log_time=ns, data=payload, publish_time=ns)
+                index += 1
+        writer.finish()
+    return path
+
+
 def fox_stamp(index: int, fps: float = 20.0):
     from foxglove.messages import Timestamp
 
@@ -505,6 +526,76 @@ def test_a_foxglove_image_without_a_timestamp_is_timed_by_its_log_time(tmp_path,
     assert [r["t"] for r in detect_records(bag)] == [0.0, 0.1, 0.2, 0.3]
 
 
+def fox_raw(frames, start: int = 0) -> list[bytes]:
+    """foxglove.RawImage (mono8) messages of ``frames``, stamped from frame ``start`` at 20 fps."""
+    from foxglove.messages import RawImage
+
+    return [RawImage(timestamp=fox_stamp(start + i), frame_id="cam", width=f.shape[1],
+                     height=f.shape[0], encoding="mono8", step=f.shape[1],
+                     data=f.tobytes()).encode() for i, f in enumerate(frames)]
+
+
+def test_a_topic_recorded_on_several_channels_is_one_topic(tmp_path, looming):
+    """Recordings merged, or a publisher that advertised again: the topic's count is its
+    channels' sum and its type the first's (the last channel alone said "holds no message"
+    of a topic whose idle channel came last, and undercounted the frames)."""
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    frames = looming.frames
+    fox = ("foxglove.RawImage", "protobuf", "protobuf")
+    for counts in ((len(frames), 0), (10, len(frames) - 10), (0, len(frames))):
+        bag = write_channels(tmp_path / "merged.mcap", [
+            ("/cam", *fox, fox_raw(frames[:counts[0]])),
+            ("/cam", *fox, fox_raw(frames[counts[0]:], start=counts[0]))])
+        assert rosbag.bag_topics(bag)["/cam"].count == len(frames), counts
+        clip = rosbag.open_bag(bag)
+        read = [image for _, image in clip.frames()]
+        assert clip.frame_count == len(read) == len(frames), counts
+        assert all(np.array_equal(a, b) for a, b in zip(read, frames))
+    # a later channel of another image type: never used (a recorder's idle subscription), it
+    # stops nothing; used, it is the type change (not an empty topic)
+    bag = write_channels(tmp_path / "mixed.mcap", [
+        ("/cam", *fox, fox_raw(frames[:5])),
+        ("/cam", "foxglove.CompressedImage", "protobuf", "protobuf", [])])
+    assert rosbag.bag_topics(bag)["/cam"] == rosbag.TopicInfo("/cam", "foxglove.RawImage", 5)
+    errors = []
+    read = list(rosbag.open_bag(bag).frames(lambda reason, message: errors.append(message)))
+    assert len(read) == 5 and not errors
+    bag = write_channels(tmp_path / "mixed2.mcap", [
+        ("/cam", *fox, fox_raw(frames[:5])),
+        ("/cam", "foxglove.CompressedImage", "protobuf", "protobuf", [b"\x12\x01x"])])
+    assert "changed its type to foxglove.CompressedImage" in detect_fails(bag)
+
+
+def test_messages_are_named_by_their_place_in_the_topic_after_one_that_does_not_decode(
+        tmp_path, looming):
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    from foxglove.messages import RawImage
+
+    payloads = fox_raw(looming.frames[:8])
+    payloads[2] = b"\xff"  # no message
+    h, w = looming.frames[5].shape
+    payloads[5] = RawImage(timestamp=fox_stamp(5), width=w, height=h, encoding="mono8", step=w,
+                           data=looming.frames[5].tobytes()[:-w]).encode()  # a row short
+    bag = write_channels(tmp_path / "bad.mcap", [("/c", "foxglove.RawImage", "protobuf",
+                                                  "protobuf", payloads)])
+    errors = []
+    read = list(rosbag.open_bag(bag).frames(lambda reason, message: errors.append(message)))
+    assert len(read) == 6 and len(errors) == 2
+    assert "message 2 does not decode" in errors[0], errors
+    assert "message 5:" in errors[1] and "needs" in errors[1], errors  # it said message 4
+
+
+def test_raw_colour_frames_are_arrays_of_their_own():
+    """Every encoding gives a new, writable array (bgr8 without padding was a read-only view of
+    the message's bytes: drawing on it raised)."""
+    for encoding, step in (("bgr8", 12), ("bgr8", 16), ("8UC3", 12), ("rgb8", 12),
+                           ("mono8", 4), ("bgra8", 16)):
+        data = bytes(range(2 * step))
+        image = rosbag.image_from_raw(4, 2, encoding, 0, step, data)
+        assert image.flags.writeable and not np.shares_memory(image, np.frombuffer(
+            data, np.uint8)), encoding
+
+
 def test_the_protobuf_reader_skips_unknown_fields_and_refuses_what_is_no_message():
     from asnn.io.foxglove_images import (ProtobufError, decode_compressed_image,
                                          decode_raw_image)
@@ -549,24 +640,14 @@ def test_bad_foxglove_messages_are_one_line_errors(tmp_path, looming):
     encoding than protobuf: refused in one line, exit 2, the reason named."""
     pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
     from foxglove.messages import CompressedImage, RawImage
-    from mcap.writer import Writer
 
     h, w = looming.frames[0].shape
     good = RawImage(timestamp=fox_stamp(0), width=w, height=h, encoding="mono8", step=w,
                     data=looming.frames[0].tobytes()).encode()
 
     def bag(name, schema, encoding, message_encoding, payloads):
-        path = tmp_path / name
-        with open(path, "wb") as fh:
-            writer = Writer(fh)
-            writer.start(profile="", library="test")
-            sid = writer.register_schema(schema, encoding, b"")
-            cid = writer.register_channel("/c", message_encoding, sid)
-            for i, payload in enumerate(payloads):
-                writer.add_message(cid, log_time=START_NS + i, data=payload,
-                                   publish_time=START_NS + i)
-            writer.finish()
-        return path
+        return write_channels(tmp_path / name, [("/c", schema, encoding, message_encoding,
+                                                 payloads)])
 
     cut = bag("cut.mcap", "foxglove.RawImage", "protobuf", "protobuf", [good[:-10]])
     assert "does not decode (ProtobufError" in detect_fails(cut)

@@ -20,7 +20,7 @@ themselves: a camera's clock reset, on which the times are re-based (``clock-res
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -160,7 +160,8 @@ def image_from_raw(width: int, height: int, encoding: str, is_bigendian: int, st
         return cv2.cvtColor(np.ascontiguousarray(rows), _BAYER[encoding])
     if bpp == 1:
         return rows.copy()
-    pixels = np.ascontiguousarray(rows).reshape(height, width, bpp)
+    contiguous = np.ascontiguousarray(rows)  # a copy only where the rows were padded
+    pixels = contiguous.reshape(height, width, bpp)
     if encoding in ("yuv422", "uyvy", "yuv422_yuy2", "yuyv"):
         if width % 2:
             raise ImageError("bad-size", f"{encoding} needs an even width, got {width}")
@@ -172,7 +173,8 @@ def image_from_raw(width: int, height: int, encoding: str, is_bigendian: int, st
         return cv2.cvtColor(pixels, cv2.COLOR_RGBA2BGR)
     if bpp == 4:
         return cv2.cvtColor(pixels, cv2.COLOR_BGRA2BGR)
-    return pixels  # bgr8, 8UC3: already a copy
+    # bgr8, 8UC3: unpadded rows are still the message's (read-only) bytes
+    return pixels if contiguous is not rows else pixels.copy()
 
 
 def image_from_compressed(format: str, data: bytes) -> np.ndarray:
@@ -225,10 +227,10 @@ def bag_topics(path: str | Path) -> dict[str, TopicInfo]:
             raise SourceError(f"{path}: not an MCAP file", "not-a-bag")
         summary = bag_summary(raw)  # None for a recording that was cut: read it through below
         if summary is not None and summary.channels:
-            return {c.topic: TopicInfo(c.topic, _schema_name(summary.schemas.get(c.schema_id)),
+            return _by_topic(TopicInfo(c.topic, _schema_name(summary.schemas.get(c.schema_id)),
                                        # an empty map: the statistic is not available
                                        summary.counts.get(c.id, 0) if summary.counts else None)
-                    for c in summary.channels.values()}
+                             for c in sorted(summary.channels.values(), key=lambda c: c.id))
         raw.seek(0)
         schemas: dict[int, str] = {}
         channels: dict[int, Channel] = {}
@@ -246,25 +248,30 @@ def bag_topics(path: str | Path) -> dict[str, TopicInfo]:
             damaged = True
         # a topic without a message before the damage is not known to hold none: reading it
         # names the damage (a "holds no message" error would hide it)
-        return {c.topic: TopicInfo(c.topic, schemas.get(c.schema_id, ""),
+        return _by_topic(TopicInfo(c.topic, schemas.get(c.schema_id, ""),
                                    counts.get(c.id, None if damaged else 0))
-                for c in channels.values()}
+                         for c in channels.values())
+
+
+def _by_topic(channels: Iterable[TopicInfo]) -> dict[str, TopicInfo]:
+    """Channels (or the topics of a split bag's parts), in the order they were declared, as
+    topics: a topic recorded on several channels (recordings merged, a publisher that advertised
+    again, a bag split in parts) has the type of its first that names one (a later channel of
+    another type is refused when it is read) and their counts summed (None where one does not
+    say)."""
+    topics: dict[str, TopicInfo] = {}
+    for info in channels:
+        seen = topics.get(info.name)
+        if seen is not None:
+            count = None if seen.count is None or info.count is None else seen.count + info.count
+            info = TopicInfo(info.name, seen.schema or info.schema, count)
+        topics[info.name] = info
+    return topics
 
 
 def _merged_topics(parts: Sequence[Path]) -> dict[str, TopicInfo]:
-    """The topics of a bag's parts together: a topic's type from the first part that names
-    one, its count the sum (None where a part does not say)."""
-    merged: dict[str, TopicInfo] = {}
-    for part in parts:
-        for name, info in bag_topics(part).items():
-            seen = merged.get(name)
-            if seen is None:
-                merged[name] = info
-                continue
-            count = (None if seen.count is None or info.count is None
-                     else seen.count + info.count)
-            merged[name] = TopicInfo(name, seen.schema or info.schema, count)
-    return merged
+    """The topics of a bag's parts together (:func:`_by_topic`)."""
+    return _by_topic(info for part in parts for info in bag_topics(part).values())
 
 
 def _schema_name(schema: Schema | None) -> str:
@@ -370,13 +377,13 @@ class BagClip:
         probe = self._messages(lambda reason, message: errors.append(SourceError(message, reason)))
         for index, item in enumerate(probe):
             if index == 0:
-                message, log_time = item
+                message, log_time, number = item
                 if _stamp_ns(message) == 0:
                     self.clock = "log"
-                first = self._decode(message, 0)
+                first = self._decode(message, number)
                 # the results' frame of reference; a name, not a payload (at most 256 characters)
                 self.frame_id = str(getattr(message.header, "frame_id", ""))[:256]
-            stamps.append(self._time_ns(*item))
+            stamps.append(self._time_ns(*item[:2]))
             if len(stamps) >= FPS_PROBE:
                 break
         probe.close()
@@ -432,10 +439,16 @@ class BagClip:
                     try:
                         channels[record.id] = self._decoder(decoders, record, schemas)
                     except SourceError as error:
-                        if on_error is None:
-                            raise
-                        on_error(error.reason, str(error))
-                        return index, True
+                        # said at its first message: a channel declared and never used (a
+                        # recorder's idle subscription of another type) stops nothing
+                        channels[record.id] = error
+                elif isinstance(record, Message) and isinstance(
+                        channels.get(record.channel_id), SourceError):
+                    if on_error is None:
+                        raise channels[record.channel_id]
+                    error = channels[record.channel_id]
+                    on_error(error.reason, str(error))
+                    return index, True
                 elif isinstance(record, TooLarge) and record.channel_id in channels:
                     error = SourceError(f"{path}: {self._topic} message {index} is "
                                         f"{record.size} bytes, more than the "
@@ -458,7 +471,7 @@ class BagClip:
                             raise error from None
                         on_error(error.reason, str(error))
                     else:
-                        yield message, record.log_time
+                        yield message, record.log_time, index
                     index += 1
 
     def _decoder(self, decoders: DecoderFactory, channel: Channel,
@@ -532,7 +545,8 @@ class BagClip:
         frames of the run before it were reported as ``stamp-backwards`` (held or skipped).
         """
         timeline = _Timeline(self.start_ns)
-        for index, (message, log_time) in enumerate(self._messages(on_error)):
+        # the message's own number in the topic (one that did not decode is counted too)
+        for message, log_time, index in self._messages(on_error):
             try:
                 image = self._decode(message, index)
                 stamp = _stamp_ns(message) if self.clock == "header" else 0  # 0: unset
