@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from asnn.approach.looming import (RIG_WEIGHT, Expansion, moved_by_expansion,
-                          region_and_rim_expansion, region_expansion, rig_pixels, rim_scaled,
-                          scene_expansion)
+                                  refined_expansion, region_and_rim_expansion, region_expansion,
+                                  rig_pixels, rim_scaled, scene_expansion)
 from asnn.approach.tracking import Observation, TargetTracker, Track, approaching
 from imageutil import texture, warp
 
@@ -27,6 +27,32 @@ def test_expansion_about_the_box_centre_is_measured_at_every_box_size(box):
     assert abs(est.drift_x) < 0.1 and abs(est.drift_y) < 0.1
     shrink = region_expansion(tex, warp(tex, 1 / 1.02), box)
     assert shrink.rate == pytest.approx(-0.02, rel=0.4)  # receding: contraction
+
+
+def test_the_refined_expansion_is_the_scale_between_the_frames_where_the_fit_is_off():
+    tex, box = _texture(), (150, 150, 250, 250)
+    # 10 % a frame: the first-order fit about the mean frame reads 14 % fast, two steps exact
+    after = warp(tex, 1.1)
+    est = region_expansion(tex, after, box)
+    assert est.rate > 0.11
+    assert refined_expansion(tex, after, box, est).rate == pytest.approx(0.1, rel=0.01)
+    # 25 % a frame and 3 px of drift: the fit saturates at half of it; from a guess near the
+    # answer (the track's prediction) the steps reach it, drift and all
+    after = warp(tex, 1.25, dx=3.0)
+    est = region_expansion(tex, after, box)
+    assert est.rate < 0.1
+    refined = refined_expansion(tex, after, box, est, est._replace(rate=0.22, drift_x=0.0))
+    assert refined.rate == pytest.approx(0.25, rel=0.01)
+    assert refined.drift_x == pytest.approx(3.0, abs=0.1)
+    assert (refined.brightness, refined.fit) == (est.brightness, est.fit)
+    # without one the steps go as far as the bound lets them: twice the fit's rate
+    bounded = refined_expansion(tex, after, box, est)
+    assert bounded.rate == pytest.approx(2 * est.rate)
+    assert bounded.drift_x == pytest.approx(2 * est.drift_x)
+    # a box too small to fit, or a start that does not expand, is left as it was
+    assert refined_expansion(tex, after, (10, 10, 14, 14), est) is est
+    still = est._replace(rate=-0.01)
+    assert refined_expansion(tex, after, box, still) is still
 
 
 def test_translation_is_drift_not_expansion():
@@ -343,6 +369,31 @@ def test_time_to_contact_and_offset_follow_from_expansion_and_drift():
     shrinking = Track(1, 0.0, 0.0, 5.0, 1.0, (0, 0, 10, 10))
     shrinking.measure(-0.5, 0.0, 0.0)
     assert shrinking.ttc is None and shrinking.offset is None
+
+
+def test_the_reported_expansion_follows_a_constant_speed_approach_and_lets_a_halt_go():
+    dt, tau = 0.1, 2.0
+    track, lagging = (Track(i, 0.0, 0.0, 10.0, 1.0, (0, 0, 20, 20)) for i in range(2))
+    for k in range(15):  # the exact rate each frame: tau falls by dt
+        rate = 1.0 / (tau - k * dt)
+        track.measure_reported(rate, dt)
+        lagging.measure(rate, 0.0, 0.0)
+        assert track.reported_ttc == pytest.approx(tau - k * dt, rel=1e-9)
+    assert lagging.ttc > 1.1 * track.reported_ttc  # the gate's average trails it (0.68 s)
+    assert track.expansion is None  # the gate's own estimate is not touched
+    # a prediction runs to infinity within a frame of contact: the rate at most doubles
+    assert track.predicted_expansion(1.0) == pytest.approx(2 * track.reported_expansion)
+    # an object that stops: its time to contact lengthens from the first frame
+    ttcs = [track.reported_ttc]
+    for _ in range(4):
+        track.measure_reported(0.0, dt)
+        ttcs.append(track.reported_ttc)
+    assert all(b > 1.5 * a for a, b in zip(ttcs, ttcs[1:]))
+    fresh = Track(2, 0.0, 0.0, 10.0, 1.0, (0, 0, 20, 20))
+    assert fresh.predicted_expansion(dt) is None and fresh.reported_ttc is None
+    fresh.measure_reported(-0.5, dt)  # the first measure as it is; a shrinking target: no ttc
+    assert fresh.reported_expansion == -0.5 and fresh.reported_ttc is None
+    assert fresh.predicted_expansion(dt) == -0.5
 
 
 def test_the_approach_test_needs_growth_a_collision_course_and_consecutive_frames():

@@ -43,7 +43,7 @@ from .._fast import _area_fast, _area_table, _reflect
 from .._jit import kernel
 
 __all__ = ["Expansion", "region_expansion", "region_and_rim_expansion", "rim_scaled",
-           "scene_expansion", "moved_by_expansion", "rig_pixels", "rig_rows", "shrunk_mask",
+           "refined_expansion", "scene_expansion", "moved_by_expansion", "rig_pixels", "rig_rows", "shrunk_mask",
            "shrink_step", "shrunk_size", "FIT_SIDE", "RIG_WEIGHT"]
 
 _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
@@ -461,6 +461,100 @@ def moved_by_expansion(previous: np.ndarray, scene: Expansion,
     return cv2.warpAffine(previous, inverse, (x1 - x0, y1 - y0),
                           flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                           borderMode=cv2.BORDER_REPLICATE)
+
+
+def refined_expansion(previous: np.ndarray, current: np.ndarray,
+                      box: tuple[int, int, int, int], estimate: Expansion,
+                      guess: Expansion | None = None, background: np.ndarray | None = None,
+                      exclude: np.ndarray | None = None, iterations: int = 2,
+                      bound: float = 2.0) -> Expansion:
+    """A box's expansion and drift refined past the gradient fit's small-motion range.
+
+    :func:`region_expansion` solves the brightness-constancy equation to first order, so it
+    reads an image motion of more than a pixel or two at its grid's edge short (it saturates:
+    the last frames before contact) and, about the mean of the two frames, a growth ``s - 1``
+    as ``2 (s - 1) / (s + 1)``. Here the previous frame is moved by the motion found so far
+    (scaled by ``1 + rate`` about the box centre and shifted by the drift, bilinearly, edges
+    replicated) and what is left between it and the current frame is fitted again
+    (:func:`region_expansion`) and composed with it: Gauss-Newton steps on the warp, as Horn,
+    Fang and Masaki's iterative form [1]_. It converges on the scale that maps the previous
+    frame's box onto the current one, ``1 + rate``, so ``1 / rate`` frames is the time to contact
+    at the current frame.
+
+    The model uses it only for the time to contact it reports (``refined_ttc``; the approach
+    test reads the first fit, on which its limits were set): a reported target whose motion
+    moves its box's edge by more than a pixel a frame at the fit's grid.
+
+    Parameters
+    ----------
+    previous, current : ndarray (H, W)
+        Luminance of two frames, float.
+    box : (x0, y0, x1, y1)
+        Pixels ``x0 <= x < x1``, ``y0 <= y < y1``.
+    estimate : Expansion
+        The box's fit (:func:`region_expansion`).
+    guess : Expansion, optional
+        Where to start instead of ``estimate`` (a prediction from the frames before: a fit
+        that saturated can be too far from the answer for a few steps to reach it).
+    exclude : ndarray (H, W) of bool, optional
+        Pixels to leave out (:func:`region_expansion`).
+    iterations : int
+        Gauss-Newton steps.
+    bound : float
+        The refined rate is kept within the range ``estimate`` and ``guess`` span, widened by
+        the factor ``bound`` (beyond it, the start's motion scaled to the nearer limit): where
+        the box holds too little of the object's outline to fix its motion (the corner of an
+        object larger than it), the steps can wander.
+
+    Returns
+    -------
+    Expansion
+        Per frame interval about the box centre, ``brightness`` and ``fit`` the estimate's;
+        ``estimate`` itself where the box is smaller than 5x5 pixels or the start does not
+        expand.
+
+    References
+    ----------
+    .. [1] B. K. P. Horn, Y. Fang, I. Masaki, "Hierarchical framework for direct gradient-based
+       time-to-contact estimation", IEEE Intelligent Vehicles Symposium, 2009, pp. 1394-1400.
+    """
+    x0, y0, x1, y1 = box
+    w, h = x1 - x0, y1 - y0
+    start = estimate if guess is None else guess
+    if w < _MIN_SIDE or h < _MIN_SIDE or not start.rate > 0.0:
+        return estimate
+    cx, cy = x0 + 0.5 * (w - 1), y0 + 0.5 * (h - 1)  # the fit's centre (pixel centres)
+    now = np.ascontiguousarray(current[y0:y1, x0:x1])
+    skip = None if exclude is None else np.ascontiguousarray(exclude[y0:y1, x0:x1])
+    slid = None if background is None else np.ascontiguousarray(background[y0:y1, x0:x1])
+    scale, ax, ay = 1.0 + start.rate, start.drift_x, start.drift_y
+    for _ in range(iterations):
+        # the previous frame moved: p = c + A + scale (q - c), sampled at the box's pixels p
+        inverse = np.array([[1.0 / scale, 0.0, cx + (x0 - cx - ax) / scale],
+                            [0.0, 1.0 / scale, cy + (y0 - cy - ay) / scale]])
+        moved = cv2.warpAffine(previous, inverse, (w, h),
+                               flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                               borderMode=cv2.BORDER_REPLICATE)
+        # a pixel the background's translation explains better than the warp is left out
+        # (region_expansion leaves out a pixel its reference, here the current frame, explains)
+        reference = (None if slid is None
+                     else np.where(np.abs(now - slid) < np.abs(now - moved), now, moved))
+        rest = region_expansion(moved, now, (0, 0, w, h), reference, skip)
+        if rest is None:
+            break
+        # the rest's motion about the same centre, after the motion so far
+        ax, ay = rest.drift_x + (1.0 + rest.rate) * ax, rest.drift_y + (1.0 + rest.rate) * ay
+        scale *= 1.0 + rest.rate
+        if not scale > 0.1:  # shrunk to a tenth: no warp to sample (the bound below holds it)
+            break
+    rate = scale - 1.0
+    low, high = min(estimate.rate, start.rate), max(estimate.rate, start.rate) * bound
+    low = low / bound if low > 0.0 else low * bound
+    if not low <= rate <= high:  # the start's motion scaled to the bound
+        k = min(max(rate, low), high) / start.rate
+        return Expansion(start.drift_x * k, start.drift_y * k, start.rate * k,
+                         estimate.brightness, estimate.fit)
+    return Expansion(ax, ay, rate, estimate.brightness, estimate.fit)
 
 
 @kernel(error_model="numpy")

@@ -139,6 +139,11 @@ class Track:
     verdict : ApproachVerdict or None
         The approach test's parts in the latest frame it was judged (:meth:`judge`); None
         before its first.
+    reported_expansion : float or None
+        The expansion rate its target reports, per second (:meth:`measure_reported`): smoothed
+        under a constant-speed approach, from a fit refined where the object grows fast; the
+        approach test reads :attr:`expansion`. None until the model measures it (only with
+        ``refined_ttc``).
     """
 
     id: int
@@ -157,6 +162,7 @@ class Track:
     own_fit: float | None = None
     layers: tuple | None = None
     verdict: "ApproachVerdict | None" = None
+    reported_expansion: float | None = None
     _smoothing: float = field(default=0.5, repr=False)
 
     def observe(self, obs: Observation, elapsed: float, box_weight: float) -> None:
@@ -201,6 +207,40 @@ class Track:
         second, drift in pixels per second at the box centre), or None where they are not
         measured (:func:`layer_estimates`)."""
         self.layers = layer_estimates(layers, self.size)
+
+    def predicted_expansion(self, elapsed: float) -> float | None:
+        """:attr:`reported_expansion` ``elapsed`` seconds on, were the object approaching at
+        constant speed: its time to contact ``1 / rate`` less ``elapsed``, the rate at most
+        doubled (within a frame of contact, where the prediction would run to infinity); the
+        rate itself where it does not grow, None before its first measure."""
+        rate = self.reported_expansion
+        if rate is None or rate <= 0.0:
+            return rate
+        return rate / max(1.0 - rate * elapsed, 0.5)
+
+    def measure_reported(self, expansion: float, elapsed: float) -> None:
+        """Take this frame's expansion rate (per second) for the reported estimate,
+        ``elapsed`` seconds after the previous frame.
+
+        An exponential average, as :meth:`measure`'s, but of a prediction: under a
+        constant-speed approach the rate ``1 / tau`` rises each frame (tau falls a second per
+        second), and an average of the past trails it, reading the time to contact long
+        (:meth:`predicted_expansion`). An object that stops measures a rate near 0, which the
+        average takes at the same weight: its reported rate halves each frame or so, its time
+        to contact lengthens, and it stops counting soon after.
+        """
+        predicted = self.predicted_expansion(elapsed)
+        if predicted is None:
+            self.reported_expansion = expansion
+        else:
+            self.reported_expansion = predicted + self._smoothing * (expansion - predicted)
+
+    @property
+    def reported_ttc(self) -> float | None:
+        """Time to contact ``1 / reported_expansion``, seconds; None unless it grows."""
+        if self.reported_expansion is None or self.reported_expansion <= 0:
+            return None
+        return 1.0 / self.reported_expansion
 
     @property
     def ttc(self) -> float | None:
