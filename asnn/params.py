@@ -392,6 +392,14 @@ class ASNNParams(BaseModel):
         "one before) is a fragment of that object and reports that track's id, and an object "
         "seen as several fragments is one target (asnn.approach.tracking.TargetTracker.object_id); "
         "changes ids and targets, never the warning; needs targets='objects'")
+    refined_ttc: bool = Field(
+        False, description="a target reports its own estimate of the expansion rate and time "
+        "to contact: smoothed under a constant-speed approach (asnn.approach.tracking."
+        "Track.measure_reported), from the box's fit refined by Gauss-Newton steps on the warped "
+        "previous frame where the target counts and its motion moves the box's edge by more "
+        "than a pixel a frame at the fit's grid (asnn.approach.looming.refined_expansion); the "
+        "approach test reads the tracks' own estimate, so this changes the targets' ttc and "
+        "expansion, never the warning; needs targets='objects'")
     partial_overlap: bool = Field(
         False, description="the approach test also passes a partial overlap: ttc <= "
         "overlap_tau_max, offset <= overlap_offset_max, from a box the expansion fit explains "
@@ -441,7 +449,8 @@ class ASNNParams(BaseModel):
             raise ValueError(f"dt * decay / tau is {step:g}: the temporal filter (eq. 5) is "
                              "unstable at 2 or more; lower dt or decay, or raise tau")
         needing = [name for name in ("approach_gate", "scene_relative", "object_ids",
-                                     "ignore_rig", "surface_ahead", "corridor_gate")
+                                     "refined_ttc", "ignore_rig", "surface_ahead",
+                                     "corridor_gate")
                    if getattr(self, name)]
         if (self.min_width is not None and self.max_width is not None
                 and self.min_width > self.max_width):
@@ -563,7 +572,8 @@ PRESETS["robust"] = _derived(
     max_width=480, min_width=160, track_box=0.3, approach_frames=3, approach_seconds=0.1,
     attention_step=2,
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
-    region_persistence=True, region_cover=0.2, object_ids=True, motion_layers=True, ignore_rig=True,
+    region_persistence=True, region_cover=0.2, object_ids=True, refined_ttc=True,
+    motion_layers=True, ignore_rig=True,
     surface_ahead=True, corridor_gate=True, own_motion_weight=2.0,
 )
 DEFAULT_PRESET = "robust"

@@ -77,7 +77,8 @@ class TrackReport:
     expansion, ttc, offset, fit, own_expansion, layers
         As :class:`asnn.approach.tracking.Track` keeps them (per second, seconds, object sizes,
         share; ``layers`` as ``(share, ttc, offset)`` per motion of the box, None where not
-        measured).
+        measured): what the approach test read. A target's own ``expansion`` and ``ttc`` can
+        differ (``refined_ttc``: :attr:`~asnn.approach.tracking.Track.reported_expansion`).
     streak : int
         Consecutive frames, up to this one, in which it passed the approach test.
     test : ApproachVerdict

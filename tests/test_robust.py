@@ -676,10 +676,11 @@ def test_the_partial_overlap_regime_is_a_part_of_the_gate():
     with pytest.raises(ValueError, match="approach_gate needs targets='objects'"):
         ASNNParams(approach_gate=True)
     # every stage on the objects named at once, so one try finds them all
-    with pytest.raises(ValueError, match="approach_gate, scene_relative, object_ids, ignore_rig, "
-                                         "surface_ahead, corridor_gate need targets='objects': "
-                                         "set approach_gate=False, scene_relative=False, "
-                                         "object_ids=False, ignore_rig=False, "
+    with pytest.raises(ValueError, match="approach_gate, scene_relative, object_ids, refined_ttc, "
+                                         "ignore_rig, surface_ahead, corridor_gate need "
+                                         "targets='objects': set approach_gate=False, "
+                                         "scene_relative=False, object_ids=False, "
+                                         "refined_ttc=False, ignore_rig=False, "
                                          "surface_ahead=False, corridor_gate=False too"):
         preset("default", targets="clusters")
 
@@ -728,6 +729,9 @@ NOT_ABLATED = {
     "targets": "objects, what the approach gate and the stages after it read (their rows)",
     "origin_seed": "the published variant's DBSCAN seed: clusters only",
     "track_box": "the tracker's box smoothing, part of the tracker the approach gate reads",
+    "refined_ttc": "the targets' reported ttc and expansion only, never a warning: measured by "
+                   "asnn eval --ttc (docs/design-notes.md, \"The reported time to contact late "
+                   "in an approach\")",
 }
 
 

@@ -39,8 +39,9 @@ from ..params import ASNNParams
 from ..retina import potential_for_output
 from ..response import TrackReport
 from ..targets import Target, extract_objects
-from .looming import (RIG_WEIGHT, moved_by_expansion, region_and_rim_expansion,
-                      region_expansion, rig_pixels, rig_rows, rim_scaled, scene_expansion)
+from .looming import (FIT_SIDE, RIG_WEIGHT, Expansion, moved_by_expansion,
+                      refined_expansion, region_and_rim_expansion, region_expansion, rig_pixels,
+                      rig_rows, rim_scaled, scene_expansion)
 from .motion_layers import motion_layers
 from .surface import SurfaceWatch, surface_frames
 from .tracking import (ApproachVerdict, Observation, TargetTracker, approach_test,
@@ -58,6 +59,10 @@ _SCENE_EXPANDS = 0.2
 # against, and a generated cut-in in a turn warned: design notes, "A scene that does not move
 # in depth is not refitted against".)
 _SCENE_MOVES = 0.002
+# a counting target's reported expansion is refined where its motion moves its box's edge by
+# more than this many pixels a frame at the looming fit's grid (at most 64 px a side): beyond
+# the gradient fit's small-motion range (asnn.approach.looming.refined_expansion)
+_REFINE_EDGE = 1.0
 
 
 class FramePair(NamedTuple):
@@ -291,7 +296,7 @@ class ApproachStage:
         tracks = self.tracker.update(observations, elapsed)
         # where the background slides, each box is fitted over its object's rim too
         rim = attended if p.rim_expansion and frames.background is not None else None
-        boxes, rates = [], []
+        boxes, rates, estimates = [], [], []
         for k, tr in enumerate(tracks):
             box = _pixel_box(tr.box, w, h)
             est = rim_scaled(*region_and_rim_expansion(
@@ -305,6 +310,7 @@ class ApproachStage:
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed,
                            est.fit if whole else 0.0)
             boxes.append(box)
+            estimates.append(est)
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
             self._measure_against_scene(tracks, boxes, rates, frames)
@@ -315,6 +321,8 @@ class ApproachStage:
             # a corridor's objects are pieces of its walls (the tracks keep their state: an
             # object standing ahead counts once it ends the corridor reading)
             coming = [False] * len(coming)
+        if p.refined_ttc:
+            self._measure_reported(tracks, boxes, estimates, coming, frames)
         self.objects = list(zip(tracks, shares))
         # what each object adds to u where it counts: its share, times own_motion_weight where it
         # closes on us by its own motion
@@ -336,7 +344,9 @@ class ApproachStage:
                             direction=float(regions.direction[k]),
                             energy=float(regions.energy[k]),
                             pixels=round(int(regions.pixels[k]) * sx * sy),
-                            id=self.tracker.object_id(tr), expansion=tr.expansion, ttc=tr.ttc,
+                            id=self.tracker.object_id(tr),
+                            expansion=tr.reported_expansion if p.refined_ttc else tr.expansion,
+                            ttc=tr.reported_ttc if p.refined_ttc else tr.ttc,
                             offset=tr.offset, approaching=coming[k])
             # an object seen as several fragments is one target: its largest
             if target.id not in targets or target.pixels > targets[target.id].pixels:
@@ -348,6 +358,36 @@ class ApproachStage:
             if record:
                 reports += report
         return total, list(targets.values()), reports
+
+    def _measure_reported(self, tracks: list, boxes: list, estimates: list, coming: list,
+                          frames: FramePair) -> None:
+        """Each measured track's reported expansion (``refined_ttc``;
+        :meth:`~asnn.approach.tracking.Track.measure_reported`), after the approach test has
+        been judged on its own: this frame's fit, refined
+        (:func:`~asnn.approach.looming.refined_expansion`) where the track counts and the
+        larger of the fit and the reported rate's prediction
+        (:meth:`~asnn.approach.tracking.Track.predicted_expansion`) moves the box's edge by
+        more than :data:`_REFINE_EDGE` pixels a frame at the fit's grid, starting from the
+        larger of the two (a saturated fit can lie too far below the answer for two steps to
+        reach it)."""
+        previous, current, background, elapsed = frames
+        for k, tr in enumerate(tracks):
+            est = estimates[k]
+            if est is None:
+                continue
+            if coming[k]:
+                x0, y0, x1, y1 = boxes[k]
+                edge = 0.5 * min(max(x1 - x0, y1 - y0), FIT_SIDE)
+                predicted = (tr.predicted_expansion(elapsed) or 0.0) * elapsed
+                guess = est
+                if predicted > est.rate:  # the prediction's rate, the fit's offset
+                    ratio = predicted / est.rate if est.rate > 0.0 else 0.0
+                    guess = Expansion(est.drift_x * ratio, est.drift_y * ratio, predicted,
+                                      est.brightness, est.fit)
+                if guess.rate * edge > _REFINE_EDGE:
+                    est = refined_expansion(previous, current, boxes[k], est, guess,
+                                            background, self.rig.mask)
+            tr.measure_reported(est.rate / elapsed, elapsed)
 
     def _surface_ahead(self, frames: FramePair, cells: int, period: float,
                        scale: tuple[float, float], record: bool
