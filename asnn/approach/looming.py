@@ -43,8 +43,8 @@ from .._fast import _area_fast, _area_table, _reflect
 from .._jit import kernel
 
 __all__ = ["Expansion", "region_expansion", "region_and_rim_expansion", "rim_scaled",
-           "refined_expansion", "scene_expansion", "moved_by_expansion", "rig_pixels", "rig_rows", "shrunk_mask",
-           "shrink_step", "shrunk_size", "FIT_SIDE", "RIG_WEIGHT"]
+           "refined_expansion", "scene_expansion", "moved_by_expansion", "rig_pixels", "rig_rows",
+           "shrunk_mask", "shrink_step", "shrunk_size", "FIT_SIDE", "RIG_WEIGHT"]
 
 _MIN_SIDE = 5  # pixels: a smaller box has too few gradients for four unknowns
 FIT_SIDE = 64  # pixels: a larger box is area-averaged down to this before a fit (every fit's)
