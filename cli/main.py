@@ -142,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
             # a command imports what it runs (the model: a second or two): Ctrl-C then is an
             # interrupt too
             args = _parse(build_parser(), argv)  # loads no numba (tests/test_layers.py)
-            if args.command == "detect":
+            if argv[:1] == ["detect"]:
                 _prefer_wide_vectors()  # before the command imports numba (not for --help)
             return int(args.func(args) or 0)
     except _Terminated:

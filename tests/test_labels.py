@@ -504,3 +504,19 @@ def test_a_scene_is_named_from_the_labels_folder_given_and_replaces_its_own_entr
     entries = json.loads(labels.read_text())
     assert [e["file"] for e in entries] == ["s.mp4"] and entries[0]["collision"] is True
     assert labels.is_symlink()
+
+
+def test_a_bags_camera_written_into_the_file_is_named_as_with_its_topic():
+    """``drive.mcap#/front/image`` in ``file`` (as the command line takes a camera) names its
+    results as ``file: drive.mcap, topic: /front/image`` does: two cameras written so were
+    refused as one name ("image"); a video with '#' in its name keeps its own."""
+    from asnn.evaluation.labels import result_name
+
+    base = {"fps": 20.0, "collision": False}
+    assert result_name({**base, "file": "d/drive.mcap#/front/image"}) == \
+        result_name({**base, "file": "d/drive.mcap", "topic": "/front/image"}) == \
+        "drive.front_image"
+    assert result_name({**base, "file": "rosbag2_run#/rear/image"}) == "rosbag2_run.rear_image"
+    assert result_name({**base, "file": "clip#2.mp4"}) == "clip#2"
+    labels = [{**base, "file": f"drive.mcap#/{side}/image"} for side in ("front", "rear")]
+    assert len(check_labels(labels)) == 2

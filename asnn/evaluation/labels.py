@@ -169,9 +169,14 @@ def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict
 def result_name(label: Mapping) -> str:
     """The name of a clip's results and plot files: its file's stem, and for a bag's camera
     its topic too (``drive.front_image_raw`` for ``drive.mcap`` and ``/front/image_raw``), so
-    that two cameras of one bag are two clips."""
-    stem = Path(str(label["file"])).stem
-    topic = label.get("topic")
+    that two cameras of one bag are two clips. A ``file`` written as the command line takes a
+    bag's camera (``drive.mcap#/front/image_raw``, or a rosbag2 folder's) is named alike."""
+    file, topic = str(label["file"]), label.get("topic")
+    head, sep, suffix = file.rpartition("#")
+    if not topic and sep and suffix.startswith("/") and (
+            head.lower().endswith(".mcap") or not Path(head).suffix):
+        file, topic = head, suffix
+    stem = Path(file).stem
     if not topic:
         return stem
     return f"{stem}.{re.sub(r'[^A-Za-z0-9_-]+', '_', str(topic)).strip('_')}"
