@@ -1137,7 +1137,7 @@ def test_a_missing_extra_is_named_in_one_line(tmp_path, monkeypatch, capsys):
 # --------------------------------------------------------------------------- eval, camera
 
 def test_eval_reads_bags_in_a_labelled_folder_and_a_label_names_the_topic(tmp_path, looming,
-                                                                          two_topics):
+                                                                          two_topics, capsys):
     clips = tmp_path / "clips"
     clips.mkdir()
     (clips / "two.mcap").write_bytes(two_topics.read_bytes())
@@ -1146,6 +1146,9 @@ def test_eval_reads_bags_in_a_labelled_folder_and_a_label_names_the_topic(tmp_pa
     out = tmp_path / "out"
     assert main(["eval", str(clips), "--models", "asnn", "--out", str(out), "--no-plots",
                  "--early-tolerance", "0"]) == 0
+    # its progress line names the camera, as the report does (it named the file alone)
+    assert f"eval: asnn two.mcap#/rear/image, {len(looming.frames)} frames" in \
+        capsys.readouterr().err
     results = json.loads((out / "results.json").read_text())
     assert not results["errors"]
     assert results["detectors"]["asnn"]["clips"][0]["outcome"] == "hit"

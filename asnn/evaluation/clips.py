@@ -296,7 +296,8 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     def finished(index: int, frames: int, error: str | None,
                  decoded: tuple | None) -> None:
         spec, clip = tasks[index][1], clip_of[index]
-        name = f"{spec.name} {labels[clip]['file']}"  # as labelled: sub/clip.mp4, not clip.mp4
+        # as labelled (sub/clip.mp4, not clip.mp4), a bag's camera with its topic
+        name = f"{spec.name} {scoring.clip_name(labels[clip])}"
         progress.advance(expected[index], name)
         progress.note(name + (f": {error}" if error else
                               f", {frames} frame{'' if frames == 1 else 's'}"))
