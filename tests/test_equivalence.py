@@ -472,3 +472,37 @@ def test_at_an_orientation_tie_the_forms_part_by_rounding_but_warn_alike():
         assert [r.collision for r in runs[name]] == [r.collision for r in base]
         gaps = [abs(a.u - b.u) / abs(b.u) for a, b in zip(runs[name], base) if b.u]
         assert max(gaps) < 0.03, name
+
+
+def _fields_read(nodes) -> set[str]:
+    """The parameters (``p.NAME``) the code of ``nodes`` reads."""
+    import ast
+
+    return {n.attr for node in nodes for n in ast.walk(node)
+            if isinstance(n, ast.Attribute) and isinstance(n.value, ast.Name) and n.value.id == "p"}
+
+
+def test_every_parameter_the_straightforward_step_reads_the_optimised_one_reads_too():
+    """A parameter added to a stage between the photoreceptors and the attention (a researcher's
+    extension of ``retina.temporal_filter_step``, say) read by ``ASNN._respond`` alone would be
+    ignored by the default, optimised form (the fused kernels of ``asnn._fast``): every command
+    would measure nothing, silently (a researcher's trial). Each such parameter must reach the
+    fused pass's set-up or its step, or ``_fast.supported`` must refuse parameter sets that use
+    it (the model then falls back to the straightforward form)."""
+    import ast
+    import inspect
+    import textwrap
+
+    def tree(name):
+        return ast.parse(textwrap.dedent(inspect.getsource(getattr(ASNN, name)))).body[0]
+
+    setup = [node for node in ast.walk(tree("__init__"))
+             if isinstance(node, ast.If) and ast.unparse(node.test) == "self.optimised"]
+    assert len(setup) == 1, "the optimised form's set-up is no longer one `if self.optimised:`"
+    straightforward = _fields_read([tree("_respond")])
+    optimised = _fields_read(setup + [tree("_respond_optimised"), tree("_front")])
+    assert {"tau", "n_fast", "w1_on", "top_k", "gamma_d"} <= straightforward  # it reads them
+    missing = straightforward - optimised
+    assert not missing, (f"ASNN._respond reads {sorted(missing)}, which the optimised form "
+                         "(asnn/_fast.py, set up in ASNN.__init__) never reads: the default "
+                         "would ignore them (CONTRIBUTING.md, 'A change to the default preset')")
