@@ -529,8 +529,11 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
         assert _png(out / f"{stem}.png")
         assert json.loads((out / f"{stem}.json").read_text())
     assert "report.md" in capsys.readouterr().out
-    assert "detectors `asnn`, `lgmd1`, `lgmd2`; the temporal filter" in \
-        (out / "report.md").read_text()  # the detectors run, not only the sweeps' preset
+    report = (out / "report.md").read_text()
+    assert "detectors `asnn`, `lgmd1`, `lgmd2`; the maps and the sweeps" in report  # not only
+    # the sweeps' preset; and Fig. 3 is said to be the paper's settings, not the preset's
+    assert "the temporal filter (Fig. 3) the paper's simulation settings (K = 5, C = 60, " \
+        "tau = 8) whatever the preset" in report
 
     fig3 = json.loads((out / "fig3_temporal_filter.json").read_text())
     # the paper's own simulation: K=5, C=60, tau=8, 100 steps of 0.05 s
@@ -571,6 +574,7 @@ def test_paper_figures_are_written_with_their_numbers(tmp_path, capsys):
     assert main(["eval", "--paper", "--detectors", "lgmd2", "--size", "64x64", "--no-plots",
                  "--out", str(bare)]) == 0
     assert not list(bare.glob("*.png")) and (bare / "fig8_maps.json").is_file()
+    assert "Figures: none (--no-plots)" in (bare / "report.md").read_text()  # not an empty list
 
 
 def test_the_maps_figure_draws_the_flow_on_the_models_grid(tmp_path):

@@ -95,8 +95,9 @@ def _paper_report(results: Mapping) -> str:
         "# The paper's synthetic experiments",
         "",
         f"Scenes {results['size'][0]}x{results['size'][1]}, {results['frames']} steps; detectors "
-        f"{', '.join(f'`{d}`' for d in results['detectors'])}; the temporal filter, the maps and "
-        f"the sweeps (and a bare `asnn`) are ASNN's preset `{results['preset']}`. "
+        f"{', '.join(f'`{d}`' for d in results['detectors'])}; the maps and the sweeps (and a "
+        f"bare `asnn`) are ASNN's preset `{results['preset']}`, the temporal filter (Fig. 3) "
+        "the paper's simulation settings (K = 5, C = 60, tau = 8) whatever the preset. "
         "Approach-recession: the disk grows over steps 10-55 and shrinks "
         "over 75-120; translation: the bar moves right over 10-55 and back over 75-120. Scored "
         "with no early tolerance (generated clips); `approach` counts warning frames in "
@@ -116,7 +117,8 @@ def _paper_report(results: Mapping) -> str:
               "", "Speed sweep (contrast 1), ASNN peak u: " + ", ".join(
         f"{s:g} px/step: {p:.4g}" for s, p in zip(results["speed"]["values"],
                                                    results["speed"]["peak"])),
-              "", "Figures: " + ", ".join(f"`{f}`" for f in results["figures"]), ""]
+              "", "Figures: " + (", ".join(f"`{f}`" for f in results["figures"])
+                                 or "none (--no-plots)"), ""]
     return "\n".join(lines)
 
 
