@@ -15,7 +15,7 @@ import numpy as np
 
 from . import _fast
 from .approach import CameraRig
-from .approach.looming import region_expansion
+from .approach.looming import Expansion, refined_expansion, region_expansion
 from .approach.motion_layers import motion_layers
 from .frames import LEVELS
 from .model import ASNN
@@ -68,6 +68,10 @@ def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference
             flat = np.zeros((128, 128), model.dtype)
             for box in ((0, 0, 90, 80), (0, 0, 128, 64)):
                 region_expansion(flat, flat, box, flat)
+            # the refined time to contact's steps (refined_ttc), first called late in an approach
+            start = Expansion(0.0, 0.0, 0.1, 0.0, 1.0)
+            for background in (None, flat):
+                refined_expansion(flat, flat, (0, 0, 90, 80), start, background=background)
             # the motion layers' kernel, which the clip (a still camera) never reaches
             texture = np.random.default_rng(0).random((64, 64)).astype(model.dtype)
             motion_layers(texture, texture, (0, 0, 64, 64))
