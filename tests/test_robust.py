@@ -783,7 +783,8 @@ def _key(response):
 
 def test_a_fast_camera_is_stepped_on_a_grid_its_stamps_fix(loom_60fps):
     """max_step_rate (30): a 60 fps stream is stepped at 30 fps, each held frame answered as
-    the one before; and a model started on an odd frame (a worker taking the robot over) steps
+    the one before, its targets' time to contact a frame on (a constant-speed approach: it
+    repeated it a frame old, reading long late in an approach); and a model started on an odd frame (a worker taking the robot over) steps
     the same frames as one that saw the whole stream, once it has judged the rate. A hold
     counted from the last frame stepped kept such a model on the other half of the frames."""
     frames = loom_60fps.frames
@@ -792,9 +793,19 @@ def test_a_fast_camera_is_stepped_on_a_grid_its_stamps_fix(loom_60fps):
     responses, stepped = _stepped(model, frames, times)
     assert model.ceiling_held == len(frames) - len(stepped) >= len(frames) // 2 - 2
     assert set(range(4, len(frames), 2)) <= set(stepped)  # the even frames, from the 4th on
+    aged = 0
     for k in range(4, len(frames)):
         if k not in stepped:
-            assert _key(responses[k]) == _key(responses[k - 1]), k
+            held, before = responses[k], responses[k - 1]
+            assert (held.u, held.collision) == (before.u, before.collision), k
+            assert [(t.id, t.x, t.y, t.offset) for t in held.targets] == \
+                [(t.id, t.x, t.y, t.offset) for t in before.targets], k
+            for now, then in zip(held.targets, before.targets):
+                if then.ttc is not None:
+                    assert now.ttc == pytest.approx(then.ttc - 1 / 60) and \
+                        now.expansion == pytest.approx(1 / now.ttc), k
+                    aged += 1
+    assert aged > 10  # the approach's held frames carry a ttc
     assert len(model.periods) and model.frame_period == pytest.approx(1 / 30)
     for start in (7, 8):
         _, cold = _stepped(ASNN("default"), frames[start:], times[start:])
