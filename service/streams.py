@@ -138,7 +138,6 @@ class Stream:
         self.frames += 1
 
 
-
 def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: int,
                 takeover_after: float, prefix: str,
                 limited_log: RateLimitedLog) -> Stream | None:
