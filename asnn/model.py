@@ -434,10 +434,10 @@ class ASNN:
         if self._held(None if t is None else stamp):
             self.repeated = True
             self.ceiling_held += 1
-            return _Frame(index, repeat=True, held_for=stamp - self._stamp)
+            return _Frame(index, repeat=True, since_stepped=stamp - self._stamp)
         self.repeated = blocks is not None and self._is_repeat(blocks)
         if self.repeated:
-            return _Frame(index, repeat=True)
+            return _Frame(index, repeat=True, since_stepped=stamp - self._stamp)
         elapsed = stamp - self._stamp
         if not timed_gap(elapsed):  # no usable times: the nominal frame period
             elapsed = p.dt
@@ -493,9 +493,9 @@ class ASNN:
 
     def _finish(self, frame: "_Frame") -> Response:
         """The last part of a step: the response to a frame whose maps are complete."""
-        if frame.held_for:  # the last response, its targets' ttc aged (kept as it was)
-            return dataclasses.replace(self._last, index=frame.index,
-                                       targets=aged_targets(self._last.targets, frame.held_for))
+        if frame.since_stepped > 0.0:  # the last response, its targets aged (kept as it was)
+            return dataclasses.replace(self._last, index=frame.index, targets=aged_targets(
+                self._last.targets, frame.since_stepped))
         if frame.lum is None:
             self._last = (dataclasses.replace(self._last, index=frame.index) if frame.repeat
                           else Response.silent(frame.index, [] if self.record_tracks else None))
@@ -733,7 +733,9 @@ class _Frame:
 
     index: int
     repeat: bool = False  # a repeat of the previous frame (no lum: no new response either)
-    held_for: float = 0.0  # held by the frame-rate ceiling: seconds since the frame stepped last
+    # a frame not stepped (held by the frame-rate ceiling, or a repeat): seconds since the frame
+    # stepped last, by which its response's targets are aged
+    since_stepped: float = 0.0
     lum: np.ndarray | None = None
     elapsed: float = 0.0
     previous: np.ndarray | None = None
@@ -746,11 +748,12 @@ class _Frame:
 
 
 def aged_targets(targets: list, seconds: float) -> list:
-    """The targets of a response ``seconds`` on, for a frame the frame-rate ceiling holds: each
-    time to contact shortened by ``seconds`` and its expansion rate the inverse (an approach at
-    constant speed, as the reported estimate assumes: a held frame repeated it a frame old, +37 %
-    at 60 fps in an approach's last frames); a target that would reach the camera within them
-    keeps its own."""
+    """The targets of a response ``seconds`` on, for a frame the model does not step (held by the
+    frame-rate ceiling, or a repeat of the one before): each time to contact shortened by
+    ``seconds`` and its expansion rate the inverse (an approach at constant speed, as the
+    reported estimate assumes: a held frame repeated it a frame old, +37 % at 60 fps in an
+    approach's last frames, and a repeat between held frames read it back up); a target that
+    would reach the camera within them keeps its own."""
     return [dataclasses.replace(t, ttc=t.ttc - seconds, expansion=1.0 / (t.ttc - seconds))
             if t.ttc is not None and t.ttc > seconds else t for t in targets]
 

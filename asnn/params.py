@@ -79,7 +79,8 @@ class ASNNParams(BaseModel):
         False,
         description="treat a frame that hardly differs from the previous one, compared with the "
         "difference of the last frame that was not a repeat, as a repeat: the state is held and "
-        "the previous response repeated (video converted to a higher frame rate repeats frames)",
+        "the previous response repeated, its targets' ttc shortened by the time since "
+        "(asnn.model.aged_targets; video converted to a higher frame rate repeats frames)",
     )
     repeat_fraction: float = Field(
         0.2, gt=0, description="a repeat differs from the previous frame by less than this "

@@ -103,8 +103,8 @@ def test_the_import_reader_resolves_relative_imports():
 # when the parser imported every command's module), OpenCV, the evaluation's tooling, and
 # matplotlib (0.2-0.6 s to import, and a writable cache folder wanted: a worker or camera
 # started under systemd's sandbox, no home, logged its font-cache complaints on every start)
-MODEL_FREE = ("numba", "llvmlite", "cv2", "asnn.model", "asnn.evaluation.runs", "asnn.evaluation.scoring",
-              "asnn.evaluation.perturb", "matplotlib")
+MODEL_FREE = ("numba", "llvmlite", "cv2", "asnn.model", "asnn.evaluation.runs",
+              "asnn.evaluation.scoring", "asnn.evaluation.perturb", "matplotlib")
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["router", "--help"], ["status", "--help"],

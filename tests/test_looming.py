@@ -79,6 +79,24 @@ def test_the_refined_expansion_on_the_shrunk_grid_is_the_scale_at_every_box_size
         assert converged.rate == pytest.approx(0.2, rel=0.003)
 
 
+def test_a_long_thin_box_is_refined_on_a_grid_that_keeps_its_short_side():
+    """A box clipped by the frame's edge to a few rows of a long side (a trailing box): its
+    grid's factor is held to what leaves 5 pixels across (the long side's factor left it 0
+    rows wide, and the area average raised), and the refinement runs or leaves it alone."""
+    from asnn.approach.looming import refine_grid
+
+    tex = _texture()
+    after = warp(tex, 1.1)
+    for box in ((100, 20, 105, 380), (10, 200, 390, 206), (100, 20, 112, 380)):
+        factor, (gx0, gy0, gx1, gy1) = refine_grid(box)
+        assert min(gx1 - gx0, gy1 - gy0) // factor >= 5, box
+        est = region_expansion(tex, after, box)
+        assert est is not None
+        refined = refined_expansion(tex, after, box, est, est._replace(rate=0.1))
+        assert math.isfinite(refined.rate) and refined.rate > 0, box
+    assert refine_grid((0, 0, 200, 200))[0] == 4  # a box of usual shape keeps its factor
+
+
 def test_translation_is_drift_not_expansion():
     tex = _texture()
     est = region_expansion(tex, warp(tex, dx=0.6, dy=-0.4), (150, 150, 250, 250))

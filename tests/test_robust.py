@@ -592,6 +592,28 @@ def test_repeated_frames_are_held_rather_than_read_as_a_stop():
     assert held_warn.index(True) < (plain_warn.index(True) if any(plain_warn) else len(frames))
 
 
+def test_a_repeated_frames_targets_are_aged_as_a_held_frames():
+    """A repeat answers with the last response, its targets' ttc shortened by the time since the
+    frame stepped, as a frame the ceiling holds does (a repeat between held frames read the
+    ttc back up: 1.097, 1.081 held, 1.097 repeated, 1.047 held)."""
+    scene = make_case("loom-dark-c0.3-d12-center")
+    frames = _with_repeats(scene.frames)
+    model = ASNN("robust")
+    fps = scene.fps * 4 / 3
+    before, aged = None, 0
+    for i, frame in enumerate(frames):
+        response = model.step(frame, i / fps)
+        if model.repeated and before is not None and model.ceiling_held == 0:
+            assert (response.u, response.collision) == (before.u, before.collision)
+            for now, then in zip(response.targets, before.targets):
+                assert (now.id, now.x, now.y) == (then.id, then.x, then.y)
+                if then.ttc is not None and then.ttc > 1 / fps:
+                    assert now.ttc == pytest.approx(then.ttc - 1 / fps)
+                    aged += 1
+        before = response
+    assert aged >= 3
+
+
 def test_a_repeated_frame_is_held_under_sensor_noise():
     # a scene moving across the view (a checkerboard sliding 2 px per frame), converted to a
     # higher frame rate (every third frame shown twice), every copy with noise of its own (4
@@ -784,8 +806,8 @@ def _key(response):
 def test_a_fast_camera_is_stepped_on_a_grid_its_stamps_fix(loom_60fps):
     """max_step_rate (30): a 60 fps stream is stepped at 30 fps, each held frame answered as
     the one before, its targets' time to contact a frame on (a constant-speed approach: it
-    repeated it a frame old, reading long late in an approach); and a model started on an odd frame (a worker taking the robot over) steps
-    the same frames as one that saw the whole stream, once it has judged the rate. A hold
+    repeated it a frame old, reading long late in an approach); and a model started on an odd
+    frame (a worker taking the robot over) steps the same frames as one that saw the whole stream, once it has judged the rate. A hold
     counted from the last frame stepped kept such a model on the other half of the frames."""
     frames = loom_60fps.frames
     times = [1000.0 + k / 60.0 for k in range(len(frames))]

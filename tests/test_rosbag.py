@@ -551,6 +551,12 @@ def test_a_topic_recorded_on_several_channels_is_one_topic(tmp_path, looming):
         read = [image for _, image in clip.frames()]
         assert clip.frame_count == len(read) == len(frames), counts
         assert all(np.array_equal(a, b) for a, b in zip(read, frames))
+    # a channel of another image type declared first and never used decides nothing
+    bag = write_channels(tmp_path / "idle-first.mcap", [
+        ("/cam", "foxglove.CompressedImage", "protobuf", "protobuf", []),
+        ("/cam", *fox, fox_raw(frames[:5]))])
+    assert rosbag.bag_topics(bag)["/cam"] == rosbag.TopicInfo("/cam", "foxglove.RawImage", 5)
+    assert len(list(rosbag.open_bag(bag).frames())) == 5
     # a later channel of another image type: never used (a recorder's idle subscription), it
     # stops nothing; used, it is the type change (not an empty topic)
     bag = write_channels(tmp_path / "mixed.mcap", [
@@ -623,7 +629,11 @@ def test_the_protobuf_reader_skips_unknown_fields_and_refuses_what_is_no_message
         "group": key(3, 3), "cut varint": key(15, 0) + b"\x80",
         "endless varint": key(15, 0) + b"\x80" * 11, "cut bytes": key(2, 2) + b"\x05abc",
         "not utf-8": text(3, b"\xff\xfe"), "nanos out of range": text(1, negative),
-        "wire type": key(2, 0) + b"\x01"}
+        "wire type": key(2, 0) + b"\x01",
+        # 10**10 s, past int64 nanoseconds (the year 2262): the bag's times overflowed
+        "seconds too large": text(1, key(1, 0) + bytes([0x80, 0xC8, 0xAF, 0xA0, 0x25])),
+        # millions of tiny unknown fields in a 135 MB message took minutes of Python each
+        "too many fields": b"\x78\x00" * 300}
     for what, data in refused.items():
         with pytest.raises(ProtobufError):
             decode_compressed_image(data)

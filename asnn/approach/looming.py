@@ -584,7 +584,10 @@ def refine_grid(box: tuple[int, int, int, int]) -> tuple[int, tuple[int, int, in
     ``factor - 1`` pixels less a side). A whole factor is OpenCV's fast area average, a tenth
     of the time of a fractional one."""
     x0, y0, x1, y1 = box
-    factor = math.ceil(shrink_step(x1 - x0, y1 - y0))
+    # at most the factor that leaves _MIN_SIDE grid pixels on the shorter side (a box clipped by
+    # the frame's edge to a few rows of a long side: a larger factor left it 0 or 1 rows)
+    factor = max(1, min(math.ceil(shrink_step(x1 - x0, y1 - y0)),
+                        min(x1 - x0, y1 - y0) // _MIN_SIDE))
     trim_x, trim_y = (x1 - x0) % factor, (y1 - y0) % factor
     x0, y0 = x0 + trim_x // 2, y0 + trim_y // 2
     return factor, (x0, y0, x1 - trim_x + trim_x // 2, y1 - trim_y + trim_y // 2)

@@ -48,8 +48,8 @@ from ..io.video import quiet_writer
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
 from .options import FAMILIES, PERTURBATIONS
 
-__all__ = ["FAMILIES", "PERTURBATIONS", "check_perturbation", "describe", "keeps_frames", "perturb_frame",
-           "perturbed", "perturb_label", "reencoded"]
+__all__ = ["FAMILIES", "PERTURBATIONS", "check_perturbation", "describe", "keeps_frames",
+           "perturb_frame", "perturbed", "perturb_label", "reencoded"]
 
 # the perturbations that drop frames instead of changing them: frame k kept is frame step * k
 _RATE_STEP = {"half-rate": 2}

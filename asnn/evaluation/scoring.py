@@ -387,8 +387,9 @@ def summarize(scores: Iterable[ClipScore]) -> dict:
         ``noncollision_minutes`` (of scored non-collision video, where the labels give the fps) and
         ``warning_frames_per_minute`` of it (SPEC.md section 5: a detector that fires once per
         clip and one that fires all the time are not equally useful); ``hit_rate_ci`` and
-        ``false_alarm_rate_ci``, the rates' 95 % :func:`~asnn.evaluation.stats.wilson_interval` as ``[low, high]``
-        (None without a denominator; :mod:`asnn.evaluation.stats`).
+        ``false_alarm_rate_ci``, the rates' 95 %
+        :func:`~asnn.evaluation.stats.wilson_interval` as ``[low, high]`` (None without a
+        denominator).
     """
     scores = list(scores)
     scored = [s for s in scores if s.outcome != "missing"]

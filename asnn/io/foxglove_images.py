@@ -7,7 +7,9 @@ the schema the file embeds: the two messages' field numbers are fixed by Foxglov
 ``.proto`` files, so a file's schema text cannot make the reader build anything (as with the
 ROS 2 types, :mod:`asnn.io.rosbag` decodes by the type's own definition). A message is at most
 :data:`~asnn.io.mcap_reader.MAX_MESSAGE_BYTES` before it gets here; decoding it allocates no more
-than its own size again.
+than its own size again, and reads at most :data:`_MAX_FIELDS` fields (a message of millions of
+tiny unknown fields took minutes of Python each). A ``timestamp`` must fit nanoseconds in 64
+bits (before the year 2262).
 
 The decoded message looks like the ROS 2 one the bag reader already handles: a ``header`` with
 ``stamp.sec``, ``stamp.nanosec`` and ``frame_id``, then ``format`` and ``data``
@@ -38,6 +40,8 @@ FOXGLOVE_IMAGE_SCHEMAS = (FOXGLOVE_COMPRESSED_IMAGE, FOXGLOVE_RAW_IMAGE)
 # protobuf wire types
 _VARINT, _FIXED64, _BYTES, _FIXED32 = 0, 1, 2, 5
 _MAX_VARINT_BYTES = 10
+_MAX_FIELDS = 256  # fields read in one message (Foxglove's images have 7, a Timestamp 2)
+_MAX_SECONDS = (1 << 63) // 1_000_000_000  # stamps in int64 nanoseconds (the year 2262)
 _MAX_TEXT = 4096  # characters kept of a frame_id, format or encoding (names, not payloads)
 
 # (field number, wire type) of each field the reader takes, by message
@@ -73,8 +77,11 @@ def _fields(data, known: dict) -> dict:
     repeated scalar), by name; unknown fields are skipped by their wire type."""
     data = memoryview(data)
     found: dict = {}
-    at = 0
+    at, count = 0, 0
     while at < len(data):
+        count += 1
+        if count > _MAX_FIELDS:  # a picture's message has 7 fields: this is no such message
+            raise ProtobufError(f"more than {_MAX_FIELDS} fields")
         key, at = _varint(data, at)
         number, wire = key >> 3, key & 7
         if wire == _VARINT:
@@ -127,6 +134,8 @@ def _header(found: dict) -> SimpleNamespace:
         nanos -= 1 << 32
     if not 0 <= nanos < 1_000_000_000:
         raise ProtobufError(f"timestamp nanos {nanos} is outside 0..999999999")
+    if not 0 <= seconds < _MAX_SECONDS:  # nanoseconds since 1970 must fit an int64
+        raise ProtobufError(f"timestamp seconds {seconds} is outside 0..{_MAX_SECONDS - 1}")
     return SimpleNamespace(stamp=SimpleNamespace(sec=seconds, nanosec=nanos),
                            frame_id=_text(found.get("frame_id")))
 

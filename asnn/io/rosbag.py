@@ -3,8 +3,9 @@
 Reads ``sensor_msgs/msg/Image`` and ``sensor_msgs/msg/CompressedImage`` topics with the MCAP
 project's reader (``mcap``) and its ROS 2 decoder (``mcap-ros2-support``), the optional ``ros``
 extra, and Foxglove's ``foxglove.RawImage`` and ``foxglove.CompressedImage`` in protobuf (what
-Foxglove's recorders and ``asnn detect --mcap`` write; :mod:`asnn.io.foxglove_images`). Everything read from a bag is bounded before it is allocated: the container's records,
-chunks and summary as :mod:`asnn.io.mcap_reader` reads them (the image topic's messages to
+Foxglove's recorders and ``asnn detect --mcap`` write; :mod:`asnn.io.foxglove_images`).
+Everything read from a bag is bounded before it is allocated: the container's records, chunks
+and summary as :mod:`asnn.io.mcap_reader` reads them (the image topic's messages to
 :data:`~asnn.io.mcap_reader.MAX_MESSAGE_BYTES`, the others never copied), pictures to
 :data:`asnn.io.images.MAX_SIDE` per side with their pixel count checked against the data they
 come with (a compressed picture's header must describe a whole image its data can hold,
@@ -264,7 +265,11 @@ def _by_topic(channels: Iterable[TopicInfo]) -> dict[str, TopicInfo]:
         seen = topics.get(info.name)
         if seen is not None:
             count = None if seen.count is None or info.count is None else seen.count + info.count
-            info = TopicInfo(info.name, seen.schema or info.schema, count)
+            # the type of the first channel that holds a message, where the counts say so
+            # (a channel declared first and never used decides nothing)
+            schema = (info.schema if seen.count == 0 and info.count and info.schema
+                      else seen.schema or info.schema)
+            info = TopicInfo(info.name, schema, count)
         topics[info.name] = info
     return topics
 
