@@ -518,5 +518,7 @@ def test_a_bags_camera_written_into_the_file_is_named_as_with_its_topic():
         "drive.front_image"
     assert result_name({**base, "file": "rosbag2_run#/rear/image"}) == "rosbag2_run.rear_image"
     assert result_name({**base, "file": "clip#2.mp4"}) == "clip#2"
+    # the bag's suffix in any case, as the command line takes it
+    assert result_name({**base, "file": "d/DRIVE.MCAP#/front/image"}) == "DRIVE.front_image"
     labels = [{**base, "file": f"drive.mcap#/{side}/image"} for side in ("front", "rear")]
     assert len(check_labels(labels)) == 2

@@ -6,11 +6,14 @@ import math
 import numpy as np
 import pytest
 
-from asnn.approach.looming import (RIG_WEIGHT, Expansion, moved_by_expansion,
-                                  refined_expansion, region_and_rim_expansion, region_expansion,
-                                  rig_pixels, rim_scaled, scene_expansion)
+from asnn.approach.looming import (FIT_SIDE, RIG_WEIGHT, Expansion, moved_by_expansion,
+                                  refine_grid, refined_expansion, region_and_rim_expansion,
+                                  region_expansion, rig_pixels, rim_scaled, scene_expansion)
 from asnn.approach.tracking import Observation, TargetTracker, Track, approaching
 from imageutil import texture, warp
+
+
+_MIN_GRID_SIDE = 5  # pixels across a refinement grid keeps
 
 
 def _texture(size=400):
@@ -95,6 +98,66 @@ def test_a_long_thin_box_is_refined_on_a_grid_that_keeps_its_short_side():
         refined = refined_expansion(tex, after, box, est, est._replace(rate=0.1))
         assert math.isfinite(refined.rate) and refined.rate > 0, box
     assert refine_grid((0, 0, 200, 200))[0] == 4  # a box of usual shape keeps its factor
+
+
+def test_the_refinement_grid_is_the_smallest_whole_factor_about_the_box_centre():
+    """refine_grid: the smallest whole factor that brings the box to 64 px a side, held to what
+    leaves 5 px across; the box trimmed to its multiples by less than the factor, evenly."""
+    for width in range(5, 400, 7):
+        for height in (5, 12, 64, 65, 129, 255, 300):
+            box = (11, 3, 11 + width, 3 + height)
+            factor, (x0, y0, x1, y1) = refine_grid(box)
+            short = min(width, height) // _MIN_GRID_SIDE
+            assert factor == max(1, min(math.ceil(max(width, height) / FIT_SIDE), short)), box
+            assert (x1 - x0) % factor == (y1 - y0) % factor == 0
+            assert 0 <= width - (x1 - x0) < factor and 0 <= height - (y1 - y0) < factor
+            assert abs((x0 + x1) - (11 + 11 + width)) <= 1 and \
+                abs((y0 + y1) - (3 + 3 + height)) <= 1, box
+
+
+def test_the_refined_drift_is_about_the_box_centre_where_the_grid_trims_the_box():
+    # boxes whose sides are no whole multiple of their factor (127: 2, 130: 3, 255: 4) are
+    # stepped on a grid half a pixel off their centre: the drift is brought back to the box's
+    # centre (the 0.2 px of the rate times that half pixel, twice, were within the tolerance
+    # of the test above)
+    tex = _texture()
+    after = warp(tex, 1.2, dx=2.0, dy=-1.0)
+    for side in (127, 130, 255):
+        box = (120, 200 - side // 2, 120 + side, 200 - side // 2 + side)
+        est = region_expansion(tex, after, box)
+        refined = refined_expansion(tex, after, box, est, est._replace(rate=0.18),
+                                    iterations=6, settled=0.0)
+        centre_x, centre_y = 0.5 * (box[0] + box[2] - 1), 0.5 * (box[1] + box[3] - 1)
+        assert refined.rate == pytest.approx(0.2, rel=0.003)
+        assert refined.drift_x == pytest.approx(2.0 + 0.2 * (centre_x - 199.5), abs=0.05), side
+        assert refined.drift_y == pytest.approx(-1.0 + 0.2 * (centre_y - 199.5), abs=0.05), side
+
+
+def test_the_refinement_s_bound_settle_and_start_as_documented():
+    tex, box = _texture(), (150, 150, 250, 250)
+    after = warp(tex, 1.25, dx=3.0)
+    est = region_expansion(tex, after, box)
+    # a guess below the answer: the bound is twice the larger of the guess and the fit, and
+    # the result the guess's motion scaled to it
+    guess = est._replace(rate=0.75 * est.rate)
+    bounded = refined_expansion(tex, after, box, est, guess)
+    assert bounded.rate == pytest.approx(2 * est.rate)
+    assert bounded.drift_x == pytest.approx(guess.drift_x * bounded.rate / guess.rate)
+    # a step that moves the edge by less than 'settled' is the last: with a settled no step
+    # can pass, one step is all, however many are allowed
+    start = est._replace(rate=0.22)
+    assert refined_expansion(tex, after, box, est, start, iterations=5, settled=1e9) == \
+        refined_expansion(tex, after, box, est, start, iterations=1)
+    # a start that does not expand (exactly 0 too) is left as it was
+    zero = est._replace(rate=0.0)
+    assert refined_expansion(tex, after, box, zero) is zero
+    # frames that shrink, from a guess of slight growth: the fit's contraction, widened by
+    # the bound, lets the steps find the shrink (5 % a frame: a rate of -0.048)
+    after = warp(tex, 1 / 1.05)
+    est = region_expansion(tex, after, box)
+    assert est.rate < 0
+    shrink = refined_expansion(tex, after, box, est, est._replace(rate=0.01))
+    assert shrink.rate == pytest.approx(1 / 1.05 - 1, rel=0.1)
 
 
 def test_translation_is_drift_not_expansion():
@@ -436,6 +499,25 @@ def test_the_reported_expansion_follows_a_constant_speed_approach_and_lets_a_hal
     fresh.measure_reported(-0.5, dt)  # the first measure as it is; a shrinking target: no ttc
     assert fresh.reported_expansion == -0.5 and fresh.reported_ttc is None
     assert fresh.predicted_expansion(dt) == -0.5
+
+
+def test_the_reported_expansion_weighs_a_new_measure_by_the_track_smoothing():
+    # track_smoothing is the new measure's weight, against the prediction from the frames
+    # before (only at its default, 0.5, are the two interchangeable)
+    dt = 0.1
+    for smoothing in (1.0, 0.25):
+        track = Track(0, 0.0, 0.0, 10.0, 1.0, (0, 0, 20, 20), _smoothing=smoothing)
+        track.measure_reported(0.5, dt)
+        predicted = track.predicted_expansion(dt)
+        track.measure_reported(0.8, dt)
+        assert track.reported_expansion == pytest.approx(
+            predicted + smoothing * (0.8 - predicted))
+    assert track.reported_expansion != pytest.approx(0.8)
+    # a rate of exactly 0 (an object that stopped dead, or a first measure of none) has no
+    # time to contact rather than an infinite one
+    still = Track(1, 0.0, 0.0, 10.0, 1.0, (0, 0, 20, 20))
+    still.measure_reported(0.0, dt)
+    assert still.reported_expansion == 0.0 and still.reported_ttc is None
 
 
 def test_the_approach_test_needs_growth_a_collision_course_and_consecutive_frames():

@@ -847,6 +847,39 @@ def test_a_fast_camera_is_stepped_on_a_grid_its_stamps_fix(loom_60fps):
     assert untimed.ceiling_held == 0 and len(untimed.periods) == 5
 
 
+def test_frames_held_in_a_row_are_each_aged_from_the_frame_stepped(loom_60fps):
+    """At 90 fps two frames in three are held: each held frame's targets are the stepped
+    frame's aged by the time since it (not the previous held frame's aged again)."""
+    frames = loom_60fps.frames
+    times = [1000.0 + k / 90.0 for k in range(len(frames))]
+    responses, stepped = _stepped(ASNN("default"), frames, times)
+    last, second = None, 0
+    for k in range(len(frames)):
+        if k in stepped:
+            last = k
+            continue
+        if last is None or k < 4:
+            continue
+        since = times[k] - times[last]
+        for now, then in zip(responses[k].targets, responses[last].targets):
+            if then.ttc is not None and then.ttc > since:
+                assert now.ttc == pytest.approx(then.ttc - since), k
+                second += k - last == 2
+    assert second > 5
+
+
+def test_a_target_that_would_reach_the_camera_while_held_keeps_its_own_ttc():
+    from asnn.model import aged_targets
+    from asnn.targets import Target
+
+    targets = [Target(1.0, 2.0, 0.0, 1.0, 10, id=k, expansion=1 / ttc, ttc=ttc)
+               for k, ttc in enumerate((0.01, 1 / 60, 0.5))] + [Target(1.0, 2.0, 0.0, 1.0, 10)]
+    aged = aged_targets(targets, 1 / 60)
+    assert aged[:2] == targets[:2] and aged[3] == targets[3]
+    assert aged[2].ttc == pytest.approx(0.5 - 1 / 60)
+    assert aged[2].expansion == pytest.approx(1 / (0.5 - 1 / 60))
+
+
 @pytest.mark.parametrize("fps", [25.0, 30.0])
 def test_a_camera_at_or_below_30_fps_whose_stamps_jitter_has_no_frame_held(fps):
     """The ceiling judges a camera's rate over many gaps: a 30 fps camera whose

@@ -570,6 +570,8 @@ def test_a_topic_recorded_on_several_channels_is_one_topic(tmp_path, looming):
         ("/cam", *fox, fox_raw(frames[:5])),
         ("/cam", "foxglove.CompressedImage", "protobuf", "protobuf", [b"\x12\x01x"])])
     assert "changed its type to foxglove.CompressedImage" in detect_fails(bag)
+    with pytest.raises(rosbag.SourceError, match="changed its type"):  # read without a handler
+        list(rosbag.open_bag(bag).frames())
 
 
 def test_messages_are_named_by_their_place_in_the_topic_after_one_that_does_not_decode(
@@ -643,6 +645,111 @@ def test_the_protobuf_reader_skips_unknown_fields_and_refuses_what_is_no_message
     long = "a" + "\u00e9" * 10000
     length = bytes([0xA1, 0x9C, 0x01])  # 20 001 as a varint
     assert decode_compressed_image(key(3, 2) + length + long.encode()).format == long[:4096]
+
+
+def test_the_protobuf_reader_s_edges():
+    """Protobuf's own rules at their limits: an int64 second (negative, before 1970: refused
+    by its value), nanos up to 999 999 999, ten bytes at most to a varint, eight to a fixed64;
+    absent text is empty."""
+    from asnn.io.foxglove_images import (ProtobufError, decode_compressed_image,
+                                         decode_raw_image)
+
+    def key(number, wire):
+        return bytes([number << 3 | wire])
+
+    def varint(value):
+        value &= (1 << 64) - 1  # a negative int64 as the wire carries it
+        out = bytearray()
+        while True:
+            out.append(value & 0x7F | (0x80 if value >> 7 else 0))
+            value >>= 7
+            if not value:
+                return bytes(out)
+
+    def text(number, value: bytes):
+        return key(number, 2) + varint(len(value)) + value
+
+    def stamp(seconds, nanos):
+        return text(1, key(1, 0) + varint(seconds) + key(2, 0) + varint(nanos))
+
+    with pytest.raises(ProtobufError, match="seconds -2 is outside"):  # as int64, not 2**64 - 2
+        decode_compressed_image(stamp(-2, 500_000_000))
+    assert decode_compressed_image(stamp(7, 999_999_999)).header.stamp.nanosec == 999_999_999
+    with pytest.raises(ProtobufError, match="nanos"):
+        decode_compressed_image(stamp(7, 1_000_000_000))
+    with pytest.raises(ProtobufError, match="longer than"):  # eleven bytes, however it ends
+        decode_compressed_image(key(15, 0) + b"\x80" * 10 + b"\x01")
+    # an unknown fixed64 is eight bytes, whatever they hold (here what would read as a format)
+    hidden = bytes(4) + text(3, b"xy")
+    assert decode_compressed_image(text(3, b"png") + key(14, 1) + hidden).format == "png"
+    # a text whose every byte is there must be UTF-8, at the reading limit too (16 384 bytes)
+    with pytest.raises(ProtobufError, match="UTF-8"):
+        decode_compressed_image(text(3, b"a" * 16383 + b"\xc3"))
+    raw = decode_raw_image(key(2, 5) + (4).to_bytes(4, "little"))
+    assert (raw.header.frame_id, raw.encoding, raw.header.stamp.sec) == ("", "", 0)
+    assert decode_compressed_image(b"").format == ""
+
+
+def test_foxglove_16_bit_images_are_little_endian(tmp_path, looming):
+    """Foxglove's 16UC1 and mono16 are little-endian (its schema says so; RawImage has no
+    is_bigendian): read by their high byte, as a ROS 2 Image with is_bigendian 0."""
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    from foxglove.messages import RawImage
+
+    frames = looming.frames[:3]
+    h, w = frames[0].shape
+    payloads = [RawImage(timestamp=fox_stamp(i), width=w, height=h, encoding=encoding,
+                         step=2 * w, data=(f.astype("<u2") * 256 + 3).tobytes()).encode()
+                for i, (f, encoding) in enumerate(zip(frames, ("16UC1", "mono16", "16UC1")))]
+    bag = write_channels(tmp_path / "deep.mcap", [("/depth", "foxglove.RawImage", "protobuf",
+                                                   "protobuf", payloads)])
+    read = [image for _, image in rosbag.open_bag(bag).frames()]
+    assert len(read) == 3 and all(np.array_equal(a, b) for a, b in zip(read, frames))
+
+
+def test_foxglove_images_need_protobuf_in_both_the_schema_and_the_channel(tmp_path, looming):
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    good = fox_raw(looming.frames[:1])
+    for schema_encoding, message_encoding in (("protobuf", "json"), ("jsonschema", "protobuf")):
+        bag = write_channels(tmp_path / f"{schema_encoding}.mcap", [
+            ("/c", "foxglove.RawImage", schema_encoding, message_encoding, good)])
+        assert "Foxglove's images are read in protobuf" in detect_fails(bag)
+
+
+def test_a_first_frame_that_does_not_decode_is_named_by_its_place_in_the_topic(tmp_path,
+                                                                              looming):
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    from foxglove.messages import RawImage
+
+    h, w = looming.frames[1].shape
+    payloads = [b"\xff", RawImage(timestamp=fox_stamp(1), width=w, height=h, encoding="mono8",
+                                  step=w, data=looming.frames[1].tobytes()[:-w]).encode()]
+    bag = write_channels(tmp_path / "first.mcap", [("/c", "foxglove.RawImage", "protobuf",
+                                                    "protobuf", payloads)])
+    message = detect_fails(bag)
+    assert "message 1:" in message and "needs" in message, message
+
+
+def test_a_split_bag_whose_part_gives_no_message_counts_has_no_partial_count(tmp_path,
+                                                                            looming):
+    """A part without the statistic makes the topic's count unknown (0), not the other
+    parts' alone."""
+    directory = tmp_path / "run"
+    directory.mkdir()
+    (directory / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    first = directory / "run_0.mcap"
+    with open(first, "wb") as fh, Ros2Writer(fh) as writer:
+        schema = writer.register_msgdef(rosbag.IMAGE, rosbag.IMAGE_MSGDEF)
+        for index, frame in enumerate(looming.frames[:5]):
+            ns = START_NS + index * 50_000_000
+            writer.write_message("/camera/image_raw", schema, raw_message(frame, "mono8", index),
+                                 log_time=ns, publish_time=ns, sequence=index)
+        writer._writer._Writer__statistics.channel_message_counts.clear()
+    rosbag.write_bag(looming.frames[5:10], directory / "run_1.mcap",
+                     start_ns=START_NS + 5 * 50_000_000)
+    clip = rosbag.open_bag(directory)
+    assert clip.frame_count in (0, 10)
+    assert len(list(clip.frames())) == 10
 
 
 def test_bad_foxglove_messages_are_one_line_errors(tmp_path, looming):

@@ -249,6 +249,19 @@ def test_mcnemar_s_exact_test():
     assert stats.mcnemar_exact(3, 2) == 1.0 and stats.mcnemar_exact(0, 0) == 1.0
     with pytest.raises(ValueError, match="cannot be negative"):
         stats.mcnemar_exact(-1, 5)  # not a p-value of 0
+    with pytest.raises(ValueError, match="cannot be negative"):
+        stats.mcnemar_exact(5, -1)  # either count
+
+
+def test_the_wilson_interval_stays_within_0_and_1_at_every_count():
+    # the formula's ends at none or all of the trials are 0 and 1 only up to rounding
+    # (-2.8e-17 at 0 of 5, 1.0000000000000002 at 5 of 5): the interval is clipped to them
+    for trials in range(1, 60):
+        for successes in range(trials + 1):
+            low, high = stats.wilson_interval(successes, trials)
+            assert 0.0 <= low < high <= 1.0, (successes, trials)
+        assert stats.wilson_interval(0, trials)[0] == pytest.approx(0.0, abs=1e-12)
+        assert stats.wilson_interval(trials, trials)[1] == pytest.approx(1.0, abs=1e-12)
 
 
 def test_a_label_built_in_code_with_its_onset_after_its_contact_is_refused():
