@@ -522,3 +522,9 @@ def test_a_bags_camera_written_into_the_file_is_named_as_with_its_topic():
     assert result_name({**base, "file": "d/DRIVE.MCAP#/front/image"}) == "DRIVE.front_image"
     labels = [{**base, "file": f"drive.mcap#/{side}/image"} for side in ("front", "rear")]
     assert len(check_labels(labels)) == 2
+    # the topic given both ways, as a source takes it where they agree: one camera (it was named
+    # after the topic's last part, and two bags' cameras collided)
+    both = [{**base, "file": f"{bag}.mcap#/front/image", "topic": "/front/image"}
+            for bag in ("a", "b")]
+    assert [result_name(label) for label in both] == ["a.front_image", "b.front_image"]
+    assert len(check_labels(both)) == 2

@@ -173,7 +173,8 @@ def result_name(label: Mapping) -> str:
     bag's camera (``drive.mcap#/front/image_raw``, or a rosbag2 folder's) is named alike."""
     file, topic = str(label["file"]), label.get("topic")
     head, sep, suffix = file.rpartition("#")
-    if not topic and sep and suffix.startswith("/") and (
+    # the topic given twice, as open_source accepts it, is one camera too
+    if sep and suffix.startswith("/") and topic in (None, "", suffix) and (
             head.lower().endswith(".mcap") or not Path(head).suffix):
         file, topic = head, suffix
     stem = Path(file).stem
