@@ -40,7 +40,10 @@ def wilson_interval(successes: int, trials: int, z: float = 1.96) -> list[float]
     scale = 1.0 + z2 / trials
     centre = (p + z2 / (2 * trials)) / scale
     half = z * math.sqrt(p * (1.0 - p) / trials + z2 / (4 * trials * trials)) / scale
-    return [max(0.0, centre - half), min(1.0, centre + half)]
+    # at 0 or n successes the interval ends at 0 or 1 exactly (rounding left 1 - 1e-16)
+    low = 0.0 if successes == 0 else max(0.0, centre - half)
+    high = 1.0 if successes == trials else min(1.0, centre + half)
+    return [low, high]
 
 
 def mcnemar_exact(only_first: int, only_second: int) -> float:
