@@ -8,7 +8,7 @@ it; ``asnn eval --paper`` regenerates the paper's synthetic figures (Figs. 3, 6-
 --ttc [--preset P]`` measures the targets' time to contact on approaches of known contact time
 (:mod:`asnn.evaluation.ttc`). Detectors
 are specs: ``asnn`` (the default preset, or ``--preset``), ``asnn:PRESET``, ``lgmd1``,
-``lgmd2``. Exit status 2 for unusable input (found before anything runs: labels, clips that
+``lgmd2``, each with parameters changed after slashes. Exit status 2 for unusable input (found before anything runs: labels, clips that
 cannot be opened, options), 1 when some runs failed after it started (their clips scored as
 missing, named in the report's errors), 130 when interrupted.
 """
@@ -118,7 +118,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detectors", "--models", dest="detectors", type=_detectors, action=Joined,
                    default=list(DEFAULT_DETECTORS), metavar="LIST",
                    help="comma-separated detector specs (repeatable: the uses add up): asnn, "
-                        "asnn:PRESET, lgmd1, lgmd2 "
+                        "asnn:PRESET, lgmd1, lgmd2, each with fields changed after slashes "
+                        "(asnn:robust/top_k=0, lgmd1/w_i=0.6) "
                         f"(default: {','.join(DEFAULT_DETECTORS)})")
     p.add_argument("--ablation", action="store_true",
                    help="run the robust preset with each of its additions switched off in turn "

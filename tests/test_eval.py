@@ -768,6 +768,30 @@ def test_a_spec_value_of_another_type_is_refused_not_converted(spec, says):
     assert parse_detector("asnn:robust/gain=5/stabilise=false").params.gain == 5.0  # int: float
 
 
+def test_the_baselines_parameters_are_changed_in_a_spec_as_the_presets_are():
+    """SPEC section 4 gives the baselines' parameters ranges (w_I 0.3-0.6, T_s 0.78-0.88): a
+    spec changes them as it changes a preset's fields (``lgmd1/w_i=0.6`` was an unknown
+    detector: only Python could), checked strictly, named and run with them."""
+    import math
+
+    from asnn.evaluation.runs import parse_detector, parse_detectors
+
+    spec = parse_detector("lgmd1/w_i=0.6/t_s=0.78")
+    assert spec.name == "lgmd1/w_i=0.6/t_s=0.78" and spec.slug == "lgmd1-w_i-0.6-t_s-0.78"
+    assert spec.description.endswith("with w_i=0.6, t_s=0.78")
+    model = spec.make()
+    assert (model.params.w_i, model.params.t_s) == (0.6, 0.78)
+    assert parse_detector(spec.name) == spec  # the name reads back as the spec
+    assert parse_detector("lgmd2/t_ffi=inf").make().params.t_ffi == math.inf
+    assert [s.name for s in parse_detectors("lgmd1,lgmd1/w_i=0.6")] == ["lgmd1", "lgmd1/w_i=0.6"]
+    assert parse_detector("lgmd2").make().params == parse_detector("lgmd2").make().params
+    for bad, says in (("lgmd1/w_x=1", "w_x: Extra inputs"), ("lgmd1/w_i=-1", "w_i: Input should "
+                      "be greater"), ("lgmd1/n_sp=true", "n_sp: Input should be a valid integer"),
+                      ("lgmd2:robust", "has no presets"), ("lgmd1/w_i=1/w_i=2", "given twice")):
+        with pytest.raises(ValueError, match=says):
+            parse_detector(bad)
+
+
 def test_a_spec_that_gives_a_field_twice_is_refused():
     from asnn.evaluation.runs import parse_detector
 

@@ -72,8 +72,8 @@ ABLATIONS = {
 
 @dataclass(frozen=True)
 class DetectorSpec:
-    """One detector to run: a model and, for ASNN, a preset (None: the default) and parameter
-    overrides (``(name, value)`` pairs)."""
+    """One detector to run: a model, for ASNN a preset (None: the default), and parameter
+    overrides (``(name, value)`` pairs: of the preset, or of an LGMD model's parameters)."""
 
     model: str
     preset: str | None = None
@@ -81,10 +81,13 @@ class DetectorSpec:
 
     @property
     def name(self) -> str:
-        """``asnn``, ``asnn:PRESET[/name=value...]``, ``lgmd1`` or ``lgmd2``."""
-        if self.model != "asnn" or not (self.preset or self.overrides):
-            return self.model
+        """``asnn``, ``asnn:PRESET[/name=value...]``, ``lgmd1[/name=value...]`` or
+        ``lgmd2[/name=value...]``."""
         extra = "".join(f"/{k}={_spell(v)}" for k, v in self.overrides)
+        if self.model != "asnn":
+            return self.model + extra
+        if not (self.preset or self.overrides):
+            return self.model
         return f"asnn:{self.preset or 'default'}{extra}"
 
     @property
@@ -92,11 +95,12 @@ class DetectorSpec:
         """What the name stands for, for a report's reader: the model, and for ASNN its preset
         (the default's own name) and overrides."""
         if self.model == "lgmd1":
-            return "LGMD1-1 (Yue & Rind 2006), asnn.baselines.LGMD1"
-        if self.model == "lgmd2":
-            return "LGMD1-2 (Fu et al. 2018), asnn.baselines.LGMD2"
-        text = (f"ASNN, the default preset (`{DEFAULT_PRESET}`)" if self.preset is None
-                else f"ASNN, preset `{self.preset}`")
+            text = "LGMD1-1 (Yue & Rind 2006), asnn.baselines.LGMD1"
+        elif self.model == "lgmd2":
+            text = "LGMD1-2 (Fu et al. 2018), asnn.baselines.LGMD2"
+        else:
+            text = (f"ASNN, the default preset (`{DEFAULT_PRESET}`)" if self.preset is None
+                    else f"ASNN, preset `{self.preset}`")
         if self.overrides:
             text += " with " + ", ".join(f"{k}={_spell(v)}" for k, v in self.overrides)
         return text
@@ -113,7 +117,9 @@ class DetectorSpec:
 
     def make(self) -> Detector:
         """A fresh detector."""
-        return make_detector(self.model, self.params if self.model == "asnn" else None)
+        if self.model != "asnn":  # the LGMD models take their overrides as keywords
+            return make_detector(self.model, None, **dict(self.overrides))
+        return make_detector(self.model, self.params)
 
 
 def _spell(value) -> str:
@@ -127,7 +133,9 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
     Parameters
     ----------
     spec : str
-        ``asnn``, ``asnn:PRESET``, ``lgmd1`` or ``lgmd2``.
+        ``asnn``, ``asnn:PRESET``, ``lgmd1`` or ``lgmd2``, each with parameters changed after
+        slashes (``asnn:robust/top_k=0``, ``lgmd1/w_i=0.6``: SPEC section 4's ranges for the
+        baselines, :class:`asnn.baselines.LGMD1Params`, :class:`~asnn.baselines.LGMD2Params`).
     default_preset : str, optional
         The preset a bare ``asnn`` stands for (None or ``default``: the default preset), with
         any overrides after slashes as a spec has them (``robust/top_k=0``); a spec's own
@@ -136,15 +144,22 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
     Raises
     ------
     ValueError
-        For an unknown model or preset, or a preset given to an LGMD model.
+        For an unknown model, preset or parameter, a value the parameter does not take, or a
+        preset given to an LGMD model.
     """
     model, _, rest = spec.strip().partition(":")
+    model, slash, changed = model.partition("/")
     if model not in MODELS:
-        raise ValueError(f"unknown detector {spec!r}; use asnn, asnn:PRESET, lgmd1 or lgmd2")
+        raise ValueError(f"unknown detector {spec!r}; use asnn, asnn:PRESET, lgmd1 or lgmd2 "
+                         "(each with /FIELD=VALUE changes)")
     if model != "asnn":
         if rest:
             raise ValueError(f"{model} has no presets: {spec!r}")
-        return DetectorSpec(model)
+        overrides = split_preset_spec(model + slash + changed, spec)[1]
+        _check_lgmd_overrides(model, overrides, spec)
+        return DetectorSpec(model, None, overrides)
+    if slash:  # asnn/FIELD=VALUE: the default preset's fields after the slashes
+        rest = f"{rest}/{changed}" if rest else f"/{changed}"
     if rest.split("/", 1)[0].strip():
         preset_name, overrides = parse_preset_spec(rest, spec)
     else:  # the default preset's, then the spec's own (which may change the default's)
@@ -153,6 +168,22 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
         check_overrides(preset_name, overrides, spec)
     return DetectorSpec("asnn", None if preset_name == "default" else preset_name,
                         tuple(overrides))
+
+
+def _check_lgmd_overrides(model: str, overrides, label: str) -> None:
+    """Check an LGMD model's parameter changes strictly, as a preset's are checked; ValueError
+    naming ``label`` and the field."""
+    from pydantic import ValidationError
+
+    from ..baselines import LGMD1Params, LGMD2Params
+
+    kind = LGMD1Params if model == "lgmd1" else LGMD2Params
+    try:
+        kind.model_validate({**kind().model_dump(), **dict(overrides)}, strict=True)
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        where = f"{error['loc'][0]}: " if error["loc"] else ""
+        raise ValueError(f"{label!r}: {where}{error['msg']}") from None
 
 
 def parse_detectors(specs: str | Iterable[str],
