@@ -45,9 +45,9 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "MAX_KERNEL", "check_overrides",
-           "parse_preset_spec", "preset", "preset_from_spec", "preset_key", "preset_names",
-           "split_preset_spec"]
+__all__ = ["ASNNParams", "PRESETS", "DEFAULT_PRESET", "MAX_KERNEL", "check_fields",
+           "check_overrides", "parse_preset_spec", "preset", "preset_from_spec", "preset_key",
+           "preset_names", "split_preset_spec"]
 
 # Upper bounds of the sizes and counts, far above what the presets and the paper use (kernels
 # of 5 and 31 px, 2 and 4 filter stages, windows of a few frames) but below what allocates
@@ -676,9 +676,15 @@ def split_preset_spec(spec: str, label: str | None = None
 def check_overrides(name: str, overrides, label: str) -> None:
     """Check a preset's overrides ``(field, value)`` as :func:`preset` does, but strictly (no
     conversion of a value's type); ValueError naming ``label`` and the field."""
+    check_fields(preset(name), overrides, label)  # preset() raises for an unknown preset
+
+
+def check_fields(base: BaseModel, overrides, label: str) -> None:
+    """Check changes ``(field, value)`` to a set of parameters (a preset's, or an LGMD model's:
+    ``asnn.baselines.LGMD1Params``) strictly, with the set's own validation; ValueError naming
+    ``label`` and the field."""
     try:
-        base = preset(name)  # raises for an unknown preset
-        ASNNParams.model_validate({**base.model_dump(), **dict(overrides)}, strict=True)
+        type(base).model_validate({**base.model_dump(), **dict(overrides)}, strict=True)
     except ValidationError as exc:
         error = exc.errors()[0]
         where = f"{error['loc'][0]}: " if error["loc"] else ""  # a check of the whole set

@@ -21,8 +21,8 @@ from . import scoring
 from .options import DEFAULT_DETECTORS
 from ..detectors import MODELS, Detector, make_detector
 from ..io.files import write_atomically
-from ..params import (DEFAULT_PRESET, ASNNParams, check_overrides, parse_preset_spec,
-                      preset, split_preset_spec)
+from ..params import (DEFAULT_PRESET, ASNNParams, check_fields, check_overrides,
+                      parse_preset_spec, preset, split_preset_spec)
 
 __all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
            "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
@@ -156,7 +156,9 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
         if rest:
             raise ValueError(f"{model} has no presets: {spec!r}")
         overrides = split_preset_spec(model + slash + changed, spec)[1]
-        _check_lgmd_overrides(model, overrides, spec)
+        from ..baselines import LGMD1Params, LGMD2Params
+
+        check_fields((LGMD1Params if model == "lgmd1" else LGMD2Params)(), overrides, spec)
         return DetectorSpec(model, None, overrides)
     if slash:  # asnn/FIELD=VALUE: the default preset's fields after the slashes
         rest = f"{rest}/{changed}" if rest else f"/{changed}"
@@ -168,22 +170,6 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
         check_overrides(preset_name, overrides, spec)
     return DetectorSpec("asnn", None if preset_name == "default" else preset_name,
                         tuple(overrides))
-
-
-def _check_lgmd_overrides(model: str, overrides, label: str) -> None:
-    """Check an LGMD model's parameter changes strictly, as a preset's are checked; ValueError
-    naming ``label`` and the field."""
-    from pydantic import ValidationError
-
-    from ..baselines import LGMD1Params, LGMD2Params
-
-    kind = LGMD1Params if model == "lgmd1" else LGMD2Params
-    try:
-        kind.model_validate({**kind().model_dump(), **dict(overrides)}, strict=True)
-    except ValidationError as exc:
-        error = exc.errors()[0]
-        where = f"{error['loc'][0]}: " if error["loc"] else ""
-        raise ValueError(f"{label!r}: {where}{error['msg']}") from None
 
 
 def parse_detectors(specs: str | Iterable[str],
