@@ -143,3 +143,22 @@ def test_pointers_from_the_code_name_sections_that_exist():
             for path in sorted((ROOT / folder).rglob("*.py"))
             for found in [lost_pointers(path.read_text())] if found}
     assert lost == {}
+
+
+def test_citation_file_passes_its_schema_and_names_this_version():
+    """CITATION.cff is what GitHub's "Cite this repository" and Zenodo read: a file the format's
+    schema refuses is ignored by them without a word, and a version left behind at a release
+    names the wrong figures."""
+    import subprocess
+    import tomllib
+
+    from test_compose import check_jsonschema
+
+    citation = ROOT / "CITATION.cff"
+    result = subprocess.run([*check_jsonschema(), "--builtin-schema",
+                             "vendor.citation-file-format", str(citation)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    fields = dict(re.findall(r"^(version|license): (\S+)$", citation.read_text(), re.M))
+    assert fields == {"version": project["version"], "license": project["license"]["text"]}
