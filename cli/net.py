@@ -176,7 +176,9 @@ def format_status(status: dict) -> str:
     Robots on whose key a second publisher was seen are listed under ``contested`` with the
     number of intrusions (docs/operations.md); the frames and bytes Zenoh delivered to the
     worker follow ``frames in`` (those of the discovery scan in brackets); robots whose frames
-    are detected at fewer than ``SLOW_FPS`` a second are listed under ``slow``, and those with
+    are detected at fewer than ``SLOW_FPS`` a second are listed under ``slow`` (and those whose
+    stamps tell the model no rate, a camera slower than a frame a second among them, under
+    ``untimed``), and those with
     a frame refused in the last minute under ``refused lately``, with the latest reason; fields
     an older worker does not report are left out.
     """
@@ -194,6 +196,7 @@ def format_status(status: dict) -> str:
                           for r, s in robots.items() if s.get("contested")) or "none"
     slow = ", ".join(f"{r} ({s['fps']:g} fps)" for r, s in robots.items()
                      if s.get("fps") is not None and s["fps"] < SLOW_FPS)
+    untimed = ", ".join(r for r, s in robots.items() if s.get("untimed"))
     # robots refused in the last minute, the latest first: why a camera gets no response (not a
     # robot refused for want of a place that has one now)
     # (``count`` is every refusal of the robot's, for any reason: the latest reason is one)
@@ -209,6 +212,8 @@ def format_status(status: dict) -> str:
             f"{stats['warnings']}, foreign {stats['foreign']}; {received}invalid: {invalid}; "
             f"second publishers: {stats.get('intrusions', 0)}, contested: {contested}; "
             + (f"slow: {slow}; " if slow else "")
+            + (f"untimed (stamps no frame period: under 1 fps, or not seconds): {untimed}; "
+               if untimed else "")
             + (f"refused lately: {refused}; " if refused else "")
             + f"live workers {', '.join(status.get('workers', []))}")
 

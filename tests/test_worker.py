@@ -500,6 +500,7 @@ def test_a_camera_that_sends_each_frame_twice_is_detected_at_the_rate_of_its_new
 
 @pytest.mark.parametrize("model, stamps, logged", [
     ("asnn", [k * 50.0 for k in range(12)], "50 s apart"),  # a clock in milliseconds
+    ("asnn", [k * 2.0 for k in range(12)], "2 s apart"),  # a camera at half a frame a second
     ("asnn", [7.0] * 12, "0 s apart"),  # a clock that never moves
     ("asnn", [k * 1e-5 for k in range(12)], "1e-05 s apart"),  # closer than MIN_FRAME_GAP_S
     ("asnn", [k * 0.05 for k in range(12)], None),
@@ -512,8 +513,15 @@ def test_stamps_the_model_cannot_time_by_are_logged_once(caplog, looming, model,
     with caplog.at_level(logging.WARNING, logger="asnn.worker"):
         for seq, stamp in enumerate(stamps):
             feed(core, "r1", looming.frames[seq], seq, stamp=stamp)
+    from cli.net import format_status
+
     lines = [r.getMessage() for r in caplog.records if "stamps are" in r.getMessage()]
-    fps = core.status()["robots"]["r1"]["fps"]
+    status = core.status()
+    fps = status["robots"]["r1"]["fps"]
+    # asnn status lists the robot as it lists a slow one (a camera under 1 fps was in neither)
+    listed = "untimed (stamps no frame period: under 1 fps, or not seconds): r1;"
+    assert status["robots"]["r1"]["untimed"] == (logged is not None)
+    assert (listed in format_status(status)) == (logged is not None)
     if logged is None:
         assert lines == []
         assert fps is not None or model == "lgmd1"
