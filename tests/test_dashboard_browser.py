@@ -292,12 +292,13 @@ def fake_response(robot: str, seq: int, stamp: float, collision: bool) -> bytes:
 def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
     """Fifty robots fed straight into the store (no Zenoh): fifty tiles, the colliding ones
     marked; robots that stop reporting turn stale on the page; robots answered at 10 fps are
-    marked slow."""
+    marked slow, and one answered every 2 s too."""
     store = FleetStore(stale_after=1.0)
     names = [f"robot{i:02d}" for i in range(50)]
     stop = threading.Event()
     silent = {"robot07", "robot33"}
     slow = set(names[5::10])  # their frames 0.1 s apart: detected at 10 fps
+    crawling = {"robot12"}  # its frames 2 s apart: no rate the worker believes, and slow
 
     def feed():
         seq = 0
@@ -306,7 +307,7 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
                 if name in silent and seq > 5:
                     continue
                 key = f"asnn/{name}/response"
-                period = 0.1 if name in slow else 0.05
+                period = 0.1 if name in slow else 2.0 if name in crawling else 0.05
                 store.offer(key, fake_response(name, seq, 1000.0 + seq * period, i % 10 == 0))
             if seq == 10:  # a worker refuses one silent robot's frames and says why
                 store.offer("asnn/robot33/refused", encode(Refusal(
@@ -339,7 +340,9 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
     assert set(shown) == set(names)
     assert {n for n, t in shown.items() if t["collision"] == "true"} == set(names[::10])
     assert {n for n, t in shown.items() if "10 fps (slow)" in t["stats"]} == slow
-    assert all("20 fps" in t["stats"] for n, t in shown.items() if n not in slow | silent)
+    assert {n for n, t in shown.items() if "under 1 fps (slow)" in t["stats"]} == crawling
+    assert all("20 fps" in t["stats"] for n, t in shown.items()
+               if n not in slow | silent | crawling)
     assert shown["robot33"]["stats"] == ("refused by w2: too-many-robots (4 frames) · already "
                                          "tracking 256 robots")
     assert "refused" not in shown["robot07"]["stats"]

@@ -216,11 +216,14 @@
   // an even count, the upper of the two middle intervals (the lower rate)
   function rateOf(points) {
     const gaps = [];
+    let longer = 0;
     for (let i = Math.max(1, points.length - 5); i < points.length; i++) {
       const gap = points[i][0] - points[i - 1][0];
       if (gap > 0 && gap <= 1) gaps.push(gap);
+      else if (gap > 1) longer++;
     }
-    if (!gaps.length) return null;
+    // frames over a second apart (the worker then gives no rate): 0, read "under 1 fps", slow
+    if (!gaps.length) return longer ? 0 : null;
     gaps.sort((a, b) => a - b);
     const mid = gaps.length >> 1;  // the median as the worker takes it (statistics.median)
     return 1 / (gaps.length % 2 ? gaps[mid] : (gaps[mid - 1] + gaps[mid]) / 2);
@@ -243,7 +246,7 @@
       return;
     }
     const fps = rateOf(v.points);
-    const rate = fps === null ? "" : `${Math.round(fps)} fps`;
+    const rate = fps === null ? "" : fps === 0 ? "under 1 fps" : `${Math.round(fps)} fps`;
     const slow = fps !== null && fps < config.slow_fps;
     // the time to contact first, then a slow rate (detection suffers): the line is cut to the
     // tile's width
