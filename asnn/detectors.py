@@ -15,6 +15,7 @@ from .params import ASNNParams, preset
 if TYPE_CHECKING:
     import numpy as np
 
+    from .baselines import LGMD1Params, LGMD2Params
     from .response import Response
 
 __all__ = ["Detector", "MODELS", "available_cores", "make_detector", "responses"]
@@ -32,23 +33,28 @@ class Detector(Protocol):
     def reset(self) -> None: ...
 
 
-def make_detector(model: str = "asnn", preset_name: str | ASNNParams | None = None,
+def make_detector(model: str = "asnn",
+                  preset_name: str | ASNNParams | LGMD1Params | LGMD2Params | None = None,
                   **options) -> Detector:
     """Build a detector by name.
 
     Parameters
     ----------
     model : {'asnn', 'lgmd1', 'lgmd2'}
-    preset_name : str or ASNNParams, optional
-        ASNN preset, by name or as parameters (ignored by the LGMD models); None means
+    preset_name : str, ASNNParams, LGMD1Params or LGMD2Params, optional
+        ASNN preset, by name or as parameters (a name or ASNNParams is ignored by the LGMD
+        models, which take their own parameters here, or as ``params=``); None means
         ``default``.
     **options
-        Passed to the detector's constructor (for ASNN, e.g. ``record_maps``).
+        Passed to the detector's constructor (for ASNN, e.g. ``record_maps``; for an LGMD
+        model, ``params``).
 
     Raises
     ------
     ValueError
-        For an unknown model or preset.
+        For an unknown model or preset, or an LGMD model's parameters given twice.
+    TypeError
+        For parameters of another model than ``model``'s (LGMD1Params for ``lgmd2``).
     """
     if model == "asnn":
         from .model import ASNN
@@ -59,8 +65,16 @@ def make_detector(model: str = "asnn", preset_name: str | ASNNParams | None = No
     if model in ("lgmd1", "lgmd2"):
         from . import baselines
 
-        if isinstance(preset_name, str):
+        params_class = baselines.LGMD1Params if model == "lgmd1" else baselines.LGMD2Params
+        if isinstance(preset_name, params_class):  # the baseline's own parameters
+            if "params" in options:
+                raise ValueError(f"{model}'s parameters given twice (preset_name and params)")
+            options["params"] = preset_name
+        elif isinstance(preset_name, str):
             preset(preset_name)  # ignored, but a misspelt name is still an error
+        elif preset_name is not None and not isinstance(preset_name, ASNNParams):
+            raise TypeError(f"{model} takes a {params_class.__name__} (or params=...), not a "
+                            f"{type(preset_name).__name__}")
 
         asnn_only = sorted(set(options) & {"record_maps", "record_tracks", "optimised",
                                            "threads"})

@@ -12,6 +12,9 @@ from .errors import FrameError
 __all__ = ["FrameError", "LEVELS", "check_frame", "frame_time", "luma", "to_luminance"]
 
 _LUMA = np.array([0.114, 0.587, 0.299])  # B, G, R weights of OpenCV's BGR -> gray
+# how far outside [0, 1] a float frame may stray by its own rounding (cv2.normalize to [0, 1]
+# in float32 gives up to 1e-5 out), clipped back; a frame on 0..255 is still refused
+FLOAT_SLACK = 1e-4
 LEVELS = np.arange(256) / 255.0  # uint8 value -> luminance: one table look-up per pixel
 
 
@@ -42,6 +45,7 @@ def to_luminance(frame: np.ndarray, min_side: int,
         return cv2.LUT(luma(frame), LEVELS.astype(dtype, copy=False))
     gray = frame.astype(np.float64)
     gray = gray @ _LUMA if gray.ndim == 3 else gray
+    np.clip(gray, 0.0, 1.0, out=gray)  # a rounding's overshoot (FLOAT_SLACK) taken back
     return gray.astype(dtype, copy=False)
 
 
@@ -91,7 +95,7 @@ def check_frame(frame: np.ndarray, min_side: int,
     if not np.isfinite(frame).all():
         raise FrameError("frame contains NaN or infinite values")
     lo, hi = float(frame.min()), float(frame.max())
-    if lo < 0.0 or hi > 1.0:
+    if lo < -FLOAT_SLACK or hi > 1.0 + FLOAT_SLACK:
         raise FrameError(f"float frames must lie in [0, 1], got values in [{lo!r}, {hi!r}]")
     return frame
 

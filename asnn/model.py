@@ -217,6 +217,7 @@ class ASNN:
         self.index = 0
         self.approach = ApproachStage(self.params) if self.params.targets == "objects" else None
         self._stamp: float | None = None
+        self._clock: float | None = None  # the latest frame's time, once a frame had one
         self.periods: deque[float] = deque(maxlen=PERIOD_FRAMES)
         self._last: Response | None = None
         self._repeats = 0
@@ -287,8 +288,10 @@ class ASNN:
             The frame's time in seconds (any origin, increasing). Used for expansion rates and
             time to contact; without it, or where it is NaN or infinite or does not advance by
             more than 0 and at most 1 s (a clock in milliseconds or smaller units, a stall),
-            frames are ``params.dt`` apart. A clock in larger units (minutes) is believed as
-            seconds: its expansion reads 60 times too fast, and the default warns early.
+            frames are ``params.dt`` apart (a frame without it in a stream whose frames had
+            times comes :attr:`frame_period` after the latest). A clock in larger units
+            (minutes) is believed as seconds: its expansion reads 60 times too fast, and the
+            default warns early.
 
         Raises
         ------
@@ -329,6 +332,13 @@ class ASNN:
         state.pop("_finalizer", None)
         state["_banded"] = None
         return state
+
+    def __copy__(self) -> "ASNN":
+        """A copy is a snapshot: a deep copy (a shallow one shared the state's arrays, deques and
+        approach stage with the model, so that stepping either changed the other)."""
+        import copy
+
+        return copy.deepcopy(self)
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
@@ -418,9 +428,15 @@ class ASNN:
         """The first part of a step: the frame's luminance, whether it is new, and P."""
         p = self.params
         index = self.index
-        stamp = index * p.dt if t is None else frame_time(t)  # before any state changes
+        # before any state changes; a frame without a time in a timed stream comes a frame
+        # period after the latest (index * dt there read the gap from another clock: 0.5 s for
+        # a 30 fps camera's 30th frame, believed, and the next timed frame's gap negative)
+        stamp = (frame_time(t) if t is not None else index * p.dt if self._clock is None
+                 else self._clock + self.frame_period)
         lum = self._luminance(frame)
         self.index += 1
+        if t is not None or self._clock is not None:
+            self._clock = stamp
         blocks = self._blocks(lum) if p.skip_repeats else None
         if self.previous is None:
             self.previous, self.previous_blocks = lum, blocks

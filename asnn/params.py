@@ -70,7 +70,12 @@ _SCALES = ("dog_sigma1", "dog_sigma2", "ds_sigma", "ds_wavelength", "cs_sigma", 
 
 
 class ASNNParams(BaseModel):
-    """Every parameter of the ASNN model, with the paper's symbol in each description."""
+    """Every parameter of the ASNN model, with the paper's symbol in each description.
+
+    The fields' own defaults are the paper's settings (the ``paper`` preset, which never warns:
+    SPEC.md); build parameters from a preset with :func:`preset` (``preset("default",
+    top_k=0)``), not as ``ASNNParams(top_k=0)``.
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
@@ -252,7 +257,8 @@ class ASNNParams(BaseModel):
     u_abs: bool = Field(False, description="sum |G'| instead of G' (reference)")
     # out(t) is a sigmoid, in [0, 1]: a threshold outside it, or a gain past 100 (e^100
     # spikes a frame), only overflows the spike count (eq. 33)
-    k_sp: float = Field(10.0, ge=0, le=100, description="K_sp, spike gain")
+    k_sp: float = Field(10.0, gt=0, le=100, description="K_sp, spike gain (0 would fire a "
+                       "spike every frame whatever u(t))")
     t_sp: float = Field(0.7, ge=0, le=1, description="T_sp, spike threshold on out(t)")
     n_t: int = Field(4, ge=1, le=MAX_FRAMES, description="N_t, spike window in frames")
     t_c: float = Field(1.0, ge=0, description="T_c, spike-rate threshold of the warning, Hz")
@@ -624,8 +630,12 @@ def preset_key(name: str) -> str:
     """
     key = DEFAULT_PRESET if name == "default" else name
     if key not in PRESETS:
-        hint = (f" (the command line's NAME/FIELD=VALUE; in Python: preset({name.split('/')[0]!r}"
-                ", FIELD=VALUE))" if isinstance(name, str) and "/" in name else "")
+        head = name.split("/")[0] if isinstance(name, str) else None
+        hint = ("" if head is None or "/" not in name else
+                f" (the command line's NAME/FIELD=VALUE; in Python: make_detector({head!r}, "
+                "FIELD=VALUE))" if head in ("lgmd1", "lgmd2") else
+                f" (the command line's NAME/FIELD=VALUE; in Python: preset({head!r}"
+                ", FIELD=VALUE))")
         raise ValueError(f"unknown preset {name!r}{hint}; choose one of "
                          f"{', '.join(preset_names())}")
     return key

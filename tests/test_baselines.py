@@ -84,6 +84,16 @@ def test_factory_builds_the_baselines():
         make_detector("lgmd1", "nopreset")
     with pytest.raises(ValueError, match="record_maps apply to the ASNN model only"):
         make_detector("lgmd1", record_maps=True)
+    # a baseline's own parameters in the preset's place were dropped without a word (a user
+    # trial): they are its parameters; another model's are refused
+    assert make_detector("lgmd1", LGMD1Params(w_i=0.6)).params.w_i == 0.6
+    assert make_detector("lgmd2", LGMD2Params(t_ffi=0.2)).params.t_ffi == 0.2
+    with pytest.raises(TypeError, match="lgmd2 takes a LGMD2Params"):
+        make_detector("lgmd2", LGMD1Params())
+    with pytest.raises(ValueError, match="given twice"):
+        make_detector("lgmd1", LGMD1Params(), params=LGMD1Params())
+    with pytest.raises(ValueError, match=r"in Python: make_detector\('lgmd1', FIELD=VALUE\)"):
+        make_detector("lgmd1", "lgmd1/w_i=0.6")
 
 
 def test_grouping_keeps_only_clustered_excitation():
