@@ -16,6 +16,7 @@ missing, named in the report's errors), 130 when interrupted.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import sys
 import time
@@ -220,16 +221,7 @@ def _replace_previous_run(out: Path, since: float, read: Path | None = None) -> 
         return
     previous = _listed(out)
     root = out.resolve()
-    written = {}
-    # only where eval writes: a whole tree (--out .) is not walked
-    candidates = [*out.glob("*"), *out.glob("plots/*"), *out.glob("results/*/*")]
-    for path in candidates:
-        relative = PurePosixPath(path.relative_to(out).as_posix())
-        if path.is_symlink() or not path.is_file() or not _eval_output(relative):
-            continue
-        mtime = path.stat().st_mtime_ns
-        if mtime >= since * 1e9:
-            written[str(relative)] = mtime
+    written = _written_since(out, since)
     for name, mtime in previous.items():
         path = out / name
         if (name in written or not _eval_output(PurePosixPath(name)) or path.is_symlink()
@@ -242,8 +234,52 @@ def _replace_previous_run(out: Path, since: float, read: Path | None = None) -> 
         while parent.resolve() != root and not any(parent.iterdir()):
             parent.rmdir()
             parent = parent.parent
+    _write_manifest(out, written)
+
+
+def _written_since(out: Path, since: float) -> dict[str, int]:
+    """The files of eval's kinds in ``out`` written since ``since`` (s), with their times."""
+    written = {}
+    # only where eval writes: a whole tree (--out .) is not walked
+    for path in [*out.glob("*"), *out.glob("plots/*"), *out.glob("results/*/*")]:
+        relative = PurePosixPath(path.relative_to(out).as_posix())
+        if path.is_symlink() or not path.is_file() or not _eval_output(relative):
+            continue
+        mtime = path.stat().st_mtime_ns
+        if mtime >= since * 1e9:
+            written[str(relative)] = mtime
+    return written
+
+
+def _write_manifest(out: Path, listed: dict[str, int]) -> None:
     (out / MANIFEST).write_text("".join(f"{mtime}\t{name}\n" for name, mtime
-                                        in sorted(written.items())), encoding="utf-8")
+                                        in sorted(listed.items())), encoding="utf-8")
+
+
+def _keep_unfinished_run(out: Path, since: float, read: Path | None = None) -> None:
+    """After a run that stopped before its report (Ctrl-C, SIGTERM, an error): where it wrote
+    or replaced files, the manifest lists them beside the previous run's (which are kept), so
+    that the next run removes what this one left; and the previous run's top-level reports,
+    which no longer describe the folder, are removed (an interrupted run left results no later
+    run removed, and the earlier report beside results it had deleted: a user trial)."""
+    if not out.is_dir():
+        return
+    previous = _listed(out)
+    written = _written_since(out, since)
+    if not written and all((out / name).is_file() for name in previous):
+        return  # it stopped before it touched the folder: the previous run's stands
+    kept = None if read is None else read.resolve()
+    listed = dict(written)
+    for name, mtime in previous.items():
+        path = out / name
+        if name in written or path.is_symlink() or not path.is_file():
+            continue
+        if (name in OUTPUT_FILES and path.stat().st_mtime_ns == mtime
+                and path.resolve() != kept):
+            path.unlink()  # one of the previous run's reports (the labels it read excepted)
+        else:
+            listed[name] = mtime
+    _write_manifest(out, listed)
 
 
 def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
@@ -270,12 +306,19 @@ def run(args: argparse.Namespace) -> int:
     """``asnn eval``; the --out folder then holds this run's files only (its earlier runs'
     others are removed, :func:`_replace_previous_run`)."""
     since = time.time()
-    status = _evaluate(args)
+    read = None
+    if args.clips_dir and not (args.synthetic or args.paper):
+        read = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
+    try:
+        status = _evaluate(args)
+    except BaseException:  # Ctrl-C, SIGTERM (cli.main's _Terminated) or a failure
+        with contextlib.suppress(OSError):  # what stopped the run is what to report
+            _keep_unfinished_run(Path(args.out), since, read)
+        raise
     if status in (0, 1):  # a report was written
-        read = None
-        if args.clips_dir and not (args.synthetic or args.paper):
-            read = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
         _replace_previous_run(Path(args.out), since, read)
+    else:
+        _keep_unfinished_run(Path(args.out), since, read)
     return status
 
 

@@ -689,6 +689,40 @@ def test_an_out_folder_holds_the_latest_run_s_files_only(clips, tmp_path):
     assert "notes.md" not in listed and not any("lgmd1" in name for name in listed)
 
 
+def test_an_interrupted_run_leaves_nothing_the_next_run_keeps(clips, tmp_path, monkeypatch):
+    """Ctrl-C after the results and before the report: the interrupted run's results were
+    never listed, so no later run removed them, and the earlier run's report stayed beside
+    results the interrupted run had replaced (a user trial)."""
+    from asnn.evaluation import clips as clip_eval
+
+    root, _ = clips
+    out = tmp_path / "out"
+    assert main(["eval", str(root), "--detectors", "asnn", "--out", str(out), "--no-plots"]) == 0
+    assert (out / "report.md").is_file()
+
+    def interrupted(scores):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as patch:
+        patch.setattr(clip_eval, "paired_comparisons", interrupted)
+        assert main(["eval", str(root), "--detectors", "asnn,lgmd1", "--out", str(out),
+                     "--no-plots"]) == 130
+    assert (out / "results" / "lgmd1" / "loom.jsonl").is_file()
+    # the earlier run's reports do not describe the folder any more; its results are kept
+    assert not (out / "report.md").exists() and not (out / "results.json").exists()
+    listed = [line.split("\t")[1] for line in (out / ".asnn-eval-files").read_text().splitlines()]
+    assert "results/lgmd1/loom.jsonl" in listed and "results/asnn/loom.jsonl" in listed
+    assert main(["eval", str(root), "--detectors", "asnn", "--out", str(out), "--no-plots"]) == 0
+    assert not (out / "results" / "lgmd1").exists()  # the interrupted run's other detector
+    assert list(json.loads((out / "results.json").read_text())["detectors"]) == ["asnn"]
+    # a run that stops before it touches the folder (a label error) leaves it as it was
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    bad = tmp_path / "bad-labels.json"
+    bad.write_text("[{}]")
+    assert main(["eval", str(root), "--labels", str(bad), "--out", str(out), "--no-plots"]) == 2
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+
+
 def test_an_out_folder_keeps_what_eval_did_not_write_and_what_was_edited(tmp_path):
     import os
     import time
