@@ -40,9 +40,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # the evaluation's labels and the decoders (OpenCV): when it runs, not with the parser
-    from asnn.evaluation.labels import (VIDEO_SUFFIXES, center_outside, check_labels, clip_hint,
-                                        label_problem, mismatches, read_entries, unlabelled,
-                                        unlabelled_videos, write_entries)
+    from asnn.evaluation.labels import (RAW_STREAM_SUFFIXES, VIDEO_SUFFIXES, center_outside,
+                                        check_labels, clip_hint, label_problem, mismatches,
+                                        read_entries, unlabelled, unlabelled_videos,
+                                        write_entries)
     from asnn.evaluation.scoring import unscored
     from asnn.io.sources import SourceError
 
@@ -103,6 +104,11 @@ def run(args: argparse.Namespace) -> int:
         added.append(entries[-1])
         todo += unscored(entries[-1], frames)
         todo.append(f"{video.name}: {label_problem(entries[-1])}")
+        if video.suffix.lower() in RAW_STREAM_SUFFIXES:
+            todo.append(f"{video.name}: a raw stream states no frame rate (OpenCV reads it at "
+                        f"{fps:g} fps): write the camera's in its fps, and know that asnn eval "
+                        "steps the model at OpenCV's (put the stream in a container that states "
+                        "its rate for both to agree)")
     if added:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)  # as asnn scene --labels makes it
@@ -124,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
     for line in todo:
         print(line)
     if not todo:
-        print(f"{path}: {len(entries)} entries, every one ready for asnn eval")
+        print(f"{path}: {len(entries)} entr{'y' if len(entries) == 1 else 'ies'}, every one "
+              "ready for asnn eval")
     return 1 if todo else 0
 
 

@@ -222,6 +222,45 @@ def test_label_starts_the_labels_of_a_folder_and_lists_what_is_left(tmp_path, ca
         f"gone.mp4: no such clip in {tmp_path}"]
 
 
+def test_label_and_eval_take_a_raw_camera_stream_and_say_it_states_no_rate(tmp_path, capsys):
+    """A raw MJPEG stream (an IP or USB camera's .mjpeg) decodes, but was neither labelled nor
+    named as unscored: asnn label said "1 entries, every one ready" beside it (a user trial)."""
+    import cv2
+
+    loom = make_scene("looming", size=(64, 48), frames=12, start=2, stop=10)
+    write_video(loom.frames, tmp_path / "loom.avi", loom.fps)
+    (tmp_path / "cam.mjpeg").write_bytes(b"".join(
+        cv2.imencode(".jpg", frame)[1].tobytes() for frame in loom.frames))
+    (tmp_path / "labels.json").write_text(json.dumps([{**loom.label("loom.avi"),
+                                                       "frames": 12}]))
+    assert main(["label", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "1 entry added (cam.mjpeg)" in out
+    assert re.search(r"cam\.mjpeg: a raw stream states no frame rate \(OpenCV reads it at "
+                     r"[\d.]+ fps\): write the camera's in its fps", out)
+    entries = json.loads((tmp_path / "labels.json").read_text())
+    assert entries[1]["file"] == "cam.mjpeg" and entries[1]["frames"] == 12
+    (tmp_path / "solo").mkdir()  # one entry, ready: "1 entry", not "1 entries"
+    write_video(loom.frames, tmp_path / "solo" / "loom.avi", loom.fps)
+    (tmp_path / "solo" / "labels.json").write_text(json.dumps([{**loom.label("loom.avi"),
+                                                               "frames": 12}]))
+    assert main(["label", str(tmp_path / "solo")]) == 0
+    assert "labels.json: 1 entry, every one ready for asnn eval" in capsys.readouterr().out
+
+
+def test_a_missing_clip_s_name_composed_otherwise_is_named_so():
+    """A label written on macOS names a clip in Unicode NFD; the folder holds it in NFC: the
+    hint read "did you mean trottoir vide é.mp4?", the same name to the eye (a user trial)."""
+    import unicodedata
+
+    from asnn.evaluation.labels import clip_hint
+
+    on_disk = unicodedata.normalize("NFC", "trottoir vide é.mp4")
+    hint = clip_hint(unicodedata.normalize("NFD", on_disk), [on_disk, "other.mp4"])
+    assert "the same name with its accents composed otherwise, Unicode NFC" in hint
+    assert clip_hint("loon.mp4", ["loom.mp4"]) == " (did you mean loom.mp4?)"
+
+
 def test_label_refuses_what_it_cannot_use(tmp_path, capsys):
     assert main(["label", str(tmp_path / "nowhere")]) == 2
     write_video(make_scene("looming", size=(64, 48), frames=3).frames, tmp_path / "a.avi")

@@ -23,6 +23,7 @@ import difflib
 import json
 import math
 import re
+import unicodedata
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -32,12 +33,16 @@ from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, Valid
 from ..io.files import write_atomically
 from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside, a mistake
 
+# raw streams, which OpenCV decodes but which carry no timing: it reads them at 25 fps
+# (.mjpeg/.mjpg from IP and USB cameras, .h264/.h265 from a Raspberry Pi's)
+RAW_STREAM_SUFFIXES = (".264", ".265", ".h264", ".h265", ".hevc", ".mjpeg", ".mjpg")
 # what OpenCV's FFmpeg backend commonly reads (dashcams write .ts and .mts too); bags (.mcap)
 # need a topic and are labelled by hand
-VIDEO_SUFFIXES = (".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4", ".mpeg",
-                  ".mpg", ".mts", ".ogv", ".ts", ".webm", ".wmv")
+VIDEO_SUFFIXES = tuple(sorted((".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4",
+                               ".mpeg", ".mpg", ".mts", ".mxf", ".ogv", ".ts", ".vob", ".webm",
+                               ".wmv", ".y4m", *RAW_STREAM_SUFFIXES)))
 
-__all__ = ["VIDEO_SUFFIXES", "ClipLabel", "center_outside", "check_labels", "clip_hint",
+__all__ = ["RAW_STREAM_SUFFIXES", "VIDEO_SUFFIXES", "ClipLabel", "center_outside", "check_labels", "clip_hint",
            "label_problem", "load_labels", "mismatches", "read_entries", "result_name",
            "unlabelled", "unlabelled_videos", "write_entries"]
 
@@ -222,7 +227,14 @@ def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
 def clip_hint(file: str, candidates: Sequence[str]) -> str:
     """For a label whose clip is missing: `` (did you mean NAME?)`` naming the one of
     ``candidates`` (videos no label names) its ``file`` is most likely a typo of, or ''."""
-    near = difflib.get_close_matches(Path(file).name, list(candidates), n=1, cutoff=0.75)
+    name = Path(file).name
+    for candidate in candidates:  # the same characters composed otherwise (macOS writes NFD)
+        if candidate != name and (unicodedata.normalize("NFC", candidate)
+                                  == unicodedata.normalize("NFC", name)):
+            form = "NFC" if unicodedata.is_normalized("NFC", candidate) else "NFD"
+            return (f" (the folder has {candidate!r}, the same name with its accents composed "
+                    f"otherwise, Unicode {form}: write it as the file's name is)")
+    near = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.75)
     return f" (did you mean {near[0]}?)" if near else ""
 
 
