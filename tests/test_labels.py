@@ -248,6 +248,16 @@ def test_label_and_eval_take_a_raw_camera_stream_and_say_it_states_no_rate(tmp_p
     assert "labels.json: 1 entry, every one ready for asnn eval" in capsys.readouterr().out
 
 
+def test_labels_saved_with_a_byte_order_mark_are_read(tmp_path):
+    """Windows Notepad saves UTF-8 with a byte-order mark: the labels were refused as not
+    JSON (a user trial)."""
+    from asnn.evaluation.labels import read_entries
+
+    path = tmp_path / "labels.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps([{"file": "a.mp4"}]).encode())
+    assert read_entries(path) == [{"file": "a.mp4"}]
+
+
 def test_a_missing_clip_s_name_composed_otherwise_is_named_so():
     """A label written on macOS names a clip in Unicode NFD; the folder holds it in NFC: the
     hint read "did you mean trottoir vide é.mp4?", the same name to the eye (a user trial)."""

@@ -307,7 +307,8 @@ def _read_document(path: str | Path):
     if len(raw) > MAX_LABELS_BYTES:
         raise ValueError(f"{path}: larger than {MAX_LABELS_BYTES >> 20} MiB")
     try:
-        data = json.loads(raw.decode("utf-8"), parse_constant=_no_constant,
+        # utf-8-sig: a byte-order mark (Windows Notepad writes one) is not the JSON's
+        data = json.loads(raw.decode("utf-8-sig"), parse_constant=_no_constant,
                           parse_float=_finite, object_pairs_hook=_unique_keys)
     except _LabelsError as exc:
         raise ValueError(f"{path}: {exc}") from None
