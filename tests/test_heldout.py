@@ -327,7 +327,7 @@ def test_the_report_names_each_folds_thresholds(traced, tmp_path, monkeypatch):
     # the lines the command prints: the same figures, the thresholds named
     lines = heldout.summary_lines(results)
     ins, held = results["in_sample"]["summary"], results["held_out"]["summary"]
-    assert lines[0].startswith(f"in-sample (preset thresholds): {ins['hit']}/"
+    assert lines[0].startswith(f"{heldout.PRESET_ROW}: {ins['hit']}/"
                                f"{ins['collision_clips']} hits ({ins['early']} early, ")
     assert lines[1].startswith("held out (leave one clip out; ties by warning-frames): "
                                f"{held['hit']}/{held['collision_clips']} hits")
@@ -355,7 +355,7 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     results = json.loads((out / "held_out.json").read_text())
     # stdout: the figures (heldout.summary_lines), the thresholds named, then the report's path
     assert printed.out.splitlines() == [*heldout.summary_lines(results), f"{out}/held_out.md"]
-    assert printed.out.startswith("in-sample (preset thresholds): 1/1 hits (0 early, 0 late)")
+    assert printed.out.startswith(f"{heldout.PRESET_ROW}: 1/1 hits (0 early, 0 late)")
     assert "chosen on every clip: tau_max = " in printed.out
     assert set(results["held_out"]["clips"][0]["chosen"]) == set(heldout.GATE_GRID)
     # the README says what each key of held_out.json holds
