@@ -1113,3 +1113,26 @@ def test_the_partial_overlap_regime_takes_the_better_of_the_box_s_two_fits():
         track.measure(1.25, 37.5, 0.0, fit=fit)  # ttc 0.8 s, offset 1.5: an overlap
         track.measure_own(1.0, own_fit)
         assert approaching(track, tau_max=0.5, offset_max=1.0, overlap=overlap), (fit, own_fit)
+
+
+def test_a_uniform_disk_with_a_one_pixel_edge_approaching_at_constant_speed_reads_its_ttc():
+    """The reported time to contact of the simplest object, a uniform dark disk whose edge is
+    one pixel wide, approaching at constant speed (radius R tau_end / (T - t)): within a few
+    per cent of T - t. (The paper's looming disk grows linearly instead, which no approach at
+    constant speed does, and reads short against its own r / (dr/dt): the track's smoothing
+    predicts the time to contact falling with the frames' time, where that disk's rises.)"""
+    from asnn import ASNN
+    from asnn.stimuli.paper import _disk_coverage
+
+    fps, contact, (w, h) = 20.0, 3.0, (160, 120)
+    frames = 58
+    reach = 0.45 * h * (contact - (frames - 1) / fps)  # radius x time to contact: 2.7-54 px
+    model, errors = ASNN("default"), []
+    for k in range(frames):
+        radius = reach / (contact - k / fps)
+        image = 200.0 - 160.0 * _disk_coverage(h, w, w / 2, h / 2, radius)
+        response = model.step(np.rint(image).astype(np.uint8), k / fps)
+        errors += [t.ttc / (contact - k / fps) - 1 for t in response.targets
+                   if t.ttc is not None]
+    assert len(errors) >= 15
+    assert abs(np.median(errors)) < 0.03 and np.percentile(np.abs(errors), 90) < 0.06
