@@ -233,6 +233,32 @@ def test_the_scene_fit_takes_its_last_frame_s_average_from_its_memo():
         frames[0], frames[1], box)
 
 
+def test_the_scene_fit_takes_the_surface_watch_s_averages():
+    # the surface watch has both frames shrunk (320 x 240 to 64 x 48, as the scene's fit
+    # shrinks them): the scene's fit reads them instead of averaging the frames again
+    from asnn.approach.surface import SurfaceWatch
+
+    tex = texture((240, 320), blur=4.0)
+    frames = [tex, warp(tex, 1.02), warp(tex, 1.04)]
+    box = [(140, 100, 180, 140)]
+    watch = SurfaceWatch()
+    assert watch.averages() == ()
+    for before, after in zip(frames, frames[1:]):
+        watch.step(before, after, 0.05, 2.0, 0.5)
+        averaged = watch.averages()
+        assert [frame is image for (frame, _), image in zip(averaged, (before, after))] == [
+            True, True]
+        assert scene_expansion(before, after, box, averaged=averaged) == scene_expansion(
+            before, after, box)
+    # they are read (an average changed changes the fit), for those very frames only
+    (before, low), (after, high) = averaged
+    changed = ((before, low), (after, high + 0.1))
+    assert scene_expansion(before, after, box, averaged=changed) != scene_expansion(
+        before, after, box)
+    assert scene_expansion(frames[0], frames[1], box, averaged=changed) == scene_expansion(
+        frames[0], frames[1], box)
+
+
 def test_an_empty_box_moved_by_the_scene_is_empty():
     # a track's box clipped to the frame is empty once the track has moved out of it (seen on a
     # real clip: the scene-relative refit then failed to broadcast the whole frame into it)

@@ -495,7 +495,9 @@ class ApproachStage:
                      and approach_test(tr.ttc, tr.offset, p.tau_max, p.offset_max, 1.0, overlap)}
         growing = ({k for k, tr in enumerate(tracks) if tr.ttc is not None}
                    if self.measure_all_against_scene else set())
-        scene = (scene_expansion(previous, current, boxes, background, rig, self._scene_average)
+        # the surface watch (surface_ahead, corridor_gate) has averaged both frames already
+        scene = (scene_expansion(previous, current, boxes, background, rig, self._scene_average,
+                                 self.surface.averages())
                  if chosen or unfit or growing else None)
         scene_rate = 0.0 if scene is None else scene.rate / elapsed
         contracts = p.receding_scene and scene_rate < -_SCENE_MOVES

@@ -271,9 +271,22 @@ class SurfaceWatch:
         # frame before
         self._rates: deque[tuple[np.ndarray, float]] = deque()
         self._latest: np.ndarray | None = None  # the frame last given as ``current``
+        self._before: np.ndarray | None = None  # the frame last given as ``previous``
         # the shrunk frames back to the baseline's, oldest first, each with the seconds since
         # the one before it
         self._history: deque[tuple[np.ndarray, float]] = deque()
+
+    def averages(self) -> tuple:
+        """The last step's two frames with their :func:`shrunk` forms, ``((previous, shrunk),
+        (current, shrunk))`` (empty before the first step): the scene's fit over the same
+        frames takes them instead of averaging the frames again
+        (:func:`asnn.approach.looming.scene_expansion`'s ``averaged``)."""
+        history = self._history
+        if self._latest is None or len(history) < 2:
+            return ()
+        # the last two kept are the step's frames: the history restarts from ``previous`` where
+        # it was not the frame before, and is never trimmed below two
+        return (self._before, history[-2][0]), (self._latest, history[-1][0])
 
     def step(self, previous: np.ndarray, current: np.ndarray, elapsed: float, tau_max: float,
              offset_max: float, exclude: np.ndarray | None = None) -> Surface | None:
@@ -288,7 +301,7 @@ class SurfaceWatch:
         history.append((shrunk(current), elapsed))
         if len(history) > MAX_KEPT:  # frames a hair apart (a clock in microseconds' steps)
             history.popleft()
-        self._latest = current
+        self._latest, self._before = current, previous
         # back to the frame BASELINE before (a thousandth of a frame's slack, as for the
         # persistence: 0.05 s stamps read 0.0499...), or the oldest kept
         span, k = 0.0, len(history) - 1
