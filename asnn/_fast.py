@@ -83,7 +83,8 @@ from ._jit import kernel
 __all__ = ["supported", "dog_factors", "gabor_factors", "cs_classes", "Scratch", "FrontMaps",
            "Workspace", "workspace", "scratch", "FrontCoefficients", "front", "add_column_sums",
            "to_differences", "shrunk_luminance", "contrast_gain_control",
-           "gain_controlled_change", "attention", "AttentionBlur"]
+           "gain_controlled_change", "attention", "AttentionBlur", "MotionVectors",
+           "motion_vectors"]
 
 RADIUS = 2  # the fused kernels are written for 5x5 kernels (Table I)
 DEPTH = 2 * RADIUS + 1  # rows kept by the ring buffers of the 5x5 filters
@@ -955,17 +956,65 @@ def motion_vectors(r, v, rows, cols):
     return dx, dy
 
 
+class MotionVectors:
+    """A frame's motion vectors (eq. 29) from its maps ``r`` and ``v``
+    (:func:`motion_vectors`): ``vectors(rows, cols) -> (dx, dy)`` at those pixels, and
+    :meth:`sums`, their sums per region, which the objects' population-coded motion reads
+    (:class:`asnn.targets.ObjectRegions`)."""
+
+    __slots__ = ("r", "v")
+
+    def __init__(self, r: np.ndarray, v: np.ndarray):
+        self.r, self.v = r, v
+
+    def __call__(self, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return motion_vectors(self.r, self.v, rows, cols)
+
+    def sums(self, rows: np.ndarray, cols: np.ndarray, labels: np.ndarray,
+             n: int) -> tuple[np.ndarray, np.ndarray]:
+        """``np.bincount(labels, dx, n)`` and ``np.bincount(labels, dy, n)`` of the vectors
+        ``(dx, dy)`` at the pixels ``(rows, cols)``, bit for bit (each region's sum from 0, in
+        the pixels' order, as NumPy adds them), in one pass and without the vectors' arrays:
+        the vectors and the two counts took about 80 us on a 6,600-pixel object."""
+        sum_dx, sum_dy = np.zeros(n), np.zeros(n)
+        _summed_motion_vectors(self.r, self.v, rows, cols, labels, sum_dx, sum_dy)
+        return sum_dx, sum_dy
+
+
 @kernel(error_model="numpy", **_jit)
 def _motion_vectors(r, v, rows, cols, dx, dy):
     for i in range(rows.shape[0]):
-        y, x = rows[i], cols[i]
-        c, s, vv = np.float64(r[0, y, x]), np.float64(r[2, y, x]), np.float64(v[y, x])
-        norm = math.sqrt(c * c + s * s)  # exact squares of float32 maps: no overflow
-        if norm > 0.0:
-            dx[i], dy[i] = vv * (c / norm), vv * (s / norm)
-        else:  # atan2 of zeros: 0 or pi by their signs
-            phi = math.atan2(s, c)
-            dx[i], dy[i] = vv * math.cos(phi), vv * math.sin(phi)
+        dx[i], dy[i] = _motion_vector(r, v, rows[i], cols[i])
+
+
+@kernel(error_model="numpy", **_jit)
+def _summed_motion_vectors(r, v, rows, cols, labels, sum_dx, sum_dy):
+    """:meth:`MotionVectors.sums` into ``sum_dx`` and ``sum_dy`` (zeros). A region's sums are
+    carried in locals along a run of its pixels (as in :func:`asnn.targets._region_moments`):
+    the same additions in the same order, without a store and a load between two of them."""
+    k0, a, b = -1, 0.0, 0.0
+    for i in range(rows.shape[0]):
+        k = labels[i]
+        if k != k0:
+            if k0 >= 0:
+                sum_dx[k0], sum_dy[k0] = a, b
+            k0, a, b = k, sum_dx[k], sum_dy[k]
+        dx, dy = _motion_vector(r, v, rows[i], cols[i])
+        a += dx
+        b += dy
+    if k0 >= 0:
+        sum_dx[k0], sum_dy[k0] = a, b
+
+
+@kernel(error_model="numpy", inline="always", **_jit)
+def _motion_vector(r, v, y, x):
+    """The motion vector ``(dx, dy)`` at pixel ``(y, x)`` (:func:`motion_vectors`)."""
+    c, s, vv = np.float64(r[0, y, x]), np.float64(r[2, y, x]), np.float64(v[y, x])
+    norm = math.sqrt(c * c + s * s)  # exact squares of float32 maps: no overflow
+    if norm > 0.0:
+        return vv * (c / norm), vv * (s / norm)
+    phi = math.atan2(s, c)  # atan2 of zeros: 0 or pi by their signs
+    return vv * math.cos(phi), vv * math.sin(phi)
 
 
 # --------------------------------------------------------------------------- attention, u(t)

@@ -18,7 +18,6 @@ one's pass runs (:mod:`asnn._parallel`); the responses are those of ``step``, bi
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import numbers
 import statistics
@@ -634,7 +633,7 @@ class ASNN:
             full=self.record_maps)
         attended = ws.mask
 
-        vectors = functools.partial(_fast.motion_vectors, r, v)  # at (rows, cols)
+        vectors = _fast.MotionVectors(r, v)  # at (rows, cols); summed per object
         if p.targets == "objects":
             total, targets = self._objects(attended if count else None, g, vectors, frame,
                                            total, points=(ws.rows[:count], ws.cols[:count]))

@@ -309,7 +309,10 @@ class ObjectRegions:
     members : (rows, cols, region) of ndarray of int
         The regions' pixels, in the mask's row-major order, and the region of each.
     vectors : callable
-        ``vectors(rows, cols) -> (dx, dy)``, as given to :func:`extract_objects`.
+        ``vectors(rows, cols) -> (dx, dy)``, as given to :func:`extract_objects`; where it
+        has a ``sums(rows, cols, labels, n)`` method (:class:`asnn._fast.MotionVectors`), the
+        regions' summed vectors come from it, as ``np.bincount`` of the vectors would give
+        them.
     direction, energy : ndarray (n,)
         Population-coded motion of each region (paper eqs. 29-31): the mean of
         ``(V cos(phi), V sin(phi))`` over its pixels, as an angle and a length. Computed when
@@ -337,9 +340,13 @@ class ObjectRegions:
         """The direction and energy of each region's mean motion vector (eqs. 30-31)."""
         rows, cols, lab = self.members
         n = len(self)
-        dx, dy = self.vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))
-        return _population_motion(np.bincount(lab, dx, n), np.bincount(lab, dy, n),
-                                  np.maximum(self.pixels, 1))
+        sums = getattr(self.vectors, "sums", None)  # the optimised model's, in one pass
+        if sums is not None:
+            sum_dx, sum_dy = sums(rows, cols, lab, n)
+        else:
+            dx, dy = self.vectors(rows, cols) if len(rows) else (np.zeros(0), np.zeros(0))
+            sum_dx, sum_dy = np.bincount(lab, dx, n), np.bincount(lab, dy, n)
+        return _population_motion(sum_dx, sum_dy, np.maximum(self.pixels, 1))
 
     @cached_property
     def direction(self) -> np.ndarray:

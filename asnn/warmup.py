@@ -75,6 +75,12 @@ def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference
             # the motion layers' kernel, which the clip (a still camera) never reaches
             texture = np.random.default_rng(0).random((64, 64)).astype(model.dtype)
             motion_layers(texture, texture, (0, 0, 64, 64))
+            # the objects' summed motion vectors, first read when an object approaches (on the
+            # maps' own arrays: numba compiles a kernel for each layout)
+            if optimised and model.approach is not None:
+                maps = _fast.workspace(model.previous.shape, model.dtype).maps
+                pixel = np.zeros(1, np.int64)
+                _fast.MotionVectors(maps.r, maps.v).sums(pixel, pixel, pixel, 1)
             # frames wider than max_width, shrunk as they are taken
             _fast.shrunk_luminance(np.zeros((16, 20), np.uint8), (15, 12), LEVELS, model.dtype)
             # the camera rig's edge test and its mask, which a stream first needs after 20
