@@ -572,7 +572,7 @@ class ASNN:
         if k == 1:
             return lum
         h, w = lum.shape
-        return cv2.resize(lum, (max(w // k, 1), max(h // k, 1)), interpolation=cv2.INTER_AREA)
+        return _fast.block_means(lum, (max(w // k, 1), max(h // k, 1)))  # cv2's INTER_AREA
 
     def _is_repeat(self, blocks: np.ndarray) -> bool:
         """Whether a frame, given by its :meth:`_blocks`, repeats the previous one

@@ -81,6 +81,10 @@ def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference
                 maps = _fast.workspace(model.previous.shape, model.dtype).maps
                 pixel = np.zeros(1, np.int64)
                 _fast.MotionVectors(maps.r, maps.v).sums(pixel, pixel, pixel, 1)
+            # the whole-factor averages of frames 320 pixels wide (the fits' grid, the repeat
+            # test's blocks), which the clip's small frames do not reach
+            for factor in (5, 8):
+                _fast.block_means(np.zeros((factor, factor), model.dtype), (1, 1))
             # frames wider than max_width, shrunk as they are taken
             _fast.shrunk_luminance(np.zeros((16, 20), np.uint8), (15, 12), LEVELS, model.dtype)
             # the camera rig's edge test and its mask, which a stream first needs after 20

@@ -456,6 +456,44 @@ def test_motion_vectors_are_v_times_cos_and_sin_of_phi():
     assert (dx[(rows == 0) & (cols < 5)] < 0).all()
 
 
+def test_motion_vectors_summed_per_object_are_numpys_sums_of_them():
+    # the objects' population-coded motion (eq. 30) reads the vectors' sums per region: one
+    # kernel pass gives np.bincount's sums of motion_vectors bit for bit, zero vectors included
+    rng = np.random.default_rng(4)
+    r = rng.standard_normal((4, 40, 50)).astype(np.float32)
+    r[:, :5] = 0.0  # norm 0: the arc tangent's branch
+    v = rng.random((40, 50)).astype(np.float32)
+    rows, cols = (np.ascontiguousarray(a, np.int64) for a in np.nonzero(rng.random((40, 50)) < 0.6))
+    labels = rng.integers(0, 3, rows.size)
+    labels[100:400] = 1  # long runs of one region, as an object's pixels come, and short ones
+    vectors = _fast.MotionVectors(r, v)
+    dx, dy = vectors(rows, cols)
+    assert np.array_equal(dx, _fast.motion_vectors(r, v, rows, cols)[0])
+    sum_dx, sum_dy = vectors.sums(rows, cols, labels, 4)
+    assert sum_dx.tobytes() == np.bincount(labels, dx, 4).tobytes()
+    assert sum_dy.tobytes() == np.bincount(labels, dy, 4).tobytes()
+    empty = np.zeros(0, np.int64)
+    assert [s.tolist() for s in vectors.sums(empty, empty, empty, 2)] == [[0.0, 0.0]] * 2
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_block_means_are_opencvs_area_averages(dtype):
+    # by 5 and by 8 in kernels of their own, any other shrink by OpenCV: cv2.resize's
+    # INTER_AREA bit for bit either way, negative values and a view that is not contiguous too
+    rng = np.random.default_rng(5)
+    for h, w in ((240, 320), (120, 160), (480, 640), (30, 45), (64, 96)):
+        image = ((rng.random((h, w)) - 0.3) * 10.0 ** rng.integers(-3, 3)).astype(dtype)
+        for view in (image, image[:, : w - w % 10 or w]):
+            vh, vw = view.shape
+            for k in (2, 3, 4, 5, 8, 10):
+                if vh % k or vw % k:
+                    continue
+                size = (vw // k, vh // k)
+                want = cv2.resize(view, size, interpolation=cv2.INTER_AREA)
+                got = _fast.block_means(view, size)
+                assert got.dtype == want.dtype and got.tobytes() == want.tobytes(), (h, w, k)
+
+
 def test_at_an_orientation_tie_the_forms_part_by_rounding_but_warn_alike():
     """A disk looming at the exact centre: the orientations' summed energies (eq. 24) are equal
     to rounding, and each form (fused float64 kernels, the straightforward retina, float32)

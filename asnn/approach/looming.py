@@ -40,7 +40,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from .._fast import _area_fast, _area_table, _reflect
+from .._fast import _area_fast, _area_table, _reflect, block_means
 from .._jit import kernel
 
 __all__ = ["Expansion", "region_expansion", "region_and_rim_expansion", "rim_scaled",
@@ -244,7 +244,7 @@ def _known_average(image: np.ndarray, part: np.ndarray, known,
     for frame, average in known:
         if frame is image and average.shape == (size[1], size[0]):
             return average
-    return cv2.resize(part, size, interpolation=cv2.INTER_AREA)
+    return block_means(part, size)  # cv2.resize's INTER_AREA
 
 
 def rim_scaled(box: Expansion | None, rim: Expansion | None, side: int = 0,

@@ -47,9 +47,9 @@ import math
 from collections import deque
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 
+from .._fast import block_means
 from .looming import region_expansion, shrink_step, shrunk_mask, shrunk_size
 
 __all__ = ["BASELINE", "CORRIDOR_RATIO", "FIT_MIN", "SECONDS", "SIDE", "TILES", "TILES_MIN",
@@ -123,7 +123,7 @@ def shrunk(image: np.ndarray) -> np.ndarray:
     step = shrink_step(w, h, SIDE)
     if step == 1.0:
         return image
-    return cv2.resize(image, shrunk_size(w, h, step), interpolation=cv2.INTER_AREA)
+    return block_means(image, shrunk_size(w, h, step))  # cv2.resize's INTER_AREA
 
 
 def surface_expansion(previous: np.ndarray, current: np.ndarray, elapsed: float,
