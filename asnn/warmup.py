@@ -15,7 +15,7 @@ import numpy as np
 
 from . import _fast
 from .approach import CameraRig
-from .approach.looming import Expansion, refined_expansion, region_expansion
+from .approach.looming import Expansion, refined_expansion, region_expansion, shrunk_mask
 from .approach.motion_layers import motion_layers
 from .frames import LEVELS
 from .model import ASNN
@@ -95,3 +95,6 @@ def compile_kernels(presets: Iterable[str | ASNNParams] = ("default", "reference
                 rig = CameraRig()
                 for _ in range(21):
                     rig.update(hood, hood)
+                # its mask shrunk by a whole factor (the surface watch's grid)
+                if rig.mask is not None:
+                    shrunk_mask(rig.mask, (8, 8))

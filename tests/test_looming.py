@@ -3,12 +3,14 @@
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
 from asnn.approach.looming import (FIT_SIDE, RIG_WEIGHT, Expansion, moved_by_expansion,
                                   refine_grid, refined_expansion, region_and_rim_expansion,
-                                  region_expansion, rig_pixels, rim_scaled, scene_expansion)
+                                  region_expansion, rig_pixels, rim_scaled, scene_expansion,
+                                  shrunk_mask)
 from asnn.approach.tracking import Observation, TargetTracker, Track, approaching
 from imageutil import texture, warp
 
@@ -257,6 +259,22 @@ def test_the_scene_fit_takes_the_surface_watch_s_averages():
         before, after, box)
     assert scene_expansion(frames[0], frames[1], box, averaged=changed) == scene_expansion(
         frames[0], frames[1], box)
+
+
+def test_a_mask_shrunk_by_whole_factors_is_opencvs_area_average_over_a_quarter():
+    # counted in a kernel where the frame shrinks by a whole factor, by OpenCV elsewhere (a
+    # view, a fractional factor): the same pixels either way
+    rng = np.random.default_rng(6)
+    for h, w, size in ((240, 320, (64, 48)), (240, 320, (160, 120)), (128, 192, (64, 43)),
+                       (60, 80, (20, 15)), (100, 90, (30, 33))):
+        for share in (0.05, 0.2, 0.3, 0.6):
+            mask = rng.random((h, w)) < share
+            mask[: h // 3, : w // 3] = True  # whole blocks set, and blocks a quarter set
+            mask[h // 2: h // 2 + 3, :] = False
+            want = cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_AREA) > 0.25
+            assert np.array_equal(shrunk_mask(mask, size), want)
+            assert np.array_equal(shrunk_mask(mask[:, :w - 5], size), cv2.resize(
+                mask[:, :w - 5].astype(np.float32), size, interpolation=cv2.INTER_AREA) > 0.25)
 
 
 def test_an_empty_box_moved_by_the_scene_is_empty():
