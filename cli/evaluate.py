@@ -256,7 +256,13 @@ def _write_manifest(out: Path, listed: dict[str, int]) -> None:
                                         in sorted(listed.items())), encoding="utf-8")
 
 
-def _keep_unfinished_run(out: Path, since: float, read: Path | None = None) -> None:
+def _present(out: Path) -> set[str]:
+    """The files the last eval into ``out`` listed that are there now (before a run starts)."""
+    return {name for name in _listed(out) if (out / name).is_file()}
+
+
+def _keep_unfinished_run(out: Path, since: float, present: set[str],
+                         read: Path | None = None) -> None:
     """After a run that stopped before its report (Ctrl-C, SIGTERM, an error): where it wrote
     or replaced files, the manifest lists them beside the previous run's (which are kept), so
     that the next run removes what this one left; and the previous run's top-level reports,
@@ -266,7 +272,9 @@ def _keep_unfinished_run(out: Path, since: float, read: Path | None = None) -> N
         return
     previous = _listed(out)
     written = _written_since(out, since)
-    if not written and all((out / name).is_file() for name in previous):
+    # the files it removed: listed and there when it started (``present``; one the user had
+    # removed before it is not its doing)
+    if not written and all((out / name).is_file() for name in present):
         return  # it stopped before it touched the folder: the previous run's stands
     kept = None if read is None else read.resolve()
     listed = dict(written)
@@ -306,6 +314,7 @@ def run(args: argparse.Namespace) -> int:
     """``asnn eval``; the --out folder then holds this run's files only (its earlier runs'
     others are removed, :func:`_replace_previous_run`)."""
     since = time.time()
+    present = _present(Path(args.out))  # what a run stopped early is judged against
     read = None
     if args.clips_dir and not (args.synthetic or args.paper):
         read = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
@@ -313,12 +322,12 @@ def run(args: argparse.Namespace) -> int:
         status = _evaluate(args)
     except BaseException:  # Ctrl-C, SIGTERM (cli.main's _Terminated) or a failure
         with contextlib.suppress(OSError):  # what stopped the run is what to report
-            _keep_unfinished_run(Path(args.out), since, read)
+            _keep_unfinished_run(Path(args.out), since, present, read)
         raise
     if status in (0, 1):  # a report was written
         _replace_previous_run(Path(args.out), since, read)
     else:
-        _keep_unfinished_run(Path(args.out), since, read)
+        _keep_unfinished_run(Path(args.out), since, present, read)
     return status
 
 

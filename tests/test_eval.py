@@ -715,12 +715,20 @@ def test_an_interrupted_run_leaves_nothing_the_next_run_keeps(clips, tmp_path, m
     assert main(["eval", str(root), "--detectors", "asnn", "--out", str(out), "--no-plots"]) == 0
     assert not (out / "results" / "lgmd1").exists()  # the interrupted run's other detector
     assert list(json.loads((out / "results.json").read_text())["detectors"]) == ["asnn"]
-    # a run that stops before it touches the folder (a label error) leaves it as it was
-    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    # a run that stops before it touches the folder (a label error) leaves it as it was, also
+    # where the user had removed some of the listed files before it (it took that for the
+    # run's doing, and removed the reports: a review)
     bad = tmp_path / "bad-labels.json"
     bad.write_text("[{}]")
-    assert main(["eval", str(root), "--labels", str(bad), "--out", str(out), "--no-plots"]) == 2
-    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+    for removed in (None, "results/asnn/bar.jsonl"):
+        if removed:
+            (out / removed).unlink()
+        before = sorted(p.relative_to(out) for p in out.rglob("*"))
+        manifest = (out / ".asnn-eval-files").read_text()
+        assert main(["eval", str(root), "--labels", str(bad), "--out", str(out),
+                     "--no-plots"]) == 2
+        assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+        assert (out / ".asnn-eval-files").read_text() == manifest
 
 
 def test_an_out_folder_keeps_what_eval_did_not_write_and_what_was_edited(tmp_path):
