@@ -105,10 +105,10 @@ def run(args: argparse.Namespace) -> int:
         todo += unscored(entries[-1], frames)
         todo.append(f"{video.name}: {label_problem(entries[-1])}")
         if video.suffix.lower() in RAW_STREAM_SUFFIXES:
-            todo.append(f"{video.name}: a raw stream states no frame rate (OpenCV reads it at "
-                        f"{fps:g} fps): write the camera's in its fps, and know that asnn eval "
-                        "steps the model at OpenCV's (put the stream in a container that states "
-                        "its rate for both to agree)")
+            todo.append(f"{video.name}: a raw stream states no frame rate: OpenCV reads it, "
+                        f"and asnn eval steps the model, at {fps:g} fps; where the camera ran "
+                        "at another, put the stream in a container that states it (ffmpeg -r "
+                        f"RATE -i {video.name} -c copy {video.stem}.mkv) and label that instead")
     if added:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)  # as asnn scene --labels makes it

@@ -236,8 +236,10 @@ def test_label_and_eval_take_a_raw_camera_stream_and_say_it_states_no_rate(tmp_p
     assert main(["label", str(tmp_path)]) == 1
     out = capsys.readouterr().out
     assert "1 entry added (cam.mjpeg)" in out
-    assert re.search(r"cam\.mjpeg: a raw stream states no frame rate \(OpenCV reads it at "
-                     r"[\d.]+ fps\): write the camera's in its fps", out)
+    assert re.search(r"cam\.mjpeg: a raw stream states no frame rate: OpenCV reads it, and "
+                     r"asnn eval steps the model, at [\d.]+ fps; where the camera ran at another, "
+                     r"put the stream in a container that states it \(ffmpeg -r RATE -i "
+                     r"cam\.mjpeg -c copy cam\.mkv\)", out)
     entries = json.loads((tmp_path / "labels.json").read_text())
     assert entries[1]["file"] == "cam.mjpeg" and entries[1]["frames"] == 12
     (tmp_path / "solo").mkdir()  # one entry, ready: "1 entry", not "1 entries"
