@@ -766,12 +766,6 @@ class WorkerCore:
                     "duplicates": s.duplicates, "warmup": s.warmup,
                     "invalid": dict(s.invalid), "resets": dict(s.resets)}
 
-    def _untimed_locked(self, state: _Robot) -> bool:
-        """Whether the ASNN model times a robot's frames at its nominal period, their stamps
-        being no frame period it believes (a camera slower than a frame a second, a clock in
-        other units): its ``fps`` is then None, and it is no less in trouble than a slow one."""
-        return self.model == "asnn" and state.untimed_frames >= PERIOD_FRAMES
-
     def status(self) -> dict:
         """What the status queryable answers (docs/operations.md): identity, limits, counters
         and the robots tracked, with their pending work."""
@@ -784,7 +778,9 @@ class WorkerCore:
                           "candidate": not s.proven, "contested": s.contested(now),
                           "intrusions": s.intrusions, "frames": s.arrived,
                           "bytes": s.arrived_bytes, "warm": self._warm_locked(s),
-                          "fps": s.fps, "untimed": self._untimed_locked(s)}
+                          # its stamps no frame period (a camera under 1 fps, a clock in
+                          # other units): fps None, and no less in trouble than a slow one
+                          "fps": s.fps, "untimed": s.untimed_frames >= PERIOD_FRAMES}
                       for r, s in sorted(self._robots.items())}
             backlog = sum((s.pending is not None) + s.busy for s in self._robots.values())
             refused = {r: {"reason": e["reason"], "detail": e["detail"], "count": e["count"],
