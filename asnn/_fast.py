@@ -767,7 +767,8 @@ def block_means(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     adds a block's pixels row after row, four at a time, ``sum += ((a + b) + c) + d`` from 0
     (the last ``k * k % 4`` one by one), in the image's precision, and multiplies the sum by
     ``1.f / (k * k)``, a float32: so do :func:`_block_means_of_five` and
-    :func:`_block_means_of_eight` (``tests/test_equivalence.py`` checks them against ``cv2.resize``).
+    :func:`_block_means_of_eight` (``tests/test_equivalence.py`` checks them against
+    ``cv2.resize``).
     """
     h, w = image.shape
     k = w // size[0]

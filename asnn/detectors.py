@@ -59,6 +59,9 @@ def make_detector(model: str = "asnn",
     if model == "asnn":
         from .model import ASNN
 
+        if not (preset_name is None or isinstance(preset_name, (str, ASNNParams))):
+            raise TypeError(f"asnn takes a preset's name or ASNNParams, not "
+                            f"{type(preset_name).__name__}")
         params = (preset_name if isinstance(preset_name, ASNNParams)
                   else preset(preset_name or "default"))
         return ASNN(params, **options)
@@ -73,7 +76,7 @@ def make_detector(model: str = "asnn",
         elif isinstance(preset_name, str):
             preset(preset_name)  # ignored, but a misspelt name is still an error
         elif preset_name is not None and not isinstance(preset_name, ASNNParams):
-            raise TypeError(f"{model} takes a {params_class.__name__} (or params=...), not a "
+            raise TypeError(f"{model} takes {params_class.__name__} (or params=...), not "
                             f"{type(preset_name).__name__}")
 
         asnn_only = sorted(set(options) & {"record_maps", "record_tracks", "optimised",

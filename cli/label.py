@@ -41,9 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     # the evaluation's labels and the decoders (OpenCV): when it runs, not with the parser
     from asnn.evaluation.labels import (RAW_STREAM_SUFFIXES, VIDEO_SUFFIXES, center_outside,
-                                        check_labels, clip_hint, label_problem, mismatches,
-                                        read_entries, unlabelled, unlabelled_videos,
-                                        write_entries)
+                                        check_labels, clip_hint, label_problem, meant_clip,
+                                        mismatches, read_entries, same_name, unlabelled,
+                                        unlabelled_videos, write_entries)
     from asnn.evaluation.scoring import unscored
     from asnn.io.sources import SourceError
 
@@ -71,6 +71,10 @@ def run(args: argparse.Namespace) -> int:
         if not clip.is_file():
             todo.append(f"{entry['file']}: no such clip in {folder}"
                         + clip_hint(entry["file"], new_names))
+            meant = meant_clip(entry["file"], new_names)
+            if meant is not None and same_name(meant, clip.name):
+                # the entry's own clip, its name composed otherwise: not a second entry
+                new_names.remove(meant)
         elif clip.suffix.lower() in VIDEO_SUFFIXES:
             try:
                 frames, fps, (height, width) = _decode(clip, todo)

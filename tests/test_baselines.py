@@ -88,8 +88,12 @@ def test_factory_builds_the_baselines():
     # trial): they are its parameters; another model's are refused
     assert make_detector("lgmd1", LGMD1Params(w_i=0.6)).params.w_i == 0.6
     assert make_detector("lgmd2", LGMD2Params(t_ffi=0.2)).params.t_ffi == 0.2
-    with pytest.raises(TypeError, match="lgmd2 takes a LGMD2Params"):
+    with pytest.raises(TypeError, match="lgmd2 takes LGMD2Params .or params=...., not "
+                       "LGMD1Params"):
         make_detector("lgmd2", LGMD1Params())
+    with pytest.raises(TypeError, match="asnn takes a preset's name or ASNNParams, not "
+                       "LGMD1Params"):  # it read "unknown preset LGMD1Params(n_p=0, ...)"
+        make_detector("asnn", LGMD1Params())
     with pytest.raises(ValueError, match="given twice"):
         make_detector("lgmd1", LGMD1Params(), params=LGMD1Params())
     with pytest.raises(ValueError, match=r"in Python: make_detector\('lgmd1', FIELD=VALUE\)"):

@@ -269,8 +269,25 @@ def test_a_missing_clip_s_name_composed_otherwise_is_named_so():
 
     on_disk = unicodedata.normalize("NFC", "trottoir vide é.mp4")
     hint = clip_hint(unicodedata.normalize("NFD", on_disk), [on_disk, "other.mp4"])
-    assert "the same name with its accents composed otherwise, Unicode NFC" in hint
+    assert hint == (" (the folder has 'trottoir vide \\xe9.mp4', the same name with its "
+                    "accents composed otherwise, Unicode NFC: write it as the file's name is)")
     assert clip_hint("loon.mp4", ["loom.mp4"]) == " (did you mean loom.mp4?)"
+
+
+def test_label_adds_no_second_entry_for_a_clip_named_in_another_unicode_form(tmp_path,
+                                                                              capsys):
+    """The entry's own clip, named in NFD: asnn label added the file on disk as a blank second
+    entry beside the hint to rename the first (two entries for one video: a review)."""
+    import unicodedata
+
+    loom = make_scene("looming", size=(64, 48), frames=12, start=2, stop=10)
+    name = unicodedata.normalize("NFC", "café.avi")
+    write_video(loom.frames, tmp_path / name, loom.fps)
+    entry = {**loom.label(unicodedata.normalize("NFD", name)), "frames": 12}
+    (tmp_path / "labels.json").write_text(json.dumps([entry]))
+    assert main(["label", str(tmp_path)]) == 1
+    assert "Unicode NFC: write it as the file's name is" in capsys.readouterr().out
+    assert json.loads((tmp_path / "labels.json").read_text()) == [entry]
 
 
 def test_label_refuses_what_it_cannot_use(tmp_path, capsys):

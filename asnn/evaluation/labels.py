@@ -42,9 +42,10 @@ VIDEO_SUFFIXES = tuple(sorted((".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", 
                                ".mpeg", ".mpg", ".mts", ".mxf", ".ogv", ".ts", ".vob", ".webm",
                                ".wmv", ".y4m", *RAW_STREAM_SUFFIXES)))
 
-__all__ = ["RAW_STREAM_SUFFIXES", "VIDEO_SUFFIXES", "ClipLabel", "center_outside", "check_labels", "clip_hint",
-           "label_problem", "load_labels", "mismatches", "read_entries", "result_name",
-           "unlabelled", "unlabelled_videos", "write_entries"]
+__all__ = ["RAW_STREAM_SUFFIXES", "VIDEO_SUFFIXES", "ClipLabel", "center_outside",
+           "check_labels", "clip_hint", "label_problem", "load_labels", "meant_clip",
+           "mismatches", "read_entries", "result_name", "same_name", "unlabelled",
+           "unlabelled_videos", "write_entries"]
 
 
 class ClipLabel(BaseModel):
@@ -226,16 +227,34 @@ def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
 
 def clip_hint(file: str, candidates: Sequence[str]) -> str:
     """For a label whose clip is missing: `` (did you mean NAME?)`` naming the one of
-    ``candidates`` (videos no label names) its ``file`` is most likely a typo of, or ''."""
+    ``candidates`` (videos no label names) its ``file`` is most likely meant for
+    (:func:`meant_clip`), or ''."""
+    meant = meant_clip(file, candidates)
+    if meant is None:
+        return ""
+    if meant != Path(file).name and same_name(meant, Path(file).name):
+        form = "NFC" if unicodedata.is_normalized("NFC", meant) else "NFD"
+        # ascii(): the two names print alike, but for their escapes
+        return (f" (the folder has {ascii(meant)}, the same name with its accents composed "
+                f"otherwise, Unicode {form}: write it as the file's name is)")
+    return f" (did you mean {meant}?)"
+
+
+def meant_clip(file: str, candidates: Sequence[str]) -> str | None:
+    """The one of ``candidates`` a label's missing ``file`` is most likely meant for: the same
+    name composed otherwise in Unicode (macOS writes NFD), or its closest spelling; None."""
     name = Path(file).name
-    for candidate in candidates:  # the same characters composed otherwise (macOS writes NFD)
-        if candidate != name and (unicodedata.normalize("NFC", candidate)
-                                  == unicodedata.normalize("NFC", name)):
-            form = "NFC" if unicodedata.is_normalized("NFC", candidate) else "NFD"
-            return (f" (the folder has {candidate!r}, the same name with its accents composed "
-                    f"otherwise, Unicode {form}: write it as the file's name is)")
+    for candidate in candidates:
+        if same_name(candidate, name):
+            return candidate
     near = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.75)
-    return f" (did you mean {near[0]}?)" if near else ""
+    return near[0] if near else None
+
+
+def same_name(a: str, b: str) -> bool:
+    """Whether two file names are the same characters, however composed in Unicode (an accent
+    on its letter, NFC, or after it, NFD)."""
+    return unicodedata.normalize("NFC", a) == unicodedata.normalize("NFC", b)
 
 
 def load_labels(path: str | Path) -> list[dict]:
