@@ -544,3 +544,43 @@ def test_every_parameter_the_straightforward_step_reads_the_optimised_one_reads_
     assert not missing, (f"ASNN._respond reads {sorted(missing)}, which the optimised form "
                          "(asnn/_fast.py, set up in ASNN.__init__) never reads: the default "
                          "would ignore them (CONTRIBUTING.md, 'A change to the default preset')")
+
+
+def test_block_means_of_other_shapes_and_types_are_opencvs_too():
+    # the kernels take a whole factor of 5 or 8 both ways only: a frame whose width shrinks by
+    # 5 but whose height does not (243 rows to 48), or a uint8 image (whose sums the kernels'
+    # image-typed totals would overflow), is OpenCV's area average as it was
+    rng = np.random.default_rng(7)
+    for dtype in (np.float32, np.float64):
+        for h, w, size in ((243, 320, (64, 48)), (240, 323, (64, 48)), (250, 320, (40, 30))):
+            image = rng.random((h, w)).astype(dtype)
+            want = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+            assert _fast.block_means(image, size).tobytes() == want.tobytes(), (h, w, size)
+    for k in (5, 8):
+        image = rng.integers(0, 256, (6 * k, 8 * k), dtype=np.uint8)
+        want = cv2.resize(image, (8, 6), interpolation=cv2.INTER_AREA)
+        got = _fast.block_means(image, (8, 6))
+        assert got.dtype == np.uint8 and np.array_equal(got, want), k
+
+
+def test_objects_motion_from_the_summed_vectors_is_that_of_the_vectors():
+    # the optimised model gives the objects its MotionVectors, whose sums() the regions read
+    # instead of summing the vectors: the same directions and energies, x to x and y to y
+    from asnn.targets import extract_objects
+
+    mask = np.zeros((40, 50), bool)
+    mask[5:15, 5:20] = True
+    mask[22:36, 25:45] = True
+    g = np.ones(mask.shape, np.float32)
+    v = np.full(mask.shape, 2.0, np.float32)
+    r = np.zeros((4, *mask.shape), np.float32)
+    for angle, rows in ((math.pi / 3, slice(0, 18)), (-3 * math.pi / 4, slice(18, 40))):
+        r[0, rows], r[2, rows] = math.cos(angle), math.sin(angle)
+    vectors = _fast.MotionVectors(r, v)
+    summed = extract_objects(mask, g, vectors, 30, False)
+    plain = extract_objects(mask, g, lambda rows, cols: vectors(rows, cols), 30, False)
+    assert len(summed) == 2
+    assert np.allclose(summed.direction, [math.pi / 3, -3 * math.pi / 4])
+    assert np.allclose(summed.energy, 2.0)
+    assert summed.direction.tobytes() == plain.direction.tobytes()
+    assert summed.energy.tobytes() == plain.energy.tobytes()
