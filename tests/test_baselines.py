@@ -199,3 +199,15 @@ def test_the_parameters_docstring_describes_every_field(params):
     for name, info in params.model_fields.items():  # help() shows them
         assert f"    {name} : " in params.__doc__
         assert info.description.split(";")[0][:40] in params.__doc__
+
+
+def test_factory_ignores_an_asnn_preset_for_the_baselines_and_hints_each_by_name():
+    # an evaluation builds every detector with the same preset, as a name or as ASNNParams:
+    # the baselines ignore both (make_detector's docstring); the slash hint names the model
+    from asnn.params import preset
+
+    for model, params_class in (("lgmd1", LGMD1Params), ("lgmd2", LGMD2Params)):
+        assert make_detector(model, preset("robust")).params == params_class()
+        assert make_detector(model, "robust").params == params_class()
+        with pytest.raises(ValueError, match=rf"in Python: make_detector\('{model}', FIELD="):
+            make_detector(model, f"{model}/dt=0.1")
