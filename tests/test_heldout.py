@@ -324,6 +324,10 @@ def test_the_report_names_each_folds_thresholds(traced, tmp_path, monkeypatch):
     assert [c["chosen"]["approach_frames"] for c in results["held_out"]["clips"]] == [
         2 if name == "drive-day-cut-in-dark" else 4 for name in CASES]
     assert "the thresholds by their `ASNNParams` names" in report
+    # the preset's row, in the report as in the printed lines: its thresholds are in-sample on
+    # the real clips that chose them only (on a user's own clips it read 'in-sample')
+    assert "held out on others" in heldout.PRESET_ROW
+    assert f"| {heldout.PRESET_ROW} | " in report
     # the lines the command prints: the same figures, the thresholds named
     lines = heldout.summary_lines(results)
     ins, held = results["in_sample"]["summary"], results["held_out"]["summary"]
