@@ -596,3 +596,27 @@ def test_a_bags_camera_written_into_the_file_is_named_as_with_its_topic():
             for bag in ("a", "b")]
     assert [result_name(label) for label in both] == ["a.front_image", "b.front_image"]
     assert len(check_labels(both)) == 2
+
+
+def test_every_video_kind_named_is_one_to_label_whatever_its_suffix_s_case(tmp_path, capsys):
+    """The kinds added for a user trial (.y4m, .mxf, .vob and the raw streams): each is found
+    by asnn label and eval, in either case, and a raw stream is named as one in any case."""
+    import cv2
+
+    from asnn.evaluation.labels import RAW_STREAM_SUFFIXES, VIDEO_SUFFIXES, unlabelled_videos
+
+    assert set(RAW_STREAM_SUFFIXES) <= set(VIDEO_SUFFIXES)
+    names = [f"clip{k}{suffix.upper() if k % 2 else suffix}" for k, suffix in enumerate(
+        (".y4m", ".mxf", ".vob", *RAW_STREAM_SUFFIXES))]
+    for name in names:
+        (tmp_path / name).write_bytes(b"")
+    (tmp_path / "notes.txt").write_bytes(b"")
+    assert unlabelled_videos(tmp_path, []) == sorted(names)
+    # an upper-case raw stream (a camera's CAM.MJPG) is told to state its rate too
+    folder = tmp_path / "camera"
+    folder.mkdir()
+    loom = make_scene("looming", size=(64, 48), frames=6, start=1, stop=5)
+    (folder / "CAM.MJPG").write_bytes(b"".join(
+        cv2.imencode(".jpg", frame)[1].tobytes() for frame in loom.frames))
+    assert main(["label", str(folder)]) == 1
+    assert "CAM.MJPG: a raw stream states no frame rate" in capsys.readouterr().out
