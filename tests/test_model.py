@@ -107,6 +107,20 @@ def test_a_frame_without_a_time_in_a_timed_stream_comes_a_frame_period_after_the
     assert list(untimed.periods) == pytest.approx([untimed.params.dt] * 4)
 
 
+def test_untimed_frames_in_a_row_in_a_timed_stream_each_come_a_frame_period_later():
+    """Two or three frames in a row without a time (a camera's stamps dropped for a moment):
+    each comes a frame period after the one before, not all at the same time (a gap of 0, a
+    stall, and the next timed frame's gap believed as three periods' worth)."""
+    frames = make_scene("looming", size=(64, 64), frames=40).frames
+    model = ASNN("default")
+    for k, f in enumerate(frames[:20]):
+        model.step(f, k / 30.0)
+    for f in frames[20:23]:
+        model.step(f)
+    model.step(frames[23], 23 / 30.0)
+    assert list(model.periods)[-4:] == pytest.approx([1 / 30.0] * 4)
+
+
 @pytest.mark.parametrize("frame, message", [
     ([[1, 2], [3, 4]], "numpy array"),
     (np.zeros((64, 64, 4), np.uint8), "gray"),
