@@ -160,3 +160,38 @@ def test_compile_kernels_loads_the_rig_kernels_before_a_stream_needs_them():
         model.step(frame)
     assert model.approach.rig.mask is not None
     assert [set(k.signatures) for k in kernels] == before
+
+
+def test_compile_kernels_loads_the_area_averages_and_summed_motion_a_stream_needs():
+    """The whole-factor area averages (the repeat test's blocks, the surface watch's and the
+    scene fit's grids of a 320-pixel-wide frame), a rig's mask shrunk to that grid and the
+    objects' summed motion vectors: loaded by compile_kernels, not compiled at a stream's
+    first object (a library user's first frames waited for numba)."""
+    import subprocess
+    import sys
+
+    names = ("_fast._block_means_of_five", "_fast._block_means_of_eight",
+             "_fast._summed_motion_vectors", "approach.looming._over_a_quarter")
+    loaded = subprocess.run(
+        [sys.executable, "-c", "from asnn.warmup import compile_kernels; compile_kernels(); "
+         "import asnn._fast, asnn.approach.looming; "
+         f"print(*(len(eval('asnn.' + n).signatures) for n in {names!r}))"],
+        capture_output=True, text=True, check=True)
+    assert all(int(n) >= 1 for n in loaded.stdout.split()), loaded.stdout
+    # and a 320 x 240 stream, a disk looming over a hood, needs no other form of them
+    from asnn import _fast
+    from asnn.approach import looming
+    from asnn.model import ASNN
+    from asnn.stimuli import make_scene
+    from asnn.warmup import compile_kernels
+
+    compile_kernels()
+    kernels = (_fast._block_means_of_five, _fast._block_means_of_eight,
+               _fast._summed_motion_vectors, looming._over_a_quarter)
+    before = [set(k.signatures) for k in kernels]
+    model = ASNN("default")
+    for k, frame in enumerate(make_scene("looming", size=(320, 240), frames=30).frames):
+        frame = frame.copy()
+        frame[200:] = 230  # the hood
+        model.step(frame, k / 20.0)
+    assert [set(k.signatures) for k in kernels] == before
