@@ -1015,3 +1015,23 @@ def test_a_frame_refused_as_it_is_processed_while_the_next_one_arrives_leaves_no
     assert stats["intrusions"] == 0 and stats["resets"] == {}
     robot = core.status()["robots"]["r1"]
     assert not robot["contested"] and robot["intrusions"] == 0
+
+
+def test_a_robot_is_listed_untimed_from_the_frame_its_stamps_are_logged_and_not_before(
+        caplog, looming):
+    """asnn status's ``untimed`` turns on with the log line and the rate it withdraws (at
+    PERIOD_FRAMES untimed gaps in a row), and its list is absent while no robot is in it."""
+    from asnn.params import PERIOD_FRAMES
+    from cli.net import format_status
+
+    core = WorkerCore("asnn")
+    with caplog.at_level(logging.WARNING, logger="asnn.worker"):
+        for seq in range(PERIOD_FRAMES + 2):
+            feed(core, "r1", looming.frames[seq], seq, stamp=seq * 2.0)  # under 1 fps
+            status = core.status()
+            logged = any("stamps are" in r.getMessage() for r in caplog.records)
+            untimed = status["robots"]["r1"]["untimed"]
+            assert untimed == logged == (seq >= PERIOD_FRAMES), seq
+            assert ("untimed" in format_status(status)) == untimed, seq
+            if untimed:
+                assert status["robots"]["r1"]["fps"] is None
