@@ -765,6 +765,60 @@ def test_an_out_folder_keeps_what_eval_did_not_write_and_what_was_edited(tmp_pat
     assert labels.exists()
 
 
+def test_an_unfinished_run_removes_only_the_previous_run_s_unedited_reports(tmp_path):
+    """What an interrupted run does to the folder (cli.evaluate._keep_unfinished_run): the
+    previous run's reports go; its results, a report the user edited since and the labels the
+    run read in place stay, listed beside what the run wrote, for the next run to replace."""
+    import os
+    import time
+
+    from cli.evaluate import MANIFEST, _keep_unfinished_run, _present, _replace_previous_run
+
+    out = tmp_path / "out"
+    for name in ("results/asnn/a.jsonl", "results/lgmd1/b.jsonl", "report.md", "results.json",
+                 "labels.json", "ttc.md"):
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        (out / name).write_text("[]")
+    _replace_previous_run(out, since=0.0)  # the previous run, which wrote them all
+    edited = out / "ttc.md"
+    stat = edited.stat()
+    os.utime(edited, ns=(stat.st_atime_ns, stat.st_mtime_ns + 10**9))  # the user edits it
+    present = _present(out)  # as the run starts
+    later = time.time() + 5
+    rewritten = out / "results" / "asnn" / "a.jsonl"  # the unfinished run's one result
+    rewritten.write_text("{}")
+    os.utime(rewritten, (later + 1, later + 1))
+    _keep_unfinished_run(out, later, present, read=out / "labels.json")
+    assert not (out / "report.md").exists() and not (out / "results.json").exists()
+    kept = ("results/asnn/a.jsonl", "results/lgmd1/b.jsonl", "labels.json", "ttc.md")
+    assert all((out / name).is_file() for name in kept)
+    listed = dict(line.split("\t")[::-1] for line in (out / MANIFEST).read_text().splitlines())
+    assert sorted(listed) == sorted(kept)
+    assert int(listed["results/asnn/a.jsonl"]) == rewritten.stat().st_mtime_ns
+
+
+def test_a_run_that_fails_after_writing_results_is_an_unfinished_one(clips, tmp_path,
+                                                                     monkeypatch):
+    """A run that stops on an error it reports (exit status 2: a disk full as the report is
+    written) leaves the folder as an interrupted one does: the earlier report removed, the
+    results it wrote listed."""
+    from asnn.evaluation import clips as clip_eval
+
+    root, _ = clips
+    out = tmp_path / "out"
+    assert main(["eval", str(root), "--detectors", "asnn", "--out", str(out), "--no-plots"]) == 0
+
+    def disk_full(scores):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(clip_eval, "paired_comparisons", disk_full)
+    assert main(["eval", str(root), "--detectors", "asnn,lgmd1", "--out", str(out),
+                 "--no-plots"]) == 2
+    assert not (out / "report.md").exists() and not (out / "results.json").exists()
+    listed = [line.split("\t")[1] for line in (out / ".asnn-eval-files").read_text().splitlines()]
+    assert "results/lgmd1/loom.jsonl" in listed
+
+
 def test_the_maps_figure_draws_motion_where_it_points_on_the_image():
     """phi is in image coordinates (y down): a rim moving down the image is drawn pointing down
     the screen, one moving right pointing right."""
