@@ -261,6 +261,18 @@ def test_the_scene_fit_takes_the_surface_watch_s_averages():
         frames[0], frames[1], box)
 
 
+def test_the_scene_fit_reads_an_average_given_for_its_frame_at_its_own_size_only():
+    # averaged pairs are (frame, its area average): one of another size (a watch on another
+    # grid) is not the fit's 64 x 48 grid, and is not read in its place
+    tex = texture((240, 320), blur=4.0)
+    before, after = tex, warp(tex, 1.02)
+    box = [(140, 100, 180, 140)]
+    other = tuple((frame, cv2.resize(frame, (32, 24), interpolation=cv2.INTER_AREA))
+                  for frame in (before, after))
+    assert scene_expansion(before, after, box, averaged=other) == scene_expansion(
+        before, after, box)
+
+
 def test_a_mask_shrunk_by_whole_factors_is_opencvs_area_average_over_a_quarter():
     # counted in a kernel where the frame shrinks by a whole factor, by OpenCV elsewhere (a
     # view, a fractional factor): the same pixels either way
