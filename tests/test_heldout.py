@@ -308,7 +308,7 @@ def test_the_report_names_each_folds_thresholds(traced, tmp_path, monkeypatch):
     report = heldout.held_out_report(results, tmp_path).read_text()
     names = list(heldout.GATE_GRID)
     assert results["grid"] == {n: list(v) for n, v in heldout.GATE_GRID.items()}
-    assert "| clip left out | in-sample | held out | " + " | ".join(names) + " |" in report
+    assert "| clip left out | preset | held out | " + " | ".join(names) + " |" in report
     rows = [[c.strip() for c in line.strip("|").split("|")] for line in report.splitlines()
             if line.startswith("| ") and line.count("|") == len(names) + 4]
     fold_rows = rows[2:]  # after the header and its rule: one row per fold, in the clips' order

@@ -337,10 +337,11 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
         row(PRESET_ROW, ins["summary"]),
         row("held out (leave one clip out)", held["summary"]),
         "",
-        "Per fold: the clip left out, its outcome with the preset's thresholds (in-sample) and "
-        "with those chosen on the other clips (held out), and the thresholds chosen without it.",
+        "Per fold: the clip left out, its outcome with the preset's thresholds (in-sample on "
+        "the real clips that chose them, held out on others) and with those chosen on the other "
+        "clips (held out), and the thresholds chosen without it.",
         "",
-        "| clip left out | in-sample | held out | " + " | ".join(results["grid"]) + " |",
+        "| clip left out | preset | held out | " + " | ".join(results["grid"]) + " |",
         "| --- | --- | --- | " + " | ".join("---" for _ in results["grid"]) + " |",
     ]
     for a, b in zip(ins["clips"], held["clips"]):
