@@ -178,9 +178,8 @@ def format_status(status: dict) -> str:
     worker follow ``frames in`` (those of the discovery scan in brackets); robots whose frames
     are detected at fewer than ``SLOW_FPS`` a second are listed under ``slow`` (and those whose
     stamps tell the model no rate, a camera slower than a frame a second among them, under
-    ``untimed``), and those with
-    a frame refused in the last minute under ``refused lately``, with the latest reason; fields
-    an older worker does not report are left out.
+    ``untimed``), and those with a frame refused in the last minute under ``refused lately``,
+    with the latest reason; fields an older worker does not report are left out.
     """
     from asnn.params import SLOW_FPS
 
