@@ -191,6 +191,22 @@ def test_missing_or_undecodable_file_exits_2_with_one_line(tmp_path, content):
     assert len(proc.stderr.strip().splitlines()) == 1 and str(path) in proc.stderr
 
 
+def test_a_video_with_no_frame_is_told_from_a_file_that_is_not_one(tmp_path):
+    """A container OpenCV opens that holds no frame (an empty AVI) was "not a video OpenCV can
+    decode", as a file of junk is (an own-data user trial)."""
+    import cv2
+
+    from asnn.io.video import VideoClip, VideoError
+
+    empty, junk = tmp_path / "empty.avi", tmp_path / "junk.avi"
+    cv2.VideoWriter(str(empty), cv2.VideoWriter_fourcc(*"MJPG"), 20, (64, 48)).release()
+    junk.write_bytes(b"not a video at all\n" * 20)
+    with pytest.raises(VideoError, match="a video without a frame OpenCV can decode"):
+        VideoClip(empty)
+    with pytest.raises(VideoError, match="not a video OpenCV can decode"):
+        VideoClip(junk)
+
+
 @pytest.mark.parametrize("what", ["--jsonl", "--tracks"])
 def test_a_reader_that_stops_early_ends_detect_quietly(tmp_path, what):
     """``asnn detect VIDEO --jsonl - | head -1``: no traceback, the status of SIGPIPE."""

@@ -250,6 +250,16 @@ def test_label_and_eval_take_a_raw_camera_stream_and_say_it_states_no_rate(tmp_p
     assert "labels.json: 1 entry, every one ready for asnn eval" in capsys.readouterr().out
 
 
+def test_a_link_to_a_clip_that_is_gone_is_named_not_skipped(tmp_path, capsys):
+    """A symbolic link whose clip was moved: asnn label skipped it without a word (an own-data
+    user trial); it is named, with what its decoding says."""
+    (tmp_path / "moved.mp4").symlink_to(tmp_path / "nowhere" / "moved.mp4")
+    assert main(["label", str(tmp_path)]) == 1
+    assert (f"{tmp_path / 'moved.mp4'}: a link to {tmp_path / 'nowhere' / 'moved.mp4'}, which "
+            "is not there") in capsys.readouterr().out
+    assert not (tmp_path / "labels.json").exists()
+
+
 def test_labels_saved_with_a_byte_order_mark_are_read(tmp_path):
     """Windows Notepad saves UTF-8 with a byte-order mark: the labels were refused as not
     JSON (a user trial)."""

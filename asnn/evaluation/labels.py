@@ -218,8 +218,9 @@ def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
     labelled = {(folder / e["file"]).resolve() for e in labels
                 if isinstance(e, Mapping) and isinstance(e.get("file"), str)}
     try:
-        found = sorted(p for p in folder.iterdir()
-                       if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES)
+        # a link to a clip that is gone too: named (its decoding then says so), not skipped
+        found = sorted(p for p in folder.iterdir() if (p.is_file() or p.is_symlink())
+                       and p.suffix.lower() in VIDEO_SUFFIXES)
     except OSError:
         return []
     return [p.name for p in found if p.resolve() not in labelled]

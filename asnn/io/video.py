@@ -65,13 +65,18 @@ class VideoClip:
         if self.path.is_dir():
             raise VideoError(f"{self.path}: is a folder, not a video file")
         if not self.path.is_file():
-            raise VideoError(f"{self.path}: not a regular file (a pipe or a device)"
-                             if self.path.exists() else f"{self.path}: no such file")
+            raise VideoError(
+                f"{self.path}: not a regular file (a pipe or a device)" if self.path.exists()
+                else f"{self.path}: a link to {self.path.readlink()}, which is not there"
+                if self.path.is_symlink() else f"{self.path}: no such file")
         cap = self._capture()
-        ok, first = cap.read() if cap.isOpened() else (False, None)
+        opened = cap.isOpened()
+        ok, first = cap.read() if opened else (False, None)
         if not ok or first is None:
             cap.release()
-            raise VideoError(f"{self.path}: not a video OpenCV can decode")
+            raise VideoError(f"{self.path}: " + (
+                "a video without a frame OpenCV can decode (an empty one, or frames in a "
+                "codec it lacks)" if opened else "not a video OpenCV can decode"))
         fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
         self.fps_stated = fps is not None
         self.fps = DEFAULT_FPS if fps is None else fps
