@@ -237,8 +237,11 @@ class ASNN:
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
         p = self.params
         width = frame.shape[1] if isinstance(frame, np.ndarray) and frame.ndim >= 2 else None
-        shrink = width is not None and p.max_width is not None and width > p.max_width
-        resize = shrink or (width is not None and p.min_width is not None and width < p.min_width)
+        size = self._retina_size(*frame.shape[:2]) if width is not None else None
+        # shrunk: narrower and not taller (a frame wider than max_width, or one whose working
+        # area the cap below bounds)
+        shrink = size is not None and size[0] < width and size[1] <= frame.shape[0]
+        resize = size is not None and size != (width, frame.shape[0])
         if shrink and self.optimised and frame.dtype == np.uint8:
             # the same luminance as below, bit for bit, without the float64 frame
             frame = check_frame(frame, self.min_side, self.shape)
@@ -266,15 +269,26 @@ class ASNN:
         """(W, H) of an (H, W) frame on the retina. The retina's kernels and the added stages
         count in pixels, so a frame wider than ``max_width`` or narrower than ``min_width`` is
         seen at the scale they were made for (targets are reported in the frame's own pixels).
-        An enlarged frame is at most ``4 * min_width`` high (or its own height): a tall, narrow
-        frame does not make the model's state grow past what a large frame's does."""
+        An enlarged frame is at most ``4 * min_width`` high (or its own height), and no frame is
+        worked on at more than ``max_width x 4 min_width`` pixels (480 x 640 for the default;
+        a taller one is shrunk both ways): a tall, narrow frame does not make the model's state
+        grow past what a large frame's does (480 x 4096 held 8.5 times 4096 x 4096's)."""
         p = self.params
         if p.max_width is not None and w > p.max_width:
-            return p.max_width, max(round(h * p.max_width / w), self.min_side)
-        if p.min_width is not None and w < p.min_width:
+            size = p.max_width, max(round(h * p.max_width / w), self.min_side)
+        elif p.min_width is not None and w < p.min_width:
             factor = max(1.0, min(p.min_width / w, 4 * p.min_width / h))
-            return round(w * factor), round(h * factor)
-        return w, h
+            size = round(w * factor), round(h * factor)
+        else:
+            size = w, h
+        # a tall frame is worked on at most at a max_width x 4 min_width portrait's area (480 x
+        # 640 for the default): the state of a 480x4096 frame was 8.5 times a 4096x4096 one's
+        if p.max_width is not None and p.min_width is not None:
+            limit = p.max_width * 4 * p.min_width
+            if size[0] * size[1] > limit:
+                f = (limit / (size[0] * size[1])) ** 0.5
+                size = (max(int(size[0] * f), self.min_side), max(int(size[1] * f), self.min_side))
+        return size
 
     def step(self, frame: np.ndarray, t: float | None = None) -> Response:
         """Process one frame and return the model's response to it.

@@ -685,6 +685,16 @@ def test_small_frames_are_enlarged_to_the_scale_the_added_stages_were_made_for()
     assert model._retina_size(400, 40) == (64, 640)
     assert model._retina_size(4096, 32) == (32, 4096)
     assert model._retina_size(120, 160) == (160, 120)  # from 160 px on, as it is
+    # and no frame is worked on at more than 480 x 640 pixels: a 480 x 4096 frame, at most 480
+    # wide, was worked on whole (8.5 times the state of a 4096 x 4096 one shrunk to 480 x 480:
+    # an audit of the documented memory bound); 480 x 640 and anything landscape as before
+    assert model._retina_size(640, 480) == (480, 640)
+    assert model._retina_size(1080, 1920) == (480, 270)
+    w, h = model._retina_size(4096, 480)
+    assert w * h <= 480 * 640 and abs(h / w - 4096 / 480) < 0.1
+    tall = ASNN()
+    tall.step(np.zeros((4096, 480), np.uint8))
+    assert tall.previous.size <= 480 * 640
     with pytest.raises(ValueError, match="min_width"):
         preset("robust", min_width=600)
 
