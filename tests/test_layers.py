@@ -99,8 +99,8 @@ def test_the_import_reader_resolves_relative_imports():
             "asnn.approach.tracking", "cv2", "numpy"} <= modules
 
 
-# what a process that runs no model may not load: numba and the model (60 MB of a router's 140
-# when the parser imported every command's module), OpenCV, the evaluation's tooling, and
+# what a process that runs no model may not load: numba and the model (a router held 145 MB
+# when the parser imported every command's module, 63 MB without them), OpenCV, the evaluation's tooling, and
 # matplotlib (0.2-0.6 s to import, and a writable cache folder wanted: a worker or camera
 # started under systemd's sandbox, no home, logged its font-cache complaints on every start)
 MODEL_FREE = ("numba", "llvmlite", "cv2", "asnn.model", "asnn.evaluation.runs",
