@@ -72,10 +72,11 @@ def cmd_worker(args: argparse.Namespace) -> int:
     with session, RouterWatch(session, f"worker {core.worker_id}"):
         worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
                         handover_timeout=args.handover_timeout)
-        with exit_on_interrupt():  # a cold compile takes under a minute
-            worker.load_kernels()
-        stop = stop_on_signals()
         try:
+            worker.check_id()  # before the kernels, which a refused worker need not load
+            with exit_on_interrupt():  # a cold compile takes under a minute
+                worker.load_kernels()
+            stop = stop_on_signals()
             worker.start()
         except WorkerIdTaken as exc:
             worker.close()

@@ -357,6 +357,14 @@ class Worker:
         log.info("worker %s: kernels ready in %.1f s", self.core.worker_id,
                  time.monotonic() - started)
 
+    def check_id(self) -> None:
+        """Raise :class:`WorkerIdTaken` if a live worker has this worker's id already: called
+        before :meth:`load_kernels` (a minute of compiling on a fresh install, for a worker
+        that cannot join), and by :meth:`start` again for one that joined meanwhile."""
+        prefix, me = self.core.prefix, self.core.worker_id
+        if self.shared and me in live_workers(self.session, prefix):
+            raise WorkerIdTaken(f"worker id {me!r} is already live under {prefix!r}")
+
     def start(self) -> None:
         """Compile the model's kernels (:meth:`load_kernels`), learn the fleet (live workers, claims, announced
         cameras), join it, subscribe to this worker's robots, then take frames.

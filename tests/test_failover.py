@@ -168,6 +168,9 @@ def test_a_second_worker_with_the_same_id_is_refused_and_status_lists_the_first(
         assert dup.popen.wait(timeout=60) == 2
         dup.stop()
         assert "already live" in "\n".join(dup.err)
+        # before it loads the model's kernels (a minute of compiling on a fresh install: an
+        # audit)
+        assert not any("loading the model's kernels" in line for line in dup.err)
         status = more("status", "--json", *net.common)
         assert status.popen.wait(timeout=60) == 0
         status.stop()
