@@ -12,7 +12,7 @@ from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
 from asnn.detectors import MODELS, available_cores, make_detector, responses
-from asnn.io.files import folder_problem, seekable_target
+from asnn.io.files import folder_problem, resolved, seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
                               split_topic)
@@ -172,7 +172,7 @@ def _output_problem(path: str | None, flag: str) -> str | None:
 def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
     """Why the outputs would overwrite the input or each other, or None: an output that is the
     input file (or lies in the input's bag folder) would be truncated before a frame is read."""
-    source = Path(split_topic(video)[0]).resolve()
+    source = resolved(split_topic(video)[0])  # a loop of links: opening it says so
     seen: dict[object, str] = {}
     try:
         stdout = os.fstat(sys.stdout.fileno())
@@ -182,7 +182,7 @@ def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
     for flag, path in outputs:
         if not path:
             continue
-        target = Path(path).resolve()
+        target = resolved(path)
         if path != "-" and target.exists() and source.exists() and \
                 os.path.samefile(target, source):
             return f"{flag} {path}: is the input {video}"  # by any name or link

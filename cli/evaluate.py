@@ -66,12 +66,18 @@ def _say_unlabelled(clips_dir: str, labels: Path) -> None:
         names = unlabelled_videos(clips_dir, read_entries(labels))
     except (OSError, ValueError):
         return
+    # a link whose clip is gone (or that loops) has nothing asnn label could enter
+    broken = [name for name in names if not (Path(clips_dir) / name).is_file()]
+    names = [name for name in names if name not in broken]
     if names:
         one = len(names) == 1
         print(f"asnn eval: {len(names)} video{'' if one else 's'} in the folder "
               f"{'has' if one else 'have'} no label and {'is' if one else 'are'} not scored "
               f"(asnn label {clips_dir} adds {'its entry' if one else 'their entries'}): "
               + ", ".join(names), file=sys.stderr)
+    if broken:
+        print("asnn eval: links in the folder that lead to no clip (not scored): "
+              + ", ".join(broken), file=sys.stderr)
 
 
 def register(sub: argparse._SubParsersAction) -> None:

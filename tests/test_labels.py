@@ -122,10 +122,14 @@ def test_two_clips_whose_results_would_share_a_file_are_refused():
         with pytest.raises(ValueError, match=r"entry 1 .*overwrite those of entry 0 \(c\.mp4\)"):
             check_labels([COLLISION, {**QUIET, "file": other}])
     # one clip entered twice is told so (it read as two clips' results colliding: a user trial)
-    for same in ("c.mp4", "./c.mp4"):
+    for same in ("c.mp4", "./c.mp4", "sub/../c.mp4"):
         with pytest.raises(ValueError, match=r"entry 1 \(.*c\.mp4\): names the same clip as "
                            "entry 0: one entry a clip"):
             check_labels([COLLISION, {**QUIET, "file": same}])
+    # a bag's camera written both ways is one camera too (a review)
+    with pytest.raises(ValueError, match="names the same clip as entry 0"):
+        check_labels([{**QUIET, "file": "drive.mcap#/front/image_raw"},
+                      {**QUIET, "file": "drive.mcap", "topic": "/front/image_raw"}])
 
 
 @pytest.mark.parametrize("text", ["not json", '{"clips": 3}', '"c.mp4"', '[{"nofile": 1}]'])
@@ -263,6 +267,27 @@ def test_a_link_to_a_clip_that_is_gone_is_named_not_skipped(tmp_path, capsys):
     assert (f"{tmp_path / 'moved.mp4'}: a link to {tmp_path / 'nowhere' / 'moved.mp4'}, which "
             "is not there") in capsys.readouterr().out
     assert not (tmp_path / "labels.json").exists()
+
+
+def test_a_loop_of_links_is_named_not_a_traceback(tmp_path, capsys):
+    """a.mp4 -> b.mp4 -> a.mp4 beside a clip: asnn label and eval ended in a RuntimeError's
+    traceback once links were listed (a review)."""
+    loom = make_scene("looming", size=(64, 48), frames=12, start=2, stop=10)
+    write_video(loom.frames, tmp_path / "c.avi", loom.fps)
+    (tmp_path / "a.mp4").symlink_to(tmp_path / "b.mp4")
+    (tmp_path / "b.mp4").symlink_to(tmp_path / "a.mp4")
+    assert main(["label", str(tmp_path)]) == 1
+    out = capsys.readouterr().out
+    assert "which leads back to itself (a loop of links)" in out
+    assert [e["file"] for e in json.loads((tmp_path / "labels.json").read_text())] == ["c.avi"]
+    assert main(["detect", str(tmp_path / "a.mp4")]) == 2
+    assert "a loop of links" in capsys.readouterr().err
+    (tmp_path / "labels.json").write_text(json.dumps([{**loom.label("c.avi"), "frames": 12}]))
+    assert main(["eval", str(tmp_path), "--detectors", "lgmd1", "--no-plots", "--out",
+                 str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err  # named as links to no clip, not as videos to label
+    assert "links in the folder that lead to no clip (not scored): a.mp4, b.mp4" in err
+    assert "asnn label" not in err
 
 
 def test_labels_saved_with_a_byte_order_mark_are_read(tmp_path):

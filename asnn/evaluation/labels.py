@@ -22,6 +22,7 @@ from __future__ import annotations
 import difflib
 import json
 import math
+import os
 import re
 import unicodedata
 from collections.abc import Mapping, Sequence
@@ -30,7 +31,7 @@ from pathlib import Path
 from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, ValidationError,
                       field_validator, model_validator)
 
-from ..io.files import write_atomically
+from ..io.files import resolved, write_atomically
 from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside, a mistake
 
 # raw streams, which OpenCV decodes but which carry no timing: it reads them at 25 fps
@@ -176,8 +177,10 @@ def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict
 
 
 def _same_clip(a: Mapping, b: Mapping) -> bool:
-    """Whether two entries name one clip: the same file (as written, but for ``./``) and topic."""
-    return (Path(a["file"]) == Path(b["file"]) and a.get("topic") == b.get("topic"))
+    """Whether two entries name one clip: the same file (``./c.mp4`` and ``sub/../c.mp4`` are
+    ``c.mp4``) and the same camera of a bag, however written (:func:`_camera`)."""
+    (file_a, topic_a), (file_b, topic_b) = _camera(a), _camera(b)
+    return os.path.normpath(file_a) == os.path.normpath(file_b) and topic_a == topic_b
 
 
 def result_name(label: Mapping) -> str:
@@ -185,16 +188,23 @@ def result_name(label: Mapping) -> str:
     its topic too (``drive.front_image_raw`` for ``drive.mcap`` and ``/front/image_raw``), so
     that two cameras of one bag are two clips. A ``file`` written as the command line takes a
     bag's camera (``drive.mcap#/front/image_raw``, or a rosbag2 folder's) is named alike."""
-    file, topic = str(label["file"]), label.get("topic")
-    head, sep, suffix = file.rpartition("#")
-    # the topic given twice, as open_source accepts it, is one camera too
-    if sep and suffix.startswith("/") and topic in (None, "", suffix) and (
-            head.lower().endswith(".mcap") or not Path(head).suffix):
-        file, topic = head, suffix
+    file, topic = _camera(label)
     stem = Path(file).stem
     if not topic:
         return stem
     return f"{stem}.{re.sub(r'[^A-Za-z0-9_-]+', '_', str(topic)).strip('_')}"
+
+
+def _camera(label: Mapping) -> tuple[str, str | None]:
+    """An entry's ``(file, topic)``, a bag's camera written as ``drive.mcap#/front/image_raw``
+    split (the topic given twice, as open_source accepts it, is one camera too); no topic:
+    None."""
+    file, topic = str(label["file"]), label.get("topic")
+    head, sep, suffix = file.rpartition("#")
+    if sep and suffix.startswith("/") and topic in (None, "", suffix) and (
+            head.lower().endswith(".mcap") or not Path(head).suffix):
+        file, topic = head, suffix
+    return file, topic or None
 
 
 def label_problem(label: object) -> str | None:
@@ -223,7 +233,7 @@ def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
     ``labels`` names (as ``clip.mp4``, ``./clip.mp4`` or ``sub/../clip.mp4``): clips
     ``asnn eval`` does not score, and ``asnn label`` would add. Sorted by name."""
     folder = Path(clips_dir)
-    labelled = {(folder / e["file"]).resolve() for e in labels
+    labelled = {resolved(folder / e["file"]) for e in labels
                 if isinstance(e, Mapping) and isinstance(e.get("file"), str)}
     try:
         # a link to a clip that is gone too: named (its decoding then says so), not skipped
@@ -231,7 +241,7 @@ def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
                        and p.suffix.lower() in VIDEO_SUFFIXES)
     except OSError:
         return []
-    return [p.name for p in found if p.resolve() not in labelled]
+    return [p.name for p in found if resolved(p) not in labelled]
 
 
 def clip_hint(file: str, candidates: Sequence[str]) -> str:

@@ -10,7 +10,17 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["folder_lock", "folder_problem", "seekable_target", "write_atomically"]
+__all__ = ["folder_lock", "folder_problem", "resolved", "seekable_target", "write_atomically"]
+
+
+def resolved(path: str | Path) -> Path:
+    """``Path(path).resolve()``, or for a link that loops (RuntimeError up to Python 3.12,
+    OSError from 3.13) the path made absolute: such a file is then named by what opens it, not
+    a traceback."""
+    try:
+        return Path(path).resolve()
+    except (OSError, RuntimeError):
+        return Path(path).absolute()
 
 
 def seekable_target(path: str | Path) -> None:

@@ -3,6 +3,7 @@ checking one written."""
 
 from __future__ import annotations
 
+import errno
 import itertools
 import os
 from collections.abc import Iterable, Iterator
@@ -36,6 +37,15 @@ class VideoError(OSError):
     """A file that cannot be opened or decoded as video."""
 
 
+def _loops(path: Path) -> bool:
+    """Whether following ``path``'s links loops (ELOOP)."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        return exc.errno == errno.ELOOP
+    return False
+
+
 class VideoClip:
     """Frames of a video file, decoded lazily, BGR uint8 as OpenCV reads them.
 
@@ -67,7 +77,8 @@ class VideoClip:
         if not self.path.is_file():
             raise VideoError(
                 f"{self.path}: not a regular file (a pipe or a device)" if self.path.exists()
-                else f"{self.path}: a link to {self.path.readlink()}, which is not there"
+                else f"{self.path}: a link to {self.path.readlink()}, which "
+                + ("leads back to itself (a loop of links)" if _loops(self.path) else "is not there")
                 if self.path.is_symlink() else f"{self.path}: no such file")
         cap = self._capture()
         opened = cap.isOpened()
