@@ -236,7 +236,10 @@ class ASNN:
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
         p = self.params
-        width = frame.shape[1] if isinstance(frame, np.ndarray) and frame.ndim >= 2 else None
+        # sized only once the frame could pass check_frame: a 0-pixel side is its FrameError,
+        # not _retina_size's ZeroDivisionError
+        width = (frame.shape[1] if isinstance(frame, np.ndarray) and frame.ndim >= 2
+                 and min(frame.shape[:2]) >= self.min_side else None)
         size = self._retina_size(*frame.shape[:2]) if width is not None else None
         # shrunk: narrower and not taller (a frame wider than max_width, or one whose working
         # area the cap below bounds)
@@ -269,10 +272,11 @@ class ASNN:
         """(W, H) of an (H, W) frame on the retina. The retina's kernels and the added stages
         count in pixels, so a frame wider than ``max_width`` or narrower than ``min_width`` is
         seen at the scale they were made for (targets are reported in the frame's own pixels).
-        An enlarged frame is at most ``4 * min_width`` high (or its own height), and no frame is
-        worked on at more than ``max_width x 4 min_width`` pixels (480 x 640 for the default;
-        a taller one is shrunk both ways): a tall, narrow frame does not make the model's state
-        grow past what a large frame's does (480 x 4096 held 8.5 times 4096 x 4096's)."""
+        An enlarged frame is at most ``4 * min_width`` high (or its own height), and with
+        ``max_width`` no frame is worked on at more pixels than a 3:4 portrait ``max_width``
+        wide (480 x 640 for the default; a taller one is shrunk both ways, below ``min_width``
+        or ``max_width`` if need be): a tall, narrow frame does not make the model's state grow
+        past what a large frame's does (480 x 4096 held 8.5 times 4096 x 4096's)."""
         p = self.params
         if p.max_width is not None and w > p.max_width:
             size = p.max_width, max(round(h * p.max_width / w), self.min_side)
@@ -281,10 +285,9 @@ class ASNN:
             size = round(w * factor), round(h * factor)
         else:
             size = w, h
-        # a tall frame is worked on at most at a max_width x 4 min_width portrait's area (480 x
-        # 640 for the default): the state of a 480x4096 frame was 8.5 times a 4096x4096 one's
-        if p.max_width is not None and p.min_width is not None:
-            limit = p.max_width * 4 * p.min_width
+        # the area of a 3:4 portrait max_width wide at most (a landscape frame never reaches it)
+        if p.max_width is not None:
+            limit = p.max_width * p.max_width * 4 // 3
             if size[0] * size[1] > limit:
                 f = (limit / (size[0] * size[1])) ** 0.5
                 size = (max(int(size[0] * f), self.min_side), max(int(size[1] * f), self.min_side))

@@ -120,8 +120,10 @@ class ASNNParams(BaseModel):
     # --- input scale (robust addition) ---
     max_width: int | None = Field(
         None, ge=32, le=4096, description="frames wider than this are averaged down to this width "
-        "(aspect kept) before the retina, whose kernels have a fixed size in pixels; targets "
-        "stay in the frame's pixels. None: every frame at its own size",
+        "(aspect kept) before the retina, whose kernels have a fixed size in pixels, and no "
+        "frame is worked on at more pixels than a 3:4 portrait this wide (a taller one is "
+        "averaged down both ways: the model's state stays bounded); targets stay in the "
+        "frame's pixels. None: every frame at its own size",
     )
     min_width: int | None = Field(
         None, ge=32, le=1024, description="frames narrower than this are enlarged to this width "

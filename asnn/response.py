@@ -20,8 +20,8 @@ class Maps:
     """Intermediate maps of one ASNN step, for figures and debugging (all (H, W) unless noted).
 
     The maps are on the model's own grid: the frame's size, or where ``max_width`` shrinks
-    wider frames or ``min_width`` enlarges narrower ones, that size (targets and tracks stay in
-    the frame's pixels). ``P`` is
+    wider frames (or taller ones, past a 3:4 portrait's area) or ``min_width`` enlarges
+    narrower ones, that size (targets and tracks stay in the frame's pixels). ``P`` is
     the photoreceptors' output after the input stages the preset has (input blur, contrast
     gain control, background stabilisation), not the raw frame difference. The bipolar and
     temporal-filter outputs are not kept: an ``ASNN(..., optimised=False)`` model keeps its

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from asnn import ASNN, preset
+from asnn import ASNN, FrameError, preset
 from asnn.stimuli.suite import make_case
 
 OFF_LED_ONLY = dict(w1_on=0.0, w2_off=0.0)  # the published variant's OFF-led map alone
@@ -695,6 +695,11 @@ def test_small_frames_are_enlarged_to_the_scale_the_added_stages_were_made_for()
     tall = ASNN()
     tall.step(np.zeros((4096, 480), np.uint8))
     assert tall.previous.size <= 480 * 640
+    w, h = ASNN(preset("default", min_width=None))._retina_size(4096, 480)  # min_width off
+    assert w * h <= 480 * 640
+    for side in ((0, 0), (100, 0), (0, 100)):  # sized only once it could pass: a FrameError
+        with pytest.raises(FrameError, match="smaller than the model's"):
+            ASNN().step(np.zeros(side, np.uint8))
     with pytest.raises(ValueError, match="min_width"):
         preset("robust", min_width=600)
 
