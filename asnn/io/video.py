@@ -77,8 +77,9 @@ class VideoClip:
         if not self.path.is_file():
             raise VideoError(
                 f"{self.path}: not a regular file (a pipe or a device)" if self.path.exists()
-                else f"{self.path}: a link to {self.path.readlink()}, which "
-                + ("leads back to itself (a loop of links)" if _loops(self.path) else "is not there")
+                else f"{self.path}: a link to {self.path.readlink()}, which " + (
+                    "leads back to itself (a loop of links)" if _loops(self.path)
+                    else "is not there")
                 if self.path.is_symlink() else f"{self.path}: no such file")
         cap = self._capture()
         opened = cap.isOpened()
