@@ -118,7 +118,7 @@ def test_two_clips_whose_results_would_share_a_file_are_refused():
     check_labels([COLLISION, {**QUIET, "file": "c2.mp4"}, {**QUIET, "file": "y" * 249 + ".mp4"}])
     with pytest.raises(ValueError, match="too long for its results file"):  # not mid-run
         check_labels([COLLISION, {**QUIET, "file": "y" * 250 + ".mp4"}])
-    for other in ("c.avi", "night/c.mp4"):
+    for other in ("c.avi", "night/c.mp4", "C.mp4"):  # C.jsonl is c.jsonl where case is ignored
         with pytest.raises(ValueError, match=r"entry 1 .*overwrite those of entry 0 \(c\.mp4\)"):
             check_labels([COLLISION, {**QUIET, "file": other}])
     # one clip entered twice is told so (it read as two clips' results colliding: a user trial)

@@ -165,13 +165,15 @@ def check_labels(labels: Sequence[Mapping], source: str = "labels") -> list[dict
             raise ValueError(f"{where}: its name is too long for its results file "
                              f"({stem[:20]}....jsonl: at most {MAX_NAME_BYTES} bytes); "
                              "shorten it")
+        stem = stem.casefold()  # on a file system that ignores case, C.jsonl is c.jsonl
         if stem in names and _same_clip(label, labels[names[stem]]):
             raise ValueError(f"{where}: names the same clip as entry {names[stem]}: one entry "
                              "a clip (remove one)")
         if stem in names:
             raise ValueError(f"{where}: its results would overwrite those of entry {names[stem]} "
                              f"({labels[names[stem]]['file']}): clip names must differ by more "
-                             "than their folder and extension (a bag's cameras by their topic)")
+                             "than their folder, extension and case (a bag's cameras by their "
+                             "topic)")
         names[stem] = index
     return [dict(label) for label in labels]
 
