@@ -198,11 +198,14 @@ def test_a_video_with_no_frame_is_told_from_a_file_that_is_not_one(tmp_path):
 
     from asnn.io.video import VideoClip, VideoError
 
-    empty, junk = tmp_path / "empty.avi", tmp_path / "junk.avi"
-    cv2.VideoWriter(str(empty), cv2.VideoWriter_fourcc(*"MJPG"), 20, (64, 48)).release()
+    junk = tmp_path / "junk.avi"
     junk.write_bytes(b"not a video at all\n" * 20)
-    with pytest.raises(VideoError, match="a video without a frame OpenCV can decode"):
-        VideoClip(empty)
+    # an empty MP4 or MKV does not even open in OpenCV: told by its first bytes (a review)
+    for name, fourcc in (("empty.avi", "MJPG"), ("empty.mp4", "mp4v"), ("empty.mkv", "MJPG")):
+        empty = tmp_path / name
+        cv2.VideoWriter(str(empty), cv2.VideoWriter_fourcc(*fourcc), 20, (64, 48)).release()
+        with pytest.raises(VideoError, match="a video without a frame OpenCV can decode"):
+            VideoClip(empty)
     with pytest.raises(VideoError, match="not a video OpenCV can decode"):
         VideoClip(junk)
 

@@ -46,6 +46,19 @@ def _loops(path: Path) -> bool:
     return False
 
 
+def _container(path: Path) -> bool:
+    """Whether a file begins as an MP4/MOV (``ftyp``), Matroska/WebM (EBML) or AVI (``RIFF``
+    ... ``AVI ``) does: OpenCV does not open an empty MP4 or MKV, which is then told apart
+    from a file that is no video by these bytes alone."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(12)
+    except OSError:
+        return False
+    return (head[4:8] == b"ftyp" or head[:4] == b"\x1a\x45\xdf\xa3"
+            or (head[:4] == b"RIFF" and head[8:12] == b"AVI "))
+
+
 class VideoClip:
     """Frames of a video file, decoded lazily, BGR uint8 as OpenCV reads them.
 
@@ -88,7 +101,8 @@ class VideoClip:
             cap.release()
             raise VideoError(f"{self.path}: " + (
                 "a video without a frame OpenCV can decode (an empty one, or frames in a "
-                "codec it lacks)" if opened else "not a video OpenCV can decode"))
+                "codec it lacks)" if opened or _container(self.path) else
+                "not a video OpenCV can decode"))
         fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
         self.fps_stated = fps is not None
         self.fps = DEFAULT_FPS if fps is None else fps
