@@ -236,21 +236,20 @@ class ASNN:
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
         p = self.params
-        # sized only once the frame could pass check_frame: a 0-pixel side is its FrameError,
-        # not _retina_size's ZeroDivisionError
-        width = (frame.shape[1] if isinstance(frame, np.ndarray) and frame.ndim >= 2
-                 and min(frame.shape[:2]) >= self.min_side else None)
-        size = self._retina_size(*frame.shape[:2]) if width is not None else None
+        # sized once, and only where the frame could pass check_frame (a 0-pixel side is its
+        # FrameError, not _retina_size's ZeroDivisionError; to_luminance refuses the rest)
+        h, w = frame.shape[:2] if isinstance(frame, np.ndarray) and frame.ndim >= 2 else (0, 0)
+        size = self._retina_size(h, w) if min(h, w) >= self.min_side else None
         # shrunk: narrower and not taller (a frame wider than max_width, or one whose working
-        # area the cap below bounds)
-        shrink = size is not None and size[0] < width and size[1] <= frame.shape[0]
-        resize = size is not None and size != (width, frame.shape[0])
+        # area the cap in _retina_size bounds)
+        shrink = size is not None and size[0] < w and size[1] <= h
+        resize = size is not None and size != (w, h)
         if shrink and self.optimised and frame.dtype == np.uint8:
             # the same luminance as below, bit for bit, without the float64 frame
             frame = check_frame(frame, self.min_side, self.shape)
-            h, w = self.shape = frame.shape[:2]
+            self.shape = (h, w)
             gray = np.ascontiguousarray(luma(frame))  # one compiled form of the kernel
-            lum = _fast.shrunk_luminance(gray, self._retina_size(h, w), LEVELS, self.dtype)
+            lum = _fast.shrunk_luminance(gray, size, LEVELS, self.dtype)
         else:
             # a frame to resize is converted and resized in float64, so that the float32 and
             # float64 forms of a preset see the same luminance to its last rounding
@@ -258,8 +257,7 @@ class ASNN:
                                np.float64 if resize else self.dtype)
             if self.shape is None:
                 self.shape = lum.shape
-            size = self._retina_size(*lum.shape)
-            if size != lum.shape[::-1]:
+            if resize:
                 lum = cv2.resize(lum, size,
                                  interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
         if lum.dtype != self.dtype:
