@@ -151,6 +151,18 @@ def test_load_records_rejects_records_without_frames(tmp_path):
         scoring.load_records(path)
 
 
+def test_load_records_names_the_line_that_is_not_json_and_reads_a_byte_order_mark(tmp_path):
+    path = tmp_path / "edited.jsonl"
+    path.write_text('{"frame": 1}\n\n{"frame": 2,}\n')
+    with pytest.raises(ValueError, match=r"edited.jsonl: not JSON at line 3, column 13"):
+        scoring.load_records(path)
+    path.write_text('\n[{"frame": 1},\n {"frame": 2},]\n')
+    with pytest.raises(ValueError, match="not JSON at line 3, column 15"):
+        scoring.load_records(path)
+    path.write_bytes('\ufeff{"frame": 1, "collision": true}\n'.encode())  # Notepad's UTF-8
+    assert scoring.load_records(path) == [{"frame": 1, "collision": True}]
+
+
 def test_localisation_follows_the_labelled_track_where_there_is_one():
     track = [[float(i), 2.0 * i] for i in range(60)]
     track[26] = None  # no target in this frame

@@ -472,15 +472,17 @@ def load_records(path: str | Path) -> list[dict]:
     Raises
     ------
     ValueError
-        If a line is not a JSON object with a whole ``frame`` and, where it has one, a
-        ``collision`` of true or false (the string "false" counted as a warning).
+        If the file is not JSON (the message names the line), or a record is not a JSON
+        object with a whole ``frame`` and, where it has one, a ``collision`` of true or false
+        (the string "false" counted as a warning).
     """
-    text = Path(path).read_text(encoding="utf-8")
-    stripped = text.lstrip()
-    if stripped.startswith("["):
-        records = json.loads(stripped)
+    # utf-8-sig: a file saved by an editor that writes a byte-order mark reads as any other
+    text = Path(path).read_text(encoding="utf-8-sig")
+    if text.lstrip().startswith("["):
+        records = _parse_json(text, path)
     else:
-        records = [json.loads(line) for line in text.splitlines() if line.strip()]
+        records = [_parse_json(line, path, number)
+                   for number, line in enumerate(text.splitlines(), 1) if line.strip()]
     for r in records:
         if not isinstance(r, dict) or "frame" not in r:
             raise ValueError(f"{path}: every record must be a JSON object with a 'frame'")
@@ -498,6 +500,16 @@ def clip_name(label: Mapping) -> str:
     ``file#topic`` (as ``asnn detect`` takes it)."""
     name = str(label.get("file", "?"))
     return f"{name}#{label['topic']}" if label.get("topic") else name
+
+
+def _parse_json(text: str, path, line: int | None = None):
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as error:
+        # in a JSON-lines file the decoder counts lines within one line: name the file's line
+        line = error.lineno if line is None else line
+        raise ValueError(f"{path}: not JSON at line {line}, column {error.colno}: "
+                         f"{error.msg}") from None
 
 
 def results_path(results_dir: str | Path, clip: str | Mapping) -> Path | None:
