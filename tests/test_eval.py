@@ -110,8 +110,16 @@ def test_eval_end_to_end_writes_results_report_and_plots(clips, evaluated):
     assert "| loom.mp4 |" in report and "| bar.mp4 |" in report
     # a row says where the first warning's target was, for the models that give targets
     loom_row = next(line for line in report.splitlines() if line.startswith("| loom.mp4 |"))
-    cells = dict(zip(DETECTORS, loom_row.strip("| ").split(" | ")[3:]))
+    cells = loom_row.strip("| ").split(" | ")
     asnn_loom = {c["clip"]: c for c in results["detectors"]["asnn"]["clips"]}["loom.mp4"]
+    # the hit window, which tells an early or late first warning from a hit, in frames
+    loom_label = next(lab for lab in labels if lab["file"] == "loom.mp4")
+    last = loom_label["contact_frame"] + scoring.CONTACT_SLACK_FRAMES
+    assert cells[3] == f"{loom_label['onset_frame']}-{last}" == (  # early tolerance 0 s here
+        "-".join(map(str, asnn_loom["window"])))
+    bar_row = next(line for line in report.splitlines() if line.startswith("| bar.mp4 |"))
+    assert bar_row.strip("| ").split(" | ")[3] == "–"  # no collision, no window
+    cells = dict(zip(DETECTORS, cells[4:]))
     assert asnn_loom["localisation_px"] is not None
     assert cells["asnn"].endswith(f", target {asnn_loom['localisation_px']:.0f} px off")
     assert "px off" not in cells["lgmd1"]

@@ -188,17 +188,24 @@ def _clips_report(results: Mapping) -> str:
               "after contact + "
               f"{scoring.CONTACT_SLACK_FRAMES} frames); warning frames per minute: over the "
               "clips without a collision, after the warm-up."]
-    lines += ["", "Per clip: outcome, first warning frame (lead time, s), warning frames, and the "
-              "distance from the nearest target to the labelled centre at the first warning.", "",
-              "| clip | onset | contact | " + " | ".join(names) + " |",
-              "| --- | --- | --- | " + " | ".join("---" for _ in names) + " |"]
+    lines += ["", "Per clip: the hit window's first and last frames (a first warning before it is "
+              "early, after it late); each detector's outcome, first warning frame (lead time, "
+              "s), warning frames, and the distance from the nearest target to the labelled "
+              "centre at the first warning.", "",
+              "| clip | onset | contact | hit window | " + " | ".join(names) + " |",
+              "| --- | --- | --- | --- | " + " | ".join("---" for _ in names) + " |"]
     for index, clip in enumerate(results["detectors"][names[0]]["clips"]):
         lab = results["labels"][index]  # the scores come in the labels' order
         cells = []
         for m in names:
             cells.append(outcome_cell(results["detectors"][m]["clips"][index]))
+        # the label's, the same for every detector that scored the clip
+        window = next((results["detectors"][m]["clips"][index]["window"] for m in names
+                       if results["detectors"][m]["clips"][index].get("window")), None)
         lines.append(f"| {clip['clip']} | {fmt(lab.get('onset_frame'))} | "
-                     f"{fmt(lab.get('contact_frame'))} | " + " | ".join(cells) + " |")
+                     f"{fmt(lab.get('contact_frame'))} | "
+                     f"{fmt(None) if window is None else f'{window[0]}-{window[1]}'} | "
+                     + " | ".join(cells) + " |")
     lines += paired_section(names[0], results.get("paired", {}))
     if results.get("errors"):
         lines += ["", "Errors:", ""] + [f"- {e}" for e in results["errors"]]
