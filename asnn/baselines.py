@@ -48,7 +48,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .frames import frame_time, to_luminance
-from .params import fields_section
+from .params import check_photoreceptor_history, fields_section
 from .retina import photoreceptor_weights, spike_count, spike_rate
 from .response import Response
 
@@ -110,6 +110,11 @@ class LGMD1Params(_LGMDParams):
         "(SPEC section 4); math.inf disables it"))
     dt: float = Field(0.05, gt=0, description="frame period in seconds, as the ASNN model's dt")
     rate_window: int = Field(4, ge=1, description="frames of the reported spike rate (ASNN's N_t)")
+
+    @model_validator(mode="after")
+    def _bounded_history(self) -> "LGMD1Params":
+        check_photoreceptor_history(self.n_p, self.p_u)
+        return self
 
 
 class LGMD2Params(_LGMDParams):

@@ -69,6 +69,36 @@ _SCALES = ("dog_sigma1", "dog_sigma2", "ds_sigma", "ds_wavelength", "cs_sigma", 
            "attention_sigma", "contrast_pool", "kernel_extent")
 
 
+def check_photoreceptor_history(n_p: int, p_u: float) -> None:
+    """Refuse photoreceptor history weights (paper eq. 1) that make P grow without bound.
+
+    ``P(t) = I(t) - I(t-1) + sum_i p_i P(t-i)`` with every p_i > 0 (eq. 2) holds a constant
+    input's response only while ``sum_i p_i < 1``: at 1 or more a still camera's noise grows
+    until it warns, then P overflows and the model is blind for good.
+
+    Parameters
+    ----------
+    n_p : int
+        N_p, frames of photoreceptor history.
+    p_u : float
+        u in ``p_i = 1 / (1 + exp(u i))``.
+
+    Raises
+    ------
+    ValueError
+        If the weights sum to 1 or more.
+    """
+    if n_p == 0:
+        return
+    from .retina import photoreceptor_weights  # here: the parameters load without OpenCV
+
+    total = float(photoreceptor_weights(n_p, p_u).sum())
+    if total >= 1.0:
+        raise ValueError(f"n_p={n_p}, p_u={p_u:g}: the photoreceptors' history weights p_i "
+                         f"sum to {total:.3g}, and P (eq. 1) grows without bound at 1 or more; "
+                         "raise p_u or lower n_p")
+
+
 class ASNNParams(BaseModel):
     """Every parameter of the ASNN model, with the paper's symbol in each description.
 
@@ -209,7 +239,9 @@ class ASNNParams(BaseModel):
     )
     n_fast: int = Field(2, ge=1, le=MAX_STAGES - 1, description="n_f, stages of the fast filter")
     n_slow: int = Field(4, ge=2, le=MAX_STAGES, description="n_s, stages of the slow filter")
-    dt: float = Field(0.05, gt=0, description="integration step, seconds per frame")
+    dt: float = Field(0.05, gt=0, description=(
+        "integration step of the temporal filter, seconds per frame (dt A / tau below 1), "
+        "and the period of frames given without a time"))
 
     # --- amacrine cells (eqs. 9-14) ---
     ds_sigma: float = Field(0.3, gt=0, description="sigma_DS of the Gabor pair")
@@ -398,8 +430,9 @@ class ASNNParams(BaseModel):
         "without scene_relative (whose scene fit tells where the scene expands)")
     object_ids: bool = Field(
         False, description="targets are named after their object: a track that appears over "
-        "an object already counted (its box overlapping a counting track's, this frame or the "
-        "one before) is a fragment of that object and reports that track's id, and an object "
+        "an object already counted (its box overlapping a counting track's, this frame or one "
+        "of the approach_frames before it with region_persistence, else the one before) is a "
+        "fragment of that object and reports that track's id, and an object "
         "seen as several fragments is one target (asnn.approach.tracking.TargetTracker.object_id); "
         "changes ids and targets, never the warning; needs targets='objects'")
     refined_ttc: bool = Field(
@@ -452,12 +485,20 @@ class ASNNParams(BaseModel):
                 raise ValueError(f"{name} must be odd, got {getattr(self, name)}")
         if self.n_fast >= self.n_slow:
             raise ValueError("n_fast must be smaller than n_slow")
+        check_photoreceptor_history(self.n_p, self.p_u)
         # the temporal filter's forward-Euler step (eq. 5) multiplies each stage by
-        # 1 - dt A / tau per frame: at 2 or more it grows without bound instead of decaying
+        # 1 - dt A / tau per frame: above 1 a stage flips its sign every frame instead of
+        # decaying (the reference warned on receding and translating stimuli at 1.2; at 0.96,
+        # still allowed, it missed a looming disk), and at 2 it grows without bound
         step = self.dt * self.decay / self.tau
-        if step >= 2.0:
-            raise ValueError(f"dt * decay / tau is {step:g}: the temporal filter (eq. 5) is "
-                             "unstable at 2 or more; lower dt or decay, or raise tau")
+        if step >= 1.0:
+            raise ValueError(
+                f"dt * decay / tau is {step:g}: the temporal filter (eq. 5) stepped by forward "
+                "Euler decays only below 1 (at 1 a stage keeps nothing of its past, above it "
+                "flips sign every frame, at 2 it grows without bound); lower dt or decay, or "
+                "raise tau. dt is the "
+                "filter's integration step, not the camera's frame period: give frames their "
+                "times, step(frame, t)")
         needing = [name for name in ("approach_gate", "scene_relative", "object_ids",
                                      "refined_ttc", "ignore_rig", "surface_ahead",
                                      "corridor_gate")

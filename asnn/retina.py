@@ -72,7 +72,8 @@ def correlate(image: np.ndarray, kernel: np.ndarray) -> np.ndarray:
 def photoreceptor_weights(n_p: int, u: float = 1.0) -> np.ndarray:
     """Decay coefficients p_i = 1 / (1 + exp(u i)), i = 1..N_p (paper eq. 1)."""
     i = np.arange(1, n_p + 1, dtype=np.float64)
-    return 1.0 / (1.0 + np.exp(u * i))
+    with np.errstate(over="ignore"):  # exp(u i) beyond a float: p_i is 0, as it should be
+        return 1.0 / (1.0 + np.exp(u * i))
 
 
 def photoreceptor(current: np.ndarray, previous: np.ndarray, history: list[np.ndarray],

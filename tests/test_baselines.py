@@ -73,8 +73,25 @@ def test_parameters_are_typed_and_overridable():
         with pytest.raises(ValidationError, match="must be a finite number"):
             params(**changes)  # a model that would never warn, or crash in its spike count
     assert LGMD1Params(t_ffi=math.inf).t_ffi == math.inf  # infinity switches the FFI off
+    # persistence weights summing to 1 or more: P_f grew to 5e50 on a still, noisy scene
+    with pytest.raises(ValidationError, match="grows without bound"):
+        LGMD1Params(n_p=8, p_u=0.0)
     for params in (LGMD1Params(), LGMD2Params()):  # every default documents its source
         assert all(f.description for f in type(params).model_fields.values())
+
+
+def test_the_longest_photoreceptor_history_allowed_stays_bounded_on_a_still_noisy_scene():
+    # n_p = 16 at the paper's u = 1 sums its weights to 0.46: P_f stays within 4 / (1 - 0.46)
+    # gray levels of 4-level noise over 300 frames (weights summing to 1.15 made it 1.5e6, and
+    # such weights are refused)
+    rng = np.random.default_rng(0)
+    still = rng.integers(100, 110, (48, 64)).astype(np.uint8)
+    model = LGMD1(n_p=16)
+    for _ in range(300):
+        frame = np.clip(still + rng.integers(-2, 3, still.shape), 0, 255).astype(np.uint8)
+        response = model.step(frame)
+    assert np.isfinite(response.u) and not response.collision
+    assert np.abs(model.history[-1]).max() < 4 / (1 - 0.46)
 
 
 def test_factory_builds_the_baselines():
