@@ -301,7 +301,7 @@ class ASNN:
         t : float, optional
             The frame's time in seconds (any origin, increasing). Used for expansion rates and
             time to contact; without it, or where it is NaN or infinite or does not advance by
-            more than 0 and at most 1 s (a clock in milliseconds or smaller units, a stall),
+            at least 0.1 ms and at most 1 s (a clock in milliseconds or smaller units, a stall),
             frames are ``params.dt`` apart (a frame without it in a stream whose frames had
             times comes :attr:`frame_period` after the latest). A clock in larger units
             (minutes) is believed as seconds: its expansion reads 60 times too fast, and the

@@ -140,8 +140,10 @@ class Response:
     spike_rate : float
         The spikes of the warning window (the last ``n_t`` frames) over ``n_t`` times the
         window's frame period (``spike_dt``, or ``dt``): spikes per second of the frames where
-        ``spike_dt`` is None; twice that in the presets that keep the published window of
-        25 ms a frame (``reference``, ``reference32``, ``light``, the default; eq. 34).
+        ``spike_dt`` is None and frames come ``dt`` apart. The presets that keep the published
+        window of 25 ms a frame whatever the frame rate (``reference``, ``reference32``,
+        ``light``, the default; eq. 34) read twice the spikes per second of 20 fps frames,
+        1.33 times those of 30 fps frames.
     collision : bool
         The collision warning.
     targets : list of Target
