@@ -70,7 +70,26 @@ def correlate(image: np.ndarray, kernel: np.ndarray) -> np.ndarray:
 
 
 def photoreceptor_weights(n_p: int, u: float = 1.0) -> np.ndarray:
-    """Decay coefficients p_i = 1 / (1 + exp(u i)), i = 1..N_p (paper eq. 1)."""
+    """Decay coefficients p_i = 1 / (1 + exp(u i)), i = 1..N_p (paper eq. 1 [1]_).
+
+    Parameters
+    ----------
+    n_p : int
+        N_p, the frames of photoreceptor history (``ASNNParams.n_p``); 0 gives no weights.
+    u : float
+        u of p_i (``ASNNParams.p_u``; the paper chooses 1).
+
+    Returns
+    -------
+    p : ndarray of float64 (N_p,)
+        p_1..p_N_p, the weights of P(t-1)..P(t-N_p) in :func:`photoreceptor`; decreasing for
+        u > 0 (0.269, 0.119, 0.047, ... for u = 1), and 0 where exp(u i) overflows a float.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 1.
+    """
     i = np.arange(1, n_p + 1, dtype=np.float64)
     with np.errstate(over="ignore"):  # exp(u i) beyond a float: p_i is 0, as it should be
         return 1.0 / (1.0 + np.exp(u * i))
@@ -381,21 +400,74 @@ def motion_energy(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray
 
 
 def motion_strength(r: np.ndarray) -> np.ndarray:
-    """Motion energy V = max_theta R^theta (paper eq. 17), over the orientations of ``r``
-    (:func:`motion_energy`'s, the whole circle)."""
+    """Motion energy V = max_theta R^theta (paper eq. 17 [1]_), over the orientations of ``r``
+    (:func:`motion_energy`'s, the whole circle).
+
+    Parameters
+    ----------
+    r : ndarray (2 n, H, W)
+        R^theta for the orientations theta_k = k pi / n, k = 0..2n-1 (:func:`motion_energy`).
+
+    Returns
+    -------
+    V : ndarray (H, W)
+        In ``r``'s dtype. Never negative: with R^{theta + pi} = -R^theta in ``r``, the maximum
+        over the circle is the largest |R^theta| over half of it.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 17.
+    """
     return r.max(axis=0)
 
 
 def motion_direction(r: np.ndarray) -> np.ndarray:
-    """Motion direction phi = atan2(R^{pi/2}, R^0) (paper eq. 18), in image coordinates (x right,
-    y down: +pi/2 points down the image), from :func:`motion_energy`'s ``r`` (any number of
-    orientations divisible by 4, the whole circle)."""
+    """Motion direction phi = atan2(R^{pi/2}, R^0) (paper eq. 18 [1]_), in image coordinates (x
+    right, y down: +pi/2 points down the image), from :func:`motion_energy`'s ``r`` (any number
+    of orientations divisible by 4, the whole circle).
+
+    Parameters
+    ----------
+    r : ndarray (n_theta, H, W)
+        R^theta for theta_k = 2 pi k / n_theta (:func:`motion_energy`): ``r[0]`` is R^0 and
+        ``r[n_theta // 4]`` is R^{pi/2}.
+
+    Returns
+    -------
+    phi : ndarray (H, W)
+        Radians in [-pi, pi], in ``r``'s dtype; 0 where R^0 and R^{pi/2} are both 0.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 18.
+    """
     return np.arctan2(r[len(r) // 4], r[0])
 
 
 def motion_components(v: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The motion vectors V_x = V cos(phi), V_y = V sin(phi) (paper eq. 29) that the targets'
-    directions and energies average."""
+    """The motion vectors V_x = V cos(phi), V_y = V sin(phi) (paper eq. 29 [1]_) that the targets'
+    directions and energies average.
+
+    Parameters
+    ----------
+    v : ndarray (H, W)
+        The motion energy V (:func:`motion_strength`).
+    phi : ndarray (H, W)
+        The motion direction, radians, image coordinates (:func:`motion_direction`).
+
+    Returns
+    -------
+    dx, dy : ndarray (H, W)
+        V_x and V_y, in image coordinates (V_y > 0 points down the image): what
+        :func:`asnn.targets.extract_targets` averages over a target's pixels (eqs. 30, 31).
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 29.
+    """
     return v * np.cos(phi), v * np.sin(phi)
 
 
@@ -461,7 +533,24 @@ def approach_map(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
 
 
 def group(g: np.ndarray) -> np.ndarray:
-    """Grouping of the published implementation: ``G (G (*) ones(3, 3) / 9)``."""
+    """Grouping of the published implementation: ``G (G (*) ones(3, 3) / 9)``.
+
+    Not in the paper (SPEC.md section 3, "Grouping"; ``ASNNParams.grouping``): each pixel of G
+    is multiplied by the mean of G over its 3 x 3 neighbourhood (reflect-101 border), so that
+    G is weighted by the activity around it: an isolated pixel keeps a ninth of its square, a
+    pixel inside an evenly active region about its square.
+
+    Parameters
+    ----------
+    g : ndarray (H, W)
+        The approach map G (:func:`approach_map`).
+
+    Returns
+    -------
+    ndarray (H, W)
+        In ``g``'s dtype. Where G can be negative (positive w2 weights), a negative pixel among
+        negative neighbours reads positive.
+    """
     return g * cv2.blur(g, (3, 3), borderType=_BORDER)
 
 
@@ -583,19 +672,82 @@ def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, 
 
 
 def attended_response(g: np.ndarray, m_a: np.ndarray, m_d: np.ndarray) -> np.ndarray:
-    """The attended approach response G' = G M_a M_d (paper eq. 27)."""
+    """The attended approach response G' = G M_a M_d (paper eq. 27 [1]_).
+
+    Parameters
+    ----------
+    g : ndarray (H, W)
+        The approach map G (after grouping, where the preset groups).
+    m_a, m_d : ndarray of bool (H, W)
+        The attention masks M_a (:func:`approach_attention`) and M_d
+        (:func:`direction_attention`).
+
+    Returns
+    -------
+    G' : ndarray (H, W)
+        G where both masks hold, 0 elsewhere, in ``g``'s dtype.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 27.
+    """
     return g * (m_a & m_d)
 
 
 def membrane_potential(g_prime: np.ndarray, scale: float, absolute: bool) -> float:
-    """u(t) = sum_xy G'(x, y, t) (paper eq. 28), scaled; ``absolute`` sums |G'| instead."""
+    """u(t) = sum_xy G'(x, y, t) (paper eq. 28 [1]_), scaled; ``absolute`` sums |G'| instead.
+
+    Parameters
+    ----------
+    g_prime : ndarray (H, W)
+        The attended response G' (:func:`attended_response`).
+    scale : float
+        The factor applied to the sum (``ASNNParams.u_scale``: 255 measures u on the 0..255
+        intensity scale of the published implementation, 1 on the [0, 1] scale of the input).
+    absolute : bool
+        Sum |G'| (``ASNNParams.u_abs``, the published implementation) instead of G', which can
+        be negative where the preset subtracts the w2 terms.
+
+    Returns
+    -------
+    u : float
+        ``scale * sum(G')`` (or of |G'|).
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 28.
+    """
     total = np.abs(g_prime).sum() if absolute else g_prime.sum()
     return float(scale * total)
 
 
 def sigmoid_output(u: float, n_cells: int) -> float:
-    """out(t) = 1 / (1 + exp(-|u| / N)), in [0.5, 1) (SPEC ruling on paper eq. 32); in floating
-    point it rounds to exactly 1.0 once |u| / N passes about 37."""
+    """out(t) = 1 / (1 + exp(-|u| / N)), in [0.5, 1) (SPEC ruling on paper eq. 32 [1]_); in
+    floating point it rounds to exactly 1.0 once |u| / N passes about 37.
+
+    The paper prints exp(+|u| / N), which maps into (0, 0.5]; its text says [0.5, 1), and
+    SPEC.md section 2 rules for the sign used here.
+
+    Parameters
+    ----------
+    u : float
+        The membrane potential u(t) (:func:`membrane_potential`); only |u| counts.
+    n_cells : int
+        N, the number of cells: the pixels of the model's grid (the frame's, or those of the
+        size ``max_width`` or ``min_width`` resizes it to).
+
+    Returns
+    -------
+    out : float
+        0.5 for u = 0, rising towards 1 with |u| / N.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 32.
+    """
     return 1.0 / (1.0 + math.exp(-abs(u) / n_cells))
 
 
@@ -609,8 +761,29 @@ MAX_SPIKES = 2**31 - 1  # the spike count saturates here (eq. 33 grows without b
 
 
 def spike_count(out: float, k_sp: float, t_sp: float) -> int:
-    """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 33), at most :data:`MAX_SPIKES`:
-    past it, exp overflows a float (from an exponent of 710) and no warning changes."""
+    """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 33 [1]_), at most :data:`MAX_SPIKES`:
+    past it, exp overflows a float (from an exponent of 710) and no warning changes.
+
+    Parameters
+    ----------
+    out : float
+        The output out(t) (:func:`sigmoid_output`).
+    k_sp : float
+        K_sp, the spike gain (``ASNNParams.k_sp``).
+    t_sp : float
+        T_sp, the spike threshold on out(t) (``ASNNParams.t_sp``).
+
+    Returns
+    -------
+    spikes : int
+        0 while out < T_sp, at least 1 from out = T_sp on; :data:`MAX_SPIKES` from an
+        exponent K_sp (out - T_sp) of ln(MAX_SPIKES) (about 21.5) on.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 33.
+    """
     exponent = k_sp * (out - t_sp)
     if exponent >= math.log(MAX_SPIKES):
         return MAX_SPIKES
@@ -619,11 +792,51 @@ def spike_count(out: float, k_sp: float, t_sp: float) -> int:
 
 def spike_rate(spikes: Iterable[int], n_t: int, dt: float) -> float:
     """The spike rate of the warning, (1 / (N_t dt)) sum of the last N_t frames' spikes (paper
-    eq. 34), spikes per second; ``spikes`` holds at most N_t frames' (fewer at a stream's
-    start, still divided by N_t: SPEC ruling)."""
+    eq. 34 [1]_), spikes per second; ``spikes`` holds at most N_t frames' (fewer at a stream's
+    start, still divided by N_t: SPEC ruling).
+
+    Parameters
+    ----------
+    spikes : iterable of int
+        The spikes of the last N_t frames at most (:func:`spike_count`; the model's
+        ``spike_window``).
+    n_t : int
+        N_t, the window's length in frames (``ASNNParams.n_t``).
+    dt : float
+        Delta t, the window's frame period, seconds: ``ASNNParams.window_dt`` (``spike_dt``,
+        else ``dt``), not the frames' own timestamps.
+
+    Returns
+    -------
+    rate : float
+        Spikes per second of frames ``dt`` apart.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 34.
+    """
     return sum(spikes) / (n_t * dt)
 
 
 def collision_warning(rate: float, t_c: float) -> bool:
-    """Col(t): the collision warning, a spike rate of at least T_c (paper eq. 34)."""
+    """Col(t): the collision warning, a spike rate of at least T_c (paper eq. 34 [1]_).
+
+    Parameters
+    ----------
+    rate : float
+        The spike rate, spikes per second (:func:`spike_rate`).
+    t_c : float
+        T_c, the warning's threshold, Hz (``ASNNParams.t_c``).
+
+    Returns
+    -------
+    bool
+        Whether ``rate >= t_c``.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 34.
+    """
     return rate >= t_c
