@@ -112,6 +112,15 @@ class ASNN:
         The times between the last processed frames, seconds (at most 5; repeats not counted):
         :attr:`frame_period` is their median.
 
+    Raises
+    ------
+    TypeError
+        If ``params`` is neither a preset's name nor an :class:`~asnn.params.ASNNParams`,
+        ``threads`` is not an int, or a flag is not True or False.
+    ValueError
+        If the preset's name is unknown or the parameters are invalid, ``record_tracks`` is
+        asked of a preset that does not track objects, or ``threads`` is out of range.
+
     Notes
     -----
     The retina integrates with the fixed step ``params.dt`` (0.05 s by default) whatever the
@@ -307,6 +316,19 @@ class ASNN:
             (minutes) is believed as seconds: its expansion reads 60 times too fast, and the
             default warns early.
 
+        Returns
+        -------
+        Response
+            The model's response to the frame (:class:`~asnn.response.Response`, its
+            ``index`` the frame's in the stream): u(t), out(t), its spikes, the spike rate,
+            the collision warning and the looming targets, in the frame's pixels; the
+            intermediate maps with ``record_maps``, the tracked objects with
+            ``record_tracks``. A stream's first frame only primes the model
+            (:meth:`~asnn.response.Response.silent`: u = 0, out = 0.5, no spikes, no maps). A
+            frame held as a repeat (``params.skip_repeats``) or by the frame-rate ceiling
+            (``params.max_step_rate``) gets the latest response again (:attr:`repeated`), its
+            targets' time to contact shortened by the time since the frame stepped last.
+
         Raises
         ------
         FrameError
@@ -370,6 +392,22 @@ class ASNN:
         generator closed) finishes the frames it had taken, up to two beyond the last response
         yielded, without yielding them: ``index`` counts them, and the model goes on from there
         as a step-by-step run would.
+
+        Parameters
+        ----------
+        frames : iterable of (t, frame)
+            The frames in order, each with its time in seconds or None: what :meth:`step`
+            takes as ``t`` and ``frame``.
+
+        Yields
+        ------
+        Response
+            :meth:`step`'s response to each frame, in order.
+
+        Raises
+        ------
+        FrameError, RuntimeError
+            As :meth:`step` does, after the responses to the frames before.
         """
         if self.threads == 1:
             for t, frame in frames:
