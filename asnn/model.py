@@ -128,6 +128,28 @@ class ASNN:
     rates are measured in the frames' own time: ``step(frame, t)`` with the frame's timestamp in
     seconds, or ``params.dt`` per frame without one. The first frame of a stream only primes
     the state: its response is all zeros (u = 0, out = 0.5, no spikes).
+
+    Examples
+    --------
+    One model per stream, stepped with each frame and its time in seconds; here a generated
+    scene, a dark disk on a 64 x 64 view that starts growing at frame 10 (20 fps):
+
+    >>> from asnn import ASNN
+    >>> from asnn.stimuli import make_scene
+    >>> scene = make_scene("looming", size=(64, 64))
+    >>> model = ASNN("default")
+    >>> responses = [model.step(frame, i / scene.fps) for i, frame in enumerate(scene.frames)]
+    >>> responses[0].u, responses[0].collision  # the first frame only primes the model
+    (0.0, False)
+    >>> warned = [r.index for r in responses if r.collision]
+    >>> scene.onset_frame < warned[0] < scene.contact_frame  # warned during the approach
+    True
+    >>> target = responses[warned[0]].targets[0]  # what approaches: where, and how soon
+    >>> target.approaching, 0 < target.ttc < 5, 0 <= target.x < 64
+    (True, True, True)
+
+    :meth:`stream` takes ``(t, frame)`` pairs and yields the same responses; :meth:`reset`
+    starts a new stream.
     """
 
     def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,

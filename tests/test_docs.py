@@ -3,12 +3,15 @@
 The README and the pages under ``docs/`` link to each other's sections by GitHub's heading
 anchors; a section moved or renamed leaves links that lead nowhere, which nothing else notices.
 A ``|`` inside a table cell (in ``|G'|``, say) splits the cell unless escaped, and GitHub then
-drops the row's tail.
+drops the row's tail. The model's docstring example, what ``help(asnn.ASNN)`` shows a newcomer,
+runs: pytest collects no doctests, and an example nothing runs rots unseen.
 """
 
 from __future__ import annotations
 
+import doctest
 import functools
+import io
 import re
 from pathlib import Path
 
@@ -162,3 +165,35 @@ def test_citation_file_passes_its_schema_and_names_this_version():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     fields = dict(re.findall(r"^(version|license): (\S+)$", citation.read_text(), re.M))
     assert fields == {"version": project["version"], "license": project["license"]["text"]}
+
+
+def run_examples(obj) -> tuple[int, str]:
+    """Run the examples of an object's own docstring (not its members'): how many ran, and
+    doctest's report of those that failed ("" where none did)."""
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
+    report = io.StringIO()
+    for test in doctest.DocTestFinder(recurse=False).find(obj, obj.__name__, globs={}):
+        runner.run(test, out=report.write)
+    return runner.tries, report.getvalue()
+
+
+def test_the_example_runner_reports_a_wrong_example():
+    class Wrong:
+        """An example that fails.
+
+        >>> 1 + 1
+        3
+        """
+
+    tries, report = run_examples(Wrong)
+    assert tries == 1 and "Expected:\n    3\nGot:\n    2" in report
+
+
+def test_the_models_docstring_example_runs():
+    """``help(asnn.ASNN)``'s example (a generated looming scene stepped, its warning and
+    target read) runs as written."""
+    from asnn import ASNN
+
+    tries, report = run_examples(ASNN)
+    assert tries >= 8, "the example lost its steps"
+    assert report == ""
