@@ -272,7 +272,8 @@ class _LGMDBase:
         Raises
         ------
         FrameError
-            If the frame is not an image the model accepts, or its size differs from the stream's.
+            If the frame is not an image the model accepts, its size differs from the stream's,
+            or ``t`` is not a number (a str, a bool); the model's state is then as it was.
         """
         if t is not None:
             frame_time(t)  # checked as ASNN checks it, though not used
