@@ -72,9 +72,9 @@ _SCALES = ("dog_sigma1", "dog_sigma2", "ds_sigma", "ds_wavelength", "cs_sigma", 
 def check_photoreceptor_history(n_p: int, p_u: float) -> None:
     """Refuse photoreceptor history weights (paper eq. 1) that make P grow without bound.
 
-    ``P(t) = I(t) - I(t-1) + sum_i p_i P(t-i)`` with every p_i > 0 (eq. 2) holds a constant
-    input's response only while ``sum_i p_i < 1``: at 1 or more a still camera's noise grows
-    until it warns, then P overflows and the model is blind for good.
+    ``P(t) = I(t) - I(t-1) + sum_i p_i P(t-i)`` with every p_i > 0 (defined after eq. 1) holds
+    a constant input's response only while ``sum_i p_i < 1``: at 1 or more a still camera's
+    noise grows until it warns, then P overflows and the model is blind for good.
 
     Parameters
     ----------
@@ -659,7 +659,15 @@ def timed_gap(gap: float) -> bool:
 
 
 def preset_names() -> list[str]:
-    """Names accepted by :func:`preset`, ``default`` included."""
+    """Names accepted by :func:`preset`, ``default`` included.
+
+    Returns
+    -------
+    list of str
+        ``"default"`` first (another name for :data:`DEFAULT_PRESET`, ``robust``), then the
+        keys of :data:`PRESETS` in their order: ``paper``, ``approach``, ..., ``robust``. A
+        new list on every call.
+    """
     return ["default", *PRESETS]
 
 
