@@ -29,16 +29,26 @@ class Maps:
     :func:`asnn.retina.temporal_readout` gives them (the optimised form keeps them in another
     form).
 
+    The float maps are in the model's dtype (:attr:`asnn.ASNN.dtype`: the preset's
+    ``precision``, float64 with ``optimised=False``).
+
     Attributes
     ----------
-    P : photoreceptor activation.
-    R : (n_theta, H, W) motion energy per orientation theta_k = 2 pi k / n_theta.
-    V : maximal motion energy over orientations.
-    phi : estimated motion direction, radians, image coordinates.
-    G : approach-sensitive map (after grouping, where the preset groups).
-    M_a, M_d : bool attention masks.
-    G_prime : G M_a M_d.
-    rig : bool, or None
+    P : ndarray (H, W)
+        Photoreceptor activation (eq. 1; after the input stages the preset has, above).
+    R : ndarray (n_theta, H, W)
+        Motion energy per orientation theta_k = 2 pi k / n_theta (eqs. 10, 15, 16; n_theta 8).
+    V : ndarray (H, W)
+        Maximal motion energy over orientations (eq. 17).
+    phi : ndarray (H, W)
+        Estimated motion direction, radians in [-pi, pi], image coordinates (eq. 18).
+    G : ndarray (H, W)
+        Approach-sensitive map (eqs. 19, 20; after grouping, where the preset groups).
+    M_a, M_d : ndarray of bool (H, W)
+        The approach and the directional attention masks (eqs. 23, 26).
+    G_prime : ndarray (H, W)
+        G M_a M_d (eq. 27).
+    rig : ndarray of bool (H, W), or None
         The pixels the looming fits left out as the camera's own rig (``ignore_rig``;
         :func:`asnn.approach.looming.rig_pixels`); None where none were.
     """
@@ -109,7 +119,14 @@ class TrackReport:
     share: float
 
     def to_dict(self) -> dict:
-        """JSON-ready fields (the test's parts and ``passes`` as a map)."""
+        """JSON-ready fields (the test's parts and ``passes`` as a map).
+
+        Returns
+        -------
+        dict
+            Every field by its name, ``box`` and ``layers`` as lists, ``test`` as a map of the
+            approach test's parts and ``passes``.
+        """
         return {"id": self.id, "object_id": self.object_id, "x": self.x, "y": self.y,
                 "size": self.size, "box": list(self.box), "expansion": self.expansion,
                 "ttc": self.ttc, "offset": self.offset, "fit": self.fit,
@@ -176,12 +193,25 @@ class Response:
             The frame's index in its stream.
         tracks : list of TrackReport, optional
             None where tracks are not recorded, ``[]`` where they are (there are none yet).
+
+        Returns
+        -------
+        Response
+            u = 0, out = 0.5, no spikes, a spike rate of 0, no warning and no targets.
         """
         return cls(index=index, u=0.0, out=0.5, spikes=0, spike_rate=0.0, collision=False,
                    tracks=tracks)
 
     def to_dict(self) -> dict:
-        """JSON-ready fields (maps and tracks excluded)."""
+        """JSON-ready fields (maps and tracks excluded).
+
+        Returns
+        -------
+        dict
+            ``u``, ``out``, ``spikes``, ``spike_rate``, ``collision`` as Python numbers and
+            bool, and ``targets`` as a list of :meth:`Target.to_dict <asnn.targets.Target.to_dict>`
+            maps (``index`` excluded too: :meth:`record` adds the frame's number and time).
+        """
         return {"u": self.u, "out": self.out, "spikes": self.spikes,
                 "spike_rate": self.spike_rate, "collision": self.collision,
                 "targets": [t.to_dict() for t in self.targets]}

@@ -72,7 +72,15 @@ class Target:
     approaching: bool | None = None
 
     def to_dict(self) -> dict:
-        """JSON-ready fields; the optional ones only where the model sets them."""
+        """JSON-ready fields; the optional ones only where the model sets them.
+
+        Returns
+        -------
+        dict
+            ``x``, ``y``, ``direction``, ``energy`` and ``pixels``; for a tracked object (``id``
+            set) also ``id``, ``expansion``, ``ttc``, ``offset`` (each None where unknown) and
+            ``approaching`` (a bool).
+        """
         d = {"x": self.x, "y": self.y, "direction": self.direction, "energy": self.energy,
              "pixels": self.pixels}
         if self.id is not None:
