@@ -97,7 +97,7 @@ def photoreceptor_weights(n_p: int, u: float = 1.0) -> np.ndarray:
 
 def photoreceptor(current: np.ndarray, previous: np.ndarray, history: list[np.ndarray],
                   weights: np.ndarray) -> np.ndarray:
-    """Photoreceptor activation, paper eq. 1.
+    """Photoreceptor activation, paper eq. 1 [1]_.
 
     ``P(t) = I(t) - I(t-1) + sum_i p_i P(t-i)``
 
@@ -113,6 +113,11 @@ def photoreceptor(current: np.ndarray, previous: np.ndarray, history: list[np.nd
     Returns
     -------
     P : ndarray (H, W)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 1.
     """
     p = current - previous
     for w, past in zip(weights, history):
@@ -181,7 +186,7 @@ def contrast_pool_spread(coarse: np.ndarray, sigma: float, shape: tuple[int, int
 
 def dog_kernel(gain: float, sigma1: float, sigma2: float, size: int,
                normalisation: str = "paper") -> np.ndarray:
-    """Difference-of-Gaussians kernel g_I, paper eq. 3, sampled on integer pixel offsets.
+    """Difference-of-Gaussians kernel g_I, paper eq. 3 [1]_, sampled on integer pixel offsets.
 
     ``normalisation='paper'`` uses F/(sqrt(2 pi) sigma) as printed; ``'2d'`` uses the
     two-dimensional F/(2 pi sigma^2) of the published implementation. Neither is renormalised.
@@ -199,6 +204,11 @@ def dog_kernel(gain: float, sigma1: float, sigma2: float, size: int,
     Returns
     -------
     g_I : ndarray (size, size)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 3.
     """
     r = size // 2
     y, x = np.mgrid[-r:r + 1, -r:r + 1].astype(np.float64)
@@ -218,7 +228,8 @@ def dog_norms(sigma1: float, sigma2: float, normalisation: str) -> tuple[float, 
 
 
 def bipolar(p: np.ndarray, dog: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """ON and OFF bipolar inputs B+^0, B-^0: half-wave rectification then g_I (paper eqs. 2, 4).
+    """ON and OFF bipolar inputs B+^0, B-^0: half-wave rectification then g_I (paper
+    eqs. 2, 4 [1]_).
 
     Parameters
     ----------
@@ -231,6 +242,11 @@ def bipolar(p: np.ndarray, dog: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     -------
     on, off : ndarray (H, W)
         ``relu(P) (*) g_I`` and ``relu(-P) (*) g_I``.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eqs. 2, 4.
     """
     return correlate(np.maximum(p, 0.0), dog), correlate(np.maximum(-p, 0.0), dog)
 
@@ -240,7 +256,7 @@ def bipolar(p: np.ndarray, dog: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def temporal_filter_step(stages: np.ndarray, x: np.ndarray, rate: float, transmission: float,
                          decay: float, leaky_input: bool) -> None:
-    """Advance the leaky-integrator cascade by one frame, in place (paper eq. 5).
+    """Advance the leaky-integrator cascade by one frame, in place (paper eq. 5 [1]_).
 
     ``tau dz_n/dt = -A z_n + C z_{n-1}``, integrated with forward Euler, ``rate = dt / tau``,
     stage by stage so that each stage sees its predecessor as already updated in this frame
@@ -262,6 +278,11 @@ def temporal_filter_step(stages: np.ndarray, x: np.ndarray, rate: float, transmi
         A, each stage's leak.
     leaky_input : bool
         Whether z_0 integrates the input (the published implementation) or is the input.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 5.
     """
     if leaky_input:
         stages[0] += rate * (transmission * x - decay * stages[0])
@@ -272,7 +293,7 @@ def temporal_filter_step(stages: np.ndarray, x: np.ndarray, rate: float, transmi
 
 
 def temporal_readout(stages: np.ndarray, gain: float, n: int) -> np.ndarray:
-    """Temporal filter output L(K, n, z_0) = K (z_n - z_{n+1}) (paper eq. 6).
+    """Temporal filter output L(K, n, z_0) = K (z_n - z_{n+1}) (paper eq. 6 [1]_).
 
     Parameters
     ----------
@@ -286,6 +307,11 @@ def temporal_readout(stages: np.ndarray, gain: float, n: int) -> np.ndarray:
     Returns
     -------
     ndarray (H, W)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 6.
     """
     return gain * (stages[n] - stages[n + 1])
 
@@ -302,7 +328,7 @@ def _grid(size: int, extent: float) -> tuple[np.ndarray, np.ndarray]:
 
 def gabor_pair(theta: float, sigma: float, wavelength: float, size: int,
                extent: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Even and odd Gabor kernels g^0_DS, g^{pi/2}_DS at orientation theta (paper eq. 9).
+    """Even and odd Gabor kernels g^0_DS, g^{pi/2}_DS at orientation theta (paper eq. 9 [1]_).
 
     ``g = exp(-(x'^2 + y'^2) / (2 sigma^2)) cos(2 pi x' / lambda + psi)`` with
     ``x' = x cos(theta) + y sin(theta)``, ``y' = -x sin(theta) + y cos(theta)``, x along columns
@@ -328,6 +354,11 @@ def gabor_pair(theta: float, sigma: float, wavelength: float, size: int,
     Returns
     -------
     even, odd : ndarray (size, size)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 9.
     """
     x, y = _grid(size, extent)
     rx = x * math.cos(theta) + y * math.sin(theta)
@@ -339,7 +370,7 @@ def gabor_pair(theta: float, sigma: float, wavelength: float, size: int,
 
 def center_surround_kernel(sigma: float, wavelength: float, phase: float, size: int,
                            extent: float = 1.0) -> np.ndarray:
-    """Antagonistic centre-surround kernel g_CS (paper eq. 11).
+    """Antagonistic centre-surround kernel g_CS (paper eq. 11 [1]_).
 
     ``g_CS = 1 - exp(-r^2 / (2 sigma^2)) cos(2 pi r^2 / lambda + psi)``; with psi = 0 the centre
     weight is 0 and the surround approaches 1.
@@ -354,6 +385,11 @@ def center_surround_kernel(sigma: float, wavelength: float, phase: float, size: 
     Returns
     -------
     g_CS : ndarray (size, size)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eq. 11.
     """
     x, y = _grid(size, extent)
     r2 = x * x + y * y
@@ -371,7 +407,7 @@ def _orientation_energy(slow: np.ndarray, fast: np.ndarray, even: np.ndarray,
 def motion_energy(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
                   fast_off: np.ndarray, pairs: list[tuple[np.ndarray, np.ndarray]],
                   v_on: float, v_off: float) -> np.ndarray:
-    """Ganglion motion energy R^theta = v+ E+^theta + v- E-^theta (paper eqs. 10, 15, 16).
+    """Ganglion motion energy R^theta = v+ E+^theta + v- E-^theta (paper eqs. 10, 15, 16 [1]_).
 
     Parameters
     ----------
@@ -388,6 +424,11 @@ def motion_energy(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray
         R^theta for theta_k = k pi / n, k = 0..2n-1. The second half is the negation of the
         first: the even kernel is symmetric and the odd one antisymmetric under theta -> theta + pi,
         so R^{theta + pi} = -R^theta exactly.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eqs. 10, 15, 16.
     """
     n = len(pairs)
     h, w = slow_on.shape
@@ -472,7 +513,7 @@ def motion_components(v: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def center_surround_inhibition(response: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """SAC inhibition S = relu(B (*) g_CS) (paper eqs. 12-14).
+    """SAC inhibition S = relu(B (*) g_CS) (paper eqs. 12-14 [1]_).
 
     Parameters
     ----------
@@ -484,6 +525,11 @@ def center_surround_inhibition(response: np.ndarray, kernel: np.ndarray) -> np.n
     Returns
     -------
     S : ndarray (H, W)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eqs. 12-14.
     """
     return np.maximum(correlate(response, kernel), 0.0)
 
@@ -491,7 +537,7 @@ def center_surround_inhibition(response: np.ndarray, kernel: np.ndarray) -> np.n
 def approach_map(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
                  fast_off: np.ndarray, cs_kernel: np.ndarray,
                  weights: tuple[float, float, float, float]) -> np.ndarray:
-    """Approach-sensitive map G of the ganglion cells (paper eqs. 19, 20).
+    """Approach-sensitive map G of the ganglion cells (paper eqs. 19, 20 [1]_).
 
     ``G1+ = relu(relu(B+s) - S1-)``, ``G2+ = relu(relu(B+f) - S2-)``,
     ``G1- = relu(relu(B-s) - S1+)``, ``G2- = relu(relu(B-f) - S2+)``, where
@@ -513,6 +559,11 @@ def approach_map(slow_on: np.ndarray, fast_on: np.ndarray, slow_off: np.ndarray,
     -------
     g : ndarray (H, W)
         G, positive where the approach is seen.
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eqs. 19, 20.
     """
     w1_on, w2_off, w1_off, w2_on = weights
     g = np.zeros_like(slow_on)
@@ -559,7 +610,7 @@ def group(g: np.ndarray) -> np.ndarray:
 
 def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
                    step: int = 1) -> np.ndarray:
-    """Smoothing with the attention Gaussian g_sigma (paper eqs. 21, 22).
+    """Smoothing with the attention Gaussian g_sigma (paper eqs. 21, 22 [1]_).
 
     ``normalised=False`` uses the printed ``exp(-r^2/2 sigma^2) / (2 pi sigma^2)`` on a
     size x size window; ``True`` uses OpenCV's GaussianBlur (sampled, normalised to sum 1),
@@ -580,6 +631,11 @@ def attention_blur(image: np.ndarray, sigma: float, size: int, normalised: bool,
     Returns
     -------
     ndarray (H, W)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eqs. 21, 22.
     """
     if step > 1:
         return coarse_attention_blur(coarse_grid(image, step), image.shape, sigma, size,
@@ -619,7 +675,7 @@ def coarse_grid_blur(coarse: np.ndarray, sigma: float, size: int, normalised: bo
 
 def approach_attention(g: np.ndarray, sigma: float, size: int, normalised: bool,
                        gamma_a: float, step: int = 1) -> np.ndarray:
-    """Approach-sensitive attention mask M_a = B(G (*) g_sigma, gamma_a) (paper eqs. 22, 23).
+    """Approach-sensitive attention mask M_a = B(G (*) g_sigma, gamma_a) (paper eqs. 22, 23 [1]_).
 
     Parameters
     ----------
@@ -633,13 +689,18 @@ def approach_attention(g: np.ndarray, sigma: float, size: int, normalised: bool,
     Returns
     -------
     m_a : ndarray of bool (H, W)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eqs. 22, 23.
     """
     return attention_blur(g, sigma, size, normalised, step) > gamma_a
 
 
 def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, size: int,
                         normalised: bool, gamma_d: float, step: int = 1) -> np.ndarray:
-    """Directionally selective attention M_d (paper eqs. 24-26).
+    """Directionally selective attention M_d (paper eqs. 24-26 [1]_).
 
     The top-k orientations by ``R_sum(theta) = sum_xy R^theta`` form Theta_I;
     ``V' = V - max_{Theta_I} R`` and ``M_d = B(V' (*) g_sigma, gamma_d)``.
@@ -660,6 +721,11 @@ def direction_attention(r: np.ndarray, v: np.ndarray, top_k: int, sigma: float, 
     Returns
     -------
     m_d : ndarray of bool (H, W)
+
+    References
+    ----------
+    .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
+       Detection in Cluttered and Dynamic Backgrounds", eqs. 24-26.
     """
     if top_k:
         totals = r.sum(axis=(1, 2))
