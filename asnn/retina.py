@@ -819,7 +819,18 @@ def sigmoid_output(u: float, n_cells: int) -> float:
 
 def potential_for_output(out: float) -> float:
     """|u| / N at which :func:`sigmoid_output` reads ``out`` (in (0.5, 1)): eq. 32 inverted,
-    log(out / (1 - out))."""
+    log(out / (1 - out)).
+
+    Parameters
+    ----------
+    out : float
+        An output of :func:`sigmoid_output`, in [0.5, 1) (1 itself divides by zero).
+
+    Returns
+    -------
+    float
+        |u| / N, 0 for ``out`` = 0.5.
+    """
     return math.log(out / (1.0 - out))
 
 
