@@ -127,7 +127,7 @@ class ASNN:
     frames' timestamps: the paper assumes a constant frame rate. Time to contact and expansion
     rates are measured in the frames' own time: ``step(frame, t)`` with the frame's timestamp in
     seconds, or ``params.dt`` per frame without one. The first frame of a stream only primes
-    the state: its response is all zeros (u = 0, out = 0.5, no spikes).
+    the state: its response is silent (u = 0, out = 0.5, no spikes, no targets).
 
     Examples
     --------

@@ -839,7 +839,8 @@ MAX_SPIKES = 2**31 - 1  # the spike count saturates here (eq. 33 grows without b
 
 def spike_count(out: float, k_sp: float, t_sp: float) -> int:
     """spike(t) = floor(exp(K_sp (out - T_sp))) (paper eq. 33 [1]_), at most :data:`MAX_SPIKES`:
-    past it, exp overflows a float (from an exponent of 710) and no warning changes.
+    capped so that exp never overflows a float (it would from an exponent of 710); past the
+    cap no warning changes.
 
     Parameters
     ----------
