@@ -170,10 +170,19 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
     current = state.stream
     gap = max_gap * state.seq_step
     broken = None if current is None else current.continues(frame, gap)
+    previous = state.previous
+    if (current is not None and broken is None and current.frames == 1
+            and current.reason == "seq-backwards"
+            and previous is not None and previous.seq > current.seq
+            and received - previous.arrival <= takeover_after
+            and previous.continues(frame, gap) is None):
+        # the frame fits the stream just replaced as well as the one-frame stream that
+        # replaced it (two publishers whose seqs are within max_gap of each other): the
+        # stream there first goes on, so two publishers interleave (not a restart)
+        broken = "interleaved"
     if current is not None and broken is None:
         current.advance(frame, received)
         return current
-    previous = state.previous
     if (current is not None and previous is not None
             and received - previous.arrival <= takeover_after
             and previous.continues(frame, gap) is None):

@@ -587,6 +587,34 @@ def test_an_intruder_with_a_seq_of_its_own_cannot_take_the_robot_over():
     assert warned["attacked"] >= warned["alone"] - 2 > 0
 
 
+def test_a_second_camera_a_few_frames_behind_on_the_robots_key_is_an_intrusion():
+    """Two cameras given one robot id, started half a second apart: the later one's seq 10
+    behind, its stamps between the first's. Each of its frames went back in seq (a new stream)
+    and the first camera's next frame continued that new stream (ahead by 11, later), so the
+    intrusion was never seen and the robot's model was reset every frame: no warning, a
+    dashboard tile that looked live (a dashboard operator's trial)."""
+    scene = make_scene("looming")
+    clock = FakeClock()
+    alone, core = WorkerCore(clock=clock), WorkerCore(clock=clock)
+    warned = {"alone": 0, "attacked": 0}
+    for seq, image in enumerate(scene.frames):
+        clock.now += 0.05
+        for name, target in (("alone", alone), ("attacked", core)):
+            warned[name] += bool(feed(target, "r1", image, 10 + seq, stamp=seq * 0.05).collision)
+        if seq >= 5:  # the second camera: its own view, seq 10 behind, stamped 25 ms later
+            clock.now += 0.001
+            core.offer("asnn/r1/frame", payload(scene.frames[seq - 5], seq, stamp=seq * 0.05
+                                                + 0.025))
+            job = core.take(timeout=0)
+            if job is not None:
+                core.process(job)
+    stats = core.stats()
+    assert stats["intrusions"] == 1 and sum(stats["resets"].values()) <= 2, stats
+    assert stats["invalid"]["second-publisher"] >= len(scene.frames) - 5 - 2
+    assert core.status()["robots"]["r1"]["contested"] is True
+    assert warned["attacked"] >= warned["alone"] - 2 > 0
+
+
 def test_after_an_intrusion_a_restarted_camera_is_followed_once_the_old_stream_is_silent():
     scene = make_scene("looming")
     clock = FakeClock()
