@@ -268,6 +268,21 @@ def test_consecutive_warnings_make_one_log_entry_per_episode():
     assert [e["seq"] for e in store.delta(version)["warnings"]] == [25, 80]
 
 
+def test_two_robots_warning_on_keep_one_log_entry_each_past_a_newer_one():
+    """A dashboard operator's trial: the log is ordered by last change, and an episode behind
+    a newer robot's was taken for one that had left the log: a and b each got a second row,
+    the first frozen, and the duplicates pushed other robots' warnings out sooner."""
+    store = FleetStore(clock=Clock())
+    for robot in ("a", "b", "c"):  # c's one-frame episode is the newest entry
+        offer_response(store, response(robot, 10, collision=True), "warning")
+    for seq in range(11, 16):  # a and b go on warning, frame after frame
+        for robot in ("a", "b"):
+            offer_response(store, response(robot, seq, collision=True), "warning")
+    log = store.delta(0)["warnings"]
+    assert sorted((e["robot"], e["first_seq"], e["seq"], e["count"]) for e in log) == [
+        ("a", 10, 15, 6), ("b", 10, 15, 6), ("c", 10, 10, 1)]
+
+
 def test_a_warning_after_the_camera_restarted_is_a_new_log_entry():
     """A probe: warnings at seq 100-130, then, after a restart, seq 110-125 an hour later on
     the camera's clock were counted into the first row, shown with its old time."""

@@ -258,7 +258,11 @@ class FleetStore:
     def _log_warning_locked(self, state: _Robot, w: Response, version: int) -> None:
         """One log entry per warning episode: consecutive warnings of a robot extend it."""
         entry = state.episode
-        if (entry is not None and self._log and entry["id"] >= self._log[0][1]["id"]
+        # where the entry is in the log, if still there: the log is ordered by last change,
+        # not by id (an id test took a continuing episode behind a newer one for gone)
+        at = None if entry is None else next(
+            (i for i, (_, item) in enumerate(self._log) if item is entry), None)
+        if (at is not None
                 and entry["first_seq"] <= w.seq <= entry["seq"] + EPISODE_GAP
                 and entry["first_stamp"] <= w.stamp <= entry["stamp"] + EPISODE_GAP_S):
             entry["count"] += 1
@@ -267,11 +271,7 @@ class FleetStore:
             if w.seq >= entry["seq"]:
                 entry.update(seq=w.seq, stamp=w.stamp, out=w.out, spike_rate=w.spike_rate,
                              targets=len(w.targets))
-            # move it to the end: the log is ordered by the last change
-            for i, (_, item) in enumerate(self._log):
-                if item is entry:
-                    del self._log[i]
-                    break
+            del self._log[at]  # to the end: the log is ordered by the last change
             self._log.append((version, entry))
             return
         self._next_entry += 1
