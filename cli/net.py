@@ -179,10 +179,13 @@ def format_status(status: dict) -> str:
     worker follow ``frames in`` (those of the discovery scan in brackets); robots whose frames
     are detected at fewer than ``SLOW_FPS`` a second are listed under ``slow`` (and those whose
     stamps tell the model no rate, a camera slower than a frame a second among them, under
-    ``untimed``), and those with a frame refused in the last minute under ``refused lately``,
-    with the latest reason; fields an older worker does not report are left out.
+    ``untimed``), those from which no frame has come for more than ``STALE_S`` (the
+    dashboard's stale) under ``silent``, and those with a frame refused in the last minute
+    under ``refused lately``, with the latest reason; fields an older worker does not report
+    are left out.
     """
     from asnn.params import SLOW_FPS
+    from clients.fleet import STALE_S
 
     stats = status["stats"]
     traffic = status.get("traffic")
@@ -197,6 +200,8 @@ def format_status(status: dict) -> str:
     slow = ", ".join(f"{r} ({s['fps']:g} fps)" for r, s in robots.items()
                      if s.get("fps") is not None and s["fps"] < SLOW_FPS)
     untimed = ", ".join(r for r, s in robots.items() if s.get("untimed"))
+    silent = ", ".join(f"{r} ({s['idle_s']:.0f} s)" for r, s in robots.items()
+                       if s.get("idle_s", 0) > STALE_S)
     # robots refused in the last minute, the latest first: why a camera gets no response (not a
     # robot refused for want of a place that has one now)
     # (``count`` is every refusal of the robot's, for any reason: the latest reason is one)
@@ -214,6 +219,7 @@ def format_status(status: dict) -> str:
             + (f"slow: {slow}; " if slow else "")
             + (f"untimed (stamps no frame period: under 1 fps, or not seconds): {untimed}; "
                if untimed else "")
+            + (f"silent (no frame for over {STALE_S:g} s): {silent}; " if silent else "")
             + (f"refused lately: {refused}; " if refused else "")
             + f"live workers {', '.join(status.get('workers', []))}")
 

@@ -780,7 +780,10 @@ class WorkerCore:
                           "bytes": s.arrived_bytes, "warm": self._warm_locked(s),
                           # its stamps no frame period (a camera under 1 fps, a clock in
                           # other units): fps None, and no less in trouble than a slow one
-                          "fps": s.fps, "untimed": s.untimed_frames >= PERIOD_FRAMES}
+                          "fps": s.fps, "untimed": s.untimed_frames >= PERIOD_FRAMES,
+                          # since its latest frame arrived: a camera that died stays listed
+                          # until idle_timeout, and only this tells it from a live one
+                          "idle_s": round(now - s.last_seen, 1)}
                       for r, s in sorted(self._robots.items())}
             backlog = sum((s.pending is not None) + s.busy for s in self._robots.values())
             refused = {r: {"reason": e["reason"], "detail": e["detail"], "count": e["count"],

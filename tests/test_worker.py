@@ -482,6 +482,34 @@ def test_the_rate_a_robot_is_detected_at_is_reported_and_a_slow_one_logged(caplo
     assert core.status()["robots"]["slow"]["fps"] is None
 
 
+def test_status_tells_a_camera_that_stopped_from_a_live_one(looming):
+    """A dashboard operator's trial: a camera killed was listed, for the minute until
+    idle_timeout, exactly as a live one ('serving, fps 20, warm'), where the dashboard showed it
+    stale after 3 s."""
+    from cli.net import format_status
+    from clients.fleet import STALE_S
+
+    clock = FakeClock()
+    core = WorkerCore(clock=clock)
+    for seq in range(6):
+        clock.now += 0.05
+        feed(core, "dead", looming.frames[seq], seq, stamp=seq * 0.05)
+        feed(core, "live", looming.frames[seq], seq, stamp=seq * 0.05)
+    for seq in range(6, 6 + int(20 / 0.05)):  # 20 s more of the live camera alone
+        clock.now += 0.05
+        feed(core, "live", looming.frames[seq % 20], seq, stamp=seq * 0.05)
+    robots = core.status()["robots"]
+    assert robots["dead"]["idle_s"] == pytest.approx(20.0, abs=0.1)
+    assert robots["live"]["idle_s"] == 0.0
+    assert f"silent (no frame for over {STALE_S:g} s): dead (20 s);" in format_status(
+        core.status())
+    clock.now += STALE_S  # the live camera quiet for STALE_S: not yet silent
+    assert "dead (23 s);" in format_status(core.status())
+    clock.now += 1.0  # then for more: listed too
+    assert "silent (no frame for over 3 s): dead (24 s), live (4 s);" in format_status(
+        core.status())
+
+
 def test_a_camera_that_sends_each_frame_twice_is_detected_at_the_rate_of_its_new_frames(
         caplog, looming):
     """A 10 fps camera up-sampled to 20 (every second frame repeats the one before): the model
