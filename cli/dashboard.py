@@ -19,10 +19,11 @@ log = logging.getLogger("asnn")
 
 
 def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
-                refusals: bool = False) -> int:
+                refusals: bool = False, on_router=None) -> int:
     """Feed ``store`` from the fleet's subscribers (``refusals``: the workers' refusal notices
     too) while ``server`` (a context manager that serves it) runs, until SIGINT or SIGTERM;
-    ``server`` is closed on every path."""
+    ``server`` is closed on every path. ``on_router`` is told whether the session reaches its
+    router (:class:`service.link.RouterWatch`)."""
     from clients.fleet import FleetSubscriber
 
     try:
@@ -31,7 +32,7 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
         server.close()
         return fail(str(exc))
     stop = stop_on_signals()
-    with session, RouterWatch(session, name), \
+    with session, RouterWatch(session, name, on_change=on_router), \
             FleetSubscriber(session, store, refusals=refusals) as subscriber, server:
         print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
               flush=True)
@@ -53,7 +54,7 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
         return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
     host, port = server.address
     return serve_fleet(args, store, server, "dashboard", f"http://{host}:{port}/",
-                       refusals=True)
+                       refusals=True, on_router=store.router_changed)
 
 
 def register(subparsers) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 
 __all__ = ["RouterWatch", "WATCH_INTERVAL"]
 
@@ -30,10 +31,16 @@ class RouterWatch:
         What the log lines call the process (``camera r1``, ``worker w1``, ``dashboard``).
     interval : float
         Seconds between two looks.
+    on_change : callable, optional
+        Called with True when a router is reached (first or again) and False when it is lost,
+        on the watch's thread: what a process shows its users besides the log (the
+        dashboard's page).
     """
 
-    def __init__(self, session, name: str, interval: float = WATCH_INTERVAL):
+    def __init__(self, session, name: str, interval: float = WATCH_INTERVAL,
+                 on_change: Callable[[bool], None] | None = None):
         self.session, self.name, self.interval = session, name, interval
+        self.on_change = on_change
         self.connected: bool | None = None  # None until a router was seen
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="router-watch", daemon=True)
@@ -54,12 +61,20 @@ class RouterWatch:
             if routers and self.connected is not True:
                 if self.connected is False:
                     log.info("%s: reached the router again (%s)", self.name, ", ".join(routers))
-                self.connected = True
+                self._changed(True)
             elif not routers and self.connected:
                 log.warning("%s: lost its router; Zenoh retries the connection (nothing is "
                             "sent or received meanwhile)", self.name)
-                self.connected = False
+                self._changed(False)
             self._stop.wait(self.interval)
+
+    def _changed(self, connected: bool) -> None:
+        self.connected = connected
+        if self.on_change is not None:
+            try:
+                self.on_change(connected)
+            except Exception:  # the watch outlives a listener's bug, which is logged
+                log.exception("%s: router watch listener failed", self.name)
 
     def close(self) -> None:
         self._stop.set()

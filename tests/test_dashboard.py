@@ -268,6 +268,17 @@ def test_consecutive_warnings_make_one_log_entry_per_episode():
     assert [e["seq"] for e in store.delta(version)["warnings"]] == [25, 80]
 
 
+def test_the_state_says_whether_the_dashboard_reaches_its_router():
+    store = FleetStore(clock=Clock())
+    assert store.delta(0)["router"] is None  # not known yet (or peers without a router)
+    store.router_changed(True)
+    version = store.version
+    store.router_changed(True)  # no change, no update
+    assert store.version == version and store.delta(0)["router"] is True
+    store.router_changed(False)  # an update goes out to every page
+    assert store.version == version + 1 and store.delta(version)["router"] is False
+
+
 def test_two_robots_warning_on_keep_one_log_entry_each_past_a_newer_one():
     """A dashboard operator's trial: the log is ordered by last change, and an episode behind
     a newer robot's was taken for one that had left the log: a and b each got a second row,

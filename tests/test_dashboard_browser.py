@@ -386,6 +386,14 @@ def test_browser_recovers_a_refused_stream_forgets_any_name_and_shows_no_stale_c
                             "the page opening a new stream once one is free")
             wait_for_tiles(chrome, lambda s: set(s) == {"warn", "plain", "constructor",
                                                         "toString"}, "four tiles")
+            # the server's router lost: the page says so (a dashboard operator read "live" and
+            # every robot stale, and went looking for failed workers and cameras)
+            store.router_changed(False)
+            chrome.wait_for("document.getElementById('conn')?.textContent === "
+                            "'no router: robots unknown'", "the page told of the lost router")
+            store.router_changed(True)
+            chrome.wait_for("document.getElementById('conn')?.textContent === 'live'",
+                            "the page told of the router again")
             quiet.set()
             shown = wait_for_tiles(chrome, lambda s: set(s) == {"warn", "plain"},
                                    "the silent robots forgotten, whatever their names")

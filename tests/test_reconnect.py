@@ -4,10 +4,12 @@ session of this test) reconnect by themselves and the stream resumes."""
 import json
 import signal
 import time
+import urllib.request
 
 import zenoh
 
 from service.config import ZenohOptions, make_config
+from service.demo import free_port
 
 from netutil import SHORT_LEASE, Fleet, Responses, wait_for
 
@@ -17,16 +19,26 @@ def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
     router, worker, alerts, common = fleet.router, fleet.worker, fleet.alerts, fleet.common
     camera = procs("camera", "--robot", "r1", "--source", "synthetic:looming", "--loop",
                    "--fps", "20", "--wait", "30", *common)
+    port = free_port()
+    dashboard = procs("dashboard", "--port", str(port), *common)
+
+    def dashboard_router():  # what the page is told of the dashboard's own link
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/state", timeout=5) as reply:
+            return json.loads(reply.read())["router"]
     options = ZenohOptions(mode="client", connect=(fleet.endpoint,), config_file=fleet.config)
     with zenoh.open(make_config(options)) as session:
         responses = Responses(session)
         wait_for(lambda: len(responses.since(0, "r1")) >= 20, what="the first responses")
         wait_for(lambda: alerts.out, timeout=60, what="a first warning")
+        dashboard.wait_line("dashboard on http")
+        wait_for(lambda: dashboard_router() is True, what="the dashboard's router reached")
 
         assert router.stop(signal.SIGKILL) != 0
         time.sleep(2.0)  # longer than the lease: every session has seen the router go
-        for proc in (camera, worker, alerts):  # and each says so
+        for proc in (camera, worker, alerts, dashboard):  # and each says so
             proc.wait_line("lost its router")
+        # the page says the robots are unknown, not that every worker and camera failed
+        wait_for(lambda: dashboard_router() is False, what="the page told of the lost router")
         down = len(responses.since(0))
         warned = len(alerts.out)
         restarted = time.monotonic()
@@ -35,12 +47,13 @@ def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
         wait_for(lambda: len(responses.since(restarted, "r1")) >= 20, timeout=60,
                  what="responses after the restart")
         wait_for(lambda: len(alerts.out) > warned, timeout=60, what="warnings after the restart")
-        for proc in (camera, worker, alerts):
+        for proc in (camera, worker, alerts, dashboard):
             proc.wait_line("reached the router again")
+        wait_for(lambda: dashboard_router() is True, what="the page told of the router again")
         resumed = min(t for t, _ in responses.items if t >= restarted) - restarted
         print(f"\nstream resumed {resumed:.2f} s after the router restarted")
         assert len(responses.since(0)) > down
-    for proc in (camera, worker, alerts):
+    for proc in (camera, worker, alerts, dashboard):
         assert proc.popen.poll() is None, "\n".join(proc.err[-20:])
     new = [json.loads(line) for line in alerts.out[warned:]]
     assert all(w["robot"] == "r1" and w["collision"] for w in new)

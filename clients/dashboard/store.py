@@ -146,6 +146,7 @@ class FleetStore:
         self._robots: dict[str, _Robot] = {}
         self._log: deque = deque(maxlen=log_size)  # (version, entry)
         self._version = 0
+        self._router: bool | None = None  # whether the session reaches its router, once known
         self._next_entry = 0
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
@@ -186,6 +187,17 @@ class FleetStore:
                 self._add_warning_locked(state, message, version)
             self._changed.notify_all()
         return robot
+
+    def router_changed(self, connected: bool) -> None:
+        """Whether the dashboard's Zenoh session reaches its router (told by
+        :class:`service.link.RouterWatch`): without one no message comes from any robot, so
+        the page says so rather than show every robot stale as if its worker or camera had
+        failed."""
+        with self._lock:
+            if self._router != connected:
+                self._router = connected
+                self._bump_locked()
+                self._changed.notify_all()
 
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:
@@ -349,7 +361,8 @@ class FleetStore:
         (if new) the preview added since then; ``live``: for every robot, ``[age, stale,
         collision]`` (age in seconds since its last response, ``None`` if none);
         ``warnings``: log entries added since then, oldest first; ``full``: whether this
-        replaces everything the receiver had.
+        replaces everything the receiver had; ``router``: whether the dashboard's session
+        reaches its router (``None`` until a router was seen: peers without one, or the start).
         """
         with self._lock:
             now = self.clock()
@@ -369,7 +382,7 @@ class FleetStore:
             warnings = [dict(entry) for version, entry in self._log if full or version > since]
             return {
                 "version": self._version, "full": full, "robots": robots, "live": live,
-                "warnings": warnings,
+                "warnings": warnings, "router": self._router,
                 "config": {"history": self.history, "hold": self.hold,
                            "stale_after": self.stale_after, "slow_fps": SLOW_FPS,
                            "max_points": MAX_POINTS},

@@ -319,7 +319,33 @@
 
   // ---------------------------------------------------------------- events
 
+  // The indicator: the event stream (the page's link to its server), and the server's own link
+  // to the Zenoh router, without which every robot reads stale for no fault of its own.
+  let streamOpen = false;
+  let routerLost = false;
+
+  function showConnection() {
+    if (!streamOpen) {
+      conn.dataset.state = "lost";
+      conn.textContent = "reconnecting";
+      conn.title = "the page lost its server; the browser reconnects";
+    } else if (routerLost) {
+      conn.dataset.state = "lost";
+      conn.textContent = "no router: robots unknown";
+      conn.title = "the dashboard's server lost its Zenoh router: no robot is heard until " +
+        "Zenoh reconnects, so every robot reads stale whatever it is doing";
+    } else {
+      conn.dataset.state = "live";
+      conn.textContent = "live";
+      conn.title = "";
+    }
+  }
+
   function apply(delta) {
+    if (routerLost !== (delta.router === false)) {
+      routerLost = delta.router === false;
+      showConnection();
+    }
     config = delta.config || config;
     counts = delta.counts;
     if (delta.full) {
@@ -368,12 +394,12 @@
     source.addEventListener("update", handle);
     source.onopen = () => {
       retry = 1000;
-      conn.dataset.state = "live";
-      conn.textContent = "live";
+      streamOpen = true;
+      showConnection();
     };
     source.onerror = () => {
-      conn.dataset.state = "lost";
-      conn.textContent = "reconnecting";
+      streamOpen = false;
+      showConnection();
       // the browser retries a dropped stream by itself, but gives up for good on an HTTP
       // error status (503 while every stream is taken): open a new one then, backing off
       if (source.readyState === EventSource.CLOSED) {
