@@ -27,6 +27,7 @@ from service import keys
 from service.camera import Source, publish_frames
 from service.demo import free_port
 from service.messages import Preview, Refusal, Response, TargetMsg, decode_preview, encode
+from service.streams import CONTESTED_FOR_S
 
 ROOT = Path(__file__).resolve().parents[1]
 TIMEOUT = 20.0
@@ -49,10 +50,12 @@ def response(robot="r1", seq=0, stamp=None, collision=False, rate=0.0, targets=(
                              for x, y in targets])
 
 
-def preview(seq=0, size=(64, 48), stamp=1000.0):
+def preview(seq=0, size=(64, 48), stamp=None):
+    """A thumbnail of the frame ``response(seq=seq)`` answers (its stamp, unless given)."""
     image = np.zeros(size[::-1], np.uint8)
     image[10:30, 20:40] = 255
-    return Preview.from_frame_image(image, seq=seq, stamp=stamp, width=32)
+    return Preview.from_frame_image(image, seq=seq, width=32,
+                                    stamp=1000.0 + seq * 0.05 if stamp is None else stamp)
 
 
 def offer_response(store, r, kind="response"):
@@ -235,6 +238,48 @@ def test_previews_are_sent_once_and_targets_match_the_previewed_frame():
     offer_response(store, response(seq=5))
     tile = store.delta(version)["robots"]["r1"]
     assert "src" not in tile["preview"] and tile["preview"]["seq"] == 3  # not sent again
+
+
+def test_a_second_cameras_previews_are_not_shown_under_the_robots_answers():
+    """A dashboard operator's trial: with a second camera on a robot's key (its frames refused
+    by the worker), the thumbnail was the intruder's picture, drawn with the robot's targets.
+    A preview is shown where its stamp lies between those of the answered frames around its
+    seq (CONTRACT: a preview carries its frame's seq and stamp)."""
+    clock = Clock()
+    store = FleetStore(clock=clock)
+    for seq in (100, 101, 103, 104):  # the worker skipped 102 under load
+        offer_response(store, response(seq=seq, targets=[(5.0, 6.0)]))
+    shown = []
+    for seq, stamp in [(102, None),  # a skipped frame's: between its neighbours
+                       (104, None),  # an answered frame's
+                       (106, None),  # a frame not answered yet
+                       (102, 1000.0 + 120 * 0.05),  # the second camera: seq 18 behind
+                       (20, 1000.0 + 104 * 0.05),  # seq far behind, stamped now
+                       (104, 1000.0 + 104 * 0.05 + 0.5)]:  # the same seq, half a second on
+        clock.now += 0.5  # one preview a robot every PREVIEW_INTERVAL
+        store.offer("asnn/r1/preview", encode(preview(seq=seq, stamp=stamp)))
+        shown.append(store.delta(0)["robots"]["r1"]["preview"]["seq"])
+    assert shown == [102, 104, 106, 106, 106, 106]
+    assert store.skipped["foreign-preview"] == 3
+    clock.now += 3.5  # no worker answers any more: the camera alone is heard, all are shown
+    store.offer("asnn/r1/preview", encode(preview(seq=20, stamp=1000.0 + 130 * 0.05)))
+    assert store.delta(0)["robots"]["r1"]["preview"]["seq"] == 20
+
+
+def test_a_second_publisher_stays_on_the_tile_while_the_robot_is_answered():
+    """The worker answers the robot's own frames and refuses the second camera's: a response
+    after the refusal hid it, and the tile looked normal while asnn status said contested."""
+    clock = Clock()
+    store = FleetStore(clock=clock)
+    notice = Refusal(robot="r1", worker="w1", reason="second-publisher",
+                     detail="frame 17 does not continue the stream of r1", count=22)
+    store.offer("asnn/r1/refused", encode(notice))
+    for seq in range(1, 70):
+        clock.now += 0.5
+        offer_response(store, response(seq=seq))
+        refused = store.delta(0)["robots"]["r1"]["refused"]
+        assert (refused is not None) == (seq * 0.5 <= CONTESTED_FOR_S), seq
+    assert refused is None  # the worker's contested window (no notice for 30 s) is over
 
 
 def test_targets_carry_the_trackers_id_and_time_to_contact_when_the_model_gives_them():

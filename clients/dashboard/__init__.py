@@ -11,7 +11,9 @@ Three parts, each usable alone:
   session: ``<prefix>/*/response``, ``<prefix>/*/preview`` and ``<prefix>/*/warning`` (an
   advanced subscriber asking the workers' caches for history, so the latest warning of each
   robot shows at once, as in ``asnn alerts``), and for the dashboard ``<prefix>/*/refused`` (a
-  worker refuses a robot's frames: its tile says why until a response comes).
+  worker refuses a robot's frames: its tile says why until a response comes; a second
+  publisher's for ``service.streams.CONTESTED_FOR_S`` whatever comes, and that camera's
+  previews are not shown: docs/operations.md, "Two publishers on one key").
 - :class:`~clients.dashboard.server.DashboardServer` serves the page (one HTML, one script, one
   style sheet, all from this package: nothing from the network) and Server-Sent Events from the
   standard library's ``ThreadingHTTPServer``. Each browser gets one full snapshot, then

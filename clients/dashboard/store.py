@@ -17,6 +17,7 @@ from asnn.params import SLOW_FPS
 from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response, track_label
+from service.streams import CONTESTED_FOR_S
 
 from ..fleet import STALE_S, stale_robot, take_fleet_sample
 
@@ -36,6 +37,7 @@ EPISODE_GAP = 20      # a warning at most this many frames after a robot's previ
 EPISODE_GAP_S = 5.0   # ... and at most this many seconds later by its stamp (not a camera that
                       # restarted with its seq counting up again from below)
 RECENT_TARGETS = 32   # responses whose targets are kept to match a preview's seq
+PREVIEW_STAMP_SLACK_S = 0.001  # a preview's stamp against its frame's answers (a camera's rounding)
 MAX_PREVIEW_TOTAL = 16 * 1024 * 1024   # all thumbnails held, encoded
 # thumbnails taken, so that what every page is sent stays bounded in bytes a second (a flood of
 # 30 KB previews from 1,000 ids sent each page 20-34 MB/s, and a browser fell behind and was
@@ -173,6 +175,11 @@ class FleetStore:
             self.received[kind] += 1
             now = self.clock()
             state.touched = now
+            if kind == "preview" and not self._answered_frames_locked(state, message, now):
+                # a second publisher's thumbnail (the worker follows the other camera):
+                # shown, it put one camera's picture under the other's targets
+                self.skipped["foreign-preview"] += 1
+                return robot
             if kind == "preview" and not self._take_preview_locked(state, len(message.data), now):
                 self.skipped["preview"] += 1
                 return robot
@@ -295,6 +302,19 @@ class FleetStore:
             "worker": w.worker}
         self._log.append((version, entry))
 
+    def _answered_frames_locked(self, state: _Robot, preview: Preview, now: float) -> bool:
+        """Whether a thumbnail can be of the frames the robot's responses answer: where they
+        come (not stale), its stamp lies between those of the answered frames around its
+        ``seq`` (1 ms slack; frames the worker skipped have none of their own). Two cameras
+        on one key differ there (a second one's frames are refused, its previews not)."""
+        if (state.answered is None or now - state.answered > self.stale_after
+                or not state.shown):
+            return True  # no worker answers it: its camera alone is heard
+        before = max(((q, t) for q, t in state.shown if q <= preview.seq), default=None)
+        after = min(((q, t) for q, t in state.shown if q >= preview.seq), default=None)
+        return ((before is None or before[1] <= preview.stamp + PREVIEW_STAMP_SLACK_S)
+                and (after is None or after[1] >= preview.stamp - PREVIEW_STAMP_SLACK_S))
+
     def _take_preview_locked(self, state: _Robot, size: int, now: float) -> bool:
         """Whether a thumbnail of ``size`` bytes arriving at ``now`` is taken: at most one a
         robot every PREVIEW_INTERVAL seconds, and PREVIEW_RATE bytes a second in all (a bucket
@@ -378,7 +398,8 @@ class FleetStore:
                 collision = not stale and state.collision(self.hold)
                 live[name] = [None if age is None else round(age, 3), stale, collision]
                 if full or state.changed > since:
-                    robots[name] = self._tile_locked(state, since, full, collision, stale)
+                    robots[name] = self._tile_locked(state, since, full, collision, stale,
+                                                     now)
             warnings = [dict(entry) for version, entry in self._log if full or version > since]
             return {
                 "version": self._version, "full": full, "robots": robots, "live": live,
@@ -394,7 +415,7 @@ class FleetStore:
             }
 
     def _tile_locked(self, state: _Robot, since: int, full: bool, collision: bool,
-                     stale: bool) -> dict:
+                     stale: bool, now: float) -> dict:
         r, w = state.response, state.warning
         reset = full or state.points_reset > since
         tile = {
@@ -410,7 +431,7 @@ class FleetStore:
                 "preset": r.preset, "worker": r.worker, "latency_ms": r.latency_ms,
                 "dropped": r.dropped},
             "last_warning": None if w is None else {"seq": w.seq, "stamp": w.stamp},
-            "refused": self._refused_locked(state),
+            "refused": self._refused_locked(state, now),
             "targets": self._targets_locked(state, collision),
         }
         if state.preview is not None:
@@ -420,10 +441,16 @@ class FleetStore:
         return tile
 
     @staticmethod
-    def _refused_locked(state: _Robot) -> dict | None:
-        """A worker's refusal of the robot's frames, unless a response came after it."""
+    def _refused_locked(state: _Robot, now: float) -> dict | None:
+        """A worker's refusal of the robot's frames, unless a response came after it; a second
+        publisher's for CONTESTED_FOR_S whatever came after (the robot's own frames are
+        answered while the other camera's are refused: the worker's ``contested``)."""
         notice = state.refused
-        if notice is None or (state.answered is not None and state.answered >= state.refused_at):
+        if notice is None:
+            return None
+        contested = (notice.reason == "second-publisher"
+                     and now - state.refused_at <= CONTESTED_FOR_S)
+        if not contested and state.answered is not None and state.answered >= state.refused_at:
             return None
         return {"worker": notice.worker, "reason": notice.reason, "detail": notice.detail,
                 "count": notice.count}
