@@ -5,7 +5,9 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
+from numba import config as numba_config
 from numba import njit
+from numba.core.caching import UserProvidedCacheLocator
 
 __all__ = ["kernel"]
 
@@ -35,27 +37,48 @@ def forget_stale_callers(package: Path, callee: str = "_fast.py") -> bool:
     the old machine code after ``_fast.py`` is edited. So the digest of ``callee`` is kept beside
     the cache, and when it differs (or is missing), the cache indexes (``*.nbi``) of every other
     file, in the package and its subpackages, are removed: numba then compiles those kernels
-    afresh. A cache that cannot be written (a read-only installation, whose sources do not
-    change either) is left alone.
+    afresh. Both places numba may keep them are cleared: beside the sources (``__pycache__``)
+    and, where ``NUMBA_CACHE_DIR`` is set, under it (one folder per source folder). A cache that
+    cannot be written (a read-only installation, whose sources do not change either) is left
+    alone.
 
     Returns whether indexes were removed.
     """
-    cache = package / "__pycache__"
     stem = callee.removesuffix(".py")
     try:
         digest = hashlib.sha256((package / callee).read_bytes()).hexdigest()
-        stamp = cache / f"{stem}.kernels.sha256"
-        if stamp.is_file() and stamp.read_text(encoding="ascii") == digest:
-            return False
-        stale = [index for index in package.glob("**/__pycache__/*.nbi")
-                 if not (index.parent == cache and index.name.startswith(stem + "."))]
-        for index in stale:
-            index.unlink(missing_ok=True)
-        cache.mkdir(exist_ok=True)
-        stamp.write_text(digest, encoding="ascii")
+        folders = [package, *(p for p in package.glob("**/") if p.name != "__pycache__")]
     except OSError:
         return False
-    return bool(stale)
+    removed = False
+    for place in _cache_places():
+        cache = place(package)
+        try:
+            stamp = cache / f"{stem}.kernels.sha256"
+            if stamp.is_file() and stamp.read_text(encoding="ascii") == digest:
+                continue
+            stale = [index for folder in dict.fromkeys(folders)
+                     for index in place(folder).glob("*.nbi")
+                     if not (folder == package and index.name.startswith(stem + "."))]
+            for index in stale:
+                index.unlink(missing_ok=True)
+            cache.mkdir(parents=True, exist_ok=True)
+            stamp.write_text(digest, encoding="ascii")
+        except OSError:
+            continue
+        removed = removed or bool(stale)
+    return removed
+
+
+def _cache_places():
+    """Where numba keeps the kernels of a source folder, as functions of the folder: beside the
+    sources, and under ``NUMBA_CACHE_DIR`` where it is set (numba's
+    ``UserProvidedCacheLocator``, which names a folder there after the source folder's path)."""
+    yield lambda folder: folder / "__pycache__"
+    if numba_config.CACHE_DIR:
+        root = Path(numba_config.CACHE_DIR)
+        yield lambda folder: root / UserProvidedCacheLocator.get_suitable_cache_subpath(
+            str(folder / "__init__.py"))
 
 
 forget_stale_callers(Path(__file__).parent)

@@ -40,3 +40,34 @@ def test_callers_indexes_go_when_the_callee_changes_and_stay_while_it_does_not(t
 def test_an_unreadable_package_is_left_alone(tmp_path):
     assert not forget_stale_callers(tmp_path / "missing")
     assert not (tmp_path / "missing").exists()
+
+
+def test_callers_indexes_under_numba_cache_dir_go_too(tmp_path, monkeypatch):
+    """An operations trial: with NUMBA_CACHE_DIR set (the systemd units, the image, a clone's
+    environment) numba keeps no kernel beside the sources, and a caller of an edited _fast.py
+    kept its old machine code: its results were silently the old code's."""
+    import asnn._jit as jit
+    from numba.core.caching import UserProvidedCacheLocator
+
+    package, root = tmp_path / "pkg", tmp_path / "numba-cache"
+    (package / "approach").mkdir(parents=True)
+    (package / "_fast.py").write_text("x = 1\n")
+    monkeypatch.setattr(jit.numba_config, "CACHE_DIR", str(root))
+
+    def place(folder, name):  # where numba itself puts a kernel of a file in ``folder``
+        return root / UserProvidedCacheLocator.get_suitable_cache_subpath(str(folder / name))
+
+    files = [place(package, "_fast.py") / "_fast._front-10.py311.nbi",
+             place(package, "_parallel.py") / "_parallel._serve-30.py311.nbi",
+             place(package / "approach", "looming.py") / "looming._solve-20.py311.nbi"]
+    for index in files:
+        index.parent.mkdir(parents=True, exist_ok=True)
+        index.write_bytes(b"index")
+    assert forget_stale_callers(package)
+    assert [f.exists() for f in files] == [True, False, False]  # the callee's own stay
+    for index in files:
+        index.write_bytes(b"index")
+    assert not forget_stale_callers(package)  # _fast.py unchanged: all kept
+    (package / "_fast.py").write_text("x = 2\n")
+    assert forget_stale_callers(package)
+    assert [f.exists() for f in files] == [True, False, False]
