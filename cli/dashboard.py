@@ -7,11 +7,11 @@ import logging
 import sys
 
 from cli.arguments import host_address, port, seconds
-from cli.session import add_zenoh_options, fail, session_for, setup_logging, stop_on_signals
+from cli.session import (add_zenoh_options, fail, router_watch, session_for, setup_logging,
+                         stop_on_signals)
 from clients.dashboard import HOLD_S
 from clients.fleet import STALE_S
 from service.config import ConfigError
-from service.link import RouterWatch
 
 __all__ = ["register"]
 
@@ -32,7 +32,7 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
         server.close()
         return fail(str(exc))
     stop = stop_on_signals()
-    with session, RouterWatch(session, name, on_change=on_router), \
+    with session, router_watch(session, name, args, on_change=on_router), \
             FleetSubscriber(session, store, refusals=refusals) as subscriber, server:
         print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
               flush=True)

@@ -11,13 +11,12 @@ import threading
 from asnn.params import preset_names
 from service import keys
 from service.config import ConfigError, zenoh_error
-from service.link import RouterWatch
 
 from .arguments import (count, fleet_size, frame_rate, non_negative, nonempty_path, preset_spec,
                         robot_id, seconds, seconds_or_zero, threads, warmup_frames,
                         worker_id)
-from .session import add_zenoh_options, exit_on_interrupt, fail, session_for, setup_logging, \
-    stop_on_signals, zenoh_options
+from .session import add_zenoh_options, exit_on_interrupt, fail, router_watch, session_for, \
+    setup_logging, stop_on_signals, zenoh_options
 
 __all__ = ["register"]
 
@@ -38,7 +37,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
     except (SourceError, ConfigError) as exc:
         return fail(str(exc))
     stop = stop_on_signals()
-    with session, RouterWatch(session, f"camera {args.robot}"):
+    with session, router_watch(session, f"camera {args.robot}", args):
         try:
             count = publish_frames(session, args.robot, source, prefix=args.prefix,
                                    fps=args.fps, loop=args.loop, format=args.format,
@@ -69,7 +68,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(str(exc))
     tune_process()
-    with session, RouterWatch(session, f"worker {core.worker_id}"):
+    with session, router_watch(session, f"worker {core.worker_id}", args):
         worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
                         handover_timeout=args.handover_timeout)
         try:
@@ -234,7 +233,7 @@ def cmd_alerts(args: argparse.Namespace) -> int:
         return fail(str(exc))
     stop = stop_on_signals()
     show = LinePrinter(args.json, sys.stdout, on_error=stop.set)
-    with session, RouterWatch(session, "alerts"), \
+    with session, router_watch(session, "alerts", args), \
             WarningListener(session, show, prefix=args.prefix, robot=args.robot) as listener:
         print(f"listening on {listener.key}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):

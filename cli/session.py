@@ -240,6 +240,20 @@ def session_for(args: argparse.Namespace):
     return open_session(make_config(zenoh_options(args)))
 
 
+def router_watch(session, name: str, args: argparse.Namespace, on_change=None):
+    """A :class:`service.link.RouterWatch` of a command's session that, while its router stays
+    lost, logs why a session of the command's options could not connect
+    (:func:`service.diagnosis.connect_failure`: the router back with another CA, certificate
+    or password, which Zenoh retries silently for ever)."""
+    from service.config import make_config
+    from service.diagnosis import connect_failure
+    from service.link import RouterWatch
+
+    config = make_config(zenoh_options(args))
+    return RouterWatch(session, name, on_change=on_change,
+                       diagnose=lambda: connect_failure(config))
+
+
 def fail(message: str, status: int = 2) -> int:
     """Print a one-line error and return the exit status."""
     print(f"asnn: error: {message}", file=sys.stderr)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 
 __all__ = ["RouterWatch", "WATCH_INTERVAL"]
@@ -18,6 +19,7 @@ __all__ = ["RouterWatch", "WATCH_INTERVAL"]
 log = logging.getLogger("asnn.link")
 
 WATCH_INTERVAL = 1.0  # seconds between looks at the session's routers
+DIAGNOSE_AFTER = 10.0  # seconds without a router before asking why, and between two askings
 
 
 class RouterWatch:
@@ -35,12 +37,25 @@ class RouterWatch:
         Called with True when a router is reached (first or again) and False when it is lost,
         on the watch's thread: what a process shows its users besides the log (the
         dashboard's page).
+    diagnose : callable, optional
+        Returns why the router cannot be reached, or None (:func:`service.diagnosis.
+        connect_failure`): asked every ``diagnose_after`` seconds while a lost router stays
+        lost, its answer logged when it changes. Zenoh retries silently, and a router back
+        with another CA, certificate or password would otherwise be a "lost its router" line
+        for ever, where a fresh start says why.
+    diagnose_after : float
+        Seconds without a router before asking, and between two askings.
     """
 
     def __init__(self, session, name: str, interval: float = WATCH_INTERVAL,
-                 on_change: Callable[[bool], None] | None = None):
+                 on_change: Callable[[bool], None] | None = None,
+                 diagnose: Callable[[], str | None] | None = None,
+                 diagnose_after: float = DIAGNOSE_AFTER):
         self.session, self.name, self.interval = session, name, interval
         self.on_change = on_change
+        self.diagnose, self.diagnose_after = diagnose, diagnose_after
+        self._asked_at = 0.0  # when the lost router was last diagnosed (or lost)
+        self._said: str | None = None  # the latest reason logged
         self.connected: bool | None = None  # None until a router was seen
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="router-watch", daemon=True)
@@ -66,7 +81,22 @@ class RouterWatch:
                 log.warning("%s: lost its router; Zenoh retries the connection (nothing is "
                             "sent or received meanwhile)", self.name)
                 self._changed(False)
+                self._asked_at, self._said = time.monotonic(), None
+            elif (not routers and self.connected is False and self.diagnose is not None
+                  and time.monotonic() - self._asked_at >= self.diagnose_after):
+                self._why()
             self._stop.wait(self.interval)
+
+    def _why(self) -> None:
+        try:
+            why = self.diagnose()
+        except Exception:  # a diagnosis that fails says nothing; the watch goes on
+            log.debug("%s: router diagnosis failed", self.name, exc_info=True)
+            why = None
+        self._asked_at = time.monotonic()  # after it: a check may take a few seconds
+        if why and why != self._said:
+            log.warning("%s: still no router: %s", self.name, why)
+            self._said = why
 
     def _changed(self, connected: bool) -> None:
         self.connected = connected

@@ -58,3 +58,48 @@ def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
     new = [json.loads(line) for line in alerts.out[warned:]]
     assert all(w["robot"] == "r1" and w["collision"] for w in new)
     assert camera.stop() == 0 and worker.stop(signal.SIGTERM) == 0 and alerts.stop() == 0
+
+
+class FakeSession:
+    """What RouterWatch reads of a session: its routers, set by the test."""
+
+    def __init__(self):
+        self.routers = ["router-a"]
+
+    def is_closed(self):
+        return False
+
+    @property
+    def info(self):
+        return self
+
+    def routers_zid(self):
+        return list(self.routers)
+
+
+def test_a_router_that_stays_lost_is_diagnosed_and_each_new_reason_logged(caplog):
+    """An operations trial: a router restarted with another CA (or certificate, or password)
+    left every running client at 'lost its router' for ever, where a fresh start says why."""
+    from service.link import RouterWatch
+
+    session, reasons, changes = FakeSession(), [], []
+    answers = iter(["tls/r:7447: the router's certificate is not trusted by ca.pem"] * 3
+                   + ["tls/r:7447: connection refused"] * 100)
+
+    def diagnose():
+        reasons.append(next(answers))
+        return reasons[-1]
+
+    with caplog.at_level("WARNING", logger="asnn.link"), RouterWatch(
+            session, "alerts", interval=0.01, on_change=changes.append, diagnose=diagnose,
+            diagnose_after=0.05):
+        wait_for(lambda: changes == [True], what="the router seen")
+        assert reasons == []  # nothing asked while a router is there
+        session.routers = []
+        wait_for(lambda: len(reasons) >= 5, what="the lost router diagnosed again and again")
+        session.routers = ["router-a"]
+        wait_for(lambda: changes == [True, False, True], what="the router back")
+    said = [r.getMessage() for r in caplog.records if "still no router" in r.getMessage()]
+    assert said == ["alerts: still no router: tls/r:7447: the router's certificate is not "
+                    "trusted by ca.pem",
+                    "alerts: still no router: tls/r:7447: connection refused"]  # once each
