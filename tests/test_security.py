@@ -423,8 +423,17 @@ def test_running_the_script_again_keeps_the_ca_and_the_identities(tmp_path):
     with zenoh.open(router_config(out, port)):
         assert not fails_to_open(client_config(out, "camera-r2", port))
         assert not fails_to_open(client_config(out, "worker", port))
-    # a robot left out loses its access, and the script says its folder is left over
-    assert "camera-r2/ is no longer an identity" in run("r1").stderr
+    # a robot left out loses its access, and the script says its folder is left over; a HOST
+    # left out is no longer in the router's certificate, and the script says so too (an
+    # operations trial: clients reaching the router by that name were refused unwarned)
+    said = run("r1").stderr
+    assert "camera-r2/ is no longer an identity" in said
+    assert "the router's new certificate no longer names DNS:routerhost (the old one" in said
+    assert "no longer names" not in run("r1").stderr  # and only where it did before
+    # a renewed identity keeps its password: its new certificate and key alone are installed
+    (out / "worker" / "worker.pem").unlink()
+    assert "(issued: worker;" in run("r1").stderr
+    assert (out / "worker" / "worker.json5").read_text() == before["worker"]
     port = free_port()
     with zenoh.open(router_config(out, port)):
         assert fails_to_open(client_config(out, "camera-r2", port))

@@ -29,10 +29,12 @@
 # folder (docs/operations.md, "Secrets on disk").
 #
 # A HOST is a DNS name or an IP address (python3 checks the addresses; [fd00::2] as in an
-# endpoint is taken too). Run again (to add a robot, or a HOST), it keeps the CA and every identity whose certificate
+# endpoint is taken too). Run again (to add a robot, or a HOST: give every robot id and every
+# HOST each time), it keeps the CA and every identity whose certificate
 # is valid for 30 more days (a third of its validity where that is shorter), with its password,
-# so the configs already deployed stay valid; it issues what is new or expiring, and the
-# router's certificate and config each time. A robot left out can no longer connect (its folder
+# so the configs already deployed stay valid; it issues what is new or expiring (a renewed
+# identity keeps its password), and the router's certificate and config each time (warning
+# where the certificate no longer names a host the previous one did). A robot left out can no longer connect (its folder
 # is named, to delete). Certificates
 # are valid for ASNN_CERT_DAYS days (365); the CA for ten times that. The configs name the files
 # by their path in OUT_DIR, or under ASNN_SECRETS_PATH when set: where each folder is mounted in
@@ -142,9 +144,37 @@ folder() {  # folder NAME: NAME/ with the CA's certificate
 
 san="DNS:localhost,IP:127.0.0.1,DNS:router"
 for host in "${hosts[@]}"; do san+=",$host"; done
+old_san=""
+[[ -f router/router.pem ]] && old_san=$(openssl x509 -in router/router.pem -noout \
+  -ext subjectAltName 2>/dev/null | tail -n +2) || true
 folder router
 issue router "basicConstraints=CA:FALSE" "keyUsage=digitalSignature,keyEncipherment" \
   "extendedKeyUsage=serverAuth,clientAuth" "subjectAltName=$san"
+# the router's certificate is issued from this run's HOSTs only: a name the old one had and
+# this one lacks (a run to add a robot that left the HOSTs out) refuses the clients that reach
+# the router by it, once the router restarts
+dropped=$(python3 - "$old_san" "$san" <<'PY'
+import ipaddress, sys
+
+def names(text):
+    found = set()
+    for part in text.replace("IP Address:", "IP:").split(","):
+        kind, _, value = part.strip().partition(":")
+        if kind == "IP":
+            try:
+                value = str(ipaddress.ip_address(value))
+            except ValueError:
+                pass
+        if kind in ("DNS", "IP"):
+            found.add(f"{kind}:{value}")
+    return found
+
+print(" ".join(sorted(names(sys.argv[1]) - names(sys.argv[2]))))
+PY
+)
+[[ -z $dropped ]] || echo "gen-dev-certs: WARNING: the router's new certificate no longer" \
+  "names $dropped (the old one did): clients that reach the router by that name are refused" \
+  "once it restarts; give every HOST on each run" >&2
 
 old_credentials=""
 [[ -f router/credentials.txt ]] && old_credentials=$(cat router/credentials.txt)
@@ -158,7 +188,9 @@ for name in "${names[@]}"; do
   else
     issue "$name" "basicConstraints=CA:FALSE" "keyUsage=digitalSignature,keyEncipherment" \
       "extendedKeyUsage=clientAuth" "subjectAltName=DNS:$name"
-    password=$(openssl rand -hex 16)
+    # a renewed identity keeps its password: installing its new certificate and key alone
+    # (what renewing usually means) keeps working with the router's new credentials.txt
+    [[ -n $password ]] || password=$(openssl rand -hex 16)
     issued+=("$name")
   fi
   credentials+="$name:$password"$'\n'
