@@ -270,8 +270,11 @@ def cmd_router(args: argparse.Namespace) -> int:
         session = zenoh.open(config)
     except ConfigError as exc:
         return fail(str(exc))
-    except Exception as exc:  # zenoh.ZError: e.g. the port is taken
-        return fail(f"cannot start the router: {zenoh_error(exc)}")
+    except Exception as exc:  # zenoh.ZError: e.g. the port is taken, a file it cannot read
+        from service.diagnosis import unreadable_files
+
+        why = unreadable_files(config)
+        return fail(f"cannot start the router: {zenoh_error(exc)}" + (f" ({why})" if why else ""))
     with session:
         listen = ", ".join(listen_endpoints(config))
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)

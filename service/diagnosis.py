@@ -17,7 +17,7 @@ import ssl
 
 import zenoh
 
-__all__ = ["connect_failure", "split_endpoint"]
+__all__ = ["connect_failure", "split_endpoint", "unreadable_files"]
 
 TIMEOUT = 2.0  # seconds for each step of one endpoint's check
 _TLS = "transport/link/tls/"
@@ -45,6 +45,30 @@ def _value(conf: zenoh.Config, key: str):
         return json.loads(conf.get_json(key))
     except Exception:  # an unknown key in this Zenoh version
         return None
+
+
+# the files a router's configuration names (its TLS identity, its clients' CA, the passwords)
+_ROUTER_FILES = tuple(_TLS + name for name in ("listen_certificate", "listen_private_key",
+                                               "root_ca_certificate")) + (
+    "transport/auth/usrpwd/dictionary_file",)
+
+
+def unreadable_files(conf: zenoh.Config) -> str | None:
+    """The files a router's configuration names that this process cannot read, each with its
+    setting and why (``"transport/link/tls/listen_private_key /etc/asnn/router.key: Permission
+    denied"``, joined by ``"; "``), or None: Zenoh's own error names neither ("Invalid TLS
+    private key file: No such file or directory")."""
+    found = []
+    for key in _ROUTER_FILES:
+        path = _value(conf, key)
+        if not isinstance(path, str) or not path:
+            continue
+        try:
+            with open(path, "rb"):
+                pass
+        except OSError as exc:
+            found.append(f"{key} {path}: {exc.strerror or exc}")
+    return "; ".join(found) or None
 
 
 def _tls_context(conf: zenoh.Config) -> tuple[ssl.SSLContext, dict]:

@@ -345,6 +345,28 @@ def test_a_refused_certificate_says_what_would_fix_it(certs, tmp_path):
         assert "gen-dev-certs.sh [--robots ...] [OUT_DIR] 127.0.0.2" in message
 
 
+def test_a_router_that_cannot_read_a_file_names_the_file_and_its_setting(certs, tmp_path,
+                                                                         capsys):
+    """An operations trial: Zenoh's error names neither the file nor the setting ('No such
+    file or directory (os error 2)' for a missing CA)."""
+    from cli.main import main
+
+    router = tmp_path / "router"
+    shutil.copytree(certs / "router", router)
+    config = tmp_path / "router.json5"
+    config.write_text((router / "router.json5").read_text().replace(
+        str(certs / "router"), str(router)))
+    for name, setting in (("ca.pem", "transport/link/tls/root_ca_certificate"),
+                          ("router.key", "transport/link/tls/listen_private_key"),
+                          ("credentials.txt", "transport/auth/usrpwd/dictionary_file")):
+        (router / name).rename(router / f"{name}.away")
+        assert main(["router", "--config", str(config), "--listen",
+                     f"tls/127.0.0.1:{free_port()}"]) == 2
+        err = capsys.readouterr().err
+        assert f"({setting} {router / name}: No such file or directory)" in err, err
+        (router / f"{name}.away").rename(router / name)
+
+
 def test_endpoints_are_split_for_the_check():
     from service.diagnosis import split_endpoint
 
