@@ -192,7 +192,8 @@ TILES = """JSON.stringify([...document.querySelectorAll('#fleet .tile')].map(t =
   robot: t.dataset.robot, collision: t.dataset.collision, stale: t.dataset.stale,
   preview: t.dataset.preview || null, responses: Number(t.dataset.responses || 0),
   contact: t.dataset.contact || null, stats: t.querySelector('.stats').textContent,
-  badge: getComputedStyle(t.querySelector('.collision-badge')).display})))"""
+  badge: getComputedStyle(t.querySelector('.collision-badge')).display,
+  staleBadge: t.querySelector('.stale-badge').textContent})))"""
 
 
 def tiles(chrome) -> dict:
@@ -338,6 +339,9 @@ def test_browser_shows_fifty_robots_and_marks_a_silent_one_stale(browser):
         stop.set()
         feeder.join(timeout=TIMEOUT)
     assert set(shown) == set(names)
+    # a stale tile says for how long no worker has answered it (the silent robots stopped
+    # after seq 5, over 1 s before they read stale)
+    assert all(re.fullmatch(r"STALE \d+ s", shown[n]["staleBadge"]) for n in silent), shown
     assert {n for n, t in shown.items() if t["collision"] == "true"} == set(names[::10])
     assert {n for n, t in shown.items() if "10 fps (slow)" in t["stats"]} == slow
     assert {n for n, t in shown.items() if "under 1 fps (slow)" in t["stats"]} == crawling

@@ -51,7 +51,8 @@
     v = {
       name, el, tile: null, contact: null, points: [], image: null, imageSrc: null,
       thumb: el.querySelector(".thumb"), spark: el.querySelector(".spark"),
-      stats: el.querySelector(".stats"), age: null, ageAt: 0, stale: true, collision: false,
+      stats: el.querySelector(".stats"), staleBadge: el.querySelector(".stale-badge"),
+      age: null, ageAt: 0, stale: true, collision: false,
     };
     robots.set(name, v);
     // keep tiles in name order, so a robot does not move around
@@ -374,6 +375,10 @@
       const age = v.age === null ? null : v.age + (now - v.ageAt) / 1000;
       // stale is never shown in collision (nothing watches the robot: as the server shows it)
       if (age === null || age > config.stale_after) setFlags(v, true, false);
+      // how long no worker has answered it: a moment's gap or a camera gone for minutes
+      const since = age === null ? "STALE" : `STALE ${age < 60 ? Math.floor(age) + " s"
+        : Math.floor(age / 60) + " min"}`;
+      if (v.staleBadge.textContent !== since) v.staleBadge.textContent = since;
     }
     showSummary();
     schedule();
