@@ -564,26 +564,37 @@ def test_a_second_publisher_cannot_reset_the_robot_over_and_over(caplog):
     assert any("two publishers" in r.getMessage() for r in caplog.records)
 
 
-def test_an_intruder_with_a_seq_of_its_own_cannot_take_the_robot_over():
-    """A second camera misconfigured with the robot's id, counting its own seq up: its frames
-    continue its own stream, which must not win the robot back after the intrusion."""
+def with_second_camera(first_seq, second):
+    """The robot's camera (a looming scene at 20 fps, seq from ``first_seq``) seen by a worker
+    alone and by one that also gets a second camera's frames on the key from the robot's frame
+    5 on, ``second(scene, seq)`` giving each one's (image, seq, stamp): the second worker, the
+    warnings of each and the scene's length."""
     scene = make_scene("looming")
-    blank = np.zeros_like(scene.frames[0])
     clock = FakeClock()
     alone, core = WorkerCore(clock=clock), WorkerCore(clock=clock)
     warned = {"alone": 0, "attacked": 0}
     for seq, image in enumerate(scene.frames):
         clock.now += 0.05
         for name, target in (("alone", alone), ("attacked", core)):
-            warned[name] += bool(feed(target, "r1", image, 1000 + seq, stamp=seq * 0.05).collision)
+            warned[name] += bool(feed(target, "r1", image, first_seq + seq,
+                                      stamp=seq * 0.05).collision)
         if seq >= 5:
-            core.offer("asnn/r1/frame", payload(blank, seq - 5, stamp=(seq - 5) * 0.05))
+            clock.now += 0.001
+            core.offer("asnn/r1/frame", payload(*second(scene, seq)))
             job = core.take(timeout=0)
             if job is not None:
                 core.process(job)
+    return core, warned, len(scene.frames)
+
+
+def test_an_intruder_with_a_seq_of_its_own_cannot_take_the_robot_over():
+    """A second camera misconfigured with the robot's id, counting its own seq up: its frames
+    continue its own stream, which must not win the robot back after the intrusion."""
+    core, warned, frames = with_second_camera(1000, lambda scene, seq: (
+        np.zeros_like(scene.frames[0]), seq - 5, (seq - 5) * 0.05))
     stats = core.stats()
     assert stats["intrusions"] == 1 and sum(stats["resets"].values()) <= 2
-    assert stats["invalid"]["second-publisher"] >= len(scene.frames) - 5 - 2
+    assert stats["invalid"]["second-publisher"] >= frames - 5 - 2
     assert warned["attacked"] >= warned["alone"] - 2 > 0
 
 
@@ -593,24 +604,12 @@ def test_a_second_camera_a_few_frames_behind_on_the_robots_key_is_an_intrusion()
     and the first camera's next frame continued that new stream (ahead by 11, later), so the
     intrusion was never seen and the robot's model was reset every frame: no warning, a
     dashboard tile that looked live (a dashboard operator's trial)."""
-    scene = make_scene("looming")
-    clock = FakeClock()
-    alone, core = WorkerCore(clock=clock), WorkerCore(clock=clock)
-    warned = {"alone": 0, "attacked": 0}
-    for seq, image in enumerate(scene.frames):
-        clock.now += 0.05
-        for name, target in (("alone", alone), ("attacked", core)):
-            warned[name] += bool(feed(target, "r1", image, 10 + seq, stamp=seq * 0.05).collision)
-        if seq >= 5:  # the second camera: its own view, seq 10 behind, stamped 25 ms later
-            clock.now += 0.001
-            core.offer("asnn/r1/frame", payload(scene.frames[seq - 5], seq, stamp=seq * 0.05
-                                                + 0.025))
-            job = core.take(timeout=0)
-            if job is not None:
-                core.process(job)
+    # the second camera: its own view, seq 10 behind, stamped 25 ms later
+    core, warned, frames = with_second_camera(10, lambda scene, seq: (
+        scene.frames[seq - 5], seq, seq * 0.05 + 0.025))
     stats = core.stats()
     assert stats["intrusions"] == 1 and sum(stats["resets"].values()) <= 2, stats
-    assert stats["invalid"]["second-publisher"] >= len(scene.frames) - 5 - 2
+    assert stats["invalid"]["second-publisher"] >= frames - 5 - 2
     assert core.status()["robots"]["r1"]["contested"] is True
     assert warned["attacked"] >= warned["alone"] - 2 > 0
 
