@@ -84,8 +84,10 @@ class MessageError(ValueError):
 
 
 class _Message(BaseModel):
-    # strict: "12" is not an int, 1.5 is not an int, true is not an int; extra fields ignored
-    model_config = ConfigDict(strict=True, extra="ignore", allow_inf_nan=False, frozen=True)
+    # strict: "12" is not an int, 1.5 is not an int, true is not an int; extra fields ignored;
+    # no protected namespace (pydantic before 2.10 warned of Response.model_ms on every start)
+    model_config = ConfigDict(strict=True, extra="ignore", allow_inf_nan=False, frozen=True,
+                              protected_namespaces=())
 
 
 class Frame(_Message):
@@ -332,6 +334,8 @@ def unpack_map(payload: bytes, what: str = "message", *, max_map_len: int = MAX_
     def unique(pairs):
         # a key given twice would be read as its last value here and maybe its first by
         # another reader (a dashboard, a proxy): refuse the ambiguity rather than pick one
+        if not isinstance(pairs, list):  # msgpack 1.0.0's pure-Python unpacker: a generator
+            pairs = list(pairs)
         mapping = dict(pairs)
         if len(mapping) < len(pairs):
             seen = set()

@@ -789,3 +789,22 @@ def test_a_sigterm_held_under_the_default_handler_still_ends_the_process():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=120, cwd=Path(__file__).resolve().parents[1])
     assert done.returncode == -signal.SIGTERM and done.stdout.split() == ["held"]
+
+
+def test_videos_are_written_with_the_opencv_4_log_calls_where_cv2_utils_has_no_logging(
+        tmp_path, monkeypatch):
+    """A packaging trial: cv2.utils.logging exists from OpenCV 4.13 only, and with 4.12 (which
+    pyproject.toml accepts) every video written raised an AttributeError: asnn scene, asnn
+    detect --annotate, eval's perturbed clips."""
+    import cv2
+
+    from asnn.io.video import open_video
+
+    levels = []  # OpenCV 4.12's calls, on whatever OpenCV runs the test
+    monkeypatch.delattr(cv2.utils, "logging", raising=False)
+    monkeypatch.setattr(cv2, "setLogLevel", levels.append, raising=False)
+    monkeypatch.setattr(cv2, "getLogLevel", lambda: 3, raising=False)
+    scene = make_scene("looming", size=(48, 48), frames=6)
+    write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
+    assert levels == [2, 3]  # held at ERROR while writing, then back
+    assert len(list(open_video(tmp_path / "loom.mp4"))) == 6

@@ -333,6 +333,30 @@ def test_a_map_that_gives_a_key_twice_is_refused_not_read_as_its_last_value(nest
     assert err.value.reason == "undecodable" and "twice" in str(err.value)
     assert decode_frame(msgpack.packb(fields)).seq == 0  # the same fields once each decode
 
+def test_maps_decode_where_msgpack_gives_their_pairs_as_a_generator(monkeypatch):
+    """A packaging trial: msgpack 1.0.0 (pyproject.toml accepts it) unpacks in pure Python,
+    handing object_pairs_hook a generator; the duplicate-key check took its len() and the
+    worker refused every frame as 'not msgpack'."""
+    import service.messages as messages
+
+    unpackb = msgpack.unpackb
+
+    def generating(payload, **options):
+        hook = options.get("object_pairs_hook")
+        if hook is not None:
+            options["object_pairs_hook"] = lambda pairs: hook(iter(pairs))
+        return unpackb(payload, **options)
+
+    monkeypatch.setattr(messages.msgpack, "unpackb", generating)
+    fields = {"v": 1, "seq": 4, "stamp": 0.0, "width": 2, "height": 1, "format": "gray8",
+              "data": b"ab"}
+    assert decode_frame(msgpack.packb(fields)).seq == 4
+    # the seven fields and seq again: eight pairs
+    junk = bytes([0x88]) + msgpack.packb(fields)[1:] + msgpack.packb("seq") + msgpack.packb(5)
+    with pytest.raises(MessageError, match="twice"):
+        decode_frame(junk)
+
+
 def test_a_status_map_of_nested_repeated_pairs_is_read_without_keeping_them():
     """A status map is read with the status bounds (8,192 pairs a map, 262,144 entries): the
     duplicate-key check keeps every pair of the maps still being read, 64 bytes each, so 30

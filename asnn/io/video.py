@@ -220,12 +220,23 @@ def check_written(path: str | Path, frames: int) -> tuple[int, int]:
 def quiet_writer():
     """OpenCV's warnings held back while a video is written: a writer that fails logs one for
     every frame, where the caller reports it in one line (:func:`check_written`)."""
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    get, put, error = _log_level_calls()
+    level = get()
+    put(error)
     try:
         yield
     finally:
-        cv2.utils.logging.setLogLevel(level)
+        put(level)
+
+
+def _log_level_calls():
+    """OpenCV's log level getter, setter and its ERROR level: ``cv2.utils.logging`` from
+    OpenCV 4.13, ``cv2.getLogLevel``/``cv2.setLogLevel`` (ERROR is 2) before it (the versions
+    pyproject.toml accepts: 4.12 raised an AttributeError on every video written)."""
+    log = getattr(cv2.utils, "logging", None)
+    if log is not None:
+        return log.getLogLevel, log.setLogLevel, log.LOG_LEVEL_ERROR
+    return cv2.getLogLevel, cv2.setLogLevel, 2
 
 
 def _decodes(capture: cv2.VideoCapture, index: int) -> bool:
