@@ -5,13 +5,19 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from asnn.detectors import MODELS
 from cli.arguments import (Joined, cameras, count, frame_rate, frame_size, frames, nonempty_path,
                            preset_spec, processes, seconds, seed, threads)
 
-# how the benches that time whole processes run asnn: this interpreter, this checkout's CLI
-ASNN_COMMAND = (sys.executable, "-m", "cli.main")
+# how the benches that time whole processes run asnn: this interpreter and the very packages
+# this process runs (-P and the path given: ``-m cli.main`` put the working folder first on the
+# children's path, and a checkout of another version there was timed in their place)
+_PACKAGES = str(Path(__file__).resolve().parent.parent)
+ASNN_COMMAND = (sys.executable, "-P", "-c",
+                f"import sys; sys.path.insert(0, {_PACKAGES!r}); from cli.main import main; "
+                "sys.exit(main())")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -617,3 +617,22 @@ def test_the_service_bench_starts_workers_with_options_the_cli_takes(tmp_path):
     assert (args.config, args.log_level, args.id, args.threads) == (str(config), "warning",
                                                                    "w1", 3)
     assert args.preset is not None and "top_k" in str(args.preset)
+
+
+def test_the_benches_processes_run_this_asnn_not_the_working_folders(tmp_path):
+    """A packaging trial: the service and detect benches started ``python -m cli.main``, which
+    puts the working folder first on the path: run from a checkout of another version, the
+    benches timed its code."""
+    import subprocess
+
+    from cli.bench import ASNN_COMMAND
+
+    shadow = tmp_path / "cli"
+    shadow.mkdir()
+    (shadow / "__init__.py").write_text("")
+    (shadow / "main.py").write_text("import sys\ndef main():\n    print('SHADOW')\n    return 0\n"
+                                    "if __name__ == '__main__':\n    sys.exit(main())\n")
+    done = subprocess.run([*ASNN_COMMAND, "router", "--help"], cwd=tmp_path, text=True,
+                          capture_output=True, timeout=120)
+    assert done.returncode == 0 and "SHADOW" not in done.stdout, done.stdout + done.stderr
+    assert done.stdout.startswith("usage: ")  # the real parser's help
