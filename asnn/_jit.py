@@ -37,10 +37,9 @@ def forget_stale_callers(package: Path, callee: str = "_fast.py") -> bool:
     the old machine code after ``_fast.py`` is edited. So the digest of ``callee`` is kept beside
     the cache, and when it differs (or is missing), the cache indexes (``*.nbi``) of every other
     file, in the package and its subpackages, are removed: numba then compiles those kernels
-    afresh. Both places numba may keep them are cleared: beside the sources (``__pycache__``)
-    and, where ``NUMBA_CACHE_DIR`` is set, under it (one folder per source folder). A cache that
-    cannot be written (a read-only installation, whose sources do not change either) is left
-    alone.
+    afresh, in the place numba keeps them: under ``NUMBA_CACHE_DIR`` where it is set (one
+    folder per source folder), else beside the sources (``__pycache__``). A cache that cannot
+    be written (a read-only installation, whose sources do not change either) is left alone.
 
     Returns whether indexes were removed.
     """
@@ -71,14 +70,16 @@ def forget_stale_callers(package: Path, callee: str = "_fast.py") -> bool:
 
 
 def _cache_places():
-    """Where numba keeps the kernels of a source folder, as functions of the folder: beside the
-    sources, and under ``NUMBA_CACHE_DIR`` where it is set (numba's
-    ``UserProvidedCacheLocator``, which names a folder there after the source folder's path)."""
-    yield lambda folder: folder / "__pycache__"
+    """Where numba keeps the kernels of a source folder, as functions of the folder: under
+    ``NUMBA_CACHE_DIR`` where it is set (numba's ``UserProvidedCacheLocator``, which names a
+    folder there after the source folder's path), and nowhere else then (no stamp is written
+    into an installed package's folder); else beside the sources."""
     if numba_config.CACHE_DIR:
         root = Path(numba_config.CACHE_DIR)
         yield lambda folder: root / UserProvidedCacheLocator.get_suitable_cache_subpath(
             str(folder / "__init__.py"))
+    else:
+        yield lambda folder: folder / "__pycache__"
 
 
 forget_stale_callers(Path(__file__).parent)

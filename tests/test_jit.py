@@ -65,6 +65,9 @@ def test_callers_indexes_under_numba_cache_dir_go_too(tmp_path, monkeypatch):
         index.write_bytes(b"index")
     assert forget_stale_callers(package)
     assert [f.exists() for f in files] == [True, False, False]  # the callee's own stay
+    # nothing written beside the sources, where numba keeps nothing now (an installed
+    # package's folder kept a stray stamp after pip uninstall: a packaging trial)
+    assert not (package / "__pycache__").exists()
     for index in files:
         index.write_bytes(b"index")
     assert not forget_stale_callers(package)  # _fast.py unchanged: all kept
