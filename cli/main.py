@@ -29,8 +29,12 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     """The full parser (also used by tests to check docker-compose commands)."""
+    from asnn import __version__
+
     parser = _Parser(
         prog="asnn", description="Approach-Sensitive Neural Network collision detection")
+    # the version to name when citing results (CITATION.cff) or reporting a bug
+    parser.add_argument("--version", action="version", version=f"asnn {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
         importlib.import_module(name).register(sub)

@@ -165,6 +165,16 @@ def test_citation_file_passes_its_schema_and_names_this_version():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     fields = dict(re.findall(r"^(version|license): (\S+)$", citation.read_text(), re.M))
     assert fields == {"version": project["version"], "license": project["license"]["text"]}
+    # and asnn --version names the same version (what a citation or a bug report names)
+    import subprocess
+    import sys
+
+    import asnn
+
+    assert asnn.__version__ == project["version"]
+    shown = subprocess.run([sys.executable, "-m", "cli.main", "--version"], cwd=ROOT,
+                           capture_output=True, text=True, timeout=60)
+    assert shown.returncode == 0 and shown.stdout == f"asnn {project['version']}\n"
 
 
 def run_examples(obj) -> tuple[int, str]:
