@@ -179,8 +179,9 @@ class SubscriberWatch:
             log.info("camera %s: a subscriber (a worker) takes its frames on %s%s", self.robot,
                      self.key, more)
         else:
-            log.warning("camera %s: no subscriber on %s any more (its worker stopped, or the "
-                        "router went): its frames are lost until a worker subscribes again%s",
+            log.warning("camera %s: no subscriber on %s any more (its worker stopped, the "
+                        "router went, or this camera's own session lapsed: a pause longer than "
+                        "its lease): its frames are lost until a worker subscribes again%s",
                         self.robot, self.key, more)
 
 
