@@ -33,7 +33,7 @@ from . import _fast, _parallel, retina
 from .approach import ApproachStage, FramePair, frame_pixel
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
 from .params import (CEILING_GAPS, CEILING_MARGIN, CEILING_MIN_GAPS, MAX_THREADS,
-                     MIN_FRAME_GAP_S, PERIOD_FRAMES, ASNNParams, preset, timed_gap)
+                     MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, PERIOD_FRAMES, ASNNParams, preset, timed_gap)
 from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
 from .targets import extract_targets
@@ -247,6 +247,7 @@ class ASNN:
         self.index = 0
         self.approach = ApproachStage(self.params) if self.params.targets == "objects" else None
         self._stamp: float | None = None
+        self._timed = False  # the stream's latest gap was one its timing believes
         self._clock: float | None = None  # the latest frame's time, once a frame had one
         self.periods: deque[float] = deque(maxlen=PERIOD_FRAMES)
         self._last: Response | None = None
@@ -334,7 +335,10 @@ class ASNN:
             time to contact; without it, or where it is NaN or infinite or does not advance by
             at least 0.1 ms and at most 1 s (a clock in milliseconds or smaller units, a stall),
             frames are ``params.dt`` apart (a frame without it in a stream whose frames had
-            times comes :attr:`frame_period` after the latest). A clock in larger units
+            times comes :attr:`frame_period` after the latest), except a gap of more than 1 s
+            right after a gap that was believed: frames lost for a while, which keeps its own
+            time (read as one frame's, the growth of seconds gave a time to contact tens of
+            times short, and a warning). A clock in larger units
             (minutes) is believed as seconds: its expansion reads 60 times too fast, and the
             default warns early.
 
@@ -529,8 +533,14 @@ class ASNN:
         if self.repeated:
             return _Frame(index, repeat=True, since_stepped=stamp - self._stamp)
         elapsed = stamp - self._stamp
-        if not timed_gap(elapsed):  # no usable times: the nominal frame period
+        if timed_gap(elapsed):
+            self._timed = True
+        elif not (self._timed and MAX_FRAME_GAP_S < elapsed < math.inf):
+            # no usable times: the nominal frame period (a timed stream's stall, frames lost
+            # for over MAX_FRAME_GAP_S, keeps its own: timed at dt it read the change of
+            # seconds as one frame's, a time to contact 50-300 times short)
             elapsed = p.dt
+            self._timed = False
         self._stamp = stamp
         self.periods.append(elapsed)
         background = None

@@ -107,6 +107,31 @@ def test_a_frame_without_a_time_in_a_timed_stream_comes_a_frame_period_after_the
     assert list(untimed.periods) == pytest.approx([untimed.params.dt] * 4)
 
 
+def test_frames_lost_for_over_a_second_keep_their_time_and_give_no_false_warning():
+    """A time-to-contact trial: a 10 fps camera losing 15 frames (1.6 s, within the worker's
+    --max-gap) had the gap timed at dt, 0.05 s: the disk's growth over 1.6 s read as one
+    frame's, a ttc 300 times short and six warnings for an object 5 s from contact."""
+    from asnn.stimuli.render import levels, paint_disk
+
+    background, level = levels(0.6, "dark")
+    rng = np.random.default_rng(95)
+    fps, tau, frames, left = 10, 8.0, [], []
+    for k in range(55):  # a disk at constant speed, 8 s from contact at 0.5 s
+        remaining = tau - max(k / fps - 0.5, 0.0)
+        image = np.full((120, 160), background, float)
+        paint_disk(image, 80, 60, 10.0 * tau / remaining, level)
+        frames.append(np.clip(np.rint(image + rng.normal(0, 2.0, image.shape)), 0, 255))
+        left.append(remaining)
+    model, shortest = ASNN(), math.inf
+    for k in [k for k in range(55) if not 15 <= k < 30]:  # frames 15-29 lost
+        response = model.step(frames[k].astype(np.uint8), 100.0 + k / fps)
+        assert not response.collision, k
+        shortest = min([shortest] + [t.ttc / left[k] for t in response.targets if t.ttc])
+        if k == 30:
+            assert model.periods[-1] == pytest.approx(1.6)  # the gap as it was
+    assert shortest > 0.5  # no target reads it closing twice as fast as it does
+
+
 def test_untimed_frames_in_a_row_in_a_timed_stream_each_come_a_frame_period_later():
     """Two or three frames in a row without a time (a camera's stamps dropped for a moment):
     each comes a frame period after the one before, not all at the same time (a gap of 0, a
