@@ -456,6 +456,11 @@ def test_running_the_script_again_keeps_the_ca_and_the_identities(tmp_path):
     (out / "worker" / "worker.pem").unlink()
     assert "(issued: worker;" in run("r1").stderr
     assert (out / "worker" / "worker.json5").read_text() == before["worker"]
+    # one whose folder was deleted (to revoke a leaked copy) gets a new password: the old
+    # certificate is still the CA's, and only the password locks the copy out
+    shutil.rmtree(out / "camera-r1")
+    run("r1")
+    assert (out / "camera-r1" / "camera-r1.json5").read_text() != before["camera-r1"]
     port = free_port()
     with zenoh.open(router_config(out, port)):
         assert fails_to_open(client_config(out, "camera-r2", port))

@@ -30,15 +30,16 @@
 #
 # A HOST is a DNS name or an IP address (python3 checks the addresses; [fd00::2] as in an
 # endpoint is taken too). Run again (to add a robot, or a HOST: give every robot id and every
-# HOST each time), it keeps the CA and every identity whose certificate
-# is valid for 30 more days (a third of its validity where that is shorter), with its password,
-# so the configs already deployed stay valid; it issues what is new or expiring (a renewed
-# identity keeps its password), and the router's certificate and config each time (warning
-# where the certificate no longer names a host the previous one did). A robot left out can no longer connect (its folder
-# is named, to delete). Certificates
-# are valid for ASNN_CERT_DAYS days (365); the CA for ten times that. The configs name the files
-# by their path in OUT_DIR, or under ASNN_SECRETS_PATH when set: where each folder is mounted in
-# containers (ASNN_SECRETS_PATH=/etc/asnn/secrets for deploy/compose.secure.yml).
+# HOST each time), it keeps the CA and every identity whose certificate is valid for 30 more
+# days (a third of its validity where that is shorter), with its password, so the configs
+# already deployed stay valid; it issues what is new or expiring (a renewed identity keeps its
+# password; one whose folder was deleted, to revoke it, gets a new one), and the router's
+# certificate and config each time (warning where the certificate no longer names a host the
+# previous one did). A robot left out can no longer connect (its folder is named, to delete).
+# Certificates are valid for ASNN_CERT_DAYS days (365); the CA for ten times that. The configs
+# name the files by their path in OUT_DIR, or under ASNN_SECRETS_PATH when set: where each
+# folder is mounted in containers (ASNN_SECRETS_PATH=/etc/asnn/secrets for
+# deploy/compose.secure.yml).
 set -euo pipefail
 if [[ ${1:-} == -h || ${1:-} == --help ]]; then
   sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'
@@ -186,10 +187,13 @@ for name in "${names[@]}"; do
   if [[ -n $password && -f $name/$name.key ]] && valid "$name/$name.pem"; then
     kept+=("$name")
   else
+    # an identity renewed (its key still here, its certificate expiring or gone) keeps its
+    # password: installing its new certificate and key alone keeps working with the router's
+    # new credentials.txt; one whose folder or key was deleted (to revoke a leaked copy: there
+    # is no revocation list) gets a new password, which locks the old copy out
+    [[ -f $name/$name.key ]] || password=""
     issue "$name" "basicConstraints=CA:FALSE" "keyUsage=digitalSignature,keyEncipherment" \
       "extendedKeyUsage=clientAuth" "subjectAltName=DNS:$name"
-    # a renewed identity keeps its password: installing its new certificate and key alone
-    # (what renewing usually means) keeps working with the router's new credentials.txt
     [[ -n $password ]] || password=$(openssl rand -hex 16)
     issued+=("$name")
   fi
