@@ -55,8 +55,12 @@ seconds ago), a frame that does not continue it is refused as ``second-publisher
 ``CONTESTED_FOR_S`` (30 s) after the last frame so refused. So an
 intruder costs the robot at most two resets, however long it keeps publishing. A camera that
 really restarts is followed as soon as its previous stream has been silent for
-``takeover_after`` seconds. A publisher that copies the robot's ``seq`` and ``stamp`` cannot be
-told apart this way: only the secured deployment (one credential per camera, allowed to publish
+``takeover_after`` seconds. A second camera whose ``seq`` runs a few frames ahead of the
+robot's continues the robot's stream with its first frame: the stream the robot's next frame
+begins is then taken for the robot's (the other's had jumped over it), and while the robot is
+contested a frame that fits both streams is the one it follows more closely. A publisher that
+copies the robot's ``seq`` and ``stamp``, or runs exactly one ``seq`` ahead, cannot be told
+apart this way: only the secured deployment (one credential per camera, allowed to publish
 its own robot's key only) stops it (docs/operations.md).
 """
 
@@ -112,6 +116,7 @@ class Stream:
     size: tuple[int, int]
     arrival: float
     frames: int = 1  # frames that arrived in it
+    prior_seq: int | None = None  # the seq before the latest frame's (None: one frame so far)
 
     def continues(self, frame: Frame, max_gap: int) -> str | None:
         """None if ``frame`` continues this stream, else the rule it breaks."""
@@ -133,6 +138,7 @@ class Stream:
                 and self.seq - max_gap <= frame.seq <= self.seq and frame.stamp <= self.stamp)
 
     def advance(self, frame: Frame, arrival: float) -> None:
+        self.prior_seq = self.seq
         self.seq, self.stamp, self.arrival = frame.seq, frame.stamp, arrival
         self.size = (frame.width, frame.height)
         self.frames += 1
@@ -171,15 +177,32 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
     gap = max_gap * state.seq_step
     broken = None if current is None else current.continues(frame, gap)
     previous = state.previous
-    if (current is not None and broken is None and current.frames == 1
-            and current.reason == "seq-backwards"
-            and previous is not None and previous.seq > current.seq
+    if (current is not None and broken is None and previous is not None
             and received - previous.arrival <= takeover_after
             and previous.continues(frame, gap) is None):
-        # the frame fits the stream just replaced as well as the one-frame stream that
-        # replaced it (two publishers whose seqs are within max_gap of each other): the
-        # stream there first goes on, so two publishers interleave (not a restart)
-        broken = "interleaved"
+        # the frame fits both streams: two cameras whose seqs run within max_gap of each other
+        if state.contested(received) and frame.seq - previous.seq < frame.seq - current.seq:
+            # the second camera's (the robot's stream is followed, the other's refused): a
+            # frame is the stream's it follows more closely (one a few frames ahead of the
+            # robot's continues the robot's stream too)
+            previous.advance(frame, received)
+            state.intruder_seen = received
+            return None
+        if (current.frames == 1 and current.reason == "seq-backwards"
+                and previous.seq > current.seq and current.stamp > previous.stamp):
+            # the stream just replaced goes on after the one-frame stream that replaced it
+            # (one camera's frames reordered come with stamps in order: not this): two
+            # publishers interleave, not a restart
+            if previous.prior_seq is not None and previous.prior_seq < current.seq:
+                # the replaced stream's latest frame had jumped ahead over the one that
+                # began this stream: that frame and this one are a second camera's a few
+                # frames ahead, and this stream goes on with the robot's own
+                _intrusion(robot, state, frame, previous, current.seq, received, prefix,
+                           limited_log)
+                previous.reason = "second-publisher"
+                previous.advance(frame, received)
+                return None
+            broken = "interleaved"
     if current is not None and broken is None:
         current.advance(frame, received)
         return current
@@ -207,14 +230,7 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
             state.stream, state.previous = previous, current
             return previous
         # the stream this one replaced goes on: two publishers interleave on the key
-        state.intrusion = (current.number, state.intruder_seen)  # undone if current's
-        state.intruder_seen = received  # one frame is refused (withdraw_frame)
-        state.intrusions += 1  # the worker counts it in its stats
-        limited_log.warning(
-            f"intrusion:{robot}", "robot %s: two publishers interleave frames on %s (seq "
-            "%d after %d); following the stream that was there first and refusing "
-            "frames that do not continue it", robot, keys.frame_key(robot, prefix),
-            frame.seq, current.seq)
+        _intrusion(robot, state, frame, current, current.seq, received, prefix, limited_log)
         previous.reason = "second-publisher"
         previous.advance(frame, received)
         state.stream, state.previous = previous, current
@@ -249,6 +265,19 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
     state.stream = Stream(state.streams, broken, frame.seq, frame.stamp,
                            (frame.width, frame.height), received)
     return state.stream
+
+
+def _intrusion(robot: str, state, frame: Frame, others: Stream, after: int, received: float,
+               prefix: str, limited_log: RateLimitedLog) -> None:
+    """Count and log a second publisher on the robot's key (``frame``'s seq coming ``after``
+    the robot's), ``others`` the stream taken for its: the robot is contested from now."""
+    state.intrusion = (others.number, state.intruder_seen)  # undone if its one frame is
+    state.intruder_seen = received  # refused when processed (withdraw_frame)
+    state.intrusions += 1  # the worker counts it in its stats
+    limited_log.warning(
+        f"intrusion:{robot}", "robot %s: two publishers interleave frames on %s (seq %d after "
+        "%d); following the stream that was there first and refusing frames that do not "
+        "continue it", robot, keys.frame_key(robot, prefix), frame.seq, after)
 
 
 def withdraw_frame(state, stream: int) -> bool:

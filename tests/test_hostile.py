@@ -622,20 +622,38 @@ def test_an_intruder_with_a_seq_of_its_own_cannot_take_the_robot_over():
     assert warned["attacked"] >= warned["alone"] - 2 > 0
 
 
-def test_a_second_camera_a_few_frames_behind_on_the_robots_key_is_an_intrusion():
+@pytest.mark.parametrize("ahead", [-10, 5, 15])
+def test_a_second_camera_a_few_frames_behind_or_ahead_on_the_robots_key_is_an_intrusion(ahead):
     """Two cameras given one robot id, started half a second apart: the later one's seq 10
     behind, its stamps between the first's. Each of its frames went back in seq (a new stream)
     and the first camera's next frame continued that new stream (ahead by 11, later), so the
     intrusion was never seen and the robot's model was reset every frame: no warning, a
-    dashboard tile that looked live (a dashboard operator's trial)."""
-    # the second camera: its own view, seq 10 behind, stamped 25 ms later
-    core, warned, frames = with_second_camera(10, lambda scene, seq: (
-        scene.frames[seq - 5], seq, seq * 0.05 + 0.025))
+    dashboard tile that looked live (a dashboard operator's trial). A second camera ahead
+    continued the robot's stream itself, and then took the robot over (a review)."""
+    # the second camera: its own view, its seq ``ahead`` of the robot's, stamped 25 ms later
+    core, warned, frames = with_second_camera(20, lambda scene, seq: (
+        scene.frames[seq - 5], 20 + seq + ahead, seq * 0.05 + 0.025))
     stats = core.stats()
     assert stats["intrusions"] == 1 and sum(stats["resets"].values()) <= 2, stats
     assert stats["invalid"]["second-publisher"] >= frames - 5 - 2
     assert core.status()["robots"]["r1"]["contested"] is True
     assert warned["attacked"] >= warned["alone"] - 2 > 0
+
+
+def test_one_cameras_first_frames_swapped_on_the_way_are_no_intrusion():
+    """A review: seq 1 arriving before seq 0 (frames travel best effort, reordered) made seq 2
+    fit both streams, and the robot was taken for contested (a second publisher)."""
+    scene = make_scene("looming")
+    clock = FakeClock()
+    core = WorkerCore(clock=clock)
+    for seq in [1, 0, *range(2, 20)]:
+        clock.now += 0.05
+        core.offer("asnn/r1/frame", payload(scene.frames[seq], seq, stamp=seq * 0.05))
+        job = core.take(timeout=0)
+        if job is not None:
+            core.process(job)
+    assert core.stats()["intrusions"] == 0
+    assert core.status()["robots"]["r1"]["contested"] is False
 
 
 def test_after_an_intrusion_a_restarted_camera_is_followed_once_the_old_stream_is_silent():
