@@ -55,6 +55,8 @@ class RouterWatch:
         self.on_change = on_change
         self.diagnose, self.diagnose_after = diagnose, diagnose_after
         self._asked_at = 0.0  # when the lost router was last diagnosed (or lost)
+        self._asking: list | None = None  # the diagnosis under way: [thread, its answer]
+        self._heard: str | None = None  # the latest answer, logged once it comes twice
         self._said: str | None = None  # the latest reason logged
         self.connected: bool | None = None  # None until a router was seen
         self._stop = threading.Event()
@@ -77,26 +79,42 @@ class RouterWatch:
                 if self.connected is False:
                     log.info("%s: reached the router again (%s)", self.name, ", ".join(routers))
                 self._changed(True)
+                self._asking = None  # an answer still to come is about a router found since
             elif not routers and self.connected:
                 log.warning("%s: lost its router; Zenoh retries the connection (nothing is "
                             "sent or received meanwhile)", self.name)
                 self._changed(False)
-                self._asked_at, self._said = time.monotonic(), None
-            elif (not routers and self.connected is False and self.diagnose is not None
-                  and time.monotonic() - self._asked_at >= self.diagnose_after):
+                self._asked_at, self._heard, self._said = time.monotonic(), None, None
+            elif not routers and self.connected is False and self.diagnose is not None:
                 self._why()
             self._stop.wait(self.interval)
 
     def _why(self) -> None:
-        try:
-            why = self.diagnose()
-        except Exception:  # a diagnosis that fails says nothing; the watch goes on
-            log.debug("%s: router diagnosis failed", self.name, exc_info=True)
-            why = None
+        """Ask why the router stays lost, on a thread of its own (a check can take seconds a
+        TLS endpoint, or hang on DNS: the watch goes on looking meanwhile), and log the answer
+        once two asks in a row agree (a router just back, not yet reconnected to, reads
+        refused for a moment)."""
+        if self._asking is None:
+            if time.monotonic() - self._asked_at >= self.diagnose_after:
+                asking = self._asking = [None, None]
+                asking[0] = threading.Thread(target=self._ask, args=(asking,),
+                                             name="router-diagnosis", daemon=True)
+                asking[0].start()
+            return
+        if self._asking[0].is_alive():
+            return
+        why, self._asking = self._asking[1], None
         self._asked_at = time.monotonic()  # after it: a check may take a few seconds
-        if why and why != self._said:
+        if why and why == self._heard and why != self._said:
             log.warning("%s: still no router: %s", self.name, why)
             self._said = why
+        self._heard = why
+
+    def _ask(self, asking: list) -> None:
+        try:
+            asking[1] = self.diagnose()
+        except Exception:  # a diagnosis that fails says nothing; the watch goes on
+            log.debug("%s: router diagnosis failed", self.name, exc_info=True)
 
     def _changed(self, connected: bool) -> None:
         self.connected = connected

@@ -83,7 +83,8 @@ def test_a_router_that_stays_lost_is_diagnosed_and_each_new_reason_logged(caplog
     from service.link import RouterWatch
 
     session, reasons, changes = FakeSession(), [], []
-    answers = iter(["tls/r:7447: the router's certificate is not trusted by ca.pem"] * 3
+    answers = iter(["tls/r:7447: the session was refused"]  # once: not said (a moment's)
+                   + ["tls/r:7447: the router's certificate is not trusted by ca.pem"] * 3
                    + ["tls/r:7447: connection refused"] * 100)
 
     def diagnose():
@@ -96,10 +97,38 @@ def test_a_router_that_stays_lost_is_diagnosed_and_each_new_reason_logged(caplog
         wait_for(lambda: changes == [True], what="the router seen")
         assert reasons == []  # nothing asked while a router is there
         session.routers = []
-        wait_for(lambda: len(reasons) >= 5, what="the lost router diagnosed again and again")
+        wait_for(lambda: len(reasons) >= 7, what="the lost router diagnosed again and again")
         session.routers = ["router-a"]
         wait_for(lambda: changes == [True, False, True], what="the router back")
     said = [r.getMessage() for r in caplog.records if "still no router" in r.getMessage()]
     assert said == ["alerts: still no router: tls/r:7447: the router's certificate is not "
                     "trusted by ca.pem",
                     "alerts: still no router: tls/r:7447: connection refused"]  # once each
+
+
+def test_a_slow_diagnosis_does_not_hold_the_watch(caplog):
+    """A review: the diagnosis ran on the watch's thread (a TLS check takes seconds, DNS can
+    hang): the router's return went unseen meanwhile, and the reason was logged after it."""
+    import threading
+
+    from service.link import RouterWatch
+
+    session, changes = FakeSession(), []
+    asked, release = threading.Event(), threading.Event()
+
+    def diagnose():
+        asked.set()
+        release.wait(10)
+        return "tcp/r:7447: connection refused"
+
+    with caplog.at_level("WARNING", logger="asnn.link"), RouterWatch(
+            session, "alerts", interval=0.01, on_change=changes.append, diagnose=diagnose,
+            diagnose_after=0.0):
+        wait_for(lambda: changes == [True], what="the router seen")
+        session.routers = []
+        wait_for(lambda: changes == [True, False], what="the router lost")
+        assert asked.wait(5)
+        session.routers = ["router-a"]  # back while the diagnosis hangs
+        wait_for(lambda: changes == [True, False, True], timeout=2, what="the router back")
+        release.set()
+    assert "still no router" not in caplog.text
