@@ -38,8 +38,8 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
               flush=True)
         while not stop.wait(0.5):
             pass
-    log.info("%s stopped: received %s, invalid %s", name, dict(store.received),
-             dict(store.invalid))
+    log.info("%s stopped: received %s, invalid %s, skipped %s", name, dict(store.received),
+             dict(store.invalid), dict(store.skipped))
     return 0
 
 

@@ -19,15 +19,17 @@ from service import keys
 from service.messages import (MAX_NOTE_LEN, MessageError, Preview, Refusal, Response,
                               check_preview, decode_preview, decode_refusal, decode_response)
 
-__all__ = ["MAX_TARGETS", "RECENT_SAMPLES", "STALE_S", "FleetSubscriber", "RecentSamples",
-           "decode_fleet_sample", "declare_warning_subscribers", "stale_robot",
-           "take_fleet_sample"]
+__all__ = ["ANSWERED_FRAMES", "MAX_TARGETS", "PREVIEW_STAMP_SLACK_S", "RECENT_SAMPLES", "STALE_S",
+           "FleetSubscriber", "RecentSamples", "answered_frame", "decode_fleet_sample",
+           "declare_warning_subscribers", "stale_robot", "take_fleet_sample"]
 
 log = logging.getLogger("asnn.fleet")
 
 MAX_TARGETS = 16      # targets kept per response (the worker finds a few)
 STALE_S = 3.0         # no response for this long: stale (no worker watches it)
 RECENT_SAMPLES = 4096  # warnings remembered to drop the second copy of each (two subscribers)
+ANSWERED_FRAMES = 32  # (seq, stamp) of a robot's latest answered frames, for answered_frame
+PREVIEW_STAMP_SLACK_S = 0.001  # a preview's stamp against its frame's answers (a camera's rounding)
 
 
 def decode_fleet_sample(key: str, payload: bytes, prefix: str
@@ -108,6 +110,21 @@ def stale_robot(robots: dict, now: float, stale_after: float) -> str | None:
     """
     name, quiet = min(robots.items(), key=lambda item: item[1].touched)
     return name if now - quiet.touched > stale_after else None
+
+
+def answered_frame(shown, seq: int, stamp: float) -> bool:
+    """Whether a preview of frame ``(seq, stamp)`` can be of the frames a robot's responses
+    answer, ``shown`` (the ``(seq, stamp)`` of its latest answered frames, at most
+    ANSWERED_FRAMES): its stamp lies between those of the answered frames around its ``seq``
+    (PREVIEW_STAMP_SLACK_S either way; frames the worker skipped have none of their own). Two
+    cameras on one key differ there: a second one's frames are refused by the worker, its
+    previews are not, and shown with the robot's targets they put one camera's picture under
+    the other's answers (docs/operations.md, "Two publishers on one key"). The callers ask only
+    while the robot is answered (not stale): otherwise its camera alone is heard."""
+    before = max(((q, t) for q, t in shown if q <= seq), default=None)
+    after = min(((q, t) for q, t in shown if q >= seq), default=None)
+    return ((before is None or before[1] <= stamp + PREVIEW_STAMP_SLACK_S)
+            and (after is None or after[1] >= stamp - PREVIEW_STAMP_SLACK_S))
 
 
 class RecentSamples:

@@ -12,14 +12,21 @@ topics named after the robot, in the schemas ``asnn detect --mcap`` writes
 ``/<prefix>/<robot>/response``     JSON ``asnn.Response``         every response (plottable)
 ``/<prefix>/<robot>/warning``      JSON ``asnn.Response``         every warning
 
+A second camera on a robot's key (the worker refuses its frames, not its previews) is shown as
+the dashboard shows it: while the robot is answered, a preview is forwarded only where it can be
+of the answered frames (:func:`clients.fleet.answered_frame`), so the robot's targets are never
+drawn on, nor scaled to, the other camera's picture; the others are counted in ``skipped``
+(``foreign-preview``).
+
 Bounds (docs/operations.md, "Hostile input"), the dashboard's rules: every inbound message is
 validated by :func:`clients.fleet.decode_fleet_sample`, as the dashboard validates it (previews of at
 most ``service.messages.MAX_PREVIEW_BYTES``, decoded; at most ``MAX_TARGETS`` targets per
 response); invalid ones are counted per reason and logged rate-limited (one line per reason
-every ``log_interval`` seconds), never raised. A robot costs four channels and two numbers, for
-at most ``max_robots`` robots; when the table is full, the robot silent longest makes room if it
-has been silent for ``stale_after`` seconds, and robots silent for ``forget_after`` seconds are
-dropped (their channels unadvertised). No picture is kept, each is forwarded as it comes, and
+every ``log_interval`` seconds), never raised. A robot costs four channels and the ``(seq,
+stamp)`` of its latest ``ANSWERED_FRAMES`` answered frames, for at most ``max_robots`` robots;
+when the table is full, the robot silent longest makes room if it has been silent for
+``stale_after`` seconds, and robots silent for ``forget_after`` seconds are dropped (their
+channels unadvertised). No picture is kept, each is forwarded as it comes, and
 the server holds at most ``backlog`` messages per connected viewer (the oldest are dropped for a
 slow one), so a viewer costs at most ``backlog`` previews.
 """
@@ -29,9 +36,9 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 # first: without the 'ros' extra, this import fails with a message naming it
 from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, close_channels, response_message,
@@ -45,7 +52,7 @@ from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Response, track_label
 
-from .fleet import STALE_S, stale_robot, take_fleet_sample
+from .fleet import ANSWERED_FRAMES, STALE_S, answered_frame, stale_robot, take_fleet_sample
 
 __all__ = ["DEFAULT_PORT", "FoxgloveBridge", "robot_topics"]
 
@@ -74,6 +81,9 @@ class _Robot:
     size: tuple[int, int] | None = None            # the latest thumbnail's (width, height)
     scale: tuple[float, float] = (1.0, 1.0)        # frame pixels -> thumbnail pixels
     touched: float = 0.0
+    answered: float | None = None                  # arrival (clock) of its latest response
+    # (seq, stamp) of its latest answered frames: a preview of others is a second camera's
+    shown: deque = field(default_factory=lambda: deque(maxlen=ANSWERED_FRAMES))
 
     def close(self) -> None:
         close_channels(self.preview, self.annotations, self.response, self.warning)
@@ -115,6 +125,7 @@ class FoxgloveBridge:
         self.forget_after, self.clock = forget_after, clock
         self.received: Counter = Counter()
         self.invalid: Counter = Counter()
+        self.skipped: Counter = Counter()  # valid messages not forwarded (foreign-preview)
         self._robots: dict[str, _Robot] = {}
         self._lock = threading.Lock()
         self._log = RateLimitedLog(log, log_interval, clock)
@@ -170,8 +181,16 @@ class FoxgloveBridge:
             state.touched = now
             self.received[kind] += 1
             if kind == "preview":
+                if not self._answered_frame_locked(state, message, now):
+                    # a second camera on the robot's key (the worker refuses its frames):
+                    # forwarded, its picture showed the robot's targets at its own scale
+                    self.skipped["foreign-preview"] += 1
+                    return robot
                 self._log_preview_locked(state, message)
             elif kind == "response":
+                state.answered = now
+                if (message.seq, message.stamp) not in state.shown:
+                    state.shown.append((message.seq, message.stamp))
                 self._log_response_locked(state, message)
             else:
                 state.warning.log(response_message(message.model_dump(),
@@ -184,6 +203,13 @@ class FoxgloveBridge:
         self._log.warning(reason, "invalid message on %r (%s): %s", str(key)[:200], reason,
                           detail[:300])
         return None
+
+    def _answered_frame_locked(self, state: _Robot, preview: Preview, now: float) -> bool:
+        """Whether a thumbnail can be of the frames the robot's responses answer, where they
+        come (the dashboard's rule, :func:`clients.fleet.answered_frame`)."""
+        if state.answered is None or now - state.answered > self.stale_after:
+            return True  # no worker answers it: its camera alone is heard
+        return answered_frame(state.shown, preview.seq, preview.stamp)
 
     def _robot_locked(self, robot: str, now: float) -> _Robot | None:
         """The robot's channels, made if there is room (as the dashboard makes it)."""

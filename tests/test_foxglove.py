@@ -305,6 +305,69 @@ def test_live_annotations_label_a_new_owners_tracks_as_asnn_alerts_does(monkeypa
     assert target_label(target) == "#25:3 ttc 1.2 s"  # the annotation's text
 
 
+class Drawn:
+    """What a bridge logs on a robot's image topics, recorded (Zenoh- and viewer-free): the
+    stamps of the previews forwarded, and per annotation message its picture size, scale,
+    number of targets and stamp."""
+
+    def __init__(self, monkeypatch):
+        import clients.foxglove as live
+
+        self.pictures, self.annotations = [], []
+        real_image, real_annotations = live.CompressedImage, live.target_annotations
+
+        def image(**fields):
+            self.pictures.append(fields["timestamp"].sec + fields["timestamp"].nsec / 1e9)
+            return real_image(**fields)
+
+        def annotations(targets, stamp_ns, size, **kwargs):
+            self.annotations.append((size, kwargs["scale"], len(targets), stamp_ns))
+            return real_annotations(targets, stamp_ns, size, **kwargs)
+
+        monkeypatch.setattr(live, "CompressedImage", image)
+        monkeypatch.setattr(live, "target_annotations", annotations)
+
+
+def camera_preview(seq: int, stamp: float, shape=(96, 128), width: int = 64) -> bytes:
+    return encode(Preview.from_frame_image(np.full(shape, 90, np.uint8), seq=seq, stamp=stamp,
+                                           width=width))
+
+
+def test_a_second_cameras_previews_are_not_forwarded_nor_rescale_the_robots_targets(
+        monkeypatch):
+    """A Foxglove operator's trial: a second camera on r1's key (320x120, its frames refused by
+    the worker) had its previews forwarded on /asnn/r1/preview, alternating with the robot's,
+    and each rescaled r1's targets (circle x / target x 0.5 -> 1.0). The dashboard's rule
+    (clients.fleet.answered_frame): while r1 is answered, a preview is forwarded where its stamp
+    lies between those of the answered frames around its seq."""
+    from clients.foxglove import FoxgloveBridge
+
+    drawn = Drawn(monkeypatch)
+    clock = [0.0]
+    with FoxgloveBridge(port=0, clock=lambda: clock[0]) as bridge:
+        bridge.offer("asnn/r1/preview", camera_preview(99, 1000 + 99 * 0.05))  # 128 -> 64: 0.5
+        for seq in (100, 101, 103, 104):  # the worker skipped 102
+            bridge.offer("asnn/r1/response", response("r1", seq, 1000 + seq * 0.05))
+        forwarded = []
+        for seq, stamp, shape in [(102, 1000 + 102 * 0.05, (96, 128)),  # a skipped frame's
+                                  (104, 1000 + 104 * 0.05, (96, 128)),  # an answered frame's
+                                  (106, 1000 + 106 * 0.05, (96, 128)),  # not answered yet
+                                  (102, 1000 + 120 * 0.05, (120, 320)),  # the second camera
+                                  (20, 1000 + 104 * 0.05, (120, 320)),  # seq far behind
+                                  (104, 1000 + 104.5 * 0.05, (120, 320))]:  # stamp 25 ms on
+            clock[0] += 0.5
+            before = len(drawn.pictures)
+            bridge.offer("asnn/r1/preview", camera_preview(seq, stamp, shape, width=shape[1] // 2))
+            forwarded.append(len(drawn.pictures) > before)
+        assert forwarded == [True, True, True, False, False, False]
+        assert bridge.skipped["foreign-preview"] == 3 and bridge.received["preview"] == 7
+        bridge.offer("asnn/r1/response", response("r1", 106, 1000 + 106 * 0.05))
+        assert drawn.annotations[-1][:2] == ((64, 48), (0.5, 0.5))  # the robot's own scale
+        clock[0] += 3.5  # no worker answers any more: the camera alone is heard
+        bridge.offer("asnn/r1/preview", camera_preview(20, 1000 + 130 * 0.05, (120, 320), 160))
+        assert drawn.pictures[-1] == pytest.approx(1000 + 130 * 0.05)
+
+
 def test_bridge_counts_bad_messages_and_bounds_its_robots():
     from clients.foxglove import FoxgloveBridge
 

@@ -19,7 +19,7 @@ from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response, track_label
 from service.streams import CONTESTED_FOR_S
 
-from ..fleet import STALE_S, stale_robot, take_fleet_sample
+from ..fleet import ANSWERED_FRAMES, STALE_S, answered_frame, stale_robot, take_fleet_sample
 
 __all__ = ["FleetStore", "HOLD_S"]
 
@@ -37,7 +37,6 @@ EPISODE_GAP = 20      # a warning at most this many frames after a robot's previ
 EPISODE_GAP_S = 5.0   # ... and at most this many seconds later by its stamp (not a camera that
                       # restarted with its seq counting up again from below)
 RECENT_TARGETS = 32   # responses whose targets are kept to match a preview's seq
-PREVIEW_STAMP_SLACK_S = 0.001  # a preview's stamp against its frame's answers (a camera's rounding)
 MAX_PREVIEW_TOTAL = 16 * 1024 * 1024   # all thumbnails held, encoded
 # thumbnails taken, so that what every page is sent stays bounded in bytes a second (a flood of
 # 30 KB previews from 1,000 ids sent each page 20-34 MB/s, and a browser fell behind and was
@@ -73,7 +72,7 @@ class _Robot:
     points: deque = field(default_factory=deque)  # (version, stamp, spike_rate)
     # (seq, its targets as JSON) of the latest responses
     recent_targets: deque = field(default_factory=lambda: deque(maxlen=RECENT_TARGETS))
-    shown: deque = field(default_factory=lambda: deque(maxlen=RECENT_TARGETS))  # (seq, stamp)
+    shown: deque = field(default_factory=lambda: deque(maxlen=ANSWERED_FRAMES))  # (seq, stamp)
     episode: dict | None = None       # its latest entry in the warning log
     refused: Refusal | None = None    # a worker's latest notice that it refuses its frames
     refused_at: float = 0.0           # its arrival (store clock)
@@ -303,17 +302,11 @@ class FleetStore:
         self._log.append((version, entry))
 
     def _answered_frames_locked(self, state: _Robot, preview: Preview, now: float) -> bool:
-        """Whether a thumbnail can be of the frames the robot's responses answer: where they
-        come (not stale), its stamp lies between those of the answered frames around its
-        ``seq`` (1 ms slack; frames the worker skipped have none of their own). Two cameras
-        on one key differ there (a second one's frames are refused, its previews not)."""
-        if (state.answered is None or now - state.answered > self.stale_after
-                or not state.shown):
+        """Whether a thumbnail can be of the frames the robot's responses answer
+        (:func:`clients.fleet.answered_frame`), where they come (not stale)."""
+        if state.answered is None or now - state.answered > self.stale_after:
             return True  # no worker answers it: its camera alone is heard
-        before = max(((q, t) for q, t in state.shown if q <= preview.seq), default=None)
-        after = min(((q, t) for q, t in state.shown if q >= preview.seq), default=None)
-        return ((before is None or before[1] <= preview.stamp + PREVIEW_STAMP_SLACK_S)
-                and (after is None or after[1] >= preview.stamp - PREVIEW_STAMP_SLACK_S))
+        return answered_frame(state.shown, preview.seq, preview.stamp)
 
     def _take_preview_locked(self, state: _Robot, size: int, now: float) -> bool:
         """Whether a thumbnail of ``size`` bytes arriving at ``now`` is taken: at most one a
