@@ -18,6 +18,12 @@ of the answered frames (:func:`clients.fleet.answered_frame`), so the robot's ta
 drawn on, nor scaled to, the other camera's picture; the others are counted in ``skipped``
 (``foreign-preview``).
 
+The viewers are told in Foxglove's problems list (the protocol's status messages, by id) what
+the dashboard's tiles show: a robot answered once and not for ``stale_after`` seconds has its
+targets cleared (an empty ``ImageAnnotations`` at the latest stamp of its pictures, so that the
+Image panel keeps no target nor red warning border over live pictures) and a Warning
+``stale:<robot>``, both until its next response.
+
 Bounds (docs/operations.md, "Hostile input"), the dashboard's rules: every inbound message is
 validated by :func:`clients.fleet.decode_fleet_sample`, as the dashboard validates it (previews of at
 most ``service.messages.MAX_PREVIEW_BYTES``, decoded; at most ``MAX_TARGETS`` targets per
@@ -46,7 +52,8 @@ from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, close_channels, response_mes
 
 import foxglove
 from foxglove.channels import CompressedImageChannel, ImageAnnotationsChannel
-from foxglove.messages import CompressedImage
+from foxglove.messages import CompressedImage, ImageAnnotations
+from foxglove.websocket import StatusLevel
 
 from service import keys
 from service.logutil import RateLimitedLog
@@ -84,6 +91,8 @@ class _Robot:
     answered: float | None = None                  # arrival (clock) of its latest response
     # (seq, stamp) of its latest answered frames: a preview of others is a second camera's
     shown: deque = field(default_factory=lambda: deque(maxlen=ANSWERED_FRAMES))
+    stamp_ns: int | None = None                    # the latest logged on its image topics
+    stale: bool = False                            # its drawing cleared, its status shown
 
     def close(self) -> None:
         close_channels(self.preview, self.annotations, self.response, self.warning)
@@ -104,7 +113,8 @@ class FoxgloveBridge:
         Robots served at once; a message of one more is counted (``too-many-robots``) and
         dropped unless a robot silent for ``stale_after`` seconds makes room.
     stale_after : float
-        Seconds without a response after which a robot may give up its place.
+        Seconds without a response after which a robot is stale: its targets are cleared, a
+        status names it, and it may give up its place.
     forget_after : float
         Seconds of silence after which a robot's channels are closed.
     backlog : int
@@ -127,6 +137,7 @@ class FoxgloveBridge:
         self.invalid: Counter = Counter()
         self.skipped: Counter = Counter()  # valid messages not forwarded (foreign-preview)
         self._robots: dict[str, _Robot] = {}
+        self._statuses: dict[str, tuple[str, StatusLevel]] = {}  # shown to the viewers, by id
         self._lock = threading.Lock()
         self._log = RateLimitedLog(log, log_interval, clock)
         self._next_sweep = clock()
@@ -189,6 +200,9 @@ class FoxgloveBridge:
                 self._log_preview_locked(state, message)
             elif kind == "response":
                 state.answered = now
+                if state.stale:  # answered again
+                    state.stale = False
+                    self._unstatus_locked(f"stale:{robot}")
                 if (message.seq, message.stamp) not in state.shown:
                     state.shown.append((message.seq, message.stamp))
                 self._log_response_locked(state, message)
@@ -219,7 +233,7 @@ class FoxgloveBridge:
                 quiet = stale_robot(self._robots, now, self.stale_after)
                 if quiet is None:
                     return None
-                self._robots.pop(quiet).close()
+                self._drop_locked(quiet)
                 self._log.info("make-room", "robot %s: silent for more than %.0f s, its topics "
                                "are closed to make room for %s", quiet, self.stale_after, robot)
             topics = robot_topics(self.prefix, robot)
@@ -234,12 +248,30 @@ class FoxgloveBridge:
             self._log.info("serving", "robot %s: serving %s", robot, ", ".join(topics.values()))
         return state
 
+    def _drop_locked(self, name: str) -> None:
+        """Close a robot's channels and take its statuses back."""
+        self._robots.pop(name).close()
+        self._unstatus_locked(f"stale:{name}")
+
+    def _status_locked(self, status_id: str, message: str, level: StatusLevel) -> None:
+        """Show a status to the viewers (Foxglove's problems list), unless it is shown."""
+        if self._statuses.get(status_id) != (message, level):
+            self._statuses[status_id] = (message, level)
+            self.server.publish_status(message, level, id=status_id)
+
+    def _unstatus_locked(self, *status_ids: str) -> None:
+        """Take back the statuses of ``status_ids`` that are shown."""
+        shown = [i for i in status_ids if self._statuses.pop(i, None) is not None]
+        if shown:
+            self.server.remove_status(shown)
+
     @staticmethod
     def _log_preview_locked(state: _Robot, preview: Preview) -> None:
         state.size = (preview.width, preview.height)
         state.scale = (preview.width / (preview.frame_width or preview.width),
                        preview.height / (preview.frame_height or preview.height))
-        state.preview.log(CompressedImage(timestamp=timestamp(time_ns(preview.stamp)),
+        state.stamp_ns = time_ns(preview.stamp)
+        state.preview.log(CompressedImage(timestamp=timestamp(state.stamp_ns),
                                           frame_id="camera", data=preview.data,
                                           format=preview.format))
 
@@ -249,6 +281,7 @@ class FoxgloveBridge:
         fields = response.model_dump()
         state.response.log(response_message(fields, stamp_ns))
         if state.size is not None:  # without a thumbnail there is no picture to draw on
+            state.stamp_ns = stamp_ns
             # ids as asnn alerts and the dashboard show them: "25:3" for a new owner's track 3
             targets = [t if t.get("id") is None else {**t, "id": track_label(t["id"])}
                        for t in fields["targets"]]
@@ -257,16 +290,42 @@ class FoxgloveBridge:
                 scale=state.scale))
 
     def _sweep(self) -> None:
-        while not self._stopped.wait(min(self.forget_after / 10, 1.0)):
-            with self._lock:
-                self._forget_locked(self.clock())
+        while not self._stopped.wait(max(min(self.forget_after / 10, self.stale_after / 2, 1.0),
+                                         0.05)):
+            self.sweep()
+
+    def sweep(self) -> None:
+        """Clear the drawing of the robots whose responses stopped and forget the silent ones:
+        the sweeper thread's round, every second or so (a test with a clock may call it)."""
+        with self._lock:
+            now = self.clock()
+            self._stale_locked(now)
+            self._forget_locked(now)
+
+    def _stale_locked(self, now: float) -> None:
+        """A robot answered once and not for ``stale_after`` seconds (its worker, camera or
+        link stopped): its targets are cleared (an empty ImageAnnotations at the latest stamp
+        of its pictures: the Image panel kept the latest targets, and the red border of a
+        warning, over the live pictures of a robot no worker watched any more) and a status
+        names it, taken back at its next response."""
+        for name, state in self._robots.items():
+            if (state.stale or state.answered is None
+                    or now - state.answered <= self.stale_after):
+                continue
+            state.stale = True
+            if state.stamp_ns is not None:
+                state.annotations.log(ImageAnnotations(timestamp=timestamp(state.stamp_ns)))
+            self._status_locked(
+                f"stale:{name}", f"robot {name}: no response for {self.stale_after:g} s (its "
+                "worker, camera or link stopped): its targets are cleared, its warnings unknown",
+                StatusLevel.Warning)
 
     def _forget_locked(self, now: float) -> None:
         if now < self._next_sweep:
             return
         self._next_sweep = now + min(self.forget_after / 10, 10.0)
         for name in [n for n, s in self._robots.items() if now - s.touched > self.forget_after]:
-            self._robots.pop(name).close()
+            self._drop_locked(name)
             log.info("robot %s: silent for %.0f s, its topics are closed", name,
                      self.forget_after)
 

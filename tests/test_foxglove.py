@@ -308,13 +308,15 @@ def test_live_annotations_label_a_new_owners_tracks_as_asnn_alerts_does(monkeypa
 class Drawn:
     """What a bridge logs on a robot's image topics, recorded (Zenoh- and viewer-free): the
     stamps of the previews forwarded, and per annotation message its picture size, scale,
-    number of targets and stamp."""
+    number of targets and stamp (an empty one, the drawing cleared: ``(None, None, 0,
+    stamp)``)."""
 
     def __init__(self, monkeypatch):
         import clients.foxglove as live
 
         self.pictures, self.annotations = [], []
         real_image, real_annotations = live.CompressedImage, live.target_annotations
+        real_empty = live.ImageAnnotations
 
         def image(**fields):
             self.pictures.append(fields["timestamp"].sec + fields["timestamp"].nsec / 1e9)
@@ -324,8 +326,14 @@ class Drawn:
             self.annotations.append((size, kwargs["scale"], len(targets), stamp_ns))
             return real_annotations(targets, stamp_ns, size, **kwargs)
 
+        def empty(**fields):
+            ts = fields["timestamp"]
+            self.annotations.append((None, None, 0, ts.sec * 10**9 + ts.nsec))
+            return real_empty(**fields)
+
         monkeypatch.setattr(live, "CompressedImage", image)
         monkeypatch.setattr(live, "target_annotations", annotations)
+        monkeypatch.setattr(live, "ImageAnnotations", empty)
 
 
 def camera_preview(seq: int, stamp: float, shape=(96, 128), width: int = 64) -> bytes:
@@ -366,6 +374,74 @@ def test_a_second_cameras_previews_are_not_forwarded_nor_rescale_the_robots_targ
         clock[0] += 3.5  # no worker answers any more: the camera alone is heard
         bridge.offer("asnn/r1/preview", camera_preview(20, 1000 + 130 * 0.05, (120, 320), 160))
         assert drawn.pictures[-1] == pytest.approx(1000 + 130 * 0.05)
+
+
+class Statuses:
+    """A bridge's server with the statuses it shows the viewers recorded: ``shown`` (id ->
+    (level, message)) and every call in ``sent``."""
+
+    def __init__(self, server):
+        self._server, self.shown, self.sent = server, {}, []
+
+    def publish_status(self, message, level, id=None):
+        self.sent.append(("status", id, message))
+        self.shown[id] = (level, message)
+        self._server.publish_status(message, level, id=id)
+
+    def remove_status(self, ids):
+        self.sent.append(("remove", list(ids)))
+        for status_id in ids:
+            self.shown.pop(status_id, None)
+        self._server.remove_status(ids)
+
+    def __getattr__(self, name):
+        return getattr(self._server, name)
+
+
+def test_a_robot_whose_responses_stop_has_its_targets_cleared_and_a_status(monkeypatch):
+    """A Foxglove operator's trial: a worker killed during a warning left the robot's latest
+    targets and the red warning border drawn over its camera's live pictures, with nothing to
+    say the robot was no longer watched. Stale (no response for stale_after): an empty
+    ImageAnnotations at its latest picture's stamp, and a status, both until it is answered."""
+    from foxglove.websocket import StatusLevel
+
+    from asnn.io.foxglove_mcap import time_ns
+    from clients.foxglove import FoxgloveBridge
+
+    drawn = Drawn(monkeypatch)
+    clock = [0.0]
+    with FoxgloveBridge(port=0, stale_after=3.0, clock=lambda: clock[0]) as bridge:
+        statuses = bridge.server = Statuses(bridge.server)
+        bridge.offer("asnn/r1/preview", camera_preview(1, 1.0))
+        bridge.offer("asnn/r1/response", response("r1", 1, 1.0, collision=True))
+        bridge.offer("asnn/r2/preview", camera_preview(1, 1.0))  # r2: never answered
+        assert drawn.annotations[-1][2] == 1
+        clock[0] = 2.0
+        bridge.offer("asnn/r1/preview", camera_preview(3, 1.1))  # the camera goes on
+        clock[0] = 3.0
+        bridge.sweep()
+        assert statuses.sent == [] and len(drawn.annotations) == 1
+        clock[0] = 3.5
+        bridge.sweep()
+        assert drawn.annotations[-1] == (None, None, 0, time_ns(1.1))  # cleared
+        (level, message), = statuses.shown.values()
+        assert list(statuses.shown) == ["stale:r1"] and level == StatusLevel.Warning
+        assert message.startswith("robot r1: no response for 3 s")
+        sent = len(statuses.sent)
+        clock[0] = 5.0
+        bridge.sweep()  # said once
+        assert len(statuses.sent) == sent and len(drawn.annotations) == 2
+        bridge.offer("asnn/r1/response", response("r1", 4, 1.15))
+        assert statuses.shown == {} and statuses.sent[-1] == ("remove", ["stale:r1"])
+        assert drawn.annotations[-1][2] == 1  # drawn again
+        bridge.offer("asnn/r1/response", response("r1", 5, 1.2))
+        assert statuses.sent[-1] == ("remove", ["stale:r1"])  # not taken back twice
+        clock[0] = 9.0
+        bridge.sweep()
+        assert list(statuses.shown) == ["stale:r1"]
+        clock[0] = 9.0 + 600.5  # forgotten: its status goes with its topics
+        bridge.sweep()
+        assert bridge.robots() == [] and statuses.shown == {}
 
 
 def test_bridge_counts_bad_messages_and_bounds_its_robots():
