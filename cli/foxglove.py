@@ -23,7 +23,8 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
                                 max_robots=args.max_robots)
     except OSError as exc:
         return fail(str(exc))
-    return serve_fleet(args, bridge, bridge, "foxglove", bridge.url)
+    return serve_fleet(args, bridge, bridge, "foxglove", bridge.url,
+                       on_router=bridge.router_changed)
 
 
 def register(subparsers) -> None:

@@ -22,7 +22,9 @@ The viewers are told in Foxglove's problems list (the protocol's status messages
 the dashboard's tiles show: a robot answered once and not for ``stale_after`` seconds has its
 targets cleared (an empty ``ImageAnnotations`` at the latest stamp of its pictures, so that the
 Image panel keeps no target nor red warning border over live pictures) and a Warning
-``stale:<robot>``, both until its next response.
+``stale:<robot>``, both until its next response; the server's Zenoh session without a router
+(:meth:`FoxgloveBridge.router_changed`, told by ``service.link.RouterWatch``) is an Error
+``router``, until one is reached again.
 
 Bounds (docs/operations.md, "Hostile input"), the dashboard's rules: every inbound message is
 validated by :func:`clients.fleet.decode_fleet_sample`, as the dashboard validates it (previews of at
@@ -210,6 +212,20 @@ class FoxgloveBridge:
                 state.warning.log(response_message(message.model_dump(),
                                                    time_ns(message.stamp)))
         return robot
+
+    def router_changed(self, connected: bool) -> None:
+        """Whether the server's Zenoh session reaches its router (told by
+        :class:`service.link.RouterWatch`): without one no message comes from any robot, so
+        the viewers are told (an Error problem ``router``) rather than see every robot go
+        stale as if its worker or camera had failed."""
+        with self._lock:
+            if self._stopped.is_set():
+                return
+            if connected:
+                self._unstatus_locked("router")
+            else:
+                self._status_locked("router", "asnn foxglove lost its router: no robot's data "
+                                    "arrives (robots unknown)", StatusLevel.Error)
 
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:

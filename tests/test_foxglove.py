@@ -181,6 +181,8 @@ class FoxgloveViewer:
         self.channels: dict[str, dict] = {}
         self.subscriptions: dict[int, str] = {}
         self.received: dict[str, list[bytes]] = {}
+        self.statuses: list[dict] = []  # status and removeStatus messages, as they came
+        self.info: dict | None = None  # serverInfo: the server has registered this viewer
 
     def __enter__(self):
         self.ws = self._connection.__enter__()
@@ -198,6 +200,10 @@ class FoxgloveViewer:
             if data["op"] == "advertise":
                 for channel in data["channels"]:
                     self.channels[channel["topic"]] = channel
+            elif data["op"] in ("status", "removeStatus"):
+                self.statuses.append(data)
+            elif data["op"] == "serverInfo":
+                self.info = data
             return None
         if message[0] == 1:  # message data: op, subscription id, log time, payload
             sub = int.from_bytes(message[1:5], "little")
@@ -213,6 +219,15 @@ class FoxgloveViewer:
             except TimeoutError:
                 pass
         return self.channels[topic]
+
+    def read_for(self, seconds: float) -> None:
+        """Read whatever comes for ``seconds``."""
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                self.pump(left)
+            except TimeoutError:
+                pass
 
     def subscribe(self, topic: str) -> None:
         sub = len(self.subscriptions) + 1
@@ -442,6 +457,47 @@ def test_a_robot_whose_responses_stop_has_its_targets_cleared_and_a_status(monke
         clock[0] = 9.0 + 600.5  # forgotten: its status goes with its topics
         bridge.sweep()
         assert bridge.robots() == [] and statuses.shown == {}
+
+
+def test_viewers_are_told_when_the_server_loses_its_router():
+    """A Foxglove operator's trial: with the router killed, every topic went quiet and nothing
+    said why (the dashboard's page reads "no router: robots unknown"). RouterWatch's calls
+    reach the viewers as an Error problem, taken back when the router is back."""
+    from clients.foxglove import FoxgloveBridge
+
+    with FoxgloveBridge(port=0) as bridge, FoxgloveViewer(bridge.url) as viewer:
+        wait_for(lambda: viewer.read_for(0.05) or viewer.info, timeout=10.0,
+                 what="serverInfo")  # a status goes to the viewers registered then
+        bridge.router_changed(True)  # the first router reached: nothing to say
+        bridge.router_changed(False)
+        bridge.router_changed(False)  # said once
+        viewer.read_for(0.5)
+        (lost,) = viewer.statuses
+        assert lost["id"] == "router" and lost["level"] == 2  # Error
+        assert "lost its router" in lost["message"]
+        bridge.router_changed(True)
+        bridge.router_changed(True)
+        viewer.read_for(0.5)
+        assert viewer.statuses[1:] == [{"op": "removeStatus", "statusIds": ["router"]}]
+    bridge.router_changed(False)  # a watch's last call after the server closed: nothing
+
+
+def test_asnn_foxglove_wires_the_router_watch_to_the_bridge(monkeypatch):
+    import cli.foxglove
+    from cli.main import build_parser
+
+    served = {}
+
+    def serve_fleet(args, store, server, name, url, **kwargs):
+        served.update(kwargs, store=store)
+        server.close()
+        return 0
+
+    monkeypatch.setattr(cli.foxglove, "serve_fleet", serve_fleet)
+    monkeypatch.setattr(cli.foxglove, "setup_logging", lambda args: None)
+    args = build_parser().parse_args(["foxglove", "--port", "0"])
+    assert args.func(args) == 0
+    assert served["on_router"] == served["store"].router_changed
 
 
 def test_bridge_counts_bad_messages_and_bounds_its_robots():
