@@ -23,7 +23,7 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
                                 max_robots=args.max_robots)
     except OSError as exc:
         return fail(str(exc))
-    return serve_fleet(args, bridge, bridge, "foxglove", bridge.url,
+    return serve_fleet(args, bridge, bridge, "foxglove", bridge.url, refusals=True,
                        on_router=bridge.router_changed)
 
 
@@ -33,8 +33,9 @@ def register(subparsers) -> None:
         description="Serve every robot seen on <prefix>/*/response, warning and preview to the "
                     "Foxglove app over its WebSocket protocol (Foxglove SDK): per robot the "
                     "preview image, the targets as image annotations, the response numbers and "
-                    "the warnings, on /<prefix>/<robot>/... topics (docs/foxglove.md). Needs "
-                    "the 'ros' extra.")
+                    "the warnings, on /<prefix>/<robot>/... topics, and as problems the "
+                    "robots gone stale, the workers' refusals (<prefix>/*/refused) and a lost "
+                    "router (docs/foxglove.md). Needs the 'ros' extra.")
     p.add_argument("--port", type=port, default=8765,
                    help="WebSocket port (default: %(default)s; 0 picks a free one)")
     p.add_argument("--host", default="127.0.0.1", type=host_address,

@@ -24,7 +24,11 @@ targets cleared (an empty ``ImageAnnotations`` at the latest stamp of its pictur
 Image panel keeps no target nor red warning border over live pictures) and a Warning
 ``stale:<robot>``, both until its next response; the server's Zenoh session without a router
 (:meth:`FoxgloveBridge.router_changed`, told by ``service.link.RouterWatch``) is an Error
-``router``, until one is reached again.
+``router``, until one is reached again; a worker's notice that it refuses a robot's frames
+(``<prefix>/<robot>/refused``) is a Warning ``refused:<robot>`` naming the worker, the reason
+and its detail (said again when the reason changes), until the robot's next
+response, or for a ``second-publisher`` refusal until ``service.streams.CONTESTED_FOR_S``
+after the latest notice (contested: the robot's own frames are answered meanwhile).
 
 Bounds (docs/operations.md, "Hostile input"), the dashboard's rules: every inbound message is
 validated by :func:`clients.fleet.decode_fleet_sample`, as the dashboard validates it (previews of at
@@ -59,7 +63,8 @@ from foxglove.websocket import StatusLevel
 
 from service import keys
 from service.logutil import RateLimitedLog
-from service.messages import Preview, Response, track_label
+from service.messages import Preview, Refusal, Response, track_label
+from service.streams import CONTESTED_FOR_S
 
 from .fleet import ANSWERED_FRAMES, STALE_S, answered_frame, stale_robot, take_fleet_sample
 
@@ -95,6 +100,8 @@ class _Robot:
     shown: deque = field(default_factory=lambda: deque(maxlen=ANSWERED_FRAMES))
     stamp_ns: int | None = None                    # the latest logged on its image topics
     stale: bool = False                            # its drawing cleared, its status shown
+    refusal: str | None = None                     # the reason of the refusal shown
+    refused_at: float = 0.0                        # arrival (clock) of the latest notice
 
     def close(self) -> None:
         close_channels(self.preview, self.annotations, self.response, self.warning)
@@ -175,8 +182,8 @@ class FoxgloveBridge:
     # ------------------------------------------------------------------ input
 
     def offer(self, key: str, payload: bytes) -> str | None:
-        """Take one sample of ``<prefix>/<robot>/(response|warning|preview)`` and log it on the
-        robot's topics. Returns the robot id, or ``None`` when the message was invalid (counted
+        """Take one sample of ``<prefix>/<robot>/(response|warning|preview|refused)`` and log
+        it on the robot's topics (a refusal: a problem). Returns the robot id, or ``None`` when the message was invalid (counted
         in ``invalid`` by reason and logged). Never raises for bad input."""
         sample = take_fleet_sample(key, payload, self.prefix, self._reject)
         if sample is None:
@@ -205,9 +212,14 @@ class FoxgloveBridge:
                 if state.stale:  # answered again
                     state.stale = False
                     self._unstatus_locked(f"stale:{robot}")
+                if self._refusal_over_locked(state, now):
+                    state.refusal = None
+                    self._unstatus_locked(f"refused:{robot}")
                 if (message.seq, message.stamp) not in state.shown:
                     state.shown.append((message.seq, message.stamp))
                 self._log_response_locked(state, message)
+            elif kind == "refused":
+                self._refused_locked(robot, state, message, now)
             else:
                 state.warning.log(response_message(message.model_dump(),
                                                    time_ns(message.stamp)))
@@ -226,6 +238,28 @@ class FoxgloveBridge:
             else:
                 self._status_locked("router", "asnn foxglove lost its router: no robot's data "
                                     "arrives (robots unknown)", StatusLevel.Error)
+
+    def _refused_locked(self, robot: str, state: _Robot, notice: Refusal, now: float) -> None:
+        """A worker's notice that it refuses the robot's frames: a Warning problem
+        ``refused:<robot>`` naming the worker, the reason and its detail, said again only when
+        the reason changes (a worker sends a notice a second, each with its own detail)."""
+        state.refused_at = now
+        if state.refusal != notice.reason:
+            state.refusal = notice.reason
+            self._status_locked(f"refused:{robot}", f"robot {robot}: worker {notice.worker} "
+                                f"refuses its frames ({notice.reason}: {notice.detail})",
+                                StatusLevel.Warning)
+
+    @staticmethod
+    def _refusal_over_locked(state: _Robot, now: float) -> bool:
+        """Whether the refusal shown is over: a response came after the latest notice, unless
+        it is a second publisher's, which stays for CONTESTED_FOR_S after the latest notice
+        (the robot's own frames are answered while the other camera's are refused: the
+        worker's ``contested``), as on the dashboard."""
+        if state.refusal is None or state.answered is None or state.answered < state.refused_at:
+            return False
+        return not (state.refusal == "second-publisher"
+                    and now - state.refused_at <= CONTESTED_FOR_S)
 
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:
@@ -267,7 +301,7 @@ class FoxgloveBridge:
     def _drop_locked(self, name: str) -> None:
         """Close a robot's channels and take its statuses back."""
         self._robots.pop(name).close()
-        self._unstatus_locked(f"stale:{name}")
+        self._unstatus_locked(f"stale:{name}", f"refused:{name}")
 
     def _status_locked(self, status_id: str, message: str, level: StatusLevel) -> None:
         """Show a status to the viewers (Foxglove's problems list), unless it is shown."""
@@ -316,6 +350,10 @@ class FoxgloveBridge:
         with self._lock:
             now = self.clock()
             self._stale_locked(now)
+            for name, state in self._robots.items():  # a second publisher's, 30 s on
+                if self._refusal_over_locked(state, now):
+                    state.refusal = None
+                    self._unstatus_locked(f"refused:{name}")
             self._forget_locked(now)
 
     def _stale_locked(self, now: float) -> None:

@@ -498,6 +498,60 @@ def test_asnn_foxglove_wires_the_router_watch_to_the_bridge(monkeypatch):
     args = build_parser().parse_args(["foxglove", "--port", "0"])
     assert args.func(args) == 0
     assert served["on_router"] == served["store"].router_changed
+    assert served["refusals"] is True  # the workers' notices, as the dashboard takes them
+
+
+def test_a_worker_refusing_a_robots_frames_is_a_problem_until_it_is_answered():
+    """A Foxglove operator's trial: a worker at --max-robots 1 refused r2's frames; r2's
+    preview went on and nothing said why it had no targets (the camera and the dashboard said
+    it). A Warning problem per robot, said when the reason changes; taken back at
+    the next response, except a second publisher's (contested) for CONTESTED_FOR_S after the
+    latest notice, as on the dashboard."""
+    from foxglove.websocket import StatusLevel
+
+    from clients.foxglove import FoxgloveBridge
+    from service.messages import Refusal
+    from service.streams import CONTESTED_FOR_S
+
+    def notice(reason, count, worker="w1", robot="r2"):
+        return encode(Refusal(robot=robot, worker=worker, reason=reason, count=count,
+                              detail=f"frame {count} refused ({reason})"))
+
+    clock = [0.0]
+    with FoxgloveBridge(port=0, clock=lambda: clock[0]) as bridge:
+        statuses = bridge.server = Statuses(bridge.server)
+        assert bridge.offer("asnn/r2/refused", notice("too-many-robots", 1)) == "r2"
+        ((level, message),) = statuses.shown.values()
+        assert list(statuses.shown) == ["refused:r2"] and level == StatusLevel.Warning
+        assert message == ("robot r2: worker w1 refuses its frames (too-many-robots: frame 1 "
+                           "refused (too-many-robots))")
+        for count in range(2, 6):  # a notice a second: said once
+            clock[0] += 1.0
+            bridge.offer("asnn/r2/refused", notice("too-many-robots", count,
+                                                   worker=f"w{count % 2 + 1}"))
+        assert len(statuses.sent) == 1 and bridge.received["refused"] == 5
+        bridge.offer("asnn/r2/refused", notice("undecodable", 6))  # another reason: said
+        assert len(statuses.sent) == 2 and "undecodable" in statuses.shown["refused:r2"][1]
+        bridge.offer("asnn/r2/warning", response("r2", 7, 7.0))  # a warning is no answer
+        assert "refused:r2" in statuses.shown
+        bridge.offer("asnn/r2/response", response("r2", 8, 8.0))
+        assert statuses.shown == {} and statuses.sent[-1] == ("remove", ["refused:r2"])
+        bridge.offer("asnn/r2/response", response("r2", 9, 9.0))
+        assert len(statuses.sent) == 3  # taken back once
+
+        # a second camera on r1's key: the robot's own frames are answered meanwhile
+        bridge.offer("asnn/r1/refused", notice("second-publisher", 1, robot="r1"))
+        start = clock[0]
+        for k in range(1, 70):
+            clock[0] = start + k * 0.5
+            bridge.offer("asnn/r1/response", response("r1", k, float(k)))
+            bridge.sweep()
+            assert ("refused:r1" in statuses.shown) == (k * 0.5 <= CONTESTED_FOR_S), k
+        clock[0] += 0.5
+        bridge.offer("asnn/r1/refused", notice("second-publisher", 2, robot="r1"))
+        clock[0] += CONTESTED_FOR_S + 1  # no response since, no notice: still refused
+        bridge.sweep()
+        assert "refused:r1" in statuses.shown
 
 
 def test_bridge_counts_bad_messages_and_bounds_its_robots():
