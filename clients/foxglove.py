@@ -34,11 +34,12 @@ Bounds (docs/operations.md, "Hostile input"), the dashboard's rules: every inbou
 validated by :func:`clients.fleet.decode_fleet_sample`, as the dashboard validates it (previews of at
 most ``service.messages.MAX_PREVIEW_BYTES``, decoded; at most ``MAX_TARGETS`` targets per
 response); invalid ones are counted per reason and logged rate-limited (one line per reason
-every ``log_interval`` seconds), never raised. A robot costs four channels and the ``(seq,
-stamp)`` of its latest ``ANSWERED_FRAMES`` answered frames, for at most ``max_robots`` robots;
-when the table is full, the robot silent longest makes room if it has been silent for
-``stale_after`` seconds, and robots silent for ``forget_after`` seconds are dropped (their
-channels unadvertised). No picture is kept, each is forwarded as it comes, and
+every ``log_interval`` seconds), never raised. The SDK's own WARNING and ERROR lines, one per
+invalid message of a viewer or failed handshake, are rate-limited alike (:class:`SdkLogLimit`
+on :data:`SDK_LOGGERS`). A robot costs four channels and the ``(seq, stamp)`` of its latest
+``ANSWERED_FRAMES`` answered frames, for at most ``max_robots`` robots; when the table is full,
+the robot silent longest makes room if it has been silent for ``stale_after`` seconds, and
+robots silent for ``forget_after`` seconds are dropped (their channels unadvertised). No picture is kept, each is forwarded as it comes, and
 the server holds at most ``backlog`` messages per connected viewer (the oldest are dropped for a
 slow one), so a viewer costs at most ``backlog`` previews.
 """
@@ -46,6 +47,7 @@ slow one), so a viewer costs at most ``backlog`` previews.
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
 from collections import Counter, deque
@@ -68,7 +70,8 @@ from service.streams import CONTESTED_FOR_S
 
 from .fleet import ANSWERED_FRAMES, STALE_S, answered_frame, stale_robot, take_fleet_sample
 
-__all__ = ["DEFAULT_PORT", "FoxgloveBridge", "robot_topics"]
+__all__ = ["DEFAULT_PORT", "SDK_LOGGERS", "FoxgloveBridge", "SdkLogLimit", "robot_topics",
+           "sdk_log_reason"]
 
 log = logging.getLogger("asnn.foxglove")
 
@@ -76,6 +79,47 @@ DEFAULT_PORT = 8765   # Foxglove's usual WebSocket port
 MAX_ROBOTS = 256
 FORGET_S = 600.0      # a robot silent this long loses its channels
 BACKLOG = 256         # messages queued per viewer before the oldest are dropped
+
+
+# the SDK's loggers (its Rust modules' log lines, through pyo3-log) that write a line per
+# invalid message of a viewer and per failed handshake: 20,000 ERROR lines in 4 s from one viewer
+SDK_LOGGERS = ("foxglove.websocket.server", "foxglove.websocket.connected_client",
+               "foxglove.websocket.connected_client.poller")
+_CLIENT_ADDRESS = re.compile(r"\[[^\]\s]{1,64}\](?::\d+)?"             # [::1]:50600
+                             r"|\b\d{1,3}(?:\.\d{1,3}){3}(?::\d+)?")  # 127.0.0.1:50600
+
+
+def sdk_log_reason(record: logging.LogRecord) -> str:
+    """The rate limit's reason for a line of the SDK: its logger and its words up to the first
+    ``": "``, with the viewers' addresses and the numbers left out. What a viewer sent (the
+    parser's error, after the colon) is never part of it, so a viewer cannot make a reason of
+    each message (``Invalid message from 127.0.0.1:50600: key must be a string at line 1
+    column 2`` -> ``...connected_client:Invalid message from <client>``)."""
+    text = _CLIENT_ADDRESS.sub("<client>", record.getMessage()).split(": ", 1)[0]
+    return f"{record.name}:{re.sub(r'[0-9]+', '#', text)[:100]}"
+
+
+class SdkLogLimit(logging.Filter):
+    """The Foxglove SDK's own WARNING and ERROR lines (a viewer's invalid messages, failed
+    handshakes) as the server's own rejections are logged (``service.logutil.RateLimitedLog``):
+    per reason (:func:`sdk_log_reason`) the first at once, then at most one every
+    ``interval`` seconds, saying how many were not shown. Its lines below WARNING (a viewer
+    registered, unregistered) pass."""
+
+    def __init__(self, interval: float = 10.0, clock: Callable[[], float] = time.monotonic):
+        super().__init__()
+        self.limit = RateLimitedLog(log, interval, clock)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno < logging.WARNING:
+            return True
+        hidden = self.limit.allow(sdk_log_reason(record))
+        if hidden is None:
+            return False
+        if hidden:
+            record.msg = f"{record.getMessage()} ({hidden} more like it since the last line)"
+            record.args = ()
+        return True
 
 
 def robot_topics(prefix: str, robot: str) -> dict[str, str]:
@@ -151,11 +195,16 @@ class FoxgloveBridge:
         self._log = RateLimitedLog(log, log_interval, clock)
         self._next_sweep = clock()
         self._context = foxglove.Context()  # the fleet's channels reach this server only
+        # the SDK logs a line per invalid message of a viewer: rate-limited as ours are
+        self._sdk_log = SdkLogLimit(log_interval, clock)
+        for name in SDK_LOGGERS:
+            logging.getLogger(name).addFilter(self._sdk_log)
         try:
             self.server = foxglove.start_server(
                 name=f"asnn fleet ({self.prefix})", host=host, port=port, context=self._context,
                 message_backlog_size=backlog)
         except Exception as exc:  # the SDK's own error type: the port is taken, a bad address
+            self._unfilter_sdk_log()
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {exc}") from None
         self.host = host
         # robots are forgotten in silence too: with the whole fleet quiet (its cameras stopped,
@@ -400,3 +449,8 @@ class FoxgloveBridge:
                 state.close()
             self._robots.clear()
         self.server.stop()
+        self._unfilter_sdk_log()
+
+    def _unfilter_sdk_log(self) -> None:
+        for name in SDK_LOGGERS:
+            logging.getLogger(name).removeFilter(self._sdk_log)

@@ -554,6 +554,46 @@ def test_a_worker_refusing_a_robots_frames_is_a_problem_until_it_is_answered():
         assert "refused:r1" in statuses.shown
 
 
+def test_the_sdks_line_per_invalid_message_of_a_viewer_is_rate_limited(caplog):
+    """A Foxglove operator's trial: a viewer sending invalid messages made the SDK log an ERROR
+    line for each (20,000 lines in 4 s), past the rate limit docs/operations.md claimed for the
+    Foxglove server. Its WARNING and ERROR lines are limited per kind as ours are (the
+    viewer's text never part of the kind), and say how many were not shown."""
+    import logging
+    import socket
+
+    from clients.foxglove import FoxgloveBridge
+
+    def sdk_lines():
+        return [r.getMessage() for r in caplog.records
+                if r.name.startswith("foxglove.") and r.levelno >= logging.WARNING]
+
+    clock = [0.0]
+    with caplog.at_level(logging.INFO), \
+            FoxgloveBridge(port=0, log_interval=10.0, clock=lambda: clock[0]) as bridge:
+        with FoxgloveViewer(bridge.url) as viewer:
+            for k in range(300):
+                viewer.ws.send("{bad" if k % 2 else '{"op": "nope_%d"}' % k)
+                if k % 50 == 49:  # read the SDK's answers (a status each), as a viewer does
+                    viewer.read_for(0.05)
+            viewer.ws.send(json.dumps({"op": "subscribe",
+                                       "subscriptions": [{"id": 1, "channelId": 99}]}))
+            for _ in range(3):  # a port scan, a health check: a handshake failed each
+                socket.create_connection(("127.0.0.1", bridge.port)).close()
+            wait_for(lambda: any("unknown channel" in line for line in sdk_lines()),
+                     what="the SDK's line for the unknown channel")
+            viewer.read_for(0.3)
+            assert len([x for x in sdk_lines() if "Invalid message" in x]) == 1, sdk_lines()
+            clock[0] = 10.5
+            viewer.ws.send("{bad")
+            wait_for(lambda: len([x for x in sdk_lines() if "Invalid message" in x]) == 2,
+                     what="the next line")
+        lines = sdk_lines()
+        assert [x[-38:] for x in lines if "Invalid message" in x][1] \
+            == "(299 more like it since the last line)", lines
+        assert len(lines) <= 4, lines  # and one unknown channel, one handshake failed
+
+
 def test_bridge_counts_bad_messages_and_bounds_its_robots():
     from clients.foxglove import FoxgloveBridge
 
