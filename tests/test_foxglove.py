@@ -594,6 +594,23 @@ def test_the_sdks_line_per_invalid_message_of_a_viewer_is_rate_limited(caplog):
         assert len(lines) <= 4, lines  # and one unknown channel, one handshake failed
 
 
+def test_the_server_speaks_foxglove_sdk_v1_only_as_docs_foxglove_md_says():
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    from clients.foxglove import FoxgloveBridge
+
+    docs = (Path(__file__).resolve().parents[1] / "docs" / "foxglove.md").read_text()
+    assert "`foxglove.sdk.v1`" in docs and "`foxglove.websocket.v1`" in docs
+    with FoxgloveBridge(port=0) as bridge:
+        for offered in (["foxglove.websocket.v1"], None):  # an older viewer, or none
+            with pytest.raises(InvalidStatus, match="HTTP 400"):
+                connect(bridge.url, subprotocols=offered, open_timeout=10)
+        with connect(bridge.url, subprotocols=["foxglove.websocket.v1", "foxglove.sdk.v1"],
+                     open_timeout=10) as viewer:
+            assert viewer.subprotocol == "foxglove.sdk.v1"
+
+
 def test_bridge_counts_bad_messages_and_bounds_its_robots():
     from clients.foxglove import FoxgloveBridge
 
