@@ -28,7 +28,9 @@ Image panel keeps no target nor red warning border over live pictures) and a War
 (``<prefix>/<robot>/refused``) is a Warning ``refused:<robot>`` naming the worker, the reason
 and its detail (said again when the reason changes), until the robot's next
 response, or for a ``second-publisher`` refusal until ``service.streams.CONTESTED_FOR_S``
-after the latest notice (contested: the robot's own frames are answered meanwhile).
+after the latest notice (contested: the robot's own frames are answered meanwhile). The SDK
+sends a status to the viewers connected at the time only: the problems shown are said again
+within a second of a viewer's subscribing to a topic (one that connected since has them then).
 
 Bounds (docs/operations.md, "Hostile input"), the dashboard's rules: every inbound message is
 validated by :func:`clients.fleet.decode_fleet_sample`, as the dashboard validates it (previews of at
@@ -61,7 +63,7 @@ from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, close_channels, response_mes
 import foxglove
 from foxglove.channels import CompressedImageChannel, ImageAnnotationsChannel
 from foxglove.messages import CompressedImage, ImageAnnotations
-from foxglove.websocket import StatusLevel
+from foxglove.websocket import ServerListener, StatusLevel
 
 from service import keys
 from service.logutil import RateLimitedLog
@@ -151,6 +153,17 @@ class _Robot:
         close_channels(self.preview, self.annotations, self.response, self.warning)
 
 
+class _Subscriptions(ServerListener):
+    """Notes that a viewer subscribed to a topic: a viewer that connected since the problems
+    were said (the SDK sends a status to the viewers connected at the time only)."""
+
+    def __init__(self) -> None:
+        self.new = threading.Event()
+
+    def on_subscribe(self, client, channel) -> None:
+        self.new.set()
+
+
 class FoxgloveBridge:
     """A Foxglove WebSocket server showing the fleet, fed with raw Zenoh samples. Use as a
     context manager, or call :meth:`close`.
@@ -197,12 +210,13 @@ class FoxgloveBridge:
         self._context = foxglove.Context()  # the fleet's channels reach this server only
         # the SDK logs a line per invalid message of a viewer: rate-limited as ours are
         self._sdk_log = SdkLogLimit(log_interval, clock)
+        self._subscriptions = _Subscriptions()
         for name in SDK_LOGGERS:
             logging.getLogger(name).addFilter(self._sdk_log)
         try:
             self.server = foxglove.start_server(
                 name=f"asnn fleet ({self.prefix})", host=host, port=port, context=self._context,
-                message_backlog_size=backlog)
+                message_backlog_size=backlog, server_listener=self._subscriptions)
         except Exception as exc:  # the SDK's own error type: the port is taken, a bad address
             self._unfilter_sdk_log()
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {exc}") from None
@@ -394,10 +408,16 @@ class FoxgloveBridge:
             self.sweep()
 
     def sweep(self) -> None:
-        """Clear the drawing of the robots whose responses stopped and forget the silent ones:
-        the sweeper thread's round, every second or so (a test with a clock may call it)."""
+        """Say the problems again after a viewer subscribed (one that connected since they were
+        said has none), clear the drawing of the robots whose responses stopped and forget the
+        silent ones: the sweeper thread's round, every second or so (a test with a clock may
+        call it)."""
         with self._lock:
             now = self.clock()
+            if self._subscriptions.new.is_set():  # a new viewer, maybe: the problems again
+                self._subscriptions.new.clear()
+                for status_id, (message, level) in self._statuses.items():
+                    self.server.publish_status(message, level, id=status_id)
             self._stale_locked(now)
             for name, state in self._robots.items():  # a second publisher's, 30 s on
                 if self._refusal_over_locked(state, now):

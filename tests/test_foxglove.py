@@ -482,6 +482,27 @@ def test_viewers_are_told_when_the_server_loses_its_router():
     bridge.router_changed(False)  # a watch's last call after the server closed: nothing
 
 
+def test_a_viewer_that_connects_later_gets_the_problems_shown():
+    """The SDK sends a status to the viewers connected at the time only: an operator opening
+    Foxglove during an outage saw no problem. They are said again once a viewer subscribes."""
+    from clients.foxglove import FoxgloveBridge
+
+    with FoxgloveBridge(port=0, stale_after=60.0) as bridge:
+        bridge.router_changed(False)
+        assert bridge.offer("asnn/r1/response", response("r1", 1, 1.0)) == "r1"
+        with FoxgloveViewer(bridge.url) as viewer:
+            viewer.wait_channel("/asnn/r1/response")
+            viewer.read_for(0.2)
+            assert viewer.statuses == []
+            bridge.sweep()
+            viewer.read_for(0.2)
+            assert viewer.statuses == []  # no subscription yet
+            viewer.subscribe("/asnn/r1/response")
+            wait_for(lambda: viewer.read_for(0.1) or viewer.statuses, timeout=5.0,
+                     what="the problems said again (the sweeper's round)")
+            assert [(s["id"], s["level"]) for s in viewer.statuses] == [("router", 2)]
+
+
 def test_asnn_foxglove_wires_the_router_watch_to_the_bridge(monkeypatch):
     import cli.foxglove
     from cli.main import build_parser
