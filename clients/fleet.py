@@ -21,7 +21,7 @@ from service.messages import (MAX_NOTE_LEN, MessageError, Preview, Refusal, Resp
 
 __all__ = ["ANSWERED_FRAMES", "MAX_TARGETS", "PREVIEW_STAMP_SLACK_S", "RECENT_SAMPLES", "STALE_S",
            "FleetSubscriber", "RecentSamples", "answered_frame", "decode_fleet_sample",
-           "declare_warning_subscribers", "stale_robot", "take_fleet_sample"]
+           "declare_warning_subscribers", "remember_answer", "stale_robot", "take_fleet_sample"]
 
 log = logging.getLogger("asnn.fleet")
 
@@ -123,8 +123,31 @@ def answered_frame(shown, seq: int, stamp: float) -> bool:
     while the robot is answered (not stale): otherwise its camera alone is heard."""
     before = max(((q, t) for q, t in shown if q <= seq), default=None)
     after = min(((q, t) for q, t in shown if q >= seq), default=None)
-    return ((before is None or before[1] <= stamp + PREVIEW_STAMP_SLACK_S)
-            and (after is None or after[1] >= stamp - PREVIEW_STAMP_SLACK_S))
+    if not ((before is None or before[1] <= stamp + PREVIEW_STAMP_SLACK_S)
+            and (after is None or after[1] >= stamp - PREVIEW_STAMP_SLACK_S)):
+        return False
+    if after is None and before is not None and seq > before[0]:
+        # ahead of every answer (a preview sent before its frame is answered): as far ahead in
+        # seq as its stamp says at the answered frames' period, not a second camera's own
+        # count (seq 5000 a moment after the robot's 100 had no bound above)
+        answered = sorted(shown)
+        periods = sorted((t2 - t1) / (q2 - q1) for (q1, t1), (q2, t2)
+                         in zip(answered, answered[1:]) if q2 > q1 and t2 >= t1)
+        if periods:
+            expected = (seq - before[0]) * periods[len(periods) // 2]
+            return (expected / 2 - PREVIEW_STAMP_SLACK_S <= stamp - before[1]
+                    <= 2 * expected + PREVIEW_STAMP_SLACK_S)
+    return True
+
+
+def remember_answer(shown, seq: int, stamp: float) -> None:
+    """Add an answered frame's ``(seq, stamp)`` to ``shown`` (a deque of ANSWERED_FRAMES), for
+    :func:`answered_frame`, first dropping the answers it contradicts: those of greater
+    ``seq`` and earlier ``stamp``, a stream its camera left (a restart: seq back to 0, its
+    clock going on), which would keep the restarted camera's previews out until they left."""
+    for entry in [(q, t) for q, t in shown if q > seq and t < stamp]:
+        shown.remove(entry)
+    shown.append((seq, stamp))
 
 
 class RecentSamples:

@@ -70,7 +70,8 @@ from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response, track_label
 from service.streams import CONTESTED_FOR_S
 
-from .fleet import ANSWERED_FRAMES, STALE_S, answered_frame, stale_robot, take_fleet_sample
+from .fleet import (ANSWERED_FRAMES, STALE_S, answered_frame, remember_answer, stale_robot,
+                    take_fleet_sample)
 
 __all__ = ["DEFAULT_PORT", "SDK_LOGGERS", "FoxgloveBridge", "SdkLogLimit", "robot_topics",
            "sdk_log_reason"]
@@ -279,7 +280,7 @@ class FoxgloveBridge:
                     state.refusal = None
                     self._unstatus_locked(f"refused:{robot}")
                 if (message.seq, message.stamp) not in state.shown:
-                    state.shown.append((message.seq, message.stamp))
+                    remember_answer(state.shown, message.seq, message.stamp)
                 self._log_response_locked(state, message)
             elif kind == "refused":
                 self._refused_locked(robot, state, message, now)

@@ -256,14 +256,34 @@ def test_a_second_cameras_previews_are_not_shown_under_the_robots_answers():
                        (102, 1000.0 + 120 * 0.05),  # the second camera: seq 18 behind
                        (20, 1000.0 + 104 * 0.05),  # seq far behind, stamped now
                        (104, 1000.0 + 104 * 0.05 + 0.5)]:  # the same seq, half a second on
-        clock.now += 0.5  # one preview a robot every PREVIEW_INTERVAL
+        clock.now += 0.45  # one preview a robot every PREVIEW_INTERVAL, all within stale_after
         store.offer("asnn/r1/preview", encode(preview(seq=seq, stamp=stamp)))
         shown.append(store.delta(0)["robots"]["r1"]["preview"]["seq"])
     assert shown == [102, 104, 106, 106, 106, 106]
     assert store.skipped["foreign-preview"] == 3
+    # a second camera counting its own seq far ahead, stamped now (a preview above every
+    # answer had no bound: a review)
+    store.offer("asnn/r1/preview", encode(preview(seq=5000, stamp=1000.0 + 106 * 0.05)))
+    assert store.skipped["foreign-preview"] == 4
     clock.now += 3.5  # no worker answers any more: the camera alone is heard, all are shown
     store.offer("asnn/r1/preview", encode(preview(seq=20, stamp=1000.0 + 130 * 0.05)))
     assert store.delta(0)["robots"]["r1"]["preview"]["seq"] == 20
+
+
+def test_a_restarted_cameras_previews_are_shown_at_its_first_answers():
+    """A review: after a camera restart (seq back to 0, its clock going on), the old stream's
+    answers of greater seq bounded the new previews from above until 32 answers had come."""
+    clock = Clock()
+    store = FleetStore(clock=clock)
+    for seq in range(200, 232):
+        offer_response(store, response(seq=seq))
+    restart = 1000.0 + 240 * 0.05  # the camera's clock goes on
+    for seq in range(3):
+        offer_response(store, response(seq=seq, stamp=restart + seq * 0.05))
+    clock.now += 0.5  # a preview of a frame not answered yet, as the camera sends it
+    store.offer("asnn/r1/preview", encode(preview(seq=4, stamp=restart + 4 * 0.05)))
+    assert store.delta(0)["robots"]["r1"]["preview"]["seq"] == 4
+    assert store.skipped["foreign-preview"] == 0
 
 
 def test_a_second_publisher_stays_on_the_tile_while_the_robot_is_answered():

@@ -19,7 +19,8 @@ from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response, track_label
 from service.streams import CONTESTED_FOR_S
 
-from ..fleet import ANSWERED_FRAMES, STALE_S, answered_frame, stale_robot, take_fleet_sample
+from ..fleet import (ANSWERED_FRAMES, STALE_S, answered_frame, remember_answer, stale_robot,
+                     take_fleet_sample)
 
 __all__ = ["FleetStore", "HOLD_S"]
 
@@ -242,7 +243,7 @@ class FleetStore:
             # around a hand-over, the old one last, and it is no restart of the camera
             state.responses += 1
             return
-        state.shown.append((response.seq, response.stamp))
+        remember_answer(state.shown, response.seq, response.stamp)
         if previous is not None and response.stamp < previous.stamp:
             state.behind += 1
             if response.seq > 0 and state.behind < LATE_RESPONSES:
