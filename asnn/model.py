@@ -38,6 +38,8 @@ from .response import Maps, Response
 from .stabilisation import background_shift, search_radius, shift_image
 from .targets import extract_targets
 
+TIMED_RUN = 3  # gaps believed in a row before one over MAX_FRAME_GAP_S is believed too
+
 __all__ = ["ASNN", "FrameError", "spike_step"]
 
 N_ORIENTATIONS = 8  # theta = k pi / 4; four are computed, four are their negatives
@@ -247,7 +249,7 @@ class ASNN:
         self.index = 0
         self.approach = ApproachStage(self.params) if self.params.targets == "objects" else None
         self._stamp: float | None = None
-        self._timed = False  # the stream's latest gap was one its timing believes
+        self._timed = 0  # believed gaps in a row (one is a ms clock's chance, not a timing)
         self._clock: float | None = None  # the latest frame's time, once a frame had one
         self.periods: deque[float] = deque(maxlen=PERIOD_FRAMES)
         self._last: Response | None = None
@@ -336,7 +338,7 @@ class ASNN:
             at least 0.1 ms and at most 1 s (a clock in milliseconds or smaller units, a stall),
             frames are ``params.dt`` apart (a frame without it in a stream whose frames had
             times comes :attr:`frame_period` after the latest), except a gap of more than 1 s
-            right after a gap that was believed: frames lost for a while, which keeps its own
+            right after three believed in a row: frames lost for a while, which keeps its own
             time (read as one frame's, the growth of seconds gave a time to contact tens of
             times short, and a warning). A clock in larger units
             (minutes) is believed as seconds: its expansion reads 60 times too fast, and the
@@ -534,13 +536,16 @@ class ASNN:
             return _Frame(index, repeat=True, since_stepped=stamp - self._stamp)
         elapsed = stamp - self._stamp
         if timed_gap(elapsed):
-            self._timed = True
-        elif not (self._timed and MAX_FRAME_GAP_S < elapsed < math.inf):
-            # no usable times: the nominal frame period (a timed stream's stall, frames lost
-            # for over MAX_FRAME_GAP_S, keeps its own: timed at dt it read the change of
-            # seconds as one frame's, a time to contact 50-300 times short)
+            self._timed += 1
+        elif self._timed >= TIMED_RUN and MAX_FRAME_GAP_S < elapsed < math.inf:
+            # a timed stream's stall, frames lost for over MAX_FRAME_GAP_S, keeps its own time
+            # (timed at dt it read the change of seconds as one frame's, a time to contact
+            # 50-300 times short); the next such gap must follow believed ones again (one
+            # chance gap of a millisecond clock under 1 ms timed all its later ones as seconds)
+            self._timed = 0
+        else:  # no usable times: the nominal frame period
             elapsed = p.dt
-            self._timed = False
+            self._timed = 0
         self._stamp = stamp
         self.periods.append(elapsed)
         background = None

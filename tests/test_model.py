@@ -132,6 +132,33 @@ def test_frames_lost_for_over_a_second_keep_their_time_and_give_no_false_warning
     assert shortest > 0.5  # no target reads it closing twice as fast as it does
 
 
+def test_a_millisecond_clock_with_one_gap_under_a_millisecond_is_still_timed_at_dt():
+    """A review: one pair of frames 0.5 ms apart in a stream stamped in milliseconds (a
+    camera read two frames at a time) was believed as a gap in seconds, and every later 33 ms
+    gap as 33 s: no time to contact and no warning for the rest of the stream."""
+    from asnn.stimuli.render import levels, paint_disk
+
+    background, level = levels(0.6, "dark")
+    rng = np.random.default_rng(1)
+    frames = []
+    for k in range(85):  # a disk 3 s from contact at 30 fps
+        image = np.full((120, 160), background, float)
+        paint_disk(image, 80, 60, 6.0 * 3.0 / (3.0 - k / 30), level)
+        frames.append(np.clip(np.rint(image + rng.normal(0, 2.0, image.shape)), 0, 255))
+    stamps, t = [], 1e5
+    for k in range(85):
+        t += 0.5 if k == 10 else 1000 / 30
+        stamps.append(t)
+    plain, paired = ASNN(), ASNN()
+    warned = {"plain": [], "paired": []}
+    for k, image in enumerate(frames):
+        image = image.astype(np.uint8)
+        warned["plain"].append(plain.step(image, 1e5 + 1000 * k / 30).collision)
+        warned["paired"].append(paired.step(image, stamps[k]).collision)
+    assert any(warned["plain"]) and warned["paired"] == warned["plain"]
+    assert paired.frame_period == plain.frame_period == paired.params.dt
+
+
 def test_untimed_frames_in_a_row_in_a_timed_stream_each_come_a_frame_period_later():
     """Two or three frames in a row without a time (a camera's stamps dropped for a moment):
     each comes a frame period after the one before, not all at the same time (a gap of 0, a
