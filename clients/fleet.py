@@ -130,13 +130,16 @@ def answered_frame(shown, seq: int, stamp: float) -> bool:
         # ahead of every answer (a preview sent before its frame is answered): as far ahead in
         # seq as its stamp says at the answered frames' period, not a second camera's own
         # count (seq 5000 a moment after the robot's 100 had no bound above)
+        # the mean period over the answered frames (a camera read two frames at a time has
+        # pairs 4 and 63 ms apart: the median of single steps read either), and a frame's
+        # period of slack either way (its own step may be any of those)
         answered = sorted(shown)
-        periods = sorted((t2 - t1) / (q2 - q1) for (q1, t1), (q2, t2)
-                         in zip(answered, answered[1:]) if q2 > q1 and t2 >= t1)
-        if periods:
-            expected = (seq - before[0]) * periods[len(periods) // 2]
-            return (expected / 2 - PREVIEW_STAMP_SLACK_S <= stamp - before[1]
-                    <= 2 * expected + PREVIEW_STAMP_SLACK_S)
+        first, last = answered[0], answered[-1]
+        if last[0] > first[0] and last[1] > first[1]:
+            period = (last[1] - first[1]) / (last[0] - first[0])
+            expected = (seq - before[0]) * period
+            return (expected / 2 - period - PREVIEW_STAMP_SLACK_S <= stamp - before[1]
+                    <= 2 * expected + period + PREVIEW_STAMP_SLACK_S)
     return True
 
 

@@ -270,6 +270,30 @@ def test_a_second_cameras_previews_are_not_shown_under_the_robots_answers():
     assert store.delta(0)["robots"]["r1"]["preview"]["seq"] == 20
 
 
+@pytest.mark.parametrize("gaps, answered_every", [
+    ([0.004, 0.063], 1),  # a camera read two frames at a time
+    ([0.004, 0.063], 3),  # the same, its worker answering every third frame
+    ([0.030, 0.036, 0.020, 0.047], 1),  # a jittery 30 fps
+])
+def test_a_cameras_own_previews_ahead_of_its_answers_are_its_own(gaps, answered_every):
+    """A review: the 'ahead of every answer' check took the median of single steps, which
+    flipped between 4 and 63 ms for a camera read two frames at a time, and refused 267 of its
+    300 own previews (each arrives before its frame's answer) as another camera's."""
+    from collections import deque
+
+    from clients.fleet import ANSWERED_FRAMES, answered_frame, remember_answer
+
+    shown, t, refused = deque(maxlen=ANSWERED_FRAMES), 100.0, []
+    for seq in range(300):
+        t += gaps[seq % len(gaps)]
+        if seq and not answered_frame(shown, seq, t):
+            refused.append(seq)
+        if seq % answered_every == 0:
+            remember_answer(shown, seq, t)  # the answer comes after the preview
+    assert refused == []
+    assert not answered_frame(shown, 5000, t + 0.03)  # a second camera's own count still is
+
+
 def test_a_restarted_cameras_previews_are_shown_at_its_first_answers():
     """A review: after a camera restart (seq back to 0, its clock going on), the old stream's
     answers of greater seq bounded the new previews from above until 32 answers had come."""
