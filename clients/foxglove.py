@@ -41,9 +41,10 @@ invalid message of a viewer or failed handshake, are rate-limited alike (:class:
 on :data:`SDK_LOGGERS`). A robot costs four channels and the ``(seq, stamp)`` of its latest
 ``ANSWERED_FRAMES`` answered frames, for at most ``max_robots`` robots; when the table is full,
 the robot silent longest makes room if it has been silent for ``stale_after`` seconds, and
-robots silent for ``forget_after`` seconds are dropped (their channels unadvertised). No picture is kept, each is forwarded as it comes, and
-the server holds at most ``backlog`` messages per connected viewer (the oldest are dropped for a
-slow one), so a viewer costs at most ``backlog`` previews.
+robots silent for ``forget_after`` seconds are dropped (their channels unadvertised). No
+picture is kept, each is forwarded as it comes, and the server holds at most ``backlog``
+messages per connected viewer (the oldest are dropped for a slow one), so a viewer costs at
+most ``backlog`` previews.
 """
 
 from __future__ import annotations
@@ -247,8 +248,9 @@ class FoxgloveBridge:
 
     def offer(self, key: str, payload: bytes) -> str | None:
         """Take one sample of ``<prefix>/<robot>/(response|warning|preview|refused)`` and log
-        it on the robot's topics (a refusal: a problem). Returns the robot id, or ``None`` when the message was invalid (counted
-        in ``invalid`` by reason and logged). Never raises for bad input."""
+        it on the robot's topics (a refusal: a problem). Returns the robot id, or ``None``
+        when the message was invalid (counted in ``invalid`` by reason and logged). Never
+        raises for bad input."""
         sample = take_fleet_sample(key, payload, self.prefix, self._reject)
         if sample is None:
             return None

@@ -59,8 +59,9 @@ really restarts is followed as soon as its previous stream has been silent for
 robot's continues the robot's stream with its first frame: the stream the robot's next frame
 begins is then taken for the robot's (the other's had jumped over it), and while the robot is
 contested a frame that fits both streams is the one it follows more closely. A publisher that
-copies the robot's ``seq`` and ``stamp``, or runs exactly one ``seq`` ahead, cannot be told
-apart this way: only the secured deployment (one credential per camera, allowed to publish
+copies the robot's ``seq`` and ``stamp``, or runs exactly one ``seq`` ahead, or keeps pace a
+few frames ahead at a lower rate than the robot's camera, cannot be told apart this way: only
+the secured deployment (one credential per camera, allowed to publish
 its own robot's key only) stops it (docs/operations.md).
 """
 
