@@ -18,10 +18,12 @@ from collections.abc import Callable
 from service import keys
 from service.messages import (MAX_NOTE_LEN, MessageError, Preview, Refusal, Response,
                               check_preview, decode_preview, decode_refusal, decode_response)
+from service.streams import CONTESTED_FOR_S
 
 __all__ = ["ANSWERED_FRAMES", "MAX_TARGETS", "PREVIEW_STAMP_SLACK_S", "RECENT_SAMPLES", "STALE_S",
            "FleetSubscriber", "RecentSamples", "answered_frame", "decode_fleet_sample",
-           "declare_warning_subscribers", "remember_answer", "stale_robot", "take_fleet_sample"]
+           "declare_warning_subscribers", "refusal_shown", "remember_answer", "stale_robot",
+           "take_fleet_sample"]
 
 log = logging.getLogger("asnn.fleet")
 
@@ -141,6 +143,17 @@ def answered_frame(shown, seq: int, stamp: float) -> bool:
             return (expected / 2 - period - PREVIEW_STAMP_SLACK_S <= stamp - before[1]
                     <= 2 * expected + period + PREVIEW_STAMP_SLACK_S)
     return True
+
+
+def refusal_shown(reason: str, refused_at: float, answered: float | None, now: float) -> bool:
+    """Whether a worker's refusal of a robot's frames (its latest notice of ``reason``, come at
+    ``refused_at``) is still shown: until a response comes after it (``answered``, the
+    latest's arrival), but a second publisher's for ``service.streams.CONTESTED_FOR_S`` after
+    the latest notice whatever came (the robot's own frames are answered while the other
+    camera's are refused: the worker's ``contested``). Times on one clock, seconds."""
+    if reason == "second-publisher" and now - refused_at <= CONTESTED_FOR_S:
+        return True
+    return answered is None or answered < refused_at
 
 
 def remember_answer(shown, seq: int, stamp: float) -> None:

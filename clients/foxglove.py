@@ -69,10 +69,9 @@ from foxglove.websocket import ServerListener, StatusLevel
 from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response, track_label
-from service.streams import CONTESTED_FOR_S
 
-from .fleet import (ANSWERED_FRAMES, STALE_S, answered_frame, remember_answer, stale_robot,
-                    take_fleet_sample)
+from .fleet import (ANSWERED_FRAMES, STALE_S, answered_frame, refusal_shown, remember_answer,
+                    stale_robot, take_fleet_sample)
 
 __all__ = ["DEFAULT_PORT", "SDK_LOGGERS", "FoxgloveBridge", "SdkLogLimit", "robot_topics",
            "sdk_log_reason"]
@@ -322,10 +321,8 @@ class FoxgloveBridge:
         it is a second publisher's, which stays for CONTESTED_FOR_S after the latest notice
         (the robot's own frames are answered while the other camera's are refused: the
         worker's ``contested``), as on the dashboard."""
-        if state.refusal is None or state.answered is None or state.answered < state.refused_at:
-            return False
-        return not (state.refusal == "second-publisher"
-                    and now - state.refused_at <= CONTESTED_FOR_S)
+        return state.refusal is not None and not refusal_shown(
+            state.refusal, state.refused_at, state.answered, now)
 
     def _reject(self, reason: str, detail: str, key) -> None:
         with self._lock:

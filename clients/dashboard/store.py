@@ -17,10 +17,9 @@ from asnn.params import SLOW_FPS
 from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response, track_label
-from service.streams import CONTESTED_FOR_S
 
-from ..fleet import (ANSWERED_FRAMES, STALE_S, answered_frame, remember_answer, stale_robot,
-                     take_fleet_sample)
+from ..fleet import (ANSWERED_FRAMES, STALE_S, answered_frame, refusal_shown, remember_answer,
+                     stale_robot, take_fleet_sample)
 
 __all__ = ["FleetStore", "HOLD_S"]
 
@@ -440,11 +439,8 @@ class FleetStore:
         publisher's for CONTESTED_FOR_S whatever came after (the robot's own frames are
         answered while the other camera's are refused: the worker's ``contested``)."""
         notice = state.refused
-        if notice is None:
-            return None
-        contested = (notice.reason == "second-publisher"
-                     and now - state.refused_at <= CONTESTED_FOR_S)
-        if not contested and state.answered is not None and state.answered >= state.refused_at:
+        if notice is None or not refusal_shown(notice.reason, state.refused_at, state.answered,
+                                               now):
             return None
         return {"worker": notice.worker, "reason": notice.reason, "detail": notice.detail,
                 "count": notice.count}
