@@ -22,7 +22,13 @@ def _left(cache):
                   for p in cache.parent.glob("**/__pycache__/*") if p.suffix in (".nbi", ".nbc"))
 
 
-def test_callers_indexes_go_when_the_callee_changes_and_stay_while_it_does_not(tmp_path):
+def test_callers_indexes_go_when_the_callee_changes_and_stay_while_it_does_not(tmp_path,
+                                                                               monkeypatch):
+    import asnn._jit as jit
+
+    # numba's kernels beside the sources: NUMBA_CACHE_DIR unset, as it may be set where the
+    # tests run (the systemd units' and the image's environment, a clone's)
+    monkeypatch.setattr(jit.numba_config, "CACHE_DIR", "")
     cache = _package(tmp_path)
     kept = ["__pycache__/_fast._front-10.py311.nbi",
             "approach/__pycache__/looming._solve-20.py311.1.nbc"]
