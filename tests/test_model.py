@@ -775,3 +775,23 @@ def test_a_spec_value_of_none_is_none():
 
     assert parse_preset_spec("robust/max_width=none") == ("robust", (("max_width", None),))
     assert preset_from_spec("robust/max_width=None").max_width is None
+
+
+@pytest.mark.parametrize("gaps, kept", [
+    ([0.1, 0.1, 0.1, 1.6], 1.6),  # three believed in a row: frames lost, the gap as it was
+    ([0.1, 0.1, 1.6], None),  # two: at dt (TIMED_RUN)
+    ([0.1, 0.1, 0.1, 1.6, 1.6], None),  # once: the next must follow believed ones again
+    ([0.1, 0.1, 0.1, 0.00005, 1.6], None),  # a gap not believed ends the run
+    ([0.1, 0.1, 0.1, 0.00005], None),  # under MIN_FRAME_GAP_S: at dt whatever came before
+])
+def test_a_gap_over_a_second_keeps_its_time_only_right_after_three_believed(gaps, kept):
+    """The rule of a stall (frames lost for over MAX_FRAME_GAP_S) gap by gap: the trials'
+    streams pinned its effect on warnings, not which gaps it believes (a mutation probe)."""
+    rng = np.random.default_rng(7)
+    model, t = ASNN("default"), 50.0
+    model.step(rng.integers(0, 256, (64, 64), dtype=np.uint8), t)
+    for gap in gaps:
+        t += gap
+        model.step(rng.integers(0, 256, (64, 64), dtype=np.uint8), t)
+    assert len(model.periods) == len(gaps) and not model.repeated
+    assert model.periods[-1] == pytest.approx(model.params.dt if kept is None else kept)
