@@ -130,3 +130,96 @@ def test_a_slow_diagnosis_does_not_hold_the_watch():
         session.routers = ["router-a"]  # back while the diagnosis hangs
         wait_for(lambda: changes == [True, False, True], timeout=2, what="the router back")
         release.set()
+
+
+def test_a_lost_router_is_asked_about_after_diagnose_after_one_ask_at_a_time():
+    """A mutation probe: nothing pinned the wait before the first ask, nor between two, nor that a
+    diagnosis hanging (DNS) is the only one under way: each look started another thread."""
+    import threading
+
+    from service.link import RouterWatch
+
+    session, changes, calls = FakeSession(), [], []
+    release = threading.Event()
+
+    def hanging():
+        calls.append(1)
+        release.wait(10)
+        return "tcp/r:7447: connection refused"
+
+    try:
+        with RouterWatch(session, "alerts", interval=0.01, on_change=changes.append,
+                         diagnose=hanging, diagnose_after=60.0):
+            wait_for(lambda: changes == [True], what="the router seen")
+            session.routers = []
+            wait_for(lambda: changes == [True, False], what="the router lost")
+            time.sleep(0.3)  # thirty looks: none asks before diagnose_after
+            assert calls == []
+        with RouterWatch(session, "alerts", interval=0.01, on_change=changes.append,
+                         diagnose=hanging, diagnose_after=0.0) as watch:
+            session.routers = ["router-a"]
+            wait_for(lambda: watch.connected is True, what="the router seen")
+            session.routers = []
+            wait_for(lambda: calls, what="the lost router asked about")
+            time.sleep(0.3)  # thirty looks while it hangs: no second diagnosis meanwhile
+            assert len(calls) == 1
+    finally:
+        release.set()
+    calls.clear()
+    with RouterWatch(session, "alerts", interval=0.01, diagnose=hanging,
+                     diagnose_after=0.5) as watch:
+        session.routers = ["router-a"]
+        wait_for(lambda: watch.connected is True, what="the router seen")
+        session.routers = []
+        wait_for(lambda: calls, what="the lost router asked about")
+        time.sleep(0.7)  # seventy looks: one more ask at most, diagnose_after after the first
+        assert 1 <= len(calls) <= 2
+
+
+def test_each_outage_says_its_reason_again_and_an_answer_from_before_is_not_counted(caplog):
+    """A mutation probe: a router lost again for the same reason was not said again when the
+    latest reason was kept across the outages, nor was the two-asks rule held when an
+    answer of the previous outage, come after the router's return, counted as one."""
+    import threading
+
+    from service.link import RouterWatch
+
+    session, changes, calls = FakeSession(), [], []
+    first, last = threading.Event(), threading.Event()
+    reason = "tls/r:7447: the router's certificate is not trusted by ca.pem"
+
+    def diagnose():
+        calls.append(1)
+        if len(calls) == 1:
+            first.wait(10)  # an answer that comes after the router is back
+        elif len(calls) == 3:
+            last.wait(10)  # the outage's second answer never comes
+        return reason
+
+    with caplog.at_level("WARNING", logger="asnn.link"), RouterWatch(
+            session, "alerts", interval=0.01, on_change=changes.append, diagnose=diagnose,
+            diagnose_after=0.0):
+        try:
+            wait_for(lambda: changes == [True], what="the router seen")
+            session.routers = []
+            wait_for(lambda: len(calls) == 1, what="the lost router asked about")
+            session.routers = ["router-a"]
+            wait_for(lambda: changes == [True, False, True], what="the router back")
+            first.set()  # its answer now: about an outage that is over
+            time.sleep(0.1)
+            session.routers = []
+            wait_for(lambda: len(calls) == 3, what="the second outage asked about twice")
+            time.sleep(0.1)
+            # one answer of this outage only: the one from before is not the second
+            assert not [r for r in caplog.records if "still no router" in r.getMessage()]
+        finally:
+            last.set()
+        wait_for(lambda: len(calls) >= 5, what="more asks")
+        wait_for(lambda: [r for r in caplog.records if "still no router" in r.getMessage()],
+                 what="the reason said")
+        session.routers = ["router-a"]
+        wait_for(lambda: changes[-1] is True and len(changes) == 5, what="the router back")
+        caplog.clear()
+        session.routers = []  # lost again, for the same reason: a new outage, said again
+        wait_for(lambda: [r for r in caplog.records if "still no router" in r.getMessage()],
+                 what="the same reason said for the new outage")
