@@ -726,3 +726,38 @@ def test_dashboard_command_fails_clearly_when_the_port_is_taken():
         out, err = proc.communicate(timeout=TIMEOUT)
     assert proc.returncode == 2
     assert err.startswith("asnn: error: cannot serve on 127.0.0.1:") and err.count("\n") == 1
+
+
+def test_the_preview_rule_at_its_edges():
+    """clients.fleet.answered_frame and remember_answer case by case (a mutation probe: the
+    trials pinned a second camera's previews refused and a restarted camera's shown, not the
+    stamp's slack, the answered frame before a preview, the bound of one far ahead, nor an
+    answer that arrives after a later one)."""
+    from collections import deque
+
+    from clients.fleet import ANSWERED_FRAMES, answered_frame, remember_answer
+
+    shown = deque(maxlen=ANSWERED_FRAMES)
+    for seq in range(10, 20):  # answered at 20 fps
+        remember_answer(shown, seq, 1.0 + (seq - 10) * 0.05)
+    # the answered frame's own preview, its stamp rounded by the camera: a millisecond's slack
+    assert answered_frame(shown, 12, 1.1 + 0.0009) and answered_frame(shown, 12, 1.1 - 0.0009)
+    assert not answered_frame(shown, 12, 1.1 + 0.002)
+    # between two answers in seq, between them in time; before the one before it: not its
+    assert answered_frame(shown, 12, 1.1) and not answered_frame(shown, 12, 1.04)
+    # ahead of every answer: as far ahead in time as in seq, a period's slack either way
+    latest = 1.45  # seq 19's
+    assert answered_frame(shown, 20, latest + 0.05)
+    assert answered_frame(shown, 20, latest + 2 * 0.05 + 0.05 - 0.002)
+    assert not answered_frame(shown, 20, latest + 0.2)
+    assert not answered_frame(shown, 21, latest + 10.0)  # a second camera's own clock
+    # an answer arriving after a later one (two workers around a hand-over): both kept
+    remember_answer(shown, 30, 2.0)
+    remember_answer(shown, 29, 1.95)
+    assert {(29, 1.95), (30, 2.0)} <= set(shown)
+    # a restart: seq back, the clock going on: the answers it contradicts go
+    remember_answer(shown, 0, 3.0)
+    assert list(shown) == [(0, 3.0)]
+    # a coarse clock (answers stamped alike): no period to judge by, ahead is taken
+    coarse = deque([(0, 5.0), (1, 5.0), (2, 5.0)], maxlen=ANSWERED_FRAMES)
+    assert answered_frame(coarse, 3, 5.02)
