@@ -640,15 +640,18 @@ def test_a_second_camera_a_few_frames_behind_or_ahead_on_the_robots_key_is_an_in
     assert warned["attacked"] >= warned["alone"] - 2 > 0
 
 
-def test_one_cameras_first_frames_swapped_on_the_way_are_no_intrusion():
+@pytest.mark.parametrize("clock_s", [0.05, 0.0])
+def test_one_cameras_first_frames_swapped_on_the_way_are_no_intrusion(clock_s):
     """A review: seq 1 arriving before seq 0 (frames travel best effort, reordered) made seq 2
-    fit both streams, and the robot was taken for contested (a second publisher)."""
+    fit both streams, and the robot was taken for contested (a second publisher); a camera
+    whose coarse clock stamps them alike neither (a mutation probe: '>=' for the stamps'
+    '>' took it for one)."""
     scene = make_scene("looming")
     clock = FakeClock()
     core = WorkerCore(clock=clock)
     for seq in [1, 0, *range(2, 20)]:
         clock.now += 0.05
-        core.offer("asnn/r1/frame", payload(scene.frames[seq], seq, stamp=seq * 0.05))
+        core.offer("asnn/r1/frame", payload(scene.frames[seq], seq, stamp=seq * clock_s))
         job = core.take(timeout=0)
         if job is not None:
             core.process(job)
@@ -1179,3 +1182,48 @@ def test_answers_on_a_workers_status_key_make_at_most_one_line_a_check(zenoh_net
     lines = [r.getMessage() for r in caplog.records if "also answered" in r.getMessage()]
     assert 1 <= len(lines) <= 5 and all("\n" not in line for line in lines), lines
     assert "instance x?2026" in lines[0] and "up " not in lines[0]
+
+
+def test_a_restarted_camera_that_then_loses_frames_is_no_intrusion():
+    """A mutation probe: a camera restarted (seq back to 0, its clock going on) whose frame
+    then jumps over its old stream's latest seq fits both streams; only a one-frame stream is
+    taken for interleaving (the rule without it counted an intrusion and refused the camera)."""
+    scene = make_scene("looming", size=(64, 64))
+    clock = FakeClock()
+    core = WorkerCore(clock=clock)
+    frames = [(k, k * 0.05) for k in range(10)] + [
+        (k, 0.5 + k * 0.05) for k in (0, 1, 2, *range(12, 30))]  # 3-11 lost after the restart
+    for seq, stamp in frames:
+        clock.now += 0.05
+        core.offer("asnn/r1/frame", payload(scene.frames[seq], seq, stamp=stamp))
+        job = core.take(timeout=0)
+        if job is not None:
+            core.process(job)
+    stats = core.stats()
+    assert stats["intrusions"] == 0 and not stats["invalid"], stats
+    assert core.status()["robots"]["r1"]["contested"] is False
+
+
+def test_a_second_camera_ahead_for_longer_than_contested_for_s_is_one_intrusion():
+    """A mutation probe: a second camera a few frames ahead keeps the robot contested for as
+    long as it publishes (its frames, refused, refresh it), one intrusion and one reset in
+    all; refreshed by nothing, the contest lapsed after CONTESTED_FOR_S and the camera's next
+    frame was a second intrusion, and a second reset."""
+    from service.streams import CONTESTED_FOR_S
+
+    scene = make_scene("looming", size=(64, 64))
+    clock = FakeClock()
+    core = WorkerCore(clock=clock)
+    frames = int((CONTESTED_FOR_S + 10) * 20)
+    for k in range(frames):
+        for seq, stamp, image in [(20 + k, k * 0.05, scene.frames[k % 40])] + (
+                [(25 + k, k * 0.05 + 0.025, scene.frames[(k + 20) % 40])] if k >= 5 else []):
+            clock.now += 0.025
+            core.offer("asnn/r1/frame", payload(image, seq, stamp=stamp))
+            job = core.take(timeout=0)
+            if job is not None:
+                core.process(job)
+    stats = core.stats()
+    assert stats["intrusions"] == 1 and sum(stats["resets"].values()) == 1, stats
+    assert stats["invalid"]["second-publisher"] >= frames - 5 - 2
+    assert core.status()["robots"]["r1"]["contested"] is True
