@@ -865,3 +865,66 @@ def test_the_response_schema_names_every_field_of_both_kinds_of_response():
     assert set().union(*records) <= set(properties)
     tracked = [t for r in records for t in r["targets"]]
     assert tracked and set().union(*tracked) <= set(target)
+
+
+def test_the_problems_are_said_again_once_per_subscription_and_cleared_at_the_latest_targets(
+        monkeypatch):
+    """A mutation probe: the statuses said again after a viewer subscribes, once (not on every
+    sweep after); a stale robot's drawing cleared at the stamp of its latest targets, a
+    response's later than its latest preview (previews are rate-limited); a second publisher's
+    refusal taken back CONTESTED_FOR_S after its notice although no response came since."""
+    from asnn.io.foxglove_mcap import time_ns
+    from clients.foxglove import FoxgloveBridge
+    from service.messages import Refusal
+    from service.streams import CONTESTED_FOR_S
+
+    drawn = Drawn(monkeypatch)
+    clock = [0.0]
+    with FoxgloveBridge(port=0, stale_after=3.0, clock=lambda: clock[0]) as bridge:
+        statuses = bridge.server = Statuses(bridge.server)
+        bridge.offer("asnn/r1/preview", camera_preview(1, 1.0))
+        bridge.offer("asnn/r1/response", response("r1", 1, 1.0))
+        bridge.offer("asnn/r1/response", response("r1", 2, 1.05))  # no preview of its own
+        assert drawn.annotations[-1][2:] == (1, time_ns(1.05))
+        bridge.router_changed(False)
+        sent = len(statuses.sent)
+        bridge._subscriptions.on_subscribe(None, None)  # a viewer subscribed: said again
+        bridge.sweep()
+        assert statuses.sent[sent:] == [("status", "router", statuses.shown["router"][1])]
+        bridge.sweep()
+        bridge.sweep()
+        assert len(statuses.sent) == sent + 1  # once
+        bridge.router_changed(True)
+        clock[0] = 3.5
+        bridge.sweep()
+        assert drawn.annotations[-1] == (None, None, 0, time_ns(1.05))  # over the latest
+        assert list(statuses.shown) == ["stale:r1"]
+        # a second publisher's refusal: kept CONTESTED_FOR_S after its notice, then taken back
+        bridge.offer("asnn/r1/refused", encode(Refusal(
+            robot="r1", worker="w1", reason="second-publisher", count=1, detail="frame 9")))
+        clock[0] = 4.0
+        bridge.offer("asnn/r1/response", response("r1", 3, 1.1))
+        bridge.sweep()
+        assert list(statuses.shown) == ["refused:r1"]
+        clock[0] = 3.5 + CONTESTED_FOR_S + 0.5  # no response since, no notice
+        bridge.sweep()
+        assert "refused:r1" not in statuses.shown and "stale:r1" in statuses.shown
+
+
+def test_the_sdks_lines_reason_leaves_out_the_viewers_address_and_numbers():
+    """A mutation probe: each viewer's address, or a number in a line, made a kind of its own,
+    one flood of lines per viewer (sdk_log_reason)."""
+    import logging
+
+    from clients.foxglove import sdk_log_reason
+
+    def reason(text):
+        return sdk_log_reason(logging.LogRecord("foxglove.websocket.connected_client",
+                                                logging.ERROR, __file__, 1, text, (), None))
+
+    kinds = {reason(f"Invalid message from {address}: key must be a string at line 1 column "
+                    f"{k}") for k, address in enumerate(["127.0.0.1:50600", "10.0.0.7:41234",
+                                                         "[::1]:50601", "[fe80::1]:7"])}
+    assert kinds == {"foxglove.websocket.connected_client:Invalid message from <client>"}
+    assert reason("Client 12 sent 3 frames too big") == reason("Client 7 sent 45 frames too big")
+    assert reason("Client 12 sent 3 frames too big") != reason("Client 12 dropped 3 messages")
