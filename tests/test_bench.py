@@ -623,6 +623,8 @@ def test_the_benches_processes_run_this_asnn_not_the_working_folders(tmp_path):
     """A packaging trial: the service and detect benches started ``python -m cli.main``, which
     puts the working folder first on the path: run from a checkout of another version, the
     benches timed its code."""
+    import os
+    import shutil
     import subprocess
 
     from cli.bench import ASNN_COMMAND
@@ -632,7 +634,14 @@ def test_the_benches_processes_run_this_asnn_not_the_working_folders(tmp_path):
     (shadow / "__init__.py").write_text("")
     (shadow / "main.py").write_text("import sys\ndef main():\n    print('SHADOW')\n    return 0\n"
                                     "if __name__ == '__main__':\n    sys.exit(main())\n")
+    # nor a module of any other name there (-P), nor a copy on PYTHONPATH or installed
+    # (an editable install of another checkout): this one is first (a mutation probe)
+    (tmp_path / "argparse.py").write_text("raise ImportError('SHADOW argparse')\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    shutil.copytree(shadow, elsewhere / "cli")
+    env = {**os.environ, "PYTHONPATH": str(elsewhere)}
     done = subprocess.run([*ASNN_COMMAND, "router", "--help"], cwd=tmp_path, text=True,
-                          capture_output=True, timeout=120)
+                          capture_output=True, timeout=120, env=env)
     assert done.returncode == 0 and "SHADOW" not in done.stdout, done.stdout + done.stderr
     assert done.stdout.startswith("usage: ")  # the real parser's help
