@@ -666,3 +666,27 @@ def test_every_documented_secured_compose_command_has_the_owner_s_ids():
     # and the overlay's own header says the other commands need them too
     header = (root / "deploy" / "compose.secure.yml").read_text()
     assert "every command with this file needs them" in header and "ps  # logs, down" in header
+
+
+def test_every_file_the_router_cannot_read_is_named(certs, tmp_path):
+    """A mutation probe: the trial moved one file away at a time, so naming the first alone,
+    or leaving its TLS certificate out, passed it."""
+    import zenoh
+
+    from service.diagnosis import unreadable_files
+
+    router = tmp_path / "router"
+    shutil.copytree(certs / "router", router)
+    config = tmp_path / "router.json5"
+    config.write_text((router / "router.json5").read_text().replace(
+        str(certs / "router"), str(router)))
+    assert unreadable_files(zenoh.Config.from_file(str(config))) is None
+    for name in ("router.pem", "router.key", "ca.pem", "credentials.txt"):
+        (router / name).unlink()
+    why = unreadable_files(zenoh.Config.from_file(str(config)))
+    tls = "transport/link/tls/"
+    assert why == "; ".join(
+        f"{setting} {router / name}: No such file or directory" for setting, name in (
+            (tls + "listen_certificate", "router.pem"), (tls + "listen_private_key", "router.key"),
+            (tls + "root_ca_certificate", "ca.pem"),
+            ("transport/auth/usrpwd/dictionary_file", "credentials.txt")))
