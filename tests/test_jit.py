@@ -80,3 +80,22 @@ def test_callers_indexes_under_numba_cache_dir_go_too(tmp_path, monkeypatch):
     (package / "_fast.py").write_text("x = 2\n")
     assert forget_stale_callers(package)
     assert [f.exists() for f in files] == [True, False, False]
+
+
+def test_a_fresh_numba_cache_dir_gets_the_stamp_and_keeps_the_kernels_then(tmp_path, monkeypatch):
+    """A mutation probe: under a NUMBA_CACHE_DIR still empty (a fresh image, a new clone's
+    folder) the stamp's folder is made with its parents; otherwise no stamp was written, and
+    every later start dropped the callers' kernels as stale (compiled again each time)."""
+    import asnn._jit as jit
+    from numba.core.caching import UserProvidedCacheLocator
+
+    package, root = tmp_path / "pkg", tmp_path / "numba-cache"
+    package.mkdir()
+    (package / "_fast.py").write_text("x = 1\n")
+    monkeypatch.setattr(jit.numba_config, "CACHE_DIR", str(root))
+    assert not forget_stale_callers(package)  # nothing cached yet
+    caller = root / UserProvidedCacheLocator.get_suitable_cache_subpath(
+        str(package / "_parallel.py")) / "_parallel._serve-30.py311.nbi"
+    caller.parent.mkdir(parents=True, exist_ok=True)
+    caller.write_bytes(b"index")  # numba compiles and caches the caller
+    assert not forget_stale_callers(package) and caller.exists()  # _fast.py unchanged: kept
