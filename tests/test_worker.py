@@ -508,6 +508,8 @@ def test_status_tells_a_camera_that_stopped_from_a_live_one(looming):
     clock.now += 1.0  # then for more: listed too
     assert "silent (no frame for over 3 s): dead (24 s), live (4 s);" in format_status(
         core.status())
+    clock.now += 0.46
+    assert core.status()["robots"]["live"]["idle_s"] == 4.5  # to a tenth of a second
 
 
 def test_a_camera_that_sends_each_frame_twice_is_detected_at_the_rate_of_its_new_frames(
