@@ -223,3 +223,17 @@ def test_each_outage_says_its_reason_again_and_an_answer_from_before_is_not_coun
         session.routers = []  # lost again, for the same reason: a new outage, said again
         wait_for(lambda: [r for r in caplog.records if "still no router" in r.getMessage()],
                  what="the same reason said for the new outage")
+
+
+def test_a_session_that_never_had_a_router_is_not_diagnosed():
+    """A mutation probe: the diagnosis is of a router lost; a session that never saw one (a
+    peer without routers, or the start, which says why itself) asks nothing, logs nothing."""
+    from service.link import RouterWatch
+
+    session, calls = FakeSession(), []
+    session.routers = []
+    with RouterWatch(session, "alerts", interval=0.01,
+                     diagnose=lambda: calls.append(1) or "tcp/r:7447: connection refused",
+                     diagnose_after=0.0) as watch:
+        time.sleep(0.3)  # thirty looks
+        assert watch.connected is None and calls == []
