@@ -22,7 +22,7 @@ from service.streams import CONTESTED_FOR_S
 
 __all__ = ["ANSWERED_FRAMES", "MAX_TARGETS", "PREVIEW_STAMP_SLACK_S", "RECENT_SAMPLES", "STALE_S",
            "FleetSubscriber", "RecentSamples", "answered_frame", "decode_fleet_sample",
-           "declare_warning_subscribers", "refusal_shown", "remember_answer", "stale_robot",
+           "declare_warning_subscribers", "foreign_preview", "refusal_shown", "remember_answer", "stale_robot",
            "take_fleet_sample"]
 
 log = logging.getLogger("asnn.fleet")
@@ -143,6 +143,16 @@ def answered_frame(shown, seq: int, stamp: float) -> bool:
             return (expected / 2 - period - PREVIEW_STAMP_SLACK_S <= stamp - before[1]
                     <= 2 * expected + period + PREVIEW_STAMP_SLACK_S)
     return True
+
+
+def foreign_preview(preview: Preview, shown, answered: float | None, now: float,
+                    stale_after: float) -> bool:
+    """Whether a robot's preview is another camera's: while its responses come (the latest,
+    ``answered``, at most ``stale_after`` seconds before ``now``), one that cannot be of the
+    frames they answer (:func:`answered_frame`); else none is (its camera alone is heard)."""
+    if answered is None or now - answered > stale_after:
+        return False
+    return not answered_frame(shown, preview.seq, preview.stamp)
 
 
 def refusal_shown(reason: str, refused_at: float, answered: float | None, now: float) -> bool:

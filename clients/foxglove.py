@@ -70,7 +70,7 @@ from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response, track_label
 
-from .fleet import (ANSWERED_FRAMES, STALE_S, answered_frame, refusal_shown, remember_answer,
+from .fleet import (ANSWERED_FRAMES, STALE_S, foreign_preview, refusal_shown, remember_answer,
                     stale_robot, take_fleet_sample)
 
 __all__ = ["DEFAULT_PORT", "SDK_LOGGERS", "FoxgloveBridge", "SdkLogLimit", "robot_topics",
@@ -266,7 +266,7 @@ class FoxgloveBridge:
             state.touched = now
             self.received[kind] += 1
             if kind == "preview":
-                if not self._answered_frame_locked(state, message, now):
+                if foreign_preview(message, state.shown, state.answered, now, self.stale_after):
                     # a second camera on the robot's key (the worker refuses its frames):
                     # forwarded, its picture showed the robot's targets at its own scale
                     self.skipped["foreign-preview"] += 1
@@ -330,13 +330,6 @@ class FoxgloveBridge:
         self._log.warning(reason, "invalid message on %r (%s): %s", str(key)[:200], reason,
                           detail[:300])
         return None
-
-    def _answered_frame_locked(self, state: _Robot, preview: Preview, now: float) -> bool:
-        """Whether a thumbnail can be of the frames the robot's responses answer, where they
-        come (the dashboard's rule, :func:`clients.fleet.answered_frame`)."""
-        if state.answered is None or now - state.answered > self.stale_after:
-            return True  # no worker answers it: its camera alone is heard
-        return answered_frame(state.shown, preview.seq, preview.stamp)
 
     def _robot_locked(self, robot: str, now: float) -> _Robot | None:
         """The robot's channels, made if there is room (as the dashboard makes it)."""

@@ -198,8 +198,7 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
                 # the replaced stream's latest frame had jumped ahead over the one that
                 # began this stream: that frame and this one are a second camera's a few
                 # frames ahead, and this stream goes on with the robot's own
-                _intrusion(robot, state, frame, previous, current.seq, received, prefix,
-                           limited_log)
+                _intrusion(robot, state, frame, previous, received, prefix, limited_log)
                 previous.reason = "second-publisher"
                 previous.advance(frame, received)
                 return None
@@ -231,7 +230,7 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
             state.stream, state.previous = previous, current
             return previous
         # the stream this one replaced goes on: two publishers interleave on the key
-        _intrusion(robot, state, frame, current, current.seq, received, prefix, limited_log)
+        _intrusion(robot, state, frame, current, received, prefix, limited_log)
         previous.reason = "second-publisher"
         previous.advance(frame, received)
         state.stream, state.previous = previous, current
@@ -268,17 +267,18 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
     return state.stream
 
 
-def _intrusion(robot: str, state, frame: Frame, others: Stream, after: int, received: float,
-               prefix: str, limited_log: RateLimitedLog) -> None:
-    """Count and log a second publisher on the robot's key (``frame``'s seq coming ``after``
-    the robot's), ``others`` the stream taken for its: the robot is contested from now."""
+def _intrusion(robot: str, state, frame: Frame, others: Stream, received: float, prefix: str,
+               limited_log: RateLimitedLog) -> None:
+    """Count and log a second publisher on the robot's key (``frame`` coming after the robot's
+    latest, ``state.stream``'s), ``others`` the stream taken for its: the robot is contested
+    from now."""
     state.intrusion = (others.number, state.intruder_seen)  # undone if its one frame is
     state.intruder_seen = received  # refused when processed (withdraw_frame)
     state.intrusions += 1  # the worker counts it in its stats
     limited_log.warning(
         f"intrusion:{robot}", "robot %s: two publishers interleave frames on %s (seq %d after "
         "%d); following the stream that was there first and refusing frames that do not "
-        "continue it", robot, keys.frame_key(robot, prefix), frame.seq, after)
+        "continue it", robot, keys.frame_key(robot, prefix), frame.seq, state.stream.seq)
 
 
 def withdraw_frame(state, stream: int) -> bool:

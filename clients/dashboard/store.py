@@ -18,7 +18,7 @@ from service import keys
 from service.logutil import RateLimitedLog
 from service.messages import Preview, Refusal, Response, track_label
 
-from ..fleet import (ANSWERED_FRAMES, STALE_S, answered_frame, refusal_shown, remember_answer,
+from ..fleet import (ANSWERED_FRAMES, STALE_S, foreign_preview, refusal_shown, remember_answer,
                      stale_robot, take_fleet_sample)
 
 __all__ = ["FleetStore", "HOLD_S"]
@@ -174,7 +174,8 @@ class FleetStore:
             self.received[kind] += 1
             now = self.clock()
             state.touched = now
-            if kind == "preview" and not self._answered_frames_locked(state, message, now):
+            if kind == "preview" and foreign_preview(message, state.shown, state.answered, now,
+                                                     self.stale_after):
                 # a second publisher's thumbnail (the worker follows the other camera):
                 # shown, it put one camera's picture under the other's targets
                 self.skipped["foreign-preview"] += 1
@@ -300,13 +301,6 @@ class FleetStore:
             "targets": len(w.targets),
             "worker": w.worker}
         self._log.append((version, entry))
-
-    def _answered_frames_locked(self, state: _Robot, preview: Preview, now: float) -> bool:
-        """Whether a thumbnail can be of the frames the robot's responses answer
-        (:func:`clients.fleet.answered_frame`), where they come (not stale)."""
-        if state.answered is None or now - state.answered > self.stale_after:
-            return True  # no worker answers it: its camera alone is heard
-        return answered_frame(state.shown, preview.seq, preview.stamp)
 
     def _take_preview_locked(self, state: _Robot, size: int, now: float) -> bool:
         """Whether a thumbnail of ``size`` bytes arriving at ``now`` is taken: at most one a
