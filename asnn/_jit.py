@@ -49,37 +49,33 @@ def forget_stale_callers(package: Path, callee: str = "_fast.py") -> bool:
         folders = [package, *(p for p in package.glob("**/") if p.name != "__pycache__")]
     except OSError:
         return False
-    removed = False
-    for place in _cache_places():
-        cache = place(package)
-        try:
-            stamp = cache / f"{stem}.kernels.sha256"
-            if stamp.is_file() and stamp.read_text(encoding="ascii") == digest:
-                continue
-            stale = [index for folder in dict.fromkeys(folders)
-                     for index in place(folder).glob("*.nbi")
-                     if not (folder == package and index.name.startswith(stem + "."))]
-            for index in stale:
-                index.unlink(missing_ok=True)
-            cache.mkdir(parents=True, exist_ok=True)
-            stamp.write_text(digest, encoding="ascii")
-        except OSError:
-            continue
-        removed = removed or bool(stale)
-    return removed
+    place = _cache_place()
+    cache = place(package)
+    try:
+        stamp = cache / f"{stem}.kernels.sha256"
+        if stamp.is_file() and stamp.read_text(encoding="ascii") == digest:
+            return False
+        stale = [index for folder in dict.fromkeys(folders) for index in place(folder).glob("*.nbi")
+                 if not (folder == package and index.name.startswith(stem + "."))]
+        for index in stale:
+            index.unlink(missing_ok=True)
+        cache.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(digest, encoding="ascii")
+    except OSError:
+        return False
+    return bool(stale)
 
 
-def _cache_places():
-    """Where numba keeps the kernels of a source folder, as functions of the folder: under
+def _cache_place():
+    """Where numba keeps the kernels of a source folder, as a function of the folder: under
     ``NUMBA_CACHE_DIR`` where it is set (numba's ``UserProvidedCacheLocator``, which names a
     folder there after the source folder's path), and nowhere else then (no stamp is written
     into an installed package's folder); else beside the sources."""
     if numba_config.CACHE_DIR:
         root = Path(numba_config.CACHE_DIR)
-        yield lambda folder: root / UserProvidedCacheLocator.get_suitable_cache_subpath(
+        return lambda folder: root / UserProvidedCacheLocator.get_suitable_cache_subpath(
             str(folder / "__init__.py"))
-    else:
-        yield lambda folder: folder / "__pycache__"
+    return lambda folder: folder / "__pycache__"
 
 
 forget_stale_callers(Path(__file__).parent)
