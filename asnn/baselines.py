@@ -269,6 +269,16 @@ class _LGMDBase:
         ``t``, the frame's time, is accepted for a common interface with :class:`asnn.ASNN`
         and not used: the LGMD models count frames.
 
+        Returns
+        -------
+        Response
+            The frame's ``index``; ``u``, the grouping layer's sum (``K_f``, ``k(t)``); ``out``,
+            the membrane potential the spikes are read from (``kappa_f``; LGMD1-2's adapted
+            ``K^(t)``), 0.5 where feed-forward inhibition suppresses the frame; ``spikes``, the
+            frame's spike count (0 or 1 for LGMD1-1); the spike rate over the last
+            ``rate_window`` frames; and ``collision``, the warning. ``targets`` is always empty.
+            A stream's first frame only primes the photoreceptors: a silent response.
+
         Raises
         ------
         FrameError
