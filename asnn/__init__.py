@@ -8,13 +8,13 @@ neither.
 
 from .params import ASNNParams, preset, preset_names
 
-__all__ = ["ASNN", "ASNNParams", "FrameError", "Maps", "Response", "Target", "TrackReport",
-           "preset", "preset_names"]
+__all__ = ["ASNN", "ASNNParams", "FrameError", "Maps", "Response", "Target", "TimingWarning",
+           "TrackReport", "preset", "preset_names"]
 __version__ = "0.1.0"
 
 # the names above imported from their module when first asked for (PEP 562)
 _MODULE_OF = {"ASNN": "model", "FrameError": "errors", "Maps": "response", "Response": "response",
-              "TrackReport": "response", "Target": "targets"}
+              "TimingWarning": "errors", "TrackReport": "response", "Target": "targets"}
 
 
 def __getattr__(name: str):

@@ -4,7 +4,7 @@ load the model to name them."""
 
 from __future__ import annotations
 
-__all__ = ["FrameError"]
+__all__ = ["FrameError", "TimingWarning"]
 
 
 class FrameError(ValueError):
@@ -17,4 +17,17 @@ class FrameError(ValueError):
     and for a frame time ``t`` that is not a number of seconds (a str, a bool) or is beyond a
     float's range (``10**400``), as :func:`asnn.frames.frame_time` refuses it. A ValueError:
     code that catches those catches it too.
+    """
+
+
+class TimingWarning(UserWarning):
+    """Frame times the model cannot measure time with: it times those frames at ``params.dt``.
+
+    Warned by :meth:`asnn.ASNN.step` (and :meth:`~asnn.ASNN.stream`) once per stream, when
+    :data:`asnn.params.PERIOD_FRAMES` frames in a row come with a time ``t`` less than
+    :data:`~asnn.params.MIN_FRAME_GAP_S` or more than :data:`~asnn.params.MAX_FRAME_GAP_S`
+    after the previous one: a clock in milliseconds or nanoseconds, frame numbers passed as
+    times, or a clock that stands still. The responses go on, their expansion rates and time to
+    contact off by as much as the clock is. Silence it with :func:`warnings.filterwarnings`
+    where that is meant (the service's worker logs the same itself, per robot).
     """

@@ -22,6 +22,7 @@ import math
 import numbers
 import statistics
 import threading
+import warnings
 import weakref
 from collections import deque
 from collections.abc import Iterable, Iterator
@@ -31,6 +32,7 @@ import numpy as np
 
 from . import _fast, _parallel, retina
 from .approach import ApproachStage, FramePair, frame_pixel
+from .errors import TimingWarning
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
 from .params import (CEILING_GAPS, CEILING_MARGIN, CEILING_MIN_GAPS, MAX_THREADS,
                      MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, PERIOD_FRAMES, ASNNParams, preset, timed_gap)
@@ -250,6 +252,7 @@ class ASNN:
         self.approach = ApproachStage(self.params) if self.params.targets == "objects" else None
         self._stamp: float | None = None
         self._timed = 0  # believed gaps in a row (one is a ms clock's chance, not a timing)
+        self._untimed = 0  # given times in a row whose gaps are not believed (-1: warned)
         self._clock: float | None = None  # the latest frame's time, once a frame had one
         self.periods: deque[float] = deque(maxlen=PERIOD_FRAMES)
         self._last: Response | None = None
@@ -495,6 +498,22 @@ class ASNN:
             if self.stages_on is not None:
                 banded.settle((self.stages_on, self.stages_off))
 
+    def _warn_untimed(self, gap: float) -> None:
+        """Count a given time whose gap the model does not believe; warn (once per stream)
+        when PERIOD_FRAMES come in a row (:class:`~asnn.errors.TimingWarning`)."""
+        if self._untimed < 0:
+            return
+        self._untimed += 1
+        if self._untimed >= PERIOD_FRAMES:
+            self._untimed = -1
+            warnings.warn(
+                f"{PERIOD_FRAMES} frames in a row came at times the model cannot time them by "
+                f"(the last {gap:g} s after the frame before; it believes {MIN_FRAME_GAP_S:g} "
+                f"to {MAX_FRAME_GAP_S:g} s): each is timed at params.dt = {self.params.dt:g} s "
+                "instead, so expansion rates and time to contact are off by as much as the "
+                "clock is. Pass each frame's time in seconds (these read like a clock in "
+                "milliseconds or nanoseconds, frame numbers, or a clock that stands still)", TimingWarning, stacklevel=4)
+
     def _stabilisation_radii(self, width: int) -> tuple[int, int]:
         """The background stabilisation's search radius and its wider search's (0: none),
         pixels per frame, on a grid ``width`` pixels wide (:mod:`asnn.stabilisation`)."""
@@ -537,6 +556,7 @@ class ASNN:
         elapsed = stamp - self._stamp
         if timed_gap(elapsed):
             self._timed += 1
+            self._untimed = min(self._untimed, 0)
         elif self._timed >= TIMED_RUN and MAX_FRAME_GAP_S < elapsed < math.inf:
             # a timed stream's stall, frames lost for over MAX_FRAME_GAP_S, keeps its own time
             # (timed at dt it read the change of seconds as one frame's, a time to contact
@@ -544,6 +564,8 @@ class ASNN:
             # chance gap of a millisecond clock under 1 ms timed all its later ones as seconds)
             self._timed = 0
         else:  # no usable times: the nominal frame period
+            if t is not None:
+                self._warn_untimed(elapsed)
             elapsed = p.dt
             self._timed = 0
         self._stamp = stamp

@@ -71,12 +71,13 @@ import socket
 import statistics
 import threading
 import time
+import warnings
 from collections import Counter, OrderedDict, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from asnn.detectors import available_cores, make_detector
-from asnn.errors import FrameError
+from asnn.errors import FrameError, TimingWarning
 from asnn.params import (DEFAULT_PRESET, MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, PERIOD_FRAMES,
                          SLOW_FPS, preset_from_spec, timed_gap)
 
@@ -91,6 +92,9 @@ __all__ = ["HANDOVER_WARMUP_FRAMES", "Job", "RobotView", "WorkerCore", "default_
            "default_worker_id", "started_here", "worker_host"]
 
 log = logging.getLogger("asnn.worker")
+# the worker logs a robot's unusable stamps itself, per robot and spell (_note_untimed), where
+# the model's warning says it once per process for whichever robot was first
+warnings.filterwarnings("ignore", category=TimingWarning, module=r"service\.core$")
 
 # Frames a new owner steps a robot's stream silently before it answers: a fresh model of the
 # default (robust) preset that has stepped 30 frames warns as one that saw the whole stream at

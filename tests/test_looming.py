@@ -637,12 +637,13 @@ def test_the_frame_period_is_the_median_of_the_last_frames():
 def test_stamps_too_close_to_time_a_stream_by_read_as_the_nominal_period():
     """Stamps a subnormal number apart (k * 5e-324 s) gave a period whose inverse is infinite:
     every step of an approach raised OverflowError (a hostile-wire round)."""
-    from asnn import ASNN
+    from asnn import ASNN, TimingWarning
     from asnn.stimuli import make_scene
 
     scene = make_scene("looming")
     model, untimed = ASNN("robust"), ASNN("robust")
-    warned = [model.step(frame, k * 5e-324).collision for k, frame in enumerate(scene.frames)]
+    with pytest.warns(TimingWarning, match="e-324 s after the frame before"):
+        warned = [model.step(frame, k * 5e-324).collision for k, frame in enumerate(scene.frames)]
     assert warned == [untimed.step(frame, None).collision for frame in scene.frames]
     assert any(warned) and model.frame_period == pytest.approx(0.05)
 

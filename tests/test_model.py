@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from asnn import ASNN, FrameError
+from asnn import ASNN, FrameError, TimingWarning
 from asnn import preset as asnn_preset
 from asnn.stimuli import make_scene
 
@@ -151,12 +151,57 @@ def test_a_millisecond_clock_with_one_gap_under_a_millisecond_is_still_timed_at_
         stamps.append(t)
     plain, paired = ASNN(), ASNN()
     warned = {"plain": [], "paired": []}
-    for k, image in enumerate(frames):
-        image = image.astype(np.uint8)
-        warned["plain"].append(plain.step(image, 1e5 + 1000 * k / 30).collision)
-        warned["paired"].append(paired.step(image, stamps[k]).collision)
+    with pytest.warns(TimingWarning) as told:  # each stream's clock said, once
+        for k, image in enumerate(frames):
+            image = image.astype(np.uint8)
+            warned["plain"].append(plain.step(image, 1e5 + 1000 * k / 30).collision)
+            warned["paired"].append(paired.step(image, stamps[k]).collision)
     assert any(warned["plain"]) and warned["paired"] == warned["plain"]
     assert paired.frame_period == plain.frame_period == paired.params.dt
+    assert len(told) == 2 and all(w.filename == __file__ for w in told)  # the caller's line
+
+
+def _timing_warnings(model, stamps, scene):
+    """The TimingWarnings a stream of ``scene``'s frames at ``stamps`` raises, in order."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for stamp, frame in zip(stamps, scene.frames):
+            model.step(frame, stamp)
+    return [str(w.message) for w in caught if issubclass(w.category, TimingWarning)]
+
+
+@pytest.mark.parametrize("stamps, told", [
+    ([1000.0 * k / 20 for k in range(40)], "50 s"),  # a clock in milliseconds
+    ([float(k) * 10**9 / 20 for k in range(40)], "5e+07 s"),  # nanoseconds
+    ([3.0] * 40, "0 s"),  # a clock that stands still
+    ([k / 20 for k in range(40)], None),  # seconds
+    ([None] * 40, None),  # no times: the nominal period, as asked
+    ([50.0 * k if k < 5 else 200.0 + (k - 4) / 20 for k in range(40)], None),  # 4 gaps only
+])
+def test_frame_times_the_model_cannot_time_by_are_warned_once_per_stream(stamps, told):
+    """A library user's frames stamped in milliseconds were timed at dt without a word (the
+    worker logs it; a script stepping the model saw times to contact off by the clock)."""
+    scene, model = make_scene("looming", size=(64, 64)), ASNN()
+    said = _timing_warnings(model, stamps, scene)
+    if told is None:
+        assert said == []
+        return
+    assert len(said) == 1 and f"the last {told} after the frame before" in said[0], said
+    assert "timed at params.dt = 0.05 s" in said[0] and "time in seconds" in said[0]
+    model.reset()  # a new stream is told again
+    assert len(_timing_warnings(model, stamps, scene)) == 1
+
+
+def test_the_timing_warning_comes_after_five_untimed_gaps_in_a_row():
+    scene, model = make_scene("looming", size=(64, 64)), ASNN()
+    stamps = [0.0, 0.05, 50.0, 50.05, 100.0, 100.05, 150.0, 150.05, 200.0, 200.05]  # 1 in 2
+    assert _timing_warnings(model, stamps, scene) == []
+    model.reset()
+    stamps = [0.0, 0.05, 50.0, 100.0, 150.0, 200.0, 250.0]  # 5 in a row, from the third gap
+    assert len(_timing_warnings(model, stamps[:6], scene)) == 0
+    assert len(_timing_warnings(model, stamps[6:], make_scene("looming", size=(64, 64)))) == 1
 
 
 def test_untimed_frames_in_a_row_in_a_timed_stream_each_come_a_frame_period_later():

@@ -819,6 +819,42 @@ def test_a_camera_slow_for_its_first_frames_only_is_not_logged_as_slow(looming, 
     assert core.status()["robots"]["r1"]["fps"] == 20.0
 
 
+UNTIMED_CHILD = """
+import logging, sys
+from asnn import ASNN
+from asnn.stimuli import make_scene
+from service.core import WorkerCore
+from service.messages import Frame, encode
+
+logging.basicConfig(level=logging.WARNING, stream=sys.stdout, format="LOG %(message)s")
+scene = make_scene("looming", size=(64, 64))
+core = WorkerCore()
+for seq in range(12):  # a clock in milliseconds
+    core.offer("asnn/r1/frame", encode(Frame.from_image(scene.frames[seq], seq=seq,
+                                                        stamp=50.0 * seq, format="gray8")))
+    core.process(core.take())
+print("WORKER DONE", flush=True)
+model = ASNN()  # the process's own model still says it
+for seq in range(12):
+    model.step(scene.frames[seq], 50.0 * seq)
+"""
+
+
+def test_the_worker_logs_untimed_stamps_itself_and_leaves_the_model_s_warning_out():
+    """The model's TimingWarning (once per process, for whichever robot was first) is the
+    worker's log line (per robot and spell); a model the process steps itself still warns."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", UNTIMED_CHILD], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "robot r1: its frames' stamps are 50 s apart" in out.stdout
+    assert "WORKER DONE" in out.stdout
+    (told,) = [line for line in out.stderr.splitlines() if "TimingWarning" in line]
+    assert told.startswith("<string>:") and "the last 50 s after the frame before" in told
+
+
 def test_an_untimed_spell_after_the_stamps_recovered_is_logged_again(looming, caplog):
     clock = FakeClock()
     core = WorkerCore(clock=clock)
