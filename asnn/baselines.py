@@ -41,6 +41,7 @@ References
 from __future__ import annotations
 
 import math
+import threading
 from collections import deque
 
 import cv2
@@ -247,6 +248,24 @@ class _LGMDBase:
 
     params: LGMD1Params | LGMD2Params
     min_side = _MIN_SIDE  # the smallest height and width of a frame the models take
+    _in_use: threading.Lock
+
+    def __getstate__(self) -> dict:
+        """For copy and pickle: without the lock; RuntimeError while the model steps."""
+        if self._lock().locked():
+            raise RuntimeError(f"this {type(self).__name__} model is stepping (on another "
+                               "thread): copy it between steps")
+        state = dict(self.__dict__)
+        state.pop("_in_use", None)
+        return state
+
+    def _lock(self) -> threading.Lock:
+        """The lock a step holds (one model serves one stream from one thread at a time, as
+        :class:`asnn.ASNN`: two threads at once mixed their states without a word)."""
+        lock = self.__dict__.get("_in_use")
+        if lock is None:  # made with the model's first use, or after a copy
+            lock = self.__dict__.setdefault("_in_use", threading.Lock())
+        return lock
 
     def _luminance(self, frame: np.ndarray) -> np.ndarray:
         lum = to_luminance(frame, self.min_side, self.shape) * 255.0
@@ -284,7 +303,20 @@ class _LGMDBase:
         FrameError
             If the frame is not an image the model accepts, its size differs from the stream's,
             or ``t`` is not a number (a str, a bool); the model's state is then as it was.
+        RuntimeError
+            If another thread is stepping the model (the refused step changes nothing).
         """
+        lock = self._lock()
+        if not lock.acquire(blocking=False):
+            raise RuntimeError(f"this {type(self).__name__} model is stepping already (on "
+                               "another thread): one model serves one stream, from one thread "
+                               "at a time")
+        try:
+            return self._step(frame, t)
+        finally:
+            lock.release()
+
+    def _step(self, frame: np.ndarray, t: float | None) -> Response:
         if t is not None:
             frame_time(t)  # checked as ASNN checks it, though not used
         lum = self._luminance(frame)

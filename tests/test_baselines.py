@@ -228,3 +228,35 @@ def test_factory_ignores_an_asnn_preset_for_the_baselines_and_hints_each_by_name
         assert make_detector(model, "robust").params == params_class()
         with pytest.raises(ValueError, match=rf"in Python: make_detector\('{model}', FIELD="):
             make_detector(model, f"{model}/dt=0.1")
+
+
+@pytest.mark.parametrize("name", ["lgmd1", "lgmd2"])
+def test_an_lgmd_model_stepped_from_two_threads_at_once_says_so(name):
+    """As the ASNN: one baseline stepped from two threads mixed their states without a word."""
+    import copy
+    import threading
+
+    frames = make_scene("looming", size=(64, 64), frames=4).frames
+    model = make_detector(name)
+    inside, release = threading.Event(), threading.Event()
+    luminance = model._luminance
+
+    def slow_luminance(frame):  # the first thread's step, held inside
+        inside.set()
+        release.wait(10)
+        return luminance(frame)
+
+    model._luminance = slow_luminance
+    first = threading.Thread(target=model.step, args=(frames[0],))
+    first.start()
+    assert inside.wait(10)
+    with pytest.raises(RuntimeError, match="stepping already"):
+        model.step(frames[1])
+    with pytest.raises(RuntimeError, match="copy it between steps"):
+        copy.deepcopy(model)
+    release.set()
+    first.join(10)
+    del model._luminance
+    assert model.step(frames[1]).index == 1  # the refused step changed nothing
+    twin = copy.deepcopy(model)  # a snapshot steps as the model does
+    assert twin.step(frames[2]).to_dict() == model.step(frames[2]).to_dict()
