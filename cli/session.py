@@ -9,6 +9,7 @@ import logging
 import logging.handlers
 import os
 import queue
+import re
 import signal
 import sys
 import threading
@@ -78,6 +79,8 @@ class _DroppingQueueHandler(logging.handlers.QueueHandler):
 
 LOG_DRAIN_S = 2.0
 """Seconds a process's exit waits, at most, for the records still queued to be written."""
+# the Zenoh log target whose DEBUG lines hold the session's configuration, secrets included
+QUIET_CONFIG_TARGET = "zenoh::api::session=info"
 
 
 class _LogWriter:
@@ -152,6 +155,11 @@ def setup_logging(args: argparse.Namespace) -> None:
         atexit.register(writer.close)
         root.addHandler(handler)
         root.setLevel(args.log_level.upper())
+    rust_log = os.environ.get("RUST_LOG", "")
+    if re.search(r"debug|trace", rust_log, re.IGNORECASE):
+        # Zenoh (1.10) logs the session's whole configuration at DEBUG, a usrpwd password with
+        # it, into the journal: that one target stays at INFO, whatever else RUST_LOG asks
+        os.environ["RUST_LOG"] = rust_log + "," + QUIET_CONFIG_TARGET
     zenoh.try_init_log_from_env()  # Zenoh's own logs only when RUST_LOG is set
 
 

@@ -565,6 +565,29 @@ def test_demo_on_a_fresh_install_warns(tmp_path):
     assert int(summary.split(",")[-1].split()[0]) > 10, summary
 
 
+@pytest.mark.parametrize("rust_log", ["debug", "zenoh=trace", "warn,zenoh=DEBUG"])
+def test_zenoh_s_debug_log_keeps_a_client_s_password_out(tmp_path, rust_log):
+    """A security review: RUST_LOG=debug (README: Zenoh's own logs) wrote the session's whole
+    configuration, its usrpwd password with it, to stderr and so to the journal."""
+    import os
+    import subprocess
+    import sys
+
+    from service.demo import free_port
+
+    config = tmp_path / "client.json5"
+    config.write_text('{transport: {auth: {usrpwd: {user: "worker", password: "S3CRETPW"}}}}')
+    env = {**os.environ, "RUST_LOG": rust_log}
+    proc = subprocess.run([sys.executable, "-m", "cli.main", "status", "--config", str(config),
+                           "--connect", f"tcp/127.0.0.1:{free_port()}", "--mode", "client",
+                           "--timeout", "1"], env=env, timeout=120, capture_output=True,
+                          text=True)
+    assert proc.returncode == 2 and "cannot open a Zenoh session" in proc.stderr
+    written = proc.stdout + proc.stderr  # Zenoh logs to stdout
+    assert "DEBUG" in written or "TRACE" in written  # its debug log is written
+    assert "S3CRETPW" not in written
+
+
 def test_worker_scan_and_handover_options_are_checked(capsys):
     from cli.main import build_parser
 
