@@ -561,12 +561,28 @@ def test_the_generator_refuses_bad_hosts_and_days_before_writing_anything(tmp_pa
              ((str(tmp_path / "e"), "999.1.1.1"), {}, "invalid host '999.1.1.1'"),
              ((str(tmp_path / "f"), ":"), {}, "invalid host ':'"),
              ((str(tmp_path / "c"),), {"ASNN_CERT_DAYS": "0"}, "ASNN_CERT_DAYS must be"),
-             ((str(tmp_path / "d"),), {"ASNN_CERT_DAYS": "abc"}, "ASNN_CERT_DAYS must be")]
+             ((str(tmp_path / "d"),), {"ASNN_CERT_DAYS": "abc"}, "ASNN_CERT_DAYS must be"),
+             # a path the configs' JSON5 strings cannot hold as it is
+             ((str(tmp_path / 'q"uote'),), {}, "cannot hold a quote"),
+             ((str(tmp_path / "g"),), {"ASNN_SECRETS_PATH": "/etc/a\\b"}, "a backslash")]
     for args, env, said in cases:
         out = subprocess.run(["bash", str(SCRIPT), *args], capture_output=True, text=True,
                              timeout=60, env={**os.environ, **env})
         assert out.returncode == 2 and said in out.stderr, out.stderr
         assert not Path(args[0]).exists()
+
+
+def test_an_ampersand_in_the_secrets_path_is_itself_in_the_router_s_config(tmp_path):
+    """A security review: bash 5.2 read the & of ASNN_SECRETS_PATH=/srv/a&b as the text it
+    replaced, and the router's config named /srv/a/etc/asnn/secretsb/router.pem."""
+    out = tmp_path / "R&D"
+    subprocess.run(["bash", str(SCRIPT), str(out)], check=True, capture_output=True, timeout=120,
+                   env={**os.environ, "ASNN_SECRETS_PATH": "/srv/a&b"})
+    config = (out / "router" / "router.json5").read_text()
+    assert 'listen_certificate: "/srv/a&b/router.pem"' in config
+    assert "/etc/asnn/secrets" not in config
+    subprocess.run(["bash", str(SCRIPT), str(out)], check=True, capture_output=True, timeout=120)
+    assert f'"{out}/router/router.pem"' in (out / "router" / "router.json5").read_text()
 
 
 def test_the_generator_names_an_ipv6_host_and_says_why_openssl_failed(tmp_path):

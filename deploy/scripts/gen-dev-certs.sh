@@ -86,6 +86,13 @@ sys.exit(a.is_unspecified or a.is_multicast)' "$host" 2>/dev/null || {
   fi
 done
 
+# the configs name files by these paths inside JSON5 strings: a quote, a backslash or a line
+# break would end or escape the string (OUT_DIR's whole path: the configs name it so)
+paths_ok() { [[ $1 != *[\"\\]* && $1 != *$'\n'* ]]; }
+paths_ok "${ASNN_SECRETS_PATH:-}" && paths_ok "$(realpath -m -- "$out")" || {
+  echo "gen-dev-certs: OUT_DIR and ASNN_SECRETS_PATH cannot hold a quote (\"), a backslash or a" \
+    "line break: the configs name their files inside JSON5 strings" >&2; exit 2; }
+
 command -v openssl >/dev/null || { echo "gen-dev-certs: openssl is required" >&2; exit 2; }
 mkdir -p "$out"
 chmod 700 "$out"
@@ -253,7 +260,8 @@ dir=$(where router)
       *"// @cameras rules"*) printf '%s' "$rules" ;;
       *"// @cameras subjects"*) printf '%s' "$subjects" ;;
       *"// @cameras policies"*) printf '%s' "$policies" ;;
-      *) printf '%s\n' "${line//\/etc\/asnn\/secrets/$dir}" ;;
+      # "$dir" quoted: an & in it is itself (bash 5.2's patsub_replacement read it as the match)
+      *) printf '%s\n' "${line//\/etc\/asnn\/secrets/"$dir"}" ;;
     esac
   done < "$template"
 } > router/router.json5
