@@ -102,9 +102,10 @@ class LGMD1Params(_LGMDParams):
     delta_c: float = Field(0.01, gt=0, description="delta_c in omega_f; 0.01 (SPEC section 4)")
     c_de: float = Field(0.5, description="C_de, decay coefficient of the grouping threshold; 0.5")
     t_de: float = Field(15.0, description="T_de, grouping threshold on G_f C_de; 15")
-    t_s: float = Field(0.88, description=(
+    t_s: float = Field(0.88, gt=0.5, le=1, description=(
         "T_s, spike threshold on kappa_f; 0.88, the upper end of the 0.78-0.88 in use "
-        "(the stricter value, since LGMD1-1 has no other defence against translation)"))
+        "(the stricter value, since LGMD1-1 has no other defence against translation); 0.5 "
+        "or less would fire a spike every frame: kappa_f is never below 0.5"))
     n_sp: int = Field(5, ge=1, description="n_sp, successive spikes that make a warning; 5")
     t_ffi: float = Field(10.0, description=(
         "threshold of the feed-forward inhibition F_f = sum|P_{f-1}| / n_cell; 10 "
@@ -141,8 +142,12 @@ class LGMD2Params(_LGMDParams):
     t_sfa: float = Field(0.003, description=(
         "T_sfa, rise of K(t) per frame above which adaptation restarts from K(t); 0.003"))
     sfa: bool = Field(True, description="apply spike frequency adaptation (False: K^ = K)")
-    k_sp: float = Field(4.0, description="gain of the spike mapping n(t) = floor(exp(4 (K^ - T_sp))); 4")
-    t_sp: float = Field(0.76, description="T_sp, spike threshold; 0.76, the middle of 0.74-0.78")
+    k_sp: float = Field(4.0, gt=0, le=100, description=(
+        "gain of the spike mapping n(t) = floor(exp(4 (K^ - T_sp))); 4 (0 would fire a spike "
+        "every frame, a negative gain spike below the threshold)"))
+    t_sp: float = Field(0.76, gt=0.5, le=1, description=(
+        "T_sp, spike threshold; 0.76, the middle of 0.74-0.78 (0.5 or less would fire a spike "
+        "every frame: K^ is never below 0.5)"))
     n_ts: int = Field(6, ge=1, description=(
         "N_ts, running spike count that makes a warning; 6, within the 5-8 in use"))
     tau_ffi: float = Field(0.09, gt=0, description="tau of the low-passed FFI, s; 90 ms")

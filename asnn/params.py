@@ -293,9 +293,11 @@ class ASNNParams(BaseModel):
     # spikes a frame), only overflows the spike count (eq. 33)
     k_sp: float = Field(10.0, gt=0, le=100, description="K_sp, spike gain (0 would fire a "
                        "spike every frame whatever u(t))")
-    t_sp: float = Field(0.7, ge=0, le=1, description="T_sp, spike threshold on out(t)")
+    t_sp: float = Field(0.7, gt=0.5, le=1, description="T_sp, spike threshold on out(t) (0.5 "
+                        "or less would fire a spike every frame: out(t) is never below 0.5)")
     n_t: int = Field(4, ge=1, le=MAX_FRAMES, description="N_t, spike window in frames")
-    t_c: float = Field(1.0, ge=0, description="T_c, spike-rate threshold of the warning, Hz")
+    t_c: float = Field(1.0, gt=0, description="T_c, spike-rate threshold of the warning, Hz "
+                       "(0 would warn on every frame)")
     spike_dt: float | None = Field(
         None, gt=0, description="frame period used in the spike rate; None means dt"
     )

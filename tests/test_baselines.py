@@ -67,12 +67,20 @@ def test_parameters_are_typed_and_overridable():
         LGMD1Params(not_a_parameter=1)
     with pytest.raises(ValidationError):
         LGMD2Params(persistence=1.5)
-    for params, changes in ((LGMD1Params, {"t_s": math.nan}), (LGMD2Params, {"k_sp": math.nan}),
+    for params, changes in ((LGMD1Params, {"t_de": math.nan}), (LGMD2Params, {"theta1": math.nan}),
                             (LGMD2Params, {"tau_sfa": math.inf}),
                             (LGMD1Params, {"c_de": -math.inf})):
         with pytest.raises(ValidationError, match="must be a finite number"):
             params(**changes)  # a model that would never warn, or crash in its spike count
     assert LGMD1Params(t_ffi=math.inf).t_ffi == math.inf  # infinity switches the FFI off
+    # the membrane potential is never below 0.5: a threshold there spikes every frame, as does
+    # a gain of 0 (a negative one spikes below the threshold): a warning on every frame
+    for params, changes, said in ((LGMD1Params, {"t_s": 0.5}, "greater than 0.5"),
+                                  (LGMD2Params, {"t_sp": 0.4}, "greater than 0.5"),
+                                  (LGMD2Params, {"k_sp": 0.0}, "greater than 0"),
+                                  (LGMD2Params, {"k_sp": -4.0}, "greater than 0")):
+        with pytest.raises(ValidationError, match=said):
+            params(**changes)
     # persistence weights summing to 1 or more: P_f grew to 5e50 on a still, noisy scene
     with pytest.raises(ValidationError, match="grows without bound"):
         LGMD1Params(n_p=8, p_u=0.0)

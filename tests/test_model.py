@@ -305,7 +305,10 @@ def test_a_model_of_more_threads_than_any_machine_has_is_refused(threads):
     ({"k_sp": 2000}, "less than or equal to 100"),  # math.exp overflowed in the spike count
     # a spike every frame whatever u(t) (floor(e^0) = 1), or a ZeroDivisionError in the default
     ({"k_sp": 0}, "greater than 0"),
-    ({"t_sp": -1000}, "greater than or equal to 0"),
+    # out(t) is never below 0.5, so a threshold there spikes, and T_c = 0 warns, every frame
+    ({"t_sp": 0.5}, "greater than 0.5"),
+    ({"t_c": 0}, "greater than 0"),
+    ({"t_sp": -1000}, "greater than 0.5"),
     # accepted until a user trial: a traceback at the model's construction, gigabytes, or a
     # model blind on every frame
     ({"min_width": 20000}, "less than or equal to 1024"),  # 9 GiB
@@ -315,7 +318,7 @@ def test_a_model_of_more_threads_than_any_machine_has_is_refused(threads):
     ({"min_object_pixels": 10**23}, "less than or equal to 16777216"),  # int64 in numba
     ({"gain": 1e30}, "gain is 1e\\+30: at most 10000"),  # float32 state: u = 0 every frame
     ({"v_on": -1e39}, "v_on is -1e\\+39"),
-    ({"t_c": -1}, "greater than or equal to 0"),  # warned on every frame
+    ({"t_c": -1}, "greater than 0"),  # warned on every frame
 ])
 def test_parameters_that_would_silence_or_blow_up_the_model_are_refused(changes, message):
     with pytest.raises(ValidationError, match=message):

@@ -62,12 +62,14 @@ def test_the_spike_rate_divides_by_n_t_dt_from_the_first_frames():
     """Fewer than N_t frames seen: still (sum of their spikes) / (N_t dt)."""
     assert retina.spike_rate([3], 4, 0.05) == pytest.approx(3 / (4 * 0.05))
     assert retina.spike_rate([3, 1], 4, 0.05) == pytest.approx(4 / (4 * 0.05))
-    p = preset("vehicle", t_sp=0.0, k_sp=1.0)  # a spike every frame from the second
-    model = ASNN(p)
-    frame = np.full((48, 48), 100, np.uint8)
-    model.step(frame)
-    r = model.step(frame)
-    assert r.spikes == 1 and r.spike_rate == pytest.approx(1 / (p.n_t * p.dt))  # not 1 / dt
+    from collections import deque
+
+    from asnn.model import spike_step
+
+    p = preset("vehicle")  # the model's output stage, on its first frame: out(t) = 1
+    out, spikes, rate = spike_step(1e9, 100, deque(maxlen=p.n_t), p)
+    assert out == 1.0 and spikes == 20  # floor(exp(10 (1 - 0.7)))
+    assert rate == pytest.approx(20 / (p.n_t * p.dt))  # not 20 / dt
 
 
 def test_a_clusters_direction_is_atan2_of_v_y_and_v_x_in_image_coordinates():
