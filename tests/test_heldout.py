@@ -340,6 +340,10 @@ def test_the_report_names_each_folds_thresholds(traced, tmp_path, monkeypatch):
                                f"{ties['collision_clips']} hits expected")
     assert lines[-1] == "chosen on every clip: " + ", ".join(
         f"{n} = {results['chosen_all'][n]}" for n in names)
+    # which preset is held out, in both (a researcher's preset read as the default's)
+    name = results.get("preset", "default")
+    named = f"`{name}`" + (" (`robust`)" if name == "default" else "")
+    assert f"Preset {named}." in report and lines[-2].startswith(f"preset thresholds ({named}): ")
 
 
 def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):

@@ -29,7 +29,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from ..io.files import write_atomically
-from ..params import ASNNParams
+from ..params import DEFAULT_PRESET, ASNNParams
 from . import scoring
 from .clips import check_clips, clip_warnings
 from .gate_replay import ClipTrace, check_replay, replay, replays, trace_item
@@ -318,12 +318,11 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
                 f"{s['window_warning_frames']} / {s['warning_frames'] - s['window_warning_frames']}"
                 " |")
 
-    changed = results.get("overrides") or {}
     lines = [
         "# Held-out figures of the approach gate's thresholds",
         "",
-        *([f"Preset `{results.get('preset', 'default')}` with "
-           + ", ".join(f"{k} = {v}" for k, v in changed.items()) + ".", ""] if changed else []),
+        f"Preset {_preset_named(results)}.",
+        "",
         f"Preset thresholds: {_named(results['base'])} (on every clip: "
         f"{_named(results['chosen_all'])}). "
         "Leave-one-clip-out: each clip scored with the thresholds chosen on the other clips "
@@ -377,6 +376,16 @@ def held_out_report(results: Mapping, out_dir: str | Path) -> Path:
     return path
 
 
+def _preset_named(results: Mapping) -> str:
+    """The preset the results hold out, as the reports name it: `robust`, `default`
+    (`robust`), `robust` with region_persistence = False."""
+    name = results.get("preset", "default")
+    named = f"`{name}`" + (f" (`{DEFAULT_PRESET}`)" if name == "default" else "")
+    changed = results.get("overrides") or {}
+    return named + ("".join([" with ", ", ".join(f"{k} = {v}" for k, v in changed.items())])
+                    if changed else "")
+
+
 def summary_lines(results: Mapping) -> list[str]:
     """What ``asnn eval --held-out`` prints: the in-sample and held-out hits, early and late
     warnings and false alarms, as ``held_out.md``'s first table has them; the held-out hits and
@@ -399,7 +408,7 @@ def summary_lines(results: Mapping) -> list[str]:
             f"expected ({hits['fewest']} to {hits['most']}), {alarms['expected']:.1f} false "
             f"alarms expected in {s['collision_clips'] + s['noncollision_clips']} clips "
             f"({alarms['fewest']} to {alarms['most']})")
-    lines += [f"preset thresholds: {_named(results['base'])}",
+    lines += [f"preset thresholds ({_preset_named(results)}): {_named(results['base'])}",
               f"chosen on every clip: {_named(results['chosen_all'])}"]
     return lines
 
