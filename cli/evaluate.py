@@ -345,8 +345,6 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     progress = ProgressPrinter(sys.stderr)
     preset_name = None if args.preset == "default" else args.preset
-    if args.ablation:
-        args.detectors = list(ABLATIONS.values())
     if (args.synthetic or args.paper or args.ttc) and args.clips_dir:
         print("asnn eval: give either CLIPS_DIR, --synthetic, --paper or --ttc", file=sys.stderr)
         return 2
@@ -365,15 +363,21 @@ def _evaluate(args: argparse.Namespace) -> int:
         ("--perturb", args.perturb, not (args.paper or args.held_out or args.ttc)),
         # --ttc measures one preset's targets (--preset)
         ("--detectors", args.detectors != list(DEFAULT_DETECTORS), not args.ttc),
+        # --ablation's rows are the robust preset's, each addition switched off: a preset or
+        # detectors given with it were dropped without a word
+        ("--preset", args.preset != "default", not args.ablation),
+        ("--detectors", args.detectors != list(DEFAULT_DETECTORS), not args.ablation),
         ("--no-plots", args.no_plots, not args.ttc),
         ("--tie-break", args.tie_break != "warning-frames", args.held_out),
         ("--frame-rates", args.frame_rates is not None, args.ttc),
         ("--jobs", args.jobs != 1, not args.paper),  # the paper's runs take seconds, in turn
     ) if given and not mode]
     if misplaced:
-        print(f"asnn eval: {', '.join(misplaced)} does not go with this mode (see asnn eval -h)",
-              file=sys.stderr)
+        print(f"asnn eval: {', '.join(dict.fromkeys(misplaced))} does not go with this mode "
+              "(see asnn eval -h)", file=sys.stderr)
         return 2
+    if args.ablation:
+        args.detectors = list(ABLATIONS.values())
     writes = (("held_out.md", "held_out.json") if args.held_out else
               ("ttc.md", "ttc.json") if args.ttc else
               ("labels.json", "report.md", "results.json") if args.synthetic else

@@ -490,6 +490,13 @@ def test_eval_rejects_bad_input(tmp_path, capsys):
                       ["--paper", "--jobs", "2"]):  # its runs go in turn
         assert main(["eval", *misplaced, "--out", str(tmp_path / "o")]) == 2
         assert "does not go with" in capsys.readouterr().err
+    # the ablation's rows are robust's: a researcher's preset was dropped without a word
+    for given, said in ((["--preset", "reference"], "--preset does not"),
+                        (["--detectors", "asnn:reference"], "--detectors does not")):
+        assert main(["eval", "--synthetic", "--ablation", *given,
+                     "--out", str(tmp_path / "o")]) == 2
+        assert f"asnn eval: {said} go with this mode" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_a_preset_with_changes_is_what_a_bare_asnn_stands_for():
