@@ -384,6 +384,8 @@ def run(args: argparse.Namespace) -> int:
                 if 1.0 / source.fps > MAX_FRAME_GAP_S else "")
         print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second; "
               f"{SLOW_NOTE}{slow}", file=sys.stderr)
+    if args.model != "asnn":  # LGMD1-2's time constants are in seconds: as asnn eval runs it
+        options["dt"] = 1.0 / source.fps
     detector = make_detector(args.model, params, **options)
     if args.model == "asnn":
         # numba loads a kernel from its cache when it is first called: all of them now, before

@@ -17,7 +17,7 @@ from ..params import SLOW_FPS, SLOW_NOTE
 from . import figures, scoring
 from .labels import (center_outside, clip_hint, load_labels, mismatches, result_name,
                      unlabelled_videos)
-from .perturb import check_perturbation, describe, perturb_label, perturbed
+from .perturb import check_perturbation, delivered_period, describe, perturb_label, perturbed
 from .pool import run_tasks
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
@@ -129,7 +129,8 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
 
     try:
         clip, stamps = open_labelled_clip(video, topic)
-        records = run_detector(perturbed(counted(clip.timed_frames()), perturbation), detector)
+        records = run_detector(perturbed(counted(clip.timed_frames()), perturbation), detector,
+                               delivered_period(clip.fps, perturbation))
     except (SourceError, ValueError) as exc:
         return 0, str(exc), None
     write_jsonl(Path(out_path), records)

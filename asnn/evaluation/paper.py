@@ -190,7 +190,7 @@ def paper_figures(out_dir: str | Path, *, preset_name: str | None = None,
                      "contact": scene.contact_frame, "collision": scene.collision, "models": {}}
             for spec in specs:
                 m = spec.name
-                records = run_detector(at_rate(scene.frames, scene.fps), spec)
+                records = run_detector(at_rate(scene.frames, scene.fps), spec, 1.0 / scene.fps)
                 entry["models"][m] = figures.response_series(records)
                 score = scoring.score_clip(records, label, warmup=warmup, early_tolerance_s=0.0)
                 inside, other = _phase_warnings(entry["models"][m]["collision"], label, warmup)

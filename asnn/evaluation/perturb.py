@@ -48,8 +48,8 @@ from ..io.video import quiet_writer
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
 from .options import FAMILIES, PERTURBATIONS
 
-__all__ = ["FAMILIES", "PERTURBATIONS", "check_perturbation", "describe", "keeps_frames",
-           "perturb_frame", "perturbed", "perturb_label", "reencoded"]
+__all__ = ["FAMILIES", "PERTURBATIONS", "check_perturbation", "delivered_period", "describe",
+           "keeps_frames", "perturb_frame", "perturbed", "perturb_label", "reencoded"]
 
 # the perturbations that drop frames instead of changing them: frame k kept is frame step * k
 _RATE_STEP = {"half-rate": 2}
@@ -112,6 +112,12 @@ def keeps_frames(name: str) -> bool:
     on the perturbed frames is about the frames as given: one record per frame, in their
     pixels."""
     return name not in _RATE_STEP and name not in _SCALE
+
+
+def delivered_period(fps: float, name: str | None) -> float:
+    """The seconds between the frames the perturbation ``name`` delivers (None: none) of a
+    clip at ``fps``: ``half-rate`` doubles the period."""
+    return _RATE_STEP.get(name, 1) / fps
 
 
 def describe(name: str) -> str:

@@ -27,7 +27,7 @@ from ..stimuli.suite import (CASES, DRIVING_SIZE, EXTRA_GROUPS, GROUPS, PLANAR_S
                              SUITE_VERSION, check_driving_size, check_scale, check_variant,
                              make_case, suite_cases)
 from . import scoring
-from .perturb import check_perturbation, describe, perturb_label, perturbed
+from .perturb import check_perturbation, delivered_period, describe, perturb_label, perturbed
 from .pool import run_tasks
 from .progress import Silent
 from .runs import (DEFAULT_DETECTORS, TARGET_QUALITY_HEADER, TARGET_QUALITY_NOTE, DetectorSpec,
@@ -53,7 +53,8 @@ def _run_case(name: str, specs: Sequence[DetectorSpec], out_dir: str, warmup: in
     entry = {"label": label, "scores": {}}
     series = {}
     for spec in specs:
-        records = run_detector(perturbed(at_rate(scene.frames, scene.fps), perturbation), spec)
+        records = run_detector(perturbed(at_rate(scene.frames, scene.fps), perturbation), spec,
+                               delivered_period(scene.fps, perturbation))
         write_jsonl(Path(out_dir) / "results" / spec.slug / f"{name}.jsonl", records)
         score = scoring.score_clip(records, label, warmup=warmup,
                                    early_tolerance_s=EARLY_TOLERANCE_S)
