@@ -350,6 +350,9 @@ class WorkerCore:
         # a camera none of whose frames is taken never appears among the robots
         self._refused: OrderedDict[str, dict] = OrderedDict()
         self._robots: dict[str, _Robot] = {}
+        # robots handed over while a frame of theirs was processed, forgotten when it was
+        # done: release_unowned() returns them next (one entry per robot, so bounded by them)
+        self._released_busy: dict[str, None] = {}
         self._stats = _Stats()
         self._arrivals = 0  # frames taken in, for the order of the queue
         self._lock = threading.Lock()
@@ -550,6 +553,7 @@ class WorkerCore:
                     if self.owns is not None and not self.owns(job.robot):
                         del self._robots[job.robot]  # handed over while it was processed
                         self._stats.released += 1
+                        self._released_busy[job.robot] = None
                     elif not state.proven and state.pending is None:
                         del self._robots[job.robot]  # a candidate whose frame failed
                     elif state.pending is not None:
@@ -712,19 +716,22 @@ class WorkerCore:
 
     def release_unowned(self) -> list[str]:
         """Forget the robots this worker no longer owns (their pending frames are discarded;
-        one being processed is forgotten when it is done); returns their ids."""
+        one being processed is forgotten when it is done); returns their ids, with those of
+        the robots forgotten so since the last call (each once)."""
         if self.owns is None:
             return []
         with self._lock:
             gone = [r for r, s in self._robots.items() if not self.owns(r)]
-            released = []
+            # counted when they were forgotten; not where the robot is back with this worker
+            released = [r for r in self._released_busy if r not in self._robots]
+            self._released_busy.clear()
             for robot in gone:
                 state = self._robots[robot]
                 state.pending = None
                 if not state.busy:
                     del self._robots[robot]
                     released.append(robot)
-            self._stats.released += len(released)
+                    self._stats.released += 1
         return released  # the worker logs each, with its new owner
 
     def robots(self) -> list[str]:

@@ -878,6 +878,19 @@ def test_a_robot_handed_over_while_busy_is_released_when_its_frame_is_done(loomi
     assert core.robots() == ["r1"]
     core.process(job)
     assert core.robots() == [] and core.stats()["released"] == 1
+    # the worker logs a hand-over from what release_unowned returns: a soak trial's robot
+    # released while busy was counted and never logged
+    assert core.release_unowned() == ["r1"] and core.release_unowned() == []
+    assert core.stats()["released"] == 1
+    # released while busy, then back with this worker before the next route pass: not said
+    mine["r1"] = True
+    assert core.offer("asnn/r1/frame", payload(looming.frames[1], 1)) == "r1"
+    job = core.take()
+    mine["r1"] = False
+    core.process(job)
+    mine["r1"] = True
+    assert core.offer("asnn/r1/frame", payload(looming.frames[2], 2)) == "r1"
+    assert core.release_unowned() == [] and core.stats()["released"] == 2
 
 
 def test_a_stray_small_frame_is_refused_as_it_arrives_and_leaves_the_stream_alone(looming):
