@@ -258,7 +258,8 @@ def place_frame(robot: str, state, frame: Frame, received: float, *, max_gap: in
             f"seq-gap:{robot}", "robot %s: seq %d after %d: frames lost on the way, more "
             "than --max-gap (%d steps of %d); its model starts again and cannot warn until "
             "it has warmed up (frequent: a link that drops frames, or a camera faster than "
-            "its link or worker)", robot, frame.seq, current.seq, max_gap,
+            "its link or worker; every robot at once: the router or its link was lost for a "
+            "while)", robot, frame.seq, current.seq, max_gap,
             state.seq_step)
     state.streams += 1
     state.previous = current

@@ -162,6 +162,8 @@ def test_frames_lost_on_the_way_are_logged_as_a_warning_at_a_limited_rate(loomin
     lost = [r for r in caplog.records if "frames lost on the way" in r.getMessage()]
     assert len(lost) == 1 and lost[0].levelno == logging.WARNING  # the second within 10 s
     assert "robot r1: seq 40 after 2" in lost[0].getMessage()
+    # a soak trial: after a router's outage every robot's line blamed the link or the camera
+    assert "every robot at once: the router or its link was lost" in lost[0].getMessage()
     resets = [r for r in caplog.records if "state reset (seq-gap)" in r.getMessage()]
     assert len(resets) == 2  # each reset still has its INFO line
 
