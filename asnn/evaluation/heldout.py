@@ -10,9 +10,10 @@ leave-one-clip-out figures: for each clip, the thresholds are chosen again from
 :data:`GATE_GRID` on the *other* clips only (by :func:`selection_key`, among the grid points
 that keep the generated suite within its aims: :func:`suite_admissible`), and that clip is
 scored with the thresholds it did not help choose.
-The preset's own thresholds are the ones this procedure picks on every clip of the design set,
-wherever those clips tell the values apart by hits and false alarms (in a tie it takes the first
-in grid order; the README says where the last tie-break, warning frames, picks otherwise).
+The preset's own thresholds agree with what this procedure picks on every clip of the design
+set wherever those clips tell the values apart by hits and false alarms; among values the clips
+tie on, the preset keeps those the generated suite favoured (the all-clip choice, by either
+tie-break, can differ there: ``held_out.md`` gives both, and the README says where).
 Since the tie-break decides part of the held-out figures, they are also given whatever breaks
 the ties: expected over every tied point of each fold, and the fewest and the most that any
 choice among them gives.
