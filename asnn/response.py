@@ -24,10 +24,13 @@ class Maps:
     narrower ones, that size (targets and tracks stay in the frame's pixels). ``P`` is
     the photoreceptors' output after the input stages the preset has (input blur, contrast
     gain control, background stabilisation), not the raw frame difference. The bipolar and
-    temporal-filter outputs are not kept: an ``ASNN(..., optimised=False)`` model keeps its
+    temporal-filter outputs are not kept: the bipolar inputs are :func:`asnn.retina.bipolar`
+    of ``P`` with the preset's :func:`asnn.retina.dog_kernel` (ON and OFF swapped for
+    ``target_polarity="light"``), and an ``ASNN(..., optimised=False)`` model keeps its
     cascades as eq. 5 writes them (``stages_on``, ``stages_off``), from which
-    :func:`asnn.retina.temporal_readout` gives them (the optimised form keeps them in another
-    form).
+    :func:`asnn.retina.temporal_readout` gives the temporal filter's outputs (the optimised
+    form keeps them in another form; with ``leaky_input`` the first stage integrates the
+    bipolar input rather than holding it).
 
     The float maps are in the model's dtype (:attr:`asnn.ASNN.dtype`: the preset's
     ``precision``, float64 with ``optimised=False``).

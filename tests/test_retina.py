@@ -121,3 +121,29 @@ def test_spike_count_and_output():
         assert retina.sigmoid_output(u, 100) == pytest.approx(out, abs=1e-12)
     assert retina.spike_count(0.5, 10.0, 0.51) == 0
     assert retina.spike_count(0.8, 10.0, 0.51) == math.floor(math.exp(2.9))
+
+
+@pytest.mark.parametrize("preset_name", ["robust", "light"])
+def test_the_bipolar_inputs_are_read_back_from_the_recorded_p_as_documented(preset_name,
+                                                                           monkeypatch):
+    """README and asnn.response.Maps: B^0 is retina.bipolar(maps.P, the preset's dog_kernel);
+    a researcher read it from the cascade's first stage, which with leaky_input integrates it."""
+    import asnn.model
+    from asnn import ASNN, retina
+    from asnn.stimuli import make_scene
+
+    seen = []
+    original = retina.bipolar
+    monkeypatch.setattr(asnn.model.retina, "bipolar", lambda p, dog: seen.append(
+        original(p, dog)) or seen[-1])
+    scene = make_scene("looming", size=(96, 96))
+    model = ASNN(preset_name, optimised=False, record_maps=True)
+    for i, frame in enumerate(scene.frames[:31]):
+        response = model.step(frame, i / scene.fps)
+    p = model.params
+    on, off = retina.bipolar(response.maps.P, retina.dog_kernel(
+        p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size, p.dog_normalisation))
+    assert np.abs(off).max() > 0.1  # the disk's edge, not an empty frame
+    np.testing.assert_array_equal(on, seen[-1][0])
+    np.testing.assert_array_equal(off, seen[-1][1])
+    assert p.leaky_input and not np.allclose(model.stages_off[0], off)  # not the first stage
