@@ -26,8 +26,11 @@ class TimingWarning(UserWarning):
     Warned by :meth:`asnn.ASNN.step` (and :meth:`~asnn.ASNN.stream`) once per stream, when
     :data:`asnn.params.PERIOD_FRAMES` frames in a row come with a time ``t`` less than
     :data:`~asnn.params.MIN_FRAME_GAP_S` or more than :data:`~asnn.params.MAX_FRAME_GAP_S`
-    after the previous one: a clock in milliseconds or nanoseconds, frame numbers passed as
-    times, or a clock that stands still. The responses go on, their expansion rates and time to
-    contact off by as much as the clock is. Silence it with :func:`warnings.filterwarnings`
-    where that is meant (the service's worker logs the same itself, per robot).
+    after the previous one: a clock in milliseconds or nanoseconds, a camera slower than a
+    frame a second, or a clock that stands still (a fast camera's, past the two frames at one
+    instant the frame-rate ceiling holds as sent twice) or goes back. The responses go on,
+    their expansion rates and time to contact off by as much as the clock is. Raised once the
+    frame is stepped (where warnings are errors, the frame's response is then lost, the model
+    stepped). Silence it with :func:`warnings.filterwarnings` where that is meant (the
+    service's worker logs the same itself, per robot).
     """

@@ -41,6 +41,7 @@ from .stabilisation import background_shift, search_radius, shift_image
 from .targets import extract_targets
 
 TIMED_RUN = 3  # gaps believed in a row before one over MAX_FRAME_GAP_S is believed too
+SAME_INSTANT_HELD = 2  # frames in a row at one instant the frame-rate ceiling may hold
 
 __all__ = ["ASNN", "FrameError", "spike_step"]
 
@@ -253,6 +254,7 @@ class ASNN:
         self._stamp: float | None = None
         self._timed = 0  # believed gaps in a row (one is a ms clock's chance, not a timing)
         self._untimed = 0  # given times in a row whose gaps are not believed (-1: warned)
+        self._timing_note: str | None = None  # the TimingWarning step() raises next
         self._clock: float | None = None  # the latest frame's time, once a frame had one
         self.periods: deque[float] = deque(maxlen=PERIOD_FRAMES)
         self._last: Response | None = None
@@ -261,6 +263,7 @@ class ASNN:
         self.repeated = False
         self._received: float | None = None  # the latest timed frame's time, held or not
         self._gaps: deque[float] = deque(maxlen=CEILING_GAPS)  # between the frames received
+        self._same_instant = 0  # frames in a row received at the instant of the one before
         self.ceiling_held = 0
 
     @property
@@ -368,7 +371,19 @@ class ASNN:
         RuntimeError
             If the model is stepping already, on another thread or in a :meth:`stream` with
             worker threads not finished: one model serves one stream from one thread at a time.
+
+        Warns
+        -----
+        TimingWarning
+            Once per stream, when five frames in a row come at times it cannot time them by
+            (:class:`~asnn.errors.TimingWarning`), after the frame is stepped.
         """
+        response = self._step(frame, t)
+        self._tell_timing(stacklevel=3)
+        return response
+
+    def _step(self, frame: np.ndarray, t: float | None) -> Response:
+        """:meth:`step` without telling of its frame times (:meth:`_tell_timing`)."""
         self._claim()
         try:
             taken = self._take(frame, t)
@@ -442,12 +457,18 @@ class ASNN:
         """
         if self.threads == 1:
             for t, frame in frames:
-                yield self.step(frame, t)
+                response = self._step(frame, t)
+                self._tell_timing(stacklevel=3)
+                yield response
             return
         self._claim()
+        inner = self._banded_stream(frames)
         try:
-            yield from self._banded_stream(frames)
+            for response in inner:
+                self._tell_timing(stacklevel=3)
+                yield response
         finally:
+            inner.close()  # a stream left early finishes the frames it took, before the release
             self._in_use.release()
 
     def _banded_stream(self, frames: Iterable[tuple[float | None, np.ndarray]]
@@ -498,21 +519,34 @@ class ASNN:
             if self.stages_on is not None:
                 banded.settle((self.stages_on, self.stages_off))
 
-    def _warn_untimed(self, gap: float) -> None:
-        """Count a given time whose gap the model does not believe; warn (once per stream)
-        when PERIOD_FRAMES come in a row (:class:`~asnn.errors.TimingWarning`)."""
+    def _note_untimed(self, gap: float) -> None:
+        """Count a given time whose gap the model does not believe; when PERIOD_FRAMES come in
+        a row, note the stream's :class:`~asnn.errors.TimingWarning` (once per stream), which
+        :meth:`step` and :meth:`stream` raise once the frame is stepped (raised here, under
+        warnings as errors, it left the model half-stepped)."""
         if self._untimed < 0:
             return
         self._untimed += 1
         if self._untimed >= PERIOD_FRAMES:
             self._untimed = -1
-            warnings.warn(
+            slow = gap > MAX_FRAME_GAP_S
+            self._timing_note = (
                 f"{PERIOD_FRAMES} frames in a row came at times the model cannot time them by "
                 f"(the last {gap:g} s after the frame before; it believes {MIN_FRAME_GAP_S:g} "
                 f"to {MAX_FRAME_GAP_S:g} s): each is timed at params.dt = {self.params.dt:g} s "
                 "instead, so expansion rates and time to contact are off by as much as the "
-                "clock is. Pass each frame's time in seconds (these read like a clock in "
-                "milliseconds or nanoseconds, frame numbers, or a clock that stands still)", TimingWarning, stacklevel=4)
+                "clock is. Pass each frame's time in seconds: " + (
+                    "these read like a clock in milliseconds or nanoseconds, or a camera slower "
+                    "than a frame a second, far below the 20 fps the default is made for"
+                    if slow else "these read like a clock that stands still or goes back"))
+
+    def _tell_timing(self, stacklevel: int) -> None:
+        """Raise the stream's noted :class:`~asnn.errors.TimingWarning`, if any, once, at the
+        frame ``stacklevel`` up (:func:`warnings.warn`'s count: the line that stepped the model
+        is 3 from step() and from stream())."""
+        note, self._timing_note = self._timing_note, None
+        if note is not None:
+            warnings.warn(note, TimingWarning, stacklevel=stacklevel)
 
     def _stabilisation_radii(self, width: int) -> tuple[int, int]:
         """The background stabilisation's search radius and its wider search's (0: none),
@@ -565,7 +599,7 @@ class ASNN:
             self._timed = 0
         else:  # no usable times: the nominal frame period
             if t is not None:
-                self._warn_untimed(elapsed)
+                self._note_untimed(elapsed)
             elapsed = p.dt
             self._timed = 0
         self._stamp = stamp
@@ -637,7 +671,8 @@ class ASNN:
         (``params.max_step_rate``, r): while the camera is fast (:meth:`_fast`), a frame in the
         same cell of a grid of 1 / r seconds as the frame received before it is held, and so
         is a frame stamped at the same instant as it (a frame delivered twice, a bag's stamp
-        that went back retimed to the latest).
+        that went back retimed to the latest), up to :data:`SAME_INSTANT_HELD` in a row: more
+        are a clock that stopped, stepped (timed at ``params.dt``, and warned of as such).
 
         The cells are fixed by the times alone, not by the frames stepped, so that two models
         started on different frames of a stream step the same frames once both have judged the
@@ -653,7 +688,14 @@ class ASNN:
             return False
         gap = stamp - previous
         if 0.0 <= gap < MIN_FRAME_GAP_S:  # the same instant: it tells nothing of the rate
-            return self._fast(rate)
+            self._same_instant += 1
+            if self._same_instant <= SAME_INSTANT_HELD:
+                return self._fast(rate)
+            # more in a row: a clock that stopped, not a frame sent twice (held for good, a
+            # fast camera's model froze without a word): the rate is unknown again
+            self._gaps.clear()
+            return False
+        self._same_instant = 0
         if not timed_gap(gap):  # a clock that jumped, or stamps in other units: stepped
             self._gaps.clear()
             return False

@@ -194,6 +194,66 @@ def test_frame_times_the_model_cannot_time_by_are_warned_once_per_stream(stamps,
     assert len(_timing_warnings(model, stamps, scene)) == 1
 
 
+def test_a_fast_camera_whose_clock_stops_is_stepped_and_warned_of():
+    """A review: a 60 fps camera whose stamp stopped was held by the frame-rate ceiling for
+    good (each frame at the instant of the one before read as one sent twice): u froze, no
+    warning, and the worker logged a timing at 20 fps that was not happening."""
+    scene = make_scene("looming", size=(64, 64), frames=120)
+    stamps = [k / 60 for k in range(30)] + [29 / 60] * 90
+    model = ASNN()
+    said = _timing_warnings(model, stamps[:30], scene)
+    held = model.ceiling_held  # while the camera ran at 60 fps
+    said += _timing_warnings(model, stamps[30:], make_scene("looming", size=(64, 64),
+                                                            frames=120))
+    assert len(said) == 1 and "a clock that stands still" in said[0]
+    assert model.ceiling_held == held + 2  # the stall's first two, as frames sent twice
+    # a frame sent twice, or twice more, is still held as one
+    for twice in (1, 2):
+        model = ASNN()
+        stamps = [k / 60 for k in range(40)]
+        for k in range(40):
+            model.step(scene.frames[k], stamps[k])
+            if k == 30:
+                held = model.ceiling_held
+                for _ in range(twice):
+                    assert model.step(scene.frames[k], stamps[k]).index > 0
+                assert model.ceiling_held == held + twice
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_the_timing_warning_points_at_the_caller_s_line_and_comes_after_the_step(threads):
+    """A review: raised inside the step, under warnings as errors it left the model half
+    stepped (index and clock moved, the frame not stepped); from stream() it named the
+    model's own line."""
+    import warnings
+
+    scene = make_scene("looming", size=(64, 64))
+    model = ASNN(threads=threads)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in model.stream((50.0 * k, frame) for k, frame in enumerate(scene.frames)):
+            pass
+    (told,) = [w for w in caught if issubclass(w.category, TimingWarning)]
+    assert told.filename == __file__
+    model.close()
+    model = ASNN()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", TimingWarning)
+        for k in range(5):
+            model.step(scene.frames[k], 50.0 * k)
+        with pytest.raises(TimingWarning):
+            model.step(scene.frames[5], 250.0)
+    twin = ASNN()
+    with pytest.warns(TimingWarning):  # the model stepped the frame it warned on, as this one
+        for k in range(6):
+            expected = twin.step(scene.frames[k], 50.0 * k)
+    assert model.index == 6 and model._in_use.acquire(blocking=False)
+    model._in_use.release()
+    assert model.step(scene.frames[6], 300.0).to_dict() == twin.step(
+        scene.frames[6], 300.0).to_dict()
+    assert expected.index == 5
+
+
 def test_the_timing_warning_comes_after_five_untimed_gaps_in_a_row():
     scene, model = make_scene("looming", size=(64, 64)), ASNN()
     stamps = [0.0, 0.05, 50.0, 50.05, 100.0, 100.05, 150.0, 150.05, 200.0, 200.05]  # 1 in 2
