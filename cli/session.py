@@ -9,7 +9,6 @@ import logging
 import logging.handlers
 import os
 import queue
-import re
 import signal
 import sys
 import threading
@@ -81,6 +80,18 @@ LOG_DRAIN_S = 2.0
 """Seconds a process's exit waits, at most, for the records still queued to be written."""
 # the Zenoh log target whose DEBUG lines hold the session's configuration, secrets included
 QUIET_CONFIG_TARGET = "zenoh::api::session=info"
+# the levels of tracing's EnvFilter at INFO or quieter (its numbers: 0 off to 5 trace)
+_QUIET_LEVELS = {"off", "error", "warn", "info", "0", "1", "2", "3"}
+
+
+def _asks_debug(rust_log: str) -> bool:
+    """Whether a directive of ``rust_log`` (tracing's EnvFilter: ``target=level``, a bare
+    ``level``, or a bare ``target``, which enables every level of it) may enable DEBUG."""
+    for directive in filter(None, (d.strip() for d in rust_log.split(","))):
+        level = directive.rpartition("=")[2].strip().lower()
+        if level not in _QUIET_LEVELS:  # debug, trace, 4, 5, or a bare target
+            return True
+    return False
 
 
 class _LogWriter:
@@ -156,7 +167,7 @@ def setup_logging(args: argparse.Namespace) -> None:
         root.addHandler(handler)
         root.setLevel(args.log_level.upper())
     rust_log = os.environ.get("RUST_LOG", "")
-    if re.search(r"debug|trace", rust_log, re.IGNORECASE):
+    if _asks_debug(rust_log):
         # Zenoh (1.10) logs the session's whole configuration at DEBUG, a usrpwd password with
         # it, into the journal: that one target stays at INFO, whatever else RUST_LOG asks
         os.environ["RUST_LOG"] = rust_log + "," + QUIET_CONFIG_TARGET

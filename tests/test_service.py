@@ -565,7 +565,8 @@ def test_demo_on_a_fresh_install_warns(tmp_path):
     assert int(summary.split(",")[-1].split()[0]) > 10, summary
 
 
-@pytest.mark.parametrize("rust_log", ["debug", "zenoh=trace", "warn,zenoh=DEBUG"])
+@pytest.mark.parametrize("rust_log", ["debug", "zenoh=trace", "warn,zenoh=DEBUG", "zenoh", "5",
+                                      "zenoh::api=4", "zenoh::api::session"])
 def test_zenoh_s_debug_log_keeps_a_client_s_password_out(tmp_path, rust_log):
     """A security review: RUST_LOG=debug (README: Zenoh's own logs) wrote the session's whole
     configuration, its usrpwd password with it, to stderr and so to the journal."""
@@ -584,8 +585,17 @@ def test_zenoh_s_debug_log_keeps_a_client_s_password_out(tmp_path, rust_log):
                           text=True)
     assert proc.returncode == 2 and "cannot open a Zenoh session" in proc.stderr
     written = proc.stdout + proc.stderr  # Zenoh logs to stdout
-    assert "DEBUG" in written or "TRACE" in written  # its debug log is written
+    assert "zenoh::api::session" in written  # Zenoh's log is written, that target at INFO
     assert "S3CRETPW" not in written
+
+
+def test_a_quiet_rust_log_is_left_as_it_is():
+    from cli.session import _asks_debug
+
+    for quiet in ("", "warn", "zenoh=info", "error,zenoh::net=3", " off , ", "zenoh=0"):
+        assert not _asks_debug(quiet), quiet
+    for loud in ("debug", "zenoh", "zenoh=5", "warn,zenoh::api=TRACE", "[span]=debug"):
+        assert _asks_debug(loud), loud
 
 
 def test_worker_scan_and_handover_options_are_checked(capsys):
