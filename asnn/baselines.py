@@ -264,6 +264,13 @@ class _LGMDBase:
         state.pop("_in_use", None)
         return state
 
+    def __copy__(self):
+        """A copy is a snapshot: a deep copy (a shallow one shared the state's arrays and
+        deques with the model, so that stepping either changed the other), as the ASNN's."""
+        import copy
+
+        return copy.deepcopy(self)
+
     def _lock(self) -> threading.Lock:
         """The lock a step holds (one model serves one stream from one thread at a time, as
         :class:`asnn.ASNN`: two threads at once mixed their states without a word)."""
