@@ -87,9 +87,12 @@ sys.exit(a.is_unspecified or a.is_multicast)' "$host" 2>/dev/null || {
 done
 
 # the configs name files by these paths inside JSON5 strings: a quote, a backslash or a line
-# break would end or escape the string (OUT_DIR's whole path: the configs name it so)
+# break would end or escape the string (OUT_DIR's whole path, as `cd` then `pwd` give it:
+# the configs name it so)
 paths_ok() { [[ $1 != *[\"\\]* && $1 != *$'\n'* ]]; }
-paths_ok "${ASNN_SECRETS_PATH:-}" && paths_ok "$(realpath -m -- "$out")" || {
+whole=$out
+[[ $whole == /* ]] || whole=$PWD/$out
+paths_ok "${ASNN_SECRETS_PATH:-}" && paths_ok "$whole" || {
   echo "gen-dev-certs: OUT_DIR and ASNN_SECRETS_PATH cannot hold a quote (\"), a backslash or a" \
     "line break: the configs name their files inside JSON5 strings" >&2; exit 2; }
 
