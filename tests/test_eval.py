@@ -900,6 +900,13 @@ def test_the_baselines_parameters_are_changed_in_a_spec_as_the_presets_are():
     assert parse_detector("lgmd2").make(1 / 30).params.dt == pytest.approx(1 / 30)
     assert parse_detector("lgmd2/dt=0.04").make(1 / 30).params.dt == 0.04
     assert parse_detector("lgmd2").make().params.dt == 0.05
+    # every parameter a run used, as results.json keeps them (JSON without infinities)
+    assert parse_detector("lgmd2/t_ffi=inf/dt=0.04").parameters["t_ffi"] == "inf"
+    assert parse_detector("lgmd2/t_ffi=inf/dt=0.04").parameters["dt"] == 0.04
+    robust = parse_detector("asnn").parameters
+    assert robust["preset"] == "robust" and robust == {"preset": "robust", **json.loads(
+        json.dumps(preset("robust").model_dump()))}
+    assert parse_detector("asnn:reference/top_k=0").parameters["top_k"] == 0
     for bad, says in (("lgmd1/w_x=1", "w_x: Extra inputs"), ("lgmd1/w_i=-1", "w_i: Input should "
                       "be greater"), ("lgmd1/n_sp=true", "n_sp: Input should be a valid integer"),
                       ("lgmd2:robust", "has no presets"), ("lgmd1/w_i=1/w_i=2", "given twice")):
@@ -1164,6 +1171,9 @@ def test_the_lgmd_models_run_at_a_clip_s_own_frame_period(tmp_path, capsys):
         model = LGMD2(dt=1 / fps)
         want = [model.step(f).u for f in frames[::int(30 / fps)]]
         assert [r["u"] for r in got] == pytest.approx(want, rel=1e-12)
+    settings = json.loads((tmp_path / "out-None" / "results.json").read_text())["settings"]
+    assert settings["parameters"]["lgmd2"]["dt"] == "frame period"  # a researcher's record
+    assert settings["parameters"]["lgmd2"]["t_sp"] == 0.76
     capsys.readouterr()  # the runs' summaries
     assert main(["detect", str(tmp_path / "loom.mp4"), "--model", "lgmd2", "--jsonl", "-"]) == 0
     detected = [json.loads(x) for x in capsys.readouterr().out.splitlines()]

@@ -135,6 +135,7 @@ def test_synthetic_eval_of_a_variant(tmp_path, capsys):
                  "--detectors", "asnn", "--no-plots", "--out", str(out)]) == 0
     results = json.loads((out / "results.json").read_text())
     assert results["settings"]["variant"] == 2
+    assert results["settings"]["parameters"]["asnn"]["preset"] == "robust"  # what ran
     assert (out / "report.md").read_text().startswith(
         "# Labelled suite of generated scenes (version 6, variant 2)")
     # the per-frame results are the detector's on the variant's frames, not the suite's

@@ -324,6 +324,7 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
     results = {
         "settings": {"clips_dir": str(clips_dir), "labels": str(labels_path),
                      "detectors": [spec.name for spec in specs],
+                     "parameters": {spec.name: spec.parameters for spec in specs},
                      "early_tolerance_s": early_tolerance_s, "warmup": warmup,
                      "perturbation": perturbation,
                      "contact_slack_frames": scoring.CONTACT_SLACK_FRAMES},

@@ -115,6 +115,23 @@ class DetectorSpec:
         """The ASNN parameters: the preset with the overrides."""
         return preset(self.preset or "default", **dict(self.overrides))
 
+    @property
+    def parameters(self) -> dict:
+        """Every parameter the detector runs with, JSON-ready (an infinity as ``"inf"``), for a
+        run's ``results.json``: a named preset edited between two runs leaves two results that
+        tell it. ASNN's add ``preset``, the one its name stands for; an LGMD model's ``dt`` is
+        ``"frame period"`` unless the spec sets it (:meth:`make`)."""
+        if self.model == "asnn":
+            values = {"preset": self.preset or DEFAULT_PRESET, **self.params.model_dump()}
+        else:
+            from ..baselines import LGMD1Params, LGMD2Params
+
+            fields = (LGMD1Params if self.model == "lgmd1" else LGMD2Params)(
+                **dict(self.overrides)).model_dump()
+            values = {**fields, "dt": fields["dt"] if "dt" in dict(self.overrides)
+                      else "frame period"}
+        return {k: _json_ready(v) for k, v in values.items()}
+
     def make(self, frame_period: float | None = None) -> Detector:
         """A fresh detector for a stream whose frames come ``frame_period`` seconds apart.
 
@@ -130,6 +147,16 @@ class DetectorSpec:
                 options["dt"] = frame_period
             return make_detector(self.model, None, **options)
         return make_detector(self.model, self.params)
+
+
+def _json_ready(value):
+    """A parameter's value as strict JSON holds it: an infinity as ``"inf"`` or ``"-inf"``
+    (the spelling the specs take), tuples as lists."""
+    if isinstance(value, float) and np.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    if isinstance(value, (tuple, list)):
+        return [_json_ready(v) for v in value]
+    return value
 
 
 def _spell(value) -> str:
