@@ -1191,3 +1191,24 @@ def _decoded(path):
         if not ok:
             return frames
         frames.append(frame)
+
+
+def test_a_clip_s_plot_of_the_ablation_s_detectors_keeps_its_layout(tmp_path):
+    """A review: with --ablation's 31 detectors the warning rows overlapped in a fixed height
+    and matplotlib gave up its layout (a warning per clip on stderr), the legend over the
+    curves."""
+    import warnings
+
+    from asnn.evaluation.figures import plot_clip_responses
+    from asnn.evaluation.runs import ABLATIONS
+
+    rng = np.random.default_rng(0)
+    models = {spec: {"out": list(0.5 + rng.random(90) / 2), "spike_rate": list(rng.random(90)),
+                     "collision": list(rng.random(90) > 0.9), "outcome": "hit"}
+              for spec in ABLATIONS.values()}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        path = plot_clip_responses(tmp_path / "c.png", {
+            "name": "c", "onset": 40, "contact": 60, "window": (30, 62), "warmup": 5,
+            "models": models, "fps": 30.0})
+    assert [str(w.message) for w in caught] == [] and path.stat().st_size > 0

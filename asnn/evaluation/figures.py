@@ -100,8 +100,11 @@ def plot_clip_responses(path: str | Path, clip: Mapping) -> Path:
         seconds over the frames (labels count frames, ``asnn detect --plot`` seconds).
     """
     models = clip["models"]
-    fig = _figure(8.0, 5.6)
-    top, middle, bottom = fig.subplots(3, 1, sharex=True, height_ratios=[3, 2, 1])
+    # a row of warnings per model: the ablation's 31 overlapped in a fixed height (and
+    # matplotlib gave up its layout), its legend over the curves
+    rows = max(len(models), 3)
+    fig = _figure(8.0 if rows <= 6 else 11.0, 5.6 + 0.16 * (rows - 3))
+    top, middle, bottom = fig.subplots(3, 1, sharex=True, height_ratios=[3, 2, rows / 3])
     for model, series in models.items():
         frames = np.arange(len(series["out"]))
         top.plot(frames, series["out"], color=_colour(model), lw=1.2,
@@ -116,10 +119,14 @@ def plot_clip_responses(path: str | Path, clip: Mapping) -> Path:
         ax.axvspan(0, clip.get("warmup", 0) - 0.5, color="0.85", lw=0)
     top.set_ylabel("out(t)")
     top.set_title(f"{clip['name']}: responses (dashed onset, solid contact, green hit window)")
-    top.legend(loc="upper left", fontsize=8)
+    if rows <= 6:
+        top.legend(loc="upper left", fontsize=8)
+    else:  # beside the axes
+        top.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=6,
+                   ncol=1 + len(models) // 16)
     middle.set_yscale("symlog", linthresh=10.0)
     middle.set_ylabel("spike rate, Hz")
-    bottom.set_yticks(range(len(models)), list(models))
+    bottom.set_yticks(range(len(models)), list(models), fontsize=8 if rows <= 6 else 6)
     bottom.set_ylim(-0.7, len(models) - 0.3)
     bottom.set_ylabel("warnings")
     bottom.set_xlabel("frame")
