@@ -538,7 +538,8 @@ class ASNN:
                 "clock is. Pass each frame's time in seconds: " + (
                     "these read like a clock in milliseconds or nanoseconds, or a camera slower "
                     "than a frame a second, far below the 20 fps the default is made for"
-                    if slow else "these read like a clock that stands still or goes back"))
+                    if slow else "these read like a clock that stands still or goes back, "
+                    "or frames stamped under 0.1 ms apart"))
 
     def _tell_timing(self, stacklevel: int) -> None:
         """Raise the stream's noted :class:`~asnn.errors.TimingWarning`, if any, once, at the

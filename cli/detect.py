@@ -7,11 +7,13 @@ import gc
 import json
 import os
 import sys
+import warnings
 from collections import deque
 from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
 from asnn.detectors import MODELS, available_cores, make_detector, responses
+from asnn.errors import TimingWarning
 from asnn.io.files import folder_problem, resolved, seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
@@ -99,6 +101,27 @@ class _WriteNow:
 
     def close(self, raise_error: bool = True) -> None:
         pass
+
+
+@contextmanager
+def _timing_noted(said: bool):
+    """Within the block, the model's TimingWarning (frame times it cannot time by) is one of
+    the command's own notes, or nothing where the note on the source's rate said it (Python's
+    form of it, a file and line of asnn's and the line of code, read as a fault)."""
+    with warnings.catch_warnings():
+        if said:
+            warnings.simplefilter("ignore", TimingWarning)
+        else:
+            shown = warnings.showwarning
+
+            def show(message, category, *rest, **keywords):
+                if issubclass(category, TimingWarning):
+                    print(f"asnn detect: note: {message}", file=sys.stderr)
+                else:
+                    shown(message, category, *rest, **keywords)
+
+            warnings.showwarning = show
+        yield
 
 
 @contextmanager
@@ -372,6 +395,7 @@ def run(args: argparse.Namespace) -> int:
                              hold_backwards=True, decoder_threads=1 if busy else None)
     except SourceError as exc:
         return _fail(str(exc))
+    slow = ""  # said: the frames are too far apart for the model to time them by
     if not source.fps_stated:
         print(f"asnn detect: note: {args.video} states no frame rate a camera runs at; its "
               f"frames are timed at {source.fps:g} a second, so the targets' expansion and ttc "
@@ -402,6 +426,7 @@ def run(args: argparse.Namespace) -> int:
                 return _fail(f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
     with ExitStack() as stack:
         stack.enter_context(_settings(busy))
+        stack.enter_context(_timing_noted(said=bool(slow)))
         jsonl, tracks = (sys.stdout if path == "-" else _OpenedAtFirstLine(path, stack)
                          if path else None for path in (args.jsonl, args.tracks))
         mcap = None

@@ -808,3 +808,19 @@ def test_videos_are_written_with_the_opencv_4_log_calls_where_cv2_utils_has_no_l
     write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
     assert levels == [2, 3]  # held at ERROR while writing, then back
     assert len(list(open_video(tmp_path / "loom.mp4"))) == 6
+
+
+def test_frame_times_the_model_cannot_time_by_are_one_note_of_detect_s_own(tmp_path, capsys):
+    """The model's TimingWarning came out in Python's form (asnn's file and line, and the line
+    of code), read as a fault; where the note on the source's rate said it, it came twice."""
+    from asnn.io.rosbag import write_bag
+    from asnn.stimuli import make_scene
+
+    frames = make_scene("looming", size=(96, 96), frames=12).frames
+    for fps, said, not_said in (
+            (20000.0, "asnn detect: note: 5 frames in a row came at times", "TimingWarning"),
+            (0.5, "its frames are more than 1 s apart", "5 frames in a row")):
+        path = write_bag(frames, tmp_path / f"at-{fps:g}.mcap", fps=fps)
+        assert main(["detect", str(path), "--jsonl", str(tmp_path / "out.jsonl")]) == 0
+        err = capsys.readouterr().err
+        assert said in err and not_said not in err and "TimingWarning" not in err, err
