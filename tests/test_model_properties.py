@@ -14,6 +14,7 @@ import os
 
 import cv2
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -84,6 +85,7 @@ def _finite(x) -> bool:
 # where out rounds to 1.0
 @example(kind="stripes", h=31, w=31, n=5, seed=986, gaps=[0.0] * 16, name="reference32",
          as_bytes=False)
+@pytest.mark.filterwarnings("ignore::asnn.errors.TimingWarning")  # any clock, by design
 def test_every_valid_stream_gets_a_well_formed_response_to_every_frame(kind, h, w, n, seed, gaps,
                                                                        name, as_bytes):
     model = ASNN(name, record_tracks=name == "robust")

@@ -442,6 +442,7 @@ def test_the_tracks_report_the_surface_in_the_frames_it_counts():
     assert quiet and not any(t.box == (0.0, 0.0, 160.0, 120.0) for r in quiet for t in r.tracks)
 
 
+@pytest.mark.filterwarnings("ignore::asnn.errors.TimingWarning")  # the 1 us clock is meant
 def test_the_watch_keeps_a_bounded_number_of_frames_whatever_the_clock():
     """A probe: stamps a microsecond apart kept every frame of the last 0.1 s in the watch's
     history (100,000 frames, 1.3 GB, and the step slowed threefold)."""
