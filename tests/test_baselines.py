@@ -243,29 +243,16 @@ def test_an_lgmd_model_stepped_from_two_threads_at_once_says_so(name):
     """As the ASNN: one baseline stepped from two threads mixed their states without a word."""
     import copy
     import pickle
-    import threading
+
+    from threadutil import step_held_inside
 
     frames = make_scene("looming", size=(64, 64), frames=4).frames
     model = make_detector(name)
-    inside, release = threading.Event(), threading.Event()
-    luminance = model._luminance
-
-    def slow_luminance(frame):  # the first thread's step, held inside
-        inside.set()
-        release.wait(10)
-        return luminance(frame)
-
-    model._luminance = slow_luminance
-    first = threading.Thread(target=model.step, args=(frames[0],))
-    first.start()
-    assert inside.wait(10)
-    with pytest.raises(RuntimeError, match="stepping already"):
-        model.step(frames[1])
-    with pytest.raises(RuntimeError, match="copy it between steps"):
-        copy.deepcopy(model)
-    release.set()
-    first.join(10)
-    del model._luminance
+    with step_held_inside(model, "_luminance", frames[0]):  # the first thread's step
+        with pytest.raises(RuntimeError, match="stepping already"):
+            model.step(frames[1])
+        with pytest.raises(RuntimeError, match="copy it between steps"):
+            copy.deepcopy(model)
     assert model.step(frames[1]).index == 1  # the refused step changed nothing
     looming = make_scene("looming", size=(64, 64)).frames
     for snapshot in (copy.deepcopy, copy.copy):  # a snapshot, stepped, leaves the model be

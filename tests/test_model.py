@@ -784,27 +784,13 @@ def test_cluster_targets_of_a_resized_frame_are_in_the_frames_own_pixels(optimis
 def test_a_model_stepped_from_two_threads_at_once_says_so():
     """A probe: one model stepped from two threads mixed their states without a word (threads=1)
     or stayed broken (threads=2)."""
-    import threading
+    from threadutil import step_held_inside
 
     frames = make_scene("looming", size=(64, 64), frames=6).frames
     model = ASNN("default")
-    inside, release = threading.Event(), threading.Event()
-    take = model._take
-
-    def slow_take(frame, t):  # the first thread's step, held inside
-        inside.set()
-        release.wait(10)
-        return take(frame, t)
-
-    model._take = slow_take
-    first = threading.Thread(target=model.step, args=(frames[0],))
-    first.start()
-    assert inside.wait(10)
-    with pytest.raises(RuntimeError, match="stepping already"):
-        model.step(frames[1])
-    release.set()
-    first.join(10)
-    del model._take
+    with step_held_inside(model, "_take", frames[0]):  # the first thread's step
+        with pytest.raises(RuntimeError, match="stepping already"):
+            model.step(frames[1])
     assert model.step(frames[1]).index == 1  # the refused step changed nothing
     # a stream with worker threads holds the model until it is finished
     threaded = ASNN("default", threads=2)
