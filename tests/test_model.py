@@ -264,6 +264,51 @@ def test_the_timing_warning_comes_after_five_untimed_gaps_in_a_row():
     assert len(_timing_warnings(model, stamps[6:], make_scene("looming", size=(64, 64)))) == 1
 
 
+
+def test_untimed_gaps_apart_are_not_warned_of_however_many():
+    """Five in a row: a believed gap between them starts the count again (ten untimed gaps,
+    each after a believed one, are a stream with a frame lost now and then, not a bad clock)."""
+    scene, model = make_scene("looming", size=(64, 64)), ASNN()
+    stamps = [50.0 * (k // 2) + 0.05 * (k % 2) for k in range(24)]  # 11 untimed, none in a row
+    assert _timing_warnings(model, stamps, scene) == []
+
+
+@pytest.mark.parametrize("stamps, told", [
+    ([1000.0 * k / 20 for k in range(10)], "like a clock in milliseconds or nanoseconds"),
+    ([3.0] * 10, "like a clock that stands still or goes back"),
+    ([10.0 - k / 20 for k in range(10)], "like a clock that stands still or goes back"),
+])
+def test_the_timing_warning_tells_a_slow_clock_from_a_stalled_one(stamps, told):
+    said = _timing_warnings(ASNN(), stamps, make_scene("looming", size=(64, 64)))
+    assert len(said) == 1 and told in said[0] and "it believes 0.0001 to 1 s" in said[0]
+
+
+def test_frames_without_times_are_not_warned_of_whatever_params_dt():
+    """The warning asks for frame times in seconds: a stream given none is timed at dt as
+    asked, even where dt is outside the gaps the model believes (here 10 us)."""
+    scene = make_scene("looming", size=(64, 64))
+    model = ASNN(asnn_preset("default", dt=1e-5))
+    assert _timing_warnings(model, [None] * 20, scene) == []
+    assert list(model.periods) == [1e-5] * 5
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_stream_left_on_the_frame_it_warns_on_has_warned(threads):
+    """The warning comes with its frame's response: a consumer that stops there (islice, a
+    break) has been told; raised on the next frame's request instead, it was never said."""
+    import itertools
+    import warnings
+
+    scene = make_scene("looming", size=(64, 64))
+    model = ASNN(threads=threads)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        taken = list(itertools.islice(
+            model.stream((50.0 * k, frame) for k, frame in enumerate(scene.frames)), 6))
+    assert [r.index for r in taken] == list(range(6))
+    assert len([w for w in caught if issubclass(w.category, TimingWarning)]) == 1
+    model.close()
+
 def test_untimed_frames_in_a_row_in_a_timed_stream_each_come_a_frame_period_later():
     """Two or three frames in a row without a time (a camera's stamps dropped for a moment):
     each comes a frame period after the one before, not all at the same time (a gap of 0, a
