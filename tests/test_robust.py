@@ -1004,6 +1004,24 @@ def test_a_reset_or_a_stalled_clock_judges_the_rate_afresh_as_a_new_model_does()
     assert stepped == expected
 
 
+
+def test_a_fast_camera_s_clock_that_stood_still_and_runs_again_judges_the_rate_afresh():
+    """Past the frames at one instant the ceiling holds as sent twice, a clock that stopped
+    leaves the rate unknown: once it runs again, the model steps and holds the frames a model
+    started on the stall's last frame does (gaps kept from before the stall held frames at
+    once)."""
+    noise = _noise_frames()
+    frames = [noise[k % 4] for k in range(60)]
+    times = [1000.0 + k / 60.0 for k in range(30)]
+    times += [times[-1]] * 5  # the clock stands still for five frames
+    times += [times[-1] + k / 60.0 for k in range(1, 60 - len(times) + 1)]
+    fresh = ASNN("default")
+    _, expected = _stepped(fresh, frames[34:], times[34:])
+    model = ASNN("default")
+    _, stepped = _stepped(model, frames, times)
+    assert [k - 34 for k in stepped if k >= 34] == expected
+    assert expected[:3] == [0, 1, 2]  # the rate judged from the third gap, as a new model's
+
 def test_a_fast_camera_s_repeated_frames_held_by_the_ceiling_count_as_held():
     """A 30 fps video up-sampled to 60 fps (each frame sent twice): the ceiling holds every
     second frame before the repeat test sees it, so the copies count among the frames held and
