@@ -78,7 +78,13 @@ def test_parameters_are_typed_and_overridable():
     for params, changes, said in ((LGMD1Params, {"t_s": 0.5}, "greater than 0.5"),
                                   (LGMD2Params, {"t_sp": 0.4}, "greater than 0.5"),
                                   (LGMD2Params, {"k_sp": 0.0}, "greater than 0"),
-                                  (LGMD2Params, {"k_sp": -4.0}, "greater than 0")):
+                                  (LGMD2Params, {"k_sp": -4.0}, "greater than 0"),
+                                  (LGMD2Params, {"t_sp": 0.5}, "greater than 0.5"),
+                                  # and past 1 never (a threshold K^ cannot reach), or past a
+                                  # gain of 100 math.exp can overflow in the spike count
+                                  (LGMD1Params, {"t_s": 1.5}, "less than or equal to 1"),
+                                  (LGMD2Params, {"t_sp": 1.5}, "less than or equal to 1"),
+                                  (LGMD2Params, {"k_sp": 2000.0}, "less than or equal to 100")):
         with pytest.raises(ValidationError, match=said):
             params(**changes)
     # persistence weights summing to 1 or more: P_f grew to 5e50 on a still, noisy scene
