@@ -592,11 +592,32 @@ def test_zenoh_s_debug_log_keeps_a_client_s_password_out(tmp_path, rust_log):
 def test_a_quiet_rust_log_is_left_as_it_is():
     from cli.session import _asks_debug
 
-    for quiet in ("", "warn", "zenoh=info", "error,zenoh::net=3", " off , ", "zenoh=0"):
+    for quiet in ("", "warn", "zenoh=info", "error,zenoh::net=3", " off , ", "zenoh=0", "OFF",
+                  "zenoh=Info", "WARN,zenoh::net=Error"):  # tracing reads levels in any case
         assert not _asks_debug(quiet), quiet
     for loud in ("debug", "zenoh", "zenoh=5", "warn,zenoh::api=TRACE", "[span]=debug"):
         assert _asks_debug(loud), loud
 
+
+
+@pytest.mark.parametrize("rust_log", [None, "", "off"])
+def test_zenoh_s_log_stays_off_where_rust_log_does_not_ask_for_it(rust_log):
+    """README: Zenoh's own logs only when RUST_LOG is set (the target kept at INFO is added
+    only to a RUST_LOG that may enable DEBUG: added to none, it turned Zenoh's log on)."""
+    import os
+    import subprocess
+    import sys
+
+    from service.demo import free_port
+
+    env = {k: v for k, v in os.environ.items() if k != "RUST_LOG"}
+    if rust_log is not None:
+        env["RUST_LOG"] = rust_log
+    proc = subprocess.run([sys.executable, "-m", "cli.main", "status", "--connect",
+                           f"tcp/127.0.0.1:{free_port()}", "--mode", "client", "--timeout", "1"],
+                          env=env, timeout=120, capture_output=True, text=True)
+    assert proc.returncode == 2 and "cannot open a Zenoh session" in proc.stderr
+    assert "zenoh::" not in proc.stdout + proc.stderr
 
 def test_worker_scan_and_handover_options_are_checked(capsys):
     from cli.main import build_parser
