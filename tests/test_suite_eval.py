@@ -275,6 +275,24 @@ def test_synthetic_eval_of_perturbed_frames(tmp_path):
     assert score["outcome"] == "hit" and score["localisation_px"] < 10
 
 
+
+def test_the_lgmd_models_run_at_the_period_a_perturbation_delivers(tmp_path):
+    """LGMD1-2's time constants are in seconds: the suite at half its frame rate runs it at
+    dt = 0.1 s, every other frame (at the fixed 0.05 s it ran 2 times slow), and a spec's own
+    dt is kept."""
+    from asnn.baselines import LGMD2
+
+    case = "course-disk-dark-right"
+    frames = make_case(case).frames
+    for spec, slug, dt in (("lgmd2", "lgmd2", 0.1), ("lgmd2/dt=0.05", "lgmd2-dt-0.05", 0.05)):
+        out = tmp_path / slug
+        assert main(["eval", "--synthetic", "--perturb", "half-rate", "--cases", case,
+                     "--detectors", spec, "--no-plots", "--out", str(out)]) == 0
+        (written,) = (out / "results").iterdir()
+        got = [json.loads(x)["u"] for x in (written / f"{case}.jsonl").open()]
+        model = LGMD2(dt=dt)
+        assert got == pytest.approx([model.step(f).u for f in frames[::2]], rel=1e-12)
+
 def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):
     out, labels = tmp_path / "case.avi", tmp_path / "labels.json"
     assert main(["scene", "--case", "nearmiss-disk-dark-right", str(out), "--labels",
