@@ -293,6 +293,18 @@ def test_the_lgmd_models_run_at_the_period_a_perturbation_delivers(tmp_path):
         model = LGMD2(dt=dt)
         assert got == pytest.approx([model.step(f).u for f in frames[::2]], rel=1e-12)
 
+
+def test_the_ablation_runs_its_rows(tmp_path):
+    """--ablation's detectors are its rows, set once the options were checked (set before,
+    they read as --detectors given with it, which it refuses)."""
+    from asnn.evaluation.runs import ABLATIONS
+
+    out = tmp_path / "ablation"
+    assert main(["eval", "--synthetic", "--ablation", "--cases", "course-disk-dark-right",
+                 "--no-plots", "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert list(results["detectors"]) == list(ABLATIONS.values())
+
 def test_scene_writes_a_suite_case_with_its_label(tmp_path, capsys):
     out, labels = tmp_path / "case.avi", tmp_path / "labels.json"
     assert main(["scene", "--case", "nearmiss-disk-dark-right", str(out), "--labels",
