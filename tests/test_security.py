@@ -564,12 +564,25 @@ def test_the_generator_refuses_bad_hosts_and_days_before_writing_anything(tmp_pa
              ((str(tmp_path / "d"),), {"ASNN_CERT_DAYS": "abc"}, "ASNN_CERT_DAYS must be"),
              # a path the configs' JSON5 strings cannot hold as it is
              ((str(tmp_path / 'q"uote'),), {}, "cannot hold a quote"),
-             ((str(tmp_path / "g"),), {"ASNN_SECRETS_PATH": "/etc/a\\b"}, "a backslash")]
+             ((str(tmp_path / "g"),), {"ASNN_SECRETS_PATH": "/etc/a\\b"}, "a backslash"),
+             ((str(tmp_path / "h"),), {"ASNN_SECRETS_PATH": "/etc/a\nb"}, "a line break"),
+             ((str(tmp_path / "i\nj"),), {}, "a line break")]
     for args, env, said in cases:
         out = subprocess.run(["bash", str(SCRIPT), *args], capture_output=True, text=True,
                              timeout=60, env={**os.environ, **env})
         assert out.returncode == 2 and said in out.stderr, out.stderr
         assert not Path(args[0]).exists()
+    # a relative OUT_DIR is named by its whole path, the working directory's quote with it
+    quoted = tmp_path / 'w"d'
+    quoted.mkdir()
+    out = subprocess.run(["bash", str(SCRIPT), "secrets"], capture_output=True, text=True,
+                         timeout=60, cwd=quoted)
+    assert out.returncode == 2 and "cannot hold a quote" in out.stderr, out.stderr
+    assert not (quoted / "secrets").exists()
+    # where OUT_DIR is whole, the working directory is not in the configs: it may hold one
+    subprocess.run(["bash", str(SCRIPT), str(tmp_path / "whole")], check=True,
+                   capture_output=True, timeout=120, cwd=quoted)
+    assert (tmp_path / "whole" / "router" / "router.json5").exists()
 
 
 def test_an_ampersand_in_the_secrets_path_is_itself_in_the_router_s_config(tmp_path):
