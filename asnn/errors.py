@@ -31,6 +31,7 @@ class TimingWarning(UserWarning):
     instant the frame-rate ceiling holds as sent twice) or goes back. The responses go on,
     their expansion rates and time to contact off by as much as the clock is. Raised once the
     frame is stepped (where warnings are errors, the frame's response is then lost, the model
-    stepped). Silence it with :func:`warnings.filterwarnings` where that is meant (the
+    stepped); from a :meth:`~asnn.ASNN.stream` with worker threads, which takes frames up to
+    two ahead of the response it yields, with the response of a frame up to two before it. Silence it with :func:`warnings.filterwarnings` where that is meant (the
     service's worker logs the same itself, per robot).
     """
