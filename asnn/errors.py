@@ -4,7 +4,11 @@ load the model to name them."""
 
 from __future__ import annotations
 
-__all__ = ["FrameError", "TimingWarning"]
+import contextlib
+import warnings
+from collections.abc import Callable, Iterator
+
+__all__ = ["FrameError", "TimingWarning", "timing_warnings_to"]
 
 
 class FrameError(ValueError):
@@ -35,3 +39,23 @@ class TimingWarning(UserWarning):
     two ahead of the response it yields, with the response of a frame up to two before it. Silence it with :func:`warnings.filterwarnings` where that is meant (the
     service's worker logs the same itself, per robot).
     """
+
+
+@contextlib.contextmanager
+def timing_warnings_to(tell: Callable[[str], None]) -> Iterator[None]:
+    """Within the block, each :class:`TimingWarning` goes to ``tell(message)``, shown or not
+    as a program says its own notes (Python's form names a file and line of asnn's and its
+    code, read as a fault), and never raised, even where warnings are errors; every other
+    warning as before. For a command's own notes (``asnn detect``, ``asnn eval``)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", TimingWarning)
+        shown = warnings.showwarning
+
+        def show(message, category, *rest, **keywords):
+            if issubclass(category, TimingWarning):
+                tell(str(message))
+            else:
+                shown(message, category, *rest, **keywords)
+
+        warnings.showwarning = show
+        yield

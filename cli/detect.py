@@ -7,13 +7,12 @@ import gc
 import json
 import os
 import sys
-import warnings
 from collections import deque
 from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
 from asnn.detectors import MODELS, available_cores, make_detector, responses
-from asnn.errors import TimingWarning
+from asnn.errors import timing_warnings_to
 from asnn.io.files import folder_problem, resolved, seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
@@ -101,27 +100,6 @@ class _WriteNow:
 
     def close(self, raise_error: bool = True) -> None:
         pass
-
-
-@contextmanager
-def _timing_noted(said: bool):
-    """Within the block, the model's TimingWarning (frame times it cannot time by) is one of
-    the command's own notes, or nothing where the note on the source's rate said it (Python's
-    form of it, a file and line of asnn's and the line of code, read as a fault)."""
-    with warnings.catch_warnings():
-        if said:
-            warnings.simplefilter("ignore", TimingWarning)
-        else:
-            shown = warnings.showwarning
-
-            def show(message, category, *rest, **keywords):
-                if issubclass(category, TimingWarning):
-                    print(f"asnn detect: note: {message}", file=sys.stderr)
-                else:
-                    shown(message, category, *rest, **keywords)
-
-            warnings.showwarning = show
-        yield
 
 
 @contextmanager
@@ -291,11 +269,11 @@ class _BackwardStamps(BackwardStamps):
         self._check(self.read)
 
 
-def _warn(message: str) -> None:
-    """A warning line on stderr; on a terminal, over the progress bar's line (it is drawn
-    again below)."""
+def _warn(message: str, kind: str = "warning") -> None:
+    """A warning (or note) line on stderr; on a terminal, over the progress bar's line (it is
+    drawn again below)."""
     lead = "\r\033[K" if sys.stderr.isatty() else ""
-    print(f"{lead}asnn detect: warning: {message}", file=sys.stderr, flush=True)
+    print(f"{lead}asnn detect: {kind}: {message}", file=sys.stderr, flush=True)
 
 
 def _check_annotated(video: list, path: str | None, frames: int) -> None:
@@ -426,7 +404,9 @@ def run(args: argparse.Namespace) -> int:
                 return _fail(f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
     with ExitStack() as stack:
         stack.enter_context(_settings(busy))
-        stack.enter_context(_timing_noted(said=bool(slow)))
+        # the model's TimingWarning as a note, where the note on the source's rate did not say it
+        stack.enter_context(timing_warnings_to(
+            (lambda message: None) if slow else (lambda message: _warn(message, "note"))))
         jsonl, tracks = (sys.stdout if path == "-" else _OpenedAtFirstLine(path, stack)
                          if path else None for path in (args.jsonl, args.tracks))
         mcap = None

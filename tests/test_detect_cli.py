@@ -824,3 +824,11 @@ def test_frame_times_the_model_cannot_time_by_are_one_note_of_detect_s_own(tmp_p
         assert main(["detect", str(path), "--jsonl", str(tmp_path / "out.jsonl")]) == 0
         err = capsys.readouterr().err
         assert said in err and not_said not in err and "TimingWarning" not in err, err
+    # a note of the command's, where warnings are errors too (a review: a traceback midway)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["detect", str(tmp_path / "at-20000.mcap"), "--jsonl", "-"]) == 0
+    printed = capsys.readouterr()
+    assert len(printed.out.splitlines()) == len(frames) and "5 frames in a row" in printed.err

@@ -1212,3 +1212,23 @@ def test_a_clip_s_plot_of_the_ablation_s_detectors_keeps_its_layout(tmp_path):
             "name": "c", "onset": 40, "contact": 60, "window": (30, 62), "warmup": 5,
             "models": models, "fps": 30.0})
     assert [str(w.message) for w in caught] == [] and path.stat().st_size > 0
+
+
+def test_a_clip_s_frame_times_the_model_cannot_time_by_are_a_line_of_the_run_s_warnings(
+        tmp_path, capsys):
+    """A review: asnn eval showed the model's TimingWarning in Python's form, a file and line
+    of asnn's; it is one of the run's warnings, named by detector and clip, in results.json."""
+    from asnn.io.rosbag import write_bag
+
+    scene = make_scene("looming", size=(96, 96))
+    write_bag(scene.frames, tmp_path / "loom.mcap", fps=20000.0)  # stamps 50 us apart
+    (tmp_path / "labels.json").write_text(json.dumps([scene.label("loom.mcap")]))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "asnn,lgmd1", "--out", str(out),
+                 "--no-plots"]) == 0
+    err = capsys.readouterr().err
+    assert "TimingWarning" not in err
+    said = [w for w in json.loads((out / "results.json").read_text())["warnings"]
+            if "cannot time them by" in w]
+    assert len(said) == 1 and said[0].startswith("asnn loom.mcap: 5 frames in a row")
+    assert f"asnn eval: {said[0]}" in err

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
+from ..errors import timing_warnings_to
 from ..io.files import write_atomically
 from ..io.sources import BackwardStamps, SourceError, open_source
 from ..params import SLOW_FPS, SLOW_NOTE
@@ -116,7 +117,8 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
     """Worker: one detector on one clip (a bag's ``topic``), its frames perturbed where
     ``perturbation`` names one, results to ``out_path``. Returns the frames run, the error
     (or None) and the clip as decoded, before any perturbation: its frames, frame rate, frame
-    size (width, height) and stamps (:func:`clip_warnings`'s)."""
+    size (width, height) and stamps (:func:`clip_warnings`'s), with the detector's own
+    warnings of the clip's frame times (:class:`~asnn.errors.TimingWarning`)."""
     decoded, size = 0, None
 
     def counted(frames):
@@ -127,14 +129,16 @@ def _run_clip(video: str, detector: DetectorSpec, out_path: str, topic: str | No
                 size = (item[1].shape[1], item[1].shape[0])  # (t, image): width, height
             yield item
 
+    timing: list[str] = []  # the model's TimingWarning, a line of the run's warnings
     try:
         clip, stamps = open_labelled_clip(video, topic)
-        records = run_detector(perturbed(counted(clip.timed_frames()), perturbation), detector,
-                               delivered_period(clip.fps, perturbation))
+        with timing_warnings_to(timing.append):
+            records = run_detector(perturbed(counted(clip.timed_frames()), perturbation),
+                                   detector, delivered_period(clip.fps, perturbation))
     except (SourceError, ValueError) as exc:
         return 0, str(exc), None
     write_jsonl(Path(out_path), records)
-    return len(records), None, (decoded, clip.fps, size, stamps.tally)
+    return len(records), None, (decoded, clip.fps, size, stamps.tally, tuple(timing))
 
 
 def _clips_report(results: Mapping) -> str:
@@ -311,11 +315,14 @@ def evaluate_clips(clips_dir: str | Path, out_dir: str | Path, *,
                               f", {frames} frame{'' if frames == 1 else 's'}"))
         if error:
             errors.append(f"{name}: {error}")
-        if decoded is not None and clip not in checked:  # once a clip, by its first run
+        if decoded is None:
+            return
+        frames, fps, size, stamps, timing = decoded
+        if clip not in checked:  # once a clip, by its first run
             checked.add(clip)
-            frames, fps, size, stamps = decoded
             warnings.extend(clip_warnings(given[clip], frames, fps, size, warmup, slow=slow,
                                           stamps=stamps))
+        warnings.extend(f"{name}: {message}" for message in timing)  # the detector's own
 
     for index, result in run_tasks(_run_clip, tasks, jobs):
         finished(index, *result)
