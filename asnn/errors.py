@@ -36,7 +36,9 @@ class TimingWarning(UserWarning):
     their expansion rates and time to contact off by as much as the clock is. Raised once the
     frame is stepped (where warnings are errors, the frame's response is then lost, the model
     stepped); from a :meth:`~asnn.ASNN.stream` with worker threads, which takes frames up to
-    two ahead of the response it yields, with the response of a frame up to two before it. Silence it with :func:`warnings.filterwarnings` where that is meant (the
+    two ahead of the response it yields, with the response of a frame up to two before it
+    (and where warnings are errors, the responses of the frames it had taken are lost with it,
+    as in a stream left early). Silence it with :func:`warnings.filterwarnings` where that is meant (the
     service's worker logs the same itself, per robot).
     """
 

@@ -468,8 +468,10 @@ class ASNN:
                 self._tell_timing(stacklevel=3)
                 yield response
         finally:
-            inner.close()  # a stream left early finishes the frames it took, before the release
-            self._in_use.release()
+            try:
+                inner.close()  # a stream left early finishes the frames it took, then releases
+            finally:
+                self._in_use.release()
 
     def _banded_stream(self, frames: Iterable[tuple[float | None, np.ndarray]]
                        ) -> Iterator[Response]:

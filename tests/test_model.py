@@ -848,6 +848,29 @@ def test_a_model_stepped_from_two_threads_at_once_says_so():
     threaded.close()
 
 
+def test_a_threaded_stream_that_fails_while_it_closes_frees_the_model(monkeypatch):
+    """A review: a stream left early whose finishing of the frames it took raised (a worker's
+    failure, a Ctrl-C) kept the model's lock: every later step said it was stepping already."""
+    frames = make_scene("looming", size=(64, 64), frames=10).frames
+    model = ASNN("default", threads=2)
+    finish, calls = model._finish, []
+
+    def failing(frame):
+        calls.append(frame)
+        if len(calls) == 2:
+            raise KeyboardInterrupt("while the stream finished its taken frames")
+        return finish(frame)
+
+    monkeypatch.setattr(model, "_finish", failing)
+    stream = model.stream((k / 20, f) for k, f in enumerate(frames))
+    next(stream)
+    with pytest.raises(KeyboardInterrupt):
+        stream.close()
+    monkeypatch.undo()
+    assert model.step(frames[5], 5 / 20).index == model.index - 1
+    model.close()
+
+
 def test_a_shallow_copy_is_a_snapshot_too():
     """copy.copy shared the state's arrays, deques and approach stage with the model (a user's
     snapshot): stepping the copy changed the original's later responses."""
