@@ -598,6 +598,18 @@ def test_an_ampersand_in_the_secrets_path_is_itself_in_the_router_s_config(tmp_p
     assert f'"{out}/router/router.pem"' in (out / "router" / "router.json5").read_text()
 
 
+def test_the_folder_written_to_is_private_whatever_the_path_to_it(tmp_path):
+    """A review: with a link/.. in OUT_DIR, mkdir and chmod resolved it through the link and cd
+    did not, so the CA key and passwords went into a folder left at mode 755."""
+    (tmp_path / "other" / "dir").mkdir(parents=True)
+    (tmp_path / "work" / "secrets").mkdir(parents=True, mode=0o755)
+    (tmp_path / "work" / "link").symlink_to("../other/dir")
+    subprocess.run(["bash", str(SCRIPT), "link/../secrets"], cwd=tmp_path / "work", check=True,
+                   capture_output=True, timeout=120)
+    written = tmp_path / "work" / "secrets"
+    assert (written / "ca.key").exists() and written.stat().st_mode & 0o777 == 0o700
+
+
 def test_the_generator_names_an_ipv6_host_and_says_why_openssl_failed(tmp_path):
     out = tmp_path / "s"
     subprocess.run(["bash", str(SCRIPT), str(out), "[fd00::2]", "routerhost.example"],

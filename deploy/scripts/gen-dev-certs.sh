@@ -98,8 +98,8 @@ paths_ok "${ASNN_SECRETS_PATH:-}" && paths_ok "$whole" || {
 
 command -v openssl >/dev/null || { echo "gen-dev-certs: openssl is required" >&2; exit 2; }
 mkdir -p "$out"
-chmod 700 "$out"
 cd "$out"
+chmod 700 .  # the folder written to (a link/.. in OUT_DIR: mkdir and cd resolve it otherwise)
 umask 077  # every file private as it is written; the certificates are opened to 644 below
 top=$(pwd)
 # a certificate valid for less than this more is issued again: 30 days, or a third of a
