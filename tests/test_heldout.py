@@ -389,6 +389,9 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
                  "--out", str(changed)]) == 0
     results = json.loads((changed / "held_out.json").read_text())
     assert (results["preset"], results["overrides"]) == ("robust", {"region_persistence": False})
+    # every parameter held out, as a plain run's results.json keeps them (a review)
+    assert results["parameters"]["preset"] == "robust"
+    assert results["parameters"]["region_persistence"] is False
     assert "Preset `robust` with region_persistence = False." in (
         changed / "held_out.md").read_text()
     for detectors in ("lgmd1", "asnn,asnn:reference"):  # one ASNN detector only

@@ -37,7 +37,7 @@ from .gate_replay import ClipTrace, check_replay, replay, replays, trace_item
 from .labels import load_labels
 from .options import TIE_BREAKS
 from .pool import run_tasks
-from .runs import write_json
+from .runs import DetectorSpec, write_json
 
 # the preset's row: its thresholds were tuned on ../shared/data/real, so on a user's own clips
 # they are already held out
@@ -541,8 +541,11 @@ def evaluate_held_out(clips_dir: str | Path, out_dir: str | Path, *,
     progress.start(2 * points, "eval --held-out: replaying the grid")
     suite = suite_summaries(suite_traces, suite_labels, base, jobs=jobs, progress=progress)
     progress.note(f"{points} points on the suite")
+    held = DetectorSpec("asnn", None if preset_name == "default" else preset_name,
+                        tuple(dict(overrides or {}).items()))
     results = {"clips_dir": str(clips_dir), "preset": preset_name,
-               "overrides": dict(overrides or {}), "suite_cases": len(cases),
+               "overrides": dict(overrides or {}), "parameters": held.parameters,
+               "suite_cases": len(cases),
                "warnings": warnings,
                **leave_one_out(traces, labels, base, suite_admissible(suite),
                                tie_break=tie_break, suite=suite, jobs=jobs,
