@@ -383,8 +383,9 @@ def _preset_named(results: Mapping) -> str:
     name = results.get("preset", "default")
     named = f"`{name}`" + (f" (`{DEFAULT_PRESET}`)" if name == "default" else "")
     changed = results.get("overrides") or {}
-    return named + ("".join([" with ", ", ".join(f"{k} = {v}" for k, v in changed.items())])
-                    if changed else "")
+    if not changed:
+        return named
+    return named + " with " + ", ".join(f"{k} = {v}" for k, v in changed.items())
 
 
 def summary_lines(results: Mapping) -> list[str]:
