@@ -429,3 +429,22 @@ def test_the_robust_presets_two_forms_warn_alike(case):
         assert [t.id for t in a.targets] == [t.id for t in b.targets]
         for ta, tb in zip(a.targets, b.targets):
             assert np.hypot(ta.x - tb.x, ta.y - tb.y) < 1.0
+
+
+def test_a_clip_s_frame_times_the_model_cannot_time_by_are_a_warning_of_the_held_out_run(
+        tmp_path):
+    """A trial: --held-out let the model's TimingWarning out in Python's form (a traceback where
+    warnings are errors), and left it out of held_out.json, where a plain run names it."""
+    import warnings
+
+    from asnn.io.rosbag import write_bag
+    from asnn.stimuli import make_scene
+
+    scene = make_scene("looming", size=(96, 96))
+    path = write_bag(scene.frames, tmp_path / "loom.mcap", fps=20000.0)  # 50 us apart
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        trace = gate_replay.trace_item("clip", str(path), None, preset("robust"))
+    assert len(trace.timing) == 1 and "5 frames in a row" in trace.timing[0]
+    said = heldout._label_warnings([scene.label("loom.mcap")], [trace])
+    assert f"asnn loom.mcap: {trace.timing[0]}" in said

@@ -29,6 +29,7 @@ from ..approach import frame_pixel
 from ..approach.tracking import (approach_parts, approach_test, better_fit, count_in_regions,
                                  layer_estimates, own_motion_weight, persistence_frames,
                                  smoothed_run)
+from ..errors import timing_warnings_to
 from ..model import ASNN, spike_step
 from ..params import ASNNParams
 from ..retina import collision_warning, sigmoid_output, spike_count, spike_rate
@@ -82,6 +83,7 @@ class ClipTrace:
     fps: float | None = None  # the clip's frame rate as decoded, and its frames' (width, height):
     size: tuple[int, int] | None = None  # what its label is checked against
     stamps: tuple[int, int, str | None] = (0, 0, None)  # a bag's (clips.clip_warnings)
+    timing: tuple[str, ...] = ()  # the model's TimingWarning of the clip's frame times
 
 
 def trace_clip(timed_frames, params: ASNNParams, clip: str = "") -> ClipTrace:
@@ -246,7 +248,10 @@ def trace_item(kind: str, name: str, topic: str | None, params: ASNNParams) -> C
 
 def _trace_source(spec: str, topic: str | None, params: ASNNParams) -> ClipTrace:
     source, stamps = open_labelled_clip(spec, topic)  # as asnn eval reads it
-    trace = trace_clip(source.timed_frames(), params, Path(spec).name)
+    timing: list[str] = []  # as asnn eval's _run_clip: a line of the run's warnings
+    with timing_warnings_to(timing.append):
+        trace = trace_clip(source.timed_frames(), params, Path(spec).name)
+    trace.timing = tuple(timing)
     trace.fps = source.fps
     trace.stamps = stamps.tally
     return trace

@@ -466,7 +466,8 @@ def _label_warnings(labels: Sequence[Mapping], traces: Sequence[ClipTrace]) -> l
     and a fold chosen on no clip at all."""
     found = [warning for label, trace in zip(labels, traces)
              for warning in clip_warnings(label, len(trace.frames), trace.fps, trace.size,
-                                          stamps=trace.stamps)]
+                                          stamps=trace.stamps)
+             + [f"asnn {trace.clip}: {message}" for message in trace.timing]]
     if len(labels) == 1:
         found.append("one clip: its fold's thresholds are chosen on no clip (the first grid "
                      "point the suite admits), so its held-out figure says nothing")
