@@ -17,7 +17,8 @@ from asnn.io.files import folder_problem, resolved, seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
                               split_topic)
-from asnn.params import MAX_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_from_spec, preset_names
+from asnn.params import (MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_from_spec,
+                         preset_names, timed_gap)
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
 from cli.session import exit_on_interrupt, signals_held
 
@@ -387,7 +388,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second; "
               f"{SLOW_NOTE}{slow}", file=sys.stderr)
     if args.model != "asnn":  # LGMD1-2's time constants are in seconds: as asnn eval runs it
-        options["dt"] = 1.0 / source.fps
+        if timed_gap(1.0 / source.fps):
+            options["dt"] = 1.0 / source.fps
+        else:  # a bag's stamps in another unit: 5e-8 s or 50 s a frame is no dt
+            print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second by "
+                  f"its stamps, no frame period a model can time by ({MIN_FRAME_GAP_S:g} to "
+                  f"{MAX_FRAME_GAP_S:g} s): the {args.model} model runs at its default dt, "
+                  "0.05 s a frame", file=sys.stderr)
     detector = make_detector(args.model, params, **options)
     if args.model == "asnn":
         # numba loads a kernel from its cache when it is first called: all of them now, before

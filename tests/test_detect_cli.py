@@ -832,3 +832,22 @@ def test_frame_times_the_model_cannot_time_by_are_one_note_of_detect_s_own(tmp_p
         assert main(["detect", str(tmp_path / "at-20000.mcap"), "--jsonl", "-"]) == 0
     printed = capsys.readouterr()
     assert len(printed.out.splitlines()) == len(frames) and "5 frames in a row" in printed.err
+
+
+def test_an_lgmd_model_takes_a_bag_s_rate_as_its_dt_only_where_it_is_a_frame_period(
+        tmp_path, capsys):
+    """A trial: a bag stamped in another unit read 2e7 fps, and LGMD1-2 ran at dt = 5e-8 s
+    without a word (twice the warning frames of the same bag in seconds)."""
+    from asnn.baselines import LGMD2
+    from asnn.io.rosbag import write_bag
+    from asnn.stimuli import make_scene
+
+    frames = make_scene("looming", size=(96, 96), frames=30).frames
+    for fps, dt in ((2e7, 0.05), (20.0, 0.05), (30.0, 1 / 30)):
+        path = write_bag(frames, tmp_path / f"at-{fps:g}.mcap", fps=fps)
+        assert main(["detect", str(path), "--model", "lgmd2", "--jsonl", "-"]) == 0
+        printed = capsys.readouterr()
+        model = LGMD2(dt=dt)
+        assert [json.loads(x)["u"] for x in printed.out.splitlines()] == pytest.approx(
+            [model.step(f).u for f in frames], rel=1e-6)  # the bag's ns stamps: 1/30 or so
+        assert ("no frame period a model can time by" in printed.err) == (fps == 2e7)

@@ -900,6 +900,8 @@ def test_the_baselines_parameters_are_changed_in_a_spec_as_the_presets_are():
     assert parse_detector("lgmd2").make(1 / 30).params.dt == pytest.approx(1 / 30)
     assert parse_detector("lgmd2/dt=0.04").make(1 / 30).params.dt == 0.04
     assert parse_detector("lgmd2").make().params.dt == 0.05
+    for implausible in (5e-8, 50.0):  # a bag's stamps in another unit: no dt (a trial)
+        assert parse_detector("lgmd2").make(implausible).params.dt == 0.05
     # every parameter a run used, as results.json keeps them (JSON without infinities)
     assert parse_detector("lgmd2/t_ffi=inf/dt=0.04").parameters["t_ffi"] == "inf"
     assert parse_detector("lgmd2/t_ffi=inf/dt=0.04").parameters["dt"] == 0.04

@@ -22,7 +22,7 @@ from .options import DEFAULT_DETECTORS
 from ..detectors import MODELS, Detector, make_detector
 from ..io.files import write_atomically
 from ..params import (DEFAULT_PRESET, ASNNParams, check_fields, check_overrides,
-                      parse_preset_spec, preset, split_preset_spec)
+                      parse_preset_spec, preset, split_preset_spec, timed_gap)
 
 __all__ = ["DEFAULT_DETECTORS", "ABLATIONS", "DetectorSpec", "parse_detector", "parse_detectors",
            "run_detector", "at_rate", "write_json", "write_jsonl", "fmt", "rate", "outcome_cell"]
@@ -135,7 +135,8 @@ class DetectorSpec:
     def make(self, frame_period: float | None = None) -> Detector:
         """A fresh detector for a stream whose frames come ``frame_period`` seconds apart.
 
-        An LGMD model's ``dt`` is that period unless the spec sets ``dt``: LGMD1-2's time
+        An LGMD model's ``dt`` is that period (where it is one the model believes,
+        :func:`asnn.params.timed_gap`) unless the spec sets ``dt``: LGMD1-2's time
         constants are in seconds (``a = dt / (dt + tau)``, SPEC section 4), and at its default
         0.05 s a 30 fps clip ran them 1.5 times slow (its `real` hits 1/9, against 3/9 at the
         clips' own period). The ASNN takes the frames' times as they come (``step(frame, t)``);
@@ -143,7 +144,8 @@ class DetectorSpec:
         """
         if self.model != "asnn":  # the LGMD models take their overrides as keywords
             options = dict(self.overrides)
-            if frame_period is not None and "dt" not in options:
+            # a period no stream has (a bag's stamps in another unit: 5e-8 s, or 50 s) is no dt
+            if frame_period is not None and timed_gap(frame_period) and "dt" not in options:
                 options["dt"] = frame_period
             return make_detector(self.model, None, **options)
         return make_detector(self.model, self.params)
