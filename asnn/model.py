@@ -564,6 +564,9 @@ class ASNN:
         """The first part of a step: the frame's luminance, whether it is new, and P."""
         p = self.params
         index = self.index
+        if t is not None and not math.isfinite(frame_time(t)):
+            t = None  # NaN or infinite: no usable time, as a frame given none (a NaN stamp
+            # kept as the stream's latest spoiled the next good frame's gap too)
         # before any state changes; a frame without a time in a timed stream comes a frame
         # period after the latest (index * dt there read the gap from another clock: 0.5 s for
         # a 30 fps camera's 30th frame, believed, and the next timed frame's gap negative)

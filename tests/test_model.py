@@ -254,6 +254,17 @@ def test_the_timing_warning_points_at_the_caller_s_line_and_comes_after_the_step
     assert expected.index == 5
 
 
+def test_a_nan_frame_time_is_no_time_and_spoils_no_other_frame_s():
+    """A trial: every other frame's time NaN (a driver's unset stamp) timed every frame at dt,
+    the good ones too (the NaN kept as the latest time), and warned of a stalled clock."""
+    scene = make_scene("looming", size=(64, 64))
+    stamps = [k / 30 if k % 2 == 0 else math.nan for k in range(len(scene.frames))]
+    nan, none = ASNN(), ASNN()
+    assert _timing_warnings(nan, stamps, scene) == []
+    _timing_warnings(none, [None if math.isnan(t) else t for t in stamps], scene)
+    assert list(nan.periods) == pytest.approx([1 / 30] * 5) and nan.periods == none.periods
+
+
 def test_the_timing_warning_comes_after_five_untimed_gaps_in_a_row():
     scene, model = make_scene("looming", size=(64, 64)), ASNN()
     stamps = [0.0, 0.05, 50.0, 50.05, 100.0, 100.05, 150.0, 150.05, 200.0, 200.05]  # 1 in 2
