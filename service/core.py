@@ -684,9 +684,11 @@ class WorkerCore:
                 f"untimed:{robot}", "robot %s: its frames' stamps are %g s apart, not a frame "
                 "period the model believes (%g to %g s): the targets' time to contact is timed "
                 "at %g frames a second instead; stamps are the camera's clock in seconds "
-                "(CONTRACT.md), and a camera slower than a frame a second is far below the 20 "
-                "fps the default is made for", robot, gap, MIN_FRAME_GAP_S, MAX_FRAME_GAP_S,
-                1.0 / state.detector.params.dt)
+                "(CONTRACT.md), and %s", robot, gap, MIN_FRAME_GAP_S, MAX_FRAME_GAP_S,
+                1.0 / state.detector.params.dt,
+                "a camera slower than a frame a second is far below the 20 fps the default "
+                "is made for" if gap > MAX_FRAME_GAP_S else
+                "these read like a clock that stands still, or stamps under 0.1 ms apart")
 
     def _refuse_taken(self, state: _Robot, job: Job, reason: str, detail: str) -> None:
         """A frame taken in is refused when it is processed (its image, its robot's place, the

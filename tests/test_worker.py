@@ -561,6 +561,10 @@ def test_stamps_the_model_cannot_time_by_are_logged_once(caplog, looming, model,
         assert fps is not None or model == "lgmd1"
     else:
         assert len(lines) == 1 and logged in lines[0] and "at 20 frames a second" in lines[0]
+        # the cause as the stamps tell it (a stalled clock read as a slow camera: a trial)
+        slow = stamps[1] - stamps[0] > 1.0
+        assert ("slower than a frame a second" in lines[0]) == slow
+        assert ("a clock that stands still" in lines[0]) == (not slow)
         # the rate the model times them at is not the camera's: none is reported (it read 20)
         assert fps is None
 
