@@ -851,3 +851,26 @@ def test_an_lgmd_model_takes_a_bag_s_rate_as_its_dt_only_where_it_is_a_frame_per
         assert [json.loads(x)["u"] for x in printed.out.splitlines()] == pytest.approx(
             [model.step(f).u for f in frames], rel=1e-6)  # the bag's ns stamps: 1/30 or so
         assert ("no frame period a model can time by" in printed.err) == (fps == 2e7)
+
+
+def test_a_raw_stream_and_a_y4m_without_its_rate_are_timed_at_a_guess_and_say_so(
+        tmp_path, capsys):
+    """A trial: a raw MJPEG stream and a y4m without its F field took OpenCV's 25 fps as stated:
+    asnn detect (and asnn camera) said nothing of the guess that timed them."""
+    import cv2
+
+    from asnn.io.sources import open_source
+    from asnn.stimuli import make_scene
+
+    frames = make_scene("looming", size=(64, 48), frames=12).frames
+    raw = tmp_path / "cam.mjpeg"
+    raw.write_bytes(b"".join(cv2.imencode(".jpg", f)[1].tobytes() for f in frames))
+    y4m, rated = tmp_path / "noF.y4m", tmp_path / "F30.y4m"
+    for path, header in ((y4m, b"YUV4MPEG2 W64 H48 Ip A1:1 Cmono\n"),
+                         (rated, b"YUV4MPEG2 W64 H48 F30:1 Ip A1:1 Cmono\n")):
+        path.write_bytes(header + b"".join(b"FRAME\n" + f.tobytes() for f in frames))
+    for path, stated in ((raw, False), (y4m, False), (rated, True)):
+        assert open_source(str(path)).fps_stated == stated, path
+        assert main(["detect", str(path), "--jsonl", str(tmp_path / "o.jsonl")]) == 0
+        said = "states no frame rate a camera runs at" in capsys.readouterr().err
+        assert said == (not stated), path

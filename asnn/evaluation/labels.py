@@ -33,10 +33,8 @@ from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, Valid
 
 from ..io.files import resolved, write_atomically
 from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside, a mistake
+from ..io.video import RAW_STREAM_SUFFIXES
 
-# raw streams, which OpenCV decodes but which carry no timing: it reads them at 25 fps
-# (.mjpeg/.mjpg from IP and USB cameras, .h264/.h265 from a Raspberry Pi's)
-RAW_STREAM_SUFFIXES = (".264", ".265", ".h264", ".h265", ".hevc", ".mjpeg", ".mjpg")
 # what OpenCV's FFmpeg backend commonly reads (dashcams write .ts and .mts too); bags (.mcap)
 # need a topic and are labelled by hand
 VIDEO_SUFFIXES = tuple(sorted((".3gp", ".avi", ".flv", ".m2ts", ".m4v", ".mkv", ".mov", ".mp4",

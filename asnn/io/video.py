@@ -17,11 +17,14 @@ from .files import seekable_target
 from .images import MAX_SIDE
 from .rates import FPS_RANGE, MAX_FPS
 
-__all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "WRITABLE_SUFFIXES", "VideoError", "VideoClip",
+__all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "RAW_STREAM_SUFFIXES", "WRITABLE_SUFFIXES", "VideoError", "VideoClip",
            "check_written", "cut_short", "open_video", "open_writer", "quiet_writer",
            "read_frames", "stated_fps", "writable_fps", "write_video"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
+# raw streams, which OpenCV decodes but which carry no timing: it reads them at 25 fps
+# (.mjpeg/.mjpg from IP and USB cameras, .h264/.h265 from a Raspberry Pi's)
+RAW_STREAM_SUFFIXES = (".264", ".265", ".h264", ".h265", ".hevc", ".mjpeg", ".mjpg")
 # the containers our video writers (OpenCV's, mp4v or MJPG) write and read back; OpenCV takes
 # the container from the name, and refuses others (.txt) or writes what it cannot read (.mpg)
 WRITABLE_SUFFIXES = (".avi", ".m4v", ".mkv", ".mov", ".mp4")
@@ -104,7 +107,9 @@ class VideoClip:
                 "codec it lacks)" if opened or _container(self.path) else
                 "not a video OpenCV can decode"))
         fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
-        self.fps_stated = fps is not None
+        # OpenCV's 25 fps for a raw stream, or a y4m without its F field, is its own default:
+        # timed at it, but said to be a guess (asnn detect's and asnn camera's notes)
+        self.fps_stated = fps is not None and _states_rate(self.path)
         self.fps = DEFAULT_FPS if fps is None else fps
         self.frame_count = max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0), 0)
         self.height, self.width = first.shape[:2]
@@ -122,6 +127,22 @@ class VideoClip:
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return read_frames(self._capture(), self.path)
+
+
+def _states_rate(path: Path) -> bool:
+    """Whether the file can state a frame rate of its own: not a raw stream, and a y4m only
+    with its header's ``F`` field (``YUV4MPEG2 W.. H.. F30:1 ...``)."""
+    suffix = path.suffix.lower()
+    if suffix in RAW_STREAM_SUFFIXES:
+        return False
+    if suffix == ".y4m":
+        try:
+            with open(path, "rb") as f:
+                header = f.readline(4096).split()
+        except OSError:
+            return False
+        return any(field.startswith(b"F") for field in header[1:])
+    return True
 
 
 def stated_fps(value: float) -> float | None:
