@@ -38,8 +38,8 @@ class TimingWarning(UserWarning):
     stepped); from a :meth:`~asnn.ASNN.stream` with worker threads, which takes frames up to
     two ahead of the response it yields, with the response of a frame up to two before it
     (and where warnings are errors, the responses of the frames it had taken are lost with it,
-    as in a stream left early). Silence it with :func:`warnings.filterwarnings` where that is meant (the
-    service's worker logs the same itself, per robot).
+    as in a stream left early). Silence it with :func:`warnings.filterwarnings` where that is
+    meant (the service's worker logs the same itself, per robot).
     """
 
 

@@ -32,8 +32,9 @@ from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, Valid
                       field_validator, model_validator)
 
 from ..io.files import resolved, write_atomically
-from ..io.video import FPS_RANGE  # frame rates a clip's camera runs at; outside, a mistake
-from ..io.video import RAW_STREAM_SUFFIXES
+# FPS_RANGE: frame rates a clip's camera runs at (outside, a mistake); RAW_STREAM_SUFFIXES:
+# the raw streams, which state none
+from ..io.video import FPS_RANGE, RAW_STREAM_SUFFIXES
 
 # what OpenCV's FFmpeg backend commonly reads (dashcams write .ts and .mts too); bags (.mcap)
 # need a topic and are labelled by hand

@@ -17,9 +17,9 @@ from .files import seekable_target
 from .images import MAX_SIDE
 from .rates import FPS_RANGE, MAX_FPS
 
-__all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "RAW_STREAM_SUFFIXES", "WRITABLE_SUFFIXES", "VideoError", "VideoClip",
-           "check_written", "cut_short", "open_video", "open_writer", "quiet_writer",
-           "read_frames", "stated_fps", "writable_fps", "write_video"]
+__all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "RAW_STREAM_SUFFIXES", "WRITABLE_SUFFIXES",
+           "VideoError", "VideoClip", "check_written", "cut_short", "open_video", "open_writer",
+           "quiet_writer", "read_frames", "stated_fps", "writable_fps", "write_video"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 # raw streams, which OpenCV decodes but which carry no timing: it reads them at 25 fps
