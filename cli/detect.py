@@ -214,6 +214,9 @@ class _BackwardStamps(BackwardStamps):
     ``CLOCK_RESET_FRAMES - 1`` frames read count toward the limit only once the frame after
     them is read (or the bag ends): odd frames before a reset do not stop the run. Wrap the
     source's ``timed_frames()`` in :meth:`frames`, which counts the frames read and raises.
+    A frame whose header stamp is unset (zero), held at the latest frame's time (its log time
+    cannot stand for a stamp), is named on stderr, the first :data:`STAMP_LINES` of them, and
+    counts toward no limit either.
     """
 
     def __init__(self, window: int = STAMP_WINDOW, limit: int = STAMP_LIMIT,
@@ -247,6 +250,14 @@ class _BackwardStamps(BackwardStamps):
             if self.resets == self.lines:
                 print("asnn detect: warning: further clock resets are counted in the summary",
                       file=sys.stderr, flush=True)
+
+    def held_unset(self, message: str) -> None:
+        if self.unset <= self.lines:
+            _warn(message)
+            if self.unset == self.lines:
+                print("asnn detect: warning: further frames whose stamp is unset are taken at "
+                      "the latest frame's time and counted in the summary", file=sys.stderr,
+                      flush=True)
 
     def _check(self, settled: int) -> None:
         """Raise where the frames before number ``settled`` that went back, which no clock
@@ -529,6 +540,9 @@ def run(args: argparse.Namespace) -> int:
     if backwards.resets:
         held += (f", {backwards.resets} clock reset{'' if backwards.resets == 1 else 's'} "
                  "(timed on from the latest frame's time)")
+    if backwards.unset:
+        held += (f", {backwards.unset} taken at the latest frame's time (header stamp "
+                 "unset)")
     if args.perturb:
         held += f", on frames perturbed: {describe(args.perturb)}"
     print(f"asnn detect: {len(records)} frames, {warned} with a collision warning{held}",

@@ -47,6 +47,8 @@ def cmd_camera(args: argparse.Namespace) -> int:
             return fail(str(exc))
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(rejections.counts.items())) or "none"
     resets = f"; clock resets (re-based): {rejections.resets}" if rejections.resets else ""
+    if rejections.unset:
+        resets += f"; held at the latest frame's time (header stamp unset): {rejections.unset}"
     log.info("camera %s: %d frames published; rejected: %s%s; workers' refusals on its key "
              "(of any publisher's frames): %s",
              args.robot, count, rejected, resets, refusals.summary())

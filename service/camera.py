@@ -37,7 +37,7 @@ from collections import Counter
 import numpy as np
 import zenoh
 
-from asnn.io.sources import CLOCK_RESET, Source, SourceError, open_source
+from asnn.io.sources import CLOCK_RESET, STAMP_UNSET, Source, SourceError, open_source
 
 from . import keys
 from .logutil import RateLimitedLog
@@ -63,12 +63,15 @@ class SourceRejections:
 
     A bag's clock reset (:data:`~asnn.io.sources.CLOCK_RESET`) is no rejection: its frame is
     published, paced on the new timeline. It is counted apart (``resets``) and logged at
-    WARNING, at most one line every 10 s."""
+    WARNING, at most one line every 10 s. Nor is a frame whose header stamp is unset, held at
+    the latest frame's time (:data:`~asnn.io.sources.STAMP_UNSET`): it is published at once,
+    counted apart (``unset``) and logged so too."""
 
     def __init__(self, robot: str):
         self.robot = robot
         self.counts: Counter = Counter()
         self.resets = 0
+        self.unset = 0
         self._log = RateLimitedLog(log)
         self._lock = threading.Lock()
 
@@ -76,6 +79,11 @@ class SourceRejections:
         if reason == CLOCK_RESET:
             with self._lock:
                 self.resets += 1
+            self._log.warning(reason, "camera %s: %s", self.robot, message[:300])
+            return
+        if reason == STAMP_UNSET:
+            with self._lock:
+                self.unset += 1
             self._log.warning(reason, "camera %s: %s", self.robot, message[:300])
             return
         with self._lock:

@@ -1129,11 +1129,14 @@ def test_a_clips_stamps_are_said_one_frame_or_reset_each():
     from asnn.evaluation.clips import clip_warnings
 
     label = {"file": "a.mcap", "fps": 20.0, "collision": False, "frames": 40}
-    assert clip_warnings(label, 40, 20.0, None, stamps=(1, 0, None)) == [
+    assert clip_warnings(label, 40, 20.0, None, stamps=(1, 0, None, 0)) == [
         "a.mcap: 1 frame whose header stamp goes back, taken at the latest frame's time"]
-    assert clip_warnings(label, 40, 20.0, None, stamps=(0, 1, "message 9: 3 s back")) == [
+    assert clip_warnings(label, 40, 20.0, None, stamps=(0, 1, "message 9: 3 s back", 0)) == [
         "a.mcap: 1 clock reset, timed on from the latest frame's time; the first: message 9: "
         "3 s back"]
+    assert clip_warnings(label, 40, 20.0, None, stamps=(0, 0, None, 1)) == [
+        "a.mcap: 1 frame whose header stamp is unset (0), its log time not the camera's clock, "
+        "taken at the latest frame's time"]
     assert clip_warnings(label, 40, 20.0, None) == []
 
 

@@ -21,7 +21,7 @@ from mcap_ros2.writer import Writer as Ros2Writer  # noqa: E402  (the third-part
 from asnn.evaluation.clips import evaluate_clips  # noqa: E402
 from asnn.io import mcap_reader, rosbag  # noqa: E402
 from asnn.io.images import ImageError  # noqa: E402
-from asnn.io.sources import SourceError, open_source  # noqa: E402
+from asnn.io.sources import BackwardStamps, SourceError, open_source  # noqa: E402
 from asnn.stimuli import make_scene  # noqa: E402
 from cli.main import main  # noqa: E402
 
@@ -1638,9 +1638,81 @@ def test_after_a_reset_a_frame_with_an_unset_stamp_is_held_at_the_latest_time(tm
     reasons = []
     times = [t for t, _ in open_source(bag, on_error=lambda r, m: reasons.append(r),
                                        hold_backwards=True).timed_frames()]
-    assert reasons == ["stamp-backwards", "stamp-backwards", "clock-reset"]
+    assert reasons == ["stamp-backwards", "stamp-backwards", "clock-reset", "stamp-unset"]
     assert times[20] == pytest.approx(times[19])
     assert times[21] == pytest.approx(times[19] + 0.1)
+
+
+def unset_stamps_bag(path, frames, unset=range(10, 13)) -> str:
+    """``frames`` stamped 100 s after their log time (another clock, as in simulated time) but
+    for those numbered in ``unset``, left unset (zero): their log time is no stand-in."""
+    stamps = [START_NS + round((100 + 0.05 * i) * 1e9) for i in range(len(frames))]
+    for i in unset:
+        stamps[i] = 0
+    return ns_bag(path, frames, stamps)
+
+
+def test_a_frame_with_an_unset_stamp_held_at_the_latest_time_is_reported(tmp_path, looming):
+    """A trial with odd stamps: a stamp left unset among header stamps, whose log time is far
+    from the frames' times, was held at the latest frame's time without a word (the stamps
+    going back and the clock resets are reported). It is reported as ``stamp-unset``, kept,
+    counted by BackwardStamps; without a handler every frame is still read."""
+    bag = unset_stamps_bag(tmp_path / "unset.mcap", looming.frames)
+    reports = []
+    frames = list(open_source(bag, on_error=lambda r, m: reports.append((r, m)),
+                              hold_backwards=True).timed_frames())
+    assert [r for r, _ in reports] == ["stamp-unset"] * 3
+    assert "message 10: its header stamp is unset (0) and its log time is 99.95 s before the " \
+           "latest frame's time: held at the latest frame's time" in reports[0][1]
+    times = [t for t, _ in frames]
+    assert times[9:14] == pytest.approx([0.45, 0.45, 0.45, 0.45, 0.65])
+    alone = [t for t, _ in rosbag.open_bag(bag).frames()]  # a report, no error
+    assert alone == pytest.approx(times)
+    stamps = BackwardStamps()
+    read = list(open_source(bag, on_error=stamps, hold_backwards=True).timed_frames())
+    assert len(read) == len(looming.frames)
+    assert stamps.tally == (0, 0, None, 3)
+
+
+def test_detect_names_the_frames_with_an_unset_stamp_it_holds(tmp_path, looming, capsys):
+    bag = unset_stamps_bag(tmp_path / "unset.mcap", looming.frames)
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", bag, "--jsonl", str(out)]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 4, err
+    for line, number in zip(err, (10, 11, 12)):
+        assert f"warning: {bag}: /c message {number}: its header stamp is unset (0)" in line
+    assert err[3].startswith(f"asnn detect: {len(looming.frames)} frames, ")
+    assert err[3].endswith(", 3 taken at the latest frame's time (header stamp unset)")
+    assert len(out.read_text().splitlines()) == len(looming.frames)
+
+
+def test_eval_lists_a_bag_s_frames_with_an_unset_stamp_in_its_warnings(tmp_path, looming):
+    clips = tmp_path / "clips"
+    clips.mkdir()
+    unset_stamps_bag(clips / "unset.mcap", looming.frames)
+    (clips / "labels.json").write_text(json.dumps([looming.label("unset.mcap")]))
+    out = tmp_path / "out"
+    assert main(["eval", str(clips), "--models", "lgmd1", "--out", str(out), "--no-plots"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert not results["errors"]
+    assert results["warnings"] == [
+        "unset.mcap: 3 frames whose header stamp is unset (0), its log time not the camera's "
+        "clock, taken at the latest frame's time"]
+
+
+def test_the_camera_publishes_a_frame_with_an_unset_stamp_and_logs_it(tmp_path, looming,
+                                                                      caplog):
+    from service.camera import SourceRejections
+
+    bag = unset_stamps_bag(tmp_path / "unset.mcap", looming.frames)
+    rejections = SourceRejections("r1")
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        frames = list(open_source(bag, on_error=rejections).timed_frames())
+    assert len(frames) == len(looming.frames)
+    assert not rejections.counts and rejections.unset == 3
+    assert any("camera r1: " in r.message and "message 10: its header stamp is unset" in r.message
+               and "rejected" not in r.message for r in caplog.records)
 
 
 @pytest.mark.parametrize("gap", [1e-6, 2000.0])

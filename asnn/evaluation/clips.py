@@ -63,33 +63,38 @@ def probe_clips(clips_dir: str | Path, labels: Sequence[Mapping]
 
 def open_labelled_clip(spec: str, topic: str | None = None):
     """A labelled clip opened as ``asnn eval`` reads it: a bag's frames whose header stamp goes
-    back taken at the latest frame's time and its clock resets re-based, so that each frame
-    keeps its place for the labels. Returns the :class:`~asnn.io.sources.Source` and the
-    :class:`~asnn.io.sources.BackwardStamps` that counts both as the frames are read (for
-    :func:`clip_warnings`)."""
+    back taken at the latest frame's time and its clock resets re-based (and one whose stamp is
+    unset held there too), so that each frame keeps its place for the labels. Returns the
+    :class:`~asnn.io.sources.Source` and the :class:`~asnn.io.sources.BackwardStamps` that
+    counts them as the frames are read (for :func:`clip_warnings`)."""
     stamps = BackwardStamps()
     return open_source(spec, topic=topic, on_error=stamps, hold_backwards=True), stamps
 
 
 def clip_warnings(label: Mapping, frames: int, fps: float, size: tuple[int, int] | None,
                   warmup: int = scoring.WARMUP_FRAMES, *, slow: bool = True,
-                  stamps: tuple[int, int, str | None] = (0, 0, None)) -> list[str]:
+                  stamps: tuple[int, int, str | None, int] = (0, 0, None, 0)) -> list[str]:
     """What ``asnn eval`` (and ``--held-out``) says of a clip as it was decoded: where it
     disagrees with its label (:func:`~asnn.evaluation.labels.mismatches`), why it cannot be
     scored (:func:`~asnn.evaluation.scoring.unscored`), with ``slow`` a frame rate below
     :data:`~asnn.params.SLOW_FPS`, and a bag's ``stamps`` as :func:`open_labelled_clip` counted
-    them (frames whose header stamp goes back, clock resets, the first reset's message). One
-    sentence each, naming the clip."""
+    them (frames whose header stamp goes back, clock resets, the first reset's message, frames
+    whose header stamp is unset held at the latest frame's time). One sentence each, naming
+    the clip."""
     found = mismatches(label, frames, fps, size=size) + scoring.unscored(label, frames, warmup)
     if slow and fps and fps < SLOW_FPS:
         found.append(f"{label['file']}: {fps:g} frames a second; {SLOW_NOTE}")
-    backwards, resets, first_reset = stamps
+    backwards, resets, first_reset, unset = stamps
     if backwards:
         found.append(f"{label['file']}: {backwards} frame{'' if backwards == 1 else 's'} whose "
                      "header stamp goes back, taken at the latest frame's time")
     if resets:
         found.append(f"{label['file']}: {resets} clock reset{'' if resets == 1 else 's'}, "
                      f"timed on from the latest frame's time; the first: {first_reset}")
+    if unset:
+        found.append(f"{label['file']}: {unset} frame{'' if unset == 1 else 's'} whose header "
+                     "stamp is unset (0), its log time not the camera's clock, taken at the "
+                     "latest frame's time")
     return found
 
 

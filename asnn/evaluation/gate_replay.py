@@ -82,7 +82,7 @@ class ClipTrace:
     warnings: list[bool] | None = None
     fps: float | None = None  # the clip's frame rate as decoded, and its frames' (width, height):
     size: tuple[int, int] | None = None  # what its label is checked against
-    stamps: tuple[int, int, str | None] = (0, 0, None)  # a bag's (clips.clip_warnings)
+    stamps: tuple[int, int, str | None, int] = (0, 0, None, 0)  # a bag's (clips.clip_warnings)
     timing: tuple[str, ...] = ()  # the model's TimingWarning of the clip's frame times
 
 

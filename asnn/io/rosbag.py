@@ -15,7 +15,8 @@ A frame's time is its ``header.stamp`` relative to the first frame's (the record
 when the first stamp is zero: drivers that leave it unset). A stamp before the latest one taken
 is refused (``stamp-backwards``), unless :data:`CLOCK_RESET_FRAMES` of them in a row advance among
 themselves: a camera's clock reset, on which the times are re-based (``clock-reset``,
-:meth:`BagClip.frames`).
+:meth:`BagClip.frames`). A stamp left unset among header stamps takes its log time where that can
+stand for one, else the latest frame's time, which is reported (``stamp-unset``).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from .foxglove_images import (FOXGLOVE_COMPRESSED_IMAGE, FOXGLOVE_IMAGE_SCHEMAS,
 from .images import MAX_SIDE, ImageError, decode_encoded, to_uint8
 from .mcap_reader import (MAGIC, MAX_MESSAGE_BYTES, READ_ERRORS, TooLarge, bag_records,
                           bag_summary)
-from .sources import CLOCK_RESET, CLOCK_RESET_FRAMES, SourceError
+from .sources import CLOCK_RESET, CLOCK_RESET_FRAMES, STAMP_UNSET, SourceError
 
 try:
     import yaml
@@ -548,6 +549,12 @@ class BagClip:
         message and the jump back) and yielded, ``t`` going on from the latest frame's by the
         differences of the new stamps, against whose latest the next ones are checked. The
         frames of the run before it were reported as ``stamp-backwards`` (held or skipped).
+
+        A frame whose header stamp is unset (zero) among header stamps is timed by its log time
+        where that is within MAX_FRAME_GAP_S after the latest frame's ``t``, else (and after a
+        clock reset) held at the latest frame's ``t``: that frame is reported to ``on_error`` as
+        ``stamp-unset`` (naming the message) and yielded. Without ``on_error`` it is yielded
+        unreported: it is no error.
         """
         timeline = _Timeline(self.start_ns)
         # the message's own number in the topic (one that did not decode is counted too)
@@ -565,25 +572,39 @@ class BagClip:
                 continue
             if reset is not None:  # the frame is kept: on_error hears of the new timeline
                 on_error(CLOCK_RESET, reset)
-            timeline.latest_t = self._frame_t(stamp, log_time, timeline)
+            timeline.latest_t, unset = self._frame_t(stamp, log_time, timeline, index)
+            if unset is not None and on_error is not None:  # the frame is kept, held
+                on_error(STAMP_UNSET, unset)
             yield timeline.latest_t, image
 
-    def _frame_t(self, stamp: int, log_time: int, timeline: "_Timeline") -> float:
+    def _frame_t(self, stamp: int, log_time: int, timeline: "_Timeline",
+                 index: int) -> tuple[float, str | None]:
         """A frame's ``t``: its header stamp on the timeline, or its log time (a stamp left
         unset, or a bag timed by the recorder) relative to the first frame's, never before the
         latest frame's (the recorder logs a frame when it arrives, and two may arrive swapped).
         A stamp left unset among header stamps takes its log time only within
         MAX_FRAME_GAP_S after the latest frame's ``t``, else the latest frame's: the recorder's
         clock need not be the camera's (simulated time), and after a clock reset it is not the
-        new timeline's."""
+        new timeline's. Returns ``t`` and, for a frame held so (message ``index``), what to
+        report of it (else None)."""
         if stamp:
-            return timeline.t(stamp)
+            return timeline.t(stamp), None
         logged = (int(log_time) - self.start_ns) / 1e9
         if self.clock == "log":
-            return max(logged, timeline.latest_t)
-        if timeline.rebased or not 0.0 <= logged - timeline.latest_t <= MAX_FRAME_GAP_S:
-            return timeline.latest_t
-        return logged
+            return max(logged, timeline.latest_t), None
+        gap = logged - timeline.latest_t
+        if timeline.rebased:
+            why = "after a clock reset its log time is not on the camera's timeline"
+        elif gap < 0.0:
+            why = f"its log time is {_seconds(-gap)} s before the latest frame's time"
+        elif gap > MAX_FRAME_GAP_S:
+            why = (f"its log time is {_seconds(gap)} s after the latest frame's time (more than "
+                   f"{MAX_FRAME_GAP_S:g} s)")
+        else:
+            return logged, None
+        return timeline.latest_t, (f"{self.path}: {self._topic} message {index}: its header "
+                                   f"stamp is unset (0) and {why}: held at the latest frame's "
+                                   "time")
 
     def _check_stamp(self, stamp: int, index: int, timeline: "_Timeline") -> str | None:
         """Take a message's header stamp (ns; 0 where unset) on the timeline; SourceError where

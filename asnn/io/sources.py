@@ -30,14 +30,18 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["CLOCK_RESET", "CLOCK_RESET_FRAMES", "SYNTHETIC", "BackwardStamps", "Source",
-           "SourceError", "is_bag", "open_source", "split_topic"]
+__all__ = ["CLOCK_RESET", "CLOCK_RESET_FRAMES", "STAMP_UNSET", "SYNTHETIC", "BackwardStamps",
+           "Source", "SourceError", "is_bag", "open_source", "split_topic"]
 
 SYNTHETIC = "synthetic:"
 BAG_SUFFIX = ".mcap"
 # The reason a bag reader gives ``on_error`` for a camera's clock reset (:mod:`asnn.io.rosbag`):
 # a notice, not a rejection, as the frame it names is kept, on the new timeline.
 CLOCK_RESET = "clock-reset"
+# The reason it gives for a frame whose header stamp is unset (zero) among header stamps and
+# whose log time cannot stand for one (not within MAX_FRAME_GAP_S after the latest frame's time,
+# or after a clock reset): a notice too, the frame is kept, held at the latest frame's time.
+STAMP_UNSET = "stamp-unset"
 # Frames in a row whose header stamps all go back from the latest taken, yet advance among
 # themselves, that make a new timeline for the bag reader (asnn.io.rosbag): a driver restart
 # resetting the camera's clock, or one stamp far ahead that every later frame is late against.
@@ -60,15 +64,18 @@ class SourceError(OSError):
 class BackwardStamps:
     """``on_error`` for a bag opened with ``hold_backwards``: counts its frames whose header
     stamp goes back (``count``; the reader yields each at the latest frame's time, so every
-    message keeps its frame and its place) and its clock resets (``resets``, the first one's
-    message ``first_reset``: the frame is kept, on the new timeline), and raises every other
-    error, as without a handler. :meth:`held` is called for each such frame, :meth:`rebased`
-    for each reset: a subclass may report them, or raise to stop."""
+    message keeps its frame and its place), its clock resets (``resets``, the first one's
+    message ``first_reset``: the frame is kept, on the new timeline) and its frames whose header
+    stamp is unset and held at the latest frame's time (``unset``: :data:`STAMP_UNSET`, the
+    frame is kept), and raises every other error, as without a handler. :meth:`held` is called
+    for each frame going back, :meth:`rebased` for each reset, :meth:`held_unset` for each
+    unset stamp held: a subclass may report them, or raise to stop."""
 
     def __init__(self) -> None:
         self.count = 0
         self.resets = 0
         self.first_reset: str | None = None
+        self.unset = 0
 
     def __call__(self, reason: str, message: str) -> None:
         if reason == CLOCK_RESET:
@@ -77,17 +84,21 @@ class BackwardStamps:
                 self.first_reset = message
             self.rebased(message)
             return
+        if reason == STAMP_UNSET:
+            self.unset += 1
+            self.held_unset(message)
+            return
         if reason != "stamp-backwards":
             raise SourceError(message, reason)
         self.count += 1
         self.held(message)
 
     @property
-    def tally(self) -> tuple[int, int, str | None]:
-        """``(count, resets, first_reset)``: what a clip's warnings say of its stamps
+    def tally(self) -> tuple[int, int, str | None, int]:
+        """``(count, resets, first_reset, unset)``: what a clip's warnings say of its stamps
         (:func:`asnn.evaluation.clips.clip_warnings`), as plain values a worker process can
         send back."""
-        return self.count, self.resets, self.first_reset
+        return self.count, self.resets, self.first_reset, self.unset
 
     def held(self, message: str) -> None:
         """A frame whose header stamp goes back (``message`` names it), the ``count``-th."""
@@ -95,6 +106,10 @@ class BackwardStamps:
     def rebased(self, message: str) -> None:
         """A clock reset (``message`` names the frame and the jump), the ``resets``-th: the
         reader yields that frame next, on the new timeline."""
+
+    def held_unset(self, message: str) -> None:
+        """A frame whose header stamp is unset, held at the latest frame's time (``message``
+        names it), the ``unset``-th: the reader yields that frame next."""
 
 
 @dataclass
@@ -188,7 +203,9 @@ def open_source(spec: str, *, topic: str | None = None,
         (``stamp-backwards``) and then taken at the latest frame's time instead of skipped
         (``asnn detect``: one result per message). Either way a clock reset (frames in a row
         going back and advancing, :meth:`asnn.io.rosbag.BagClip.frames`) is reported as
-        :data:`CLOCK_RESET` and its frames go on from the latest frame's time.
+        :data:`CLOCK_RESET` and its frames go on from the latest frame's time, and a frame whose
+        header stamp is unset (zero) among header stamps, held at the latest frame's time
+        (:meth:`asnn.io.rosbag.BagClip.frames`), is reported as :data:`STAMP_UNSET` and kept.
     decoder_threads : int, optional
         For video files: the threads the decoder may use (default: OpenCV's choice).
 
