@@ -232,12 +232,8 @@ class _BackwardStamps(BackwardStamps):
         self._recent.append((number, message))
         while self._recent[0][0] <= number - self.window:
             self._recent.popleft()
-        if self.count <= self.lines:
-            _warn(f"{message}; taken at the latest frame's time")
-            if self.count == self.lines:
-                print("asnn detect: warning: further frames whose stamp goes back are taken "
-                      "at the latest frame's time and counted in the summary", file=sys.stderr,
-                      flush=True)
+        self._say(self.count, f"{message}; taken at the latest frame's time",
+                  "frames whose stamp goes back are taken at the latest frame's time and")
 
     def rebased(self, message: str) -> None:
         # the frames of the reset held before it were the new clock's first, not stamps out of
@@ -245,19 +241,20 @@ class _BackwardStamps(BackwardStamps):
         number = self.read  # the re-based frame, which the reader yields next
         while self._recent and self._recent[-1][0] >= number - (CLOCK_RESET_FRAMES - 1):
             self._recent.pop()
-        if self.resets <= self.lines:
-            _warn(message)
-            if self.resets == self.lines:
-                print("asnn detect: warning: further clock resets are counted in the summary",
-                      file=sys.stderr, flush=True)
+        self._say(self.resets, message, "clock resets are")
 
     def held_unset(self, message: str) -> None:
-        if self.unset <= self.lines:
+        self._say(self.unset, message,
+                  "frames whose stamp is unset are taken at the latest frame's time and")
+
+    def _say(self, count: int, message: str, further: str) -> None:
+        """The ``count``-th such message on stderr, the first :attr:`lines` of them, then one
+        line saying the ``further`` ones ("further ... counted in the summary")."""
+        if count <= self.lines:
             _warn(message)
-            if self.unset == self.lines:
-                print("asnn detect: warning: further frames whose stamp is unset are taken at "
-                      "the latest frame's time and counted in the summary", file=sys.stderr,
-                      flush=True)
+            if count == self.lines:
+                print(f"asnn detect: warning: further {further} counted in the summary",
+                      file=sys.stderr, flush=True)
 
     def _check(self, settled: int) -> None:
         """Raise where the frames before number ``settled`` that went back, which no clock

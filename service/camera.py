@@ -76,14 +76,12 @@ class SourceRejections:
         self._lock = threading.Lock()
 
     def __call__(self, reason: str, message: str) -> None:
-        if reason == CLOCK_RESET:
+        if reason in (CLOCK_RESET, STAMP_UNSET):  # notices: the frame is published
             with self._lock:
-                self.resets += 1
-            self._log.warning(reason, "camera %s: %s", self.robot, message[:300])
-            return
-        if reason == STAMP_UNSET:
-            with self._lock:
-                self.unset += 1
+                if reason == CLOCK_RESET:
+                    self.resets += 1
+                else:
+                    self.unset += 1
             self._log.warning(reason, "camera %s: %s", self.robot, message[:300])
             return
         with self._lock:
