@@ -564,13 +564,15 @@ class ASNN:
         """The first part of a step: the frame's luminance, whether it is new, and P."""
         p = self.params
         index = self.index
-        if t is not None and not math.isfinite(frame_time(t)):
-            t = None  # NaN or infinite: no usable time, as a frame given none (a NaN stamp
-            # kept as the stream's latest spoiled the next good frame's gap too)
-        # before any state changes; a frame without a time in a timed stream comes a frame
-        # period after the latest (index * dt there read the gap from another clock: 0.5 s for
-        # a 30 fps camera's 30th frame, believed, and the next timed frame's gap negative)
-        stamp = (frame_time(t) if t is not None else index * p.dt if self._clock is None
+        if t is not None:
+            t = frame_time(t)  # checked before any state changes
+            if not math.isfinite(t):
+                t = None  # NaN or infinite: no usable time, as a frame given none (a NaN stamp
+                # kept as the stream's latest spoiled the next good frame's gap too)
+        # a frame without a time in a timed stream comes a frame period after the latest
+        # (index * dt there read the gap from another clock: 0.5 s for a 30 fps camera's 30th
+        # frame, believed, and the next timed frame's gap negative)
+        stamp = (t if t is not None else index * p.dt if self._clock is None
                  else self._clock + self.frame_period)
         lum = self._luminance(frame)
         self.index += 1
