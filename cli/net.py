@@ -45,13 +45,9 @@ def cmd_camera(args: argparse.Namespace) -> int:
                                    refusals=refusals)
         except OSError as exc:  # a live source's frame the wire cannot carry (VideoError)
             return fail(str(exc))
-    rejected = ", ".join(f"{k} {v}" for k, v in sorted(rejections.counts.items())) or "none"
-    resets = f"; clock resets (re-based): {rejections.resets}" if rejections.resets else ""
-    if rejections.unset:
-        resets += f"; held at the latest frame's time (header stamp unset): {rejections.unset}"
-    log.info("camera %s: %d frames published; rejected: %s%s; workers' refusals on its key "
+    log.info("camera %s: %d frames published; %s; workers' refusals on its key "
              "(of any publisher's frames): %s",
-             args.robot, count, rejected, resets, refusals.summary())
+             args.robot, count, rejections.summary(), refusals.summary())
     return 0
 
 

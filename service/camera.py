@@ -89,6 +89,19 @@ class SourceRejections:
         self._log.warning(reason, "camera %s: rejected (%s): %s", self.robot, reason,
                           message[:300])
 
+    def summary(self) -> str:
+        """The camera's exit line's part: ``rejected: <reason> <count>, ...`` (or ``none``),
+        then the clock resets and the unset stamps, each only if there were any."""
+        with self._lock:
+            rejected = ", ".join(f"{k} {v}" for k, v in sorted(self.counts.items())) or "none"
+            parts = [f"rejected: {rejected}"]
+            if self.resets:
+                parts.append(f"clock resets (re-based): {self.resets}")
+            if self.unset:
+                parts.append(f"held at the latest frame's time (header stamp unset): "
+                             f"{self.unset}")
+        return "; ".join(parts)
+
 
 # seconds without a refusal notice after which a camera says the refusals are over (a worker
 # that refuses a robot's frames says so at most once a second, and keeps saying it)

@@ -1587,6 +1587,8 @@ def test_the_camera_skips_at_most_the_frames_before_a_reset_and_logs_it(tmp_path
     assert len(frames) == 25 - (rosbag.CLOCK_RESET_FRAMES - 1)
     assert rejections.counts == {"stamp-backwards": rosbag.CLOCK_RESET_FRAMES - 1}
     assert rejections.resets == 1
+    assert rejections.summary() == (f"rejected: stamp-backwards {rosbag.CLOCK_RESET_FRAMES - 1}"
+                                    "; clock resets (re-based): 1")
     assert any("camera r1: " in r.message and "message 14: clock reset" in r.message
                and "rejected" not in r.message for r in caplog.records)
     times = [t for t, _ in frames]
@@ -1672,6 +1674,23 @@ def test_a_frame_with_an_unset_stamp_held_at_the_latest_time_is_reported(tmp_pat
     read = list(open_source(bag, on_error=stamps, hold_backwards=True).timed_frames())
     assert len(read) == len(looming.frames)
     assert stamps.tally == (0, 0, None, 3)
+
+
+def test_the_camera_publishes_a_frame_with_an_unset_stamp_and_says_how_many(tmp_path, looming,
+                                                                           caplog):
+    """The camera's exit line says how many frames it held at the latest frame's time, apart
+    from its rejections (there are none: every frame is published)."""
+    from service.camera import SourceRejections
+
+    bag = unset_stamps_bag(tmp_path / "unset.mcap", looming.frames)
+    rejections = SourceRejections("r1")
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        frames = list(open_source(bag, on_error=rejections).timed_frames())
+    assert len(frames) == len(looming.frames)
+    assert rejections.summary() == ("rejected: none; held at the latest frame's time "
+                                    "(header stamp unset): 3")
+    # the first notice is logged; the other two fall in its 10 s
+    assert ["message 10: its header stamp is unset" in r.message for r in caplog.records] == [True]
 
 
 def test_detect_names_the_frames_with_an_unset_stamp_it_holds(tmp_path, looming, capsys):
