@@ -5,6 +5,8 @@ load the model to name them."""
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
 import warnings
 from collections.abc import Callable, Iterator
 
@@ -41,6 +43,20 @@ class TimingWarning(UserWarning):
     as in a stream left early). Silence it with :func:`warnings.filterwarnings` where that is
     meant (the service's worker logs the same itself, per robot).
     """
+
+
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def _warn_at_caller(message: str, category: type[Warning]) -> None:
+    """Warn at the first line outside the asnn package on the way up the stack: the caller's
+    line that stepped the model, through however many of asnn's own frames (a ``stream``
+    inside :func:`asnn.detectors.responses` is one more than ``step``). Python 3.12's
+    ``skip_file_prefixes``, by hand."""
+    frame, level = sys._getframe(1), 2
+    while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE_DIR):
+        frame, level = frame.f_back, level + 1
+    warnings.warn(message, category, stacklevel=level)
 
 
 @contextlib.contextmanager

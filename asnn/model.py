@@ -22,7 +22,6 @@ import math
 import numbers
 import statistics
 import threading
-import warnings
 import weakref
 from collections import deque
 from collections.abc import Iterable, Iterator
@@ -32,7 +31,7 @@ import numpy as np
 
 from . import _fast, _parallel, retina
 from .approach import ApproachStage, FramePair, frame_pixel
-from .errors import TimingWarning
+from .errors import TimingWarning, _warn_at_caller
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
 from .params import (CEILING_GAPS, CEILING_MARGIN, CEILING_MIN_GAPS, MAX_THREADS,
                      MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, PERIOD_FRAMES, ASNNParams, preset, timed_gap)
@@ -379,7 +378,7 @@ class ASNN:
             (:class:`~asnn.errors.TimingWarning`), after the frame is stepped.
         """
         response = self._step(frame, t)
-        self._tell_timing(stacklevel=3)
+        self._tell_timing()
         return response
 
     def _step(self, frame: np.ndarray, t: float | None) -> Response:
@@ -458,14 +457,14 @@ class ASNN:
         if self.threads == 1:
             for t, frame in frames:
                 response = self._step(frame, t)
-                self._tell_timing(stacklevel=3)
+                self._tell_timing()
                 yield response
             return
         self._claim()
         inner = self._banded_stream(frames)
         try:
             for response in inner:
-                self._tell_timing(stacklevel=3)
+                self._tell_timing()
                 yield response
         finally:
             try:
@@ -543,13 +542,12 @@ class ASNN:
                     if slow else "these read like a clock that stands still or goes back, "
                     "or frames stamped under 0.1 ms apart"))
 
-    def _tell_timing(self, stacklevel: int) -> None:
+    def _tell_timing(self) -> None:
         """Raise the stream's noted :class:`~asnn.errors.TimingWarning`, if any, once, at the
-        frame ``stacklevel`` up (:func:`warnings.warn`'s count: the line that stepped the model
-        is 3 from step() and from stream())."""
+        caller's line that stepped the model (the first outside asnn)."""
         note, self._timing_note = self._timing_note, None
         if note is not None:
-            warnings.warn(note, TimingWarning, stacklevel=stacklevel)
+            _warn_at_caller(note, TimingWarning)
 
     def _stabilisation_radii(self, width: int) -> tuple[int, int]:
         """The background stabilisation's search radius and its wider search's (0: none),

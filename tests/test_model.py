@@ -9,6 +9,7 @@ from pydantic import ValidationError
 from asnn import ASNN, FrameError, TimingWarning
 from asnn import preset as asnn_preset
 from asnn.stimuli import make_scene
+from asnn.detectors import responses
 
 
 def _grating(theta: float, frames: int = 20, size: int = 96, period: float = 12.0,
@@ -236,6 +237,14 @@ def test_the_timing_warning_points_at_the_caller_s_line_and_comes_after_the_step
     (told,) = [w for w in caught if issubclass(w.category, TimingWarning)]
     assert told.filename == __file__
     model.close()
+    # through asnn.detectors.responses, one more of asnn's frames, it named that one's line
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with ASNN(threads=threads) as model:
+            for _ in responses(model, ((50.0 * k, f) for k, f in enumerate(scene.frames))):
+                pass
+    (told,) = [w for w in caught if issubclass(w.category, TimingWarning)]
+    assert told.filename == __file__
     model = ASNN()
     with warnings.catch_warnings():
         warnings.simplefilter("error", TimingWarning)
