@@ -1,14 +1,17 @@
-"""One factory for every detector: the ASNN model and the LGMD baselines.
+"""One factory for every detector: the ASNN model and the baselines it is compared with.
 
-The models are imported when one is made, so that :data:`MODELS` and
+A baseline is registered in one place, :data:`BASELINES`; :data:`MODELS`, ``asnn detect``,
+``asnn worker`` and ``asnn bench --model``, ``asnn eval --detectors`` and a run's reports all
+read it. The models are imported when one is made, so that :data:`MODELS` and
 :func:`available_cores` cost a process that runs none (the command line's parser) neither
 numba nor OpenCV."""
 
 from __future__ import annotations
 
+import importlib
 import os
 from collections.abc import Iterable, Iterator
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 from .params import ASNNParams, preset
 
@@ -18,13 +21,54 @@ if TYPE_CHECKING:
     from .baselines import LGMD1Params, LGMD2Params
     from .response import Response
 
-__all__ = ["Detector", "MODELS", "available_cores", "make_detector", "responses"]
+__all__ = ["BASELINES", "Baseline", "Detector", "MODELS", "available_cores", "baseline_classes",
+           "make_detector", "responses"]
 
-MODELS = ("asnn", "lgmd1", "lgmd2")
+
+class Baseline(NamedTuple):
+    """Where a baseline's class and the class of its parameters live (names, so that the
+    parser imports no model), and what it is, for a report's reader."""
+
+    module: str
+    cls: str
+    params: str
+    description: str
+
+
+# Every baseline, by the name the command line and the detector specs give it. A new one is one
+# entry here (CONTRIBUTING.md, "A new baseline"): its class is a Detector, built as
+# ``cls(params=None, **fields)``, whose parameters are a frozen pydantic model with a ``dt``
+# field, the frame period ``asnn detect`` and ``asnn eval`` set from the clip.
+BASELINES = {
+    "lgmd1": Baseline("asnn.baselines", "LGMD1", "LGMD1Params", "LGMD1-1 (Yue & Rind 2006)"),
+    "lgmd2": Baseline("asnn.baselines", "LGMD2", "LGMD2Params", "LGMD1-2 (Fu et al. 2018)"),
+}
+MODELS = ("asnn", *BASELINES)
+
+
+def baseline_classes(model: str) -> tuple[type, type]:
+    """A baseline's class and the class of its parameters.
+
+    Raises
+    ------
+    ValueError
+        If ``model`` is not in :data:`BASELINES`.
+    """
+    if model not in BASELINES:
+        raise ValueError(f"unknown baseline {model!r}; choose one of {', '.join(BASELINES)}")
+    entry = BASELINES[model]
+    module = importlib.import_module(entry.module)
+    return getattr(module, entry.cls), getattr(module, entry.params)
 
 
 class Detector(Protocol):
-    """What every model offers: one object per stream."""
+    """What every model offers: one object per stream.
+
+    A baseline's class also has ``params`` (its frozen pydantic parameters, ``dt`` among
+    them: the frame period in seconds) and is built as ``cls(params=None, **fields)``; one
+    stream at a time (a second thread's step is refused), and a ``t`` that is not a number
+    of seconds is a :class:`~asnn.errors.FrameError`, as the ASNN's is.
+    """
 
     min_side: int  # the smallest height and width of a frame it takes
 
@@ -40,19 +84,19 @@ def make_detector(model: str = "asnn",
 
     Parameters
     ----------
-    model : {'asnn', 'lgmd1', 'lgmd2'}
-    preset_name : str, ASNNParams, LGMD1Params or LGMD2Params, optional
-        ASNN preset, by name or as parameters (a name or ASNNParams is ignored by the LGMD
-        models, which take their own parameters here, or as ``params=``); None means
-        ``default``.
+    model : str
+        One of :data:`MODELS`: ``asnn`` or a baseline of :data:`BASELINES`.
+    preset_name : str, ASNNParams or a baseline's parameters, optional
+        ASNN preset, by name or as parameters (a name or ASNNParams is ignored by a baseline,
+        which takes its own parameters here, or as ``params=``); None means ``default``.
     **options
-        Passed to the detector's constructor (for ASNN, e.g. ``record_maps``; for an LGMD
-        model, ``params``).
+        Passed to the detector's constructor (for ASNN, e.g. ``record_maps``; for a baseline,
+        ``params`` or its fields).
 
     Raises
     ------
     ValueError
-        For an unknown model or preset, or an LGMD model's parameters given twice.
+        For an unknown model or preset, or a baseline's parameters given twice.
     TypeError
         For parameters of another model than ``model``'s (LGMD1Params for ``lgmd2``).
     """
@@ -65,10 +109,8 @@ def make_detector(model: str = "asnn",
         params = (preset_name if isinstance(preset_name, ASNNParams)
                   else preset(preset_name or "default"))
         return ASNN(params, **options)
-    if model in ("lgmd1", "lgmd2"):
-        from . import baselines
-
-        params_class = baselines.LGMD1Params if model == "lgmd1" else baselines.LGMD2Params
+    if model in BASELINES:
+        cls, params_class = baseline_classes(model)
         if isinstance(preset_name, params_class):  # the baseline's own parameters
             if "params" in options:
                 raise ValueError(f"{model}'s parameters given twice (preset_name and params)")
@@ -83,7 +125,7 @@ def make_detector(model: str = "asnn",
                                            "threads"})
         if asnn_only:
             raise ValueError(f"{', '.join(asnn_only)} apply to the ASNN model only, not {model}")
-        return (baselines.LGMD1 if model == "lgmd1" else baselines.LGMD2)(**options)
+        return cls(**options)
     raise ValueError(f"unknown model {model!r}; choose one of {', '.join(MODELS)}")
 
 
@@ -96,7 +138,7 @@ def responses(detector: Detector, timed_frames: Iterable[tuple[float | None, np.
     Parameters
     ----------
     detector : Detector
-        An ASNN model or an LGMD baseline (:func:`make_detector`), at the start of its stream
+        An ASNN model or a baseline (:func:`make_detector`), at the start of its stream
         or where the frames go on from.
     timed_frames : iterable of (float or None, ndarray)
         Each frame with its time in seconds (None: the detector's ``dt`` a frame).

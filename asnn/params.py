@@ -673,6 +673,13 @@ def preset_names() -> list[str]:
     return ["default", *PRESETS]
 
 
+def _baseline_names() -> tuple[str, ...]:
+    """The baselines' names (asnn.detectors imports this module: read at call time)."""
+    from .detectors import BASELINES
+
+    return tuple(BASELINES)
+
+
 def preset_key(name: str) -> str:
     """The key in :data:`PRESETS` of a name :func:`preset` accepts (``default``: the default's).
 
@@ -686,7 +693,7 @@ def preset_key(name: str) -> str:
         head = name.split("/")[0] if isinstance(name, str) else None
         hint = ("" if head is None or "/" not in name else
                 f" (the command line's NAME/FIELD=VALUE; in Python: make_detector({head!r}, "
-                "FIELD=VALUE))" if head in ("lgmd1", "lgmd2") else
+                "FIELD=VALUE))" if head in _baseline_names() else
                 f" (the command line's NAME/FIELD=VALUE; in Python: preset({head!r}"
                 ", FIELD=VALUE))")
         raise ValueError(f"unknown preset {name!r}{hint}; choose one of "

@@ -197,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
             report = bench.run(sizes=args.size or list(bench.DEFAULT_SIZES),
                                frames=args.frames or 40,
                                presets=args.preset,
-                               models=tuple(args.model or ("asnn", "lgmd1", "lgmd2")),
+                               models=tuple(args.model or MODELS),
                                straightforward=not args.no_straightforward,
                                progress=_progress(), case=args.case,
                                repeat=args.repeat or 1)

@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="image topic of a bag (sensor_msgs/msg/Image or CompressedImage, "
                         "foxglove.RawImage or CompressedImage); needed when it has several")
     p.add_argument("--model", choices=MODELS, default="asnn",
-                   help="detector: ASNN or an LGMD baseline (default: %(default)s)")
+                   help="detector: ASNN or a baseline it is compared with (default: %(default)s)")
     p.add_argument("--preset", type=preset_spec, default="default", metavar="NAME[/FIELD=VALUE...]",
                    help=f"ASNN parameter preset ({', '.join(preset_names())}; default: "
                         "%(default)s), with any fields of asnn.params.ASNNParams changed after "

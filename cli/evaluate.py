@@ -23,6 +23,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path, PurePosixPath
 
+from asnn.detectors import BASELINES
 from asnn.evaluation.options import (DEFAULT_DETECTORS, EARLY_TOLERANCE_S, FAMILIES,
                                      PERTURBATIONS, TIE_BREAKS, WARMUP_FRAMES)
 from asnn.io.files import folder_problem
@@ -125,7 +126,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detectors", "--models", dest="detectors", type=_detectors, action=Joined,
                    default=list(DEFAULT_DETECTORS), metavar="LIST",
                    help="comma-separated detector specs (repeatable: the uses add up): asnn, "
-                        "asnn:PRESET, lgmd1, lgmd2, each with fields changed after slashes "
+                        f"asnn:PRESET, {', '.join(BASELINES)}, each with fields changed after "
+                        "slashes "
                         "(asnn:robust/top_k=0, lgmd1/w_i=0.6) "
                         f"(default: {','.join(DEFAULT_DETECTORS)})")
     p.add_argument("--ablation", action="store_true",

@@ -266,7 +266,8 @@ class WorkerCore:
 
     Parameters
     ----------
-    model : {'asnn', 'lgmd1', 'lgmd2'}
+    model : str
+        One of :data:`asnn.detectors.MODELS`: ``asnn`` or a baseline.
     preset : str, optional
         ASNN preset spec, ``NAME[/FIELD=VALUE...]`` (:func:`asnn.params.parse_preset_spec`;
         ``None``: the default preset), reported as given in every response.

@@ -7,6 +7,7 @@ import types
 import numpy as np
 import pytest
 
+from asnn.detectors import MODELS
 from asnn.evaluation.bench import THREAD_VARIABLES
 from cli.main import main
 from netutil import wait_for
@@ -19,7 +20,7 @@ def test_bench_json_report_shape(capsys, monkeypatch):
     report = json.loads(capsys.readouterr().out)
     assert "setNumThreads(1)" in report["threads"] and report["machine"]["cores"] >= 1
     rows = report["results"]
-    assert {r["model"] for r in rows} == {"asnn", "lgmd1", "lgmd2"}
+    assert {r["model"] for r in rows} == set(MODELS)  # every model, a new baseline too
     for r in rows:
         assert r["size"] == "64x64" and r["frames"] == 3
         assert 0 < r["median_ms"] <= r["p90_ms"]

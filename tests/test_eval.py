@@ -8,8 +8,10 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pydantic
 import pytest
 
+from asnn.detectors import BASELINES, baseline_classes, make_detector
 from asnn.evaluation import paper, scoring
 from asnn.params import preset
 from asnn.evaluation.progress import ProgressPrinter
@@ -1237,3 +1239,81 @@ def test_a_clip_s_frame_times_the_model_cannot_time_by_are_a_line_of_the_run_s_w
             if "cannot time them by" in w]
     assert len(said) == 1 and said[0].startswith("asnn loom.mcap: 5 frames in a row")
     assert f"asnn eval: {said[0]}" in err
+
+
+class ToyParams(pydantic.BaseModel):
+    """A baseline's parameters, as the registry asks them: frozen, no extra fields, a dt."""
+
+    model_config = pydantic.ConfigDict(frozen=True, extra="forbid")
+    dt: float = pydantic.Field(0.05, gt=0)
+    level: float = pydantic.Field(0.5, ge=0, le=1)
+
+
+class Toy:
+    """The smallest baseline: warns while the frame's mean is above ``level``."""
+
+    min_side = 8
+
+    def __init__(self, params: ToyParams | None = None, **fields):
+        self.params = ToyParams(**{**(params or ToyParams()).model_dump(), **fields})
+        self.reset()
+
+    def reset(self) -> None:
+        self.index = 0
+
+    def step(self, frame, t=None):
+        from asnn.response import Response
+
+        bright = float(np.asarray(frame, dtype=float).mean()) / 255 > self.params.level
+        self.index += 1
+        return Response(index=self.index - 1, u=0.0, out=0.5, spikes=int(bright),
+                        spike_rate=0.0, collision=bright, targets=[])
+
+
+def test_one_entry_in_baselines_makes_a_baseline_everywhere_eval_and_bench_name_it(
+        monkeypatch, tmp_path):
+    """A contributor's trial: a baseline added to MODELS and the factory only was described
+    in report.md as the ASNN's default preset, recorded with LGMD1-2's parameters, checked
+    against LGMD1-2's fields, and left out of bench's default. One entry in BASELINES is now
+    all the detector specs, the reports and bench read."""
+    from asnn import detectors
+    from asnn.evaluation import bench, runs
+
+    monkeypatch.setitem(detectors.BASELINES, "toy", detectors.Baseline(
+        __name__, "Toy", "ToyParams", "a toy baseline (tests)"))
+    monkeypatch.setattr(detectors, "MODELS", (*detectors.MODELS, "toy"))
+    spec = runs.parse_detector("toy/level=0.25")
+    assert spec.description == f"a toy baseline (tests), {__name__}.Toy with level=0.25"
+    assert spec.parameters == {"dt": "frame period", "level": 0.25}
+    detector = spec.make(frame_period=1 / 30)
+    assert isinstance(detector, Toy) and detector.params.dt == pytest.approx(1 / 30)
+    with pytest.raises(ValueError, match="w_i"):  # its own fields, not an LGMD's
+        runs.parse_detector("toy/w_i=0.6")
+    with pytest.raises(ValueError, match="apply to the ASNN model only"):
+        detectors.make_detector("toy", record_maps=True)
+    scene = make_scene("looming", size=(64, 64), frames=24, start=4, stop=20)
+    write_video(scene.frames, tmp_path / "loom.mp4", scene.fps)
+    (tmp_path / "labels.json").write_text(json.dumps([scene.label("loom.mp4")]))
+    out = tmp_path / "out"
+    assert main(["eval", str(tmp_path), "--detectors", "asnn,toy", "--out", str(out),
+                 "--no-plots"]) == 0
+    assert f"- `toy`: a toy baseline (tests), {__name__}.Toy" in (out / "report.md").read_text()
+    results = json.loads((out / "results.json").read_text())
+    assert results["settings"]["parameters"]["toy"]["level"] == 0.5
+    for name in bench.THREAD_VARIABLES:  # the bench pins threads for the process
+        monkeypatch.delenv(name, raising=False)
+    timed = bench.run(sizes=[(32, 32)], frames=3, straightforward=False, presets=["light"])
+    assert {row["model"] for row in timed["results"]} == {"asnn", "lgmd1", "lgmd2", "toy"}
+
+
+@pytest.mark.parametrize("model", sorted(BASELINES))
+def test_every_registered_baseline_is_made_described_and_recorded_as_itself(model):
+    from asnn.evaluation import runs
+
+    cls, params_class = baseline_classes(model)
+    entry = BASELINES[model]
+    assert isinstance(make_detector(model), cls)
+    spec = runs.parse_detector(model)
+    assert spec.description == f"{entry.description}, {entry.module}.{entry.cls}"
+    assert set(spec.parameters) == set(params_class.model_fields)
+    assert spec.make(frame_period=0.04).params.dt == 0.04

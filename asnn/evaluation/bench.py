@@ -176,7 +176,7 @@ def _preset_params(names: list[str] | None) -> dict:
 
 
 def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
-        models=("asnn", "lgmd1", "lgmd2"), straightforward: bool = True,
+        models: tuple[str, ...] | None = None, straightforward: bool = True,
         progress=None, case: str | None = None, repeat: int = 1) -> dict:
     """Time every model and preset at every size; returns the report as a dict.
 
@@ -185,9 +185,10 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     are not used): a driving scene, where the stages that act only while the scene expands
     under the camera's own motion have work to do.
 
-    ``presets`` are names of :func:`asnn.params.preset` (``None``: all), each optionally with
-    fields changed after slashes as a detector spec has them (``robust/top_k=0``: a stage's
-    cost is the difference of its two rows, timed in one run). With ``straightforward``,
+    ``models`` are names of :data:`asnn.detectors.MODELS` (None: all). ``presets`` are names
+    of :func:`asnn.params.preset` (``None``: all), each optionally with fields changed after
+    slashes as a detector spec has them (``robust/top_k=0``: a stage's cost is the difference
+    of its two rows, timed in one run). With ``straightforward``,
     the default preset is timed too, since the straightforward form's ratio is against it.
     Whenever the default preset is timed, the published variant in float32 (``reference32``,
     the default before the robust preset) is timed with it, and the default's row carries
@@ -206,12 +207,13 @@ def run(sizes=DEFAULT_SIZES, frames: int = 40, presets: list[str] | None = None,
     """
     if repeat < 1:
         raise ValueError(f"repeat must be at least 1, not {repeat}")
-    from ..detectors import make_detector
+    from ..detectors import MODELS, make_detector
     from ..model import ASNN
     from ..warmup import compile_kernels
     from ..params import DEFAULT_PRESET
     from ..stimuli import make_scene
 
+    models = MODELS if models is None else models
     timed_params = _preset_params(presets)
     presets = list(timed_params)
     if straightforward and "asnn" in models and DEFAULT_PRESET not in presets:

@@ -19,7 +19,7 @@ import numpy as np
 
 from . import scoring
 from .options import DEFAULT_DETECTORS
-from ..detectors import MODELS, Detector, make_detector
+from ..detectors import BASELINES, Detector, baseline_classes, make_detector
 from ..io.files import write_atomically
 from ..params import (DEFAULT_PRESET, ASNNParams, check_fields, check_overrides,
                       parse_preset_spec, preset, split_preset_spec, timed_gap)
@@ -94,10 +94,9 @@ class DetectorSpec:
     def description(self) -> str:
         """What the name stands for, for a report's reader: the model, and for ASNN its preset
         (the default's own name) and overrides."""
-        if self.model == "lgmd1":
-            text = "LGMD1-1 (Yue & Rind 2006), asnn.baselines.LGMD1"
-        elif self.model == "lgmd2":
-            text = "LGMD1-2 (Fu et al. 2018), asnn.baselines.LGMD2"
+        if self.model in BASELINES:
+            entry = BASELINES[self.model]
+            text = f"{entry.description}, {entry.module}.{entry.cls}"
         else:
             text = (f"ASNN, the default preset (`{DEFAULT_PRESET}`)" if self.preset is None
                     else f"ASNN, preset `{self.preset}`")
@@ -124,10 +123,7 @@ class DetectorSpec:
         if self.model == "asnn":
             values = {"preset": self.preset or DEFAULT_PRESET, **self.params.model_dump()}
         else:
-            from ..baselines import LGMD1Params, LGMD2Params
-
-            fields = (LGMD1Params if self.model == "lgmd1" else LGMD2Params)(
-                **dict(self.overrides)).model_dump()
+            fields = baseline_classes(self.model)[1](**dict(self.overrides)).model_dump()
             values = {**fields, "dt": fields["dt"] if "dt" in dict(self.overrides)
                       else "frame period"}
         return {k: _json_ready(v) for k, v in values.items()}
@@ -188,16 +184,14 @@ def parse_detector(spec: str, default_preset: str | None = None) -> DetectorSpec
     """
     model, _, rest = spec.strip().partition(":")
     model, slash, changed = model.partition("/")
-    if model not in MODELS:
-        raise ValueError(f"unknown detector {spec!r}; use asnn, asnn:PRESET, lgmd1 or lgmd2 "
-                         "(each with /FIELD=VALUE changes)")
+    if model != "asnn" and model not in BASELINES:
+        raise ValueError(f"unknown detector {spec!r}; use asnn, asnn:PRESET, "
+                         f"{', '.join(BASELINES)} (each with /FIELD=VALUE changes)")
     if model != "asnn":
         if rest:
             raise ValueError(f"{model} has no presets: {spec!r}")
         overrides = split_preset_spec(model + slash + changed, spec)[1]
-        from ..baselines import LGMD1Params, LGMD2Params
-
-        check_fields((LGMD1Params if model == "lgmd1" else LGMD2Params)(), overrides, spec)
+        check_fields(baseline_classes(model)[1](), overrides, spec)
         return DetectorSpec(model, None, overrides)
     if slash:  # asnn/FIELD=VALUE: the default preset's fields after the slashes
         rest = f"{rest}/{changed}" if rest else f"/{changed}"
