@@ -171,6 +171,17 @@ def _output_problem(path: str | None, flag: str) -> str | None:
     return None
 
 
+def _bag_parts(folder: Path) -> list[Path]:
+    """The files a rosbag2 folder's metadata.yaml lists (none where the bag cannot be read:
+    opening it says why)."""
+    from asnn.io.rosbag import bag_files
+
+    try:
+        return bag_files(folder)
+    except SourceError:
+        return []
+
+
 def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
     """Why the outputs would overwrite the input or each other, or None: an output that is the
     input file (or lies in the input's bag folder) would be truncated before a frame is read."""
@@ -190,6 +201,12 @@ def _overwrites(outputs: list[tuple[str, str]], video: str) -> str | None:
             return f"{flag} {path}: is the input {video}"  # by any name or link
         if path != "-" and source.is_dir() and source in target.parents:
             return f"{flag} {path}: inside the input bag's folder {video}"
+        if path != "-" and target.exists() and source.is_dir():
+            # the bag's files may lie elsewhere (its metadata.yaml may list a link, a ../ or
+            # an absolute path): an output that is one of them would truncate the recording
+            for part in _bag_parts(source):
+                if os.path.samefile(target, part):
+                    return f"{flag} {path}: is {part}, a file of the input bag {video}"
         # the same file by any name: a hard link, /dev/stdout beside -
         key = target
         if path == "-":

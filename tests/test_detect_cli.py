@@ -326,6 +326,30 @@ def test_an_output_over_the_input_or_another_output_is_refused_before_it_is_open
     assert copy.read_bytes() == before  # the recording is intact
 
 
+@pytest.mark.parametrize("listed", ["link", "outside"])
+def test_an_output_over_a_file_of_the_input_bag_is_refused_wherever_the_file_lies(
+        tmp_path, capsys, listed):
+    """An integrator's trial: a bag folder whose metadata.yaml lists a file by a link, or by
+    a path out of the folder, had that recording overwritten by --jsonl naming it (exit 0)."""
+    from asnn.io.rosbag import write_bag
+
+    store, bag = tmp_path / "store", tmp_path / "bag"
+    store.mkdir(), bag.mkdir()
+    part = write_bag(make_scene("looming", size=(64, 64), frames=12).frames,
+                     store / "rec_0.mcap")
+    if listed == "link":
+        (bag / "rec_0.mcap").symlink_to(part)
+    name = "rec_0.mcap" if listed == "link" else "../store/rec_0.mcap"
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  storage_identifier: "
+                                       f"mcap\n  relative_file_paths:\n    - {name}\n")
+    before = part.read_bytes()
+    for flag in ("--jsonl", "--mcap"):
+        assert main(["detect", str(bag), flag, str(part)]) == 2
+        assert f"{flag} {part}: is " in capsys.readouterr().err
+    assert part.read_bytes() == before
+    assert main(["detect", str(bag), "--jsonl", str(tmp_path / "out.jsonl")]) == 0
+
+
 def test_a_clip_cut_partway_is_run_as_far_as_it_decodes_with_a_note(tmp_path, capsys):
     whole = tmp_path / "whole.avi"
     write_video(make_scene("looming", size=(64, 64), frames=40).frames, whole)

@@ -48,7 +48,7 @@ except ImportError as exc:  # the optional extra is missing: say which one, in o
                       f" ({exc.name} is missing)") from exc
 
 __all__ = ["BagClip", "CLOCK_RESET_FRAMES", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_SCHEMAS",
-           "RAW_ENCODINGS", "TopicInfo", "bag_topics",
+           "RAW_ENCODINGS", "TopicInfo", "bag_files", "bag_topics",
            "choose_topic", "image_from_compressed", "image_from_raw", "open_bag", "write_bag",
            "IMAGE_MSGDEF", "COMPRESSED_IMAGE_MSGDEF"]
 
@@ -704,14 +704,14 @@ def open_bag(path: str | Path, topic: str | None = None) -> BagClip:
     """
     path = Path(path)
     if path.is_dir():
-        files = _bag_files(path)
+        files = bag_files(path)
         if len(files) == 1:
             return BagClip(files[0], topic)
         return BagClip(path, topic, parts=files)
     return BagClip(path, topic)
 
 
-def _bag_files(folder: Path) -> list[Path]:
+def bag_files(folder: Path) -> list[Path]:
     """The files of a rosbag2 directory, as its ``metadata.yaml`` lists them
     (``relative_file_paths``): other files beside them (a copy, a recovered file, results
     written there) are not part of the bag. A metadata file that lists none: every ``.mcap``
