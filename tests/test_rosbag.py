@@ -441,14 +441,14 @@ def write_foxglove(path, topics: dict[str, list], fps: float = 20.0):
     return path
 
 
-def write_channels(path, channels: list[tuple], fps: float = 20.0):
+def write_channels(path, channels: list[tuple], fps: float = 20.0, **options):
     """An MCAP written channel by channel: ``(topic, schema name, schema encoding, message
     encoding, [payload bytes])`` each, declared in that order (several may share a topic), each
-    channel's messages timed on from the previous channel's."""
+    channel's messages timed on from the previous channel's; ``options`` go to mcap's Writer."""
     from mcap.writer import Writer
 
     with open(path, "wb") as fh:
-        writer = Writer(fh)
+        writer = Writer(fh, **options)
         writer.start(profile="", library="test")
         index = 0
         for topic, schema, encoding, message_encoding, payloads in channels:
@@ -534,6 +534,20 @@ def fox_raw(frames, start: int = 0) -> list[bytes]:
                      height=f.shape[0], encoding="mono8", step=f.shape[1],
                      data=f.tobytes()).encode() for i, f in enumerate(frames)]
 
+
+@pytest.mark.parametrize("repeat_channels", [True, False])
+def test_a_bag_whose_summary_does_not_repeat_its_schemas_is_read(tmp_path, looming,
+                                                                 repeat_channels):
+    """A valid MCAP (mcap's repeat_schemas=False, the Foxglove SDK's option too) keeps its
+    schemas in the data section only: its summary's channels pointed at no schema and the bag
+    was refused, "topics: /cam (no schema)"."""
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    frames = looming.frames[:10]
+    bag = write_channels(tmp_path / "norepeat.mcap", [
+        ("/cam", "foxglove.RawImage", "protobuf", "protobuf", fox_raw(frames))],
+        repeat_schemas=False, repeat_channels=repeat_channels)
+    assert rosbag.bag_topics(bag)["/cam"].schema == "foxglove.RawImage"
+    assert len(detect_records(bag)) == len(frames)
 
 def test_a_topic_recorded_on_several_channels_is_one_topic(tmp_path, looming):
     """Recordings merged, or a publisher that advertised again: the topic's count is its

@@ -449,6 +449,12 @@ def _parse_summary(section: memoryview) -> _Summary:
             raise McapError(f"a summary record of {length} bytes runs past the summary's end")
         record, at = section[at:at + length], at + length
         if opcode == Opcode.FOOTER:
+            if any(c.schema_id and c.schema_id not in summary.schemas
+                   for c in summary.channels.values()):
+                # a valid MCAP that does not repeat its schemas here (a writer's
+                # repeat_schemas=False): the channels' types are in the data section only,
+                # so the file is read through as one without channels in its summary is
+                summary.channels = {}
             return summary
         if opcode == Opcode.SCHEMA:
             schema = _schema(record)
