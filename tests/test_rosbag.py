@@ -526,6 +526,36 @@ def test_a_foxglove_image_without_a_timestamp_is_timed_by_its_log_time(tmp_path,
     assert [r["t"] for r in detect_records(bag)] == [0.0, 0.1, 0.2, 0.3]
 
 
+def test_frames_timed_by_log_times_that_go_back_are_held_reported_and_not_the_rate(
+        tmp_path, looming):
+    """An integrator's trial: a bag timed by its recorder (no header stamps) whose log times
+    go back (frames that arrived swapped, a file not in log-time order) had those frames held
+    at the latest frame's time without a word, and its frame rate read from the gaps in file
+    order (2.9 fps for a 20 fps file, shuffled)."""
+    foxglove = pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    from foxglove.channels import RawImageChannel
+    from foxglove.messages import RawImage
+
+    h, w = looming.frames[0].shape
+    order = [0, 1, 3, 2, 4, 5, 7, 6, 8, 9]  # two pairs arrived swapped
+    bag = tmp_path / "swapped.mcap"
+    context = foxglove.Context()
+    with foxglove.open_mcap(str(bag), allow_overwrite=True, context=context):
+        channel = RawImageChannel("/c", context=context)
+        for i in order:
+            channel.log(RawImage(width=w, height=h, encoding="mono8", step=w,
+                                 data=looming.frames[i].tobytes()),
+                        log_time=START_NS + i * 100_000_000)
+    reports = []
+    clip = open_source(str(bag), on_error=lambda r, m: reports.append((r, m)))
+    times = [t for t, _ in clip.timed_frames()]
+    assert times == pytest.approx([0.0, 0.1, 0.3, 0.3, 0.4, 0.5, 0.7, 0.7, 0.8, 0.9])
+    assert [r for r, _ in reports] == ["stamp-unset"] * 2
+    assert "message 3: its header stamp is unset (0), as every frame's of this topic, and its " \
+           "log time is 0.1 s before the latest frame's time: held" in reports[0][1]
+    assert rosbag.open_bag(bag).fps == pytest.approx(10.0)
+
+
 def fox_raw(frames, start: int = 0) -> list[bytes]:
     """foxglove.RawImage (mono8) messages of ``frames``, stamped from frame ``start`` at 20 fps."""
     from foxglove.messages import RawImage

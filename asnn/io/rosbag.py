@@ -398,7 +398,9 @@ class BagClip:
                 f"{self.path}: topic {self._topic} holds no message", "empty-topic")
         self.height, self.width = first.shape[:2]
         self.start_ns = stamps[0]
-        steps = np.diff(np.asarray(stamps, dtype=np.int64))
+        # the frames' spacing, in whatever order they were written (a recorder's log times of
+        # frames that arrived swapped; a clock reset is one step among many)
+        steps = np.diff(np.sort(np.asarray(stamps, dtype=np.int64)))
         steps = steps[steps > 0]
         self.fps = float(1e9 / np.median(steps)) if steps.size else 20.0
 
@@ -586,12 +588,20 @@ class BagClip:
         MAX_FRAME_GAP_S after the latest frame's ``t``, else the latest frame's: the recorder's
         clock need not be the camera's (simulated time), and after a clock reset it is not the
         new timeline's. Returns ``t`` and, for a frame held so (message ``index``), what to
-        report of it (else None)."""
+        report of it (else None): a frame held at the latest frame's time, whichever clock."""
         if stamp:
             return timeline.t(stamp), None
         logged = (int(log_time) - self.start_ns) / 1e9
         if self.clock == "log":
-            return max(logged, timeline.latest_t), None
+            if logged >= timeline.latest_t:
+                return logged, None
+            # logged as it arrived: two frames that arrived swapped, or a file not in log-time
+            # order (the frames are read in file order)
+            return timeline.latest_t, (
+                f"{self.path}: {self._topic} message {index}: its header stamp is unset (0), "
+                f"as every frame's of this topic, and its log time is "
+                f"{_seconds(timeline.latest_t - logged)} s before the latest frame's time: "
+                "held at the latest frame's time")
         gap = logged - timeline.latest_t
         if timeline.rebased:
             why = "after a clock reset its log time is not on the camera's timeline"
