@@ -7,6 +7,7 @@ import logging
 import os
 import sys
 import threading
+import time
 
 from asnn.params import preset_names
 from service import keys
@@ -259,6 +260,8 @@ def _printed(show) -> int:
 def cmd_router(args: argparse.Namespace) -> int:
     import zenoh
 
+    from service.diagnosis import expiring_certificates
+    from service.link import CERTIFICATES_EVERY
     from service.router import listen_endpoints, router_config
 
     setup_logging(args)
@@ -276,8 +279,16 @@ def cmd_router(args: argparse.Namespace) -> int:
     with session:
         listen = ", ".join(listen_endpoints(config))
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)
-        while not stop.wait(0.5):
-            pass
+        # its certificate's end locks every client out at its next connection: said ahead
+        checked = -CERTIFICATES_EVERY  # at once
+        while True:
+            if time.monotonic() - checked >= CERTIFICATES_EVERY:
+                checked = time.monotonic()
+                expiring = expiring_certificates(config)
+                if expiring:
+                    logging.getLogger("asnn.router").warning("router: %s", expiring)
+            if stop.wait(0.5):
+                break
     print("router stopped", file=sys.stderr, flush=True)  # the clients now lose it: say when
     return 0
 

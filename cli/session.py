@@ -263,14 +263,16 @@ def router_watch(session, name: str, args: argparse.Namespace, on_change=None):
     """A :class:`service.link.RouterWatch` of a command's session that, while its router stays
     lost, logs why a session of the command's options could not connect
     (:func:`service.diagnosis.connect_failure`: the router back with another CA, certificate
-    or password, which Zenoh retries silently for ever)."""
+    or password, which Zenoh retries silently for ever), and at start and once a day which of
+    its certificates expire soon (:func:`service.diagnosis.expiring_certificates`)."""
     from service.config import make_config
-    from service.diagnosis import connect_failure
+    from service.diagnosis import connect_failure, expiring_certificates
     from service.link import RouterWatch
 
     config = make_config(zenoh_options(args))
     return RouterWatch(session, name, on_change=on_change,
-                       diagnose=lambda: connect_failure(config))
+                       diagnose=lambda: connect_failure(config),
+                       certificates=lambda: expiring_certificates(config))
 
 
 def fail(message: str, status: int = 2) -> int:

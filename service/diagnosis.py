@@ -6,10 +6,18 @@ router refuses (mTLS) and a wrong user or password all read alike. :func:`connec
 tries each ``tcp`` and ``tls`` endpoint of the configuration again, one step at a time (TCP,
 the TLS handshake with the configuration's own certificates, the router's first answer), and
 says which step failed. It reads the configuration only; nothing it learns is kept.
+
+A session outlives its certificate: the router checks it at the handshake only, so a
+certificate that expires while the process runs locks it out at its next connection (a router
+restart, a lost link), and a fleet whose certificates were issued together goes dark together.
+:func:`expiring_certificates` says ahead of time which of the configuration's certificates
+expires soon.
 """
 
 from __future__ import annotations
 
+import base64
+import datetime
 import json
 import os
 import socket
@@ -17,7 +25,12 @@ import ssl
 
 import zenoh
 
-__all__ = ["connect_failure", "split_endpoint", "unreadable_files"]
+__all__ = ["EXPIRY_WARNING_DAYS", "connect_failure", "expiring_certificates", "split_endpoint",
+           "unreadable_files"]
+
+# days before a certificate's end from which a process says so (the development script renews
+# a certificate with fewer days left than this)
+EXPIRY_WARNING_DAYS = 30
 
 TIMEOUT = 2.0  # seconds for each step of one endpoint's check
 _TLS = "transport/link/tls/"
@@ -68,6 +81,77 @@ def unreadable_files(conf: zenoh.Config) -> str | None:
                 pass
         except OSError as exc:
             found.append(f"{key} {path}: {exc.strerror or exc}")
+    return "; ".join(found) or None
+
+
+# what an expired certificate of each kind does to the session that names it
+_EXPIRED_MEANS = {
+    "connect_certificate": "the router refuses this client at its next connection (a router "
+                           "restart, a lost link)",
+    "listen_certificate": "every client refuses this router at its next connection",
+    "root_ca_certificate": "the certificates it signed are refused at the next connection",
+}
+
+
+def _not_after(pem: bytes) -> datetime.datetime | None:
+    """The earliest end of validity of the PEM certificates (a chain: its first to end), or
+    None where the data holds none that parse."""
+    from cryptography import x509
+
+    try:
+        certificates = x509.load_pem_x509_certificates(pem)
+    except ValueError:
+        return None
+    return min((c.not_valid_after_utc for c in certificates), default=None)
+
+
+def expiring_certificates(conf: zenoh.Config, now: datetime.datetime | None = None,
+                          within_days: float = EXPIRY_WARNING_DAYS) -> str | None:
+    """Which of the TLS certificates the configuration names (its own, the router's listening
+    one, the CA's; files or inline base64) have expired or expire within ``within_days``
+    days, and what that does to the session; None where none does. A file that cannot be
+    read or parsed is not judged here (opening the session says so).
+
+    Parameters
+    ----------
+    conf : zenoh.Config
+        A client's or a router's configuration.
+    now : datetime, optional
+        The present, timezone-aware (default: the system clock's).
+    within_days : float
+        How far ahead to look.
+    """
+    now = now or datetime.datetime.now(datetime.timezone.utc)
+    found = []
+    for name, means in _EXPIRED_MEANS.items():
+        path, pem = _value(conf, _TLS + name), None
+        if isinstance(path, str) and path:
+            try:
+                with open(path, "rb") as fh:
+                    pem = fh.read(1 << 20)  # a certificate chain is a few kB
+            except OSError:
+                continue
+            label = f"{name} {path}"
+        else:
+            inline = _value(conf, _TLS + name + "_base64")
+            if not isinstance(inline, str) or not inline:
+                continue
+            try:
+                pem = base64.b64decode(inline, validate=False)
+            except ValueError:
+                continue
+            label = f"{name} (inline)"
+        end = _not_after(pem)
+        if end is None:
+            continue
+        left = end - now
+        day = end.strftime("%Y-%m-%d %H:%M UTC")
+        if left <= datetime.timedelta(0):
+            found.append(f"{label} expired on {day}: {means}")
+        elif left <= datetime.timedelta(days=within_days):
+            found.append(f"{label} expires on {day}, in {left.days} days {left.seconds // 3600} "
+                         f"hours: issue it again before then (the development fleet's: run "
+                         f"{_SCRIPT} again); once expired, {means}")
     return "; ".join(found) or None
 
 

@@ -4,7 +4,9 @@ Zenoh reconnects by itself (:mod:`service.config`'s ``connect/retry``) and says 
 a camera publishing into a lost link, or a worker or a dashboard hearing nothing, would look as
 if all were quiet. :class:`RouterWatch` logs a WARNING when a session that had a router has none
 left, and an INFO line when one is back. A session that never had a router (peers on a LAN) is
-not reported.
+not reported. It also says, at start and once a day, which of the session's certificates
+expire soon (:func:`service.diagnosis.expiring_certificates`): the router checks them at the
+handshake only, so one that expires while the process runs locks it out at its next connection.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ log = logging.getLogger("asnn.link")
 
 WATCH_INTERVAL = 1.0  # seconds between looks at the session's routers
 DIAGNOSE_AFTER = 10.0  # seconds without a router before asking why, and between two askings
+CERTIFICATES_EVERY = 24 * 3600.0  # seconds between two looks at the certificates' validity
 
 
 class RouterWatch:
@@ -45,15 +48,25 @@ class RouterWatch:
         for ever, where a fresh start says why.
     diagnose_after : float
         Seconds without a router before asking, and between two askings.
+    certificates : callable, optional
+        Returns which of the session's certificates expire soon, or None
+        (:func:`service.diagnosis.expiring_certificates`): asked at start and every
+        ``certificates_every`` seconds, its answer logged at WARNING.
+    certificates_every : float
+        Seconds between two askings.
     """
 
     def __init__(self, session, name: str, interval: float = WATCH_INTERVAL,
                  on_change: Callable[[bool], None] | None = None,
                  diagnose: Callable[[], str | None] | None = None,
-                 diagnose_after: float = DIAGNOSE_AFTER):
+                 diagnose_after: float = DIAGNOSE_AFTER,
+                 certificates: Callable[[], str | None] | None = None,
+                 certificates_every: float = CERTIFICATES_EVERY):
         self.session, self.name, self.interval = session, name, interval
         self.on_change = on_change
         self.diagnose, self.diagnose_after = diagnose, diagnose_after
+        self.certificates, self.certificates_every = certificates, certificates_every
+        self._certificates_at: float | None = None  # when they were last looked at
         self._asked_at = 0.0  # when the lost router was last diagnosed (or lost)
         self._asking: list | None = None  # the diagnosis under way: [thread, its answer]
         self._heard: str | None = None  # the latest answer, logged once it comes twice
@@ -87,7 +100,22 @@ class RouterWatch:
                 self._asked_at, self._heard, self._said = time.monotonic(), None, None
             elif not routers and self.connected is False and self.diagnose is not None:
                 self._why()
+            self._check_certificates()
             self._stop.wait(self.interval)
+
+    def _check_certificates(self) -> None:
+        now = time.monotonic()
+        if self.certificates is None or (self._certificates_at is not None and
+                                         now - self._certificates_at < self.certificates_every):
+            return
+        self._certificates_at = now
+        try:
+            expiring = self.certificates()
+        except Exception:  # a check that fails says nothing; the watch goes on
+            log.debug("%s: certificate check failed", self.name, exc_info=True)
+            return
+        if expiring:
+            log.warning("%s: %s", self.name, expiring)
 
     def _why(self) -> None:
         """Ask why the router stays lost, on a thread of its own (a check can take seconds a

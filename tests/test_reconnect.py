@@ -237,3 +237,20 @@ def test_a_session_that_never_had_a_router_is_not_diagnosed():
                      diagnose_after=0.0) as watch:
         time.sleep(0.3)  # thirty looks
         assert watch.connected is None and calls == []
+
+
+def test_the_router_watch_says_at_start_which_certificates_end_soon(caplog):
+    """A fleet operator's trial: nothing said a certificate was about to end; the watch asks
+    at start and then once every ``certificates_every`` seconds, and logs the answer."""
+    from service.link import RouterWatch
+
+    session, calls = FakeSession(), []
+    session.routers = ["router-a"]
+    with caplog.at_level("WARNING", logger="asnn.link"), RouterWatch(
+            session, "camera r1", interval=0.01, certificates_every=3600.0,
+            certificates=lambda: calls.append(1) or "connect_certificate c.pem expires on ..."):
+        wait_for(lambda: calls, what="the certificates looked at")
+        time.sleep(0.2)  # twenty looks: asked once within the hour
+    assert calls == [1]
+    assert [r.getMessage() for r in caplog.records] == [
+        "camera r1: connect_certificate c.pem expires on ..."]
