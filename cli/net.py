@@ -27,11 +27,12 @@ log = logging.getLogger("asnn")
 # ---------------------------------------------------------------- commands
 
 def cmd_camera(args: argparse.Namespace) -> int:
-    from service.camera import (RefusalNotices, SourceError, SourceRejections, open_source,
-                                publish_frames)
+    from service.camera import (RefusalNotices, SourceError, SourceRejections,
+                                SubscriberWatch, open_source, publish_frames)
 
     setup_logging(args)
     rejections, refusals = SourceRejections(args.robot), RefusalNotices(args.robot)
+    subscribers = SubscriberWatch(args.robot, keys.frame_key(args.robot, args.prefix))
     try:
         source = open_source(args.source, on_error=rejections)
         session = session_for(args)
@@ -43,12 +44,14 @@ def cmd_camera(args: argparse.Namespace) -> int:
             count = publish_frames(session, args.robot, source, prefix=args.prefix,
                                    fps=args.fps, loop=args.loop, format=args.format,
                                    wait=args.wait, stop=stop, preview_hz=args.preview_hz,
-                                   refusals=refusals)
+                                   refusals=refusals, subscribers=subscribers)
         except OSError as exc:  # a live source's frame the wire cannot carry (VideoError)
             return fail(str(exc))
-    log.info("camera %s: %d frames published; %s; workers' refusals on its key "
+    unheard = (f" ({subscribers.unheard} while no subscriber took them: lost)"
+               if subscribers.unheard else "")
+    log.info("camera %s: %d frames published%s; %s; workers' refusals on its key "
              "(of any publisher's frames): %s",
-             args.robot, count, rejections.summary(), refusals.summary())
+             args.robot, count, unheard, rejections.summary(), refusals.summary())
     return 0
 
 

@@ -174,14 +174,23 @@ class SubscriberWatch:
     Each of the two lines at most once every ``interval`` seconds, the next one saying how many
     changes it did not show: with several workers, the scanning one subscribes to every
     robot's frames for a moment every second (:data:`service.worker.SCAN_INTERVAL`), so a
-    camera no worker serves saw a subscriber come and go twice a line a second."""
+    camera no worker serves saw a subscriber come and go twice a line a second.
+
+    ``unheard`` counts the frames :meth:`published` while no subscriber took them (lost:
+    frames are best effort), for the camera's exit line."""
 
     def __init__(self, robot: str, key: str, matching: bool | None = None, *,
                  interval: float = 10.0, clock=time.monotonic):
         self.robot, self.key = robot, key
         self.matching = matching
+        self.unheard = 0
         self._lines = RateLimitedLog(log, interval, clock)  # one reason per status
         self._lock = threading.Lock()
+
+    def published(self) -> None:
+        """A frame was put: counted in ``unheard`` when no subscriber takes it."""
+        if self.matching is False:
+            self.unheard += 1
 
     def __call__(self, status) -> None:
         with self._lock:
@@ -209,7 +218,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    loop: bool = False, format: str = "gray8", wait: float = 0.0,
                    stop: threading.Event | None = None, max_frames: int | None = None,
                    preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH,
-                   announce: bool = True, refusals: RefusalNotices | None = None) -> int:
+                   announce: bool = True, refusals: RefusalNotices | None = None,
+                   subscribers: SubscriberWatch | None = None) -> int:
     """Publish the source's frames paced at ``fps`` (default: the source's own times).
 
     ``stamp``: the capture time of a live source's frame (wall clock when it was read); a
@@ -223,7 +233,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     ``preview_hz``: thumbnails (``preview_width`` pixels wide) per second on the preview key,
     at most one per frame; 0 publishes none.
     ``refusals``: collects and logs the workers' notices that they refuse the frames (a new
-    :class:`RefusalNotices` if not given).
+    :class:`RefusalNotices` if not given). ``subscribers``: logs when the frames lose their
+    last subscriber, and counts the frames published meanwhile (a new :class:`SubscriberWatch`
+    if not given).
     Returns the number of frames published. Ends at the end of the source unless ``loop``
     (a live source is never replayed), when ``stop`` is set, or after ``max_frames``.
     """
@@ -262,8 +274,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         if wait and not publisher.matching_status.matching:
             log.warning("no subscriber on %s after %.1f s; publishing anyway", key, wait)
         # a worker that dies or stops later leaves the camera publishing into nothing: say so
-        declare(publisher.declare_matching_listener(
-            SubscriberWatch(robot, key, publisher.matching_status.matching)))
+        subscribers = subscribers or SubscriberWatch(robot, key)
+        subscribers.matching = publisher.matching_status.matching
+        declare(publisher.declare_matching_listener(subscribers))
         log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
         if not (fps or source.live or source.fps_stated):  # a live source stamps its own times
             log.warning("camera %s: %s states no frame rate a camera runs at; its frames are "
@@ -301,6 +314,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                 frame = Frame.from_image(np.ascontiguousarray(image), seq=seq, stamp=stamp,
                                          format=format)
                 publisher.put(encode(frame))
+                subscribers.published()
                 refusals.check_quiet()
                 if previews is not None and time.monotonic() >= next_preview:
                     next_preview = max(next_preview + 1.0 / preview_hz, time.monotonic())

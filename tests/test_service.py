@@ -634,6 +634,24 @@ def test_worker_scan_and_handover_options_are_checked(capsys):
     assert "must be longer than its window" in capsys.readouterr().err
 
 
+def test_a_camera_counts_the_frames_it_published_while_no_subscriber_took_them(zenoh_net):
+    """A failover trial: locked out of its router, a camera's exit line said "4285 frames
+    published; rejected: none", a quarter of them into nothing."""
+    from service.camera import SubscriberWatch
+
+    source = open_source("synthetic:looming")
+    watch = SubscriberWatch("r8", keys.frame_key("r8"))
+    assert publish_frames(zenoh_net.spoke(), "r8", source, fps=200, max_frames=5,
+                          preview_hz=0, subscribers=watch) == 5
+    assert watch.unheard == 5  # nobody subscribed
+    sub = zenoh_net.hub.declare_subscriber(  # noqa: F841 (kept declared)
+        keys.frame_key("r8"), lambda sample: None)
+    watch = SubscriberWatch("r8", keys.frame_key("r8"))
+    assert publish_frames(zenoh_net.spoke(), "r8", source, fps=200, max_frames=5, wait=5.0,
+                          preview_hz=0, subscribers=watch) == 5
+    assert watch.unheard == 0 and watch.matching is True
+
+
 def test_a_file_without_a_camera_s_frame_rate_is_replayed_at_20_fps_with_a_warning(
         zenoh_net, tmp_path, caplog):
     path = tmp_path / "base.avi"  # a container's time base read as its frame rate
