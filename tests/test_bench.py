@@ -242,8 +242,13 @@ def test_kernels_are_loaded_before_anything_is_timed(monkeypatch):
     from service.bench import model_time
 
     calls = []
-    monkeypatch.setattr(asnn.warmup, "compile_kernels",
-                        lambda straightforward=False: calls.append("compile"))
+    loaded = []
+
+    def compile_kernels(presets=("default", "reference"), threads=1, straightforward=False):
+        calls.append("compile")
+        loaded.append(list(presets))
+
+    monkeypatch.setattr(asnn.warmup, "compile_kernels", compile_kernels)
     timed = asnn.evaluation.bench.time_detector
 
     def time_detector(*args, **kwargs):
@@ -254,6 +259,7 @@ def test_kernels_are_loaded_before_anything_is_timed(monkeypatch):
     asnn.evaluation.bench.run(sizes=[(32, 32)], frames=2, presets=["paper"], models=("asnn",),
                               straightforward=False)
     assert calls == ["compile", "time"]
+    assert "paper" in loaded[-1]  # timed: some of its float32 kernels are not the default's
     calls.clear()
     frames = np.zeros((4, 32, 32), np.uint8)
     assert model_time(None, frames)["median_ms"] > 0
