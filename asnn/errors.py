@@ -5,7 +5,6 @@ load the model to name them."""
 from __future__ import annotations
 
 import contextlib
-import os
 import sys
 import warnings
 from collections.abc import Callable, Iterator
@@ -45,7 +44,14 @@ class TimingWarning(UserWarning):
     """
 
 
-_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+_PACKAGE = __name__.partition(".")[0]  # "asnn"
+
+
+def _ours(frame) -> bool:
+    """Whether the frame runs code of the asnn package, known by its module's name (a path
+    is not: ``..`` in a sys.path entry, zipimport, a frozen application)."""
+    name = frame.f_globals.get("__name__") or ""
+    return name == _PACKAGE or name.startswith(_PACKAGE + ".")
 
 
 def _warn_at_caller(message: str, category: type[Warning]) -> None:
@@ -54,7 +60,7 @@ def _warn_at_caller(message: str, category: type[Warning]) -> None:
     inside :func:`asnn.detectors.responses` is one more than ``step``). Python 3.12's
     ``skip_file_prefixes``, by hand."""
     frame, level = sys._getframe(1), 2
-    while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE_DIR):
+    while frame is not None and _ours(frame):
         frame, level = frame.f_back, level + 1
     warnings.warn(message, category, stacklevel=level)
 

@@ -221,6 +221,23 @@ def test_a_fast_camera_whose_clock_stops_is_stepped_and_warned_of():
                 assert model.ceiling_held == held + twice
 
 
+def test_the_timing_warning_knows_asnn_s_frames_by_their_module_not_their_path():
+    """A review: asnn's frames were told by their file's path, which is as imported: a script
+    that put the package on sys.path by a path with ``..`` had the warning point into asnn."""
+    import warnings
+
+    from asnn.errors import _warn_at_caller
+
+    ours = {"__name__": "asnn.elsewhere", "tell": _warn_at_caller, "Told": TimingWarning}
+    exec(compile("def step():\n    tell('noted', Told)\n", "/x/../asnn/elsewhere.py", "exec"),
+         ours)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ours["step"]()
+    (told,) = caught
+    assert told.filename == __file__
+
+
 @pytest.mark.parametrize("threads", [1, 2])
 def test_the_timing_warning_points_at_the_caller_s_line_and_comes_after_the_step(threads):
     """A review: raised inside the step, under warnings as errors it left the model half
