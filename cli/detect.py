@@ -11,7 +11,8 @@ from collections import deque
 from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
-from asnn.detectors import MODELS, available_cores, make_detector, responses
+from asnn.detectors import (MODELS, available_cores, baseline_classes, make_detector,
+                            responses)
 from asnn.errors import timing_warnings_to
 from asnn.io.files import folder_problem, resolved, seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
@@ -174,11 +175,11 @@ def _output_problem(path: str | None, flag: str) -> str | None:
 def _bag_parts(folder: Path) -> list[Path]:
     """The files a rosbag2 folder's metadata.yaml lists (none where the bag cannot be read:
     opening it says why)."""
-    from asnn.io.rosbag import bag_files
-
     try:
+        from asnn.io.rosbag import bag_files  # the 'ros' extra: without it, no bag is read
+
         return bag_files(folder)
-    except SourceError:
+    except (ImportError, SourceError):
         return []
 
 
@@ -419,7 +420,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"asnn detect: note: {args.video} runs at {source.fps:g} frames a second by "
                   f"its stamps, no frame period a model can time by ({MIN_FRAME_GAP_S:g} to "
                   f"{MAX_FRAME_GAP_S:g} s): the {args.model} model runs at its default dt, "
-                  "0.05 s a frame", file=sys.stderr)
+                  f"{baseline_classes(args.model)[1]().dt:g} s a frame", file=sys.stderr)
     detector = make_detector(args.model, params, **options)
     if args.model == "asnn":
         # numba loads a kernel from its cache when it is first called: all of them now, before

@@ -551,9 +551,20 @@ def test_frames_timed_by_log_times_that_go_back_are_held_reported_and_not_the_ra
     times = [t for t, _ in clip.timed_frames()]
     assert times == pytest.approx([0.0, 0.1, 0.3, 0.3, 0.4, 0.5, 0.7, 0.7, 0.8, 0.9])
     assert [r for r, _ in reports] == ["stamp-unset"] * 2
-    assert "message 3: its header stamp is unset (0), as every frame's of this topic, and its " \
-           "log time is 0.1 s before the latest frame's time: held" in reports[0][1]
+    assert "message 3: timed by its log time (the topic's first frame has no header stamp), " \
+           "and its log time is 0.1 s before the latest frame's time: held" in reports[0][1]
     assert rosbag.open_bag(bag).fps == pytest.approx(10.0)
+
+
+def test_a_header_clock_that_steps_back_a_little_early_on_leaves_the_frame_rate(tmp_path,
+                                                                               looming):
+    """A review: the frame rate read from the stamps sorted (right for a recorder's log times
+    of swapped frames) read a 20 fps bag whose clock stepped back 0.587 s at frame 12 (an NTP
+    step at boot) as 27 fps, its two timelines interleaved."""
+    stamps = [START_NS + 50_000_000 * i for i in range(len(looming.frames))]
+    stamps[12:] = [ns - 587_000_000 for ns in stamps[12:]]
+    bag = ns_bag(tmp_path / "step.mcap", looming.frames, stamps)
+    assert rosbag.open_bag(bag).fps == pytest.approx(20.0)
 
 
 def fox_raw(frames, start: int = 0) -> list[bytes]:
@@ -1291,6 +1302,14 @@ def test_a_missing_extra_is_named_in_one_line(tmp_path, monkeypatch, capsys):
     monkeypatch.delattr(asnn.io, "rosbag")
     write_messages(tmp_path / "run.mcap", {})
     assert main(["detect", str(tmp_path / "run.mcap")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "asnn[ros]" in err
+    # a bag folder with an output: its files, looked for before the bag opens, did not say so
+    (tmp_path / "bag").mkdir()
+    (tmp_path / "run.mcap").rename(tmp_path / "bag" / "run.mcap")
+    (tmp_path / "bag" / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information:\n  relative_file_paths: [run.mcap]\n")
+    assert main(["detect", str(tmp_path / "bag"), "--jsonl", str(tmp_path / "out.jsonl")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "asnn[ros]" in err
 

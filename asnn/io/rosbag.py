@@ -398,9 +398,11 @@ class BagClip:
                 f"{self.path}: topic {self._topic} holds no message", "empty-topic")
         self.height, self.width = first.shape[:2]
         self.start_ns = stamps[0]
-        # the frames' spacing, in whatever order they were written (a recorder's log times of
-        # frames that arrived swapped; a clock reset is one step among many)
-        steps = np.diff(np.sort(np.asarray(stamps, dtype=np.int64)))
+        stamps = np.asarray(stamps, dtype=np.int64)
+        if self.clock == "log":  # a recorder's log times of frames that arrived swapped: the
+            stamps = np.sort(stamps)  # spacing whatever the order (header stamps: a clock
+            # that steps back a little would interleave with itself, sorted)
+        steps = np.diff(stamps)
         steps = steps[steps > 0]
         self.fps = float(1e9 / np.median(steps)) if steps.size else 20.0
 
@@ -598,8 +600,8 @@ class BagClip:
             # logged as it arrived: two frames that arrived swapped, or a file not in log-time
             # order (the frames are read in file order)
             return timeline.latest_t, (
-                f"{self.path}: {self._topic} message {index}: its header stamp is unset (0), "
-                f"as every frame's of this topic, and its log time is "
+                f"{self.path}: {self._topic} message {index}: timed by its log time (the "
+                f"topic's first frame has no header stamp), and its log time is "
                 f"{_seconds(timeline.latest_t - logged)} s before the latest frame's time: "
                 "held at the latest frame's time")
         gap = logged - timeline.latest_t
