@@ -287,7 +287,12 @@ def cmd_router(args: argparse.Namespace) -> int:
         while True:
             if time.monotonic() - checked >= CERTIFICATES_EVERY:
                 checked = time.monotonic()
-                expiring = expiring_certificates(config)
+                try:  # a check that fails says nothing; the router goes on
+                    expiring = expiring_certificates(config)
+                except Exception:
+                    logging.getLogger("asnn.router").debug("certificate check failed",
+                                                           exc_info=True)
+                    expiring = None
                 if expiring:
                     logging.getLogger("asnn.router").warning("router: %s", expiring)
             if stop.wait(0.5):

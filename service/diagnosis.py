@@ -22,6 +22,7 @@ import json
 import os
 import socket
 import ssl
+import warnings
 
 import zenoh
 
@@ -93,24 +94,50 @@ _EXPIRED_MEANS = {
 }
 
 
-def _not_after(pem: bytes) -> datetime.datetime | None:
-    """The earliest end of validity of the PEM certificates (a chain: its first to end), or
-    None where the data holds none that parse."""
-    from cryptography import x509
-
+def _certificates(conf: zenoh.Config, name: str) -> tuple[str, list] | None:
+    """The setting's label and the certificates it names (a file or inline base64 PEM), or None
+    where it is not set, cannot be read, or holds none that cryptography parses (opening the
+    session judges those), or cryptography is not installed."""
     try:
-        certificates = x509.load_pem_x509_certificates(pem)
-    except ValueError:
+        from cryptography import x509
+    except ImportError:
         return None
-    return min((c.not_valid_after_utc for c in certificates), default=None)
+    path = _value(conf, _TLS + name)
+    try:
+        if isinstance(path, str) and path:
+            with open(path, "rb") as fh:
+                pem = fh.read(1 << 20)  # a certificate chain is a few kB, a CA bundle 200
+            label = f"{name} {path}"
+        else:
+            inline = _value(conf, _TLS + name + "_base64")
+            if not isinstance(inline, str) or not inline:
+                return None
+            pem = base64.b64decode(inline, validate=False)
+            label = f"{name} (inline)"
+        with warnings.catch_warnings():  # a system bundle's odd old CA: said once per load
+            warnings.simplefilter("ignore")
+            certificates = x509.load_pem_x509_certificates(pem)
+    except Exception:  # OSError, ValueError, x509.InvalidVersion: not judged here
+        return None
+    return (label, certificates) if certificates else None
+
+
+def _end(name: str, certificates: list, own: list | None) -> datetime.datetime:
+    """When the setting's certificates stop serving: a chain (its own, the listening one) when
+    its first ends; a trust bundle when the CA that issued this process's own certificate ends
+    (without one, which CA signs the router's is not known: the latest end)."""
+    if name != "root_ca_certificate":
+        return min(c.not_valid_after_utc for c in certificates)
+    issuers = [c for c in certificates if own and c.subject == own[0].issuer] or certificates
+    return max(c.not_valid_after_utc for c in issuers)
 
 
 def expiring_certificates(conf: zenoh.Config, now: datetime.datetime | None = None,
                           within_days: float = EXPIRY_WARNING_DAYS) -> str | None:
     """Which of the TLS certificates the configuration names (its own, the router's listening
-    one, the CA's; files or inline base64) have expired or expire within ``within_days``
-    days, and what that does to the session; None where none does. A file that cannot be
-    read or parsed is not judged here (opening the session says so).
+    one, the CA that issued them; files or inline base64) have expired or expire within
+    ``within_days`` days, and what that does to the session; None where none does. A file
+    that cannot be read or parsed is not judged here (opening the session says so).
 
     Parameters
     ----------
@@ -122,28 +149,15 @@ def expiring_certificates(conf: zenoh.Config, now: datetime.datetime | None = No
         How far ahead to look.
     """
     now = now or datetime.datetime.now(datetime.timezone.utc)
+    loaded = {name: _certificates(conf, name) for name in _EXPIRED_MEANS}
+    own = next((loaded[n][1] for n in ("connect_certificate", "listen_certificate")
+                if loaded[n]), None)
     found = []
     for name, means in _EXPIRED_MEANS.items():
-        path, pem = _value(conf, _TLS + name), None
-        if isinstance(path, str) and path:
-            try:
-                with open(path, "rb") as fh:
-                    pem = fh.read(1 << 20)  # a certificate chain is a few kB
-            except OSError:
-                continue
-            label = f"{name} {path}"
-        else:
-            inline = _value(conf, _TLS + name + "_base64")
-            if not isinstance(inline, str) or not inline:
-                continue
-            try:
-                pem = base64.b64decode(inline, validate=False)
-            except ValueError:
-                continue
-            label = f"{name} (inline)"
-        end = _not_after(pem)
-        if end is None:
+        if loaded[name] is None:
             continue
+        label, certificates = loaded[name]
+        end = _end(name, certificates, own)
         left = end - now
         day = end.strftime("%Y-%m-%d %H:%M UTC")
         if left <= datetime.timedelta(0):

@@ -10,6 +10,7 @@ import os
 import shutil
 import stat
 import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -733,8 +734,9 @@ def test_every_file_the_router_cannot_read_is_named(certs, tmp_path):
             ("transport/auth/usrpwd/dictionary_file", "credentials.txt")))
 
 
-def short_lived_certificate(path: Path, days: float) -> Path:
-    """A self-signed certificate (PEM) that ends ``days`` days from now (negative: ended)."""
+def short_lived_certificate(path: Path, days: float, name: str = "alerts") -> Path:
+    """A self-signed certificate (PEM) of ``name`` that ends ``days`` days from now (negative:
+    ended)."""
     import datetime
 
     from cryptography import x509
@@ -743,9 +745,9 @@ def short_lived_certificate(path: Path, days: float) -> Path:
     from cryptography.x509.oid import NameOID
 
     key = ec.generate_private_key(ec.SECP256R1())
-    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "alerts")])
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)])
     now = datetime.datetime.now(datetime.timezone.utc)
-    certificate = (x509.CertificateBuilder().subject_name(name).issuer_name(name)
+    certificate = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
                    .public_key(key.public_key()).serial_number(x509.random_serial_number())
                    .not_valid_before(now - datetime.timedelta(days=400))
                    .not_valid_after(now + datetime.timedelta(days=days))
@@ -781,11 +783,30 @@ def test_a_certificate_that_ends_soon_or_has_ended_is_said_with_what_it_will_do(
     set_json(router, "transport/link/tls/listen_certificate_base64",
              base64.b64encode(soon.read_bytes()).decode())
     assert expiring_certificates(router).startswith("listen_certificate (inline) expires on ")
+    # a trust bundle (a system's holds CAs long ended) by the CA of this process's own
+    # certificate; without one, by its latest: it said "expired" of every client's bundle
+    bundle = tmp_path / "bundle.pem"
+    bundle.write_bytes(ended.read_bytes() + later.read_bytes())
+    conf = zenoh.Config()
+    set_json(conf, "transport/link/tls/root_ca_certificate", str(bundle))
+    assert expiring_certificates(conf) is None
+    set_json(conf, "transport/link/tls/connect_certificate", str(later))  # issued by "alerts"
+    assert expiring_certificates(conf) is None
+    issued = short_lived_certificate(tmp_path / "by-old.pem", 200, name="old-ca")
+    old_ca = short_lived_certificate(tmp_path / "old-ca.pem", -1, name="old-ca")
+    bundle.write_bytes(old_ca.read_bytes() + later.read_bytes())
+    set_json(conf, "transport/link/tls/connect_certificate", str(issued))
+    assert expiring_certificates(conf).startswith(f"root_ca_certificate {bundle} expired on ")
     # what cannot be read or parsed is not judged here: opening the session says so
     set_json(conf, "transport/link/tls/root_ca_certificate", str(tmp_path / "none.pem"))
     (tmp_path / "junk.pem").write_text("not a certificate")
     set_json(conf, "transport/link/tls/connect_certificate", str(tmp_path / "junk.pem"))
     assert expiring_certificates(conf) is None
+    set_json(conf, "transport/link/tls/connect_certificate", str(soon))
+    assert expiring_certificates(conf) is not None
+    with pytest.MonkeyPatch.context() as patch:  # an environment made before the dependency
+        patch.setitem(sys.modules, "cryptography", None)
+        assert expiring_certificates(conf) is None
 
 
 
