@@ -168,6 +168,19 @@ def seconds_or_zero(value: str) -> float:
     return _interval(value, 0, MAX_SECONDS, open_low=False, unit="seconds")
 
 
+def megabytes(value: str) -> float:
+    """A file size in MB: more than 0, at most a petabyte."""
+    return _interval(value, 0, 1e9, open_low=True, unit="MB")
+
+
+def mcap_output(value: str) -> str:
+    """A path for a new MCAP file: it ends in ``.mcap``."""
+    value = nonempty_path(value)
+    if not value.endswith(".mcap"):
+        raise argparse.ArgumentTypeError(f"an MCAP file's name ends in .mcap: {value!r}")
+    return value
+
+
 def non_negative(value: str) -> float:
     """A number of 0 or more."""
     number = _number(value)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from cli.arguments import fleet_size, host_address, port
+from cli.arguments import fleet_size, host_address, mcap_output, megabytes, port
 from cli.dashboard import serve_fleet
 from cli.session import add_zenoh_options, fail, setup_logging
 
@@ -19,8 +19,9 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
     except ImportError as exc:  # the message names the extra to install
         return fail(str(exc))
     try:
+        bound = {} if args.mcap_max_mb is None else {"record_max_bytes": args.mcap_max_mb * 1e6}
         bridge = FoxgloveBridge(args.prefix, host=args.host, port=args.port,
-                                max_robots=args.max_robots)
+                                max_robots=args.max_robots, record=args.mcap, **bound)
     except OSError as exc:
         return fail(str(exc))
     return serve_fleet(args, bridge, bridge, "foxglove", bridge.url, refusals=True,
@@ -44,5 +45,11 @@ def register(subparsers) -> None:
     p.add_argument("--max-robots", type=fleet_size, default=256, metavar="N",
                    help="robots served at once; messages of more are counted and dropped "
                         "(default: %(default)s)")
+    p.add_argument("--mcap", type=mcap_output, default=None, metavar="OUT.mcap",
+                   help="also record what the viewers are sent (every robot's previews, "
+                        "annotations, responses and warnings) to this new file, for a later "
+                        "look in Foxglove; finished when the server stops")
+    p.add_argument("--mcap-max-mb", type=megabytes, default=None, metavar="MB",
+                   help="stop recording once the file reaches this size (default: 1000)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_foxglove)

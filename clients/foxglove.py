@@ -56,9 +56,11 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 # first: without the 'ros' extra, this import fails with a message naming it
-from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, close_channels, response_message,
+from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, McapRecording, close_channels,
+                                   response_message,
                                    target_annotations, time_ns, timestamp)
 
 import foxglove
@@ -82,6 +84,7 @@ DEFAULT_PORT = 8765   # Foxglove's usual WebSocket port
 MAX_ROBOTS = 256
 FORGET_S = 600.0      # a robot silent this long loses its channels
 BACKLOG = 256         # messages queued per viewer before the oldest are dropped
+RECORD_MAX_BYTES = 10**9  # a recording stops at this size (asnn foxglove --mcap-max-mb: 1000)
 
 
 # the SDK's loggers (its Rust modules' log lines, through pyo3-log) that write a line per
@@ -190,13 +193,22 @@ class FoxgloveBridge:
         Seconds between two log lines of the same rejection reason.
     clock : callable
         Seconds, monotonic (staleness, forgetting, log rate); injectable for tests.
+    record : str or Path, optional
+        A new MCAP file that records every message the viewers are sent, as they are sent
+        (:class:`asnn.io.foxglove_mcap.McapRecording`), until :meth:`close`; the problems
+        (statuses) are not in it.
+    record_max_bytes : float
+        The recording stops, said at WARNING, once its file has reached this size (checked
+        every sweep, about a second), or at the first write that failed (a full disk).
     """
 
     def __init__(self, prefix: str = keys.DEFAULT_PREFIX, *, host: str = "127.0.0.1",
                  port: int = DEFAULT_PORT, max_robots: int = MAX_ROBOTS,
                  stale_after: float = STALE_S, forget_after: float = FORGET_S,
                  backlog: int = BACKLOG, log_interval: float = 10.0,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic,
+                 record: str | Path | None = None,
+                 record_max_bytes: float = RECORD_MAX_BYTES):
         self.prefix = keys.check_prefix(prefix)
         self.max_robots, self.stale_after = max_robots, stale_after
         self.forget_after, self.clock = forget_after, clock
@@ -222,6 +234,15 @@ class FoxgloveBridge:
             self._unfilter_sdk_log()
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {exc}") from None
         self.host = host
+        self.recording: McapRecording | None = None
+        self.record_max_bytes = record_max_bytes
+        if record is not None:
+            try:
+                self.recording = McapRecording(record, self._context)
+            except OSError:
+                self.server.stop()
+                self._unfilter_sdk_log()
+                raise
         # robots are forgotten in silence too: with the whole fleet quiet (its cameras stopped,
         # the router gone) no message comes to do it, and every new viewer saw the dead topics
         self._stopped = threading.Event()
@@ -412,11 +433,27 @@ class FoxgloveBridge:
                 for status_id, (message, level) in self._statuses.items():
                     self.server.publish_status(message, level, id=status_id)
             self._stale_locked(now)
+            self._bound_recording()
             for name, state in self._robots.items():  # a second publisher's, 30 s on
                 if self._refusal_over_locked(state, now):
                     state.refusal = None
                     self._unstatus_locked(f"refused:{name}")
             self._forget_locked(now)
+
+    def _bound_recording(self) -> None:
+        """Stop the recording at its size bound or its first failed write, and say so."""
+        recording = self.recording
+        if recording is None or recording.closed:
+            return
+        if recording.error is None and recording.size < self.record_max_bytes:
+            return
+        error = recording.close()
+        if error is not None:
+            log.error("recording to %s stopped: %s (the file is finished where it could be)",
+                      recording.path, error.strerror or error)
+        else:
+            log.warning("recording to %s stopped at %.0f MB, its bound (--mcap-max-mb): "
+                        "the viewers are served on", recording.path, recording.size / 1e6)
 
     def _stale_locked(self, now: float) -> None:
         """A robot answered once and not for ``stale_after`` seconds (its worker, camera or
@@ -454,9 +491,16 @@ class FoxgloveBridge:
         self.close()
 
     def close(self) -> None:
-        """Stop serving and close every robot's channels."""
+        """Stop serving and recording, and close every robot's channels."""
         self._stopped.set()
         self._sweeper.join()
+        if self.recording is not None and not self.recording.closed:
+            error = self.recording.close()
+            if error is not None:
+                log.error("recording to %s: %s", self.recording.path, error.strerror or error)
+            else:
+                log.info("recorded %.1f MB to %s", self.recording.size / 1e6,
+                         self.recording.path)
         with self._lock:
             for state in self._robots.values():
                 state.close()

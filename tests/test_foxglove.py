@@ -5,6 +5,7 @@ through a real Zenoh session and a WebSocket client."""
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import math
 import os
@@ -928,3 +929,62 @@ def test_the_sdks_lines_reason_leaves_out_the_viewers_address_and_numbers():
     assert kinds == {"foxglove.websocket.connected_client:Invalid message from <client>"}
     assert reason("Client 12 sent 3 frames too big") == reason("Client 7 sent 45 frames too big")
     assert reason("Client 12 sent 3 frames too big") != reason("Client 12 dropped 3 messages")
+
+
+def recorded_topics(path) -> dict[str, int]:
+    """Messages per topic of an MCAP file, read through its summary's index."""
+    from collections import Counter
+
+    with open(path, "rb") as fh:
+        return dict(Counter(channel.topic for _, channel, _ in make_reader(fh).iter_messages()))
+
+
+def test_the_live_server_records_what_its_viewers_are_sent_to_a_new_file(tmp_path):
+    """An integrator's trial: the project had no recorder of the live fleet for a later look
+    in Foxglove (only ``asnn detect --mcap`` of a clip); they wrote their own."""
+    from clients.foxglove import FoxgloveBridge
+
+    path = tmp_path / "fleet.mcap"
+    with FoxgloveBridge(port=0, record=path) as bridge:
+        for seq in range(1, 6):
+            bridge.offer("asnn/r1/preview", camera_preview(seq, 0.05 * seq))
+            bridge.offer("asnn/r1/response", response("r1", seq, 0.05 * seq, seq >= 4))
+        bridge.offer("asnn/r1/warning", response("r1", 4, 0.2))
+        bridge.offer("asnn/r2/response", response("r2", 1, 0.05, False))
+    topics = recorded_topics(path)
+    assert topics["/asnn/r1/preview"] == 5 and topics["/asnn/r1/response"] == 5
+    assert topics["/asnn/r1/warning"] == 1 and topics["/asnn/r2/response"] == 1
+    assert topics["/asnn/r1/annotations"] >= 5
+    with pytest.raises(OSError, match="exists; a recording goes to a new file"):
+        FoxgloveBridge(port=0, record=path)
+    assert recorded_topics(path) == topics  # never overwritten
+
+
+def test_a_recording_stops_at_its_bound_and_the_file_is_whole(tmp_path, caplog):
+    from clients.foxglove import FoxgloveBridge
+
+    path = tmp_path / "fleet.mcap"
+    with caplog.at_level("WARNING", logger="asnn.foxglove"), FoxgloveBridge(
+            port=0, record=path, record_max_bytes=1) as bridge:
+        bridge.offer("asnn/r1/response", response("r1", 1, 0.05))
+        bridge.sweep()
+        assert bridge.recording.closed
+        size = path.stat().st_size
+        bridge.offer("asnn/r1/response", response("r1", 2, 0.1))  # served, not recorded
+    assert path.stat().st_size == size
+    assert recorded_topics(path) == {"/asnn/r1/response": 1}
+    assert f"recording to {path} stopped at 0 MB, its bound (--mcap-max-mb)" in caplog.text
+
+
+def test_asnn_foxglove_refuses_a_recording_it_cannot_make_before_it_serves(tmp_path, capsys):
+    from cli.main import main
+
+    taken = tmp_path / "taken.mcap"
+    taken.write_bytes(b"mine")
+    for args, says in ((["--mcap", str(taken)], "exists; a recording goes to a new file"),
+                       (["--mcap", str(tmp_path / "none" / "x.mcap")], "cannot write"),
+                       (["--mcap", str(tmp_path / "x.json")], "ends in .mcap")):
+        with contextlib.suppress(SystemExit):
+            assert main(["foxglove", "--port", "0", *args]) == 2
+        assert says in capsys.readouterr().err
+    assert taken.read_bytes() == b"mine"

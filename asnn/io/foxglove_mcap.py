@@ -34,7 +34,7 @@ except ImportError as exc:  # the optional extra is missing: say which one, in o
                       f" ({exc.name} is missing)") from exc
 
 __all__ = ["DEFAULT_TOPIC_PREFIX", "IMAGE_FORMATS", "RESPONSE_SCHEMA", "FoxgloveMcapWriter",
-           "close_channels", "image_message", "response_message", "target_annotations", "time_ns",
+           "McapRecording", "close_channels", "image_message", "response_message", "target_annotations", "time_ns",
            "timestamp"]
 
 DEFAULT_TOPIC_PREFIX = "/asnn"
@@ -193,8 +193,8 @@ class _FileSink:
     :class:`FoxgloveMcapWriter` checks :attr:`error` after each frame and stops at the first
     that failed."""
 
-    def __init__(self, path: Path):
-        self._file = open(path, "wb")  # noqa: SIM115  (closed by FoxgloveMcapWriter.close)
+    def __init__(self, path: Path, mode: str = "wb"):
+        self._file = open(path, mode)  # noqa: SIM115  (closed by its writer's close)
         self.error: OSError | None = None
 
     def _kept(self, call, *args):
@@ -236,6 +236,71 @@ class _QuietAfterFailure(logging.Filter):
 
     def filter(self, record: logging.LogRecord) -> bool:
         return self._sink.error is None
+
+
+class McapRecording:
+    """An MCAP file recording every channel of a Foxglove context as it is logged (the live
+    server's, ``asnn foxglove --mcap``), until :meth:`close`.
+
+    The file must not exist (a recording is never overwritten). The SDK reports no write
+    error to the code that logs: :attr:`error` keeps the first (a full disk), and
+    :attr:`size` is the bytes written so far, for the caller to stop the recording at a
+    bound of its own.
+
+    Raises
+    ------
+    OSError
+        If the file exists or cannot be created.
+    """
+
+    def __init__(self, path: str | Path, context: foxglove.Context):
+        self.path = Path(path)
+        try:
+            self._sink = _FileSink(self.path, mode="xb")
+        except FileExistsError:
+            raise OSError(f"{self.path}: exists; a recording goes to a new file") from None
+        except OSError as exc:
+            raise OSError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        try:
+            self._writer = foxglove.open_mcap(self._sink, context=context)
+        except Exception as exc:  # the SDK's own error type
+            self._sink.close()
+            raise OSError(f"cannot write {self.path}: {exc}") from None
+        self._quiet = _QuietAfterFailure(self._sink)
+        logging.getLogger(_SDK_LOGGER).addFilter(self._quiet)
+
+    @property
+    def size(self) -> int:
+        """Bytes written so far (the file's, once closed)."""
+        return self._sink.tell() if self._writer is not None else self._size
+
+    @property
+    def error(self) -> OSError | None:
+        """The first write that failed, or None."""
+        return self._sink.error
+
+    @property
+    def closed(self) -> bool:
+        return self._writer is None
+
+    def close(self) -> OSError | None:
+        """Finish the file (its index and summary) and stop recording; returns the first error
+        the file met, or None. Closing twice does nothing."""
+        if self._writer is None:
+            return self._sink.error
+        writer, failure = self._writer, None
+        try:
+            writer.close()
+        except Exception as exc:  # the SDK's error type (RuntimeError)
+            failure = exc
+        finally:
+            self._size = self._sink.tell()
+            self._writer = None
+            self._sink.close()
+            logging.getLogger(_SDK_LOGGER).removeFilter(self._quiet)
+        if self._sink.error is None and failure is not None:
+            return OSError(str(failure))
+        return self._sink.error
 
 
 def close_channels(*channels) -> None:
