@@ -32,6 +32,9 @@ STALE_S = 3.0         # no response for this long: stale (no worker watches it)
 RECENT_SAMPLES = 4096  # warnings remembered to drop the second copy of each (two subscribers)
 ANSWERED_FRAMES = 32  # (seq, stamp) of a robot's latest answered frames, for answered_frame
 PREVIEW_STAMP_SLACK_S = 0.001  # a preview's stamp against its frame's answers (a camera's rounding)
+# previews waiting to be checked (each is decoded, up to 1 Mpx: 20 ms for a 5 kB png that
+# declares one): a ring that drops the oldest, drained by a thread of its own
+PREVIEW_RING = 64
 
 
 def decode_fleet_sample(key: str, payload: bytes, prefix: str
@@ -241,7 +244,13 @@ class FleetSubscriber:
     and with ``refusals`` the workers' refusal notices), feeding ``store`` (a
     :class:`clients.dashboard.store.FleetStore`, or anything with a ``prefix`` and an
     ``offer(key, payload)`` that never raises, such as the Foxglove bridge of
-    :mod:`clients.foxglove`)."""
+    :mod:`clients.foxglove`).
+
+    The previews reach ``store`` from a thread of their own, through a ring of the latest
+    :data:`PREVIEW_RING` (older ones are dropped: thumbnails, best effort): checking one
+    decodes it, and a callback that takes that long held up the session's other
+    subscribers, so that a flood of small previews that declare a megapixel delayed every
+    robot's responses and warnings by 20-30 s (a control-room trial)."""
 
     def __init__(self, session, store, *, refusals: bool = False):
         prefix = store.prefix
@@ -249,12 +258,32 @@ class FleetSubscriber:
         self.keys = [keys.responses(prefix), keys.warnings(prefix), keys.previews(prefix)]
         if refusals:
             self.keys.append(keys.refusals(prefix))
-        self._subscribers = [
-            *(session.declare_subscriber(key, self._on_sample)
-              for key in self.keys if key != keys.warnings(prefix)),
-            # an advanced subscriber (history, recovery) and a plain one, each warning once
-            *declare_warning_subscribers(session, keys.warnings(prefix), self._on_sample),
-        ]
+        import zenoh
+
+        previews = session.declare_subscriber(keys.previews(prefix),
+                                              zenoh.handlers.RingChannel(PREVIEW_RING))
+        self._subscribers = [previews]
+        try:
+            self._subscribers += [
+                *(session.declare_subscriber(key, self._on_sample) for key in self.keys
+                  if key not in (keys.warnings(prefix), keys.previews(prefix))),
+                # an advanced subscriber (history, recovery) and a plain one, each warning once
+                *declare_warning_subscribers(session, keys.warnings(prefix), self._on_sample),
+            ]
+        except Exception:
+            self.close()
+            raise
+        self._previews = threading.Thread(target=self._drain, args=(previews,),
+                                          name="fleet-previews", daemon=True)
+        self._previews.start()
+
+    def _drain(self, previews) -> None:
+        """The previews' thread: until their subscriber is undeclared."""
+        try:
+            for sample in previews:
+                self._on_sample(sample)
+        except Exception:  # the ring closed under us (the session closing)
+            log.debug("preview subscriber ended", exc_info=True)
 
     def _on_sample(self, sample) -> None:
         try:
@@ -275,3 +304,6 @@ class FleetSubscriber:
             except Exception:  # the session may already be closed
                 pass
         self._subscribers = []
+        thread = getattr(self, "_previews", None)
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)

@@ -646,6 +646,54 @@ def test_subscriber_feeds_the_store_over_zenoh(zenoh_net):
     assert store.invalid == {"undecodable": 1}
 
 
+def test_slow_previews_hold_up_no_response_and_the_oldest_are_dropped(procs, tmp_path):
+    """A control-room trial: checking a preview decodes it (20 ms for a 5 kB png declaring a
+    megapixel), and on the subscriber's callback that held up the session's other ones: a
+    flood of them through the router delayed every robot's responses and warnings by
+    20-30 s."""
+    import zenoh
+
+    from clients.fleet import PREVIEW_RING
+    from service.config import ZenohOptions, make_config
+    from service.demo import free_port
+
+    class Slow:
+        prefix = "asnn"
+
+        def __init__(self):
+            self.previews, self.response_after = 0, None
+
+        def offer(self, key, payload):
+            if key.endswith("/preview"):
+                time.sleep(0.02)  # an expensive one
+                self.previews += 1
+            elif self.response_after is None:
+                self.response_after = self.previews
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    config = tmp_path / "router.json5"
+    config.write_text("{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
+    procs("router", "--listen", endpoint, "--config", str(config)).wait_line("listening on")
+    client = make_config(ZenohOptions(mode="client", connect=(endpoint,),
+                                      multicast_scouting=False, gossip=False))
+    store = Slow()
+    with zenoh.open(client) as viewer, zenoh.open(client) as camera, \
+            FleetSubscriber(viewer, store) as subscriber:
+        time.sleep(0.5)  # let the subscriptions reach the router
+        for _ in range(450):  # 150 a second for 3 s, to a store that takes 50
+            camera.put("asnn/r1/preview", b"x" * 4800)
+            time.sleep(1 / 150)
+        camera.put("asnn/r1/response", encode(response(seq=1)))
+        published = store.previews
+        deadline = time.monotonic() + 3 * TIMEOUT
+        while store.response_after is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        # taken at once, not after the previews waiting
+        assert store.response_after is not None and store.response_after <= published + 2
+    assert not subscriber._previews.is_alive()  # its thread ends with the subscriber
+    assert store.previews <= published + PREVIEW_RING + 2  # the rest dropped, not queued
+
+
 # ---------------------------------------------------------------- the command
 
 def test_dashboard_command_parses_with_the_common_zenoh_options():
