@@ -85,6 +85,7 @@ MAX_ROBOTS = 256
 FORGET_S = 600.0      # a robot silent this long loses its channels
 BACKLOG = 256         # messages queued per viewer before the oldest are dropped
 RECORD_MAX_BYTES = 10**9  # a recording stops at this size (asnn foxglove --mcap-max-mb: 1000)
+STATUS_INTERVAL = 1.0  # seconds between two messages of one status id to the viewers
 
 
 # the SDK's loggers (its Rust modules' log lines, through pyo3-log) that write a line per
@@ -217,6 +218,8 @@ class FoxgloveBridge:
         self.skipped: Counter = Counter()  # valid messages not forwarded (foreign-preview)
         self._robots: dict[str, _Robot] = {}
         self._statuses: dict[str, tuple[str, StatusLevel]] = {}  # shown to the viewers, by id
+        self._told_at: dict[str, float] = {}  # when each status id was last told the viewers
+        self._untold: set[str] = set()  # ids whose latest state waits for STATUS_INTERVAL
         self._lock = threading.Lock()
         self._log = RateLimitedLog(log, log_interval, clock)
         self._next_sweep = clock()
@@ -384,13 +387,32 @@ class FoxgloveBridge:
         """Show a status to the viewers (Foxglove's problems list), unless it is shown."""
         if self._statuses.get(status_id) != (message, level):
             self._statuses[status_id] = (message, level)
-            self.server.publish_status(message, level, id=status_id)
+            self._tell_locked(status_id)
 
     def _unstatus_locked(self, *status_ids: str) -> None:
         """Take back the statuses of ``status_ids`` that are shown."""
-        shown = [i for i in status_ids if self._statuses.pop(i, None) is not None]
-        if shown:
-            self.server.remove_status(shown)
+        for status_id in status_ids:
+            if self._statuses.pop(status_id, None) is not None:
+                self._tell_locked(status_id)
+
+    def _tell_locked(self, status_id: str) -> None:
+        """Tell the viewers a status's latest state (shown or taken back), at most once per
+        STATUS_INTERVAL per id; a later change waits for the sweeper's next round. Each status
+        is a control message the SDK queues per viewer, and a viewer whose queue overflows is
+        disconnected: 1,000-5,000 notices with alternating reasons did that to every viewer."""
+        now = self.clock()
+        # the router's status follows this server's own link, not anything a peer sends
+        told = self._told_at.get(status_id, float("-inf"))
+        if status_id != "router" and now - told < STATUS_INTERVAL:
+            self._untold.add(status_id)
+            return
+        self._told_at[status_id] = now
+        self._untold.discard(status_id)
+        shown = self._statuses.get(status_id)
+        if shown is None:
+            self.server.remove_status([status_id])
+        else:
+            self.server.publish_status(shown[0], shown[1], id=status_id)
 
     @staticmethod
     def _log_preview_locked(state: _Robot, preview: Preview) -> None:
@@ -432,6 +454,11 @@ class FoxgloveBridge:
                 self._subscriptions.new.clear()
                 for status_id, (message, level) in self._statuses.items():
                     self.server.publish_status(message, level, id=status_id)
+            for status_id in list(self._untold):
+                self._tell_locked(status_id)
+            for status_id in [i for i, t in self._told_at.items()
+                              if now - t >= STATUS_INTERVAL and i not in self._untold]:
+                del self._told_at[status_id]
             self._stale_locked(now)
             self._bound_recording()
             for name, state in self._robots.items():  # a second publisher's, 30 s on

@@ -557,9 +557,24 @@ def test_a_worker_refusing_a_robots_frames_is_a_problem_until_it_is_answered():
         bridge.offer("asnn/r2/warning", response("r2", 7, 7.0))  # a warning is no answer
         assert "refused:r2" in statuses.shown
         bridge.offer("asnn/r2/response", response("r2", 8, 8.0))
+        assert "refused:r2" in statuses.shown  # said a moment ago: taken back a second on
+        clock[0] += 1.0
+        bridge.sweep()
         assert statuses.shown == {} and statuses.sent[-1] == ("remove", ["refused:r2"])
         bridge.offer("asnn/r2/response", response("r2", 9, 9.0))
         assert len(statuses.sent) == 3  # taken back once
+        # a flood of notices whose reason keeps changing: at most one status a second
+        for count in range(5000):
+            bridge.offer("asnn/r2/refused", notice(("late", "undecodable")[count % 2],
+                                                   count + 1))
+        assert len(statuses.sent) == 3  # taken back a moment ago: said a second on
+        clock[0] += 1.0
+        bridge.sweep()  # the latest said, once
+        assert len(statuses.sent) == 4 and "undecodable" in statuses.shown["refused:r2"][1]
+        bridge.offer("asnn/r2/response", response("r2", 10, 10.0))
+        clock[0] += 1.0
+        bridge.sweep()
+        assert statuses.shown == {}
 
         # a second camera on r1's key: the robot's own frames are answered meanwhile
         bridge.offer("asnn/r1/refused", notice("second-publisher", 1, robot="r1"))
@@ -905,6 +920,7 @@ def test_the_problems_are_said_again_once_per_subscription_and_cleared_at_the_la
             robot="r1", worker="w1", reason="second-publisher", count=1, detail="frame 9")))
         clock[0] = 4.0
         bridge.offer("asnn/r1/response", response("r1", 3, 1.1))
+        clock[0] = 4.6  # stale:r1 was said at 3.5: taken back a second on
         bridge.sweep()
         assert list(statuses.shown) == ["refused:r1"]
         clock[0] = 3.5 + CONTESTED_FOR_S + 0.5  # no response since, no notice
