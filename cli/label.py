@@ -6,7 +6,8 @@ their clips are entered by hand, as ``sub/clip.mp4``, and then checked like the 
 filled in, the rest to fill in by hand: :func:`asnn.evaluation.labels.unlabelled`), and lists
 what is left to do: entries to finish or mend, clips that decode to other frames, another frame
 rate or another size than their labels say, a centre outside the clip's frames, labels whose clip
-is not there. Exit status 0 when every entry is ready for
+is not there, and bags (``.mcap``) no entry names (entered by hand, with their topic). Exit
+status 0 when every entry is ready for
 ``asnn eval``, 1 when something is listed, 2 for unusable input.
 """
 
@@ -92,7 +93,13 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             todo.append(str(exc))
     new_videos = [folder / name for name in new_names]
-    if not entries and not new_videos:
+    named = {Path(str(e.get("file"))).name for e in entries if isinstance(e, dict)}
+    for bag in sorted(folder.glob("*.mcap")):  # entered by hand: the topic is the user's
+        if bag.name not in named and bag.is_file():
+            todo.append(f"{bag.name}: a bag no entry names: enter it by hand, with its image "
+                        f'topic where it has several ({{"file": "{bag.name}", "topic": '
+                        '"/camera/image_raw", "fps": ..., "collision": ...}, docs/foxglove.md)')
+    if not entries and not new_videos and not todo:
         print(f"asnn label: {folder} holds no video ({', '.join(VIDEO_SUFFIXES)}; subfolders "
               "are not searched: enter their clips by hand, as sub/clip.mp4, and bags with "
               "their topic)")

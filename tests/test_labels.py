@@ -257,6 +257,14 @@ def test_label_and_eval_take_a_raw_camera_stream_and_say_it_states_no_rate(tmp_p
                                                                "frames": 12}]))
     assert main(["label", str(tmp_path / "solo")]) == 0
     assert "labels.json: 1 entry, every one ready for asnn eval" in capsys.readouterr().out
+    # a bag beside it: entered by hand (its topic is the user's), and said so, not "ready"
+    (tmp_path / "solo" / "run.mcap").write_bytes(b"")
+    assert main(["label", str(tmp_path / "solo")]) == 1
+    assert capsys.readouterr().out.startswith("run.mcap: a bag no entry names: enter it by hand")
+    entries = [{**loom.label("loom.avi"), "frames": 12},
+               {**loom.label("run.mcap"), "topic": "/c", "frames": 12}]
+    (tmp_path / "solo" / "labels.json").write_text(json.dumps(entries))
+    assert main(["label", str(tmp_path / "solo")]) == 0  # named: the bag is not listed
 
 
 def test_a_link_to_a_clip_that_is_gone_is_named_not_skipped(tmp_path, capsys):
