@@ -291,6 +291,25 @@ def test_driving_collision_course_keeps_its_bearing_and_ends_at_the_bumper():
     assert np.array_equal(scene.frames[-1], scene.frames[-2])  # the crash stops the motion
 
 
+@pytest.mark.parametrize("front, speed, oncoming", [(0.5, 3.0, 0.0), (0.3, 3.0, 0.0),
+                                                    (2.0, 20.0, -20.0)])
+def test_a_short_bumper_or_a_fast_closing_keeps_the_target_drawn_and_labelled_to_contact(
+        front, speed, oncoming):
+    """A stress trial: nothing nearer than 0.5 m was drawn nor labelled, but a robot's bumper
+    (0.3-0.5 m ahead of its camera) or a frame's travel at 40 m/s closing puts the target
+    nearer at contact: its centre was NaN (its label no JSON, asnn eval's end a crash) and it
+    vanished from the picture."""
+    box = Vehicle(0.0, 9.0 if speed < 10 else 80.5, oncoming, width=0.8, height=1.0,
+                  shape="rect", albedo=0.3)
+    scene = driving_scene(speed=speed, frames=80, front=front, camera_height=0.6,
+                          vehicles=(box,), target=0)
+    c = scene.contact_frame
+    assert scene.collision and all(map(math.isfinite, scene.center))
+    json.dumps(scene.label("robot.mp4"), allow_nan=False)
+    road = driving_scene(speed=speed, frames=c + 1, front=front, camera_height=0.6)
+    assert np.abs(scene.frames[c].astype(float) - road.frames[c]).mean() > 20  # still there
+
+
 def test_driving_pass_in_the_next_lane_drifts_out_and_is_no_collision():
     scene = driving_scene(vehicles=(Vehicle(-LANE_WIDTH, 84.0, -12.0),), target=0, frames=90)
     assert not scene.collision

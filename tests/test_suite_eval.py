@@ -124,6 +124,19 @@ def test_synthetic_eval_end_to_end(evaluated):
     assert (out / "plots" / "summary.png").is_file()
 
 
+def test_a_case_whose_label_is_no_json_stops_before_its_detectors(monkeypatch, tmp_path):
+    """A stress trial: a generated collision whose centre was NaN ran every detector on every
+    case and then stopped at writing labels.json, naming neither the case nor the field."""
+    ran = []
+    monkeypatch.setattr(suite, "perturb_label",
+                        lambda label, perturbation: {**label, "center": [float("nan")] * 2})
+    monkeypatch.setattr(suite, "run_detector", lambda *args: ran.append(args))
+    name = "loom-dark-c1.0-d12-center"
+    with pytest.raises(ValueError, match=f"case {name}: its label is not valid JSON"):
+        suite._run_case(name, [parse_detector("lgmd1")], str(tmp_path), 5, False)
+    assert ran == []
+
+
 def test_synthetic_eval_rejects_an_unknown_case(tmp_path, capsys):
     assert main(["eval", "--synthetic", "--cases", "no-such-*", "--out", str(tmp_path)]) == 2
     assert "no suite case matches" in capsys.readouterr().err

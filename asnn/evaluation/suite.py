@@ -17,6 +17,7 @@ spec, see :mod:`asnn.evaluation.runs`) over each case, scores it with
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -50,6 +51,10 @@ def _run_case(name: str, specs: Sequence[DetectorSpec], out_dir: str, warmup: in
     and score every detector on it, write its results."""
     scene = make_case(name, variant, driving_size, scale)
     label = perturb_label(scene.label(f"{name}.mp4"), perturbation)
+    try:  # a label that cannot be written must stop the run before its detectors, naming it
+        json.dumps(label, allow_nan=False)
+    except ValueError as error:
+        raise ValueError(f"case {name}: its label is not valid JSON ({error})") from None
     entry = {"label": label, "scores": {}}
     series = {}
     for spec in specs:

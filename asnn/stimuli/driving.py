@@ -45,6 +45,8 @@ _LINE_WIDTH, _EDGE_WIDTH = 0.12, 0.15
 _DASH_PERIOD, _DASH_DUTY = 9.0, 1.0 / 3.0
 _TEXEL = 0.05                          # metres per texel of the fine asphalt grain
 _NEAR = 0.5                            # nothing nearer than this is drawn (m)
+# ... except that the near clip moves closer for a short bumper or a fast closing speed, so
+# the target is still drawn and labelled at contact (the frame its near face is at the bumper)
 _EGO_WIDTH = 1.8
 
 
@@ -240,6 +242,7 @@ class _Camera:
     z: np.ndarray
     heading: np.ndarray
     pitch: np.ndarray
+    near: float = _NEAR
 
     @property
     def center(self) -> tuple[float, float]:
@@ -262,7 +265,7 @@ class _Camera:
         when it is not in front of us."""
         x, yb, z = self.point(s, d, bottom, k)
         _, yt, zt = self.point(s, d, top, k)
-        if min(z, zt) < _NEAR:
+        if min(z, zt) < self.near:
             return None
         _, cy = self.center
         return x, z, cy + self.f * yb / z, cy + self.f * yt / zt
@@ -341,7 +344,7 @@ def _draw_boxes(image: np.ndarray, camera: _Camera, k: int, look: _Look, boxes) 
 
 
 def _target_label(camera: _Camera, vehicle: Vehicle, s_v: np.ndarray, d_v: np.ndarray,
-                  fps: float):
+                  fps: float, near: float = _NEAR):
     """Image centre (of the near face), image height and time to contact of a vehicle at road
     positions (``s_v``, ``d_v``) frame by frame."""
     cx, cy = camera.center
@@ -350,7 +353,7 @@ def _target_label(camera: _Camera, vehicle: Vehicle, s_v: np.ndarray, d_v: np.nd
                          for k, (s, d) in enumerate(zip(s_v, d_v))]).T
     _, yt, zt = np.array([camera.point(s, d, vehicle.height, k)
                           for k, (s, d) in enumerate(zip(s_v, d_v))]).T
-    seen = np.minimum(z, zt) >= _NEAR  # NaN once it is beside or behind us
+    seen = np.minimum(z, zt) >= near  # NaN once it is beside or behind us
     with np.errstate(divide="ignore", invalid="ignore"):
         track = np.where(seen[:, None],
                          np.stack([cx + f * x / z, cy + f * (yb / z + yt / zt) / 2], axis=1),
@@ -438,8 +441,13 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
     ego_s = speed * t / fps
     pitch = math.radians(pitch_deg) + math.radians(bumps_deg) * (
         np.sin(2 * math.pi * 1.3 * t / fps) + 0.5 * np.sin(2 * math.pi * 3.1 * t / fps + 1.0))
+    near = min(_NEAR, 0.5 * front)
+    if contact is not None:  # the gap at contact can be a whole frame's travel under the bumper
+        gap_at_contact = vehicles[target].distance + vehicles[target].travelled(
+            np.array([contact]), fps)[0] - speed * contact / fps
+        near = max(0.02, min(near, 0.5 * gap_at_contact))
     camera = _Camera(size, f, camera_height, curvature, ego_s, *path_pose(ego_s, curvature),
-                     pitch)
+                     pitch, near)
     vehicle_s = [v.distance + v.travelled(t, fps) for v in vehicles]
     vehicle_d = [v.lateral(t, fps) for v in vehicles]
     pyramid = _pyramid(seed)
@@ -459,7 +467,7 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
     track = target_size = ttc = None
     if target is not None:
         track, target_size, ttc = _target_label(camera, vehicles[target], vehicle_s[target],
-                                                vehicle_d[target], fps)
+                                                vehicle_d[target], fps, near)
     collision = contact is not None
     params = dict(size=size, fps=fps, frames=frames, speed=speed, curvature=curvature,
                   bumps_deg=bumps_deg, night=night, vehicles=[asdict(v) for v in vehicles],
