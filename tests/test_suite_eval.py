@@ -176,12 +176,26 @@ def test_synthetic_eval_of_the_extra_drives_outside_the_suite(tmp_path, capsys):
         ("extra-day-moves-in", "extra-threat"), ("extra-day-moves-in-stays-beside", "extra-pass")]
     report = (out / "report.md").read_text()
     assert "Extra cases outside the suite" in report
+    assert "and not looked at while the default preset was designed." in report
     assert "extra-day-moves-in-stays-beside" in report.split("## Near misses")[1]  # paired
     capsys.readouterr()
     assert main(["scene", "--list", "extra-*"]) == 0
     listed = capsys.readouterr().out.splitlines()
     assert len(listed) == len(EXTRA_CASES) and all(line.startswith("extra-") for line in listed)
     assert open_source("synthetic:extra-day-sharp-left").fps == 20.0
+
+
+def test_a_report_names_the_extra_cases_the_default_was_designed_on():
+    """A stress trial: every extra case was "not looked at while the default preset was
+    designed", the walls and corridors it was designed on too."""
+    cases = [{"name": n, "group": "extra-clear"}
+             for n in ("extra-wall-recede", "extra-corridor", "extra-corridor-slow",
+                       "extra-day-moves-in")]
+    assert suite._extra_note(cases) == (
+        "Extra cases outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
+        "version. The default preset's design looked at some of them, whose figures are "
+        "in-sample: the surface-ahead pathway on `extra-wall-*` (1 here); the corridor gate "
+        "on `extra-corridor*` (2 here); the other 1 was not looked at.")
 
 
 def test_synthetic_eval_of_drives_rendered_at_another_size(tmp_path):

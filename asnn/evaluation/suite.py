@@ -24,7 +24,8 @@ from pathlib import Path
 
 from ..io.files import write_atomically
 from ..stimuli.effects import scaled_size
-from ..stimuli.suite import (CASES, DRIVING_SIZE, EXTRA_GROUPS, GROUPS, PLANAR_SIZE,
+from ..stimuli.suite import (CASES, DESIGN_INPUTS, DRIVING_SIZE, EXTRA_GROUPS, GROUPS,
+                             PLANAR_SIZE,
                              SUITE_VERSION, check_driving_size, check_scale, check_variant,
                              make_case, suite_cases)
 from . import scoring
@@ -292,6 +293,25 @@ def _category_cell(s: Mapping) -> str:
     return ", ".join(parts)
 
 
+def _extra_note(cases: list[dict]) -> str:
+    """What the report says of the extra cases it holds: which the default preset's design
+    looked at (:data:`asnn.stimuli.suite.DESIGN_INPUTS`: in-sample), and that the others were
+    not."""
+    extra = [c["name"] for c in cases if c["group"] in EXTRA_GROUPS]
+    seen = {prefix: [n for n in extra if n.startswith(prefix)] for prefix in DESIGN_INPUTS}
+    seen = {prefix: names for prefix, names in seen.items() if names}
+    note = ("Extra cases outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
+            "version")
+    if not seen:
+        return note + ", and not looked at while the default preset was designed."
+    looked = "; ".join(f"{DESIGN_INPUTS[prefix]} on `{prefix}*` ({len(names)} here)"
+                       for prefix, names in seen.items())
+    others = len(extra) - sum(map(len, seen.values()))
+    return (f"{note}. The default preset's design looked at some of them, whose figures are "
+            f"in-sample: {looked}" + (f"; the other {others} {'was' if others == 1 else 'were'}"
+                                       " not looked at." if others else "."))
+
+
 def suite_report(results: Mapping) -> str:
     """``report.md`` of a suite run (what :func:`evaluate_suite` returns)."""
     settings = results["settings"]
@@ -309,9 +329,7 @@ def suite_report(results: Mapping) -> str:
            " persistence and motion layers on variants 1-5 (docs/evaluation.md, 'The same cases"
            " in fresh scenery').",
            ""] if settings.get("variant") else []),
-        *(["Extra cases outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
-           "version, and not looked at while the default preset was designed.", ""]
-          if any(c["group"] in EXTRA_GROUPS for c in cases) else []),
+        *([_extra_note(cases), ""] if any(c["group"] in EXTRA_GROUPS for c in cases) else []),
         *([f"Frames perturbed: {settings['perturbation']} "
            f"({describe(settings['perturbation'])}).", ""]
           if settings.get("perturbation") else []),

@@ -88,7 +88,7 @@ from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 from .surface import corridor_scene, surface_scene
 
-__all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "Case", "SUITE_CASES", "EXTRA_CASES",
+__all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "DESIGN_INPUTS", "Case", "SUITE_CASES", "EXTRA_CASES",
            "CASES", "suite_cases", "make_case", "check_variant", "check_driving_size",
            "check_scale", "DRIVING_SIZE", "LARGEST_SIZE", "PLANAR_SIZE", "SCALES"]
 
@@ -97,6 +97,10 @@ GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "rece
           "translation", "moving-pattern", "camera", "brightness", "noise", "driving-threat",
           "driving-pass", "driving-clear")
 EXTRA_GROUPS = ("extra-threat", "extra-pass", "extra-clear")  # EXTRA_CASES (module docstring)
+# the extra cases the default preset's design looked at, and what was designed on them (README,
+# "Beyond the suite"): their figures are in-sample
+DESIGN_INPUTS = {"extra-wall-": "the surface-ahead pathway",
+                 "extra-corridor": "the corridor gate"}
 PLANAR_SIZE = (160, 120)
 DRIVING_SIZE = (192, 128)
 SCALES = (0.5, 8.0)  # the smallest and largest scale make_case renders every case at
