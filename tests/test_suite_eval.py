@@ -189,13 +189,13 @@ def test_a_report_names_the_extra_cases_the_default_was_designed_on():
     """A stress trial: every extra case was "not looked at while the default preset was
     designed", the walls and corridors it was designed on too."""
     cases = [{"name": n, "group": "extra-clear"}
-             for n in ("extra-wall-recede", "extra-corridor", "extra-corridor-slow",
+             for n in ("extra-wall-recede", "extra-corridor", "extra-corridor-board",
                        "extra-day-moves-in")]
     assert suite._extra_note(cases) == (
         "Extra cases outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
         "version. The default preset's design looked at some of them, whose figures are "
-        "in-sample: the surface-ahead pathway on `extra-wall-*` (1 here); the corridor gate "
-        "on `extra-corridor*` (2 here); the other 1 was not looked at.")
+        "in-sample: the surface-ahead pathway on `extra-wall-recede`; the corridor gate on "
+        "`extra-corridor`; the other 2 were not looked at.")
 
 
 def test_synthetic_eval_of_drives_rendered_at_another_size(tmp_path):

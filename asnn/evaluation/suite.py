@@ -17,6 +17,7 @@ spec, see :mod:`asnn.evaluation.runs`) over each case, scores it with
 
 from __future__ import annotations
 
+import fnmatch
 import json
 import time
 from collections.abc import Mapping, Sequence
@@ -298,14 +299,15 @@ def _extra_note(cases: list[dict]) -> str:
     looked at (:data:`asnn.stimuli.suite.DESIGN_INPUTS`: in-sample), and that the others were
     not."""
     extra = [c["name"] for c in cases if c["group"] in EXTRA_GROUPS]
-    seen = {prefix: [n for n in extra if n.startswith(prefix)] for prefix in DESIGN_INPUTS}
-    seen = {prefix: names for prefix, names in seen.items() if names}
+    seen = {what: [n for n in extra if any(fnmatch.fnmatchcase(n, p) for p in patterns)]
+            for what, patterns in DESIGN_INPUTS.items()}
+    seen = {what: names for what, names in seen.items() if names}
     note = ("Extra cases outside the suite (`asnn.stimuli.suite.EXTRA_CASES`): not part of its "
             "version")
     if not seen:
         return note + ", and not looked at while the default preset was designed."
-    looked = "; ".join(f"{DESIGN_INPUTS[prefix]} on `{prefix}*` ({len(names)} here)"
-                       for prefix, names in seen.items())
+    looked = "; ".join(f"{what} on {', '.join(f'`{n}`' for n in names)}"
+                       for what, names in seen.items())
     others = len(extra) - sum(map(len, seen.values()))
     return (f"{note}. The default preset's design looked at some of them, whose figures are "
             f"in-sample: {looked}" + (f"; the other {others} {'was' if others == 1 else 'were'}"

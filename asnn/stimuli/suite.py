@@ -99,8 +99,9 @@ GROUPS = ("approach", "approach-stops", "approach-in-clutter", "nearmiss", "rece
 EXTRA_GROUPS = ("extra-threat", "extra-pass", "extra-clear")  # EXTRA_CASES (module docstring)
 # the extra cases the default preset's design looked at, and what was designed on them (README,
 # "Beyond the suite"): their figures are in-sample
-DESIGN_INPUTS = {"extra-wall-": "the surface-ahead pathway",
-                 "extra-corridor": "the corridor gate"}
+DESIGN_INPUTS = {"the surface-ahead pathway": ("extra-wall-*",),
+                 "the corridor gate": ("extra-corridor", "extra-corridor-slow",
+                                       "extra-corridor-fast")}  # nothing ahead
 PLANAR_SIZE = (160, 120)
 DRIVING_SIZE = (192, 128)
 SCALES = (0.5, 8.0)  # the smallest and largest scale make_case renders every case at
