@@ -493,6 +493,25 @@ def test_suite_cases_are_deterministic_and_selectable(suite):
         make_case("no-such-case")
 
 
+def test_post_scene_lights_or_rains_on_any_generator_and_keeps_its_label():
+    from asnn.stimuli.effects import Step
+    from asnn.stimuli.heldout import post_scene
+
+    options = dict(vehicles=(Vehicle(0.0, 30.0, 0.0),), target=0, speed=10.0, frames=40,
+                   seed=5)
+    plain = driving_scene(**options)
+    lit = post_scene(base=driving_scene, lighting=(Step(10, 0.5),), **options)
+    assert lit.frames[:10].mean() == pytest.approx(plain.frames[:10].mean(), abs=0.5)
+    assert lit.frames[10:].mean() == pytest.approx(0.5 * plain.frames[10:].mean(), abs=0.5)
+    rain = post_scene(base=driving_scene, rain=True, **options)
+    again = post_scene(base=driving_scene, rain=True, **options)
+    assert np.array_equal(rain.frames, again.frames)  # seeded
+    assert (rain.frames.astype(int) - plain.frames > 30).mean() > 0.005  # bright streaks
+    same = {k: v for k, v in plain.label("x").items() if k != "description"}
+    assert {k: v for k, v in rain.label("x").items() if k in same} == same
+    assert rain.params["rain"] is True and "'rain': True" in rain.label("x")["description"]
+
+
 def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins():
     # the suite's selections (every case, its groups and name patterns) never take them in
     assert not set(EXTRA_CASES) & set(SUITE_CASES)

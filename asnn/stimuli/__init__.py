@@ -14,6 +14,8 @@
 :mod:`~asnn.stimuli.suite`
     The named, versioned, labelled suite of such scenes (``make_case``, :data:`SUITE_CASES`)
     that ``asnn eval --synthetic`` scores.
+:mod:`~asnn.stimuli.heldout`
+    Any generator's scene under a lighting change or rain (the held-out cases').
 :mod:`~asnn.stimuli.render`, :mod:`~asnn.stimuli.effects`, :mod:`~asnn.stimuli.scene`
     Anti-aliased drawing; camera and image effects; the :class:`Scene` (written to a video file by
     :func:`asnn.io.video.write_video`).
