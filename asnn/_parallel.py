@@ -459,34 +459,41 @@ class BandedFront:
         key = (id(on), id(off), on.shape, on.dtype)
         if key == self._bound:
             return
-        self._tell_servers(_EXIT, 1)
-        for s in self._servers:
-            s.lock.acquire()
         try:
-            h, w = on.shape[1:]
-            t = on.dtype
-            self.other = (np.zeros_like(on), np.zeros_like(off))
-            self.maps, stacked = _fast.FrontMaps.slots(SLOTS, (h, w), t)
-            self._photos = np.empty((SLOTS, h, w), t)
-            self._photo_slots = list(self._photos)  # the slots handed out (next_photo)
-            self._versions = np.zeros((SLOTS, 2, h), np.int8)  # per pass: read, write
-            self._state = np.zeros(h, np.int8)  # where each row's state is after the passes
-            self._params = np.zeros((len(self._servers), SLOTS, 3), np.int64)
-            self._timing = np.zeros((len(self._servers), SLOTS, 2), np.int64)
-            c = self.coefficients
-            self.arguments = []
-            for s in self._servers:
-                # the servers' ring buffers: made here, used only by their threads
-                scratch = _fast.Scratch(w, t)
-                self.arguments.append((
-                    self._params, self._timing, self._photos, self._versions, on, off,
-                    *self.other, c.env, c.scales, *c[2:], *scratch.buffers(),
-                    *scratch.spare(on.shape[0]), *stacked, scratch.done))
-            self._bound = key
+            self._tell_servers(_EXIT, 1)
+            # each lock in a with statement: a KeyboardInterrupt between an acquire and a
+            # try: block left one held for good (the next new stream waited for it forever)
+            self._with_servers_out(list(self._servers), lambda: self._rebind(on, off, key))
         finally:
             self._tell_servers(_EXIT, 0)
-            for s in self._servers:
-                s.lock.release()
+
+    def _with_servers_out(self, servers: list, body) -> None:
+        if not servers:
+            return body()
+        with servers[0].lock:
+            return self._with_servers_out(servers[1:], body)
+
+    def _rebind(self, on, off, key) -> None:
+        h, w = on.shape[1:]
+        t = on.dtype
+        self.other = (np.zeros_like(on), np.zeros_like(off))
+        self.maps, stacked = _fast.FrontMaps.slots(SLOTS, (h, w), t)
+        self._photos = np.empty((SLOTS, h, w), t)
+        self._photo_slots = list(self._photos)  # the slots handed out (next_photo)
+        self._versions = np.zeros((SLOTS, 2, h), np.int8)  # per pass: read, write
+        self._state = np.zeros(h, np.int8)  # where each row's state is after the passes
+        self._params = np.zeros((len(self._servers), SLOTS, 3), np.int64)
+        self._timing = np.zeros((len(self._servers), SLOTS, 2), np.int64)
+        c = self.coefficients
+        self.arguments = []
+        for s in self._servers:
+            # the servers' ring buffers: made here, used only by their threads
+            scratch = _fast.Scratch(w, t)
+            self.arguments.append((
+                self._params, self._timing, self._photos, self._versions, on, off,
+                *self.other, c.env, c.scales, *c[2:], *scratch.buffers(),
+                *scratch.spare(on.shape[0]), *stacked, scratch.done))
+        self._bound = key
 
     def start(self, p: np.ndarray, stages: tuple, overlapped: bool = False) -> _Pass:
         """Start a frame's pass: hand the servers their bands.

@@ -21,6 +21,7 @@ import dataclasses
 import math
 import numbers
 import statistics
+import sys
 import threading
 import weakref
 from collections import deque
@@ -196,6 +197,7 @@ class ASNN:
         self.threads = int(threads) if self.optimised and _parallel.supported() else 1
         self._banded: _parallel.BandedFront | None = None
         self._in_use = threading.Lock()  # a step or a stream in progress (_claim)
+        self._close_pending = False  # close() asked while in use: done when the use ends
         if self.optimised:
             t = self.dtype
             env, scales = _fast.dog_factors(p.dog_gain, p.dog_sigma1, p.dog_sigma2, p.dog_size,
@@ -225,10 +227,25 @@ class ASNN:
         return self._banded
 
     def close(self) -> None:
-        """Stop the model's worker threads (``threads`` > 1); a later frame starts new ones."""
+        """Stop the model's worker threads (``threads`` > 1); a later frame starts new ones.
+        While a step or a stream of the model is under way (a stream left suspended, a with
+        block left with its generator alive), they are stopped once it ends."""
+        if self._in_use.locked():
+            self._close_pending = True
+            return
+        self._close_now()
+
+    def _close_now(self) -> None:
+        self._close_pending = False
         if self._banded is not None:
             self._finalizer()
             self._banded = None
+
+    def _release(self) -> None:
+        """End a step or a stream: release the model, closing it if asked meanwhile."""
+        self._in_use.release()
+        if self._close_pending:
+            self._close_now()
 
     def __enter__(self) -> "ASNN":
         return self
@@ -239,7 +256,18 @@ class ASNN:
     # ------------------------------------------------------------------ state
 
     def reset(self) -> None:
-        """Forget the stream: the next frame starts a new one (of any size)."""
+        """Forget the stream: the next frame starts a new one (of any size).
+
+        Raises
+        ------
+        RuntimeError
+            While a step is under way on another thread, or a stream with worker threads
+            (``threads`` > 1), which has taken frames ahead of its responses: reset it between
+            streams (or before :meth:`stream`, whose frames then start afresh).
+        """
+        if self._in_use.locked():
+            raise RuntimeError("this ASNN model is stepping (a stream of it is under way, or a "
+                               "step on another thread): reset it between streams")
         self.shape: tuple[int, int] | None = None
         self.previous: np.ndarray | None = None
         self.previous_blocks: np.ndarray | None = None
@@ -390,7 +418,7 @@ class ASNN:
                 self._front(taken)
             return self._finish(taken)
         finally:
-            self._in_use.release()
+            self._release()
 
     def _claim(self) -> None:
         """Take the model for one step or one stream with worker threads: RuntimeError where
@@ -412,6 +440,7 @@ class ASNN:
         del state["_in_use"]
         state.pop("_finalizer", None)
         state["_banded"] = None
+        state["_close_pending"] = False
         return state
 
     def __copy__(self) -> "ASNN":
@@ -470,7 +499,7 @@ class ASNN:
             try:
                 inner.close()  # a stream left early finishes the frames it took, then releases
             finally:
-                self._in_use.release()
+                self._release()
 
     def _banded_stream(self, frames: Iterable[tuple[float | None, np.ndarray]]
                        ) -> Iterator[Response]:
@@ -506,6 +535,8 @@ class ASNN:
             while pending:
                 yield self._finish(self._joined(pending.popleft()))
         except GeneratorExit:
+            if sys.is_finalizing():  # a stream left suspended at the interpreter's exit: its
+                raise  # worker threads are gone, and waiting for their passes hung the exit
             # the caller stopped early: the frames already taken are finished (their responses
             # dropped), so that the model is as step() would leave it after ``index`` frames
             while pending:
@@ -516,9 +547,10 @@ class ASNN:
                 self._finish(self._joined(taken))
             raise
         finally:
-            banded.abandon()  # an abandoned stream: no worker goes on behind the caller
-            if self.stages_on is not None:
-                banded.settle((self.stages_on, self.stages_off))
+            if not sys.is_finalizing():
+                banded.abandon()  # an abandoned stream: no worker goes on behind the caller
+                if self.stages_on is not None:
+                    banded.settle((self.stages_on, self.stages_off))
 
     def _note_untimed(self, gap: float) -> None:
         """Count a given time whose gap the model does not believe; when PERIOD_FRAMES come in

@@ -1,6 +1,7 @@
 """Behaviour of the ASNN object: input handling, direction estimates, per-stream state."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -679,6 +680,62 @@ def test_a_stream_left_early_goes_on_as_a_step_by_step_run():
     start = len(frames) - len(rest)
     assert ([r.record(start + k, (start + k) / 20) for k, r in enumerate(rest)]
             == [r.record(start + k, (start + k) / 20) for k, r in enumerate(whole[start:])])
+
+
+def test_a_threaded_stream_is_not_reset_under_it():
+    """A concurrency review: reset() at a response of a stream with worker threads, which has
+    taken frames ahead, answered them with the reset model (indices 10, 11, 0, 1, ...), or
+    failed on a frame of no size."""
+    frames = make_scene("looming", size=(96, 72), frames=20).frames
+    with ASNN("default", threads=2) as model:
+        for response in model.stream((i / 20, f) for i, f in enumerate(frames)):
+            if response.index == 9:
+                with pytest.raises(RuntimeError, match="reset it between streams"):
+                    model.reset()
+        model.reset()  # between streams
+        assert [r.index for r in model.stream((i / 20, f) for i, f in enumerate(frames))] \
+            == list(range(len(frames)))
+
+
+_LIFECYCLE = """
+import faulthandler
+import numpy as np
+faulthandler.dump_traceback_later(90, exit=True)
+from asnn import ASNN
+
+rng = np.random.default_rng(0)
+frames = [(i / 20, rng.integers(0, 255, (240, 320), dtype=np.uint8)) for i in range(30)]
+
+
+def first_five():  # close() by the with block while the stream is suspended
+    with ASNN("default", threads=2) as model:
+        responses = model.stream(frames)
+        for response in responses:
+            if response.index == 5:
+                return response.index
+print("closed mid-stream:", first_five(), flush=True)
+
+left = ASNN("default", threads=2).stream(frames)  # suspended at the interpreter's exit
+for k, response in enumerate(left):
+    if k == 5:
+        break
+print("exit", flush=True)
+"""
+
+
+def test_a_threaded_stream_closed_under_it_or_left_at_exit_does_not_hang(tmp_path):
+    """A concurrency review: close() (a with block's) while a stream with worker threads was
+    suspended hung it for good, and a stream left suspended when the interpreter exits hung
+    the exit. Either would hang this child, which a fault handler ends after 90 s."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "lifecycle.py"
+    script.write_text(_LIFECYCLE)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=180, cwd=Path(__file__).resolve().parents[1])
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.splitlines() == ["closed mid-stream: 5", "exit"]
 
 
 @pytest.mark.parametrize("stream", [False, True])
