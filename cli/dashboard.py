@@ -32,8 +32,10 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
         server.close()
         return fail(str(exc))
     stop = stop_on_signals()
-    with session, router_watch(session, name, args, on_change=on_router), \
-            FleetSubscriber(session, store, refusals=refusals) as subscriber, server:
+    # the subscriber closed first: the server (and a Foxglove bridge's channels) would take
+    # samples still arriving after it was closed
+    with session, router_watch(session, name, args, on_change=on_router), server, \
+            FleetSubscriber(session, store, refusals=refusals) as subscriber:
         print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
               flush=True)
         while not stop.wait(0.5):

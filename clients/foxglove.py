@@ -279,6 +279,8 @@ class FoxgloveBridge:
             return None
         robot, kind, message = sample
         with self._lock:
+            if self._stopped.is_set():  # closed: no channel is made again
+                return None
             now = self.clock()
             self._forget_locked(now)
             state = self._robot_locked(robot, now)
@@ -518,8 +520,11 @@ class FoxgloveBridge:
         self.close()
 
     def close(self) -> None:
-        """Stop serving and recording, and close every robot's channels."""
-        self._stopped.set()
+        """Stop serving and recording, and close every robot's channels; a sample offered
+        since is dropped (a subscriber still feeding the bridge made a closed bridge's
+        channels again)."""
+        with self._lock:  # an offer under way ends first
+            self._stopped.set()
         self._sweeper.join()
         if self.recording is not None and not self.recording.closed:
             error = self.recording.close()
@@ -532,7 +537,7 @@ class FoxgloveBridge:
             for state in self._robots.values():
                 state.close()
             self._robots.clear()
-        self.server.stop()
+            self.server.stop()
         self._unfilter_sdk_log()
 
     def _unfilter_sdk_log(self) -> None:

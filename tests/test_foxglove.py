@@ -1004,3 +1004,59 @@ def test_asnn_foxglove_refuses_a_recording_it_cannot_make_before_it_serves(tmp_p
             assert main(["foxglove", "--port", "0", *args]) == 2
         assert says in capsys.readouterr().err
     assert taken.read_bytes() == b"mine"
+
+
+def test_a_closed_bridge_takes_no_sample_and_makes_no_channel():
+    """A concurrency review: asnn foxglove closed its bridge before the subscriber feeding
+    it, and samples arriving since made 21 robots' channels again, never closed."""
+    from clients.foxglove import FoxgloveBridge
+
+    bridge = FoxgloveBridge(port=0)
+    assert bridge.offer("asnn/r1/response", response("r1", 1, 0.05)) == "r1"
+    bridge.close()
+    assert bridge.offer("asnn/r2/response", response("r2", 1, 0.05)) is None
+    assert bridge.robots() == []
+
+
+def test_the_fleet_s_server_closes_after_the_subscriber_that_feeds_it(monkeypatch):
+    import argparse
+
+    import cli.dashboard
+    from clients import fleet
+
+    closed = []
+
+    class Server:
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            closed.append("server")
+
+        close = __exit__
+
+    class Subscriber:
+        keys = ["asnn/*/response"]
+
+        def __init__(self, *args, **kwargs):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            closed.append("subscriber")
+
+    class Stop:
+        def wait(self, seconds):
+            return True
+
+    monkeypatch.setattr(fleet, "FleetSubscriber", Subscriber)
+    monkeypatch.setattr(cli.dashboard, "session_for", lambda args: contextlib.nullcontext())
+    monkeypatch.setattr(cli.dashboard, "router_watch",
+                        lambda *args, **kwargs: contextlib.nullcontext())
+    monkeypatch.setattr(cli.dashboard, "stop_on_signals", Stop)
+    store = type("Store", (), {"received": {}, "invalid": {}, "skipped": {}})()
+    assert cli.dashboard.serve_fleet(argparse.Namespace(), store, Server(), "foxglove",
+                                     "ws://x") == 0
+    assert closed == ["subscriber", "server"]
