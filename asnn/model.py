@@ -157,6 +157,8 @@ class ASNN:
     starts a new stream.
     """
 
+    _close_pending = False  # the instance's; a class default for models pickled before it
+
     def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,
                  record_tracks: bool = False, optimised: bool = True, threads: int = 1):
         if isinstance(params, str):
@@ -220,7 +222,7 @@ class ASNN:
         a step first needs them (again after a worker's failure, once it was raised) and
         stopped when the model is closed or collected."""
         if self._banded is not None and self._banded.failed:
-            self.close()
+            self._close_now()  # the caller holds the model: close() would wait for it
         if self._banded is None:
             self._banded = _parallel.BandedFront(self._coefficients, self.threads - 1)
             self._finalizer = weakref.finalize(self, self._banded.close)
@@ -230,10 +232,15 @@ class ASNN:
         """Stop the model's worker threads (``threads`` > 1); a later frame starts new ones.
         While a step or a stream of the model is under way (a stream left suspended, a with
         block left with its generator alive), they are stopped once it ends."""
-        if self._in_use.locked():
+        if not self._in_use.acquire(blocking=False):
             self._close_pending = True
-            return
-        self._close_now()
+            # the use may have ended before the flag was set: then it is this call's to close
+            if not self._in_use.acquire(blocking=False):
+                return
+        try:
+            self._close_now()
+        finally:
+            self._in_use.release()
 
     def _close_now(self) -> None:
         self._close_pending = False
@@ -242,10 +249,13 @@ class ASNN:
             self._banded = None
 
     def _release(self) -> None:
-        """End a step or a stream: release the model, closing it if asked meanwhile."""
-        self._in_use.release()
-        if self._close_pending:
-            self._close_now()
+        """End a step or a stream: close the model if asked meanwhile, then release it (closed
+        after, a stream claimed on another thread in between had its workers stopped)."""
+        try:
+            if self._close_pending:
+                self._close_now()
+        finally:
+            self._in_use.release()
 
     def __enter__(self) -> "ASNN":
         return self

@@ -765,6 +765,42 @@ def test_a_failure_on_a_worker_thread_is_raised_not_waited_for(monkeypatch, stre
     assert outcome and "no room on the worker" in str(outcome[0])
 
 
+@pytest.mark.parametrize("stream", [False, True])
+def test_after_a_worker_s_failure_the_next_frames_get_fresh_workers(monkeypatch, stream):
+    """A review: after a worker's failure was raised, the next step (or stream) raised it
+    again, the failed workers kept (close() under the model's own use only marked them)."""
+    import threading
+
+    from asnn import _parallel
+
+    serve, calls = _parallel._serve, []
+
+    def failing_once(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise MemoryError("no room on the worker")
+        return serve(*args, **kwargs)
+
+    monkeypatch.setattr(_parallel, "_serve", failing_once)
+    frames = make_scene("looming", size=(64, 64), frames=6).frames
+    outcome = []
+
+    def run():
+        with ASNN("default", threads=2) as model:
+            for attempt in range(2):
+                try:
+                    outcome.append(len(_responses(model, frames, stream)))
+                except MemoryError:
+                    outcome.append("failed")
+                model.reset()
+
+    runner = threading.Thread(target=run, daemon=True)
+    runner.start()
+    runner.join(timeout=60)
+    assert not runner.is_alive(), "the model hung"
+    assert outcome == ["failed", len(frames)]
+
+
 def test_a_worker_computes_its_band_while_the_stepping_thread_holds_the_gil():
     """A worker thread stays in its kernel between passes (asnn._parallel): it computes its
     band while the thread that steps the model runs Python and keeps the GIL (as finishing a
