@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     from asnn.evaluation.labels import (RAW_STREAM_SUFFIXES, VIDEO_SUFFIXES, center_outside,
                                         check_labels, clip_hint, label_problem, meant_clip,
                                         mismatches, read_entries, same_name, unlabelled,
-                                        unlabelled_videos, write_entries)
+                                        unlabelled_bags, unlabelled_videos, write_entries)
     from asnn.evaluation.scoring import unscored
     from asnn.io.sources import SourceError
 
@@ -93,12 +93,10 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             todo.append(str(exc))
     new_videos = [folder / name for name in new_names]
-    named = {Path(str(e.get("file"))).name for e in entries if isinstance(e, dict)}
-    for bag in sorted(folder.glob("*.mcap")):  # entered by hand: the topic is the user's
-        if bag.name not in named and bag.is_file():
-            todo.append(f"{bag.name}: a bag no entry names: enter it by hand, with its image "
-                        f'topic where it has several ({{"file": "{bag.name}", "topic": '
-                        '"/camera/image_raw", "fps": ..., "collision": ...}, docs/foxglove.md)')
+    for bag in unlabelled_bags(folder, entries):  # entered by hand: the topic is the user's
+        todo.append(f"{bag}: a bag no entry names: enter it by hand, with its image topic "
+                    f'where it has several ({{"file": "{bag}", "topic": "/camera/image_raw", '
+                    '"fps": ..., "collision": ...}, docs/foxglove.md)')
     if not entries and not new_videos and not todo:
         print(f"asnn label: {folder} holds no video ({', '.join(VIDEO_SUFFIXES)}; subfolders "
               "are not searched: enter their clips by hand, as sub/clip.mp4, and bags with "

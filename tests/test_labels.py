@@ -265,6 +265,20 @@ def test_label_and_eval_take_a_raw_camera_stream_and_say_it_states_no_rate(tmp_p
                {**loom.label("run.mcap"), "topic": "/c", "frames": 12}]
     (tmp_path / "solo" / "labels.json").write_text(json.dumps(entries))
     assert main(["label", str(tmp_path / "solo")]) == 0  # named: the bag is not listed
+    capsys.readouterr()
+    # a review: named by its name only, a bag in a subfolder hid one of the same name; an
+    # .MCAP, a rosbag2 folder and a link to a bag that is gone were not listed
+    (tmp_path / "solo" / "sub").mkdir()
+    (tmp_path / "solo" / "sub" / "run.mcap").write_bytes(b"")
+    (tmp_path / "solo" / "labels.json").write_text(json.dumps(
+        [entries[0], {**entries[1], "file": "sub/run.mcap"}]))
+    (tmp_path / "solo" / "OTHER.MCAP").write_bytes(b"")
+    (tmp_path / "solo" / "drive").mkdir()
+    (tmp_path / "solo" / "drive" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}")
+    (tmp_path / "solo" / "gone.mcap").symlink_to(tmp_path / "nowhere.mcap")
+    assert main(["label", str(tmp_path / "solo")]) == 1
+    listed = [line.split(":")[0] for line in capsys.readouterr().out.splitlines()]
+    assert listed == ["OTHER.MCAP", "drive", "gone.mcap", "run.mcap"]
 
 
 def test_a_link_to_a_clip_that_is_gone_is_named_not_skipped(tmp_path, capsys):

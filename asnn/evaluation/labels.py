@@ -245,6 +245,22 @@ def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
     return [p.name for p in found if resolved(p) not in labelled]
 
 
+def unlabelled_bags(clips_dir: str | Path, labels: Sequence) -> list[str]:
+    """The ROS 2 bags directly in ``clips_dir`` (an ``.mcap`` file, any case, or a link to
+    one, gone too; a rosbag2 folder, one holding a ``metadata.yaml``) that no entry of
+    ``labels`` names, by any path to it: entered by hand, with their topic. Sorted by name."""
+    folder = Path(clips_dir)
+    labelled = {resolved(folder / e["file"]) for e in labels
+                if isinstance(e, Mapping) and isinstance(e.get("file"), str)}
+    try:
+        found = sorted(p for p in folder.iterdir()
+                       if ((p.is_file() or p.is_symlink()) and p.suffix.lower() == ".mcap")
+                       or (p.is_dir() and (p / "metadata.yaml").is_file()))
+    except OSError:
+        return []
+    return [p.name for p in found if resolved(p) not in labelled]
+
+
 def clip_hint(file: str, candidates: Sequence[str]) -> str:
     """For a label whose clip is missing: `` (did you mean NAME?)`` naming the one of
     ``candidates`` (videos no label names) its ``file`` is most likely meant for
