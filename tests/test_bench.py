@@ -264,6 +264,9 @@ def test_kernels_are_loaded_before_anything_is_timed(monkeypatch):
     frames = np.zeros((4, 32, 32), np.uint8)
     assert model_time(None, frames)["median_ms"] > 0
     assert calls == ["compile", "time"]
+    calls.clear()
+    assert model_time("paper", frames)["median_ms"] > 0  # the service bench's preset too
+    assert calls == ["compile", "time"] and "paper" in loaded[-1]
 
 
 def test_warmup_after_a_handover():

@@ -348,6 +348,8 @@ def test_an_output_over_a_file_of_the_input_bag_is_refused_wherever_the_file_lie
         assert f"{flag} {part}: is " in capsys.readouterr().err
     assert part.read_bytes() == before
     assert main(["detect", str(bag), "--jsonl", str(tmp_path / "out.jsonl")]) == 0
+    # an output not yet made (--mcap is not created before the run) is no file of the bag
+    assert main(["detect", str(bag), "--mcap", str(tmp_path / "out.mcap")]) == 0
 
 
 def test_a_clip_cut_partway_is_run_as_far_as_it_decodes_with_a_note(tmp_path, capsys):

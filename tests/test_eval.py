@@ -1317,3 +1317,9 @@ def test_every_registered_baseline_is_made_described_and_recorded_as_itself(mode
     assert spec.description == f"{entry.description}, {entry.module}.{entry.cls}"
     assert set(spec.parameters) == set(params_class.model_fields)
     assert spec.make(frame_period=0.04).params.dt == 0.04
+
+
+def test_only_a_registered_baseline_has_classes():
+    for name in ("asnn", "lgmd3", ""):
+        with pytest.raises(ValueError, match=f"unknown baseline {name!r}; choose one of lgmd1"):
+            baseline_classes(name)

@@ -1060,3 +1060,82 @@ def test_the_fleet_s_server_closes_after_the_subscriber_that_feeds_it(monkeypatc
     assert cli.dashboard.serve_fleet(argparse.Namespace(), store, Server(), "foxglove",
                                      "ws://x") == 0
     assert closed == ["subscriber", "server"]
+
+
+def test_a_recording_stops_at_its_first_failed_write_and_says_why(tmp_path, monkeypatch,
+                                                                   caplog):
+    """A mutation probe: a full disk (the first write that failed) stops the recording at the
+    next sweep, far below its bound, with the reason; the viewers are served on, and the
+    recording's size is its file's, closing it again does nothing."""
+    import builtins
+    import errno
+
+    import asnn.io.foxglove_mcap as foxglove_mcap
+    from clients.foxglove import FoxgloveBridge
+
+    class FullDisk:
+        """A file that takes the first ``room`` bytes, then none."""
+
+        def __init__(self, file, room: int):
+            self._file, self._room = file, room
+
+        def write(self, data):
+            if len(data) > self._room:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            self._room -= len(data)
+            return self._file.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self._file, name)
+
+    monkeypatch.setattr(foxglove_mcap, "open", lambda path, mode="r": FullDisk(
+        builtins.open(path, mode), 2000), raising=False)
+    rng = np.random.default_rng(0)
+    path = tmp_path / "fleet.mcap"
+    with caplog.at_level("WARNING", logger="asnn.foxglove"), FoxgloveBridge(
+            port=0, record=path) as bridge:
+        for seq in range(1, 40):  # noise: previews that do not compress, past a chunk
+            bridge.offer("asnn/r1/preview", encode(Preview.from_frame_image(
+                rng.integers(0, 255, (240, 320), np.uint8), seq=seq, stamp=0.05 * seq,
+                width=320)))
+        bridge.sweep()
+        assert bridge.recording.closed
+        bridge.offer("asnn/r1/response", response("r1", 40, 2.0))  # served on
+        assert "r1" in bridge.robots()
+    assert f"recording to {path} stopped: No space left on device" in caplog.text
+    assert bridge.recording.size == path.stat().st_size
+    assert bridge.recording.close() is not None  # closed: its error, and nothing done
+
+
+def test_a_recording_that_cannot_be_made_leaves_the_port_free(tmp_path):
+    """A mutation probe: the server started before the recording was refused is stopped, so
+    that asnn foxglove started again on its port (with a new file) serves."""
+    from clients.foxglove import FoxgloveBridge
+    from service.demo import free_port
+
+    taken = tmp_path / "taken.mcap"
+    taken.write_bytes(b"mine")
+    port = free_port()
+    with pytest.raises(OSError, match="exists"):
+        FoxgloveBridge(port=port, record=taken)
+    with FoxgloveBridge(port=port, record=tmp_path / "new.mcap") as bridge:
+        assert bridge.recording is not None and not bridge.recording.closed
+    assert bridge.recording.size == (tmp_path / "new.mcap").stat().st_size > 0
+
+
+def test_asnn_foxglove_bounds_its_recording_in_megabytes(tmp_path, monkeypatch):
+    import clients.foxglove
+    from cli.main import main
+
+    made = []
+
+    def bridge(*args, **options):
+        made.append(options)
+        raise OSError("not served here")
+
+    monkeypatch.setattr(clients.foxglove, "FoxgloveBridge", bridge)
+    out = str(tmp_path / "fleet.mcap")
+    assert main(["foxglove", "--port", "0", "--mcap", out, "--mcap-max-mb", "2.5"]) == 2
+    assert main(["foxglove", "--port", "0", "--mcap", out]) == 2
+    assert made[0]["record"] == out and made[0]["record_max_bytes"] == 2.5e6
+    assert made[1].get("record_max_bytes", clients.foxglove.RECORD_MAX_BYTES) == 1e9

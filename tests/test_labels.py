@@ -279,6 +279,17 @@ def test_label_and_eval_take_a_raw_camera_stream_and_say_it_states_no_rate(tmp_p
     assert main(["label", str(tmp_path / "solo")]) == 1
     listed = [line.split(":")[0] for line in capsys.readouterr().out.splitlines()]
     assert listed == ["OTHER.MCAP", "drive", "gone.mcap", "run.mcap"]
+    capsys.readouterr()
+    # a mutation probe: a folder of a bag alone lists the bag, not "holds no video"; and an
+    # entry naming it by another spelling of its path names it
+    (tmp_path / "bags").mkdir()
+    (tmp_path / "bags" / "run.mcap").write_bytes(b"")
+    assert main(["label", str(tmp_path / "bags")]) == 1
+    out = capsys.readouterr().out
+    assert out.startswith("run.mcap: a bag no entry names") and "holds no video" not in out
+    (tmp_path / "bags" / "labels.json").write_text(json.dumps([{**entries[1],
+                                                                 "file": "./run.mcap"}]))
+    assert main(["label", str(tmp_path / "bags")]) == 0
 
 
 def test_a_link_to_a_clip_that_is_gone_is_named_not_skipped(tmp_path, capsys):

@@ -239,6 +239,34 @@ def test_the_timing_warning_knows_asnn_s_frames_by_their_module_not_their_path()
     assert told.filename == __file__
 
 
+def test_the_timing_warning_skips_the_package_s_own_frames_only():
+    """A mutation probe: the package's frames are ``asnn`` and ``asnn.*``; a user's module
+    whose name merely starts with asnn (``asnn_scripts``), or whose file lies in a folder
+    named asnn, is the caller the warning names."""
+    import warnings
+
+    from asnn.errors import _warn_at_caller
+
+    def module(name: str, filename: str, source: str, **names) -> dict:
+        namespace = {"__name__": name, **names}
+        exec(compile(source, filename, "exec"), namespace)
+        return namespace
+
+    inner = module("asnn.elsewhere", "/x/asnn/elsewhere.py",
+                   "def step():\n    tell('noted', Told)\n", tell=_warn_at_caller,
+                   Told=TimingWarning)
+    top = module("asnn", "/x/asnn/__init__.py", "def step():\n    inner()\n",
+                 inner=inner["step"])
+    for name, filename in (("asnn_scripts.run", "/x/asnn_scripts/run.py"),
+                           ("__main__", "/home/me/asnn/run.py")):
+        user = module(name, filename, "def run():\n    step()\n", step=top["step"])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            user["run"]()
+        (told,) = caught
+        assert (told.filename, told.lineno) == (filename, 2)
+
+
 @pytest.mark.parametrize("threads", [1, 2])
 def test_the_timing_warning_points_at_the_caller_s_line_and_comes_after_the_step(threads):
     """A review: raised inside the step, under warnings as errors it left the model half

@@ -254,3 +254,32 @@ def test_the_router_watch_says_at_start_which_certificates_end_soon(caplog):
     assert calls == [1]
     assert [r.getMessage() for r in caplog.records] == [
         "camera r1: connect_certificate c.pem expires on ..."]
+
+
+def test_a_certificate_check_that_fails_or_finds_nothing_says_nothing_and_the_watch_goes_on(
+        caplog):
+    """A mutation probe: the check's answer None (nothing ends soon) is no line, and a check
+    that raises (an odd certificate, an old cryptography) stops neither the watch nor its
+    report of a lost router."""
+    from service.link import RouterWatch
+
+    def failing():
+        raise AttributeError("'Certificate' object has no attribute 'not_valid_after_utc'")
+
+    for answer in (lambda: None, failing):
+        session, changes, calls = FakeSession(), [], []
+
+        def certificates():
+            calls.append(1)
+            return answer()
+
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="asnn.link"), RouterWatch(
+                session, "camera r1", interval=0.01, on_change=changes.append,
+                certificates=certificates):
+            wait_for(lambda: calls and changes == [True], what="the certificates looked at")
+            session.routers = []
+            wait_for(lambda: changes == [True, False], what="the router lost")
+        assert calls == [1]
+        assert not [r for r in caplog.records if "camera r1: " in r.getMessage()
+                    and "router" not in r.getMessage()]

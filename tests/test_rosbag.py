@@ -452,7 +452,7 @@ def write_channels(path, channels: list[tuple], fps: float = 20.0, **options):
         writer.start(profile="", library="test")
         index = 0
         for topic, schema, encoding, message_encoding, payloads in channels:
-            sid = writer.register_schema(schema, encoding, b"")
+            sid = writer.register_schema(schema, encoding, b"") if schema else 0  # 0: none
             cid = writer.register_channel(topic, message_encoding, sid)
             for payload in payloads:
                 ns = START_NS + round(index * 1e9 / fps)
@@ -589,6 +589,20 @@ def test_a_bag_whose_summary_does_not_repeat_its_schemas_is_read(tmp_path, loomi
         repeat_schemas=False, repeat_channels=repeat_channels)
     assert rosbag.bag_topics(bag)["/cam"].schema == "foxglove.RawImage"
     assert len(detect_records(bag)) == len(frames)
+
+
+def test_a_bag_with_a_schemaless_channel_whose_summary_does_not_repeat_its_schemas_is_read(
+        tmp_path, looming):
+    """A mutation probe: beside a channel without a schema (schema id 0: a JSON log), the
+    image channel whose schema the summary does not repeat was still refused as 'no schema'."""
+    pytest.importorskip("foxglove", reason="the 'ros' extra is not installed")
+    frames = looming.frames[:10]
+    bag = write_channels(tmp_path / "norepeat.mcap", [
+        ("/log", None, "", "json", [b"{}"] * 3),
+        ("/cam", "foxglove.RawImage", "protobuf", "protobuf", fox_raw(frames))],
+        repeat_schemas=False)
+    assert rosbag.bag_topics(bag)["/cam"].schema == "foxglove.RawImage"
+    assert len(detect_records(bag, "--topic", "/cam")) == len(frames)
 
 def test_a_topic_recorded_on_several_channels_is_one_topic(tmp_path, looming):
     """Recordings merged, or a publisher that advertised again: the topic's count is its
@@ -1754,6 +1768,18 @@ def test_the_camera_publishes_a_frame_with_an_unset_stamp_and_says_how_many(tmp_
                                     "(header stamp unset): 3")
     # the first notice is logged; the other two fall in its 10 s
     assert ["message 10: its header stamp is unset" in r.message for r in caplog.records] == [True]
+    # and asnn camera's exit line says so (a mutation probe: the line's wiring was untested)
+    from service.demo import free_port
+
+    config = tmp_path / "peer.json5"
+    config.write_text("{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
+    caplog.clear()
+    with caplog.at_level("INFO", logger="asnn"):
+        assert main(["camera", "--robot", "r1", "--source", str(bag), "--fps", "240", "--mode",
+                     "peer", "--listen", f"tcp/127.0.0.1:{free_port()}", "--config",
+                     str(config)]) == 0
+    (line,) = [r.getMessage() for r in caplog.records if "frames published" in r.getMessage()]
+    assert "; rejected: none; held at the latest frame's time (header stamp unset): 3; " in line
 
 
 def test_detect_names_the_frames_with_an_unset_stamp_it_holds(tmp_path, looming, capsys):

@@ -810,6 +810,63 @@ def test_a_certificate_that_ends_soon_or_has_ended_is_said_with_what_it_will_do(
 
 
 
+def certificate(days: float, name: str, issuer=None):
+    """A certificate (and its key) of ``name`` that ends ``days`` days from now, signed by
+    ``issuer`` (a certificate and its key; None: itself)."""
+    import datetime
+
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+
+    key = ec.generate_private_key(ec.SECP256R1())
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)])
+    signer, signer_key = issuer or (None, key)
+    now = datetime.datetime.now(datetime.timezone.utc)
+    built = (x509.CertificateBuilder().subject_name(subject)
+             .issuer_name(subject if signer is None else signer.subject)
+             .public_key(key.public_key()).serial_number(x509.random_serial_number())
+             .not_valid_before(now - datetime.timedelta(days=400))
+             .not_valid_after(now + datetime.timedelta(days=days))
+             .sign(signer_key, hashes.SHA256()))
+    return built, key
+
+
+def pem(*certificates) -> bytes:
+    from cryptography.hazmat.primitives import serialization
+
+    return b"".join(c.public_bytes(serialization.Encoding.PEM) for c in certificates)
+
+
+def test_a_certificate_chain_ends_with_its_first_and_a_bundle_with_the_ca_of_ours(tmp_path):
+    """A mutation probe: a chain whose intermediate ends first stops serving then; a bundle
+    is judged by the CA that issued this process's certificate, an intermediate too, wherever
+    it lies in a bundle of a system's size."""
+    from service.diagnosis import expiring_certificates
+
+    root = certificate(3000, "root")
+    ending = certificate(10, "intermediate", issuer=root)  # its end comes first
+    leaf = certificate(200, "alerts", issuer=ending)
+    chain = tmp_path / "chain.pem"
+    chain.write_bytes(pem(leaf[0], ending[0]))
+    conf = zenoh.Config()
+    set_json(conf, "transport/link/tls/connect_certificate", str(chain))
+    assert "in 9 days" in expiring_certificates(conf)
+    # the trust bundle: the intermediate that issued ours has ended, its root has not; and
+    # other CAs (a system bundle's) before them
+    ended = certificate(-1, "intermediate", issuer=root)
+    own = certificate(200, "alerts", issuer=ended)
+    chain.write_bytes(pem(own[0]))
+    bundle = tmp_path / "bundle.pem"
+    others = [certificate(3000, f"other-{k}")[0] for k in range(150)]
+    bundle.write_bytes(pem(*others, root[0], ended[0]))
+    assert bundle.stat().st_size > 64_000
+    set_json(conf, "transport/link/tls/root_ca_certificate", str(bundle))
+    said = expiring_certificates(conf)
+    assert said is not None and said.startswith(f"root_ca_certificate {bundle} expired on ")
+
+
 def test_the_router_and_a_client_say_at_start_that_their_certificates_end_soon(procs,
                                                                                tmp_path):
     """The development fleet issued for 20 days: the router and a client each log, at start,
@@ -828,4 +885,26 @@ def test_the_router_and_a_client_say_at_start_that_their_certificates_end_soon(p
     alerts.wait_line("alerts: connect_certificate ")
     said = next(line for line in alerts.err if "connect_certificate" in line)
     assert "expires on " in said and "in 19 days 23 hours" in said, said
+    time.sleep(1.2)  # more than two looks of the router's loop (every 0.5 s)
     assert alerts.stop() == 0 and router.stop() == 0
+    # said at start, not at every look of its loop
+    assert sum("router: listen_certificate " in line for line in router.err) == 1
+
+
+def test_a_certificate_check_that_fails_does_not_stop_the_router(procs, tmp_path):
+    """A mutation probe: the router's look at its certificates may fail (an old cryptography
+    without their UTC ends, an odd certificate): it says so at debug level and serves on."""
+    boot = tmp_path / "boot"
+    boot.mkdir()
+    (boot / "sitecustomize.py").write_text(
+        "import service.diagnosis\n"
+        "def failing(*args, **kwargs):\n"
+        "    raise AttributeError('not_valid_after_utc')\n"
+        "service.diagnosis.expiring_certificates = failing\n")
+    path = os.pathsep.join(p for p in (str(boot), str(ROOT), os.environ.get("PYTHONPATH"))
+                           if p)
+    router = procs("router", "--listen", f"tcp/127.0.0.1:{free_port()}", "--log-level",
+                   "debug", env={"PYTHONPATH": path})
+    router.wait_line("certificate check failed")
+    assert router.popen.poll() is None
+    assert router.stop() == 0

@@ -895,3 +895,27 @@ def test_a_camera_says_at_most_a_line_of_each_kind_when_its_subscriber_comes_and
     assert caplog.text.count(back) == 2
     assert "(8 more times since the last such line" in caplog.text
     assert watch.matching is True
+
+
+def test_the_camera_s_exit_line_counts_the_frames_no_subscriber_took(tmp_path, caplog):
+    """A mutation probe: the exit line of ``asnn camera`` with nobody subscribed says how many
+    of its frames went into nothing, and its rejections' summary, in order of reason."""
+    from service.camera import SourceRejections
+    from service.demo import free_port
+
+    config = tmp_path / "peer.json5"
+    config.write_text("{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }")
+    with caplog.at_level("INFO", logger="asnn"):
+        assert main(["camera", "--robot", "r9", "--source", "synthetic:looming", "--fps", "240",
+                     "--mode", "peer", "--listen", f"tcp/127.0.0.1:{free_port()}",
+                     "--config", str(config)]) == 0
+    (line,) = [r.getMessage() for r in caplog.records if "frames published" in r.getMessage()]
+    count = int(line.split("camera r9: ")[1].split()[0])
+    assert count > 0
+    assert f"{count} frames published ({count} while no subscriber took them: lost); " \
+           "rejected: none; workers' refusals" in line
+    rejections = SourceRejections("r9")
+    rejections("undecodable", "frame 3")
+    rejections("stamp-backwards", "frame 4")
+    rejections("undecodable", "frame 5")
+    assert rejections.summary() == "rejected: stamp-backwards 1, undecodable 2"

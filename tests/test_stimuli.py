@@ -510,6 +510,24 @@ def test_post_scene_lights_or_rains_on_any_generator_and_keeps_its_label():
     same = {k: v for k, v in plain.label("x").items() if k != "description"}
     assert {k: v for k, v in rain.label("x").items() if k in same} == same
     assert rain.params["rain"] is True and "'rain': True" in rain.label("x")["description"]
+    # each case's seed its own rain: the streaks of another seed lie elsewhere
+    other = {**options, "seed": 6}
+    streaks = (rain.frames.astype(int) - plain.frames) > 30
+    others = (post_scene(base=driving_scene, rain=True, **other).frames.astype(int)
+              - driving_scene(**other).frames) > 30
+    assert (streaks & others).sum() < 0.2 * (streaks | others).sum()
+
+
+def test_rain_streaks_are_laid_over_the_frame_at_their_level():
+    """A mutation probe: a streak blends the pixel toward its level, it does not add light: a
+    frame at the level is unchanged, a white one is darkened, a black one lit."""
+    from asnn.stimuli.heldout import rain_streaks
+
+    for value in (230.0, 255.0, 0.0):
+        frames = np.full((3, 40, 160), value)
+        out = rain_streaks(frames, seed=1, level=230.0)
+        assert out.min() >= min(value, 230.0) - 1e-3 and out.max() <= max(value, 230.0) + 1e-3
+        assert value == 230.0 or (out != value).mean() > 0.01
 
 
 def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins():

@@ -196,6 +196,12 @@ def test_a_report_names_the_extra_cases_the_default_was_designed_on():
         "version. The default preset's design looked at some of them, whose figures are "
         "in-sample: the surface-ahead pathway on `extra-wall-recede`; the corridor gate on "
         "`extra-corridor`; the other 2 were not looked at.")
+    # the suite's own cases beside them are not extra cases; one other is "was"
+    cases = [{"name": "extra-wall-recede", "group": "extra-clear"},
+             {"name": "extra-day-moves-in", "group": "extra-threat"},
+             {"name": "loom-dark-c1.0-d12-center", "group": "approach"}]
+    assert suite._extra_note(cases).endswith(
+        "the surface-ahead pathway on `extra-wall-recede`; the other 1 was not looked at.")
 
 
 def test_synthetic_eval_of_drives_rendered_at_another_size(tmp_path):
