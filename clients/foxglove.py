@@ -60,8 +60,7 @@ from pathlib import Path
 
 # first: without the 'ros' extra, this import fails with a message naming it
 from asnn.io.foxglove_mcap import (RESPONSE_SCHEMA, McapRecording, close_channels,
-                                   response_message,
-                                   target_annotations, time_ns, timestamp)
+                                   response_message, target_annotations, time_ns, timestamp)
 
 import foxglove
 from foxglove.channels import CompressedImageChannel, ImageAnnotationsChannel

@@ -34,8 +34,8 @@ except ImportError as exc:  # the optional extra is missing: say which one, in o
                       f" ({exc.name} is missing)") from exc
 
 __all__ = ["DEFAULT_TOPIC_PREFIX", "IMAGE_FORMATS", "RESPONSE_SCHEMA", "FoxgloveMcapWriter",
-           "McapRecording", "close_channels", "image_message", "response_message", "target_annotations", "time_ns",
-           "timestamp"]
+           "McapRecording", "close_channels", "image_message", "response_message",
+           "target_annotations", "time_ns", "timestamp"]
 
 DEFAULT_TOPIC_PREFIX = "/asnn"
 IMAGE_FORMATS = ENCODED_FORMATS

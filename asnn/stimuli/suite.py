@@ -91,7 +91,8 @@ from .planar import Background, Gait, Prop, planar_scene
 from .scene import Scene
 from .surface import corridor_scene, surface_scene
 
-__all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "DESIGN_INPUTS", "Case", "SUITE_CASES", "EXTRA_CASES",
+__all__ = ["SUITE_VERSION", "GROUPS", "EXTRA_GROUPS", "DESIGN_INPUTS", "Case", "SUITE_CASES",
+           "EXTRA_CASES",
            "CASES", "suite_cases", "make_case", "check_variant", "check_driving_size",
            "check_scale", "DRIVING_SIZE", "LARGEST_SIZE", "PLANAR_SIZE", "SCALES"]
 
