@@ -189,9 +189,8 @@ def _plain(value):
 
 class _FileSink:
     """The MCAP's file as the SDK writes it, keeping the first error: the SDK's logging reports
-    none to its caller (a full disk would surface only when the file is closed), so
-    :class:`FoxgloveMcapWriter` checks :attr:`error` after each frame and stops at the first
-    that failed."""
+    none to its caller (a full disk would surface only when the file is closed), so its
+    :class:`McapRecording`'s user checks :attr:`error` and stops at the first that failed."""
 
     def __init__(self, path: Path, mode: str = "wb"):
         self._file = open(path, mode)  # noqa: SIM115  (closed by its writer's close)
@@ -242,21 +241,22 @@ class McapRecording:
     """An MCAP file recording every channel of a Foxglove context as it is logged (the live
     server's, ``asnn foxglove --mcap``), until :meth:`close`.
 
-    The file must not exist (a recording is never overwritten). The SDK reports no write
-    error to the code that logs: :attr:`error` keeps the first (a full disk), and
-    :attr:`size` is the bytes written so far, for the caller to stop the recording at a
+    The file must not exist (a recording is never overwritten) unless ``overwrite``. The SDK
+    reports no write error to the code that logs: :attr:`error` keeps the first (a full disk),
+    and :attr:`size` is the bytes written so far, for the caller to stop the recording at a
     bound of its own.
 
     Raises
     ------
     OSError
-        If the file exists or cannot be created.
+        If the file exists (without ``overwrite``) or cannot be created.
     """
 
-    def __init__(self, path: str | Path, context: foxglove.Context):
+    def __init__(self, path: str | Path, context: foxglove.Context, *,
+                 overwrite: bool = False):
         self.path = Path(path)
         try:
-            self._sink = _FileSink(self.path, mode="xb")
+            self._sink = _FileSink(self.path, mode="wb" if overwrite else "xb")
         except FileExistsError:
             raise OSError(f"{self.path}: exists; a recording goes to a new file") from None
         except OSError as exc:
@@ -343,18 +343,8 @@ class FoxgloveMcapWriter:
         self.frame_id = frame_id or "camera"
         self.image_format = image_format
         self._context = foxglove.Context()  # only this file's channels reach this writer
-        self._sink = None
-        try:
-            self._sink = _FileSink(self.path)
-            self._writer = foxglove.open_mcap(self._sink, context=self._context)
-        except OSError as exc:
-            raise OSError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        except Exception as exc:  # the SDK's own error type: say it as an OSError
-            self._sink.close()
-            raise OSError(f"cannot write {self.path}: {exc}") from None
+        self._recording = McapRecording(self.path, self._context, overwrite=True)
         self._failed = False
-        self._quiet = _QuietAfterFailure(self._sink)
-        logging.getLogger(_SDK_LOGGER).addFilter(self._quiet)
         prefix = prefix.rstrip("/")
         self.topics = {kind: f"{prefix}/{kind}"
                        for kind in ("image", "annotations", "response", "warning")}
@@ -381,10 +371,10 @@ class FoxgloveMcapWriter:
         self._response.log(message, log_time=stamp_ns)
         if record.get("collision"):
             self._warning.log(message, log_time=stamp_ns)
-        if self._sink.error is not None:
+        error = self._recording.error
+        if error is not None:
             self._failed = True
-            raise OSError(f"cannot write {self.path}: "
-                          f"{self._sink.error.strerror or self._sink.error}")
+            raise OSError(f"cannot write {self.path}: {error.strerror or error}")
         self.written += 1
 
     def close(self) -> None:
@@ -396,23 +386,14 @@ class FoxgloveMcapWriter:
         OSError
             If the file cannot be finished (a full disk).
         """
-        if self._writer is None:
+        if self._recording.closed:
             return
-        writer, self._writer = self._writer, None
         try:
-            writer.close()
-        except Exception as exc:  # the SDK's error type (RuntimeError)
-            failure = exc
-        else:
-            failure = None
+            error = self._recording.close()
         finally:
-            self._sink.close()
             close_channels(self._image, self._annotations, self._response, self._warning)
-            logging.getLogger(_SDK_LOGGER).removeFilter(self._quiet)
-        error = self._sink.error or failure
         if error is not None and not self._failed:
-            reason = error.strerror if isinstance(error, OSError) else None
-            raise OSError(f"cannot write {self.path}: {reason or error}")
+            raise OSError(f"cannot write {self.path}: {error.strerror or error}")
 
     def __enter__(self) -> FoxgloveMcapWriter:
         return self
