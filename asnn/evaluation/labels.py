@@ -25,7 +25,7 @@ import math
 import os
 import re
 import unicodedata
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 from pydantic import (BaseModel, ConfigDict, Field, StrictBool, StrictInt, ValidationError,
@@ -229,36 +229,34 @@ def unlabelled(file: str, frames: int, fps: float, width: int, height: int) -> d
             "description": ""}
 
 
-def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
-    """The videos (:data:`VIDEO_SUFFIXES`) directly in ``clips_dir`` that no entry of
-    ``labels`` names (as ``clip.mp4``, ``./clip.mp4`` or ``sub/../clip.mp4``): clips
-    ``asnn eval`` does not score, and ``asnn label`` would add. Sorted by name."""
-    folder = Path(clips_dir)
+def _unnamed(folder: Path, labels: Sequence, wanted: Callable[[Path], bool]) -> list[str]:
+    """The names of the entries directly in ``folder`` that are ``wanted`` and no entry of
+    ``labels`` names, by any path to them (``clip.mp4``, ``./clip.mp4``, ``sub/../clip.mp4``).
+    Sorted by name."""
     labelled = {resolved(folder / e["file"]) for e in labels
                 if isinstance(e, Mapping) and isinstance(e.get("file"), str)}
     try:
-        # a link to a clip that is gone too: named (its decoding then says so), not skipped
-        found = sorted(p for p in folder.iterdir() if (p.is_file() or p.is_symlink())
-                       and p.suffix.lower() in VIDEO_SUFFIXES)
+        found = sorted(p for p in folder.iterdir() if wanted(p))
     except OSError:
         return []
     return [p.name for p in found if resolved(p) not in labelled]
+
+
+def unlabelled_videos(clips_dir: str | Path, labels: Sequence) -> list[str]:
+    """The videos (:data:`VIDEO_SUFFIXES`) directly in ``clips_dir`` that no entry of
+    ``labels`` names: clips ``asnn eval`` does not score, and ``asnn label`` would add; a link
+    to a clip that is gone too (its decoding then says so), not skipped. Sorted by name."""
+    return _unnamed(Path(clips_dir), labels, lambda p: (p.is_file() or p.is_symlink())
+                    and p.suffix.lower() in VIDEO_SUFFIXES)
 
 
 def unlabelled_bags(clips_dir: str | Path, labels: Sequence) -> list[str]:
     """The ROS 2 bags directly in ``clips_dir`` (an ``.mcap`` file, any case, or a link to
     one, gone too; a rosbag2 folder, one holding a ``metadata.yaml``) that no entry of
     ``labels`` names, by any path to it: entered by hand, with their topic. Sorted by name."""
-    folder = Path(clips_dir)
-    labelled = {resolved(folder / e["file"]) for e in labels
-                if isinstance(e, Mapping) and isinstance(e.get("file"), str)}
-    try:
-        found = sorted(p for p in folder.iterdir()
-                       if ((p.is_file() or p.is_symlink()) and p.suffix.lower() == ".mcap")
-                       or (p.is_dir() and (p / "metadata.yaml").is_file()))
-    except OSError:
-        return []
-    return [p.name for p in found if resolved(p) not in labelled]
+    return _unnamed(Path(clips_dir), labels, lambda p: (
+        (p.is_file() or p.is_symlink()) and p.suffix.lower() == ".mcap")
+        or (p.is_dir() and (p / "metadata.yaml").is_file()))
 
 
 def clip_hint(file: str, candidates: Sequence[str]) -> str:
