@@ -7,7 +7,6 @@ import logging
 import os
 import sys
 import threading
-import time
 
 from asnn.params import preset_names
 from service import keys
@@ -264,7 +263,7 @@ def cmd_router(args: argparse.Namespace) -> int:
     import zenoh
 
     from service.diagnosis import expiring_certificates
-    from service.link import CERTIFICATES_EVERY
+    from service.link import CertificateCheck
     from service.router import listen_endpoints, router_config
 
     setup_logging(args)
@@ -283,18 +282,10 @@ def cmd_router(args: argparse.Namespace) -> int:
         listen = ", ".join(listen_endpoints(config))
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)
         # its certificate's end locks every client out at its next connection: said ahead
-        checked = -CERTIFICATES_EVERY  # at once
+        certificates = CertificateCheck("router", lambda: expiring_certificates(config),
+                                        logger=logging.getLogger("asnn.router"))
         while True:
-            if time.monotonic() - checked >= CERTIFICATES_EVERY:
-                checked = time.monotonic()
-                try:  # a check that fails says nothing; the router goes on
-                    expiring = expiring_certificates(config)
-                except Exception:
-                    logging.getLogger("asnn.router").debug("certificate check failed",
-                                                           exc_info=True)
-                    expiring = None
-                if expiring:
-                    logging.getLogger("asnn.router").warning("router: %s", expiring)
+            certificates.tick()
             if stop.wait(0.5):
                 break
     print("router stopped", file=sys.stderr, flush=True)  # the clients now lose it: say when

@@ -16,13 +16,38 @@ import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["RouterWatch", "WATCH_INTERVAL"]
+__all__ = ["CERTIFICATES_EVERY", "CertificateCheck", "RouterWatch", "WATCH_INTERVAL"]
 
 log = logging.getLogger("asnn.link")
 
 WATCH_INTERVAL = 1.0  # seconds between looks at the session's routers
 DIAGNOSE_AFTER = 10.0  # seconds without a router before asking why, and between two askings
 CERTIFICATES_EVERY = 24 * 3600.0  # seconds between two looks at the certificates' validity
+
+
+class CertificateCheck:
+    """Asks ``check`` (:func:`service.diagnosis.expiring_certificates` of a configuration) at
+    its first :meth:`tick` and then once every ``every`` seconds, and logs a non-empty answer
+    at WARNING as ``<name>: <answer>`` on ``logger``; a check that fails says so at debug level
+    only, and its caller goes on. What the router's loop and :class:`RouterWatch` share."""
+
+    def __init__(self, name: str, check: Callable[[], str | None],
+                 every: float = CERTIFICATES_EVERY, logger: logging.Logger = log):
+        self.name, self.check, self.every, self.logger = name, check, every, logger
+        self._at: float | None = None  # when the certificates were last looked at
+
+    def tick(self) -> None:
+        now = time.monotonic()
+        if self._at is not None and now - self._at < self.every:
+            return
+        self._at = now
+        try:
+            expiring = self.check()
+        except Exception:  # a check that fails says nothing; the caller goes on
+            self.logger.debug("%s: certificate check failed", self.name, exc_info=True)
+            return
+        if expiring:
+            self.logger.warning("%s: %s", self.name, expiring)
 
 
 class RouterWatch:
@@ -65,8 +90,8 @@ class RouterWatch:
         self.session, self.name, self.interval = session, name, interval
         self.on_change = on_change
         self.diagnose, self.diagnose_after = diagnose, diagnose_after
-        self.certificates, self.certificates_every = certificates, certificates_every
-        self._certificates_at: float | None = None  # when they were last looked at
+        self._certificates = (None if certificates is None else
+                              CertificateCheck(name, certificates, certificates_every))
         self._asked_at = 0.0  # when the lost router was last diagnosed (or lost)
         self._asking: list | None = None  # the diagnosis under way: [thread, its answer]
         self._heard: str | None = None  # the latest answer, logged once it comes twice
@@ -100,22 +125,9 @@ class RouterWatch:
                 self._asked_at, self._heard, self._said = time.monotonic(), None, None
             elif not routers and self.connected is False and self.diagnose is not None:
                 self._why()
-            self._check_certificates()
+            if self._certificates is not None:
+                self._certificates.tick()
             self._stop.wait(self.interval)
-
-    def _check_certificates(self) -> None:
-        now = time.monotonic()
-        if self.certificates is None or (self._certificates_at is not None and
-                                         now - self._certificates_at < self.certificates_every):
-            return
-        self._certificates_at = now
-        try:
-            expiring = self.certificates()
-        except Exception:  # a check that fails says nothing; the watch goes on
-            log.debug("%s: certificate check failed", self.name, exc_info=True)
-            return
-        if expiring:
-            log.warning("%s: %s", self.name, expiring)
 
     def _why(self) -> None:
         """Ask why the router stays lost, on a thread of its own (a check can take seconds a
