@@ -736,23 +736,8 @@ def test_every_file_the_router_cannot_read_is_named(certs, tmp_path):
 
 def short_lived_certificate(path: Path, days: float, name: str = "alerts") -> Path:
     """A self-signed certificate (PEM) of ``name`` that ends ``days`` days from now (negative:
-    ended)."""
-    import datetime
-
-    from cryptography import x509
-    from cryptography.hazmat.primitives import hashes, serialization
-    from cryptography.hazmat.primitives.asymmetric import ec
-    from cryptography.x509.oid import NameOID
-
-    key = ec.generate_private_key(ec.SECP256R1())
-    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, name)])
-    now = datetime.datetime.now(datetime.timezone.utc)
-    certificate = (x509.CertificateBuilder().subject_name(subject).issuer_name(subject)
-                   .public_key(key.public_key()).serial_number(x509.random_serial_number())
-                   .not_valid_before(now - datetime.timedelta(days=400))
-                   .not_valid_after(now + datetime.timedelta(days=days))
-                   .sign(key, hashes.SHA256()))
-    path.write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
+    ended), written to ``path``."""
+    path.write_bytes(pem(certificate(days, name)[0]))
     return path
 
 
