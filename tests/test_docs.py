@@ -165,6 +165,12 @@ def test_citation_file_passes_its_schema_and_names_this_version():
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     fields = dict(re.findall(r"^(version|license): (\S+)$", citation.read_text(), re.M))
     assert fields == {"version": project["version"], "license": project["license"]}
+    # the package index names the same authors, and the Python it was tested on (its floor)
+    cited = re.search(r"^authors:\n((?:  - name: .*\n)+)", citation.read_text(), re.M)
+    assert cited and re.findall(r'name: "(.*)"', cited.group(1)) == [
+        a["name"] for a in project["authors"]]
+    floor = project["requires-python"].removeprefix(">=")
+    assert f"Programming Language :: Python :: {floor}" in project["classifiers"]
     # and asnn --version names the same version (what a citation or a bug report names)
     import subprocess
     import sys
