@@ -68,7 +68,8 @@ slanted, off its heading, faster, faint), backing away from one or passing along
 ahead, with a board a person's size standing in it, or up to its end wall
 (:func:`.surface.corridor_scene`); and a held-out set (``extra-ho-*``, tag ``heldout``) that a
 trial designed and wrote down with its labels before any detector ran on it
-(:func:`_heldout_cases`).
+(:func:`_heldout_cases`); and an indoor set for mobile robots (``extra-in-*``, tag ``indoor``),
+designed and written down the same way by another trial (:func:`_indoor_cases`).
 
 **Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
 drives at S times their size (their world is in metres and degrees), the planar scenes with
@@ -851,13 +852,159 @@ def _heldout_cases() -> list[Case]:
     ]
 
 
+def _indoor_cases() -> list[Case]:
+    """The indoor set (``extra-in-*``, 37 cases): designed by a trial on 2026-12-01 for indoor
+    mobile robots (warehouse, hospital and home robots: a forward camera 0.25-1.2 m above the
+    floor, 0.3-2 m/s, 15-30 fps) and written down with their labels before any detector ran on
+    them (docs/evaluation.md, "An indoor held-out set"): people walking at the robot, crossing
+    its path, passing alongside, receding and followed; a door, a cabinet, a corridor's end
+    wall, a box, a pallet, a ball and another robot ahead; a cart pushed into the path; low
+    contrast and glass-like obstacles; corridors and turning in place with nothing ahead;
+    fluorescent flicker aliased at the frame rate, lights switched off and on, a sunlit patch;
+    a low camera over floor seams. The third tag is ``indoor``, the second the trial's
+    category.
+
+    The drives stand for the floor (the road, its painted lines) with no roadside objects;
+    their ego width is a car's (1.8 m), so every collision overlaps a robot 0.6 m wide and every
+    pass clears a car's width.
+    """
+    P, D = PLANAR_SIZE, DRIVING_SIZE
+    cx, cy = (P[0] - 1) / 2, (P[1] - 1) / 2
+    wall = Background("texture", 0.3, 1.5, mean=110.0)
+    props = (Prop("disk", 30.0, 40.0, 20.0, 60.0), Prop("square", 122.0, 32.0, 18.0, 165.0),
+             Prop("rect", 140.0, 82.0, 50.0, 150.0, 0.2))
+    ped = dict(width=0.5, height=1.75, shape="rect", albedo=0.25)
+    walker = dict(shape="ellipse", contrast=0.5, tau=3.0, texture=0.15, gait=Gait(),
+                  background=wall, noise=2.0)
+    robot = dict(roadside=0.0, front=0.3)  # a robot's bumper 0.3 m ahead of its lens
+    tall, low = dict(robot, camera_height=0.9), dict(robot, camera_height=0.5)
+    flicker100 = (Flicker(100.0, 0.12),)  # 100 Hz lamps seen at 30 fps: a 10 Hz flicker
+
+    def pl(name, group, cat, **o):
+        return _planar(name, group, cat, "indoor", **o)
+
+    def dr(name, group, cat, **o):
+        return _driving(name, group, cat, "indoor", **o)
+
+    def co(name, group, cat, base=corridor_scene, **o):
+        return Case(name, base, {"size": P, "noise": 2.0, **o}, (group, cat, "indoor"))
+
+    def post(name, group, cat, base, **o):
+        size = {"size": D} if base is driving_scene else {"size": P, "noise": 2.0}
+        return Case(name, post_scene, {"base": base, **size, **o}, (group, cat, "indoor"))
+
+    T, S, C = "extra-threat", "extra-pass", "extra-clear"
+    return [
+        # --- collisions: people
+        dr("extra-in-person-walks-at-robot", T, "person", speed=0.8, frames=80, **tall,
+           vehicles=(Vehicle(0.0, 7.0, -1.3, **ped),), target=0),
+        dr("extra-in-person-walks-at-still-robot", T, "person", speed=0.0, frames=80, **tall,
+           vehicles=(Vehicle(0.1, 5.0, -1.4, **ped),), target=0),
+        pl("extra-in-walker-gait-30fps", T, "person", fps=30.0, aspect=0.35, height=20.0,
+           **walker),
+        dr("extra-in-person-crosses-into-path", T, "person", speed=1.5, frames=60, **tall,
+           vehicles=(Vehicle(-2.96, 4.0, 0.0, lateral_speed=1.2, **ped),), target=0),
+        # --- collisions: things in the way
+        dr("extra-in-door-ahead", T, "obstacle", speed=1.2, frames=100, **tall,
+           vehicles=(Vehicle(0.0, 6.0, 0.0, width=0.9, height=2.1, shape="rect",
+                             albedo=0.55),), target=0),
+        dr("extra-in-cabinet-offset", T, "obstacle", speed=1.0, frames=100,
+           **dict(robot, camera_height=0.6),
+           vehicles=(Vehicle(0.35, 5.0, 0.0, width=1.0, height=1.9, shape="rect",
+                             albedo=0.35),), target=0),
+        co("extra-in-corridor-end-slow", T, "obstacle", speed=0.5, end=3.0, half_width=1.2,
+           below=0.6, seconds=6.0),
+        dr("extra-in-box-on-floor", T, "obstacle", speed=1.0, frames=100, **low,
+           vehicles=(Vehicle(0.0, 5.0, 0.0, width=0.6, height=0.4, shape="rect",
+                             albedo=0.3),), target=0),
+        dr("extra-in-pallet-low-camera-bumps", T, "obstacle", speed=1.5, frames=85,
+           roadside=0.0, camera_height=0.25, front=0.25, bumps_deg=2.0,
+           vehicles=(Vehicle(0.0, 6.0, 0.0, width=1.2, height=0.15, shape="rect",
+                             albedo=0.55),), target=0),
+        dr("extra-in-ball-rolls-at-robot", T, "obstacle", speed=0.6, frames=60, **low,
+           vehicles=(Vehicle(0.1, 6.0, -2.0, width=0.22, height=0.22, shape="disk",
+                             albedo=0.75),), target=0),
+        dr("extra-in-cart-pushed-into-path", T, "obstacle", speed=1.0, frames=80, **tall,
+           vehicles=(Vehicle(-2.4, 4.0, 0.0, lateral_speed=0.65, width=1.0, height=1.0,
+                             shape="rect", albedo=0.45),), target=0),
+        dr("extra-in-agv-headon", T, "obstacle", speed=1.5, frames=75, **low,
+           vehicles=(Vehicle(0.0, 10.0, -1.5, width=0.8, height=0.5, shape="rect",
+                             albedo=0.6),), target=0),
+        # --- collisions: low contrast, glass-like
+        dr("extra-in-grey-box-lowcontrast", T, "lowcontrast-glass", speed=1.0, frames=100,
+           **low, vehicles=(Vehicle(0.0, 5.0, 0.0, width=0.6, height=0.45, shape="rect",
+                                    albedo=0.41),), target=0),
+        pl("extra-in-person-lowcontrast-15fps", T, "lowcontrast-glass", fps=15.0,
+           shape="ellipse", aspect=0.4, contrast=0.15, height=16.0, tau=3.0,
+           background=Background("texture", 0.1, 1.5), noise=2.0),
+        co("extra-in-glass-panel-corridor", T, "lowcontrast-glass", speed=1.0, below=0.6,
+           obstacle=5.0, obstacle_size=(1.0, 2.0), obstacle_shade=1.0, seconds=5.5),
+        Case("extra-in-frosted-glass-wall", surface_scene,
+             {"size": P, "onset": 20, "noise": 2.0, "contrast": 0.06, "tau": 3.0},
+             (T, "lowcontrast-glass", "indoor")),
+        # --- collisions under lighting and shake
+        post("extra-in-person-flicker-100hz-30fps", T, "lighting", driving_scene,
+             lighting=flicker100, fps=30.0, speed=0.8, frames=110, **tall,
+             vehicles=(Vehicle(0.0, 7.0, -1.3, **ped),), target=0),
+        post("extra-in-person-lights-off-on", T, "lighting", driving_scene,
+             lighting=(Step(30, 0.45), Step(46, 1 / 0.45)), speed=0.8, frames=80, **tall,
+             vehicles=(Vehicle(0.0, 7.0, -1.3, **ped),), target=0),
+        pl("extra-in-walker-vibration-15fps", T, "ego-motion", fps=15.0, aspect=0.4,
+           height=14.0, camera=Shake(2.0, 0.5, smooth=1, seed=21), **walker),
+        # --- non-collisions: people
+        dr("extra-in-person-passes-alongside", S, "person", speed=0.8, frames=80, **tall,
+           vehicles=(Vehicle(1.4, 7.0, -1.3, **ped),), target=0),
+        pl("extra-in-walker-passes-close-30fps", S, "person", fps=30.0, motion="nearmiss",
+           aspect=0.4, height=24.0, position=(cx + 14.4, cy), **{**walker, "tau": 2.5}),
+        dr("extra-in-person-crosses-clears", S, "person", speed=1.5, frames=60, **tall,
+           vehicles=(Vehicle(-1.5, 4.0, 0.0, lateral_speed=1.2, **ped),), target=0),
+        dr("extra-in-person-crosses-still-robot", S, "person", speed=0.0, frames=80, **tall,
+           vehicles=(Vehicle(-2.5, 1.5, 0.0, lateral_speed=1.3, **ped),), target=0),
+        dr("extra-in-person-recedes", C, "person", speed=0.8, frames=70, **tall,
+           vehicles=(Vehicle(0.0, 1.2, 1.4, **ped),), target=0),
+        dr("extra-in-follow-person", C, "person", speed=1.0, frames=80, **tall,
+           vehicles=(Vehicle(0.0, 2.0, 1.0, **ped),), target=0),
+        dr("extra-in-person-overtakes-robot", C, "person", speed=0.8, frames=70, **tall,
+           vehicles=(Vehicle(1.3, -1.0, 1.8, **ped),), target=0),
+        # --- non-collisions: our own motion with nothing ahead
+        co("extra-in-corridor-wide", C, "ego-motion", speed=1.5, half_width=1.5, below=1.0,
+           above=1.8, seconds=5.0),
+        co("extra-in-aisle-narrow", C, "ego-motion", speed=1.0, half_width=0.7, below=0.4,
+           above=2.0, seconds=5.0),
+        pl("extra-in-turn-in-place", C, "ego-motion", motion="none", background=wall,
+           props=props, camera=Pan((-5.0, 0.0)), noise=2.0),
+        pl("extra-in-scan-sweep-15fps", C, "ego-motion", fps=15.0, motion="none",
+           background=wall, props=props, camera=Sweep((30.0, 0.0), 3.0), noise=2.0),
+        dr("extra-in-low-camera-bumps-clear", C, "ego-motion", speed=1.5, frames=80,
+           roadside=0.0, camera_height=0.25, front=0.25, bumps_deg=2.0),
+        dr("extra-in-door-passed-alongside", S, "obstacle", speed=1.0, frames=80, **tall,
+           vehicles=(Vehicle(1.5, 4.0, 0.0, width=0.9, height=2.1, shape="rect",
+                             albedo=0.55),), target=0),
+        dr("extra-in-ball-rolls-across", S, "obstacle", speed=0.6, frames=60, **low,
+           vehicles=(Vehicle(-1.5, 2.5, 0.0, lateral_speed=1.5, width=0.22, height=0.22,
+                             shape="disk", albedo=0.75),), target=0),
+        # --- non-collisions: lighting
+        post("extra-in-corridor-flicker-100hz-30fps", C, "lighting", corridor_scene,
+             lighting=flicker100, fps=30.0, speed=1.0, seconds=4.0),
+        pl("extra-in-still-flicker-120hz-25fps", C, "lighting", fps=25.0, motion="none",
+           background=wall, props=props, lighting=(Flicker(120.0, 0.15),), noise=2.0),
+        post("extra-in-corridor-lights-off-on", C, "lighting", corridor_scene,
+             lighting=(Step(30, 0.3), Step(50, 1 / 0.3)), speed=1.0, seconds=4.0),
+        pl("extra-in-sunlight-patch", C, "lighting", motion="none", background=wall,
+           props=props, noise=2.0,
+           lighting=(Headlights(10, 60, (80.0, 50.0), (80.0, 150.0), 22.0, 70.0),
+                     Ramp(20, 40, 1.0, 1.25))),
+    ]
+
+
 SUITE_CASES: dict[str, Case] = {
     case.name: case
     for case in (_approach_cases() + _pair_cases() + _clutter_cases() + _recession_cases()
                  + _translation_cases() + _pattern_cases() + _camera_cases()
                  + _brightness_cases() + _noise_cases() + _driving_cases())
 }
-EXTRA_CASES: dict[str, Case] = {case.name: case for case in _extra_cases() + _heldout_cases()}
+EXTRA_CASES: dict[str, Case] = {case.name: case for case in _extra_cases() + _heldout_cases()
+                                 + _indoor_cases()}
 CASES: dict[str, Case] = {**SUITE_CASES, **EXTRA_CASES}  # every case make_case knows
 
 
