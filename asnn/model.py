@@ -158,6 +158,7 @@ class ASNN:
     """
 
     _close_pending = False  # the instance's; a class default for models pickled before it
+    _unfinished = 0  # likewise (see _claim)
 
     def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,
                  record_tracks: bool = False, optimised: bool = True, threads: int = 1):
@@ -302,6 +303,7 @@ class ASNN:
         self._gaps: deque[float] = deque(maxlen=CEILING_GAPS)  # between the frames received
         self._same_instant = 0  # frames in a row received at the instant of the one before
         self.ceiling_held = 0
+        self._unfinished = 0  # frames taken (their state changes begun) and not finished
 
     @property
     def frame_period(self) -> float:
@@ -408,6 +410,10 @@ class ASNN:
         RuntimeError
             If the model is stepping already, on another thread or in a :meth:`stream` with
             worker threads not finished: one model serves one stream from one thread at a time.
+            Or if a step was interrupted part-way, after its frame was taken (an exception
+            other than :class:`FrameError` raised by the step, a KeyboardInterrupt, a worker
+            thread's failure): its frame's state changes are half made, and cannot be undone,
+            so the model refuses every frame until :meth:`reset` starts a new stream.
 
         Warns
         -----
@@ -438,6 +444,15 @@ class ASNN:
             raise RuntimeError("this ASNN model is stepping already (on another thread, or in "
                                "a stream not finished): one model serves one stream, from one "
                                "thread at a time")
+        if self._unfinished:
+            # a frame taken and never finished left the state part-way through a step (the
+            # previous frame, the cascades advanced, no response): stepped on, a held frame
+            # read the response that never came (AttributeError on None), and a new one
+            # stepped from a state no stream of frames gives
+            self._release()
+            raise RuntimeError("a step of this ASNN model was interrupted part-way (an "
+                               "exception or a KeyboardInterrupt after its frame was taken): "
+                               "its state is half a frame's; reset() it to start a new stream")
 
     def __getstate__(self) -> dict:
         """For copy and pickle: without the lock and the worker threads, which a copy starts
@@ -615,6 +630,7 @@ class ASNN:
         stamp = (t if t is not None else index * p.dt if self._clock is None
                  else self._clock + self.frame_period)
         lum = self._luminance(frame)
+        self._unfinished += 1  # the state changes from here on, until _finish (see _claim)
         self.index += 1
         if t is not None or self._clock is not None:
             self._clock = stamp
@@ -703,16 +719,20 @@ class ASNN:
     def _finish(self, frame: "_Frame") -> Response:
         """The last part of a step: the response to a frame whose maps are complete."""
         if frame.since_stepped > 0.0:  # the last response, its targets aged (kept as it was)
-            return dataclasses.replace(self._last, index=frame.index, targets=aged_targets(
+            response = dataclasses.replace(self._last, index=frame.index, targets=aged_targets(
                 self._last.targets, frame.since_stepped))
-        if frame.lum is None:
-            self._last = (dataclasses.replace(self._last, index=frame.index) if frame.repeat
-                          else Response.silent(frame.index, [] if self.record_tracks else None))
-        elif self.optimised:
-            self._last = self._respond_optimised(frame)
         else:
-            self._last = self._respond(frame)
-        return self._last
+            if frame.lum is None:
+                self._last = (dataclasses.replace(self._last, index=frame.index) if frame.repeat
+                              else Response.silent(frame.index,
+                                                   [] if self.record_tracks else None))
+            elif self.optimised:
+                self._last = self._respond_optimised(frame)
+            else:
+                self._last = self._respond(frame)
+            response = self._last
+        self._unfinished -= 1
+        return response
 
     def _held(self, stamp: float | None) -> bool:
         """Whether the frame-rate ceiling holds a frame of time ``stamp`` (None: untimed)

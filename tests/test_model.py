@@ -1025,7 +1025,38 @@ def test_a_threaded_stream_that_fails_while_it_closes_frees_the_model(monkeypatc
     with pytest.raises(KeyboardInterrupt):
         stream.close()
     monkeypatch.undo()
-    assert model.step(frames[5], 5 / 20).index == model.index - 1
+    # free, not stepping: it refuses the half-finished stream's frames until reset
+    with pytest.raises(RuntimeError, match=r"interrupted part-way.*reset\(\)"):
+        model.step(frames[5], 5 / 20)
+    model.reset()
+    assert model.step(frames[5], 5 / 20).index == model.index - 1 == 0
+    model.close()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_step_interrupted_part_way_is_refused_until_reset(monkeypatch, threads):
+    """A review: a step that raised after its frame was taken (a stage's error, a Ctrl-C) left
+    the model half-stepped, and stepped on without a word (a frame held as a repeat then got
+    a response the model never finished; where none was, it raised AttributeError on None)."""
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, (64, 64), np.uint8) for _ in range(4)]
+    model = ASNN("default", threads=threads)
+    model.step(frames[0], 0.0)
+
+    def failing(frame):
+        raise KeyboardInterrupt("in the output stage")
+
+    monkeypatch.setattr(model, "_respond_optimised", failing)
+    with pytest.raises(KeyboardInterrupt):
+        model.step(frames[1], 0.05)
+    monkeypatch.undo()
+    for t, frame in ((0.1, frames[1]), (0.1, frames[2])):  # a repeat, a new frame
+        with pytest.raises(RuntimeError, match=r"interrupted part-way.*reset\(\)"):
+            model.step(frame, t)
+    model.reset()
+    expected = [r.to_dict() for r in ASNN("default").stream(
+        (k / 20, f) for k, f in enumerate(frames))]
+    assert [model.step(f, k / 20).to_dict() for k, f in enumerate(frames)] == expected
     model.close()
 
 
