@@ -486,7 +486,9 @@ class ASNN:
         calling thread while the worker threads compute their bands of frame n + 1's fused
         pass, and response n is yielded while they still do: it comes once frame n + 1 has been
         taken. An exception raised by ``frames``, or by a frame (:class:`FrameError`), is
-        raised after the responses to the frames before it. While the stream runs, the model's
+        raised after the responses to the frames before it; a KeyboardInterrupt raised by
+        ``frames`` leaves the model as :meth:`step` would after the frames before it (their
+        responses not yielded). While the stream runs, the model's
         attributes may already describe the next frame. A stream left early (``break``, or the
         generator closed) finishes the frames it had taken, up to two beyond the last response
         yielded, without yielding them: ``index`` counts them, and the model goes on from there
@@ -546,6 +548,13 @@ class ASNN:
                 except Exception:  # the responses before it first
                     while pending:
                         yield self._finish(self._joined(pending.popleft()))
+                    raise
+                except BaseException:  # a KeyboardInterrupt while the source read a frame:
+                    # between two frames, as with one thread, so the frames taken are finished
+                    # (their responses dropped, as for a stream left early); left unfinished,
+                    # the model refused every frame until reset
+                    while pending:
+                        self._finish(self._joined(pending.popleft()))
                     raise
                 if taken.photo is not None:  # the workers' bands queue behind the previous ones
                     self._start(taken, overlapped=True)

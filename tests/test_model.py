@@ -1060,6 +1060,32 @@ def test_a_step_interrupted_part_way_is_refused_until_reset(monkeypatch, threads
     model.close()
 
 
+def test_a_threaded_stream_interrupted_in_its_frame_source_goes_on_as_one_thread_does():
+    """A review: a Ctrl-C in the frame source of a stream with worker threads (a camera's
+    read) left the frames it had taken unfinished, the first one's response never made: the
+    next frame, a repeat, raised AttributeError on None. With one thread the model went on."""
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, (64, 64), np.uint8) for _ in range(4)]
+
+    def source():
+        yield 0.0, frames[0]
+        yield 0.05, frames[1]
+        raise KeyboardInterrupt("while the camera was read")
+
+    after = []
+    for threads in (1, 2):
+        model = ASNN("default", threads=threads)
+        with pytest.raises(KeyboardInterrupt):
+            for _ in model.stream(source()):
+                pass
+        # a repeat of the latest frame (the model's response held), then new ones
+        after.append([model.step(f, t).to_dict() for t, f in
+                      ((0.1, frames[1]), (0.15, frames[2]), (0.2, frames[3]))])
+        assert model.index == 5
+        model.close()
+    assert after[1] == after[0]
+
+
 def test_a_shallow_copy_is_a_snapshot_too():
     """copy.copy shared the state's arrays, deques and approach stage with the model (a user's
     snapshot): stepping the copy changed the original's later responses."""
