@@ -56,6 +56,8 @@ SLOTS = 3  # passes whose data and maps live at once: two frames being finished 
 SPIN = 100e-6  # seconds a thread polls for a pass or a band before it sleeps
 _NAP = 10_000_000  # nanoseconds a sleeping thread sleeps at most before it looks again
 _LEAVE = 50_000_000  # nanoseconds without a pass after which a server leaves its kernel
+_LIVENESS = 100_000_000  # nanoseconds the calling thread waits for bands before it looks
+# whether the servers' threads still run (one that ended never finishes its band)
 
 # the shared counters, per server: the latest pass handed to it, the latest it finished, and
 # flags: told to leave its kernel (EXIT), failed (FAILED), in its kernel (RUNNING), asleep
@@ -226,9 +228,10 @@ def _finished(control, servers, number):
 
 
 @kernel()
-def _await_pass(control, bells, number, spin_ns):
-    """Wait until every server has finished pass ``number`` (1) or one failed (-1): polling for
-    ``spin_ns``, then asleep until a server wakes this thread (see :func:`_serve`)."""
+def _await_pass(control, bells, number, spin_ns, limit_ns):
+    """Wait until every server has finished pass ``number`` (1) or one failed (-1), or for
+    ``limit_ns`` at most (0): polling for ``spin_ns``, then asleep until a server wakes this
+    thread (see :func:`_serve`) or ``_NAP`` passed."""
     servers = len(bells) - 1
     me = servers * _FIELDS  # the calling thread's flag after the servers' rows
     start = _clock_ns(_MONOTONIC)
@@ -236,7 +239,10 @@ def _await_pass(control, bells, number, spin_ns):
         state = _finished(control, servers, number)
         if state != 0:
             return state
-        if _clock_ns(_MONOTONIC) - start <= spin_ns:
+        waited = _clock_ns(_MONOTONIC) - start
+        if waited > limit_ns:
+            return 0
+        if waited <= spin_ns:
             _pause()
             continue
         seen = _load(bells, servers)
@@ -328,6 +334,14 @@ class _Server:
         self._thread = threading.Thread(target=self._run, args=(front,), daemon=True,
                                         name=f"asnn-model-{index + 1}")
         self._thread.start()
+
+    @property
+    def name(self) -> str:
+        return self._thread.name
+
+    def alive(self) -> bool:
+        """Whether the thread still runs (it ends when told to stop, or when it dies)."""
+        return self._thread.is_alive()
 
     def wake(self, number: int | None) -> None:
         """Pass ``number`` is handed out while the thread is out of its kernel (None: stop):
@@ -573,8 +587,22 @@ class BandedFront:
         self._waited = 0.0
 
     def _wait(self, number: int) -> None:
-        """Wait until every server has finished pass ``number``; raise a server's error."""
-        if _await_pass(self.control, self.bells, number, int(SPIN * 1e9)) < 0:
+        """Wait until every server has finished pass ``number``; raise a server's error, or a
+        RuntimeError where a server's thread ended without finishing its band (waited for in
+        the kernel alone, the calling thread slept on for ever)."""
+        while (state := _await_pass(self.control, self.bells, number, int(SPIN * 1e9),
+                                    _LIVENESS)) == 0:
+            for s in self._servers:
+                # dead first: a band it finished before it ended is then seen as served
+                if not s.alive() and self.served(s.index) < number and s.error is None:
+                    s.error = RuntimeError(
+                        f"the ASNN model's worker thread {s.name} ended without computing its "
+                        f"band of a frame (pass {number}); the model starts new worker "
+                        "threads when it steps again")
+                    state = -1
+            if state < 0:
+                break
+        if state < 0:
             self._stop_serving()
             raise next(s.error for s in self._servers if s.error is not None)
 

@@ -829,6 +829,42 @@ def test_after_a_worker_s_failure_the_next_frames_get_fresh_workers(monkeypatch,
     assert outcome == ["failed", len(frames)]
 
 
+def test_a_worker_thread_that_ended_is_raised_not_waited_for():
+    """A review: the stepping thread waited for the workers' bands in a kernel that only a
+    band done or a worker's recorded failure ended, so a worker thread that ended without
+    either (died) left it waiting for ever; it now raises, and the model goes on after a
+    reset with new worker threads."""
+    import threading
+
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, (64, 64), np.uint8) for _ in range(6)]
+    model = ASNN("default", threads=2)
+    model.step(frames[0])
+    model.step(frames[1])  # the worker is up
+    server = model._banded._servers[0]
+    server.wake(None)  # its thread ends as close() ends it, but unasked: as if it died
+    server._thread.join(timeout=60)
+    assert not server._thread.is_alive()
+    outcome = []
+
+    def run():
+        try:
+            model.step(frames[2])
+        except RuntimeError as exc:
+            outcome.append(exc)
+
+    runner = threading.Thread(target=run, daemon=True)
+    runner.start()
+    runner.join(timeout=60)
+    assert not runner.is_alive(), "the model hung"
+    assert outcome and "worker thread asnn-model-1 ended" in str(outcome[0])
+    model.reset()
+    one = ASNN("default")
+    assert [model.step(f).to_dict() for f in frames] == [one.step(f).to_dict() for f in frames]
+    assert model._banded._servers[0]._thread.is_alive()  # a new worker
+    model.close()
+
+
 def test_a_worker_computes_its_band_while_the_stepping_thread_holds_the_gil():
     """A worker thread stays in its kernel between passes (asnn._parallel): it computes its
     band while the thread that steps the model runs Python and keeps the GIL (as finishing a
