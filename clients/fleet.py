@@ -11,11 +11,13 @@ from __future__ import annotations
 import hashlib
 import logging
 import threading
+import time
 import unicodedata
 from collections import OrderedDict
 from collections.abc import Callable
 
 from service import keys
+from service.logutil import RateLimitedLog
 from service.messages import (MAX_NOTE_LEN, MessageError, Preview, Refusal, Response,
                               check_preview, decode_preview, decode_refusal, decode_response)
 from service.streams import CONTESTED_FOR_S
@@ -250,11 +252,17 @@ class FleetSubscriber:
     :data:`PREVIEW_RING` (older ones are dropped: thumbnails, best effort): checking one
     decodes it, and a callback that takes that long held up the session's other
     subscribers, so that a flood of small previews that declare a megapixel delayed every
-    robot's responses and warnings by 20-30 s (a control-room trial)."""
+    robot's responses and warnings by 20-30 s (a control-room trial).
 
-    def __init__(self, session, store, *, refusals: bool = False):
+    A ``store`` whose ``offer`` raises (a bug) has its traceback logged at most once every
+    ``log_interval`` seconds (``clock``'s), each line saying how many failed since the one
+    before; the subscriber keeps feeding it."""
+
+    def __init__(self, session, store, *, refusals: bool = False, log_interval: float = 10.0,
+                 clock: Callable[[], float] = time.monotonic):
         prefix = store.prefix
         self.store = store
+        self._log = RateLimitedLog(log, log_interval, clock)
         self.keys = [keys.responses(prefix), keys.warnings(prefix), keys.previews(prefix)]
         if refusals:
             self.keys.append(keys.refusals(prefix))
@@ -289,7 +297,12 @@ class FleetSubscriber:
         try:
             self.store.offer(str(sample.key_expr), sample.payload.to_bytes())
         except Exception:  # offer never raises for bad input; this is a bug, keep listening
-            log.exception("unexpected error on %s", sample.key_expr)
+            # rate-limited: a store that fails on every sample logged a traceback per sample
+            hidden = self._log.allow("offer-failed")
+            if hidden is not None:
+                log.error("unexpected error on %s%s", sample.key_expr,
+                          f" ({hidden} more since the last line)" if hidden else "",
+                          exc_info=True)
 
     def __enter__(self) -> FleetSubscriber:
         return self

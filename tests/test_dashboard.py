@@ -646,6 +646,39 @@ def test_subscriber_feeds_the_store_over_zenoh(zenoh_net):
     assert store.invalid == {"undecodable": 1}
 
 
+def test_a_store_that_fails_on_every_sample_logs_a_traceback_rate_limited(zenoh_net, caplog):
+    """A concurrency review: a store whose offer raised (a bug) had a traceback logged for
+    every sample, so one broken store flooded the log; it is fed on, and the failures counted."""
+    import logging
+
+    class Broken:
+        prefix = "asnn"
+        offered = 0
+
+        def offer(self, key, payload):
+            self.offered += 1
+            raise ValueError("a bug in the store")
+
+    class Sample:  # what the subscriber reads of a Zenoh sample
+        key_expr = "asnn/r1/response"
+        payload = type("Payload", (), {"to_bytes": staticmethod(lambda: b"{}")})
+
+    now, store = [0.0], Broken()
+    with caplog.at_level(logging.ERROR, logger="asnn.fleet"), \
+            FleetSubscriber(zenoh_net.hub, store, log_interval=10.0,
+                            clock=lambda: now[0]) as subscriber:
+        for _ in range(100):
+            subscriber._on_sample(Sample)
+        now[0] = 10.0
+        subscriber._on_sample(Sample)
+    lines = [r for r in caplog.records if r.name == "asnn.fleet"]
+    assert store.offered == 101
+    assert len(lines) == 2
+    assert all(r.exc_info and "a bug in the store" in str(r.exc_info[1]) for r in lines)
+    assert lines[0].getMessage() == "unexpected error on asnn/r1/response"
+    assert "(99 more since the last line)" in lines[1].getMessage()
+
+
 def test_slow_previews_hold_up_no_response_and_the_oldest_are_dropped(procs, tmp_path):
     """A control-room trial: checking a preview decodes it (20 ms for a 5 kB png declaring a
     megapixel), and on the subscriber's callback that held up the session's other ones: a
