@@ -648,8 +648,11 @@ class Worker:
 
     def _drop_outlets(self) -> None:
         """Undeclare the publishers of robots the core no longer tracks (evicted, handed over)."""
-        tracked = set(self.core.robots())
         with self._outlets_lock:
+            # the robots tracked read under the lock (publish() never holds the core's): read
+            # before, a robot tracked and answered in between lost the publishers it had just
+            # declared, as one no longer tracked, and a put on them failed its response
+            tracked = set(self.core.robots())
             gone = [r for r in self._outlets if r not in tracked]
             outlets = [self._outlets.pop(r) for r in gone]
         for outlet in outlets:

@@ -82,6 +82,42 @@ def service(zenoh_net):
         yield zenoh_net
 
 
+def test_a_robot_answered_while_the_publishers_are_pruned_keeps_its_publishers(zenoh_net,
+                                                                               monkeypatch):
+    """A concurrency review: the worker's pruning of its robots' publishers (_drop_outlets,
+    on the routes' thread) read the robots tracked before it took the publishers' lock, so a
+    robot tracked and answered in between had the publishers it had just declared undeclared,
+    as one no longer tracked."""
+    def answer(robot):
+        return Response(robot=robot, seq=1, stamp=1.0, model="asnn", preset="p", u=0.0,
+                        out=0.5, spikes=0, spike_rate=0.0, collision=False, targets=[],
+                        worker="w1", latency_ms=1.0, dropped=0)
+
+    core = WorkerCore()
+    worker = Worker(zenoh_net.hub, core, stats_every=0)  # not started: no routes' thread
+    tracked, answering = ["r1"], []
+
+    def robots():
+        before = list(tracked)
+        if not answering:  # r2's first frame comes, is tracked and answered meanwhile
+            tracked.append("r2")
+            answering.append(threading.Thread(target=worker.publish, args=(answer("r2"),)))
+            answering[0].start()
+            answering[0].join(timeout=2)  # at once, unless the pruning holds the lock
+        return before
+
+    monkeypatch.setattr(core, "robots", robots)
+    try:
+        worker.publish(answer("r1"))
+        worker._drop_outlets()
+        answering[0].join(timeout=30)
+        assert not answering[0].is_alive()
+        assert sorted(worker._outlets) == ["r1", "r2"]
+        worker.publish(answer("r2"))  # on publishers still declared
+    finally:
+        worker.close()
+
+
 def test_two_cameras_at_once_looming_warns_with_targets_translating_does_not(service):
     warnings = []
     listener = WarningListener(service.spoke(), warnings.append)
