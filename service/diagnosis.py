@@ -20,6 +20,7 @@ import base64
 import datetime
 import json
 import os
+import re
 import socket
 import ssl
 import warnings
@@ -39,6 +40,7 @@ _TLS_FILES = ("root_ca_certificate", "connect_certificate", "connect_private_key
 # OpenSSL's verification results (X509_V_ERR_*) that another CA would not fix
 _NOT_YET_VALID, _EXPIRED, _HOSTNAME_MISMATCH, _IP_ADDRESS_MISMATCH = 9, 10, 62, 64
 _SCRIPT = "deploy/scripts/gen-dev-certs.sh"  # the development fleet's certificates
+_MODULE = re.escape(__name__) + "$"  # this module's warnings (the filter of _quiet_loads)
 
 
 def split_endpoint(endpoint: str) -> tuple[str, str, int] | None:
@@ -94,6 +96,22 @@ _EXPIRED_MEANS = {
 }
 
 
+def _quiet_loads() -> None:
+    """Ignore the warnings of this module's certificate loads (cryptography warns at each load
+    of a bundle's odd old CAs, a system bundle's serial numbers that are not positive: not this
+    process's to say, at every check) by a filter of this module's own, added where it is
+    missing. warnings.catch_warnings around the load swapped the process's filters from the
+    router watch's thread, which is not thread-safe (every other thread's warnings ignored
+    meanwhile, a filter another thread set meanwhile undone after); this adds one filter at
+    most, and only reads them after. Not once at import: a catch_warnings block that the
+    import came in drops the filter at its end."""
+    for action, _, category, module, _ in warnings.filters:
+        if (action == "ignore" and category is UserWarning and module is not None
+                and module.pattern == _MODULE):
+            return
+    warnings.filterwarnings("ignore", category=UserWarning, module=_MODULE)
+
+
 def _certificates(conf: zenoh.Config, name: str) -> tuple[str, list] | None:
     """The setting's label and the certificates it names (a file or inline base64 PEM), or None
     where it is not set, cannot be read, or holds none that cryptography parses (opening the
@@ -114,9 +132,8 @@ def _certificates(conf: zenoh.Config, name: str) -> tuple[str, list] | None:
                 return None
             pem = base64.b64decode(inline, validate=False)
             label = f"{name} (inline)"
-        with warnings.catch_warnings():  # a system bundle's odd old CA: said once per load
-            warnings.simplefilter("ignore")
-            certificates = x509.load_pem_x509_certificates(pem)
+        _quiet_loads()
+        certificates = x509.load_pem_x509_certificates(pem)
     except Exception:  # OSError, ValueError, x509.InvalidVersion: not judged here
         return None
     return (label, certificates) if certificates else None

@@ -795,6 +795,45 @@ def test_a_certificate_that_ends_soon_or_has_ended_is_said_with_what_it_will_do(
 
 
 
+def test_the_certificate_check_on_the_watch_s_thread_leaves_other_threads_warnings_alone(
+        tmp_path, monkeypatch):
+    """A concurrency review: the certificate check (the router watch's thread, once a day)
+    loaded the certificates inside warnings.catch_warnings, which swaps the process's filters:
+    meanwhile every other thread's warnings were ignored. A bundle's odd old CA, of which
+    cryptography warns at each load, is still not said."""
+    import warnings
+
+    from cryptography import x509
+    from cryptography.utils import CryptographyDeprecationWarning
+
+    from service.diagnosis import expiring_certificates
+
+    load, inside, done = x509.load_pem_x509_certificates, threading.Event(), threading.Event()
+
+    def odd_bundle(pem):  # cryptography warns at its caller's line, as of a serial number <= 0
+        warnings.warn("Parsed a serial number which wasn't positive", CryptographyDeprecationWarning,
+                      stacklevel=2)
+        inside.set()
+        done.wait(30)
+        return load(pem)
+
+    monkeypatch.setattr(x509, "load_pem_x509_certificates", odd_bundle)
+    conf = zenoh.Config()
+    set_json(conf, "transport/link/tls/connect_certificate",
+             str(short_lived_certificate(tmp_path / "soon.pem", 10.2)))
+    said = []
+    check = threading.Thread(target=lambda: said.append(expiring_certificates(conf)))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.filterwarnings("always", append=True)  # after the filters set before
+        check.start()
+        assert inside.wait(30)
+        warnings.warn("this thread's own", UserWarning)
+        done.set()
+        check.join(30)
+    assert [str(w.message) for w in caught] == ["this thread's own"]
+    assert "expires on" in said[0]
+
+
 def certificate(days: float, name: str, issuer=None):
     """A certificate (and its key) of ``name`` that ends ``days`` days from now, signed by
     ``issuer`` (a certificate and its key; None: itself)."""
