@@ -1070,7 +1070,7 @@ def test_a_recording_stops_at_its_first_failed_write_and_says_why(tmp_path, monk
     import builtins
     import errno
 
-    import asnn.io.foxglove_mcap as foxglove_mcap
+    import asnn.io.files as files
     from clients.foxglove import FoxgloveBridge
 
     class FullDisk:
@@ -1088,7 +1088,7 @@ def test_a_recording_stops_at_its_first_failed_write_and_says_why(tmp_path, monk
         def __getattr__(self, name):
             return getattr(self._file, name)
 
-    monkeypatch.setattr(foxglove_mcap, "open", lambda path, mode="r": FullDisk(
+    monkeypatch.setattr(files, "open", lambda path, mode="r": FullDisk(
         builtins.open(path, mode), 2000), raising=False)
     rng = np.random.default_rng(0)
     path = tmp_path / "fleet.mcap"

@@ -1,5 +1,6 @@
 """Files written whole: a process killed while it writes leaves the old file or the new one,
-and processes that read, change and write one file take turns."""
+and processes that read, change and write one file take turns; and recordings, written to a new
+file that keeps its first failed write (:class:`RecordingFile`)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["folder_lock", "folder_problem", "resolved", "seekable_target", "write_atomically"]
+__all__ = ["RecordingFile", "folder_lock", "folder_problem", "resolved", "seekable_target",
+           "write_atomically"]
 
 
 def resolved(path: str | Path) -> Path:
@@ -94,3 +96,54 @@ def folder_lock(path: str | Path) -> Iterator[None]:
         yield
     finally:
         os.close(fd)  # releases the lock
+
+
+class RecordingFile:
+    """A recording's file as its MCAP writer writes it, keeping the first error: a writer may
+    report none to its caller (the Foxglove SDK's logs it; a writer on a thread of its own has
+    no caller to raise to), so its user checks :attr:`error` and stops at the first write that
+    failed (a full disk).
+
+    The file is new: a recording never overwrites one (unless ``overwrite``).
+
+    Raises
+    ------
+    OSError
+        One line naming the file: it exists (without ``overwrite``), or cannot be created (a
+        folder that is missing or not writable).
+    """
+
+    def __init__(self, path: str | Path, *, overwrite: bool = False):
+        self.path = Path(path)
+        try:
+            self._file = open(self.path, "wb" if overwrite else "xb")  # noqa: SIM115
+        except FileExistsError:
+            raise OSError(f"{self.path}: exists; a recording goes to a new file") from None
+        except OSError as exc:
+            raise OSError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        self.error: OSError | None = None
+
+    def _kept(self, call, *args):
+        try:
+            return call(*args)
+        except OSError as exc:
+            self.error = self.error or exc
+            raise
+
+    def write(self, data) -> int:
+        return self._kept(self._file.write, data)
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._kept(self._file.seek, offset, whence)
+
+    def tell(self) -> int:
+        return self._file.tell()
+
+    def flush(self) -> None:
+        self._kept(self._file.flush)
+
+    def close(self) -> None:
+        try:
+            self._kept(self._file.close)  # flushes what is buffered
+        except OSError:
+            pass  # kept in error

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .files import RecordingFile
 from .images import ENCODED_FORMATS, encode
 from .visualize import target_arrow, target_label
 
@@ -187,41 +188,6 @@ def _plain(value):
     return value
 
 
-class _FileSink:
-    """The MCAP's file as the SDK writes it, keeping the first error: the SDK's logging reports
-    none to its caller (a full disk would surface only when the file is closed), so its
-    :class:`McapRecording`'s user checks :attr:`error` and stops at the first that failed."""
-
-    def __init__(self, path: Path, mode: str = "wb"):
-        self._file = open(path, mode)  # noqa: SIM115  (closed by its writer's close)
-        self.error: OSError | None = None
-
-    def _kept(self, call, *args):
-        try:
-            return call(*args)
-        except OSError as exc:
-            self.error = self.error or exc
-            raise
-
-    def write(self, data) -> int:
-        return self._kept(self._file.write, data)
-
-    def seek(self, offset: int, whence: int = 0) -> int:
-        return self._kept(self._file.seek, offset, whence)
-
-    def tell(self) -> int:
-        return self._file.tell()
-
-    def flush(self) -> None:
-        self._kept(self._file.flush)
-
-    def close(self) -> None:
-        try:
-            self._kept(self._file.close)  # flushes what is buffered
-        except OSError:
-            pass  # kept in error
-
-
 # the SDK's logger of a message it could not write: one line for each after the first failure
 _SDK_LOGGER = "foxglove.log_sink_set"
 
@@ -229,7 +195,7 @@ _SDK_LOGGER = "foxglove.log_sink_set"
 class _QuietAfterFailure(logging.Filter):
     """Drops the SDK's complaints once a sink has failed: the writer says it in one error."""
 
-    def __init__(self, sink: _FileSink):
+    def __init__(self, sink: RecordingFile):
         super().__init__()
         self._sink = sink
 
@@ -255,12 +221,7 @@ class McapRecording:
     def __init__(self, path: str | Path, context: foxglove.Context, *,
                  overwrite: bool = False):
         self.path = Path(path)
-        try:
-            self._sink = _FileSink(self.path, mode="wb" if overwrite else "xb")
-        except FileExistsError:
-            raise OSError(f"{self.path}: exists; a recording goes to a new file") from None
-        except OSError as exc:
-            raise OSError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        self._sink = RecordingFile(self.path, overwrite=overwrite)
         try:
             self._writer = foxglove.open_mcap(self._sink, context=context)
         except Exception as exc:  # the SDK's own error type
