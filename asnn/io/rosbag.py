@@ -49,7 +49,8 @@ except ImportError as exc:  # the optional extra is missing: say which one, in o
 
 __all__ = ["BagClip", "CLOCK_RESET_FRAMES", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_SCHEMAS",
            "RAW_ENCODINGS", "TopicInfo", "bag_files", "bag_topics",
-           "choose_topic", "image_from_compressed", "image_from_raw", "open_bag", "write_bag",
+           "choose_topic", "compressed_image_message", "image_from_compressed", "image_from_raw",
+           "open_bag", "raw_image_message", "register_image_type", "write_bag",
            "IMAGE_MSGDEF", "COMPRESSED_IMAGE_MSGDEF"]
 
 IMAGE = "sensor_msgs/msg/Image"
@@ -799,23 +800,46 @@ def write_bag(frames, path: str | Path, *, topic: str = "/camera/image_raw", fps
     seekable_target(path)
     with open(path, "wb") as fh, Ros2Writer(fh) as writer:
         raw = format == "raw"
-        schema = writer.register_msgdef(IMAGE if raw else COMPRESSED_IMAGE,
-                                        IMAGE_MSGDEF if raw else COMPRESSED_IMAGE_MSGDEF)
+        schema = register_image_type(writer, IMAGE if raw else COMPRESSED_IMAGE)
         for index, frame in enumerate(frames):
             stamp = start_ns + round(index * 1e9 / fps)
-            header = {"stamp": {"sec": stamp // 1_000_000_000, "nanosec": stamp % 1_000_000_000},
-                      "frame_id": frame_id}
             frame = np.ascontiguousarray(frame)
             if raw:
-                gray = frame.ndim == 2
-                message = {"header": header, "height": frame.shape[0], "width": frame.shape[1],
-                           "encoding": "mono8" if gray else "bgr8", "is_bigendian": 0,
-                           "step": frame.shape[1] * (1 if gray else 3), "data": frame.tobytes()}
+                message = raw_image_message(frame, stamp, frame_id)
             else:
                 ok, data = cv2.imencode(".png" if format == "png" else ".jpg", frame)
                 if not ok:
                     raise ValueError(f"cannot encode a {frame.shape} frame as {format}")
-                message = {"header": header, "format": format, "data": data.tobytes()}
+                message = compressed_image_message(data.tobytes(), format, stamp, frame_id)
             writer.write_message(topic, schema, message, log_time=stamp, publish_time=stamp,
                                  sequence=index)
     return path
+
+
+def register_image_type(writer: Ros2Writer, datatype: str):
+    """The schema of ``sensor_msgs/msg/Image`` or ``CompressedImage`` in a ROS 2 MCAP writer:
+    the message definition rosbag2 embeds."""
+    return writer.register_msgdef(datatype, IMAGE_MSGDEF if datatype == IMAGE
+                                  else COMPRESSED_IMAGE_MSGDEF)
+
+
+def _header(stamp_ns: int, frame_id: str) -> dict:
+    return {"stamp": {"sec": stamp_ns // 1_000_000_000, "nanosec": stamp_ns % 1_000_000_000},
+            "frame_id": frame_id}
+
+
+def raw_image_message(image: np.ndarray, stamp_ns: int, frame_id: str = "camera") -> dict:
+    """A gray (mono8) or BGR (bgr8) uint8 picture as a ``sensor_msgs/msg/Image``, stamped
+    ``stamp_ns`` (nanoseconds since the epoch), for :class:`mcap_ros2.writer.Writer`."""
+    gray = image.ndim == 2
+    return {"header": _header(stamp_ns, frame_id), "height": image.shape[0],
+            "width": image.shape[1], "encoding": "mono8" if gray else "bgr8", "is_bigendian": 0,
+            "step": image.shape[1] * (1 if gray else 3),
+            "data": np.ascontiguousarray(image).tobytes()}
+
+
+def compressed_image_message(data: bytes, format: str, stamp_ns: int,
+                             frame_id: str = "camera") -> dict:
+    """An encoded picture (``format``: jpeg or png) as a ``sensor_msgs/msg/CompressedImage``,
+    stamped ``stamp_ns`` (nanoseconds since the epoch), for :class:`mcap_ros2.writer.Writer`."""
+    return {"header": _header(stamp_ns, frame_id), "format": format, "data": bytes(data)}
