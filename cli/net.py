@@ -12,9 +12,9 @@ from asnn.params import preset_names
 from service import keys
 from service.config import ConfigError, zenoh_error
 
-from .arguments import (count, fleet_size, frame_rate, non_negative, nonempty_path, preset_spec,
-                        robot_id, seconds, seconds_or_zero, threads, warmup_frames,
-                        worker_id)
+from .arguments import (count, fleet_size, frame_rate, mcap_output, megabytes, non_negative,
+                        nonempty_path, preset_spec, robot_id, seconds, seconds_or_zero, threads,
+                        warmup_frames, worker_id)
 from .session import add_zenoh_options, exit_on_interrupt, fail, router_watch, session_for, \
     setup_logging, stop_on_signals, zenoh_options
 
@@ -26,10 +26,15 @@ log = logging.getLogger("asnn")
 # ---------------------------------------------------------------- commands
 
 def cmd_camera(args: argparse.Namespace) -> int:
-    from service.camera import (RefusalNotices, SourceError, SourceRejections,
-                                SubscriberWatch, open_source, publish_frames)
+    from service.camera import (RECORD_MAX_BYTES, RefusalNotices, SourceError, SourceRejections,
+                                SubscriberWatch, open_recording, open_source, publish_frames)
 
     setup_logging(args)
+    if args.record:
+        try:  # the 'ros' extra, said before anything opens
+            import asnn.io.bag_recording  # noqa: F401
+        except ImportError as exc:  # the message names the extra to install
+            return fail(str(exc))
     rejections, refusals = SourceRejections(args.robot), RefusalNotices(args.robot)
     subscribers = SubscriberWatch(args.robot, keys.frame_key(args.robot, args.prefix))
     try:
@@ -39,19 +44,42 @@ def cmd_camera(args: argparse.Namespace) -> int:
         return fail(str(exc))
     stop = stop_on_signals()
     with session, router_watch(session, f"camera {args.robot}", args):
+        recording = None
+        if args.record:  # made last: a camera that cannot start leaves no file behind
+            bound = RECORD_MAX_BYTES if args.record_max_mb is None else args.record_max_mb * 1e6
+            try:
+                recording = open_recording(args.record, args.robot, prefix=args.prefix,
+                                           format=args.format, frame_id=source.frame_id,
+                                           max_bytes=bound)
+            except OSError as exc:
+                return fail(str(exc))
         try:
             count = publish_frames(session, args.robot, source, prefix=args.prefix,
                                    fps=args.fps, loop=args.loop, format=args.format,
                                    wait=args.wait, stop=stop, preview_hz=args.preview_hz,
-                                   refusals=refusals, subscribers=subscribers)
+                                   refusals=refusals, subscribers=subscribers,
+                                   recording=recording)
         except OSError as exc:  # a live source's frame the wire cannot carry (VideoError)
             return fail(str(exc))
+        finally:  # finished (its index and summary) however the camera stops
+            if recording is not None:
+                _close_recording(recording, args.robot)
     unheard = (f" ({subscribers.unheard} while no subscriber took them: lost)"
                if subscribers.unheard else "")
     log.info("camera %s: %d frames published%s; %s; workers' refusals on its key "
              "(of any publisher's frames): %s",
              args.robot, count, unheard, rejections.summary(), refusals.summary())
     return 0
+
+
+def _close_recording(recording, robot: str) -> None:
+    """Finish the camera's recording and say what it holds (or why it could not be finished)."""
+    error = recording.close()
+    if error is not None and recording.stopped != "failed":  # a stop said it already
+        log.error("camera %s: recording to %s: %s", robot, recording.path,
+                  error.strerror or error)
+    log.info("camera %s: recorded %d frames (%.1f MB) to %s", robot, recording.frames,
+             recording.size / 1e6, recording.path)
 
 
 def cmd_worker(args: argparse.Namespace) -> int:
@@ -363,6 +391,14 @@ def register(subparsers) -> None:
     p.add_argument("--preview-hz", type=non_negative, default=PREVIEW_HZ, metavar="HZ",
                    help="thumbnails per second on <prefix>/<robot>/preview for dashboards "
                         "(docs/contract.md; default: %(default)s; 0: none)")
+    p.add_argument("--record", type=mcap_output, default=None, metavar="OUT.mcap",
+                   help="also record every frame published, as sent and with its stamp, to this "
+                        "new file: a ROS 2 bag (topic /<prefix>/<robot>/frame) that asnn detect "
+                        "and asnn camera --source replay (docs/foxglove.md; the 'ros' extra); "
+                        "finished when the camera stops")
+    p.add_argument("--record-max-mb", type=megabytes, default=None, metavar="MB",
+                   help="stop recording once the file reaches this size; the camera publishes "
+                        "on (default: 1000)")
     add_zenoh_options(p)
     p.set_defaults(func=cmd_camera)
 

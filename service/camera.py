@@ -24,6 +24,13 @@ A worker that refuses the camera's frames says why on ``<prefix>/<robot>/refused
 Optionally (``preview_hz`` > 0), a small jpeg thumbnail of the current frame goes to
 ``<prefix>/<robot>/preview`` a few times a second for dashboards (docs/contract.md), with the
 same best-effort delivery as frames.
+
+Optionally (``asnn camera --record OUT.mcap``, :func:`open_recording`), every frame published
+is also recorded, as it was sent and with its stamp, as a ROS 2 bag on the topic
+``/<prefix>/<robot>/frame`` (:class:`asnn.io.bag_recording.BagRecording`, the ``ros`` extra),
+for ``asnn detect`` or ``asnn camera --source`` to replay. A recording that stops (its size
+bound, a failed write, a disk that does not keep up) says so in one line; the camera publishes
+on.
 """
 
 from __future__ import annotations
@@ -45,8 +52,9 @@ from .messages import (FORMATS, PREVIEW_WIDTH, Frame, MessageError, Preview, dec
                        encode)
 
 __all__ = ["FRAME_QOS", "MAX_NOTICES", "MAX_REPLAY_GAP", "PREVIEW_HZ", "PREVIEW_WIDTH",
-           "RefusalNotices", "Source", "SourceError", "SourceRejections", "SubscriberWatch",
-           "open_source", "publish_frames"]
+           "RECORD_MAX_BYTES", "RefusalNotices", "Source", "SourceError", "SourceRejections",
+           "SubscriberWatch", "open_recording", "open_source", "publish_frames",
+           "recording_topic", "stamp_ns"]
 
 log = logging.getLogger("asnn.camera")
 
@@ -55,6 +63,7 @@ FRAME_QOS = dict(congestion_control=zenoh.CongestionControl.DROP,
 PREVIEW_HZ = 2.0     # thumbnails per second on <prefix>/<robot>/preview (0: none)
 MAX_REPLAY_GAP = 5.0  # seconds: a longer pause between two recorded frames is shortened to this
 MAX_NOTICES = 64  # workers whose latest refusal notice a camera keeps
+RECORD_MAX_BYTES = 10**9  # a recording of the frames stops at this size (--record-max-mb 1000)
 
 
 class SourceRejections:
@@ -213,13 +222,59 @@ class SubscriberWatch:
                         self.robot, self.key, more)
 
 
+def recording_topic(robot: str, prefix: str = keys.DEFAULT_PREFIX) -> str:
+    """The topic of a camera's recorded frames: its frame key as a ROS topic,
+    ``/<prefix>/<robot>/frame`` (as ``asnn foxglove`` names a robot's topics after its keys)."""
+    return "/" + keys.frame_key(robot, prefix)
+
+
+def stamp_ns(stamp: float) -> int:
+    """A frame's ``stamp`` (seconds) in nanoseconds since the epoch, for a bag's header stamp:
+    0 to the last second a ROS 2 ``int32`` of seconds holds."""
+    return min(max(round(stamp * 1e9), 0), (2**31 - 1) * 1_000_000_000)
+
+
+def open_recording(path, robot: str, *, prefix: str = keys.DEFAULT_PREFIX,
+                   format: str = "gray8", frame_id: str = "",
+                   max_bytes: float = RECORD_MAX_BYTES):
+    """A new recording of the camera's frames (:class:`asnn.io.bag_recording.BagRecording`) on
+    :func:`recording_topic`, for :func:`publish_frames`' ``recording``; it says when it stops
+    (at WARNING for its bound, at ERROR otherwise), and warns now when the disk has less room
+    than the bound.
+
+    Raises
+    ------
+    ImportError
+        Without the ``ros`` extra (the message names it).
+    OSError
+        One line: the file exists, cannot be created, or its disk is full.
+    """
+    from asnn.io.bag_recording import BagRecording
+
+    def stopped(reason: str, detail: str) -> None:
+        if reason == "bound":
+            log.warning("camera %s: recording to %s stopped at %s (--record-max-mb): the frames "
+                        "are published on", robot, path, detail)
+        else:
+            log.error("camera %s: recording to %s stopped: %s; the frames are published on",
+                      robot, path, detail)
+
+    recording = BagRecording(path, recording_topic(robot, prefix), frame_format=format,
+                             frame_id=frame_id, max_bytes=max_bytes, on_stop=stopped)
+    if recording.free_bytes is not None and recording.free_bytes < max_bytes:
+        log.warning("camera %s: the disk of %s has %.0f MB free, less than the recording's "
+                    "bound (%.0f MB): it will stop when the disk is full", robot, path,
+                    recording.free_bytes / 1e6, max_bytes / 1e6)
+    return recording
+
+
 def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                    prefix: str = keys.DEFAULT_PREFIX, fps: float | None = None,
                    loop: bool = False, format: str = "gray8", wait: float = 0.0,
                    stop: threading.Event | None = None, max_frames: int | None = None,
                    preview_hz: float = PREVIEW_HZ, preview_width: int = PREVIEW_WIDTH,
                    announce: bool = True, refusals: RefusalNotices | None = None,
-                   subscribers: SubscriberWatch | None = None) -> int:
+                   subscribers: SubscriberWatch | None = None, recording=None) -> int:
     """Publish the source's frames paced at ``fps`` (default: the source's own times).
 
     ``stamp``: the capture time of a live source's frame (wall clock when it was read); a
@@ -235,7 +290,9 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
     ``refusals``: collects and logs the workers' notices that they refuse the frames (a new
     :class:`RefusalNotices` if not given). ``subscribers``: logs when the frames lose their
     last subscriber, and counts the frames published meanwhile (a new :class:`SubscriberWatch`
-    if not given).
+    if not given). ``recording``: each frame published is handed to it as it was sent, with its
+    stamp (:func:`open_recording`, made for the frames' ``format``); it neither blocks nor
+    raises, and closing it is the caller's.
     Returns the number of frames published. Ends at the end of the source unless ``loop``
     (a live source is never replayed), when ``stop`` is set, or after ``max_frames``.
     """
@@ -315,6 +372,14 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                                          format=format)
                 publisher.put(encode(frame))
                 subscribers.published()
+                if recording is not None:
+                    try:
+                        recording.write(frame.width, frame.height, frame.data,
+                                        stamp_ns(frame.stamp))
+                    except Exception:  # a recording is never worth losing the frames over
+                        log.exception("camera %s: recording frame %d failed; recording no more",
+                                      robot, seq)
+                        recording = None
                 refusals.check_quiet()
                 if previews is not None and time.monotonic() >= next_preview:
                     next_preview = max(next_preview + 1.0 / preview_hz, time.monotonic())

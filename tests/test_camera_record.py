@@ -1,0 +1,259 @@
+"""``asnn camera --record OUT.mcap``: the frames a camera publishes, recorded as a ROS 2 bag that
+``asnn detect`` and ``asnn camera --source`` replay (asnn.io.bag_recording, service.camera)."""
+
+from __future__ import annotations
+
+import errno
+import json
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mcap_ros2", reason="the 'ros' extra is not installed")
+
+from mcap.reader import make_reader  # noqa: E402
+from mcap_ros2.decoder import DecoderFactory  # noqa: E402
+
+from cli.main import main  # noqa: E402
+from service import keys  # noqa: E402
+from service.camera import (Source, open_recording, open_source, publish_frames,  # noqa: E402
+                            recording_topic, stamp_ns)
+from service.messages import decode_frame  # noqa: E402
+from netutil import wait_for  # noqa: E402
+
+PEER = "{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }"
+
+
+def camera_args(tmp_path, *args) -> list[str]:
+    """``asnn camera`` in a peer session of its own on a free loopback port, scouting off."""
+    from service.demo import free_port
+
+    config = tmp_path / "peer.json5"
+    config.write_text(PEER)
+    return ["camera", *args, "--wait", "0", "--preview-hz", "0", "--mode", "peer", "--listen",
+            f"tcp/127.0.0.1:{free_port()}", "--config", str(config)]
+
+
+def collect(net, robot: str) -> tuple[list, object]:
+    """The frames published for ``robot``, as a subscriber on the hub receives them, and the
+    subscriber (undeclared when let go: keep it)."""
+    got = []
+    subscriber = net.hub.declare_subscriber(
+        keys.frame_key(robot), lambda sample: got.append(decode_frame(sample.payload.to_bytes())))
+    return got, subscriber
+
+
+def recorded(path) -> list:
+    """(topic, schema, decoded message, log time) of every message of a bag, in file order."""
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        return [(channel.topic, schema.name, decoded, message.log_time)
+                for schema, channel, message, decoded in reader.iter_decoded_messages()]
+
+
+def noise_source(frames: int, side: int = 256) -> Source:
+    """Frames of noise: they do not compress, so a recording grows by their size."""
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (side, side), np.uint8) for _ in range(frames)]
+    return Source("noise", 20.0, False, lambda: iter(images))
+
+
+def test_a_recorded_camera_replays_through_detect_as_the_scene_itself(tmp_path):
+    """The round trip: a generated scene published at its own rate and recorded, then detected
+    from the recording, answers every frame as ``asnn detect`` on the scene directly does. The
+    stamps went over the wire as float seconds since the epoch (some 2e-7 s apart from the
+    scene's exact times), so the targets' expansion and ttc agree to that, not bit for bit."""
+    out = tmp_path / "looming.mcap"
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(out))) == 0
+    replayed, direct = tmp_path / "replayed.jsonl", tmp_path / "direct.jsonl"
+    assert main(["detect", str(out), "--jsonl", str(replayed)]) == 0
+    assert main(["detect", "synthetic:looming", "--jsonl", str(direct)]) == 0
+    ours = [json.loads(line) for line in replayed.read_text().splitlines()]
+    theirs = [json.loads(line) for line in direct.read_text().splitlines()]
+    assert len(ours) == len(theirs) == 60
+    assert sum(r["collision"] for r in theirs) > 0  # a run with warnings to compare
+    for mine, reference in zip(ours, theirs):
+        assert mine["frame"] == reference["frame"]
+        assert mine["collision"] == reference["collision"]
+        assert mine["spikes"] == reference["spikes"]
+        assert mine["t"] == pytest.approx(reference["t"], abs=1e-6)
+        assert mine["u"] == pytest.approx(reference["u"], rel=1e-6, abs=1e-12)
+        assert len(mine["targets"]) == len(reference["targets"])
+        for a, b in zip(mine["targets"], reference["targets"]):
+            assert a.keys() == b.keys()
+            assert a == pytest.approx(b, rel=1e-4, abs=1e-9)
+
+
+@pytest.mark.parametrize("format", ["gray8", "jpeg"])
+def test_the_recording_holds_each_published_frame_as_sent_with_its_stamp(zenoh_net, tmp_path,
+                                                                         format):
+    got, held = collect(zenoh_net, "r1")
+    path = tmp_path / "r1.mcap"
+    recording = open_recording(path, "r1", format=format)
+    source = open_source("synthetic:looming")
+    published = publish_frames(zenoh_net.spoke(), "r1", source, fps=200, format=format,
+                               wait=10.0, preview_hz=0, recording=recording)
+    assert recording.close() is None
+    assert published == recording.frames == 60
+    wait_for(lambda: len(got) == published, what="every frame")
+    messages = recorded(path)
+    assert len(messages) == published
+    schema = "sensor_msgs/msg/Image" if format == "gray8" else "sensor_msgs/msg/CompressedImage"
+    for frame, (topic, name, message, log_time) in zip(sorted(got, key=lambda f: f.seq),
+                                                      messages):
+        assert (topic, name) == (recording_topic("r1"), schema) == ("/asnn/r1/frame", schema)
+        assert bytes(message.data) == frame.data  # the very pixels, or jpeg bytes, sent
+        stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+        assert stamp == log_time == stamp_ns(frame.stamp)
+        if format == "gray8":
+            assert (message.encoding, message.width, message.height) == ("mono8", 128, 128)
+        else:
+            assert message.format == "jpeg"
+    # and asnn camera --source replays it: the same pixels at the recorded times
+    again, held_again = collect(zenoh_net, "r2")
+    assert publish_frames(zenoh_net.spoke(), "r2", open_source(str(path)), wait=10.0,
+                          preview_hz=0) == published
+    wait_for(lambda: len(again) == published, what="every frame replayed")
+    again.sort(key=lambda f: f.seq)
+    for first, second in zip(sorted(got, key=lambda f: f.seq), again):
+        assert np.array_equal(first.image(), second.image())
+    steps = np.diff([f.stamp for f in sorted(got, key=lambda f: f.seq)])
+    assert np.diff([f.stamp for f in again]) == pytest.approx(steps, abs=1e-6)
+
+
+def test_a_recording_never_overwrites_a_file_and_an_unwritable_one_fails_at_start(tmp_path,
+                                                                                capsys):
+    path = tmp_path / "run.mcap"
+    path.write_bytes(b"an earlier run")
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(path))) == 2
+    assert capsys.readouterr().err.strip() == \
+        f"asnn: error: {path}: exists; a recording goes to a new file"
+    assert path.read_bytes() == b"an earlier run"
+    missing = tmp_path / "no-such-folder" / "run.mcap"
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(missing))) == 2
+    assert capsys.readouterr().err.strip() == \
+        f"asnn: error: cannot write {missing}: No such file or directory"
+
+
+def test_a_full_disk_is_an_error_at_start_and_leaves_no_file(tmp_path, monkeypatch, capsys):
+    import asnn.io.bag_recording as bag_recording
+
+    class Usage:
+        free = 1_000_000
+
+    monkeypatch.setattr(bag_recording.shutil, "disk_usage", lambda path: Usage)
+    path = tmp_path / "run.mcap"
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(path))) == 2
+    assert capsys.readouterr().err.strip() == \
+        f"asnn: error: cannot record to {path}: its disk is full (1.0 MB free)"
+    assert not path.exists()
+
+
+def test_the_bound_stops_the_recording_and_the_camera_publishes_on(zenoh_net, tmp_path,
+                                                                   caplog):
+    got, held = collect(zenoh_net, "r1")
+    path = tmp_path / "r1.mcap"
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        recording = open_recording(path, "r1", max_bytes=1.5e6)
+        # 64 kB frames: the writer writes a chunk of 16 of them (1 MiB) at a time
+        published = publish_frames(zenoh_net.spoke(), "r1", noise_source(80), fps=200,
+                                   wait=10.0, preview_hz=0, recording=recording)
+        assert recording.close() is None
+    assert published == 80
+    wait_for(lambda: len(got) == 80, what="every frame, those after the bound included")
+    assert recording.stopped == "bound"
+    assert 16 <= recording.frames < 80
+    assert len(recorded(path)) == recording.frames  # a finished file, read to its end
+    lines = [r.getMessage() for r in caplog.records if "recording" in r.getMessage()]
+    assert lines == [f"camera r1: recording to {path} stopped at 2 MB, its bound "
+                     "(--record-max-mb): the frames are published on"]
+
+
+def test_a_failed_write_stops_the_recording_and_the_camera_publishes_on(zenoh_net, tmp_path,
+                                                                        monkeypatch, caplog):
+    import builtins
+
+    import asnn.io.files as files
+
+    class FullDisk:
+        """A file that takes the first ``room`` bytes, then none."""
+
+        def __init__(self, file, room: int):
+            self._file, self._room = file, room
+
+        def write(self, data):
+            if len(data) > self._room:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            self._room -= len(data)
+            return self._file.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self._file, name)
+
+    monkeypatch.setattr(files, "open", lambda path, mode="r": FullDisk(
+        builtins.open(path, mode), 1_500_000), raising=False)
+    got, held = collect(zenoh_net, "r1")
+    path = tmp_path / "r1.mcap"
+    with caplog.at_level("WARNING", logger="asnn.camera"):
+        recording = open_recording(path, "r1")
+        published = publish_frames(zenoh_net.spoke(), "r1", noise_source(80), fps=200,
+                                   wait=10.0, preview_hz=0, recording=recording)
+        assert recording.close().errno == errno.ENOSPC
+    assert published == 80
+    wait_for(lambda: len(got) == 80, what="every frame, those after the failure included")
+    assert recording.stopped == "failed"
+    lines = [r.getMessage() for r in caplog.records if "recording" in r.getMessage()]
+    assert lines == [f"camera r1: recording to {path} stopped: No space left on device (the "
+                     f"file holds the {recording.frames} frames before, cut there, unfinished "
+                     "(`mcap recover` repairs it)); the frames are published on"]
+    # what reached the disk reads back as far as it goes (a cut bag: `mcap recover` repairs it)
+    frames = list(open_source(str(path), on_error=lambda reason, message: None).frames())
+    assert 0 < len(frames) < 80
+
+
+def test_a_disk_that_does_not_keep_up_stops_the_recording_not_the_camera(tmp_path, caplog):
+    """A writer held up (a stalled disk): the frames wait in memory up to the backlog's bound,
+    then the recording stops with the frames before, and ``write`` never blocked."""
+    import threading
+
+    from asnn.io.bag_recording import BagRecording
+
+    stops = []
+    recording = BagRecording(tmp_path / "slow.mcap", "/asnn/r1/frame",
+                             backlog_bytes=5 * 64 * 64,
+                             on_stop=lambda reason, detail: stops.append((reason, detail)))
+    held = threading.Event()
+    write = recording._write
+    recording._write = lambda *args: (held.wait(), write(*args))
+    data = bytes(64 * 64)
+    accepted = [recording.write(64, 64, data, 10**18 + i) for i in range(8)]
+    # the first is being written (or about to be) and five wait: the next ones find no room
+    assert accepted[:5] == [True] * 5 and accepted[-1] is False
+    assert stops == [("behind", "the disk does not keep up (0 MB of frames waiting to be "
+                      "written: the file is finished once they are)")]
+    held.set()
+    assert recording.close() is None
+    assert recording.stopped == "behind"
+    assert len(recorded(tmp_path / "slow.mcap")) == recording.frames == accepted.count(True)
+
+
+def test_without_the_ros_extra_record_is_a_clear_error_at_start(tmp_path, monkeypatch, capsys):
+    import asnn.io
+
+    # as if the extra were not installed: mcap cannot be imported, the bag modules not loaded
+    for name in [n for n in sys.modules if n.split(".")[0] in ("mcap", "mcap_ros2")]:
+        monkeypatch.setitem(sys.modules, name, None)
+    for name in ("rosbag", "bag_recording"):
+        monkeypatch.delitem(sys.modules, f"asnn.io.{name}", raising=False)
+        monkeypatch.delattr(asnn.io, name, raising=False)
+    path = tmp_path / "run.mcap"
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(path))) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "asnn[ros]" in err
+    assert not path.exists()
