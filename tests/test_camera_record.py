@@ -257,3 +257,26 @@ def test_without_the_ros_extra_record_is_a_clear_error_at_start(tmp_path, monkey
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "asnn[ros]" in err
     assert not path.exists()
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_camera_stopped_by_a_signal_leaves_a_finished_recording(procs, tmp_path, sig):
+    """Ctrl-C or ``docker stop``: the recording is finished (its summary written) with every
+    frame published, and the camera exits as it always does."""
+    import signal
+
+    path = tmp_path / "run.mcap"
+    camera = procs(*camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                                "--loop", "--fps", "100", "--record", str(path)))
+    camera.wait_line("synthetic:looming at 100.0 fps")
+    header = path.stat().st_size  # the file's start, written when it opened
+    wait_for(lambda: path.stat().st_size > header, what="a chunk of frames on disk")
+    assert camera.stop(getattr(signal, sig)) == 0, "\n".join(camera.err[-20:])
+    (line,) = [line for line in camera.err if "recorded" in line]
+    count = int(line.split("recorded ")[1].split()[0])
+    (published,) = [line for line in camera.err if "frames published" in line]
+    assert f"camera r1: {count} frames published" in published
+    with open(path, "rb") as fh:
+        summary = make_reader(fh).get_summary()
+    assert summary is not None and summary.statistics.message_count == count >= 64  # a chunk and more
+    assert len(recorded(path)) == count
