@@ -169,7 +169,7 @@ def test_the_bound_stops_the_recording_and_the_camera_publishes_on(zenoh_net, tm
     assert recording.stopped == "bound"
     assert 16 <= recording.frames < 80
     assert len(recorded(path)) == recording.frames  # a finished file, read to its end
-    lines = [r.getMessage() for r in caplog.records if "recording" in r.getMessage()]
+    lines = [r.getMessage() for r in caplog.records if "recording to" in r.getMessage()]
     assert lines == [f"camera r1: recording to {path} stopped at 2 MB, its bound "
                      "(--record-max-mb): the frames are published on"]
 
@@ -207,7 +207,7 @@ def test_a_failed_write_stops_the_recording_and_the_camera_publishes_on(zenoh_ne
     assert published == 80
     wait_for(lambda: len(got) == 80, what="every frame, those after the failure included")
     assert recording.stopped == "failed"
-    lines = [r.getMessage() for r in caplog.records if "recording" in r.getMessage()]
+    lines = [r.getMessage() for r in caplog.records if "recording to" in r.getMessage()]
     assert lines == [f"camera r1: recording to {path} stopped: No space left on device (the "
                      f"file holds the {recording.frames} frames before, cut there, unfinished "
                      "(`mcap recover` repairs it)); the frames are published on"]

@@ -232,6 +232,6 @@ class BagRecording:
 def _free_bytes(path: Path) -> int | None:
     """Room on the disk of ``path``'s folder, or None where it cannot be read."""
     try:
-        return shutil.disk_usage(path.parent if str(path.parent) else ".").free
+        return shutil.disk_usage(path.parent).free
     except OSError:
         return None
