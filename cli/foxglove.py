@@ -14,6 +14,8 @@ __all__ = ["register"]
 
 def cmd_foxglove(args: argparse.Namespace) -> int:
     setup_logging(args)
+    if args.mcap_max_mb is not None and args.mcap is None:
+        return fail("--mcap-max-mb bounds a recording: give it with --mcap OUT.mcap")
     try:
         from clients.foxglove import FoxgloveBridge
     except ImportError as exc:  # the message names the extra to install

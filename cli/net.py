@@ -30,6 +30,8 @@ def cmd_camera(args: argparse.Namespace) -> int:
                                 SubscriberWatch, open_recording, open_source, publish_frames)
 
     setup_logging(args)
+    if args.record_max_mb is not None and args.record is None:
+        return fail("--record-max-mb bounds a recording: give it with --record OUT.mcap")
     if args.record:
         try:  # the 'ros' extra, said before anything opens
             import asnn.io.bag_recording  # noqa: F401
@@ -72,9 +74,16 @@ def cmd_camera(args: argparse.Namespace) -> int:
     return 0
 
 
+RECORD_CLOSE_TIMEOUT = 30.0  # seconds the camera's exit waits for its recording to be finished
+
+
 def _close_recording(recording, robot: str) -> None:
     """Finish the camera's recording and say what it holds (or why it could not be finished)."""
-    error = recording.close()
+    error = recording.close(timeout=RECORD_CLOSE_TIMEOUT)
+    if recording.writing:  # a disk that hangs must not hang the camera's exit
+        log.error("camera %s: recording to %s: still writing after %.0f s; left unfinished "
+                  "(`mcap recover` repairs it)", robot, recording.path, RECORD_CLOSE_TIMEOUT)
+        return
     if error is not None and recording.stopped != "failed":  # a stop said it already
         log.error("camera %s: recording to %s: %s", robot, recording.path,
                   error.strerror or error)

@@ -284,3 +284,39 @@ def test_a_camera_stopped_by_a_signal_leaves_a_finished_recording(procs, tmp_pat
         summary = make_reader(fh).get_summary()
     assert summary is not None and summary.statistics.message_count == count >= 64  # a chunk and more
     assert len(recorded(path)) == count
+
+
+def test_a_bound_without_its_recording_is_a_clear_error(tmp_path, capsys):
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record-max-mb", "5")) == 2
+    assert capsys.readouterr().err.strip() == \
+        "asnn: error: --record-max-mb bounds a recording: give it with --record OUT.mcap"
+    assert main(["foxglove", "--port", "0", "--mcap-max-mb", "5"]) == 2
+    assert capsys.readouterr().err.strip() == \
+        "asnn: error: --mcap-max-mb bounds a recording: give it with --mcap OUT.mcap"
+
+
+def test_a_disk_that_hangs_leaves_the_recording_unfinished_and_the_camera_exits(
+        tmp_path, monkeypatch, caplog):
+    """The camera's exit waits for its recording a bounded time: a writer that never returns
+    (a hung network disk) is said and left, the file unfinished."""
+    import logging
+    import threading
+
+    import cli.net
+    from asnn.io.bag_recording import BagRecording
+
+    monkeypatch.setattr(cli.net, "RECORD_CLOSE_TIMEOUT", 0.2)
+    recording = BagRecording(tmp_path / "hung.mcap", "/asnn/r1/frame")
+    held = threading.Event()
+    recording._write = lambda *args: held.wait()
+    assert recording.write(64, 64, bytes(64 * 64), 10**18)
+    with caplog.at_level(logging.INFO, logger="asnn"):
+        cli.net._close_recording(recording, "r1")
+    assert recording.writing
+    assert [r.getMessage() for r in caplog.records if "recording to" in r.getMessage()] == [
+        f"camera r1: recording to {recording.path}: still writing after 0 s; left unfinished "
+        "(`mcap recover` repairs it)"]
+    held.set()  # the writer returns: the file is finished
+    recording._thread.join(10)
+    assert not recording.writing

@@ -27,9 +27,9 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
-from .files import RecordingFile
 import numpy as np
 
+from .files import RecordingFile
 from .rosbag import (COMPRESSED_IMAGE, IMAGE, Ros2Writer, compressed_image_message,
                      raw_image_message, register_image_type)
 
@@ -150,6 +150,12 @@ class BagRecording:
     def size(self) -> int:
         """Bytes written to the file so far (the file's, once finished)."""
         return self._size if self._finished else self._file.tell()
+
+    @property
+    def writing(self) -> bool:
+        """Whether the writing thread still runs (after :meth:`close`: the file is not
+        finished yet)."""
+        return self._thread.is_alive()
 
     def close(self, timeout: float | None = None) -> OSError | None:
         """Write the frames handed over, finish the file (its index and summary) and stop;
