@@ -215,6 +215,59 @@ def test_an_event_stream_that_is_never_read_is_dropped():
         sock.close()
 
 
+def read_until_closed(sock, timeout=20.0) -> bytes:
+    """Everything the server sent, once it closed the connection (within ``timeout``)."""
+    sock.settimeout(timeout)
+    chunks = []
+    while chunk := sock.recv(65536):
+        chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def sse_events(raw: bytes) -> list[tuple[str, dict]]:
+    """The whole events in a stream's bytes (an event cut off by the end is not one)."""
+    events = []
+    for block in raw.split(b"\r\n\r\n", 1)[-1].split(b"\n\n")[:-1]:
+        fields = dict(line.split(": ", 1) for line in block.decode().split("\n") if ": " in line)
+        if "event" in fields:
+            events.append((fields["event"], json.loads(fields["data"])))
+    return events
+
+
+def test_the_events_a_dropped_stream_still_delivers_say_when_their_state_was_taken():
+    """A control-room trial: after the server dropped a slow client's stream, the events the
+    kernel had buffered for it still reached the page, which showed a warning that had ended
+    long before as current. Every event carries ``at``, the server's monotonic clock when its
+    state was taken, by which the page judges how far behind it is (docs/contract.md)."""
+    store = FleetStore()
+    offer_response(store, response("warn", 0, collision=True))
+    with DashboardServer(store, "127.0.0.1", 0, send_timeout=1.0, heartbeat=0.1,
+                         send_buffer=16 * 1024) as server:
+        sock = raw_client(server, rcvbuf=4096)
+        asked = time.monotonic()
+        sock.sendall(b"GET /events HTTP/1.1\r\nHost: x\r\n\r\n")
+        wait_for(lambda: server.clients == 1, what="the stream to start")
+        time.sleep(0.5)  # a few heartbeats, each a whole event in the buffers
+        for i in range(10):  # far more than the sockets' buffers: the client is behind
+            store.offer(f"asnn/r{i}/preview", big_preview(i))
+        wait_for(lambda: server.clients == 0, what="the unread stream to be dropped")
+        dropped = time.monotonic()
+        offer_response(store, response("warn", 1))  # its warning is over
+        raw = read_until_closed(sock)
+        sock.close()
+        now = store.delta(0)
+    assert server.dropped_streams == 1
+    events = sse_events(raw)
+    assert [e for e, _ in events][:2] == ["snapshot", "update"], events
+    # what still arrived after the drop is the state from before it: the warning as current
+    assert all(delta["live"]["warn"][2] for _, delta in events)
+    assert not now["live"]["warn"][2]
+    # ... and each event says when it was taken, on the server's clock (here the test's own)
+    stamps = [delta["at"] for _, delta in events]
+    assert all(asked <= at <= dropped for at in stamps), (asked, stamps, dropped)
+    assert stamps == sorted(stamps)
+
+
 def test_idle_and_half_open_connections_are_closed():
     with DashboardServer(FleetStore(), "127.0.0.1", 0, idle_timeout=0.5) as server:
         half = raw_client(server)

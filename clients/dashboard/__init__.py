@@ -22,7 +22,8 @@ Three parts, each usable alone:
 
 HTTP routes: ``/`` the page, ``/static/dashboard.js`` and ``/static/dashboard.css``, ``/events``
 (``text/event-stream``: event ``snapshot`` then ``update``), ``/state`` (the full snapshot as
-JSON, for scripts).
+JSON, for scripts); each state is stamped ``at``, the server's clock when it was taken
+(docs/contract.md, "Dashboard HTTP interface").
 
 Bounds (docs/operations.md, "Hostile input"): at most ``max_robots`` robots (when the table is
 full, the one silent longest makes room if it is stale); per robot a preview of at most

@@ -13,6 +13,7 @@ import socket
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from importlib import resources
 
 from service.logutil import RateLimitedLog
@@ -152,7 +153,8 @@ class DashboardServer:
     """The page and its event stream on ``host:port`` (``port=0``: a free one, see ``url``).
 
     Use as a context manager, or call ``start`` and ``close``. The limits are described in the
-    module notes.
+    module notes. ``clock`` (seconds, monotonic; injectable for tests) stamps each state sent
+    as ``at`` (:meth:`state`).
     """
 
     def __init__(self, store: FleetStore, host: str = "127.0.0.1", port: int = 8080, *,
@@ -160,8 +162,10 @@ class DashboardServer:
                  max_streams_per_address: int = MAX_STREAMS_PER_ADDRESS,
                  spare_connections: int = SPARE_CONNECTIONS,
                  idle_timeout: float = IDLE_TIMEOUT, send_timeout: float = SEND_TIMEOUT,
-                 send_buffer: int = SEND_BUFFER, log_interval: float = 10.0):
+                 send_buffer: int = SEND_BUFFER, log_interval: float = 10.0,
+                 clock: Callable[[], float] = time.monotonic):
         self.store = store
+        self.clock = clock
         self.min_interval = 1.0 / push_hz
         self.heartbeat = heartbeat
         self.max_streams = max_streams
@@ -223,6 +227,15 @@ class DashboardServer:
             self._thread = None
         self._httpd.server_close()
 
+    def state(self, since: int = 0) -> dict:
+        """The store's delta since ``since`` (0: the full state), stamped ``at``: this server's
+        clock when it was taken. A page can only tell how far behind its event stream is from
+        it: events a slow client's kernel still held, delivered after its stream was dropped,
+        showed state tens of seconds old as current (a control-room trial)."""
+        delta = self.store.delta(since)
+        delta["at"] = self.clock()
+        return delta
+
     # ------------------------------------------------------------------ requests
 
     def _handler_class(self):
@@ -278,7 +291,7 @@ class DashboardServer:
                             self._send(503, "text/plain; charset=utf-8", b"busy: try again\n",
                                        head, cache=False)
                             return
-                        body = json.dumps(server.store.delta(0)).encode()
+                        body = json.dumps(server.state()).encode()
                         self._send(200, "application/json", body, head, cache=False)
                 elif path == "/events" and head:
                     # a health check's HEAD: the stream's headers, no stream held open
@@ -346,7 +359,7 @@ class DashboardServer:
                 with self._full_send() if since == 0 else contextlib.nullcontext(True) as taken:
                     if not taken:
                         break  # closed: the page opens another stream
-                    delta = self.store.delta(since)
+                    delta = self.state(since)
                     since = delta["version"]
                     out.write(f"event: {event}\ndata: {json.dumps(delta)}\n\n".encode())
                     out.flush()
