@@ -1,6 +1,7 @@
 """The fleet dashboard without a browser: the store (no Zenoh), the HTTP server and its event
 stream, the preview message and the camera's preview publishing, and the ``asnn dashboard``
-command as a process. The page itself is tested in headless Chromium (test_dashboard_browser).
+command as a process, and the page's freshness rule in node. The page itself is tested in
+headless Chromium (test_dashboard_browser).
 """
 
 from __future__ import annotations
@@ -8,6 +9,7 @@ from __future__ import annotations
 import http.client
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -600,6 +602,57 @@ def test_event_stream_sends_a_snapshot_then_coalesced_deltas_losing_nothing():
     assert points == {name: sent if name == names[0] else sent - 1 for name in names}
     # coalesced: 1000 messages arrived in a handful of deltas, at most 5 a second
     assert updates <= elapsed * 5.0 + 2
+
+
+STREAM_LAG = ROOT / "clients" / "dashboard_static" / "freshness.js"
+
+
+def page_lags(steps) -> list[float]:
+    """The page's StreamLag (freshness.js, run in node) through ``steps``: ``("ask", now)``
+    or ``("event", at, now)``; the lag it gives each event."""
+    node = shutil.which("node") or shutil.which("nodejs")
+    if node is None:
+        pytest.skip("no node to run the page's script in")
+    script = ("const {StreamLag} = require(process.argv[1]); const s = new StreamLag();"
+              "const out = [];"
+              "for (const [kind, ...args] of JSON.parse(process.argv[2])) {"
+              "  if (kind === 'ask') s.ask(...args); else out.push(s.lag(...args)); }"
+              "console.log(JSON.stringify(out));")
+    done = subprocess.run([node, "-e", script, str(STREAM_LAG), json.dumps(steps)],
+                          capture_output=True, text=True, timeout=TIMEOUT, check=True)
+    return json.loads(done.stdout)
+
+
+def test_the_page_never_takes_an_event_for_fresher_than_it_is():
+    """The page's clock and the server's are not set alike (here 5,000 s apart, and a restarted
+    server's another 6,000 s), yet the lag it takes every event to have is never less than the
+    truth, and is small for events that are not behind: what a dropped stream's buffers still
+    deliver 20 s late, and a snapshot received 8 s after it was taken, read as that old."""
+    steps, truth = [], []
+
+    def stream(offset, asked, events):
+        """Asked at ``asked`` (page clock); ``(taken, received)`` events, page clock; the
+        server's clock is the page's minus ``offset``."""
+        steps.append(("ask", asked))
+        for taken, received in events:
+            steps.append(("event", taken - offset, received))
+            truth.append(received - taken)
+
+    fresh = [(10.05 + 0.2 * i, 10.1 + 0.2 * i) for i in range(10)]
+    backlog = [(12.0 + 0.2 * i, 32.0 + 0.2 * i) for i in range(5)]  # sent, arriving 20 s late
+    stream(-5000.0, 10.0, fresh + backlog)
+    stream(1000.0, 40.0, [(40.02 + 0.2 * i, 40.03 + 0.2 * i) for i in range(5)])  # restarted
+    stream(1000.0, 50.0, [(50.01, 58.0), (50.2, 58.05), (58.2, 58.21)])  # a slow snapshot
+    lags = page_lags(steps)
+    assert len(lags) == len(truth)
+    assert all(lag >= true - 1e-9 for lag, true in zip(lags, truth)), list(zip(lags, truth))
+    # over by no more than the server took to take a stream's first state
+    assert all(lag <= true + 0.05 + 1e-9 for lag, true in zip(lags, truth)), lags
+    assert max(lags[:10]) < 0.2 and min(lags[10:15]) >= 20.0
+    assert max(lags[15:20]) < 0.1  # a restarted server, its clock elsewhere: fresh at once
+    assert lags[20] >= 7.99 and lags[22] < 0.1
+    # a first event with no stream asked for: counted from its arrival
+    assert page_lags([("event", 7.0, 100.0), ("event", 8.0, 101.5)]) == [0.0, 0.5]
 
 
 def test_closing_the_server_ends_open_event_streams():

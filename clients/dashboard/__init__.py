@@ -14,13 +14,13 @@ Three parts, each usable alone:
   worker refuses a robot's frames: its tile says why until a response comes; a second
   publisher's for ``service.streams.CONTESTED_FOR_S`` whatever comes, and that camera's
   previews are not shown: docs/operations.md, "Two publishers on one key").
-- :class:`~clients.dashboard.server.DashboardServer` serves the page (one HTML, one script, one
+- :class:`~clients.dashboard.server.DashboardServer` serves the page (one HTML, two scripts, one
   style sheet, all from this package: nothing from the network) and Server-Sent Events from the
   standard library's ``ThreadingHTTPServer``. Each browser gets one full snapshot, then
   coalesced deltas, at most ``push_hz`` a second plus a heartbeat every second, so fifty robots
   at twenty responses a second stay cheap for the server and the page.
 
-HTTP routes: ``/`` the page, ``/static/dashboard.js`` and ``/static/dashboard.css``, ``/events``
+HTTP routes: ``/`` the page, ``/static/<name>`` its files (``STATIC_FILES``), ``/events``
 (``text/event-stream``: event ``snapshot`` then ``update``), ``/state`` (the full snapshot as
 JSON, for scripts); each state is stamped ``at``, the server's clock when it was taken
 (docs/contract.md, "Dashboard HTTP interface").

@@ -38,6 +38,7 @@ MAX_REQUEST_BYTES = 64 * 1024  # a request line and its headers (the pages send 
 STATIC_FILES = {  # the only files served: name -> content type
     "index.html": "text/html; charset=utf-8",
     "dashboard.js": "text/javascript; charset=utf-8",
+    "freshness.js": "text/javascript; charset=utf-8",
     "dashboard.css": "text/css; charset=utf-8",
 }
 SECURITY_HEADERS = {

@@ -1,11 +1,15 @@
 // ASNN fleet dashboard: one tile per robot, fed by Server-Sent Events from /events.
 // The server sends a full "snapshot", then "update" deltas (only the robots that changed, plus
-// every robot's [age, stale, collision]). Drawing happens once per animation frame, only for the
-// tiles that changed, so fifty robots stay cheap.
+// every robot's [age, stale, collision]), each stamped with the server's clock (`at`), by which
+// the page knows how far behind the stream is (freshness.js). Drawing happens once per animation
+// frame, only for the tiles that changed, so fifty robots stay cheap.
 "use strict";
 
 (() => {
   const LOG_SIZE = 50;
+  // seconds behind (or silent) beyond which a stream is dropped for a new one, whatever the
+  // staleness limit; the server sends an event at least every second
+  const BEHIND_MIN_S = 3;
   const fleet = document.getElementById("fleet");
   const empty = document.getElementById("empty");
   const template = document.getElementById("tile-template");
@@ -324,12 +328,21 @@
   // to the Zenoh router, without which every robot reads stale for no fault of its own.
   let streamOpen = false;
   let routerLost = false;
+  let lag = 0;           // seconds the latest event was behind its server (freshness.js)
+  let behind = null;     // seconds the stream dropped for it was behind (or silent), until a
+                         // fresh event
 
   function showConnection() {
-    if (!streamOpen) {
+    conn.dataset.lag = lag.toFixed(1);
+    if (!streamOpen && behind !== null) {
+      conn.dataset.state = "lost";
+      conn.textContent = `${Math.round(behind)} s behind: reconnecting`;
+      conn.title = "the page's event stream fell behind its server (state that old is shown " +
+        "stale); a new stream starts from the server's state now";
+    } else if (!streamOpen) {
       conn.dataset.state = "lost";
       conn.textContent = "reconnecting";
-      conn.title = "the page lost its server; the browser reconnects";
+      conn.title = "the page lost its server; it reconnects";
     } else if (routerLost) {
       conn.dataset.state = "lost";
       conn.textContent = "no router: robots unknown";
@@ -338,8 +351,14 @@
     } else {
       conn.dataset.state = "live";
       conn.textContent = "live";
-      conn.title = "";
+      conn.title = `the latest event was ${lag.toFixed(1)} s behind its server`;
     }
+  }
+
+  // how far behind (or how long silent) a stream may be: state older than the staleness
+  // limit reads stale, so such a stream can show nothing live, only replay the past
+  function behindLimit() {
+    return Math.max(config.stale_after, BEHIND_MIN_S);
   }
 
   function apply(delta) {
@@ -356,9 +375,12 @@
     const now = performance.now();
     for (const [name, [age, stale, collision]] of Object.entries(delta.live)) {
       const v = view(name);
+      // the ages are the server's when it took the state, `lag` seconds ago: a robot answered
+      // then, but longer ago now than the staleness limit, is stale (and so in no collision)
       v.age = age;
-      v.ageAt = now;
-      setFlags(v, stale, collision);
+      v.ageAt = now - lag * 1000;
+      const old = stale || age + lag > config.stale_after;
+      setFlags(v, old, collision && !old);
     }
     for (const name of [...robots.keys()]) if (!Object.hasOwn(delta.live, name)) remove(name);
     addWarnings(delta.warnings, delta.full);
@@ -368,9 +390,13 @@
   }
 
   // Staleness also advances between events (a dashboard whose server went quiet must not show
-  // old tiles as live).
+  // old tiles as live), and a stream silent for longer than behindLimit (a connection cut
+  // without a word: no end ever arrives) is dropped for a new one.
   setInterval(() => {
     const now = performance.now();
+    if (streamOpen && lastEvent !== null && (now - lastEvent) / 1000 > behindLimit()) {
+      reopen((now - lastEvent) / 1000);
+    }
     for (const v of robots.values()) {
       const age = v.age === null ? null : v.age + (now - v.ageAt) / 1000;
       // stale is never shown in collision (nothing watches the robot: as the server shows it)
@@ -384,35 +410,58 @@
     schedule();
   }, 500);
 
-  let retry = 1000; // ms before a new stream, after one the server refused or closed
+  let retry = 1000; // ms before a new stream, after one the server refused, closed or was behind
+  let source = null;
+  let lastEvent = null; // performance.now() of the stream's latest event
+  const streamLag = new StreamLag();
+
+  // the stream closed and a new one opened after `retry`, backing off until one keeps up;
+  // `behindBy`: seconds it was behind, if that is why
+  function reopen(behindBy = null) {
+    source.close();
+    streamOpen = false;
+    behind = behindBy;
+    showConnection();
+    setTimeout(connect, retry);
+    retry = Math.min(retry * 2, 30000);
+  }
 
   function connect() {
-    const source = new EventSource("/events");
+    const current = source = new EventSource("/events");
+    streamLag.ask(performance.now() / 1000);
+    lastEvent = null;
     const handle = (event) => {
+      if (current !== source) return;  // a stream the page dropped has no say any more
       try {
-        apply(JSON.parse(event.data));
+        const delta = JSON.parse(event.data);
+        lastEvent = performance.now();
+        lag = typeof delta.at === "number" ? streamLag.lag(delta.at, lastEvent / 1000) : 0;
+        apply(delta);
+        showConnection();
       } catch (err) {
         console.error("bad event", err);
+        return;
+      }
+      if (lag <= behindLimit()) {
+        retry = 1000;
+        behind = null;
+      } else if (event.type === "update") {
+        // the past, replayed (a stream that fell behind, or one the server already dropped
+        // whose buffered events still arrive): a new stream starts from the state now. Not
+        // for a snapshot: it is the newest state there is, and its tiles read stale if old
+        reopen(lag);
       }
     };
     source.addEventListener("snapshot", handle);
     source.addEventListener("update", handle);
     source.onopen = () => {
-      retry = 1000;
       streamOpen = true;
       showConnection();
     };
-    source.onerror = () => {
-      streamOpen = false;
-      showConnection();
-      // the browser retries a dropped stream by itself, but gives up for good on an HTTP
-      // error status (503 while every stream is taken): open a new one then, backing off
-      if (source.readyState === EventSource.CLOSED) {
-        source.close();
-        setTimeout(connect, retry);
-        retry = Math.min(retry * 2, 30000);
-      }
-    };
+    // A stream that ended or failed is replaced by the page, backing off: the browser retries
+    // one by itself, but gives up for good on an HTTP error status (503 while every stream is
+    // taken), and its own retry would not say when it asked (freshness.js)
+    source.onerror = () => reopen();
   }
 
   connect();
