@@ -4,7 +4,9 @@ Two generated streams run through a real worker over Zenoh (TCP loopback, free p
 off): one looming, one translating. The page is loaded in headless Chromium, driven through the
 DevTools protocol over ``--remote-debugging-pipe`` (no WebSocket client, no downloads), and must
 show both robots with their previews, only the looming one in the collision state, fetch nothing
-but its own server's files, and throw no script error. A screenshot is kept in
+but its own server's files, and throw no script error. Robots fed straight into a store test the
+rest: fifty robots, refused and silent ones, events that arrive late (read stale), a stream
+behind or silent (replaced by the page). A screenshot is kept in
 ``test-artifacts/dashboard.png``. Skipped when no Chromium binary is installed.
 """
 
@@ -409,3 +411,112 @@ def test_browser_recovers_a_refused_stream_forgets_any_name_and_shows_no_stale_c
         stop.set()
         feeder.join(timeout=TIMEOUT)
     assert shown["warn"]["collision"] == "false" and shown["warn"]["badge"] == "none"
+
+
+# what the page showed at each change of its DOM: the indicator and every tile's flags (a
+# MutationObserver, so a state shown for a moment between two polls is not missed)
+RECORD_SHOWN = """window.shown = [];
+new MutationObserver(() => window.shown.push({
+  conn: document.getElementById('conn').textContent,
+  tiles: Object.fromEntries([...document.querySelectorAll('#fleet .tile')].map(t =>
+    [t.dataset.robot, {stale: t.dataset.stale, collision: t.dataset.collision}]))}))
+  .observe(document.body, {subtree: true, childList: true, attributes: true,
+                           characterData: true});
+true"""
+
+
+def streams_asked(chrome) -> int:
+    """The event streams the page asked for so far."""
+    return sum(1 for e in chrome.events if e["method"] == "Network.requestWillBeSent"
+               and e["params"]["request"]["url"].endswith("/events"))
+
+
+def feed_warn_and_plain(store, stop):
+    """``warn`` in collision and ``plain`` not, twenty responses a second, until ``stop``."""
+    seq = 0
+    while not stop.is_set():
+        for name in ("warn", "plain"):
+            store.offer(f"asnn/{name}/response",
+                        fake_response(name, seq, 1000.0 + seq * 0.05, name == "warn"))
+        seq += 1
+        stop.wait(0.05)
+
+
+def live_and_warning(shown) -> bool:
+    return (set(shown) == {"warn", "plain"} and shown["warn"]["collision"] == "true"
+            and all(t["stale"] == "false" for t in shown.values()))
+
+
+def test_browser_shows_events_that_arrive_late_as_stale_and_takes_a_new_stream(browser):
+    """A control-room trial: after the server dropped a slow page's stream, the events its
+    kernel had buffered still arrived, and the page showed them as current (a warning over for
+    tens of seconds). Here the server's clock says its events were taken 20 s before they
+    arrive: the page must show them stale (so in no collision), say it is behind, and take a
+    new stream by itself, whose state is live again."""
+    store = FleetStore()
+    stop = threading.Event()
+    late = [0.0]  # seconds the events are stamped before they are sent
+    feeder = threading.Thread(target=feed_warn_and_plain, args=(store, stop), daemon=True)
+    feeder.start()
+    try:
+        with DashboardServer(store, "127.0.0.1", 0,
+                             clock=lambda: time.monotonic() - late[0]) as server:
+            chrome = browser(server.url)
+            wait_for_tiles(chrome, live_and_warning, "warn live in collision")
+            assert chrome.evaluate(RECORD_SHOWN)
+            asked = streams_asked(chrome)
+            late[0] = 20.0
+            chrome.wait_for(f"window.shown.some(s => /^2\\d s behind: reconnecting$/"
+                            f".test(s.conn))", "the page saying it is 20 s behind")
+            shown = wait_for_tiles(chrome, lambda s: live_and_warning(s) and streams_asked(
+                chrome) > asked and chrome.evaluate(
+                "document.getElementById('conn').textContent") == "live",
+                "a new stream, live again")
+            seen = chrome.evaluate("window.shown")
+            check_page_health(chrome, server.url)
+    finally:
+        stop.set()
+        feeder.join(timeout=TIMEOUT)
+    behind = [i for i, s in enumerate(seen) if s["conn"].endswith("behind: reconnecting")]
+    # what arrived 20 s late was shown stale, in no collision; nothing live until a new stream
+    assert seen[behind[0]]["tiles"]["warn"] == {"stale": "true", "collision": "false"}, seen
+    assert all(s["tiles"]["warn"]["collision"] == "false" for s in seen[behind[0]:]
+               if s["conn"] != "live"), seen
+    assert shown["warn"]["collision"] == "true" and shown["warn"]["stale"] == "false"
+
+
+def test_browser_takes_a_new_stream_when_its_stream_falls_silent(browser):
+    """A stream that stops without ending (a connection cut on the way: no end ever arrives)
+    is replaced by the page once silent for longer than the staleness limit (at least 3 s):
+    the server sends an event at least every second."""
+    store = FleetStore()
+    stop, hold, held, release = (threading.Event() for _ in range(4))
+    feeder = threading.Thread(target=feed_warn_and_plain, args=(store, stop), daemon=True)
+    feeder.start()
+    try:
+        with DashboardServer(store, "127.0.0.1", 0) as server:
+            taken = server.state
+
+            def state(since=0):
+                if since and hold.is_set() and not held.is_set():  # the one stream open now
+                    held.set()
+                    release.wait(TIMEOUT)
+                return taken(since)
+
+            server.state = state
+            chrome = browser(server.url)
+            wait_for_tiles(chrome, live_and_warning, "warn live in collision")
+            assert chrome.evaluate(RECORD_SHOWN)
+            asked = streams_asked(chrome)
+            hold.set()
+            chrome.wait_for("window.shown.some(s => s.conn.endsWith('behind: reconnecting'))",
+                            "the page saying its stream is silent")
+            wait_for_tiles(chrome, lambda s: live_and_warning(s) and streams_asked(
+                chrome) > asked, "a new stream, live again")
+            assert held.is_set() and not release.is_set()  # the first is still open, silent
+            release.set()
+            check_page_health(chrome, server.url)
+    finally:
+        release.set()
+        stop.set()
+        feeder.join(timeout=TIMEOUT)
