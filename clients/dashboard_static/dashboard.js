@@ -376,11 +376,11 @@
     for (const [name, [age, stale, collision]] of Object.entries(delta.live)) {
       const v = view(name);
       // the ages are the server's when it took the state, `lag` seconds ago: a robot answered
-      // then, but longer ago now than the staleness limit, is stale (and so in no collision)
+      // then, but longer ago now than the staleness limit, is stale (showAge)
       v.age = age;
       v.ageAt = now - lag * 1000;
-      const old = stale || age + lag > config.stale_after;
-      setFlags(v, old, collision && !old);
+      setFlags(v, stale, collision);
+      showAge(v, now);
     }
     for (const name of [...robots.keys()]) if (!Object.hasOwn(delta.live, name)) remove(name);
     addWarnings(delta.warnings, delta.full);
@@ -389,23 +389,28 @@
     schedule();
   }
 
-  // Staleness also advances between events (a dashboard whose server went quiet must not show
-  // old tiles as live), and a stream silent for longer than behindLimit (a connection cut
-  // without a word: no end ever arrives) is dropped for a new one.
+  // A robot's age at `now` (page clock, ms), from the one it had when the server took the
+  // state: past the staleness limit it is stale, and its badge says for how long. On an
+  // event's arrival (it may arrive late) and between events (a dashboard whose server went
+  // quiet must not show old tiles as live); at once, so no tile reads stale without its age.
+  function showAge(v, now) {
+    const age = v.age === null ? null : v.age + (now - v.ageAt) / 1000;
+    // stale is never shown in collision (nothing watches the robot: as the server shows it)
+    if (age === null || age > config.stale_after) setFlags(v, true, false);
+    // how long no worker has answered it: a moment's gap or a camera gone for minutes
+    const since = age === null ? "STALE" : `STALE ${age < 60 ? Math.floor(age) + " s"
+      : Math.floor(age / 60) + " min"}`;
+    if (v.staleBadge.textContent !== since) v.staleBadge.textContent = since;
+  }
+
+  // Ages advance between events too, and a stream silent for longer than behindLimit (a
+  // connection cut without a word: no end ever arrives) is dropped for a new one.
   setInterval(() => {
     const now = performance.now();
     if (streamOpen && lastEvent !== null && (now - lastEvent) / 1000 > behindLimit()) {
       reopen((now - lastEvent) / 1000);
     }
-    for (const v of robots.values()) {
-      const age = v.age === null ? null : v.age + (now - v.ageAt) / 1000;
-      // stale is never shown in collision (nothing watches the robot: as the server shows it)
-      if (age === null || age > config.stale_after) setFlags(v, true, false);
-      // how long no worker has answered it: a moment's gap or a camera gone for minutes
-      const since = age === null ? "STALE" : `STALE ${age < 60 ? Math.floor(age) + " s"
-        : Math.floor(age / 60) + " min"}`;
-      if (v.staleBadge.textContent !== since) v.staleBadge.textContent = since;
-    }
+    for (const v of robots.values()) showAge(v, now);
     showSummary();
     schedule();
   }, 500);
