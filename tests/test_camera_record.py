@@ -217,7 +217,48 @@ def test_a_failed_write_stops_the_recording_and_the_camera_publishes_on(zenoh_ne
                      "(`mcap recover` repairs it)); the frames are published on"]
     # what reached the disk reads back as far as it goes (a cut bag: `mcap recover` repairs it)
     frames = list(open_source(str(path), on_error=lambda reason, message: None).frames())
-    assert 0 < len(frames) < 80
+    assert 0 < len(frames) == recording.frames < 80
+
+
+def test_after_a_failed_write_the_frames_said_recorded_are_those_the_file_holds(
+        tmp_path, monkeypatch):
+    """A review: the writer holds the frames of the chunk it fills, and the failed write of
+    that chunk loses them, but the stop line and the camera's exit counted them as in the file
+    (31 frames said where the file held 16)."""
+    import builtins
+
+    import asnn.io.files as files
+    from asnn.io.bag_recording import BagRecording
+
+    class FullDisk:
+        """A file that takes the first ``room`` bytes, then none."""
+
+        def __init__(self, file, room: int):
+            self._file, self._room = file, room
+
+        def write(self, data):
+            if len(data) > self._room:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            self._room -= len(data)
+            return self._file.write(data)
+
+        def __getattr__(self, name):
+            return getattr(self._file, name)
+
+    monkeypatch.setattr(files, "open", lambda path, mode="r": FullDisk(
+        builtins.open(path, mode), 1_500_000), raising=False)
+    stops = []
+    path = tmp_path / "full.mcap"
+    recording = BagRecording(path, "/asnn/r1/frame", on_stop=lambda *stop: stops.append(stop))
+    rng = np.random.default_rng(0)
+    for i in range(80):  # 64 kB frames of noise: a chunk (1 MiB) holds 16
+        recording.write(256, 256, rng.integers(0, 256, 256 * 256, np.uint8).tobytes(),
+                        10**18 + i * 50_000_000)
+    assert recording.close().errno == errno.ENOSPC
+    held = list(open_source(str(path), on_error=lambda reason, message: None).frames())
+    assert len(held) == recording.frames == 16
+    assert [(reason, f"holds the {len(held)} frames before" in detail)
+            for reason, detail in stops] == [("failed", True)]
 
 
 def test_a_disk_that_does_not_keep_up_stops_the_recording_not_the_camera(tmp_path, caplog):

@@ -70,7 +70,9 @@ class BagRecording:
     Attributes
     ----------
     frames : int
-        The frames written so far.
+        The frames written so far; after a write that failed, those the file holds (the
+        frames of the chunks written whole: the writer holds the frames of the chunk it
+        fills, which a failed write loses).
     stopped : str or None
         Why the recording stopped before it was closed (``on_stop``'s reason), or None.
     free_bytes : int or None
@@ -96,6 +98,7 @@ class BagRecording:
         self.max_bytes, self.backlog_bytes = max_bytes, backlog_bytes
         self._on_stop = on_stop
         self.frames = 0
+        self._in_chunks = 0  # the frames of the chunks written to the file (see _run)
         self.stopped: str | None = None
         self.free_bytes = _free_bytes(self.path)
         self._file = RecordingFile(self.path)
@@ -192,17 +195,24 @@ class BagRecording:
                 self._backlog -= len(data)
             if self._finished:
                 continue  # after a stop: let it go
+            written = self._file.tell()
             try:
                 self._write(width, height, data, stamp_ns)
             except Exception as exc:  # a full disk; anything else the writer met
                 why = (exc.strerror or str(exc) if isinstance(exc, OSError)
                        else f"{type(exc).__name__}: {exc}")
-                ended = ("finished" if self._finish() else "cut there, unfinished (`mcap "
-                         "recover` repairs it)")
+                whole = self._finish()
+                if not whole:  # the frames of the chunk being filled never reached the file
+                    # (counted, the stop and the camera's exit said the file held them)
+                    self.frames = self._in_chunks
+                ended = "finished" if whole else ("cut there, unfinished (`mcap recover` "
+                                                  "repairs it)")
                 self._stop("failed", f"{why} (the file holds the {self.frames} frames before, "
                                      f"{ended})")
                 continue
             self.frames += 1
+            if self._file.tell() != written:  # a chunk was written: it ends with this frame
+                self._in_chunks = self.frames
             if self.size >= self.max_bytes:
                 self._finish()
                 self._stop("bound", f"{self.size / 1e6:.0f} MB, its bound")
