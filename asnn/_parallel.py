@@ -597,8 +597,8 @@ class BandedFront:
                 if not s.alive() and self.served(s.index) < number and s.error is None:
                     s.error = RuntimeError(
                         f"the ASNN model's worker thread {s.name} ended without computing its "
-                        f"band of a frame (pass {number}); the model starts new worker "
-                        "threads when it steps again")
+                        f"band of a frame (pass {number}), so that frame was not stepped; "
+                        "reset() the model: it starts new worker threads at its next step")
                     state = -1
             if state < 0:
                 break

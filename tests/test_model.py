@@ -858,6 +858,10 @@ def test_a_worker_thread_that_ended_is_raised_not_waited_for():
     runner.join(timeout=60)
     assert not runner.is_alive(), "the model hung"
     assert outcome and "worker thread asnn-model-1 ended" in str(outcome[0])
+    # what the error tells to do is what the model takes: a step without reset() is refused
+    assert "reset() the model" in str(outcome[0])
+    with pytest.raises(RuntimeError, match=r"interrupted part-way.*reset\(\)"):
+        model.step(frames[2])
     model.reset()
     one = ASNN("default")
     assert [model.step(f).to_dict() for f in frames] == [one.step(f).to_dict() for f in frames]
