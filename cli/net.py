@@ -87,6 +87,14 @@ def _close_recording(recording, robot: str) -> None:
     if error is not None and recording.stopped != "failed":  # a stop said it already
         log.error("camera %s: recording to %s: %s", robot, recording.path,
                   error.strerror or error)
+    if recording.frames == 0:  # stopped before its first frame (Ctrl-C while it waited for a
+        # worker): kept, a bag that replays nothing made the same command's rerun fail (exists)
+        try:
+            os.unlink(recording.path)
+        except OSError:
+            pass
+        log.info("camera %s: recorded no frame; %s not kept", robot, recording.path)
+        return
     log.info("camera %s: recorded %d frames (%.1f MB) to %s", robot, recording.frames,
              recording.size / 1e6, recording.path)
 

@@ -361,3 +361,24 @@ def test_a_disk_that_hangs_leaves_the_recording_unfinished_and_the_camera_exits(
     held.set()  # the writer returns: the file is finished
     recording._thread.join(10)
     assert not recording.writing
+
+
+def test_a_camera_stopped_before_its_first_frame_leaves_no_recording(tmp_path, caplog):
+    """A review: a camera stopped while it waited for a worker (Ctrl-C during --wait) left a
+    bag with no frame, which asnn detect reads as one without an image topic, and over which
+    the same command, run again, failed: the file exists."""
+    import logging
+
+    import cli.net
+    from asnn.io.bag_recording import BagRecording
+
+    recording = BagRecording(tmp_path / "none.mcap", "/asnn/r1/frame")
+    with caplog.at_level(logging.INFO, logger="asnn"):
+        cli.net._close_recording(recording, "r1")
+    assert not recording.path.exists()
+    assert [r.getMessage() for r in caplog.records if "record" in r.getMessage()] == [
+        f"camera r1: recorded no frame; {recording.path} not kept"]
+    kept = BagRecording(tmp_path / "one.mcap", "/asnn/r1/frame")  # one frame: kept
+    assert kept.write(64, 64, bytes(64 * 64), 10**18)
+    cli.net._close_recording(kept, "r1")
+    assert len(recorded(kept.path)) == kept.frames == 1
