@@ -20,6 +20,7 @@ from service import keys  # noqa: E402
 from service.camera import (Source, open_recording, open_source, publish_frames,  # noqa: E402
                             recording_topic, stamp_ns)
 from service.messages import decode_frame  # noqa: E402
+from diskutil import fill_disk_after  # noqa: E402
 from netutil import wait_for  # noqa: E402
 
 PEER = "{ scouting: { multicast: { enabled: false }, gossip: { enabled: false } } }"
@@ -178,27 +179,7 @@ def test_the_bound_stops_the_recording_and_the_camera_publishes_on(zenoh_net, tm
 
 def test_a_failed_write_stops_the_recording_and_the_camera_publishes_on(zenoh_net, tmp_path,
                                                                         monkeypatch, caplog):
-    import builtins
-
-    import asnn.io.files as files
-
-    class FullDisk:
-        """A file that takes the first ``room`` bytes, then none."""
-
-        def __init__(self, file, room: int):
-            self._file, self._room = file, room
-
-        def write(self, data):
-            if len(data) > self._room:
-                raise OSError(errno.ENOSPC, "No space left on device")
-            self._room -= len(data)
-            return self._file.write(data)
-
-        def __getattr__(self, name):
-            return getattr(self._file, name)
-
-    monkeypatch.setattr(files, "open", lambda path, mode="r": FullDisk(
-        builtins.open(path, mode), 1_500_000), raising=False)
+    fill_disk_after(monkeypatch, 1_500_000)
     got, held = collect(zenoh_net, "r1")
     path = tmp_path / "r1.mcap"
     with caplog.at_level("WARNING", logger="asnn.camera"):
@@ -225,28 +206,9 @@ def test_after_a_failed_write_the_frames_said_recorded_are_those_the_file_holds(
     """A review: the writer holds the frames of the chunk it fills, and the failed write of
     that chunk loses them, but the stop line and the camera's exit counted them as in the file
     (31 frames said where the file held 16)."""
-    import builtins
-
-    import asnn.io.files as files
     from asnn.io.bag_recording import BagRecording
 
-    class FullDisk:
-        """A file that takes the first ``room`` bytes, then none."""
-
-        def __init__(self, file, room: int):
-            self._file, self._room = file, room
-
-        def write(self, data):
-            if len(data) > self._room:
-                raise OSError(errno.ENOSPC, "No space left on device")
-            self._room -= len(data)
-            return self._file.write(data)
-
-        def __getattr__(self, name):
-            return getattr(self._file, name)
-
-    monkeypatch.setattr(files, "open", lambda path, mode="r": FullDisk(
-        builtins.open(path, mode), 1_500_000), raising=False)
+    fill_disk_after(monkeypatch, 1_500_000)
     stops = []
     path = tmp_path / "full.mcap"
     recording = BagRecording(path, "/asnn/r1/frame", on_stop=lambda *stop: stops.append(stop))

@@ -1067,29 +1067,10 @@ def test_a_recording_stops_at_its_first_failed_write_and_says_why(tmp_path, monk
     """A mutation probe: a full disk (the first write that failed) stops the recording at the
     next sweep, far below its bound, with the reason; the viewers are served on, and the
     recording's size is its file's, closing it again does nothing."""
-    import builtins
-    import errno
-
-    import asnn.io.files as files
     from clients.foxglove import FoxgloveBridge
+    from diskutil import fill_disk_after
 
-    class FullDisk:
-        """A file that takes the first ``room`` bytes, then none."""
-
-        def __init__(self, file, room: int):
-            self._file, self._room = file, room
-
-        def write(self, data):
-            if len(data) > self._room:
-                raise OSError(errno.ENOSPC, "No space left on device")
-            self._room -= len(data)
-            return self._file.write(data)
-
-        def __getattr__(self, name):
-            return getattr(self._file, name)
-
-    monkeypatch.setattr(files, "open", lambda path, mode="r": FullDisk(
-        builtins.open(path, mode), 2000), raising=False)
+    fill_disk_after(monkeypatch, 2000)
     rng = np.random.default_rng(0)
     path = tmp_path / "fleet.mcap"
     with caplog.at_level("WARNING", logger="asnn.foxglove"), FoxgloveBridge(
