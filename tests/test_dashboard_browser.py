@@ -485,6 +485,43 @@ def test_browser_shows_events_that_arrive_late_as_stale_and_takes_a_new_stream(b
     assert shown["warn"]["collision"] == "true" and shown["warn"]["stale"] == "false"
 
 
+def test_browser_keeps_a_stream_that_catches_up(browser):
+    """Updates that arrive late and then on time again (a slow link draining what queued behind
+    a large snapshot) are shown as old as they are, and the stream is kept: replaced at its
+    first late update, a page on a slow link would download the snapshot again and again,
+    never live (a review of the freshness rule)."""
+    store = FleetStore()
+    stop = threading.Event()
+    late = [0.0]
+    feeder = threading.Thread(target=feed_warn_and_plain, args=(store, stop), daemon=True)
+    feeder.start()
+    try:
+        with DashboardServer(store, "127.0.0.1", 0,
+                             clock=lambda: time.monotonic() - late[0]) as server:
+            chrome = browser(server.url)
+            wait_for_tiles(chrome, live_and_warning, "warn live in collision")
+            assert chrome.evaluate(RECORD_SHOWN)
+            asked = streams_asked(chrome)
+            late[0] = 20.0
+            chrome.wait_for("window.shown.some(s => /^2\\d s behind$/.test(s.conn))",
+                            "the page saying it is 20 s behind")
+            late[0] = 0.0  # caught up
+            shown = wait_for_tiles(chrome, lambda s: live_and_warning(s) and chrome.evaluate(
+                "document.getElementById('conn').textContent") == "live", "live again")
+            seen = chrome.evaluate("window.shown")
+            kept = streams_asked(chrome) == asked
+            check_page_health(chrome, server.url)
+    finally:
+        stop.set()
+        feeder.join(timeout=TIMEOUT)
+    assert kept, "the page replaced a stream that caught up"
+    behind = [i for i, s in enumerate(seen) if s["conn"].endswith("s behind")]
+    # while behind, what arrived late was shown stale, in no collision
+    assert all(s["tiles"]["warn"]["collision"] == "false" for s in seen[behind[0]:]
+               if s["conn"] != "live"), seen
+    assert shown["warn"]["collision"] == "true" and shown["warn"]["stale"] == "false"
+
+
 def test_browser_takes_a_new_stream_when_its_stream_falls_silent(browser):
     """A stream that stops without ending (a connection cut on the way: no end ever arrives)
     is replaced by the page once silent for longer than the staleness limit (at least 3 s):

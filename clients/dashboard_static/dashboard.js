@@ -10,6 +10,9 @@
   // seconds behind (or silent) beyond which a stream is dropped for a new one, whatever the
   // staleness limit; the server sends an event at least every second
   const BEHIND_MIN_S = 3;
+  // seconds a new stream may take to send its first event (the server makes a snapshot wait
+  // for a send slot up to its send timeout, 10 s) before it is taken for cut and replaced
+  const FIRST_EVENT_S = 30;
   const fleet = document.getElementById("fleet");
   const empty = document.getElementById("empty");
   const template = document.getElementById("tile-template");
@@ -343,6 +346,11 @@
       conn.dataset.state = "lost";
       conn.textContent = "reconnecting";
       conn.title = "the page lost its server; it reconnects";
+    } else if (lag > behindLimit()) {
+      conn.dataset.state = "lost";
+      conn.textContent = `${Math.round(lag)} s behind`;
+      conn.title = "the page's event stream is behind its server (state that old is shown " +
+        "stale); unless it catches up, a new stream starts from the server's state now";
     } else if (routerLost) {
       conn.dataset.state = "lost";
       conn.textContent = "no router: robots unknown";
@@ -409,6 +417,8 @@
     const now = performance.now();
     if (streamOpen && lastEvent !== null && (now - lastEvent) / 1000 > behindLimit()) {
       reopen((now - lastEvent) / 1000);
+    } else if (streamOpen && lastEvent === null && (now - asked) / 1000 > FIRST_EVENT_S) {
+      reopen((now - asked) / 1000);  // opened, and never a snapshot: cut after its headers
     }
     for (const v of robots.values()) showAge(v, now);
     showSummary();
@@ -418,6 +428,8 @@
   let retry = 1000; // ms before a new stream, after one the server refused, closed or was behind
   let source = null;
   let lastEvent = null; // performance.now() of the stream's latest event
+  let asked = 0;        // performance.now() when the page asked for the stream
+  let behindSince = null; // performance.now() of the first update behind, while behind
   const streamLag = new StreamLag();
 
   // the stream closed and a new one opened after `retry`, backing off until one keeps up;
@@ -433,8 +445,10 @@
 
   function connect() {
     const current = source = new EventSource("/events");
-    streamLag.ask(performance.now() / 1000);
+    asked = performance.now();
+    streamLag.ask(asked / 1000);
     lastEvent = null;
+    behindSince = null;
     const handle = (event) => {
       if (current !== source) return;  // a stream the page dropped has no say any more
       try {
@@ -450,11 +464,16 @@
       if (lag <= behindLimit()) {
         retry = 1000;
         behind = null;
+        behindSince = null;
       } else if (event.type === "update") {
         // the past, replayed (a stream that fell behind, or one the server already dropped
-        // whose buffered events still arrive): a new stream starts from the state now. Not
-        // for a snapshot: it is the newest state there is, and its tiles read stale if old
-        reopen(lag);
+        // whose buffered events still arrive): shown as old as it is, and, unless the stream
+        // catches up within behindLimit, a new one starts from the state now. Not at once: on
+        // a slow link the updates queued behind a large snapshot arrive late, and a stream
+        // replaced at its first late update would download the snapshot again, never live.
+        // Not for a snapshot: it is the newest state there is, and its tiles read stale if old
+        if (behindSince === null) behindSince = lastEvent;
+        else if ((lastEvent - behindSince) / 1000 > behindLimit()) reopen(lag);
       }
     };
     source.addEventListener("snapshot", handle);
