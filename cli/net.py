@@ -21,6 +21,7 @@ from .session import add_zenoh_options, exit_on_interrupt, fail, router_watch, s
 __all__ = ["register"]
 
 log = logging.getLogger("asnn")
+RECORD_CLOSE_TIMEOUT = 30.0  # seconds the camera's exit waits for its recording to be finished
 
 
 # ---------------------------------------------------------------- commands
@@ -72,9 +73,6 @@ def cmd_camera(args: argparse.Namespace) -> int:
              "(of any publisher's frames): %s",
              args.robot, count, unheard, rejections.summary(), refusals.summary())
     return 0
-
-
-RECORD_CLOSE_TIMEOUT = 30.0  # seconds the camera's exit waits for its recording to be finished
 
 
 def _close_recording(recording, robot: str) -> None:

@@ -37,7 +37,7 @@ __all__ = ["BagRecording", "FRAME_TYPES", "MAX_BACKLOG_BYTES", "MIN_FREE_BYTES"]
 
 # the message type of each of the service's frame formats (service.messages.FORMATS)
 FRAME_TYPES = {"gray8": IMAGE, "bgr8": IMAGE, "jpeg": COMPRESSED_IMAGE, "png": COMPRESSED_IMAGE}
-MAX_BACKLOG_BYTES = 64 * 2**20  # frames waiting for the disk: 7 s of 640x480 gray8 at 20 fps
+MAX_BACKLOG_BYTES = 64 * 2**20  # frames waiting for the disk: 11 s of 640x480 gray8 at 20 fps
 # a disk with less room than this is full at the start: the file's first chunks (1 MiB each,
 # the writer holds the one being filled) would fail within seconds of frames
 MIN_FREE_BYTES = 16 * 2**20
