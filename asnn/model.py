@@ -30,7 +30,7 @@ from collections.abc import Iterable, Iterator
 import cv2
 import numpy as np
 
-from . import _fast, _parallel, retina
+from . import _fast, _parallel, brightness, retina
 from .approach import ApproachStage, FramePair, frame_pixel
 from .errors import TimingWarning, _warn_at_caller
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
@@ -159,6 +159,10 @@ class ASNN:
 
     _close_pending = False  # the instance's; a class default for models pickled before it
     _unfinished = 0  # likewise (see _claim)
+    # the brightness compensation's state (reset), likewise: a model pickled before the stage
+    # measures its first change on the frame after the next
+    _log_gain = 0.0
+    _sampled: np.ndarray | None = None
 
     def __init__(self, params: ASNNParams | str = "default", *, record_maps: bool = False,
                  record_tracks: bool = False, optimised: bool = True, threads: int = 1):
@@ -283,6 +287,8 @@ class ASNN:
         self.previous: np.ndarray | None = None
         self.previous_blocks: np.ndarray | None = None
         self._search_radii = (0, 0)  # the stabilisation's search and wider search, pixels
+        self._log_gain = 0.0  # the global brightness compensation's gain, log
+        self._sampled: np.ndarray | None = None  # its sample of the previous frame stepped
         self.history: deque[np.ndarray] = deque(maxlen=self.params.n_p)
         self.stages_on: np.ndarray | None = None
         self.stages_off: np.ndarray | None = None
@@ -646,6 +652,8 @@ class ASNN:
         blocks = self._blocks(lum) if p.skip_repeats else None
         if self.previous is None:
             self.previous, self.previous_blocks = lum, blocks
+            if p.global_gain is not None:
+                self._sampled = brightness.sampled(lum)
             if p.stabilise:  # the stream's grid keeps this width
                 self._search_radii = self._stabilisation_radii(lum.shape[1])
             self.stages_on = np.zeros((p.n_slow + 2, *lum.shape), self.dtype)
@@ -677,6 +685,8 @@ class ASNN:
             self._timed = 0
         self._stamp = stamp
         self.periods.append(elapsed)
+        if p.global_gain is not None:
+            lum = self._compensated(lum, elapsed)
         background = None
         if p.stabilise:
             radius, wider = self._search_radii
@@ -695,6 +705,20 @@ class ASNN:
             taken.photo = self._photoreceptors(lum, previous if background is None
                                                else background, out)
         return taken
+
+    def _compensated(self, lum: np.ndarray, elapsed: float) -> np.ndarray:
+        """The frame's luminance scaled by the global brightness compensation's gain
+        (``params.global_gain``, :mod:`asnn.brightness`), its change measured against the
+        previous frame stepped, both as the camera gave them; the gain is the model's state."""
+        sampled = brightness.sampled(lum)
+        change = (0.0 if self._sampled is None
+                  else brightness.global_change(sampled, self._sampled))
+        self._sampled = sampled
+        self._log_gain = brightness.compensation_step(self._log_gain, change, elapsed,
+                                                      self.params.global_gain)
+        if self._log_gain == 0.0:
+            return lum
+        return lum * lum.dtype.type(math.exp(self._log_gain))
 
     def _front(self, frame: "_Frame") -> None:
         """The fused pass of a frame :meth:`_take` took (optimised form): its maps."""

@@ -163,6 +163,16 @@ class ASNNParams(BaseModel):
         "in the frame's pixels. None: every frame at its own size",
     )
 
+    # --- global brightness compensation (robust addition) ---
+    global_gain: float | None = Field(
+        None, gt=0, le=60.0, description="time constant, seconds, of the global brightness "
+        "compensation: each frame is scaled by a gain that divides out its brightness change "
+        "against the previous frame (the median ratio of 2,048 pixels, counted where three "
+        "quarters of them change the same way) and returns to 1 with this time constant, so "
+        "that a lamp's flicker, an exposure step or the lights switched leave the "
+        "photoreceptors quiet and a slow ramp passes (asnn.brightness, ASNN._compensated). "
+        "None: every frame at the camera's level")
+
     # --- background stabilisation (robust addition) ---
     stabilise: bool = Field(
         False, description="photoreceptors: difference each frame against the previous one "
