@@ -25,6 +25,7 @@ NO_RIG = dict(ignore_rig=False)
 NO_RIM = dict(rim_expansion=False)
 NO_RIM_LIMIT = dict(rim_motion_max=None)
 NO_OWN_MOTION_WEIGHT = dict(own_motion_weight=1.0)
+NO_GLOBAL_GAIN = dict(global_gain=None)
 
 
 def _run(case, variant=0, perturbation=None, scale=None, every=1, **overrides):
@@ -198,6 +199,87 @@ def test_the_rim_warns_earlier_over_sliding_stripes_and_is_inert_where_nothing_s
     for case in ("loom-light-c0.6-d12-top", "drive-day-stopped-car"):
         assert ([r.to_dict() for r in _run(case)[1]]
                 == [r.to_dict() for r in _run(case, **NO_RIM)[1]])
+
+def _under_lamps(flicker: bool):
+    """A dark disk (Weber -0.6) looming over the suite's still texture at 30 fps, under 100 Hz
+    lamps aliased at the frame rate (a 10 Hz, +-12 % flicker of the whole view) or not."""
+    from asnn.stimuli.effects import Flicker
+    from asnn.stimuli.planar import planar_scene
+    from asnn.stimuli.suite import _STILL_TEXTURE, PLANAR_SIZE
+
+    return planar_scene(size=PLANAR_SIZE, onset=20, fps=30.0, background=_STILL_TEXTURE,
+                        lighting=(Flicker(100.0, 0.12),) if flicker else ())
+
+
+def _stepped_scene(scene, **overrides):
+    model = ASNN(preset("robust", **overrides))
+    return [model.step(f, i / scene.fps) for i, f in enumerate(scene.frames)]
+
+
+def test_a_lamp_s_flicker_at_the_frame_rate_is_divided_out_before_the_retina():
+    # the flicker changes every pixel by up to 20 % from frame to frame: the frame difference
+    # covers the whole view, G is positive nearly everywhere and the attention finds nothing,
+    # so the approach is missed; with the view's brightness change divided out it warns within
+    # a few frames of the same approach under a steady light
+    assert preset("default").global_gain == 1.0
+    flickering, steady = _under_lamps(True), _under_lamps(False)
+    lit = _first(_stepped_scene(flickering))
+    assert lit is not None and flickering.onset_frame <= lit <= flickering.contact_frame
+    assert abs(lit - _first(_stepped_scene(steady))) <= 4
+    assert not _hit(flickering, _stepped_scene(flickering, **NO_GLOBAL_GAIN))
+
+
+def test_the_brightness_compensation_is_inert_where_the_light_is_steady():
+    # an approach over a sliding pattern, a drive and a headlight sweep change no pixel's light
+    # as a whole: response for response as without the stage
+    for case in ("loom-light-c0.5-over-stripes-h2px", "drive-day-stopped-car",
+                 "headlights-sweep-night"):
+        assert ([r.to_dict() for r in _run(case)[1]]
+                == [r.to_dict() for r in _run(case, **NO_GLOBAL_GAIN)[1]])
+
+
+def test_the_view_s_brightness_change_is_measured_where_the_light_changes_it():
+    from asnn import brightness
+
+    rng = np.random.default_rng(5)
+    scene = rng.uniform(0.1, 0.8, (120, 160)).astype(np.float32)
+    before = brightness.sampled(scene)
+    # a change of the light: every pixel by one factor, also under sensor noise
+    noisy = scene * np.float32(0.8) + rng.normal(0, 2 / 255, scene.shape).astype(np.float32)
+    assert brightness.global_change(brightness.sampled(scene * np.float32(1.1)), before) == \
+        pytest.approx(math.log(1.1), abs=1e-4)
+    assert brightness.global_change(brightness.sampled(noisy), before) == \
+        pytest.approx(math.log(0.8), abs=0.01)
+    # clipped white does not follow the light: the rest of the view tells the change
+    sky = scene.copy()
+    sky[:60] = 1.0
+    assert brightness.global_change(brightness.sampled(np.minimum(sky * 0.9, 1.0)),
+                                    brightness.sampled(sky)) == pytest.approx(math.log(0.9),
+                                                                               abs=1e-4)
+    # stripes sliding by, or a dark object covering a third of the view, are no change of
+    # the light: about as many pixels brighten as darken, or most stay as they were
+    stripes = np.tile((0.3 + 0.4 * (np.arange(160) // 4 % 2)).astype(np.float32), (120, 1))
+    assert brightness.global_change(brightness.sampled(np.roll(stripes, 2, axis=1)),
+                                    brightness.sampled(stripes)) == 0.0
+    dark = scene.copy()
+    dark[30:90, 50:110] = 0.05
+    assert brightness.global_change(brightness.sampled(dark), before) == 0.0
+
+
+def test_the_compensation_divides_a_step_out_and_returns_to_the_camera_s_level():
+    from asnn import brightness
+
+    # the lights dimmed to 0.45 at once: the next frame is scaled back by 1 / 0.45, and the
+    # gain returns to 1 with the time constant, gone after a few of them
+    gain = brightness.compensation_step(0.0, math.log(0.45), 1 / 30, 1.0)
+    assert math.exp(gain) == pytest.approx(1 / 0.45, rel=0.04)
+    for _ in range(29):
+        gain = brightness.compensation_step(gain, 0.0, 1 / 30, 1.0)
+    assert gain == pytest.approx(-math.log(0.45) / math.e)  # a second: one time constant
+    for _ in range(210):
+        gain = brightness.compensation_step(gain, 0.0, 1 / 30, 1.0)
+    assert gain == 0.0  # the frames as the camera gives them, bit for bit
+
 
 @pytest.mark.parametrize("case", ["halt-dark-c0.6", "approach-recede-light-c0.6"])
 def test_the_warning_ends_when_the_approach_ends(case):

@@ -34,6 +34,8 @@ ABLATIONS = {
     "no repeated-frame hold": "asnn:robust/skip_repeats=false",
     "every frame of a fast camera stepped (no frame-rate ceiling)": (
         "asnn:robust/max_step_rate=none"),
+    "no global brightness compensation (flicker, exposure steps)": (
+        "asnn:robust/global_gain=none"),
     "no background stabilisation": "asnn:robust/stabilise=false",
     "the stabilisation's search fixed at 3 px at any width": "asnn:robust/stabilise_reach=none",
     "the stabilisation's translation judged on the whole frame only": (
