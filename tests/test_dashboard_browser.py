@@ -13,6 +13,7 @@ behind or silent (replaced by the page). A screenshot is kept in
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import os
 import re
@@ -447,15 +448,14 @@ def live_and_warning(shown) -> bool:
             and all(t["stale"] == "false" for t in shown.values()))
 
 
-def test_browser_shows_events_that_arrive_late_as_stale_and_takes_a_new_stream(browser):
-    """A control-room trial: after the server dropped a slow page's stream, the events its
-    kernel had buffered still arrived, and the page showed them as current (a warning over for
-    tens of seconds). Here the server's clock says its events were taken 20 s before they
-    arrive: the page must show them stale (so in no collision), say it is behind, and take a
-    new stream by itself, whose state is live again."""
+@contextlib.contextmanager
+def page_on_a_late_clock(browser):
+    """A page showing ``warn`` live in collision and ``plain`` (fed twenty times a second),
+    recording what it shows (``RECORD_SHOWN``), from a server whose clock stamps its events
+    ``late[0]`` seconds before they are sent: yields ``(server, chrome, late)``."""
     store = FleetStore()
     stop = threading.Event()
-    late = [0.0]  # seconds the events are stamped before they are sent
+    late = [0.0]
     feeder = threading.Thread(target=feed_warn_and_plain, args=(store, stop), daemon=True)
     feeder.start()
     try:
@@ -464,19 +464,29 @@ def test_browser_shows_events_that_arrive_late_as_stale_and_takes_a_new_stream(b
             chrome = browser(server.url)
             wait_for_tiles(chrome, live_and_warning, "warn live in collision")
             assert chrome.evaluate(RECORD_SHOWN)
-            asked = streams_asked(chrome)
-            late[0] = 20.0
-            chrome.wait_for(f"window.shown.some(s => /^2\\d s behind: reconnecting$/"
-                            f".test(s.conn))", "the page saying it is 20 s behind")
-            shown = wait_for_tiles(chrome, lambda s: live_and_warning(s) and streams_asked(
-                chrome) > asked and chrome.evaluate(
-                "document.getElementById('conn').textContent") == "live",
-                "a new stream, live again")
-            seen = chrome.evaluate("window.shown")
-            check_page_health(chrome, server.url)
+            yield server, chrome, late
     finally:
         stop.set()
         feeder.join(timeout=TIMEOUT)
+
+
+def test_browser_shows_events_that_arrive_late_as_stale_and_takes_a_new_stream(browser):
+    """A control-room trial: after the server dropped a slow page's stream, the events its
+    kernel had buffered still arrived, and the page showed them as current (a warning over for
+    tens of seconds). Here the server's clock says its events were taken 20 s before they
+    arrive: the page must show them stale (so in no collision), say it is behind, and take a
+    new stream by itself, whose state is live again."""
+    with page_on_a_late_clock(browser) as (server, chrome, late):
+        asked = streams_asked(chrome)
+        late[0] = 20.0
+        chrome.wait_for(f"window.shown.some(s => /^2\\d s behind: reconnecting$/"
+                        f".test(s.conn))", "the page saying it is 20 s behind")
+        shown = wait_for_tiles(chrome, lambda s: live_and_warning(s) and streams_asked(
+            chrome) > asked and chrome.evaluate(
+            "document.getElementById('conn').textContent") == "live",
+            "a new stream, live again")
+        seen = chrome.evaluate("window.shown")
+        check_page_health(chrome, server.url)
     behind = [i for i, s in enumerate(seen) if s["conn"].endswith("behind: reconnecting")]
     # what arrived 20 s late was shown stale, in no collision; nothing live until a new stream
     assert seen[behind[0]]["tiles"]["warn"] == {"stale": "true", "collision": "false"}, seen
@@ -490,30 +500,17 @@ def test_browser_keeps_a_stream_that_catches_up(browser):
     a large snapshot) are shown as old as they are, and the stream is kept: replaced at its
     first late update, a page on a slow link would download the snapshot again and again,
     never live (a review of the freshness rule)."""
-    store = FleetStore()
-    stop = threading.Event()
-    late = [0.0]
-    feeder = threading.Thread(target=feed_warn_and_plain, args=(store, stop), daemon=True)
-    feeder.start()
-    try:
-        with DashboardServer(store, "127.0.0.1", 0,
-                             clock=lambda: time.monotonic() - late[0]) as server:
-            chrome = browser(server.url)
-            wait_for_tiles(chrome, live_and_warning, "warn live in collision")
-            assert chrome.evaluate(RECORD_SHOWN)
-            asked = streams_asked(chrome)
-            late[0] = 20.0
-            chrome.wait_for("window.shown.some(s => /^2\\d s behind$/.test(s.conn))",
-                            "the page saying it is 20 s behind")
-            late[0] = 0.0  # caught up
-            shown = wait_for_tiles(chrome, lambda s: live_and_warning(s) and chrome.evaluate(
-                "document.getElementById('conn').textContent") == "live", "live again")
-            seen = chrome.evaluate("window.shown")
-            kept = streams_asked(chrome) == asked
-            check_page_health(chrome, server.url)
-    finally:
-        stop.set()
-        feeder.join(timeout=TIMEOUT)
+    with page_on_a_late_clock(browser) as (server, chrome, late):
+        asked = streams_asked(chrome)
+        late[0] = 20.0
+        chrome.wait_for("window.shown.some(s => /^2\\d s behind$/.test(s.conn))",
+                        "the page saying it is 20 s behind")
+        late[0] = 0.0  # caught up
+        shown = wait_for_tiles(chrome, lambda s: live_and_warning(s) and chrome.evaluate(
+            "document.getElementById('conn').textContent") == "live", "live again")
+        seen = chrome.evaluate("window.shown")
+        kept = streams_asked(chrome) == asked
+        check_page_health(chrome, server.url)
     assert kept, "the page replaced a stream that caught up"
     behind = [i for i, s in enumerate(seen) if s["conn"].endswith("s behind")]
     # while behind, what arrived late was shown stale, in no collision
