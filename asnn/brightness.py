@@ -52,6 +52,11 @@ AGREEMENT = 0.75
 # a gain within this of 1 (log) is 1: the compensation, once it has leaked away, leaves the frames
 # as the camera gave them, bit for bit (0.001 is a quarter of a gray level at white)
 NEGLIGIBLE = 1e-3
+# the gain's log stays within this either way (31x): the largest change one frame can be
+# measured to make, a pixel counted as dark scaled to white. A change taken at once and undone
+# where no three quarters of the view agreed (darkened as a whole, then lit again part by part)
+# ran it up without bound, e^22 with a 1 s time constant, and at 60 s math.exp overflowed
+MAX_LOG_GAIN = math.log(BRIGHT / DARK)
 # the pixels compared: this many, at fixed places drawn at random over the frame (a regular
 # lattice aliases a periodic pattern: stripes whose period divides its step look the same at
 # every sampled pixel, and their sliding would read as a change of the light)
@@ -108,7 +113,8 @@ def global_change(current: np.ndarray, previous: np.ndarray) -> float:
 def compensation_step(log_gain: float, change: float, elapsed: float, tau: float) -> float:
     """The compensating gain's log after a frame whose brightness changed by ``change`` (a log
     ratio, :func:`global_change`): the change divided out, and the gain leaked toward 1 by
-    ``exp(-elapsed / tau)``, a first-order high-pass filter of the view's log brightness.
+    ``exp(-elapsed / tau)``, a first-order high-pass filter of the view's log brightness,
+    bounded to ``MAX_LOG_GAIN`` either way.
 
     Parameters
     ----------
@@ -124,7 +130,9 @@ def compensation_step(log_gain: float, change: float, elapsed: float, tau: float
     Returns
     -------
     float
-        The log of the factor to scale the frame by; 0.0 within ``NEGLIGIBLE`` of it.
+        The log of the factor to scale the frame by, within ``MAX_LOG_GAIN`` of 0; 0.0
+        within ``NEGLIGIBLE`` of it.
     """
     log_gain = (log_gain - change) * math.exp(-elapsed / tau)
+    log_gain = min(max(log_gain, -MAX_LOG_GAIN), MAX_LOG_GAIN)
     return 0.0 if abs(log_gain) < NEGLIGIBLE else log_gain

@@ -281,6 +281,31 @@ def test_the_compensation_divides_a_step_out_and_returns_to_the_camera_s_level()
     assert gain == 0.0  # the frames as the camera gives them, bit for bit
 
 
+def test_the_compensating_gain_stays_within_what_one_frame_can_measure():
+    """A review: a darkening taken at once and undone where no three quarters of the view
+    agree (darkened as a whole, then lit again part by part) is divided out each time and never
+    taken back, so the gain ran up without bound: e^22 with the default's 1 s, and at 60 s
+    math.exp overflowed mid-step (OverflowError at frame 1373, the model then refusing every
+    frame until reset)."""
+    from asnn import brightness
+
+    rng = np.random.default_rng(0)
+    lit = (rng.uniform(0.7, 0.95, (120, 160)) * 255).astype(np.uint8)
+    dark = (lit / 9).astype(np.uint8)  # every pixel: a change of the light, taken
+    part = lit.copy()
+    part[66:] = dark[66:]  # 55 % lit again: no three quarters agree either way, no change
+    bound = math.log(brightness.BRIGHT / brightness.DARK)
+    model = ASNN(preset("robust"))
+    for i in range(60):
+        model.step((lit, dark, part)[i % 3], i / 30)
+        assert abs(model._log_gain) <= bound
+    gain = 0.0
+    for _ in range(2000):  # at the longest time constant, as far as math.exp overflowed
+        for change in (math.log(1 / 9), 0.0, 0.0):
+            gain = brightness.compensation_step(gain, change, 1 / 30, 60.0)
+            assert abs(gain) <= bound
+
+
 @pytest.mark.parametrize("case", ["halt-dark-c0.6", "approach-recede-light-c0.6"])
 def test_the_warning_ends_when_the_approach_ends(case):
     scene, responses = _run(case)
