@@ -89,8 +89,10 @@ def _close_recording(recording, robot: str) -> None:
         # worker): kept, a bag that replays nothing made the same command's rerun fail (exists)
         try:
             os.unlink(recording.path)
-        except OSError:
-            pass
+        except OSError as exc:
+            log.warning("camera %s: recorded no frame; %s could not be removed: %s", robot,
+                        recording.path, exc.strerror or exc)
+            return
         log.info("camera %s: recorded no frame; %s not kept", robot, recording.path)
         return
     log.info("camera %s: recorded %d frames (%.1f MB) to %s", robot, recording.frames,

@@ -418,7 +418,7 @@
     if (streamOpen && lastEvent !== null && (now - lastEvent) / 1000 > behindLimit()) {
       reopen((now - lastEvent) / 1000);
     } else if (streamOpen && lastEvent === null && (now - asked) / 1000 > FIRST_EVENT_S) {
-      reopen((now - asked) / 1000);  // opened, and never a snapshot: cut after its headers
+      reopen();  // opened, and never a snapshot: cut after its headers (not behind: silent)
     }
     for (const v of robots.values()) showAge(v, now);
     showSummary();
