@@ -229,6 +229,33 @@ def test_a_lamp_s_flicker_at_the_frame_rate_is_divided_out_before_the_retina():
     assert not _hit(flickering, _stepped_scene(flickering, **NO_GLOBAL_GAIN))
 
 
+def test_the_compensating_gain_is_state_a_copy_and_worker_threads_carry():
+    """The gain is the model's state: stepped with worker threads, as a stream, or copied
+    mid-stream (pickled, as a worker hands a model on), a flickering approach, where the gain
+    is not 1 in most frames, gets the responses of one model stepped on one thread."""
+    import pickle
+
+    scene = _under_lamps(True)
+    times = [i / scene.fps for i in range(len(scene.frames))]
+    one = ASNN(preset("robust"))
+    gains, expected = [], []
+    for frame, t in zip(scene.frames, times):
+        expected.append(one.step(frame, t).to_dict())
+        gains.append(one._log_gain)
+    assert sum(g != 0.0 for g in gains) > len(gains) // 2  # the stage acts in most frames
+    threaded = ASNN(preset("robust"), threads=2)
+    assert [threaded.step(f, t).to_dict() for f, t in zip(scene.frames, times)] == expected
+    streamed = ASNN(preset("robust"), threads=2)
+    assert [r.to_dict() for r in streamed.stream(zip(times, scene.frames))] == expected
+    half = len(times) // 2
+    first = ASNN(preset("robust"))
+    head = [first.step(f, t).to_dict() for f, t in zip(scene.frames[:half], times[:half])]
+    copy = pickle.loads(pickle.dumps(first))
+    assert copy._log_gain == gains[half - 1]
+    assert head + [copy.step(f, t).to_dict() for f, t in
+                   zip(scene.frames[half:], times[half:])] == expected
+
+
 def test_the_brightness_compensation_is_inert_where_the_light_is_steady():
     # an approach over a sliding pattern, a drive and a headlight sweep change no pixel's light
     # as a whole: response for response as without the stage
