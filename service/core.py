@@ -101,7 +101,9 @@ warnings.filterwarnings("ignore", category=TimingWarning, module=r"service\.core
 # 99.45 % of 4,152 hand-overs tried over the labelled suite, 99.34 % of the 1,504 during an
 # approach (the tracker needs a few frames of approach in a row, and the camera-rig stage its
 # running means; the worst need 53 during an approach, 64 before one):
-# `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes.
+# `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes (last:
+# 2026-12-01, with the global brightness compensation: the suite's figures unchanged; the real
+# clips' and the indoor set's in docs/operations.md).
 HANDOVER_WARMUP_FRAMES = 30
 # robot ids whose latest refusal the status keeps (the most recently refused)
 MAX_REFUSED = 256
