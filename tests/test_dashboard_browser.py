@@ -479,8 +479,8 @@ def test_browser_shows_events_that_arrive_late_as_stale_and_takes_a_new_stream(b
     with page_on_a_late_clock(browser) as (server, chrome, late):
         asked = streams_asked(chrome)
         late[0] = 20.0
-        chrome.wait_for(f"window.shown.some(s => /^2\\d s behind: reconnecting$/"
-                        f".test(s.conn))", "the page saying it is 20 s behind")
+        chrome.wait_for("window.shown.some(s => /^2\\d s behind: reconnecting$/"
+                        ".test(s.conn))", "the page saying it is 20 s behind")
         shown = wait_for_tiles(chrome, lambda s: live_and_warning(s) and streams_asked(
             chrome) > asked and chrome.evaluate(
             "document.getElementById('conn').textContent") == "live",
