@@ -766,10 +766,28 @@ def test_a_threaded_stream_closed_under_it_or_left_at_exit_does_not_hang(tmp_pat
     assert done.stdout.splitlines() == ["closed mid-stream: 5", "exit"]
 
 
-@pytest.mark.parametrize("stream", [False, True])
-def test_a_failure_on_a_worker_thread_is_raised_not_waited_for(monkeypatch, stream):
+def _raised_in_time(call, error):
+    """What ``call`` raised of ``error``'s type (None if nothing), run on a thread of its own
+    that must end within 60 s: a model that waits for ever fails the test, not the run."""
     import threading
 
+    outcome = []
+
+    def run():
+        try:
+            call()
+        except error as exc:
+            outcome.append(exc)
+
+    runner = threading.Thread(target=run, daemon=True)
+    runner.start()
+    runner.join(timeout=60)
+    assert not runner.is_alive(), "the model hung"
+    return outcome[0] if outcome else None
+
+
+@pytest.mark.parametrize("stream", [False, True])
+def test_a_failure_on_a_worker_thread_is_raised_not_waited_for(monkeypatch, stream):
     from asnn import _parallel
 
     def failing(*args, **kwargs):  # the worker thread's kernel, which computes its bands
@@ -777,20 +795,13 @@ def test_a_failure_on_a_worker_thread_is_raised_not_waited_for(monkeypatch, stre
 
     monkeypatch.setattr(_parallel, "_serve", failing)
     frames = make_scene("looming", size=(64, 64), frames=6).frames
-    outcome = []
 
     def run():
-        try:
-            with ASNN("default", threads=2) as model:
-                _responses(model, frames, stream)
-        except MemoryError as exc:
-            outcome.append(exc)
+        with ASNN("default", threads=2) as model:
+            _responses(model, frames, stream)
 
-    runner = threading.Thread(target=run, daemon=True)
-    runner.start()
-    runner.join(timeout=60)
-    assert not runner.is_alive(), "the model hung"
-    assert outcome and "no room on the worker" in str(outcome[0])
+    raised = _raised_in_time(run, MemoryError)
+    assert raised is not None and "no room on the worker" in str(raised)
 
 
 @pytest.mark.parametrize("stream", [False, True])
@@ -834,8 +845,6 @@ def test_a_worker_thread_that_ended_is_raised_not_waited_for():
     band done or a worker's recorded failure ended, so a worker thread that ended without
     either (died) left it waiting for ever; it now raises, and the model goes on after a
     reset with new worker threads."""
-    import threading
-
     rng = np.random.default_rng(0)
     frames = [rng.integers(0, 256, (64, 64), np.uint8) for _ in range(6)]
     model = ASNN("default", threads=2)
@@ -845,21 +854,10 @@ def test_a_worker_thread_that_ended_is_raised_not_waited_for():
     server.wake(None)  # its thread ends as close() ends it, but unasked: as if it died
     server._thread.join(timeout=60)
     assert not server._thread.is_alive()
-    outcome = []
-
-    def run():
-        try:
-            model.step(frames[2])
-        except RuntimeError as exc:
-            outcome.append(exc)
-
-    runner = threading.Thread(target=run, daemon=True)
-    runner.start()
-    runner.join(timeout=60)
-    assert not runner.is_alive(), "the model hung"
-    assert outcome and "worker thread asnn-model-1 ended" in str(outcome[0])
+    raised = _raised_in_time(lambda: model.step(frames[2]), RuntimeError)
+    assert raised is not None and "worker thread asnn-model-1 ended" in str(raised)
     # what the error tells to do is what the model takes: a step without reset() is refused
-    assert "reset() the model" in str(outcome[0])
+    assert "reset() the model" in str(raised)
     with pytest.raises(RuntimeError, match=r"interrupted part-way.*reset\(\)"):
         model.step(frames[2])
     model.reset()
