@@ -54,7 +54,7 @@ from .messages import (FORMATS, PREVIEW_WIDTH, Frame, MessageError, Preview, dec
 __all__ = ["FRAME_QOS", "MAX_NOTICES", "MAX_REPLAY_GAP", "PREVIEW_HZ", "PREVIEW_WIDTH",
            "RECORD_MAX_BYTES", "RefusalNotices", "Source", "SourceError", "SourceRejections",
            "SubscriberWatch", "open_recording", "open_source", "publish_frames",
-           "recording_topic", "stamp_ns"]
+           "recording_topic"]
 
 log = logging.getLogger("asnn.camera")
 
@@ -228,12 +228,6 @@ def recording_topic(robot: str, prefix: str = keys.DEFAULT_PREFIX) -> str:
     return "/" + keys.frame_key(robot, prefix)
 
 
-def stamp_ns(stamp: float) -> int:
-    """A frame's ``stamp`` (seconds) in nanoseconds since the epoch, for a bag's header stamp:
-    0 to the last second a ROS 2 ``int32`` of seconds holds."""
-    return min(max(round(stamp * 1e9), 0), (2**31 - 1) * 1_000_000_000)
-
-
 def open_recording(path, robot: str, *, prefix: str = keys.DEFAULT_PREFIX,
                    format: str = "gray8", frame_id: str = "",
                    max_bytes: float = RECORD_MAX_BYTES):
@@ -375,7 +369,7 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
                 if recording is not None:
                     try:
                         recording.write(frame.width, frame.height, frame.data,
-                                        stamp_ns(frame.stamp))
+                                        recording.time_ns(frame.stamp))
                     except Exception:  # a recording is never worth losing the frames over
                         log.exception("camera %s: recording frame %d failed; recording no more",
                                       robot, seq)

@@ -15,10 +15,11 @@ pytest.importorskip("mcap_ros2", reason="the 'ros' extra is not installed")
 from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
+from asnn.io.rosbag import ros_time_ns as stamp_ns  # noqa: E402
 from cli.main import main  # noqa: E402
 from service import keys  # noqa: E402
 from service.camera import (Source, open_recording, open_source, publish_frames,  # noqa: E402
-                            recording_topic, stamp_ns)
+                            recording_topic)
 from service.messages import decode_frame  # noqa: E402
 from diskutil import fill_disk_after  # noqa: E402
 from netutil import wait_for  # noqa: E402

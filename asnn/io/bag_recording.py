@@ -31,7 +31,7 @@ import numpy as np
 
 from .files import RecordingFile
 from .rosbag import (COMPRESSED_IMAGE, IMAGE, Ros2Writer, compressed_image_message,
-                     raw_image_message, register_image_type)
+                     raw_image_message, register_image_type, ros_time_ns)
 
 __all__ = ["BagRecording", "FRAME_TYPES", "MAX_BACKLOG_BYTES", "MIN_FREE_BYTES"]
 
@@ -126,6 +126,8 @@ class BagRecording:
         self._thread.start()
 
     # ------------------------------------------------------------------ the camera's side
+
+    time_ns = staticmethod(ros_time_ns)  # a frame's stamp, seconds, as :meth:`write` takes it
 
     def write(self, width: int, height: int, data: bytes, stamp_ns: int) -> bool:
         """Hand a frame over: ``data`` is its pixels (``gray8``: ``height`` rows of ``width``

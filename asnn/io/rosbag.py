@@ -50,7 +50,7 @@ except ImportError as exc:  # the optional extra is missing: say which one, in o
 __all__ = ["BagClip", "CLOCK_RESET_FRAMES", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_SCHEMAS",
            "RAW_ENCODINGS", "TopicInfo", "bag_files", "bag_topics",
            "choose_topic", "compressed_image_message", "image_from_compressed", "image_from_raw",
-           "open_bag", "raw_image_message", "register_image_type", "write_bag",
+           "open_bag", "raw_image_message", "register_image_type", "ros_time_ns", "write_bag",
            "IMAGE_MSGDEF", "COMPRESSED_IMAGE_MSGDEF"]
 
 IMAGE = "sensor_msgs/msg/Image"
@@ -821,6 +821,12 @@ def register_image_type(writer: Ros2Writer, datatype: str):
     the message definition rosbag2 embeds."""
     return writer.register_msgdef(datatype, IMAGE_MSGDEF if datatype == IMAGE
                                   else COMPRESSED_IMAGE_MSGDEF)
+
+
+def ros_time_ns(seconds: float) -> int:
+    """Seconds since the epoch in nanoseconds, for a message's header stamp: 0 to the last
+    second a ROS 2 ``int32`` of seconds holds."""
+    return min(max(round(seconds * 1e9), 0), (2**31 - 1) * 1_000_000_000)
 
 
 def _header(stamp_ns: int, frame_id: str) -> dict:
