@@ -298,11 +298,7 @@ class FleetSubscriber:
             self.store.offer(str(sample.key_expr), sample.payload.to_bytes())
         except Exception:  # offer never raises for bad input; this is a bug, keep listening
             # rate-limited: a store that fails on every sample logged a traceback per sample
-            hidden = self._log.allow("offer-failed")
-            if hidden is not None:
-                log.error("unexpected error on %s%s", sample.key_expr,
-                          f" ({hidden} more since the last line)" if hidden else "",
-                          exc_info=True)
+            self._log.exception("offer-failed", "unexpected error on %s", sample.key_expr)
 
     def __enter__(self) -> FleetSubscriber:
         return self

@@ -14,8 +14,9 @@ MAX_REASONS = 1024
 
 
 class RateLimitedLog:
-    """WARNING lines per reason: the first at once, then at most one every ``interval`` seconds,
-    each saying how many were not shown since the previous one.
+    """WARNING lines (or ERROR lines with a traceback, :meth:`exception`) per reason: the first
+    at once, then at most one every ``interval`` seconds, each saying how many were not shown
+    since the previous one.
 
     Reasons may name a robot (``intrusion:<robot>``): past :data:`MAX_REASONS` of them, those
     quiet for ``interval`` are forgotten, so ids that come and go cannot grow it.
@@ -54,6 +55,23 @@ class RateLimitedLog:
     def info(self, reason: str, message: str, *args) -> bool:
         """Log (or count) one event of ``reason`` at INFO; True if a line was written."""
         return self._write(logging.INFO, reason, message, args)
+
+    def exception(self, reason: str, message: str, *args) -> bool:
+        """Log (or count) one event of ``reason`` at ERROR with the traceback being handled
+        (call it in an ``except`` block); True if a line was written.
+
+        For a bug that may fail every message or frame: one traceback per ``interval``, not
+        one per event. The line after hidden ones ends ``(N more since the last line)``: the
+        message names what failed, so the reason is not repeated.
+        """
+        hidden = self.allow(reason)
+        if hidden is None:
+            return False
+        if hidden:
+            message += " (%d more since the last line)"
+            args = (*args, hidden)
+        self.logger.error(message, *args, exc_info=True)
+        return True
 
     def _write(self, level: int, reason: str, message: str, args: tuple) -> bool:
         hidden = self.allow(reason)

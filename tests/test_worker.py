@@ -406,6 +406,25 @@ def test_rate_limited_log_counts_what_it_hides():
     assert limited.warning("a", "later")
 
 
+def test_rate_limited_log_exception_logs_one_traceback_per_interval_with_the_count(caplog):
+    clock = FakeClock()
+    limited = RateLimitedLog(logging.getLogger("test.ratelimit"), interval=5.0, clock=clock)
+    with caplog.at_level(logging.ERROR, logger="test.ratelimit"):
+        for k in range(20):
+            try:
+                raise ValueError(f"bug {k}")
+            except ValueError:
+                assert limited.exception("bug", "failed on %s", k) == (k == 0)
+        clock.now += 5
+        try:
+            raise ValueError("bug 20")
+        except ValueError:
+            assert limited.exception("bug", "failed on %s", 20)
+    assert [(r.levelno, r.getMessage(), str(r.exc_info[1])) for r in caplog.records] == [
+        (logging.ERROR, "failed on 0", "bug 0"),
+        (logging.ERROR, "failed on 20 (19 more since the last line)", "bug 20")]
+
+
 def test_rate_limited_log_forgets_quiet_per_robot_reasons():
     from service.logutil import MAX_REASONS
 
