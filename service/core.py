@@ -348,6 +348,7 @@ class WorkerCore:
             raise ValueError(f"warmup_frames must be 0 or more, got {warmup_frames}")
         self.warmup_frames = int(warmup_frames)
         self.started = clock()
+        self.log_interval = float(log_interval)
         self._limited_log = RateLimitedLog(log, log_interval, clock)
         # the latest refusal of each of the last MAX_REFUSED robot ids refused, for the status:
         # a camera none of whose frames is taken never appears among the robots

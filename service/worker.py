@@ -21,7 +21,9 @@ robots start cold at their new owners. A robot whose frames the worker refuses (
 message, a second publisher, a full table, ...) is told why on ``<prefix>/<robot>/refused``, at
 most once a second (:class:`~service.messages.Refusal`). Each worker answers queries on
 ``<prefix>/@worker/<id>/status`` with a msgpack map (:meth:`service.core.WorkerCore.status` plus
-the live workers, the routes and the frames received).
+the live workers, the routes and the frames received). A bug that fails frames outside the
+model (publishing a response, a frame callback) has its traceback logged at most once every
+``log_interval`` (the core's) per robot, or per callback, with the count of those not shown.
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ import zenoh
 from zenoh.ext import CacheConfig, MissDetectionConfig, declare_advanced_publisher
 
 from . import keys
-from .core import WorkerCore
+from .core import Job, WorkerCore
+from .logutil import RateLimitedLog
 from .messages import (MAX_NOTE_LEN, MessageError, Refusal, Response, decode_status, encode,
                        encode_status)
 from .routing import Routes
@@ -330,6 +333,9 @@ class Worker:
         self._token = self._status_queryable = None
         self._watchers: list = []  # liveliness subscribers: workers, claims, cameras
         self._kernels_loaded = False
+        # a bug that fails every frame logged a traceback per frame, at the frame rate: one per
+        # kind (per robot for a frame's processing) every log_interval, by the core's clock
+        self._failures = RateLimitedLog(log, core.log_interval, core.clock)
 
     def __enter__(self) -> Worker:
         self.start()
@@ -481,7 +487,8 @@ class Worker:
             self._count(len(payload), scanned=False)
             self.core.offer(str(sample.key_expr), payload)
         except Exception:  # never let a bug in one message kill the subscriber
-            log.exception("unexpected error on a frame from %s", sample.key_expr)
+            self._failures.exception("frame-in", "unexpected error on a frame from %s",
+                                     sample.key_expr)
 
     def _on_scanned_frame(self, sample: zenoh.Sample) -> None:
         """A frame on ``<prefix>/*/frame``: a robot nobody knows yet is adopted."""
@@ -499,7 +506,8 @@ class Worker:
                 log.info("robot %s: found by its frames (its camera does not announce it)", robot)
                 self._changed.set()
         except Exception:
-            log.exception("unexpected error on a frame from %s", sample.key_expr)
+            self._failures.exception("scanned-frame-in", "unexpected error on a frame from %s",
+                                     sample.key_expr)
 
     def _answers(self, robot: str) -> bool:
         """Whether a robot's frame is answered: it is served (or being released), or this
@@ -637,14 +645,18 @@ class Worker:
         _lower_priority(COMPUTE_NICENESS)
         while not self._stop.is_set():
             job = self.core.take(timeout=0.2)
-            if job is None:
-                continue
-            try:
-                response = self.core.process(job, publish=self.publish)
-                if response is None and self.routes.role(job.robot) == "warming":
-                    self._changed.set()  # it may be warm now: claim it
-            except Exception:
-                log.exception("robot %s: frame %d failed", job.robot, job.frame.seq)
+            if job is not None:
+                self._step(job)
+
+    def _step(self, job: Job) -> None:
+        """Process one job taken from the core and publish its response; never raises."""
+        try:
+            response = self.core.process(job, publish=self.publish)
+            if response is None and self.routes.role(job.robot) == "warming":
+                self._changed.set()  # it may be warm now: claim it
+        except Exception:  # a bug (publishing, a callback): the thread goes on
+            self._failures.exception(f"frame-failed:{job.robot}", "robot %s: frame %d failed",
+                                     job.robot, job.frame.seq)
 
     def _drop_outlets(self) -> None:
         """Undeclare the publishers of robots the core no longer tracks (evicted, handed over)."""

@@ -118,6 +118,66 @@ def test_a_robot_answered_while_the_publishers_are_pruned_keeps_its_publishers(z
         worker.close()
 
 
+def test_a_frame_that_fails_every_time_logs_one_traceback_per_robot_per_interval(zenoh_net,
+                                                                                  caplog):
+    """Earlier sessions: a bug that failed every frame in the worker's processing threads (here
+    the response's callback) or its frame callbacks logged a traceback per frame, flooding the
+    log at the frame rate. Now one per kind (per robot for the processing) every
+    log_interval by the core's clock, the next line counting those not shown."""
+    now = [1000.0]
+    core = WorkerCore(clock=lambda: now[0], log_interval=10.0)
+    calls = []
+
+    def broken(response):
+        calls.append(response.seq)
+        raise RuntimeError("a bug in the callback")
+
+    worker = Worker(zenoh_net.hub, core, stats_every=0, on_response=broken)  # not started
+    image = make_scene("looming").frames[0]
+
+    def step(robot, seq):
+        core.offer(keys.frame_key(robot), encode(Frame.from_image(image, seq=seq,
+                                                                  stamp=seq * 0.05)))
+        job = core.take()
+        assert job is not None and job.robot == robot
+        worker._step(job)  # never raises
+
+    class Sample:  # what the frame callbacks read of a Zenoh sample
+        key_expr = "asnn/r1/frame"
+        payload = type("Payload", (), {"to_bytes": staticmethod(lambda: b"\x80")})
+
+    def offer_fails(key, payload, received=None):
+        raise RuntimeError("a bug in offer")
+
+    try:
+        with caplog.at_level(logging.ERROR, logger="asnn.worker"):
+            for seq in range(30):
+                step("r1", seq)
+            step("r2", 0)  # another robot: its own first line
+            now[0] += 10.0
+            step("r1", 30)
+            core.offer = offer_fails
+            for _ in range(50):
+                worker._on_frame(Sample)
+                worker._on_scanned_frame(Sample)
+            now[0] += 10.0
+            worker._on_frame(Sample)
+    finally:
+        worker.close()
+    assert calls == list(range(30)) + [0, 30]  # every frame processed and published
+    lines = [(r.getMessage(), str(r.exc_info[1])) for r in caplog.records
+             if r.name == "asnn.worker" and r.exc_info]
+    assert lines == [
+        ("robot r1: frame 0 failed", "a bug in the callback"),
+        ("robot r2: frame 0 failed", "a bug in the callback"),
+        ("robot r1: frame 30 failed (29 more since the last line)", "a bug in the callback"),
+        ("unexpected error on a frame from asnn/r1/frame", "a bug in offer"),
+        ("unexpected error on a frame from asnn/r1/frame", "a bug in offer"),  # the scan's
+        ("unexpected error on a frame from asnn/r1/frame (49 more since the last line)",
+         "a bug in offer"),
+    ]
+
+
 def test_two_cameras_at_once_looming_warns_with_targets_translating_does_not(service):
     warnings = []
     listener = WarningListener(service.spoke(), warnings.append)
