@@ -655,6 +655,43 @@ def test_the_page_never_takes_an_event_for_fresher_than_it_is():
     assert page_lags([("event", 7.0, 100.0), ("event", 8.0, 101.5)]) == [0.0, 0.5]
 
 
+def page_waits(steps, first_event_s=None) -> list[list[bool]]:
+    """A StreamLag (freshness.js, run in node; ``first_event_s``: its limit, else the
+    default) through ``steps``: ``("ask", now)``, ``("event", at, now)`` or ``("check", now)``;
+    ``[waiting, overdue]`` at each check."""
+    node = shutil.which("node") or shutil.which("nodejs")
+    if node is None:
+        pytest.skip("no node to run the page's script in")
+    script = ("const {StreamLag} = require(process.argv[1]);"
+              "const limit = JSON.parse(process.argv[3]);"
+              "const s = limit === null ? new StreamLag() : new StreamLag(limit);"
+              "const out = [];"
+              "for (const [kind, ...args] of JSON.parse(process.argv[2])) {"
+              "  if (kind === 'ask') s.ask(...args); else if (kind === 'event') s.lag(...args);"
+              "  else out.push([s.waiting(), s.overdue(...args)]); }"
+              "console.log(JSON.stringify(out));")
+    done = subprocess.run([node, "-e", script, str(STREAM_LAG), json.dumps(steps),
+                           json.dumps(first_event_s)],
+                          capture_output=True, text=True, timeout=TIMEOUT, check=True)
+    return json.loads(done.stdout)
+
+
+def test_a_stream_waits_for_its_first_event_and_is_overdue_past_the_limit():
+    """A new stream is waiting (the page says so, not "live") until its first event, and one
+    with none more than 30 s (the default) after it was asked for is taken for cut and
+    replaced; the limit is the rule's parameter, so a fake clock checks it here."""
+    WAITING, OVERDUE, HEARD = [True, False], [True, True], [False, False]
+    assert page_waits([("check", 1e6)]) == [HEARD]  # no stream asked for: nothing to wait for
+    assert page_waits([("ask", 100.0), ("check", 100.0), ("check", 129.9), ("check", 130.1),
+                       ("event", 5000.0, 131.0), ("check", 131.0), ("check", 1e6),
+                       ("ask", 2000.0), ("check", 2029.0), ("check", 2031.0)]) == [
+        WAITING, WAITING, OVERDUE, HEARD, HEARD, WAITING, OVERDUE]
+    # a short limit; an event without a stamp counts as the first all the same
+    assert page_waits([("ask", 10.0), ("check", 10.4), ("check", 10.6), ("ask", 11.0),
+                       ("check", 11.4), ("event", None, 11.45), ("check", 20.0)],
+                      first_event_s=0.5) == [WAITING, OVERDUE, WAITING, HEARD]
+
+
 def test_closing_the_server_ends_open_event_streams():
     with DashboardServer(FleetStore(), "127.0.0.1", 0, heartbeat=0.2) as server:
         reader = EventReader(server)

@@ -554,3 +554,39 @@ def test_browser_takes_a_new_stream_when_its_stream_falls_silent(browser):
         release.set()
         stop.set()
         feeder.join(timeout=TIMEOUT)
+
+
+def test_browser_says_it_waits_for_a_streams_first_event_not_live(browser):
+    """An earlier session: a stream open but with no first event yet (its snapshot waiting for
+    a send slot) read "live" in the header, while the tiles shown were older than it. Here the
+    first snapshot is held: the page says it waits, then "live" once the snapshot comes."""
+    store = FleetStore()
+    stop, held, release = (threading.Event() for _ in range(3))
+    feeder = threading.Thread(target=feed_warn_and_plain, args=(store, stop), daemon=True)
+    feeder.start()
+    try:
+        with DashboardServer(store, "127.0.0.1", 0) as server:
+            taken = server.state
+
+            def state(since=0):
+                if since == 0 and not held.is_set():  # the first stream's snapshot
+                    held.set()
+                    release.wait(TIMEOUT)
+                return taken(since)
+
+            server.state = state
+            chrome = browser(server.url)
+            chrome.wait_for("document.getElementById('conn')?.dataset.state === 'connecting'"
+                            " && document.getElementById('conn').textContent === "
+                            "'waiting for the first event'", "the page saying it waits")
+            assert held.is_set() and not release.is_set()
+            assert chrome.evaluate("document.querySelectorAll('#fleet .tile').length") == 0
+            release.set()
+            wait_for_tiles(chrome, lambda s: live_and_warning(s) and chrome.evaluate(
+                "document.getElementById('conn').textContent") == "live", "live at last")
+            assert streams_asked(chrome) == 1  # the stream that waited, kept
+            check_page_health(chrome, server.url)
+    finally:
+        release.set()
+        stop.set()
+        feeder.join(timeout=TIMEOUT)

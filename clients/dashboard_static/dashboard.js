@@ -10,9 +10,6 @@
   // seconds behind (or silent) beyond which a stream is dropped for a new one, whatever the
   // staleness limit; the server sends an event at least every second
   const BEHIND_MIN_S = 3;
-  // seconds a new stream may take to send its first event (the server makes a snapshot wait
-  // for a send slot up to its send timeout, 10 s) before it is taken for cut and replaced
-  const FIRST_EVENT_S = 30;
   const fleet = document.getElementById("fleet");
   const empty = document.getElementById("empty");
   const template = document.getElementById("tile-template");
@@ -346,6 +343,12 @@
       conn.dataset.state = "lost";
       conn.textContent = "reconnecting";
       conn.title = "the page lost its server; it reconnects";
+    } else if (streamLag.waiting()) {
+      // open, but nothing on it yet (the tiles, and `lag`, are the previous stream's)
+      conn.dataset.state = "connecting";
+      conn.textContent = "waiting for the first event";
+      conn.title = "the page's event stream is open; the server's state has not arrived " +
+        "yet (it may wait for a send slot): the tiles shown are older than that";
     } else if (lag > behindLimit()) {
       conn.dataset.state = "lost";
       conn.textContent = `${Math.round(lag)} s behind`;
@@ -417,7 +420,7 @@
     const now = performance.now();
     if (streamOpen && lastEvent !== null && (now - lastEvent) / 1000 > behindLimit()) {
       reopen((now - lastEvent) / 1000);
-    } else if (streamOpen && lastEvent === null && (now - asked) / 1000 > FIRST_EVENT_S) {
+    } else if (streamOpen && streamLag.overdue(now / 1000)) {
       reopen();  // opened, and never a snapshot: cut after its headers (not behind: silent)
     }
     for (const v of robots.values()) showAge(v, now);
@@ -428,7 +431,6 @@
   let retry = 1000; // ms before a new stream, after one the server refused, closed or was behind
   let source = null;
   let lastEvent = null; // performance.now() of the stream's latest event
-  let asked = 0;        // performance.now() when the page asked for the stream
   let behindSince = null; // performance.now() of the first update behind, while behind
   const streamLag = new StreamLag();
 
@@ -445,8 +447,7 @@
 
   function connect() {
     const current = source = new EventSource("/events");
-    asked = performance.now();
-    streamLag.ask(asked / 1000);
+    streamLag.ask(performance.now() / 1000);
     lastEvent = null;
     behindSince = null;
     const handle = (event) => {
@@ -454,7 +455,7 @@
       try {
         const delta = JSON.parse(event.data);
         lastEvent = performance.now();
-        lag = typeof delta.at === "number" ? streamLag.lag(delta.at, lastEvent / 1000) : 0;
+        lag = streamLag.lag(delta.at, lastEvent / 1000);
         apply(delta);
         showConnection();
       } catch (err) {
