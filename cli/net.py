@@ -28,7 +28,8 @@ RECORD_CLOSE_TIMEOUT = 30.0  # seconds the camera's exit waits for its recording
 
 def cmd_camera(args: argparse.Namespace) -> int:
     from service.camera import (RECORD_MAX_BYTES, RefusalNotices, SourceError, SourceRejections,
-                                SubscriberWatch, open_recording, open_source, publish_frames)
+                                SubscriberWatch, open_recording, open_source, publish_frames,
+                                recording_topic)
 
     setup_logging(args)
     if args.record_max_mb is not None and args.record is None:
@@ -37,6 +38,10 @@ def cmd_camera(args: argparse.Namespace) -> int:
         try:  # the 'ros' extra, said before anything opens
             import asnn.io.bag_recording  # noqa: F401
         except ImportError as exc:  # the message names the extra to install
+            return fail(str(exc))
+        try:  # a topic ROS 2 would refuse (a long --prefix), said before anything opens too
+            recording_topic(args.robot, args.prefix)
+        except ValueError as exc:
             return fail(str(exc))
     rejections, refusals = SourceRejections(args.robot), RefusalNotices(args.robot)
     subscribers = SubscriberWatch(args.robot, keys.frame_key(args.robot, args.prefix))
@@ -410,9 +415,9 @@ def register(subparsers) -> None:
                         "(docs/contract.md; default: %(default)s; 0: none)")
     p.add_argument("--record", type=mcap_output, default=None, metavar="OUT.mcap",
                    help="also record every frame published, as sent and with its stamp, to this "
-                        "new file: a ROS 2 bag (topic /<prefix>/<robot>/frame) that asnn detect "
-                        "and asnn camera --source replay (docs/foxglove.md; the 'ros' extra); "
-                        "finished when the camera stops")
+                        "new file: a ROS 2 bag (topic /<prefix>/<robot>/frame, a robot id's - "
+                        "as _) that asnn detect and asnn camera --source replay "
+                        "(docs/foxglove.md; the 'ros' extra); finished when the camera stops")
     p.add_argument("--record-max-mb", type=megabytes, default=None, metavar="MB",
                    help="stop recording once the file reaches this size; the camera publishes "
                         "on (default: 1000)")

@@ -27,7 +27,8 @@ same best-effort delivery as frames.
 
 Optionally (``asnn camera --record OUT.mcap``, :func:`open_recording`), every frame published
 is also recorded, as it was sent and with its stamp, as a ROS 2 bag on the topic
-``/<prefix>/<robot>/frame`` (:class:`asnn.io.bag_recording.BagRecording`, the ``ros`` extra),
+``/<prefix>/<robot>/frame`` made a valid ROS 2 name (:func:`recording_topic`: ``-`` becomes
+``_``) (:class:`asnn.io.bag_recording.BagRecording`, the ``ros`` extra),
 for ``asnn detect`` or ``asnn camera --source`` to replay. A recording that stops (its size
 bound, a failed write, a disk that does not keep up) says so in one line; the camera publishes
 on.
@@ -223,9 +224,29 @@ class SubscriberWatch:
 
 
 def recording_topic(robot: str, prefix: str = keys.DEFAULT_PREFIX) -> str:
-    """The topic of a camera's recorded frames: its frame key as a ROS topic,
-    ``/<prefix>/<robot>/frame`` (as ``asnn foxglove`` names a robot's topics after its keys)."""
-    return "/" + keys.frame_key(robot, prefix)
+    """The topic of a camera's recorded frames: its frame key ``<prefix>/<robot>/frame`` as a
+    valid ROS 2 name (:func:`asnn.io.rosbag.ros_topic`), ``/asnn/r1/frame`` for robot ``r1``.
+
+    ROS 2 takes fewer characters than a robot id or a prefix may hold: each run of other
+    characters than letters and digits (in a robot id, ``-`` and ``_``) becomes one ``_``,
+    none kept at either end of a part, and a part starting with a digit gets an ``r`` in front
+    (``cam-2`` -> ``/asnn/cam_2/frame``, ``7`` -> ``/asnn/r7/frame``). So robots ``cam-2``
+    and ``cam_2`` record on one topic name; a recording holds one robot, so they never meet in
+    a bag, but merged bags of both would share the topic.
+
+    Raises
+    ------
+    ImportError
+        Without the ``ros`` extra (the message names it).
+    KeySchemeError
+        For an invalid robot id or prefix.
+    ValueError
+        For a topic longer than ROS 2 allows (a long prefix: with a 64-character robot id,
+        one of more than about 170 characters).
+    """
+    from asnn.io.rosbag import ros_topic
+
+    return ros_topic(keys.frame_key(robot, prefix))
 
 
 def open_recording(path, robot: str, *, prefix: str = keys.DEFAULT_PREFIX,
@@ -242,6 +263,8 @@ def open_recording(path, robot: str, *, prefix: str = keys.DEFAULT_PREFIX,
         Without the ``ros`` extra (the message names it).
     OSError
         One line: the file exists, cannot be created, or its disk is full.
+    ValueError
+        A topic longer than ROS 2 allows (:func:`recording_topic`); no file is made.
     """
     from asnn.io.bag_recording import BagRecording
 

@@ -4,7 +4,10 @@
 from __future__ import annotations
 
 import errno
+import itertools
 import json
+import random
+import string
 import sys
 
 import numpy as np
@@ -123,6 +126,96 @@ def test_the_recording_holds_each_published_frame_as_sent_with_its_stamp(zenoh_n
         assert np.array_equal(first.image(), second.image())
     steps = np.diff([f.stamp for f in sorted(got, key=lambda f: f.seq)])
     assert np.diff([f.stamp for f in again]) == pytest.approx(steps, abs=1e-6)
+
+
+def ros2_topic_problem(name: str) -> str | None:
+    """What makes ``name`` no fully qualified ROS 2 topic name, or None: the rules of
+    design.ros2.org, "Topic and Service name mapping to DDS" (written from them, not from
+    recording_topic's mapping)."""
+    if not name.startswith("/"):
+        return "not absolute"  # fully qualified names start with a forward slash
+    tokens = name[1:].split("/")
+    for token in tokens:
+        if not token:
+            return "an empty token"  # "//", or a trailing "/"
+        if any(c not in string.ascii_letters + string.digits + "_" for c in token):
+            return f"a character not alphanumeric nor underscore in {token!r}"
+        if token[0] in string.digits:
+            return f"{token!r} starts with a digit"
+        if "__" in token:
+            return f"{token!r} repeats an underscore"  # "single underscores"
+        if token.endswith("_"):
+            return f"{token!r} ends with an underscore"  # "foo_/bar" is invalid
+    if len(name) + len(tokens) + 8 > 255:  # C + N + P <= 255, P = 8
+        return "too long"
+    return None
+
+
+def test_the_ros2_rules_as_written_accept_and_refuse_the_design_articles_examples():
+    """The checker above against the article's own examples, so it is no straw man."""
+    valid = ["/foo", "/bar/baz", "/_private/thing", "/public_namespace/_private/thing",
+             "/abc123", "/_foo", "/Foo", "/BAR", "/foo/_bar", "/" + "a" * 245]
+    invalid = ["foo", "/123abc", "/123", "/foo bar", "/", "/foo//bar", "/foo/", "/foo_/bar",
+               "/foo~", "/foo/~bar", "/a-b", "/a__b", "/" + "a" * 246]
+    assert [n for n in valid if ros2_topic_problem(n)] == []
+    assert [n for n in invalid if ros2_topic_problem(n) is None] == []
+
+
+def robot_ids_of_every_class() -> list[str]:
+    """Robot ids the service accepts (``[A-Za-z0-9_-]{1,64}``): every string of up to four
+    characters over one of each class (lower, upper, digit, ``_``, ``-``), so each class at the
+    start, the end, alone, repeated and next to each other; the longest of each class; and
+    random ones over the whole alphabet."""
+    ids = ["".join(p) for n in range(1, 5) for p in itertools.product("aZ7_-", repeat=n)]
+    ids += [c * 64 for c in "aZ7_-"] + ["7" + "-" * 62 + "_", "-" * 63 + "7"]
+    alphabet = string.ascii_letters + string.digits + "_-"
+    rng = random.Random(0)
+    ids += ["".join(rng.choice(alphabet) for _ in range(rng.randint(1, 64)))
+            for _ in range(2000)]
+    return [keys.check_robot(robot) for robot in ids]
+
+
+@pytest.mark.parametrize("prefix", ["asnn", "site-3/fleet_a", "2024/é.b@c/-"])
+def test_the_recording_topic_is_a_valid_ros2_name_for_every_robot_id(prefix):
+    """A robot id with a '-' (valid for the service) made a topic ROS 2 refuses; so did a
+    prefix chunk or a robot id starting with a digit, or one with '__' or ending with '_'."""
+    bad = {robot: problem for robot in robot_ids_of_every_class()
+           if (problem := ros2_topic_problem(recording_topic(robot, prefix)))}
+    assert bad == {}
+    keys.check_prefix(prefix)  # one the service accepts
+
+
+def test_the_recording_topic_maps_what_ros2_refuses_and_keeps_the_rest():
+    assert recording_topic("r1") == "/asnn/r1/frame"  # unchanged where valid already
+    assert recording_topic("Cam_2b") == "/asnn/Cam_2b/frame"
+    assert recording_topic("cam-2") == "/asnn/cam_2/frame"
+    assert recording_topic("7") == "/asnn/r7/frame"
+    assert recording_topic("_x--y_", prefix="site-3") == "/site_3/x_y/frame"
+    assert recording_topic("-") == "/asnn/r/frame"
+    # not one to one (docs/foxglove.md): a recording holds one robot's frames
+    assert len({recording_topic(r) for r in ("cam-2", "cam_2", "cam--2", "-cam-2-")}) == 1
+    with pytest.raises(keys.KeySchemeError):
+        recording_topic("r.1")
+    with pytest.raises(ValueError, match="longer than ROS 2 allows"):
+        recording_topic("r" * 64, prefix="p" * 180)
+
+
+def test_a_camera_records_a_robot_id_with_a_dash_on_a_valid_topic_and_replays_it(tmp_path):
+    path = tmp_path / "cam-2.mcap"
+    recording = open_recording(path, "cam-2")
+    for i in range(3):
+        recording.write(64, 64, bytes([i]) * 64 * 64, 10**18 + i * 50_000_000)
+    assert recording.close() is None
+    assert {topic for topic, *_ in recorded(path)} == {"/asnn/cam_2/frame"}
+    assert len(list(open_source(str(path)).frames())) == 3
+
+
+def test_a_camera_whose_topic_ros2_refuses_fails_at_start_without_a_file(tmp_path, capsys):
+    out = tmp_path / "long.mcap"
+    assert main(camera_args(tmp_path, "--robot", "r" * 64, "--prefix", "p" * 180, "--source",
+                            "synthetic:looming", "--record", str(out))) == 2
+    assert "longer than ROS 2 allows" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_a_recording_never_overwrites_a_file_and_an_unwritable_one_fails_at_start(tmp_path,

@@ -50,8 +50,8 @@ except ImportError as exc:  # the optional extra is missing: say which one, in o
 __all__ = ["BagClip", "CLOCK_RESET_FRAMES", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_SCHEMAS",
            "RAW_ENCODINGS", "TopicInfo", "bag_files", "bag_topics",
            "choose_topic", "compressed_image_message", "image_from_compressed", "image_from_raw",
-           "open_bag", "raw_image_message", "register_image_type", "ros_time_ns", "write_bag",
-           "IMAGE_MSGDEF", "COMPRESSED_IMAGE_MSGDEF"]
+           "open_bag", "raw_image_message", "register_image_type", "ros_name_token", "ros_time_ns",
+           "ros_topic", "write_bag", "IMAGE_MSGDEF", "COMPRESSED_IMAGE_MSGDEF"]
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
@@ -821,6 +821,48 @@ def register_image_type(writer: Ros2Writer, datatype: str):
     the message definition rosbag2 embeds."""
     return writer.register_msgdef(datatype, IMAGE_MSGDEF if datatype == IMAGE
                                   else COMPRESSED_IMAGE_MSGDEF)
+
+
+# ROS 2 names (design.ros2.org, "Topic and Service name mapping to DDS"): each token of a name
+# holds ASCII letters, digits and single underscores, does not start with a digit nor end with an
+# underscore; a fully qualified topic of C characters in N tokens has C + N + 8 <= 255 (room
+# for the DDS prefix, and one character per separator). rmw's validation refuses other
+# characters and a token starting with a digit; the underscore rules are the article's, kept
+# so that no tool that checks them refuses ours.
+_ROS_PREFIX_CHARS = 8
+_ROS_MAX_DDS_CHARS = 255
+
+
+def ros_name_token(text: str) -> str:
+    """``text`` as one token of a ROS 2 name: each run of characters other than ASCII letters
+    and digits becomes one underscore, none kept at either end, and a token that would then be
+    empty or start with a digit gets an ``r`` in front: ``cam-2`` -> ``cam_2``, ``_a__b-`` ->
+    ``a_b``, ``7`` -> ``r7``, ``-`` -> ``r``.
+
+    Not one to one: ``cam-2``, ``cam_2`` and ``cam--2`` give one token, as do ``7`` and ``r7``.
+    """
+    token = "_".join(re.findall(r"[A-Za-z0-9]+", text))
+    return token if token[:1].isalpha() else "r" + token
+
+
+def ros_topic(name: str) -> str:
+    """The absolute ROS 2 topic of a ``/``-separated ``name`` (a Zenoh key such as
+    ``asnn/cam-2/frame``): each of its parts as a token (:func:`ros_name_token`), so
+    ``/asnn/cam_2/frame``.
+
+    Raises
+    ------
+    ValueError
+        If the topic is longer than ROS 2 allows (some 240 characters, less with many parts).
+    """
+    tokens = [ros_name_token(part) for part in name.strip("/").split("/")]
+    topic = "/" + "/".join(tokens)
+    if len(topic) + len(tokens) + _ROS_PREFIX_CHARS > _ROS_MAX_DDS_CHARS:
+        shown = repr(name) if len(name) <= 80 else repr(name[:80]) + "..."
+        raise ValueError(f"the ROS 2 topic of {shown} is {len(topic)} characters in "
+                         f"{len(tokens)} parts, longer than ROS 2 allows (characters + parts "
+                         f"<= {_ROS_MAX_DDS_CHARS - _ROS_PREFIX_CHARS})")
+    return topic
 
 
 def ros_time_ns(seconds: float) -> int:
