@@ -323,6 +323,26 @@ def test_driving_pass_in_the_next_lane_drifts_out_and_is_no_collision():
     assert np.ptp(follow.target_size) < 1e-6
 
 
+def test_a_braking_robot_stands_short_of_what_it_would_have_hit():
+    # 1.5 m/s, braking at 0.5 m/s^2 from frame 10: 0.75 + 2.25 m travelled, then standing
+    box = Vehicle(0.0, 4.5, 0.0, width=1.8, height=1.45, shape="rect", albedo=0.3)
+    robot = dict(speed=1.5, frames=90, front=0.3, camera_height=0.6, roadside=0.0,
+                 vehicles=(box,), target=0)
+    stops = driving_scene(**robot, brake=0.5, brake_frame=10)
+    assert not stops.collision and len(stops.frames) == 90
+    assert stops.params["brake"] == 0.5
+    # still from the stop (frame 70) on, moving before it, the box as big as 1.5 m away
+    assert np.array_equal(stops.frames[71], stops.frames[89])
+    assert not np.array_equal(stops.frames[60], stops.frames[70])
+    assert np.isnan(stops.ttc[75:]).all() and np.isfinite(stops.ttc[:60]).all()
+    assert stops.target_size[89] == pytest.approx(stops.target_size[0] * 4.5 / 1.5, rel=0.02)
+    # without braking the same robot runs into it; a brake of 0 is the drive as it was
+    hits = driving_scene(**robot)
+    assert hits.collision and hits.contact_frame == 56  # 4.2 m to the bumper at 1.5 m/s
+    assert np.array_equal(driving_scene(**robot, brake=0.0, brake_frame=10).frames, hits.frames)
+    assert "brake" not in hits.params
+
+
 def test_crossing_vehicle_hits_our_path_or_clears_it_before_we_arrive():
     crossing = dict(speed=0.0, lateral_speed=6.0, width=4.5, height=1.45)
     # 36 m ahead, from 18 m left at 6 m/s while we close at 12 m/s: constant bearing, and at

@@ -374,6 +374,7 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
                   vehicles: Sequence[Vehicle] = (), target: int | None = None, onset: int = 0,
                   roadside: float = 1.0, hfov_deg: float = 70.0, camera_height: float = 1.3,
                   pitch_deg: float = 2.0, front: float = 2.0, tail: int = 2, seed: int = 0,
+                  brake: float = 0.0, brake_frame: int = 0,
                   category: Sequence[str] = (), twin: str | None = None) -> Scene:
     """Render a labelled driving clip.
 
@@ -406,6 +407,10 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
     tail : int
     seed : int
         Of the textures and the roadside.
+    brake : float
+        Our deceleration from ``brake_frame`` until we stand, m/s^2 (0: none): a robot
+        stopping short of something (as a :class:`Vehicle`'s ``brake``).
+    brake_frame : int
     category : sequence of str
     twin : str, optional
 
@@ -427,10 +432,17 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
     f = (w / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
     # the target's contact ends the clip and stops every motion (the crash)
     t = np.arange(frames, dtype=np.float64)
+
+    def ego_travelled(t: np.ndarray) -> np.ndarray:
+        # without braking exactly as before (the suite's drives stay bit-identical)
+        if brake <= 0:
+            return speed * t / fps
+        return Vehicle(0.0, 0.0, speed, brake=brake, brake_frame=brake_frame).travelled(t, fps)
+
     contact = None
     if target is not None:
         vehicle = vehicles[target]
-        gap = vehicle.distance + vehicle.travelled(t, fps) - speed * t / fps
+        gap = vehicle.distance + vehicle.travelled(t, fps) - ego_travelled(t)
         reached = np.flatnonzero(gap <= front)  # our bumper at its near face
         if reached.size and abs(vehicle.lateral(reached[0], fps)) < (vehicle.width
                                                                      + _EGO_WIDTH) / 2:
@@ -438,13 +450,13 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
         if contact is not None:
             frames = min(frames, contact + tail + 1)
             t = np.minimum(t[:frames], contact)
-    ego_s = speed * t / fps
+    ego_s = ego_travelled(t)
     pitch = math.radians(pitch_deg) + math.radians(bumps_deg) * (
         np.sin(2 * math.pi * 1.3 * t / fps) + 0.5 * np.sin(2 * math.pi * 3.1 * t / fps + 1.0))
     near = min(_NEAR, 0.5 * front)
     if contact is not None:  # the gap at contact can be a whole frame's travel under the bumper
         gap_at_contact = vehicles[target].distance + vehicles[target].travelled(
-            np.array([contact]), fps)[0] - speed * contact / fps
+            np.array([contact]), fps)[0] - ego_travelled(np.array([float(contact)]))[0]
         near = max(0.02, min(near, 0.5 * gap_at_contact))
     camera = _Camera(size, f, camera_height, curvature, ego_s, *path_pose(ego_s, curvature),
                      pitch, near)
@@ -474,6 +486,8 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
                   target=target, onset=onset, roadside=roadside, hfov_deg=hfov_deg,
                   camera_height=camera_height, pitch_deg=pitch_deg, front=front, seed=seed,
                   focal_px=round(f, 3))
+    if brake > 0:  # only where used, so the other drives' params stay as they were
+        params.update(brake=brake, brake_frame=brake_frame)
     return Scene(name=name, frames=video, fps=fps, collision=collision,
                  onset_frame=onset if collision else None,
                  contact_frame=contact, params=params,
