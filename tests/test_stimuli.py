@@ -649,6 +649,70 @@ def test_the_indoor_set_is_selected_by_its_pattern_and_carries_its_written_label
             assert contact < len(scene.frames), name
 
 
+
+# the sidewalk set as its trial wrote it down before any detector ran on it (docs/evaluation.md,
+# "A sidewalk held-out set"): (fps, onset, contact) of each collision, (fps, None, None) of
+# each other case
+SIDEWALK_LABELS = {
+    "extra-sw-person-walks-at-robot": (20, 0, 67),
+    "extra-sw-person-walks-at-still-robot-15fps": (15, 0, 66),
+    "extra-sw-walker-gait-25fps": (25, 20, 85),
+    "extra-sw-person-steps-from-doorway": (20, 0, 45),
+    "extra-sw-person-from-behind-parked-car": (20, 0, 42),
+    "extra-sw-cyclist-headon": (20, 0, 76),
+    "extra-sw-scooter-headon-30fps": (30, 0, 102),
+    "extra-sw-cyclist-crosses-into-path": (20, 0, 57),
+    "extra-sw-pole-ahead": (20, 0, 103),
+    "extra-sw-bollard-ahead-10fps": (10, 0, 48),
+    "extra-sw-bin-ahead": (20, 0, 90),
+    "extra-sw-hydrant-low-camera-15fps": (15, 0, 71),
+    "extra-sw-kerb-step-ahead": (20, 0, 76),
+    "extra-sw-parked-car-side-ahead": (20, 0, 77),
+    "extra-sw-pole-paving-bumps-25fps": (25, 0, 112),
+    "extra-sw-bin-loom-shake-slabs-15fps": (15, 20, 61),
+    "extra-sw-person-crosses-into-path-dusk": (20, 0, 63),
+    "extra-sw-scooter-headon-dusk-10fps": (10, 0, 38),
+    "extra-sw-bollard-dusk": (20, 0, 90),
+    "extra-sw-person-passes-alongside": (20, None, None),
+    "extra-sw-person-passes-still-robot-15fps": (15, None, None),
+    "extra-sw-walker-passes-close-25fps": (25, None, None),
+    "extra-sw-person-crosses-clears": (20, None, None),
+    "extra-sw-follow-pedestrian": (20, None, None),
+    "extra-sw-cyclist-passes-oncoming": (20, None, None),
+    "extra-sw-scooter-overtakes-robot": (20, None, None),
+    "extra-sw-cyclist-crosses-clears": (20, None, None),
+    "extra-sw-bollards-alongside": (20, None, None),
+    "extra-sw-street-trees-alongside": (20, None, None),
+    "extra-sw-parked-cars-alongside": (20, None, None),
+    "extra-sw-stops-at-kerb-short-of-car": (20, None, None),
+    "extra-sw-turn-at-corner": (20, None, None),
+    "extra-sw-turn-in-place-15fps": (15, None, None),
+    "extra-sw-paving-bumps-15fps": (15, None, None),
+    "extra-sw-paving-slabs-jolts": (20, None, None),
+    "extra-sw-tree-shadows-sway": (20, None, None),
+    "extra-sw-tree-shadows-sweep-moving": (20, None, None),
+    "extra-sw-dusk-clear-10fps": (10, None, None),
+    "extra-sw-person-passes-dusk": (20, None, None),
+}
+
+
+def test_the_sidewalk_set_is_selected_by_its_pattern_and_carries_its_written_labels():
+    # its pattern selects it, in the order written down, and nothing else; the suite's own
+    # selections and the other held-out sets' patterns never take it in
+    assert suite_cases("extra-sw-*") == list(SIDEWALK_LABELS)
+    assert not set(SIDEWALK_LABELS) & (set(suite_cases("all")) | set(suite_cases("extra-ho-*"))
+                                       | set(suite_cases("extra-in-*")))
+    assert sum(contact is not None for _, _, contact in SIDEWALK_LABELS.values()) == 19
+    for name, (fps, onset, contact) in SIDEWALK_LABELS.items():
+        case = EXTRA_CASES[name]
+        assert case.category[2] == "sidewalk", name
+        assert (case.group == "extra-threat") == (contact is not None), name
+        scene = make_case(name)
+        assert (scene.fps, scene.onset_frame, scene.contact_frame) == (fps, onset, contact), name
+        assert scene.collision == (contact is not None), name
+        if contact is not None:  # the clip holds its contact frame
+            assert contact < len(scene.frames), name
+
 def _without_seeds(value):
     if isinstance(value, dict):
         return {k: _without_seeds(v) for k, v in value.items() if k != "seed"}

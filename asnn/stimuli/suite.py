@@ -69,7 +69,9 @@ ahead, with a board a person's size standing in it, or up to its end wall
 (:func:`.surface.corridor_scene`); and a held-out set (``extra-ho-*``, tag ``heldout``) that a
 trial designed and wrote down with its labels before any detector ran on it
 (:func:`_heldout_cases`); and an indoor set for mobile robots (``extra-in-*``, tag ``indoor``),
-designed and written down the same way by another trial (:func:`_indoor_cases`).
+designed and written down the same way by another trial (:func:`_indoor_cases`); and a
+sidewalk set for delivery robots and small outdoor robots (``extra-sw-*``, tag ``sidewalk``),
+designed and written down the same way by a third (:func:`_sidewalk_cases`).
 
 **Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
 drives at S times their size (their world is in metres and degrees), the planar scenes with
@@ -997,6 +999,189 @@ def _indoor_cases() -> list[Case]:
     ]
 
 
+
+def _sidewalk_cases() -> list[Case]:
+    """The sidewalk set (``extra-sw-*``, 39 cases): designed by a trial on 2026-12-01 for
+    sidewalk delivery robots and other small outdoor robots (a forward camera 0.4-0.9 m above
+    the ground, 1-2 m/s, 10-30 fps, by day and at dusk) and written down with their labels
+    before any detector ran on them (docs/evaluation.md, "A sidewalk held-out set"):
+    pedestrians walking at the robot, stepping out of a doorway or from behind a parked car,
+    crossing into its path; a cyclist and a scooter head-on, a cyclist crossing; a pole, a
+    bollard, a bin, a hydrant, a kerb and a parked car's side ahead; pedestrians and cyclists
+    passing, a scooter overtaking, crossings that clear, bollards, trees and parked cars
+    alongside, turning at a corner, stopping at a kerb short of a car (the drive's ``brake``),
+    tree shadows sweeping over the path (the headlights' blob with a negative amplitude), paving
+    slabs under a bumping camera; dusk (the day's drive at a third of its light). The third tag
+    is ``sidewalk``, the second the trial's category.
+
+    The drives stand for the pavement (the road, its painted lines as the slabs' joints, the
+    roadside objects beyond it) with the robot's bumper 0.3 m ahead of the lens; their ego width
+    is a car's (1.8 m), so every collision overlaps a robot 0.6 m wide and every pass clears
+    1.8 m. A collision course keeps its bearing, ``atan(crossing speed / our speed)``: the
+    pedestrians stepping in are seen by a 90-degree camera and the crossing cyclist by a
+    110-degree one (a 70-degree camera would see them only at its edge, or not at all).
+    """
+    P, D = PLANAR_SIZE, DRIVING_SIZE
+    cx, cy = (P[0] - 1) / 2, (P[1] - 1) / 2
+    paving = Background("texture", 0.25, 1.5, mean=120.0)
+    slabs = Background("checker", 0.15, 20.0)  # paving slabs, their joints a faint checker
+    street = (Prop("rect", 28.0, 50.0, 60.0, 70.0, 0.08), Prop("rect", 118.0, 46.0, 52.0, 60.0,
+                                                               0.1),
+              Prop("rect", 140.0, 86.0, 22.0, 55.0, 0.7), Prop("square", 70.0, 30.0, 20.0, 175.0))
+    ped = dict(width=0.5, height=1.75, shape="rect", albedo=0.25)
+    cyclist = dict(width=0.6, height=1.75, shape="rect", albedo=0.3)  # from the front or behind
+    side_on = dict(cyclist, width=1.7)  # a bicycle seen from the side
+    scooter = dict(width=0.5, height=1.8, shape="rect", albedo=0.2)
+    bollard = dict(width=0.2, height=0.9, shape="rect", albedo=0.15)
+    pole = dict(width=0.12, height=3.0, shape="rect", albedo=0.25)
+    walker = dict(shape="ellipse", aspect=0.4, height=16.0, contrast=0.45, polarity="light",
+                  tau=3.0, texture=0.12, gait=Gait(), background=paving, noise=2.0)
+    robot = dict(front=0.3)  # a robot's bumper 0.3 m ahead of its lens
+    dusk = (Ramp(0, 1, 0.35, 0.35),)  # a third of the day's light, all along
+
+    def pl(name, group, cat, **o):
+        return _planar(name, group, cat, "sidewalk", **o)
+
+    def dr(name, group, cat, camera_height, **o):
+        return _driving(name, group, cat, "sidewalk", camera_height=camera_height, **robot,
+                        **o)
+
+    def post(name, group, cat, camera_height, **o):
+        return Case(name, post_scene, {"base": driving_scene, "size": D, "lighting": dusk,
+                                       "camera_height": camera_height, **robot, **o},
+                    (group, cat, "sidewalk"))
+
+    T, S, C = "extra-threat", "extra-pass", "extra-clear"
+    return [
+        # --- collisions: people
+        dr("extra-sw-person-walks-at-robot", T, "person", 0.7, speed=1.5, frames=90,
+           vehicles=(Vehicle(0.1, 10.0, -1.4, **ped),), target=0),
+        dr("extra-sw-person-walks-at-still-robot-15fps", T, "person", 0.5, fps=15.0,
+           speed=0.0, frames=80, vehicles=(Vehicle(-0.2, 6.0, -1.3, **ped),), target=0),
+        pl("extra-sw-walker-gait-25fps", T, "person", fps=25.0, **walker),
+        # out of a dark doorway 2 m to the right, 3 m ahead, at 0.9 m/s
+        dr("extra-sw-person-steps-from-doorway", T, "person", 0.7, speed=1.2, frames=60,
+           hfov_deg=90.0,
+           vehicles=(Vehicle(2.0, 3.0, 0.0, lateral_speed=-0.9, **ped),
+                     Vehicle(2.0, 3.3, 0.0, width=1.1, height=2.2, shape="rect", albedo=0.08)),
+           target=0),
+        # from behind a car parked at the kerb on the left (its head above the car's roof)
+        dr("extra-sw-person-from-behind-parked-car", T, "person", 0.6, speed=2.0, frames=60,
+           vehicles=(Vehicle(-2.0, 4.5, 0.0, lateral_speed=0.95, **ped),
+                     Vehicle(-2.0, 4.0, 0.0, albedo=0.35)), target=0),
+        # --- collisions: cyclists and scooters
+        dr("extra-sw-cyclist-headon", T, "cyclist-scooter", 0.8, speed=1.5, frames=90,
+           vehicles=(Vehicle(0.2, 25.0, -5.0, **cyclist),), target=0),
+        dr("extra-sw-scooter-headon-30fps", T, "cyclist-scooter", 0.6, fps=30.0, speed=1.0,
+           frames=120, vehicles=(Vehicle(-0.15, 24.0, -6.0, **scooter),), target=0),
+        dr("extra-sw-cyclist-crosses-into-path", T, "cyclist-scooter", 0.7, speed=2.0,
+           frames=70, hfov_deg=110.0,
+           vehicles=(Vehicle(-5.5, 6.0, 0.0, lateral_speed=2.0, **side_on),), target=0),
+        # --- collisions: street furniture, a kerb, a parked car
+        dr("extra-sw-pole-ahead", T, "obstacle", 0.7, speed=1.5, frames=110,
+           vehicles=(Vehicle(0.1, 8.0, 0.0, **pole),), target=0),
+        dr("extra-sw-bollard-ahead-10fps", T, "obstacle", 0.5, fps=10.0, speed=1.2, frames=55,
+           vehicles=(Vehicle(-0.15, 6.0, 0.0, **bollard),), target=0),
+        dr("extra-sw-bin-ahead", T, "obstacle", 0.9, speed=1.5, frames=100,
+           vehicles=(Vehicle(0.2, 7.0, 0.0, width=0.6, height=1.0, shape="rect",
+                             albedo=0.2),), target=0),
+        dr("extra-sw-hydrant-low-camera-15fps", T, "obstacle", 0.4, fps=15.0, speed=1.0,
+           frames=80, vehicles=(Vehicle(0.0, 5.0, 0.0, width=0.3, height=0.7, shape="rect",
+                                        albedo=0.55),), target=0),
+        dr("extra-sw-kerb-step-ahead", T, "obstacle", 0.5, speed=1.5, frames=85,
+           vehicles=(Vehicle(0.0, 6.0, 0.0, width=3.0, height=0.18, shape="rect",
+                             albedo=0.6),), target=0),
+        # a car parked across a driveway, its side 4.5 m long, its centre 0.8 m to our right
+        dr("extra-sw-parked-car-side-ahead", T, "obstacle", 0.6, speed=2.0, frames=85,
+           vehicles=(Vehicle(0.8, 8.0, 0.0, width=4.5, height=1.45, albedo=0.5),), target=0),
+        # --- collisions: our own motion
+        dr("extra-sw-pole-paving-bumps-25fps", T, "ego-motion", 0.5, fps=25.0, speed=1.5,
+           frames=125, bumps_deg=1.5,
+           vehicles=(Vehicle(-0.1, 7.0, 0.0, **{**pole, "width": 0.15, "albedo": 0.2}),),
+           target=0),
+        pl("extra-sw-bin-loom-shake-slabs-15fps", T, "ego-motion", fps=15.0, shape="rect",
+           aspect=0.7, height=12.0, contrast=0.5, background=slabs, noise=2.0,
+           camera=Shake(2.5, 0.6, smooth=2, seed=31)),
+        # --- collisions at dusk
+        post("extra-sw-person-crosses-into-path-dusk", T, "lighting", 0.8, speed=1.5,
+             frames=80, hfov_deg=90.0,
+             vehicles=(Vehicle(-3.3, 5.0, 0.0, lateral_speed=1.1, **ped),), target=0),
+        post("extra-sw-scooter-headon-dusk-10fps", T, "lighting", 0.6, fps=10.0, speed=1.2,
+             frames=45, vehicles=(Vehicle(0.25, 20.0, -4.0, **scooter),), target=0),
+        post("extra-sw-bollard-dusk", T, "lighting", 0.6, speed=1.5, frames=100,
+             vehicles=(Vehicle(0.0, 7.0, 0.0, **{**bollard, "height": 1.0, "albedo": 0.7}),),
+             target=0),
+        # --- non-collisions: people
+        dr("extra-sw-person-passes-alongside", S, "person", 0.7, speed=1.5, frames=90,
+           vehicles=(Vehicle(1.3, 10.0, -1.4, **ped),), target=0),
+        dr("extra-sw-person-passes-still-robot-15fps", S, "person", 0.5, fps=15.0, speed=0.0,
+           frames=90, vehicles=(Vehicle(-1.2, 7.0, -1.3, **ped),), target=0),
+        pl("extra-sw-walker-passes-close-25fps", S, "person", fps=25.0, motion="nearmiss",
+           position=(cx + 12.0, cy), **walker),
+        dr("extra-sw-person-crosses-clears", S, "person", 0.8, speed=1.5, frames=80,
+           hfov_deg=90.0,
+           vehicles=(Vehicle(-1.5, 5.0, 0.0, lateral_speed=1.1, **ped),), target=0),
+        dr("extra-sw-follow-pedestrian", C, "person", 0.7, speed=1.2, frames=80,
+           vehicles=(Vehicle(0.0, 2.5, 1.3, **ped),), target=0),
+        # --- non-collisions: cyclists and scooters
+        dr("extra-sw-cyclist-passes-oncoming", S, "cyclist-scooter", 0.8, speed=1.5,
+           frames=90, vehicles=(Vehicle(-1.5, 25.0, -5.0, **cyclist),), target=0),
+        dr("extra-sw-scooter-overtakes-robot", C, "cyclist-scooter", 0.6, speed=1.2,
+           frames=70, vehicles=(Vehicle(1.3, -1.0, 5.0, **scooter),), target=0),
+        dr("extra-sw-cyclist-crosses-clears", S, "cyclist-scooter", 0.7, speed=2.0,
+           frames=70, hfov_deg=110.0,
+           vehicles=(Vehicle(-3.0, 6.0, 0.0, lateral_speed=2.0, **side_on),), target=0),
+        # --- non-collisions: street furniture alongside, stopping short
+        dr("extra-sw-bollards-alongside", S, "obstacle", 0.6, speed=1.5, frames=80,
+           vehicles=tuple(Vehicle(1.1, d, 0.0, **bollard) for d in (3.0, 5.0, 7.0, 9.0, 11.0,
+                                                                     13.0)), target=0),
+        dr("extra-sw-street-trees-alongside", S, "obstacle", 0.7, speed=1.5, frames=80,
+           vehicles=(Vehicle(-1.5, 4.0, 0.0, width=0.3, height=2.5, shape="rect",
+                             albedo=0.2),
+                     Vehicle(-1.5, 7.0, 0.0, **pole),
+                     Vehicle(-1.5, 10.0, 0.0, width=0.35, height=2.5, shape="rect",
+                             albedo=0.18),
+                     Vehicle(-1.5, 16.0, 0.0, width=0.3, height=2.5, shape="rect",
+                             albedo=0.22)), target=0),
+        dr("extra-sw-parked-cars-alongside", S, "obstacle", 0.6, speed=1.5, frames=80,
+           vehicles=(Vehicle(-2.0, 3.0, 0.0), Vehicle(-2.0, 8.5, 0.0, albedo=0.5),
+                     Vehicle(-2.0, 14.0, 0.0, albedo=0.35)), target=0),
+        # braking at 0.5 m/s^2 from 1.5 m/s, standing 1 m (lens) short of the kerb and 1.5 m
+        # short of a car's side beyond it: their time to contact never under 2 s
+        dr("extra-sw-stops-at-kerb-short-of-car", C, "obstacle", 0.5, speed=1.5, frames=90,
+           brake=0.5, brake_frame=10,
+           vehicles=(Vehicle(0.5, 4.5, 0.0, width=4.5, height=1.45, albedo=0.5),
+                     Vehicle(0.0, 4.0, 0.0, width=6.0, height=0.18, shape="rect",
+                             albedo=0.6)), target=0),
+        # --- non-collisions: our own motion with nothing ahead
+        dr("extra-sw-turn-at-corner", C, "ego-motion", 0.6, speed=1.2, frames=70,
+           curvature=1 / 5, vehicles=(Vehicle(-2.2, 4.0, 0.0, albedo=0.4),), target=0),
+        pl("extra-sw-turn-in-place-15fps", C, "ego-motion", fps=15.0, motion="none",
+           background=paving, props=street, camera=Pan((-4.0, 0.0)), noise=2.0),
+        dr("extra-sw-paving-bumps-15fps", C, "ego-motion", 0.4, fps=15.0, speed=1.5,
+           frames=70, bumps_deg=2.5),
+        pl("extra-sw-paving-slabs-jolts", C, "ego-motion", motion="none",
+           background=Background("checker", 0.2, 24.0, 0.0, (0.0, 1.2), mean=120.0),
+           camera=Shake(2.5, 0.8, smooth=1, seed=41), noise=2.0),
+        # --- non-collisions: tree shadows (a dark blob: the headlights' with a negative
+        # amplitude), dusk
+        pl("extra-sw-tree-shadows-sway", C, "lighting", motion="none", background=paving,
+           props=street, noise=2.0,
+           lighting=(Headlights(0, 80, (30.0, 70.0), (75.0, 85.0), 18.0, -45.0),
+                     Headlights(0, 80, (130.0, 50.0), (100.0, 95.0), 22.0, -40.0),
+                     Headlights(0, 80, (80.0, 112.0), (125.0, 100.0), 15.0, -35.0))),
+        pl("extra-sw-tree-shadows-sweep-moving", C, "lighting", motion="none",
+           background=Background("texture", 0.25, 1.5, 0.0, (0.0, 1.0), mean=120.0),
+           noise=2.0,
+           lighting=(Headlights(0, 40, (-80.0, 60.0), (240.0, 100.0), 25.0, -50.0),
+                     Headlights(20, 60, (240.0, 40.0), (-80.0, 110.0), 20.0, -45.0),
+                     Headlights(35, 69, (-80.0, 90.0), (240.0, 70.0), 25.0, -50.0))),
+        post("extra-sw-dusk-clear-10fps", C, "lighting", 0.6, fps=10.0, speed=1.5, frames=40,
+             bumps_deg=1.0),
+        post("extra-sw-person-passes-dusk", S, "lighting", 0.8, speed=1.5, frames=90,
+             vehicles=(Vehicle(-1.3, 10.0, -1.4, **ped),), target=0),
+    ]
+
 SUITE_CASES: dict[str, Case] = {
     case.name: case
     for case in (_approach_cases() + _pair_cases() + _clutter_cases() + _recession_cases()
@@ -1004,7 +1189,7 @@ SUITE_CASES: dict[str, Case] = {
                  + _brightness_cases() + _noise_cases() + _driving_cases())
 }
 EXTRA_CASES: dict[str, Case] = {case.name: case for case in _extra_cases() + _heldout_cases()
-                                 + _indoor_cases()}
+                                 + _indoor_cases() + _sidewalk_cases()}
 CASES: dict[str, Case] = {**SUITE_CASES, **EXTRA_CASES}  # every case make_case knows
 
 
