@@ -610,9 +610,9 @@ class WorkerCore:
         except Exception as exc:  # a bug: the frame is refused, counted and told, not lost,
             # its traceback logged at most once per log_interval (not once per frame), and the
             # model, stopped halfway through a step, starts afresh on the next frame
-            if self._limited_log.allow("model-failed-trace") is not None:
-                log.error("robot %s: the model failed on frame %d", job.robot, frame.seq,
-                          exc_info=True)
+            self._limited_log.exception("model-failed-trace",
+                                        "robot %s: the model failed on frame %d", job.robot,
+                                        frame.seq)
             state.detector = state.processed_stream = None
             self._refuse_taken(state, job, "model-failed", f"{type(exc).__name__}: {exc}")
             return None

@@ -720,17 +720,22 @@ def test_a_frame_the_model_fails_on_is_refused_counted_and_told_with_one_traceba
     frame accepted was left unanswered and uncounted, a traceback logged per frame."""
     from asnn import ASNN
 
-    core, step = WorkerCore(), ASNN.step
+    clock = FakeClock()
+    core, step = WorkerCore(clock=clock, log_interval=10.0), ASNN.step
     feed(core, "r1", looming.frames[0], 0)
     monkeypatch.setattr(ASNN, "step", lambda self, *a, **k: 1 / 0)
     with caplog.at_level(logging.WARNING, logger="asnn.worker"):
         assert [feed(core, "r1", looming.frames[seq], seq) for seq in range(1, 6)] == [None] * 5
+        clock.now += 10.0  # the next traceback counts the ones not shown
+        assert feed(core, "r1", looming.frames[6], 6) is None
     stats = core.stats()
-    assert stats["invalid"] == {"model-failed": 5} and stats["received"] == 1
-    assert sum(r.exc_info is not None for r in caplog.records) == 1
+    assert stats["invalid"] == {"model-failed": 6} and stats["received"] == 1
+    assert [r.getMessage() for r in caplog.records if r.exc_info is not None] == [
+        "robot r1: the model failed on frame 1",
+        "robot r1: the model failed on frame 6 (4 more since the last line)"]
     assert core.refusals_to_tell()[0][:2] == ("r1", "model-failed")
     monkeypatch.setattr(ASNN, "step", step)
-    response = feed(core, "r1", looming.frames[6], 6)  # the model starts afresh
+    response = feed(core, "r1", looming.frames[7], 7)  # the model starts afresh
     assert response is not None and response.u == 0.0 and response.stream_frames == 1
 
 
