@@ -649,7 +649,6 @@ def test_the_indoor_set_is_selected_by_its_pattern_and_carries_its_written_label
             assert contact < len(scene.frames), name
 
 
-
 # the sidewalk set as its trial wrote it down before any detector ran on it (docs/evaluation.md,
 # "A sidewalk held-out set"): (fps, onset, contact) of each collision, (fps, None, None) of
 # each other case
@@ -712,6 +711,7 @@ def test_the_sidewalk_set_is_selected_by_its_pattern_and_carries_its_written_lab
         assert scene.collision == (contact is not None), name
         if contact is not None:  # the clip holds its contact frame
             assert contact < len(scene.frames), name
+
 
 def _without_seeds(value):
     if isinstance(value, dict):

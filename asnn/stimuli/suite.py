@@ -999,7 +999,6 @@ def _indoor_cases() -> list[Case]:
     ]
 
 
-
 def _sidewalk_cases() -> list[Case]:
     """The sidewalk set (``extra-sw-*``, 39 cases): designed by a trial on 2026-12-01 for
     sidewalk delivery robots and other small outdoor robots (a forward camera 0.4-0.9 m above
@@ -1181,6 +1180,7 @@ def _sidewalk_cases() -> list[Case]:
         post("extra-sw-person-passes-dusk", S, "lighting", 0.8, speed=1.5, frames=90,
              vehicles=(Vehicle(-1.3, 10.0, -1.4, **ped),), target=0),
     ]
+
 
 SUITE_CASES: dict[str, Case] = {
     case.name: case
