@@ -341,6 +341,12 @@ def test_a_braking_robot_stands_short_of_what_it_would_have_hit():
     assert hits.collision and hits.contact_frame == 56  # 4.2 m to the bumper at 1.5 m/s
     assert np.array_equal(driving_scene(**robot, brake=0.0, brake_frame=10).frames, hits.frames)
     assert "brake" not in hits.params
+    # a braking that would accelerate, or start before the clip, is refused (it moved frame 0)
+    for bad in (dict(brake=-0.5), dict(brake=0.5, brake_frame=-10), dict(brake=float("nan"))):
+        with pytest.raises(ValueError, match="brake"):
+            driving_scene(**robot, **bad)
+        with pytest.raises(ValueError, match="brake"):
+            Vehicle(0.0, 4.5, 1.0, **bad)
 
 
 def test_crossing_vehicle_hits_our_path_or_clears_it_before_we_arrive():

@@ -89,6 +89,9 @@ class Vehicle:
     shape: str = "car"
     albedo: float = 0.22
 
+    def __post_init__(self):
+        _check_braking(self.brake, self.brake_frame)
+
     def travelled(self, t: np.ndarray, fps: float) -> np.ndarray:
         """Metres along the road since frame 0, at frames ``t``."""
         t0 = self.brake_frame / fps
@@ -104,6 +107,14 @@ class Vehicle:
     def lateral(self, t: np.ndarray, fps: float) -> np.ndarray:
         """Lateral position of its centre (metres right of our lane's centre) at frames ``t``."""
         return self.lane + self.lateral_speed * np.asarray(t, dtype=np.float64) / fps
+
+
+def _check_braking(brake: float, brake_frame: int) -> None:
+    """Refuse a braking that would accelerate, or start before the clip (it moved frame 0)."""
+    if not brake >= 0:
+        raise ValueError(f"brake is a deceleration, 0 or more m/s^2, got {brake}")
+    if brake_frame < 0:
+        raise ValueError(f"brake_frame must be 0 or more, got {brake_frame}")
 
 
 def path_pose(s: np.ndarray, curvature: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -409,7 +420,8 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
         Of the textures and the roadside.
     brake : float
         Our deceleration from ``brake_frame`` until we stand, m/s^2 (0: none): a robot
-        stopping short of something (as a :class:`Vehicle`'s ``brake``).
+        stopping short of something (as a :class:`Vehicle`'s ``brake``). ``bumps_deg`` go on
+        while we stand (they follow time, not distance).
     brake_frame : int
     category : sequence of str
     twin : str, optional
@@ -421,9 +433,11 @@ def driving_scene(*, name: str = "driving", size: tuple[int, int] = (192, 128),
     Raises
     ------
     ValueError
-        For a target index out of range or a size below 32x32.
+        For a target index out of range, a size below 32x32, or a negative ``brake`` or
+        ``brake_frame``.
     """
     w, h = size
+    _check_braking(brake, brake_frame)
     if w < 32 or h < 32:
         raise ValueError(f"scene size must be at least 32x32, got {w}x{h}")
     if target is not None and not 0 <= target < len(vehicles):
