@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import replace
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -557,7 +558,22 @@ def test_rain_streaks_are_laid_over_the_frame_at_their_level():
         assert value == 230.0 or (out != value).mean() > 0.01
 
 
-def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins():
+@pytest.fixture(scope="module")
+def extra_labels():
+    """Every extra case rendered once, kept as its labels and frame count (not its frames):
+    the extra cases' tests read them, and rendering them all takes about a minute."""
+    labels = {}
+    for name in EXTRA_CASES:
+        scene = make_case(name)
+        labels[name] = SimpleNamespace(
+            category=scene.category, collision=scene.collision, fps=scene.fps,
+            onset_frame=scene.onset_frame, contact_frame=scene.contact_frame,
+            target_size=scene.target_size, ttc=scene.ttc, frames=len(scene.frames),
+            height=scene.frames.shape[1])
+    return labels
+
+
+def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins(extra_labels):
     # the suite's selections (every case, its groups and name patterns) never take them in
     assert not set(EXTRA_CASES) & set(SUITE_CASES)
     for pattern in (None, "all", "driving-*", "drive-*,rear-*"):
@@ -568,10 +584,9 @@ def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins():
     assert suite_cases(" all , halt-*") == list(SUITE_CASES)
     assert suite_cases("extra-pass") == [n for n, c in EXTRA_CASES.items()
                                          if c.group == "extra-pass"]
-    scenes = {name: make_case(name) for name in EXTRA_CASES}
     assert {case.group for case in EXTRA_CASES.values()} == set(EXTRA_GROUPS)
     for name, case in EXTRA_CASES.items():
-        scene = scenes[name]
+        scene = extra_labels[name]
         assert name.startswith("extra-") and scene.category == case.category, name
         assert scene.collision == (case.group == "extra-threat"), name
         if scene.collision and ("surface" in case.category
@@ -585,7 +600,7 @@ def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins():
             low = (case.generator is driving_scene and options["vehicles"][
                 options["target"]].height < options.get("camera_height", 1.3))
             assert scene.target_size[scene.contact_frame] >= (
-                0.5 if low else 0.75) * scene.frames.shape[1], name
+                0.5 if low else 0.75) * scene.height, name
         if case.twin:  # the same vehicle, distance and speed, on a course that misses us
             twin = EXTRA_CASES[case.twin]
             assert twin.group == "extra-threat" and "twin" in twin.category
@@ -638,23 +653,6 @@ INDOOR_LABELS = {
 }
 
 
-def test_the_indoor_set_is_selected_by_its_pattern_and_carries_its_written_labels():
-    # its pattern selects it, in the order written down, and nothing else; the suite's own
-    # selections and the driving held-out set's pattern never take it in
-    assert suite_cases("extra-in-*") == list(INDOOR_LABELS)
-    assert not set(INDOOR_LABELS) & (set(suite_cases("all")) | set(suite_cases("extra-ho-*")))
-    assert sum(contact is not None for _, _, contact in INDOOR_LABELS.values()) == 19
-    for name, (fps, onset, contact) in INDOOR_LABELS.items():
-        case = EXTRA_CASES[name]
-        assert case.category[2] == "indoor", name
-        assert (case.group == "extra-threat") == (contact is not None), name
-        scene = make_case(name)
-        assert (scene.fps, scene.onset_frame, scene.contact_frame) == (fps, onset, contact), name
-        assert scene.collision == (contact is not None), name
-        if contact is not None:  # the clip holds its contact frame
-            assert contact < len(scene.frames), name
-
-
 # the sidewalk set as its trial wrote it down before any detector ran on it (docs/evaluation.md,
 # "A sidewalk held-out set"): (fps, onset, contact) of each collision, (fps, None, None) of
 # each other case
@@ -701,22 +699,25 @@ SIDEWALK_LABELS = {
 }
 
 
-def test_the_sidewalk_set_is_selected_by_its_pattern_and_carries_its_written_labels():
+@pytest.mark.parametrize("pattern, labels, tag", [
+    ("extra-in-*", INDOOR_LABELS, "indoor"), ("extra-sw-*", SIDEWALK_LABELS, "sidewalk")])
+def test_a_held_out_set_is_selected_by_its_pattern_and_carries_its_written_labels(
+        extra_labels, pattern, labels, tag):
     # its pattern selects it, in the order written down, and nothing else; the suite's own
     # selections and the other held-out sets' patterns never take it in
-    assert suite_cases("extra-sw-*") == list(SIDEWALK_LABELS)
-    assert not set(SIDEWALK_LABELS) & (set(suite_cases("all")) | set(suite_cases("extra-ho-*"))
-                                       | set(suite_cases("extra-in-*")))
-    assert sum(contact is not None for _, _, contact in SIDEWALK_LABELS.values()) == 19
-    for name, (fps, onset, contact) in SIDEWALK_LABELS.items():
+    assert suite_cases(pattern) == list(labels)
+    others = {"extra-ho-*", "extra-in-*", "extra-sw-*"} - {pattern}
+    assert not set(labels) & set().union(suite_cases("all"), *map(suite_cases, others))
+    assert sum(contact is not None for _, _, contact in labels.values()) == 19
+    for name, (fps, onset, contact) in labels.items():
         case = EXTRA_CASES[name]
-        assert case.category[2] == "sidewalk", name
+        assert case.category[2] == tag, name
         assert (case.group == "extra-threat") == (contact is not None), name
-        scene = make_case(name)
+        scene = extra_labels[name]
         assert (scene.fps, scene.onset_frame, scene.contact_frame) == (fps, onset, contact), name
         assert scene.collision == (contact is not None), name
         if contact is not None:  # the clip holds its contact frame
-            assert contact < len(scene.frames), name
+            assert contact < scene.frames, name
 
 
 def _without_seeds(value):
