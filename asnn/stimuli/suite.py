@@ -1261,15 +1261,17 @@ def make_case(name: str, variant: int = 0,
     variant = check_variant(variant)
     if driving_size is not None and scale is not None:
         raise ValueError("give a driving size or a scale, not both")
+    # a case whose frames post_scene lights or rains on is drawn by its base generator
+    drawn_by = case.options["base"] if case.generator is post_scene else case.generator
     if scale is not None:
         scale = check_scale(scale)
-        if case.generator is driving_scene:
+        if drawn_by is driving_scene:
             driving_size = scaled_size(DRIVING_SIZE, scale)
         elif scale != 1.0:
             case = replace(case, options={**case.options, "scale": scale})
     if driving_size is not None:
         size = check_driving_size(driving_size)
-        if case.generator is driving_scene:
+        if drawn_by is driving_scene:
             case = replace(case, options={**case.options, "size": size})
     return case.make(variant)
 
