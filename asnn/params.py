@@ -625,7 +625,7 @@ PRESETS["light"] = _derived(PRESETS["reference32"], target_polarity="light")
 # has the parameter that switches it off
 PRESETS["robust"] = _derived(
     PRESETS["reference32"],
-    skip_repeats=True, max_step_rate=30.0, global_gain=1.0,
+    skip_repeats=True, max_step_rate=30.0, global_gain=0.5,
     stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
     rim_motion_max=8.0,
     contrast_gain=0.005,

@@ -102,8 +102,8 @@ warnings.filterwarnings("ignore", category=TimingWarning, module=r"service\.core
 # approach (the tracker needs a few frames of approach in a row, and the camera-rig stage its
 # running means; the worst need 53 during an approach, 64 before one):
 # `asnn bench --handover --every 3`, README "Service". Re-measure when the default changes (last:
-# 2026-12-01, with the global brightness compensation: the suite's figures unchanged; the real
-# clips' and the indoor set's in docs/operations.md).
+# 2026-12-01, with the global brightness compensation's time constant at 0.5 s: the suite's
+# figures unchanged; the real clips' and the indoor set's in docs/operations.md).
 HANDOVER_WARMUP_FRAMES = 30
 # robot ids whose latest refusal the status keeps (the most recently refused)
 MAX_REFUSED = 256

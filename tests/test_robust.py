@@ -221,7 +221,7 @@ def test_a_lamp_s_flicker_at_the_frame_rate_is_divided_out_before_the_retina():
     # covers the whole view, G is positive nearly everywhere and the attention finds nothing,
     # so the approach is missed; with the view's brightness change divided out it warns within
     # a few frames of the same approach under a steady light
-    assert preset("default").global_gain == 1.0
+    assert preset("default").global_gain == 0.5
     flickering, steady = _under_lamps(True), _under_lamps(False)
     lit = _first(_stepped_scene(flickering))
     assert lit is not None and flickering.onset_frame <= lit <= flickering.contact_frame
@@ -311,7 +311,7 @@ def test_the_compensation_divides_a_step_out_and_returns_to_the_camera_s_level()
 def test_the_compensating_gain_stays_within_what_one_frame_can_measure():
     """A review: a darkening taken at once and undone where no three quarters of the view
     agree (darkened as a whole, then lit again part by part) is divided out each time and never
-    taken back, so the gain ran up without bound: e^22 with the default's 1 s, and at 60 s
+    taken back, so the gain ran up without bound: e^22 with a 1 s time constant, and at 60 s
     math.exp overflowed mid-step (OverflowError at frame 1373, the model then refusing every
     frame until reset)."""
     from asnn import brightness
