@@ -816,13 +816,17 @@ def test_the_whole_suite_can_be_rendered_at_another_scale(suite):
         planar_scene(scale=0.0)
 
 
-@pytest.mark.parametrize("name", ["extra-sw-dusk-clear-10fps", "extra-ho-rain-still-scene"])
-def test_a_case_lit_or_rained_on_after_drawing_is_drawn_at_a_scale_by_its_base(name):
+@pytest.mark.parametrize("name, sized", [("extra-sw-dusk-clear-10fps", (256, 384)),
+                                         ("extra-ho-rain-still-scene", (120, 160))])
+def test_a_case_lit_or_rained_on_after_drawing_is_drawn_at_a_scale_by_its_base(name, sized):
     # post_scene's drive took the planar scenes' 'scale' (a TypeError); its planar scene did not
     plain, scaled = make_case(name), make_case(name, scale=2.0)
     assert scaled.frames.shape == (len(plain.frames), *(2 * n for n in plain.frames.shape[1:]))
     assert (scaled.collision, scaled.contact_frame) == (plain.collision, plain.contact_frame)
     assert scaled.params["post_lighting"] == plain.params["post_lighting"]
+    # a driving size reaches its drive too (it was dropped without a word); the planar scene
+    # keeps its own size, as every planar case does
+    assert make_case(name, 0, (384, 256)).frames.shape[1:] == sized
 
 
 def test_brightness_and_noise_cases_of_the_suite_do_what_their_names_say(suite):
