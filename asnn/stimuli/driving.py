@@ -76,6 +76,11 @@ class Vehicle:
         A car (window band and lamps) or a plain box (a truck's rear).
     albedo : float
         Reflectance of its body, 0..1 (by day its gray level is ``255 * albedo``).
+
+    Raises
+    ------
+    ValueError
+        For a negative (or NaN) ``brake`` or a negative ``brake_frame``.
     """
 
     lane: float
