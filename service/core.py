@@ -348,7 +348,6 @@ class WorkerCore:
             raise ValueError(f"warmup_frames must be 0 or more, got {warmup_frames}")
         self.warmup_frames = int(warmup_frames)
         self.started = clock()
-        self.log_interval = float(log_interval)
         self._limited_log = RateLimitedLog(log, log_interval, clock)
         # the latest refusal of each of the last MAX_REFUSED robot ids refused, for the status:
         # a camera none of whose frames is taken never appears among the robots
@@ -782,6 +781,11 @@ class WorkerCore:
                     "candidates": len(self._robots) - proven, "intrusions": s.intrusions,
                     "duplicates": s.duplicates, "warmup": s.warmup,
                     "invalid": dict(s.invalid), "resets": dict(s.resets)}
+
+    @property
+    def log_interval(self) -> float:
+        """Seconds between two lines of one reason in its rate-limited log (``log_interval``)."""
+        return self._limited_log.interval
 
     def status(self) -> dict:
         """What the status queryable answers (docs/operations.md): identity, limits, counters

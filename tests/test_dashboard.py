@@ -607,20 +607,29 @@ def test_event_stream_sends_a_snapshot_then_coalesced_deltas_losing_nothing():
 STREAM_LAG = ROOT / "clients" / "dashboard_static" / "freshness.js"
 
 
-def page_lags(steps) -> list[float]:
-    """The page's StreamLag (freshness.js, run in node) through ``steps``: ``("ask", now)``
-    or ``("event", at, now)``; the lag it gives each event."""
+def _stream_lag_in_node(loop: str, *args):
+    """Run ``loop`` in node after ``const s = new StreamLag(...)`` (freshness.js, the limit
+    ``argv[3]`` where given, else its default) with ``out = []``, over the steps
+    ``JSON.parse(argv[2])``; ``out`` as JSON, read back."""
     node = shutil.which("node") or shutil.which("nodejs")
     if node is None:
         pytest.skip("no node to run the page's script in")
-    script = ("const {StreamLag} = require(process.argv[1]); const s = new StreamLag();"
-              "const out = [];"
-              "for (const [kind, ...args] of JSON.parse(process.argv[2])) {"
-              "  if (kind === 'ask') s.ask(...args); else out.push(s.lag(...args)); }"
-              "console.log(JSON.stringify(out));")
-    done = subprocess.run([node, "-e", script, str(STREAM_LAG), json.dumps(steps)],
+    script = ("const {StreamLag} = require(process.argv[1]);"
+              "const limit = process.argv.length > 3 ? JSON.parse(process.argv[3]) : null;"
+              "const s = limit === null ? new StreamLag() : new StreamLag(limit);"
+              "const out = []; const steps = JSON.parse(process.argv[2]);"
+              + loop + "console.log(JSON.stringify(out));")
+    done = subprocess.run([node, "-e", script, str(STREAM_LAG), *map(json.dumps, args)],
                           capture_output=True, text=True, timeout=TIMEOUT, check=True)
     return json.loads(done.stdout)
+
+
+def page_lags(steps) -> list[float]:
+    """The page's StreamLag (freshness.js, run in node) through ``steps``: ``("ask", now)``
+    or ``("event", at, now)``; the lag it gives each event."""
+    return _stream_lag_in_node(
+        "for (const [kind, ...args] of steps) {"
+        "  if (kind === 'ask') s.ask(...args); else out.push(s.lag(...args)); }", steps)
 
 
 def test_the_page_never_takes_an_event_for_fresher_than_it_is():
@@ -659,21 +668,10 @@ def page_waits(steps, first_event_s=None) -> list[list[bool]]:
     """A StreamLag (freshness.js, run in node; ``first_event_s``: its limit, else the
     default) through ``steps``: ``("ask", now)``, ``("event", at, now)`` or ``("check", now)``;
     ``[waiting, overdue]`` at each check."""
-    node = shutil.which("node") or shutil.which("nodejs")
-    if node is None:
-        pytest.skip("no node to run the page's script in")
-    script = ("const {StreamLag} = require(process.argv[1]);"
-              "const limit = JSON.parse(process.argv[3]);"
-              "const s = limit === null ? new StreamLag() : new StreamLag(limit);"
-              "const out = [];"
-              "for (const [kind, ...args] of JSON.parse(process.argv[2])) {"
-              "  if (kind === 'ask') s.ask(...args); else if (kind === 'event') s.lag(...args);"
-              "  else out.push([s.waiting(), s.overdue(...args)]); }"
-              "console.log(JSON.stringify(out));")
-    done = subprocess.run([node, "-e", script, str(STREAM_LAG), json.dumps(steps),
-                           json.dumps(first_event_s)],
-                          capture_output=True, text=True, timeout=TIMEOUT, check=True)
-    return json.loads(done.stdout)
+    return _stream_lag_in_node(
+        "for (const [kind, ...args] of steps) {"
+        "  if (kind === 'ask') s.ask(...args); else if (kind === 'event') s.lag(...args);"
+        "  else out.push([s.waiting(), s.overdue(...args)]); }", steps, first_event_s)
 
 
 def test_a_stream_waits_for_its_first_event_and_is_overdue_past_the_limit():
