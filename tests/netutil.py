@@ -144,6 +144,11 @@ class Responses:
         with self.lock:
             return [r for t, r in self.items if t >= t0 and (robot is None or r.robot == robot)]
 
+    def answered(self, seq: int, robot: str) -> bool:
+        """Whether any worker has answered frame ``seq`` of ``robot``."""
+        with self.lock:
+            return any(r.seq == seq and r.robot == robot for _, r in self.items)
+
     def first_after(self, t0: float, robot: str, worker: str) -> float | None:
         with self.lock:
             return next((t for t, r in self.items
