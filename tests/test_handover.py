@@ -15,7 +15,7 @@ from service import keys
 from service.config import make_config
 from service.messages import Frame, encode
 from service.ownership import owner
-from service.worker import live_workers
+from service.worker import live_workers, query_status
 
 from netutil import TIMEOUT, Responses, wait_for
 from test_failover import net  # noqa: F401  (the router fixture)
@@ -43,13 +43,14 @@ class SceneCamera:
     """A camera that announces itself and plays frames at FPS at most (stamps seq / FPS, no
     frame lost on the way); ``play`` runs an action after publishing the frames it names.
 
-    Each frame waits for its answer before the next is sent: a worker slowed by a loaded machine
-    would otherwise replace a frame it had no time for by the next (counted in the response's
+    Each frame waits until it is answered and every worker that tracks the robot (the one
+    warming up to take it over too) has stepped it, before the next is sent: a worker slowed by
+    a loaded machine would otherwise replace a frame it had no time for by the next (counted in
     ``dropped``: the overload rule, not the hand-over's), and its model would then see other
     frames than the uninterrupted one. A frame that nobody answers fails the wait."""
 
     def __init__(self, session, robot, frames):
-        self.frames = frames
+        self.session, self.robot, self.frames = session, robot, frames
         self.token = session.liveliness().declare_token(keys.camera_token_key(robot))
         self.publisher = session.declare_publisher(
             keys.frame_key(robot), congestion_control=zenoh.CongestionControl.BLOCK)
@@ -60,12 +61,22 @@ class SceneCamera:
         next_time = time.monotonic()
         for seq, image in enumerate(self.frames):
             self.publisher.put(encode(Frame.from_image(image, seq=seq, stamp=seq / FPS)))
-            wait_for(lambda: answered(seq), what=f"an answer to frame {seq}")
+            wait_for(lambda: answered(seq) and self._stepped_by_all(seq),
+                     what=f"an answer to frame {seq}, and every worker of the robot past it")
+            next_time = max(next_time, time.monotonic())
             if seq in actions:
                 actions[seq]()
                 next_time = max(next_time, time.monotonic())
             next_time += 1.0 / FPS
             time.sleep(max(0.0, next_time - time.monotonic()))
+
+    def _stepped_by_all(self, seq):
+        """Whether every worker whose status lists the robot has stepped frame seq (or a
+        later one): nothing of it is pending there, to be replaced by the next frame."""
+        rows = [status["robots"].get(self.robot)
+                for status in query_status(self.session, timeout=1.0).values()]
+        return all(row["last_seq"] is not None and row["last_seq"] >= seq
+                   and not row["pending"] and not row["busy"] for row in rows if row)
 
     def close(self):
         self.publisher.undeclare()
@@ -79,6 +90,8 @@ def check_handover(responses, robot, frames, handover, old, new, capsys):
     for r in responses.since(0, robot):
         answers[r.seq].append(r)
     reference = reference_warnings(frames)
+    # play already waited for an answer to each frame: kept as the statement of what a
+    # hand-over owes
     missing = sorted(set(range(handover, len(frames))) - set(answers))
     assert not missing, f"frames answered by nobody: {missing}"
     wrong = [(seq, r.worker, r.collision) for seq, rs in answers.items() for r in rs
@@ -98,7 +111,9 @@ def check_handover(responses, robot, frames, handover, old, new, capsys):
 
 def test_a_worker_stopped_mid_approach_hands_its_robot_over_warm(net, capsys):  # noqa: F811
     robot = robot_of("w1", ["w1", "w2"])
-    w1, w2 = net.worker("w1"), net.worker("w2")
+    # the camera waits for each answer, so on a loaded machine the 30 frames of w2's warm-up
+    # may take w1 longer than its default 5 s of answering after SIGTERM
+    w1, w2 = net.worker("w1", "--handover-timeout", "30"), net.worker("w2")
     frames = scene().frames
     handover = HANDOVER
     with zenoh.open(make_config(net.options)) as session:
