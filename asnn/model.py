@@ -30,7 +30,7 @@ from collections.abc import Iterable, Iterator
 import cv2
 import numpy as np
 
-from . import _fast, _parallel, brightness, retina
+from . import _fast, _parallel, brightness, light, retina
 from .approach import ApproachStage, FramePair, frame_pixel
 from .errors import TimingWarning, _warn_at_caller
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
@@ -289,6 +289,13 @@ class ASNN:
         self._search_radii = (0, 0)  # the stabilisation's search and wider search, pixels
         self._log_gain = 0.0  # the global brightness compensation's gain, log
         self._sampled: np.ndarray | None = None  # its sample of the previous frame stepped
+        p = self.params
+        self._light = (None if p.contrast_light is None or p.contrast_gain is None
+                       else light.LightAdaptation(p.contrast_gain, p.contrast_light,
+                                                  p.contrast_light_floor, p.contrast_light_tau,
+                                                  p.contrast_light_spread,
+                                                  p.contrast_light_noise))
+        self._semi_saturation = p.contrast_gain  # the gain control's c for the frame stepped
         self.history: deque[np.ndarray] = deque(maxlen=self.params.n_p)
         self.stages_on: np.ndarray | None = None
         self.stages_off: np.ndarray | None = None
@@ -694,6 +701,9 @@ class ASNN:
                                      p.stabilise_spread, wider)
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
                 background = shift_image(self.previous, *shift, border=lum)
+        if self._light is not None:
+            self._semi_saturation = self._light.step(brightness.sampled(lum),
+                                                     brightness.sampled(self.previous), elapsed)
         previous, self.previous, self.previous_blocks = self.previous, lum, blocks
         taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, background=background)
         if self.optimised:
@@ -865,14 +875,15 @@ class ASNN:
         (:func:`asnn._fast.gain_controlled_change`), into ``out`` where given."""
         p = self.params
         if self.optimised and not p.n_p and p.contrast_gain is not None:
-            return _fast.gain_controlled_change(lum, previous, p.contrast_gain, p.contrast_pool,
-                                                p.contrast_scale, out)
+            return _fast.gain_controlled_change(lum, previous, self._semi_saturation,
+                                                p.contrast_pool, p.contrast_scale, out)
         photo = retina.photoreceptor(lum, previous, list(self.history), self._p_weights)
         if p.n_p:
             self.history.appendleft(photo)
         if p.contrast_gain is not None:
             gain_control = (_fast if self.optimised else retina).contrast_gain_control
-            photo = gain_control(photo, p.contrast_gain, p.contrast_pool, p.contrast_scale)
+            photo = gain_control(photo, self._semi_saturation, p.contrast_pool,
+                                 p.contrast_scale)
         return photo
 
     def _respond_optimised(self, frame: "_Frame") -> Response:
