@@ -57,7 +57,8 @@ def test_both_forms_adapt_alike(name):
     fast, slow = ASNN(params), ASNN(params, optimised=False)
     for index, frame in enumerate(frames):
         a, b = fast.step(frame), slow.step(frame)
-        assert fast._semi_saturation == slow._semi_saturation
-        assert index == 0 or fast._semi_saturation < 0.005  # from the first change on
+        # the optimised form samples float32 luminance, the straightforward one float64
+        assert fast._semi_saturation == pytest.approx(slow._semi_saturation, rel=1e-6)
+        assert index == 0 or slow._semi_saturation < 0.005  # from the first change on
         assert abs(a.u - b.u) <= max(1e-9, 1e-5 * abs(b.u))
         assert (a.spikes, a.collision) == (b.spikes, b.collision)
