@@ -9,14 +9,10 @@ makes the stage invariant to a camera's overall light (``P' = s k P / (k c + g *
 is the photoreceptors' light adaptation [1]_ in the form of a Weber law. The view's light is
 read as the median of a sample of its pixels (a lamp or a headlight in view moves a mean, not a
 median), relative to ``reference``, a lit view's median; it is smoothed over a time constant
-and bounded below by ``floor``. Two gates keep the fixed ``c`` where a lower one would lift
-noise rather than signal:
-
-- ``spread``: a view lit in pools (the upper decile of the sample more than ``spread`` times
-  its median: a night lit by headlights and lamps) keeps the fixed constant;
-- ``noise``: ``c`` does not fall below ``noise`` times the view's temporal noise (the median
-  absolute change of the sampled pixels from the previous frame: most pixels of a view do not
-  move in a frame), nor above its fixed value.
+and bounded below by ``floor``. A view lit in pools (the upper decile of the sample more than
+``spread`` times its median: a night lit by headlights and lamps) keeps the fixed ``c``, where a
+lower one lifted the night's noise rather than its signal (docs/design-notes.md, "Light
+adaptation of the contrast gain control").
 
 References
 ----------
@@ -49,14 +45,12 @@ class LightAdaptation:
     spread : float or None
         The upper decile's ratio to the median above which the view counts as lit in pools
         (the fixed ``c``); None: no such gate.
-    noise : float
-        ``c`` stays at least this times the temporal noise (0: no gate).
     """
 
     def __init__(self, semi_saturation: float, reference: float, floor: float, tau: float,
-                 spread: float | None, noise: float):
+                 spread: float | None):
         self.semi_saturation, self.reference, self.floor = semi_saturation, reference, floor
-        self.tau, self.spread, self.noise = tau, spread, noise
+        self.tau, self.spread = tau, spread
         self._log_light: float | None = None
 
     def light(self, sample: np.ndarray) -> float:
@@ -69,18 +63,13 @@ class LightAdaptation:
             return 1.0
         return min(max(median / self.reference, self.floor), 1.0)
 
-    def step(self, sample: np.ndarray, previous: np.ndarray | None, elapsed: float) -> float:
-        """The semi-saturation for the frame whose sample of pixels is ``sample`` (and the
-        previous frame's, at the same places, ``previous``), ``elapsed`` seconds after it."""
+    def step(self, sample: np.ndarray, elapsed: float) -> float:
+        """The semi-saturation for the frame whose sample of pixels is ``sample``, ``elapsed``
+        seconds after the previous one."""
         target = math.log(self.light(sample))
         if self._log_light is None:  # a stream starts adapted to its first view
             self._log_light = target
         else:
             keep = math.exp(-elapsed / self.tau)
             self._log_light = keep * self._log_light + (1.0 - keep) * target
-        semi = self.semi_saturation * math.exp(self._log_light)
-        if self.noise and previous is not None:
-            change = np.abs(sample - previous)
-            noise = float(np.partition(change, change.size // 2)[change.size // 2])
-            semi = max(semi, min(self.semi_saturation, self.noise * noise))
-        return semi
+        return self.semi_saturation * math.exp(self._log_light)

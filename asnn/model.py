@@ -293,8 +293,7 @@ class ASNN:
         self._light = (None if p.contrast_light is None or p.contrast_gain is None
                        else light.LightAdaptation(p.contrast_gain, p.contrast_light,
                                                   p.contrast_light_floor, p.contrast_light_tau,
-                                                  p.contrast_light_spread,
-                                                  p.contrast_light_noise))
+                                                  p.contrast_light_spread))
         self._semi_saturation = p.contrast_gain  # the gain control's c for the frame stepped
         self.history: deque[np.ndarray] = deque(maxlen=self.params.n_p)
         self.stages_on: np.ndarray | None = None
@@ -702,8 +701,7 @@ class ASNN:
             if shift != (0, 0):  # where nothing moved in, the frame differs by nothing
                 background = shift_image(self.previous, *shift, border=lum)
         if self._light is not None:
-            self._semi_saturation = self._light.step(brightness.sampled(lum),
-                                                     brightness.sampled(self.previous), elapsed)
+            self._semi_saturation = self._light.step(brightness.sampled(lum), elapsed)
         previous, self.previous, self.previous_blocks = self.previous, lum, blocks
         taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, background=background)
         if self.optimised:

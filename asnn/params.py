@@ -226,9 +226,8 @@ class ASNNParams(BaseModel):
         description="light adaptation of the contrast gain control (prototype): its "
         "semi-saturation scaled by the view's median luminance over this (a lit view's median, "
         "[0, 1]), bounded below by contrast_light_floor, smoothed over contrast_light_tau, "
-        "kept fixed in a view lit in pools (contrast_light_spread) and above "
-        "contrast_light_noise times the temporal noise (asnn.light.LightAdaptation). "
-        "None: the fixed constant")
+        "kept fixed in a view lit in pools (contrast_light_spread) "
+        "(asnn.light.LightAdaptation). None: the fixed constant")
     contrast_light_floor: float = Field(0.25, gt=0, le=1.0,
                                         description="least fraction of contrast_gain the "
                                         "light adaptation takes it to")
@@ -238,10 +237,6 @@ class ASNNParams(BaseModel):
     contrast_light_spread: float | None = Field(
         None, gt=1.0, description="upper decile over median of the view above which it counts "
         "as lit in pools (a night) and keeps the fixed constant; None: no such gate")
-    contrast_light_noise: float = Field(0.0, ge=0, description="the adapted semi-saturation "
-                                        "stays at least this times the view's temporal noise "
-                                        "(median absolute change of the sampled pixels); 0: "
-                                        "no gate")
     contrast_pool: float = Field(8.0, gt=0, le=MAX_KERNEL / 4,
                                  description="sigma of the pooling Gaussian, px")
     contrast_scale: float = Field(0.05, gt=0, description="s, the output scale")
