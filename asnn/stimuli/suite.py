@@ -72,7 +72,8 @@ trial designed and wrote down with its labels before any detector ran on it
 designed and written down the same way by another trial (:func:`_indoor_cases`); and a
 sidewalk set for delivery robots and small outdoor robots (``extra-sw-*``, tag ``sidewalk``),
 designed and written down the same way by a third (:func:`_sidewalk_cases`); and a dusk set
-(``extra-dk-*``, tag ``dusk``), the same way by a fourth (:func:`_dusk_cases`).
+(``extra-dk-*``, tag ``dusk``), the same way by a fourth (:func:`_dusk_cases`), and a second
+one (``extra-dk2-*``, tag ``dusk``) by a fifth (:func:`_dusk2_cases`).
 
 **Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
 drives at S times their size (their world is in metres and degrees), the planar scenes with
@@ -1240,6 +1241,96 @@ def _dusk_cases() -> list[Case]:
     ]
 
 
+def _dusk2_cases() -> list[Case]:
+    """The second dusk set (``extra-dk2-*``, 12 cases): designed by a trial on 2026-12-01 to
+    give the light adaptation of the contrast gain control (``contrast_light``, chosen after
+    looking at :func:`_dusk_cases`) a held-out figure, and written down with their labels
+    before any detector ran on them (docs/evaluation.md, "A dusk held-out set"). Other scenes
+    than the first set's, at 0.1-0.5 of the day's light, 10-30 fps: cars on a road at car
+    speeds (one braking ahead of us, a white van standing in our lane, one crossing into our
+    path from a side street), a person walking at a robot down a corridor with its lights off,
+    a dark-clothed cyclist head-on on the pavement, a child running at a low robot, a person
+    walking up to the camera in a dim underpass with sensor noise after the dimming (the
+    planar walker, lit by the scene's own ``lighting``); and a car followed at its speed with
+    another alongside, a car passing oncoming at night under our headlights (at half the
+    light), a dim corridor with nothing ahead, street lamps and their pools of light passing
+    (the headlights' blob, added after the dimming), and a lit shop window passing close (a
+    light rectangle on a dark street). The third tag is ``dusk``, the second the trial's
+    category.
+
+    The robots' drives have their bumper 0.3 m ahead of the lens (the indoor and sidewalk
+    sets'), the cars' 2 m (the suite's). A post-dimmed corridor's noise is dimmed with it
+    (:func:`.surface.corridor_scene` draws its noise before :func:`.heldout.post_scene`'s
+    lighting): 6 gray levels at 0.12 of the light are 0.7.
+    """
+    P, D = PLANAR_SIZE, DRIVING_SIZE
+    ped = dict(width=0.5, height=1.75, shape="rect", albedo=0.3)
+    dark_cyclist = dict(width=0.6, height=1.75, shape="rect", albedo=0.08)
+    child = dict(width=0.35, height=1.1, shape="rect", albedo=0.35)
+    robot = dict(front=0.3)  # a robot's bumper 0.3 m ahead of its lens
+    underpass = Background("texture", 0.25, 1.5, mean=110.0)
+    street = Background("texture", 0.1, 1.5, mean=50.0)  # a dark street, a lit window on it
+    road = Background("texture", 0.25, 1.5, 0.0, (0.0, 1.0), mean=100.0)  # flowing past
+
+    def post(name, group, cat, light, base=driving_scene, **o):
+        return Case(name, post_scene, {"base": base, "size": D if base is driving_scene else P,
+                                       "lighting": (Ramp(0, 1, light, light),), **o},
+                    (group, cat, "dusk"))
+
+    def pl(name, group, cat, light, *glows, **o):
+        # the sensor noise and any lamp's light come after the dimming
+        return _planar(name, group, cat, "dusk", lighting=(Ramp(0, 1, light, light), *glows),
+                       **o)
+
+    def lamp(start, x):
+        # a street lamp on our left passing overhead, its pool of light on the pavement
+        # passing under us: two blobs sweeping out of the view in 30 frames
+        return (Headlights(start, start + 30, (x, 42.0), (-40.0, -20.0), 6.0, 150.0),
+                Headlights(start, start + 30, (x + 5.0, 72.0), (20.0, 170.0), 20.0, 60.0))
+
+    T, S, C = "extra-threat", "extra-pass", "extra-clear"
+    return [
+        # --- collisions
+        post("extra-dk2-car-brakes-ahead-road", T, "vehicle", 0.3, speed=10.0, frames=90,
+             onset=10, vehicles=(Vehicle(0.0, 18.0, 10.0, brake=6.0, brake_frame=10),),
+             target=0),
+        post("extra-dk2-white-van-stands-in-lane-10fps", T, "vehicle", 0.45, fps=10.0,
+             speed=8.0, frames=40,
+             vehicles=(Vehicle(0.2, 30.0, 0.0, width=2.0, height=2.5, shape="rect",
+                               albedo=0.85),), target=0),
+        post("extra-dk2-car-crosses-into-path-30fps", T, "vehicle", 0.2, fps=30.0, speed=8.0,
+             frames=90, camera_height=1.2,
+             vehicles=(Vehicle(6.0, 20.0, 0.0, lateral_speed=-2.5, width=4.5, albedo=0.3),),
+             target=0),
+        post("extra-dk2-person-corridor-lights-off-30fps", T, "person", 0.1, fps=30.0,
+             speed=0.8, frames=150, roadside=0.0, camera_height=0.9, **robot,
+             vehicles=(Vehicle(0.1, 7.0, -1.2, **ped),), target=0),
+        post("extra-dk2-dark-cyclist-headon-25fps", T, "cyclist-scooter", 0.3, fps=25.0,
+             speed=1.8, frames=130, camera_height=0.8, **robot,
+             vehicles=(Vehicle(0.1, 25.0, -4.2, **dark_cyclist),), target=0),
+        post("extra-dk2-child-runs-at-low-robot", T, "person", 0.4, speed=1.0, frames=90,
+             camera_height=0.5, **robot, vehicles=(Vehicle(-0.1, 9.0, -2.5, **child),),
+             target=0),
+        pl("extra-dk2-walker-underpass-noise-15fps", T, "person", 0.2, fps=15.0,
+           shape="ellipse", aspect=0.4, height=16.0, contrast=0.4, polarity="dark", tau=3.0,
+           texture=0.12, gait=Gait(), background=underpass, noise=4.0),
+        # --- non-collisions
+        post("extra-dk2-follow-car-with-car-alongside-30fps", S, "vehicle", 0.15, fps=30.0,
+             speed=10.0, frames=90,
+             vehicles=(Vehicle(0.0, 15.0, 10.0), Vehicle(3.5, 4.0, 10.8, albedo=0.4)),
+             target=0),
+        post("extra-dk2-car-passes-oncoming-night", S, "vehicle", 0.5, speed=10.0, frames=80,
+             night=True, vehicles=(Vehicle(-3.5, 60.0, -10.0),), target=0),
+        post("extra-dk2-dim-corridor-nothing-ahead-15fps", C, "ego-motion", 0.12,
+             base=corridor_scene, fps=15.0, speed=1.0, seconds=4.0, noise=6.0),
+        pl("extra-dk2-street-lamps-pass", C, "lighting", 0.2, *lamp(0, 70.0), *lamp(30, 75.0),
+           *lamp(60, 68.0), motion="none", frames=90, background=road, noise=3.0),
+        pl("extra-dk2-lit-shop-window-passes-15fps", S, "lighting", 0.4, fps=15.0,
+           motion="nearmiss", shape="rect", aspect=1.3, height=16.0, contrast=0.9,
+           polarity="light", position=(112.0, 55.0), tau=3.0, background=street, noise=3.0),
+    ]
+
+
 SUITE_CASES: dict[str, Case] = {
     case.name: case
     for case in (_approach_cases() + _pair_cases() + _clutter_cases() + _recession_cases()
@@ -1247,7 +1338,8 @@ SUITE_CASES: dict[str, Case] = {
                  + _brightness_cases() + _noise_cases() + _driving_cases())
 }
 EXTRA_CASES: dict[str, Case] = {case.name: case for case in _extra_cases() + _heldout_cases()
-                                 + _indoor_cases() + _sidewalk_cases() + _dusk_cases()}
+                                 + _indoor_cases() + _sidewalk_cases() + _dusk_cases()
+                                 + _dusk2_cases()}
 CASES: dict[str, Case] = {**SUITE_CASES, **EXTRA_CASES}  # every case make_case knows
 
 
