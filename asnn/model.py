@@ -490,6 +490,8 @@ class ASNN:
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._in_use = threading.Lock()
+        if "_semi_saturation" not in state:  # pickled before the light adaptation: fixed c
+            self._light, self._semi_saturation = None, self.params.contrast_gain
 
     def stream(self, frames: Iterable[tuple[float | None, np.ndarray]]) -> Iterator[Response]:
         """The responses to ``(t, frame)`` pairs, in order: ``step(frame, t)`` for each.

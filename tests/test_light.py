@@ -1,5 +1,7 @@
 """The light adaptation of the contrast gain control (``contrast_light``, a prototype off by
 default: asnn.light)."""
+import pickle
+
 import numpy as np
 import pytest
 
@@ -66,3 +68,17 @@ def test_a_dim_approach_the_fixed_constant_misses_is_warned_of_with_the_light_ad
         first[spec] = warned.index(True) if any(warned) else None
     assert first["robust"] is None
     assert first[SPEC] is not None and first[SPEC] < scene.contact_frame
+
+
+def test_a_model_pickled_before_the_light_adaptation_steps_with_the_fixed_constant():
+    frames = make_case("extra-sw-bollard-dusk").frames[:6]
+    model = ASNN("robust")
+    for frame in frames[:3]:
+        model.step(frame)
+    state = model.__getstate__()
+    del state["_light"], state["_semi_saturation"]  # as a model pickled before the stage
+    old = ASNN.__new__(ASNN)
+    old.__setstate__(pickle.loads(pickle.dumps(state)))
+    assert old._semi_saturation == model.params.contrast_gain
+    for frame in frames[3:]:
+        assert old.step(frame).u == model.step(frame).u
