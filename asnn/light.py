@@ -12,7 +12,7 @@ median), relative to ``reference``, a lit view's median; it is smoothed over a t
 and bounded below by ``floor``. A view lit in pools (the upper decile of the sample more than
 ``spread`` times its median: a night lit by headlights and lamps) keeps the fixed ``c``, where a
 lower one lifted the night's noise rather than its signal (docs/design-notes.md, "Light
-adaptation of the contrast gain control").
+adaptation of the contrast gain control", and "..., again" for this form).
 
 References
 ----------
@@ -54,8 +54,19 @@ class LightAdaptation:
         self._log_light: float | None = None
 
     def light(self, sample: np.ndarray) -> float:
-        """The fraction of a lit view's light one frame's sample shows, in [floor, 1] (1 for a
-        view lit in pools)."""
+        """The fraction of a lit view's light one frame's sample shows.
+
+        Parameters
+        ----------
+        sample : ndarray (n,)
+            Luminance in [0, 1] at the sampled places.
+
+        Returns
+        -------
+        float
+            The sample's median over ``reference``, in [``floor``, 1]; 1 for a view lit in
+            pools.
+        """
         n = sample.size
         ordered = np.partition(sample, (n // 2, (9 * n) // 10))
         median, decile = float(ordered[n // 2]), float(ordered[(9 * n) // 10])
@@ -64,8 +75,21 @@ class LightAdaptation:
         return min(max(median / self.reference, self.floor), 1.0)
 
     def step(self, sample: np.ndarray, elapsed: float) -> float:
-        """The semi-saturation for the frame whose sample of pixels is ``sample``, ``elapsed``
-        seconds after the previous one."""
+        """The semi-saturation for one frame; the first frame it is given sets the light
+        the stream starts adapted to.
+
+        Parameters
+        ----------
+        sample : ndarray (n,)
+            The frame's luminance in [0, 1] at the sampled places.
+        elapsed : float
+            Seconds since the previous frame stepped.
+
+        Returns
+        -------
+        float
+            ``c`` for this frame: the fixed value times the smoothed light.
+        """
         target = math.log(self.light(sample))
         if self._log_light is None:  # a stream starts adapted to its first view
             self._log_light = target

@@ -490,6 +490,11 @@ class ASNN:
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
         self._in_use = threading.Lock()
+        params = self.params
+        if set(type(params).model_fields) - set(vars(params)):
+            # pickled before a field was added: unpickling does not fill it in, so the stages
+            # added since read their defaults (every one off) rather than raise at reset()
+            self.params = type(params).model_validate(vars(params))
         if "_semi_saturation" not in state:  # pickled before the light adaptation: fixed c
             self._light, self._semi_saturation = None, self.params.contrast_gain
 

@@ -227,7 +227,9 @@ class ASNNParams(BaseModel):
         "semi-saturation scaled by the view's median luminance over this (a lit view's median, "
         "[0, 1]), bounded below by contrast_light_floor, smoothed over contrast_light_tau, "
         "kept fixed in a view lit in pools (contrast_light_spread) "
-        "(asnn.light.LightAdaptation). None: the fixed constant")
+        "(asnn.light.LightAdaptation); inert without contrast_gain. The form measured (not "
+        "adopted: docs/design-notes.md) is 0.3 with contrast_light_spread 3. None: the fixed "
+        "constant")
     contrast_light_floor: float = Field(0.25, gt=0, le=1.0,
                                         description="least fraction of contrast_gain the "
                                         "light adaptation takes it to")
