@@ -710,7 +710,8 @@ class ASNN:
         if self._light is not None:
             self._semi_saturation = self._light.step(brightness.sampled(lum), elapsed)
         previous, self.previous, self.previous_blocks = self.previous, lum, blocks
-        taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, background=background)
+        taken = _Frame(index, lum=lum, elapsed=elapsed, previous=previous, background=background,
+                       semi_saturation=self._semi_saturation)
         if self.optimised:
             # with threads of its own, P goes where the fused pass will read it (a front that
             # failed is left as it is: the pass in flight raises its error)
@@ -718,7 +719,7 @@ class ASNN:
             out = (banded.next_photo((self.stages_on, self.stages_off))
                    if banded is not None and not banded.failed else None)
             taken.photo = self._photoreceptors(lum, previous if background is None
-                                               else background, out)
+                                               else background, taken.semi_saturation, out)
         return taken
 
     def _compensated(self, lum: np.ndarray, elapsed: float) -> np.ndarray:
@@ -873,22 +874,23 @@ class ASNN:
         return spike_step(u, n_cells, self.spike_window, self.params)
 
     def _photoreceptors(self, lum: np.ndarray, previous: np.ndarray,
+                        semi_saturation: float | None,
                         out: np.ndarray | None = None) -> np.ndarray:
         """P (eq. 1) from the frame and the previous one, after the contrast gain control where
-        the preset has it. The optimised form without photoreceptor history computes the
+        the preset has it (its ``c`` the frame's ``semi_saturation``). The optimised form
+        without photoreceptor history computes the
         difference and the gain control's pool together
         (:func:`asnn._fast.gain_controlled_change`), into ``out`` where given."""
         p = self.params
         if self.optimised and not p.n_p and p.contrast_gain is not None:
-            return _fast.gain_controlled_change(lum, previous, self._semi_saturation,
+            return _fast.gain_controlled_change(lum, previous, semi_saturation,
                                                 p.contrast_pool, p.contrast_scale, out)
         photo = retina.photoreceptor(lum, previous, list(self.history), self._p_weights)
         if p.n_p:
             self.history.appendleft(photo)
         if p.contrast_gain is not None:
             gain_control = (_fast if self.optimised else retina).contrast_gain_control
-            photo = gain_control(photo, self._semi_saturation, p.contrast_pool,
-                                 p.contrast_scale)
+            photo = gain_control(photo, semi_saturation, p.contrast_pool, p.contrast_scale)
         return photo
 
     def _respond_optimised(self, frame: "_Frame") -> Response:
@@ -934,7 +936,7 @@ class ASNN:
         """One step in the straightforward float64 form (:mod:`asnn.retina`, stage by stage)."""
         p = self.params
         photo = self._photoreceptors(frame.lum, frame.previous if frame.background is None
-                                     else frame.background)
+                                     else frame.background, frame.semi_saturation)
 
         on0, off0 = retina.bipolar(photo, self._dog)
         if p.target_polarity == "light":
@@ -1028,6 +1030,9 @@ class _Frame:
     # the previous frame moved by the background's translation since (None: no translation)
     background: np.ndarray | None = None
     photo: np.ndarray | None = None
+    # the contrast gain control's c for this frame (light-adapted where the preset adapts it):
+    # the straightforward form computes P after the next frame may have been taken
+    semi_saturation: float | None = None
     maps: _fast.FrontMaps | None = None
     flight: "_parallel._Pass | None" = None  # its banded pass, until joined
     tracks: list | None = None  # its objects' approach tests (record_tracks)
