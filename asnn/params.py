@@ -400,6 +400,12 @@ class ASNNParams(BaseModel):
         "fit and that one (asnn.approach.tracking.Track.own_fit): the scenery receding behind "
         "an object coming at a rear camera lowers its box's fit; inert without scene_relative and "
         "partial_overlap")
+    receding_edge_rule: bool = Field(
+        False, description="the fit against a receding scene counts 0 while the frame's edge "
+        "cuts the object, as its box's own fit does "
+        "(asnn.approach.stage.ApproachStage._measure_against_scene): a car overtaking into view "
+        "at the frame's side is then measured on its visible part only; inert without "
+        "receding_scene")
     tau_max: float = Field(1.5, gt=0, description="longest time to contact that warns, s")
     offset_max: float = Field(
         1.0, gt=0, description="largest drift/expansion offset of an approaching object, in "

@@ -273,7 +273,7 @@ class ApproachStage:
         if attended is None:
             self.tracker.update([], elapsed)
             if p.scene_relative:
-                self._measure_against_scene([], [], [], frames)
+                self._measure_against_scene([], [], [], [], frames)
             self.objects = []
             total = 0.0 if p.approach_gate else total
             if surface is not None:
@@ -296,24 +296,25 @@ class ApproachStage:
         tracks = self.tracker.update(observations, elapsed)
         # where the background slides, each box is fitted over its object's rim too
         rim = attended if p.rim_expansion and frames.background is not None else None
-        boxes, rates, estimates = [], [], []
+        boxes, rates, estimates, wholes = [], [], [], []
         for k, tr in enumerate(tracks):
             box = _pixel_box(tr.box, w, h)
             est = rim_scaled(*region_and_rim_expansion(
                 frames.previous, frames.current, box, rim, frames.background, self.rig.mask),
                 max(box[2] - box[0], box[3] - box[1]), p.rim_motion_max)
+            # an object the frame's edge cuts is measured on its visible part: its drift and
+            # size, so its offset, are not the object's, whatever the fit
+            ox0, oy0, ox1, oy1 = object_boxes[k]
+            whole = ox0 > 0 and oy0 > 0 and ox1 < w and oy1 < h
             if est is not None:
-                # an object the frame's edge cuts is measured on its visible part: its drift
-                # and size, so its offset, are not the object's, whatever the fit
-                ox0, oy0, ox1, oy1 = object_boxes[k]
-                whole = ox0 > 0 and oy0 > 0 and ox1 < w and oy1 < h
                 tr.measure(est.rate / elapsed, est.drift_x / elapsed, est.drift_y / elapsed,
                            est.fit if whole else 0.0)
             boxes.append(box)
+            wholes.append(whole)
             estimates.append(est)
             rates.append(None if est is None else est.rate / elapsed)
         if p.scene_relative:
-            self._measure_against_scene(tracks, boxes, rates, frames)
+            self._measure_against_scene(tracks, boxes, rates, wholes, frames)
         persistence = persistence_frames(p.approach_frames, p.approach_seconds, period)
         coming = self.tracker.judge(tracks, p.tau_max, p.offset_max, persistence,
                                     self._overlap, p.scene_tolerance)
@@ -447,7 +448,7 @@ class ApproachStage:
             own_expansion=track.own_expansion, layers=track.layers, streak=track.streak,
             test=track.verdict, counts=bool(counts), share=share if counts else 0.0)
 
-    def _measure_against_scene(self, tracks: list, boxes: list, rates: list,
+    def _measure_against_scene(self, tracks: list, boxes: list, rates: list, wholes: list,
                                frames: FramePair) -> None:
         """Each track that otherwise passes the approach test gets its expansion against the
         scene (:meth:`~asnn.approach.tracking.Track.measure_own`); the others None.
@@ -471,7 +472,10 @@ class ApproachStage:
         (``own_fit``), whose regime test takes the better of the two fits
         (:func:`~asnn.approach.tracking.approaching`). An object expanding in a contracting scene
         moves against it, so the pixels the scene explains are the scenery's; where the scene
-        expands, object and scenery expand alike, and the box's own fit stands.
+        expands, object and scenery expand alike, and the box's own fit stands. With
+        ``receding_edge_rule``, that fit is 0 while the frame's edge cuts the object (``wholes``
+        False), as the box's own fit is: its offset is then its visible part's, whatever the fit
+        (a car overtaking us into view at the frame's side edge otherwise passes the regime).
 
         With ``motion_layers``, where the scene expands at least 0.2 per second (our own forward
         motion), each candidate's box is split into its motions
@@ -522,7 +526,7 @@ class ApproachStage:
                 own = region_expansion(previous, current, box, self._scene_reference, rig)
                 rate = None if own is None else own.rate / elapsed
                 if contracts and own is not None:
-                    fit = own.fit
+                    fit = own.fit if wholes[k] or not p.receding_edge_rule else 0.0
             self.against_scene[tracks[k].id] = rate
             self.fit_against_scene[tracks[k].id] = fit
         layered = p.motion_layers and scene_rate >= _SCENE_EXPANDS
