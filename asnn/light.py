@@ -1,5 +1,6 @@
-"""Light adaptation of the contrast gain control's semi-saturation (a prototype of this project,
-off by default: ``ASNNParams.contrast_light``).
+"""Light adaptation of the contrast gain control's semi-saturation (this project; in the default
+preset since 2026-12-01 with ``contrast_light`` 0.3 and ``contrast_light_spread`` 3, off in the
+others: ``ASNNParams.contrast_light``).
 
 The contrast gain control (:func:`asnn.retina.contrast_gain_control`) divides each change by
 ``c + g_pool * |P|``. Its ``c`` is fixed in intensity units, so a view at a third of the day's

@@ -223,13 +223,11 @@ class ASNNParams(BaseModel):
     )
     contrast_light: float | None = Field(
         None, gt=0, le=1.0,
-        description="light adaptation of the contrast gain control (prototype): its "
+        description="light adaptation of the contrast gain control: its "
         "semi-saturation scaled by the view's median luminance over this (a lit view's median, "
         "[0, 1]), bounded below by contrast_light_floor, smoothed over contrast_light_tau, "
         "kept fixed in a view lit in pools (contrast_light_spread) "
-        "(asnn.light.LightAdaptation); inert without contrast_gain. The form measured (not "
-        "adopted: docs/design-notes.md) is 0.3 with contrast_light_spread 3. None: the fixed "
-        "constant")
+        "(asnn.light.LightAdaptation); inert without contrast_gain. None: the fixed constant")
     contrast_light_floor: float = Field(0.25, gt=0, le=1.0,
                                         description="least fraction of contrast_gain the "
                                         "light adaptation takes it to")
@@ -652,15 +650,15 @@ PRESETS["robust"] = _derived(
     skip_repeats=True, max_step_rate=30.0, global_gain=0.5,
     stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
     rim_motion_max=8.0,
-    contrast_gain=0.005,
+    contrast_gain=0.005, contrast_light=0.3, contrast_light_spread=3.0,
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,
     max_width=480, min_width=160, track_box=0.3, approach_frames=3, approach_seconds=0.1,
     attention_step=2,
     scene_relative=True, partial_overlap=True, scene_tolerance=0.1, receding_scene=True,
-    region_persistence=True, region_cover=0.2, object_ids=True, refined_ttc=True,
-    motion_layers=True, ignore_rig=True,
+    receding_edge_rule=True, region_persistence=True, region_cover=0.2, object_ids=True,
+    refined_ttc=True, motion_layers=True, ignore_rig=True,
     surface_ahead=True, corridor_gate=True, own_motion_weight=2.0,
 )
 DEFAULT_PRESET = "robust"

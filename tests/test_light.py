@@ -1,5 +1,5 @@
-"""The light adaptation of the contrast gain control (``contrast_light``, a prototype off by
-default: asnn.light)."""
+"""The light adaptation of the contrast gain control (``contrast_light``, in the default preset
+since 2026-12-01: asnn.light)."""
 import pickle
 
 import numpy as np
@@ -10,7 +10,7 @@ from asnn.light import LightAdaptation
 from asnn.params import preset_from_spec
 from asnn.stimuli.suite import make_case
 
-SPEC = "robust/contrast_light=0.3/contrast_light_spread=3"
+FIXED = "robust/contrast_light=none/contrast_light_spread=none"  # the default before the stage
 
 
 def _adaptation(**changes):
@@ -44,7 +44,7 @@ def test_the_light_is_followed_with_its_time_constant():
 @pytest.mark.parametrize("name", ["extra-sw-bollard-dusk"])
 def test_both_forms_adapt_alike(name):
     frames = make_case(name).frames[:40]
-    params = preset_from_spec(SPEC)
+    params = preset_from_spec("robust")
     fast, slow = ASNN(params), ASNN(params, optimised=False)
     for index, frame in enumerate(frames):
         a, b = fast.step(frame), slow.step(frame)
@@ -61,18 +61,18 @@ def test_a_dim_approach_the_fixed_constant_misses_is_warned_of_with_the_light_ad
     the light, it warns before contact."""
     scene = make_case("extra-dk-hydrant-low-camera-10fps")
     first = {}
-    for spec in ("robust", SPEC):
+    for spec in (FIXED, "robust"):
         model = ASNN(preset_from_spec(spec))
         warned = [model.step(frame, index / scene.fps).collision
                   for index, frame in enumerate(scene.frames)]
         first[spec] = warned.index(True) if any(warned) else None
-    assert first["robust"] is None
-    assert first[SPEC] is not None and first[SPEC] < scene.contact_frame
+    assert first[FIXED] is None
+    assert first["robust"] is not None and first["robust"] < scene.contact_frame
 
 
 def test_a_model_pickled_before_the_light_adaptation_steps_with_the_fixed_constant():
     frames = make_case("extra-sw-bollard-dusk").frames[:6]
-    model = ASNN("robust")
+    model = ASNN(preset_from_spec(FIXED))
     for frame in frames[:3]:
         model.step(frame)
     state = pickle.loads(pickle.dumps(model.__getstate__()))

@@ -47,6 +47,10 @@ ABLATIONS = {
     "the rim's expansion at any motion (no small-motion limit)": (
         "asnn:robust/rim_motion_max=none"),
     "no contrast gain control": "asnn:robust/contrast_gain=none",
+    "no light adaptation of the contrast gain control (dusk)": (
+        "asnn:robust/contrast_light=none"),
+    "the light adaptation at night too (no spread gate)": (
+        "asnn:robust/contrast_light_spread=none"),
     "OFF-led map only (no ON-led mirror)": "asnn:robust/w1_on=0/w2_off=0",
     "no approach gate (u sums every object)": "asnn:robust/approach_gate=false",
     "no offset test (near misses)": "asnn:robust/offset_max=1000",
@@ -61,6 +65,8 @@ ABLATIONS = {
     "no partial-overlap regime": "asnn:robust/partial_overlap=false",
     "partial overlaps without the fit test": "asnn:robust/overlap_fit_min=-1",
     "no fit against a receding scene": "asnn:robust/receding_scene=false",
+    "the fit against a receding scene where the frame's edge cuts the object (no edge rule)": (
+        "asnn:robust/receding_edge_rule=false"),
     "no persistence (one frame of approach)": "asnn:robust/approach_frames=1",
     "persistence per track only (no region persistence)": "asnn:robust/region_persistence=false",
     "region persistence from any overlap (no region_cover)": "asnn:robust/region_cover=0",
