@@ -130,6 +130,22 @@ def test_the_replay_reproduces_the_partial_overlap_regime():
             update=without))) != warned
 
 
+def test_the_replay_reproduces_the_frame_s_edge_rule():
+    # the night crossing car of fresh-scenery variant 8: its front lamp, cut by the frame's left
+    # edge, passes the partial-overlap regime on its fit against the receding night scene
+    # unless that fit counts 0 at the edge (receding_edge_rule); the trace records the fit as
+    # the rule leaves it, so the replay warns as the model does with the rule and without it
+    scene = make_case("drive-night-cross-tbone", 8)
+    first = []
+    for rule in (True, False):
+        params = preset("robust", receding_edge_rule=rule)
+        trace = gate_replay.trace_clip(at_rate(scene.frames, scene.fps), params, "tbone")
+        replayed = [r["collision"] for r in gate_replay.replay(trace, params)]
+        assert replayed == trace.warnings
+        first.append(replayed.index(True))
+    assert first[0] > first[1]
+
+
 def test_the_replay_asks_a_slow_stream_for_as_few_frames_as_the_model():
     # the dark walker at 10 fps: caught with two frames of approach, missed with three
     base = preset("robust")

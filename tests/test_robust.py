@@ -523,6 +523,31 @@ def test_an_object_the_frame_s_edge_cuts_is_not_judged_on_its_fit_against_a_rece
     assert _first(ruled) > _first(unruled)
 
 
+def test_a_car_overtaking_into_view_at_the_frame_s_edge_does_not_pass_on_its_fit_against_the_scene():
+    # real nc03 (no collision): a car overtaking us enters large at the frame's right edge.
+    # At the limits its held-out fold takes, its track passed the partial-overlap regime in
+    # frame 87 on its fit against a scene read as receding (the box's own fit 0.016, counted
+    # 0 at the edge; offset 2.04) and the model warned from frame 90; with the rule, quiet
+    from asnn.io.video import open_video
+    from shared_data import SHARED
+
+    folder = SHARED / "data" / "real"
+    if not (folder / "nc03.mp4").exists():
+        pytest.skip(f"{folder / 'nc03.mp4'} is absent")
+    label = next(entry for entry in json.loads((folder / "labels.json").read_text())
+                 if entry["file"] == "nc03.mp4")
+    fold = dict(approach_frames=2, overlap_tau_max=0.8, scene_tolerance=0.0,
+                overlap_offset_max=2.5)
+
+    def warned(**overrides):
+        model = ASNN(preset("robust", **fold, **overrides))
+        return any(model.step(frame, i / label["fps"]).collision
+                   for i, frame in enumerate(open_video(folder / "nc03.mp4")))
+
+    assert not warned()
+    assert warned(**NO_EDGE_RULE)
+
+
 @pytest.mark.parametrize("case", ["walk-light-c0.4-gait", "walk-dark-c0.4-gait"])
 def test_a_walker_seen_in_fragments_warns_by_region_persistence(case):
     # its gait's sway splits its outline: its parts pass the approach test as different tracks
