@@ -235,8 +235,8 @@ class ASNNParams(BaseModel):
                                       description="time constant, seconds, of the light "
                                       "adaptation's smoothing")
     contrast_light_spread: float | None = Field(
-        None, gt=1.0, description="upper decile over median of the view above which it counts "
-        "as lit in pools (a night) and keeps the fixed constant; None: no such gate")
+        None, gt=1.0, le=100.0, description="upper decile over median of the view above which "
+        "it counts as lit in pools (a night) and keeps the fixed constant; None: no such gate")
     contrast_pool: float = Field(8.0, gt=0, le=MAX_KERNEL / 4,
                                  description="sigma of the pooling Gaussian, px")
     contrast_scale: float = Field(0.05, gt=0, description="s, the output scale")
@@ -400,9 +400,10 @@ class ASNNParams(BaseModel):
         "partial_overlap")
     receding_edge_rule: bool = Field(
         False, description="the fit against a receding scene counts 0 while the frame's edge "
-        "cuts the object, as its box's own fit does "
+        "cuts the object, as its box's own fit does (and enters the track's smoothed own_fit so) "
         "(asnn.approach.stage.ApproachStage._measure_against_scene): a car overtaking into view "
-        "at the frame's side is then measured on its visible part only; inert without "
+        "at the frame's side does not pass the partial-overlap regime on that fit; applied when "
+        "the fit is measured, so the held-out replay takes it as traced; inert without "
         "receding_scene")
     tau_max: float = Field(1.5, gt=0, description="longest time to contact that warns, s")
     offset_max: float = Field(

@@ -129,7 +129,8 @@ class Track:
     own_fit : float or None
         The share of the box's change that the fit against the scene explains, smoothed over
         the same run; the model measures it only where the scene contracts
-        (``receding_scene``), and None elsewhere.
+        (``receding_scene``), and None elsewhere; with ``receding_edge_rule`` it is measured
+        as 0 while the frame's edge cuts the object (the 0 enters the smoothed value).
     layers : tuple of (share, ttc, offset), or None
         The motions its box held in the latest frame (:mod:`asnn.approach.motion_layers`): each
         one's share of the box's textured pixels, time to contact in seconds and offset (None unless
