@@ -8,14 +8,108 @@ import contextlib
 import pytest
 
 
+#: The test that runs ``asnn demo`` on an empty numba cache (tests/test_service.py), whose
+#: command the session starts first (:func:`fresh_install_demo`).
+FRESH_INSTALL_TEST = "test_demo_on_a_fresh_install_warns"
+
+
 @pytest.fixture(scope="session", autouse=True)
-def compiled_kernels():
+def compiled_kernels(request):
     """Compile the numba kernels once (numba caches them on disk) before any test starts worker
     processes: on a fresh checkout a worker's first frame would otherwise wait seconds for the
-    compiler, which time-bounded service tests mistake for a failure."""
+    compiler, which time-bounded service tests mistake for a failure.
+
+    Where the fresh-install demo's test is selected, its command starts first. On a cache that
+    holds none of the kernels yet (a fresh checkout, as in CI) it runs in that cache, and this
+    compile waits for it, since numba's cache takes one writer at a time: the default preset's
+    kernels, which its worker compiled, then load here instead of being compiled a second time.
+    On a cache that holds some, it runs in an empty cache of its own while the tests go on."""
     from asnn.warmup import compile_kernels
 
+    if any(getattr(item, "originalname", None) == FRESH_INSTALL_TEST
+           for item in request.session.items):
+        demo = request.getfixturevalue("fresh_install_demo")
+        if demo.in_the_session_cache:
+            demo.wait()
     compile_kernels()
+
+
+def _kernels_cached() -> bool:
+    """Whether numba's cache, where this session keeps it, holds any of asnn's kernels (an index
+    file in the place of one of the package's folders)."""
+    from pathlib import Path
+
+    import asnn
+    from asnn._jit import _cache_place
+
+    package = Path(asnn.__file__).parent
+    place = _cache_place()
+    folders = [package, *(p for p in package.glob("**/") if p.name != "__pycache__")]
+    return any(next(place(folder).glob("*.nbi"), None) is not None for folder in folders)
+
+
+class BackgroundCommand:
+    """An ``asnn`` command run in a process of its own while the session goes on, its output kept
+    in files (a pipe that nobody reads would stop it once full)."""
+
+    def __init__(self, args, env, folder, timeout):
+        import subprocess
+        import sys
+        import time
+
+        self.args, self.timeout, self.timed_out = args, timeout, False
+        self.deadline = time.monotonic() + timeout
+        self.stdout, self.stderr = folder / "stdout", folder / "stderr"
+        with open(self.stdout, "w") as out, open(self.stderr, "w") as err:
+            self.popen = subprocess.Popen([sys.executable, "-m", "cli.main", *args], env=env,
+                                          stdout=out, stderr=err)
+
+    def wait(self):
+        """Wait until it ends, or kill it ``timeout`` seconds after it started."""
+        import subprocess
+        import time
+
+        try:
+            self.popen.wait(timeout=max(self.deadline - time.monotonic(), 0.0))
+        except subprocess.TimeoutExpired:
+            self.timed_out = True
+            self.kill()
+
+    def result(self):
+        """The ended command, as ``subprocess.run(..., capture_output=True, text=True)`` gives
+        it, or its ``subprocess.TimeoutExpired``."""
+        import subprocess
+
+        self.wait()
+        if self.timed_out:
+            raise subprocess.TimeoutExpired(self.args, self.timeout)
+        return subprocess.CompletedProcess(self.args, self.popen.returncode,
+                                           self.stdout.read_text(), self.stderr.read_text())
+
+    def kill(self):
+        if self.popen.poll() is None:
+            self.popen.kill()
+        self.popen.wait()
+
+
+@pytest.fixture(scope="session")
+def fresh_install_demo(tmp_path_factory):
+    """README's first command on a new machine, ``asnn demo`` on a numba cache that holds none of
+    the kernels, started in the background (a :class:`BackgroundCommand`, killed at the end of
+    the session if it still runs): in the session's own cache where that holds none yet (its
+    ``in_the_session_cache``), else in an empty one of its own."""
+    import os
+
+    folder = tmp_path_factory.mktemp("fresh-install")
+    env = {**os.environ}
+    env.pop("RUST_LOG", None)
+    in_the_session_cache = not _kernels_cached()
+    if not in_the_session_cache:
+        env["NUMBA_CACHE_DIR"] = str(folder / "numba-cache")
+    demo = BackgroundCommand(["demo"], env, folder, timeout=600)
+    demo.in_the_session_cache = in_the_session_cache
+    yield demo
+    demo.kill()
 
 
 @pytest.fixture

@@ -644,17 +644,12 @@ def test_tune_process_shortens_the_switch_interval():
         cv2.setNumThreads(before[1])
 
 
-def test_demo_on_a_fresh_install_warns(tmp_path):
+def test_demo_on_a_fresh_install_warns(fresh_install_demo):
     """README's first command on a new machine: nothing compiled yet (an empty numba cache).
-    The worker compiles before it takes frames, so the looming clip still raises warnings."""
-    import os
-    import subprocess
-    import sys
-
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba-cache")}
-    env.pop("RUST_LOG", None)
-    proc = subprocess.run([sys.executable, "-m", "cli.main", "demo"], env=env, timeout=600,
-                          capture_output=True, text=True)
+    The worker compiles before it takes frames, so the looming clip still raises warnings.
+    The command starts first in the session, in the session's own cache while that is still
+    empty (tests/conftest.py, fresh_install_demo)."""
+    proc = fresh_install_demo.result()
     assert proc.returncode == 0, proc.stderr[-2000:]
     summary = proc.stdout.strip().splitlines()[-1]  # "60 frames published, ..., N warnings received"
     assert summary.endswith("warnings received"), summary
