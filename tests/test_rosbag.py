@@ -3,12 +3,15 @@ same frames from a lossless video, eval and camera on bags, and every kind of ba
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import json
 import os
 import subprocess
 import sys
 import time
+import warnings
 
 import cv2
 import numpy as np
@@ -69,11 +72,32 @@ def looming():
     return make_scene("looming", size=(96, 96), start=5, stop=30)
 
 
-def detect_records(*args) -> list[dict]:
-    proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", *map(str, args),
-                           "--jsonl", "-"], capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    return [json.loads(line) for line in proc.stdout.splitlines()]
+def run_detect(*args, process: bool = False) -> tuple[int, str, str]:
+    """``asnn detect ARGS``: its exit status, standard output and standard error.
+
+    Run in this process (``cli.main.main``) unless ``process``: the bag is read, and its
+    errors said, by the same code either way, without a new interpreter's start-up (a second or
+    more each, for some fifty runs in this module); a few tests run ``asnn detect`` as its own
+    process, as a user does. A warning raised here is added to the standard error, where a
+    process prints it."""
+    args = ["detect", *map(str, args)]
+    if process:
+        proc = subprocess.run([sys.executable, "-m", "cli.main", *args], capture_output=True,
+                              text=True, timeout=300)
+        return proc.returncode, proc.stdout, proc.stderr
+    out, err = io.StringIO(), io.StringIO()
+    with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stdout(out), \
+            contextlib.redirect_stderr(err):
+        code = main(args)
+    printed = "".join(warnings.formatwarning(w.message, w.category, w.filename, w.lineno, w.line)
+                      for w in caught)
+    return code, out.getvalue(), err.getvalue() + printed
+
+
+def detect_records(*args, process: bool = False) -> list[dict]:
+    code, out, err = run_detect(*args, "--jsonl", "-", process=process)
+    assert code == 0, err
+    return [json.loads(line) for line in out.splitlines()]
 
 
 def write_ffv1(frames, path, fps=20.0):
@@ -236,7 +260,7 @@ def test_detect_on_a_mono8_bag_equals_detect_on_the_same_frames_in_a_lossless_vi
     bag = write_messages(tmp_path / "run.mcap", {"/camera/image_raw": (rosbag.IMAGE, [
         raw_message(f, "mono8", i) for i, f in enumerate(frames)])})
     video = write_ffv1(frames, tmp_path / "run.avi")
-    from_bag, from_video = detect_records(bag), detect_records(video)
+    from_bag, from_video = detect_records(bag, process=True), detect_records(video, process=True)
     assert len(from_bag) == len(frames) and from_bag == from_video
     assert any(r["collision"] and r["targets"] for r in from_bag)  # the comparison is not empty
 
@@ -1104,12 +1128,11 @@ def test_images_are_decoded_by_the_types_own_definition_not_the_bags_text(tmp_pa
     assert len(frames) == 5 and all(np.array_equal(a, b) for a, b in zip(frames, looming.frames))
 
 
-def detect_fails(*args) -> str:
-    proc = subprocess.run([sys.executable, "-m", "cli.main", "detect", *map(str, args)],
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+def detect_fails(*args, process: bool = False) -> str:
+    code, _, err = run_detect(*args, process=process)
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
     return lines[0]
 
 
@@ -1123,7 +1146,7 @@ def two_topics(tmp_path_factory, looming):
 
 
 def test_several_image_topics_without_a_topic_is_an_error_listing_them(two_topics):
-    line = detect_fails(two_topics)
+    line = detect_fails(two_topics, process=True)
     assert "/front/image" in line and "/rear/image" in line and "--topic" in line
     assert "/chatter" not in line
 
