@@ -118,7 +118,7 @@ def test_a_track_box_outside_the_frame_is_measured_as_empty():
     direction inhibition, once crashed the scene-relative measurement this way)."""
     from asnn.approach.stage import _pixel_box
     from asnn.model import ASNN
-    from asnn.stimuli.suite import make_case
+    from cached_cases import make_case
 
     assert _pixel_box((-198.3, 17.9, -158.0, 63.1), W, H) == (0, 17, 0, 64)
     assert _pixel_box((150.5, -4.0, 171.2, 9.5), W, H) == (150, 0, 160, 10)

@@ -37,7 +37,7 @@ def test_bench_times_a_case_of_the_suite_at_its_own_size(capsys, monkeypatch):
                  "--no-straightforward", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["scene"] == "drive-day-brake"
-    from asnn.stimuli.suite import make_case
+    from cached_cases import make_case
 
     frames = make_case("drive-day-brake").frames
     size = f"{frames.shape[2]}x{frames.shape[1]}"

@@ -11,7 +11,7 @@ from asnn import ASNN, preset
 from asnn.evaluation import gate_replay, heldout, scoring
 from asnn.evaluation.runs import ABLATIONS, at_rate, parse_detector, parse_detectors
 from asnn.io.video import write_video
-from asnn.stimuli.suite import make_case
+from cached_cases import make_case
 from cli.main import main
 
 CASES = ("loom-dark-c0.6-d6-center", "nearmiss-disk-dark-right", "course-disk-dark-right",

@@ -8,7 +8,7 @@ import pytest
 from asnn import ASNN
 from asnn.light import LightAdaptation
 from asnn.params import preset_from_spec
-from asnn.stimuli.suite import make_case
+from cached_cases import make_case
 
 FIXED = "robust/contrast_light=none/contrast_light_spread=none"  # the default before the stage
 

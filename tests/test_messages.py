@@ -397,7 +397,7 @@ def test_a_config_zenoh_refuses_is_named_without_the_rust_source_location(tmp_pa
 def test_tracked_target_fields_cross_the_wire_and_are_left_out_where_unset():
     import msgpack
 
-    from asnn.stimuli.suite import make_case
+    from cached_cases import make_case
 
     scene = make_case("loom-dark-c0.6-d12-topleft")
     frame = Frame.from_image(scene.frames[0], seq=0, stamp=0.0)

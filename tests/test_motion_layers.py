@@ -90,7 +90,7 @@ def test_compile_kernels_loads_the_motion_layers_kernel_before_a_drive_needs_it(
     from asnn import ASNN
     from asnn.warmup import compile_kernels
     from asnn.approach.motion_layers import _best_hypothesis
-    from asnn.stimuli.suite import make_case
+    from cached_cases import make_case
 
     # in a fresh process (here other tests may have compiled it already)
     loaded = subprocess.run(

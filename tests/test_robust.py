@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from asnn import ASNN, FrameError, preset
-from asnn.stimuli.suite import make_case
+from cached_cases import make_case
 
 OFF_LED_ONLY = dict(w1_on=0.0, w2_off=0.0)  # the published variant's OFF-led map alone
 NO_GATE = dict(approach_gate=False)

@@ -7,7 +7,7 @@ import pytest
 from asnn import ASNN, preset
 from asnn.approach.looming import region_expansion
 from asnn.stabilisation import _accepted, _on_edge, background_shift, search_radius, shift_image
-from asnn.stimuli.suite import make_case
+from cached_cases import make_case
 from imageutil import texture, warp
 
 

@@ -12,7 +12,8 @@ from asnn.evaluation import scoring, suite
 from asnn.evaluation.labels import load_labels
 from asnn.evaluation.runs import at_rate, parse_detector, parse_detectors, run_detector
 from asnn.io.video import open_video
-from asnn.stimuli.suite import EXTRA_CASES, make_case
+from asnn.stimuli.suite import EXTRA_CASES
+from cached_cases import make_case
 from cli.main import main
 from service.camera import open_source
 
