@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 import pytest
 
+from asnn.evaluation.pool import run_tasks
 from asnn.stimuli import make_scene, render
 from asnn.stimuli.driving import LANE_WIDTH, Vehicle, driving_scene, path_pose, road_coordinates
 from asnn.stimuli.effects import Pan, Shake, Step
@@ -20,12 +21,23 @@ from asnn.stimuli.suite import (EXTRA_CASES, EXTRA_GROUPS, GROUPS, SUITE_CASES, 
 from asnn.stimuli.surface import corridor_scene, surface_scene
 
 CENTER = (79.5, 59.5)  # of a 160x120 frame
+# processes that render the cases for the module's fixtures (rendering them is most of the
+# module's time, and each case is rendered on its own)
+RENDER_JOBS = 2
+
+
+def _each_case(function, names):
+    """``{name: function(name)}`` for every case name in their order, computed in RENDER_JOBS
+    processes."""
+    names = list(names)
+    results = dict(run_tasks(function, [(name,) for name in names], RENDER_JOBS))
+    return {name: results[index] for index, name in enumerate(names)}
 
 
 @pytest.fixture(scope="module")
 def suite():
     """Every case of the suite, generated once."""
-    return {name: make_case(name) for name in SUITE_CASES}
+    return _each_case(make_case, SUITE_CASES)
 
 
 # --------------------------------------------------------------------------- drawing
@@ -558,19 +570,21 @@ def test_rain_streaks_are_laid_over_the_frame_at_their_level():
         assert value == 230.0 or (out != value).mean() > 0.01
 
 
+def _extra_label(name):
+    """Extra case ``name`` rendered, kept as its labels and frame count (not its frames)."""
+    scene = make_case(name)
+    return SimpleNamespace(
+        category=scene.category, collision=scene.collision, fps=scene.fps,
+        onset_frame=scene.onset_frame, contact_frame=scene.contact_frame,
+        target_size=scene.target_size, ttc=scene.ttc, frames=len(scene.frames),
+        height=scene.frames.shape[1])
+
+
 @pytest.fixture(scope="module")
 def extra_labels():
     """Every extra case rendered once, kept as its labels and frame count (not its frames):
     the extra cases' tests read them, and rendering them all takes about a minute."""
-    labels = {}
-    for name in EXTRA_CASES:
-        scene = make_case(name)
-        labels[name] = SimpleNamespace(
-            category=scene.category, collision=scene.collision, fps=scene.fps,
-            onset_frame=scene.onset_frame, contact_frame=scene.contact_frame,
-            target_size=scene.target_size, ttc=scene.ttc, frames=len(scene.frames),
-            height=scene.frames.shape[1])
-    return labels
+    return _each_case(_extra_label, EXTRA_CASES)
 
 
 def test_the_extra_drives_stay_outside_the_suite_and_pair_with_their_twins(extra_labels):
