@@ -440,9 +440,12 @@ def test_label_flags_clips_asnn_eval_cannot_score_as_they_are(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("text, says", [
-    ("[" * 100000 + "]" * 100000, "labels.json: not JSON (nested too deeply)"),
-    ('[{"fps": ' + "9" * 5000 + "}]", "labels.json: not JSON this reads (Exceeds the limit"),
-    (" " * (64 << 20) + "[]", "labels.json: larger than 64 MiB"),
+    # named: a test's id made of its text (64 MiB) took seconds of pytest's own time
+    pytest.param("[" * 100000 + "]" * 100000, "labels.json: not JSON (nested too deeply)",
+                 id="nested-too-deeply"),
+    pytest.param('[{"fps": ' + "9" * 5000 + "}]",
+                 "labels.json: not JSON this reads (Exceeds the limit", id="a-5000-digit-number"),
+    pytest.param(" " * (64 << 20) + "[]", "labels.json: larger than 64 MiB", id="64-MiB"),
     # accepted, then the evaluation stopped once it had run (NaN), or a rewrite lost a value
     ('[{"file": "a.mp4", "fps": 20.0, "note": NaN}]', "labels.json: NaN is not a JSON number"),
     ('[{"file": "a.mp4", "fps": 1e400}]', "labels.json: 1e400 is beyond a float's range"),
