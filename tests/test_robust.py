@@ -58,6 +58,20 @@ def _quiet(responses):
     return _first(responses) is None
 
 
+def _real_clip(name):
+    """A clip of ``../shared/data/real``: its frames (a fresh iterator each call) and its label;
+    the test is skipped where the clip is absent."""
+    from asnn.io.video import open_video
+    from shared_data import SHARED
+
+    folder = SHARED / "data" / "real"
+    if not (folder / name).exists():
+        pytest.skip(f"{folder / name} is absent")
+    label = next(entry for entry in json.loads((folder / "labels.json").read_text())
+                 if entry["file"] == name)
+    return (lambda: open_video(folder / name)), label
+
+
 def test_the_default_preset_is_robust():
     assert ASNN().params == preset("robust")
 
@@ -528,21 +542,14 @@ def test_a_car_overtaking_into_view_at_the_frame_s_edge_does_not_pass_on_its_fit
     # At the limits its held-out fold takes, its track passed the partial-overlap regime in
     # frame 87 on its fit against a scene read as receding (the box's own fit 0.016, counted
     # 0 at the edge; offset 2.04) and the model warned from frame 90; with the rule, quiet
-    from asnn.io.video import open_video
-    from shared_data import SHARED
-
-    folder = SHARED / "data" / "real"
-    if not (folder / "nc03.mp4").exists():
-        pytest.skip(f"{folder / 'nc03.mp4'} is absent")
-    label = next(entry for entry in json.loads((folder / "labels.json").read_text())
-                 if entry["file"] == "nc03.mp4")
+    frames, label = _real_clip("nc03.mp4")
     fold = dict(approach_frames=2, overlap_tau_max=0.8, scene_tolerance=0.0,
                 overlap_offset_max=2.5)
 
     def warned(**overrides):
         model = ASNN(preset("robust", **fold, **overrides))
         return any(model.step(frame, i / label["fps"]).collision
-                   for i, frame in enumerate(open_video(folder / "nc03.mp4")))
+                   for i, frame in enumerate(frames()))
 
     assert not warned()
     assert warned(**NO_EDGE_RULE)
@@ -609,18 +616,12 @@ def test_a_large_track_over_a_wet_roads_reflections_does_not_inherit_their_persi
     # fixed constant of the gain control, as it was chosen: the light adaptation alone keeps
     # that early warning away (the first warning from any overlap is then the hit's, frame 81)
     from asnn.evaluation.perturb import perturb_frame
-    from asnn.io.video import open_video
-    from shared_data import SHARED
 
-    folder = SHARED / "data" / "real"
-    if not (folder / "c06.mp4").exists():
-        pytest.skip(f"{folder / 'c06.mp4'} is absent")
-    label = next(entry for entry in json.loads((folder / "labels.json").read_text())
-                 if entry["file"] == "c06.mp4")
+    frames, label = _real_clip("c06.mp4")
 
     def first_warning(**overrides):
         model = ASNN(preset("robust", **overrides))
-        for i, frame in enumerate(open_video(folder / "c06.mp4")):
+        for i, frame in enumerate(frames()):
             if model.step(perturb_frame(frame, "jpeg90", i), i / label["fps"]).collision:
                 return i
         return None
