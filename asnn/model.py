@@ -30,7 +30,7 @@ from collections.abc import Iterable, Iterator
 import cv2
 import numpy as np
 
-from . import _fast, _parallel, brightness, light, retina
+from . import _fast, _parallel, brightness, light, retina, summation
 from .approach import ApproachStage, FramePair, frame_pixel
 from .errors import TimingWarning, _warn_at_caller
 from .frames import LEVELS, FrameError, check_frame, frame_time, luma, to_luminance
@@ -294,6 +294,9 @@ class ASNN:
                        else light.LightAdaptation(p.contrast_gain, p.contrast_light,
                                                   p.contrast_light_floor, p.contrast_light_tau,
                                                   p.contrast_light_spread))
+        self._summation = (None if p.noise_summation is None or not p.input_blur
+                           or self._light is None
+                           else summation.NoiseSummation(p.noise_summation))
         self._semi_saturation = p.contrast_gain  # the gain control's c for the frame stepped
         self.history: deque[np.ndarray] = deque(maxlen=self.params.n_p)
         self.stages_on: np.ndarray | None = None
@@ -353,7 +356,10 @@ class ASNN:
                                  interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
         if lum.dtype != self.dtype:
             lum = lum.astype(self.dtype)
-        if p.input_blur:
+        if self._summation is not None:  # the fixed blur, or a wider one in a dim, noisy view
+            lum = self._summation.blurred(
+                lum, dim=self._semi_saturation < p.contrast_gain)
+        elif p.input_blur:
             lum = cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
         return lum
 
@@ -497,6 +503,8 @@ class ASNN:
             self.params = type(params).model_validate(vars(params))
         if "_semi_saturation" not in state:  # pickled before the light adaptation: fixed c
             self._light, self._semi_saturation = None, self.params.contrast_gain
+        if "_summation" not in state:  # pickled before the noise summation: the fixed blur
+            self._summation = None
 
     def stream(self, frames: Iterable[tuple[float | None, np.ndarray]]) -> Iterator[Response]:
         """The responses to ``(t, frame)`` pairs, in order: ``step(frame, t)`` for each.

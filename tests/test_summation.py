@@ -1,0 +1,102 @@
+"""The spatial summation that widens with the view's noise in low light (``noise_summation``,
+in the default preset since 2026-12-01: asnn.summation)."""
+import pickle
+
+import cv2
+import numpy as np
+import pytest
+
+from asnn import ASNN
+from asnn.params import preset_from_spec
+from asnn.summation import MAX_SIGMA, NoiseSummation, noise_level, summation_sigma
+from cached_cases import make_case
+
+LEVEL = 1.0 / 255.0
+
+
+def _view(sigma_levels, seed=0, shape=(240, 320)):
+    """A dim view with edges and a gradient (what the measure must not read as noise), plus
+    white noise of ``sigma_levels`` gray levels."""
+    h, w = shape
+    view = np.tile(np.linspace(0.05, 0.25, w), (h, 1))
+    view[h // 3: 2 * h // 3, w // 4: w // 2] = 0.02  # a dark object's edges
+    rng = np.random.default_rng(seed)
+    return view + rng.normal(0.0, sigma_levels * LEVEL, shape)
+
+
+@pytest.mark.parametrize("sigma", [0.0, 1.0, 4.0, 10.0])
+def test_the_noise_is_measured_on_the_frame_and_not_its_edges(sigma):
+    assert noise_level(_view(sigma)) / LEVEL == pytest.approx(sigma, abs=0.15 + 0.08 * sigma)
+
+
+def test_the_sigma_leaves_the_noise_at_its_target():
+    noise = np.random.default_rng(1).normal(0.0, 4.0, (400, 400))
+    sigma = summation_sigma(4.0, 1.0)
+    blurred = cv2.GaussianBlur(noise, (0, 0), sigma)[20:-20, 20:-20]
+    assert blurred.std() == pytest.approx(1.0, rel=0.15)
+
+
+def _fixed(lum):
+    return cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
+
+
+def test_a_lit_or_quiet_view_keeps_the_fixed_blur():
+    noisy, quiet = _view(6.0), _view(0.0)
+    assert np.array_equal(NoiseSummation(1.0).blurred(noisy, dim=False), _fixed(noisy))
+    # 3 gray levels of noise ask for less than the fixed blur gives at the target of 1
+    for view in (quiet, _view(3.0)):
+        assert np.array_equal(NoiseSummation(1.0).blurred(view, dim=True), _fixed(view))
+
+
+def test_a_dim_noisy_view_is_blurred_wider_down_to_its_target():
+    summation = NoiseSummation(1.0)
+    frames = [_view(6.0, seed) for seed in range(6)]
+    flat = [f - _view(0.0) for f in frames]  # the noise alone, to measure what is left of it
+    for frame, noise in zip(frames, flat):
+        out = summation.blurred(frame, dim=True)
+    assert summation.noise == pytest.approx(6.0, rel=0.15)
+    left = cv2.GaussianBlur(noise, (0, 0), summation_sigma(summation.noise, 1.0))
+    assert left[20:-20, 20:-20].std() / LEVEL == pytest.approx(1.0, rel=0.2)
+    assert not np.array_equal(out, _fixed(frame))
+
+
+def test_the_blur_is_bounded_whatever_the_noise():
+    # a frame of noise alone asks for a sigma of about 20 px: the kernel stays MAX_SIGMA's
+    frame = np.random.default_rng(2).uniform(0.0, 1.0, (120, 160))
+    summation = NoiseSummation(1.0)
+    out = summation.blurred(frame, dim=True)
+    assert summation_sigma(summation.noise, 1.0) > 4 * MAX_SIGMA
+    expected = cv2.GaussianBlur(frame, (0, 0), MAX_SIGMA, borderType=cv2.BORDER_REFLECT_101)
+    assert np.array_equal(out, expected)
+
+
+def test_a_frame_too_small_to_measure_keeps_the_fixed_blur():
+    frame = np.full((2, 40), 0.1)
+    assert np.array_equal(NoiseSummation(1.0).blurred(frame, dim=True), _fixed(frame))
+
+
+def test_a_noiseless_dusk_stream_steps_as_without_the_stage():
+    # generated frames measure no noise: frame for frame what the fixed blur gives
+    frames = make_case("extra-dk2-white-van-stands-in-lane-10fps").frames[:20]
+    with_stage, without = (ASNN(preset_from_spec(spec)) for spec in
+                           ("robust/noise_summation=1", "robust/noise_summation=none"))
+    assert with_stage._summation is not None and without._summation is None
+    for index, frame in enumerate(frames):
+        a, b = with_stage.step(frame, index / 10), without.step(frame, index / 10)
+        assert a.u == b.u and a.spikes == b.spikes
+    assert with_stage._semi_saturation < with_stage.params.contrast_gain  # it is dim
+
+
+def test_a_model_pickled_before_the_stage_keeps_the_fixed_blur():
+    frames = make_case("extra-dk2-white-van-stands-in-lane-10fps").frames[:6]
+    model = ASNN(preset_from_spec("robust/noise_summation=none"))
+    for frame in frames[:3]:
+        model.step(frame)
+    state = pickle.loads(pickle.dumps(model.__getstate__()))
+    del state["_summation"]
+    del vars(state["params"])["noise_summation"]
+    old = ASNN.__new__(ASNN)
+    old.__setstate__(state)
+    assert old._summation is None and old.params.noise_summation is None
+    for frame in frames[3:]:
+        assert old.step(frame).u == model.step(frame).u
