@@ -657,7 +657,7 @@ PRESETS["robust"] = _derived(
     skip_repeats=True, max_step_rate=30.0, global_gain=0.5,
     stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
     rim_motion_max=8.0,
-    contrast_gain=0.005, contrast_light=0.3, contrast_light_spread=3.0,
+    contrast_gain=0.005, contrast_light=0.3, contrast_light_spread=3.0, noise_summation=1.0,
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,

@@ -34,6 +34,8 @@ ABLATIONS = {
     "no repeated-frame hold": "asnn:robust/skip_repeats=false",
     "every frame of a fast camera stepped (no frame-rate ceiling)": (
         "asnn:robust/max_step_rate=none"),
+    "the input blur fixed in a dim, noisy view (no summation by the noise)": (
+        "asnn:robust/noise_summation=none"),
     "no global brightness compensation (flicker, exposure steps)": (
         "asnn:robust/global_gain=none"),
     "no background stabilisation": "asnn:robust/stabilise=false",
