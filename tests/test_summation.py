@@ -42,7 +42,9 @@ def _fixed(lum):
 
 def test_a_lit_or_quiet_view_keeps_the_fixed_blur():
     noisy, quiet = _view(6.0), _view(0.0)
-    assert np.array_equal(NoiseSummation(1.0).blurred(noisy, dim=False), _fixed(noisy))
+    lit = NoiseSummation(1.0)
+    assert np.array_equal(lit.blurred(noisy, dim=False), _fixed(noisy))
+    assert lit.noise is None  # a lit view is not measured: no cost where the blur stays fixed
     # 3 gray levels of noise ask for less than the fixed blur gives at the target of 1
     for view in (quiet, _view(3.0)):
         assert np.array_equal(NoiseSummation(1.0).blurred(view, dim=True), _fixed(view))
