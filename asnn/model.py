@@ -358,7 +358,7 @@ class ASNN:
             lum = lum.astype(self.dtype)
         if self._summation is not None:  # the fixed blur, or a wider one in a dim, noisy view
             lum = self._summation.blurred(
-                lum, dim=self._semi_saturation < p.contrast_gain)
+                lum, dim=self._semi_saturation < summation.DIM * p.contrast_gain)
         elif p.input_blur:
             lum = cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
         return lum

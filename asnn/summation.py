@@ -9,7 +9,7 @@ in single frames far apart and the persistence it needs is never met (the dusk s
 gray levels of noise lost 8 of their 10 hits; docs/design-notes.md, "A dim view's noise"). The
 retina pools over a wider field as the light falls [1]_, which averages noise at the cost of
 detail. Here the blur widens only in a view the light adaptation reads as dim
-(:mod:`asnn.light`: ``c`` below its fixed value), and only as far as the measured noise asks:
+(:mod:`asnn.light`: ``c`` below ``DIM`` of its fixed value), and only as far as the measured noise asks:
 a Gaussian of ``sigma = noise / (2 sqrt(pi) target)`` leaves white noise of ``noise`` gray
 levels at about ``target`` (its gain on white noise is ``1 / (2 sqrt(pi) sigma)``), used where
 that is wider than the fixed blur (and at most ``MAX_SIGMA``). The noise is measured on the
@@ -53,6 +53,11 @@ _NOISE_PER_MEDIAN = 1.0 / (6.0 * 0.6745)
 # one: about five frames, so that the blur does not change from frame to frame with the measure
 FIXED_SIGMA = 1.0
 SMOOTHING = 0.2
+# a view is dim while the light adaptation holds c below this share of its fixed value: its
+# smoothing only approaches the fixed value after a dim spell (equal to it once the exponential
+# rounds to 1, some 18 s at its 0.5 s), and a view lit again should have its fixed blur back
+# soon (from a third of the light, in 2.3 s)
+DIM = 0.99
 # the widest blur: a frame noisier than this asks for (14 gray levels at the default's target)
 # is mostly noise, and the kernel a wider sigma takes would grow with it
 MAX_SIGMA = 4.0

@@ -105,3 +105,21 @@ def test_a_model_pickled_before_the_stage_keeps_the_fixed_blur():
     assert old._summation is None and old.params.noise_summation is None
     for frame in frames[3:]:
         assert old.step(frame).u == model.step(frame).u
+
+
+def test_a_view_lit_again_has_its_fixed_blur_back_within_seconds():
+    # the light adaptation's smoothing only approaches the fixed constant (equal to it some
+    # 18 s after a dim spell): the view counts as dim only below DIM of it
+    from asnn import summation
+
+    rng = np.random.default_rng(3)
+    model = ASNN(preset_from_spec("robust"))
+    c0 = model.params.contrast_gain
+    for k in range(40):  # 2 s at 20 fps, a still view at a third of the light, noisy
+        model.step(np.clip(25 + rng.normal(0, 6, (120, 160)), 0, 255).astype(np.uint8), k / 20)
+    assert model._semi_saturation < summation.DIM * c0
+    dim = []
+    for k in range(40, 120):  # 4 s lit
+        model.step(np.clip(128 + rng.normal(0, 6, (120, 160)), 0, 255).astype(np.uint8), k / 20)
+        dim.append(model._semi_saturation < summation.DIM * c0)
+    assert not any(dim[60:]) and model._semi_saturation < c0  # back within 3 s, c not yet c0
