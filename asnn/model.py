@@ -360,7 +360,7 @@ class ASNN:
             lum = self._summation.blurred(
                 lum, dim=self._semi_saturation < summation.DIM * p.contrast_gain)
         elif p.input_blur:
-            lum = cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
+            lum = summation.fixed_blur(lum)
         return lum
 
     def _retina_size(self, h: int, w: int) -> tuple[int, int]:

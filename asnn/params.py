@@ -214,10 +214,11 @@ class ASNNParams(BaseModel):
     )
     noise_summation: float | None = Field(
         None, gt=0, le=50.0, description="spatial summation in low light: in a view the light "
-        "adaptation reads as dim (contrast_light; c below 0.99 of its fixed value), the input blur widened to a Gaussian that "
-        "leaves the frame's measured white noise at about this many gray levels, where that is "
-        "wider than input_blur's (asnn.summation.NoiseSummation); inert without input_blur and "
-        "contrast_light. None: the fixed blur")
+        "adaptation reads as dim (contrast_light; c below 0.99 of its fixed value), the input "
+        "blur widened to a Gaussian that leaves the frame's measured white noise at about this "
+        "many gray levels, where that is wider than input_blur's "
+        "(asnn.summation.NoiseSummation); inert without input_blur and contrast_light. None: "
+        "the fixed blur")
     n_p: int = Field(0, ge=0, le=16, description="N_p: frames of photoreceptor history (paper eq. 1)")
     p_u: float = Field(1.0, description="u in p_i = 1/(1+exp(u i))")
 

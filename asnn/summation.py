@@ -9,10 +9,11 @@ in single frames far apart and the persistence it needs is never met (the dusk s
 gray levels of noise lost 8 of their 10 hits; docs/design-notes.md, "A dim view's noise"). The
 retina pools over a wider field as the light falls [1]_, which averages noise at the cost of
 detail. Here the blur widens only in a view the light adaptation reads as dim
-(:mod:`asnn.light`: ``c`` below ``DIM`` of its fixed value), and only as far as the measured noise asks:
-a Gaussian of ``sigma = noise / (2 sqrt(pi) target)`` leaves white noise of ``noise`` gray
-levels at about ``target`` (its gain on white noise is ``1 / (2 sqrt(pi) sigma)``), used where
-that is wider than the fixed blur (and at most ``MAX_SIGMA``). The noise is measured on the
+(:mod:`asnn.light`: ``c`` below ``DIM`` of its fixed value), and only as far as the measured
+noise asks: a Gaussian of ``sigma = noise / (2 sqrt(pi) target)`` leaves white noise of
+``noise`` gray levels at about ``target`` (its gain on white noise is
+``1 / (2 sqrt(pi) sigma)``), used where that is wider than the fixed blur (and at most
+``MAX_SIGMA``). The noise is measured on the
 frame itself [2]_: the 3x3 mask below cancels any plane and any quadratic along a row or
 column, so what it leaves is noise and fine texture; the median of its magnitude over sampled
 places is robust to the edges. A view with less noise than ``2 sqrt(pi) target`` gray levels
@@ -36,7 +37,7 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["NoiseSummation", "noise_level", "summation_sigma"]
+__all__ = ["NoiseSummation", "fixed_blur", "noise_level", "summation_sigma"]
 
 # the places the noise is measured at: this many, at fixed places drawn at random inside the
 # frame's border (the mask needs each place's eight neighbours), so that the cost does not
@@ -101,6 +102,11 @@ def noise_level(lum: np.ndarray) -> float:
     return median * _NOISE_PER_MEDIAN
 
 
+def fixed_blur(lum: np.ndarray) -> np.ndarray:
+    """The published implementation's input blur (``input_blur``): a 3x3 Gaussian of sigma 1."""
+    return cv2.GaussianBlur(lum, (3, 3), FIXED_SIGMA, borderType=cv2.BORDER_REFLECT_101)
+
+
 def summation_sigma(noise: float, target: float) -> float:
     """The sigma (px) of the Gaussian that leaves white noise of standard deviation ``noise``
     at ``target`` (same units): ``noise / (2 sqrt(pi) target)``."""
@@ -136,7 +142,8 @@ class NoiseSummation:
         lum : ndarray (H, W)
             Luminance in [0, 1].
         dim : bool
-            Whether the light adaptation reads the view as dim (its ``c`` below the fixed one).
+            Whether the light adaptation reads the view as dim (its ``c`` below ``DIM`` of the
+            fixed one).
 
         Returns
         -------
@@ -150,4 +157,4 @@ class NoiseSummation:
         if dim and sigma > FIXED_SIGMA:
             return cv2.GaussianBlur(lum, (0, 0), min(sigma, MAX_SIGMA),
                                     borderType=cv2.BORDER_REFLECT_101)
-        return cv2.GaussianBlur(lum, (3, 3), FIXED_SIGMA, borderType=cv2.BORDER_REFLECT_101)
+        return fixed_blur(lum)
