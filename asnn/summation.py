@@ -108,8 +108,23 @@ def fixed_blur(lum: np.ndarray) -> np.ndarray:
 
 
 def summation_sigma(noise: float, target: float) -> float:
-    """The sigma (px) of the Gaussian that leaves white noise of standard deviation ``noise``
-    at ``target`` (same units): ``noise / (2 sqrt(pi) target)``."""
+    """The sigma of the Gaussian blur that leaves white noise at ``target``.
+
+    A Gaussian of sigma ``s`` px scales white noise's standard deviation by
+    ``1 / (2 sqrt(pi) s)``, the root of the sum of its squared weights.
+
+    Parameters
+    ----------
+    noise : float
+        The noise's standard deviation.
+    target : float
+        The standard deviation to leave, in ``noise``'s units.
+
+    Returns
+    -------
+    float
+        ``noise / (2 sqrt(pi) target)``, px.
+    """
     return noise / (2.0 * math.sqrt(math.pi) * target)
 
 
@@ -123,6 +138,8 @@ class NoiseSummation:
 
     Attributes
     ----------
+    target : float
+        As given.
     noise : float or None
         The smoothed noise measure, gray levels; None before the first frame.
     """
