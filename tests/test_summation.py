@@ -123,3 +123,24 @@ def test_a_view_lit_again_has_its_fixed_blur_back_within_seconds():
         model.step(np.clip(128 + rng.normal(0, 6, (120, 160)), 0, 255).astype(np.uint8), k / 20)
         dim.append(model._semi_saturation < summation.DIM * c0)
     assert not any(dim[60:]) and model._semi_saturation < c0  # back within 3 s, c not yet c0
+
+
+def test_a_view_dimmed_into_noise_with_nothing_coming_stays_quiet():
+    # entering a tunnel or an underpass: the blur widens at once on the first frame the view
+    # reads as dim (sigma 1 -> about 2.3 here), a change of every edge in one frame; the
+    # retina must not read it as an object coming (nor the still props it blurs)
+    from asnn.stimuli.effects import Step
+    from asnn.stimuli.planar import Background, Prop, planar_scene
+
+    props = [Prop("disk", 40, 60, 10, 40), Prop("rect", 110, 50, 14, 60, 0.5),
+             Prop("disk", 80, 90, 6, 30)]
+    scene = planar_scene("none", frames=60, lighting=[Step(20, 0.25)], noise=8.0,
+                         background=Background(mean=110.0), props=props, seed=3)
+    model = ASNN(preset_from_spec("robust"))
+    sigmas, warned = [], []
+    for index, frame in enumerate(scene.frames):
+        warned.append(model.step(frame, index / scene.fps).collision)
+        stage = model._summation
+        sigmas.append(0.0 if stage.noise is None else summation_sigma(stage.noise, stage.target))
+    assert sigmas[19] == 0.0 and max(sigmas) > 2.0  # lit, then widened
+    assert not any(warned)
