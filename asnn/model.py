@@ -296,7 +296,8 @@ class ASNN:
                                                   p.contrast_light_spread))
         self._summation = (None if p.noise_summation is None or not p.input_blur
                            or self._light is None
-                           else summation.NoiseSummation(p.noise_summation))
+                           else summation.NoiseSummation(p.noise_summation,
+                                                         p.temporal_summation))
         self._semi_saturation = p.contrast_gain  # the gain control's c for the frame stepped
         self.history: deque[np.ndarray] = deque(maxlen=self.params.n_p)
         self.stages_on: np.ndarray | None = None
@@ -706,6 +707,9 @@ class ASNN:
             self._timed = 0
         self._stamp = stamp
         self.periods.append(elapsed)
+        if self._summation is not None:  # a dim, noisy view summed in time (after the repeats
+            # are held: a repeated frame is not a second look at the scene)
+            lum = self._summation.integrated(lum, elapsed)
         if p.global_gain is not None:
             lum = self._compensated(lum, elapsed)
         background = None

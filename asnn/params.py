@@ -219,6 +219,12 @@ class ASNNParams(BaseModel):
         "many gray levels, where that is wider than input_blur's "
         "(asnn.summation.NoiseSummation); inert without input_blur and contrast_light. None: "
         "the fixed blur")
+    temporal_summation: float | None = Field(
+        None, gt=0, le=10.0, description="temporal summation in low light: where noise_summation "
+        "widens the input blur, each pixel averaged over its frames with this time constant, "
+        "seconds, while its change stays within asnn.summation.CHANGE times the blurred noise "
+        "(a larger change, something moving, is taken at once) "
+        "(asnn.summation.NoiseSummation.integrated); inert without noise_summation. None: off")
     n_p: int = Field(0, ge=0, le=16, description="N_p: frames of photoreceptor history (paper eq. 1)")
     p_u: float = Field(1.0, description="u in p_i = 1/(1+exp(u i))")
 
@@ -659,6 +665,7 @@ PRESETS["robust"] = _derived(
     stabilise=True, stabilise_reach=1 / 64, stabilise_wider=2.0, rim_expansion=True,
     rim_motion_max=8.0,
     contrast_gain=0.005, contrast_light=0.3, contrast_light_spread=3.0, noise_summation=1.0,
+    temporal_summation=0.5,
     w1_on=1.0, w2_off=-0.3, w1_off=1.0, w2_on=-0.3,  # both polarities: OFF-led + ON-led maps
     gamma_a=0.003, gamma_d=0.002,  # on the contrast-normalised scale
     targets="objects", approach_gate=True, origin_seed=False,

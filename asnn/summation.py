@@ -1,6 +1,6 @@
-"""Spatial summation that widens with the view's noise in low light (this project; in the
-default preset since 2026-12-01 with ``noise_summation`` 1, off in the others:
-``ASNNParams.noise_summation``).
+"""Summation in low light: a blur that widens with the view's noise, and an average over time
+(this project; in the default preset since 2026-12-01 with ``noise_summation`` 1 and
+``temporal_summation`` 0.5 s, off in the others: ``ASNNParams``).
 
 The model blurs each frame before differencing it (``input_blur``: a 3x3 Gaussian of sigma 1,
 the published implementation's). A camera at dusk raises its gain, and its noise, a few gray
@@ -21,12 +21,28 @@ places is robust to the edges. A view with less noise than ``2 sqrt(pi) target``
 levels (their codec has smoothed the sensor's noise), and the suite's noisy cases (up to 10.4)
 are lit.
 
+Where the blur is widened, the frames are also summed in time (``temporal_summation``, in the
+default since 2026-12-01 with 0.5 s): each pixel is the running average of its frames with that
+time constant while its change from the average stays within the noise, and takes the new
+frame at once where the change is over ``CHANGE`` times the blurred noise (something moved or
+lit up). The dark-adapted retina sums over a longer time as well as a wider field [3]_; a fixed
+longer integration would delay every moving edge with it, so the average gives way to a change,
+as a video denoiser's recursive filter does where its gain grows with the frame's difference
+[4]_. A wider blur thins a moving edge's change about as much as the noise; an average over
+time in the still parts of the view leaves the change whole (docs/design-notes.md, "A dim
+view's noise, summed in time").
+
 References
 ----------
 .. [1] H. B. Barlow, R. Fitzhugh, S. W. Kuffler, "Change of organization in the receptive
    fields of the cat's retina during dark adaptation", J. Physiol. 137, 1957, pp. 338-354.
 .. [2] J. Immerkaer, "Fast noise variance estimation", Computer Vision and Image Understanding
    64, 1996, pp. 300-302.
+.. [3] H. B. Barlow, "Temporal and spatial summation in human vision at different background
+   intensities", J. Physiol. 141, 1958, pp. 337-350.
+.. [4] J. C. Brailean, R. P. Kleihorst, S. Efstratiadis, A. K. Katsaggelos, R. L. Lagendijk,
+   "Noise reduction filters for dynamic image sequences: a review", Proc. IEEE 83, 1995,
+   pp. 1272-1292 (the recursive temporal filters without motion compensation).
 """
 
 from __future__ import annotations
@@ -37,7 +53,7 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ["NoiseSummation", "fixed_blur", "noise_level", "summation_sigma"]
+__all__ = ["CHANGE", "NoiseSummation", "fixed_blur", "noise_level", "summation_sigma"]
 
 # the places the noise is measured at: this many, at fixed places drawn at random inside the
 # frame's border (the mask needs each place's eight neighbours), so that the cost does not
@@ -62,6 +78,11 @@ DIM = 0.99
 # the widest blur: a frame noisier than this asks for (14 gray levels at the default's target)
 # is mostly noise, and the kernel a wider sigma takes would grow with it
 MAX_SIGMA = 4.0
+# the temporal summation: a pixel whose change from its running average is this many times the
+# blurred noise (the target) takes the new frame at once; the weight grows with the change
+# squared, so a change of the noise's size moves the average by 1/64 more than the time
+# constant alone
+CHANGE = 8.0
 
 
 @functools.lru_cache(maxsize=8)
@@ -135,18 +156,31 @@ class NoiseSummation:
     ----------
     target : float
         The noise, gray levels (of 255), the blur leaves in a dim view.
+    integration : float, optional
+        The temporal summation's time constant, seconds (:meth:`integrated`); None: none.
 
     Attributes
     ----------
-    target : float
+    target, integration : float
         As given.
     noise : float or None
         The smoothed noise measure, gray levels; None before the first frame.
+    wide : bool
+        Whether the last frame was blurred wider than the fixed blur.
+    average : ndarray (H, W) or None
+        The temporal summation's running average, while the frames are blurred wider.
     """
 
-    def __init__(self, target: float):
+    def __init__(self, target: float, integration: float | None = None):
         self.target = target
+        self.integration = integration
         self.noise: float | None = None
+        self.wide = False
+        self.average: np.ndarray | None = None
+
+    def __setstate__(self, state: dict) -> None:
+        # pickled before the temporal summation: without it
+        self.__dict__.update({"integration": None, "wide": False, "average": None, **state})
 
     def blurred(self, lum: np.ndarray, dim: bool) -> np.ndarray:
         """Blur a frame: by the fixed 3x3 Gaussian, or, in a dim view whose smoothed noise asks
@@ -171,7 +205,47 @@ class NoiseSummation:
             self.noise = (measured if self.noise is None
                           else (1.0 - SMOOTHING) * self.noise + SMOOTHING * measured)
         sigma = 0.0 if self.noise is None else summation_sigma(self.noise, self.target)
-        if dim and sigma > FIXED_SIGMA:
+        self.wide = dim and sigma > FIXED_SIGMA
+        if self.wide:
             return cv2.GaussianBlur(lum, (0, 0), min(sigma, MAX_SIGMA),
                                     borderType=cv2.BORDER_REFLECT_101)
         return fixed_blur(lum)
+
+    def integrated(self, lum: np.ndarray, elapsed: float) -> np.ndarray:
+        """Sum a frame :meth:`blurred` gave in time, where it was blurred wider [3]_, [4]_.
+
+        Each pixel's running average moves toward the frame by ``w = min(1, a + (d / (CHANGE
+        n))**2)`` of the difference ``d``, with ``a = 1 - exp(-elapsed / integration)`` and
+        ``n`` the blurred noise (``target`` gray levels): a still pixel is averaged over about
+        ``integration`` seconds, a change of ``CHANGE n`` or more is taken whole. The average
+        starts from the first frame blurred wider and is dropped with the first that is not.
+
+        Parameters
+        ----------
+        lum : ndarray (H, W)
+            The frame as :meth:`blurred` gave it, in [0, 1].
+        elapsed : float
+            Seconds since the previous frame stepped.
+
+        Returns
+        -------
+        ndarray (H, W)
+            The running average; ``lum`` itself without ``integration``, where the frame was
+            not blurred wider, and on the first frame that was.
+        """
+        if self.integration is None or not self.wide:
+            self.average = None
+            return lum
+        if self.average is None or self.average.shape != lum.shape:
+            self.average = lum
+            return lum
+        dtype = lum.dtype.type
+        change = lum - self.average
+        weight = change * dtype(255.0 / (CHANGE * self.target))
+        np.square(weight, out=weight)
+        weight += dtype(-math.expm1(-elapsed / self.integration))
+        np.minimum(weight, dtype(1.0), out=weight)
+        weight *= change
+        # a new array: the average given back becomes the model's previous frame
+        self.average = self.average + weight
+        return self.average

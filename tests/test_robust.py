@@ -30,6 +30,7 @@ NO_OWN_MOTION_WEIGHT = dict(own_motion_weight=1.0)
 NO_GLOBAL_GAIN = dict(global_gain=None)
 NO_EDGE_RULE = dict(receding_edge_rule=False)
 NO_NOISE_SUMMATION = dict(noise_summation=None)
+NO_TEMPORAL_SUMMATION = dict(temporal_summation=None)
 
 
 def _run(case, variant=0, perturbation=None, scale=None, every=1, **overrides):
@@ -263,6 +264,16 @@ def test_a_dusk_approach_under_sensor_noise_warns_by_the_noise_summation(case):
     # apart and never persists; blurred as wide as the measured noise asks, it does
     assert _hit(*_run(case, perturbation="noise"))
     assert _first(_run(case, perturbation="noise", **NO_NOISE_SUMMATION)[1]) is None
+
+
+@pytest.mark.parametrize("case", ["extra-dk-hydrant-low-camera-10fps",
+                                  "extra-dk-person-walks-at-robot"])
+def test_a_dusk_approach_under_sensor_noise_warns_by_the_temporal_summation(case):
+    # blurred as wide as the noise asks, the hydrant and the person are still tracked as
+    # fragments whose offsets fail the approach test; averaged over time where the view is
+    # still, the attention keeps them whole
+    assert _hit(*_run(case, perturbation="noise"))
+    assert _first(_run(case, perturbation="noise", **NO_TEMPORAL_SUMMATION)[1]) is None
 
 
 def test_a_lit_view_under_sensor_noise_keeps_the_fixed_blur():

@@ -144,3 +144,53 @@ def test_a_view_dimmed_into_noise_with_nothing_coming_stays_quiet():
         sigmas.append(0.0 if stage.noise is None else summation_sigma(stage.noise, stage.target))
     assert sigmas[19] == 0.0 and max(sigmas) > 2.0  # lit, then widened
     assert not any(warned)
+
+
+def _dim_stream(frames, shape=(120, 160), noise=4.0, seed=5):
+    """A still dim view with a dark patch, and white noise of ``noise`` gray levels drawn
+    afresh for each frame: (clean, noisy) pairs."""
+    rng = np.random.default_rng(seed)
+    clean = np.full(shape, 30 * LEVEL)
+    clean[40:80, 60:100] = 20 * LEVEL
+    for _ in range(frames):
+        yield clean, clean + rng.normal(0.0, noise * LEVEL, shape)
+
+
+def test_a_still_dim_view_is_averaged_in_time_and_a_change_taken_at_once():
+    stage = NoiseSummation(1.0, integration=0.5)
+    errors = []
+    for clean, noisy in _dim_stream(40):
+        out = stage.integrated(stage.blurred(noisy, dim=True), 0.05)
+        errors.append(np.std((out - _fixed(clean))[10:-10, 10:-10]) / LEVEL)
+    assert stage.wide and errors[0] > 0.9  # the first frame is the blur's alone: 1 gray level
+    assert max(errors[-10:]) < 0.45  # after 2 s, averaged over about 0.5 s
+    # the patch lit by 20 gray levels (something coming into view): taken whole at once
+    clean, noisy = next(_dim_stream(1, seed=6))
+    noisy[40:80, 60:100] += 20 * LEVEL
+    out = stage.integrated(stage.blurred(noisy, dim=True), 0.05)
+    assert np.mean(out[50:70, 70:90]) / LEVEL == pytest.approx(40.0, abs=1.0)  # not partly averaged
+
+
+def test_the_frame_passes_as_it_is_without_the_temporal_summation_or_a_wide_blur():
+    frames = [noisy for _, noisy in _dim_stream(4)]
+    without = NoiseSummation(1.0)
+    blurred = without.blurred(frames[0], dim=True)
+    assert without.integrated(blurred, 0.05) is blurred
+    stage = NoiseSummation(1.0, integration=0.5)
+    for frame in frames[:3]:
+        stage.integrated(stage.blurred(frame, dim=True), 0.05)
+    assert stage.average is not None
+    lit = stage.blurred(frames[3], dim=False)  # lit again: the average is dropped
+    assert stage.integrated(lit, 0.05) is lit and stage.average is None
+
+
+def test_a_stage_pickled_before_the_temporal_summation_sums_in_space_only():
+    stage = NoiseSummation(1.0)
+    state = dict(vars(stage))
+    for name in ("integration", "wide", "average"):
+        del state[name]
+    old = NoiseSummation.__new__(NoiseSummation)
+    old.__setstate__(state)
+    frame = next(_dim_stream(1))[1]
+    blurred = old.blurred(frame, dim=True)
+    assert old.integration is None and old.integrated(blurred, 0.05) is blurred

@@ -36,6 +36,8 @@ ABLATIONS = {
         "asnn:robust/max_step_rate=none"),
     "the input blur fixed in a dim, noisy view (no summation by the noise)": (
         "asnn:robust/noise_summation=none"),
+    "a dim, noisy view not summed in time (no temporal summation)": (
+        "asnn:robust/temporal_summation=none"),
     "no global brightness compensation (flicker, exposure steps)": (
         "asnn:robust/global_gain=none"),
     "no background stabilisation": "asnn:robust/stabilise=false",
