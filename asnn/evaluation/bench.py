@@ -129,14 +129,12 @@ def _stats(seconds: np.ndarray) -> dict:
 
 
 def _state_bytes(model) -> int:
-    """Bytes of per-stream state of an ASNN after a few frames (cascades, previous frame)."""
-    total = 0
-    for name in ("stages_on", "stages_off", "previous"):
-        a = getattr(model, name, None)
-        if isinstance(a, np.ndarray):
-            total += a.nbytes
-    total += sum(h.nbytes for h in getattr(model, "history", []))
-    return total
+    """Bytes of per-stream state of an ASNN after a few frames (cascades, previous frame, and
+    in a dim, noisy view the temporal summation's running average)."""
+    summation = getattr(model, "_summation", None)
+    arrays = [getattr(model, name, None) for name in ("stages_on", "stages_off", "previous")]
+    arrays += [getattr(summation, "average", None), *getattr(model, "history", [])]
+    return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray))
 
 
 PUBLISHED = "reference32"  # the published variant in float32: the default before `robust`
