@@ -161,7 +161,9 @@ class NoiseSummation:
 
     Attributes
     ----------
-    target, integration : float
+    target : float
+        As given.
+    integration : float or None
         As given.
     noise : float or None
         The smoothed noise measure, gray levels; None before the first frame.

@@ -1,5 +1,6 @@
-"""The spatial summation that widens with the view's noise in low light (``noise_summation``,
-in the default preset since 2026-12-01: asnn.summation)."""
+"""The summation in low light: the spatial one that widens with the view's noise
+(``noise_summation``) and the temporal one where it does (``temporal_summation``), both in the
+default preset since 2026-12-01 (asnn.summation)."""
 import pickle
 
 import cv2
@@ -158,9 +159,16 @@ def _dim_stream(frames, shape=(120, 160), noise=4.0, seed=5):
 
 def test_a_still_dim_view_is_averaged_in_time_and_a_change_taken_at_once():
     stage = NoiseSummation(1.0, integration=0.5)
-    errors = []
+    errors, outs, kept = [], [], []
     for clean, noisy in _dim_stream(40):
-        out = stage.integrated(stage.blurred(noisy, dim=True), 0.05)
+        blurred = stage.blurred(noisy, dim=True)
+        out = stage.integrated(blurred, 0.05)
+        if not outs:
+            assert out is blurred  # the average starts from the first frame blurred wider
+        else:  # the frame given back before (the model's previous frame) is left as it was
+            assert np.array_equal(outs[-1], kept[-1])
+        outs.append(out)
+        kept.append(out.copy())
         errors.append(np.std((out - _fixed(clean))[10:-10, 10:-10]) / LEVEL)
     assert stage.wide and errors[0] > 0.9  # the first frame is the blur's alone: 1 gray level
     assert max(errors[-10:]) < 0.45  # after 2 s, averaged over about 0.5 s
@@ -186,11 +194,29 @@ def test_the_frame_passes_as_it_is_without_the_temporal_summation_or_a_wide_blur
 
 def test_a_stage_pickled_before_the_temporal_summation_sums_in_space_only():
     stage = NoiseSummation(1.0)
-    state = dict(vars(stage))
     for name in ("integration", "wide", "average"):
-        del state[name]
-    old = NoiseSummation.__new__(NoiseSummation)
-    old.__setstate__(state)
+        delattr(stage, name)
+    old = pickle.loads(pickle.dumps(stage))
     frame = next(_dim_stream(1))[1]
     blurred = old.blurred(frame, dim=True)
     assert old.integration is None and old.integrated(blurred, 0.05) is blurred
+
+
+def test_a_model_pickled_before_the_temporal_summation_steps_a_dim_noisy_view_without_it():
+    from asnn.evaluation.perturb import perturb_frame
+
+    frames = [perturb_frame(frame, "noise", index) for index, frame in
+              enumerate(make_case("extra-dk-person-walks-at-robot").frames[:12])]
+    model = ASNN(preset_from_spec("robust/temporal_summation=none"))
+    for index, frame in enumerate(frames[:6]):
+        model.step(frame, index / 20)
+    state = pickle.loads(pickle.dumps(model.__getstate__()))
+    del vars(state["params"])["temporal_summation"]
+    for name in ("integration", "wide", "average"):
+        delattr(state["_summation"], name)
+    old = ASNN.__new__(ASNN)
+    old.__setstate__(pickle.loads(pickle.dumps(state)))
+    assert old.params.temporal_summation is None and old._summation.integration is None
+    for index, frame in enumerate(frames[6:], 6):
+        assert old.step(frame, index / 20).u == model.step(frame, index / 20).u
+        assert old._summation.wide  # where the stage would act
