@@ -30,6 +30,19 @@ def test_bench_json_report_shape(capsys, monkeypatch):
     assert all(r["state_mb"] > 0 for r in rows if r["model"] == "asnn")
 
 
+def test_the_state_counts_the_temporal_summations_average_once():
+    # in a dim, noisy view the running average is the model's previous frame itself
+    from asnn import ASNN
+    from asnn.evaluation.bench import _state_bytes
+
+    rng = np.random.default_rng(0)
+    model = ASNN()
+    for k in range(20):  # 1 s at 20 fps of a still view at a tenth of the light, noisy
+        model.step(np.clip(25 + rng.normal(0, 6, (120, 160)), 0, 255).astype(np.uint8), k / 20)
+    assert model._summation.average is model.previous
+    cascades = model.stages_on.nbytes + model.stages_off.nbytes
+    assert _state_bytes(model) == cascades + model.previous.nbytes
+
 def test_bench_times_a_case_of_the_suite_at_its_own_size(capsys, monkeypatch):
     for name in THREAD_VARIABLES:
         monkeypatch.delenv(name, raising=False)

@@ -130,11 +130,14 @@ def _stats(seconds: np.ndarray) -> dict:
 
 def _state_bytes(model) -> int:
     """Bytes of per-stream state of an ASNN after a few frames (cascades, previous frame, and
-    in a dim, noisy view the temporal summation's running average)."""
+    in a dim, noisy view the temporal summation's running average), each array once."""
     summation = getattr(model, "_summation", None)
     arrays = [getattr(model, name, None) for name in ("stages_on", "stages_off", "previous")]
     arrays += [getattr(summation, "average", None), *getattr(model, "history", [])]
-    return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray))
+    # the running average is the previous frame itself unless the brightness compensation
+    # scaled it: counted by identity, not twice
+    unique = {id(a): a for a in arrays if isinstance(a, np.ndarray)}
+    return sum(a.nbytes for a in unique.values())
 
 
 PUBLISHED = "reference32"  # the published variant in float32: the default before `robust`
