@@ -737,7 +737,9 @@ class ASNN:
     def _compensated(self, lum: np.ndarray, elapsed: float) -> np.ndarray:
         """The frame's luminance scaled by the global brightness compensation's gain
         (``params.global_gain``, :mod:`asnn.brightness`), its change measured against the
-        previous frame stepped, both as the camera gave them; the gain is the model's state."""
+        previous frame stepped, both as the input stages gave them (blurred, and in a dim, noisy
+        view summed in time: a step under 8 gray levels there comes in over the temporal
+        summation's time constant); the gain is the model's state."""
         sampled = brightness.sampled(lum)
         change = (0.0 if self._sampled is None
                   else brightness.global_change(sampled, self._sampled))

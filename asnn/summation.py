@@ -218,9 +218,11 @@ class NoiseSummation:
 
         Each pixel's running average moves toward the frame by ``w = min(1, a + (d / (CHANGE
         n))**2)`` of the difference ``d``, with ``a = 1 - exp(-elapsed / integration)`` and
-        ``n`` the blurred noise (``target`` gray levels): a still pixel is averaged over about
-        ``integration`` seconds, a change of ``CHANGE n`` or more is taken whole. The average
-        starts from the first frame blurred wider and is dropped with the first that is not.
+        ``n`` the blurred noise, taken as ``target`` gray levels (a frame noisier than 14 gray
+        levels, whose blur is bounded at ``MAX_SIGMA``, keeps more): a still pixel is averaged
+        over about ``integration`` seconds, a change of ``CHANGE n`` or more is taken whole.
+        The average starts from the first frame blurred wider and is dropped with the first
+        that is not.
 
         Parameters
         ----------

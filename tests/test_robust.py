@@ -269,9 +269,9 @@ def test_a_dusk_approach_under_sensor_noise_warns_by_the_noise_summation(case):
 @pytest.mark.parametrize("case", ["extra-dk-hydrant-low-camera-10fps",
                                   "extra-dk-person-walks-at-robot"])
 def test_a_dusk_approach_under_sensor_noise_warns_by_the_temporal_summation(case):
-    # blurred as wide as the noise asks, the hydrant and the person are still tracked as
-    # fragments whose offsets fail the approach test; averaged over time where the view is
-    # still, the attention keeps them whole
+    # blurred as wide as the noise asks, the attention masks keep a part of the object (traced
+    # on the person: its tracks are fragments whose offsets fail the approach test); averaged
+    # over time where the view is still, it is kept whole enough to pass
     assert _hit(*_run(case, perturbation="noise"))
     assert _first(_run(case, perturbation="noise", **NO_TEMPORAL_SUMMATION)[1]) is None
 
