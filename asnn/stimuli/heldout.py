@@ -1,5 +1,5 @@
 """Post-processing for the held-out cases (``extra-ho-*``): any generator's frames under a
-lighting change or rain.
+lighting change, rain or a dim camera's noise.
 
 :func:`post_scene` runs a generator (:func:`.planar.planar_scene`, :func:`.driving.driving_scene`)
 and multiplies its frames by the gains of lighting changes (:func:`.effects.gains`: a drive has
@@ -17,7 +17,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from .effects import gains
+from .effects import gains, sensor_noise
 from .scene import Scene
 
 __all__ = ["post_scene", "rain_streaks"]
@@ -47,9 +47,10 @@ def rain_streaks(frames: np.ndarray, seed: int, count: int = 70,
 
 
 def post_scene(*, base: Callable[..., Scene], lighting: Sequence = (), rain: bool = False,
-               **options) -> Scene:
+               post_noise: float = 0.0, **options) -> Scene:
     """``base(**options)`` with its frames multiplied by the ``lighting`` changes' gains and,
-    with ``rain``, rain streaks added (seeded from ``options["seed"]``); its label as it is.
+    with ``rain``, rain streaks added (seeded from ``options["seed"]``), and with
+    ``post_noise``, a camera's sensor noise after both; its label as it is.
 
     Parameters
     ----------
@@ -59,6 +60,11 @@ def post_scene(*, base: Callable[..., Scene], lighting: Sequence = (), rain: boo
         Lighting changes (:class:`.effects.Ramp`, :class:`.effects.Flicker`, ...).
     rain : bool
         Whether to add rain streaks (:func:`rain_streaks`).
+    post_noise : float
+        Standard deviation of the per-frame Gaussian sensor noise added after the lighting and
+        the rain, before rounding, gray levels (seeded from ``options["seed"]``). Not
+        ``noise``: that is a generator's own option (:func:`.surface.corridor_scene` draws its
+        noise before the lighting dims it).
     **options
         The generator's options.
     """
@@ -68,6 +74,10 @@ def post_scene(*, base: Callable[..., Scene], lighting: Sequence = (), rain: boo
         frames = frames * gains(lighting, len(frames), scene.fps)[:, None, None]
     if rain:
         frames = rain_streaks(frames, options.get("seed", 0) + 99)
+    # a dim camera's noise is its sensor's, not dimmed with the scene
+    frames = sensor_noise(frames, post_noise, options.get("seed", 0) + 101)
+    # the key only where there is such noise: every scene without it keeps its parameters
+    noise = {"post_noise": post_noise} if post_noise else {}
     return replace(scene, frames=np.clip(np.rint(frames), 0, 255).astype(np.uint8),
                    params={**scene.params, "post_lighting": [repr(g) for g in lighting],
-                           "rain": rain})
+                           "rain": rain, **noise})

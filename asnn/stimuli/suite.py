@@ -73,7 +73,9 @@ designed and written down the same way by another trial (:func:`_indoor_cases`);
 sidewalk set for delivery robots and small outdoor robots (``extra-sw-*``, tag ``sidewalk``),
 designed and written down the same way by a third (:func:`_sidewalk_cases`); and a dusk set
 (``extra-dk-*``, tag ``dusk``), the same way by a fourth (:func:`_dusk_cases`), and a second
-one (``extra-dk2-*``, tag ``dusk``) by a fifth (:func:`_dusk2_cases`).
+one (``extra-dk2-*``, tag ``dusk``) by a fifth (:func:`_dusk2_cases`), and a third low-light
+set with a camera's noise drawn into its frames (``extra-dk3-*``, tag ``dusk``) by a sixth
+(:func:`_dusk3_cases`).
 
 **Scales.** :func:`make_case` with ``scale`` S draws every case with S times its pixels: the
 drives at S times their size (their world is in metres and degrees), the planar scenes with
@@ -1331,6 +1333,92 @@ def _dusk2_cases() -> list[Case]:
     ]
 
 
+def _dusk3_cases() -> list[Case]:
+    """The third low-light set (``extra-dk3-*``, 15 cases): designed by a trial on 2026-12-01
+    to give the temporal summation in low light (``temporal_summation``, chosen on the dusk
+    sets under ``--perturb noise``) a held-out figure, and written down with their labels
+    before any detector ran on them (docs/evaluation.md, "A third low-light set, with the
+    camera's noise"). Every frame carries a camera's sensor noise drawn into it by its
+    generator after the dimming (3-8 gray levels; a drive's by :func:`.heldout.post_scene`'s
+    ``post_noise``, a planar scene's by its ``noise``), at 0.1-0.5 of the day's light, 10-30 fps:
+    a stopped car in our lane, a car oncoming in our lane, a slow car caught up with, a
+    cyclist head-on at a sidewalk robot, two people walking at one, a box ahead of one, and a
+    dark disk on a dim ground and a light one looming; and a car passing oncoming in the next
+    lane, a car followed at its speed, a robot's clear path, bins alongside a robot, a cyclist
+    passing one, and a still dim view with a lamp flickering or a headlight sweeping across it
+    (the blob added after the dimming). The third tag is ``dusk``, the second the trial's
+    category.
+
+    The robots' drives have their bumper 0.3 m ahead of the lens (the indoor and sidewalk
+    sets'), the cars' 2 m (the suite's).
+    """
+    D = DRIVING_SIZE
+    ped = dict(width=0.5, height=1.75, shape="rect", albedo=0.3)
+    cyclist = dict(width=0.6, height=1.75, shape="rect", albedo=0.25)
+    bin_ = dict(width=0.6, height=1.0, shape="rect", albedo=0.2)
+    robot = dict(front=0.3)  # a robot's bumper 0.3 m ahead of its lens
+    ground = Background("texture", 0.25, 1.5, mean=110.0)
+    props = (Prop("disk", 30.0, 40.0, 20.0, 60.0), Prop("square", 122.0, 32.0, 18.0, 165.0),
+             Prop("rect", 140.0, 82.0, 50.0, 150.0, 0.2))
+
+    def post(name, group, cat, light, noise, **o):
+        return Case(name, post_scene, {"base": driving_scene, "size": D,
+                                       "lighting": (Ramp(0, 1, light, light),),
+                                       "post_noise": noise, **o}, (group, cat, "dusk"))
+
+    def pl(name, group, cat, light, noise, *glows, **o):
+        # the sensor noise and any lamp's light come after the dimming
+        return _planar(name, group, cat, "dusk", lighting=(Ramp(0, 1, light, light), *glows),
+                       noise=noise, **o)
+
+    T, S, C = "extra-threat", "extra-pass", "extra-clear"
+    return [
+        # --- collisions
+        post("extra-dk3-car-stopped-in-lane-noise5", T, "vehicle", 0.25, 5.0, speed=10.0,
+             frames=80, vehicles=(Vehicle(0.1, 35.0, 0.0),), target=0),
+        post("extra-dk3-car-oncoming-in-lane-15fps", T, "vehicle", 0.4, 4.0, fps=15.0,
+             speed=8.0, frames=70, vehicles=(Vehicle(-0.3, 60.0, -8.0, albedo=0.35),),
+             target=0),
+        post("extra-dk3-slow-car-caught-up-light0.1", T, "vehicle", 0.1, 3.0, speed=10.0,
+             frames=100, vehicles=(Vehicle(0.0, 25.0, 4.0, albedo=0.5),), target=0),
+        post("extra-dk3-cyclist-headon-robot-30fps", T, "cyclist-scooter", 0.2, 6.0,
+             fps=30.0, speed=1.5, frames=120, camera_height=0.7, **robot,
+             vehicles=(Vehicle(0.1, 20.0, -4.5, **cyclist),), target=0),
+        post("extra-dk3-people-walk-at-robot-10fps", T, "person", 0.3, 3.0, fps=10.0,
+             speed=1.0, frames=50, camera_height=0.6, **robot,
+             vehicles=(Vehicle(0.0, 9.0, -1.4, **ped), Vehicle(0.5, 10.0, -1.4, **ped)),
+             target=0),
+        post("extra-dk3-box-ahead-sidewalk-robot-noise7", T, "obstacle", 0.15, 7.0, speed=1.2,
+             frames=110, camera_height=0.5, **robot,
+             vehicles=(Vehicle(0.1, 6.0, 0.0, width=0.5, height=0.6, shape="rect",
+                               albedo=0.35),), target=0),
+        pl("extra-dk3-dark-disk-dim-ground-noise8", T, "object", 0.3, 8.0, shape="disk",
+           height=12.0, contrast=0.6, polarity="dark", tau=3.0, background=ground),
+        pl("extra-dk3-light-disk-dim-ground-25fps", T, "object", 0.15, 4.0, fps=25.0,
+           shape="disk", height=12.0, contrast=0.6, polarity="light", tau=3.0,
+           background=ground),
+        # --- non-collisions
+        post("extra-dk3-car-passes-oncoming-next-lane", S, "vehicle", 0.3, 5.0, speed=8.0,
+             frames=80, vehicles=(Vehicle(-3.5, 60.0, -8.0),), target=0),
+        post("extra-dk3-follow-car-15fps", C, "vehicle", 0.2, 6.0, fps=15.0, speed=10.0,
+             frames=70, vehicles=(Vehicle(0.0, 15.0, 10.0, albedo=0.4),), target=0),
+        post("extra-dk3-robot-clear-path-30fps", C, "ego-motion", 0.1, 8.0, fps=30.0,
+             speed=1.5, frames=120, camera_height=0.6, bumps_deg=1.0, **robot),
+        post("extra-dk3-bins-alongside-robot", S, "obstacle", 0.35, 4.0, speed=1.5,
+             frames=80, camera_height=0.6, **robot,
+             vehicles=tuple(Vehicle(1.2, d, 0.0, **bin_) for d in (3.0, 6.0, 9.0, 12.0)),
+             target=0),
+        post("extra-dk3-cyclist-passes-robot-25fps", S, "cyclist-scooter", 0.25, 5.0,
+             fps=25.0, speed=1.5, frames=110, camera_height=0.7, **robot,
+             vehicles=(Vehicle(-1.4, 20.0, -4.5, **cyclist),), target=0),
+        pl("extra-dk3-still-view-lamp-flickers", C, "lighting", 0.2, 6.0,
+           Flicker(7.0, 0.15), motion="none", frames=80, background=ground, props=props),
+        pl("extra-dk3-still-view-headlight-sweeps-15fps", C, "lighting", 0.15, 5.0,
+           Headlights(10, 40, (-40.0, 70.0), (200.0, 60.0), 22.0, 60.0), fps=15.0,
+           motion="none", frames=60, background=ground, props=props),
+    ]
+
+
 SUITE_CASES: dict[str, Case] = {
     case.name: case
     for case in (_approach_cases() + _pair_cases() + _clutter_cases() + _recession_cases()
@@ -1339,7 +1427,7 @@ SUITE_CASES: dict[str, Case] = {
 }
 EXTRA_CASES: dict[str, Case] = {case.name: case for case in _extra_cases() + _heldout_cases()
                                  + _indoor_cases() + _sidewalk_cases() + _dusk_cases()
-                                 + _dusk2_cases()}
+                                 + _dusk2_cases() + _dusk3_cases()}
 CASES: dict[str, Case] = {**SUITE_CASES, **EXTRA_CASES}  # every case make_case knows
 
 
