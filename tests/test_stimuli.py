@@ -764,8 +764,8 @@ DUSK2_LABELS = {
 
 
 # the third low-light set (a camera's noise drawn into its frames) as its trial wrote it down
-# before any detector ran on it (docs/evaluation.md, "A third low-light set, with the camera's
-# noise"), in the same form
+# before any detector ran on it (docs/evaluation.md, "A dusk held-out set", its third set),
+# in the same form
 DUSK3_LABELS = {
     "extra-dk3-car-stopped-in-lane-noise5": (20, 0, 66),
     "extra-dk3-car-oncoming-in-lane-15fps": (15, 0, 55),

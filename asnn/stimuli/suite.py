@@ -1337,8 +1337,8 @@ def _dusk3_cases() -> list[Case]:
     """The third low-light set (``extra-dk3-*``, 15 cases): designed by a trial on 2026-12-01
     to give the temporal summation in low light (``temporal_summation``, chosen on the dusk
     sets under ``--perturb noise``) a held-out figure, and written down with their labels
-    before any detector ran on them (docs/evaluation.md, "A third low-light set, with the
-    camera's noise"). Every frame carries a camera's sensor noise drawn into it by its
+    before any detector ran on them (docs/evaluation.md, "A dusk held-out set", its third
+    set). Every frame carries a camera's sensor noise drawn into it by its
     generator after the dimming (3-8 gray levels; a drive's by :func:`.heldout.post_scene`'s
     ``post_noise``, a planar scene's by its ``noise``), at 0.1-0.5 of the day's light, 10-30 fps:
     a stopped car in our lane, a car oncoming in our lane, a slow car caught up with, a
