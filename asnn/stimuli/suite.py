@@ -1186,6 +1186,22 @@ def _sidewalk_cases() -> list[Case]:
     ]
 
 
+def _dim_drive(name: str, group: str, cat: str, light: float, **options) -> Case:
+    """A drive (:func:`.driving.driving_scene`) at a constant ``light`` of the day's light, through
+    :func:`.heldout.post_scene` (with its ``options``), tagged for a low-light set."""
+    return Case(name, post_scene, {"base": driving_scene, "size": DRIVING_SIZE,
+                                   "lighting": (Ramp(0, 1, light, light),), **options},
+                (group, cat, "dusk"))
+
+
+def _dim_planar(name: str, group: str, cat: str, light: float, *glows, **options) -> Case:
+    """A planar scene at a constant ``light`` of the day's light, tagged for a low-light set:
+    the dimming is the scene's own first lighting, so its sensor noise and any lamp's light
+    (``glows``) come after it."""
+    return _planar(name, group, cat, "dusk", lighting=(Ramp(0, 1, light, light), *glows),
+                   **options)
+
+
 def _dusk_cases() -> list[Case]:
     """The dusk set (``extra-dk-*``, 10 cases): designed by a trial on 2026-12-01 that traced
     the sidewalk set's two dusk misses, and written down with their labels before any detector
@@ -1196,7 +1212,6 @@ def _dusk_cases() -> list[Case]:
     oncoming, bollards alongside, and at night a person passing in our own lamp's light
     (``night=True`` at full light). The third tag is ``dusk``, the second the trial's category.
     """
-    D = DRIVING_SIZE
     ped = dict(width=0.5, height=1.75, shape="rect", albedo=0.25)
     cyclist = dict(width=0.6, height=1.75, shape="rect", albedo=0.3)
     side_on = dict(cyclist, width=1.7)  # a bicycle seen from the side
@@ -1204,10 +1219,7 @@ def _dusk_cases() -> list[Case]:
     bollard = dict(width=0.2, height=0.9, shape="rect", albedo=0.15)
 
     def post(name, group, cat, light, camera_height, **o):
-        return Case(name, post_scene, {"base": driving_scene, "size": D,
-                                       "lighting": (Ramp(0, 1, light, light),),
-                                       "camera_height": camera_height, "front": 0.3, **o},
-                    (group, cat, "dusk"))
+        return _dim_drive(name, group, cat, light, camera_height=camera_height, front=0.3, **o)
 
     T, S = "extra-threat", "extra-pass"
     return [
@@ -1265,7 +1277,7 @@ def _dusk2_cases() -> list[Case]:
     (:func:`.surface.corridor_scene` draws its noise before :func:`.heldout.post_scene`'s
     lighting): 6 gray levels at 0.12 of the light are 0.7.
     """
-    P, D = PLANAR_SIZE, DRIVING_SIZE
+    P = PLANAR_SIZE
     ped = dict(width=0.5, height=1.75, shape="rect", albedo=0.3)
     dark_cyclist = dict(width=0.6, height=1.75, shape="rect", albedo=0.08)
     child = dict(width=0.35, height=1.1, shape="rect", albedo=0.35)
@@ -1275,14 +1287,13 @@ def _dusk2_cases() -> list[Case]:
     road = Background("texture", 0.25, 1.5, 0.0, (0.0, 1.0), mean=100.0)  # flowing past
 
     def post(name, group, cat, light, base=driving_scene, **o):
-        return Case(name, post_scene, {"base": base, "size": D if base is driving_scene else P,
+        if base is driving_scene:
+            return _dim_drive(name, group, cat, light, **o)
+        return Case(name, post_scene, {"base": base, "size": P,
                                        "lighting": (Ramp(0, 1, light, light),), **o},
                     (group, cat, "dusk"))
 
-    def pl(name, group, cat, light, *glows, **o):
-        # the sensor noise and any lamp's light come after the dimming
-        return _planar(name, group, cat, "dusk", lighting=(Ramp(0, 1, light, light), *glows),
-                       **o)
+    pl = _dim_planar
 
     def lamp(start, x):
         # a street lamp on our left passing overhead, its pool of light on the pavement
@@ -1352,7 +1363,6 @@ def _dusk3_cases() -> list[Case]:
     The robots' drives have their bumper 0.3 m ahead of the lens (the indoor and sidewalk
     sets'), the cars' 2 m (the suite's).
     """
-    D = DRIVING_SIZE
     ped = dict(width=0.5, height=1.75, shape="rect", albedo=0.3)
     cyclist = dict(width=0.6, height=1.75, shape="rect", albedo=0.25)
     bin_ = dict(width=0.6, height=1.0, shape="rect", albedo=0.2)
@@ -1361,60 +1371,51 @@ def _dusk3_cases() -> list[Case]:
     props = (Prop("disk", 30.0, 40.0, 20.0, 60.0), Prop("square", 122.0, 32.0, 18.0, 165.0),
              Prop("rect", 140.0, 82.0, 50.0, 150.0, 0.2))
 
-    def post(name, group, cat, light, noise, **o):
-        return Case(name, post_scene, {"base": driving_scene, "size": D,
-                                       "lighting": (Ramp(0, 1, light, light),),
-                                       "post_noise": noise, **o}, (group, cat, "dusk"))
-
-    def pl(name, group, cat, light, noise, *glows, **o):
-        # the sensor noise and any lamp's light come after the dimming
-        return _planar(name, group, cat, "dusk", lighting=(Ramp(0, 1, light, light), *glows),
-                       noise=noise, **o)
-
+    dr, pl = _dim_drive, _dim_planar
     T, S, C = "extra-threat", "extra-pass", "extra-clear"
     return [
         # --- collisions
-        post("extra-dk3-car-stopped-in-lane-noise5", T, "vehicle", 0.25, 5.0, speed=10.0,
-             frames=80, vehicles=(Vehicle(0.1, 35.0, 0.0),), target=0),
-        post("extra-dk3-car-oncoming-in-lane-15fps", T, "vehicle", 0.4, 4.0, fps=15.0,
-             speed=8.0, frames=70, vehicles=(Vehicle(-0.3, 60.0, -8.0, albedo=0.35),),
-             target=0),
-        post("extra-dk3-slow-car-caught-up-light0.1", T, "vehicle", 0.1, 3.0, speed=10.0,
-             frames=100, vehicles=(Vehicle(0.0, 25.0, 4.0, albedo=0.5),), target=0),
-        post("extra-dk3-cyclist-headon-robot-30fps", T, "cyclist-scooter", 0.2, 6.0,
-             fps=30.0, speed=1.5, frames=120, camera_height=0.7, **robot,
-             vehicles=(Vehicle(0.1, 20.0, -4.5, **cyclist),), target=0),
-        post("extra-dk3-people-walk-at-robot-10fps", T, "person", 0.3, 3.0, fps=10.0,
-             speed=1.0, frames=50, camera_height=0.6, **robot,
-             vehicles=(Vehicle(0.0, 9.0, -1.4, **ped), Vehicle(0.5, 10.0, -1.4, **ped)),
-             target=0),
-        post("extra-dk3-box-ahead-sidewalk-robot-noise7", T, "obstacle", 0.15, 7.0, speed=1.2,
-             frames=110, camera_height=0.5, **robot,
-             vehicles=(Vehicle(0.1, 6.0, 0.0, width=0.5, height=0.6, shape="rect",
-                               albedo=0.35),), target=0),
-        pl("extra-dk3-dark-disk-dim-ground-noise8", T, "object", 0.3, 8.0, shape="disk",
+        dr("extra-dk3-car-stopped-in-lane-noise5", T, "vehicle", 0.25, post_noise=5.0,
+           speed=10.0, frames=80, vehicles=(Vehicle(0.1, 35.0, 0.0),), target=0),
+        dr("extra-dk3-car-oncoming-in-lane-15fps", T, "vehicle", 0.4, post_noise=4.0, fps=15.0,
+           speed=8.0, frames=70, vehicles=(Vehicle(-0.3, 60.0, -8.0, albedo=0.35),),
+           target=0),
+        dr("extra-dk3-slow-car-caught-up-light0.1", T, "vehicle", 0.1, post_noise=3.0,
+           speed=10.0, frames=100, vehicles=(Vehicle(0.0, 25.0, 4.0, albedo=0.5),), target=0),
+        dr("extra-dk3-cyclist-headon-robot-30fps", T, "cyclist-scooter", 0.2, post_noise=6.0,
+           fps=30.0, speed=1.5, frames=120, camera_height=0.7, **robot,
+           vehicles=(Vehicle(0.1, 20.0, -4.5, **cyclist),), target=0),
+        dr("extra-dk3-people-walk-at-robot-10fps", T, "person", 0.3, post_noise=3.0, fps=10.0,
+           speed=1.0, frames=50, camera_height=0.6, **robot,
+           vehicles=(Vehicle(0.0, 9.0, -1.4, **ped), Vehicle(0.5, 10.0, -1.4, **ped)),
+           target=0),
+        dr("extra-dk3-box-ahead-sidewalk-robot-noise7", T, "obstacle", 0.15, post_noise=7.0,
+           speed=1.2, frames=110, camera_height=0.5, **robot,
+           vehicles=(Vehicle(0.1, 6.0, 0.0, width=0.5, height=0.6, shape="rect",
+                             albedo=0.35),), target=0),
+        pl("extra-dk3-dark-disk-dim-ground-noise8", T, "object", 0.3, noise=8.0, shape="disk",
            height=12.0, contrast=0.6, polarity="dark", tau=3.0, background=ground),
-        pl("extra-dk3-light-disk-dim-ground-25fps", T, "object", 0.15, 4.0, fps=25.0,
+        pl("extra-dk3-light-disk-dim-ground-25fps", T, "object", 0.15, noise=4.0, fps=25.0,
            shape="disk", height=12.0, contrast=0.6, polarity="light", tau=3.0,
            background=ground),
         # --- non-collisions
-        post("extra-dk3-car-passes-oncoming-next-lane", S, "vehicle", 0.3, 5.0, speed=8.0,
-             frames=80, vehicles=(Vehicle(-3.5, 60.0, -8.0),), target=0),
-        post("extra-dk3-follow-car-15fps", C, "vehicle", 0.2, 6.0, fps=15.0, speed=10.0,
-             frames=70, vehicles=(Vehicle(0.0, 15.0, 10.0, albedo=0.4),), target=0),
-        post("extra-dk3-robot-clear-path-30fps", C, "ego-motion", 0.1, 8.0, fps=30.0,
-             speed=1.5, frames=120, camera_height=0.6, bumps_deg=1.0, **robot),
-        post("extra-dk3-bins-alongside-robot", S, "obstacle", 0.35, 4.0, speed=1.5,
-             frames=80, camera_height=0.6, **robot,
-             vehicles=tuple(Vehicle(1.2, d, 0.0, **bin_) for d in (3.0, 6.0, 9.0, 12.0)),
-             target=0),
-        post("extra-dk3-cyclist-passes-robot-25fps", S, "cyclist-scooter", 0.25, 5.0,
-             fps=25.0, speed=1.5, frames=110, camera_height=0.7, **robot,
-             vehicles=(Vehicle(-1.4, 20.0, -4.5, **cyclist),), target=0),
-        pl("extra-dk3-still-view-lamp-flickers", C, "lighting", 0.2, 6.0,
-           Flicker(7.0, 0.15), motion="none", frames=80, background=ground, props=props),
-        pl("extra-dk3-still-view-headlight-sweeps-15fps", C, "lighting", 0.15, 5.0,
-           Headlights(10, 40, (-40.0, 70.0), (200.0, 60.0), 22.0, 60.0), fps=15.0,
+        dr("extra-dk3-car-passes-oncoming-next-lane", S, "vehicle", 0.3, post_noise=5.0,
+           speed=8.0, frames=80, vehicles=(Vehicle(-3.5, 60.0, -8.0),), target=0),
+        dr("extra-dk3-follow-car-15fps", C, "vehicle", 0.2, post_noise=6.0, fps=15.0,
+           speed=10.0, frames=70, vehicles=(Vehicle(0.0, 15.0, 10.0, albedo=0.4),), target=0),
+        dr("extra-dk3-robot-clear-path-30fps", C, "ego-motion", 0.1, post_noise=8.0, fps=30.0,
+           speed=1.5, frames=120, camera_height=0.6, bumps_deg=1.0, **robot),
+        dr("extra-dk3-bins-alongside-robot", S, "obstacle", 0.35, post_noise=4.0, speed=1.5,
+           frames=80, camera_height=0.6, **robot,
+           vehicles=tuple(Vehicle(1.2, d, 0.0, **bin_) for d in (3.0, 6.0, 9.0, 12.0)),
+           target=0),
+        dr("extra-dk3-cyclist-passes-robot-25fps", S, "cyclist-scooter", 0.25, post_noise=5.0,
+           fps=25.0, speed=1.5, frames=110, camera_height=0.7, **robot,
+           vehicles=(Vehicle(-1.4, 20.0, -4.5, **cyclist),), target=0),
+        pl("extra-dk3-still-view-lamp-flickers", C, "lighting", 0.2, Flicker(7.0, 0.15),
+           noise=6.0, motion="none", frames=80, background=ground, props=props),
+        pl("extra-dk3-still-view-headlight-sweeps-15fps", C, "lighting", 0.15,
+           Headlights(10, 40, (-40.0, 70.0), (200.0, 60.0), 22.0, 60.0), noise=5.0, fps=15.0,
            motion="none", frames=60, background=ground, props=props),
     ]
 
