@@ -319,7 +319,8 @@ def frame_perturbation(name: str) -> str:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"unknown perturbation {name!r}; asnn detect takes those that keep every frame "
-            f"({kept}; jpegQ: quality Q, 1-100; gainG: brightness times G)") from None
+            f"({kept}; jpegQ: quality Q, 1-100; gainG: brightness times G; noiseS: S gray "
+            f"levels of noise)") from None
     if not keeps_frames(name):
         raise argparse.ArgumentTypeError(
             f"{name} changes the frames' number or size; asnn detect takes those that keep "

@@ -231,7 +231,7 @@ def test_perturbations_keep_a_frame_s_size_type_and_channels_and_are_determinist
     assert np.ptp(perturb_frame(bars.astype(np.uint8), "half-detail", 0)) >= 200
 
 
-def test_jpeg_and_gain_take_their_strength_in_their_name(tmp_path, capsys):
+def test_jpeg_gain_and_noise_take_their_strength_in_their_name(tmp_path, capsys):
     from asnn.evaluation.perturb import describe, perturb_frame, perturb_label
 
     frame = np.random.default_rng(5).integers(0, 256, (24, 32, 3), dtype=np.uint8)
@@ -244,7 +244,15 @@ def test_jpeg_and_gain_take_their_strength_in_their_name(tmp_path, capsys):
     assert describe("jpeg80") == "every frame re-encoded as JPEG at quality 80"
     assert describe("gain1.04").startswith("1.04 times the brightness")
     assert perturb_label({"file": "a.mp4", "center": [3, 4]}, "gain1.04")["center"] == [3, 4]
-    for wrong in ("jpeg0", "jpeg101", "jpegx", "gain0", "gain11", "gain1.", "gain-1", "Jpeg80"):
+    assert np.array_equal(perturb_frame(frame, "noise4", 3), perturb_frame(frame, "noise", 3))
+    flat = np.full((200, 200), 128, np.uint8)
+    for sigma in (1.5, 8):  # the noise's spread is the strength named, frame by frame afresh
+        noisy = perturb_frame(flat, f"noise{sigma}", 0).astype(float)
+        assert abs(noisy.std() - sigma) < 0.05 * sigma
+        assert not np.array_equal(noisy, perturb_frame(flat, f"noise{sigma}", 1))
+    assert describe("noise2.5") == "Gaussian sensor noise of 2.5 gray levels on every pixel"
+    for wrong in ("jpeg0", "jpeg101", "jpegx", "gain0", "gain11", "gain1.", "gain-1", "Jpeg80",
+                  "noise0", "noise51", "noise-1", "noisy2"):
         with pytest.raises(ValueError, match="unknown perturbation"):
             perturb_frame(frame, wrong, 0)
         with pytest.raises(SystemExit):

@@ -41,9 +41,11 @@ PERTURBATIONS = {
              "predicted and their residual quantised)",
 }
 
-# the families named with their strength: jpegQ (quality Q) and gainG (brightness times G)
+# the families named with their strength: jpegQ (quality Q), gainG (brightness times G) and
+# noiseS (S gray levels of noise)
 FAMILIES = {"jpegQ": "every frame re-encoded as JPEG at quality Q (1-100)",
-            "gainG": "the brightness times G (0.1-10), rounded and clipped to 8 bits"}
+            "gainG": "the brightness times G (0.1-10), rounded and clipped to 8 bits",
+            "noiseS": "Gaussian sensor noise of S gray levels (0.1-50) on every pixel"}
 
 # how grid points that tie on hits and false alarms are told apart (heldout.selection_key); the
 # first rewards thresholds that warn more, so the held-out figures are given with each

@@ -19,10 +19,11 @@ detail and what the pixel sizes of the model's kernels;
 the generated suite, 15 fps for the 30 fps dashcam clips) would deliver the same scene, and maps
 the labels' frames onto the frames kept.
 
-Two families take their strength in their name, for a camera's own settings: ``jpegQ`` re-encodes
-every frame as JPEG at quality Q (1-100; ``jpeg90`` is the wire's, ``jpeg`` is ``jpeg30``) and
-``gainG`` scales the brightness by G (0.1-10, rounded and clipped as a camera's 8 bits would be;
-``dim`` is ``gain0.6``).
+Three families take their strength in their name, for a camera's own settings: ``jpegQ``
+re-encodes every frame as JPEG at quality Q (1-100; ``jpeg90`` is the wire's, ``jpeg`` is
+``jpeg30``), ``gainG`` scales the brightness by G (0.1-10, rounded and clipped as a camera's 8
+bits would be; ``dim`` is ``gain0.6``) and ``noiseS`` adds Gaussian sensor noise of S gray levels
+(0.1-50; ``noise`` is ``noise4``): a camera raises its gain, and its noise, as the light falls.
 
 Every perturbation but two changes each frame on its own (:func:`perturb_frame`). ``half-rate``
 and ``mpeg4`` take the clip as a whole (:func:`perturbed`): ``mpeg4`` re-encodes it with an
@@ -75,26 +76,28 @@ CODEC_FOURCC = "mp4v"
 CODEC_FPS = 30.0  # the rate written in the file: the decoded frames do not depend on it
 
 
-_FAMILY = re.compile(r"(jpeg)([0-9]{1,3})|(gain)([0-9]{1,2}(?:\.[0-9]{1,4})?)")
+_FAMILY = re.compile(r"(jpeg)([0-9]{1,3})|(gain|noise)([0-9]{1,2}(?:\.[0-9]{1,4})?)")
 GAIN_RANGE = (0.1, 10.0)
+NOISE_RANGE = (0.1, 50.0)
 
 
 # the named perturbations that are members of a family
 _MEMBERS = {**{name: f"jpeg{quality}" for name, quality in JPEG_QUALITY.items()},
-            "dim": f"gain{DIM_GAIN:g}"}
+            "dim": f"gain{DIM_GAIN:g}", "noise": f"noise{NOISE_SIGMA:g}"}
 
 
 def _strength(name: str) -> tuple[str, float] | None:
-    """``('jpeg', Q)`` or ``('gain', G)`` for a family's name within its range, or for a named
-    member of one (``jpeg``, ``jpeg90``, ``dim``), else None."""
+    """``('jpeg', Q)``, ``('gain', G)`` or ``('noise', S)`` for a family's name within its
+    range, or for a named member of one (``jpeg``, ``jpeg90``, ``dim``, ``noise``), else None."""
     match = _FAMILY.fullmatch(_MEMBERS.get(name, name))
     if match is None:
         return None
     if match.group(1):
         quality = int(match.group(2))
         return ("jpeg", quality) if 1 <= quality <= 100 else None
-    gain = float(match.group(4))
-    return ("gain", gain) if GAIN_RANGE[0] <= gain <= GAIN_RANGE[1] else None
+    family, strength = match.group(3), float(match.group(4))
+    low, high = GAIN_RANGE if family == "gain" else NOISE_RANGE
+    return (family, strength) if low <= strength <= high else None
 
 
 def check_perturbation(name: str | None) -> None:
@@ -102,8 +105,9 @@ def check_perturbation(name: str | None) -> None:
     :data:`FAMILIES` within its range (``jpeg80``, ``gain1.04``)."""
     if name is not None and name not in PERTURBATIONS and _strength(name) is None:
         raise ValueError(f"unknown perturbation {name!r}; choose one of "
-                         f"{', '.join(PERTURBATIONS)}, or jpegQ (quality Q, 1-100) or gainG "
-                         f"(brightness times G, {GAIN_RANGE[0]:g}-{GAIN_RANGE[1]:g})")
+                         f"{', '.join(PERTURBATIONS)}, or jpegQ (quality Q, 1-100), gainG "
+                         f"(brightness times G, {GAIN_RANGE[0]:g}-{GAIN_RANGE[1]:g}) or noiseS "
+                         f"(S gray levels of noise, {NOISE_RANGE[0]:g}-{NOISE_RANGE[1]:g})")
 
 
 def keeps_frames(name: str) -> bool:
@@ -128,6 +132,8 @@ def describe(name: str) -> str:
     family, strength = _strength(name)
     if family == "jpeg":
         return f"every frame re-encoded as JPEG at quality {strength:g}"
+    if family == "noise":
+        return f"Gaussian sensor noise of {strength:g} gray levels on every pixel"
     return f"{strength:g} times the brightness, rounded and clipped to 8 bits"
 
 
@@ -168,8 +174,8 @@ def perturb_frame(frame: np.ndarray, name: str, index: int) -> np.ndarray:
         if frame.ndim == 3:
             blade = blade[..., None]
         changed = frame * (1.0 - blade) + WIPER_GRAY * blade
-    elif name == "noise":
-        changed = sensor_noise(frame.astype(np.float64), NOISE_SIGMA, seed=index)
+    elif family and family[0] == "noise":
+        changed = sensor_noise(frame.astype(np.float64), family[1], seed=index)
     else:  # dim, or gainG
         changed = frame * family[1]
     return np.clip(np.rint(changed), 0, 255).astype(np.uint8)
