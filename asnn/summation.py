@@ -10,16 +10,20 @@ gray levels of noise lost 8 of their 10 hits; docs/design-notes.md, "A dim view'
 retina pools over a wider field as the light falls [1]_, which averages noise at the cost of
 detail. Here the blur widens only in a view the light adaptation reads as dim
 (:mod:`asnn.light`: ``c`` below ``DIM`` of its fixed value), and only as far as the measured
-noise asks: a Gaussian of ``sigma = noise / (2 sqrt(pi) target)`` leaves white noise of
-``noise`` gray levels at about ``target`` (its gain on white noise is
-``1 / (2 sqrt(pi) sigma)``), used where that is wider than the fixed blur (and at most
-``MAX_SIGMA``). The noise is measured on the
+noise asks: where the fixed blur would leave more white noise than ``target`` (its gain on
+white noise is ``FIXED_NOISE_GAIN``, 0.354: from ``target / FIXED_NOISE_GAIN`` gray levels of
+noise, 2.8 at the default's 1), the frame is blurred by a Gaussian of ``sigma = noise / (2
+sqrt(pi) target)``, which leaves about ``target`` (its gain on white noise is ``1 / (2 sqrt(pi)
+sigma)``), at least ``FIXED_SIGMA`` and at most ``MAX_SIGMA``. The noise is measured on the
 frame itself [2]_: the 3x3 mask below cancels any plane and any quadratic along a row or
 column, so what it leaves is noise and fine texture; the median of its magnitude over sampled
-places is robust to the edges. A view with less noise than ``2 sqrt(pi) target`` gray levels
-(3.5 at the default's 1) keeps the fixed blur, frame for frame: the real clips read 0-0.74 gray
-levels (their codec has smoothed the sensor's noise), and the suite's noisy cases (up to 10.4)
-are lit.
+places is robust to the edges. A view with less noise keeps the fixed blur, frame for frame:
+the real clips read 0-0.74 gray levels (their codec has smoothed the sensor's noise), and the
+suite's noisy cases (up to 10.4) are lit. Until 2026-12-02 the blur widened from ``2 sqrt(pi)
+target`` gray levels (3.5), where the Gaussian's own formula reaches the fixed sigma: but the
+fixed blur is cut to 3x3, which leaves 1.25 times as much noise as the formula says, so noise of
+2.8-3.5 gray levels got neither the wider blur nor the temporal summation below, and cost more
+hits at dusk than 4 gray levels did (docs/design-notes.md, "Noise under the threshold").
 
 Where the blur is widened, the frames are also summed in time (``temporal_summation``, in the
 default since 2026-12-01 with 0.5 s): each pixel is the running average of its frames with that
@@ -70,6 +74,10 @@ _NOISE_PER_MEDIAN = 1.0 / (6.0 * 0.6745)
 # one: about five frames, so that the blur does not change from frame to frame with the measure
 FIXED_SIGMA = 1.0
 SMOOTHING = 0.2
+# the fixed blur's gain on white noise, the root of the sum of its squared weights: the 3x3
+# kernel is the outer product of OpenCV's 1-D Gaussian k of sigma 1 ([0.274, 0.452, 0.274]),
+# so the root is the sum of k squared (0.354)
+FIXED_NOISE_GAIN = float(np.sum(cv2.getGaussianKernel(3, FIXED_SIGMA) ** 2))
 # a view is dim while the light adaptation holds c below this share of its fixed value: its
 # smoothing only approaches the fixed value after a dim spell (equal to it once the exponential
 # rounds to 1, some 18 s at its 0.5 s), and a view lit again should have its fixed blur back
@@ -185,8 +193,8 @@ class NoiseSummation:
         self.__dict__.update({"integration": None, "wide": False, "average": None, **state})
 
     def blurred(self, lum: np.ndarray, dim: bool) -> np.ndarray:
-        """Blur a frame: by the fixed 3x3 Gaussian, or, in a dim view whose smoothed noise asks
-        for more, by a Gaussian as wide as it asks. The noise is measured in dim views only (a
+        """Blur a frame: by the fixed 3x3 Gaussian, or, in a dim view where that would leave
+        more than ``target`` of the smoothed noise, by a Gaussian as wide as it asks. The noise is measured in dim views only (a
         lit view has no use for it, and the measure costs about 0.1 ms a frame): the smoothed
         measure is kept through a lit spell and goes on from there.
 
@@ -206,10 +214,11 @@ class NoiseSummation:
             measured = noise_level(lum) * 255.0
             self.noise = (measured if self.noise is None
                           else (1.0 - SMOOTHING) * self.noise + SMOOTHING * measured)
-        sigma = 0.0 if self.noise is None else summation_sigma(self.noise, self.target)
-        self.wide = dim and sigma > FIXED_SIGMA
+        self.wide = (dim and self.noise is not None
+                     and self.noise * FIXED_NOISE_GAIN > self.target)
         if self.wide:
-            return cv2.GaussianBlur(lum, (0, 0), min(sigma, MAX_SIGMA),
+            sigma = summation_sigma(self.noise, self.target)
+            return cv2.GaussianBlur(lum, (0, 0), min(max(sigma, FIXED_SIGMA), MAX_SIGMA),
                                     borderType=cv2.BORDER_REFLECT_101)
         return fixed_blur(lum)
 
