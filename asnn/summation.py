@@ -23,7 +23,10 @@ suite's noisy cases (up to 10.4) are lit. Until 2026-12-02 the blur widened from
 target`` gray levels (3.5), where the Gaussian's own formula reaches the fixed sigma: but the
 fixed blur is cut to 3x3, which leaves 1.25 times as much noise as the formula says, so noise of
 2.8-3.5 gray levels got neither the wider blur nor the temporal summation below, and cost more
-hits at dusk than 4 gray levels did (docs/design-notes.md, "Noise under the threshold").
+hits at dusk than 4 gray levels did (docs/design-notes.md, "Noise under the threshold"). Once
+widened, the blur stays wide while the noise stays over ``KEEP`` of the threshold: the measure
+wavers by a few per cent, and a view whose noise sits at the threshold would otherwise switch
+every few frames and restart the temporal summation each time.
 
 Where the blur is widened, the frames are also summed in time (``temporal_summation``, in the
 default since 2026-12-01 with 0.5 s): each pixel is the running average of its frames with that
@@ -83,6 +86,11 @@ FIXED_NOISE_GAIN = float(np.sum(cv2.getGaussianKernel(3, FIXED_SIGMA) ** 2))
 # rounds to 1, some 18 s at its 0.5 s), and a view lit again should have its fixed blur back
 # soon (from a third of the light, in 2.3 s)
 DIM = 0.99
+# a blur widened stays wide while the smoothed noise measure is over this share of the noise
+# that widened it: the measure of a still view wavers by 2-4 % about its mean from frame to
+# frame after the smoothing (2.72-2.92 gray levels in views drawn with 2.8), a tenth is about
+# three times that
+KEEP = 0.9
 # the widest blur: a frame noisier than this asks for (14 gray levels at the default's target)
 # is mostly noise, and the kernel a wider sigma takes would grow with it
 MAX_SIGMA = 4.0
@@ -214,8 +222,11 @@ class NoiseSummation:
             measured = noise_level(lum) * 255.0
             self.noise = (measured if self.noise is None
                           else (1.0 - SMOOTHING) * self.noise + SMOOTHING * measured)
-        self.wide = (dim and self.noise is not None
-                     and self.noise * FIXED_NOISE_GAIN > self.target)
+        # once widened, the blur stays wide down to KEEP of the noise that widened it: the
+        # measure wavers by a few per cent, and a view whose noise sits at the threshold would
+        # switch every few frames, restarting the temporal summation's average each time
+        widens = self.target / FIXED_NOISE_GAIN * (KEEP if self.wide else 1.0)
+        self.wide = dim and self.noise is not None and self.noise > widens
         if self.wide:
             sigma = summation_sigma(self.noise, self.target)
             return cv2.GaussianBlur(lum, (0, 0), min(max(sigma, FIXED_SIGMA), MAX_SIGMA),

@@ -42,6 +42,26 @@ def _fixed(lum):
     return cv2.GaussianBlur(lum, (3, 3), 1.0, borderType=cv2.BORDER_REFLECT_101)
 
 
+def test_a_blur_widened_stays_wide_while_the_noise_wavers_under_its_threshold():
+    # the threshold is 2.82 gray levels; a view measured at 2.7 is not widened from the fixed
+    # blur, but once widened (by 3 gray levels) stays wide at 2.7, where the measure of a view
+    # drawn near the threshold wavers, and narrows under a tenth below it
+    fresh = NoiseSummation(1.0, 0.5)
+    for seed in range(8):
+        fresh.blurred(_view(2.7, seed), dim=True)
+        assert not fresh.wide
+    summation = NoiseSummation(1.0, 0.5)
+    for seed in range(8):
+        summation.blurred(_view(3.0, seed), dim=True)
+    assert summation.wide
+    for seed in range(8, 24):
+        summation.blurred(_view(2.7, seed), dim=True)
+        assert summation.wide
+    for seed in range(24, 40):
+        summation.blurred(_view(2.2, seed), dim=True)
+    assert not summation.wide and summation.noise < 0.9 * 2.82
+
+
 def test_a_lit_or_quiet_view_keeps_the_fixed_blur():
     noisy, quiet = _view(6.0), _view(0.0)
     lit = NoiseSummation(1.0)
