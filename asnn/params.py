@@ -215,10 +215,10 @@ class ASNNParams(BaseModel):
     noise_summation: float | None = Field(
         None, gt=0, le=50.0, description="spatial summation in low light: in a view the light "
         "adaptation reads as dim (contrast_light; c below 0.99 of its fixed value), the input "
-        "blur widened to a Gaussian that leaves the frame's measured white noise at about this "
-        "many gray levels, where that is wider than input_blur's "
-        "(asnn.summation.NoiseSummation); inert without input_blur and contrast_light. None: "
-        "the fixed blur")
+        "blur widened, where input_blur's 3x3 kernel would leave more than this many gray "
+        "levels of the frame's measured white noise, to a Gaussian of at least input_blur's "
+        "sigma that leaves about this many (asnn.summation.NoiseSummation); inert without "
+        "input_blur and contrast_light. None: the fixed blur")
     temporal_summation: float | None = Field(
         None, gt=0, le=10.0, description="temporal summation in low light: where noise_summation "
         "widens the input blur, each pixel averaged over its frames with this time constant, "

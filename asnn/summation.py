@@ -202,9 +202,11 @@ class NoiseSummation:
 
     def blurred(self, lum: np.ndarray, dim: bool) -> np.ndarray:
         """Blur a frame: by the fixed 3x3 Gaussian, or, in a dim view where that would leave
-        more than ``target`` of the smoothed noise, by a Gaussian as wide as it asks. The noise is measured in dim views only (a
-        lit view has no use for it, and the measure costs about 0.1 ms a frame): the smoothed
-        measure is kept through a lit spell and goes on from there.
+        more noise than ``target`` (the smoothed measure times ``FIXED_NOISE_GAIN``), by a
+        Gaussian as wide as the noise asks (at least ``FIXED_SIGMA``, at most ``MAX_SIGMA``).
+        The noise is measured in dim views only (a lit view has no use for it, and the measure
+        costs about 0.1 ms a frame): the smoothed measure is kept through a lit spell and goes
+        on from there.
 
         Parameters
         ----------
