@@ -1422,7 +1422,7 @@ def _dusk3_cases() -> list[Case]:
 
 
 def _dusk4_cases() -> list[Case]:
-    """The fourth low-light set (``extra-dk4-*``, 16 cases): designed by a trial on 2026-12-01 and
+    """The fourth low-light set (``extra-dk4-*``, 16 cases): designed by a trial on 2026-12-02 and
     written down with their labels before any detector ran on them, held out for the noise
     summation's threshold (:mod:`asnn.summation`) where the camera's noise is light
     (docs/evaluation.md, "A dusk held-out set", its fourth set). As the third set's, every frame
