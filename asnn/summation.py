@@ -184,7 +184,8 @@ class NoiseSummation:
     noise : float or None
         The smoothed noise measure, gray levels; None before the first frame.
     wide : bool
-        Whether the last frame was blurred wider than the fixed blur.
+        Whether the last frame was blurred wider than the fixed blur (and so whether the next
+        is kept wide down to ``KEEP`` of the threshold).
     average : ndarray (H, W) or None
         The temporal summation's running average, while the frames are blurred wider.
     """
@@ -203,7 +204,8 @@ class NoiseSummation:
     def blurred(self, lum: np.ndarray, dim: bool) -> np.ndarray:
         """Blur a frame: by the fixed 3x3 Gaussian, or, in a dim view where that would leave
         more noise than ``target`` (the smoothed measure times ``FIXED_NOISE_GAIN``), by a
-        Gaussian as wide as the noise asks (at least ``FIXED_SIGMA``, at most ``MAX_SIGMA``).
+        Gaussian as wide as the noise asks (at least ``FIXED_SIGMA``, at most ``MAX_SIGMA``);
+        once widened, it stays wide while the measure stays over ``KEEP`` of that threshold.
         The noise is measured in dim views only (a lit view has no use for it, and the measure
         costs about 0.1 ms a frame): the smoothed measure is kept through a lit spell and goes
         on from there.

@@ -102,7 +102,7 @@ def _strength(name: str) -> tuple[str, float] | None:
 
 def check_perturbation(name: str | None) -> None:
     """Raise ValueError unless ``name`` is None, one of :data:`PERTURBATIONS` or of the
-    :data:`FAMILIES` within its range (``jpeg80``, ``gain1.04``)."""
+    :data:`FAMILIES` within its range (``jpeg80``, ``gain1.04``, ``noise2.5``)."""
     if name is not None and name not in PERTURBATIONS and _strength(name) is None:
         raise ValueError(f"unknown perturbation {name!r}; choose one of "
                          f"{', '.join(PERTURBATIONS)}, or jpegQ (quality Q, 1-100), gainG "
