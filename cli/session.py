@@ -223,11 +223,15 @@ def signals_held():
 
 
 def stop_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM (docker stop), for a clean shutdown."""
+    """An event set by SIGINT or SIGTERM (docker stop), for a clean shutdown.
+
+    The handler sets it from a thread of its own: a handler runs on the main thread between
+    two of its bytecodes, and ``Event.set`` there deadlocked (now and then, for ever) where the
+    signal came while the main thread held the event's lock, inside its ``stop.wait(...)``."""
     stop = threading.Event()
 
     def handler(signum, frame):
-        stop.set()
+        threading.Thread(target=stop.set, name="stop-on-signal", daemon=True).start()
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, handler)
