@@ -262,7 +262,12 @@ def test_browser_shows_both_robots_and_only_the_looming_one_colliding(zenoh_net,
                 " && document.querySelectorAll('#warnings tbody tr').length > 0; })()",
                 "both robots with previews, the looming one colliding, a bar cycle answered")
             time.sleep(0.6)  # let the next animation frame draw the latest state
-            shown = tiles(chrome)
+            # a reading with the time to contact shown: the looping scene restarts far away,
+            # its warning held a while after with no approaching target (a CI run read that)
+            shown = wait_for_tiles(
+                chrome, lambda t: {"loom", "bar"} <= set(t)
+                and t["loom"]["collision"] == "true" and t["loom"]["contact"] is not None,
+                "the looming robot colliding with its time to contact shown")
             chrome.screenshot(ARTIFACTS / "dashboard.png")
             log_robots = set(json.loads(chrome.evaluate(
                 "JSON.stringify([...document.querySelectorAll('#warnings tbody tr')]"
