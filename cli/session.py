@@ -184,8 +184,13 @@ def exit_on_interrupt():
     raised in the callback, and the compile would go on for up to a minute."""
     def handler(signum, frame):
         term = signum == signal.SIGTERM  # docker stop's grace is 10 s: not a minute's compile
-        print(f"\nasnn: {'terminated' if term else 'interrupted'}", file=sys.stderr, flush=True)
-        sys.stdout.flush()
+        # written past Python's buffered streams: the handler runs between two bytecodes of
+        # the main thread, which may be inside a write to one (a reentrant call raises there)
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        with contextlib.suppress(OSError):
+            os.write(2, f"\nasnn: {'terminated' if term else 'interrupted'}\n".encode())
         os._exit(143 if term else 130)
 
     previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}

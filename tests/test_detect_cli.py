@@ -803,6 +803,46 @@ def test_signals_held_in_a_block_are_given_after_it_sigterm_first():
             signal.signal(sig, handler)
 
 
+def test_a_signal_that_lands_inside_the_stop_events_wait_still_sets_it():
+    """The handler of every networked command (``stop_on_signals``) ran ``Event.set`` on the
+    main thread: a SIGTERM that came while ``stop.wait(...)`` held the event's lock deadlocked
+    the camera for ever (a CI run's camera killed after 30 s). Run apart: it hung, unkillable
+    by SIGTERM."""
+    import subprocess
+    import sys
+
+    script = ("import signal\n"
+              "from cli.session import stop_on_signals\n"
+              "stop = stop_on_signals()\n"
+              "with stop._cond:  # where the main thread is, inside stop.wait(...)\n"
+              "    signal.raise_signal(signal.SIGTERM)\n"
+              "print(stop.wait(10))\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60)
+    assert (done.returncode, done.stdout) == (0, "True\n"), done.stderr
+
+
+def test_a_signal_that_lands_inside_a_write_to_a_stream_still_ends_a_compile():
+    """``exit_on_interrupt``'s handler (a worker compiling its kernels) printed its line: where
+    the main thread was inside a write to the same stream, the print raised (a buffered
+    stream's reentrant call) and the process went on instead of ending."""
+    import subprocess
+    import sys
+
+    script = ("import signal, sys\n"
+              "from cli.session import exit_on_interrupt\n"
+              "class Busy:  # a stream the interrupted thread is writing to\n"
+              "    def write(self, text): raise RuntimeError('reentrant call')\n"
+              "    flush = write\n"
+              "with exit_on_interrupt():\n"
+              "    sys.stdout = sys.stderr = Busy()\n"
+              "    signal.raise_signal(signal.SIGTERM)\n"
+              "sys.__stdout__.write('went on')\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60)
+    assert (done.returncode, done.stdout, done.stderr) == (143, "", "\nasnn: terminated\n")
+
+
 def test_a_sigterm_held_under_the_default_handler_still_ends_the_process():
     import signal
     import subprocess
