@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections import Counter
+from collections import Counter, OrderedDict
 from collections.abc import Callable
 
 __all__ = ["MAX_REASONS", "RateLimitedLog"]
@@ -18,8 +18,9 @@ class RateLimitedLog:
     at once, then at most one every ``interval`` seconds, each saying how many were not shown
     since the previous one.
 
-    Reasons may name a robot (``intrusion:<robot>``): past :data:`MAX_REASONS` of them, those
-    quiet for ``interval`` are forgotten, so ids that come and go cannot grow it.
+    Reasons may name a robot (``intrusion:<robot>``): it keeps :data:`MAX_REASONS` of them at
+    most, forgetting the longest unlogged first, so ids that come and go cannot grow it (nor a
+    burst of new ones within ``interval``: a forgotten reason's next event is a line at once).
     """
 
     def __init__(self, logger: logging.Logger, interval: float = 10.0,
@@ -27,7 +28,7 @@ class RateLimitedLog:
         self.logger = logger
         self.interval = float(interval)
         self.clock = clock
-        self._last: dict[str, float] = {}
+        self._last: OrderedDict[str, float] = OrderedDict()  # by when each last wrote a line
         self._hidden: Counter = Counter()
         self._lock = threading.Lock()
 
@@ -41,11 +42,11 @@ class RateLimitedLog:
                 self._hidden[reason] += 1
                 return None
             hidden = self._hidden.pop(reason, 0)
-            if last is None and len(self._last) >= MAX_REASONS:
-                for old in [r for r, t in self._last.items() if now - t >= self.interval]:
-                    del self._last[old]
-                    self._hidden.pop(old, None)
+            if last is None:
+                while len(self._last) >= MAX_REASONS:  # the oldest first: each a step, not a scan
+                    self._hidden.pop(self._last.popitem(last=False)[0], None)
             self._last[reason] = now
+            self._last.move_to_end(reason)
         return hidden
 
     def warning(self, reason: str, message: str, *args) -> bool:

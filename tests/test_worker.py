@@ -433,8 +433,14 @@ def test_rate_limited_log_forgets_quiet_per_robot_reasons():
     for k in range(3 * MAX_REASONS):  # robot ids that come and go, each logged once
         limited.warning(f"intrusion:r{k}", "robot %s", k)
         clock.now += 0.01
-    assert len(limited._last) <= MAX_REASONS + 5 / 0.01  # the quiet ones went
+    assert len(limited._last) == MAX_REASONS  # the quiet ones went
     assert not limited.warning(f"intrusion:r{3 * MAX_REASONS - 1}", "again")  # the recent stay
+    # a burst of new ids within one interval is bounded too (it grew by each before)
+    for k in range(5 * MAX_REASONS):
+        limited.warning(f"intrusion:burst{k}", "robot %s", k)
+    assert len(limited._last) == MAX_REASONS and len(limited._hidden) <= MAX_REASONS
+    assert not limited.warning(f"intrusion:burst{5 * MAX_REASONS - 1}", "again")
+    assert limited.warning("intrusion:burst0", "again")  # forgotten: a line at once
 
 
 def test_a_worker_takes_only_the_robots_it_owns(looming):
