@@ -7,8 +7,8 @@ import logging
 import sys
 
 from cli.arguments import host_address, port, seconds
-from cli.session import (add_zenoh_options, fail, router_watch, session_for, setup_logging,
-                         stop_on_signals)
+from cli.session import (add_zenoh_options, fail, open_session, router_watch, setup_logging,
+                         stop_on_signals, zenoh_config)
 from clients.dashboard import HOLD_S
 from clients.fleet import STALE_S
 from service.config import ConfigError
@@ -27,14 +27,15 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
     from clients.fleet import FleetSubscriber
 
     try:
-        session = session_for(args)
+        config = zenoh_config(args)
+        session = open_session(config)
     except ConfigError as exc:
         server.close()
         return fail(str(exc))
     stop = stop_on_signals()
     # the subscriber closed first: the server (and a Foxglove bridge's channels) would take
     # samples still arriving after it was closed
-    with session, router_watch(session, name, args, on_change=on_router), server, \
+    with session, router_watch(session, name, config, on_change=on_router), server, \
             FleetSubscriber(session, store, refusals=refusals) as subscriber:
         print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
               flush=True)

@@ -15,8 +15,8 @@ from service.config import ConfigError, zenoh_error
 from .arguments import (count, fleet_size, frame_rate, mcap_output, megabytes, non_negative,
                         nonempty_path, preset_spec, robot_id, seconds, seconds_or_zero, threads,
                         warmup_frames, worker_id)
-from .session import add_zenoh_options, exit_on_interrupt, fail, router_watch, session_for, \
-    setup_logging, stop_on_signals, zenoh_options
+from .session import add_zenoh_options, exit_on_interrupt, fail, open_session, router_watch, \
+    setup_logging, stop_on_signals, zenoh_config, zenoh_options
 
 __all__ = ["register"]
 
@@ -47,11 +47,12 @@ def cmd_camera(args: argparse.Namespace) -> int:
     subscribers = SubscriberWatch(args.robot, keys.frame_key(args.robot, args.prefix))
     try:
         source = open_source(args.source, on_error=rejections)
-        session = session_for(args)
+        config = zenoh_config(args)
+        session = open_session(config)
     except (SourceError, ConfigError) as exc:
         return fail(str(exc))
     stop = stop_on_signals()
-    with session, router_watch(session, f"camera {args.robot}", args):
+    with session, router_watch(session, f"camera {args.robot}", config):
         recording = None
         if args.record:  # made last: a camera that cannot start leaves no file behind
             bound = RECORD_MAX_BYTES if args.record_max_mb is None else args.record_max_mb * 1e6
@@ -115,11 +116,12 @@ def cmd_worker(args: argparse.Namespace) -> int:
                           idle_timeout=args.idle_timeout, max_gap=args.max_gap,
                           max_robots=args.max_robots, takeover_after=args.takeover_after,
                           warmup_frames=args.warmup_frames)
-        session = session_for(args)
+        config = zenoh_config(args)
+        session = open_session(config)
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(str(exc))
     tune_process()
-    with session, router_watch(session, f"worker {core.worker_id}", args):
+    with session, router_watch(session, f"worker {core.worker_id}", config):
         worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
                         handover_timeout=args.handover_timeout)
         try:
@@ -150,7 +152,7 @@ def cmd_status(args: argparse.Namespace) -> int:
 
     setup_logging(args)
     try:
-        session = session_for(args)
+        session = open_session(zenoh_config(args))
     except ConfigError as exc:
         return fail(str(exc))
     keep = None
@@ -279,12 +281,13 @@ def cmd_alerts(args: argparse.Namespace) -> int:
 
     setup_logging(args)
     try:
-        session = session_for(args)
+        config = zenoh_config(args)
+        session = open_session(config)
     except ConfigError as exc:
         return fail(str(exc))
     stop = stop_on_signals()
     show = LinePrinter(args.json, sys.stdout, on_error=stop.set)
-    with session, router_watch(session, "alerts", args), \
+    with session, router_watch(session, "alerts", config), \
             WarningListener(session, show, prefix=args.prefix, robot=args.robot) as listener:
         print(f"listening on {listener.key}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):

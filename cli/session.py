@@ -19,7 +19,7 @@ from service.config import ConfigError, ZenohOptions, zenoh_error
 from .arguments import key_prefix
 
 __all__ = ["add_zenoh_options", "zenoh_options", "setup_logging", "stop_on_signals",
-           "open_session", "session_for", "fail"]
+           "open_session", "zenoh_config", "fail"]
 
 
 def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client")) -> None:
@@ -261,24 +261,25 @@ def open_session(config):
         raise ConfigError(message) from None
 
 
-def session_for(args: argparse.Namespace):
-    """The Zenoh session a command's common options describe (raises ConfigError)."""
+def zenoh_config(args: argparse.Namespace):
+    """The Zenoh configuration a command's common options describe (raises ConfigError): made
+    once, for its session (:func:`open_session`) and its :func:`router_watch`, so that a
+    config file is read once."""
     from service.config import make_config
 
-    return open_session(make_config(zenoh_options(args)))
+    return make_config(zenoh_options(args))
 
 
-def router_watch(session, name: str, args: argparse.Namespace, on_change=None):
+def router_watch(session, name: str, config, on_change=None):
     """A :class:`service.link.RouterWatch` of a command's session that, while its router stays
     lost, logs why a session of the command's options could not connect
     (:func:`service.diagnosis.connect_failure`: the router back with another CA, certificate
     or password, which Zenoh retries silently for ever), and at start and once a day which of
-    its certificates expire soon (:func:`service.diagnosis.expiring_certificates`)."""
-    from service.config import make_config
+    its certificates expire soon (:func:`service.diagnosis.expiring_certificates`); ``config``
+    is the one the session was opened with (:func:`zenoh_config`)."""
     from service.diagnosis import connect_failure, expiring_certificates
     from service.link import RouterWatch
 
-    config = make_config(zenoh_options(args))
     return RouterWatch(session, name, on_change=on_change,
                        diagnose=lambda: connect_failure(config),
                        certificates=lambda: expiring_certificates(config))

@@ -837,13 +837,37 @@ def test_camera_command_passes_its_preview_rate_on(monkeypatch, flag, expected):
     import service.camera
 
     calls = []
-    monkeypatch.setattr(cli.net, "session_for", lambda args: contextlib.nullcontext())
+    monkeypatch.setattr(cli.net, "open_session", lambda config: contextlib.nullcontext())
     monkeypatch.setattr(service.camera, "publish_frames",
                         lambda *a, **kw: calls.append(kw) or 0)
     args = build_parser().parse_args(["camera", "--robot", "r1", "--source",
                                       "synthetic:looming", *flag])
     assert args.func(args) == 0
     assert calls[0]["preview_hz"] == expected
+
+
+def test_a_command_reads_its_zenoh_config_file_once(monkeypatch, tmp_path):
+    """The session and its router watch (which says why a lost router refuses us) take the
+    same configuration: the file was read a second time for the watch, which a file edited
+    or removed in between would have made another, or an error out of the command."""
+    import contextlib
+
+    import cli.net
+    import service.camera
+    import service.config
+
+    config = tmp_path / "zenoh.json5"
+    config.write_text("{}")
+    reads = []
+    read = service.config._read_config_file
+    monkeypatch.setattr(service.config, "_read_config_file",
+                        lambda path: reads.append(path) or read(path))
+    monkeypatch.setattr(cli.net, "open_session", lambda config: contextlib.nullcontext())
+    monkeypatch.setattr(service.camera, "publish_frames", lambda *a, **kw: 0)
+    args = build_parser().parse_args(["camera", "--robot", "r1", "--source",
+                                      "synthetic:looming", "--config", str(config)])
+    assert args.func(args) == 0
+    assert reads == [str(config)]
 
 
 def test_camera_command_refuses_a_negative_preview_rate(capsys):

@@ -1058,7 +1058,8 @@ def test_the_fleet_s_server_closes_after_the_subscriber_that_feeds_it(monkeypatc
             return True
 
     monkeypatch.setattr(fleet, "FleetSubscriber", Subscriber)
-    monkeypatch.setattr(cli.dashboard, "session_for", lambda args: contextlib.nullcontext())
+    monkeypatch.setattr(cli.dashboard, "zenoh_config", lambda args: None)
+    monkeypatch.setattr(cli.dashboard, "open_session", lambda config: contextlib.nullcontext())
     monkeypatch.setattr(cli.dashboard, "router_watch",
                         lambda *args, **kwargs: contextlib.nullcontext())
     monkeypatch.setattr(cli.dashboard, "stop_on_signals", Stop)
