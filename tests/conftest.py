@@ -4,7 +4,6 @@ free ports, no multicast, no gossip."""
 from __future__ import annotations
 
 import contextlib
-import os
 
 import pytest
 
@@ -27,11 +26,10 @@ def compiled_kernels(request):
     On a cache that holds some, it runs in an empty cache of its own while the tests go on."""
     from asnn.warmup import compile_kernels
 
-    # each of pytest-xdist's processes collects every test: the first starts the demo, and a
-    # test run by another starts one of its own when it asks for it
-    first = os.environ.get("PYTEST_XDIST_WORKER", "gw0") == "gw0"
-    if first and any(getattr(item, "originalname", None) == FRESH_INSTALL_TEST
-                     for item in request.session.items):
+    # each of pytest-xdist's processes collects every test, so each starts the demo: whichever
+    # runs the test finds it done (started later, it had a minute's compile of its own)
+    if any(getattr(item, "originalname", None) == FRESH_INSTALL_TEST
+           for item in request.session.items):
         demo = request.getfixturevalue("fresh_install_demo")
         if demo.in_the_session_cache:
             demo.wait()
