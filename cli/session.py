@@ -230,13 +230,24 @@ def signals_held():
 def stop_on_signals() -> threading.Event:
     """An event set by SIGINT or SIGTERM (docker stop), for a clean shutdown.
 
-    The handler sets it from a thread of its own: a handler runs on the main thread between
-    two of its bytecodes, and ``Event.set`` there deadlocked (now and then, for ever) where the
-    signal came while the main thread held the event's lock, inside its ``stop.wait(...)``."""
+    The event is set by a thread started here, which the handler wakes through a
+    ``queue.SimpleQueue`` (whose ``put`` is reentrant and never blocks): a handler runs on the
+    main thread between two of its bytecodes, and ``Event.set`` there deadlocked (now and then,
+    for ever) where the signal came while the main thread held the event's lock, inside its
+    ``stop.wait(...)``. The handler starts no thread either: from Python 3.12 that raises
+    (``can't create new thread at interpreter shutdown``) for a signal that comes during the
+    exit's log drain, out of the ``atexit`` callback it interrupted."""
     stop = threading.Event()
+    signals: queue.SimpleQueue = queue.SimpleQueue()
+
+    def set_on_signal() -> None:
+        signals.get()
+        stop.set()
+
+    threading.Thread(target=set_on_signal, name="stop-on-signal", daemon=True).start()
 
     def handler(signum, frame):
-        threading.Thread(target=stop.set, name="stop-on-signal", daemon=True).start()
+        signals.put(signum)
 
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, handler)

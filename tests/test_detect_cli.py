@@ -822,6 +822,27 @@ def test_a_signal_that_lands_inside_the_stop_events_wait_still_sets_it():
     assert (done.returncode, done.stdout) == (0, "True\n"), done.stderr
 
 
+def test_the_stop_handler_starts_no_thread():
+    """A handler that started a thread to set the event raised, from Python 3.12, where the
+    signal came during the interpreter's shutdown (the exit's log drain, an atexit callback):
+    "can't create new thread at interpreter shutdown", out of the callback it interrupted, and
+    the event was never set. Simulated here on any Python by refusing new threads."""
+    import subprocess
+    import sys
+
+    script = ("import signal, threading\n"
+              "from cli.session import stop_on_signals\n"
+              "stop = stop_on_signals()\n"
+              "def refused(self):\n"
+              "    raise RuntimeError(\"can't create new thread at interpreter shutdown\")\n"
+              "threading.Thread.start = refused\n"
+              "signal.raise_signal(signal.SIGTERM)\n"
+              "print(stop.wait(10))\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60)
+    assert (done.returncode, done.stdout) == (0, "True\n"), done.stderr
+
+
 def test_a_signal_that_lands_inside_a_write_to_a_stream_still_ends_a_compile():
     """``exit_on_interrupt``'s handler (a worker compiling its kernels) printed its line: where
     the main thread was inside a write to the same stream, the print raised (a buffered
@@ -833,7 +854,7 @@ def test_a_signal_that_lands_inside_a_write_to_a_stream_still_ends_a_compile():
               "from cli.session import exit_on_interrupt\n"
               "class Busy:  # a stream the interrupted thread is writing to\n"
               "    def write(self, text): raise RuntimeError('reentrant call')\n"
-              "    flush = write\n"
+              "    def flush(self): raise RuntimeError('reentrant call')\n"
               "with exit_on_interrupt():\n"
               "    sys.stdout = sys.stderr = Busy()\n"
               "    signal.raise_signal(signal.SIGTERM)\n"
