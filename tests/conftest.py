@@ -114,6 +114,25 @@ def fresh_install_demo(tmp_path_factory):
     demo.kill()
 
 
+@pytest.fixture(autouse=True)
+def _signal_handlers_restored():
+    """SIGINT's and SIGTERM's handlers as they were before each test: a command run in-process
+    (``args.func(args)``, ``main([...])``) installs ``stop_on_signals``'s, which outlived it and
+    swallowed the test process's Ctrl-C and SIGTERM, and which later tests in the same process
+    (whichever pytest-xdist gives it) found in place of Python's own."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for sig, handler in before.items():
+        if signal.getsignal(sig) is not handler and handler is not None:
+            signal.signal(sig, handler)
+
+
 @pytest.fixture
 def zenoh_net():
     """A small loopback network: ``hub`` (a peer session) listens on a free port and ``spoke()``
