@@ -274,8 +274,9 @@ def open_session(config):
 
 def zenoh_config(args: argparse.Namespace):
     """The Zenoh configuration a command's common options describe (raises ConfigError): made
-    once, for its session (:func:`open_session`) and its :func:`router_watch`, so that a
-    config file is read once."""
+    once, for its session (:func:`open_session`) and its :func:`router_watch`, so that the
+    watch diagnoses the configuration the session was opened with, not the config file as it
+    reads later."""
     from service.config import make_config
 
     return make_config(zenoh_options(args))

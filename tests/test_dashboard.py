@@ -846,10 +846,11 @@ def test_camera_command_passes_its_preview_rate_on(monkeypatch, flag, expected):
     assert calls[0]["preview_hz"] == expected
 
 
-def test_a_command_reads_its_zenoh_config_file_once(monkeypatch, tmp_path):
+def test_a_command_makes_its_zenoh_config_once(monkeypatch, tmp_path):
     """The session and its router watch (which says why a lost router refuses us) take the
-    same configuration: the file was read a second time for the watch, which a file edited
-    or removed in between would have made another, or an error out of the command."""
+    same configuration: it was made a second time for the watch, from the config file read
+    again, which a file edited or removed in between would have made another, or an error
+    out of the command."""
     import contextlib
 
     import cli.net
@@ -858,16 +859,16 @@ def test_a_command_reads_its_zenoh_config_file_once(monkeypatch, tmp_path):
 
     config = tmp_path / "zenoh.json5"
     config.write_text("{}")
-    reads = []
-    read = service.config._read_config_file
-    monkeypatch.setattr(service.config, "_read_config_file",
-                        lambda path: reads.append(path) or read(path))
+    made = []
+    make = service.config.make_config
+    monkeypatch.setattr(service.config, "make_config",
+                        lambda options: made.append(options.config_file) or make(options))
     monkeypatch.setattr(cli.net, "open_session", lambda config: contextlib.nullcontext())
     monkeypatch.setattr(service.camera, "publish_frames", lambda *a, **kw: 0)
     args = build_parser().parse_args(["camera", "--robot", "r1", "--source",
                                       "synthetic:looming", "--config", str(config)])
     assert args.func(args) == 0
-    assert reads == [str(config)]
+    assert made == [str(config)]
 
 
 def test_camera_command_refuses_a_negative_preview_rate(capsys):
