@@ -27,7 +27,9 @@ def compiled_kernels(request):
     from asnn.warmup import compile_kernels
 
     # each of pytest-xdist's processes collects every test, so each starts the demo: whichever
-    # runs the test finds it done (started later, it had a minute's compile of its own)
+    # runs the test finds it done (started later, it had a minute's compile of its own). On an
+    # empty cache the two compile into it at once, which numba allows (each file written
+    # aside, then moved into place): no slower than one, since the other core was idle
     if any(getattr(item, "originalname", None) == FRESH_INSTALL_TEST
            for item in request.session.items):
         demo = request.getfixturevalue("fresh_install_demo")
