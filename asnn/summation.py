@@ -89,7 +89,7 @@ DIM = 0.99
 # a blur widened stays wide while the smoothed noise measure is over this share of the noise
 # that widened it: the measure of a still view wavers by 2-4 % about its mean from frame to
 # frame after the smoothing (2.72-2.92 gray levels in views drawn with 2.8), a tenth is about
-# three times that
+# three times that (0.5-0.95 score alike, case by case: docs/design-notes.md)
 KEEP = 0.9
 # the widest blur: a frame noisier than this asks for (14 gray levels at the default's target)
 # is mostly noise, and the kernel a wider sigma takes would grow with it
