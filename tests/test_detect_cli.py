@@ -803,41 +803,29 @@ def test_signals_held_in_a_block_are_given_after_it_sigterm_first():
             signal.signal(sig, handler)
 
 
-def test_a_signal_that_lands_inside_the_stop_events_wait_still_sets_it():
-    """The handler of every networked command (``stop_on_signals``) ran ``Event.set`` on the
-    main thread: a SIGTERM that came while ``stop.wait(...)`` held the event's lock deadlocked
-    the camera for ever (a CI run's camera killed after 30 s). Run apart: it hung, unkillable
-    by SIGTERM."""
-    import subprocess
-    import sys
-
-    script = ("import signal\n"
-              "from cli.session import stop_on_signals\n"
-              "stop = stop_on_signals()\n"
-              "with stop._cond:  # where the main thread is, inside stop.wait(...)\n"
-              "    signal.raise_signal(signal.SIGTERM)\n"
-              "print(stop.wait(10))\n")
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=60)
-    assert (done.returncode, done.stdout) == (0, "True\n"), done.stderr
-
-
-def test_the_stop_handler_starts_no_thread():
-    """A handler that started a thread to set the event raised, from Python 3.12, where the
-    signal came during the interpreter's shutdown (the exit's log drain, an atexit callback):
-    "can't create new thread at interpreter shutdown", out of the callback it interrupted, and
-    the event was never set. Simulated here on any Python by refusing new threads."""
+@pytest.mark.parametrize("where", [
+    # the handler ran Event.set on the main thread: a SIGTERM that came while stop.wait(...)
+    # held the event's lock deadlocked the camera for ever (a CI run's camera killed after
+    # 30 s), unkillable by SIGTERM
+    "with stop._cond:  # where the main thread is, inside stop.wait(...)\n"
+    "    signal.raise_signal(signal.SIGTERM)\n",
+    # a handler that started a thread to set it raised, from Python 3.12, where the signal came
+    # during the interpreter's shutdown (the exit's log drain, an atexit callback): "can't
+    # create new thread at interpreter shutdown", and the event was never set; simulated on
+    # any Python by refusing new threads
+    "def refused(self):\n"
+    "    raise RuntimeError(\"can't create new thread at interpreter shutdown\")\n"
+    "threading.Thread.start = refused\n"
+    "signal.raise_signal(signal.SIGTERM)\n",
+], ids=["inside-its-wait", "at-shutdown"])
+def test_the_stop_handler_sets_its_event_wherever_the_signal_lands(where):
+    """The handler of every networked command (``stop_on_signals``), run apart."""
     import subprocess
     import sys
 
     script = ("import signal, threading\n"
               "from cli.session import stop_on_signals\n"
-              "stop = stop_on_signals()\n"
-              "def refused(self):\n"
-              "    raise RuntimeError(\"can't create new thread at interpreter shutdown\")\n"
-              "threading.Thread.start = refused\n"
-              "signal.raise_signal(signal.SIGTERM)\n"
-              "print(stop.wait(10))\n")
+              "stop = stop_on_signals()\n" + where + "print(stop.wait(10))\n")
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                           timeout=60)
     assert (done.returncode, done.stdout) == (0, "True\n"), done.stderr
