@@ -21,8 +21,8 @@ def compiled_kernels(request):
 
     Where the fresh-install demo's test is selected, its command starts first. On a cache that
     holds none of the kernels yet (a fresh checkout, as in CI) it runs in that cache, and this
-    compile waits for it, since numba's cache takes one writer at a time: the default preset's
-    kernels, which its worker compiled, then load here instead of being compiled a second time.
+    compile waits for it: the default preset's kernels, which its worker compiled, then load
+    here instead of being compiled a second time.
     On a cache that holds some, it runs in an empty cache of its own while the tests go on."""
     from asnn.warmup import compile_kernels
 
