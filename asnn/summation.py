@@ -226,9 +226,7 @@ class NoiseSummation:
             measured = noise_level(lum) * 255.0
             self.noise = (measured if self.noise is None
                           else (1.0 - SMOOTHING) * self.noise + SMOOTHING * measured)
-        # once widened, the blur stays wide down to KEEP of the noise that widened it: the
-        # measure wavers by a few per cent, and a view whose noise sits at the threshold would
-        # switch every few frames, restarting the temporal summation's average each time
+        # once widened, the blur stays wide down to KEEP of the threshold (why: KEEP's comment)
         widens = self.target / FIXED_NOISE_GAIN * (KEEP if self.wide else 1.0)
         self.wide = dim and self.noise is not None and self.noise > widens
         if self.wide:
