@@ -106,7 +106,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                            "other clips (your own) the preset's row is not in-sample but "
                            "already held out, and the leave-one-clip-out row shows what "
                            "choosing them on your clips would give. Runs the generated suite "
-                           "too (minutes; the replay after it prints nothing)")
+                           "too (minutes; its progress printed as it traces the clips and cases "
+                           "and as it replays the gate)")
     mode.add_argument("--ttc", action="store_true",
                       help="instead, how right the targets' time to contact is: the default "
                            "preset (or --preset) over 96 generated constant-speed approaches of "

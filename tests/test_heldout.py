@@ -376,6 +376,12 @@ def test_asnn_eval_held_out_end_to_end(tmp_path, capsys):
     err = printed.err  # off a terminal: a line per traced clip or case
     for name in (*(lab["file"] for lab in labels), "nearmiss-disk-dark-right"):
         assert f"eval --held-out: {name} (" in err
+    # and the replay after them (--help said it "prints nothing", stale since it reports)
+    assert "eval --held-out: replaying the grid" in err
+    with pytest.raises(SystemExit):
+        main(["eval", "--help"])
+    said = " ".join(capsys.readouterr().out.split())
+    assert "prints nothing" not in said and "as it replays the gate" in said
     results = json.loads((out / "held_out.json").read_text())
     # stdout: the figures (heldout.summary_lines), the thresholds named, then the report's path
     assert printed.out.splitlines() == [*heldout.summary_lines(results), f"{out}/held_out.md"]
