@@ -172,7 +172,9 @@ def make_config(options: ZenohOptions | None = None, **overrides) -> zenoh.Confi
         try:
             conf.insert_json5(key, json.dumps(value))
         except Exception as exc:
-            raise ConfigError(f"Zenoh rejects {key} = {json.dumps(value)}: {exc}") from None
+            # the place is in the one-line JSON made of the value here, not in a file: left out
+            raise ConfigError(f"Zenoh rejects {key} = {json.dumps(value)}: "
+                              f"{zenoh_error(exc, place=False)}") from None
     return conf
 
 
@@ -180,14 +182,24 @@ _RUST_LOCATION = re.compile(r"\s+at /\S+\.rs:\d+\.?")
 # a config parser's report: "--> LINE:COLUMN", a drawing of the line, "= what it expected"
 _PARSER_PLACE = re.compile(r"-->\s*(\d+):(\d+)")
 _PARSER_SAYS = re.compile(r"^\s*=\s*(.+)$", re.M)
+# a value the config refuses, in Rust's debug form: `Json5Err(Message { msg: "...", location:
+# Some(Location { line: 1, column: 2 }) })` or `JSON error: Message { ... }`
+_JSON_MESSAGE = re.compile(r'Message \{ msg: "(.*)", location: (?:Some\(Location \{ line: '
+                           r'(\d+), column: (\d+) \}\)|None) \}', re.S)
 
 
-def zenoh_error(exc: BaseException) -> str:
+def zenoh_error(exc: BaseException, place: bool = True) -> str:
     """A Zenoh error's text for a user, on one line: without the Rust source locations it
-    carries, and a config parser's drawing of the line at fault (six lines) said as the place
-    and what the parser expected there."""
+    carries, a config parser's drawing of the line at fault (six lines) said as the place
+    and what the parser expected there, and a refused value's message without the Rust
+    structure around it (its line and column first, unless ``place`` is false)."""
     text = _RUST_LOCATION.sub("", str(exc)).strip()
-    place, says = _PARSER_PLACE.search(text), _PARSER_SAYS.search(text)
-    if place and says:
-        return f"line {place[1]}, column {place[2]}: {says[1].strip()}"
+    where, says = _PARSER_PLACE.search(text), _PARSER_SAYS.search(text)
+    if where and says:
+        return f"line {where[1]}, column {where[2]}: {says[1].strip()}"
+    message = _JSON_MESSAGE.search(text)
+    if message:
+        text = message[1].replace('\\"', '"').strip()
+        if place and message[2]:
+            text = f"line {message[2]}, column {message[3]}: {text}"
     return " ".join(line.strip() for line in text.splitlines() if line.strip())

@@ -394,6 +394,25 @@ def test_a_config_zenoh_refuses_is_named_without_the_rust_source_location(tmp_pa
     assert "broken.json5: line 1, column 43: expected array" in str(caught.value)
 
 
+def test_an_endpoint_zenoh_refuses_is_named_without_the_rust_structure(tmp_path):
+    """`--connect foo` printed Zenoh's whole Rust error: `Json5Err(Message { msg: ...` with two
+    `/root/.cargo/...rs` source paths; a config file's bad value printed the `Message { ... }`."""
+    for options in (ZenohOptions(connect=("foo",)), ZenohOptions(listen=("foo",))):
+        with pytest.raises(ConfigError) as caught:
+            make_config(options)
+        text = str(caught.value)
+        assert ".rs:" not in text and "Json5Err" not in text and "Message {" not in text, text
+        assert text.endswith("endpoints = [\"foo\"]: Endpoints must be of the form "
+                             "<protocol>/<address>[?<metadata>][#<config>]: foo"), text
+    bad = tmp_path / "bad.json5"
+    bad.write_text('{ mode: "client", connect: { endpoints: ["foo"] } }')
+    with pytest.raises(ConfigError) as caught:
+        make_config(ZenohOptions(config_file=bad))
+    assert str(caught.value) == (
+        f"cannot load Zenoh config {bad}: line 1, column 42: Endpoints must be of the form "
+        "<protocol>/<address>[?<metadata>][#<config>]: foo")
+
+
 def test_tracked_target_fields_cross_the_wire_and_are_left_out_where_unset():
     import msgpack
 
