@@ -176,6 +176,15 @@ def run(args: argparse.Namespace) -> int:
         elif args.handover:
             from asnn.evaluation import handover
 
+            # said as asnn eval says it, not as an OSError's repr (with --cases or --looms
+            # too, handover.run says the sources conflict)
+            if args.clips is not None and args.cases is None and args.looms is None:
+                if not Path(args.clips).is_dir():
+                    raise ValueError(f"--clips {args.clips}: not a folder")
+                if not (Path(args.clips) / "labels.json").is_file():
+                    raise ValueError(f"--clips {args.clips}: no labels file "
+                                     f"{Path(args.clips) / 'labels.json'} (asnn label "
+                                     f"{args.clips} starts one)")
             preset = args.preset[0] if args.preset else None
             report = handover.run(f"asnn:{preset}" if preset else "asnn", cases=args.cases,
                                   every=args.every, progress=_progress(), clips_dir=args.clips,

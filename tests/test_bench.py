@@ -420,6 +420,22 @@ def test_handover_bench_takes_labelled_clips(tmp_path, capsys, monkeypatch):
     assert {w["scene"] for w in report["worst"]} == {"loom.avi"}
 
 
+def test_handover_bench_says_a_clips_folder_it_cannot_read_as_asnn_eval_does(
+        tmp_path, capsys, monkeypatch):
+    """`--clips nosuch` printed `[Errno 2] No such file or directory: 'nosuch/labels.json'`,
+    and `--clips clip.mp4` `[Errno 20] Not a directory: 'clip.mp4/labels.json'`."""
+    for name in THREAD_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    clip = tmp_path / "clip.mp4"
+    clip.write_bytes(b"")
+    for folder, says in ((tmp_path / "nosuch", "not a folder"), (clip, "not a folder"),
+                         (tmp_path, "no labels file")):
+        assert main(["bench", "--handover", "--clips", str(folder)]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"asnn bench: --clips {folder}: {says}"), err
+        assert "Errno" not in err
+
+
 def test_handover_bench_reports_the_warmup_distribution(capsys, monkeypatch):
     for name in THREAD_VARIABLES:
         monkeypatch.delenv(name, raising=False)
