@@ -7,7 +7,10 @@ import logging
 import os
 import sys
 import threading
+from contextlib import suppress
+from pathlib import Path
 
+from asnn.io.files import folder_problem
 from asnn.params import preset_names
 from service import keys
 from service.config import ConfigError, zenoh_error
@@ -43,6 +46,9 @@ def cmd_camera(args: argparse.Namespace) -> int:
             recording_topic(args.robot, args.prefix)
         except ValueError as exc:
             return fail(str(exc))
+        problem = folder_problem(Path(args.record).parent)  # made later, where it is missing
+        if problem:
+            return fail(f"--record {args.record}: {problem}")
     rejections, refusals = SourceRejections(args.robot), RefusalNotices(args.robot)
     subscribers = SubscriberWatch(args.robot, keys.frame_key(args.robot, args.prefix))
     try:
@@ -56,11 +62,19 @@ def cmd_camera(args: argparse.Namespace) -> int:
         recording = None
         if args.record:  # made last: a camera that cannot start leaves no file behind
             bound = RECORD_MAX_BYTES if args.record_max_mb is None else args.record_max_mb * 1e6
+            folder = Path(args.record).parent
+            made = [f for f in (folder, *folder.parents) if not f.exists()]  # deepest first
+            try:  # its folders too, as asnn detect makes its outputs'
+                folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                _remove_folders(made)
+                return fail(f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
             try:
                 recording = open_recording(args.record, args.robot, prefix=args.prefix,
                                            format=args.format, frame_id=source.frame_id,
                                            max_bytes=bound)
-            except OSError as exc:
+            except OSError as exc:  # nor the folders it made for the file (a full disk)
+                _remove_folders(made)
                 return fail(str(exc))
         try:
             count = publish_frames(session, args.robot, source, prefix=args.prefix,
@@ -73,12 +87,22 @@ def cmd_camera(args: argparse.Namespace) -> int:
         finally:  # finished (its index and summary) however the camera stops
             if recording is not None:
                 _close_recording(recording, args.robot)
+                if not recording.path.exists():  # no frame recorded: nor its new folders
+                    _remove_folders(made)
     unheard = (f" ({subscribers.unheard} while no subscriber took them: lost)"
                if subscribers.unheard else "")
     log.info("camera %s: %d frames published%s; %s; workers' refusals on its key "
              "(of any publisher's frames): %s",
              args.robot, count, unheard, rejections.summary(), refusals.summary())
     return 0
+
+
+def _remove_folders(folders: list[Path]) -> None:
+    """Remove the folders a camera made for its recording and did not use, deepest first
+    (each only if empty: what another process put there meanwhile stays)."""
+    for folder in folders:
+        with suppress(OSError):
+            folder.rmdir()
 
 
 def _close_recording(recording, robot: str) -> None:
@@ -420,7 +444,9 @@ def register(subparsers) -> None:
                    help="also record every frame published, as sent and with its stamp, to this "
                         "new file: a ROS 2 bag (topic /<prefix>/<robot>/frame, a robot id's - "
                         "as _) that asnn detect and asnn camera --source replay "
-                        "(docs/foxglove.md; the 'ros' extra); finished when the camera stops")
+                        "(docs/foxglove.md; the 'ros' extra); its folder is made where "
+                        "missing, once the source and the session open; finished when the "
+                        "camera stops")
     p.add_argument("--record-max-mb", type=megabytes, default=None, metavar="MB",
                    help="stop recording once the file reaches this size; the camera publishes "
                         "on (default: 1000)")

@@ -227,11 +227,45 @@ def test_a_recording_never_overwrites_a_file_and_an_unwritable_one_fails_at_star
     assert capsys.readouterr().err.strip() == \
         f"asnn: error: {path}: exists; a recording goes to a new file"
     assert path.read_bytes() == b"an earlier run"
-    missing = tmp_path / "no-such-folder" / "run.mcap"
+    (tmp_path / "a-file").write_text("")  # where a folder would have to be made
+    unwritable = tmp_path / "a-file" / "run.mcap"
     assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
-                            "--record", str(missing))) == 2
+                            "--record", str(unwritable))) == 2
     assert capsys.readouterr().err.strip() == \
-        f"asnn: error: cannot write {missing}: No such file or directory"
+        f"asnn: error: --record {unwritable}: {tmp_path / 'a-file'} is not a folder"
+
+
+def test_a_recording_s_missing_folders_are_made_once_the_camera_starts(tmp_path, capsys,
+                                                                      monkeypatch):
+    """As ``asnn detect`` makes its outputs' folders: a new user's --record rec/x.mcap failed
+    with "No such file or directory". A camera that cannot start, or records no frame, leaves
+    no folder behind."""
+    import asnn.io.bag_recording as bag_recording
+
+    path = tmp_path / "rec" / "day1" / "run.mcap"
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(path))) == 0, capsys.readouterr().err
+    assert len(recorded(path)) == 60
+    for source in ("synthetic:nope", str(tmp_path / "none.avi")):  # the source does not open
+        assert main(camera_args(tmp_path, "--robot", "r1", "--source", source,
+                                "--record", str(tmp_path / "new" / "run.mcap"))) == 2
+        assert not (tmp_path / "new").exists()
+    import service.camera
+
+    with monkeypatch.context() as patch:  # stopped before its first frame: no file, no folder
+        patch.setattr(service.camera, "publish_frames", lambda *args, **kwargs: 0)
+        assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                                "--record", str(tmp_path / "new" / "run.mcap"))) == 0
+    assert not (tmp_path / "new").exists()
+
+    class Usage:  # the recording does not open: the folders made for it are removed
+        free = 1_000_000
+
+    monkeypatch.setattr(bag_recording.shutil, "disk_usage", lambda path: Usage)
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(tmp_path / "new" / "more" / "run.mcap"))) == 2
+    assert "its disk is full" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
 
 
 def test_a_full_disk_is_an_error_at_start_and_leaves_no_file(tmp_path, monkeypatch, capsys):
