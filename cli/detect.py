@@ -51,7 +51,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="threads the ASNN model uses for the stream, besides decoding and "
                         "output (default: the cores available; the results are the same "
                         "whatever the number; at most 256: more than the cores only take "
-                        "turns, and thousands stall the machine)")
+                        "turns, and thousands stall the machine); the LGMD models step on one "
+                        "thread and refuse it")
     p.add_argument("--tracks", type=nonempty_path, metavar="PATH|-",
                    help="write every tracked object with its approach test, one JSON object per "
                         "frame ('-': stdout): why the model warned, or did not (presets that "
@@ -379,6 +380,8 @@ def run(args: argparse.Namespace) -> int:
     model_threads = 1
     if args.model != "asnn" and args.preset != "default":
         return _fail(f"--preset applies to the ASNN model only, not {args.model}")
+    if args.model != "asnn" and args.threads is not None:  # a baseline steps on this thread
+        return _fail(f"--threads applies to the ASNN model only, not {args.model}")
     params = preset_from_spec(args.preset)
     if args.tracks:
         if args.model != "asnn" or params.targets != "objects":

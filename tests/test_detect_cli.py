@@ -115,6 +115,11 @@ def test_lgmd_models_are_selectable_and_report_no_targets(looming_video, capsys)
     # a preset is the ASNN model's: given with an LGMD model it was ignored without a word
     assert main(["detect", str(path), "--model", "lgmd1", "--preset", "robust"]) == 2
     assert "--preset applies to the ASNN model only" in capsys.readouterr().err
+    # and so are its threads: an LGMD model steps on the main thread whatever --threads says
+    for model in ("lgmd1", "lgmd2"):
+        assert main(["detect", str(path), "--model", model, "--threads", "4"]) == 2
+        assert capsys.readouterr().err.strip() == \
+            f"asnn detect: --threads applies to the ASNN model only, not {model}"
 
 
 def test_a_camera_given_an_empty_source_is_refused_before_it_starts(capsys):
