@@ -405,9 +405,9 @@ def run(args: argparse.Namespace) -> int:
         return _fail(str(exc))
     slow = ""  # said: the frames are too far apart for the model to time them by
     if not source.fps_stated:
-        print(f"asnn detect: note: {args.video} states no frame rate a camera runs at; its "
-              f"frames are timed at {source.fps:g} a second, so the targets' expansion and ttc "
-              "are only as right as that guess", file=sys.stderr)
+        print(f"asnn detect: note: {args.video} {source.rate_problem()}; its frames are timed "
+              f"at {source.fps:g} a second, so the targets' expansion and ttc are only as right "
+              "as that guess", file=sys.stderr)
     elif args.model == "asnn" and source.fps < SLOW_FPS:
         # frames further apart than the model believes a gap (MAX_FRAME_GAP_S): it takes the
         # nominal period instead, and its times to contact would read short without a word

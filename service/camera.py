@@ -353,8 +353,8 @@ def publish_frames(session: zenoh.Session, robot: str, source: Source, *,
         declare(publisher.declare_matching_listener(subscribers))
         log.info("camera %s: %s at %.1f fps as %s on %s", robot, source.name, rate, format, key)
         if not (fps or source.live or source.fps_stated):  # a live source stamps its own times
-            log.warning("camera %s: %s states no frame rate a camera runs at; its frames are "
-                        "paced and stamped at %.1f fps (set --fps)", robot, source.name, rate)
+            log.warning("camera %s: %s %s; its frames are paced and stamped at %.1f fps (set "
+                        "--fps)", robot, source.name, source.rate_problem(), rate)
         seq = 0
         next_time = time.monotonic()
         # a replayed source's frames are stamped with their recorded times, shifted to now:

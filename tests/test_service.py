@@ -750,7 +750,8 @@ def test_a_file_without_a_camera_s_frame_rate_is_replayed_at_20_fps_with_a_warni
     source = open_source(str(path))
     with caplog.at_level("WARNING", logger="asnn.camera"):
         assert publish_frames(zenoh_net.spoke(), "r8", source, max_frames=2) == 2
-    assert "states no frame rate a camera runs at" in caplog.text
+    assert "states 1000 frames a second, more than a camera runs at (a stated rate is taken " \
+           "up to 240)" in caplog.text
     assert "at 20.0 fps (set --fps)" in caplog.text
     caplog.clear()
     with caplog.at_level("WARNING", logger="asnn.camera"):

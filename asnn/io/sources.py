@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .rates import MAX_FPS
+
 __all__ = ["CLOCK_RESET", "CLOCK_RESET_FRAMES", "STAMP_UNSET", "SYNTHETIC", "BackwardStamps",
            "Source", "SourceError", "is_bag", "open_source", "split_topic"]
 
@@ -139,6 +141,9 @@ class Source:
     fps_stated : bool
         Whether ``fps`` is the source's own; otherwise it states none, or one no camera runs
         at, and ``fps`` is :data:`asnn.io.video.DEFAULT_FPS` (:func:`asnn.io.video.stated_fps`).
+    fps_ignored : float or None
+        The rate the source states where it is not timed at it, being above
+        :data:`asnn.io.rates.MAX_FPS` (:func:`asnn.io.video.ignored_fps`); None otherwise.
     """
 
     name: str
@@ -150,6 +155,16 @@ class Source:
     start_ns: int | None = None
     frame_id: str = ""
     fps_stated: bool = True
+    fps_ignored: float | None = None
+
+    def rate_problem(self) -> str:
+        """Why the source is not timed at a rate of its own (``fps_stated`` false), worded to
+        follow its name in a note: the rate it states and the rates taken, where it states
+        one above them (a container's time base: 500 or 1000), else that it states none."""
+        if self.fps_ignored is None:
+            return "states no frame rate a camera runs at"
+        return (f"states {self.fps_ignored:g} frames a second, more than a camera runs at (a "
+                f"stated rate is taken up to {MAX_FPS:g})")
 
     def timed_frames(self) -> Iterator[tuple[float, np.ndarray]]:
         """``(t, image)``: seconds since the first frame, and the frame."""
@@ -279,7 +294,7 @@ def _open_scene(spec: str) -> Source:
 def _open_capture(spec: str) -> Source:
     import cv2
 
-    from .video import DEFAULT_FPS, read_frames, stated_fps
+    from .video import DEFAULT_FPS, ignored_fps, read_frames, stated_fps
 
     # a V4L2 node by its index, as OpenCV's backends all take it
     device = re.fullmatch(r"/dev/video(\d+)", os.path.realpath(spec))
@@ -288,9 +303,10 @@ def _open_capture(spec: str) -> Source:
     if not cap.isOpened():
         what = "capture device" if _is_device(spec) else "capture source"
         raise SourceError(f"cannot open {what} {spec!r}", "missing")
-    fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
+    reported = cap.get(cv2.CAP_PROP_FPS)
+    fps = stated_fps(reported)
     return Source(spec, DEFAULT_FPS if fps is None else fps, True, lambda: read_frames(cap, spec),
-                  fps_stated=fps is not None)
+                  fps_stated=fps is not None, fps_ignored=ignored_fps(reported))
 
 
 def _open_file(spec: str, decoder_threads: int | None) -> Source:
@@ -302,7 +318,7 @@ def _open_file(spec: str, decoder_threads: int | None) -> Source:
         raise SourceError(str(exc), "missing" if "no such file" in str(exc) else
                           "undecodable") from None
     return Source(spec, clip.fps, False, lambda: iter(clip), frame_count=clip.frame_count,
-                  fps_stated=clip.fps_stated)
+                  fps_stated=clip.fps_stated, fps_ignored=clip.fps_ignored)
 
 
 def _open_bag(path: str, topic: str | None, on_error: ErrorHandler | None,

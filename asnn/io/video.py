@@ -19,7 +19,8 @@ from .rates import FPS_RANGE, MAX_FPS
 
 __all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "RAW_STREAM_SUFFIXES", "WRITABLE_SUFFIXES",
            "VideoError", "VideoClip", "check_written", "cut_short", "open_video", "open_writer",
-           "quiet_writer", "read_frames", "stated_fps", "writable_fps", "write_video"]
+           "ignored_fps", "quiet_writer", "read_frames", "stated_fps", "writable_fps",
+           "write_video"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 # raw streams, which OpenCV decodes but which carry no timing: it reads them at 25 fps
@@ -73,6 +74,9 @@ class VideoClip:
         one above :data:`MAX_FPS` (:func:`stated_fps`).
     fps_stated : bool
         Whether ``fps`` is the file's own.
+    fps_ignored : float or None
+        The rate the file states where it is not timed at it, being above :data:`MAX_FPS`
+        (:func:`ignored_fps`); None otherwise.
     frame_count : int
         Frame count stated by the file (may be approximate; 0 when unknown).
     width, height : int
@@ -106,10 +110,13 @@ class VideoClip:
                 "a video without a frame OpenCV can decode (an empty one, or frames in a "
                 "codec it lacks)" if opened or _container(self.path) else
                 "not a video OpenCV can decode"))
-        fps = stated_fps(cap.get(cv2.CAP_PROP_FPS))
+        reported = cap.get(cv2.CAP_PROP_FPS)
+        fps = stated_fps(reported)
         # OpenCV's 25 fps for a raw stream, or a y4m without its F field, is its own default:
         # timed at it, but said to be a guess (asnn detect's and asnn camera's notes)
-        self.fps_stated = fps is not None and _states_rate(self.path)
+        states_rate = _states_rate(self.path)
+        self.fps_stated = fps is not None and states_rate
+        self.fps_ignored = ignored_fps(reported) if states_rate else None
         self.fps = DEFAULT_FPS if fps is None else fps
         self.frame_count = max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0), 0)
         self.height, self.width = first.shape[:2]
@@ -152,6 +159,14 @@ def stated_fps(value: float) -> float | None:
     rate, every per-second figure of the model (expansion, time to contact) would be 30 to 50
     times off."""
     return float(value) if value and np.isfinite(value) and 0 < value <= MAX_FPS else None
+
+
+def ignored_fps(value: float) -> float | None:
+    """The frame rate OpenCV reports (``CAP_PROP_FPS``) where a rate is stated but
+    :func:`stated_fps` does not take it, being above :data:`MAX_FPS`; else None. Kept so that
+    the note on the guessed rate can say what the file states (500), not that it states
+    none."""
+    return float(value) if np.isfinite(value) and value > MAX_FPS else None
 
 
 def cut_short(stated: int, decoded: int) -> str | None:
