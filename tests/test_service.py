@@ -449,6 +449,28 @@ def test_a_capture_devices_node_opens_the_device_not_a_file(monkeypatch):
     assert opened == [7, "/dev/null", 7]  # a V4L2 node by its index, as every backend takes it
 
 
+def test_a_camera_device_that_is_not_there_is_one_line_of_ours_not_opencv_s_warnings():
+    """A new user's ``asnn camera --source 7`` printed two of OpenCV's ``[ WARN:0@...]`` lines
+    (each backend it tried) before the camera's own error; its log level is restored after."""
+    from asnn.io.video import _log_level_calls
+
+    index = next(str(i) for i in range(7, 64) if not os.path.exists(f"/dev/video{i}"))
+    done = subprocess.run([sys.executable, "-m", "cli.main", "camera", "--robot", "r1",
+                           "--source", index, "--wait", "0"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 2
+    assert done.stderr.splitlines() == [f"asnn: error: cannot open capture source '{index}'"]
+    get, put, _ = _log_level_calls()
+    level = get()
+    put(level + 1)  # a level of the caller's own, not OpenCV's default
+    try:
+        with pytest.raises(SourceError, match="cannot open capture"):
+            open_source(index)
+        assert get() == level + 1
+    finally:
+        put(level)
+
+
 def test_demo_prints_warnings_and_exits_0(capsys):
     assert main(["demo", "--fps", "100"]) == 0
     out = capsys.readouterr().out

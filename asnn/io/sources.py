@@ -294,12 +294,14 @@ def _open_scene(spec: str) -> Source:
 def _open_capture(spec: str) -> Source:
     import cv2
 
-    from .video import DEFAULT_FPS, ignored_fps, read_frames, stated_fps
+    from .video import DEFAULT_FPS, ignored_fps, quiet_opencv, read_frames, stated_fps
 
     # a V4L2 node by its index, as OpenCV's backends all take it
     device = re.fullmatch(r"/dev/video(\d+)", os.path.realpath(spec))
-    cap = cv2.VideoCapture(int(spec) if spec.isdigit() else
-                           int(device.group(1)) if device else spec)
+    with quiet_opencv():  # each backend it tries warns of a device that is not there (V4L2,
+        # FFmpeg): two lines on stderr before the one error below says it
+        cap = cv2.VideoCapture(int(spec) if spec.isdigit() else
+                               int(device.group(1)) if device else spec)
     if not cap.isOpened():
         what = "capture device" if _is_device(spec) else "capture source"
         raise SourceError(f"cannot open {what} {spec!r}", "missing")

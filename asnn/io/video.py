@@ -19,8 +19,8 @@ from .rates import FPS_RANGE, MAX_FPS
 
 __all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "RAW_STREAM_SUFFIXES", "WRITABLE_SUFFIXES",
            "VideoError", "VideoClip", "check_written", "cut_short", "open_video", "open_writer",
-           "ignored_fps", "quiet_writer", "read_frames", "stated_fps", "writable_fps",
-           "write_video"]
+           "ignored_fps", "quiet_opencv", "quiet_writer", "read_frames", "stated_fps",
+           "writable_fps", "write_video"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 # raw streams, which OpenCV decodes but which carry no timing: it reads them at 25 fps
@@ -253,9 +253,9 @@ def check_written(path: str | Path, frames: int) -> tuple[int, int]:
 
 
 @contextmanager
-def quiet_writer():
-    """OpenCV's warnings held back while a video is written: a writer that fails logs one for
-    every frame, where the caller reports it in one line (:func:`check_written`)."""
+def quiet_opencv():
+    """OpenCV's own log held to its errors while the block runs, its level restored after: its
+    warnings (``[ WARN:0@...]`` lines on stderr) are for the caller to say in its own words."""
     get, put, error = _log_level_calls()
     level = get()
     put(error)
@@ -263,6 +263,14 @@ def quiet_writer():
         yield
     finally:
         put(level)
+
+
+@contextmanager
+def quiet_writer():
+    """OpenCV's warnings held back while a video is written: a writer that fails logs one for
+    every frame, where the caller reports it in one line (:func:`check_written`)."""
+    with quiet_opencv():
+        yield
 
 
 def _log_level_calls():
