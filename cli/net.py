@@ -62,12 +62,9 @@ def cmd_camera(args: argparse.Namespace) -> int:
         recording = None
         if args.record:  # made last: a camera that cannot start leaves no file behind
             bound = RECORD_MAX_BYTES if args.record_max_mb is None else args.record_max_mb * 1e6
-            folder = Path(args.record).parent
-            made = [f for f in (folder, *folder.parents) if not f.exists()]  # deepest first
             try:  # its folders too, as asnn detect makes its outputs'
-                folder.mkdir(parents=True, exist_ok=True)
+                made = _make_folders(Path(args.record).parent)
             except OSError as exc:
-                _remove_folders(made)
                 return fail(f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
             try:
                 recording = open_recording(args.record, args.robot, prefix=args.prefix,
@@ -95,6 +92,38 @@ def cmd_camera(args: argparse.Namespace) -> int:
              "(of any publisher's frames): %s",
              args.robot, count, unheard, rejections.summary(), refusals.summary())
     return 0
+
+
+def _make_folders(folder: Path) -> list[Path]:
+    """Make ``folder`` and the folders missing on the way to it; those this call made, deepest
+    first (what :func:`_remove_folders` takes). Only a folder ``os.mkdir`` itself created is
+    counted: not one there already under another spelling (``a/../b`` where ``b`` exists), nor
+    one another process made meanwhile.
+
+    Raises
+    ------
+    OSError
+        A folder that cannot be made; those made before it are removed.
+    """
+    missing = []
+    for step in (folder, *folder.parents):  # deepest first, up to the first that is there
+        if step.is_dir():
+            break
+        missing.append(step)
+    made: list[Path] = []
+    try:
+        for step in reversed(missing):
+            try:
+                os.mkdir(step)
+            except FileExistsError:
+                if not step.is_dir():  # a file, or a link to none, where a folder goes
+                    raise
+                continue
+            made.insert(0, step)
+    except OSError:
+        _remove_folders(made)
+        raise
+    return made
 
 
 def _remove_folders(folders: list[Path]) -> None:

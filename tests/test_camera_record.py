@@ -6,9 +6,11 @@ from __future__ import annotations
 import errno
 import itertools
 import json
+import os
 import random
 import string
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -266,6 +268,48 @@ def test_a_recording_s_missing_folders_are_made_once_the_camera_starts(tmp_path,
                             "--record", str(tmp_path / "new" / "more" / "run.mcap"))) == 2
     assert "its disk is full" in capsys.readouterr().err
     assert not (tmp_path / "new").exists()
+
+
+def test_a_recording_removes_only_the_folders_it_made(tmp_path, capsys, monkeypatch):
+    """The folders removed after a camera that recorded no frame are the ones it made: not a
+    folder that was there, named through one that was not (``new/../kept``), nor one another
+    process made while the camera made its own; and a folder it cannot make leaves none of
+    those it made before."""
+    import service.camera
+
+    kept = tmp_path / "kept"
+    kept.mkdir()  # there before, and empty
+    monkeypatch.setattr(service.camera, "publish_frames", lambda *args, **kwargs: 0)
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(tmp_path / "new" / ".." / "kept" / "run.mcap"))) \
+        == 0, capsys.readouterr().err
+    assert kept.is_dir() and not (tmp_path / "new").exists()
+
+    real_mkdir = os.mkdir
+    other = tmp_path / "other"
+
+    def racing_mkdir(path, *args, **kwargs):  # another process makes the folder first
+        if Path(path) == other:
+            real_mkdir(path)
+        return real_mkdir(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "mkdir", racing_mkdir)
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(other / "day" / "run.mcap"))) == 0
+    assert other.is_dir() and not (other / "day").exists()
+
+    def failing_mkdir(path, *args, **kwargs):  # the deepest folder cannot be made
+        if Path(path).name == "day":
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_mkdir(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "mkdir", failing_mkdir)
+    target = tmp_path / "made" / "day" / "run.mcap"
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(target))) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        f"asnn: error: cannot make the folder {target.parent}: Permission denied")
+    assert not (tmp_path / "made").exists()
 
 
 def test_a_full_disk_is_an_error_at_start_and_leaves_no_file(tmp_path, monkeypatch, capsys):
