@@ -471,6 +471,25 @@ def test_a_camera_device_that_is_not_there_is_one_line_of_ours_not_opencv_s_warn
         put(level)
 
 
+def test_opencv_s_log_is_held_to_its_errors_in_a_block_and_never_made_louder():
+    """quiet_opencv lowers OpenCV's level to ERROR for the block and restores it, also when the
+    block raises; a level already quieter (a user's OPENCV_LOG_LEVEL=SILENT) stays as it is: it
+    was raised to ERROR."""
+    from asnn.io.video import _log_level_calls, quiet_opencv
+
+    get, put, error = _log_level_calls()
+    level = get()
+    try:
+        for before in (error + 1, error, 0):  # WARNING, ERROR, SILENT
+            put(before)
+            with pytest.raises(RuntimeError), quiet_opencv():
+                assert get() == min(before, error)
+                raise RuntimeError("the block fails")
+            assert get() == before
+    finally:
+        put(level)
+
+
 def test_demo_prints_warnings_and_exits_0(capsys):
     assert main(["demo", "--fps", "100"]) == 0
     out = capsys.readouterr().out

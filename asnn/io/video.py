@@ -255,10 +255,11 @@ def check_written(path: str | Path, frames: int) -> tuple[int, int]:
 @contextmanager
 def quiet_opencv():
     """OpenCV's own log held to its errors while the block runs, its level restored after: its
-    warnings (``[ WARN:0@...]`` lines on stderr) are for the caller to say in its own words."""
+    warnings (``[ WARN:0@...]`` lines on stderr) are for the caller to say in its own words. A
+    level already quieter (``OPENCV_LOG_LEVEL=SILENT``) is kept."""
     get, put, error = _log_level_calls()
     level = get()
-    put(error)
+    put(min(level, error))
     try:
         yield
     finally:
