@@ -184,6 +184,7 @@ _PARSER_PLACE = re.compile(r"-->\s*(\d+):(\d+)")
 _PARSER_SAYS = re.compile(r"^\s*=\s*(.+)$", re.M)
 # a value the config refuses, in Rust's debug form: `Json5Err(Message { msg: "...", location:
 # Some(Location { line: 1, column: 2 }) })` or `JSON error: Message { ... }`
+_RUST_ESCAPE = re.compile(r'\\(["\\])')
 _JSON_MESSAGE = re.compile(r'Message \{ msg: "(.*)", location: (?:Some\(Location \{ line: '
                            r'(\d+), column: (\d+) \}\)|None) \}', re.S)
 
@@ -199,7 +200,9 @@ def zenoh_error(exc: BaseException, place: bool = True) -> str:
         return f"line {where[1]}, column {where[2]}: {says[1].strip()}"
     message = _JSON_MESSAGE.search(text)
     if message:
-        text = message[1].replace('\\"', '"').strip()
+        # Rust's escapes of a quote and a backslash undone, in one pass (a value's `\"` is
+        # `\\\"` there); a newline's or a tab's kept as `\n`, `\t`: the message stays one line
+        text = _RUST_ESCAPE.sub(r"\1", message[1]).strip()
         if place and message[2]:
             text = f"line {message[2]}, column {message[3]}: {text}"
     return " ".join(line.strip() for line in text.splitlines() if line.strip())

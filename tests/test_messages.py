@@ -413,6 +413,18 @@ def test_an_endpoint_zenoh_refuses_is_named_without_the_rust_structure(tmp_path)
         "<protocol>/<address>[?<metadata>][#<config>]: foo")
 
 
+def test_an_endpoint_zenoh_refuses_is_quoted_as_given_with_no_rust_escapes():
+    """Zenoh's message carries the endpoint in Rust's debug form: a backslash in it was said
+    doubled, and one before a quote as two backslashes and the quote. A newline stays the two
+    characters backslash and n: the message is one line."""
+    form = "Endpoints must be of the form <protocol>/<address>[?<metadata>][#<config>]: "
+    for endpoint, said in (("fo\\o", "fo\\o"), ('a"b', 'a"b'), ('c\\"d', 'c\\"d'),
+                           ("e\nf", "e\\nf")):
+        with pytest.raises(ConfigError) as caught:
+            make_config(ZenohOptions(connect=(endpoint,)))
+        assert str(caught.value).endswith(form + said), (endpoint, str(caught.value))
+
+
 def test_tracked_target_fields_cross_the_wire_and_are_left_out_where_unset():
     import msgpack
 
