@@ -37,9 +37,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "foxglove.RawImage or CompressedImage); needed when it has several")
     p.add_argument("--model", choices=MODELS, default="asnn",
                    help="detector: ASNN or a baseline it is compared with (default: %(default)s)")
-    p.add_argument("--preset", type=preset_spec, default="default", metavar="NAME[/FIELD=VALUE...]",
+    # None where not given, so that an LGMD model refuses a --preset default too
+    p.add_argument("--preset", type=preset_spec, default=None, metavar="NAME[/FIELD=VALUE...]",
                    help=f"ASNN parameter preset ({', '.join(preset_names())}; default: "
-                        "%(default)s), with any fields of asnn.params.ASNNParams changed after "
+                        "default), with any fields of asnn.params.ASNNParams changed after "
                         "slashes, as asnn eval's specs take them: robust/top_k=0")
     p.add_argument("--jsonl", type=nonempty_path, metavar="PATH|-",
                    help="write one JSON object per frame ('-': stdout)")
@@ -378,11 +379,12 @@ def run(args: argparse.Namespace) -> int:
         return _fail(problem)
     options = {}
     model_threads = 1
-    if args.model != "asnn" and args.preset != "default":
+    if args.model != "asnn" and args.preset is not None:
         return _fail(f"--preset applies to the ASNN model only, not {args.model}")
     if args.model != "asnn" and args.threads is not None:  # a baseline steps on this thread
         return _fail(f"--threads applies to the ASNN model only, not {args.model}")
-    params = preset_from_spec(args.preset)
+    preset = args.preset or "default"
+    params = preset_from_spec(preset)
     if args.tracks:
         if args.model != "asnn" or params.targets != "objects":
             return _fail("--tracks needs the ASNN model with a preset that tracks objects "
@@ -546,7 +548,8 @@ def run(args: argparse.Namespace) -> int:
             plot_responses([r["t"] for r in records], [r["u"] for r in records],
                            [r["spike_rate"] for r in records], [r["collision"] for r in records],
                            args.plot,
-                           title=f"{Path(args.video).name} ({args.model}, {args.preset})")
+                           title=f"{Path(args.video).name} ({args.model}"
+                                 + (f", {preset})" if args.model == "asnn" else ")"))
         except (OSError, ValueError) as exc:
             return _fail(f"cannot write {args.plot}: {exc}")
     short = cut_short(source.frame_count, len(records))

@@ -114,8 +114,9 @@ def test_lgmd_models_are_selectable_and_report_no_targets(looming_video, capsys)
     assert len(records) == len(scene.frames)
     assert all(r["targets"] == [] for r in records)
     # a preset is the ASNN model's: given with an LGMD model it was ignored without a word
-    assert main(["detect", str(path), "--model", "lgmd1", "--preset", "robust"]) == 2
-    assert "--preset applies to the ASNN model only" in capsys.readouterr().err
+    for spec in ("robust", "default"):  # the default's name too: it was taken for no --preset
+        assert main(["detect", str(path), "--model", "lgmd1", "--preset", spec]) == 2
+        assert "--preset applies to the ASNN model only" in capsys.readouterr().err
     # and so are its threads: an LGMD model steps on the main thread whatever --threads says
     for model in ("lgmd1", "lgmd2"):
         assert main(["detect", str(path), "--model", model, "--threads", "4"]) == 2
