@@ -31,7 +31,7 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
         session = open_session(config)
     except ConfigError as exc:
         server.close()
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     stop = stop_on_signals()
     # the subscriber closed first: the server (and a Foxglove bridge's channels) would take
     # samples still arriving after it was closed
@@ -54,7 +54,8 @@ def cmd_dashboard(args: argparse.Namespace) -> int:
     try:
         server = DashboardServer(store, args.host, args.port)
     except OSError as exc:  # the port is taken, or the address is not ours
-        return fail(f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
+        return fail(args.command,
+                    f"cannot serve on {args.host}:{args.port}: {exc.strerror or exc}")
     host, port = server.address
     return serve_fleet(args, store, server, "dashboard", f"http://{host}:{port}/",
                        refusals=True, on_router=store.router_changed)

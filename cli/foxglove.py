@@ -15,17 +15,18 @@ __all__ = ["register"]
 def cmd_foxglove(args: argparse.Namespace) -> int:
     setup_logging(args)
     if args.mcap_max_mb is not None and args.mcap is None:
-        return fail("--mcap-max-mb bounds a recording: give it with --mcap OUT.mcap")
+        return fail(args.command,
+                    "--mcap-max-mb bounds a recording: give it with --mcap OUT.mcap")
     try:
         from clients.foxglove import FoxgloveBridge
     except ImportError as exc:  # the message names the extra to install
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     try:
         bound = {} if args.mcap_max_mb is None else {"record_max_bytes": args.mcap_max_mb * 1e6}
         bridge = FoxgloveBridge(args.prefix, host=args.host, port=args.port,
                                 max_robots=args.max_robots, record=args.mcap, **bound)
     except OSError as exc:
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     return serve_fleet(args, bridge, bridge, "foxglove", bridge.url, refusals=True,
                        on_router=bridge.router_changed)
 

@@ -130,17 +130,18 @@ def _quiet_stdout() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from cli.session import fail  # the error lines' one form (as the networked commands')
+
     argv = sys.argv[1:] if argv is None else argv
     if sys.stdout is None and argv[:1] and argv[0] not in _SERVICES:
         # started with standard output closed (>&-): a command's output would be lost
-        print("asnn: error: standard output is closed", file=sys.stderr)
-        return 2
+        return fail(None, "standard output is closed")
     for arg in argv:  # bytes of another encoding (a file name): OpenCV crashes on such a path
         try:
             arg.encode("utf-8")
         except UnicodeEncodeError:
-            print(f"asnn: error: {arg!r} is not UTF-8 text (rename the file)", file=sys.stderr)
-            return 2
+            return fail(None, f"{arg!r} is not UTF-8 text (rename the file)")
+    args = None  # the command's, once parsed: its name leads the errors said here
     try:
         with _sigterm_interrupts():
             # a command imports what it runs (the model: a second or two): Ctrl-C then is an
@@ -170,8 +171,8 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(failed, BrokenPipeError):
             return 141  # as above: the reader went away
         failed = failed or exc
-        print(f"asnn: error: a write failed: {failed.strerror or failed}", file=sys.stderr)
-        return 2
+        return fail(getattr(args, "command", None),
+                    f"a write failed: {failed.strerror or failed}")
 
 
 if __name__ == "__main__":

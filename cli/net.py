@@ -36,19 +36,20 @@ def cmd_camera(args: argparse.Namespace) -> int:
 
     setup_logging(args)
     if args.record_max_mb is not None and args.record is None:
-        return fail("--record-max-mb bounds a recording: give it with --record OUT.mcap")
+        return fail(args.command,
+                    "--record-max-mb bounds a recording: give it with --record OUT.mcap")
     if args.record:
         try:  # the 'ros' extra, said before anything opens
             import asnn.io.bag_recording  # noqa: F401
         except ImportError as exc:  # the message names the extra to install
-            return fail(str(exc))
+            return fail(args.command, str(exc))
         try:  # a topic ROS 2 would refuse (a long --prefix), said before anything opens too
             recording_topic(args.robot, args.prefix)
         except ValueError as exc:
-            return fail(str(exc))
+            return fail(args.command, str(exc))
         problem = folder_problem(Path(args.record).parent)  # made later, where it is missing
         if problem:
-            return fail(f"--record {args.record}: {problem}")
+            return fail(args.command, f"--record {args.record}: {problem}")
     rejections, refusals = SourceRejections(args.robot), RefusalNotices(args.robot)
     subscribers = SubscriberWatch(args.robot, keys.frame_key(args.robot, args.prefix))
     try:
@@ -56,7 +57,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
         config = zenoh_config(args)
         session = open_session(config)
     except (SourceError, ConfigError) as exc:
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     stop = stop_on_signals()
     with session, router_watch(session, f"camera {args.robot}", config):
         recording = None
@@ -65,14 +66,15 @@ def cmd_camera(args: argparse.Namespace) -> int:
             try:  # its folders too, as asnn detect makes its outputs'
                 made = _make_folders(Path(args.record).parent)
             except OSError as exc:
-                return fail(f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
+                return fail(args.command,
+                            f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
             try:
                 recording = open_recording(args.record, args.robot, prefix=args.prefix,
                                            format=args.format, frame_id=source.frame_id,
                                            max_bytes=bound)
             except OSError as exc:  # nor the folders it made for the file (a full disk)
                 _remove_folders(made)
-                return fail(str(exc))
+                return fail(args.command, str(exc))
         try:
             count = publish_frames(session, args.robot, source, prefix=args.prefix,
                                    fps=args.fps, loop=args.loop, format=args.format,
@@ -80,7 +82,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
                                    refusals=refusals, subscribers=subscribers,
                                    recording=recording)
         except OSError as exc:  # a live source's frame the wire cannot carry (VideoError)
-            return fail(str(exc))
+            return fail(args.command, str(exc))
         finally:  # finished (its index and summary) however the camera stops
             if recording is not None:
                 _close_recording(recording, args.robot)
@@ -172,7 +174,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
         config = zenoh_config(args)
         session = open_session(config)
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     tune_process()
     with session, router_watch(session, f"worker {core.worker_id}", config):
         worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
@@ -185,7 +187,7 @@ def cmd_worker(args: argparse.Namespace) -> int:
             worker.start()
         except WorkerIdTaken as exc:
             worker.close()
-            return fail(f"{exc}; give each worker its own --id")
+            return fail(args.command, f"{exc}; give each worker its own --id")
         try:
             print(f"worker {core.worker_id} ready", file=sys.stderr, flush=True)
             while not stop.wait(0.2):
@@ -207,7 +209,7 @@ def cmd_status(args: argparse.Namespace) -> int:
     try:
         session = open_session(zenoh_config(args))
     except ConfigError as exc:
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     keep = None
     if args.local:
         from service.core import started_here as keep
@@ -337,7 +339,7 @@ def cmd_alerts(args: argparse.Namespace) -> int:
         config = zenoh_config(args)
         session = open_session(config)
     except ConfigError as exc:
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     stop = stop_on_signals()
     show = LinePrinter(args.json, sys.stdout, on_error=stop.set)
     with session, router_watch(session, "alerts", config), \
@@ -345,23 +347,23 @@ def cmd_alerts(args: argparse.Namespace) -> int:
         print(f"listening on {listener.key}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
-    return _printed(show)
+    return _printed(show, args.command)
 
 
-def _printed(show) -> int:
-    """The exit status once a command's warnings are printed (or could not be): 141 when the
+def _printed(show, command: str) -> int:
+    """The exit status once ``command``'s warnings are printed (or could not be): 141 when the
     reader of standard output went away (as ``cli.main`` ends a command on a broken pipe), 1
     when a write failed otherwise or the output still blocks after two seconds."""
     flushed = show.close()
     if isinstance(show.error, BrokenPipeError):
         raise BrokenPipeError  # cli.main: quietly, with the status of the pipe's signal
     if show.error is not None:
-        return fail(f"cannot write the warnings: {show.error.strerror or show.error}", 1)
+        return fail(command, f"cannot write the warnings: {show.error.strerror or show.error}",
+                    1)
     if not flushed:
         # the writing thread holds standard output: Python's own flush at exit would wait on it
-        print(f"asnn: the output is not read: {show.unprinted} warnings not printed",
-              file=sys.stderr, flush=True)
-        os._exit(1)
+        os._exit(fail(command, f"the output is not read: {show.unprinted} warnings not printed",
+                      1))
     return 0
 
 
@@ -378,12 +380,13 @@ def cmd_router(args: argparse.Namespace) -> int:
         config = router_config(zenoh_options(args))
         session = zenoh.open(config)
     except ConfigError as exc:
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     except Exception as exc:  # zenoh.ZError: e.g. the port is taken, a file it cannot read
         from service.diagnosis import unreadable_files
 
         why = unreadable_files(config)
-        return fail(f"cannot start the router: {zenoh_error(exc)}" + (f" ({why})" if why else ""))
+        return fail(args.command, f"cannot start the router: {zenoh_error(exc)}"
+                    + (f" ({why})" if why else ""))
     with session:
         listen = ", ".join(listen_endpoints(config))
         print(f"router {session.zid()} listening on {listen}", file=sys.stderr, flush=True)
@@ -410,7 +413,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         core = WorkerCore(args.model, args.preset)
         source = open_source(f"synthetic:{args.scene}")
     except (ValueError, ImportError, OSError) as exc:
-        return fail(str(exc))
+        return fail(args.command, str(exc))
     info = sys.stderr if args.json else sys.stdout
     print(f"asnn demo: camera -> worker ({core.model}, preset {core.preset or '-'}) -> alerts, "
           f"scene {args.scene!r}, {source.fps:g} fps, over Zenoh on 127.0.0.1", file=info,
@@ -419,7 +422,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     show = LinePrinter(args.json, sys.stdout, on_error=stop.set)
     result = run_pipeline(source, core, lambda s: WarningListener(s, show), fps=args.fps,
                           stop=stop)
-    status = _printed(show)
+    status = _printed(show, args.command)
     print(f"{result['published']} frames published, {result['responses']} responses, "
           f"{result['received']} warnings received", file=info, flush=True)
     return status

@@ -297,7 +297,13 @@ def router_watch(session, name: str, config, on_change=None):
                        certificates=lambda: expiring_certificates(config))
 
 
-def fail(message: str, status: int = 2) -> int:
-    """Print a one-line error and return the exit status."""
-    print(f"asnn: error: {message}", file=sys.stderr)
+def fail(command: str | None, message: str, status: int = 2) -> int:
+    """Print a one-line error naming the command that failed, ``asnn COMMAND: MESSAGE`` (as
+    ``asnn detect``, ``asnn eval`` and the other commands say theirs: among several commands'
+    lines in one journal or ``docker compose logs``, the one that failed), and return the exit
+    status. ``command`` is the sub-command's name (``args.command``); None for an error of
+    ``asnn`` itself, before a command is known: ``asnn: error: MESSAGE``, as argparse says
+    its own."""
+    lead = "asnn: error" if command is None else f"asnn {command}"
+    print(f"{lead}: {message}", file=sys.stderr, flush=True)
     return status

@@ -227,14 +227,14 @@ def test_a_recording_never_overwrites_a_file_and_an_unwritable_one_fails_at_star
     assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
                             "--record", str(path))) == 2
     assert capsys.readouterr().err.strip() == \
-        f"asnn: error: {path}: exists; a recording goes to a new file"
+        f"asnn camera: {path}: exists; a recording goes to a new file"
     assert path.read_bytes() == b"an earlier run"
     (tmp_path / "a-file").write_text("")  # where a folder would have to be made
     unwritable = tmp_path / "a-file" / "run.mcap"
     assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
                             "--record", str(unwritable))) == 2
     assert capsys.readouterr().err.strip() == \
-        f"asnn: error: --record {unwritable}: {tmp_path / 'a-file'} is not a folder"
+        f"asnn camera: --record {unwritable}: {tmp_path / 'a-file'} is not a folder"
 
 
 def test_a_recording_s_missing_folders_are_made_once_the_camera_starts(tmp_path, capsys,
@@ -308,7 +308,7 @@ def test_a_recording_removes_only_the_folders_it_made(tmp_path, capsys, monkeypa
     assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
                             "--record", str(target))) == 2
     assert capsys.readouterr().err.strip().endswith(
-        f"asnn: error: cannot make the folder {target.parent}: Permission denied")
+        f"asnn camera: cannot make the folder {target.parent}: Permission denied")
     assert not (tmp_path / "made").exists()
 
 
@@ -323,7 +323,7 @@ def test_a_full_disk_is_an_error_at_start_and_leaves_no_file(tmp_path, monkeypat
     assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
                             "--record", str(path))) == 2
     assert capsys.readouterr().err.strip() == \
-        f"asnn: error: cannot record to {path}: its disk is full (1.0 MB free)"
+        f"asnn camera: cannot record to {path}: its disk is full (1.0 MB free)"
     assert not path.exists()
 
 
@@ -465,10 +465,10 @@ def test_a_bound_without_its_recording_is_a_clear_error(tmp_path, capsys):
     assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
                             "--record-max-mb", "5")) == 2
     assert capsys.readouterr().err.strip() == \
-        "asnn: error: --record-max-mb bounds a recording: give it with --record OUT.mcap"
+        "asnn camera: --record-max-mb bounds a recording: give it with --record OUT.mcap"
     assert main(["foxglove", "--port", "0", "--mcap-max-mb", "5"]) == 2
     assert capsys.readouterr().err.strip() == \
-        "asnn: error: --mcap-max-mb bounds a recording: give it with --mcap OUT.mcap"
+        "asnn foxglove: --mcap-max-mb bounds a recording: give it with --mcap OUT.mcap"
 
 
 def test_a_disk_that_hangs_leaves_the_recording_unfinished_and_the_camera_exits(

@@ -919,7 +919,7 @@ def test_dashboard_command_fails_clearly_when_the_port_is_taken():
         proc = run_dashboard("--port", str(taken.getsockname()[1]))
         out, err = proc.communicate(timeout=TIMEOUT)
     assert proc.returncode == 2
-    assert err.startswith("asnn: error: cannot serve on 127.0.0.1:") and err.count("\n") == 1
+    assert err.startswith("asnn dashboard: cannot serve on 127.0.0.1:") and err.count("\n") == 1
 
 
 def test_the_preview_rule_at_its_edges():

@@ -748,7 +748,7 @@ def test_a_closed_or_full_standard_output_is_one_error_line_not_lost_output(tmp_
                                 text=True, timeout=120)
     assert failed.returncode == 2, failed.stderr
     assert failed.stderr.strip().splitlines() == [
-        "asnn: error: a write failed: No space left on device"]
+        "asnn label: a write failed: No space left on device"]
 
 
 def test_a_video_or_bag_is_not_written_to_a_pipe_and_a_bag_is_named_mcap(tmp_path, capsys):

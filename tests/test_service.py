@@ -459,7 +459,7 @@ def test_a_camera_device_that_is_not_there_is_one_line_of_ours_not_opencv_s_warn
                            "--source", index, "--wait", "0"], cwd=ROOT, capture_output=True,
                           text=True, timeout=120)
     assert done.returncode == 2
-    assert done.stderr.splitlines() == [f"asnn: error: cannot open capture source '{index}'"]
+    assert done.stderr.splitlines() == [f"asnn camera: cannot open capture source '{index}'"]
     get, put, _ = _log_level_calls()
     level = get()
     put(level + 1)  # a level of the caller's own, not OpenCV's default
@@ -508,6 +508,18 @@ def test_demo_plays_the_papers_scenes_and_rejects_unknown_ones(capsys):
     assert "70 frames published" in out and "WARNING robot demo" not in out
     assert main(["demo", "--scene", "nothing"]) == 2
     assert "unknown scene 'nothing'" in capsys.readouterr().err
+
+
+def test_each_networked_command_s_error_names_the_command(tmp_path, capsys):
+    """A CLI trial: every networked command's error began `asnn: error:`, so that among a
+    camera's and a status check's lines in one journal the failed one could not be told; each
+    is now named as asnn detect names its own (`asnn detect: ...`), before any session opens."""
+    missing = tmp_path / "none.mp4"
+    assert main(["camera", "--robot", "r1", "--source", str(missing), "--wait", "0"]) == 2
+    assert capsys.readouterr().err.splitlines() == [f"asnn camera: {missing}: no such file"]
+    assert main(["status", "--connect", "foo"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith('asnn status: Zenoh rejects connect/endpoints = ["foo"]: '), line
 
 
 def _warning(seq: int = 0) -> Response:
