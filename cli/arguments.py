@@ -326,3 +326,18 @@ def frame_perturbation(name: str) -> str:
             f"{name} changes the frames' number or size; asnn detect takes those that keep "
             f"every frame ({kept}), asnn eval takes them all")
     return name
+
+
+def clips_problem(clips_dir, labels=None) -> tuple[str, str] | None:
+    """Why a folder of labelled clips cannot be read, found before anything runs, as ``(what,
+    why)``: the folder and ``"not a folder"``, or the labels file (by default
+    ``CLIPS/labels.json``) and ``"no labels file (...)"``; None where both are there. What
+    ``asnn eval`` and ``asnn bench --handover --clips`` say alike."""
+    from pathlib import Path
+
+    labels = Path(clips_dir) / "labels.json" if labels is None else Path(labels)
+    if not Path(clips_dir).is_dir():
+        return str(clips_dir), "not a folder"
+    if not labels.is_file():
+        return str(labels), f"no labels file (asnn label {clips_dir} starts one)"
+    return None

@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 from asnn.detectors import MODELS
-from cli.arguments import (Joined, cameras, count, frame_rate, frame_size, frames, nonempty_path,
-                           preset_spec, processes, seconds, seed, threads)
+from cli.arguments import (Joined, cameras, clips_problem, count, frame_rate, frame_size, frames,
+                           nonempty_path, preset_spec, processes, seconds, seed, threads)
 
 # how the benches that time whole processes run asnn: this interpreter and the very packages
 # this process runs (-P and the path given: ``-m cli.main`` put the working folder first on the
@@ -179,12 +179,9 @@ def run(args: argparse.Namespace) -> int:
             # said as asnn eval says it, not as an OSError's repr (with --cases or --looms
             # too, handover.run says the sources conflict)
             if args.clips is not None and args.cases is None and args.looms is None:
-                if not Path(args.clips).is_dir():
-                    raise ValueError(f"--clips {args.clips}: not a folder")
-                if not (Path(args.clips) / "labels.json").is_file():
-                    raise ValueError(f"--clips {args.clips}: no labels file "
-                                     f"{Path(args.clips) / 'labels.json'} (asnn label "
-                                     f"{args.clips} starts one)")
+                problem = clips_problem(args.clips)
+                if problem:
+                    raise ValueError(f"--clips {args.clips}: {problem[1]}")
             preset = args.preset[0] if args.preset else None
             report = handover.run(f"asnn:{preset}" if preset else "asnn", cases=args.cases,
                                   every=args.every, progress=_progress(), clips_dir=args.clips,

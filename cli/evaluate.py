@@ -29,8 +29,8 @@ from asnn.evaluation.options import (DEFAULT_DETECTORS, EARLY_TOLERANCE_S, FAMIL
 from asnn.io.files import folder_problem
 from asnn.params import preset_names
 
-from .arguments import (Joined, finite, frame_rates, frame_size, nonempty_path, perturbation,
-                        preset_spec, processes, tolerance_seconds, warmup_frames, whole)
+from .arguments import (Joined, clips_problem, finite, frame_rates, frame_size, nonempty_path,
+                        perturbation, preset_spec, processes, tolerance_seconds, warmup_frames, whole)
 
 
 # the files of the latest run in an --out folder: "mtime_ns<TAB>path relative to it" per line
@@ -394,12 +394,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     warmup = WARMUP_FRAMES if args.warmup is None else args.warmup
     if args.clips_dir and not (args.synthetic or args.paper or args.ttc):
         labels = Path(args.labels) if args.labels else Path(args.clips_dir) / "labels.json"
-        if not Path(args.clips_dir).is_dir():
-            print(f"asnn eval: {args.clips_dir}: not a folder", file=sys.stderr)
-            return 2
-        if not labels.is_file():
-            print(f"asnn eval: {labels}: no labels file (asnn label {args.clips_dir} starts "
-                  "one)", file=sys.stderr)
+        problem = clips_problem(args.clips_dir, labels)
+        if problem:
+            print(f"asnn eval: {problem[0]}: {problem[1]}", file=sys.stderr)
             return 2
     try:
         if args.paper:
