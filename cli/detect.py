@@ -117,14 +117,14 @@ def _settings(busy: bool):
     """
     import cv2
 
-    from asnn.io.video import quiet_writer
+    from asnn.io.video import quiet_opencv
 
     threads = cv2.getNumThreads()
     if busy:
         cv2.setNumThreads(1)
     gc.freeze()
     try:
-        with quiet_writer():  # a failed --annotate is one line (:func:`_check_annotated`)
+        with quiet_opencv():  # a failed --annotate is one line (:func:`_check_annotated`)
             yield
     finally:
         gc.unfreeze()

@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 
 from ..io.images import JPEG_QUALITY as WIRE_JPEG_QUALITY
-from ..io.video import quiet_writer
+from ..io.video import quiet_opencv
 from ..stimuli.effects import camera_rig, jpeg, sensor_noise, wiper
 from .options import FAMILIES, PERTURBATIONS
 
@@ -232,7 +232,7 @@ def reencoded(timed_frames: Iterable[tuple[float, np.ndarray]]
     try:
         # a writer that fails (a full disk) would log a warning for every frame: the frames
         # missing when the file is read back are reported once, below
-        with quiet_writer():
+        with quiet_opencv():
             times, shape = _encoded(timed_frames, path)
         if not times:
             return

@@ -19,8 +19,8 @@ from .rates import FPS_RANGE, MAX_FPS
 
 __all__ = ["DEFAULT_FPS", "FPS_RANGE", "MAX_FPS", "RAW_STREAM_SUFFIXES", "WRITABLE_SUFFIXES",
            "VideoError", "VideoClip", "check_written", "cut_short", "open_video", "open_writer",
-           "ignored_fps", "quiet_opencv", "quiet_writer", "read_frames", "stated_fps",
-           "writable_fps", "write_video"]
+           "ignored_fps", "quiet_opencv", "read_frames", "stated_fps", "writable_fps",
+           "write_video"]
 
 DEFAULT_FPS = 20.0  # the rate a source that states none (or an implausible one) is timed at
 # raw streams, which OpenCV decodes but which carry no timing: it reads them at 25 fps
@@ -266,14 +266,6 @@ def quiet_opencv():
         put(level)
 
 
-@contextmanager
-def quiet_writer():
-    """OpenCV's warnings held back while a video is written: a writer that fails logs one for
-    every frame, where the caller reports it in one line (:func:`check_written`)."""
-    with quiet_opencv():
-        yield
-
-
 def _log_level_calls():
     """OpenCV's log level getter, setter and its ERROR level: ``cv2.utils.logging`` from
     OpenCV 4.13, ``cv2.getLogLevel``/``cv2.setLogLevel`` (ERROR is 2) before it (the versions
@@ -347,7 +339,9 @@ def write_video(frames: np.ndarray | Iterable[np.ndarray], path: str | Path,
     writer = open_writer(path, fps, (w, h))
     written = 0
     try:
-        with quiet_writer():  # a failed write is raised once, below
+        # a writer that fails logs a warning for every frame: a failed write is raised once,
+        # below
+        with quiet_opencv():
             for frame in frames:
                 writer.write(cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR))
                 written += 1
