@@ -21,7 +21,7 @@ from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, op
 from asnn.params import (MAX_FRAME_GAP_S, MIN_FRAME_GAP_S, SLOW_FPS, SLOW_NOTE, preset_from_spec,
                          preset_names, timed_gap)
 from cli.arguments import frame_perturbation, nonempty_path, preset_spec, threads
-from cli.session import exit_on_interrupt, signals_held
+from cli.session import exit_on_interrupt, fail, signals_held
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -76,8 +76,7 @@ def _tracks_record(index: int, t: float, response) -> dict:
 
 
 def _fail(message: str) -> int:
-    print(f"asnn detect: {message}", file=sys.stderr)
-    return 2
+    return fail("detect", message)
 
 
 class _OutputError(Exception):
