@@ -293,7 +293,8 @@ def temporal_filter_step(stages: np.ndarray, x: np.ndarray, rate: float, transmi
 
 
 def temporal_readout(stages: np.ndarray, gain: float, n: int) -> np.ndarray:
-    """Temporal filter output L(K, n, z_0) = K (z_n - z_{n+1}) (paper eq. 6 [1]_).
+    """Temporal filter output L(K, n, z_0) = K (z_n - z_{n+1}) (paper eq. 6 [1]_); read at
+    n = n_f and n = n_s it gives the fast and slow bipolar responses B^f, B^s (eq. 7).
 
     Parameters
     ----------
@@ -311,7 +312,7 @@ def temporal_readout(stages: np.ndarray, gain: float, n: int) -> np.ndarray:
     References
     ----------
     .. [1] Huang, Qiao, Li, Jiang, "A Bioinspired Approach-Sensitive Neural Network for Collision
-       Detection in Cluttered and Dynamic Backgrounds", eq. 6.
+       Detection in Cluttered and Dynamic Backgrounds", eqs. 6, 7.
     """
     return gain * (stages[n] - stages[n + 1])
 

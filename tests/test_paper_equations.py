@@ -98,3 +98,27 @@ def test_a_kernel_cited_with_an_equation_cites_the_one_that_defines_it():
                     wrong.append(f"{name}: {line.strip()}")
     assert not wrong, "kernels cited with an equation that does not define them:\n" + \
         "\n".join(wrong)
+
+
+# the body's equations that are not the model's: eq. 8 is the traditional temporal kernel
+# (Adelson and Bergen's) the paper compares its filter with
+NOT_THE_MODEL = {8}
+
+
+@pytest.mark.skipif(not PAPER.is_file(), reason="../shared/paper is absent")
+def test_every_equation_of_the_model_is_named_by_a_function():
+    """CONTRIBUTING, "One place each": a reader holding the code beside the paper finds each of
+    its equations named in the first paragraph of a docstring in ``asnn/retina.py`` (or, for
+    the targets' population-coded motion, ``asnn/targets.py``)."""
+    import inspect
+
+    from asnn import targets
+
+    count = len(paper_equations(PAPER.read_text(encoding="utf-8")))
+    named = set()
+    for module in (retina, targets):
+        for _, function in inspect.getmembers(module, inspect.isfunction):
+            if function.__module__ == module.__name__:
+                named.update(cited(function.__doc__ or ""))
+    missing = sorted(set(range(1, count + 1)) - NOT_THE_MODEL - named)
+    assert not missing, f"equations no function's docstring names: {missing}"
