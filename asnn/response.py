@@ -22,12 +22,13 @@ class Maps:
     The maps are on the model's own grid: the frame's size, or where ``max_width`` shrinks
     wider frames (or taller ones, past a 3:4 portrait's area) or ``min_width`` enlarges
     narrower ones, that size (targets and tracks stay in the frame's pixels). ``P`` is
-    the photoreceptors' output after the input stages the preset has (input blur, contrast
-    gain control, background stabilisation), not the raw frame difference. The bipolar and
-    temporal-filter outputs are not kept: the bipolar inputs are :func:`asnn.retina.bipolar`
-    of ``P`` with the preset's :func:`asnn.retina.dog_kernel` (ON and OFF swapped for
-    ``target_polarity="light"``), and an ``ASNN(..., optimised=False)`` model keeps its
-    cascades as eq. 5 writes them (``stages_on``, ``stages_off``), from which
+    the photoreceptors' output after the input stages the preset has (input blur, widened and
+    summed in time in a dim, noisy view; global brightness compensation; background
+    stabilisation; contrast gain control, light-adapted), not the raw frame difference. The
+    bipolar and temporal-filter outputs are not kept: the bipolar inputs are
+    :func:`asnn.retina.bipolar` of ``P`` with the preset's :func:`asnn.retina.dog_kernel` (ON
+    and OFF swapped for ``target_polarity="light"``), and an ``ASNN(..., optimised=False)``
+    model keeps its cascades as eq. 5 writes them (``stages_on``, ``stages_off``), from which
     :func:`asnn.retina.temporal_readout` gives the temporal filter's outputs (the optimised
     form keeps them in another form; with ``leaky_input`` the first stage integrates the
     bipolar input rather than holding it).
