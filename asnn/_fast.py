@@ -292,7 +292,8 @@ def _pad(line, w, r):
 
 @kernel(inline="always", **_jit)
 def _dog_row(p, y, env, sc, zero, col, on, off):
-    """B+^0 and B-^0 of row y: relu(+-P) (*) g_I with g_I = s1 e1 e1' - s2 e2 e2'."""
+    """B+^0 and B-^0 of row y (eqs. 2-4, :func:`~asnn.retina.bipolar`): relu(+-P) (*) g_I
+    with g_I = s1 e1 e1' - s2 e2 e2'."""
     h, w = p.shape
     a0, a1, b1 = p[y], p[_reflect(y - 1, h)], p[_reflect(y + 1, h)]
     a2, b2 = p[_reflect(y - 2, h)], p[_reflect(y + 2, h)]
@@ -326,7 +327,8 @@ def _dog_row(p, y, env, sc, zero, col, on, off):
 
 @kernel(inline="always", **_jit)
 def _cascade_row(old, y_old, new, y_new, x0, a, b, e_x, j, line, tiny):
-    """One frame of the cascade at a row, in difference form (see :func:`to_differences`):
+    """One frame of the cascade (eq. 5, :func:`~asnn.retina.temporal_filter_step`) at a row,
+    in difference form (see :func:`to_differences`):
     row ``y_old`` of the stages ``old`` advanced into row ``y_new`` of ``new`` (the same
     array and row to advance in place).
 
@@ -375,7 +377,8 @@ def _cascade_row(old, y_old, new, y_new, x0, a, b, e_x, j, line, tiny):
 
 @kernel(inline="always", **_jit)
 def _readout_row(stages, y, gain, n_fast, n_slow, fast, slow):
-    """The fast and slow read-outs ``K d_n`` of row y of an advanced cascade, padded."""
+    """The fast and slow read-outs ``K d_n`` of row y of an advanced cascade, padded (eqs. 6,
+    7, :func:`~asnn.retina.temporal_readout`)."""
     w = stages.shape[2]
     df, ds = stages[n_fast + 1, y], stages[n_slow + 1, y]
     for x in range(w):
@@ -458,7 +461,8 @@ def _gabor_rows(c, k, a):
 @kernel(inline="always", **_jit)
 def _gabor_channel(ro, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, gabor, acc,
                    r0, r1, r2, r3):
-    """One channel's ``weight E^theta`` at one row, set (``first``) or added into R^theta.
+    """One channel's ``weight E^theta`` at one row, set (``first``) or added into R^theta
+    (eqs. 10, 15, 16, :func:`~asnn.retina.motion_energy`).
 
     Column passes first, over the padded read-out rows of the ring (so their output keeps the
     padding), then the row passes: every buffer involved is a few rows long and stays in the L1
@@ -500,7 +504,8 @@ def _gabor_channel(ro, slow, fast, s0, sm1, sp1, sm2, sp2, k, weight, first, gab
 
 @kernel(inline="always", **_jit)
 def _approach_row(ro, s0, sm1, sp1, sm2, sp2, kc, weights, terms, zero, csl, gl):
-    """G of one row, ``sum_i weight_i relu(relu(ex_i) - relu(inh_i (*) g_CS))``, into gl[1:w+1]."""
+    """G of one row, ``sum_i weight_i relu(relu(ex_i) - relu(inh_i (*) g_CS))``, into gl[1:w+1]
+    (eqs. 12-14, 19, 20, :func:`~asnn.retina.approach_map`)."""
     w = gl.shape[0] - 2
     first = True
     for t in range(4):
@@ -535,7 +540,8 @@ def _approach_row(ro, s0, sm1, sp1, sm2, sp2, kc, weights, terms, zero, csl, gl)
 
 @kernel(inline="always", **_jit)
 def _group_row(a, b, c, ninth, line, out):
-    """``G (G (*) ones(3, 3) / 9)`` of one row from the padded rows above, at and below it."""
+    """``G (G (*) ones(3, 3) / 9)`` of one row from the padded rows above, at and below it
+    (the published implementation's grouping, :func:`~asnn.retina.group`)."""
     w = out.shape[0]
     for x in range(w + 2):
         line[x] = a[x] + b[x] + c[x]
@@ -1112,7 +1118,7 @@ def _box(blur, gamma, r0, r1, c0, c1):
 
 @kernel(**_jit)
 def _v_prime(v, r, ks, signs, y0, y1, x0, x1, out):
-    """``V - max_j signs_j R^{ks_j}`` in the window, into ``out``."""
+    """V' = ``V - max_j signs_j R^{ks_j}`` (eq. 25) in the window, into ``out``."""
     for y in range(y0, y1):
         vv, o = v[y], out[y]
         if ks.shape[0] == 1:
@@ -1143,12 +1149,13 @@ def _v_prime_halved(v, r, k, sign, out):
 @kernel(**_jit)
 def _attend(blur_g, gy0, gx0, gamma_a, blur_v, vy0, vx0, gamma_d, g, absolute, y0, y1, x0, x1,
             mask, colsum, rows, cols):
-    """M_a M_d in the window ``y0:y1, x0:x1`` into ``mask``, the attended pixels into ``rows``,
-    ``cols`` (row-major), and sum G M_a M_d (in float64). ``blur_g`` and ``blur_v`` are
-    C-contiguous blurs whose first pixels lie at ``(gy0, gx0)`` and ``(vy0, vx0)`` of the
-    frame: whole arrays rather than slices from the window's origin, whose layout (contiguous
-    or not) would depend on where the window lies, and numba would compile the kernel again
-    for each (seconds, the first time a stream's window touches the frame's corner)."""
+    """M_a M_d (eqs. 23, 26) in the window ``y0:y1, x0:x1`` into ``mask``, the attended pixels
+    into ``rows``, ``cols`` (row-major), and sum G M_a M_d (eqs. 27, 28; in float64).
+    ``blur_g`` and ``blur_v`` are C-contiguous blurs whose first pixels lie at ``(gy0, gx0)``
+    and ``(vy0, vx0)`` of the frame: whole arrays rather than slices from the window's origin,
+    whose layout (contiguous or not) would depend on where the window lies, and numba would
+    compile the kernel again for each (seconds, the first time a stream's window touches the
+    frame's corner)."""
     for x in range(x0, x1):
         colsum[x] = 0.0
     count = 0
@@ -1181,7 +1188,7 @@ def _attend(blur_g, gy0, gx0, gamma_a, blur_v, vy0, vx0, gamma_d, g, absolute, y
 
 
 def attention(g, r, v, sums, ws, blur, gamma_a, gamma_d, top_k, absolute, full=False):
-    """M_a, M_d and ``sum G M_a M_d`` (or of ``|G|``), in float64.
+    """M_a, M_d and ``sum G M_a M_d`` (or of ``|G|``), in float64 (eqs. 22-28).
 
     Reproduces :func:`~asnn.retina.approach_attention`, :func:`~asnn.retina.direction_attention`
     and :func:`~asnn.retina.membrane_potential` (before its scale). ``blur`` is the
