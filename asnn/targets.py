@@ -295,7 +295,8 @@ def extract_targets(mask: np.ndarray, dx: np.ndarray | None, dy: np.ndarray | No
 def _population_motion(sum_dx: np.ndarray, sum_dy: np.ndarray, count: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Each cluster's population-coded motion from its summed motion vectors: the mean
-    ``(V_X, V_Y)`` (paper eq. 30) as a direction and an energy (eq. 31)."""
+    ``(V_X, V_Y)`` (paper eq. 30) as a direction and an energy (eq. 31), the direction
+    ``atan2(V_Y, V_X)`` (SPEC.md section 2's ruling: the paper prints atan2(V_X, V_Y))."""
     vx, vy = sum_dx / count, sum_dy / count
     return np.arctan2(vy, vx), np.hypot(vx, vy)
 
