@@ -3,8 +3,9 @@
 Zenoh reconnects by itself (:mod:`service.config`'s ``connect/retry``) and says nothing meanwhile:
 a camera publishing into a lost link, or a worker or a dashboard hearing nothing, would look as
 if all were quiet. :class:`RouterWatch` logs a WARNING when a session that had a router has none
-left, and an INFO line when one is back. A session that never had a router (peers on a LAN) is
-not reported. It also says, at start and once a day, which of the session's certificates
+left, and an INFO line when one is back. A session that has reached no router or peer yet is
+diagnosed as a lost one is, so that a mistyped ``--connect`` of a peer, which Zenoh retries
+silently, is said; one linked to peers only (peers on a LAN) is not reported. It also says, at start and once a day, which of the session's certificates
 expire soon (:func:`service.diagnosis.expiring_certificates`): the router checks them at the
 handshake only, so one that expires while the process runs locks it out at its next connection.
 """
@@ -68,7 +69,8 @@ class RouterWatch:
     diagnose : callable, optional
         Returns why the router cannot be reached, or None (:func:`service.diagnosis.
         connect_failure`): asked every ``diagnose_after`` seconds while a lost router stays
-        lost, its answer logged when it changes. Zenoh retries silently, and a router back
+        lost, or while a session that never had one reaches no peer either, its answer logged
+        when it changes. Zenoh retries silently, and a router back
         with another CA, certificate or password would otherwise be a "lost its router" line
         for ever, where a fresh start says why.
     diagnose_after : float
@@ -92,7 +94,8 @@ class RouterWatch:
         self.diagnose, self.diagnose_after = diagnose, diagnose_after
         self._certificates = (None if certificates is None else
                               CertificateCheck(name, certificates, certificates_every))
-        self._asked_at = 0.0  # when the lost router was last diagnosed (or lost)
+        # when the lost router was last diagnosed (or lost, or the watch started)
+        self._asked_at = time.monotonic()
         self._asking: list | None = None  # the diagnosis under way: [thread, its answer]
         self._heard: str | None = None  # the latest answer, logged once it comes twice
         self._said: str | None = None  # the latest reason logged
@@ -103,6 +106,16 @@ class RouterWatch:
 
     def _routers(self) -> list[str]:
         return [str(zid) for zid in self.session.info.routers_zid()]
+
+    def _unlinked(self) -> bool:
+        """Whether the session has no router and no peer: a session that never had a router
+        and has no peer is as cut off as one that lost its router."""
+        if self.connected is False:
+            return True
+        try:
+            return not list(self.session.info.peers_zid())
+        except Exception:  # the session closing under us: nothing left to diagnose
+            return False
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -123,7 +136,7 @@ class RouterWatch:
                             "sent or received meanwhile)", self.name)
                 self._changed(False)
                 self._asked_at, self._heard, self._said = time.monotonic(), None, None
-            elif not routers and self.connected is False and self.diagnose is not None:
+            elif not routers and self.diagnose is not None and self._unlinked():
                 self._why()
             if self._certificates is not None:
                 self._certificates.tick()

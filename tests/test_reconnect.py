@@ -61,10 +61,11 @@ def test_everything_reconnects_after_a_router_restart(procs, tmp_path):
 
 
 class FakeSession:
-    """What RouterWatch reads of a session: its routers, set by the test."""
+    """What RouterWatch reads of a session: its routers and peers, set by the test."""
 
     def __init__(self):
         self.routers = ["router-a"]
+        self.peers = []
 
     def is_closed(self):
         return False
@@ -75,6 +76,9 @@ class FakeSession:
 
     def routers_zid(self):
         return list(self.routers)
+
+    def peers_zid(self):
+        return list(self.peers)
 
 
 def test_a_router_that_stays_lost_is_diagnosed_and_each_new_reason_logged(caplog):
@@ -155,9 +159,9 @@ def test_a_lost_router_is_asked_about_after_diagnose_after_one_ask_at_a_time():
             wait_for(lambda: changes == [True, False], what="the router lost")
             time.sleep(0.3)  # thirty looks: none asks before diagnose_after
             assert calls == []
+        session.routers = ["router-a"]  # seen from the start: only the lost router is asked about
         with RouterWatch(session, "alerts", interval=0.01, on_change=changes.append,
                          diagnose=hanging, diagnose_after=0.0) as watch:
-            session.routers = ["router-a"]
             wait_for(lambda: watch.connected is True, what="the router seen")
             session.routers = []
             wait_for(lambda: calls, what="the lost router asked about")
@@ -166,9 +170,9 @@ def test_a_lost_router_is_asked_about_after_diagnose_after_one_ask_at_a_time():
     finally:
         release.set()
     calls.clear()
+    session.routers = ["router-a"]
     with RouterWatch(session, "alerts", interval=0.01, diagnose=hanging,
                      diagnose_after=0.5) as watch:
-        session.routers = ["router-a"]
         wait_for(lambda: watch.connected is True, what="the router seen")
         session.routers = []
         wait_for(lambda: calls, what="the lost router asked about")
@@ -225,18 +229,42 @@ def test_each_outage_says_its_reason_again_and_an_answer_from_before_is_not_coun
                  what="the same reason said for the new outage")
 
 
-def test_a_session_that_never_had_a_router_is_not_diagnosed():
-    """A mutation probe: the diagnosis is of a router lost; a session that never saw one (a
-    peer without routers, or the start, which says why itself) asks nothing, logs nothing."""
+def test_a_session_linked_to_peers_only_is_not_diagnosed():
+    """A mutation probe: peers on a LAN have no router and are not cut off: a session that
+    never saw a router but has peers asks nothing, logs nothing."""
     from service.link import RouterWatch
 
     session, calls = FakeSession(), []
-    session.routers = []
+    session.routers, session.peers = [], ["peer-b"]
     with RouterWatch(session, "alerts", interval=0.01,
                      diagnose=lambda: calls.append(1) or "tcp/r:7447: connection refused",
                      diagnose_after=0.0) as watch:
         time.sleep(0.3)  # thirty looks
         assert watch.connected is None and calls == []
+
+
+def test_a_peer_that_never_reached_its_endpoint_says_why(caplog):
+    """A user trial: ``asnn alerts --mode peer --connect tcp/HOST:PORT`` to an endpoint
+    nothing listens on printed "listening" and then nothing, for ever (a client exits at
+    start, but Zenoh retries a peer's endpoints silently); it now says why, after
+    ``diagnose_after``, as a session that lost its router does."""
+    from service.link import RouterWatch
+
+    session, calls = FakeSession(), []
+    session.routers = []
+    reason = "tcp/127.0.0.1:9: nothing accepts connections at 127.0.0.1:9 (Connection refused)"
+    with caplog.at_level("WARNING", logger="asnn.link"), RouterWatch(
+            session, "alerts", interval=0.01, diagnose=lambda: calls.append(1) or reason,
+            diagnose_after=0.05) as watch:
+        wait_for(lambda: [r for r in caplog.records if "still no router" in r.getMessage()],
+                 what="the unreached endpoint said")
+        assert watch.connected is None
+        session.peers = ["peer-b"]  # linked at last: no more asking
+        time.sleep(0.1)
+        asked = len(calls)
+        time.sleep(0.3)
+        assert len(calls) == asked
+    assert [r.getMessage() for r in caplog.records] == [f"alerts: still no router: {reason}"]
 
 
 def test_the_router_watch_says_at_start_which_certificates_end_soon(caplog):
