@@ -7,10 +7,9 @@ import logging
 import os
 import sys
 import threading
-from contextlib import suppress
 from pathlib import Path
 
-from asnn.io.files import folder_problem
+from asnn.io.files import folder_problem, make_folders, remove_folders
 from asnn.params import preset_names
 from service import keys
 from service.config import ConfigError, zenoh_error
@@ -64,7 +63,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
         if args.record:  # made last: a camera that cannot start leaves no file behind
             bound = RECORD_MAX_BYTES if args.record_max_mb is None else args.record_max_mb * 1e6
             try:  # its folders too, as asnn detect makes its outputs'
-                made = _make_folders(Path(args.record).parent)
+                made = make_folders(Path(args.record).parent)
             except OSError as exc:
                 return fail(args.command,
                             f"cannot make the folder {exc.filename}: {exc.strerror or exc}")
@@ -73,7 +72,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
                                            format=args.format, frame_id=source.frame_id,
                                            max_bytes=bound)
             except OSError as exc:  # nor the folders it made for the file (a full disk)
-                _remove_folders(made)
+                remove_folders(made)
                 return fail(args.command, str(exc))
         try:
             count = publish_frames(session, args.robot, source, prefix=args.prefix,
@@ -87,53 +86,13 @@ def cmd_camera(args: argparse.Namespace) -> int:
             if recording is not None:
                 _close_recording(recording, args.robot)
                 if not recording.path.exists():  # no frame recorded: nor its new folders
-                    _remove_folders(made)
+                    remove_folders(made)
     unheard = (f" ({subscribers.unheard} while no subscriber took them: lost)"
                if subscribers.unheard else "")
     log.info("camera %s: %d frames published%s; %s; workers' refusals on its key "
              "(of any publisher's frames): %s",
              args.robot, count, unheard, rejections.summary(), refusals.summary())
     return 0
-
-
-def _make_folders(folder: Path) -> list[Path]:
-    """Make ``folder`` and the folders missing on the way to it; those this call made, deepest
-    first (what :func:`_remove_folders` takes). Only a folder ``os.mkdir`` itself created is
-    counted: not one there already under another spelling (``a/../b`` where ``b`` exists), nor
-    one another process made meanwhile.
-
-    Raises
-    ------
-    OSError
-        A folder that cannot be made; those made before it are removed.
-    """
-    missing = []
-    for step in (folder, *folder.parents):  # deepest first, up to the first that is there
-        if step.is_dir():
-            break
-        missing.append(step)
-    made: list[Path] = []
-    try:
-        for step in reversed(missing):
-            try:
-                os.mkdir(step)
-            except FileExistsError:
-                if not step.is_dir():  # a file, or a link to none, where a folder goes
-                    raise
-                continue
-            made.insert(0, step)
-    except OSError:
-        _remove_folders(made)
-        raise
-    return made
-
-
-def _remove_folders(folders: list[Path]) -> None:
-    """Remove the folders a camera made for its recording and did not use, deepest first
-    (each only if empty: what another process put there meanwhile stays)."""
-    for folder in folders:
-        with suppress(OSError):
-            folder.rmdir()
 
 
 def _close_recording(recording, robot: str) -> None:

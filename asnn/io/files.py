@@ -11,8 +11,8 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["RecordingFile", "folder_lock", "folder_problem", "resolved", "seekable_target",
-           "write_atomically"]
+__all__ = ["RecordingFile", "folder_lock", "folder_problem", "make_folders", "remove_folders",
+           "resolved", "seekable_target", "write_atomically"]
 
 
 def resolved(path: str | Path) -> Path:
@@ -49,6 +49,46 @@ def folder_problem(folder: str | Path) -> str | None:
     if parent != folder and not os.access(parent, os.W_OK | os.X_OK):
         return f"cannot make {folder} in {parent} (no write access)"
     return None
+
+
+def make_folders(folder: Path) -> list[Path]:
+    """Make ``folder`` and the folders missing on the way to it; those this call made, deepest
+    first (what :func:`remove_folders` takes). Only a folder ``os.mkdir`` itself created is
+    counted: not one there already under another spelling (``a/../b`` where ``b`` exists), nor
+    one another process made meanwhile.
+
+    Raises
+    ------
+    OSError
+        A folder that cannot be made; those made before it are removed.
+    """
+    missing = []
+    for step in (folder, *folder.parents):  # deepest first, up to the first that is there
+        if step.is_dir():
+            break
+        missing.append(step)
+    made: list[Path] = []
+    try:
+        for step in reversed(missing):
+            try:
+                os.mkdir(step)
+            except FileExistsError:
+                if not step.is_dir():  # a file, or a link to none, where a folder goes
+                    raise
+                continue
+            made.insert(0, step)
+    except OSError:
+        remove_folders(made)
+        raise
+    return made
+
+
+def remove_folders(folders: list[Path]) -> None:
+    """Remove the folders :func:`make_folders` made, deepest first (each only if empty: what
+    another process put there meanwhile stays)."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
 
 
 def write_atomically(path: str | Path, text: str) -> None:
