@@ -301,9 +301,10 @@ def _keep_unfinished_run(out: Path, since: float, present: set[str],
 
 def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
     """Why ``--out`` cannot be the results' folder, found before anything runs, or None: a file
-    there, a file or a folder without write access where it would be made, or a file of the
-    names this run ``writes`` there that no asnn eval wrote (not in its manifest: a user's
-    labels.json or report.md, which the run would replace)."""
+    there, a file or a folder without write access where it would be made, a folder no file
+    can be made in (:func:`asnn.io.files.folder_problem`), or a file of the names this run
+    ``writes`` there that no asnn eval wrote (not in its manifest: a user's labels.json or
+    report.md, which the run would replace)."""
     if out.exists():
         if not out.is_dir():
             return f"--out {out}: not a folder"
@@ -314,7 +315,6 @@ def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
             return (f"--out {out}: {', '.join(foreign)} there {verb} not written by asnn eval "
                     f"(not in {MANIFEST}), and this run would replace {them}: move {them}, or "
                     "choose another --out")
-        return None
     problem = folder_problem(out)
     return f"--out {out}: {problem}" if problem else None
 

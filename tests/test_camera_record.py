@@ -308,7 +308,7 @@ def test_a_recording_removes_only_the_folders_it_made(tmp_path, capsys, monkeypa
     assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
                             "--record", str(target))) == 2
     assert capsys.readouterr().err.strip().endswith(
-        f"asnn camera: cannot make the folder {target.parent}: Permission denied")
+        f"asnn camera: --record {target}: cannot make {target.parent}: Permission denied")
     assert not (tmp_path / "made").exists()
 
 

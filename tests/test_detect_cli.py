@@ -281,6 +281,23 @@ def test_an_output_folder_that_cannot_be_made_is_refused_before_the_run(looming_
     assert list(locked.iterdir()) == []  # refused before anything was made
 
 
+@pytest.mark.parametrize("flag, path", [
+    ("--annotate", "/proc/self/a.mp4"), ("--plot", "/proc/self/a.png"),
+    ("--mcap", "/proc/self/a.mcap"), ("--jsonl", "/proc/asnn-none/a.jsonl")])
+def test_an_output_no_file_can_be_made_for_is_refused_before_the_run(looming_video, capsys,
+                                                                     flag, path):
+    """Permissions do not tell it (root may write anywhere by them; /proc takes no new file
+    whatever they say): --annotate, --plot and --mcap failed at their first frame or at the end
+    of the run, and a folder that could not be made once the kernels had compiled, without
+    naming the option or why."""
+    if not Path("/proc/self").is_dir():
+        pytest.skip("no /proc here")
+    video, _ = looming_video
+    assert main(["detect", str(video), flag, path]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"asnn detect: {flag} {path}: cannot "), err
+
+
 def test_outputs_in_folders_that_do_not_exist_yet_are_written_there(looming_video, tmp_path,
                                                                      capsys):
     """As ``asnn scene OUT`` does, detect makes the folders its outputs go into."""
@@ -779,7 +796,7 @@ def test_a_run_that_stops_before_its_first_frame_leaves_an_existing_output_as_it
         scene = make_scene("looming", size=(64, 64), frames=8, start=2, stop=7)
         clip = write_video(scene.frames, tmp_path / "c.mp4", scene.fps)
         assert main(["detect", str(clip), "--jsonl", str(kept), "--mcap", "/proc/x.mcap"]) == 2
-        assert "cannot write /proc/x.mcap" in capsys.readouterr().err
+        assert "--mcap /proc/x.mcap: cannot write in /proc" in capsys.readouterr().err
     assert kept.read_text() == '{"frame": 0}\n'
 
 

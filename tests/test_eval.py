@@ -987,6 +987,19 @@ def test_eval_refuses_an_out_it_may_not_make_before_it_runs(tmp_path, capsys, mo
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("out, says", [("/proc/asnn-none/out", "cannot make /proc/asnn-none: "),
+                                       ("/proc/self", "cannot write in /proc/self: ")])
+def test_eval_refuses_an_out_no_file_can_be_made_in_before_it_runs(capsys, out, says):
+    """Permissions do not tell it (root may write anywhere by them; /proc takes no new file
+    whatever they say): eval --out /proc/foo failed after its last case, with a bare errno."""
+    if not Path("/proc/self").is_dir():
+        pytest.skip("no /proc here")
+    assert main(["eval", "--synthetic", "--cases", "loom-dark-c1.0-d12-center", "--detectors",
+                 "lgmd1", "--no-plots", "--out", out]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"asnn eval: --out {out}: {says}"), err
+
+
 def test_a_clips_report_says_which_detector_is_which_and_what_its_columns_count(tmp_path):
     # a reader of report.md alone must learn that a bare asnn is the robust preset, what the
     # LGMD names stand for, and what the false-alarm rate and the warning frames count over

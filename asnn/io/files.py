@@ -35,12 +35,11 @@ def seekable_target(path: str | Path) -> None:
 
 
 def folder_problem(folder: str | Path) -> str | None:
-    """Why ``folder`` cannot be had for writing into, found before a run, or None: it exists,
-    or the folders missing on the way to it can be made, since the nearest one there is is a
-    folder this process may write (the outputs' folders are made as they are written)."""
+    """Why ``folder`` cannot be had for writing into, found before a run, or None: the nearest
+    folder there is on the way to it is a folder this process may write, and a file can be
+    made in ``folder`` (:func:`_write_problem`; the outputs' folders are made as they are
+    written)."""
     folder = Path(folder)
-    if folder.is_dir():
-        return None
     parent = folder
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
@@ -48,6 +47,25 @@ def folder_problem(folder: str | Path) -> str | None:
         return f"{parent} is not a folder"
     if parent != folder and not os.access(parent, os.W_OK | os.X_OK):
         return f"cannot make {folder} in {parent} (no write access)"
+    return _write_problem(folder)
+
+
+def _write_problem(folder: Path) -> str | None:
+    """Why no file can be made in ``folder``, found by making one (and the folders missing on
+    the way), all removed again; or None. Permissions do not say it: root may write anywhere by
+    them, and /proc or /sys refuse what they allow (``--out /proc/foo`` failed at the end of
+    the run, with a bare errno)."""
+    try:
+        made = make_folders(folder)
+    except OSError as exc:
+        return f"cannot make {exc.filename}: {exc.strerror or exc}"
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".asnn-"):
+            pass
+    except OSError as exc:
+        return f"cannot write in {folder}: {exc.strerror or exc}"
+    finally:
+        remove_folders(made)
     return None
 
 
