@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -26,7 +27,7 @@ from pathlib import Path, PurePosixPath
 from asnn.detectors import BASELINES
 from asnn.evaluation.options import (DEFAULT_DETECTORS, EARLY_TOLERANCE_S, FAMILIES,
                                      PERTURBATIONS, TIE_BREAKS, WARMUP_FRAMES)
-from asnn.io.files import folder_problem
+from asnn.io.files import folder_problem, path_problem
 from asnn.params import preset_names
 
 from .arguments import (Joined, clips_problem, finite, frame_rates, frame_size, nonempty_path,
@@ -277,7 +278,7 @@ def _keep_unfinished_run(out: Path, since: float, present: set[str],
     that the next run removes what this one left; and the previous run's top-level reports,
     which no longer describe the folder, are removed (an interrupted run left results no later
     run removed, and the earlier report beside results it had deleted: a user trial)."""
-    if not out.is_dir():
+    if not os.path.isdir(out):  # False for an --out refused as too long a name: Path's raises
         return
     previous = _listed(out)
     written = _written_since(out, since)
@@ -305,6 +306,9 @@ def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
     can be made in (:func:`asnn.io.files.folder_problem`), or a file of the names this run
     ``writes`` there that no asnn eval wrote (not in its manifest: a user's labels.json or
     report.md, which the run would replace)."""
+    problem = path_problem(out)
+    if problem:
+        return f"--out {out}: {problem}"
     if out.exists():
         if not out.is_dir():
             return f"--out {out}: not a folder"

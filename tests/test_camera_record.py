@@ -235,6 +235,11 @@ def test_a_recording_never_overwrites_a_file_and_an_unwritable_one_fails_at_star
                             "--record", str(unwritable))) == 2
     assert capsys.readouterr().err.strip() == \
         f"asnn camera: --record {unwritable}: {tmp_path / 'a-file'} is not a folder"
+    too_long = tmp_path / ("a" * 300)  # Path.exists raised for its folder: a traceback
+    assert main(camera_args(tmp_path, "--robot", "r1", "--source", "synthetic:looming",
+                            "--record", str(too_long / "run.mcap"))) == 2
+    assert capsys.readouterr().err.strip() == \
+        f"asnn camera: --record {too_long / 'run.mcap'}: {too_long}: File name too long"
 
 
 def test_a_recording_s_missing_folders_are_made_once_the_camera_starts(tmp_path, capsys,

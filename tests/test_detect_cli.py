@@ -238,6 +238,11 @@ def test_a_reader_that_stops_early_ends_detect_quietly(tmp_path, what):
     ("--plot", "{tmp}", "is a folder"),
     ("--annotate", "{tmp}/a-file/more/a.mp4", "a-file is not a folder"),
     ("--jsonl", "/dev/full", "No space left on device"),  # found while writing
+    # names longer than a file system takes: Path.is_dir raised for them (a traceback)
+    pytest.param("--jsonl", "{tmp}/" + "a" * 300 + ".jsonl", "File name too long",
+                 id="jsonl-name-too-long"),
+    pytest.param("--annotate", "{tmp}/" + "a" * 300 + "/a.mp4", "File name too long",
+                 id="annotate-folder-name-too-long"),
 ])
 def test_an_output_that_cannot_be_written_is_a_one_line_error(looming_video, tmp_path, capsys,
                                                               flag, path, says):

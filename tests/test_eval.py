@@ -1000,6 +1000,15 @@ def test_eval_refuses_an_out_no_file_can_be_made_in_before_it_runs(capsys, out, 
     assert len(err) == 1 and err[0].startswith(f"asnn eval: --out {out}: {says}"), err
 
 
+def test_eval_refuses_an_out_whose_name_is_too_long_in_one_line(tmp_path, capsys):
+    # Path.exists raised for it, and again when the refused run's folder was tidied: a traceback
+    out = tmp_path / ("a" * 300)
+    assert main(["eval", "--synthetic", "--cases", "loom-dark-c1.0-d12-center", "--out",
+                 str(out)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == \
+        [f"asnn eval: --out {out}: File name too long"]
+
+
 def test_a_clips_report_says_which_detector_is_which_and_what_its_columns_count(tmp_path):
     # a reader of report.md alone must learn that a bare asnn is the robust preset, what the
     # LGMD names stand for, and what the false-alarm rate and the warning frames count over

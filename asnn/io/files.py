@@ -11,8 +11,8 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["RecordingFile", "folder_lock", "folder_problem", "make_folders", "remove_folders",
-           "resolved", "seekable_target", "write_atomically"]
+__all__ = ["RecordingFile", "folder_lock", "folder_problem", "make_folders", "path_problem",
+           "remove_folders", "resolved", "seekable_target", "write_atomically"]
 
 
 def resolved(path: str | Path) -> Path:
@@ -34,12 +34,29 @@ def seekable_target(path: str | Path) -> None:
                          "or a bag is written with seeks")
 
 
+def path_problem(path: str | Path) -> str | None:
+    """Why ``path`` cannot even be looked up (a name longer than the file system takes, a loop
+    of links, a folder on the way this process may not search), or None where it is there or
+    merely missing: ``Path.exists`` and ``Path.is_dir`` raise for those, and a check of an
+    output made with them ended in a traceback."""
+    try:
+        os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return None
+
+
 def folder_problem(folder: str | Path) -> str | None:
     """Why ``folder`` cannot be had for writing into, found before a run, or None: the nearest
     folder there is on the way to it is a folder this process may write, and a file can be
     made in ``folder`` (:func:`_write_problem`; the outputs' folders are made as they are
     written)."""
     folder = Path(folder)
+    problem = path_problem(folder)
+    if problem:
+        return f"{folder}: {problem}"
     parent = folder
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
