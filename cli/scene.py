@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-from asnn.io.files import folder_lock
+from asnn.io.files import folder_lock, folder_problem, path_problem
 from asnn.io.rates import FPS_RANGE
 from asnn.stimuli import SCENE_NAMES, make_scene
 
@@ -107,6 +107,9 @@ def run(args: argparse.Namespace) -> int:
         if Path(out).suffix.lower() not in (*WRITABLE_SUFFIXES, ".mcap"):  # before drawing
             raise ValueError(f"{out}: name the format by its extension: a video "
                              f"({', '.join(WRITABLE_SUFFIXES)}) or a bag (.mcap)")
+        problem = path_problem(out) or folder_problem(Path(out).parent)
+        if problem:  # said as the other commands say theirs, not as a bare errno at the write
+            raise ValueError(f"{out}: {problem}")
         if args.labels:  # a labels file that cannot take the clip stops the command first
             _check_labels_file(Path(args.labels), Path(out))
         Path(out).parent.mkdir(parents=True, exist_ok=True)
@@ -148,6 +151,9 @@ def _check_labels_file(labels: Path, out: Path) -> None:
     OSError
         If it cannot be read.
     """
+    problem = path_problem(labels)
+    if problem:
+        raise ValueError(f"--labels {labels}: {problem}")
     if labels.is_dir():
         raise ValueError(f"--labels {labels}: a folder; give the labels file "
                          f"({labels / 'labels.json'})")

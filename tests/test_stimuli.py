@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 from types import SimpleNamespace
 
 import cv2
@@ -1053,6 +1054,34 @@ def test_scene_names_the_extensions_it_writes_before_drawing(tmp_path, capsys):
         f"asnn scene: {out}: name the format by its extension: a video (.avi, .m4v, .mkv, .mov, "
         ".mp4) or a bag (.mcap)"]
     assert not out.exists()
+
+
+@pytest.mark.parametrize("out, says", [
+    ("{tmp}/a-file/x.mp4", "{tmp}/a-file is not a folder"),  # was "[Errno 17] File exists"
+    ("{tmp}/" + "a" * 300 + "/x.mcap", "File name too long"),  # was a bare errno
+    ("/proc/asnn-none/x.mp4", "cannot make /proc/asnn-none: "),  # root's permissions say yes
+    ("/proc/self/x.mcap", "cannot write in /proc/self: "),
+])
+def test_scene_names_an_out_it_cannot_write_in_one_line(tmp_path, capsys, out, says):
+    from cli.main import main
+
+    if out.startswith("/proc/") and not Path("/proc/self").is_dir():
+        pytest.skip("no /proc here")
+    (tmp_path / "a-file").write_text("")
+    out = out.format(tmp=tmp_path)
+    assert main(["scene", "looming", out, "--size", "32x32"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"asnn scene: {out}: ") \
+        and says.format(tmp=tmp_path) in err[0], err
+
+
+def test_scene_names_a_labels_file_whose_name_is_too_long_in_one_line(tmp_path, capsys):
+    from cli.main import main
+
+    labels = tmp_path / ("a" * 300 + ".json")
+    assert main(["scene", "looming", str(tmp_path / "x.mp4"), "--labels", str(labels)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"asnn scene: --labels {labels}: File name too long"]
 
 
 def test_a_paper_scene_refuses_a_rate_or_speed_it_cannot_draw_and_records_its_arguments():
