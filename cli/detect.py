@@ -162,9 +162,10 @@ def _output_problem(path: str | None, flag: str) -> str | None:
             seekable_target(target)
         except ValueError as exc:
             return f"{flag} {exc}"
-    elif flag in ("--jsonl", "--tracks") and target.parent.is_dir():
-        try:  # opened now without emptying it (that waits for its first line), so that a path
-            # that cannot be written is said before the kernels compile, not after
+    elif flag in ("--jsonl", "--tracks") and target.exists():
+        try:  # opened now without emptying it (that waits for its first line), so that a file
+            # that cannot be written is said before the kernels compile, not after; a new one
+            # is not made here (a run refused after it left it empty): its folder was tried
             open(target, "a").close()  # noqa: SIM115
         except OSError as exc:
             return f"{flag} {path}: cannot write: {exc.strerror or exc}"

@@ -324,6 +324,14 @@ def test_an_output_folder_is_made_only_once_the_input_opens(tmp_path, capsys):
     assert "none.avi" in capsys.readouterr().err and not (tmp_path / "new").exists()
 
 
+@pytest.mark.parametrize("flag", ["--jsonl", "--tracks"])
+def test_a_run_refused_at_start_leaves_no_new_output_file(tmp_path, capsys, flag):
+    # the check of the path made the file, and a run refused after it left it there, empty
+    out = tmp_path / "out.jsonl"
+    assert main(["detect", str(tmp_path / "none.avi"), flag, str(out)]) == 2
+    assert "none.avi" in capsys.readouterr().err and not out.exists()
+
+
 def test_an_output_over_the_input_or_another_output_is_refused_before_it_is_opened(
         looming_video, tmp_path, capsys):
     video, _ = looming_video
