@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from asnn.io.files import folder_lock
+from asnn.io.files import folder_lock, folder_problem, path_problem
 from asnn.params import preset
 from cli.arguments import nonempty_path
 
@@ -52,6 +52,10 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.labels) if args.labels else folder / "labels.json"
     if not folder.is_dir():
         print(f"asnn label: {folder}: not a folder", file=sys.stderr)
+        return 2
+    problem = path_problem(path)  # before path.exists(), which raises for it
+    if problem:
+        print(f"asnn label: {path}: {problem}", file=sys.stderr)
         return 2
     try:
         entries = read_entries(path) if path.exists() else []
@@ -93,6 +97,12 @@ def run(args: argparse.Namespace) -> int:
         except ValueError as exc:
             todo.append(str(exc))
     new_videos = [folder / name for name in new_names]
+    # entries to add: the labels' folder is tried before their clips decode, not after (a
+    # check alone writes nothing, and may read a folder it cannot write)
+    problem = folder_problem(path.parent) if new_videos else None
+    if problem:
+        print(f"asnn label: cannot write {path}: {problem}", file=sys.stderr)
+        return 2
     for bag in unlabelled_bags(folder, entries):  # entered by hand: the topic is the user's
         todo.append(f"{bag}: a bag no entry names: enter it by hand, with its image topic "
                     f'where it has several ({{"file": "{bag}", "topic": "/camera/image_raw", '

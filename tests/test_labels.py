@@ -363,6 +363,25 @@ def test_label_adds_no_second_entry_for_a_clip_named_in_another_unicode_form(tmp
     assert json.loads((tmp_path / "labels.json").read_text()) == [entry]
 
 
+def test_label_refuses_labels_it_cannot_write_before_it_decodes_the_clips(tmp_path, capsys,
+                                                                         monkeypatch):
+    """A file where the labels' folder goes was said as "File exists" once every clip had
+    decoded, and a name too long as a bare errno: said first, in words."""
+    import cli.label
+
+    write_video(make_scene("looming", size=(64, 48), frames=3).frames, tmp_path / "a.avi")
+    (tmp_path / "a-file").write_text("")
+    monkeypatch.setattr(cli.label, "_decode", lambda *args: pytest.fail("decoded first"))
+    labels = tmp_path / "a-file" / "labels.json"
+    assert main(["label", str(tmp_path), "--labels", str(labels)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"asnn label: cannot write {labels}: {tmp_path / 'a-file'} is not a folder"]
+    labels = tmp_path / ("a" * 300 + ".json")
+    assert main(["label", str(tmp_path), "--labels", str(labels)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"asnn label: {labels}: File name too long"]
+
+
 def test_label_refuses_what_it_cannot_use(tmp_path, capsys):
     assert main(["label", str(tmp_path / "nowhere")]) == 2
     write_video(make_scene("looming", size=(64, 48), frames=3).frames, tmp_path / "a.avi")
