@@ -300,12 +300,13 @@ def _keep_unfinished_run(out: Path, since: float, present: set[str],
     _write_manifest(out, listed)
 
 
-def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
+def _out_problem(out: Path, writes: Sequence[str] = (),
+                 folders: Sequence[str] = ()) -> str | None:
     """Why ``--out`` cannot be the results' folder, found before anything runs, or None: a file
     there, a file or a folder without write access where it would be made, a folder no file
-    can be made in (:func:`asnn.io.files.folder_problem`), or a file of the names this run
-    ``writes`` there that no asnn eval wrote (not in its manifest: a user's labels.json or
-    report.md, which the run would replace)."""
+    can be made in (:func:`asnn.io.files.folder_problem`), the same for the ``folders`` this
+    run makes in it, or a file of the names this run ``writes`` there that no asnn eval wrote
+    (not in its manifest: a user's labels.json or report.md, which the run would replace)."""
     problem = path_problem(out)
     if problem:
         return f"--out {out}: {problem}"
@@ -319,8 +320,11 @@ def _out_problem(out: Path, writes: Sequence[str] = ()) -> str | None:
             return (f"--out {out}: {', '.join(foreign)} there {verb} not written by asnn eval "
                     f"(not in {MANIFEST}), and this run would replace {them}: move {them}, or "
                     "choose another --out")
-    problem = folder_problem(out)
-    return f"--out {out}: {problem}" if problem else None
+    for folder in (out, *(out / name for name in folders)):
+        problem = folder_problem(folder)
+        if problem:
+            return f"--out {out}: {problem}"
+    return None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -389,7 +393,9 @@ def _evaluate(args: argparse.Namespace) -> int:
               ("ttc.md", "ttc.json") if args.ttc else
               ("labels.json", "report.md", "results.json") if args.synthetic else
               ("report.md", "results.json"))
-    problem = _out_problem(Path(args.out), writes)
+    # a scored run's per-clip results and plots (a file named plots there failed it at its end)
+    folders = () if args.paper or args.held_out or args.ttc else ("results", "plots")
+    problem = _out_problem(Path(args.out), writes, folders)
     if problem is not None:  # before the first clip runs, not when its results are written
         print(f"asnn eval: {problem}", file=sys.stderr)
         return 2

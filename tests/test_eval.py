@@ -973,6 +973,19 @@ def test_eval_refuses_an_out_that_cannot_be_a_folder_before_it_runs(tmp_path, ca
     assert (tmp_path / "afile.txt").read_text() == "mine\n"
 
 
+@pytest.mark.parametrize("name", ["results", "plots"])
+def test_eval_refuses_a_file_where_it_makes_a_folder_in_out_before_it_runs(tmp_path, capsys,
+                                                                           name):
+    # a file named plots failed the run at its end with '[Errno 17] File exists', its report
+    # written; one named results at its start with a bare errno
+    (tmp_path / name).write_text("mine\n")
+    assert main(["eval", "--synthetic", "--cases", "loom-dark-c1.0-d12-center", "--detectors",
+                 "lgmd1", "--out", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"asnn eval: --out {tmp_path}: {tmp_path / name} is not a folder"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]
+
+
 def test_eval_refuses_an_out_it_may_not_make_before_it_runs(tmp_path, capsys, monkeypatch):
     # the tests run as root, who may write anywhere: the folder's refusal is simulated
     import os
