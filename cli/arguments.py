@@ -331,11 +331,18 @@ def frame_perturbation(name: str) -> str:
 def clips_problem(clips_dir, labels=None) -> tuple[str, str] | None:
     """Why a folder of labelled clips cannot be read, found before anything runs, as ``(what,
     why)``: the folder and ``"not a folder"``, or the labels file (by default
-    ``CLIPS/labels.json``) and ``"no labels file (...)"``; None where both are there. What
+    ``CLIPS/labels.json``) and ``"no labels file (...)"``, or either path and why it cannot
+    even be looked up (:func:`asnn.io.files.path_problem`); None where both are there. What
     ``asnn eval`` and ``asnn bench --handover --clips`` say alike."""
     from pathlib import Path
 
+    from asnn.io.files import path_problem
+
     labels = Path(clips_dir) / "labels.json" if labels is None else Path(labels)
+    for path in (clips_dir, labels):  # a name too long, a loop of links: is_dir raises for it
+        problem = path_problem(path)
+        if problem:
+            return str(path), problem
     if not Path(clips_dir).is_dir():
         return str(clips_dir), "not a folder"
     if not labels.is_file():

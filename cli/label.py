@@ -50,12 +50,13 @@ def run(args: argparse.Namespace) -> int:
 
     folder = Path(args.clips_dir)
     path = Path(args.labels) if args.labels else folder / "labels.json"
+    for named in (folder, path):  # before is_dir and exists, which raise for it
+        problem = path_problem(named)
+        if problem:
+            print(f"asnn label: {named}: {problem}", file=sys.stderr)
+            return 2
     if not folder.is_dir():
         print(f"asnn label: {folder}: not a folder", file=sys.stderr)
-        return 2
-    problem = path_problem(path)  # before path.exists(), which raises for it
-    if problem:
-        print(f"asnn label: {path}: {problem}", file=sys.stderr)
         return 2
     try:
         entries = read_entries(path) if path.exists() else []

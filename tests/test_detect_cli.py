@@ -986,3 +986,22 @@ def test_a_raw_stream_and_a_y4m_without_its_rate_are_timed_at_a_guess_and_say_so
         assert main(["detect", str(path), "--jsonl", str(tmp_path / "o.jsonl")]) == 0
         said = "states no frame rate a camera runs at" in capsys.readouterr().err
         assert said == (not stated), path
+
+
+@pytest.mark.parametrize("command", [
+    ["detect", "{long}.mp4"], ["detect", "{long}.mcap"], ["eval", "{long}"],
+    ["eval", "{tmp}", "--labels", "{long}.json"], ["label", "{long}"],
+    ["bench", "--handover", "--clips", "{long}"], ["detect", "{loop}"],
+], ids=["detect-video", "detect-bag", "eval-clips", "eval-labels", "label-clips",
+        "bench-clips", "detect-link-loop"])
+def test_an_input_path_that_cannot_be_looked_up_is_a_one_line_error(tmp_path, capsys, command):
+    """A contributor's trial: an input named too long for the file system, or a loop of links,
+    ended every reading command in a traceback (Path.is_dir and exists raise for them)."""
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    names = {"tmp": str(tmp_path), "long": str(tmp_path / ("a" * 300)),
+             "loop": str(tmp_path / "loop")}
+    argv = [part.format(**names) for part in command]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"asnn {command[0]}: "), err
+    assert err[0].endswith(("File name too long", "(a loop of links)")), err

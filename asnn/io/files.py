@@ -5,6 +5,7 @@ file that keeps its first failed write (:class:`RecordingFile`)."""
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import os
 import tempfile
@@ -44,6 +45,8 @@ def path_problem(path: str | Path) -> str | None:
     except (FileNotFoundError, NotADirectoryError):
         return None
     except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "a link that leads back to itself (a loop of links)"
         return exc.strerror or str(exc)
     return None
 

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .files import path_problem
 from .rates import MAX_FPS
 
 __all__ = ["CLOCK_RESET", "CLOCK_RESET_FRAMES", "STAMP_UNSET", "SYNTHETIC", "BackwardStamps",
@@ -233,6 +234,9 @@ def open_source(spec: str, *, topic: str | None = None,
     """
     spec = str(spec)
     path, suffix_topic = split_topic(spec)
+    problem = None if "://" in spec else path_problem(path)  # a URL may have long parts
+    if problem:  # Path's checks below raise for it, and a traceback said it
+        raise SourceError(f"{path}: {problem}", "unreadable")
     if topic is not None and suffix_topic is not None and topic != suffix_topic:
         raise SourceError(f"{spec}: names the topic {suffix_topic}, and the topic given is "
                           f"{topic}: give one", "two-topics")
