@@ -213,3 +213,68 @@ def test_the_models_docstring_example_runs():
     tries, report = run_examples(ASNN)
     assert tries >= 8, "the example lost its steps"
     assert report == ""
+
+
+def field_tables(text: str, heading: str) -> dict[str, dict[str, bool]]:
+    """The field tables of a section: for each ``**Name**`` before a table, its fields (the
+    first column's backquoted names) and whether the table says they are required."""
+    lines = prose_lines(text)
+    start = next((i for i, line in enumerate(lines) if line.strip() == heading), None)
+    assert start is not None, f"no section {heading!r}"
+    tables, name = {}, None
+    for line in lines[start + 1:]:
+        if line.startswith("## "):
+            break
+        label = re.match(r"\*\*(\w+)\*\*", line)
+        if label:
+            name = label.group(1)
+            tables[name] = {}
+        elif name and line.startswith("| `"):
+            cells = [c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]]
+            for field in re.findall(r"`(\w+)`", cells[0]):
+                tables[name][field] = cells[2] == "yes"
+    return tables
+
+
+def test_contract_field_tables_are_the_wire_formats():
+    """docs/contract.md's Frame, Response and Target tables, what a client written without this
+    package reads, name every field of ``service.messages``' models, and a field they call
+    required is refused when missing (one they call optional is not); an optional field without
+    a value is left out of the map, as the page says."""
+    import msgpack
+
+    from service.messages import (Frame, MessageError, Response, TargetMsg, decode_frame,
+                                  decode_response, encode)
+
+    tables = field_tables((ROOT / "docs" / "contract.md").read_text(),
+                          "## Frame and Response, field by field")
+    models = {"Frame": Frame, "Response": Response, "Target": TargetMsg}
+    assert {name: set(table) for name, table in tables.items()} == \
+        {name: set(model.model_fields) for name, model in models.items()}
+
+    target = dict(x=1.0, y=2.0, direction=0.5, energy=0.1, pixels=3, id=7, expansion=2.0,
+                  ttc=0.5, offset=0.1, approaching=True)
+    response = dict(v=1, robot="r1", seq=4, stamp=1.5, model="asnn", preset="robust", u=3.0,
+                    out=0.6, spikes=1, spike_rate=10.0, collision=True, targets=[target],
+                    worker="w1", latency_ms=2.0, dropped=0, model_ms=1.0, stream_frames=5)
+    frame = dict(v=1, seq=0, stamp=0.5, width=2, height=1, format="gray8", data=b"\0\0")
+    messages = {"Frame": (frame, decode_frame, lambda m: m),
+                "Response": (response, decode_response, lambda m: m),
+                "Target": (target, decode_response, lambda m: {**response, "targets": [m]})}
+    for name, (message, decode, wrap) in messages.items():
+        decode(msgpack.packb(wrap(message)))
+        for field, required in tables[name].items():
+            cut = msgpack.packb(wrap({k: v for k, v in message.items() if k != field}))
+            if required:
+                with pytest.raises(MessageError) as refused:
+                    decode(cut)
+                # a target's missing field is the response's ill-typed one
+                assert refused.value.reason == ("invalid-field" if name == "Target"
+                                                else "missing-field"), (name, field)
+            else:
+                decode(cut)
+    bare = Response(**{**response, "model_ms": None, "stream_frames": None,
+                       "targets": [TargetMsg(x=1.0, y=2.0, direction=0.0, energy=0.0, pixels=1)]})
+    sent = msgpack.unpackb(encode(bare))
+    assert "model_ms" not in sent and "stream_frames" not in sent
+    assert set(sent["targets"][0]) == {"x", "y", "direction", "energy", "pixels"}
