@@ -184,8 +184,10 @@ _PARSER_PLACE = re.compile(r"-->\s*(\d+):(\d+)")
 _PARSER_SAYS = re.compile(r"^\s*=\s*(.+)$", re.M)
 # a value the config refuses, in Rust's debug form: `Json5Err(Message { msg: "...", location:
 # Some(Location { line: 1, column: 2 }) })` or `JSON error: Message { ... }`
-_JSON_MESSAGE = re.compile(r'Message \{ msg: "(.*)", location: (?:Some\(Location \{ line: '
-                           r'(\d+), column: (\d+) \}\)|None) \}', re.S)
+# (the message is read as a Rust string literal, up to its closing quote: two such blocks in one
+# error are two messages, not one that spans both)
+_JSON_MESSAGE = re.compile(r'Message \{ msg: "((?:[^"\\]|\\.)*)", location: (?:Some\(Location '
+                           r'\{ line: (\d+), column: (\d+) \}\)|None) \}', re.S)
 # Rust's escapes of a quote and a backslash in such a message
 _RUST_ESCAPE = re.compile(r'\\(["\\])')
 

@@ -385,6 +385,10 @@ def test_a_config_zenoh_refuses_is_named_without_the_rust_source_location(tmp_pa
 
     assert zenoh_error(Exception("bad at /a/b.rs:3. rule repeated at /c/d.rs:395.")) \
         == "bad rule repeated"
+    # two refused values in one error: the first message alone, not both and what lies between
+    two = ('Json5Err(Message { msg: "a \\"x\\" is bad", location: Some(Location { line: 1, '
+           'column: 2 }) }) and Message { msg: "second", location: None }')
+    assert zenoh_error(Exception(two)) == 'line 1, column 2: a "x" is bad'
     # a file Zenoh's parser cannot read: its drawing of the line at fault took six lines
     broken = tmp_path / "broken.json5"
     broken.write_text('{ mode: "client", connect: { endpoints: [ }\n')
