@@ -486,6 +486,16 @@ def test_opencv_s_log_is_held_to_its_errors_in_a_block_and_never_made_louder():
                 assert get() == min(before, error)
                 raise RuntimeError("the block fails")
             assert get() == before
+        # two blocks that end out of order (two threads opening captures): the level comes
+        # back once both end, not the one the second found, which was the first's ERROR
+        put(error + 1)
+        first, second = quiet_opencv(), quiet_opencv()
+        first.__enter__()
+        second.__enter__()
+        first.__exit__(None, None, None)
+        assert get() == error  # the second block still runs
+        second.__exit__(None, None, None)
+        assert get() == error + 1
     finally:
         put(level)
 

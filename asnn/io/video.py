@@ -6,6 +6,7 @@ from __future__ import annotations
 import errno
 import itertools
 import os
+import threading
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -252,18 +253,46 @@ def check_written(path: str | Path, frames: int) -> tuple[int, int]:
     raise VideoError(f"cannot write {path}: the video written {found}")
 
 
+class _QuietOpenCV:
+    """OpenCV's log level is one for the process: the blocks of :func:`quiet_opencv` that
+    overlap (threads opening captures at once) share one lowering, made by the first to enter
+    and undone by the last to leave. Each restoring the level it had found left OpenCV held to
+    its errors for good where two blocks ended out of order."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.blocks = 0  # the blocks running
+        self.level = None  # the level the first of them found
+
+    def enter(self) -> None:
+        with self.lock:
+            if self.blocks == 0:
+                get, put, error = _log_level_calls()
+                self.level = get()
+                put(min(self.level, error))
+            self.blocks += 1
+
+    def leave(self) -> None:
+        with self.lock:
+            self.blocks -= 1
+            if self.blocks == 0:
+                _log_level_calls()[1](self.level)
+
+
+_QUIET = _QuietOpenCV()
+
+
 @contextmanager
 def quiet_opencv():
     """OpenCV's own log held to its errors while the block runs, its level restored after: its
     warnings (``[ WARN:0@...]`` lines on stderr) are for the caller to say in its own words. A
-    level already quieter (``OPENCV_LOG_LEVEL=SILENT``) is kept."""
-    get, put, error = _log_level_calls()
-    level = get()
-    put(min(level, error))
+    level already quieter (``OPENCV_LOG_LEVEL=SILENT``) is kept; blocks that overlap, on
+    several threads, restore it once the last ends (:class:`_QuietOpenCV`)."""
+    _QUIET.enter()
     try:
         yield
     finally:
-        put(level)
+        _QUIET.leave()
 
 
 def _log_level_calls():
