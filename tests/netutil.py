@@ -34,13 +34,14 @@ def wait_for(predicate, timeout=TIMEOUT, what="condition", step=0.02):
 
 
 class Proc:
-    """A child ``asnn`` process whose output is drained by threads into lists."""
+    """A child ``asnn`` process whose output is drained by threads into lists; with
+    ``program=()``, the Python script that ``args`` begin with."""
 
-    def __init__(self, *args, env=None):
+    def __init__(self, *args, env=None, program=("-m", "cli.main")):
         env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
         env.pop("RUST_LOG", None)
         self.args = args
-        self.popen = subprocess.Popen([sys.executable, "-m", "cli.main", *args], cwd=ROOT,
+        self.popen = subprocess.Popen([sys.executable, *program, *args], cwd=ROOT,
                                       env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                       text=True)
         self.out, self.err = [], []

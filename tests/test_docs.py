@@ -18,7 +18,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCUMENTS = [ROOT / "README.md", ROOT / "CONTRIBUTING.md", *sorted((ROOT / "docs").glob("*.md"))]
+DOCUMENTS = [ROOT / "README.md", ROOT / "CONTRIBUTING.md", *sorted((ROOT / "docs").glob("*.md")),
+             ROOT / "examples" / "README.md"]
 _LINK = re.compile(r"\[(?:[^\]]*)\]\(([^)\s]+)\)")
 
 
@@ -101,12 +102,12 @@ def test_the_checks_find_what_they_look_for(tmp_path):
     assert ragged_rows(page) == ["line 7: | `|x|` | 1 |"]
 
 
-@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.relative_to(ROOT).as_posix())
 def test_links_land(document):
     assert broken_links(document) == []
 
 
-@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.relative_to(ROOT).as_posix())
 def test_table_rows_have_their_headers_cells(document):
     assert ragged_rows(document) == []
 
@@ -142,7 +143,7 @@ def test_pointers_from_the_code_name_sections_that_exist():
     rate'") is there: a section renamed or moved leaves the pointer leading nowhere."""
     assert lost_pointers('x = 1  # (README, "Nowhere at all")') == ["README, 'Nowhere at all'"]
     lost = {str(path.relative_to(ROOT)): found
-            for folder in ("asnn", "service", "clients", "cli")
+            for folder in ("asnn", "service", "clients", "cli", "examples")
             for path in sorted((ROOT / folder).rglob("*.py"))
             for found in [lost_pointers(path.read_text())] if found}
     assert lost == {}
