@@ -14,7 +14,7 @@ from pathlib import Path
 from asnn.detectors import (MODELS, available_cores, baseline_classes, make_detector,
                             responses)
 from asnn.errors import timing_warnings_to
-from asnn.io.files import folder_problem, path_problem, resolved, seekable_target
+from asnn.io.files import output_problem, resolved, seekable_target
 from asnn.io.pipeline import WriteBehind, read_ahead
 from asnn.io.sources import (CLOCK_RESET_FRAMES, BackwardStamps, SourceError, open_source,
                               split_topic)
@@ -147,14 +147,13 @@ def _output_problem(path: str | None, flag: str) -> str | None:
         return None if flag in ("--jsonl", "--tracks") else \
             f"{flag} -: writes a file (- is standard output, for --jsonl and --tracks)"
     target = Path(path)
-    problem = path_problem(target)  # before is_dir, which raises for it
+    # before is_dir, which raises for a name too long; a new one's folders are made as scene
+    # makes them, and an existing one is written where it is (/dev/null, /proc/self/fd/1)
+    problem = output_problem(target)
     if problem:
         return f"{flag} {path}: {problem}"
     if target.is_dir():
         return f"{flag} {path}: is a folder"
-    problem = folder_problem(target.parent)  # its folders are made as scene makes them
-    if problem:
-        return f"{flag} {path}: {problem}"
     if flag == "--plot" and target.suffix.lower() not in PLOT_FORMATS:
         return f"--plot {path}: name the format by its extension ({', '.join(PLOT_FORMATS)})"
     if flag in ("--annotate", "--mcap"):

@@ -12,7 +12,7 @@ import os
 import sys
 from pathlib import Path
 
-from asnn.io.files import folder_lock, folder_problem, path_problem
+from asnn.io.files import folder_lock, output_problem, path_problem
 from asnn.io.rates import FPS_RANGE
 from asnn.stimuli import SCENE_NAMES, make_scene
 
@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         if Path(out).suffix.lower() not in (*WRITABLE_SUFFIXES, ".mcap"):  # before drawing
             raise ValueError(f"{out}: name the format by its extension: a video "
                              f"({', '.join(WRITABLE_SUFFIXES)}) or a bag (.mcap)")
-        problem = path_problem(out) or folder_problem(Path(out).parent)
+        problem = output_problem(out)
         if problem:  # said as the other commands say theirs, not as a bare errno at the write
             raise ValueError(f"{out}: {problem}")
         if args.labels:  # a labels file that cannot take the clip stops the command first

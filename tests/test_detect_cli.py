@@ -303,6 +303,25 @@ def test_an_output_no_file_can_be_made_for_is_refused_before_the_run(looming_vid
     assert len(err) == 1 and err[0].startswith(f"asnn detect: {flag} {path}: cannot "), err
 
 
+@pytest.mark.parametrize("flag", ["--jsonl", "--tracks"])
+def test_an_existing_output_in_a_folder_that_takes_no_new_file_is_written(looming_video,
+                                                                          tmp_path, capsys,
+                                                                          flag):
+    """A review's trial: trying the output's folder with a new file there refused
+    ``--jsonl /proc/self/fd/N`` (and, for a user not root, ``/dev/null`` and a file of one's own
+    in a read-only folder), which an existing file, written where it is, does not need."""
+    if not Path("/proc/self/fd").is_dir():
+        pytest.skip("no /proc here")
+    video, scene = looming_video
+    with open(tmp_path / "out.jsonl", "w") as held:
+        assert main(["detect", str(video), flag, f"/proc/self/fd/{held.fileno()}"]) == 0, \
+            capsys.readouterr().err
+    lines = (tmp_path / "out.jsonl").read_text().splitlines()
+    assert lines and all(json.loads(line) for line in lines)
+    if flag == "--jsonl":
+        assert len(lines) == len(scene.frames)
+
+
 def test_outputs_in_folders_that_do_not_exist_yet_are_written_there(looming_video, tmp_path,
                                                                      capsys):
     """As ``asnn scene OUT`` does, detect makes the folders its outputs go into."""

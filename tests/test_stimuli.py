@@ -1119,3 +1119,27 @@ def test_a_disk_that_fills_the_view_before_it_stops_growing_has_reached_contact(
     assert (full == full[0, 0]).all()  # the disk covers every pixel at contact
     before = fast.frames[fast.contact_frame - 1]
     assert not (before == before[0, 0]).all()
+
+
+def test_scene_writes_over_an_existing_out_in_a_folder_that_takes_no_new_file(tmp_path,
+                                                                              monkeypatch):
+    """A review's trial: trying OUT's folder with a new file there refused an existing OUT in
+    a folder one may not write (as a user, not root); the file is written where it is. The
+    folder's refusal is simulated: root may write anywhere."""
+    import asnn.io.files
+    import cli.scene
+    from cli.main import main
+
+    out = tmp_path / "x.mp4"
+    out.write_bytes(b"")
+
+    def refused(folder):
+        return f"cannot write in {folder}: Permission denied"
+
+    for module in (asnn.io.files, cli.scene):  # wherever the check looks it up
+        monkeypatch.setattr(module, "folder_problem", refused, raising=False)
+    assert main(["scene", "looming", str(out), "--size", "32x32"]) == 0
+    assert out.stat().st_size > 0
+    out.unlink()  # a new one still needs its folder
+    assert main(["scene", "looming", str(out), "--size", "32x32"]) == 2
+    assert not out.exists()

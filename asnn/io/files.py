@@ -12,8 +12,8 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["RecordingFile", "folder_lock", "folder_problem", "make_folders", "path_problem",
-           "remove_folders", "resolved", "seekable_target", "write_atomically"]
+__all__ = ["RecordingFile", "folder_lock", "folder_problem", "make_folders", "output_problem",
+           "path_problem", "remove_folders", "resolved", "seekable_target", "write_atomically"]
 
 
 def resolved(path: str | Path) -> Path:
@@ -68,6 +68,18 @@ def folder_problem(folder: str | Path) -> str | None:
     if parent != folder and not os.access(parent, os.W_OK | os.X_OK):
         return f"cannot make {folder} in {parent} (no write access)"
     return _write_problem(folder)
+
+
+def output_problem(path: str | Path) -> str | None:
+    """Why a file written in place at ``path`` cannot be had, found before a run, or None: its
+    name cannot be looked up (:func:`path_problem`), or, for a new file, its folder cannot be
+    had for writing into (:func:`folder_problem`). An existing file is opened where it is, so
+    its folder need take no new file: ``/dev/null``, ``/proc/self/fd/1``, a file of one's own
+    in a folder one may not write (trying the folder refused them all)."""
+    problem = path_problem(path)
+    if problem or os.path.exists(path):
+        return problem
+    return folder_problem(Path(path).parent)
 
 
 def _write_problem(folder: Path) -> str | None:
