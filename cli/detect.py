@@ -161,10 +161,12 @@ def _output_problem(path: str | None, flag: str) -> str | None:
             seekable_target(target)
         except ValueError as exc:
             return f"{flag} {exc}"
-    elif flag in ("--jsonl", "--tracks") and target.exists():
+    elif flag in ("--jsonl", "--tracks") and target.exists() and not target.is_fifo():
         try:  # opened now without emptying it (that waits for its first line), so that a file
             # that cannot be written is said before the kernels compile, not after; a new one
-            # is not made here (a run refused after it left it empty): its folder was tried
+            # is not made here (a run refused after it left it empty): its folder was tried.
+            # Not a named pipe: opening one waits for its reader, and closing it ends the
+            # reader's input (`cat PIPE` quit, and the run waited for ever at its first line)
             open(target, "a").close()  # noqa: SIM115
         except OSError as exc:
             return f"{flag} {path}: cannot write: {exc.strerror or exc}"

@@ -322,6 +322,30 @@ def test_an_existing_output_in_a_folder_that_takes_no_new_file_is_written(loomin
         assert len(lines) == len(scene.frames)
 
 
+@pytest.mark.parametrize("flag", ["--jsonl", "--tracks"])
+def test_a_named_pipe_output_is_not_opened_by_the_check(tmp_path, flag):
+    """A review's trial: ``mkfifo p; cat p & asnn detect clip --jsonl p``: the check opened
+    the pipe (waiting for its reader) and closed it, which ended cat's input, and the run then
+    waited for ever, SIGTERM or not, for a reader at its first line."""
+    import os
+    import threading
+
+    from cli.detect import _output_problem
+
+    pipe = tmp_path / "p"
+    os.mkfifo(pipe)
+    found = []
+    check = threading.Thread(target=lambda: found.append(_output_problem(str(pipe), flag)),
+                             daemon=True)
+    check.start()
+    check.join(timeout=10)
+    if check.is_alive():  # the check opened it: a reader lets it go
+        os.close(os.open(pipe, os.O_RDONLY | os.O_NONBLOCK))
+        check.join(timeout=10)
+        pytest.fail("the check opened the named pipe, and waited for a reader")
+    assert found == [None]
+
+
 def test_outputs_in_folders_that_do_not_exist_yet_are_written_there(looming_video, tmp_path,
                                                                      capsys):
     """As ``asnn scene OUT`` does, detect makes the folders its outputs go into."""
