@@ -1034,9 +1034,9 @@ def test_a_raw_stream_and_a_y4m_without_its_rate_are_timed_at_a_guess_and_say_so
 @pytest.mark.parametrize("command", [
     ["detect", "{long}.mp4"], ["detect", "{long}.mcap"], ["eval", "{long}"],
     ["eval", "{tmp}", "--labels", "{long}.json"], ["label", "{long}"],
-    ["bench", "--handover", "--clips", "{long}"], ["detect", "{loop}"],
+    ["bench", "--handover", "--clips", "{long}"], ["detect", "{loop}"], ["detect", "{long}#/cam"],
 ], ids=["detect-video", "detect-bag", "eval-clips", "eval-labels", "label-clips",
-        "bench-clips", "detect-link-loop"])
+        "bench-clips", "detect-link-loop", "detect-topic-suffix"])
 def test_an_input_path_that_cannot_be_looked_up_is_a_one_line_error(tmp_path, capsys, command):
     """A contributor's trial: an input named too long for the file system, or a loop of links,
     ended every reading command in a traceback (Path.is_dir and exists raise for them)."""

@@ -196,7 +196,9 @@ def is_bag(path: str) -> bool:
     ``metadata.yaml``)."""
     if path.lower().endswith(BAG_SUFFIX):
         return True
-    return Path(path).is_dir() and (Path(path) / "metadata.yaml").is_file()
+    # os.path's, which say False where Path's raise (a name too long: split_topic asks this of
+    # a spec's head before open_source can say so in one line)
+    return os.path.isdir(path) and os.path.isfile(os.path.join(path, "metadata.yaml"))
 
 
 def open_source(spec: str, *, topic: str | None = None,
