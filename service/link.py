@@ -3,11 +3,13 @@
 Zenoh reconnects by itself (:mod:`service.config`'s ``connect/retry``) and says nothing meanwhile:
 a camera publishing into a lost link, or a worker or a dashboard hearing nothing, would look as
 if all were quiet. :class:`RouterWatch` logs a WARNING when a session that had a router has none
-left, and an INFO line when one is back. A session that has reached no router or peer yet is
+left, and an INFO line when one is back. A session that never had a router and has no peer is
 diagnosed as a lost one is, so that a mistyped ``--connect`` of a peer, which Zenoh retries
-silently, is said; one linked to peers only (peers on a LAN) is not reported. It also says, at start and once a day, which of the session's certificates
-expire soon (:func:`service.diagnosis.expiring_certificates`): the router checks them at the
-handshake only, so one that expires while the process runs locks it out at its next connection.
+silently, is said (again each time it is left without peers); one linked to peers only (peers
+on a LAN) is not reported. It also says, at start and once a day, which of the session's
+certificates expire soon (:func:`service.diagnosis.expiring_certificates`): the router checks
+them at the handshake only, so one that expires while the process runs locks it out at its next
+connection.
 """
 
 from __future__ import annotations
@@ -136,8 +138,13 @@ class RouterWatch:
                             "sent or received meanwhile)", self.name)
                 self._changed(False)
                 self._asked_at, self._heard, self._said = time.monotonic(), None, None
-            elif not routers and self.diagnose is not None and self._unlinked():
-                self._why()
+            elif not routers and self.diagnose is not None:
+                if self._unlinked():
+                    self._why()
+                else:  # linked to peers: a time without any, later, is a new outage, its
+                    # reason said anew and counted from then, as a lost router's is
+                    self._asked_at, self._heard, self._said = time.monotonic(), None, None
+                    self._asking = None
             if self._certificates is not None:
                 self._certificates.tick()
             self._stop.wait(self.interval)

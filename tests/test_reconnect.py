@@ -267,6 +267,31 @@ def test_a_peer_that_never_reached_its_endpoint_says_why(caplog):
     assert [r.getMessage() for r in caplog.records] == [f"alerts: still no router: {reason}"]
 
 
+def test_a_peer_that_had_peers_and_has_none_again_says_why_again(caplog):
+    """A review's trial: a peer that never reached its endpoint said why; once linked to a
+    peer and then left without any, the same reason was not said again (nor was the peer's
+    going: nothing said the session was cut off again), where a lost router's each outage
+    says its reason."""
+    from service.link import RouterWatch
+
+    session = FakeSession()
+    session.routers = []
+    reason = "tcp/127.0.0.1:9: nothing accepts connections at 127.0.0.1:9 (Connection refused)"
+    said = f"alerts: still no router: {reason}"
+
+    def lines():
+        return [r.getMessage() for r in caplog.records if r.name == "asnn.link"]
+
+    with caplog.at_level("WARNING", logger="asnn.link"), RouterWatch(
+            session, "alerts", interval=0.01, diagnose=lambda: reason, diagnose_after=0.05):
+        wait_for(lambda: lines() == [said], what="the unreached endpoint said")
+        looks = []
+        session.peers_zid = lambda: looks.append(1) or ["peer-b"]
+        wait_for(lambda: len(looks) >= 3, what="the peer seen")
+        del session.peers_zid
+        wait_for(lambda: lines() == [said, said], what="the same reason said again")
+
+
 def test_the_router_watch_says_at_start_which_certificates_end_soon(caplog):
     """A fleet operator's trial: nothing said a certificate was about to end; the watch asks
     at start and then once every ``certificates_every`` seconds, and logs the answer."""
