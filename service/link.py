@@ -166,7 +166,9 @@ class RouterWatch:
         why, self._asking = self._asking[1], None
         self._asked_at = time.monotonic()  # after it: a check may take a few seconds
         if why and why == self._heard and why != self._said:
-            log.warning("%s: still no router: %s", self.name, why)
+            # a session that never had a router may be a peer whose endpoint is another peer
+            log.warning("%s: %s: %s", self.name, "still no router" if self.connected is False
+                        else "reaches no router or peer", why)
             self._said = why
         self._heard = why
 
