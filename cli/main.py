@@ -32,7 +32,10 @@ def build_parser() -> argparse.ArgumentParser:
     from asnn import __version__
 
     parser = _Parser(
-        prog="asnn", description="Approach-Sensitive Neural Network collision detection")
+        prog="asnn", description="Approach-Sensitive Neural Network collision detection",
+        # the help texts name documents (docs/*.md) that a wheel does not install
+        epilog="The documents the commands' help names (README.md, docs/*.md, examples/) are in "
+               "the source distribution and the repository, not in an installed wheel.")
     # the version to name when citing results (CITATION.cff) or reporting a bug
     parser.add_argument("--version", action="version", version=f"asnn {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

@@ -149,6 +149,21 @@ def test_pointers_from_the_code_name_sections_that_exist():
     assert lost == {}
 
 
+def test_the_documents_the_help_names_ship_with_the_sources_and_the_help_says_where():
+    """A new user's trial: the commands' help names docs/*.md, which a wheel does not install;
+    each one named is in the repository and grafted into the source distribution, and
+    ``asnn --help`` says where they are."""
+    from cli.main import build_parser
+
+    parser = build_parser()
+    helps = [parser.format_help(), *(sub.format_help() for sub in parser.commands.values())]
+    named = set(re.findall(r"docs/[\w.-]+\.md", " ".join(" ".join(helps).split())))
+    assert named, "no help text names a document: the check looks at nothing"
+    assert sorted(name for name in named if not (ROOT / name).is_file()) == []
+    assert "graft docs" in (ROOT / "MANIFEST.in").read_text().splitlines()
+    assert "source distribution" in " ".join(parser.format_help().split())
+
+
 def test_citation_file_passes_its_schema_and_names_this_version():
     """CITATION.cff is what GitHub's "Cite this repository" and Zenodo read: a file the format's
     schema refuses is ignored by them without a word, and a version left behind at a release
