@@ -174,6 +174,10 @@ def setup_logging(args: argparse.Namespace) -> None:
     zenoh.try_init_log_from_env()  # Zenoh's own logs only when RUST_LOG is set
 
 
+# seconds an interrupted compile's exit waits for its buffered output to be taken
+FLUSH_GRACE = 2
+
+
 @contextlib.contextmanager
 def exit_on_interrupt():
     """Within the block, Ctrl-C ends the process at once, with the status and line of an
@@ -184,14 +188,19 @@ def exit_on_interrupt():
     raised in the callback, and the compile would go on for up to a minute."""
     def handler(signum, frame):
         term = signum == signal.SIGTERM  # docker stop's grace is 10 s: not a minute's compile
-        # written past Python's buffered streams: the handler runs between two bytecodes of
-        # the main thread, which may be inside a write to one (a reentrant call raises there)
+        status = 143 if term else 130
+        # a flush into a full pipe nobody reads blocks for ever (and so would the line after
+        # it, into the same pipe): it has FLUSH_GRACE seconds, then the process ends unsaid
+        signal.signal(signal.SIGALRM, lambda *_: os._exit(status))
+        signal.alarm(FLUSH_GRACE)
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 stream.flush()
+        # written past Python's buffered streams: the handler runs between two bytecodes of
+        # the main thread, which may be inside a write to one (a reentrant call raises there)
         with contextlib.suppress(OSError):
             os.write(2, f"\nasnn: {'terminated' if term else 'interrupted'}\n".encode())
-        os._exit(143 if term else 130)
+        os._exit(status)
 
     previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:

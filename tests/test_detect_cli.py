@@ -932,6 +932,30 @@ def test_a_signal_that_lands_inside_a_write_to_a_stream_still_ends_a_compile():
     assert (done.returncode, done.stdout, done.stderr) == (143, "", "\nasnn: terminated\n")
 
 
+def test_an_interrupted_compile_ends_though_its_output_goes_to_a_pipe_nobody_reads():
+    """A review: ``exit_on_interrupt``'s handler flushed standard output before it exited; into
+    a full pipe nobody reads (``asnn worker | slow-reader``) the flush blocked, and SIGTERM
+    ended nothing. It now has ``FLUSH_GRACE`` seconds."""
+    import subprocess
+    import sys
+
+    script = ("import os, signal, sys, time\n"
+              "from cli.session import exit_on_interrupt\n"
+              "sys.stdout = open(1, 'w', buffering=1 << 20)  # held, more than a pipe takes\n"
+              "with exit_on_interrupt():\n"
+              "    sys.stdout.write('x' * 300000)\n"
+              "    os.kill(os.getpid(), signal.SIGTERM)\n"
+              "    time.sleep(60)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, cwd=Path(__file__).resolve().parents[1])
+    try:
+        assert proc.wait(timeout=40) == 143  # nobody reads its output meanwhile
+    finally:
+        proc.kill()
+        proc.wait()
+        proc.stdout.close()
+
+
 def test_a_sigterm_held_under_the_default_handler_still_ends_the_process():
     import signal
     import subprocess
