@@ -7,8 +7,8 @@ import logging
 import sys
 
 from cli.arguments import host_address, port, seconds
-from cli.session import (add_zenoh_options, fail, open_session, router_watch, setup_logging,
-                         stop_on_signals, zenoh_config)
+from cli.session import (EXIT_NO_ROUTER, add_zenoh_options, fail, open_session, router_watch,
+                         setup_logging, stop_on_signals, zenoh_config)
 from clients.dashboard import HOLD_S
 from clients.fleet import STALE_S
 from service.config import ConfigError
@@ -35,7 +35,8 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
     stop = stop_on_signals()
     # the subscriber closed first: the server (and a Foxglove bridge's channels) would take
     # samples still arriving after it was closed
-    with session, router_watch(session, name, config, on_change=on_router), server, \
+    with session, router_watch(session, name, config, on_change=on_router, args=args,
+                               stop=stop) as watch, server, \
             FleetSubscriber(session, store, refusals=refusals) as subscriber:
         print(f"{name} on {url} showing {', '.join(subscriber.keys)}", file=sys.stderr,
               flush=True)
@@ -43,7 +44,7 @@ def serve_fleet(args: argparse.Namespace, store, server, name: str, url: str, *,
             pass
     log.info("%s stopped: received %s, invalid %s, skipped %s", name, dict(store.received),
              dict(store.invalid), dict(store.skipped))
-    return 0
+    return EXIT_NO_ROUTER if watch.gave_up else 0
 
 
 def cmd_dashboard(args: argparse.Namespace) -> int:
@@ -79,5 +80,5 @@ def register(subparsers) -> None:
     p.add_argument("--hold", type=seconds, default=HOLD_S, metavar="SECONDS",
                    help="keep a robot in the collision state for SECONDS (camera clock) after "
                         "its latest warning (default: %(default)s)")
-    add_zenoh_options(p)
+    add_zenoh_options(p, watched=True)
     p.set_defaults(func=cmd_dashboard)

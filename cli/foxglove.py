@@ -54,5 +54,5 @@ def register(subparsers) -> None:
                         "look in Foxglove; finished when the server stops")
     p.add_argument("--mcap-max-mb", type=megabytes, default=None, metavar="MB",
                    help="stop recording once the file reaches this size (default: 1000)")
-    add_zenoh_options(p)
+    add_zenoh_options(p, watched=True)
     p.set_defaults(func=cmd_foxglove)

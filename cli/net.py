@@ -17,8 +17,8 @@ from service.config import ConfigError, zenoh_error
 from .arguments import (count, fleet_size, frame_rate, mcap_output, megabytes, non_negative,
                         nonempty_path, preset_spec, robot_id, seconds, seconds_or_zero, threads,
                         warmup_frames, worker_id)
-from .session import add_zenoh_options, exit_on_interrupt, fail, open_session, router_watch, \
-    setup_logging, stop_on_signals, zenoh_config, zenoh_options
+from .session import EXIT_NO_ROUTER, add_zenoh_options, exit_on_interrupt, fail, open_session, \
+    router_watch, setup_logging, stop_on_signals, zenoh_config, zenoh_options
 
 __all__ = ["register"]
 
@@ -58,7 +58,8 @@ def cmd_camera(args: argparse.Namespace) -> int:
     except (SourceError, ConfigError) as exc:
         return fail(args.command, str(exc))
     stop = stop_on_signals()
-    with session, router_watch(session, f"camera {args.robot}", config):
+    with session, router_watch(session, f"camera {args.robot}", config, args=args,
+                               stop=stop) as watch:
         recording = None
         if args.record:  # made last: a camera that cannot start leaves no file behind
             bound = RECORD_MAX_BYTES if args.record_max_mb is None else args.record_max_mb * 1e6
@@ -92,7 +93,7 @@ def cmd_camera(args: argparse.Namespace) -> int:
     log.info("camera %s: %d frames published%s; %s; workers' refusals on its key "
              "(of any publisher's frames): %s",
              args.robot, count, unheard, rejections.summary(), refusals.summary())
-    return 0
+    return EXIT_NO_ROUTER if watch.gave_up else 0
 
 
 def _close_recording(recording, robot: str) -> None:
@@ -135,7 +136,8 @@ def cmd_worker(args: argparse.Namespace) -> int:
     except (ValueError, ImportError) as exc:  # ConfigError is a ValueError
         return fail(args.command, str(exc))
     tune_process()
-    with session, router_watch(session, f"worker {core.worker_id}", config):
+    with session, router_watch(session, f"worker {core.worker_id}", config,
+                               args=args) as watch:
         worker = Worker(session, core, threads=args.threads, scan_interval=args.scan_interval,
                         handover_timeout=args.handover_timeout)
         try:
@@ -149,12 +151,12 @@ def cmd_worker(args: argparse.Namespace) -> int:
             return fail(args.command, f"{exc}; give each worker its own --id")
         try:
             print(f"worker {core.worker_id} ready", file=sys.stderr, flush=True)
-            while not stop.wait(0.2):
+            while not stop.wait(0.2) and not watch.gave_up:
                 pass
         finally:
             worker.close()  # hands the robots over, warm
     log.info("worker stopped: %s", core.stats())
-    return 0
+    return EXIT_NO_ROUTER if watch.gave_up else 0
 
 
 def cmd_status(args: argparse.Namespace) -> int:
@@ -301,12 +303,12 @@ def cmd_alerts(args: argparse.Namespace) -> int:
         return fail(args.command, str(exc))
     stop = stop_on_signals()
     show = LinePrinter(args.json, sys.stdout, on_error=stop.set)
-    with session, router_watch(session, "alerts", config), \
+    with session, router_watch(session, "alerts", config, args=args, stop=stop) as watch, \
             WarningListener(session, show, prefix=args.prefix, robot=args.robot) as listener:
         print(f"listening on {listener.key}", file=sys.stderr, flush=True)
         while not stop.wait(0.5):
             pass
-    return _printed(show, args.command)
+    return _printed(show, args.command) or (EXIT_NO_ROUTER if watch.gave_up else 0)
 
 
 def _printed(show, command: str) -> int:
@@ -441,7 +443,7 @@ def register(subparsers) -> None:
     p.add_argument("--record-max-mb", type=megabytes, default=None, metavar="MB",
                    help="stop recording once the file reaches this size; the camera publishes "
                         "on (default: 1000)")
-    add_zenoh_options(p)
+    add_zenoh_options(p, watched=True)
     p.set_defaults(func=cmd_camera)
 
     p = subparsers.add_parser("worker", help="run the detector on every robot's frames",
@@ -483,7 +485,7 @@ def register(subparsers) -> None:
                    "that do not announce themselves every SECONDS, receiving every frame for "
                    f"{SCAN_WINDOW:g} s (default: %(default)s; 0: serve only announced robots, "
                    "as asnn camera's are, so that each frame reaches one worker)")
-    add_zenoh_options(p)
+    add_zenoh_options(p, watched=True)
     p.set_defaults(func=cmd_worker)
 
     p = subparsers.add_parser("status", help="ask the workers for their status",
@@ -509,7 +511,7 @@ def register(subparsers) -> None:
                               "warning. A late subscriber first receives each robot's latest.")
     p.add_argument("--robot", type=robot_id, default=None, help="only this robot (default: all)")
     p.add_argument("--json", action="store_true", help="JSON lines (the Response fields)")
-    add_zenoh_options(p)
+    add_zenoh_options(p, watched=True)
     p.set_defaults(func=cmd_alerts)
 
     p = subparsers.add_parser("router", help="run a Zenoh router (for machines without zenohd)",

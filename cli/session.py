@@ -16,15 +16,18 @@ import threading
 from service import keys
 from service.config import ConfigError, ZenohOptions, zenoh_error
 
-from .arguments import key_prefix
+from .arguments import key_prefix, seconds
 
 __all__ = ["add_zenoh_options", "zenoh_options", "setup_logging", "stop_on_signals",
            "open_session", "zenoh_config", "fail"]
 
 
-def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client")) -> None:
+def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client"),
+                      watched: bool = False) -> None:
     """The common Zenoh options of every networked command (CONTRACT.md); a command that can
-    run in one mode only (the router) takes ``--mode`` with that mode alone."""
+    run in one mode only (the router) takes ``--mode`` with that mode alone, and a
+    long-running one that watches its router (``watched``: :func:`router_watch`) takes
+    ``--exit-without-router``."""
     group = parser.add_argument_group("Zenoh")
     group.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                        help="endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable)")
@@ -41,6 +44,14 @@ def add_zenoh_options(parser: argparse.ArgumentParser, *, modes=("peer", "client
     group.add_argument("--log-level", default="info",
                        choices=("debug", "info", "warning", "error"),
                        help="log level on stderr (default: %(default)s)")
+    if watched:
+        group.add_argument(
+            "--exit-without-router", type=seconds, default=None, metavar="SECONDS",
+            help=f"exit with status {EXIT_NO_ROUTER} once no router (nor a peer) has been "
+                 "reached for SECONDS, from the start or a lost link, so that a supervisor "
+                 "(systemd, compose) starts the process again and it reads its configuration "
+                 "and credentials again: a router that rotated its CA or password refuses the "
+                 "running process for ever (default: retry for ever)")
 
 
 def zenoh_options(args: argparse.Namespace) -> ZenohOptions:
@@ -291,19 +302,27 @@ def zenoh_config(args: argparse.Namespace):
     return make_config(zenoh_options(args))
 
 
-def router_watch(session, name: str, config, on_change=None):
+EXIT_NO_ROUTER = 3
+"""The exit status of a command whose ``--exit-without-router`` time passed."""
+
+
+def router_watch(session, name: str, config, on_change=None, args=None, stop=None):
     """A :class:`service.link.RouterWatch` of a command's session that, while its router stays
     lost, logs why a session of the command's options could not connect
     (:func:`service.diagnosis.connect_failure`: the router back with another CA, certificate
     or password, which Zenoh retries silently for ever), and at start and once a day which of
     its certificates expire soon (:func:`service.diagnosis.expiring_certificates`); ``config``
-    is the one the session was opened with (:func:`zenoh_config`)."""
+    is the one the session was opened with (:func:`zenoh_config`). With the command's ``args``
+    holding ``--exit-without-router``, the watch gives up after it (:attr:`RouterWatch.
+    gave_up`) and sets ``stop``; the command then ends with :data:`EXIT_NO_ROUTER`."""
     from service.diagnosis import connect_failure, expiring_certificates
     from service.link import RouterWatch
 
     return RouterWatch(session, name, on_change=on_change,
                        diagnose=lambda: connect_failure(config),
-                       certificates=lambda: expiring_certificates(config))
+                       certificates=lambda: expiring_certificates(config),
+                       give_up_after=getattr(args, "exit_without_router", None),
+                       on_give_up=None if stop is None else stop.set)
 
 
 def fail(command: str | None, message: str, status: int = 2) -> int:

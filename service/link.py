@@ -83,6 +83,13 @@ class RouterWatch:
         ``certificates_every`` seconds, its answer logged at WARNING.
     certificates_every : float
         Seconds between two askings.
+    give_up_after : float, optional
+        Seconds cut off (no router, and no peer; counted from the start for a session that
+        never had one) after which the watch logs an ERROR, sets :attr:`gave_up` and calls
+        ``on_give_up`` (the command's ``--exit-without-router``: a process its supervisor
+        starts again reads its credentials again); None: never.
+    on_give_up : callable, optional
+        Called once, on the watch's thread, when ``give_up_after`` has passed.
     """
 
     def __init__(self, session, name: str, interval: float = WATCH_INTERVAL,
@@ -90,7 +97,9 @@ class RouterWatch:
                  diagnose: Callable[[], str | None] | None = None,
                  diagnose_after: float = DIAGNOSE_AFTER,
                  certificates: Callable[[], str | None] | None = None,
-                 certificates_every: float = CERTIFICATES_EVERY):
+                 certificates_every: float = CERTIFICATES_EVERY,
+                 give_up_after: float | None = None,
+                 on_give_up: Callable[[], None] | None = None):
         self.session, self.name, self.interval = session, name, interval
         self.on_change = on_change
         self.diagnose, self.diagnose_after = diagnose, diagnose_after
@@ -102,6 +111,10 @@ class RouterWatch:
         self._heard: str | None = None  # the latest answer, logged once it comes twice
         self._said: str | None = None  # the latest reason logged
         self.connected: bool | None = None  # None until a router was seen
+        self.give_up_after, self.on_give_up = give_up_after, on_give_up
+        self.gave_up = False  # whether give_up_after has passed cut off
+        # since when the session has had no router and no peer (None: linked); from the start
+        self._cut_since: float | None = time.monotonic()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="router-watch", daemon=True)
         self._thread.start()
@@ -128,6 +141,8 @@ class RouterWatch:
             except Exception as exc:  # the session closing under us, or not a Zenoh session
                 log.debug("%s: router watch ended: %r", self.name, exc)
                 return
+            if routers:
+                self._cut_since = None
             if routers and self.connected is not True:
                 if self.connected is False:
                     log.info("%s: reached the router again (%s)", self.name, ", ".join(routers))
@@ -138,16 +153,36 @@ class RouterWatch:
                             "sent or received meanwhile)", self.name)
                 self._changed(False)
                 self._asked_at, self._heard, self._said = time.monotonic(), None, None
-            elif not routers and self.diagnose is not None:
+                self._cut_since = time.monotonic()
+            elif not routers:
                 if self._unlinked():
-                    self._why()
+                    if self._cut_since is None:
+                        self._cut_since = time.monotonic()
+                    if self.diagnose is not None:
+                        self._why()
                 else:  # linked to peers: a time without any, later, is a new outage, its
                     # reason said anew and counted from then, as a lost router's is
                     self._asked_at, self._heard, self._said = time.monotonic(), None, None
-                    self._asking = None
+                    self._asking, self._cut_since = None, None
+            self._give_up_when_due()
             if self._certificates is not None:
                 self._certificates.tick()
             self._stop.wait(self.interval)
+
+    def _give_up_when_due(self) -> None:
+        """Once the session has been cut off (no router, and no peer) for ``give_up_after``
+        seconds: log it, set :attr:`gave_up` and call ``on_give_up``, once."""
+        if (self.give_up_after is None or self.gave_up or self._cut_since is None
+                or time.monotonic() - self._cut_since < self.give_up_after):
+            return
+        self.gave_up = True
+        log.error("%s: no router reached for %g s: exiting, for its supervisor to start it "
+                  "again (--exit-without-router)", self.name, self.give_up_after)
+        if self.on_give_up is not None:
+            try:
+                self.on_give_up()
+            except Exception:  # the watch outlives a listener's bug, which is logged
+                log.exception("%s: router watch listener failed", self.name)
 
     def _why(self) -> None:
         """Ask why the router stays lost, on a thread of its own (a check can take seconds a

@@ -1060,8 +1060,9 @@ def test_the_fleet_s_server_closes_after_the_subscriber_that_feeds_it(monkeypatc
     monkeypatch.setattr(fleet, "FleetSubscriber", Subscriber)
     monkeypatch.setattr(cli.dashboard, "zenoh_config", lambda args: None)
     monkeypatch.setattr(cli.dashboard, "open_session", lambda config: contextlib.nullcontext())
+    watch = argparse.Namespace(gave_up=False)  # a watch that never gave up
     monkeypatch.setattr(cli.dashboard, "router_watch",
-                        lambda *args, **kwargs: contextlib.nullcontext())
+                        lambda *args, **kwargs: contextlib.nullcontext(watch))
     monkeypatch.setattr(cli.dashboard, "stop_on_signals", Stop)
     store = type("Store", (), {"received": {}, "invalid": {}, "skipped": {}})()
     assert cli.dashboard.serve_fleet(argparse.Namespace(), store, Server(), "foxglove",

@@ -340,3 +340,66 @@ def test_a_certificate_check_that_fails_or_finds_nothing_says_nothing_and_the_wa
         assert calls == [1]
         assert not [r for r in caplog.records if "camera r1: " in r.getMessage()
                     and "router" not in r.getMessage()]
+
+
+def test_a_watch_given_a_time_gives_up_once_cut_off_that_long_and_never_while_linked(caplog):
+    """An operator's ask: a router that rotated its CA refuses a running process for ever
+    (Zenoh retries with the credentials it started with); with ``give_up_after`` the watch
+    says so and calls ``on_give_up`` once, for the command to exit and its supervisor to start
+    it again. Never while a router, or only peers (a LAN), are linked."""
+    from service.link import RouterWatch
+
+    session, calls = FakeSession(), []
+    with caplog.at_level("ERROR", logger="asnn.link"), RouterWatch(
+            session, "worker w1", interval=0.01, give_up_after=0.2,
+            on_give_up=lambda: calls.append(1)) as watch:
+        wait_for(lambda: watch.connected is True, what="the router seen")
+        time.sleep(0.4)  # linked longer than the time: nothing
+        assert calls == [] and not watch.gave_up
+        session.routers = []
+        wait_for(lambda: calls, what="the watch giving up")
+        time.sleep(0.1)
+        assert calls == [1] and watch.gave_up
+    assert [r.getMessage() for r in caplog.records] == [
+        "worker w1: no router reached for 0.2 s: exiting, for its supervisor to start it "
+        "again (--exit-without-router)"]
+    session, calls = FakeSession(), []
+    session.routers, looks = [], []
+    session.peers_zid = lambda: looks.append(1) or ["peer-b"]
+    with RouterWatch(session, "alerts", interval=0.01, give_up_after=0.05,
+                     on_give_up=lambda: calls.append(1)) as watch:
+        wait_for(lambda: len(looks) >= 30, what="thirty looks at the peers")
+        assert calls == [] and not watch.gave_up
+
+
+def test_exit_without_router_ends_each_long_running_command_with_its_status(procs, tmp_path):
+    """``--exit-without-router``: the worker and ``asnn alerts`` whose router goes, and a
+    camera and a dashboard that never reach theirs (a peer's dead endpoint), each end with
+    status 3 after the time given; a command without it goes on retrying."""
+    from cli.session import EXIT_NO_ROUTER
+
+    fleet_config = tmp_path / "zenoh.json5"
+    fleet_config.write_text(SHORT_LEASE)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    common = ["--config", str(fleet_config), "--connect", endpoint, "--mode", "client"]
+    router = procs("router", "--listen", endpoint, "--config", str(fleet_config))
+    router.wait_line("listening on")
+    worker = procs("worker", "--id", "w7", "--exit-without-router", "1", *common)
+    alerts = procs("alerts", "--exit-without-router", "1", *common)
+    patient = procs("alerts", *common)
+    worker.wait_line("ready", timeout=60)
+    alerts.wait_line("listening on")
+    patient.wait_line("listening on")
+    dead = ["--config", str(fleet_config), "--connect", f"tcp/127.0.0.1:{free_port()}",
+            "--mode", "peer", "--exit-without-router", "1"]
+    camera = procs("camera", "--robot", "r7", "--source", "synthetic:looming", "--loop",
+                   "--fps", "20", *dead)
+    dashboard = procs("dashboard", "--port", "0", *dead)
+    router.stop()
+    for proc in (worker, alerts, camera, dashboard):
+        wait_for(lambda proc=proc: proc.popen.poll() is not None, timeout=60,
+                 what=f"{proc.args[0]} to exit")
+        assert proc.stop() == EXIT_NO_ROUTER, "\n".join(proc.err[-20:])
+        assert any("no router reached for 1 s: exiting" in line for line in proc.err)
+    assert patient.popen.poll() is None  # without the option: retrying, as before
+    assert patient.stop() == 0
