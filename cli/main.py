@@ -9,6 +9,7 @@ import importlib
 import os
 import signal
 import sys
+import threading
 
 # Each module defines ``register(subparsers)``, adding its sub-commands with ``func`` set.
 COMMAND_MODULES = ["cli.detect", "cli.scene", "cli.net", "cli.evaluate", "cli.label", "cli.bench",
@@ -96,6 +97,33 @@ def _raise_terminated(signum, frame):
     raise _Terminated
 
 
+INTERRUPT_AGAIN_S = 0.05  # the moment after which a lost interrupt is sent again
+
+
+def _interrupt_again(previous):
+    """A ``sys.unraisablehook`` that raises an interrupt Python ignored once more: raised where
+    exceptions cannot propagate (an ``os.fork`` callback, logging's ``_releaseLock`` after a
+    pool's fork) it was printed as "Exception ignored" and lost, and an evaluation sent SIGTERM
+    ran to its end. Its signal is sent again by a timer's thread, a moment later: sent from
+    here, its handler would run at once, here again (``signal.raise_signal``,
+    ``_thread.interrupt_main`` and a thread's start, which waits for it, all do); from the
+    timer, once this hook has returned, in the command's own code (or, should it land in such
+    a place again, sent once more)."""
+    def hook(unraisable):
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):  # _Terminated among them
+            signum = (signal.SIGTERM if isinstance(unraisable.exc_value, _Terminated)
+                      else signal.SIGINT)
+            try:
+                timer = threading.Timer(INTERRUPT_AGAIN_S, os.kill, (os.getpid(), signum))
+                timer.daemon = True
+                timer.start()
+                return
+            except RuntimeError:  # no thread at interpreter shutdown: said, as it was
+                pass
+        previous(unraisable)
+    return hook
+
+
 @contextlib.contextmanager
 def _sigterm_interrupts():
     try:
@@ -103,10 +131,12 @@ def _sigterm_interrupts():
     except ValueError:  # not the main thread (main() called from a test's thread)
         yield
         return
+    previous_hook, sys.unraisablehook = sys.unraisablehook, _interrupt_again(sys.unraisablehook)
     try:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+        sys.unraisablehook = previous_hook
 
 
 _WRITE_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}

@@ -956,6 +956,33 @@ def test_an_interrupted_compile_ends_though_its_output_goes_to_a_pipe_nobody_rea
         proc.stdout.close()
 
 
+def test_a_sigterm_that_lands_where_python_ignores_exceptions_still_ends_the_command():
+    """A full run's flaky failure: an evaluation sent SIGTERM ran to its end with status 0. The
+    signal's _Terminated was raised inside an ``os.fork`` callback (logging's _releaseLock, as
+    the pool forked), where Python prints "Exception ignored" and goes on."""
+    import subprocess
+    import sys
+
+    script = ("import os, signal, time\n"
+              "from cli.main import _Terminated, _sigterm_interrupts\n"
+              "os.register_at_fork(after_in_parent=lambda: os.kill(os.getpid(), "
+              "signal.SIGTERM))  # the signal lands in the fork's callback\n"
+              "try:\n"
+              "    with _sigterm_interrupts():\n"
+              "        pid = os.fork()\n"
+              "        if pid == 0:\n"
+              "            os._exit(0)\n"
+              "        os.waitpid(pid, 0)\n"
+              "        for _ in range(100):\n"
+              "            time.sleep(0.01)\n"
+              "    print('ran on')\n"
+              "except _Terminated:\n"
+              "    print('terminated')\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60, cwd=Path(__file__).resolve().parents[1])
+    assert done.stdout == "terminated\n", done.stderr
+
+
 def test_a_sigterm_held_under_the_default_handler_still_ends_the_process():
     import signal
     import subprocess
