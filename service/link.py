@@ -123,14 +123,16 @@ class RouterWatch:
         return [str(zid) for zid in self.session.info.routers_zid()]
 
     def _unlinked(self) -> bool:
-        """Whether the session has no router and no peer: a session that never had a router
-        and has no peer is as cut off as one that lost its router."""
-        if self.connected is False:
-            return True
+        """Whether the session is to be diagnosed: it lost its router, or never had one and has
+        no peer (as cut off as one that lost its router)."""
+        return self.connected is False or not self._peers()
+
+    def _peers(self) -> bool:
+        """Whether the session has a peer (True where it cannot tell: closing under us)."""
         try:
-            return not list(self.session.info.peers_zid())
+            return bool(list(self.session.info.peers_zid()))
         except Exception:  # the session closing under us: nothing left to diagnose
-            return False
+            return True
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -171,9 +173,14 @@ class RouterWatch:
 
     def _give_up_when_due(self) -> None:
         """Once the session has been cut off (no router, and no peer) for ``give_up_after``
-        seconds: log it, set :attr:`gave_up` and call ``on_give_up``, once."""
-        if (self.give_up_after is None or self.gave_up or self._cut_since is None
-                or time.monotonic() - self._cut_since < self.give_up_after):
+        seconds: log it, set :attr:`gave_up` and call ``on_give_up``, once. A peer linked
+        after the router's loss counts the time again from when it goes."""
+        if self.give_up_after is None or self.gave_up or self._cut_since is None:
+            return
+        if self._peers():
+            self._cut_since = None
+            return
+        if time.monotonic() - self._cut_since < self.give_up_after:
             return
         self.gave_up = True
         log.error("%s: no router reached for %g s: exiting, for its supervisor to start it "

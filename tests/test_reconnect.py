@@ -370,6 +370,18 @@ def test_a_watch_given_a_time_gives_up_once_cut_off_that_long_and_never_while_li
                      on_give_up=lambda: calls.append(1)) as watch:
         wait_for(lambda: len(looks) >= 30, what="thirty looks at the peers")
         assert calls == [] and not watch.gave_up
+    # a review: a router lost while a peer stays linked is not cut off either, until the
+    # peer goes too
+    session, calls, looks = FakeSession(), [], []
+    with RouterWatch(session, "worker w1", interval=0.01, give_up_after=0.05,
+                     on_give_up=lambda: calls.append(1)) as watch:
+        wait_for(lambda: watch.connected is True, what="the router seen")
+        session.peers_zid = lambda: looks.append(1) or ["peer-b"]
+        session.routers = []
+        wait_for(lambda: len(looks) >= 30, what="thirty looks at the peers")
+        assert calls == [] and not watch.gave_up
+        del session.peers_zid  # the peer goes: the class's, none
+        wait_for(lambda: calls, what="the watch giving up once the peer is gone")
 
 
 def test_exit_without_router_ends_each_long_running_command_with_its_status(procs, tmp_path):
