@@ -100,7 +100,7 @@ def _raise_terminated(signum, frame):
 INTERRUPT_AGAIN_S = 0.05  # the moment after which a lost interrupt is sent again
 
 
-def _interrupt_again(previous):
+class _InterruptAgain:
     """A ``sys.unraisablehook`` that raises an interrupt Python ignored once more: raised where
     exceptions cannot propagate (an ``os.fork`` callback, logging's ``_releaseLock`` after a
     pool's fork) it was printed as "Exception ignored" and lost, and an evaluation sent SIGTERM
@@ -108,20 +108,48 @@ def _interrupt_again(previous):
     here, its handler would run at once, here again (``signal.raise_signal``,
     ``_thread.interrupt_main`` and a thread's start, which waits for it, all do); from the
     timer, once this hook has returned, in the command's own code (or, should it land in such
-    a place again, sent once more)."""
-    def hook(unraisable):
+    a place again, sent once more). A command that ends before the timer fires takes the
+    interrupt at its end (:meth:`deliver`)."""
+
+    def __init__(self, previous):
+        self.previous = previous
+        self.pending: tuple[threading.Timer, int] | None = None  # the timer, its signal
+        self.sent = False  # whether the timer has sent it
+
+    def __call__(self, unraisable):
         if isinstance(unraisable.exc_value, KeyboardInterrupt):  # _Terminated among them
             signum = (signal.SIGTERM if isinstance(unraisable.exc_value, _Terminated)
                       else signal.SIGINT)
             try:
-                timer = threading.Timer(INTERRUPT_AGAIN_S, os.kill, (os.getpid(), signum))
+                timer = threading.Timer(INTERRUPT_AGAIN_S, self._send, (signum,))
                 timer.daemon = True
+                self.pending, self.sent = (timer, signum), False
                 timer.start()
                 return
             except RuntimeError:  # no thread at interpreter shutdown: said, as it was
                 pass
-        previous(unraisable)
-    return hook
+        self.previous(unraisable)
+
+    def _send(self, signum: int) -> None:
+        self.sent = True
+        os.kill(os.getpid(), signum)
+
+    def cancel(self) -> int | None:
+        """Stop a timer that has not fired; the signal it would have sent, or None."""
+        if self.pending is None:
+            return None
+        timer, signum = self.pending
+        timer.cancel()
+        timer.join()  # one sending now ends first
+        self.pending = None
+        return None if self.sent else signum
+
+    def deliver(self) -> None:
+        """Raise, at the command's end, an interrupt whose timer has not fired: it would be
+        lost with the process, or come once the handlers are restored."""
+        signum = self.cancel()
+        if signum is not None:
+            raise _Terminated if signum == signal.SIGTERM else KeyboardInterrupt
 
 
 @contextlib.contextmanager
@@ -131,10 +159,13 @@ def _sigterm_interrupts():
     except ValueError:  # not the main thread (main() called from a test's thread)
         yield
         return
-    previous_hook, sys.unraisablehook = sys.unraisablehook, _interrupt_again(sys.unraisablehook)
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = again = _InterruptAgain(previous_hook)
     try:
         yield
+        again.deliver()
     finally:
+        again.cancel()  # a command ending in an error: no signal after its handlers
         signal.signal(signal.SIGTERM, previous)
         sys.unraisablehook = previous_hook
 
