@@ -12,8 +12,9 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
-__all__ = ["RecordingFile", "folder_lock", "folder_problem", "make_folders", "output_problem",
-           "path_problem", "remove_folders", "resolved", "seekable_target", "write_atomically"]
+__all__ = ["LOOP_OF_LINKS", "RecordingFile", "folder_lock", "folder_problem", "link_loops",
+           "make_folders", "output_problem", "path_problem", "remove_folders", "resolved",
+           "seekable_target", "write_atomically"]
 
 
 def resolved(path: str | Path) -> Path:
@@ -35,6 +36,19 @@ def seekable_target(path: str | Path) -> None:
                          "or a bag is written with seeks")
 
 
+LOOP_OF_LINKS = "leads back to itself (a loop of links)"
+"""What a link is said to do whose links loop (ELOOP), wherever a path is refused for it."""
+
+
+def link_loops(path: str | Path) -> bool:
+    """Whether following ``path``'s links loops (ELOOP)."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        return exc.errno == errno.ELOOP
+    return False
+
+
 def path_problem(path: str | Path) -> str | None:
     """Why ``path`` cannot even be looked up (a name longer than the file system takes, a loop
     of links, a folder on the way this process may not search), or None where it is there or
@@ -46,7 +60,7 @@ def path_problem(path: str | Path) -> str | None:
         return None
     except OSError as exc:
         if exc.errno == errno.ELOOP:
-            return "a link that leads back to itself (a loop of links)"
+            return f"a link that {LOOP_OF_LINKS}"
         return exc.strerror or str(exc)
     return None
 

@@ -3,7 +3,6 @@ checking one written."""
 
 from __future__ import annotations
 
-import errno
 import itertools
 import os
 import threading
@@ -14,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .files import seekable_target
+from .files import LOOP_OF_LINKS, link_loops, seekable_target
 from .images import MAX_SIDE
 from .rates import FPS_RANGE, MAX_FPS
 
@@ -40,15 +39,6 @@ os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 class VideoError(OSError):
     """A file that cannot be opened or decoded as video."""
-
-
-def _loops(path: Path) -> bool:
-    """Whether following ``path``'s links loops (ELOOP)."""
-    try:
-        os.stat(path)
-    except OSError as exc:
-        return exc.errno == errno.ELOOP
-    return False
 
 
 def _container(path: Path) -> bool:
@@ -99,7 +89,7 @@ class VideoClip:
             raise VideoError(
                 f"{self.path}: not a regular file (a pipe or a device)" if self.path.exists()
                 else f"{self.path}: a link to {self.path.readlink()}, which " + (
-                    "leads back to itself (a loop of links)" if _loops(self.path)
+                    LOOP_OF_LINKS if link_loops(self.path)
                     else "is not there")
                 if self.path.is_symlink() else f"{self.path}: no such file")
         cap = self._capture()
